@@ -1,0 +1,37 @@
+# Everything a fresh clone needs: `make demo`, `make test`, `make bench`.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test bench install broker clean
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+# The MQTT tests start their own Mosquitto on a free loopback port; install
+# the Debian package when the binary is missing and we are allowed to.
+broker:
+	@command -v mosquitto >/dev/null 2>&1 || test -x /usr/sbin/mosquitto || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    (apt-get install -y -qq mosquitto >/dev/null 2>&1 || \
+	     (apt-get update -qq >/dev/null && apt-get install -y -qq mosquitto >/dev/null)) || \
+	    echo "note: could not install mosquitto; MQTT tests will be skipped"; \
+	  else echo "note: mosquitto missing and not root; MQTT tests will be skipped"; fi; }
+
+demo: $(STAMP)
+	$(VENV)/bin/moi demo
+
+test: $(STAMP) broker
+	$(PY) -m pytest -q
+
+bench: $(STAMP)
+	$(PY) bench/run.py
+
+clean:
+	rm -rf $(VENV) build *.egg-info

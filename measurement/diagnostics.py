@@ -1,0 +1,196 @@
+"""What a residual says: size against the noise floor, and its structure.
+
+The numbers here decide when the discovery loop stops (residual at the
+noise floor and white) and what the report says about a residual the model
+library cannot explain. Each effect reads them in ``evidence`` to say why it
+is a plausible cause.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from .fit import ModelFit, autocorrelation
+from .signal import find_swings
+
+#: residual RMS / noise floor below which the model is "at the noise floor"
+AT_NOISE = 1.10
+#: above this ratio a non-white residual is reported as structure
+STRUCTURED = 1.20
+
+
+@dataclass(frozen=True)
+class Diagnostics:
+    """Residual diagnostics of one fit. Angles in rad, frequencies in Hz."""
+
+    residual_rms: float
+    noise_floor: float
+    rms_ratio: float
+    lag1: float
+    whiteness_p: float
+    white: bool
+    swing_hz: float
+    line_hz: float | None
+    line_fraction: float
+    low_frequency_fraction: float
+    envelope_law: str | None
+    envelope_errors: dict
+    stopped: bool
+    freq_amp_slope: float
+    freq_amp_t: float
+    centre_slope: float
+    centre_t: float
+    asymmetry: float
+    asymmetry_t: float
+
+    @property
+    def at_noise_floor(self) -> bool:
+        return self.rms_ratio <= AT_NOISE
+
+    @property
+    def structured(self) -> bool:
+        """Residual clearly above the noise and not white: something is unmodelled."""
+        return self.rms_ratio > STRUCTURED and not self.white
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d.pop("envelope_errors")
+        for law, err in self.envelope_errors.items():
+            d[f"envelope_error_{law}"] = err
+        d["structured"] = self.structured
+        d["at_noise_floor"] = self.at_noise_floor
+        return d
+
+    def describe(self) -> list[str]:
+        """Plain sentences on the residual's size and shape."""
+        out = [f"RMS {self.residual_rms:.3g} rad = {self.rms_ratio:.3g} × the noise floor ({self.noise_floor:.3g} rad, estimated from the data)"]
+        if self.white:
+            out.append(f"white (lag-1 autocorrelation {self.lag1:+.2f}, Ljung–Box p = {self.whiteness_p:.2g})")
+        else:
+            out.append(f"not white: lag-1 autocorrelation {self.lag1:+.2f} (Ljung–Box p = {self.whiteness_p:.2g})")
+        if self.line_hz is not None and self.line_fraction >= 0.2:
+            ratio = self.line_hz / self.swing_hz if self.swing_hz > 0 else float("nan")
+            out.append(f"spectral line at {self.line_hz:.4g} Hz ({ratio:.3g} × the swing frequency {self.swing_hz:.4g} Hz)"
+                       f" holds {100 * self.line_fraction:.0f} % of the residual power")
+        if self.low_frequency_fraction >= 0.3:
+            out.append(f"{100 * self.low_frequency_fraction:.0f} % of the residual power is slower than the swing (trend or drift)")
+        if abs(self.freq_amp_t) >= 4:
+            out.append(f"frequency depends on amplitude beyond the model: dω/d(A²) = {self.freq_amp_slope:+.3g} rad/s per rad² (t = {self.freq_amp_t:.1f})")
+        if abs(self.centre_t) >= 4:
+            out.append(f"the swing centre moves by {self.centre_slope:+.3g} rad/s against the model (t = {self.centre_t:.1f})")
+        if abs(self.asymmetry_t) >= 4:
+            out.append(f"positive and negative half-swings differ by {self.asymmetry:+.3g} rad in amplitude (t = {self.asymmetry_t:.1f})")
+        if self.envelope_law:
+            out.append(f"the measured envelope decays most like a{'n' if self.envelope_law[0] in 'aeiou' else ''} {self.envelope_law} law")
+        if self.stopped:
+            out.append("the pendulum came to rest within the record (stuck by friction)")
+        return out
+
+
+def _uniform(t: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float]:
+    dt = float(np.median(np.diff(t)))
+    if np.max(np.abs(np.diff(t) - dt)) <= 0.01 * dt:
+        return r, dt
+    tu = np.arange(t[0], t[-1], dt)
+    return np.interp(tu, t, r), dt
+
+
+def _envelope_law(times: np.ndarray, amps: np.ndarray) -> tuple[str | None, dict]:
+    """Which decay law fits the peak amplitudes best: exponential, linear, hyperbolic."""
+    if amps.size < 5:
+        return None, {}
+    laws = {
+        "exponential (viscous)": (np.log(amps), np.exp),
+        "linear (coulomb)": (amps, lambda v: v),
+        "hyperbolic (quadratic drag)": (1.0 / amps, lambda v: 1.0 / np.clip(v, 1e-12, None)),
+    }
+    errors = {}
+    for law, (z, back) in laws.items():
+        coef = np.polyfit(times, z, 1)
+        pred = back(np.polyval(coef, times))
+        errors[law.split(" ")[0]] = float(np.sqrt(np.mean((pred - amps) ** 2)) / np.mean(amps))
+    best = min(errors, key=errors.get)
+    runner_up = min(v for k, v in errors.items() if k != best)
+    # Over a small decay the three laws look alike; name one only when the
+    # amplitude fell by a third and the best law fits clearly better.
+    if amps.min() > 0.67 * amps.max() or errors[best] > 0.5 * runner_up:
+        return None, errors
+    full = next(k for k in laws if k.startswith(best))
+    return full, errors
+
+
+def _slope_t(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    if x.size < 4 or np.ptp(x) == 0:
+        return 0.0, 0.0
+    A = np.vstack([x, np.ones_like(x)]).T
+    coef, res, *_ = np.linalg.lstsq(A, y, rcond=None)
+    resid = y - A @ coef
+    s2 = float(resid @ resid) / max(x.size - 2, 1)
+    var = s2 / float(np.sum((x - x.mean()) ** 2))
+    se = math.sqrt(var) if var > 0 else 0.0
+    return float(coef[0]), float(coef[0] / se) if se > 0 else 0.0
+
+
+def diagnose(fit: ModelFit, noise: float, stopped: bool = False) -> Diagnostics:
+    """Diagnostics of ``fit``'s residual; noise: the noise floor estimated from the data, rad."""
+    r = fit.residual
+    n = r.size
+    rms = fit.residual_rms
+    ratio = rms / noise if noise > 0 else math.inf
+    lags = int(min(20, max(2, n // 10)))
+    rho = autocorrelation(r, lags)
+    q = n * (n + 2) * float(np.sum(rho[1:] ** 2 / (n - np.arange(1, lags + 1))))
+    p = float(chi2.sf(q, lags))
+    white = p > 1e-3
+
+    offset = float(fit.x[fit.model.n_dynamic])
+    sw_data = find_swings(fit.t, fit.y, centre=offset, hysteresis=3 * noise)
+    sw_fit = find_swings(fit.t, fit.fitted, centre=offset, hysteresis=3 * noise)
+    swing_hz = sw_fit.damped_frequency / (2 * math.pi) if math.isfinite(sw_fit.damped_frequency) else float("nan")
+
+    ru, dt = _uniform(fit.t, r)
+    spec = np.abs(np.fft.rfft(ru - ru.mean())) ** 2
+    freqs = np.fft.rfftfreq(ru.size, dt)
+    line_hz, line_fraction, low_fraction = None, 0.0, 0.0
+    total = float(spec[1:].sum())
+    if total > 0 and spec.size > 8:
+        k = int(np.argmax(spec[1:])) + 1
+        band = spec[max(1, k - 3): k + 4].sum()
+        line_hz, line_fraction = float(freqs[k]), float(band / total)
+        if math.isfinite(swing_hz):
+            low_fraction = float(spec[1:][freqs[1:] < 0.3 * swing_hz].sum() / total)
+
+    amps = np.abs(sw_data.peak_values)
+    good = amps > 20 * noise
+    law, errors = _envelope_law(sw_data.peak_times[good], amps[good])
+
+    m = min(sw_data.peak_values.size, sw_fit.peak_values.size)
+    fa_slope = fa_t = c_slope = c_t = asym = asym_t = 0.0
+    if m >= 6 and sw_data.crossings.size >= 5 and sw_fit.crossings.size >= 5:
+        mc = min(sw_data.crossings.size, sw_fit.crossings.size)
+        w_data = math.pi / np.diff(sw_data.crossings[:mc])
+        w_fit = math.pi / np.diff(sw_fit.crossings[:mc])
+        # the half-swing between crossings i and i+1 has its peak at index i+1
+        a_half = np.abs(sw_data.peak_values[1:mc])
+        k2 = min(a_half.size, w_data.size)
+        fa_slope, fa_t = _slope_t(a_half[:k2] ** 2, (w_data - w_fit)[:k2])
+        pd, pf = sw_data.peak_values[:m], sw_fit.peak_values[:m]
+        mid = 0.5 * ((pd[:-1] + pd[1:]) - (pf[:-1] + pf[1:]))
+        c_slope, c_t = _slope_t(sw_data.peak_times[1:m], mid)
+        diff = np.abs(pd) - np.abs(pf)
+        pos, neg = diff[pd > 0], diff[pd < 0]
+        if pos.size >= 3 and neg.size >= 3:
+            asym = float(pos.mean() - neg.mean())
+            se = math.sqrt(pos.var(ddof=1) / pos.size + neg.var(ddof=1) / neg.size)
+            asym_t = asym / se if se > 0 else 0.0
+    return Diagnostics(
+        residual_rms=rms, noise_floor=noise, rms_ratio=ratio, lag1=float(rho[1]), whiteness_p=p, white=white,
+        swing_hz=swing_hz, line_hz=line_hz, line_fraction=line_fraction, low_frequency_fraction=low_fraction,
+        envelope_law=law, envelope_errors=errors, stopped=stopped,
+        freq_amp_slope=fa_slope, freq_amp_t=fa_t, centre_slope=c_slope, centre_t=c_t,
+        asymmetry=asym, asymmetry_t=asym_t,
+    )

@@ -1,0 +1,253 @@
+"""The identification result: one plain, complete, serialisable object.
+
+The JSON of ``moi identify --json``, the MQTT payload and the Modbus
+registers are all produced from this object (``to_dict``), so they cannot
+disagree. Arrays (trace, fit, residuals) stay on the object for plots and the
+result store and are left out of ``to_dict`` unless asked for.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+SCHEMA_VERSION = 1
+
+
+def _num(v: Any) -> Any:
+    if v is None:
+        return None
+    if isinstance(v, (np.floating, float)):
+        f = float(v)
+        return f if math.isfinite(f) else None
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    return v
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A value with its 1σ standard uncertainty and SI unit (value None = unknown)."""
+
+    value: float | None
+    std: float | None
+    unit: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"value": _num(self.value), "std": _num(self.std), "unit": self.unit}
+
+    def __str__(self) -> str:
+        if self.value is None:
+            return f"n/a ({self.unit})"
+        if self.std is None or not math.isfinite(self.std):
+            return f"{self.value:.6g} {self.unit}"
+        return f"{self.value:.7g} ± {self.std:.2g} {self.unit}"
+
+
+@dataclass(frozen=True)
+class ModelSummary:
+    """What one model (the declared one, or the final one) says."""
+
+    effects: tuple[str, ...]
+    J: float | None
+    J_std: float | None
+    omega_n: float
+    omega_n_std: float
+    residual_rms: float
+    bic: float
+    aic: float
+    damping: dict[str, dict[str, Quantity]]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "effects": list(self.effects),
+            "J": _num(self.J), "J_std": _num(self.J_std),
+            "omega_n": _num(self.omega_n), "omega_n_std": _num(self.omega_n_std),
+            "residual_rms": _num(self.residual_rms),
+            "bic": _num(self.bic), "aic": _num(self.aic),
+            "damping": {e: {k: q.to_dict() for k, q in ps.items()} for e, ps in self.damping.items()},
+        }
+
+
+@dataclass(frozen=True)
+class DiscoveryStep:
+    """One round of the discovery loop and its evidence.
+
+    candidates: effect → {bic, residual_rms, excess_explained} for every effect tried.
+    chosen: the effect added this round, or None when none helped (the loop stopped).
+    evidence: the diagnostics that pointed to the chosen effect, in words.
+    """
+
+    round: int
+    residual_rms_before: float
+    bic_before: float
+    candidates: dict[str, dict[str, float]]
+    chosen: str | None
+    residual_rms_after: float | None
+    bic_after: float | None
+    evidence: str
+    reason: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "round": self.round,
+            "residual_rms_before": _num(self.residual_rms_before), "bic_before": _num(self.bic_before),
+            "candidates": {k: {kk: _num(vv) for kk, vv in v.items()} for k, v in self.candidates.items()},
+            "chosen": self.chosen,
+            "residual_rms_after": _num(self.residual_rms_after), "bic_after": _num(self.bic_after),
+            "evidence": self.evidence, "reason": self.reason,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class IdentificationResult:
+    """Everything a measurement says. SI units; *_std are 1σ standard uncertainties.
+
+    J: total inertia about the pivot, kg·m² (None when the rig lacks k or m·S).
+    J_object: J − tare_inertia (None without a tare).
+    J_object_axis: seed 000 eq. 2, J_object − m·L² about the object's own axis.
+    omega_n: small-amplitude natural angular frequency, rad/s.
+    damping_ratio: equivalent viscous damping ratio at ``reference_amplitude``.
+    residual_rms / noise_floor: rad; baseline: the declared model's summary.
+    """
+
+    source: str
+    rig_kind: str
+    J: float | None
+    J_std: float | None
+    J_std_calibration: float | None
+    J_object: float | None
+    J_object_std: float | None
+    J_object_axis: float | None
+    J_object_axis_std: float | None
+    omega_n: float
+    omega_n_std: float
+    damping_ratio: float
+    damping_ratio_std: float
+    reference_amplitude: float
+    offset: Quantity
+    damping: dict[str, dict[str, Quantity]]
+    stiffness: dict[str, dict[str, Quantity]]
+    sensor: dict[str, dict[str, Quantity]]
+    declared_effects: tuple[str, ...]
+    effects: tuple[str, ...]
+    added_effects: tuple[str, ...]
+    residual_rms: float
+    noise_floor: float
+    statistics: dict[str, Any]
+    flags: tuple[str, ...]
+    baseline: ModelSummary
+    steps: tuple[DiscoveryStep, ...]
+    diagnostics: dict[str, Any]
+    structure: tuple[str, ...]
+    window: dict[str, Any]
+    arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+    @property
+    def error_reduction(self) -> float | None:
+        """Fraction by which the final model lowered the declared model's residual RMS."""
+        if self.baseline.residual_rms > 0:
+            return 1.0 - self.residual_rms / self.baseline.residual_rms
+        return None
+
+    def to_dict(self, include_arrays: bool = False) -> dict[str, Any]:
+        d: dict[str, Any] = {
+            "schema": SCHEMA_VERSION,
+            "source": self.source,
+            "rig_kind": self.rig_kind,
+            "J": _num(self.J), "J_std": _num(self.J_std),
+            "J_std_calibration": _num(self.J_std_calibration),
+            "J_object": _num(self.J_object), "J_object_std": _num(self.J_object_std),
+            "J_object_axis": _num(self.J_object_axis), "J_object_axis_std": _num(self.J_object_axis_std),
+            "omega_n": _num(self.omega_n), "omega_n_std": _num(self.omega_n_std),
+            "damping_ratio": _num(self.damping_ratio), "damping_ratio_std": _num(self.damping_ratio_std),
+            "reference_amplitude": _num(self.reference_amplitude),
+            "offset": self.offset.to_dict(),
+            "declared_effects": list(self.declared_effects),
+            "effects": list(self.effects),
+            "added_effects": list(self.added_effects),
+            "damping": {e: {k: q.to_dict() for k, q in ps.items()} for e, ps in self.damping.items()},
+            "stiffness": {e: {k: q.to_dict() for k, q in ps.items()} for e, ps in self.stiffness.items()},
+            "sensor": {e: {k: q.to_dict() for k, q in ps.items()} for e, ps in self.sensor.items()},
+            "residual_rms": _num(self.residual_rms),
+            "noise_floor": _num(self.noise_floor),
+            "error_reduction": _num(self.error_reduction),
+            "statistics": {k: _num(v) for k, v in self.statistics.items()},
+            "flags": list(self.flags),
+            "baseline": self.baseline.to_dict(),
+            "steps": [s.to_dict() for s in self.steps],
+            "diagnostics": {k: _num(v) for k, v in self.diagnostics.items()},
+            "structure": list(self.structure),
+            "window": {k: _num(v) for k, v in self.window.items()},
+        }
+        if include_arrays:
+            d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
+        return d
+
+    def to_json(self, **kwargs: Any) -> str:
+        return json.dumps(self.to_dict(**kwargs), ensure_ascii=False, allow_nan=False)
+
+    # -- readable report -------------------------------------------------------
+    def report(self) -> str:
+        """A plain-text report for the technician (lmfit ``fit_report`` style)."""
+        L: list[str] = []
+        s = self.statistics
+        L.append(f"[[Identification]] {self.source}  ({self.rig_kind} rig)")
+        L.append(f"    samples {s.get('n')}, window {self.window.get('t_start', 0):.3f}–{self.window.get('t_stop', 0):.3f} s,"
+                 f" {s.get('nfev')} simulations, converged: {s.get('success')}")
+        L.append("[[Result]]")
+        if self.J is not None:
+            extra = f" (calibration adds ±{self.J_std_calibration:.2g})" if self.J_std_calibration else ""
+            L.append(f"    J            = {Quantity(self.J, self.J_std, 'kg·m²')}{extra}")
+        else:
+            L.append("    J            = n/a: the rig gives no stiffness (torsion) or mass·com_distance (compound)")
+        if self.J_object is not None:
+            L.append(f"    J_object     = {Quantity(self.J_object, self.J_object_std, 'kg·m²')}  (J − tare)")
+        if self.J_object_axis is not None:
+            L.append(f"    J_object_axis= {Quantity(self.J_object_axis, self.J_object_axis_std, 'kg·m²')}  (own axis, J_D − m·L²)")
+        L.append(f"    omega_n      = {Quantity(self.omega_n, self.omega_n_std, 'rad/s')}"
+                 f"  (f_n = {self.omega_n / (2 * math.pi):.6g} Hz)")
+        L.append(f"    damping ratio= {Quantity(self.damping_ratio, self.damping_ratio_std, '')}"
+                 f" (equivalent viscous, at {self.reference_amplitude:.4g} rad)")
+        for group, title in ((self.damping, "damping"), (self.stiffness, "stiffness"), (self.sensor, "sensor")):
+            for eff, params in group.items():
+                for name, q in params.items():
+                    if q.value is not None:
+                        L.append(f"    {eff}.{name:<10} = {q}")
+        L.append(f"    offset       = {self.offset}")
+        L.append("[[Model]]")
+        L.append(f"    declared : {', '.join(self.declared_effects) or '(none)'}")
+        L.append(f"    final    : {', '.join(self.effects) or '(none)'}")
+        L.append(f"    added    : {', '.join(self.added_effects) or '(none)'}")
+        L.append("[[Before / after]]")
+        b = self.baseline
+        jb = f"{b.J:.7g}" if b.J is not None else "n/a"
+        ja = f"{self.J:.7g}" if self.J is not None else "n/a"
+        L.append(f"    {'':14}{'declared':>16}{'final':>16}")
+        L.append(f"    {'J [kg·m²]':14}{jb:>16}{ja:>16}")
+        L.append(f"    {'omega_n [rad/s]':14}{b.omega_n:>15.7g}{self.omega_n:>16.7g}")
+        L.append(f"    {'residual [rad]':14}{b.residual_rms:>16.4g}{self.residual_rms:>16.4g}")
+        L.append(f"    {'BIC':14}{b.bic:>16.1f}{s.get('bic', float('nan')):>16.1f}")
+        L.append(f"    noise floor {self.noise_floor:.3g} rad; residual/noise {self.residual_rms / self.noise_floor if self.noise_floor else float('nan'):.3g};"
+                 f" error reduction {100 * (self.error_reduction or 0):.1f} %")
+        if self.steps:
+            L.append("[[Discovery]]")
+            for st in self.steps:
+                tried = ", ".join(f"{k} ΔBIC {v['bic'] - st.bic_before:+.1f}" for k, v in st.candidates.items())
+                if st.chosen:
+                    L.append(f"    round {st.round}: added {st.chosen} — {st.reason}")
+                    if st.evidence:
+                        L.append(f"        evidence: {st.evidence}")
+                else:
+                    L.append(f"    round {st.round}: nothing added — {st.reason}")
+                if tried:
+                    L.append(f"        tried: {tried}")
+        L.append("[[Residual]]")
+        for line in self.structure:
+            L.append(f"    {line}")
+        L.append(f"[[Flags]] {', '.join(self.flags) if self.flags else 'none'}")
+        return "\n".join(L)

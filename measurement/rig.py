@@ -1,0 +1,178 @@
+"""The rig: what swings and what restores it.
+
+Two kinds (DESIGN.md):
+
+* ``torsion``: restoring torque k·θ; J = k / ω_n².
+* ``compound``: restoring torque m·g·S·sin θ (exact, not small-angle);
+  J = m·g·S / ω_n².
+
+A rig without its constant (no k, or no m and S) is valid: ω_n and the
+damping normalised by J are still identified, J is then unknown (None).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any, Mapping
+
+from .errors import RigError
+
+STANDARD_GRAVITY = 9.80665  # m/s²
+
+RIG_KINDS = ("torsion", "compound")
+
+_RIG_KEYS = {
+    "kind", "stiffness", "stiffness_std", "tare_inertia", "tare_inertia_std",
+    "mass", "com_distance", "g",
+}
+_OBJECT_KEYS = {"mass", "axis_offset"}
+_MODEL_KEYS = {"declared"}
+
+
+def _positive(name: str, value: Any, unit: str, *, allow_zero: bool = False) -> float:
+    """Return ``value`` as a finite float > 0 (or >= 0), else raise RigError."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise RigError(f"rig: {name} must be a number in {unit}, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        expect = ">= 0" if allow_zero else "> 0"
+        raise RigError(f"rig: {name} must be {expect} {unit}, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class ObjectTransfer:
+    """Seed 000 eq. 2: J_S = J_D − m_D·L², the object's inertia about its own axis.
+
+    mass: m_D, kg. axis_offset: L, m, from the pivot to the object's own axis.
+    """
+
+    mass: float
+    axis_offset: float
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A pendulum rig. SI units throughout.
+
+    kind: "torsion" | "compound".
+    stiffness: k, N·m/rad (torsion); None when not calibrated.
+    stiffness_std: 1σ of k from calibration, N·m/rad (optional).
+    tare_inertia: J of the empty fixture, kg·m² (optional): J_object = J − tare.
+    mass, com_distance: m (kg) and S (m) of the swinging body (compound).
+    g: local gravity, m/s².
+    declared: effect names the user declares (from ``[model] declared``).
+    """
+
+    kind: str
+    stiffness: float | None = None
+    stiffness_std: float | None = None
+    tare_inertia: float | None = None
+    tare_inertia_std: float | None = None
+    mass: float | None = None
+    com_distance: float | None = None
+    g: float = STANDARD_GRAVITY
+    object: ObjectTransfer | None = None
+    declared: tuple[str, ...] = field(default=("viscous",))
+
+    def __post_init__(self) -> None:
+        if self.kind not in RIG_KINDS:
+            raise RigError(f"rig: unknown kind {self.kind!r}; expected one of {', '.join(RIG_KINDS)}")
+        if self.kind == "torsion" and (self.mass is not None or self.com_distance is not None):
+            # m and S do not enter a torsion rig's equation; accepting them silently
+            # would let a user believe they were used.
+            raise RigError("rig: mass/com_distance belong to a compound rig; kind is 'torsion'")
+        if self.kind == "compound" and self.stiffness is not None:
+            raise RigError("rig: stiffness belongs to a torsion rig; kind is 'compound'")
+        from .effects import resolve_effects  # late import: effects needs Rig only as a type
+
+        resolve_effects(self.declared, self)
+
+    # -- derived constants ---------------------------------------------------
+    @property
+    def restoring_constant(self) -> float | None:
+        """C such that J = C / ω_n²: k (N·m/rad) or m·g·S (N·m); None if unknown."""
+        if self.kind == "torsion":
+            return self.stiffness
+        if self.mass is not None and self.com_distance is not None:
+            return self.mass * self.g * self.com_distance
+        return None
+
+    @property
+    def restoring_constant_std(self) -> float | None:
+        """1σ of the restoring constant from calibration, when known."""
+        if self.kind == "torsion":
+            return self.stiffness_std
+        return None
+
+    def with_declared(self, declared: tuple[str, ...] | list[str]) -> "Rig":
+        return replace(self, declared=tuple(declared))
+
+    # -- (de)serialisation ---------------------------------------------------
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> "Rig":
+        """Build a rig from the parsed TOML document of DESIGN.md."""
+        unknown_tables = set(doc) - {"rig", "object", "model"}
+        if unknown_tables:
+            raise RigError(f"rig file: unknown table(s) {sorted(unknown_tables)}; expected [rig], [object], [model]")
+        rig = doc.get("rig")
+        if not isinstance(rig, Mapping):
+            raise RigError("rig file: missing [rig] table")
+        unknown = set(rig) - _RIG_KEYS
+        if unknown:
+            raise RigError(f"rig file: unknown key(s) in [rig]: {sorted(unknown)}; expected {sorted(_RIG_KEYS)}")
+        if "kind" not in rig:
+            raise RigError("rig file: [rig] kind is missing; expected \"torsion\" or \"compound\"")
+        kind = rig["kind"]
+        if kind not in RIG_KINDS:
+            raise RigError(f"rig file: unknown kind {kind!r}; expected one of {', '.join(RIG_KINDS)}")
+
+        def opt(name: str, unit: str, allow_zero: bool = False) -> float | None:
+            return None if name not in rig else _positive(name, rig[name], unit, allow_zero=allow_zero)
+
+        obj = None
+        if "object" in doc:
+            o = doc["object"]
+            if not isinstance(o, Mapping) or set(o) != _OBJECT_KEYS:
+                raise RigError("rig file: [object] needs exactly mass (kg) and axis_offset (m)")
+            obj = ObjectTransfer(
+                mass=_positive("object.mass", o["mass"], "kg"),
+                axis_offset=_positive("object.axis_offset", o["axis_offset"], "m", allow_zero=True),
+            )
+        declared: tuple[str, ...] = ("viscous",)
+        if "model" in doc:
+            m = doc["model"]
+            if not isinstance(m, Mapping) or set(m) - _MODEL_KEYS:
+                raise RigError("rig file: [model] takes only declared = [effect names]")
+            d = m.get("declared", [])
+            if not isinstance(d, list) or not all(isinstance(x, str) for x in d):
+                raise RigError("rig file: [model] declared must be a list of effect names")
+            declared = tuple(d)
+        return cls(
+            kind=kind,
+            stiffness=opt("stiffness", "N·m/rad"),
+            stiffness_std=opt("stiffness_std", "N·m/rad", allow_zero=True),
+            tare_inertia=opt("tare_inertia", "kg·m²", allow_zero=True),
+            tare_inertia_std=opt("tare_inertia_std", "kg·m²", allow_zero=True),
+            mass=opt("mass", "kg"),
+            com_distance=opt("com_distance", "m"),
+            g=opt("g", "m/s²") or STANDARD_GRAVITY,
+            object=obj,
+            declared=declared,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The TOML document of DESIGN.md (None values left out)."""
+        rig: dict[str, Any] = {"kind": self.kind}
+        for key in ("stiffness", "stiffness_std", "tare_inertia", "tare_inertia_std", "mass", "com_distance"):
+            value = getattr(self, key)
+            if value is not None:
+                rig[key] = value
+        if self.g != STANDARD_GRAVITY:
+            rig["g"] = self.g
+        doc: dict[str, Any] = {"rig": rig}
+        if self.object is not None:
+            doc["object"] = {"mass": self.object.mass, "axis_offset": self.object.axis_offset}
+        doc["model"] = {"declared": list(self.declared)}
+        return doc

@@ -1,0 +1,165 @@
+"""Physical simulation of a swing: truth for tests, mocks and `moi simulate`.
+
+``Pendulum`` is the truth (rig, J, effects with values); ``simulate_trace``
+samples it like a sensor would (rate, jitter, noise, encoder quantisation,
+zero offset); ``Swing`` gives θ at any time for live mocks (the simulated
+encoder and camera ask for the angle "now").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+from scipy.interpolate import CubicHermiteSpline
+
+from .effects import resolve_effects
+from .errors import InvalidInput
+from .integrator import default_max_step
+from .model import Model, normalise_effect_values, omega_n_of
+from .rig import Rig
+from .trace import Trace
+
+
+@dataclass(frozen=True)
+class Pendulum:
+    """A pendulum with known truth.
+
+    rig: the rig (its restoring constant turns J into ω_n).
+    inertia: J, kg·m² (total about the pivot).
+    effects: effect name → {parameter: value}; physical names (c, Tc, mu,
+    K, k3, rate) or normalised ones (c_per_J, ...).
+    """
+
+    rig: Rig
+    inertia: float
+    effects: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.inertia, (int, float)) and self.inertia > 0 and math.isfinite(self.inertia)):
+            raise InvalidInput(f"inertia must be a finite number > 0 kg·m², got {self.inertia!r}")
+
+    @property
+    def omega_n(self) -> float:
+        return omega_n_of(self.rig, self.inertia)
+
+    @property
+    def model(self) -> Model:
+        return Model(self.rig, tuple(resolve_effects(self.effects, self.rig)))
+
+    def parameter_vector(self, theta0: float, omega0: float = 0.0, offset: float = 0.0) -> np.ndarray:
+        m = self.model
+        x = [theta0, omega0, self.omega_n]
+        for e in m.dynamic:
+            x += normalise_effect_values(self.rig, e, self.effects[e.name], self.inertia)
+        x.append(offset)
+        for e in m.sensor:
+            x += normalise_effect_values(self.rig, e, self.effects[e.name], self.inertia)
+        return np.asarray(x, dtype=float)
+
+    def max_step(self, amplitude: float) -> float:
+        """Integration step (s) accurate at this amplitude (rad)."""
+        k3_ratio = 0.0
+        if "cubic_stiffness" in self.effects:
+            eff = next(e for e in self.model.effects if e.name == "cubic_stiffness")
+            k3 = normalise_effect_values(self.rig, eff, self.effects["cubic_stiffness"], self.inertia)[0]
+            k3_ratio = k3 / self.omega_n**2
+        return default_max_step(self.omega_n, amplitude, k3_ratio)
+
+    def motion(self, t: np.ndarray, theta0: float, omega0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """True θ (rad) and θ' (rad/s) at times t (s), starting at t[0]; sensor effects excluded."""
+        x = self.parameter_vector(theta0, omega0)
+        return self.model.true_angle(x, np.asarray(t, dtype=float), self.max_step(abs(theta0)))
+
+    def sensor_terms(self, t: np.ndarray, offset: float = 0.0) -> np.ndarray:
+        """Offset plus sensor effects (e.g. drift) at times t, rad."""
+        m = self.model
+        x = self.parameter_vector(0.0, 0.0, offset)
+        return m.sensor_columns(np.asarray(t, dtype=float)) @ x[m.n_dynamic:]
+
+
+def quantise(angle: np.ndarray, bits: int) -> np.ndarray:
+    """Round to an absolute encoder's resolution of 2π/2^bits rad."""
+    if not (isinstance(bits, int) and 4 <= bits <= 32):
+        raise InvalidInput(f"encoder resolution must be 4..32 bits, got {bits!r}")
+    step = 2.0 * math.pi / (1 << bits)
+    return np.round(angle / step) * step
+
+
+def simulate_trace(
+    pendulum: Pendulum,
+    *,
+    theta0: float,
+    duration: float,
+    rate: float,
+    omega0: float = 0.0,
+    offset: float = 0.0,
+    noise_std: float = 0.0,
+    quantisation_bits: int | None = None,
+    jitter: float = 0.0,
+    pre_trigger: float = 0.0,
+    seed: int | None = None,
+) -> Trace:
+    """Sample a free swing like a sensor.
+
+    theta0: release angle, rad (held at rest for ``pre_trigger`` s first).
+    duration: s after the release; rate: samples per second, Hz.
+    noise_std: white angle noise, rad; quantisation_bits: encoder resolution.
+    jitter: std of the timestamp jitter as a fraction of the sample interval
+    (uneven timestamps, order kept).
+    """
+    if not (duration > 0 and rate > 0):
+        raise InvalidInput(f"duration and rate must be > 0 (got {duration} s, {rate} Hz)")
+    if noise_std < 0 or jitter < 0 or pre_trigger < 0:
+        raise InvalidInput("noise, jitter and pre-trigger must be >= 0")
+    if jitter >= 0.45:
+        raise InvalidInput("jitter must be < 0.45 of the sample interval to keep time increasing")
+    rng = np.random.default_rng(seed)
+    dt = 1.0 / rate
+    n_pre = int(round(pre_trigger * rate))
+    n = int(round(duration * rate)) + 1
+    t = np.arange(-n_pre, n) * dt
+    if jitter:
+        t = t + rng.normal(0.0, jitter * dt, t.size).clip(-0.45 * dt, 0.45 * dt)
+        t[n_pre] = 0.0
+    release = n_pre
+    theta = np.empty_like(t)
+    theta[:release] = theta0
+    theta[release:], _ = pendulum.motion(t[release:], theta0, omega0)
+    measured = theta + pendulum.sensor_terms(t - t[0], offset)
+    if noise_std:
+        measured = measured + rng.normal(0.0, noise_std, t.size)
+    if quantisation_bits:
+        measured = quantise(measured, quantisation_bits)
+    t = t - t[0]
+    return Trace(t, measured, source="simulation", meta={"truth": {
+        "J": pendulum.inertia, "omega_n": pendulum.omega_n, "effects": {k: dict(v) for k, v in pendulum.effects.items()},
+        "theta0": theta0, "offset": offset, "noise_std": noise_std, "quantisation_bits": quantisation_bits,
+    }})
+
+
+class Swing:
+    """θ(t) of one free swing after a release, for live mocks.
+
+    The swing is integrated once on a fine grid (1 kHz or 40 points per
+    period) and read back with cubic Hermite interpolation from θ and θ'.
+    """
+
+    def __init__(self, pendulum: Pendulum, theta0: float, duration: float, omega0: float = 0.0):
+        steps_per_period = 40.0
+        fine = max(1000.0, steps_per_period * pendulum.omega_n / (2 * math.pi))
+        t = np.arange(0.0, duration + 2.0 / fine, 1.0 / fine)
+        theta, omega = pendulum.motion(t, theta0, omega0)
+        self.duration = float(t[-1])
+        self.theta0 = float(theta0)
+        self._spline = CubicHermiteSpline(t, theta, omega)
+        self._final = float(theta[-1])
+
+    def angle(self, t_since_release: float | np.ndarray) -> float | np.ndarray:
+        """True angle (rad) at time(s) after the release (s); θ0 before it."""
+        ts = np.asarray(t_since_release, dtype=float)
+        out = np.where(ts <= 0, self.theta0, self._spline(np.clip(ts, 0.0, self.duration)))
+        out = np.where(ts > self.duration, self._final, out)
+        return float(out) if out.ndim == 0 else out

@@ -1,0 +1,111 @@
+"""Angle traces: validation and the CSV format of DESIGN.md (parsing only, no file I/O)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass, field
+from typing import Iterable
+
+import numpy as np
+
+from .errors import TraceError
+
+
+@dataclass(frozen=True, eq=False)
+class Trace:
+    """A recorded swing: times t (s, strictly increasing, possibly uneven) and angle (rad).
+
+    flags: facts about the acquisition the identification must report
+    (e.g. "dropped_frames"); meta: free-form provenance (source, sensor).
+    """
+
+    t: np.ndarray
+    angle: np.ndarray
+    source: str = "trace"
+    flags: tuple[str, ...] = ()
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t, dtype=float)
+        a = np.asarray(self.angle, dtype=float)
+        if t.ndim != 1 or a.ndim != 1 or t.shape != a.shape:
+            raise TraceError(f"{self.source}: t and angle must be 1-D columns of equal length, got {t.shape} and {a.shape}")
+        if t.size == 0:
+            raise TraceError(f"{self.source}: the trace is empty; expected rows of t (s) and angle (rad)")
+        bad = ~np.isfinite(t) | ~np.isfinite(a)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise TraceError(
+                f"{self.source}: non-finite value (NaN/inf gap) at row {i + 1} (t={t[i]!r}); "
+                "expected finite numbers in every row (drop the gap rows: timestamps may be uneven)"
+            )
+        dt = np.diff(t)
+        if (dt <= 0).any():
+            i = int(np.argmax(dt <= 0))
+            raise TraceError(
+                f"{self.source}: time is not strictly increasing at row {i + 2} "
+                f"(t={t[i + 1]!r} after {t[i]!r}); expected increasing timestamps in s"
+            )
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "angle", a)
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def duration(self) -> float:
+        """s"""
+        return float(self.t[-1] - self.t[0])
+
+    @property
+    def sample_rate(self) -> float:
+        """Median sample rate, Hz."""
+        return float(1.0 / np.median(np.diff(self.t))) if len(self) > 1 else float("nan")
+
+    def to_csv(self, header_comment: str | None = None) -> str:
+        """CSV text with columns t (s) and angle (rad); comment lines start with '#'."""
+        buf = io.StringIO()
+        if header_comment:
+            for line in header_comment.splitlines():
+                buf.write(f"# {line}\n")
+        buf.write("t,angle\n")
+        for ti, ai in zip(self.t, self.angle):
+            buf.write(f"{ti:.9f},{ai:.12g}\n")
+        return buf.getvalue()
+
+
+def parse_trace_csv(lines: Iterable[str], source: str = "trace") -> Trace:
+    """Parse the trace CSV of DESIGN.md: a header row with columns t (s) and angle (rad).
+
+    Other columns are ignored, lines starting with '#' are comments.
+    Raises TraceError naming the row and what was expected.
+    """
+    content = [(n, line) for n, line in enumerate(lines, start=1) if line.strip() and not line.lstrip().startswith("#")]
+    if not content:
+        raise TraceError(f"{source}: no header row; expected a CSV with columns t (s) and angle (rad)")
+    header_no, header_line = content[0]
+    header = [h.strip() for h in next(csv.reader([header_line]))]
+    missing = [c for c in ("t", "angle") if c not in header]
+    if missing:
+        raise TraceError(f"{source}: missing column(s) {', '.join(missing)} in header {header}; expected columns t (s) and angle (rad)")
+    it, ia = header.index("t"), header.index("angle")
+    t, a = [], []
+    for n, line in content[1:]:
+        row = next(csv.reader([line]))
+        if len(row) <= max(it, ia):
+            raise TraceError(f"{source}: line {n} has {len(row)} cells; expected at least {max(it, ia) + 1} (t and angle)")
+        try:
+            t.append(float(row[it]))
+            a.append(float(row[ia]))
+        except ValueError:
+            raise TraceError(f"{source}: line {n}: non-numeric cell in {row!r}; expected numbers for t (s) and angle (rad)") from None
+    if not t:
+        raise TraceError(f"{source}: the trace is empty (a header but no data rows)")
+    for n_value, (tv, av) in enumerate(zip(t, a)):
+        if not (math.isfinite(tv) and math.isfinite(av)):
+            # find the file line of this data row for the message
+            line_no = content[1 + n_value][0]
+            raise TraceError(f"{source}: line {line_no}: NaN/inf in t or angle; expected finite numbers (drop gap rows instead)")
+    return Trace(np.asarray(t), np.asarray(a), source=source)
