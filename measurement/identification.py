@@ -73,12 +73,12 @@ def prepare(trace: Trace, options: Options = Options()) -> Prepared:
     t_all, y_all = trace.t, trace.angle
     if len(trace) < 30:
         raise TraceError(f"{trace.source}: only {len(trace)} samples; expected at least 30 covering {options.min_swings:g} swings")
-    noise = noise_floor(y_all)
     span = float(np.ptp(y_all))
     if span == 0:
         raise TraceError(f"{trace.source}: the angle never changes; expected a free swing")
-    noise = max(noise, 1e-9 * span)  # noise-free simulations still need a scale
-    spikes = spike_candidates(y_all, noise)
+    floor = 1e-9 * span  # noise-free simulations still need a scale
+    spikes = spike_candidates(y_all, max(noise_floor(y_all, robust=True), floor))
+    noise = max(noise_floor(y_all, exclude=spikes), floor)
     keep = np.ones(y_all.size, dtype=bool)
     keep[spikes] = False
     win = swing_window(t_all[keep], y_all[keep], noise)
@@ -316,5 +316,5 @@ def identify(trace: Trace, rig: Rig, options: Options = Options()) -> Identifica
         declared_effects=declared.effect_names, effects=final.model.effect_names, added_effects=added,
         residual_rms=final.residual_rms, noise_floor=prep.noise, statistics=statistics, flags=tuple(dict.fromkeys(flags)),
         baseline=_summary(base, rig), steps=tuple(steps), diagnostics=diag.as_dict(), structure=tuple(structure),
-        window=window, arrays=arrays,
+        window=window, acquisition={k: v for k, v in trace.meta.items() if k != "truth"}, arrays=arrays,
     )

@@ -29,6 +29,16 @@ def _num(v: Any) -> Any:
     return v
 
 
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return [_jsonable(x) for x in v.tolist()]
+    return _num(v)
+
+
 @dataclass(frozen=True)
 class Quantity:
     """A value with its 1σ standard uncertainty and SI unit (value None = unknown)."""
@@ -145,6 +155,8 @@ class IdentificationResult:
     diagnostics: dict[str, Any]
     structure: tuple[str, ...]
     window: dict[str, Any]
+    #: facts from the sensor path (camera yaw, dropped frames, encoder errors...), from Trace.meta
+    acquisition: dict[str, Any] = field(default_factory=dict)
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -183,6 +195,7 @@ class IdentificationResult:
             "diagnostics": {k: _num(v) for k, v in self.diagnostics.items()},
             "structure": list(self.structure),
             "window": {k: _num(v) for k, v in self.window.items()},
+            "acquisition": _jsonable(self.acquisition),
         }
         if include_arrays:
             d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
@@ -249,5 +262,9 @@ class IdentificationResult:
         L.append("[[Residual]]")
         for line in self.structure:
             L.append(f"    {line}")
+        if self.acquisition:
+            L.append("[[Acquisition]]")
+            for k, v in self.acquisition.items():
+                L.append(f"    {k}: {v}")
         L.append(f"[[Flags]] {', '.join(self.flags) if self.flags else 'none'}")
         return "\n".join(L)

@@ -24,14 +24,19 @@ def robust_std(x: np.ndarray) -> float:
     return float(_MAD_TO_SIGMA * np.median(np.abs(x - np.median(x))))
 
 
-def noise_floor(angle: np.ndarray, orders: range = range(2, 7)) -> float:
+def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bool = False,
+                orders: range = range(2, 7)) -> float:
     """White-noise σ of a densely sampled smooth signal, rad.
 
     k-th differences remove a smooth signal (it contributes ≈ A·(ω·Δt)^k) and
     turn white noise of σ into noise of σ·sqrt(C(2k, k)). Each order gives an
     estimate that can only be biased upwards by the signal, so the smallest
-    robust one is kept. Quantisation counts as noise here: it is what the
-    sensor cannot resolve.
+    is kept. Quantisation counts as noise here: it is what the sensor cannot
+    resolve.
+
+    robust: use the median absolute deviation (immune to glitches, but
+    itself quantised on encoder data: use it only to find glitches).
+    exclude: indices of known glitches, masked out of the plain estimate.
     """
     y = np.asarray(angle, dtype=float)
     best = math.inf
@@ -39,10 +44,15 @@ def noise_floor(angle: np.ndarray, orders: range = range(2, 7)) -> float:
         if y.size <= k + 10:
             break
         d = np.diff(y, n=k)
-        s = robust_std(d) / math.sqrt(comb(2 * k, k))
-        if s == 0.0:
-            # quantised and locally constant: fall back to the plain RMS
-            s = float(np.sqrt(np.mean(d**2)) / math.sqrt(comb(2 * k, k)))
+        if exclude is not None and len(exclude):
+            keep = np.ones(d.size, dtype=bool)
+            for i in np.asarray(exclude, dtype=int):
+                keep[max(0, i - k): i + 1] = False
+            d = d[keep]
+        norm = math.sqrt(comb(2 * k, k))
+        s = robust_std(d) / norm if robust else float(np.sqrt(np.mean(d**2))) / norm
+        if s == 0.0 and robust:
+            s = float(np.sqrt(np.mean(d**2))) / norm
         best = min(best, s)
     return float(best) if math.isfinite(best) else 0.0
 

@@ -1,0 +1,72 @@
+"""The `moi` command.
+
+Each subcommand lives in its own module under ``service.commands`` with
+``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int``.
+Bad input (``measurement.errors.InvalidInput`` and its subclasses) gives one
+line on stderr and exit status 2; anything else escaping is a bug (exit 1,
+with its traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Sequence
+
+from measurement.errors import InvalidInput
+
+#: subcommand → module (in the order `moi --help` lists them)
+COMMANDS = {
+    "identify": "service.commands.identify",
+    "simulate": "service.commands.simulate",
+    "calibrate": "service.commands.calibrate",
+    "camera-check": "service.commands.camera_check",
+    "measure": "service.commands.measure",
+    "run": "service.commands.run",
+    "results": "service.commands.results",
+    "export": "service.commands.export",
+    "modbus-map": "service.commands.modbus_map",
+    "demo": "service.commands.demo",
+}
+
+
+def _modules():
+    for name, path in COMMANDS.items():
+        try:
+            yield name, importlib.import_module(path)
+        except ModuleNotFoundError as exc:
+            if exc.name != path:
+                raise  # a real missing dependency inside the module is a bug
+            continue
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="moi", description="Measure the moment of inertia of a part from a free pendulum swing.")
+    from service import __version__
+    parser.add_argument("--version", action="version", version=f"moi {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name, module in _modules():
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args) or 0)
+    except InvalidInput as exc:
+        print(f"moi {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"moi {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

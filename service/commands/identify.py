@@ -1,0 +1,43 @@
+"""`moi identify SOURCE --rig RIG.toml [--camera CAM.toml] [--json] [--plot FILE.png]`."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from measurement import Options, identify
+from measurement.effects import EFFECTS
+
+from ..files import load_source, read_rig
+
+HELP = "identify J, ω_n and the damping from a trace CSV or a video"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("source", metavar="SOURCE", help="trace CSV (t in s, angle in rad), video file or image folder")
+    p.add_argument("--rig", required=True, metavar="RIG.toml", help="rig file (kind, stiffness or mass/com_distance, declared effects)")
+    p.add_argument("--camera", metavar="CAM.toml", help="camera file, for a video SOURCE")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the report")
+    p.add_argument("--plot", metavar="FILE.png", help="write the trace, the fits and both residuals to a PNG")
+    p.add_argument("--no-discover", action="store_true", help="fit the declared model only (no discovery loop)")
+    p.add_argument("--candidates", metavar="NAMES",
+                   help=f"comma-separated effects the loop may add (default: all of {', '.join(EFFECTS)})")
+
+
+def run(args: argparse.Namespace) -> int:
+    rig = read_rig(args.rig)
+    trace = load_source(args.source, camera=args.camera, rig=rig)
+    candidates = None
+    if args.candidates is not None:
+        candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
+    result = identify(trace, rig, Options(discover=not args.no_discover, candidates=candidates))
+    if args.plot:
+        from ..plot import plot_result
+        plot_result(result, args.plot)
+    if args.json:
+        sys.stdout.write(result.to_json() + "\n")
+    else:
+        print(result.report())
+        if args.plot:
+            print(f"plot written to {args.plot}")
+    return 0

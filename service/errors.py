@@ -1,0 +1,20 @@
+"""Errors of the service package (CLI, config, store, publishers).
+
+``ConfigError`` and ``InputFileError`` are input errors: the CLI prints one
+line and exits 2. ``ServiceError`` subclasses that are not input errors are
+runtime faults the daemon turns into its FAULT state.
+"""
+
+from measurement.errors import InvalidInput
+
+
+class ServiceError(Exception):
+    """Base of the service package's errors."""
+
+
+class ConfigError(ServiceError, InvalidInput):
+    """A configuration or rig/camera file is unusable; the message says why."""
+
+
+class InputFileError(ServiceError, InvalidInput):
+    """A file named on the command line is missing, unreadable or malformed."""

@@ -1,0 +1,81 @@
+"""Reading and writing the user's files (trace CSV, rig TOML) with clear errors."""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from measurement.rig import Rig
+from measurement.trace import Trace, parse_trace_csv
+
+from .errors import InputFileError
+
+
+def read_text(path: str | os.PathLike, what: str) -> str:
+    p = Path(path)
+    if not p.exists():
+        raise InputFileError(f"{what} {str(p)!r} not found")
+    if p.is_dir():
+        raise InputFileError(f"{what} {str(p)!r} is a directory; expected a file")
+    try:
+        return p.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise InputFileError(f"{what} {str(p)!r} is not UTF-8 text") from None
+    except OSError as exc:
+        raise InputFileError(f"{what} {str(p)!r} cannot be read: {exc.strerror}") from None
+
+
+def read_toml(path: str | os.PathLike, what: str) -> dict[str, Any]:
+    text = read_text(path, what)
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputFileError(f"{what} {str(path)!r} is not valid TOML: {exc}") from None
+
+
+def read_trace(path: str | os.PathLike) -> Trace:
+    """A trace CSV (columns t in s and angle in rad; '#' comments)."""
+    text = read_text(path, "trace")
+    return parse_trace_csv(text.splitlines(), source=str(path))
+
+
+def read_rig(path: str | os.PathLike) -> Rig:
+    doc = read_toml(path, "rig file")
+    from measurement.errors import RigError
+    try:
+        return Rig.from_dict(doc)
+    except RigError as exc:
+        raise RigError(f"{path}: {exc}") from None
+
+
+def write_rig(rig: Rig, path: str | os.PathLike, comment: str | None = None) -> None:
+    text = tomli_w.dumps(rig.to_dict())
+    if comment:
+        text = "".join(f"# {line}\n" for line in comment.splitlines()) + text
+    Path(path).write_text(text, encoding="utf-8")
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> None:
+    """Write via a temporary file and rename, so a reader never sees half a file."""
+    p = Path(path)
+    tmp = p.with_name(f".{p.name}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, p)
+
+
+VIDEO_SUFFIXES = {".avi", ".mp4", ".mkv", ".mov", ".m4v", ".webm", ".mjpg", ".mjpeg", ".ogv"}
+
+
+def load_source(path: str | os.PathLike, camera: str | os.PathLike | None = None, rig: Rig | None = None) -> Trace:
+    """SOURCE of `moi identify`: a trace CSV, a video file or an image-sequence folder."""
+    p = Path(path)
+    if p.is_dir() or p.suffix.lower() in VIDEO_SUFFIXES:
+        if camera is None:
+            raise InputFileError(f"{str(p)!r} is a video source; expected --camera CAM.toml with the camera and marker geometry")
+        from .video import video_trace  # the vision path (issue 4)
+        return video_trace(p, camera)
+    return read_trace(p)

@@ -1,0 +1,48 @@
+"""The picture of an identification: trace and fit, then both residuals one above the other."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from measurement.result import IdentificationResult
+
+
+def plot_result(result: IdentificationResult, path: str | os.PathLike) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")  # headless appliance: never needs a display
+    import matplotlib.pyplot as plt
+
+    a = result.arrays
+    t, y = a["t"], a["angle"]
+    fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True,
+                             gridspec_kw={"height_ratios": [2.2, 1, 1]}, constrained_layout=True)
+    ax = axes[0]
+    ax.plot(a["trace_t"], a["trace_angle"], color="0.75", lw=0.8, label="trace (all samples)")
+    ax.plot(t, y, ".", ms=1.5, color="k", label="fitted samples")
+    ax.plot(t, a["fitted"], color="tab:red", lw=0.9, label=f"final model: {', '.join(result.effects) or 'undamped'}")
+    title = f"{os.path.basename(result.source)} — "
+    title += f"J = {result.J:.6g} ± {result.J_std:.2g} kg·m²" if result.J is not None else "J n/a (rig lacks k or m·S)"
+    title += f", ω_n = {result.omega_n:.6g} rad/s"
+    ax.set_title(title)
+    ax.set_ylabel("angle [rad]")
+    ax.legend(loc="upper right", fontsize=8)
+    b = result.baseline
+    for ax, res, label in (
+        (axes[1], a["baseline_residual"], f"declared ({', '.join(b.effects) or 'none'}): RMS {b.residual_rms:.3g} rad"),
+        (axes[2], a["residual"], f"final ({', '.join(result.effects) or 'none'}): RMS {result.residual_rms:.3g} rad"),
+    ):
+        ax.plot(t, res, lw=0.6, color="tab:blue")
+        ax.axhspan(-result.noise_floor, result.noise_floor, color="tab:green", alpha=0.2, label=f"±noise floor {result.noise_floor:.2g} rad")
+        ax.set_ylabel("residual [rad]")
+        ax.set_title(label, fontsize=9, loc="left")
+        ax.legend(loc="upper right", fontsize=8)
+        lim = float(np.max(np.abs(res))) * 1.1 if res.size else 1.0
+        ax.set_ylim(-lim, lim)
+    axes[2].set_xlabel("t [s]")
+    if result.flags:
+        axes[2].text(0.01, 0.03, "flags: " + ", ".join(result.flags), transform=axes[2].transAxes, fontsize=8, color="tab:red")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
