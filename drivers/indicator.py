@@ -1,0 +1,94 @@
+"""Optional status output: an LED or a buzzer on one GPIO line.
+
+``show(state)`` maps the sequencer's state names to a pattern, so the
+operator sees (or hears) ready / busy / fault without a screen:
+
+    LED:    IDLE steady on (ready) · busy slow blink · FAULT fast blink
+    buzzer: one short beep on PUBLISHING (result ready) · three long beeps on FAULT · silent while busy
+"""
+
+from __future__ import annotations
+
+import threading
+
+from gpiozero import DigitalOutputDevice
+from gpiozero.pins import Factory
+
+from .backend import check_pin, pin_factory as default_factory
+from .errors import DriverConfigError
+
+KINDS = ("led", "buzzer")
+_BUSY = {"ARMED", "RELEASING", "CAPTURING", "IDENTIFYING"}
+
+
+class Indicator:
+    """A status LED or buzzer.
+
+    pin: BCM number or gpiozero pin name; kind: "led" | "buzzer";
+    active_high: True when a high level lights/sounds it.
+    """
+
+    def __init__(self, pin: int | str, *, kind: str = "led", active_high: bool = True,
+                 pin_factory: Factory | None = None):
+        check_pin(pin, "indicator")
+        if kind not in KINDS:
+            raise DriverConfigError(f"indicator: kind must be one of {', '.join(KINDS)}, got {kind!r}")
+        self.kind = kind
+        self.shown: str | None = None
+        self._lock = threading.Lock()
+        self._closed = False
+        self._device = DigitalOutputDevice(pin, active_high=active_high, initial_value=False,
+                                           pin_factory=pin_factory or default_factory())
+
+    @property
+    def pin(self):
+        return self._device.pin
+
+    @property
+    def is_active(self) -> bool:
+        return not self._closed and bool(self._device.value)
+
+    def show(self, state: str) -> None:
+        """Show a sequencer state name (unknown names switch it off)."""
+        with self._lock:
+            if self._closed:
+                return
+            self.shown = state
+            d = self._device
+            if self.kind == "led":
+                if state == "IDLE":
+                    d.on()
+                elif state in _BUSY or state == "PUBLISHING":
+                    d.blink(on_time=0.5, off_time=0.5)
+                elif state == "FAULT":
+                    d.blink(on_time=0.1, off_time=0.1)
+                else:
+                    d.off()
+            else:
+                if state == "PUBLISHING":
+                    d.blink(on_time=0.1, off_time=0.1, n=1)
+                elif state == "FAULT":
+                    d.blink(on_time=0.4, off_time=0.2, n=3)
+                elif state in _BUSY:
+                    d.off()
+                # IDLE right after PUBLISHING leaves the beep to finish
+
+    def off(self) -> None:
+        with self._lock:
+            if not self._closed:
+                self._device.off()
+
+    def close(self) -> None:
+        """Off and release the pin; safe twice."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._device.off()
+            self._device.close()
+
+    def __enter__(self) -> "Indicator":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

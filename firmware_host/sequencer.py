@@ -1,0 +1,675 @@
+"""The measurement sequencer: IDLE → ARMED → RELEASING → CAPTURING → IDENTIFYING → PUBLISHING → IDLE.
+
+See the package docstring (``firmware_host/__init__.py``) for the contract
+the daemon relies on. Design notes (why, not what):
+
+* Everything that changes the state happens inside ``poll()``, on the caller's
+  thread. Requests from other threads (button callback, MQTT, Modbus) only
+  set a flag under a lock, so subscribers always run on the polling thread
+  and never race a transition.
+* ``poll()`` never blocks for long: the sensor acquires in its own thread
+  (or is computed on demand in simulation) and identification runs in a
+  worker thread, so the daemon loop keeps pinging its watchdog.
+* The solenoid is switched off on every way out of RELEASING: the normal
+  end of the pulse, FAULT, ABORTED, ``close()`` and an exception anywhere in
+  a step; ``abort()`` and ``fault()`` switch it off at once from the calling
+  thread as well, without waiting for the next poll.
+"""
+
+from __future__ import annotations
+
+import bisect
+import logging
+import math
+import threading
+import uuid
+from dataclasses import dataclass, field
+from typing import Any, Callable, Protocol
+
+import numpy as np
+
+from drivers.clock import Clock
+from drivers.errors import DeviceFault
+from drivers.sensor import AngleSensor
+from measurement import IdentificationResult, Options, Rig, Trace, identify
+from measurement.errors import MeasurementError
+
+from .errors import (CaptureTimeout, CaptureTooShort, IdentificationFailed, IdentificationTimeout, IllegalTransition,
+                     PublishFailed, SequencerConfigError, SequencerFault)
+from .states import BUSY, TRANSITIONS, Event, State
+
+log = logging.getLogger("moi.sequencer")
+
+
+# -- what the sequencer needs from its drivers ----------------------------------
+class ReleaseActuator(Protocol):
+    """The release solenoid as the sequencer uses it (``drivers.solenoid.Solenoid``)."""
+
+    max_on_time: float
+
+    def pulse(self, duration: float) -> float:
+        """Energise for ``duration`` s, clamped to ``max_on_time``; returns the granted s; never blocks."""
+
+    def off(self) -> None:
+        """De-energise now (safe state)."""
+
+    @property
+    def is_active(self) -> bool: ...
+
+
+class PressSource(Protocol):
+    """A push button (``drivers.button.PushButton``): the sequencer sets ``when_pressed``."""
+
+    when_pressed: Callable[[], None] | None
+
+
+class StatusIndicator(Protocol):
+    """An optional LED/buzzer (``drivers.indicator.Indicator``)."""
+
+    def show(self, state: str) -> None: ...
+
+
+#: the result sink: called once per successful measurement, on the polling thread, in PUBLISHING;
+#: it must return quickly (queue or store; do not talk to the network here). Raising → FAULT.
+ResultSink = Callable[["Measurement"], None]
+
+#: identification seam (tests inject failures); default: measurement.identify(trace, rig, options)
+Identifier = Callable[[Trace, Rig], IdentificationResult]
+
+
+@dataclass(frozen=True)
+class SequencerConfig:
+    """Timing of one measurement, all in s on the sequencer's clock (angles in rad).
+
+    pre_trigger: capture recorded before the release (at rest at the release angle).
+    release_pulse: how long the solenoid is asked to stay on (the solenoid clamps
+        it to its own hard maximum).
+    capture_duration: the capture ends this long after the release at the latest.
+    decay_threshold: the capture ends earlier when the half peak-to-peak angle over
+        the last ``decay_window`` falls below this (rad); 0 disables.
+    min_capture: the decay test starts only this long after the release.
+    sample_timeout: no new sample for this long while capturing → FAULT (capture time-out).
+        The release also waits for the first pre-trigger sample (never release blind).
+    identify_timeout: identification longer than this → FAULT.
+    min_samples: fewer samples in the capture → FAULT instead of a meaningless fit.
+    identify_in_worker: run identification in a worker thread (True for the daemon:
+        ``poll`` stays responsive); False runs it inside ``poll`` (tests on a ManualClock).
+    """
+
+    pre_trigger: float = 0.5
+    release_pulse: float = 0.15
+    capture_duration: float = 30.0
+    decay_threshold: float = 0.0
+    decay_window: float = 2.0
+    min_capture: float = 5.0
+    sample_timeout: float = 1.0
+    identify_timeout: float = 60.0
+    min_samples: int = 50
+    identify_in_worker: bool = True
+
+    def __post_init__(self) -> None:
+        def check(name: str, ok: bool, expected: str) -> None:
+            if not ok:
+                raise SequencerConfigError(f"sequencer: {name} = {getattr(self, name)!r}; expected {expected}")
+
+        def finite(v: Any) -> bool:
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+        check("pre_trigger", finite(self.pre_trigger) and self.pre_trigger >= 0, "a time >= 0 s")
+        check("release_pulse", finite(self.release_pulse) and self.release_pulse > 0, "a time > 0 s")
+        check("capture_duration", finite(self.capture_duration) and self.capture_duration > 0, "a time > 0 s")
+        check("decay_threshold", finite(self.decay_threshold) and self.decay_threshold >= 0, "an angle >= 0 rad (0 disables)")
+        check("decay_window", finite(self.decay_window) and self.decay_window > 0, "a time > 0 s")
+        check("min_capture", finite(self.min_capture) and self.min_capture >= 0, "a time >= 0 s")
+        check("sample_timeout", finite(self.sample_timeout) and self.sample_timeout > 0, "a time > 0 s")
+        check("identify_timeout", finite(self.identify_timeout) and self.identify_timeout > 0, "a time > 0 s")
+        check("min_samples", isinstance(self.min_samples, int) and self.min_samples >= 2, "an integer >= 2")
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """One finished measurement, handed to the result sink.
+
+    id: UUID4 string; requested_by: who asked ("button", "mqtt", "modbus", "cli", ...).
+    requested_at / released_at / capture_ended_at / finished_at: s on the sequencer's clock.
+    trace: the captured trace (t from the first pre-trigger sample, s; angle, rad).
+    result: the identification result (J, damping, flags, acquisition counts...).
+    capture_end: why the capture ended, in words.
+    """
+
+    id: str
+    requested_by: str
+    requested_at: float
+    released_at: float
+    capture_ended_at: float
+    finished_at: float
+    trace: Trace
+    result: IdentificationResult
+    capture_end: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """The result's JSON (``IdentificationResult.to_dict()``) plus ``id``, ``requested_by`` and ``timing``."""
+        d: dict[str, Any] = {"id": self.id, "requested_by": self.requested_by}
+        d.update(self.result.to_dict())
+        d["timing"] = {
+            "released_after_request_s": self.released_at - self.requested_at,
+            "capture_s": self.capture_ended_at - self.released_at,
+            "capture_to_result_s": self.finished_at - self.capture_ended_at,
+            "capture_end": self.capture_end,
+            "samples": len(self.trace),
+        }
+        return d
+
+
+class _Job:
+    """One identification, inline or in a worker thread; the result is read once ``done`` is set."""
+
+    def __init__(self, fn: Callable[[], IdentificationResult]):
+        self._fn = fn
+        self.done = threading.Event()
+        self.result: IdentificationResult | None = None
+        self.error: BaseException | None = None
+
+    def run(self) -> None:
+        try:
+            self.result = self._fn()
+        except BaseException as exc:  # handed to the sequencer, which turns it into FAULT with the reason
+            self.error = exc
+        finally:
+            self.done.set()
+
+
+@dataclass
+class _Run:
+    """Book-keeping of the measurement in progress."""
+
+    id: str
+    requested_by: str
+    requested_at: float
+    armed_at: float
+    released_at: float | None = None
+    granted_pulse: float = 0.0
+    capture_ended_at: float | None = None
+    capture_end: str = ""
+    t: list[float] = field(default_factory=list)
+    angle: list[float] = field(default_factory=list)
+    last_sample_at: float | None = None  # clock time a new sample last arrived
+    dropped_out_of_order: int = 0
+    trace: Trace | None = None
+    job: _Job | None = None
+    identify_started_at: float | None = None
+
+
+class Sequencer:
+    """The measurement state machine. See ``firmware_host`` for the contract.
+
+    clock: the time source (``drivers.clock``): MonotonicClock on the device,
+        ManualClock in tests, ScaledClock with the simulated rig.
+    solenoid: the release actuator (``drivers.solenoid.Solenoid``).
+    sensor: the angle sensor captured from (``drivers.sensor.AngleSensor``).
+    rig: the rig identified against.
+    sink: called with each finished ``Measurement`` (on the polling thread).
+    config: timing (``SequencerConfig``); options: identification options.
+    button: optional push button: a press is ``request_measurement("button")``.
+    indicator: optional LED/buzzer: ``show(state)`` on every transition.
+    identifier: replaces ``measurement.identify`` (tests).
+
+    The sequencer does not own its drivers: ``close()`` makes them safe but
+    the caller closes them.
+    """
+
+    def __init__(self, *, clock: Clock, solenoid: ReleaseActuator, sensor: AngleSensor, rig: Rig, sink: ResultSink,
+                 config: SequencerConfig | None = None, options: Options | None = None,
+                 button: PressSource | None = None, indicator: StatusIndicator | None = None,
+                 identifier: Identifier | None = None):
+        self.clock = clock
+        self.solenoid = solenoid
+        self.sensor = sensor
+        self.rig = rig
+        self.config = config or SequencerConfig()
+        self.options = options or Options()
+        self._sink = sink
+        self._identifier = identifier or (lambda trace, rig: identify(trace, rig, self.options))
+        self._button = button
+        self._indicator = indicator
+
+        self._lock = threading.Lock()        # guards the request flags and the state seen by other threads
+        self._poll_lock = threading.Lock()   # one poll at a time
+        self._subscribers: list[Callable[[Event], None]] = []
+        self._events: list[Event] = []
+        self._seq = 0
+
+        self._state = State.IDLE
+        self._since = clock.now()
+        self._run: _Run | None = None
+        self._closed = False
+        self._pending_request: tuple[str, float] | None = None
+        self._pending_abort: str | None = None
+        self._pending_fault: str | None = None
+        self._pending_reset = False
+
+        self.last_fault: str | None = None
+        self.last_measurement: Measurement | None = None
+        self.counts = {"measurements": 0, "faults": 0, "aborts": 0, "ignored_requests": 0}
+
+        # the safe state from the start, whatever the solenoid was left in
+        self.solenoid.off()
+        if button is not None:
+            button.when_pressed = self._on_button
+
+    # -- read-only view --------------------------------------------------------
+    @property
+    def state(self) -> State:
+        return self._state
+
+    @property
+    def busy(self) -> bool:
+        """True while a measurement runs (ARMED … PUBLISHING) or one is requested."""
+        with self._lock:
+            return self._state in BUSY or self._pending_request is not None
+
+    @property
+    def measurement_id(self) -> str | None:
+        run = self._run
+        return run.id if run else None
+
+    def status(self) -> dict[str, Any]:
+        """A JSON-ready snapshot for the status topic / registers (safe from any thread)."""
+        with self._lock:
+            return {
+                "state": self._state.value,
+                "since": self._since,
+                "measurement_id": self._run.id if self._run else None,
+                "last_fault": self.last_fault,
+                "last_measurement_id": self.last_measurement.id if self.last_measurement else None,
+                "solenoid_on": bool(self.solenoid.is_active),
+                **self.counts,
+            }
+
+    # -- subscriptions -----------------------------------------------------------
+    def subscribe(self, callback: Callable[[Event], None]) -> Callable[[], None]:
+        """Call ``callback(event)`` after every transition (on the polling thread); returns an unsubscribe function.
+
+        A callback that raises is logged and skipped; it never affects the measurement.
+        """
+        with self._lock:
+            self._subscribers.append(callback)
+
+        def unsubscribe() -> None:
+            with self._lock:
+                if callback in self._subscribers:
+                    self._subscribers.remove(callback)
+        return unsubscribe
+
+    # -- requests (any thread) -------------------------------------------------
+    def request_measurement(self, source: str = "api") -> bool:
+        """Ask for one measurement; True if accepted (it starts at the next ``poll``).
+
+        Refused (False, logged, counted in ``counts["ignored_requests"]``) while a
+        measurement runs or is already requested, in FAULT, or after ``close()``.
+        """
+        with self._lock:
+            why = None
+            if self._closed:
+                why = "the sequencer is closed"
+            elif self._pending_request is not None:
+                why = f"a measurement requested by {self._pending_request[0]} is about to start"
+            elif self._state is State.FAULT:
+                why = f"in FAULT ({self.last_fault}); reset() first"
+            elif self._state is not State.IDLE:
+                why = f"a measurement is running ({self._state.value})"
+            if why is None:
+                self._pending_request = (source, self.clock.now())
+                log.info("measurement requested by %s", source)
+                return True
+            self.counts["ignored_requests"] += 1
+        log.info("measurement request from %s ignored: %s", source, why)
+        return False
+
+    def abort(self, reason: str = "aborted by request") -> bool:
+        """Abandon the measurement in progress (or clear FAULT): → ABORTED → IDLE at the next ``poll``.
+
+        The solenoid is switched off at once from this thread. False in IDLE
+        (nothing to abort) unless a request was pending, which is cancelled.
+        """
+        with self._lock:
+            if self._state is State.IDLE and self._pending_abort is None:
+                if self._pending_request is None:
+                    return False
+                log.info("pending measurement request from %s cancelled: %s", self._pending_request[0], reason)
+                self._pending_request = None
+                return True
+            self._pending_abort = reason
+        self._solenoid_off_now()
+        return True
+
+    def fault(self, reason: str) -> bool:
+        """Force FAULT with ``reason`` (e.g. the daemon found a device unhealthy); solenoid off at once.
+
+        False if already in FAULT.
+        """
+        with self._lock:
+            if self._state is State.FAULT:
+                return False
+            self._pending_fault = reason
+        self._solenoid_off_now()
+        return True
+
+    def reset(self) -> bool:
+        """Acknowledge a FAULT: → IDLE at the next ``poll``. False when not in FAULT."""
+        with self._lock:
+            if self._state is not State.FAULT:
+                return False
+            self._pending_reset = True
+            return True
+
+    # -- driving -----------------------------------------------------------------
+    def poll(self) -> State:
+        """Advance the state machine by what the clock and the devices say; returns the state.
+
+        Non-blocking (milliseconds); call it every 10–50 ms from the main loop.
+        Subscribers are called from here. Never raises for a device fault or a
+        failed identification: those end in FAULT with the reason.
+        """
+        with self._poll_lock:
+            now = self.clock.now()
+            try:
+                self._apply_requests(now)
+                self._step(now)
+            except IllegalTransition:
+                self._make_safe()
+                raise  # a bug in this module: do not hide it
+            except Exception as exc:  # safety boundary: any device error or bug mid-measurement ends safe, in FAULT
+                if isinstance(exc, (DeviceFault, SequencerFault)):
+                    reason = str(exc)  # these messages name the device/step and what went wrong
+                elif isinstance(exc, MeasurementError):
+                    reason = f"{type(exc).__name__}: {exc}"
+                else:
+                    log.exception("unexpected error in state %s", self._state.value)
+                    reason = f"internal error in {self._state.value}: {type(exc).__name__}: {exc}"
+                self._enter_fault(now, reason)
+            with self._lock:
+                events, self._events = self._events, []
+                subscribers = list(self._subscribers)
+        for event in events:
+            self._deliver(event, subscribers)
+        return self._state
+
+    def run_until_settled(self, timeout: float, poll_interval: float = 0.01) -> Event | None:
+        """Poll (sleeping ``poll_interval`` s on the clock between polls) until no measurement runs.
+
+        Returns the last event seen (PUBLISHING's IDLE, FAULT or ABORTED's IDLE),
+        or None if nothing happened. After ``timeout`` s on the clock it aborts
+        the measurement and returns the resulting event. For the CLI and tests;
+        the daemon calls ``poll`` from its own loop instead.
+        """
+        seen: list[Event] = []
+        unsubscribe = self.subscribe(seen.append)
+        try:
+            deadline = self.clock.now() + timeout
+            while True:
+                state = self.poll()
+                if state in (State.IDLE, State.FAULT) and not self.busy:
+                    return seen[-1] if seen else None
+                if self.clock.now() >= deadline:
+                    self.abort(f"no result within {timeout:g} s")
+                    self.poll()
+                    return seen[-1] if seen else None
+                self._wait(poll_interval)
+        finally:
+            unsubscribe()
+
+    def close(self) -> None:
+        """Abort what runs, switch the solenoid off, stop the sensor, detach the button. Safe twice."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._pending_request = None
+        if self._button is not None and getattr(self._button, "when_pressed", None) == self._on_button:
+            self._button.when_pressed = None
+        if self._state in BUSY:
+            self.abort("sequencer closed")
+            self.poll()
+        self._make_safe()
+
+    def __enter__(self) -> "Sequencer":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # -- internals -----------------------------------------------------------------
+    def _on_button(self) -> None:
+        self.request_measurement("button")
+
+    def _wait(self, seconds: float) -> None:
+        # while a worker identifies, wake up as soon as it is done rather than after a full interval
+        run = self._run
+        if self._state is State.IDENTIFYING and run is not None and run.job is not None and not run.job.done.is_set():
+            if run.job.done.wait(0.0):
+                return
+        self.clock.sleep(seconds)
+
+    def _transition(self, now: float, new: State, reason: str, measurement: Measurement | None = None) -> None:
+        old = self._state
+        if new not in TRANSITIONS[old]:
+            raise IllegalTransition(f"{old.value} → {new.value} is not a legal transition ({reason})")
+        with self._lock:
+            self._state = new
+            self._since = now
+            self._seq += 1
+            run = self._run
+            event = Event(self._seq, now, new, old, reason, run.id if run else None, measurement)
+            self._events.append(event)
+        level = logging.WARNING if new in (State.FAULT, State.ABORTED) else logging.INFO
+        log.log(level, "%s → %s: %s", old.value, new.value, reason)
+
+    def _deliver(self, event: Event, subscribers: list[Callable[[Event], None]]) -> None:
+        if self._indicator is not None:
+            try:
+                self._indicator.show(event.state.value)
+            except Exception:  # a status lamp must never stop a measurement
+                log.exception("indicator failed to show %s", event.state.value)
+        for callback in subscribers:
+            try:
+                callback(event)
+            except Exception:  # one broken listener must not starve the others or the machine
+                log.exception("event subscriber %r failed on %s", callback, event.state.value)
+
+    def _solenoid_off_now(self) -> None:
+        try:
+            self.solenoid.off()
+        except Exception:  # keep going: the FAULT/abort path still runs and calls off() again
+            log.exception("solenoid off() failed")
+
+    def _make_safe(self) -> None:
+        self._solenoid_off_now()
+        try:
+            self.sensor.stop()
+        except Exception:  # a sensor that cannot stop is reported, the safe state is what matters
+            log.exception("sensor stop() failed")
+
+    def _enter_fault(self, now: float, reason: str) -> None:
+        self._make_safe()
+        run = self._run
+        if run is not None and run.job is not None:
+            run.job = None  # a late identification result is discarded
+        if self._state is State.FAULT:
+            log.error("further fault while in FAULT: %s", reason)
+            return
+        self.last_fault = reason
+        self.counts["faults"] += 1
+        self._transition(now, State.FAULT, reason)
+
+    def _apply_requests(self, now: float) -> None:
+        with self._lock:
+            request, self._pending_request = self._pending_request, None
+            abort, self._pending_abort = self._pending_abort, None
+            fault, self._pending_fault = self._pending_fault, None
+            reset, self._pending_reset = self._pending_reset, False
+        if fault is not None and self._state is not State.FAULT:
+            self._enter_fault(now, fault)
+        if abort is not None and self._state is not State.IDLE:
+            self._make_safe()
+            self.counts["aborts"] += 1
+            self._transition(now, State.ABORTED, abort)
+            self._transition(now, State.IDLE, "ready after abort")
+            self._run = None
+            if request is not None:
+                log.info("measurement request from %s dropped by the abort", request[0])
+                request = None
+        if reset and self._state is State.FAULT:
+            self._transition(now, State.IDLE, "fault reset")
+            self._run = None
+        if request is not None:
+            if self._state is State.IDLE:
+                self._start(now, *request)
+            else:  # a fault or abort raced the request
+                log.info("measurement request from %s dropped: now %s", request[0], self._state.value)
+
+    def _start(self, now: float, source: str, requested_at: float) -> None:
+        # interlock: nothing may be energised when a measurement starts
+        self.solenoid.off()
+        self._run = _Run(id=str(uuid.uuid4()), requested_by=source, requested_at=requested_at, armed_at=now)
+        self.sensor.start()
+        self._transition(now, State.ARMED, f"requested by {source}; pre-trigger capture {self.config.pre_trigger:g} s")
+
+    def _step(self, now: float) -> None:
+        run = self._run
+        state = self._state
+        if state in (State.ARMED, State.RELEASING, State.CAPTURING):
+            assert run is not None
+            self._collect(run, now)
+            self._check_sample_timeout(run, now)
+        if state is State.ARMED:
+            if now - run.armed_at >= self.config.pre_trigger and run.t:
+                if self.solenoid.is_active:  # interlock: never fire into an energised coil
+                    raise DeviceFault("solenoid already energised before the release")
+                run.granted_pulse = self.solenoid.pulse(self.config.release_pulse)
+                run.released_at = now
+                self._transition(now, State.RELEASING, f"solenoid pulse {run.granted_pulse:g} s")
+        elif state is State.RELEASING:
+            if now - run.released_at >= run.granted_pulse:
+                self.solenoid.off()
+                self._transition(now, State.CAPTURING, "released; solenoid off, swinging freely")
+        elif state is State.CAPTURING:
+            end = self._capture_end(run, now)
+            if end is not None:
+                self._finish_capture(run, now, end)
+        elif state is State.IDENTIFYING:
+            self._check_identification(run, now)
+
+    def _collect(self, run: _Run, now: float) -> None:
+        t, angle = self.sensor.read()  # SensorFault propagates to poll → FAULT
+        if len(t) == 0:
+            return
+        last = run.t[-1] if run.t else -math.inf
+        added = 0
+        for ti, ai in zip(np.asarray(t, float).tolist(), np.asarray(angle, float).tolist()):
+            if not (math.isfinite(ti) and math.isfinite(ai)):
+                continue
+            if ti <= last:  # Trace needs strictly increasing time
+                run.dropped_out_of_order += 1
+                continue
+            run.t.append(ti)
+            run.angle.append(ai)
+            last = ti
+            added += 1
+        if added:
+            run.last_sample_at = now
+
+    def _check_sample_timeout(self, run: _Run, now: float) -> None:
+        since = run.last_sample_at if run.last_sample_at is not None else run.armed_at
+        if now - since > self.config.sample_timeout:
+            what = "since arming" if run.last_sample_at is None else "since the last one"
+            raise CaptureTimeout(
+                f"capture time-out: no sample from the {self.sensor.source} for {now - since:.3g} s {what} "
+                f"(limit {self.config.sample_timeout:g} s)")
+
+    def _capture_end(self, run: _Run, now: float) -> str | None:
+        cfg = self.config
+        elapsed = now - run.released_at
+        if elapsed >= cfg.capture_duration:
+            return f"capture complete: {cfg.capture_duration:g} s after the release"
+        if cfg.decay_threshold > 0 and elapsed >= cfg.min_capture and run.t:
+            t_end = run.t[-1]
+            i = bisect.bisect_left(run.t, t_end - cfg.decay_window)
+            if run.t[i] <= run.released_at and i > 0:
+                return None
+            window = run.angle[i:]
+            if t_end - run.t[i] >= 0.9 * cfg.decay_window and len(window) >= 4:
+                half_pp = 0.5 * (max(window) - min(window))
+                if half_pp < cfg.decay_threshold:
+                    return (f"swing decayed: amplitude {half_pp:.3g} rad < {cfg.decay_threshold:g} rad "
+                            f"after {elapsed:.3g} s")
+        return None
+
+    def _finish_capture(self, run: _Run, now: float, why: str) -> None:
+        self._collect(run, now)
+        self.sensor.stop()
+        self._collect(run, now)  # what the sensor buffered up to the stop
+        run.capture_ended_at = now
+        run.capture_end = why
+        if len(run.t) < self.config.min_samples:
+            raise CaptureTooShort(
+                f"capture too short: {len(run.t)} samples from the {self.sensor.source}; "
+                f"expected at least {self.config.min_samples}")
+        t = np.asarray(run.t)
+        t0 = t[0]
+        stats = dict(self.sensor.stats())
+        if run.dropped_out_of_order:
+            stats["dropped_out_of_order"] = run.dropped_out_of_order
+        meta = {
+            self.sensor.source: stats,
+            "sequencer": {
+                "measurement_id": run.id,
+                "requested_by": run.requested_by,
+                "release_t": float(run.released_at - t0),
+                "release_pulse_s": run.granted_pulse,
+                "capture_end": why,
+            },
+        }
+        run.trace = Trace(t - t0, np.asarray(run.angle), source=self.sensor.source,
+                          flags=tuple(self.sensor.flags()), meta=meta)
+        trace, rig = run.trace, self.rig
+        run.job = _Job(lambda: self._identifier(trace, rig))
+        run.identify_started_at = now
+        self._transition(now, State.IDENTIFYING, f"{why}; {len(trace)} samples over {trace.duration:.3g} s")
+        if self.config.identify_in_worker:
+            threading.Thread(target=run.job.run, name=f"moi-identify-{run.id[:8]}", daemon=True).start()
+        else:
+            run.job.run()
+
+    def _check_identification(self, run: _Run, now: float) -> None:
+        job = run.job
+        assert job is not None
+        if not job.done.is_set():
+            if now - run.identify_started_at > self.config.identify_timeout:
+                raise IdentificationTimeout(
+                    f"identification time-out: no result after {now - run.identify_started_at:.3g} s "
+                    f"(limit {self.config.identify_timeout:g} s)")
+            return
+        if job.error is not None:
+            exc = job.error
+            if not isinstance(exc, Exception):  # KeyboardInterrupt/SystemExit in the worker: not ours to hide
+                raise exc
+            if not isinstance(exc, MeasurementError):
+                log.error("identification raised", exc_info=exc)
+            raise IdentificationFailed(f"identification failed: {type(exc).__name__}: {exc}") from exc
+        result = job.result
+        measurement = Measurement(
+            id=run.id, requested_by=run.requested_by, requested_at=run.requested_at, released_at=run.released_at,
+            capture_ended_at=run.capture_ended_at, finished_at=now, trace=run.trace, result=result,
+            capture_end=run.capture_end)
+        j = f"J = {result.J:.7g} kg·m²" if result.J is not None else f"omega_n = {result.omega_n:.7g} rad/s (J n/a)"
+        self._transition(now, State.PUBLISHING, j, measurement)
+        try:
+            self._sink(measurement)
+        except Exception as exc:  # the sink is the daemon's (store/outbox): its failure is a FAULT with the reason
+            log.exception("result sink failed")
+            raise PublishFailed(f"publishing failed: {type(exc).__name__}: {exc}") from exc
+        self.last_measurement = measurement
+        self.counts["measurements"] += 1
+        self._transition(now, State.IDLE, f"published measurement {measurement.id}", measurement)
+        self._run = None
