@@ -46,6 +46,10 @@ class Diagnostics:
     centre_t: float
     asymmetry: float
     asymmetry_t: float
+    #: amplitude lost per full swing, ΔA = d0 + d1·A + d2·A² (rad), with t-values:
+    #: d0 is dry friction's signature, d1 linear damping's, d2 air drag's
+    decrement: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    decrement_t: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def at_noise_floor(self) -> bool:
@@ -59,6 +63,9 @@ class Diagnostics:
     def as_dict(self) -> dict:
         d = asdict(self)
         d.pop("envelope_errors")
+        for key in ("decrement", "decrement_t"):
+            for name, v in zip(("const", "linear", "quadratic"), d.pop(key)):
+                d[f"{key}_{name}"] = v
         for law, err in self.envelope_errors.items():
             d[f"envelope_error_{law}"] = err
         d["structured"] = self.structured
@@ -84,6 +91,9 @@ class Diagnostics:
             out.append(f"the swing centre moves by {self.centre_slope:+.3g} rad/s against the model (t = {self.centre_t:.1f})")
         if abs(self.asymmetry_t) >= 4:
             out.append(f"positive and negative half-swings differ by {self.asymmetry:+.3g} rad in amplitude (t = {self.asymmetry_t:.1f})")
+        terms = [f"{name} part (t = {t:.1f})" for name, t in zip(("a constant", "a linear", "a quadratic"), self.decrement_t) if t >= 3]
+        if terms:
+            out.append("the amplitude lost per swing has " + ", ".join(terms) + " in the amplitude")
         if self.envelope_law:
             out.append(f"the measured envelope decays most like a{'n' if self.envelope_law[0] in 'aeiou' else ''} {self.envelope_law} law")
         if self.stopped:
@@ -106,12 +116,16 @@ def _envelope_law(times: np.ndarray, amps: np.ndarray) -> tuple[str | None, dict
     laws = {
         "exponential (viscous)": (np.log(amps), np.exp),
         "linear (coulomb)": (amps, lambda v: v),
-        "hyperbolic (quadratic drag)": (1.0 / amps, lambda v: 1.0 / np.clip(v, 1e-12, None)),
+        "hyperbolic (quadratic drag)": (1.0 / amps, lambda v: 1.0 / v),
     }
     errors = {}
     for law, (z, back) in laws.items():
         coef = np.polyfit(times, z, 1)
-        pred = back(np.polyval(coef, times))
+        lin = np.polyval(coef, times)
+        if law.startswith("hyperbolic") and np.any(lin <= 0):
+            errors[law.split(" ")[0]] = math.inf  # 1/A crossing zero: the law does not apply
+            continue
+        pred = back(lin)
         errors[law.split(" ")[0]] = float(np.sqrt(np.mean((pred - amps) ** 2)) / np.mean(amps))
     best = min(errors, key=errors.get)
     runner_up = min(v for k, v in errors.items() if k != best)
@@ -133,6 +147,29 @@ def _slope_t(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     var = s2 / float(np.sum((x - x.mean()) ** 2))
     se = math.sqrt(var) if var > 0 else 0.0
     return float(coef[0]), float(coef[0] / se) if se > 0 else 0.0
+
+
+def _decrement(peaks: np.ndarray) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """Fit ΔA = d0 + d1·A + d2·A² to the loss over each full swing (peak i to i+2)."""
+    a = np.abs(peaks)
+    if a.size < 8:
+        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    loss = a[:-2] - a[2:]
+    amp = 0.5 * (a[:-2] + a[2:])
+    # over a narrow amplitude range 1, A and A² are nearly collinear: keep
+    # the quadratic term only when the amplitude fell by 3× or more
+    wide = amp.max() >= 3.0 * amp.min()
+    X = np.vstack([np.ones_like(amp), amp, amp**2 if wide else np.zeros_like(amp)]).T
+    coef, *_ = np.linalg.lstsq(X, loss, rcond=None)
+    resid = loss - X @ coef
+    dof = max(loss.size - 3, 1)
+    try:
+        cov = float(resid @ resid) / dof * np.linalg.pinv(X.T @ X)
+    except np.linalg.LinAlgError:
+        return tuple(float(c) for c in coef), (0.0, 0.0, 0.0)
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    tv = np.where(se > 0, coef / np.where(se > 0, se, 1.0), 0.0)
+    return tuple(float(c) for c in coef), tuple(float(v) for v in tv)
 
 
 def diagnose(fit: ModelFit, noise: float, stopped: bool = False) -> Diagnostics:
@@ -165,22 +202,28 @@ def diagnose(fit: ModelFit, noise: float, stopped: bool = False) -> Diagnostics:
             low_fraction = float(spec[1:][freqs[1:] < 0.3 * swing_hz].sum() / total)
 
     amps = np.abs(sw_data.peak_values)
-    good = amps > 20 * noise
+    good = (amps > 20 * noise) & sw_data.complete
+    dec, dec_t = _decrement(sw_data.peak_values[good])
     law, errors = _envelope_law(sw_data.peak_times[good], amps[good])
 
     m = min(sw_data.peak_values.size, sw_fit.peak_values.size)
     fa_slope = fa_t = c_slope = c_t = asym = asym_t = 0.0
     if m >= 6 and sw_data.crossings.size >= 5 and sw_fit.crossings.size >= 5:
         mc = min(sw_data.crossings.size, sw_fit.crossings.size)
-        w_data = math.pi / np.diff(sw_data.crossings[:mc])
-        w_fit = math.pi / np.diff(sw_fit.crossings[:mc])
-        # the half-swing between crossings i and i+1 has its peak at index i+1
-        a_half = np.abs(sw_data.peak_values[1:mc])
-        k2 = min(a_half.size, w_data.size)
-        fa_slope, fa_t = _slope_t(a_half[:k2] ** 2, (w_data - w_fit)[:k2])
+        # full periods (crossing i to i+2): half periods alternate when the
+        # centre is off, which would hide an amplitude dependence
+        w_data = 2 * math.pi / (sw_data.crossings[2:mc] - sw_data.crossings[:mc - 2])
+        w_fit = 2 * math.pi / (sw_fit.crossings[2:mc] - sw_fit.crossings[:mc - 2])
+        pk = np.abs(sw_data.peak_values)
+        k2 = min(w_data.size, pk.size - 2)
+        a_full = 0.5 * (pk[1:k2 + 1] + pk[2:k2 + 2])
+        fa_slope, fa_t = _slope_t(a_full**2, (w_data - w_fit)[:k2])
+        ok = sw_data.complete[:m] & sw_fit.complete[:m]
         pd, pf = sw_data.peak_values[:m], sw_fit.peak_values[:m]
+        pair = ok[:-1] & ok[1:]
         mid = 0.5 * ((pd[:-1] + pd[1:]) - (pf[:-1] + pf[1:]))
-        c_slope, c_t = _slope_t(sw_data.peak_times[1:m], mid)
+        c_slope, c_t = _slope_t(sw_data.peak_times[1:m][pair], mid[pair])
+        pd, pf = pd[ok], pf[ok]
         diff = np.abs(pd) - np.abs(pf)
         pos, neg = diff[pd > 0], diff[pd < 0]
         if pos.size >= 3 and neg.size >= 3:
@@ -192,5 +235,5 @@ def diagnose(fit: ModelFit, noise: float, stopped: bool = False) -> Diagnostics:
         swing_hz=swing_hz, line_hz=line_hz, line_fraction=line_fraction, low_frequency_fraction=low_fraction,
         envelope_law=law, envelope_errors=errors, stopped=stopped,
         freq_amp_slope=fa_slope, freq_amp_t=fa_t, centre_slope=c_slope, centre_t=c_t,
-        asymmetry=asym, asymmetry_t=asym_t,
+        asymmetry=asym, asymmetry_t=asym_t, decrement=dec, decrement_t=dec_t,
     )

@@ -144,9 +144,12 @@ class Viscous(Effect):
         return float(values[0])
 
     def evidence(self, diag):
+        why = []
+        if diag.decrement_t[1] >= 3:
+            why.append(f"the amplitude lost per swing grows in proportion to the amplitude (t = {diag.decrement_t[1]:.1f})")
         if diag.envelope_law and diag.envelope_law.startswith("exponential"):
-            return "the measured envelope decays exponentially, the signature of linear damping"
-        return ""
+            why.append("the measured envelope decays exponentially, the signature of linear damping")
+        return "; ".join(why)
 
 
 class Coulomb(Effect):
@@ -180,6 +183,9 @@ class Coulomb(Effect):
 
     def evidence(self, diag):
         why = []
+        if diag.decrement_t[0] >= 3:
+            why.append(f"the amplitude lost per swing has a constant part, {diag.decrement[0]:.3g} rad per swing"
+                       f" (t = {diag.decrement_t[0]:.1f}), which only dry friction gives")
         if diag.envelope_law and diag.envelope_law.startswith("linear"):
             why.append("the measured envelope decays linearly (constant energy loss per swing)")
         if diag.stopped:
@@ -216,9 +222,12 @@ class Quadratic(Effect):
         return 8.0 * float(values[0]) * amplitude * omega / (3.0 * math.pi)
 
     def evidence(self, diag):
+        why = []
+        if diag.decrement_t[2] >= 3:
+            why.append(f"the amplitude lost per swing grows with the square of the amplitude (t = {diag.decrement_t[2]:.1f})")
         if diag.envelope_law and diag.envelope_law.startswith("hyperbolic"):
-            return "the measured envelope decays hyperbolically: fast at large amplitude, slowly at small"
-        return ""
+            why.append("the measured envelope decays hyperbolically: fast at large amplitude, slowly at small")
+        return "; ".join(why)
 
 
 class CubicStiffness(Effect):

@@ -64,7 +64,8 @@ class Prepared:
     start: int
     stop: int
     release_detected: bool
-    stopped: bool
+    stopped: bool  # the window was cut before the end of the record
+    stuck: bool    # ... because the pendulum came to rest
     outliers: np.ndarray  # indices into the original trace
 
 
@@ -96,7 +97,7 @@ def prepare(trace: Trace, options: Options = Options()) -> Prepared:
             f"{trace.source}: {per_period:.1f} samples per swing period; expected at least 6 (sample faster)"
         )
     return Prepared(t=t, y=y, noise=noise, start=int(idx[0]), stop=int(idx[-1]) + 1,
-                    release_detected=win.release_detected, stopped=win.stop_detected,
+                    release_detected=win.release_detected, stopped=win.stop_detected, stuck=win.stuck,
                     outliers=np.asarray(spikes, dtype=int))
 
 
@@ -170,7 +171,7 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options) -> tuple
     spent = 0
     allowed = set(options.candidates) if options.candidates is not None else set(EFFECTS)
     for rnd in range(1, options.max_rounds + 1):
-        diag = diagnose(current, prep.noise, prep.stopped)
+        diag = diagnose(current, prep.noise, prep.stuck)
         if diag.at_noise_floor and diag.white:
             steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, {}, None, None, None, "",
                                        f"residual at the noise floor and white ({diag.rms_ratio:.3g} × noise)"))
@@ -245,7 +246,7 @@ def identify(trace: Trace, rig: Rig, options: Options = Options()) -> Identifica
             nfev += base.nfev
         else:
             base = final
-    diag: Diagnostics = diagnose(final, prep.noise, prep.stopped)
+    diag: Diagnostics = diagnose(final, prep.noise, prep.stuck)
 
     w, ws = final.value("omega_n"), final.stdev("omega_n")
     J = _inertia(rig, w)
@@ -297,7 +298,7 @@ def identify(trace: Trace, rig: Rig, options: Options = Options()) -> Identifica
     }
     window = {
         "t_start": float(final.t[0]), "t_stop": float(final.t[-1]), "n_used": final.n, "n_total": len(trace),
-        "n_outliers": n_outliers, "release_detected": prep.release_detected, "stop_detected": prep.stopped,
+        "n_outliers": n_outliers, "release_detected": prep.release_detected, "stop_detected": prep.stopped, "came_to_rest": prep.stuck,
     }
     arrays = {
         "t": final.t, "angle": final.y, "fitted": final.fitted, "residual": final.residual,

@@ -92,13 +92,17 @@ class Swings:
     """Half-swing facts of a trace around a centre line.
 
     crossings: times of the zero crossings of angle − centre, s.
-    peak_times/peak_values: extremum times (s) and signed excursions (rad).
+    peak_times/peak_values: extremum times (s) and signed excursions (rad)
+    of every lobe; lobe j lies before crossing j.
+    complete: whether lobe j's extremum is a real turning point: not the
+    record's first sample, and not the last lobe, cut off by the record's end.
     """
 
     centre: float
     crossings: np.ndarray
     peak_times: np.ndarray
     peak_values: np.ndarray
+    complete: np.ndarray
 
     @property
     def count(self) -> float:
@@ -148,7 +152,12 @@ def find_swings(t: np.ndarray, angle: np.ndarray, centre: float | None = None, h
     if state != 0 and lobe_i >= 0:
         peaks_t.append(t[lobe_i])
         peaks_v.append(z[lobe_i])
-    return Swings(c, np.asarray(crossings), np.asarray(peaks_t), np.asarray(peaks_v))
+    complete = np.ones(len(peaks_v), dtype=bool)
+    if complete.size:
+        complete[-1] = False
+        # the first lobe's extremum at the very first sample may be mid-swing
+        complete[0] = peaks_t[0] > t[0]
+    return Swings(c, np.asarray(crossings), np.asarray(peaks_t), np.asarray(peaks_v), complete)
 
 
 def _crossing_time(t: np.ndarray, z: np.ndarray, i: int) -> float:
@@ -171,6 +180,9 @@ class SwingWindow:
     stop: int
     release_detected: bool
     stop_detected: bool
+    #: the pendulum came to rest (a flat tail at the noise level), as only
+    #: dry friction makes it; a swing that merely decayed into the noise is not
+    stuck: bool = False
 
 
 def swing_window(t: np.ndarray, angle: np.ndarray, sigma: float) -> SwingWindow:
@@ -198,10 +210,12 @@ def swing_window(t: np.ndarray, angle: np.ndarray, sigma: float) -> SwingWindow:
     rest = float(np.median(tail))
     moving = np.flatnonzero(np.abs(y - rest) > tol)
     stop = n
-    stopped = False
+    stopped = stuck = False
     if moving.size and moving[-1] < n - 4:
         stop = min(n, int(moving[-1]) + 2)
         stopped = True
+        tail_after = y[stop:]
+        stuck = tail_after.size >= 20 and float(np.std(tail_after)) <= 1.5 * sigma
     # swings decayed into the noise carry no information but cost time
     if stop - start > 20:
         sw = find_swings(t[start:stop], y[start:stop], centre=rest, hysteresis=3 * sigma)
@@ -211,4 +225,5 @@ def swing_window(t: np.ndarray, angle: np.ndarray, sigma: float) -> SwingWindow:
             cut = int(np.searchsorted(t, t_cut, side="right"))
             if cut < stop:
                 stop, stopped = cut, True
-    return SwingWindow(start=start, stop=max(stop, start + 1), release_detected=release, stop_detected=stopped)
+    return SwingWindow(start=start, stop=max(stop, start + 1), release_detected=release, stop_detected=stopped,
+                       stuck=stuck)
