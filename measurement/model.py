@@ -139,7 +139,10 @@ def normalise_effect_values(rig: Rig, effect: Effect, given: Mapping[str, float]
             continue
         accepted = [p.name] + ([p.physical] if p.physical else []) + (["mu"] if effect.name == "coulomb" and rig.kind == "compound" else [])
         raise InvalidInput(f"{effect.name}: missing value; expected one of {', '.join(accepted)}")
-    extra = set(given) - {p.name for p in effect.parameters} - {p.physical for p in effect.parameters} - {"mu"}
+    accepted_names = {p.name for p in effect.parameters} | {p.physical for p in effect.parameters if p.physical}
+    if effect.name == "coulomb" and rig.kind == "compound":
+        accepted_names.add("mu")
+    extra = set(given) - accepted_names
     if extra:
         raise InvalidInput(f"{effect.name}: unknown parameter(s) {sorted(extra)}")
     return values
