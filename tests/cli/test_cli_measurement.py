@@ -140,3 +140,24 @@ def test_bad_rig_gives_one_line_and_exit_2(case, files, tmp_path):
 def test_unknown_effect_in_simulate_is_exit_2(files, tmp_path):
     r = moi("simulate", "--rig", files / "rig.toml", "--inertia", 0.01, "--effects", "friction=1", "--out", tmp_path / "x.csv")
     assert r.returncode == 2 and "unknown effect 'friction'" in r.stderr
+
+
+def test_calibrate_from_traces_of_known_loads(tmp_path):
+    """Empty fixture and two known loads, recorded as traces, give back k and I0."""
+    k, I0 = 0.3651, 4.5043e-3
+    (tmp_path / "rig.toml").write_text('[rig]\nkind = "torsion"\nstiffness = 0.3651\n')
+    refs = []
+    for i, added in enumerate((0.0, 3.0e-3, 8.0e-3)):
+        out = tmp_path / f"ref{i}.csv"
+        r = moi("simulate", "--rig", tmp_path / "rig.toml", "--inertia", I0 + added, "--effects", "viscous=1e-4",
+                "--duration", 20, "--noise", 1e-4, "--bits", 17, "--seed", i, "--out", out)
+        assert r.returncode == 0, r.stderr
+        refs.append(f'[[reference]]\nname = "load {i}"\ntrace = "{out.name}"\nadded_inertia = {added}\n')
+    (tmp_path / "cal.toml").write_text("\n".join(refs))
+    (tmp_path / "empty_rig.toml").write_text('[rig]\nkind = "torsion"\n')
+    r = moi("calibrate", tmp_path / "cal.toml", "--rig", tmp_path / "empty_rig.toml", "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["stiffness"] == pytest.approx(k, rel=1e-4)
+    assert d["tare_inertia"] == pytest.approx(I0, rel=1e-4)
+    assert d["stiffness_std"] < 1e-4 * k
