@@ -18,3 +18,15 @@ class ConfigError(ServiceError, InvalidInput):
 
 class InputFileError(ServiceError, InvalidInput):
     """A file named on the command line is missing, unreadable or malformed."""
+
+
+class StartupError(ServiceError):
+    """The daemon cannot start (port in use, unusable state directory, ...); not an input error."""
+
+
+class ModbusServerError(StartupError):
+    """The Modbus server cannot listen on its port or serial line."""
+
+
+class StoreError(ServiceError):
+    """The result store (SQLite) cannot be opened or written."""

@@ -1,0 +1,60 @@
+"""`moi run --config appliance.toml [--sim]`: the appliance daemon (what systemd starts)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+
+from ..config import load_config
+from ..errors import StartupError, StoreError
+
+HELP = "run the appliance daemon: sequencer, result store, MQTT, Modbus server, systemd notify"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", "-c", metavar="appliance.toml",
+                   help="configuration file (default: all defaults, simulated rig, MQTT off)")
+    p.add_argument("--sim", action="store_true",
+                   help="run on the simulated rig even when [hardware] is configured (default without [hardware])")
+    p.add_argument("--state-dir", metavar="DIR", help="result store directory (overrides [device] state_dir)")
+    p.add_argument("--check", action="store_true", help="validate the configuration, print a summary and exit")
+    p.add_argument("--log-level", choices=("debug", "info", "warning", "error"), help="overrides [device] log_level")
+
+
+def setup_logging(level: str) -> None:
+    # journald adds its own timestamps; the level and the logger name are what helps there
+    logging.basicConfig(level=getattr(logging, level.upper()), stream=sys.stderr,
+                        format="%(levelname)s %(name)s: %(message)s", force=True)
+    if level != "debug":
+        # pymodbus logs every refused request (e.g. a PLC writing a read-only register) as an error
+        logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+
+
+def run(args: argparse.Namespace) -> int:
+    config = load_config(args.config, sim=args.sim, state_dir=args.state_dir)
+    if args.check:
+        import json
+        print(json.dumps(config.to_dict(), indent=2, default=str))
+        return 0
+    setup_logging(args.log_level or config.log_level)
+    from ..daemon import Appliance
+
+    app = Appliance(config)
+
+    def on_signal(signum, frame):  # noqa: ARG001 (signal handler signature)
+        logging.getLogger("moi.daemon").info("signal %s: stopping", signal.Signals(signum).name)
+        app.request_stop()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        try:
+            app.start()
+        except (StartupError, StoreError) as exc:
+            print(f"moi run: error: {exc}", file=sys.stderr)
+            return 3
+        return app.run()
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)

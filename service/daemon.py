@@ -1,0 +1,375 @@
+"""The appliance daemon: sequencer, result store, MQTT, Modbus and systemd, in one main loop.
+
+Threads and who owns what:
+
+* the main loop (``Appliance.run``, the caller's thread) polls the sequencer
+  every ``poll_interval`` s, executes the commands queued by the button, the
+  Modbus coils and MQTT, refreshes the live Modbus registers and pings the
+  systemd watchdog, only after an iteration that completed (a hung loop
+  therefore gets the daemon restarted by systemd);
+* the sequencer calls back on the main loop's thread: state events (published
+  on MQTT and in the registers) and the result sink, which stores the
+  measurement and its outbox row in one SQLite transaction, then swaps the
+  Modbus snapshot and wakes the outbox sender; nothing is published before
+  the store has it;
+* pymodbus, paho and the outbox sender run in their own threads and only
+  enqueue commands / acknowledgements.
+
+Only ``run``'s loop catches broadly: an unexpected error becomes a FAULT of
+the sequencer (solenoid off), published like any state; a component thread
+that died ends the daemon with status 3 so that systemd restarts it.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from typing import Any, Callable
+
+from firmware_host import Event, Measurement, Sequencer, State
+
+from . import __version__
+from .config import Config
+from .errors import ServiceError
+from .hardware import Devices, build_devices
+from .modbus_server import ModbusServer
+from .mqtt import MqttService
+from .notify import Notifier
+from .payload import iso_utc, result_payload
+from .registers import LiveStatus
+from .store import Store
+
+log = logging.getLogger("moi.daemon")
+
+#: exit statuses of ``run``
+EXIT_OK = 0
+EXIT_RUNTIME_FAILURE = 3
+
+#: consecutive failing loop iterations after which the daemon gives up (systemd restarts it)
+MAX_LOOP_FAILURES = 20
+
+
+class Appliance:
+    """The whole appliance. ``start()``, then ``run()`` (blocks until ``request_stop()``).
+
+    config: the validated configuration. notifier: systemd notification (default: from the
+    environment). devices: injected devices (default: built from the config).
+    wall_clock: Unix time, s (timestamps in the store and the payloads).
+    """
+
+    def __init__(self, config: Config, *, notifier: Notifier | None = None, devices: Devices | None = None,
+                 wall_clock: Callable[[], float] = time.time, poll_interval: float = 0.02,
+                 stop_grace: float = 10.0) -> None:
+        self.config = config
+        self.notifier = notifier or Notifier()
+        self.wall_clock = wall_clock
+        self.poll_interval = poll_interval
+        self.stop_grace = stop_grace
+        self._devices = devices
+        self.devices: Devices | None = None
+        self.store: Store | None = None
+        self.modbus: ModbusServer | None = None
+        self.mqtt: MqttService | None = None
+        self.sequencer: Sequencer | None = None
+        self._commands: queue.SimpleQueue[tuple[str, str]] = queue.SimpleQueue()
+        self._wakeup = threading.Event()
+        self._stop = threading.Event()
+        self._started_runs = 0
+        self._run_started: dict[str, tuple[float, str]] = {}  # measurement id → (wall time of ARMED, trigger source)
+        self._accepted_source = "unknown"  # source of the last accepted trigger (paired with the next ARMED)
+        self._last_status = ""
+        self.loop_iterations = 0
+        self.last_loop_error: str | None = None
+        self.stored: list[str] = []  # UUIDs stored since start (ok, failed, aborted), in order
+        self._stored_cond = threading.Condition()
+        self.exit_status = EXIT_OK
+
+    # --- commands (any thread; never blocks) ----------------------------------------------------
+    def command(self, name: str, source: str) -> None:
+        """Queue "trigger" or "abort" from ``source`` ("button", "modbus", "mqtt", "cli")."""
+        self._commands.put((name, source))
+        self._wakeup.set()
+
+    def request_stop(self) -> None:
+        self._stop.set()
+        self._wakeup.set()
+
+    # --- start ------------------------------------------------------------------------------------
+    def start(self) -> None:
+        """Open the store, start Modbus and MQTT, build the devices and the sequencer; then READY."""
+        cfg = self.config
+        try:
+            self.store = Store(cfg.state_dir)
+            if cfg.modbus is not None:
+                self.modbus = ModbusServer(cfg.modbus, on_command=self.command)
+                self.modbus.start()
+                last = self.store.latest("ok")
+                if last is not None and last.payload is not None:
+                    self.modbus.publish_result(last.payload)  # the PLC sees the last result after a restart too
+            if cfg.mqtt is not None:
+                self.mqtt = MqttService(cfg.mqtt, cfg.device_id, self.store, software_version=__version__,
+                                        on_command=self.command)
+                self.mqtt.start()
+            self.devices = self._devices or build_devices(cfg)
+            d = self.devices
+            # the button is wired through the command queue like the other sources, so every
+            # trigger is logged and executed the same way on the main loop
+            self.sequencer = Sequencer(clock=d.clock, solenoid=d.solenoid, sensor=d.sensor, rig=cfg.rig,
+                                       sink=self._store_measurement, config=cfg.sequencer,
+                                       options=cfg.identification, button=None, indicator=d.indicator)
+            if d.button is not None:
+                d.button.when_pressed = lambda: self.command("trigger", "button")
+            self.sequencer.subscribe(self._on_event)
+        except BaseException:
+            self._shutdown_components()
+            raise
+        self._refresh_live()
+        if self.mqtt is not None:
+            self.mqtt.publish_state(self._state_message("IDLE", "IDLE", "daemon started", None))
+        where = []
+        if self.modbus is not None:
+            m = cfg.modbus
+            where.append(f"Modbus {m.mode.upper()} " + (f"{m.host}:{self.modbus.bound_port}" if m.mode == "tcp" else str(m.serial_port)))
+        where.append(f"MQTT {cfg.mqtt.host}:{cfg.mqtt.port}" if cfg.mqtt else "MQTT off")
+        log.info("moi %s ready (%s rig; %s; store %s)", __version__, "simulated" if cfg.simulated else "hardware",
+                 ", ".join(where), self.store.path)
+        self.notifier.ready(f"idle; {', '.join(where)}")
+
+    # --- the main loop ---------------------------------------------------------------------------------
+    def run(self, until: Callable[[], bool] | None = None) -> int:
+        """Run until ``request_stop()`` (or ``until()`` is true), then stop gracefully. Returns the exit status."""
+        failures = 0
+        try:
+            while not self._stop.is_set() and not (until is not None and until()):
+                try:
+                    self._iteration()
+                    failures = 0
+                    self.last_loop_error = None
+                except _Fatal as exc:
+                    log.error("%s; stopping", exc)
+                    self.exit_status = EXIT_RUNTIME_FAILURE
+                    break
+                except Exception as exc:  # the outermost loop: an error becomes a FAULT, the loop goes on
+                    failures += 1
+                    self.last_loop_error = f"{type(exc).__name__}: {exc}"
+                    log.exception("main loop iteration failed (%d in a row)", failures)
+                    self._fault(f"internal error: {self.last_loop_error}")
+                    if failures >= MAX_LOOP_FAILURES:
+                        log.error("main loop failed %d times in a row; stopping", failures)
+                        self.exit_status = EXIT_RUNTIME_FAILURE
+                        break
+                self._wakeup.wait(self.poll_interval)
+                self._wakeup.clear()
+        finally:
+            self.stop()
+        return self.exit_status
+
+    def _iteration(self) -> None:
+        assert self.sequencer is not None
+        self._drain_commands()
+        self.sequencer.poll()
+        self._check_components()
+        self._refresh_live()
+        self.loop_iterations += 1
+        # the watchdog is fed only here, after a complete healthy iteration
+        if self.notifier.watchdog_due():
+            self.notifier.watchdog()
+        status = self._status_text()
+        if status != self._last_status:
+            self._last_status = status
+            self.notifier.status(status)
+
+    def _drain_commands(self) -> None:
+        seq = self.sequencer
+        assert seq is not None
+        while True:
+            try:
+                name, source = self._commands.get_nowait()
+            except queue.Empty:
+                return
+            if name == "trigger":
+                if seq.request_measurement(source):
+                    self._accepted_source = source
+                else:
+                    log.info("trigger from %s ignored (state %s)", source, seq.state.value)
+            elif name == "abort":
+                if seq.state is State.FAULT:
+                    seq.abort(f"fault acknowledged by {source}")
+                elif not seq.abort(f"aborted by {source}"):
+                    log.info("abort from %s: nothing to abort", source)
+            else:
+                log.warning("unknown command %r from %s", name, source)
+
+    def _check_components(self) -> None:
+        if self.modbus is not None and self.modbus._thread is not None and not self.modbus._thread.is_alive():
+            raise _Fatal("the Modbus server thread stopped")
+        if self.mqtt is not None and self.mqtt.sender.error is not None:
+            raise _Fatal(f"the MQTT outbox sender failed: {self.mqtt.sender.error}")
+
+    def _fault(self, reason: str) -> None:
+        seq = self.sequencer
+        if seq is None:
+            return
+        try:
+            seq.fault(reason)
+            seq.poll()  # deliver the FAULT event (published like any other)
+        except Exception:  # the sequencer itself is broken: the solenoid was switched off by fault()
+            log.exception("could not put the sequencer in FAULT")
+
+    # --- sequencer callbacks (main loop thread) ------------------------------------------------------------
+    def _on_event(self, event: Event) -> None:
+        if event.state is State.ARMED:
+            self._started_runs += 1
+            if event.measurement_id:
+                self._run_started[event.measurement_id] = (self.wall_clock(), self._accepted_source)
+        if event.state in (State.FAULT, State.ABORTED) and event.measurement_id \
+                and event.measurement_id in self._run_started:
+            self._store_failure(event)
+        if self.mqtt is not None:
+            self.mqtt.publish_state(self._state_message(event.state.value, event.previous.value, event.reason,
+                                                        event.measurement_id, event))
+        self._refresh_live()
+
+    def _state_message(self, state: str, previous: str, reason: str, measurement_id: str | None,
+                       event: Event | None = None) -> dict[str, Any]:
+        msg = event.to_dict() if event is not None else {"state": state, "previous": previous, "reason": reason,
+                                                          "measurement_id": measurement_id}
+        now = self.wall_clock()
+        msg.update({"device_id": self.config.device_id, "timestamp": now, "at": iso_utc(now)})
+        return msg
+
+    def _clock_scale(self) -> float:
+        return self.config.simulation.time_scale if self.config.simulated else 1.0
+
+    def _store_measurement(self, m: Measurement) -> None:
+        """The sequencer's result sink: store (with the outbox row), then Modbus, then wake MQTT."""
+        assert self.store is not None
+        finished = self.wall_clock()
+        started = self._run_started.pop(m.id, (None, ""))[0]
+        if started is None:
+            started = finished - (m.finished_at - m.requested_at) / self._clock_scale()
+        cfg = self.config
+        result = m.result.to_dict()
+        timing = m.to_dict().get("timing", {})
+
+        def build(uuid: str, seq: int) -> dict[str, Any]:
+            return result_payload(result, uuid=uuid, seq=seq, device_id=cfg.device_id, trigger=m.requested_by,
+                                  started_at=started, finished_at=finished, software_version=__version__,
+                                  timing=timing)
+
+        trace = m.trace
+        stored = self.store.record(
+            uuid=m.id, status="ok", trigger=m.requested_by, device_id=cfg.device_id, software_version=__version__,
+            started_at=started, finished_at=finished, result=result, build_payload=build,
+            rig=cfg.rig.to_dict(), config=cfg.to_dict(),
+            trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
+            trace_meta=dict(trace.meta), enqueue=("result",) if self.mqtt is not None else (),
+        )
+        if self.modbus is not None and stored.payload is not None:
+            self.modbus.publish_result(stored.payload)
+        if self.mqtt is not None:
+            self.mqtt.wake()
+        self._note_stored(m.id)
+        log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, result.get("J"),
+                 ", ".join(result.get("flags") or []) or "none")
+
+    def _store_failure(self, event: Event) -> None:
+        assert self.store is not None and event.measurement_id is not None
+        started, trigger = self._run_started.pop(event.measurement_id)
+        status = "failed" if event.state is State.FAULT else "aborted"
+        try:
+            self.store.record(uuid=event.measurement_id, status=status, trigger=trigger,
+                              device_id=self.config.device_id, software_version=__version__, started_at=started,
+                              finished_at=self.wall_clock(), error=event.reason, rig=self.config.rig.to_dict(),
+                              config=self.config.to_dict())
+            self._note_stored(event.measurement_id)
+        except ServiceError:
+            log.exception("could not store the %s measurement %s", status, event.measurement_id)
+
+    def _note_stored(self, uuid: str) -> None:
+        with self._stored_cond:
+            self.stored.append(uuid)
+            self._stored_cond.notify_all()
+
+    def wait_stored(self, n: int, timeout: float) -> bool:
+        """Wait until ``n`` measurements were stored since start (tests, demo). True if so."""
+        deadline = time.monotonic() + timeout
+        with self._stored_cond:
+            while len(self.stored) < n:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._stored_cond.wait(left)
+        return True
+
+    # --- live status --------------------------------------------------------------------------------------------
+    def live_status(self) -> LiveStatus:
+        seq = self.sequencer
+        state = seq.state.value if seq is not None else "STARTING"
+        return LiveStatus(
+            state=state, busy=bool(seq and seq.busy), fault=state == "FAULT",
+            mqtt_connected=bool(self.mqtt and self.mqtt.is_connected), simulated=self.config.simulated,
+            outbox_pending=self.mqtt.sender.pending if self.mqtt is not None else 0, started=self._started_runs,
+        )
+
+    def _refresh_live(self) -> None:
+        if self.modbus is not None:
+            self.modbus.set_live(self.live_status())
+
+    def _status_text(self) -> str:
+        seq = self.sequencer
+        parts = [seq.state.value.lower() if seq else "starting"]
+        if self.mqtt is not None:
+            parts.append("mqtt connected" if self.mqtt.is_connected else "mqtt disconnected")
+            if self.mqtt.sender.pending:
+                parts.append(f"{self.mqtt.sender.pending} result(s) waiting for the broker")
+        return "; ".join(parts)
+
+    # --- stop -------------------------------------------------------------------------------------------------------
+    def stop(self) -> None:
+        """Graceful stop: finish an identification that is nearly done or abort the measurement,
+        solenoid off, devices closed, in-flight MQTT publications given a moment, store closed."""
+        self.notifier.stopping()
+        seq = self.sequencer
+        if seq is not None:
+            try:
+                if seq.state in (State.IDENTIFYING, State.PUBLISHING):
+                    # the swing is recorded: a few more seconds give a result instead of nothing
+                    deadline = time.monotonic() + self.stop_grace
+                    while seq.state in (State.IDENTIFYING, State.PUBLISHING) and time.monotonic() < deadline:
+                        seq.poll()
+                        if self.notifier.watchdog_due():
+                            self.notifier.watchdog()
+                        time.sleep(self.poll_interval)
+                if seq.busy:
+                    seq.abort("daemon stopping")
+                    seq.poll()
+            except Exception:  # stopping: make safe below whatever happened
+                log.exception("error while finishing the measurement at stop")
+            finally:
+                seq.close()
+        self._shutdown_components()
+
+    def _shutdown_components(self) -> None:
+        if self.devices is not None:
+            self.devices.close()  # solenoid first
+            self.devices = None
+        if self.mqtt is not None:
+            try:
+                self.mqtt.stop(flush_timeout=2.0)
+            except Exception:
+                log.exception("MQTT stop failed")
+            self.mqtt = None
+        if self.modbus is not None:
+            self.modbus.stop()
+            self.modbus = None
+        if self.store is not None:
+            self.store.close()
+            self.store = None
+        self.notifier.close()
+
+
+class _Fatal(ServiceError):
+    """A component thread died: the daemon stops (and systemd restarts it)."""

@@ -1,0 +1,243 @@
+"""The Modbus server the PLC polls (pymodbus 3.16, TCP or RTU).
+
+The register layout lives in ``service.registers``; this module serves it.
+The server runs its own asyncio loop in a thread. The daemon hands it a new
+result with ``publish_result`` and the live status with ``set_live``; both
+build a complete register image and swap it in with one assignment, and every
+request copies that image into pymodbus' datastore before pymodbus reads it,
+so one request never mixes two images (see the snapshot protocol in
+docs/modbus.md).
+
+Writes: only the two command coils are writable. Holding registers are
+declared read-only (pymodbus answers 0x02), coils other than the command
+coils are refused in the access hook with 0x02.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping
+
+from pymodbus.constants import ExcCodes
+from pymodbus.exceptions import NoSuchIdException
+from pymodbus.framer import FramerType
+from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.simulator import DataType, SimData, SimDevice
+from pymodbus.simulator.simcore import SimCore
+
+from . import registers as R
+from .errors import ModbusServerError
+
+log = logging.getLogger("moi.modbus")
+
+_READ_REGISTERS = {3, 4}
+_READ_DISCRETE = {2}
+_WRITE_COILS = {5, 15}
+
+
+@dataclass(frozen=True)
+class ModbusSettings:
+    """Where and how to serve (see ``[modbus]`` in docs/service.md).
+
+    mode: "tcp" | "rtu". host/port: TCP listen address (port 0: any free port).
+    serial_port, baudrate, parity ("N"|"E"|"O"), stopbits, bytesize: RTU line
+    (serial_port may be "socket://HOST:PORT" for a serial-over-TCP bridge).
+    unit_id: the Modbus device id answered. word_order: "big" | "little".
+    """
+
+    mode: str = "tcp"
+    host: str = "127.0.0.1"
+    port: int = 5020
+    unit_id: int = 1
+    word_order: str = "big"
+    serial_port: str | None = None
+    baudrate: int = 19200
+    parity: str = "E"
+    stopbits: int = 1
+    bytesize: int = 8
+
+
+class _OneUnitCore(SimCore):
+    """SimCore that treats an unknown unit id as missing instead of raising KeyError.
+
+    pymodbus 3.16's SimCore falls back to device id 0 and raises KeyError when it
+    is absent, which the request handler turns into a logged "device failure"
+    reply; a request for another unit must instead be ignored (RTU, shared line)
+    or answered with "gateway target failed to respond" (TCP).
+    """
+
+    async def async_getValues(self, device_id: int, func_code: int, address: int, count: int = 1):
+        if device_id not in self.devices:
+            raise NoSuchIdException(f"unit id {device_id} is not served")
+        return await super().async_getValues(device_id, func_code, address, count)
+
+    async def async_setValues(self, device_id: int, func_code: int, address: int, values):
+        if device_id not in self.devices:
+            raise NoSuchIdException(f"unit id {device_id} is not served")
+        return await super().async_setValues(device_id, func_code, address, values)
+
+
+class ModbusServer:
+    """Serves the register image of ``service.registers``.
+
+    on_command(name, source) is called from the server thread when the PLC
+    writes 1 to a command coil (name "trigger" or "abort"); it must not block.
+    """
+
+    def __init__(self, settings: ModbusSettings, on_command: Callable[[str, str], None] | None = None) -> None:
+        if settings.word_order not in R.WORD_ORDERS:
+            raise ValueError(f"word_order must be one of {R.WORD_ORDERS}")
+        self.settings = settings
+        self._on_command = on_command or (lambda name, source: None)
+        self._lock = threading.Lock()
+        self._live = R.LiveStatus()
+        self._snapshot = R.encode_snapshot(None, settings.word_order)
+        self._result_valid = False
+        self._image: tuple[int, ...] = ()
+        self._status_bits = 0
+        self._rebuild()
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._server: ModbusTcpServer | ModbusSerialServer | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self.bound_port: int | None = None
+        self.requests = 0  # requests served (all function codes), for diagnostics
+
+    # --- data the daemon updates --------------------------------------------
+    def publish_result(self, payload: Mapping[str, Any]) -> None:
+        """Make a stored result the current snapshot (one atomic swap)."""
+        words = R.encode_snapshot(payload, self.settings.word_order)
+        with self._lock:
+            self._snapshot = words
+            self._result_valid = True
+            self._rebuild()
+
+    def set_live(self, live: R.LiveStatus) -> None:
+        with self._lock:
+            if live != self._live:
+                self._live = live
+                self._rebuild()
+
+    @property
+    def live(self) -> R.LiveStatus:
+        return self._live
+
+    def image(self) -> tuple[int, ...]:
+        """The registers 0 … IMAGE_SIZE-1 as served now."""
+        return self._image
+
+    def _rebuild(self) -> None:
+        live = R.encode_live(self._live, self._result_valid, self.settings.word_order)
+        # one assignment: a request handler sees the old or the new tuple, never a mix
+        self._image = tuple(live + self._snapshot)
+        self._status_bits = self._live.status_bits(self._result_valid)
+
+    # --- pymodbus access hook (runs in the server's event loop) -------------------
+    async def _action(self, func_code: int, start_address: int, address: int, count: int,
+                      current: list, values: list | None) -> ExcCodes | None:
+        self.requests += 1
+        if func_code in _READ_REGISTERS:
+            image = self._image
+            current[0: len(image)] = image  # the block starts at address 0
+            return None
+        if func_code in _READ_DISCRETE:
+            current[0] = self._status_bits
+            return None
+        if func_code in _WRITE_COILS and values is not None:
+            if address < 0 or address + len(values) > len(R.COILS):
+                return ExcCodes.ILLEGAL_ADDRESS
+            names = {a: n for n, a in R.COILS.items()}
+            for i, v in enumerate(values):
+                if v:
+                    self._on_command(names[address + i], "modbus")
+                values[i] = False  # command coils are pulses: they read back 0
+            return None
+        return None
+
+    def _device(self) -> SimDevice:
+        n_coil_regs = len(R.COILS)
+        return SimDevice(
+            id=self.settings.unit_id,
+            simdata=(
+                [SimData(0, count=n_coil_regs, values=False, datatype=DataType.BITS)],
+                [SimData(0, count=len(R.STATUS_BITS), values=False, datatype=DataType.BITS)],
+                [SimData(0, count=R.IMAGE_SIZE, values=0, datatype=DataType.REGISTERS, readonly=True)],
+                [SimData(0, count=R.IMAGE_SIZE, values=0, datatype=DataType.REGISTERS, readonly=True)],
+            ),
+            action=self._action,
+        )
+
+    # --- lifecycle -------------------------------------------------------------------
+    def start(self, timeout: float = 10.0) -> None:
+        """Start serving; returns once the port is bound. Raises ModbusServerError if it cannot."""
+        if self._thread is not None:
+            raise RuntimeError("Modbus server already started")
+        self._thread = threading.Thread(target=self._run, name="moi-modbus", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(timeout):
+            raise ModbusServerError(f"Modbus server did not start within {timeout} s")
+        if self._error is not None:
+            self._thread.join(timeout)
+            self._thread = None
+            raise ModbusServerError(str(self._error)) from None
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except BaseException as exc:  # reported to start(); after start it is logged
+            if not self._ready.is_set():
+                self._error = exc
+                self._ready.set()
+            else:
+                log.error("Modbus server stopped: %s", exc)
+
+    async def _main(self) -> None:
+        s = self.settings
+        self._loop = asyncio.get_running_loop()
+        device = self._device()
+        if s.mode == "tcp":
+            server = ModbusTcpServer(device, address=(s.host, s.port), ignore_missing_devices=False)
+            where = f"TCP {s.host}:{s.port}"
+        elif s.mode == "rtu":
+            server = ModbusSerialServer(device, framer=FramerType.RTU, port=s.serial_port or "", baudrate=s.baudrate,
+                                        parity=s.parity, stopbits=s.stopbits, bytesize=s.bytesize,
+                                        ignore_missing_devices=True)
+            where = f"RTU {s.serial_port} {s.baudrate} {s.bytesize}{s.parity}{s.stopbits}"
+        else:
+            raise ModbusServerError(f"unknown Modbus mode {s.mode!r}; expected tcp or rtu")
+        server.context = _OneUnitCore(device)
+        self._server = server
+        try:
+            await server.serve_forever(background=True)
+        except RuntimeError:
+            raise ModbusServerError(f"cannot listen on Modbus {where} (address in use, or no permission)") from None
+        sockets = getattr(server.transport, "sockets", None)
+        if sockets:
+            self.bound_port = sockets[0].getsockname()[1]
+        log.info("Modbus server on %s (unit id %d)", where if self.bound_port is None else
+                 f"TCP {s.host}:{self.bound_port}", s.unit_id)
+        self._ready.set()
+        await server.serving
+
+    def stop(self, timeout: float = 5.0) -> None:
+        if self._thread is None:
+            return
+        if self._loop is not None and self._server is not None and self._loop.is_running():
+            fut = asyncio.run_coroutine_threadsafe(self._server.shutdown(), self._loop)
+            try:
+                fut.result(timeout)
+            except Exception as exc:  # shutting down: nothing else to do but say so
+                log.warning("Modbus server shutdown: %s", exc)
+        self._thread.join(timeout)
+        self._thread = None
+
+    def __enter__(self) -> "ModbusServer":
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

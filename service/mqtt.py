@@ -1,0 +1,266 @@
+"""MQTT telemetry (paho-mqtt 2.x, callback API version 2).
+
+Topics under ``<prefix>/<device_id>/`` (prefix default "moi"):
+
+* ``result``      one JSON result per measurement, QoS 1, from the durable outbox
+  (``service.outbox``); consumers dedupe by ``uuid``.
+* ``status``      ``online`` / ``offline``, retained; ``offline`` is also the last will.
+* ``state``       sequencer events as JSON, retained (the latest state), QoS 0.
+* ``cmd/measure`` a message here starts one measurement (like the push button);
+  ``cmd/abort`` aborts the running one. Retained messages are ignored (a stale
+  retained command must not fire at every reconnect); a JSON payload with an
+  ``"id"`` is acted on once per id (QoS 1 may deliver twice).
+
+Optional Home Assistant MQTT discovery (retained config messages) for J, its
+uncertainty, ω_n, the damping ratio, the state, each quality flag and a
+"measure" button.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import ssl
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import paho.mqtt.client as mqtt
+from paho.mqtt.enums import CallbackAPIVersion
+
+from .errors import ConfigError
+from .outbox import OutboxSender
+from .registers import FLAG_BITS
+from .store import Store
+
+log = logging.getLogger("moi.mqtt")
+
+
+@dataclass(frozen=True)
+class MqttSettings:
+    """Broker connection and topics (``[mqtt]`` in the config file).
+
+    keepalive, reconnect_min/max, resend_after: s.
+    """
+
+    host: str = "localhost"
+    port: int = 1883
+    prefix: str = "moi"
+    client_id: str | None = None
+    username: str | None = None
+    password: str | None = None
+    password_file: str | None = None
+    keepalive: int = 30
+    tls: bool = False
+    ca_file: str | None = None
+    cert_file: str | None = None
+    key_file: str | None = None
+    tls_insecure: bool = False
+    reconnect_min: float = 0.5
+    reconnect_max: float = 30.0
+    resend_after: float = 30.0
+    window: int = 10
+    home_assistant: bool = False
+    discovery_prefix: str = "homeassistant"
+
+
+class Topics:
+    def __init__(self, prefix: str, device_id: str) -> None:
+        base = f"{prefix.strip('/')}/{device_id}" if prefix.strip("/") else device_id
+        self.base = base
+        self.result = f"{base}/result"
+        self.status = f"{base}/status"
+        self.state = f"{base}/state"
+        self.cmd_measure = f"{base}/cmd/measure"
+        self.cmd_abort = f"{base}/cmd/abort"
+
+    def for_kind(self, kind: str) -> str:
+        if kind == "result":
+            return self.result
+        raise ValueError(f"unknown outbox kind {kind!r}")
+
+
+class MqttService:
+    """The MQTT client of the daemon: durable result delivery, status, state, commands.
+
+    on_command(name, source) is called from paho's thread for a command
+    message ("trigger" or "abort", source "mqtt"); it must not block.
+    """
+
+    def __init__(self, settings: MqttSettings, device_id: str, store: Store, *, software_version: str = "",
+                 on_command: Callable[[str, str], None] | None = None,
+                 on_delivered: Callable[[str], None] | None = None) -> None:
+        self.settings = settings
+        self.device_id = device_id
+        self.topics = Topics(settings.prefix, device_id)
+        self.software_version = software_version
+        self._on_command = on_command or (lambda name, source: None)
+        self._seen_ids: deque[str] = deque(maxlen=256)
+        self._seen_lock = threading.Lock()
+        self.connected_event = threading.Event()
+        self.last_error: str | None = None
+        client_id = settings.client_id or f"moi-{device_id}"
+        # clean session: the outbox, not the broker session, is what makes delivery durable
+        self.client = mqtt.Client(CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=True)
+        self._configure_auth()
+        self.client.will_set(self.topics.status, "offline", qos=1, retain=True)
+        # the type hints say int, but paho only sleeps for these: sub-second backoff works
+        self.client.reconnect_delay_set(settings.reconnect_min, settings.reconnect_max)  # type: ignore[arg-type]
+        self.client.on_connect = self._on_connect
+        self.client.on_disconnect = self._on_disconnect
+        self.client.on_publish = self._on_publish
+        self.client.on_message = self._on_message
+        self.sender = OutboxSender(store, self._publish_kind, window=settings.window,
+                                   resend_after=settings.resend_after, on_delivered=on_delivered)
+
+    def _configure_auth(self) -> None:
+        s = self.settings
+        password = s.password
+        if s.password_file:
+            try:
+                password = Path(s.password_file).read_text(encoding="utf-8").strip()
+            except OSError as exc:
+                raise ConfigError(f"[mqtt] password_file {s.password_file!r} cannot be read: {exc.strerror}") from None
+        if s.username is not None:
+            self.client.username_pw_set(s.username, password)
+        if s.tls:
+            try:
+                self.client.tls_set(ca_certs=s.ca_file, certfile=s.cert_file, keyfile=s.key_file,
+                                    cert_reqs=ssl.CERT_REQUIRED)
+            except (OSError, ssl.SSLError, ValueError) as exc:
+                raise ConfigError(f"[mqtt] TLS settings unusable: {exc}") from None
+            if s.tls_insecure:
+                self.client.tls_insecure_set(True)
+
+    # --- lifecycle -------------------------------------------------------------------
+    def start(self) -> None:
+        """Start connecting (in the background; the broker may be down) and delivering."""
+        self.sender.start()
+        self.client.connect_async(self.settings.host, self.settings.port, keepalive=self.settings.keepalive)
+        self.client.loop_start()
+
+    def stop(self, flush_timeout: float = 2.0) -> None:
+        """Wait a little for in-flight results to be acknowledged, say offline, disconnect.
+
+        Unacknowledged results stay in the outbox for the next start.
+        """
+        if self.connected_event.is_set():
+            self.sender.wait_idle(flush_timeout)
+            info = self.client.publish(self.topics.status, "offline", qos=1, retain=True)
+            try:
+                info.wait_for_publish(timeout=min(flush_timeout, 1.0))
+            except (RuntimeError, ValueError):
+                pass  # connection gone meanwhile: the last will says offline instead
+        self.sender.stop()
+        self.client.disconnect()
+        self.client.loop_stop()
+
+    @property
+    def is_connected(self) -> bool:
+        return self.connected_event.is_set()
+
+    # --- publishing --------------------------------------------------------------------
+    def _publish_kind(self, kind: str, payload: str) -> int:
+        info = self.client.publish(self.topics.for_kind(kind), payload, qos=1, retain=False)
+        return info.mid
+
+    def publish_state(self, event: dict[str, Any]) -> None:
+        """A sequencer event (retained: a new subscriber sees the current state)."""
+        self.client.publish(self.topics.state, json.dumps(event, default=str), qos=0, retain=True)
+
+    def wake(self) -> None:
+        """New outbox rows were stored."""
+        self.sender.wake()
+
+    # --- paho callbacks (network thread) -----------------------------------------------------
+    def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
+        if reason_code.is_failure:
+            self.last_error = f"broker refused the connection: {reason_code}"
+            log.warning("MQTT: %s", self.last_error)
+            return
+        self.last_error = None
+        log.info("MQTT connected to %s:%d", self.settings.host, self.settings.port)
+        client.publish(self.topics.status, "online", qos=1, retain=True)
+        client.subscribe([(self.topics.cmd_measure, 1), (self.topics.cmd_abort, 1)])
+        if self.settings.home_assistant:
+            for topic, config in discovery_messages(self.settings, self.topics, self.device_id, self.software_version):
+                client.publish(topic, json.dumps(config), qos=1, retain=True)
+        self.connected_event.set()
+        self.sender.connected()
+
+    def _on_disconnect(self, client, userdata, flags, reason_code, properties) -> None:
+        if self.connected_event.is_set():
+            log.warning("MQTT disconnected: %s", reason_code)
+        self.connected_event.clear()
+        self.sender.disconnected()
+
+    def _on_publish(self, client, userdata, mid, reason_code, properties) -> None:
+        self.sender.acked(mid)
+
+    def _on_message(self, client, userdata, message) -> None:
+        if message.retain:
+            log.warning("MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
+            return
+        name = {self.topics.cmd_measure: "trigger", self.topics.cmd_abort: "abort"}.get(message.topic)
+        if name is None:
+            return
+        cmd_id = None
+        if message.payload:
+            try:
+                doc = json.loads(message.payload)
+                if isinstance(doc, dict) and doc.get("id") is not None:
+                    cmd_id = str(doc["id"])
+            except (ValueError, UnicodeDecodeError):
+                pass  # any payload is a valid command; only a JSON "id" is used for dedupe
+        if cmd_id is not None:
+            with self._seen_lock:
+                if (name, cmd_id) in self._seen_ids:
+                    log.info("MQTT: duplicate %s command id %s ignored", name, cmd_id)
+                    return
+                self._seen_ids.append((name, cmd_id))
+        self._on_command(name, "mqtt")
+
+
+def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
+                       software_version: str) -> list[tuple[str, dict[str, Any]]]:
+    """Home Assistant MQTT discovery config messages (topic, config)."""
+    dp = settings.discovery_prefix.strip("/")
+    node = "".join(c if c.isalnum() or c in "_-" else "_" for c in device_id)
+    device = {"identifiers": [f"moi_{node}"], "name": f"moi {device_id}", "manufacturer": "moi",
+              "model": "pendulum inertia appliance", "sw_version": software_version}
+    common = {"availability_topic": topics.status, "payload_available": "online",
+              "payload_not_available": "offline", "device": device}
+    out: list[tuple[str, dict[str, Any]]] = []
+    sensors = [
+        ("J", "Moment of inertia", "kg·m²", "{{ value_json.J }}"),
+        ("J_std", "Moment of inertia uncertainty", "kg·m²", "{{ value_json.J_std }}"),
+        ("omega_n", "Natural angular frequency", "rad/s", "{{ value_json.omega_n }}"),
+        ("damping_ratio", "Damping ratio", None, "{{ value_json.damping_ratio }}"),
+        ("residual_rms", "Fit residual RMS", "rad", "{{ value_json.residual_rms_after }}"),
+    ]
+    for key, name, unit, template in sensors:
+        cfg = {"name": name, "unique_id": f"moi_{node}_{key}", "object_id": f"moi_{node}_{key}",
+               "state_topic": topics.result, "value_template": template, "state_class": "measurement",
+               "json_attributes_topic": topics.result if key == "J" else None, **common}
+        if key == "J":
+            cfg["json_attributes_template"] = ("{{ {'uuid': value_json.uuid, 'seq': value_json.seq, "
+                                               "'finished_at': value_json.finished_at, 'flags': value_json.flags} | tojson }}")
+        if unit:
+            cfg["unit_of_measurement"] = unit
+        out.append((f"{dp}/sensor/{node}/{key}/config", {k: v for k, v in cfg.items() if v is not None}))
+    out.append((f"{dp}/sensor/{node}/state/config", {
+        "name": "Sequencer state", "unique_id": f"moi_{node}_state", "object_id": f"moi_{node}_state",
+        "state_topic": topics.state, "value_template": "{{ value_json.state }}", **common}))
+    for flag in FLAG_BITS:
+        out.append((f"{dp}/binary_sensor/{node}/{flag}/config", {
+            "name": f"Flag {flag.replace('_', ' ')}", "unique_id": f"moi_{node}_flag_{flag}",
+            "object_id": f"moi_{node}_flag_{flag}", "device_class": "problem",
+            "state_topic": topics.result,
+            "value_template": "{{ 'ON' if '" + flag + "' in value_json.flags else 'OFF' }}", **common}))
+    out.append((f"{dp}/button/{node}/measure/config", {
+        "name": "Measure", "unique_id": f"moi_{node}_measure", "object_id": f"moi_{node}_measure",
+        "command_topic": topics.cmd_measure, "payload_press": "{}", **common}))
+    return out

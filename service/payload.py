@@ -1,0 +1,63 @@
+"""The published result: one dict, from which the MQTT JSON and the Modbus registers are both made.
+
+``result_payload`` takes ``IdentificationResult.to_dict()`` unchanged and adds
+an envelope (uuid, sequence number, device, trigger, timestamps, software
+version) plus the two residual RMS values under explicit before/after names.
+The result store keeps this exact dict; the outbox sends it as JSON; the
+Modbus image is encoded from it (``service.registers.encode_snapshot``).
+"""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime, timezone
+from typing import Any, Mapping
+
+from .registers import flag_bits
+
+PAYLOAD_SCHEMA = 1
+
+#: keys the envelope adds on top of the result's own keys
+ENVELOPE_KEYS = (
+    "payload_schema", "uuid", "seq", "device_id", "software_version", "trigger", "status",
+    "started_at", "finished_at", "timestamp", "duration",
+    "residual_rms_before", "residual_rms_after", "flag_bits", "timing",
+)
+
+
+def iso_utc(t: float) -> str:
+    """Unix time (s) → ISO 8601 UTC with milliseconds, e.g. 2025-01-31T12:00:00.123+00:00."""
+    return datetime.fromtimestamp(t, timezone.utc).isoformat(timespec="milliseconds")
+
+
+def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id: str, trigger: str,
+                   started_at: float, finished_at: float, software_version: str,
+                   timing: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The result payload (JSON-ready dict). started_at/finished_at: Unix time, s."""
+    clash = set(ENVELOPE_KEYS) & set(result)
+    if clash:  # the result object grew a key the envelope uses: fail loudly rather than overwrite
+        raise ValueError(f"result keys {sorted(clash)} collide with the payload envelope")
+    baseline = result.get("baseline") or {}
+    envelope = {
+        "payload_schema": PAYLOAD_SCHEMA,
+        "uuid": str(uuid),
+        "seq": int(seq),
+        "device_id": device_id,
+        "software_version": software_version,
+        "trigger": trigger,
+        "status": "ok",
+        "started_at": iso_utc(started_at),
+        "finished_at": iso_utc(finished_at),
+        "timestamp": float(finished_at),
+        "duration": float(finished_at - started_at),
+        "residual_rms_before": baseline.get("residual_rms"),
+        "residual_rms_after": result.get("residual_rms"),
+        "flag_bits": flag_bits(result.get("flags") or ()),
+        "timing": dict(timing or {}),
+    }
+    return {**envelope, **result}
+
+
+def dumps(payload: Mapping[str, Any]) -> str:
+    """Canonical JSON text of a payload (what MQTT carries and the store keeps)."""
+    return json.dumps(payload, ensure_ascii=False, allow_nan=False, separators=(",", ":"))

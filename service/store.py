@@ -1,0 +1,355 @@
+"""The result store: every measurement in SQLite (WAL) in the state directory.
+
+One row per measurement (ok, failed or aborted) with the raw trace, the
+published payload (which contains ``IdentificationResult.to_dict()``), the rig
+and configuration used, timestamps and the software version. The MQTT outbox
+lives in the same database so that a result and its pending publication are
+written in one transaction, before anything is published: a crash either
+loses the measurement entirely (it never reached the store, nothing was
+published) or keeps both.
+
+Durability: WAL with ``synchronous=FULL`` (a power cut after commit keeps the
+row). One connection guarded by a lock is shared by the daemon's threads.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+import time
+import uuid as uuidlib
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterator, Mapping, Sequence
+
+import numpy as np
+
+from .errors import StoreError
+
+DB_NAME = "results.db"
+SCHEMA_VERSION = 1
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (
+    key   TEXT PRIMARY KEY,
+    value TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS measurements (
+    id               INTEGER PRIMARY KEY,
+    uuid             TEXT NOT NULL UNIQUE,
+    seq              INTEGER NOT NULL UNIQUE,
+    status           TEXT NOT NULL CHECK (status IN ('ok', 'failed', 'aborted')),
+    trigger          TEXT NOT NULL,
+    device_id        TEXT NOT NULL,
+    software_version TEXT NOT NULL,
+    started_at       REAL NOT NULL,
+    finished_at      REAL NOT NULL,
+    stored_at        REAL NOT NULL,
+    published_at     REAL,
+    J                REAL,
+    J_std            REAL,
+    omega_n          REAL,
+    damping_ratio    REAL,
+    residual_rms     REAL,
+    flags            TEXT NOT NULL DEFAULT '[]',
+    error            TEXT,
+    payload          TEXT,
+    rig              TEXT,
+    config           TEXT,
+    trace_t          BLOB,
+    trace_angle      BLOB,
+    trace_meta       TEXT
+);
+CREATE INDEX IF NOT EXISTS measurements_finished ON measurements (finished_at);
+CREATE TABLE IF NOT EXISTS outbox (
+    id             INTEGER PRIMARY KEY,
+    measurement_id INTEGER NOT NULL REFERENCES measurements (id),
+    uuid           TEXT NOT NULL,
+    kind           TEXT NOT NULL,
+    payload        TEXT NOT NULL,
+    created_at     REAL NOT NULL,
+    attempts       INTEGER NOT NULL DEFAULT 0,
+    last_attempt   REAL
+);
+"""
+
+
+def _pack(a: np.ndarray | None) -> bytes | None:
+    if a is None:
+        return None
+    return zlib.compress(np.ascontiguousarray(a, dtype="<f8").tobytes(), 6)
+
+
+def _unpack(b: bytes | None) -> np.ndarray | None:
+    if b is None:
+        return None
+    return np.frombuffer(zlib.decompress(b), dtype="<f8").copy()
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One stored measurement (times: Unix s; trace arrays: s and rad)."""
+
+    id: int
+    uuid: str
+    seq: int
+    status: str
+    trigger: str
+    device_id: str
+    software_version: str
+    started_at: float
+    finished_at: float
+    stored_at: float
+    published_at: float | None
+    J: float | None
+    J_std: float | None
+    omega_n: float | None
+    damping_ratio: float | None
+    residual_rms: float | None
+    flags: tuple[str, ...]
+    error: str | None
+    payload: dict[str, Any] | None
+    rig: dict[str, Any] | None
+    config: dict[str, Any] | None
+    trace_t: np.ndarray | None = None
+    trace_angle: np.ndarray | None = None
+    trace_meta: dict[str, Any] | None = None
+
+    def summary(self) -> dict[str, Any]:
+        """The listing fields (no payload, no trace)."""
+        return {
+            "uuid": self.uuid, "seq": self.seq, "status": self.status, "trigger": self.trigger,
+            "device_id": self.device_id, "software_version": self.software_version,
+            "started_at": self.started_at, "finished_at": self.finished_at, "published_at": self.published_at,
+            "J": self.J, "J_std": self.J_std, "omega_n": self.omega_n, "damping_ratio": self.damping_ratio,
+            "residual_rms": self.residual_rms, "flags": list(self.flags), "error": self.error,
+        }
+
+
+@dataclass(frozen=True)
+class OutboxItem:
+    id: int
+    uuid: str
+    kind: str
+    payload: str
+    attempts: int
+
+
+_LIST_COLUMNS = ("id, uuid, seq, status, trigger, device_id, software_version, started_at, finished_at, stored_at, "
+                 "published_at, J, J_std, omega_n, damping_ratio, residual_rms, flags, error")
+_FULL_COLUMNS = _LIST_COLUMNS + ", payload, rig, config"
+_TRACE_COLUMNS = ", trace_t, trace_angle, trace_meta"
+
+
+class Store:
+    """The SQLite result store and outbox in ``state_dir``/results.db."""
+
+    def __init__(self, state_dir: str | Path, *, create: bool = True) -> None:
+        self.state_dir = Path(state_dir)
+        self.path = self.state_dir / DB_NAME
+        if not create and not self.path.exists():
+            raise StoreError(f"no result store at {str(self.path)!r}")
+        try:
+            self.state_dir.mkdir(parents=True, exist_ok=True)
+            # isolation_level=None: explicit BEGIN/COMMIT, no implicit transactions
+            self._db = sqlite3.connect(str(self.path), isolation_level=None, check_same_thread=False, timeout=10.0)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=FULL")
+            self._db.execute("PRAGMA foreign_keys=ON")
+            self._db.executescript(_SCHEMA)  # idempotent (IF NOT EXISTS)
+            with self._tx():
+                row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
+                if row is None:
+                    self._db.execute("INSERT INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),))
+                elif int(row[0]) > SCHEMA_VERSION:
+                    raise StoreError(f"{self.path}: result store schema {row[0]} is newer than this software ({SCHEMA_VERSION})")
+        except sqlite3.Error as exc:
+            raise StoreError(f"cannot open the result store {str(self.path)!r}: {exc}") from None
+        except OSError as exc:
+            raise StoreError(f"cannot create the state directory {str(self.state_dir)!r}: {exc.strerror}") from None
+        self._lock = threading.RLock()
+
+    # --- plumbing -----------------------------------------------------------------
+    class _Tx:
+        def __init__(self, db: sqlite3.Connection) -> None:
+            self.db = db
+
+        def __enter__(self) -> sqlite3.Connection:
+            self.db.execute("BEGIN IMMEDIATE")
+            return self.db
+
+        def __exit__(self, exc_type, exc, tb) -> None:
+            self.db.execute("COMMIT" if exc_type is None else "ROLLBACK")
+
+    def _tx(self) -> "_Tx":
+        return Store._Tx(self._db)
+
+    def close(self) -> None:
+        with self._lock:
+            try:
+                self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            except sqlite3.Error:
+                pass  # another reader holds the WAL: the checkpoint happens later
+            self._db.close()
+
+    def __enter__(self) -> "Store":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- writing ------------------------------------------------------------------
+    def record(
+        self,
+        *,
+        status: str,
+        trigger: str,
+        device_id: str,
+        software_version: str,
+        started_at: float,
+        finished_at: float,
+        result: Mapping[str, Any] | None = None,
+        build_payload: Callable[[str, int], dict[str, Any]] | None = None,
+        error: str | None = None,
+        rig: Mapping[str, Any] | None = None,
+        config: Mapping[str, Any] | None = None,
+        trace_t: np.ndarray | None = None,
+        trace_angle: np.ndarray | None = None,
+        trace_meta: Mapping[str, Any] | None = None,
+        enqueue: Sequence[str] = (),
+        uuid: str | None = None,
+    ) -> Measurement:
+        """Store one measurement and queue its publications, atomically.
+
+        build_payload(uuid, seq) makes the published payload once the sequence
+        number is known (ok results). enqueue: outbox kinds to queue (e.g.
+        ("result",)); the payload is queued as it is stored.
+        """
+        from .payload import dumps
+
+        uid = uuid or str(uuidlib.uuid4())
+        now = time.time()
+        try:
+            with self._lock, self._tx() as db:
+                seq = int(db.execute("SELECT COALESCE(MAX(seq), 0) + 1 FROM measurements").fetchone()[0])
+                counter = db.execute("SELECT value FROM meta WHERE key='last_seq'").fetchone()
+                if counter is not None:  # never reuse a number, even after rows were pruned
+                    seq = max(seq, int(counter[0]) + 1)
+                db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('last_seq', ?)", (str(seq),))
+                payload = build_payload(uid, seq) if build_payload is not None else None
+                payload_text = dumps(payload) if payload is not None else None
+                r = result or {}
+                cur = db.execute(
+                    "INSERT INTO measurements (uuid, seq, status, trigger, device_id, software_version, started_at, "
+                    "finished_at, stored_at, J, J_std, omega_n, damping_ratio, residual_rms, flags, error, payload, rig, "
+                    "config, trace_t, trace_angle, trace_meta) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                    (uid, seq, status, trigger, device_id, software_version, started_at, finished_at, now,
+                     r.get("J"), r.get("J_std"), r.get("omega_n"), r.get("damping_ratio"), r.get("residual_rms"),
+                     json.dumps(list(r.get("flags") or [])), error, payload_text,
+                     json.dumps(rig) if rig is not None else None,
+                     json.dumps(config) if config is not None else None,
+                     _pack(trace_t), _pack(trace_angle),
+                     json.dumps(trace_meta, default=str) if trace_meta is not None else None),
+                )
+                mid = cur.lastrowid
+                if payload_text is not None:
+                    for kind in enqueue:
+                        db.execute("INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at) VALUES (?,?,?,?,?)",
+                                   (mid, uid, kind, payload_text, now))
+        except sqlite3.Error as exc:
+            raise StoreError(f"cannot write to the result store {str(self.path)!r}: {exc}") from None
+        m = self.get(uid)
+        assert m is not None
+        return m
+
+    # --- outbox -------------------------------------------------------------------
+    def outbox_pending(self, limit: int = 100, exclude: Sequence[int] = ()) -> list[OutboxItem]:
+        """Oldest unacknowledged publications first."""
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT id, uuid, kind, payload, attempts FROM outbox ORDER BY id LIMIT ?", (limit + len(exclude),)
+            ).fetchall()
+        skip = set(exclude)
+        return [OutboxItem(*row) for row in rows if row[0] not in skip][:limit]
+
+    def outbox_attempt(self, item_id: int) -> None:
+        with self._lock, self._tx() as db:
+            db.execute("UPDATE outbox SET attempts = attempts + 1, last_attempt = ? WHERE id = ?", (time.time(), item_id))
+
+    def outbox_ack(self, item_id: int) -> bool:
+        """The broker acknowledged the publication: drop it from the outbox. False if it was not there."""
+        now = time.time()
+        with self._lock, self._tx() as db:
+            row = db.execute("SELECT measurement_id FROM outbox WHERE id = ?", (item_id,)).fetchone()
+            if row is None:
+                return False
+            db.execute("DELETE FROM outbox WHERE id = ?", (item_id,))
+            db.execute("UPDATE measurements SET published_at = COALESCE(published_at, ?) WHERE id = ?", (now, row[0]))
+        return True
+
+    def outbox_count(self) -> int:
+        with self._lock:
+            return int(self._db.execute("SELECT COUNT(*) FROM outbox").fetchone()[0])
+
+    # --- reading ------------------------------------------------------------------
+    def _row(self, row: Sequence[Any], full: bool, trace: bool) -> Measurement:
+        base = list(row[:18])
+        base[16] = tuple(json.loads(base[16] or "[]"))
+        payload = rig = config = None
+        t = a = meta = None
+        if full:
+            payload, rig, config = (json.loads(x) if x is not None else None for x in row[18:21])
+        if trace:
+            t, a = _unpack(row[21]), _unpack(row[22])
+            meta = json.loads(row[23]) if row[23] is not None else None
+        return Measurement(*base, payload, rig, config, t, a, meta)
+
+    def get(self, key: str | int, *, trace: bool = False) -> Measurement | None:
+        """A measurement by UUID (or a unique UUID prefix) or by sequence number."""
+        cols = _FULL_COLUMNS + (_TRACE_COLUMNS if trace else "")
+        with self._lock:
+            if isinstance(key, int) or (isinstance(key, str) and key.isdigit()):
+                rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE seq = ?", (int(key),)).fetchall()
+            else:
+                rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE uuid LIKE ? || '%'", (str(key),)).fetchall()
+        if len(rows) != 1:
+            return None
+        return self._row(rows[0], full=True, trace=trace)
+
+    def latest(self, status: str | None = "ok") -> Measurement | None:
+        where = "WHERE status = ?" if status else ""
+        args: tuple = (status,) if status else ()
+        with self._lock:
+            row = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC LIMIT 1", args).fetchone()
+        return self._row(row, full=True, trace=False) if row else None
+
+    def list(self, limit: int | None = 20, *, since: float | None = None, until: float | None = None,
+             status: str | None = None, full: bool = False) -> list[Measurement]:
+        """Measurements, newest first (limit None: all)."""
+        clauses, args = [], []
+        if since is not None:
+            clauses.append("finished_at >= ?")
+            args.append(since)
+        if until is not None:
+            clauses.append("finished_at < ?")
+            args.append(until)
+        if status is not None:
+            clauses.append("status = ?")
+            args.append(status)
+        where = ("WHERE " + " AND ".join(clauses)) if clauses else ""
+        lim = "LIMIT ?" if limit is not None else ""
+        if limit is not None:
+            args.append(int(limit))
+        cols = _FULL_COLUMNS if full else _LIST_COLUMNS
+        with self._lock:
+            rows = self._db.execute(f"SELECT {cols} FROM measurements {where} ORDER BY seq DESC {lim}", args).fetchall()
+        return [self._row(r, full=full, trace=False) for r in rows]
+
+    def iter_all(self, **kwargs: Any) -> Iterator[Measurement]:
+        yield from self.list(limit=None, **kwargs)
+
+    def count(self) -> int:
+        with self._lock:
+            return int(self._db.execute("SELECT COUNT(*) FROM measurements").fetchone()[0])
