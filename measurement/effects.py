@@ -111,9 +111,22 @@ class Effect:
                 return p.physical_unit or ""
         return self.extra_units.get(physical_name, "")
 
+    #: damping effects: the term of the per-swing amplitude loss ΔA = d0 + d1·A + d2·A²
+    #: that is this effect's signature, how to say it, and the envelope law it produces
+    decrement_order: ClassVar[int | None] = None
+    decrement_words: ClassVar[str] = ""
+    envelope: ClassVar[str] = ""
+
     def evidence(self, diag) -> str:
         """Why the residual diagnostics (``Diagnostics``) point to this effect; "" if they do not."""
-        return ""
+        why = []
+        k = self.decrement_order
+        if k is not None and diag.decrement_t[k] >= 3:
+            words = self.decrement_words.format(value=diag.decrement[k])
+            why.append(f"the amplitude lost per swing {words} (t = {diag.decrement_t[k]:.1f})")
+        if self.envelope and diag.envelope_law and diag.envelope_law.startswith(self.envelope):
+            why.append(f"the measured envelope decays {self.envelope}ly")
+        return "; ".join(why)
 
     def physical(self, values: Sequence[float], inertia: float | None, omega_n: float) -> dict[str, float | None]:
         """Torque-law values from the normalised ones; None where J is unknown."""
@@ -143,13 +156,9 @@ class Viscous(Effect):
     def equivalent_viscous(self, values, amplitude, omega):
         return float(values[0])
 
-    def evidence(self, diag):
-        why = []
-        if diag.decrement_t[1] >= 3:
-            why.append(f"the amplitude lost per swing grows in proportion to the amplitude (t = {diag.decrement_t[1]:.1f})")
-        if diag.envelope_law and diag.envelope_law.startswith("exponential"):
-            why.append("the measured envelope decays exponentially, the signature of linear damping")
-        return "; ".join(why)
+    decrement_order = 1
+    decrement_words = "grows in proportion to the amplitude"
+    envelope = "exponential"
 
 
 class Coulomb(Effect):
@@ -181,13 +190,13 @@ class Coulomb(Effect):
 
     extra_units = {"mu": "m", "mu_over_S": "1"}
 
+    decrement_order = 0
+    decrement_words = "has a constant part, {value:.3g} rad per swing, which only dry friction gives"
+    envelope = "linear"
+
     def evidence(self, diag):
-        why = []
-        if diag.decrement_t[0] >= 3:
-            why.append(f"the amplitude lost per swing has a constant part, {diag.decrement[0]:.3g} rad per swing"
-                       f" (t = {diag.decrement_t[0]:.1f}), which only dry friction gives")
-        if diag.envelope_law and diag.envelope_law.startswith("linear"):
-            why.append("the measured envelope decays linearly (constant energy loss per swing)")
+        base = super().evidence(diag)
+        why = [base] if base else []
         if diag.stopped:
             why.append("the pendulum stopped dead within the record, which only dry friction does")
         return "; ".join(why)
@@ -221,13 +230,9 @@ class Quadratic(Effect):
     def equivalent_viscous(self, values, amplitude, omega):
         return 8.0 * float(values[0]) * amplitude * omega / (3.0 * math.pi)
 
-    def evidence(self, diag):
-        why = []
-        if diag.decrement_t[2] >= 3:
-            why.append(f"the amplitude lost per swing grows with the square of the amplitude (t = {diag.decrement_t[2]:.1f})")
-        if diag.envelope_law and diag.envelope_law.startswith("hyperbolic"):
-            why.append("the measured envelope decays hyperbolically: fast at large amplitude, slowly at small")
-        return "; ".join(why)
+    decrement_order = 2
+    decrement_words = "grows with the square of the amplitude"
+    envelope = "hyperbolic"
 
 
 class CubicStiffness(Effect):
