@@ -1,0 +1,453 @@
+"""RS-485 Modbus RTU absolute encoder: the client that samples the pendulum angle.
+
+``ModbusEncoder`` is an ``AngleSensor``: between ``start()`` and ``stop()`` it
+reads the position register(s) back to back, as fast as the bus answers
+(pymodbus ``AsyncModbusSerialClient`` on its own thread and event loop,
+pyserial underneath: ``/dev/ttyUSB0`` on the device, ``socket://host:port``
+for the simulated encoder). Each sample is timestamped on the host, on the
+injected clock, at the midpoint between sending the request and receiving
+the reply (the encoder latches somewhere in between; a constant bias does not
+change J).
+
+Failed reads are dropped (the trace keeps its gaps) and counted by kind:
+
+    timeouts          no reply within ``timeout``
+    crc_errors        a reply arrived but its CRC was wrong (the framer rejected it)
+    exceptions        the encoder answered with a Modbus exception (e.g. 2: illegal
+                      data address: wrong ``register`` or ``registers``)
+    connection_errors the port could not be opened or the link dropped
+
+A run of ``max_consecutive_errors`` failures in a row is an ``EncoderFault``
+(raised by the next ``read()``): never a hang, never a silent empty trace.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import socket
+import threading
+import time
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from .clock import Clock, MonotonicClock
+from .errors import DriverConfigError, EncoderFault
+
+log = logging.getLogger("moi.drivers.encoder")
+
+REGISTER_TYPES = ("holding", "input")
+WORD_ORDERS = ("big", "little")
+PARITIES = ("N", "E", "O")
+
+
+def check_register_layout(device_id: Any, register: Any, registers: Any, word_order: Any, counts_per_turn: Any,
+                          direction: Any, *, what: str) -> None:
+    """Validate the bus layout shared by the client and the simulated server (raises DriverConfigError)."""
+    def is_int(v: Any) -> bool:
+        return isinstance(v, int) and not isinstance(v, bool)
+
+    if not (is_int(device_id) and 1 <= device_id <= 247):
+        raise DriverConfigError(f"{what}: device_id must be a Modbus RTU address 1..247, got {device_id!r}")
+    if not (is_int(register) and 0 <= register <= 65534):
+        raise DriverConfigError(f"{what}: register must be an address 0..65534, got {register!r}")
+    if registers not in (1, 2) or not is_int(registers):
+        raise DriverConfigError(f"{what}: registers must be 1 (16-bit position) or 2 (32-bit), got {registers!r}")
+    if word_order not in WORD_ORDERS:
+        raise DriverConfigError(f"{what}: word_order must be 'big' (high word first) or 'little', got {word_order!r}")
+    if not (is_int(counts_per_turn) and 16 <= counts_per_turn <= (1 << (16 * registers))):
+        raise DriverConfigError(
+            f"{what}: counts_per_turn must be an integer in 16..{1 << (16 * registers)} for {registers} register(s), "
+            f"got {counts_per_turn!r}")
+    if direction not in (1, -1) or not is_int(direction):
+        raise DriverConfigError(f"{what}: direction must be 1 or -1, got {direction!r}")
+
+
+@dataclass(frozen=True)
+class EncoderConfig:
+    """How to reach and read the encoder (the ``[encoder]`` table of the device settings).
+
+    port: serial device ("/dev/ttyUSB0") or pyserial URL ("socket://127.0.0.1:5020").
+    device_id: Modbus RTU address 1..247. baudrate: bit/s; parity "N"/"E"/"O"; stopbits 1|2.
+    register: address of the (first) position register; register_type "holding" (function 3)
+        or "input" (function 4); registers: 1 (16-bit) or 2 (32-bit position).
+    word_order: "big" (high word first) or "little", for 2 registers.
+    counts_per_turn: counts per revolution (2**17 for a 17-bit encoder).
+    direction: +1, or −1 to flip the sign of the angle.
+    zero: counts read at the rig's zero angle (hanging at rest).
+    timeout: s to wait for one reply. max_consecutive_errors: this many failed reads in
+        a row is an EncoderFault.
+    min_interval: s between the starts of two requests (0: as fast as the bus allows).
+    """
+
+    port: str
+    device_id: int = 1
+    baudrate: int = 115200
+    parity: str = "N"
+    stopbits: int = 1
+    bytesize: int = 8
+    register: int = 0
+    register_type: str = "holding"
+    registers: int = 2
+    word_order: str = "big"
+    counts_per_turn: int = 1 << 17
+    direction: int = 1
+    zero: int = 0
+    timeout: float = 0.05
+    max_consecutive_errors: int = 10
+    min_interval: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.port, str) and self.port.strip()):
+            raise DriverConfigError(f"encoder: port must be a serial device or socket:// URL, got {self.port!r}")
+        check_register_layout(self.device_id, self.register, self.registers, self.word_order, self.counts_per_turn,
+                              self.direction, what="encoder")
+        if not (isinstance(self.baudrate, int) and 300 <= self.baudrate <= 4_000_000):
+            raise DriverConfigError(f"encoder: baudrate must be an integer 300..4000000 bit/s, got {self.baudrate!r}")
+        if self.parity not in PARITIES:
+            raise DriverConfigError(f"encoder: parity must be one of N, E, O, got {self.parity!r}")
+        if self.stopbits not in (1, 2):
+            raise DriverConfigError(f"encoder: stopbits must be 1 or 2, got {self.stopbits!r}")
+        if self.bytesize not in (7, 8):
+            raise DriverConfigError(f"encoder: bytesize must be 7 or 8, got {self.bytesize!r}")
+        if self.register_type not in REGISTER_TYPES:
+            raise DriverConfigError(f"encoder: register_type must be 'holding' or 'input', got {self.register_type!r}")
+        if not isinstance(self.zero, int) or isinstance(self.zero, bool):
+            raise DriverConfigError(f"encoder: zero must be an integer count, got {self.zero!r}")
+        if not (isinstance(self.timeout, (int, float)) and 0.001 <= self.timeout <= 10):
+            raise DriverConfigError(f"encoder: timeout must be 0.001..10 s, got {self.timeout!r}")
+        if not (isinstance(self.max_consecutive_errors, int) and self.max_consecutive_errors >= 1):
+            raise DriverConfigError(
+                f"encoder: max_consecutive_errors must be an integer >= 1, got {self.max_consecutive_errors!r}")
+        if not (isinstance(self.min_interval, (int, float)) and 0 <= self.min_interval <= 1):
+            raise DriverConfigError(f"encoder: min_interval must be 0..1 s, got {self.min_interval!r}")
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "EncoderConfig":
+        """From a TOML table; unknown keys are an error naming the known ones."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise DriverConfigError(f"encoder: unknown setting(s) {', '.join(unknown)}; expected some of {', '.join(sorted(known))}")
+        if "port" not in d:
+            raise DriverConfigError("encoder: 'port' is required (e.g. '/dev/ttyUSB0')")
+        return cls(**d)
+
+    def counts_to_angle(self, value: int) -> float:
+        """Single-turn angle (rad, in (−π, π]) of a raw register value, relative to ``zero``."""
+        half = self.counts_per_turn // 2
+        d = (value - self.zero) % self.counts_per_turn
+        if d > half:
+            d -= self.counts_per_turn
+        return self.direction * 2.0 * math.pi * d / self.counts_per_turn
+
+
+def _crc16(frame: bytes) -> int:
+    crc = 0xFFFF
+    for byte in frame:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+    return crc
+
+
+def bad_crc(frame: bytes) -> bool:
+    """True when an RTU frame (>= 4 bytes) ends with a CRC that does not match its content."""
+    if len(frame) < 4:
+        return False
+    return _crc16(frame[:-2]) != int.from_bytes(frame[-2:], "little")
+
+
+def _send_immediately(client: Any) -> None:
+    """Disable Nagle's algorithm on a socket:// port so each request leaves at once, as on a serial line.
+
+    Without it a request sent after an unanswered one waits for the peer's
+    delayed ACK (~40 ms) and times out as well, doubling every lost reply.
+    pymodbus keeps the pyserial port at ``client.ctx.transport.sync_serial``.
+    """
+    port = getattr(getattr(getattr(client, "ctx", None), "transport", None), "sync_serial", None)
+    try:
+        fd = port.fileno()
+        with socket.fromfd(fd, socket.AF_INET, socket.SOCK_STREAM) as sock:  # a dup: closing it keeps the port
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    except (AttributeError, OSError) as exc:
+        log.warning("cannot disable Nagle on %r (%s): replies after a lost one may time out too", port, exc)
+
+
+class ModbusEncoder:
+    """The Modbus RTU absolute encoder as an ``AngleSensor`` (source "encoder").
+
+    config: ``EncoderConfig``; clock: the sequencer's clock (timestamps), a
+    real-time one (MonotonicClock, or ScaledClock with the simulated encoder).
+
+    The I/O runs on a private thread with its own event loop, started on the
+    first ``start()``; ``read()`` only drains a buffer and never blocks.
+    """
+
+    source = "encoder"
+
+    def __init__(self, config: EncoderConfig, clock: Clock | None = None):
+        self.config = config
+        self.clock = clock or MonotonicClock()
+        self._lock = threading.Lock()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._client = None
+        self._task: asyncio.Future | None = None
+        self._t: list[float] = []
+        self._angle: list[float] = []
+        self._fault: EncoderFault | None = None
+        self._closed = False
+        self._rx = bytearray()  # bytes received for the request in flight (CRC check)
+        self._counts = self._zero_counts()
+        self._unwrap_last: float | None = None
+
+    # -- AngleSensor ---------------------------------------------------------------
+    def start(self) -> None:
+        """Start sampling (connects on the I/O thread; connection failures count toward a fault)."""
+        if self._closed:
+            raise EncoderFault("encoder fault: start() after close()")
+        self._ensure_loop()
+        self._stop_task()
+        with self._lock:
+            self._t.clear()
+            self._angle.clear()
+            self._fault = None
+            self._counts = self._zero_counts()
+            self._unwrap_last = None
+        assert self._loop is not None
+        self._task = asyncio.run_coroutine_threadsafe(self._sample_loop(), self._loop)
+
+    def read(self) -> tuple[np.ndarray, np.ndarray]:
+        """Samples since the last read: (t in s on the clock, angle in rad). Raises EncoderFault after a fault."""
+        with self._lock:
+            if self._fault is not None:
+                raise self._fault
+            t, a = self._t, self._angle
+            self._t, self._angle = [], []
+        return np.asarray(t, dtype=float), np.asarray(a, dtype=float)
+
+    def stop(self) -> None:
+        """Stop sampling (keeps the port open for the next capture); samples already taken stay readable."""
+        self._stop_task()
+
+    def stats(self) -> dict:
+        """Counters of the current/last capture: samples, requests and the failed reads by kind."""
+        with self._lock:
+            c = dict(self._counts)
+        c["errors"] = c["timeouts"] + c["crc_errors"] + c["exceptions"] + c["connection_errors"]
+        c["port"] = self.config.port
+        c["device_id"] = self.config.device_id
+        if c["requests"]:
+            c["error_rate"] = c["errors"] / c["requests"]
+        if c["samples"] > 1 and c["last_t"] > c["first_t"]:
+            c["rate_hz"] = (c["samples"] - 1) / (c["last_t"] - c["first_t"])
+        for k in ("first_t", "last_t", "consecutive_errors"):
+            c.pop(k, None)
+        return c
+
+    def flags(self) -> tuple[str, ...]:
+        return ("encoder_errors",) if self.stats()["errors"] else ()
+
+    def close(self) -> None:
+        """Stop sampling, close the port and the I/O thread; safe twice."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop_task()
+        loop, thread = self._loop, self._thread
+        if loop is not None and thread is not None and thread.is_alive():
+            fut = asyncio.run_coroutine_threadsafe(self._close_client(), loop)
+            try:
+                fut.result(2.0)
+            except Exception:  # closing a dead port: nothing more to do
+                log.debug("encoder close raised", exc_info=True)
+            loop.call_soon_threadsafe(loop.stop)
+            thread.join(2.0)
+        self._loop = None
+        self._thread = None
+
+    def __enter__(self) -> "ModbusEncoder":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # -- one-off read (diagnostics) -------------------------------------------------
+    def read_position(self, timeout: float = 2.0) -> tuple[float, float]:
+        """One read outside a capture: (t in s on the clock, single-turn angle in rad). Raises EncoderFault."""
+        self._ensure_loop()
+        assert self._loop is not None
+        fut = asyncio.run_coroutine_threadsafe(self._read_once(), self._loop)
+        try:
+            outcome = fut.result(timeout)
+        except TimeoutError:
+            fut.cancel()
+            raise EncoderFault(f"encoder fault: no answer from {self._where()} within {timeout:g} s") from None
+        if isinstance(outcome, str):
+            raise EncoderFault(f"encoder fault: {self._where()}: {outcome.partition(':')[2]}")
+        t, value = outcome
+        return t, self.config.counts_to_angle(value)
+
+    # -- I/O thread -------------------------------------------------------------------
+    @staticmethod
+    def _zero_counts() -> dict[str, Any]:
+        return {"samples": 0, "requests": 0, "timeouts": 0, "crc_errors": 0, "exceptions": 0,
+                "connection_errors": 0, "max_run_of_errors": 0, "consecutive_errors": 0,
+                "first_t": 0.0, "last_t": 0.0, "rtt_max_s": 0.0}
+
+    def _where(self) -> str:
+        return f"device {self.config.device_id} on {self.config.port}"
+
+    def _ensure_loop(self) -> None:
+        if self._thread is not None and self._thread.is_alive():
+            return
+        loop = asyncio.new_event_loop()
+        ready = threading.Event()
+
+        def run() -> None:
+            asyncio.set_event_loop(loop)
+            loop.call_soon(ready.set)
+            try:
+                loop.run_forever()
+            finally:
+                loop.close()
+
+        self._loop = loop
+        self._thread = threading.Thread(target=run, name="moi-encoder-io", daemon=True)
+        self._thread.start()
+        ready.wait(2.0)
+
+    def _stop_task(self) -> None:
+        task, self._task = self._task, None
+        if task is None:
+            return
+        task.cancel()
+        try:
+            task.result(2.0)
+        except BaseException:  # CancelledError is the normal outcome of the cancel above
+            pass
+
+    def _trace_packet(self, sending: bool, data: bytes) -> bytes:
+        if not sending:
+            self._rx = bytearray(data)  # pymodbus hands over the whole receive buffer so far
+        return data
+
+    def _new_client(self):
+        from pymodbus.client import AsyncModbusSerialClient
+        from pymodbus.framer import FramerType
+        c = self.config
+        # retries=0: every failed read is counted here, not hidden by pymodbus retrying;
+        # reconnect_delay=0: reconnecting is this driver's decision (and counted)
+        return AsyncModbusSerialClient(c.port, framer=FramerType.RTU, baudrate=c.baudrate, bytesize=c.bytesize,
+                                       parity=c.parity, stopbits=c.stopbits, timeout=c.timeout, retries=0,
+                                       reconnect_delay=0, trace_packet=self._trace_packet)
+
+    async def _close_client(self) -> None:
+        client, self._client = self._client, None
+        if client is not None:
+            client.close()
+
+    async def _connect(self) -> str | None:
+        """Connect if needed; None on success, else why not."""
+        if self._client is not None and self._client.connected:
+            return None
+        if self._client is not None:
+            self._client.close()
+        self._client = self._new_client()
+        try:
+            ok = await asyncio.wait_for(self._client.connect(), timeout=max(self.config.timeout, 0.5))
+        except (asyncio.TimeoutError, OSError) as exc:
+            return f"cannot open the port: {type(exc).__name__}: {exc}"
+        if not ok:
+            return "cannot open the port (connection refused or device missing)"
+        if self.config.port.startswith("socket://"):
+            _send_immediately(self._client)
+        return None
+
+    async def _read_once(self) -> tuple[float, int] | str:
+        """One request; (t_mid on the clock, raw value) or a string naming the failure kind and details."""
+        from pymodbus.exceptions import ConnectionException, ModbusIOException
+        why = await self._connect()
+        if why is not None:
+            return "connection_errors:" + why
+        c = self.config
+        self._rx = bytearray()
+        read = (self._client.read_holding_registers if c.register_type == "holding"
+                else self._client.read_input_registers)
+        t_send = self.clock.now()
+        try:
+            reply = await read(c.register, count=c.registers, device_id=c.device_id)
+        except ModbusIOException:
+            if bad_crc(bytes(self._rx)):
+                return f"crc_errors:reply with a bad CRC ({bytes(self._rx).hex(' ')})"
+            return f"timeouts:no reply within {c.timeout:g} s"
+        except ConnectionException as exc:
+            return f"connection_errors:link lost ({exc})"
+        t_reply = self.clock.now()
+        if reply.isError():
+            code = getattr(reply, "exception_code", None)
+            meaning = {1: "illegal function", 2: "illegal data address", 3: "illegal data value",
+                       4: "device failure", 6: "device busy"}.get(code, "exception")
+            return (f"exceptions:exception reply {code} ({meaning}) reading {c.registers} register(s) at "
+                    f"{c.register} ({c.register_type})")
+        regs = list(reply.registers)
+        if len(regs) != c.registers:
+            return f"exceptions:expected {c.registers} register(s), got {len(regs)}"
+        if c.registers == 1:
+            value = regs[0]
+        else:
+            high, low = (regs[0], regs[1]) if c.word_order == "big" else (regs[1], regs[0])
+            value = (high << 16) | low
+        with self._lock:
+            self._counts["rtt_max_s"] = max(self._counts["rtt_max_s"], t_reply - t_send)
+        return 0.5 * (t_send + t_reply), value
+
+    async def _sample_loop(self) -> None:
+        c = self.config
+        next_start = 0.0
+        while True:
+            if c.min_interval > 0:
+                wait = next_start - time.perf_counter()
+                if wait > 0:
+                    await asyncio.sleep(wait)
+                next_start = time.perf_counter() + c.min_interval
+            outcome = await self._read_once()
+            failed = None
+            with self._lock:
+                counts = self._counts
+                counts["requests"] += 1
+                if isinstance(outcome, str):
+                    failed, _, detail = outcome.partition(":")
+                    counts[failed] += 1
+                    counts["consecutive_errors"] += 1
+                    counts["max_run_of_errors"] = max(counts["max_run_of_errors"], counts["consecutive_errors"])
+                    if counts["consecutive_errors"] >= c.max_consecutive_errors:
+                        snapshot = {k: v for k, v in counts.items() if k not in ("first_t", "last_t")}
+                        self._fault = EncoderFault(
+                            f"encoder fault: {counts['consecutive_errors']} failed reads in a row from {self._where()}; "
+                            f"last: {detail} (timeouts {counts['timeouts']}, CRC errors {counts['crc_errors']}, "
+                            f"exception replies {counts['exceptions']}, connection errors {counts['connection_errors']})",
+                            snapshot)
+                        log.error("%s", self._fault)
+                        return
+                else:
+                    counts["consecutive_errors"] = 0
+                    t, value = outcome
+                    angle = c.counts_to_angle(value)
+                    if self._unwrap_last is not None:
+                        # keep the angle continuous across the encoder's 0/full-turn wrap
+                        angle += 2 * math.pi * round((self._unwrap_last - angle) / (2 * math.pi))
+                    self._unwrap_last = angle
+                    if counts["samples"] == 0:
+                        counts["first_t"] = t
+                    counts["last_t"] = t
+                    counts["samples"] += 1
+                    self._t.append(t)
+                    self._angle.append(angle)
+            if failed == "connection_errors":
+                # a refused connection fails instantly: pace the retries at the request time-out
+                await asyncio.sleep(c.timeout)

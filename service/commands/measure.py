@@ -1,0 +1,134 @@
+"""`moi measure --sim [--rig RIG.toml] [--effects ...]`: one push-button measurement on the simulated rig.
+
+Everything below the sequencer is simulated but real in kind: the GPIO pins
+are gpiozero mock pins (the button is pressed on its pin, the solenoid's
+on/off is recorded on its pin), the encoder is a pymodbus RTU server on a
+loopback socket read by the same Modbus client the device uses, and the
+pendulum swings according to the physics with the chosen effects. Time runs
+``--time-scale`` times faster than real time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from measurement import Options, Pendulum, Rig
+from measurement.errors import InvalidInput
+
+from ..files import read_rig
+from .simulate import EFFECT_SYNTAX, parse_effects
+
+HELP = "one push-button measurement cycle on the simulated rig (solenoid, encoder, sequencer), printed"
+
+#: the demo rig of `moi demo` when no --rig is given
+DEFAULT_RIG = Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5043e-3, declared=("viscous",))
+DEFAULT_INERTIA = 0.0125
+DEFAULT_EFFECTS = ["viscous=1.5e-4", "coulomb=1.2e-4"]
+
+#: exit status when the measurement ended in FAULT (not a bug: exit 1; not bad input: exit 2)
+EXIT_FAULT = 3
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--sim", action="store_true",
+                   help="use the simulated rig (required: on the device the daemon `moi run` measures)")
+    p.add_argument("--rig", metavar="RIG.toml",
+                   help="rig file (default: the torsion demo rig, k = 0.3651 N·m/rad, declared viscous)")
+    p.add_argument("--inertia", "-J", type=float, default=DEFAULT_INERTIA, metavar="KG_M2",
+                   help=f"true J of the simulated pendulum, kg·m² (default {DEFAULT_INERTIA})")
+    p.add_argument("--effects", nargs="*", default=None, metavar="EFFECT",
+                   help=f"{EFFECT_SYNTAX} (default without --rig: {' '.join(DEFAULT_EFFECTS)}; with --rig: none)")
+    p.add_argument("--theta0", type=float, default=0.25, metavar="RAD", help="release angle, rad (default 0.25)")
+    p.add_argument("--duration", type=float, default=30.0, metavar="S",
+                   help="capture after the release, s of simulated time (default 30)")
+    p.add_argument("--pre-trigger", type=float, default=0.5, metavar="S", help="capture before the release, s (default 0.5)")
+    p.add_argument("--decay-threshold", type=float, default=0.0, metavar="RAD",
+                   help="end the capture early once the swing amplitude is below this, rad (default 0: off)")
+    p.add_argument("--time-scale", type=float, default=5.0, metavar="X",
+                   help="simulated seconds per wall-clock second (default 5)")
+    p.add_argument("--bits", type=int, default=17, help="encoder resolution, bits per turn (default 17)")
+    p.add_argument("--noise", type=float, default=0.0, metavar="RAD", help="encoder angle noise σ, rad (default 0)")
+    p.add_argument("--latency", type=float, default=0.0002, metavar="S",
+                   help="encoder reply latency, s of real time (default 0.0002)")
+    p.add_argument("--drop-rate", type=float, default=0.0, metavar="P", help="fraction of encoder replies lost (default 0)")
+    p.add_argument("--crc-rate", type=float, default=0.0, metavar="P",
+                   help="fraction of encoder replies with a corrupted CRC (default 0)")
+    p.add_argument("--seed", type=int, default=None, help="random seed of the encoder noise and faults")
+    p.add_argument("--no-discover", action="store_true", help="fit the declared model only (no discovery loop)")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object instead of the report")
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.sim:
+        raise InvalidInput("moi measure: only --sim is available here; on the device the daemon (`moi run`) measures")
+    if not (0 < args.time_scale <= 100):
+        raise InvalidInput(f"--time-scale must be in (0, 100], got {args.time_scale:g}")
+    if not (args.duration > 0 and args.pre_trigger >= 0):
+        raise InvalidInput("--duration must be > 0 s and --pre-trigger >= 0 s")
+
+    # imported here: `moi --help` must not pay for gpiozero/pymodbus
+    from drivers.backend import pin_factory
+    from drivers.button import PushButton
+    from drivers.clock import ScaledClock
+    from drivers.encoder import ModbusEncoder
+    from drivers.sim_encoder import SimEncoderConfig, SimEncoderServer
+    from drivers.simrig import SimRig
+    from drivers.solenoid import Solenoid
+    from firmware_host import Sequencer, SequencerConfig, State
+
+    rig = read_rig(args.rig) if args.rig else DEFAULT_RIG
+    tokens = args.effects if args.effects is not None else ([] if args.rig else DEFAULT_EFFECTS)
+    effects = parse_effects(tokens, rig.kind)
+    truth = Pendulum(rig, args.inertia, effects)
+    # each lost encoder reply already costs a time-out; pymodbus would log every one as an error
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+
+    clock = ScaledClock(args.time_scale)
+    factory = pin_factory("mock")  # --sim: the one place that picks mock pins
+    sim = SimRig(truth, theta0=args.theta0, clock=clock, duration=args.pre_trigger + args.duration + 5.0)
+    server_config = SimEncoderConfig(counts_per_turn=1 << args.bits, registers=1 if args.bits <= 16 else 2,
+                                     noise_std=args.noise, latency=args.latency, drop_rate=args.drop_rate,
+                                     crc_error_rate=args.crc_rate, seed=args.seed)
+    config = SequencerConfig(pre_trigger=args.pre_trigger, capture_duration=args.duration,
+                             decay_threshold=args.decay_threshold, sample_timeout=max(1.0, 0.2 * args.time_scale))
+    desc = ", ".join(f"{k}({', '.join(f'{p}={v:g}' for p, v in ps.items())})" for k, ps in effects.items()) or "no damping"
+    out = sys.stderr if args.json else sys.stdout
+    print(f"simulated {rig.kind} rig: true J = {truth.inertia:g} kg·m², ω_n = {truth.omega_n:.6g} rad/s, {desc}; "
+          f"θ0 = {args.theta0:g} rad, time × {args.time_scale:g}", file=out)
+
+    results = []
+    with Solenoid(17, pin_factory=factory) as solenoid, PushButton(27, bounce_time=None, pin_factory=factory) as button, \
+            SimEncoderServer(sim.angle, clock, server_config) as server:
+        sim.attach(solenoid)
+        print(f"simulated encoder: Modbus RTU on {server.url}, {args.bits} bits", file=out)
+        with ModbusEncoder(server.encoder_config(timeout=0.02), clock) as encoder, \
+                Sequencer(clock=clock, solenoid=solenoid, sensor=encoder, rig=rig, sink=results.append, config=config,
+                          options=Options(discover=not args.no_discover), button=button) as seq:
+            t0 = clock.now()
+            seq.subscribe(lambda e: print(f"[{e.time - t0:7.2f} s] {e.state.value:<12} {e.reason}", file=out))
+            print("pressing the button", file=out)
+            button.pin.drive_low()   # pull-up button: pressed pulls the line low
+            button.pin.drive_high()
+            last = seq.run_until_settled(timeout=args.pre_trigger + args.duration + 120.0 * args.time_scale)
+            on_times = [s.timestamp for prev, s in zip(solenoid.pin.states, solenoid.pin.states[1:]) if prev.state]
+            print(f"solenoid: {len(on_times)} pulse(s), on for {', '.join(f'{x * 1e3:.1f}' for x in on_times)} ms "
+                  f"(real time), now {'ON' if solenoid.is_active else 'off'}", file=out)
+        sim.close()
+
+    if not results:
+        reason = seq.last_fault or (last.reason if last else "no result")
+        print(f"moi measure: measurement failed: {reason}", file=sys.stderr)
+        return EXIT_FAULT if seq.state is State.FAULT or last is not None else 1
+    m = results[0]
+    if args.json:
+        import json
+        d = m.to_dict()
+        d["truth"] = {"J": truth.inertia, "omega_n": truth.omega_n, "effects": effects}
+        sys.stdout.write(json.dumps(d, ensure_ascii=False, allow_nan=False) + "\n")
+        return 0
+    print(m.result.report())
+    if m.result.J is not None:
+        print(f"true J {truth.inertia:g} kg·m² → error {100 * (m.result.J / truth.inertia - 1):+.4f} %")
+    return 0
