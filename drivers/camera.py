@@ -1,0 +1,272 @@
+"""The camera: grey frames with their timestamps, from a V4L2 device or from a simulated swing.
+
+``Camera`` is the interface (``grab()`` → ``Frame``, ``stats()``, ``close()``,
+a context manager whose ``close`` is safe twice). Two implementations side
+by side, chosen in one place (``open_camera``):
+
+* ``V4L2Camera``: OpenCV ``CAP_V4L2``, MJPG at the camera file's resolution
+  and frame rate, a small driver buffer (so a frame is at most a couple of
+  periods old), kernel buffer timestamps from ``CAP_PROP_POS_MSEC``
+  (CLOCK_MONOTONIC, the same clock as ``MonotonicClock``), dropped frames
+  counted from the gaps between them.
+* ``MockCamera``: frames rendered by ``measurement.vision.render`` (the very
+  renderer the vision tests use) of the marker at the angle an angle source
+  gives for the frame's time: a ``SimRig.angle`` or ``Swing.angle``. Blur,
+  noise, lens distortion (from the camera file) and pose errors are options.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import cv2
+import numpy as np
+
+from measurement.vision.config import CameraConfig, CameraModel
+from measurement.vision.locate import to_grey
+from measurement.vision.render import CameraPose, Imaging, MarkerPattern, MarkerRenderer
+
+from .errors import DriverConfigError, SensorFault
+
+log = logging.getLogger("moi.drivers.camera")
+
+#: time (s on the clock) → true swing angle (rad)
+AngleSource = Callable[[float], float]
+
+#: a gap longer than this many frame periods means frames were lost
+DROP_GAP = 1.5
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """One grabbed frame.
+
+    t: s, exposure time on the camera's clock. image: grey, uint8, height×width.
+    index: frame number since the camera opened (counts dropped frames too, when known).
+    """
+
+    t: float
+    image: np.ndarray
+    index: int
+
+
+class DropCounter:
+    """Counts frames missing between consecutive timestamps of a camera running at ``fps``."""
+
+    def __init__(self, fps: float):
+        self.period = 1.0 / fps
+        self.last: float | None = None
+        self.dropped = 0
+
+    def add(self, t: float) -> int:
+        """Record a frame time (s); returns how many frames went missing just before it."""
+        missing = 0
+        if self.last is not None:
+            gap = (t - self.last) / self.period
+            if gap > DROP_GAP:
+                missing = int(round(gap)) - 1
+                self.dropped += missing
+        self.last = t
+        return missing
+
+
+class Camera(ABC):
+    """A source of timestamped grey frames of the camera file's size."""
+
+    model: CameraModel
+
+    @abstractmethod
+    def grab(self) -> Frame:
+        """The next frame (waits for it). Raises ``SensorFault`` when the camera stopped delivering."""
+
+    @abstractmethod
+    def stats(self) -> dict:
+        """Counters since opening: frames delivered, dropped frames, read failures (JSON-ready)."""
+
+    def flags(self) -> tuple[str, ...]:
+        """Quality flags for a trace (``dropped_frames``)."""
+        return ("dropped_frames",) if self.stats().get("dropped_frames") else ()
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the device; safe twice."""
+
+    def __enter__(self) -> "Camera":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+class V4L2Camera(Camera):
+    """A UVC/CSI camera through OpenCV's V4L2 backend.
+
+    device: "/dev/video0" or an index. model: intrinsics and the image size and frame rate to ask for.
+    buffer_size: driver buffers (small: a slow reader gets recent frames, and the gaps show the drops).
+    max_failures: consecutive failed reads before ``SensorFault``.
+    capture_factory: ``cv2.VideoCapture`` (tests pass a fake with the same methods).
+    clock: fallback time source (s) when the driver gives no buffer timestamps.
+    """
+
+    def __init__(self, device: str | int, model: CameraModel, *, buffer_size: int = 2, max_failures: int = 10,
+                 capture_factory: Callable[..., Any] = cv2.VideoCapture, clock: Callable[[], float] = time.monotonic):
+        if not (isinstance(buffer_size, int) and 1 <= buffer_size <= 32):
+            raise DriverConfigError(f"camera: buffer_size must be 1..32 buffers, got {buffer_size!r}")
+        if isinstance(device, str) and device.startswith("/dev/") and not os.path.exists(device):
+            raise DriverConfigError(f"camera: device {device} does not exist (is the camera plugged in? `v4l2-ctl --list-devices`)")
+        self.model = model
+        self.device = device
+        self._clock = clock
+        self._max_failures = max_failures
+        self._cap = capture_factory(device, cv2.CAP_V4L2)
+        self._closed = False
+        if not self._cap.isOpened():
+            self.close()
+            raise DriverConfigError(f"camera: {device} cannot be opened as a V4L2 capture device (busy, or not a camera)")
+        self._cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*"MJPG"))
+        self._cap.set(cv2.CAP_PROP_FRAME_WIDTH, model.width)
+        self._cap.set(cv2.CAP_PROP_FRAME_HEIGHT, model.height)
+        self._cap.set(cv2.CAP_PROP_FPS, model.fps)
+        self._cap.set(cv2.CAP_PROP_BUFFERSIZE, buffer_size)
+        w, h = int(self._cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+        if (w, h) != (model.width, model.height):
+            self.close()
+            raise DriverConfigError(f"camera: {device} delivers {w}×{h} px, the camera file says "
+                                    f"{model.width}×{model.height} (a mode the camera supports is needed)")
+        fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        if fps > 0 and abs(fps - model.fps) > 0.01 * model.fps:
+            log.warning("camera %s runs at %g frames/s, the camera file says %g", device, fps, model.fps)
+        self._drops = DropCounter(fps if fps > 0 else model.fps)
+        self._index = -1
+        self._frames = 0
+        self._failures = 0
+        self._failed_total = 0
+        self._host_timestamps = 0
+
+    def grab(self) -> Frame:
+        if self._closed:
+            raise SensorFault(f"camera {self.device}: grab() after close()")
+        while True:
+            ok, image = self._cap.read()
+            if ok and image is not None:
+                break
+            self._failures += 1
+            self._failed_total += 1
+            if self._failures >= self._max_failures:
+                raise SensorFault(f"camera {self.device}: {self._failures} reads in a row failed (unplugged?)")
+        self._failures = 0
+        ms = float(self._cap.get(cv2.CAP_PROP_POS_MSEC) or 0.0)
+        if ms > 0 and math.isfinite(ms):
+            t = ms / 1000.0  # kernel buffer timestamp, CLOCK_MONOTONIC
+        else:
+            # no buffer timestamp from this driver: the host's clock at hand-over (later by the latency)
+            t = self._clock()
+            self._host_timestamps += 1
+        missing = self._drops.add(t)
+        self._index += 1 + missing
+        self._frames += 1
+        return Frame(t=t, image=to_grey(image), index=self._index)
+
+    def stats(self) -> dict:
+        return {"frames": self._frames, "dropped_frames": self._drops.dropped, "read_failures": self._failed_total,
+                "host_timestamps": self._host_timestamps, "device": str(self.device)}
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            try:
+                self._cap.release()
+            except Exception as exc:  # pragma: no cover - a driver failing to let go must not hide the real error
+                log.warning("camera %s: release failed: %s", self.device, exc)
+
+
+class MockCamera(Camera):
+    """Frames of the marker rendered from a simulated swing, on a fixed frame schedule of the clock.
+
+    config: the camera file (size, fps, intrinsics, distortion, marker R and D).
+    angle_source: clock time (s) → true angle (rad), e.g. ``SimRig.angle`` or
+        ``lambda t: swing.angle(t - t_release)``.
+    clock: a ``drivers.clock.Clock`` (``now``/``sleep``) or a bare ``() -> s`` callable.
+    sleep: how to wait for the next frame when ``clock`` is a bare callable (default: no waiting,
+        the frame carries its scheduled time).
+    pose, imaging, pattern: the camera's yaw/pitch/roll, blur/noise/exposure, the printed marker.
+    drop_probability: share of frames lost at random (tests the drop accounting); seed: noise and drops.
+
+    Frame k is exposed at t0 + k/fps (t0: the clock when the camera opened). ``grab`` waits for the
+    next frame; a caller that fell behind gets the newest one, and the frames it missed count as dropped.
+    """
+
+    def __init__(self, config: CameraConfig, angle_source: AngleSource, clock: Any, *,
+                 sleep: Callable[[float], None] | None = None, pose: CameraPose = CameraPose(),
+                 imaging: Imaging = Imaging(), pattern: MarkerPattern = MarkerPattern(),
+                 drop_probability: float = 0.0, seed: int | None = None):
+        if not (0.0 <= drop_probability < 1.0):
+            raise DriverConfigError(f"mock camera: drop_probability must be in [0, 1), got {drop_probability!r}")
+        self.model = config.camera
+        self.config = config
+        self._angle = angle_source
+        if hasattr(clock, "now"):
+            self._now: Callable[[], float] = clock.now
+            self._sleep = sleep or getattr(clock, "sleep", None)
+        elif callable(clock):
+            self._now, self._sleep = clock, sleep
+        else:
+            raise DriverConfigError(f"mock camera: clock must be a Clock or a callable returning s, got {clock!r}")
+        self.renderer = MarkerRenderer(config.camera, config.marker, pattern=pattern, pose=pose, imaging=imaging,
+                                       seed=seed)
+        self._rng = np.random.default_rng(None if seed is None else seed + 1)
+        self._drop_p = float(drop_probability)
+        self._period = 1.0 / config.camera.fps
+        self._t0 = float(self._now())
+        self._next = 0
+        self._frames = 0
+        self._dropped = 0
+        self._closed = False
+
+    def grab(self) -> Frame:
+        if self._closed:
+            raise SensorFault("mock camera: grab() after close()")
+        while True:
+            now = float(self._now())
+            due = self._t0 + self._next * self._period
+            if due > now and self._sleep is not None:
+                self._sleep(due - now)
+            elif due + self._period <= now:
+                # the reader fell behind: the frames in between are gone, as with a real camera
+                newest = int(math.floor((now - self._t0) / self._period + 1e-9))
+                self._dropped += newest - self._next
+                self._next = newest
+                due = self._t0 + self._next * self._period
+            k = self._next
+            self._next += 1
+            if self._drop_p and self._rng.random() < self._drop_p:
+                self._dropped += 1
+                continue
+            self._frames += 1
+            return Frame(t=due, image=self.renderer.render_at(self._angle, due), index=k)
+
+    def stats(self) -> dict:
+        return {"frames": self._frames, "dropped_frames": self._dropped, "read_failures": 0, "device": "mock"}
+
+    def close(self) -> None:
+        self._closed = True
+
+
+def open_camera(config: CameraConfig, device: str | int | None = None, *, angle_source: AngleSource | None = None,
+                clock: Any = None, **mock_options: Any) -> Camera:
+    """The one place that picks the camera: the V4L2 ``device`` when given, else a mock of the swing.
+
+    Without a device, ``angle_source`` (default: the marker held at rest) and ``clock`` (default:
+    ``time.monotonic``) drive a ``MockCamera``; ``mock_options`` go to it.
+    """
+    if device is not None:
+        if mock_options:
+            raise DriverConfigError(f"camera: {sorted(mock_options)} apply only to the mock camera")
+        return V4L2Camera(device, config.camera)
+    return MockCamera(config, angle_source or (lambda t: 0.0), clock or time.monotonic, **mock_options)

@@ -1,0 +1,26 @@
+"""Monocular vision: from camera frames of a marker on the swinging cylinder to the swing angle.
+
+    config     the camera file (intrinsics, distortion, marker radius/distance, pose settings)
+    locate     grey frame → marker edge, sub-pixel, in ideal normalised coordinates (MarkerTracker)
+    geometry   normalised coordinate → angle, exact (R·sin θ lateral, R·(1 − cos θ) deeper)
+    pose       the camera's yaw, fitted as a parameter of the projection over a whole swing
+    pipeline   frames → Trace (gaps and flags for lost/corrupt/dropped frames, yaw corrected)
+    render     ray-traced synthetic frames: the truth for tests, bench and the mock camera
+
+Pure numpy/scipy/opencv: decoding files and talking to cameras live in
+``service.video`` and ``drivers.camera``.
+"""
+
+from .config import CameraConfig, CameraModel, MarkerGeometry, PoseSettings
+from .geometry import angle_from_normalised, normalised_from_angle
+from .locate import MarkerObservation, MarkerTracker, TrackerSettings
+from .pipeline import Tracking, VisionSettings, count_dropped, trace_from_tracking, track_frames
+from .pose import PoseEstimate, estimate_yaw
+from .render import CameraPose, Imaging, MarkerPattern, MarkerRenderer
+
+__all__ = [
+    "CameraConfig", "CameraModel", "MarkerGeometry", "PoseSettings", "angle_from_normalised",
+    "normalised_from_angle", "MarkerObservation", "MarkerTracker", "TrackerSettings", "Tracking", "VisionSettings",
+    "count_dropped", "trace_from_tracking", "track_frames", "PoseEstimate", "estimate_yaw", "CameraPose", "Imaging",
+    "MarkerPattern", "MarkerRenderer",
+]

@@ -1,0 +1,184 @@
+"""Frames to an angle trace: track the marker, convert with the exact geometry, correct the camera yaw.
+
+Pure: the caller decodes the frames (``service/video.py`` from a file,
+``drivers/camera.py`` live) and hands over (time, grey frame) pairs; a
+frame that could not be decoded is passed as ``None`` and counted as
+corrupt. Frames without a marker leave a gap in the trace (timestamps may
+be uneven) and a flag, never an exception.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Iterable
+
+import numpy as np
+
+from ..errors import VisionError
+from ..trace import Trace
+from .config import CameraConfig
+from .geometry import angle_from_normalised
+from .locate import CORRUPT, LOST, MarkerObservation, MarkerTracker, TrackerSettings
+from .pose import PoseEstimate, estimate_yaw
+
+DROPPED = "dropped_frames"
+POSE = "camera_pose"
+
+
+def count_dropped(t: np.ndarray, fps: float, tolerance: float = 0.5) -> int:
+    """Frames missing from timestamps t (s) of a camera running at ``fps`` frames/s.
+
+    A gap of n frame periods (rounded) hides n − 1 frames; gaps within
+    (1 + tolerance) periods are jitter, not drops.
+    """
+    t = np.asarray(t, dtype=float)
+    if t.size < 2 or not fps > 0:
+        return 0
+    gaps = np.diff(t) * fps
+    return int(np.sum(np.where(gaps > 1.0 + tolerance, np.rint(gaps) - 1, 0)))
+
+
+@dataclass
+class Tracking:
+    """The marker's track over a sequence of frames (what the tracker saw, before any geometry).
+
+    t: s, frame times of the frames where the marker was found; x: ideal normalised coordinate there.
+    slope: the edge's dx/dy per found frame; rows, residual: rows used and line RMS (px) per found frame.
+    frames: frames offered (decoded or not); lost, corrupt: frames without a position.
+    reasons: why frames failed (first words of the tracker's detail) → count.
+    seen_times: s, every frame that had a timestamp; untimed: frames that had none (undecodable).
+    """
+
+    t: list[float] = field(default_factory=list)
+    x: list[float] = field(default_factory=list)
+    slope: list[float] = field(default_factory=list)
+    rows: list[int] = field(default_factory=list)
+    residual: list[float] = field(default_factory=list)
+    contrast: list[float] = field(default_factory=list)
+    frames: int = 0
+    lost: int = 0
+    corrupt: int = 0
+    reasons: Counter = field(default_factory=Counter)
+    seen_times: list[float] = field(default_factory=list)
+    untimed: int = 0
+
+    def add(self, t: float | None, obs: MarkerObservation) -> None:
+        self.frames += 1
+        if t is not None and math.isfinite(t):
+            self.seen_times.append(float(t))
+        else:
+            self.untimed += 1
+        if obs.found and t is not None and math.isfinite(t):
+            if self.t and t <= self.t[-1]:
+                # a repeated or out-of-order timestamp cannot be placed in a trace
+                self.corrupt += 1
+                self.reasons["timestamp out of order"] += 1
+                return
+            self.t.append(float(t))
+            self.x.append(obs.x)
+            self.slope.append(obs.slope)
+            self.rows.append(obs.rows)
+            self.residual.append(obs.residual)
+            self.contrast.append(obs.contrast)
+            return
+        if obs.reason == CORRUPT or t is None:
+            self.corrupt += 1
+        else:
+            self.lost += 1
+        self.reasons[(obs.detail or obs.reason).split(" (")[0]] += 1
+
+
+def track_frames(frames: Iterable[tuple[float | None, np.ndarray | None]], config: CameraConfig,
+                 settings: TrackerSettings = TrackerSettings()) -> Tracking:
+    """Run the tracker over (time in s, grey uint8 frame) pairs; ``None`` frames count as corrupt."""
+    tracker = MarkerTracker(config.camera, settings)
+    out = Tracking()
+    for t, frame in frames:
+        out.add(t, tracker.locate(frame))
+    return out
+
+
+@dataclass(frozen=True)
+class VisionSettings:
+    """How a track becomes a trace.
+
+    estimate_yaw: fit the camera yaw from the swing and correct the angles with it.
+    yaw: a known yaw, rad, used when not estimating.
+    yaw_limit_deg: |yaw| above which the trace is flagged ``camera_pose``, degrees.
+    """
+
+    estimate_yaw: bool = True
+    yaw: float = 0.0
+    yaw_limit_deg: float = 2.0
+
+    @classmethod
+    def from_config(cls, config: CameraConfig) -> "VisionSettings":
+        return cls(estimate_yaw=config.pose.estimate, yaw_limit_deg=config.pose.yaw_limit_deg)
+
+
+def trace_from_tracking(tracking: Tracking, config: CameraConfig, *, source: str = "video",
+                        settings: VisionSettings | None = None, dropped: int | None = None,
+                        extra_meta: dict | None = None) -> Trace:
+    """The angle trace (rad) of a track: exact geometry, yaw estimated and corrected, gaps flagged.
+
+    dropped: frames the acquisition knows it lost (None: counted from timestamp gaps at the
+    camera's fps). The trace's ``meta["camera"]`` holds the counts and the pose estimate; its
+    flags say ``marker_lost``, ``corrupt_frame``, ``dropped_frames``, ``camera_pose``.
+    Raises VisionError when the marker was (almost) never found.
+    """
+    settings = settings or VisionSettings.from_config(config)
+    t = np.asarray(tracking.t, dtype=float)
+    x = np.asarray(tracking.x, dtype=float)
+    if t.size < 2:
+        top = ", ".join(f"{k} ×{n}" for k, n in tracking.reasons.most_common(3)) or "no frames"
+        raise VisionError(f"{source}: the marker was found in {t.size} of {tracking.frames} frames ({top}); "
+                          "expected a vertical dark/bright marker edge in view (check with `moi camera-check`)")
+    marker = config.marker
+    pose = PoseEstimate(False, reason="yaw estimation switched off; using the configured yaw")
+    yaw, rest = settings.yaw, 0.0
+    if settings.estimate_yaw:
+        pose = estimate_yaw(t, x, marker)
+        if pose.estimated:
+            yaw, rest = pose.yaw, pose.rest_angle
+    theta = angle_from_normalised(x, marker, yaw, rest)
+    bad = ~np.isfinite(theta)
+    if bad.any():
+        # a position beyond the cylinder's silhouette: the geometry in the camera file is wrong for it
+        tracking.lost += int(bad.sum())
+        tracking.reasons["beyond the cylinder's silhouette"] += int(bad.sum())
+        t, theta, x = t[~bad], theta[~bad], x[~bad]
+    if t.size < 2:
+        raise VisionError(f"{source}: no marker position fits the geometry of the camera file "
+                          f"(radius {marker.radius} m, distance {marker.distance} m)")
+    if dropped is None:
+        # an undecodable frame still took its slot in the stream: it is not a dropped one
+        dropped = max(count_dropped(np.unique(tracking.seen_times), config.camera.fps) - tracking.untimed, 0)
+    flags: list[str] = []
+    if tracking.lost:
+        flags.append(LOST)
+    if tracking.corrupt:
+        flags.append(CORRUPT)
+    if dropped:
+        flags.append(DROPPED)
+    yaw_reported = pose.yaw if pose.estimated else settings.yaw
+    if abs(math.degrees(yaw_reported)) > settings.yaw_limit_deg:
+        flags.append(POSE)
+    slope = np.asarray(tracking.slope)
+    camera_meta = {
+        "frames": tracking.frames, "frames_used": int(t.size), "marker_lost": tracking.lost,
+        "corrupt_frames": tracking.corrupt, "dropped_frames": int(dropped),
+        "failures": dict(tracking.reasons),
+        "yaw_deg": math.degrees(yaw_reported), "yaw_limit_deg": settings.yaw_limit_deg,
+        "yaw_corrected": bool(pose.estimated),
+        **{k: v for k, v in pose.to_dict().items() if k != "yaw_deg"},
+        "marker_tilt_deg": float(np.degrees(np.arctan(np.median(slope)))) if slope.size else None,
+        "edge_rows_median": float(np.median(tracking.rows)) if tracking.rows else None,
+        "edge_line_rms_px": float(np.median(tracking.residual)) if tracking.residual else None,
+        "edge_strength_grey": float(np.median(tracking.contrast)) if tracking.contrast else None,
+        "radius_m": marker.radius, "distance_m": marker.distance,
+    }
+    if extra_meta:
+        camera_meta.update(extra_meta)
+    return Trace(t, theta, source=source, flags=tuple(flags), meta={"sensor": "camera", "camera": camera_meta})

@@ -1,0 +1,201 @@
+"""Camera pose error: the yaw of the optical axis, estimated from the swing itself.
+
+Why the data tell the yaw. The pendulum's equation of motion is odd: it is
+unchanged under θ → −θ (viscous, Coulomb and quadratic damping, cubic
+stiffness, gravity's sin θ all are), so a free swing has half-wave symmetry
+and no even harmonics. The projection of a camera looking straight at the
+swing axis is odd too. A yawed camera's is not: the angle computed with the
+wrong yaw ψ' is θ + (ψ' − ψ)·∂θ/∂ψ, and ∂θ/∂ψ grows with θ² (it is
+(L/R)·cos α / sqrt(1 − ((L/R)·sin α)²) − 1), so the half-swings on the two
+sides differ and a second harmonic appears whose size is proportional to
+the yaw error and to the amplitude squared (seed 001 §4.3 sees the same
+asymmetry in its two envelopes).
+
+The fit (yaw as a parameter of the projection, not two envelope points):
+the measured image coordinate x(t) is turned into an angle with the exact
+projection at yaw ψ; that angle is fitted by a symmetric swing — odd
+harmonics 1, 3, 5 of a smooth phase Φ(t) with smoothly varying (B-spline)
+amplitudes, on top of a slowly varying zero level — plus the yaw column
+∂θ/∂ψ. Gauss–Newton on ψ (the other coefficients are linear) converges in a
+few iterations. Only even-order structure can move ψ, and nothing in the
+pendulum produces it, so damping of any kind, cubic stiffness and slow zero
+drift do not bias the estimate.
+
+The marker's rest angle φ0 (the swing's centre seen from the camera) is
+estimated on the way: with D (camera to marker at rest) it fixes the
+camera–axis distance L (D² = L² + R² − 2·L·R·cos φ0).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import BSpline
+
+from .config import MarkerGeometry
+from .geometry import angle_from_normalised, axis_distance, d_angle_d_yaw
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """The camera's yaw as seen in one swing.
+
+    estimated: False when the record cannot tell (too few swings); ``reason`` says why.
+    yaw, yaw_std: ψ and its 1σ (white-residual) uncertainty, rad.
+    rest_angle: φ0, rad, the swing's centre seen from the camera; axis_distance: L, m.
+    swings: half-swings used; residual_rms: rad, of the symmetric-swing fit; iterations: Gauss–Newton steps.
+    """
+
+    estimated: bool
+    yaw: float = 0.0
+    yaw_std: float = math.nan
+    rest_angle: float = 0.0
+    axis_distance: float = math.nan
+    swings: int = 0
+    residual_rms: float = math.nan
+    iterations: int = 0
+    reason: str = ""
+
+    @property
+    def yaw_deg(self) -> float:
+        return math.degrees(self.yaw)
+
+    @property
+    def yaw_std_deg(self) -> float:
+        return math.degrees(self.yaw_std)
+
+    def to_dict(self) -> dict:
+        def num(v: float) -> float | None:
+            return float(v) if math.isfinite(v) else None
+        return {"yaw_estimated": self.estimated, "yaw_deg": num(self.yaw_deg), "yaw_std_deg": num(self.yaw_std_deg),
+                "rest_angle_deg": num(math.degrees(self.rest_angle)), "axis_distance_m": num(self.axis_distance),
+                "pose_half_swings": self.swings, "pose_fit_rms_rad": num(self.residual_rms),
+                **({"pose_note": self.reason} if self.reason else {})}
+
+
+def _crossings(t: np.ndarray, y: np.ndarray, level: float, hysteresis: float) -> np.ndarray:
+    """Times (s) at which y crosses ``level``, alternating in direction, linearly interpolated."""
+    state = 0
+    out = []
+    for i in range(1, y.size):
+        if state <= 0 and y[i] > level + hysteresis:
+            new = 1
+        elif state >= 0 and y[i] < level - hysteresis:
+            new = -1
+        else:
+            continue
+        if state != 0:
+            # last sample on the other side of the level before i
+            j = i
+            while j > 0 and (y[j - 1] - level) * new > 0:
+                j -= 1
+            if j > 0:
+                y0, y1 = y[j - 1] - level, y[j] - level
+                out.append(t[j - 1] + (t[j] - t[j - 1]) * (y0 / (y0 - y1) if y0 != y1 else 0.5))
+        state = new
+    return np.asarray(out)
+
+
+def _bspline_basis(t: np.ndarray, t0: float, t1: float, spacing: float) -> np.ndarray:
+    """Cubic B-spline design matrix on [t0, t1] with knots about ``spacing`` s apart."""
+    n_int = max(int(math.ceil((t1 - t0) / spacing)), 1)
+    inner = np.linspace(t0, t1, n_int + 1)
+    knots = np.concatenate([[t0] * 3, inner, [t1] * 3])
+    tt = np.clip(t, t0, t1)
+    return BSpline.design_matrix(tt, knots, 3).toarray()
+
+
+def estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, *, harmonics: tuple[int, ...] = (1, 3, 5),
+                 max_iterations: int = 12, outlier_sigma: float = 6.0) -> PoseEstimate:
+    """Estimate the camera yaw ψ (rad) from a free swing seen at ideal normalised coordinates x(t).
+
+    t: s, increasing (gaps allowed); x: dimensionless, finite. Needs at least
+    three full swings; otherwise returns ``estimated=False`` with a reason.
+    """
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(x, dtype=float)
+    if t.size < 40:
+        return PoseEstimate(False, reason=f"only {t.size} samples: too few to estimate the camera yaw")
+    yaw, rest = 0.0, 0.0
+    theta = angle_from_normalised(x, marker, yaw, rest)
+    if not np.isfinite(theta).all():
+        return PoseEstimate(False, reason="the marker leaves the cylinder's visible side: geometry does not fit")
+    # Phase from the crossings of the swing's centre line.
+    span = float(np.percentile(theta, 99) - np.percentile(theta, 1))
+    level = float(np.median(theta))
+    cross = _crossings(t, theta, level, 0.05 * span)
+    if cross.size >= 4:
+        # centre of the swing from the record between the first and last crossing (not the hold, not the rest)
+        sel = (t >= cross[0]) & (t <= cross[-1])
+        level = 0.5 * (float(theta[sel].max()) + float(theta[sel].min()))
+        cross = _crossings(t, theta, level, 0.05 * span)
+    if cross.size < 7:
+        return PoseEstimate(False, reason=f"only {max(cross.size - 1, 0)} half-swings: at least 6 are needed to "
+                            "estimate the camera yaw")
+    period = 2.0 * float(np.median(np.diff(cross)))
+    k = np.arange(cross.size) * math.pi
+    tn = (cross - cross[0]) / max(cross[-1] - cross[0], 1e-9)
+    deg = min(3, cross.size - 2)
+    phase_poly = np.polyfit(tn, k, deg)
+    t0, t1 = cross[0] - 0.25 * period, cross[-1] + 0.25 * period
+    use = (t >= t0) & (t <= t1)
+    tu, xu = t[use], x[use]
+    phi_t = np.polyval(phase_poly, (tu - cross[0]) / max(cross[-1] - cross[0], 1e-9))
+    amp_basis = _bspline_basis(tu, t0, t1, 2.0 * period)
+    dc_basis = _bspline_basis(tu, t0, t1, 3.0 * period)
+    cols = [dc_basis]
+    for h in harmonics:
+        cols.append(amp_basis * np.cos(h * phi_t)[:, None])
+        cols.append(amp_basis * np.sin(h * phi_t)[:, None])
+    M = np.hstack(cols)
+    # Variable projection: the symmetric-swing coefficients are linear, so they are projected out
+    # (QR of M once per set of samples) and only the yaw is iterated.
+    keep = np.ones(tu.size, dtype=bool)
+    Q, Rm = np.linalg.qr(M)
+    iterations = 0
+    residual = np.zeros(tu.size)
+    curvature = math.nan
+    for outer in range(3):  # the rest angle changes L a little: refine it
+        for it in range(max_iterations):
+            iterations += 1
+            th = angle_from_normalised(xu, marker, yaw, rest)[keep]
+            jac = d_angle_d_yaw(xu, marker, yaw, rest)[keep]
+            if not (np.isfinite(th).all() and np.isfinite(jac).all()):
+                return PoseEstimate(False, reason="the yaw fit left the cylinder's visible side (diverged)")
+            th_r = th - Q @ (Q.T @ th)
+            jac_r = jac - Q @ (Q.T @ jac)
+            curvature = float(jac_r @ jac_r)
+            if not curvature > 0:
+                return PoseEstimate(False, reason="the swing shows no sign of the camera yaw (amplitude too small)")
+            step = -float(jac_r @ th_r) / curvature
+            yaw += step
+            residual = th_r + step * jac_r
+            if abs(yaw) > 0.5:
+                return PoseEstimate(False, reason="the yaw fit ran away (> 30°): not a yawed camera, or not a swing")
+            if it == 0 and outer == 0:
+                # glitches (a mistracked frame) would pull the fit: drop them once, on the first residual
+                sigma = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
+                if sigma > 0:
+                    good = np.abs(residual - np.median(residual)) <= outlier_sigma * sigma
+                    if not good.all():
+                        keep[np.flatnonzero(keep)[~good]] = False
+                        Q, Rm = np.linalg.qr(M[keep])
+                        continue
+            if abs(step) < 1e-10:
+                break
+        # the zero level of the symmetric fit is the marker's surface angle at rest (relative to the current one)
+        th = angle_from_normalised(xu, marker, yaw, rest)[keep]
+        coef = np.linalg.solve(Rm, Q.T @ th)
+        dc = dc_basis[keep] @ coef[:dc_basis.shape[1]]
+        shift = float(np.median(dc))
+        rest += shift
+        if abs(shift) < 1e-7:
+            break
+    dof = max(int(keep.sum()) - M.shape[1] - 1, 1)
+    rms = float(np.sqrt(np.sum(residual ** 2) / dof))
+    yaw_std = rms / math.sqrt(curvature)
+    return PoseEstimate(True, yaw=yaw, yaw_std=yaw_std, rest_angle=rest,
+                        axis_distance=axis_distance(marker, rest), swings=int(cross.size - 1), residual_rms=rms,
+                        iterations=iterations)

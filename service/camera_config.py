@@ -1,0 +1,24 @@
+"""Reading the camera file (TOML, DESIGN.md) with errors that name the file and the key."""
+
+from __future__ import annotations
+
+import os
+
+from measurement.errors import VisionError
+from measurement.vision.config import CameraConfig
+
+from .files import read_toml
+
+
+def read_camera(path: str | os.PathLike) -> CameraConfig:
+    """The camera file at ``path``: intrinsics, distortion, marker radius and distance (and optional [pose])."""
+    doc = read_toml(path, "camera file")
+    try:
+        return CameraConfig.from_dict(doc)
+    except VisionError as exc:
+        raise VisionError(f"{path}: {exc}") from None
+
+
+def camera_config(camera: str | os.PathLike | CameraConfig) -> CameraConfig:
+    """A camera file path or an already parsed ``CameraConfig``."""
+    return camera if isinstance(camera, CameraConfig) else read_camera(camera)
