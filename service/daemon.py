@@ -168,8 +168,9 @@ class Appliance:
 
     def _iteration(self) -> None:
         assert self.sequencer is not None
-        self._drain_commands()
+        # poll first: a trigger that arrived during PUBLISHING finds the IDLE that follows it
         self.sequencer.poll()
+        self._drain_commands()
         self._check_components()
         self._refresh_live()
         self.loop_iterations += 1

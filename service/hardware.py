@@ -1,29 +1,31 @@
 """Build the devices the sequencer drives from the configuration: real hardware or the simulated rig.
 
 Simulated (``--sim`` or no ``[hardware]``): gpiozero mock pins for the
-solenoid and the button, and a simulated pendulum that is held at its release
-angle until the mock solenoid fires, then swings by the physics of
-``[simulation]`` on a clock running ``time_scale`` times faster than real time.
-The simulated pendulum is ``drivers.simrig.SimRig`` when that module is
-installed; until then a thin adapter here couples the same pieces
-(``measurement.Swing`` + ``drivers.SimulatedAngleSensor`` + the solenoid's
-listener).
+solenoid and the button, and ``drivers.simrig.SimRig``: a pendulum held at its
+release angle until the mock solenoid fires, then swinging by the physics of
+``[simulation]`` on a clock running ``time_scale`` times faster than real
+time. With ``[simulation] sensor = "encoder"`` (the default) it is read over a
+real Modbus RTU link: ``drivers.sim_encoder.SimEncoderServer`` on a loopback
+socket and the same ``drivers.encoder.ModbusEncoder`` the device uses; with
+``"direct"`` an in-process ``drivers.SimulatedAngleSensor`` samples it at
+``rate`` (faster, for tests).
 """
 
 from __future__ import annotations
 
 import logging
-import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from drivers.backend import pin_factory
 from drivers.button import PushButton
 from drivers.clock import Clock, MonotonicClock, ScaledClock
+from drivers.errors import DriverConfigError
 from drivers.indicator import Indicator
 from drivers.sensor import AngleSensor, SimulatedAngleSensor
+from drivers.simrig import SimRig
 from drivers.solenoid import Solenoid
-from measurement import Pendulum, Swing
+from measurement import Pendulum
 
 from .config import Config
 from .errors import ConfigError
@@ -44,7 +46,7 @@ class Devices:
     button: PushButton | None = None
     indicator: Indicator | None = None
     simulated: bool = False
-    sim: Any = None  # the simulated pendulum (tests read its truth)
+    sim: Any = None  # the SimRig (tests read its truth)
     _closers: list[Callable[[], None]] = field(default_factory=list)
 
     def close(self) -> None:
@@ -62,50 +64,17 @@ class Devices:
                 log.exception("closing the simulation failed")
 
 
-class SimPendulum:
-    """A pendulum held at theta0 until the solenoid fires, then swinging freely.
+class _RelatchingSensor:
+    """A sensor on the simulated rig whose ``start()`` first re-latches the pendulum at θ0
+    (what the operator does between two measurements)."""
 
-    angle(t): the true angle (rad) at clock time t (s). ``rearm()`` puts it
-    back at theta0 and latched (the operator re-latching the arm).
-    """
-
-    def __init__(self, pendulum: Pendulum, theta0: float, clock: Clock, duration: float) -> None:
-        self.pendulum = pendulum
-        self.theta0 = float(theta0)
-        self._clock = clock
-        self._swing = Swing(pendulum, theta0, duration)
-        self._lock = threading.Lock()
-        self._released_at: float | None = None
-        self.releases = 0
-
-    def on_solenoid(self, active: bool) -> None:
-        if active:
-            with self._lock:
-                if self._released_at is None:
-                    self._released_at = self._clock.now()
-                    self.releases += 1
-
-    def rearm(self) -> None:
-        with self._lock:
-            self._released_at = None
-
-    def angle(self, t: float) -> float:
-        released = self._released_at
-        if released is None or t <= released:
-            return self.theta0
-        return float(self._swing.angle(t - released))
-
-
-class _RearmingSensor:
-    """A simulated sensor whose ``start()`` re-latches the simulated pendulum first."""
-
-    def __init__(self, inner: SimulatedAngleSensor, rig: SimPendulum) -> None:
+    def __init__(self, inner: Any, rig: SimRig) -> None:
         self._inner = inner
         self._rig = rig
         self.source = inner.source
 
     def start(self) -> None:
-        self._rig.rearm()
+        self._rig.relatch()
         self._inner.start()
 
     def __getattr__(self, name: str) -> Any:
@@ -124,24 +93,39 @@ def _simulated(config: Config) -> Devices:
     sol_pin = hw.solenoid["pin"] if hw else SIM_SOLENOID_PIN
     btn_pin = hw.button["pin"] if hw and hw.button else SIM_BUTTON_PIN
     max_on = hw.solenoid["max_on_time"] if hw else 0.5
+    opened: list[Callable[[], None]] = []
     solenoid = Solenoid(sol_pin, max_on_time=max_on, pin_factory=factory)
-    button = None
+    opened.append(solenoid.close)
     try:
         button = PushButton(btn_pin, pull_up=True, bounce_time=None, pin_factory=factory)
-        pendulum = Pendulum(config.rig, sim.inertia, sim.effects)
+        opened.append(button.close)
         duration = config.sequencer.pre_trigger + config.sequencer.capture_duration + 5.0
-        rig = SimPendulum(pendulum, sim.theta0, clock, duration)
-        remove = solenoid.add_listener(rig.on_solenoid)
-        inner = SimulatedAngleSensor(rig.angle, clock, rate=sim.rate, noise_std=sim.noise,
-                                     quantisation_bits=sim.bits or None, seed=sim.seed, source="encoder")
-        sensor = _RearmingSensor(inner, rig)
+        rig = SimRig(Pendulum(config.rig, sim.inertia, sim.effects), theta0=sim.theta0, clock=clock,
+                     duration=duration).attach(solenoid)
+        closers: list[Callable[[], None]] = [rig.close]
+        opened.append(rig.close)
+        if sim.sensor == "encoder":
+            from drivers.encoder import ModbusEncoder
+            from drivers.sim_encoder import SimEncoderConfig, SimEncoderServer
+
+            bits = sim.bits or 17
+            server = SimEncoderServer(rig.angle, clock, SimEncoderConfig(
+                counts_per_turn=1 << bits, registers=1 if bits <= 16 else 2, noise_std=sim.noise,
+                latency=sim.latency, seed=sim.seed)).start()
+            opened.append(server.stop)
+            closers.insert(0, server.stop)
+            # the client's time-out is real time: a scaled clock must not stretch it
+            inner: Any = ModbusEncoder(server.encoder_config(timeout=0.05), clock)
+        else:
+            inner = SimulatedAngleSensor(rig.angle, clock, rate=sim.rate, noise_std=sim.noise,
+                                         quantisation_bits=sim.bits or None, seed=sim.seed, source="encoder")
+        sensor = _RelatchingSensor(inner, rig)
     except BaseException:
-        solenoid.close()
-        if button is not None:
-            button.close()
+        for close in reversed(opened):
+            close()
         raise
     return Devices(clock=clock, solenoid=solenoid, sensor=sensor, button=button, simulated=True, sim=rig,
-                   _closers=[remove])
+                   _closers=closers)
 
 
 def _hardware(config: Config) -> Devices:
@@ -165,12 +149,13 @@ def _hardware(config: Config) -> Devices:
             indicator = Indicator(i["pin"], kind=i["kind"], active_high=i["active_high"], pin_factory=factory)
             opened.append(indicator)
         if hw.sensor == "encoder":
+            from drivers.encoder import EncoderConfig, ModbusEncoder
+
             try:
-                from drivers.encoder import ModbusEncoder
-            except ImportError:
-                raise ConfigError("[hardware] sensor = \"encoder\": the encoder driver (drivers.encoder) is not "
-                                  "available in this build") from None
-            sensor = ModbusEncoder(clock=clock, **dict(hw.encoder or {}))
+                enc = EncoderConfig.from_dict(dict(hw.encoder or {}))
+            except DriverConfigError as exc:
+                raise ConfigError(f"{config.source}: [hardware.encoder]: {exc}") from None
+            sensor = ModbusEncoder(enc, clock)
         else:  # guarded by the config schema
             raise ConfigError(f"[hardware] sensor {hw.sensor!r} is not supported")
     except BaseException:

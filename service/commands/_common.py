@@ -1,0 +1,57 @@
+"""What `moi results` and `moi export` share: finding the result store."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from datetime import datetime, timezone
+from pathlib import Path
+
+from ..config import load_config
+from ..errors import InputFileError, StoreError
+from ..store import DB_NAME, Store
+
+#: where systemd's StateDirectory=moi puts the store
+SYSTEM_STATE_DIR = Path("/var/lib/moi")
+
+
+def add_store_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--state-dir", metavar="DIR", help="directory of results.db")
+    g.add_argument("--config", "-c", metavar="appliance.toml", help="take the state directory from this config")
+
+
+def open_store(args: argparse.Namespace) -> Store:
+    """The store named by --state-dir / --config, else $STATE_DIRECTORY, ./moi-state or /var/lib/moi."""
+    if args.state_dir:
+        candidates = [Path(args.state_dir)]
+    elif args.config:
+        candidates = [load_config(args.config).state_dir]
+    else:
+        env = os.environ.get("STATE_DIRECTORY")
+        candidates = ([Path(env.split(":")[0])] if env else []) + [Path("moi-state"), SYSTEM_STATE_DIR]
+    for d in candidates:
+        if (d / DB_NAME).exists():
+            try:
+                return Store(d, create=False)
+            except StoreError as exc:
+                raise InputFileError(str(exc)) from None
+    tried = ", ".join(str(d / DB_NAME) for d in candidates)
+    raise InputFileError(f"no result store found (looked for {tried}); give --state-dir DIR or --config FILE")
+
+
+def parse_time(text: str) -> float:
+    """ISO 8601 date or date-time (UTC unless it has an offset) → Unix time, s."""
+    try:
+        dt = datetime.fromisoformat(text)
+    except ValueError:
+        raise InputFileError(f"{text!r} is not a date or date-time; expected e.g. 2025-03-01 or 2025-03-01T12:00") from None
+    if dt.tzinfo is None:
+        dt = dt.replace(tzinfo=timezone.utc)
+    return dt.timestamp()
+
+
+def fmt_time(t: float | None) -> str:
+    if t is None:
+        return "-"
+    return datetime.fromtimestamp(t, timezone.utc).strftime("%Y-%m-%d %H:%M:%S")

@@ -1,0 +1,82 @@
+"""`moi export`: write stored measurements as CSV (one row each) or JSON (full payloads), or one raw trace."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import sys
+
+from measurement import Trace
+
+from ..errors import InputFileError
+from ..files import write_text_atomic
+from ..payload import iso_utc
+from ._common import add_store_arguments, fmt_time, open_store, parse_time
+
+HELP = "export stored measurements to CSV or JSON, or one measurement's raw trace"
+
+CSV_COLUMNS = (
+    "seq", "uuid", "status", "trigger", "device_id", "software_version", "started_at", "finished_at",
+    "published_at", "J", "J_std", "J_object", "J_object_std", "omega_n", "omega_n_std", "damping_ratio",
+    "damping_ratio_std", "residual_rms_before", "residual_rms_after", "noise_floor", "effects",
+    "added_effects", "flags", "error",
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_store_arguments(p)
+    p.add_argument("--format", "-f", choices=("csv", "json"), default="csv", help="output format (default csv)")
+    p.add_argument("--out", "-o", metavar="FILE", help="write to FILE (default stdout)")
+    p.add_argument("--since", metavar="DATE", help="only measurements finished at or after DATE (ISO 8601, UTC)")
+    p.add_argument("--until", metavar="DATE", help="only measurements finished before DATE")
+    p.add_argument("--status", choices=("ok", "failed", "aborted"), help="only this status")
+    p.add_argument("--trace", metavar="ID", help="export the raw trace of one measurement (UUID or seq) as trace CSV "
+                                                 "(t in s, angle in rad; `moi identify` reads it)")
+
+
+def run(args: argparse.Namespace) -> int:
+    with open_store(args) as store:
+        if args.trace:
+            m = store.get(args.trace, trace=True)
+            if m is None:
+                raise InputFileError(f"no single measurement matches {args.trace!r}")
+            if m.trace_t is None:
+                raise InputFileError(f"measurement {m.uuid} has no stored trace ({m.status}; or store_trace = false)")
+            text = Trace(m.trace_t, m.trace_angle, source=m.uuid).to_csv(
+                f"moi measurement {m.uuid} (seq {m.seq}), finished {fmt_time(m.finished_at)} UTC, device {m.device_id}")
+        else:
+            rows = list(reversed(store.list(
+                limit=None, full=True, status=args.status,
+                since=parse_time(args.since) if args.since else None,
+                until=parse_time(args.until) if args.until else None)))  # oldest first
+            text = _json(rows) if args.format == "json" else _csv(rows)
+    if args.out:
+        write_text_atomic(args.out, text)
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def _json(rows) -> str:
+    docs = [m.summary() | {"payload": m.payload, "rig": m.rig} for m in rows]
+    return json.dumps(docs, indent=2, ensure_ascii=False) + "\n"
+
+
+def _csv(rows) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(CSV_COLUMNS)
+    for m in rows:
+        p = m.payload or {}
+        s = m.summary()
+        rec = {**{k: p.get(k) for k in CSV_COLUMNS}, **{k: v for k, v in s.items() if k in CSV_COLUMNS and v is not None}}
+        rec["effects"] = " ".join(p.get("effects") or [])
+        rec["added_effects"] = " ".join(p.get("added_effects") or [])
+        rec["flags"] = " ".join(m.flags)
+        for k in ("started_at", "finished_at", "published_at"):
+            rec[k] = iso_utc(s[k]) if s[k] is not None else ""
+        w.writerow(["" if rec.get(k) is None else (repr(rec[k]) if isinstance(rec[k], float) else rec[k])
+                    for k in CSV_COLUMNS])
+    return buf.getvalue()

@@ -1,0 +1,68 @@
+"""`moi modbus-map`: print the Modbus register map as Markdown (docs/modbus.md is its output).
+
+`moi modbus-map --check docs/modbus.md` exits 1 when the file differs from the code;
+`moi modbus-map --read HOST[:PORT]` reads a running appliance and prints the values.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from .. import registers as R
+from ..errors import InputFileError
+
+HELP = "print the Modbus register map (Markdown, as in docs/modbus.md), check the doc, or read a live appliance"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--check", metavar="FILE", help="compare FILE with the generated map; exit 1 if it differs")
+    p.add_argument("--out", metavar="FILE", help="write the map to FILE instead of stdout")
+    p.add_argument("--read", metavar="HOST[:PORT]", help="read the registers of a running appliance (Modbus TCP)")
+    p.add_argument("--unit", type=int, default=1, help="unit id for --read (default 1)")
+    p.add_argument("--word-order", choices=R.WORD_ORDERS, default="big", help="word order for --read (default big)")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.read:
+        return _read(args)
+    text = R.markdown()
+    if args.check:
+        path = Path(args.check)
+        if not path.exists():
+            raise InputFileError(f"{args.check!r} not found")
+        if path.read_text(encoding="utf-8") != text:
+            print(f"moi modbus-map: {args.check} differs from the register map in the code; "
+                  f"regenerate it with `moi modbus-map --out {args.check}`", file=sys.stderr)
+            return 1
+        print(f"{args.check} matches the register map (version {R.MAP_VERSION})")
+        return 0
+    if args.out:
+        Path(args.out).write_text(text, encoding="utf-8")
+        return 0
+    sys.stdout.write(text)
+    return 0
+
+
+def _read(args: argparse.Namespace) -> int:
+    from pymodbus.client import ModbusTcpClient
+
+    host, _, port = args.read.partition(":")
+    client = ModbusTcpClient(host, port=int(port or 502), timeout=3)
+    if not client.connect():
+        print(f"moi modbus-map: cannot connect to {args.read}", file=sys.stderr)
+        return 3
+    try:
+        rr = client.read_input_registers(0, count=R.IMAGE_SIZE, device_id=args.unit)
+        if rr.isError():
+            print(f"moi modbus-map: {args.read} answered {rr}", file=sys.stderr)
+            return 3
+        values = R.decode_image(rr.registers, args.word_order)
+        values["flags"] = R.flags_from_bits(values["flags"])
+        values["state"] = next((k for k, v in R.STATE_CODES.items() if v == values["state"]), values["state"])
+        print(json.dumps(values, indent=2, default=str))
+    finally:
+        client.close()
+    return 0

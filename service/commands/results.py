@@ -1,0 +1,69 @@
+"""`moi results [ID]`: list past measurements, or show one (UUID, UUID prefix or sequence number)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from ..errors import InputFileError
+from ._common import add_store_arguments, fmt_time, open_store, parse_time
+
+HELP = "list the stored measurements, or show one in full"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("id", nargs="?", metavar="ID", help="UUID, UUID prefix or sequence number to show in full")
+    add_store_arguments(p)
+    p.add_argument("--limit", "-n", type=int, default=20, help="list at most this many, newest first (default 20)")
+    p.add_argument("--since", metavar="DATE", help="only measurements finished at or after DATE (ISO 8601, UTC)")
+    p.add_argument("--status", choices=("ok", "failed", "aborted"), help="only measurements with this status")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table/report")
+
+
+def _num(v, fmt: str) -> str:
+    return "-" if v is None else format(v, fmt)
+
+
+def run(args: argparse.Namespace) -> int:
+    with open_store(args) as store:
+        if args.id:
+            m = store.get(args.id)
+            if m is None:
+                raise InputFileError(f"no single measurement matches {args.id!r} in {store.path}")
+            if args.json:
+                doc = m.summary() | {"payload": m.payload, "rig": m.rig, "config": m.config}
+                print(json.dumps(doc, indent=2, ensure_ascii=False))
+                return 0
+            print(f"measurement {m.uuid}  (seq {m.seq}, {m.status}, triggered by {m.trigger})")
+            print(f"  started   {fmt_time(m.started_at)} UTC, finished {fmt_time(m.finished_at)} UTC")
+            print(f"  published {fmt_time(m.published_at) + ' UTC' if m.published_at else 'not yet (in the MQTT outbox or MQTT off)'}")
+            print(f"  device {m.device_id}, software {m.software_version}")
+            if m.error:
+                print(f"  error: {m.error}")
+            p = m.payload or {}
+            if p:
+                print(f"  J             = {_num(p.get('J'), '.7g')} ± {_num(p.get('J_std'), '.2g')} kg·m²")
+                print(f"  omega_n       = {_num(p.get('omega_n'), '.7g')} ± {_num(p.get('omega_n_std'), '.2g')} rad/s")
+                print(f"  damping ratio = {_num(p.get('damping_ratio'), '.4g')} ± {_num(p.get('damping_ratio_std'), '.2g')}")
+                print(f"  effects       : {', '.join(p.get('effects') or []) or '-'} "
+                      f"(added: {', '.join(p.get('added_effects') or []) or 'none'})")
+                print(f"  residual RMS  : {_num(p.get('residual_rms_before'), '.3g')} rad declared model → "
+                      f"{_num(p.get('residual_rms_after'), '.3g')} rad final; noise floor {_num(p.get('noise_floor'), '.3g')} rad")
+                print(f"  flags         : {', '.join(p.get('flags') or []) or 'none'}")
+            return 0
+        since = parse_time(args.since) if args.since else None
+        rows = store.list(limit=args.limit, since=since, status=args.status)
+        if args.json:
+            print(json.dumps([m.summary() for m in rows], indent=2, ensure_ascii=False))
+            return 0
+        if not rows:
+            print(f"no measurements in {store.path}")
+            return 0
+        print(f"{'seq':>6}  {'finished (UTC)':19}  {'status':7}  {'trigger':7}  {'J [kg·m²]':>13}  {'±':>8}  "
+              f"{'ω_n [rad/s]':>11}  {'ζ':>9}  {'pub':3}  {'uuid':8}  flags / error")
+        for m in rows:
+            note = m.error if m.error else ", ".join(m.flags)
+            print(f"{m.seq:>6}  {fmt_time(m.finished_at):19}  {m.status:7}  {m.trigger:7}  {_num(m.J, '13.7g')}  "
+                  f"{_num(m.J_std, '8.2g')}  {_num(m.omega_n, '11.6g')}  {_num(m.damping_ratio, '9.3g')}  "
+                  f"{'yes' if m.published_at else 'no':3}  {m.uuid[:8]}  {note}")
+    return 0

@@ -1,0 +1,126 @@
+"""The MQTT side against a real Mosquitto: outbox delivery, status/last will, commands, discovery."""
+
+from __future__ import annotations
+
+import json
+import threading
+
+import pytest
+
+from service.mqtt import MqttService, MqttSettings, discovery_messages, Topics
+from service.store import Store
+
+pytestmark = pytest.mark.broker
+
+
+def settings(port: int, **kw) -> MqttSettings:
+    return MqttSettings(host="127.0.0.1", port=port, reconnect_min=0.1, reconnect_max=0.5, keepalive=5, **kw)
+
+
+def add_rows(store: Store, n: int) -> list[str]:
+    uuids = []
+    for i in range(n):
+        m = store.record(status="ok", trigger="test", device_id="d1", software_version="0", started_at=1.0,
+                         finished_at=2.0, result={"J": 0.01 * (i + 1)},
+                         build_payload=lambda uuid, seq: {"uuid": uuid, "seq": seq, "J": 0.01 * seq},
+                         enqueue=("result",))
+        uuids.append(m.uuid)
+    return uuids
+
+
+def test_outbox_rows_are_published_and_deleted_only_after_the_broker_acknowledges(tmp_path, broker, consumer_factory):
+    store = Store(tmp_path)
+    uuids = add_rows(store, 3)  # stored before the client even exists
+    c = consumer_factory(broker.port, ["moi/d1/#"])
+    c.wait_subscribed()
+    svc = MqttService(settings(broker.port), "d1", store)
+    svc.start()
+    try:
+        c.wait(lambda c: len(c.unique_results()) == 3, 10, "three results")
+        assert svc.sender.wait_empty(10)
+        assert store.outbox_count() == 0
+        assert list(c.unique_results()) == uuids  # in order
+        assert all(store.get(u).published_at is not None for u in uuids)
+        assert c.on("/status")[-1] == b"online"
+    finally:
+        svc.stop()
+    c.wait(lambda c: c.on("/status")[-1:] == [b"offline"], 5, "offline status at a clean stop")
+    store.close()
+
+
+def test_results_stored_while_the_broker_is_down_go_out_when_it_is_back(tmp_path, persistent_broker, consumer_factory):
+    store = Store(tmp_path)
+    c = consumer_factory(persistent_broker.port, ["moi/d1/result"], client_id="dedupe-consumer", persistent=True)
+    c.wait_subscribed()
+    svc = MqttService(settings(persistent_broker.port), "d1", store)
+    svc.start()
+    try:
+        assert svc.connected_event.wait(10)
+        persistent_broker.stop()
+        uuids = add_rows(store, 3)
+        svc.wake()
+        assert store.outbox_count() == 3
+        persistent_broker.start()
+        c.wait(lambda c: len(c.unique_results()) == 3, 20, "three results after the broker came back")
+        assert set(c.unique_results()) == set(uuids)
+        assert svc.sender.wait_empty(10) and store.outbox_count() == 0
+    finally:
+        svc.stop()
+        store.close()
+
+
+def test_commands_trigger_once_and_retained_or_repeated_ids_do_not(tmp_path, broker, consumer_factory):
+    got: list[tuple[str, str]] = []
+    cond = threading.Condition()
+
+    def on_command(name, source):
+        with cond:
+            got.append((name, source))
+            cond.notify_all()
+
+    store = Store(tmp_path)
+    c = consumer_factory(broker.port, ["moi/d1/status"])
+    c.wait_subscribed()
+    # a retained command left on the broker: it would fire at every (re)connect if it were obeyed
+    c.publish("moi/d1/cmd/measure", "{}", retain=True)
+    svc = MqttService(settings(broker.port), "d1", store, on_command=on_command)
+    svc.start()
+    try:
+        assert svc.connected_event.wait(10)
+        c.wait(lambda c: c.on("/status") == [b"online"], 5, "online")  # our subscriptions are in place by then
+        c.publish("moi/d1/cmd/measure", json.dumps({"id": "a1"}))
+        c.publish("moi/d1/cmd/measure", json.dumps({"id": "a1"}))  # QoS 1 duplicate of the same command
+        c.publish("moi/d1/cmd/abort", "now")
+        c.publish("moi/d1/cmd/measure", "")
+        with cond:
+            assert cond.wait_for(lambda: len(got) >= 3, 10)
+        # a marker after everything: when it arrives, every earlier command was handled
+        c.publish("moi/d1/cmd/abort", json.dumps({"id": "marker"}))
+        with cond:
+            assert cond.wait_for(lambda: len(got) >= 4, 10)
+        assert got == [("trigger", "mqtt"), ("abort", "mqtt"), ("trigger", "mqtt"), ("abort", "mqtt")]
+    finally:
+        svc.stop()
+        store.close()
+
+
+def test_home_assistant_discovery_is_retained_and_names_the_result_topic(tmp_path, broker, consumer_factory):
+    store = Store(tmp_path)
+    svc = MqttService(settings(broker.port, home_assistant=True), "d1", store, software_version="1.2")
+    svc.start()
+    try:
+        assert svc.connected_event.wait(10)
+        expected = discovery_messages(svc.settings, Topics("moi", "d1"), "d1", "1.2")
+        early = consumer_factory(broker.port, ["homeassistant/#"], client_id="early")
+        early.wait(lambda c: len(c.messages) >= len(expected), 10, "discovery configs (all at the broker)")
+        late = consumer_factory(broker.port, ["homeassistant/#"])  # subscribes after: sees retained configs
+        late.wait(lambda c: len(c.messages) >= len(expected), 10, "discovery configs")
+        assert all(retained for _, _, retained in late.messages)
+        j = json.loads(dict((t, p) for t, p, _ in late.messages)["homeassistant/sensor/d1/J/config"])
+        assert j["state_topic"] == "moi/d1/result" and j["availability_topic"] == "moi/d1/status"
+        assert j["unit_of_measurement"] == "kg·m²"
+        flags = [t for t, _, _ in late.messages if t.startswith("homeassistant/binary_sensor/")]
+        assert "homeassistant/binary_sensor/d1/unmodeled_residual/config" in flags
+    finally:
+        svc.stop()
+        store.close()

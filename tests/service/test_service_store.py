@@ -1,0 +1,127 @@
+"""The result store, its outbox, and `moi results` / `moi export`."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import sqlite3
+
+import numpy as np
+import pytest
+
+from measurement import Pendulum, Rig, identify, simulate_trace
+from service.cli import main
+from service.payload import dumps, result_payload
+from service.store import Store
+
+
+@pytest.fixture(scope="module")
+def result():
+    rig = Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5043e-3, declared=("viscous",))
+    trace = simulate_trace(Pendulum(rig, 0.0125, {"viscous": {"c": 1.5e-4}}), theta0=0.25, duration=5, rate=100,
+                           noise_std=1e-4, seed=3)
+    return identify(trace, rig), trace, rig
+
+
+def store_one(store: Store, result, status: str = "ok", enqueue=("result",), t0: float = 1_700_000_000.0):
+    res, trace, rig = result
+    d = res.to_dict()
+
+    def build(uuid, seq):
+        return result_payload(d, uuid=uuid, seq=seq, device_id="dev", trigger="button", started_at=t0,
+                              finished_at=t0 + 6.5, software_version="9.9")
+
+    return store.record(status=status, trigger="button", device_id="dev", software_version="9.9", started_at=t0,
+                        finished_at=t0 + 6.5, result=d if status == "ok" else None,
+                        build_payload=build if status == "ok" else None, error=None if status == "ok" else "encoder fault",
+                        rig=rig.to_dict(), config={"x": 1}, trace_t=trace.t, trace_angle=trace.angle,
+                        trace_meta={"encoder": {"samples": len(trace)}}, enqueue=enqueue)
+
+
+def test_a_measurement_is_stored_with_trace_payload_rig_config_and_an_outbox_row(tmp_path, result):
+    with Store(tmp_path) as store:
+        m = store_one(store, result)
+        assert m.seq == 1 and m.status == "ok"
+        full = store.get(m.uuid, trace=True)
+        assert full.payload["uuid"] == m.uuid and full.payload["seq"] == 1
+        assert full.payload["J"] == result[0].to_dict()["J"]  # the payload carries the result unchanged
+        assert full.payload["residual_rms_before"] == result[0].baseline.residual_rms
+        assert full.rig["rig"]["kind"] == "torsion" and full.config == {"x": 1}
+        np.testing.assert_array_equal(full.trace_t, result[1].t)
+        np.testing.assert_array_equal(full.trace_angle, result[1].angle)
+        [item] = store.outbox_pending()
+        assert item.uuid == m.uuid and item.payload == dumps(full.payload)
+        assert store.get(str(m.seq)).uuid == m.uuid and store.get(m.uuid[:8]).uuid == m.uuid
+
+
+def test_the_database_is_in_wal_mode(tmp_path, result):
+    Store(tmp_path).close()
+    with sqlite3.connect(tmp_path / "results.db") as db:
+        assert db.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+
+
+def test_ack_removes_the_row_and_marks_the_measurement_published(tmp_path, result):
+    with Store(tmp_path) as store:
+        m = store_one(store, result)
+        [item] = store.outbox_pending()
+        assert store.outbox_ack(item.id) is True
+        assert store.outbox_ack(item.id) is False  # a duplicate PUBACK is harmless
+        assert store.outbox_count() == 0
+        assert store.get(m.uuid).published_at is not None
+
+
+def test_sequence_numbers_survive_a_reopen_and_failures_take_a_number(tmp_path, result):
+    with Store(tmp_path) as store:
+        a = store_one(store, result)
+        b = store_one(store, result, status="failed")
+        assert store.outbox_count() == 1  # a failed measurement publishes nothing
+    with Store(tmp_path) as store:
+        c = store_one(store, result)
+        assert (a.seq, b.seq, c.seq) == (1, 2, 3)
+        assert [m.seq for m in store.list()] == [3, 2, 1]
+        assert store.latest().uuid == c.uuid
+        assert store.list(status="failed")[0].error == "encoder fault"
+        assert [i.uuid for i in store.outbox_pending()] == [a.uuid, c.uuid]  # oldest first
+
+
+def test_results_command_lists_and_shows(tmp_path, result, capsys):
+    with Store(tmp_path) as store:
+        m = store_one(store, result)
+        store_one(store, result, status="failed")
+    assert main(["results", "--state-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert m.uuid[:8] in out and "failed" in out and "encoder fault" in out
+    assert main(["results", "1", "--state-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert m.uuid in out and "J" in out and "kg·m²" in out
+    assert main(["results", "--state-dir", str(tmp_path), "--json", "--status", "ok"]) == 0
+    listed = json.loads(capsys.readouterr().out)
+    assert [r["uuid"] for r in listed] == [m.uuid]
+
+
+def test_results_without_a_store_is_one_clear_line(tmp_path, capsys):
+    assert main(["results", "--state-dir", str(tmp_path / "nothing")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no result store found" in err
+
+
+def test_export_csv_json_and_trace(tmp_path, result, capsys):
+    with Store(tmp_path) as store:
+        m = store_one(store, result)
+        store_one(store, result, status="failed")
+    out_csv = tmp_path / "all.csv"
+    assert main(["export", "--state-dir", str(tmp_path), "--out", str(out_csv)]) == 0
+    rows = list(csv.DictReader(io.StringIO(out_csv.read_text())))
+    assert [r["status"] for r in rows] == ["ok", "failed"]  # oldest first
+    assert float(rows[0]["J"]) == result[0].J and rows[0]["uuid"] == m.uuid
+    assert rows[1]["error"] == "encoder fault" and rows[1]["J"] == ""
+    assert main(["export", "--state-dir", str(tmp_path), "--format", "json", "--status", "ok"]) == 0
+    docs = json.loads(capsys.readouterr().out)
+    assert docs[0]["payload"]["uuid"] == m.uuid and docs[0]["payload"]["J"] == result[0].J
+    trace_csv = tmp_path / "trace.csv"
+    assert main(["export", "--state-dir", str(tmp_path), "--trace", m.uuid, "--out", str(trace_csv)]) == 0
+    from service.files import read_trace
+    t = read_trace(trace_csv)
+    np.testing.assert_allclose(t.t, result[1].t, atol=1e-9)
+    np.testing.assert_allclose(t.angle, result[1].angle, rtol=1e-11, atol=1e-15)
