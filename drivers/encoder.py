@@ -193,10 +193,12 @@ class ModbusEncoder:
         self.config = config
         self.clock = clock or MonotonicClock()
         self._lock = threading.Lock()
+        self._arrived = threading.Condition(self._lock)  # notified on every sample and on a fault
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._client = None
-        self._task: asyncio.Future | None = None
+        self._task: asyncio.Task | None = None
+        self._sampling = False
         self._t: list[float] = []
         self._angle: list[float] = []
         self._fault: EncoderFault | None = None
@@ -218,8 +220,7 @@ class ModbusEncoder:
             self._fault = None
             self._counts = self._zero_counts()
             self._unwrap_last = None
-        assert self._loop is not None
-        self._task = asyncio.run_coroutine_threadsafe(self._sample_loop(), self._loop)
+        self._call(self._begin_sampling())
 
     def read(self) -> tuple[np.ndarray, np.ndarray]:
         """Samples since the last read: (t in s on the clock, angle in rad). Raises EncoderFault after a fault."""
@@ -251,6 +252,12 @@ class ModbusEncoder:
 
     def flags(self) -> tuple[str, ...]:
         return ("encoder_errors",) if self.stats()["errors"] else ()
+
+    def wait_for_samples(self, n: int, timeout: float) -> bool:
+        """Block until ``n`` samples were taken since ``start()`` (True), a fault, or ``timeout`` s of real time (False)."""
+        with self._arrived:
+            return self._arrived.wait_for(lambda: self._counts["samples"] >= n or self._fault is not None, timeout) \
+                and self._fault is None
 
     def close(self) -> None:
         """Stop sampling, close the port and the I/O thread; safe twice."""
@@ -321,15 +328,50 @@ class ModbusEncoder:
         self._thread.start()
         ready.wait(2.0)
 
-    def _stop_task(self) -> None:
-        task, self._task = self._task, None
-        if task is None:
-            return
-        task.cancel()
+    def _call(self, coro, timeout: float = 5.0):
+        """Run a coroutine on the I/O loop and wait for it (real time)."""
+        assert self._loop is not None
+        return asyncio.run_coroutine_threadsafe(coro, self._loop).result(timeout)
+
+    async def _begin_sampling(self) -> None:
+        self._sampling = True
+        self._task = asyncio.get_running_loop().create_task(self._guarded_sample_loop())
+
+    async def _guarded_sample_loop(self) -> None:
         try:
-            task.result(2.0)
-        except BaseException:  # CancelledError is the normal outcome of the cancel above
-            pass
+            await self._sample_loop()
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # top of the I/O thread: an unforeseen client error must surface as a fault, not silence
+            log.exception("encoder sampling stopped")
+            with self._lock:
+                self._fault = EncoderFault(f"encoder fault: sampling stopped on {self._where()}: "
+                                           f"{type(exc).__name__}: {exc}", dict(self._counts))
+                self._arrived.notify_all()
+
+    async def _end_sampling(self) -> None:
+        # A flag, not only cancel(): on Python 3.11 asyncio.wait_for (inside pymodbus) swallows a
+        # cancellation that races a reply, and the loop would keep reading. The flag ends it after
+        # the read in flight (at most one time-out); cancel() is the fallback.
+        task, self._task = self._task, None
+        self._sampling = False
+        if task is None or task.done():
+            return
+        await asyncio.wait({task}, timeout=self.config.timeout + 0.5)
+        for _ in range(50):
+            if task.done():
+                break
+            task.cancel()
+            await asyncio.wait({task}, timeout=0.1)
+        else:
+            log.error("encoder sampling task did not stop")
+        if task.done() and not task.cancelled() and task.exception() is not None:
+            log.error("encoder sampling ended with %r", task.exception())
+
+    def _stop_task(self) -> None:
+        if self._task is None or self._loop is None or not (self._thread and self._thread.is_alive()):
+            return
+        self._call(self._end_sampling())
 
     def _trace_packet(self, sending: bool, data: bytes) -> bytes:
         if not sending:
@@ -409,7 +451,7 @@ class ModbusEncoder:
     async def _sample_loop(self) -> None:
         c = self.config
         next_start = 0.0
-        while True:
+        while self._sampling:
             if c.min_interval > 0:
                 wait = next_start - time.perf_counter()
                 if wait > 0:
@@ -433,6 +475,7 @@ class ModbusEncoder:
                             f"exception replies {counts['exceptions']}, connection errors {counts['connection_errors']})",
                             snapshot)
                         log.error("%s", self._fault)
+                        self._arrived.notify_all()
                         return
                 else:
                     counts["consecutive_errors"] = 0
@@ -448,6 +491,7 @@ class ModbusEncoder:
                     counts["samples"] += 1
                     self._t.append(t)
                     self._angle.append(angle)
+                    self._arrived.notify_all()
             if failed == "connection_errors":
                 # a refused connection fails instantly: pace the retries at the request time-out
                 await asyncio.sleep(c.timeout)

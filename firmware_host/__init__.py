@@ -15,7 +15,9 @@ States (``State``, a ``str`` enum; the value is the published name)::
     CAPTURING    solenoid off, free swing; ends after capture_duration s or when
                  the swing decayed below decay_threshold rad
     IDENTIFYING  identification in a worker thread (poll() stays responsive)
-    PUBLISHING   the result sink is called once with the ``Measurement``
+    PUBLISHING   the result sink is called once with the ``Measurement`` on entry;
+                 IDLE follows at the next poll (an abort in PUBLISHING does not
+                 recall a result the sink already has)
 
 Construction (everything injected; the sequencer owns none of its drivers)::
 

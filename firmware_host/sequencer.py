@@ -198,6 +198,7 @@ class _Run:
     trace: Trace | None = None
     job: _Job | None = None
     identify_started_at: float | None = None
+    measurement: "Measurement | None" = None
 
 
 class Sequencer:
@@ -559,6 +560,8 @@ class Sequencer:
                 self._finish_capture(run, now, end)
         elif state is State.IDENTIFYING:
             self._check_identification(run, now)
+        elif state is State.PUBLISHING:
+            self._finish_publishing(run, now)
 
     def _collect(self, run: _Run, now: float) -> None:
         t, angle = self.sensor.read()  # SensorFault propagates to poll → FAULT
@@ -671,5 +674,10 @@ class Sequencer:
             raise PublishFailed(f"publishing failed: {type(exc).__name__}: {exc}") from exc
         self.last_measurement = measurement
         self.counts["measurements"] += 1
+        run.measurement = measurement
+        # IDLE follows at the next poll, so PUBLISHING is observable (and abortable) like every other state
+
+    def _finish_publishing(self, run: _Run, now: float) -> None:
+        measurement = run.measurement
         self._transition(now, State.IDLE, f"published measurement {measurement.id}", measurement)
         self._run = None
