@@ -12,8 +12,10 @@ frame are dropped frames. A folder's frames are 1/fps apart (fps from the
 camera file) unless it holds ``timestamps.csv`` with columns ``file`` and
 ``t`` (s).
 
-A frame that does not decode counts as corrupt, a frame without the marker
-as lost; both leave gaps in the trace and a flag.
+A frame that does not decode counts as corrupt (so does one whose marker
+rows repeat the previous frame bit for bit: FFmpeg's concealment of a
+damaged frame, see ``MarkerTracker``), a frame without the marker as lost;
+both leave gaps in the trace and a flag.
 """
 
 from __future__ import annotations
@@ -54,8 +56,8 @@ def _natural_key(name: str) -> list:
 class FrameSource:
     """Frames of a video file or an image folder as (t in s or None, grey uint8 frame or None).
 
-    After iteration: ``count`` frames offered, ``failed`` undecodable ones,
-    ``timing`` how times were obtained, ``dropped`` frames missing from the stream.
+    After iteration: ``count`` frames offered, ``failed`` undecodable ones, ``timing`` how times
+    were obtained, ``dropped`` frames missing from the stream.
     """
 
     def __init__(self, path: str | os.PathLike, config: CameraConfig):
@@ -207,4 +209,5 @@ def video_trace(path: str | os.PathLike, camera: str | os.PathLike | CameraConfi
     config = camera_config(camera)
     tracking, source = track_source(path, config, settings)
     return trace_from_tracking(tracking, config, source=str(path), settings=vision, dropped=source.dropped,
-                               extra_meta={"timing": source.timing, "camera_file": None if isinstance(camera, CameraConfig) else str(camera)})
+                               extra_meta={"timing": source.timing,
+                                           "camera_file": None if isinstance(camera, CameraConfig) else str(camera)})

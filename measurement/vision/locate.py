@@ -54,6 +54,8 @@ class TrackerSettings:
         (so the cylinder's silhouette is not taken for the marker).
     max_residual: largest RMS distance of the rows from the fitted line, px.
     trim_rows: rows left out at each end of the marker (its corners are not a clean edge).
+    reject_repeated: rows identical to the previous frame are a decoder's stand-in for a damaged
+        frame, not a measurement (switch off only for noise-free synthetic frames of a still marker).
     """
 
     track: bool = True
@@ -65,6 +67,7 @@ class TrackerSettings:
     relock_ratio: float = 0.5
     max_residual: float = 0.35
     trim_rows: int = 4
+    reject_repeated: bool = True
 
 
 @dataclass(frozen=True)
@@ -98,7 +101,11 @@ class MarkerObservation:
 
     @property
     def tilt_deg(self) -> float:
-        """Angle of the marker edge from the image's vertical, degrees (positive: top leans to −u)."""
+        """Angle of the marker edge from the image's vertical, degrees.
+
+        Positive when the edge's top leans towards −u: what a camera rolled by that angle about its
+        optical axis (``CameraPose.roll``) sees of a vertical edge.
+        """
         return math.degrees(math.atan(self.slope)) if math.isfinite(self.slope) else math.nan
 
 
@@ -149,6 +156,7 @@ class MarkerTracker:
         self._last_u: float | None = None
         self._velocity = 0.0  # px/frame
         self._locked = False
+        self._previous: tuple[int, np.ndarray] | None = None  # first row and rows of the last frame
 
     @property
     def y_ref(self) -> float | None:
@@ -198,7 +206,9 @@ class MarkerTracker:
         roi_box = (r0, r1, c0, c1)
         if r1 - r0 < s.min_rows or c1 - c0 < 5:
             return MarkerObservation(False, LOST, "the marker window left the image", roi=roi_box)
-        roi = img[r0:r1, c0:c1].astype(np.float32)
+        raw = img[r0:r1, c0:c1]
+        stale = self._stale_rows(raw, r0, c0)
+        roi = raw.astype(np.float32)
         if s.smooth_rows > 1:
             roi = cv2.blur(roi, (1, s.smooth_rows), borderType=cv2.BORDER_REPLICATE)
         g = polarity * (roi[:, 2:] - roi[:, :-2])  # gradient at columns c0+1 … c1−2
@@ -214,6 +224,11 @@ class MarkerTracker:
         contrast = float(np.median(peak)) if peak.size else 0.0
         # a row counts when its edge is as strong as the marker's (not noise, not a corner)
         ok = inner & (peak >= max(0.6 * contrast, s.min_contrast)) & (np.abs(delta) <= 0.5)
+        if stale.any():
+            ok &= ~stale
+            if ok.sum() < s.min_rows:
+                return MarkerObservation(False, CORRUPT, f"the marker's rows repeat the previous frame bit for bit "
+                                         f"({int(stale.sum())} rows: a frame the decoder could not decode)", roi=roi_box)
         if contrast < s.min_contrast or ok.sum() < s.min_rows:
             return MarkerObservation(False, LOST, f"edge too weak or too short ({int(ok.sum())} rows, "
                                      f"strength {contrast:.0f} grey levels)", roi=roi_box, contrast=contrast)
@@ -246,14 +261,38 @@ class MarkerTracker:
                                  rows=int(keep.sum()), residual=resid_px, contrast=contrast, roi=roi_box,
                                  points=pts)
 
+    def _stale_rows(self, raw: np.ndarray, r0: int, c0: int) -> np.ndarray:
+        """Rows of the window that equal the previous frame's pixel for pixel.
+
+        Sensor noise never repeats a row of the marker's edge exactly; a decoder that cannot
+        decode (part of) a frame does: FFmpeg conceals a damaged MJPEG frame with the previous
+        frame's pixels. Measured, those rows would put the old angle at the new time.
+        """
+        stale = np.zeros(raw.shape[0], dtype=bool)
+        if not self.settings.reject_repeated or self._previous is None:
+            return stale
+        p0, band = self._previous
+        lo, hi = max(r0, p0), min(r0 + raw.shape[0], p0 + band.shape[0])
+        if hi > lo:
+            stale[lo - r0:hi - r0] = np.all(raw[lo - r0:hi - r0] == band[lo - p0:hi - p0, c0:c0 + raw.shape[1]], axis=1)
+        return stale
+
     def locate(self, frame: np.ndarray | None, keep_points: bool = False) -> MarkerObservation:
         """Measure the marker in one grey frame (uint8, camera size). Never raises on bad frames."""
         why = check_frame(frame, self.camera)
         if why:
             self._locked = False
             return MarkerObservation(False, CORRUPT, why)
+        try:
+            return self._locate(frame, keep_points)
+        finally:
+            if self.settings.reject_repeated:
+                # a copy: a caller may decode the next frame into the same buffer
+                r0, r1 = self._rows if self._rows is not None else (0, frame.shape[0])
+                self._previous = (r0, frame[r0:r1].copy())
+
+    def _locate(self, img: np.ndarray, keep_points: bool) -> MarkerObservation:
         s = self.settings
-        img = frame
         if self._locked and s.track:
             pred = self._last_u + self._velocity
             half = s.roi_half_width + int(math.ceil(2 * abs(self._velocity)))
