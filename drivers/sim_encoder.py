@@ -6,8 +6,9 @@ talks to it through exactly the code path it uses on an RS-485 adapter.
 
 On every read request the server latches the position from the angle source
 at that instant on the injected clock (real or scaled time), adds noise,
-quantises to the encoder's counts, and replies after the configured latency
-(plus the wire time of the request and the reply at ``baudrate``). Faults
+quantises to the encoder's counts, and replies after the configured latency.
+With ``baudrate`` set it also spends the request's wire time before latching
+and the reply's after, as a real RS-485 line does. Faults
 are injected on the wire: dropped replies (no answer: the client times out)
 and CRC corruption (the last byte flipped: the client's framer rejects it).
 A read outside the position registers gets an ILLEGAL DATA ADDRESS
@@ -54,9 +55,9 @@ class SimEncoderConfig:
     direction: +1, or −1 when the encoder counts against the rig's positive angle.
     zero: counts reported at angle 0 (mounting offset).
     noise_std: white noise added to the true angle before quantisation, rad.
-    latency: delay from latching the position to replying, s of real time.
-    baudrate: if set, the request and reply are also delayed by their wire time
-        at this baud rate (11 bits per character with parity, 10 without).
+    latency: encoder turnaround, from latching the position to replying, s of real time.
+    baudrate: if set, the request's wire time passes before the latch and the reply's
+        after it, at this baud rate (11 bits per character with parity, 10 without).
     parity: "N", "E" or "O" (only used for the wire time).
     drop_rate: fraction of replies never sent (0…1).
     crc_error_rate: fraction of replies sent with a corrupted CRC (0…1).
@@ -103,12 +104,12 @@ class SimEncoderConfig:
             return c % (1 << width)
         return c % self.counts_per_turn
 
-    def wire_time(self, count: int) -> float:
-        """Seconds a read of ``count`` registers spends on the wire (request + reply) at ``baudrate``."""
+    def wire_times(self, count: int) -> tuple[float, float]:
+        """Seconds the request and the reply of a read of ``count`` registers spend on the wire at ``baudrate``."""
         if not self.baudrate:
-            return 0.0
+            return 0.0, 0.0
         bits = 11 if self.parity != "N" else 10
-        return (8 + 5 + 2 * count) * bits / self.baudrate
+        return 8 * bits / self.baudrate, (5 + 2 * count) * bits / self.baudrate
 
 
 def free_tcp_port(host: str = "127.0.0.1") -> int:
@@ -253,6 +254,9 @@ class SimEncoderServer:
         c = self.config
         if function_code not in _READ_CODES or set_values is not None:
             return ExcCodes.ILLEGAL_FUNCTION
+        request_wire, reply_wire = c.wire_times(count)
+        if request_wire > 0:  # the request is still on the wire: the encoder latches after its last byte
+            await asyncio.sleep(request_wire)
         t = self._clock.now()
         true_angle = float(self._angle(t))
         self.last_latch = (t, true_angle)
@@ -266,7 +270,7 @@ class SimEncoderServer:
             registers[offset:offset + 2] = [high, low] if c.word_order == "big" else [low, high]
         with self._lock:
             self.counts["reads"] += 1
-        delay = c.latency + c.wire_time(count)
+        delay = c.latency + reply_wire
         if delay > 0:
             await asyncio.sleep(delay)
         return None

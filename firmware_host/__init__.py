@@ -73,7 +73,10 @@ path. Only ``IllegalTransition`` (a bug here) propagates.
 
 Clocks (``drivers.clock``, re-exported here): ``MonotonicClock`` on the device,
 ``ManualClock`` in tests (``sleep`` advances it: no wall-clock waits), and
-``ScaledClock`` for the simulated rig running faster than real time.
+``ScaledClock`` for the simulated rig running faster than real time. Physics
+times of ``SequencerConfig`` are clock seconds; its two computer time-outs
+(``sample_timeout``, ``identify_timeout``) are real seconds (clock time divided
+by ``clock.scale`` when the clock has one).
 """
 
 from drivers.clock import Clock, ManualClock, MonotonicClock, ScaledClock

@@ -79,7 +79,13 @@ Identifier = Callable[[Trace, Rig], IdentificationResult]
 
 @dataclass(frozen=True)
 class SequencerConfig:
-    """Timing of one measurement, all in s on the sequencer's clock (angles in rad).
+    """Timing of one measurement (angles in rad).
+
+    The physics times (pre_trigger, release_pulse, capture_duration, decay_window,
+    min_capture) are s on the sequencer's clock. The two computer time-outs
+    (sample_timeout: sensor I/O; identify_timeout: processor time) are real
+    seconds: on a ``ScaledClock`` the sequencer divides clock time by its
+    ``scale``, so a simulation running 5× faster does not starve the bus or the fit.
 
     pre_trigger: capture recorded before the release (at rest at the release angle).
     release_pulse: how long the solenoid is asked to stay on (the solenoid clamps
@@ -88,9 +94,9 @@ class SequencerConfig:
     decay_threshold: the capture ends earlier when the half peak-to-peak angle over
         the last ``decay_window`` falls below this (rad); 0 disables.
     min_capture: the decay test starts only this long after the release.
-    sample_timeout: no new sample for this long while capturing → FAULT (capture time-out).
-        The release also waits for the first pre-trigger sample (never release blind).
-    identify_timeout: identification longer than this → FAULT.
+    sample_timeout: no new sample for this long while capturing → FAULT (capture time-out);
+        real s. The release also waits for the first pre-trigger sample (never release blind).
+    identify_timeout: identification longer than this → FAULT; real s.
     min_samples: fewer samples in the capture → FAULT instead of a meaningless fit.
     identify_in_worker: run identification in a worker thread (True for the daemon:
         ``poll`` stays responsive); False runs it inside ``poll`` (tests on a ManualClock).
@@ -242,6 +248,8 @@ class Sequencer:
 
         self._state = State.IDLE
         self._since = clock.now()
+        # clock seconds per real second (ScaledClock.scale): the computer time-outs are real seconds
+        self._scale = float(getattr(clock, "scale", 1.0) or 1.0)
         self._run: _Run | None = None
         self._closed = False
         self._pending_request: tuple[str, float] | None = None
@@ -584,10 +592,11 @@ class Sequencer:
 
     def _check_sample_timeout(self, run: _Run, now: float) -> None:
         since = run.last_sample_at if run.last_sample_at is not None else run.armed_at
-        if now - since > self.config.sample_timeout:
+        silent = (now - since) / self._scale
+        if silent > self.config.sample_timeout:
             what = "since arming" if run.last_sample_at is None else "since the last one"
             raise CaptureTimeout(
-                f"capture time-out: no sample from the {self.sensor.source} for {now - since:.3g} s {what} "
+                f"capture time-out: no sample from the {self.sensor.source} for {silent:.3g} s {what} "
                 f"(limit {self.config.sample_timeout:g} s)")
 
     def _capture_end(self, run: _Run, now: float) -> str | None:
@@ -648,10 +657,10 @@ class Sequencer:
         job = run.job
         assert job is not None
         if not job.done.is_set():
-            if now - run.identify_started_at > self.config.identify_timeout:
+            busy = (now - run.identify_started_at) / self._scale
+            if busy > self.config.identify_timeout:
                 raise IdentificationTimeout(
-                    f"identification time-out: no result after {now - run.identify_started_at:.3g} s "
-                    f"(limit {self.config.identify_timeout:g} s)")
+                    f"identification time-out: no result after {busy:.3g} s (limit {self.config.identify_timeout:g} s)")
             return
         if job.error is not None:
             exc = job.error
