@@ -170,13 +170,13 @@ def trace_from_tracking(tracking: Tracking, config: CameraConfig, *, source: str
         "frames": tracking.frames, "frames_used": int(t.size), "marker_lost": tracking.lost,
         "corrupt_frames": tracking.corrupt, "dropped_frames": int(dropped),
         "failures": dict(tracking.reasons),
-        "yaw_deg": math.degrees(yaw_reported), "yaw_limit_deg": settings.yaw_limit_deg,
+        "yaw_deg": round(math.degrees(yaw_reported), 4), "yaw_limit_deg": settings.yaw_limit_deg,
         "yaw_corrected": bool(pose.estimated),
         **{k: v for k, v in pose.to_dict().items() if k != "yaw_deg"},
-        "marker_tilt_deg": float(np.degrees(np.arctan(np.median(slope)))) if slope.size else None,
+        "marker_tilt_deg": round(float(np.degrees(np.arctan(np.median(slope)))), 3) if slope.size else None,
         "edge_rows_median": float(np.median(tracking.rows)) if tracking.rows else None,
-        "edge_line_rms_px": float(np.median(tracking.residual)) if tracking.residual else None,
-        "edge_strength_grey": float(np.median(tracking.contrast)) if tracking.contrast else None,
+        "edge_line_rms_px": round(float(np.median(tracking.residual)), 4) if tracking.residual else None,
+        "edge_strength_grey": round(float(np.median(tracking.contrast)), 1) if tracking.contrast else None,
         "radius_m": marker.radius, "distance_m": marker.distance,
     }
     if extra_meta:

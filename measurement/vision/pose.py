@@ -67,11 +67,13 @@ class PoseEstimate:
         return math.degrees(self.yaw_std)
 
     def to_dict(self) -> dict:
-        def num(v: float) -> float | None:
-            return float(v) if math.isfinite(v) else None
-        return {"yaw_estimated": self.estimated, "yaw_deg": num(self.yaw_deg), "yaw_std_deg": num(self.yaw_std_deg),
-                "rest_angle_deg": num(math.degrees(self.rest_angle)), "axis_distance_m": num(self.axis_distance),
-                "pose_half_swings": self.swings, "pose_fit_rms_rad": num(self.residual_rms),
+        def num(v: float, digits: int) -> float | None:
+            # rounded well below the uncertainty: the report is read by people
+            return round(float(v), digits) if math.isfinite(v) else None
+        return {"yaw_estimated": self.estimated, "yaw_deg": num(self.yaw_deg, 4), "yaw_std_deg": num(self.yaw_std_deg, 4),
+                "rest_angle_deg": num(math.degrees(self.rest_angle), 4), "axis_distance_m": num(self.axis_distance, 6),
+                "pose_half_swings": self.swings,
+                "pose_fit_rms_rad": float(f"{self.residual_rms:.3g}") if math.isfinite(self.residual_rms) else None,
                 **({"pose_note": self.reason} if self.reason else {})}
 
 
