@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from drivers.sim_encoder import SimEncoderConfig, SimEncoderServer
     from drivers.simrig import SimRig
     from drivers.solenoid import Solenoid
-    from firmware_host import Sequencer, SequencerConfig, State
+    from firmware_host import Sequencer, SequencerConfig
 
     rig = read_rig(args.rig) if args.rig else DEFAULT_RIG
     tokens = args.effects if args.effects is not None else ([] if args.rig else DEFAULT_EFFECTS)
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     if not results:
         reason = seq.last_fault or (last.reason if last else "no result")
         print(f"moi measure: measurement failed: {reason}", file=sys.stderr)
-        return EXIT_FAULT if seq.state is State.FAULT or last is not None else 1
+        return EXIT_FAULT
     m = results[0]
     if args.json:
         import json
