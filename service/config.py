@@ -469,3 +469,29 @@ def _check_encoder_keys(c: _Checker, enc: Mapping[str, Any]) -> None:
         EncoderConfig.from_dict(dict(enc))
     except DriverConfigError as exc:
         raise c.fail("hardware.encoder", None, str(exc)) from None
+
+
+def reference_markdown() -> str:
+    """The configuration reference (the generated part of docs/service.md): every table and key."""
+    L = ["| key | type | default | meaning |", "|---|---|---|---|"]
+    out: list[str] = []
+    for table, keys in SCHEMA.items():
+        out.append(f"**[{table}]**")
+        out.append("")
+        out += L
+        for k, spec in keys.items():
+            if spec.default is REQUIRED:
+                default = "**required**"
+            elif spec.default is None:
+                default = "–"
+            elif isinstance(spec.default, bool):
+                default = f"`{str(spec.default).lower()}`"
+            elif isinstance(spec.default, dict):
+                default = ", ".join(f"{e} {p}" for e, p in spec.default.items())
+            else:
+                default = f"`{spec.default!r}`".replace("'", '"') if isinstance(spec.default, str) else f"`{spec.default}`"
+            kind = {"pinlike": "int or str", "strlist": "list of str", "effects": "table", "path": "path"}.get(spec.kind, spec.kind)
+            doc = spec.doc + (f" ({', '.join(repr(c) for c in spec.choices)})" if spec.choices else "")
+            out.append(f"| `{k}` | {kind} | {default} | {doc.replace('|', '/')} |")
+        out.append("")
+    return "\n".join(out)

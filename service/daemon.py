@@ -29,6 +29,7 @@ import time
 from typing import Any, Callable
 
 from firmware_host import Event, Measurement, Sequencer, State
+from measurement import IdentificationResult, Rig, Trace, identify
 
 from . import __version__
 from .config import Config
@@ -61,12 +62,13 @@ class Appliance:
 
     def __init__(self, config: Config, *, notifier: Notifier | None = None, devices: Devices | None = None,
                  wall_clock: Callable[[], float] = time.time, poll_interval: float = 0.02,
-                 stop_grace: float = 10.0) -> None:
+                 stop_grace: float = 10.0, identifier: Callable[[Trace, Rig], IdentificationResult] | None = None) -> None:
         self.config = config
         self.notifier = notifier or Notifier()
         self.wall_clock = wall_clock
         self.poll_interval = poll_interval
         self.stop_grace = stop_grace
+        self._identifier = identifier or (lambda trace, rig: identify(trace, rig, self.config.identification))
         self._devices = devices
         self.devices: Devices | None = None
         self.store: Store | None = None
@@ -118,7 +120,8 @@ class Appliance:
             # trigger is logged and executed the same way on the main loop
             self.sequencer = Sequencer(clock=d.clock, solenoid=d.solenoid, sensor=d.sensor, rig=cfg.rig,
                                        sink=self._store_measurement, config=cfg.sequencer,
-                                       options=cfg.identification, button=None, indicator=d.indicator)
+                                       options=cfg.identification, button=None, indicator=d.indicator,
+                                       identifier=self._identify)
             if d.button is not None:
                 d.button.when_pressed = lambda: self.command("trigger", "button")
             self.sequencer.subscribe(self._on_event)
@@ -220,6 +223,14 @@ class Appliance:
             log.exception("could not put the sequencer in FAULT")
 
     # --- sequencer callbacks (main loop thread) ------------------------------------------------------------
+    def _identify(self, trace: Trace, rig: Rig) -> IdentificationResult:
+        """Identification (in the sequencer's worker thread), then wake the main loop so that the
+        result is stored and published at once rather than at the next poll tick."""
+        try:
+            return self._identifier(trace, rig)
+        finally:
+            self._wakeup.set()
+
     def _on_event(self, event: Event) -> None:
         if event.state is State.ARMED:
             self._started_runs += 1

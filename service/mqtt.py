@@ -193,7 +193,7 @@ class MqttService:
 
     def _on_disconnect(self, client, userdata, flags, reason_code, properties) -> None:
         if self.connected_event.is_set():
-            log.warning("MQTT disconnected: %s", reason_code)
+            (log.warning if reason_code.is_failure else log.info)("MQTT disconnected: %s", reason_code)
         self.connected_event.clear()
         self.sender.disconnected()
 

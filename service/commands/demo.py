@@ -1,26 +1,195 @@
-"""`moi demo`: one simulated measurement end to end, printed (what `make demo` runs)."""
+"""`moi demo` (what `make demo` runs): the whole appliance on the simulated rig, one push-button measurement.
+
+The real daemon (``service.daemon.Appliance``) runs with a temporary result
+store: the sequencer, the gpiozero mock pins (the button is pressed on its
+pin), the simulated pendulum read over a loopback Modbus RTU encoder link,
+the identification, the SQLite store, the Modbus server on a free loopback
+port (read back here with a real pymodbus client) and, when a broker is
+given, MQTT (the result is received back from the broker). Without a broker
+MQTT is skipped with a note.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import logging
+import sys
+import tempfile
+import threading
+import time
 
-from measurement import Pendulum, Rig, identify, simulate_trace
+from ..config import parse_config
+from ..errors import InputFileError
 
-HELP = "one simulated push-button measurement, end to end"
+HELP = "the appliance on the simulated rig: one push-button measurement, printed with its Modbus registers (and MQTT)"
+
+EXIT_FAULT = 3
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seed", type=int, default=1, help="noise seed")
+    p.add_argument("--mqtt", metavar="HOST[:PORT]", help="also publish to this MQTT broker and show the result it delivers "
+                                                       "(default: MQTT skipped)")
+    p.add_argument("--time-scale", type=float, default=5.0, metavar="X",
+                   help="simulated seconds per wall-clock second (default 5)")
+    p.add_argument("--duration", type=float, default=20.0, metavar="S", help="capture after the release, simulated s (default 20)")
+    p.add_argument("--inertia", "-J", type=float, default=0.0125, metavar="KG_M2", help="true J of the simulated part (default 0.0125)")
+    p.add_argument("--seed", type=int, default=1, help="noise seed (default 1)")
+    p.add_argument("--state-dir", metavar="DIR", help="keep the result store here (default: a temporary directory)")
+    p.add_argument("--json", action="store_true", help="print the published result payload as JSON at the end")
+
+
+def _doc(args: argparse.Namespace, state_dir: str) -> dict:
+    doc = {
+        "device": {"id": "demo", "state_dir": state_dir, "log_level": "warning"},
+        "sequencer": {"pre_trigger": 0.5, "capture_duration": args.duration,
+                      "sample_timeout": max(1.0, 0.2 * args.time_scale)},
+        "simulation": {"inertia": args.inertia, "time_scale": args.time_scale, "seed": args.seed, "sensor": "encoder",
+                       "noise": 5e-5, "effects": {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 1.2e-4}}},
+        "modbus": {"host": "127.0.0.1", "port": 0},
+    }
+    if args.mqtt:
+        host, _, port = args.mqtt.rpartition(":") if ":" in args.mqtt else (args.mqtt, "", "1883")
+        try:
+            doc["mqtt"] = {"host": host or "localhost", "port": int(port), "reconnect_min": 0.2, "reconnect_max": 2.0}
+        except ValueError:
+            raise InputFileError(f"--mqtt {args.mqtt!r}: expected HOST or HOST:PORT") from None
+    return doc
 
 
 def run(args: argparse.Namespace) -> int:
-    rig = Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5043e-3, declared=("viscous",))
-    truth = Pendulum(rig, 0.0125, {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 1.2e-4}})
-    print(f"simulated torsion rig: k = {rig.stiffness} N·m/rad, true J = {truth.inertia} kg·m², "
-          f"effects {dict(truth.effects)} (declared: viscous only)")
-    trace = simulate_trace(truth, theta0=0.25, duration=30, rate=200, noise_std=1e-4, quantisation_bits=17,
-                           pre_trigger=0.5, seed=args.seed)
-    result = identify(trace, rig)
-    print(result.report())
-    print(f"true J {truth.inertia} kg·m² → error {100 * (result.J / truth.inertia - 1):+.4f} %")
-    return 0
+    if not (0 < args.time_scale <= 50):
+        raise InputFileError(f"--time-scale must be in (0, 50], got {args.time_scale:g}")
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+    from ..daemon import Appliance
+
+    tmp = None
+    if args.state_dir:
+        state_dir = args.state_dir
+    else:
+        tmp = tempfile.TemporaryDirectory(prefix="moi-demo-")
+        state_dir = tmp.name
+    try:
+        config = parse_config(_doc(args, state_dir), source="moi demo")
+        return _run(Appliance(config, stop_grace=5.0), args)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+
+
+def _run(app, args: argparse.Namespace) -> int:
+    from pymodbus.client import ModbusTcpClient
+
+    from .. import registers as R
+
+    cfg = app.config
+    out = sys.stdout
+    app.start()
+    done = threading.Event()
+    published: list = []
+    t0 = app.devices.clock.now()
+
+    def on_event(e) -> None:
+        out.write(f"[{e.time - t0:7.2f} s] {e.state.value:<12} {e.reason}\n")
+        out.flush()
+        if e.state.value == "PUBLISHING" and e.measurement is not None:
+            published.append(e.measurement)
+        if e.state.value in ("IDLE", "FAULT") and e.previous.value != "IDLE":
+            done.set()
+
+    app.sequencer.subscribe(on_event)
+    consumer = _consumer(cfg, app) if cfg.mqtt is not None else None
+    main = threading.Thread(target=app.run, name="moi-demo-main", daemon=True)
+    main.start()
+    status = 0
+    try:
+        sim = app.devices.sim
+        print(f"simulated {cfg.rig.kind} rig: true J = {sim.inertia:g} kg·m², ω_n = {sim.pendulum.omega_n:.6g} rad/s, "
+              f"effects {dict(sim.pendulum.effects)} (declared: {', '.join(cfg.rig.declared)}); "
+              f"time × {cfg.simulation.time_scale:g}")
+        print(f"Modbus TCP server on 127.0.0.1:{app.modbus.bound_port} (unit id {cfg.modbus.unit_id})")
+        if cfg.mqtt is None:
+            print("MQTT: skipped, no broker configured (try `moi demo --mqtt localhost`, or [mqtt] in the config of `moi run`)")
+        else:
+            print(f"MQTT: broker {cfg.mqtt.host}:{cfg.mqtt.port}, topics moi/{cfg.device_id}/...")
+        print(f"result store: {app.config.state_dir}/results.db")
+        print("pressing the push button (gpiozero mock pin)")
+        pin = app.devices.button.pin
+        pin.drive_low()
+        pin.drive_high()
+        limit = 60.0 + (cfg.sequencer.pre_trigger + cfg.sequencer.capture_duration) / cfg.simulation.time_scale
+        if not done.wait(limit):
+            print(f"moi demo: no result within {limit:.0f} s", file=sys.stderr)
+            return EXIT_FAULT
+        if not published:
+            print(f"moi demo: the measurement failed: {app.sequencer.last_fault}", file=sys.stderr)
+            return EXIT_FAULT
+        m = published[0]
+        print()
+        print(m.result.report())
+        if m.result.J is not None:
+            print(f"true J {sim.inertia:g} kg·m² → error {100 * (m.result.J / sim.inertia - 1):+.4f} %")
+        stored = app.store.get(m.id)
+        payload = stored.payload
+        print()
+        client = ModbusTcpClient("127.0.0.1", port=app.modbus.bound_port, timeout=3)
+        client.connect()
+        try:
+            snap = R.read_snapshot(lambda a, n: client.read_input_registers(a, count=n, device_id=cfg.modbus.unit_id).registers)
+        finally:
+            client.close()
+        print(f"Modbus registers read back over TCP (seq {snap['seq']}, uuid {snap['uuid']}):")
+        for reg, key in (("J", "J"), ("J_std", "J_std"), ("omega_n", "omega_n"), ("damping_ratio", "damping_ratio"),
+                         ("residual_rms", "residual_rms_after")):
+            a = R.BY_NAME[reg].address
+            print(f"  {a:>3}–{a + 1:<3} {reg:<14} {snap[reg]:.8g}   (JSON {payload[key]!r})")
+        print(f"  {R.BY_NAME['flags'].address:>3}     flags          0x{snap['flags']:04x} "
+              f"{R.flags_from_bits(snap['flags']) or '(none)'}")
+        if consumer is not None:
+            got = consumer.wait(payload["uuid"], 15)
+            print(f"MQTT: result {payload['uuid']} " + ("received back from the broker" if got else
+                                                         "not received within 15 s (is the broker reachable?)"))
+        if args.json:
+            print(json.dumps(payload, ensure_ascii=False))
+        status = 0
+    finally:
+        app.request_stop()
+        main.join(30)
+        if consumer is not None:
+            consumer.close()
+    return status if app.exit_status == 0 else app.exit_status
+
+
+class _consumer:
+    """Subscribes to the demo's result topic (to show the broker delivered it)."""
+
+    def __init__(self, cfg, app) -> None:
+        import paho.mqtt.client as mqtt
+        from paho.mqtt.enums import CallbackAPIVersion
+
+        self.seen: set[str] = set()
+        self.cond = threading.Condition()
+        self.client = mqtt.Client(CallbackAPIVersion.VERSION2, client_id=f"moi-demo-consumer-{time.time_ns()}")
+        topic = app.mqtt.topics.result
+        self.client.on_connect = lambda c, u, f, rc, p: c.subscribe(topic, 1)
+        self.client.on_message = self._on_message
+        self.client.connect_async(cfg.mqtt.host, cfg.mqtt.port)
+        self.client.loop_start()
+
+    def _on_message(self, client, userdata, msg) -> None:
+        try:
+            uid = json.loads(msg.payload)["uuid"]
+        except (ValueError, KeyError, TypeError):
+            return
+        with self.cond:
+            self.seen.add(uid)
+            self.cond.notify_all()
+
+    def wait(self, uuid: str, timeout: float) -> bool:
+        with self.cond:
+            return self.cond.wait_for(lambda: uuid in self.seen, timeout)
+
+    def close(self) -> None:
+        self.client.disconnect()
+        self.client.loop_stop()

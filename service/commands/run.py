@@ -21,6 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--state-dir", metavar="DIR", help="result store directory (overrides [device] state_dir)")
     p.add_argument("--check", action="store_true", help="validate the configuration, print a summary and exit")
     p.add_argument("--log-level", choices=("debug", "info", "warning", "error"), help="overrides [device] log_level")
+    p.add_argument("--config-reference", action="store_true",
+                   help="print every table and key of the configuration file (Markdown) and exit")
 
 
 def setup_logging(level: str) -> None:
@@ -33,6 +35,10 @@ def setup_logging(level: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.config_reference:
+        from ..config import reference_markdown
+        sys.stdout.write(reference_markdown())
+        return 0
     config = load_config(args.config, sim=args.sim, state_dir=args.state_dir)
     if args.check:
         import json
