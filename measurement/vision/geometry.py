@@ -33,7 +33,6 @@ import math
 
 import numpy as np
 
-from ..errors import VisionError
 from .config import MarkerGeometry
 
 
@@ -99,9 +98,3 @@ def d_angle_d_yaw(x: np.ndarray, marker: MarkerGeometry, yaw: float, rest_angle:
 def visible_limit(marker: MarkerGeometry) -> float:
     """Largest |φ| (rad) at which the marker is still in front of the cylinder's silhouette: cos φ = R/L."""
     return math.acos(marker.radius / marker.axis_distance)
-
-
-def check_geometry(marker: MarkerGeometry) -> None:
-    """Raise VisionError when the numbers cannot describe a camera looking at a cylinder."""
-    if not (marker.radius > 0 and marker.distance > 0):
-        raise VisionError(f"marker radius and distance must be > 0 m, got {marker.radius!r} and {marker.distance!r}")

@@ -193,7 +193,7 @@ class MarkerTracker:
         if not rows:
             return "no vertical edge in the frame"
         r0, r1 = min(rows), max(rows) + 1
-        contrast = float(np.median(polarity * g[r0:r1, max(j - half, 1):min(j + half + 1, img.shape[1] - 1)].max(axis=1)))
+        contrast = float(np.median((polarity * g[r0:r1, max(j - half, 1):min(j + half + 1, img.shape[1] - 1)]).max(axis=1)))
         return (r0, r1), int(j), polarity, contrast
 
     # -- measure ----------------------------------------------------------

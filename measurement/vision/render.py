@@ -16,7 +16,7 @@ Gaussian sensor noise (σ in grey levels) and 8-bit quantisation.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Sequence
 
 import cv2
@@ -193,22 +193,3 @@ class MarkerRenderer:
             times = t + exp * (np.arange(n) + 0.5 - n / 2) / n
             return self.render([float(angle_of_time(tt)) for tt in times])
         return self.render(float(angle_of_time(t)))
-
-    def edge_pixel(self, theta: float, row: float | None = None) -> float:
-        """Reference: u (px) of the edge at swing angle θ on image row ``row`` (default: the marker's centre row).
-
-        Found by bisection on the ray-traced surface angle, so it checks the
-        extraction without sharing its formulas.
-        """
-        phi_edge = theta + self.pose.rest_angle
-        H = self.camera.height
-        if row is None:
-            cols = np.flatnonzero(self._hit.any(axis=0))
-            cmid = int(cols.mean()) if cols.size else self.camera.width // 2
-            hh = self._height[:, cmid]
-            row = float(np.nanargmin(np.abs(np.where(self._hit[:, cmid], hh - self.pattern.centre_height, np.inf))))
-        r = int(round(min(max(row, 0), H - 1)))
-        line = self._phi[r]
-        ok = np.isfinite(line)
-        cols = np.flatnonzero(ok)
-        return float(np.interp(phi_edge, line[cols], cols.astype(float)))

@@ -30,7 +30,7 @@ from measurement.vision.locate import MarkerObservation, MarkerTracker
 from ..camera_config import read_camera
 from ..errors import InputFileError
 
-HELP = "grab a frame, find the marker, print its position and angle, write an annotated PNG for camera alignment"
+HELP = "find the marker in one camera frame: position, angle, annotated PNG for alignment"
 
 #: the camera of the demo rig (and of the mock camera when no camera file is given)
 DEFAULT_CAMERA = CameraConfig(

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from measurement.vision import (CameraConfig, CameraModel, CameraPose, Imaging, MarkerRenderer, MarkerTracker,
+from measurement.vision import (CameraModel, CameraPose, Imaging, MarkerRenderer, MarkerTracker,
                                 TrackerSettings, angle_from_normalised)
 from measurement.vision.locate import CORRUPT, LOST
 
@@ -175,3 +175,14 @@ def test_decoder_concealment_is_not_measured():
     partial[270:] = b[270:]
     obs = tracker.locate(partial)
     assert obs.found and angle_from_normalised(obs.x, MARKER) == pytest.approx(0.12, abs=math.radians(LIMIT_DEG))
+
+
+def test_either_polarity_of_the_marker():
+    """Bright field on the left (the marker stuck on the other way round) works the same."""
+    from measurement.vision import MarkerPattern
+
+    angles = known_angles()[::12]
+    r = MarkerRenderer(CAMERA, MARKER, pattern=MarkerPattern(dark=220.0, bright=30.0), imaging=IMAGING, seed=10)
+    err = recover(r, angles) - angles
+    assert np.isfinite(err).all()
+    assert math.degrees(float(np.sqrt(np.mean(err**2)))) < LIMIT_DEG

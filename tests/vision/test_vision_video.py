@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from measurement import identify
-from measurement.vision import CameraPose, MarkerRenderer
+from measurement.vision import MarkerRenderer
 from service.cli import main
 from service.files import read_rig
 from service.video import video_trace
