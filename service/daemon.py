@@ -87,6 +87,7 @@ class Appliance:
         self.stored: list[str] = []  # UUIDs stored since start (ok, failed, aborted), in order
         self._stored_cond = threading.Condition()
         self.exit_status = EXIT_OK
+        self._stopping = False
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str) -> None:
@@ -207,7 +208,7 @@ class Appliance:
                 log.warning("unknown command %r from %s", name, source)
 
     def _check_components(self) -> None:
-        if self.modbus is not None and self.modbus._thread is not None and not self.modbus._thread.is_alive():
+        if self.modbus is not None and not self.modbus.alive():
             raise _Fatal("the Modbus server thread stopped")
         if self.mqtt is not None and self.mqtt.sender.error is not None:
             raise _Fatal(f"the MQTT outbox sender failed: {self.mqtt.sender.error}")
@@ -321,7 +322,7 @@ class Appliance:
         seq = self.sequencer
         state = seq.state.value if seq is not None else "STARTING"
         return LiveStatus(
-            state=state, busy=bool(seq and seq.busy), fault=state == "FAULT",
+            state="STOPPING" if self._stopping else state, busy=bool(seq and seq.busy), fault=state == "FAULT",
             mqtt_connected=bool(self.mqtt and self.mqtt.is_connected), simulated=self.config.simulated,
             outbox_pending=self.mqtt.sender.pending if self.mqtt is not None else 0, started=self._started_runs,
         )
@@ -344,6 +345,8 @@ class Appliance:
         """Graceful stop: finish an identification that is nearly done or abort the measurement,
         solenoid off, devices closed, in-flight MQTT publications given a moment, store closed."""
         self.notifier.stopping()
+        self._stopping = True
+        self._refresh_live()
         seq = self.sequencer
         if seq is not None:
             try:

@@ -223,6 +223,10 @@ class ModbusServer:
         self._ready.set()
         await server.serving
 
+    def alive(self) -> bool:
+        """True while the server thread runs (after a successful ``start``)."""
+        return self._thread is not None and self._thread.is_alive()
+
     def stop(self, timeout: float = 5.0) -> None:
         if self._thread is None:
             return

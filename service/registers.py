@@ -409,7 +409,8 @@ def markdown() -> str:
     meaning = {
         "trigger": "start one measurement (ignored while one runs, exactly as a button press); the coil reads back 0. "
                    "`measurements_started` increments when the measurement starts",
-        "abort": "abort the running measurement (solenoid off, no result); reads back 0",
+        "abort": "abort the running measurement (solenoid off, no result), or acknowledge a FAULT (FAULT is latched "
+                 "until then; a trigger in FAULT is ignored); reads back 0",
     }
     for name, a in COILS.items():
         L.append(f"| {a} | `{name}` | {meaning[name]} |")

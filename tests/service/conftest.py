@@ -61,13 +61,13 @@ class Broker:
     consumer with a persistent session misses nothing while the broker is down.
     """
 
-    def __init__(self, workdir: Path, persistent: bool = False) -> None:
+    def __init__(self, workdir: Path, persistent: bool = False, listener_lines: list[str] | None = None) -> None:
         self.port = free_port()
         self.workdir = workdir
         self.persistent = persistent
         self.proc: subprocess.Popen | None = None
         self.conf = workdir / "mosquitto.conf"
-        lines = [f"listener {self.port} 127.0.0.1", "allow_anonymous true"]
+        lines = [f"listener {self.port} 127.0.0.1"] + (listener_lines or ["allow_anonymous true"])
         if os.geteuid() == 0:
             # mosquitto started as root drops to the 'mosquitto' user, which cannot write our temporary directory
             import pwd
