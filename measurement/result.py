@@ -264,7 +264,16 @@ class IdentificationResult:
             L.append(f"    {line}")
         if self.acquisition:
             L.append("[[Acquisition]]")
-            for k, v in self.acquisition.items():
-                L.append(f"    {k}: {v}")
+
+            def walk(prefix: str, value: Any) -> None:
+                if isinstance(value, dict):
+                    for k, v in value.items():
+                        walk(f"{prefix}.{k}" if prefix else str(k), v)
+                elif isinstance(value, float):
+                    L.append(f"    {prefix} = {value:.6g}")
+                else:
+                    L.append(f"    {prefix} = {value}")
+
+            walk("", self.acquisition)
         L.append(f"[[Flags]] {', '.join(self.flags) if self.flags else 'none'}")
         return "\n".join(L)
