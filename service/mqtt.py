@@ -22,7 +22,6 @@ import json
 import logging
 import ssl
 import threading
-import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
