@@ -1,8 +1,13 @@
 """The camera: grey frames with their timestamps, from a V4L2 device or from a simulated swing.
 
 ``Camera`` is the interface (``grab()`` → ``Frame``, ``stats()``, ``close()``,
-a context manager whose ``close`` is safe twice). Two implementations side
-by side, chosen in one place (``open_camera``):
+a context manager whose ``close`` is safe twice). A camera whose frames can
+be had without waiting says so with ``nonblocking = True`` and offers
+``grab_ready()`` (the frames exposed by now, never waits): that is how the
+mock is read on the caller's thread, so a ``ManualClock`` is never advanced
+from a background thread. A blocking camera (V4L2) is read from a thread
+(``drivers.camera_sensor``). Two implementations side by side, chosen in one
+place (``open_camera``):
 
 * ``V4L2Camera``: OpenCV ``CAP_V4L2``, MJPG at the camera file's resolution
   and frame rate, a small driver buffer (so a frame is at most a couple of
@@ -81,9 +86,20 @@ class Camera(ABC):
 
     model: CameraModel
 
+    #: True when ``grab_ready`` is available: frames can be had without waiting, on the caller's thread
+    nonblocking: bool = False
+
     @abstractmethod
     def grab(self) -> Frame:
         """The next frame (waits for it). Raises ``SensorFault`` when the camera stopped delivering."""
+
+    def grab_ready(self) -> list[Frame]:
+        """The frames exposed since the last grab, oldest first, without waiting (possibly none).
+
+        Only for ``nonblocking`` cameras; raises ``SensorFault`` when the camera stopped delivering.
+        """
+        raise NotImplementedError(f"{type(self).__name__} blocks in grab(): read it from a thread "
+                                  "(nonblocking is False)")
 
     @abstractmethod
     def stats(self) -> dict:
@@ -197,17 +213,25 @@ class MockCamera(Camera):
         the frame carries its scheduled time).
     pose, imaging, pattern: the camera's yaw/pitch/roll, blur/noise/exposure, the printed marker.
     drop_probability: share of frames lost at random (tests the drop accounting); seed: noise and drops.
+    buffer_size: frames ``grab_ready`` keeps for a reader that polls (older ones are dropped and
+        counted, as a real camera's driver buffers overflow when the reader falls behind).
 
     Frame k is exposed at t0 + k/fps (t0: the clock when the camera opened). ``grab`` waits for the
     next frame; a caller that fell behind gets the newest one, and the frames it missed count as dropped.
+    ``grab_ready`` never waits: it renders the frames exposed by now (at most ``buffer_size``), on the
+    caller's thread, so a ``ManualClock`` only moves when the test moves it.
     """
+
+    nonblocking = True
 
     def __init__(self, config: CameraConfig, angle_source: AngleSource, clock: Any, *,
                  sleep: Callable[[float], None] | None = None, pose: CameraPose = CameraPose(),
                  imaging: Imaging = Imaging(), pattern: MarkerPattern = MarkerPattern(),
-                 drop_probability: float = 0.0, seed: int | None = None):
+                 drop_probability: float = 0.0, seed: int | None = None, buffer_size: int = 8):
         if not (0.0 <= drop_probability < 1.0):
             raise DriverConfigError(f"mock camera: drop_probability must be in [0, 1), got {drop_probability!r}")
+        if not (isinstance(buffer_size, int) and not isinstance(buffer_size, bool) and 1 <= buffer_size <= 1000):
+            raise DriverConfigError(f"mock camera: buffer_size must be 1..1000 frames, got {buffer_size!r}")
         self.model = config.camera
         self.config = config
         self._angle = angle_source
@@ -222,6 +246,7 @@ class MockCamera(Camera):
                                        seed=seed)
         self._rng = np.random.default_rng(None if seed is None else seed + 1)
         self._drop_p = float(drop_probability)
+        self._buffer = buffer_size
         self._period = 1.0 / config.camera.fps
         self._t0 = float(self._now())
         self._next = 0
@@ -250,6 +275,26 @@ class MockCamera(Camera):
                 continue
             self._frames += 1
             return Frame(t=due, image=self.renderer.render_at(self._angle, due), index=k)
+
+    def grab_ready(self) -> list[Frame]:
+        if self._closed:
+            raise SensorFault("mock camera: grab_ready() after close()")
+        # index of the newest frame exposed by now (the epsilon: a clock landing exactly on a frame time)
+        newest = int(math.floor((float(self._now()) - self._t0) / self._period + 1e-9))
+        if newest < self._next:
+            return []
+        first = max(self._next, newest - self._buffer + 1)
+        self._dropped += first - self._next  # overwritten in the buffers before anyone read them
+        self._next = newest + 1
+        frames = []
+        for k in range(first, newest + 1):
+            if self._drop_p and self._rng.random() < self._drop_p:
+                self._dropped += 1
+                continue
+            due = self._t0 + k * self._period
+            self._frames += 1
+            frames.append(Frame(t=due, image=self.renderer.render_at(self._angle, due), index=k))
+        return frames
 
     def stats(self) -> dict:
         return {"frames": self._frames, "dropped_frames": self._dropped, "read_failures": 0, "device": "mock"}

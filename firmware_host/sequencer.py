@@ -29,7 +29,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 
 from drivers.clock import Clock
-from drivers.errors import DeviceFault
+from drivers.errors import DeviceFault, SensorFault
 from drivers.sensor import AngleSensor
 from measurement import IdentificationResult, Options, Rig, Trace, identify
 from measurement.errors import MeasurementError
@@ -168,12 +168,15 @@ class Measurement:
 
 
 class _Job:
-    """One identification, inline or in a worker thread; the result is read once ``done`` is set."""
+    """One identification, inline or in a worker thread; the result is read once ``done`` is set.
 
-    def __init__(self, fn: Callable[[], IdentificationResult]):
+    ``result`` is (the trace identified, its result): a sensor's ``finish`` may have replaced the trace.
+    """
+
+    def __init__(self, fn: Callable[[], tuple[Trace, IdentificationResult]]):
         self._fn = fn
         self.done = threading.Event()
-        self.result: IdentificationResult | None = None
+        self.result: tuple[Trace, IdentificationResult] | None = None
         self.error: BaseException | None = None
 
     def run(self) -> None:
@@ -645,13 +648,27 @@ class Sequencer:
         run.trace = Trace(t - t0, np.asarray(run.angle), source=self.sensor.source,
                           flags=tuple(self.sensor.flags()), meta=meta)
         trace, rig = run.trace, self.rig
-        run.job = _Job(lambda: self._identifier(trace, rig))
+        run.job = _Job(lambda: self._finish_and_identify(trace, rig))
         run.identify_started_at = now
         self._transition(now, State.IDENTIFYING, f"{why}; {len(trace)} samples over {trace.duration:.3g} s")
         if self.config.identify_in_worker:
             threading.Thread(target=run.job.run, name=f"moi-identify-{run.id[:8]}", daemon=True).start()
         else:
             run.job.run()
+
+    def _finish_and_identify(self, trace: Trace, rig: Rig) -> tuple[Trace, IdentificationResult]:
+        # the optional sensor hook: a camera fits its yaw over the whole swing; in the job, because
+        # that takes a while and poll() must stay responsive (it counts toward identify_timeout)
+        finish = getattr(self.sensor, "finish", None)
+        if finish is not None:
+            try:
+                trace = finish(trace)
+            except Exception as exc:
+                raise SensorFault(f"{self.sensor.source}: finishing the capture failed: "
+                                  f"{type(exc).__name__}: {exc}") from exc
+            if not isinstance(trace, Trace):
+                raise SensorFault(f"{self.sensor.source}: finish() returned {type(trace).__name__}; expected a Trace")
+        return trace, self._identifier(trace, rig)
 
     def _check_identification(self, run: _Run, now: float) -> None:
         job = run.job
@@ -666,10 +683,12 @@ class Sequencer:
             exc = job.error
             if not isinstance(exc, Exception):  # KeyboardInterrupt/SystemExit in the worker: not ours to hide
                 raise exc
+            if isinstance(exc, SensorFault):  # from the sensor's finish(): its message names the sensor
+                raise exc
             if not isinstance(exc, MeasurementError):
                 log.error("identification raised", exc_info=exc)
             raise IdentificationFailed(f"identification failed: {type(exc).__name__}: {exc}") from exc
-        result = job.result
+        run.trace, result = job.result
         measurement = Measurement(
             id=run.id, requested_by=run.requested_by, requested_at=run.requested_at, released_at=run.released_at,
             capture_ended_at=run.capture_ended_at, finished_at=now, trace=run.trace, result=result,

@@ -1,0 +1,311 @@
+"""The camera as an angle sensor: frames tracked as they arrive, the camera yaw fitted over the whole swing.
+
+``CameraAngleSensor`` is an ``AngleSensor`` (source "camera") over any
+``drivers.camera.Camera`` and the camera file (intrinsics, marker geometry,
+pose settings). The sequencer captures from it exactly as from the encoder.
+
+How frames reach the tracker depends on the camera, decided here and nowhere else:
+
+* a ``nonblocking`` camera (``MockCamera``) is read inside ``read()``, on the
+  caller's thread: the frames exposed by now on the clock are rendered and
+  tracked there. No thread ever sleeps on the clock, so a capture on a
+  ``ManualClock`` is exactly reproducible and costs no wall time.
+* a blocking camera (``V4L2Camera``) is read by a reader thread between
+  ``start()`` and ``stop()``: it grabs, tracks and buffers; ``read()`` only
+  drains the buffer and never blocks.
+
+Each frame becomes a sample at the frame's exposure time (s on the camera's
+clock: CLOCK_MONOTONIC for V4L2, the injected clock for the mock; the same
+clock the sequencer runs on) with the angle of the exact cylinder geometry
+at the configured yaw (default 0). A frame without the marker (``marker_lost``)
+or unusable (``corrupt_frame``) leaves a gap; frames missing from the
+camera's numbering are ``dropped_frames``; all three are counted and flagged,
+never fatal, until the marker has not been seen for ``max_lost_time`` s of
+frames in a row: then ``SensorFault`` with the counts and the last reason.
+
+The camera's yaw needs the whole swing: ``finish(trace)``, which the
+sequencer calls once after the capture (see ``firmware_host``), fits it
+(``measurement.vision.pose``), recomputes the angles with it and returns the
+trace with ``meta["camera"]`` (yaw ± σ, counts, edge quality) and the flag
+``camera_pose`` when |yaw| exceeds the camera file's limit.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections import Counter
+from typing import Any
+
+import numpy as np
+
+from measurement.trace import Trace
+from measurement.vision.config import CameraConfig
+from measurement.vision.geometry import angle_from_normalised, normalised_from_angle
+from measurement.vision.locate import CORRUPT, LOST, MarkerTracker, TrackerSettings
+from measurement.vision.pipeline import DROPPED, Tracking, VisionSettings, trace_from_tracking
+
+from .camera import Camera, Frame
+from .clock import Clock, MonotonicClock
+from .errors import DriverConfigError, SensorFault
+
+log = logging.getLogger("moi.drivers.camera_sensor")
+
+
+class CameraAngleSensor:
+    """A ``Camera`` and the camera file as an ``AngleSensor`` (source "camera").
+
+    camera: any ``Camera``; the sensor owns it (``close`` closes it).
+    config: the camera file (``CameraConfig``): intrinsics, marker radius/distance, pose settings.
+    clock: the sequencer's clock (s); frames exposed before ``start()`` on it are never returned.
+    tracker: marker tracker settings. vision: yaw estimation and limit (default: from ``config.pose``).
+    max_lost_time: s of consecutive frames without the marker (lost or corrupt) that make a
+        ``SensorFault``; at least 5 frames.
+    stop_timeout: real s ``stop()`` waits for the reader thread to finish the frame in hand.
+    """
+
+    source = "camera"
+
+    def __init__(self, camera: Camera, config: CameraConfig, clock: Clock | None = None, *,
+                 tracker: TrackerSettings = TrackerSettings(), vision: VisionSettings | None = None,
+                 max_lost_time: float = 0.5, stop_timeout: float = 2.0):
+        if not isinstance(camera, Camera):
+            raise DriverConfigError(f"camera sensor: camera must be a drivers.camera.Camera, got {camera!r}")
+        if not isinstance(config, CameraConfig):
+            raise DriverConfigError(f"camera sensor: config must be a CameraConfig (the camera file), got {config!r}")
+        if (camera.model.width, camera.model.height) != (config.camera.width, config.camera.height):
+            raise DriverConfigError(
+                f"camera sensor: the camera delivers {camera.model.width}×{camera.model.height} px, the camera "
+                f"file says {config.camera.width}×{config.camera.height}")
+        if not (isinstance(max_lost_time, (int, float)) and math.isfinite(max_lost_time) and max_lost_time > 0):
+            raise DriverConfigError(f"camera sensor: max_lost_time must be a time > 0 s, got {max_lost_time!r}")
+        if not (isinstance(stop_timeout, (int, float)) and stop_timeout > 0):
+            raise DriverConfigError(f"camera sensor: stop_timeout must be a time > 0 s, got {stop_timeout!r}")
+        self.camera = camera
+        self.config = config
+        self.clock = clock or MonotonicClock()
+        self.tracker_settings = tracker
+        self.vision = vision or VisionSettings.from_config(config)
+        self.fps = float(config.camera.fps)
+        self.max_lost_frames = max(5, int(math.ceil(max_lost_time * self.fps)))
+        self._stop_timeout = float(stop_timeout)
+        # the camera counts from opening: only the frames of the current capture are this capture's
+        self._threaded = not camera.nonblocking
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._stop_reading = threading.Event()
+        self._capturing = False
+        self._closed = False
+        self._tracker = MarkerTracker(config.camera, tracker)
+        self._reset(math.inf)
+
+    # -- AngleSensor ---------------------------------------------------------------
+    def start(self) -> None:
+        """Begin a capture: counters reset, a fresh tracker lock, frames from now on."""
+        if self._closed:
+            raise SensorFault("camera fault: start() after close()")
+        self.stop()
+        if self._thread is not None and self._thread.is_alive():
+            raise SensorFault("camera fault: the previous capture's reader is still blocked in grab() "
+                              "(camera not delivering frames?)")
+        with self._lock:
+            self._reset(float(self.clock.now()))
+            self._tracker = MarkerTracker(self.config.camera, self.tracker_settings)
+            self._capturing = True
+        if self._threaded:
+            self._stop_reading = threading.Event()
+            self._thread = threading.Thread(target=self._reader, args=(self._stop_reading,),
+                                            name="moi-camera-reader", daemon=True)
+            self._thread.start()
+
+    def read(self) -> tuple[np.ndarray, np.ndarray]:
+        """Samples since the last read: (t in s on the clock, angle in rad). Raises ``SensorFault`` after a fault.
+
+        With a nonblocking camera the frames exposed by now are grabbed and tracked here.
+        """
+        if not self._threaded and self._capturing and self._fault is None:
+            try:
+                frames = self.camera.grab_ready()
+            except SensorFault as exc:
+                self._set_fault(exc)
+            else:
+                for frame in frames:
+                    if not self._process(frame):
+                        break
+        with self._lock:
+            if self._fault is not None:
+                raise self._fault
+            t, a = self._t, self._a
+            self._t, self._a = [], []
+        return np.asarray(t, dtype=float), np.asarray(a, dtype=float)
+
+    def stop(self) -> None:
+        """Stop grabbing (safe when not started, and twice); samples already taken stay readable."""
+        self._capturing = False
+        thread = self._thread
+        if thread is not None:
+            self._stop_reading.set()
+            if thread is not threading.current_thread():
+                thread.join(self._stop_timeout)
+            if thread.is_alive():
+                log.warning("camera reader still blocked in grab() %g s after stop()", self._stop_timeout)
+            else:
+                self._thread = None
+
+    def stats(self) -> dict:
+        """Counters of the current/last capture (JSON-ready): frames, samples, lost/corrupt/dropped, rate."""
+        with self._lock:
+            c = {"frames": self._tracking.frames, "samples": self._samples,
+                 "marker_lost": self._tracking.lost, "corrupt_frames": self._tracking.corrupt,
+                 "dropped_frames": self._dropped, "max_run_without_marker": self._max_run,
+                 "frames_before_start": self._early, "failures": dict(self._tracking.reasons),
+                 "fps": self.fps, "reader": "thread" if self._threaded else "poll"}
+            if self._samples > 1 and self._last_t > self._first_t:
+                c["rate_hz"] = (self._samples - 1) / (self._last_t - self._first_t)
+        c["device"] = str(self.camera.stats().get("device", type(self.camera).__name__))
+        return c
+
+    def flags(self) -> tuple[str, ...]:
+        """``marker_lost``, ``corrupt_frame``, ``dropped_frames`` of the current/last capture."""
+        with self._lock:
+            return tuple(flag for flag, n in ((LOST, self._tracking.lost), (CORRUPT, self._tracking.corrupt),
+                                              (DROPPED, self._dropped)) if n)
+
+    def finish(self, trace: Trace) -> Trace:
+        """The captured ``trace`` (t in s, angle in rad) with the camera yaw fitted and corrected.
+
+        Called once per capture by the sequencer, after ``stop()``, before identification. The
+        angles are turned back into image coordinates (the exact inverse of the live conversion),
+        the yaw is fitted over the whole swing and the angles recomputed with it. Returns a new
+        trace: same source, ``meta`` with ``meta["camera"]`` extended by the pose and edge figures,
+        flags plus ``camera_pose`` when |yaw| > the limit. Raises ``VisionError`` (a
+        ``MeasurementError``) when too few samples are left.
+        """
+        marker = self.config.marker
+        with self._lock:
+            live = self._tracking
+            tracking = Tracking(t=[float(v) for v in trace.t],
+                                x=np.asarray(normalised_from_angle(trace.angle, marker, self.vision.yaw, 0.0),
+                                             dtype=float).tolist(),
+                                slope=list(live.slope), rows=list(live.rows), residual=list(live.residual),
+                                contrast=list(live.contrast), frames=live.frames, lost=live.lost,
+                                corrupt=live.corrupt, reasons=Counter(live.reasons))
+            dropped = self._dropped
+        fitted = trace_from_tracking(tracking, self.config, source=trace.source, settings=self.vision,
+                                     dropped=dropped)
+        meta = dict(trace.meta)
+        camera_meta = dict(meta.get(self.source) or {})
+        camera_meta.update(fitted.meta.get("camera", {}))
+        meta[self.source] = camera_meta
+        meta.setdefault("sensor", "camera")
+        flags = tuple(dict.fromkeys((*trace.flags, *fitted.flags)))
+        return Trace(fitted.t, fitted.angle, source=trace.source, flags=flags, meta=meta)
+
+    def close(self) -> None:
+        """Stop and close the camera; safe twice."""
+        if self._closed:
+            return
+        self._closed = True
+        self.stop()
+        self.camera.close()
+
+    def __enter__(self) -> "CameraAngleSensor":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # -- internals -----------------------------------------------------------------
+    def _reset(self, t_start: float) -> None:
+        self._t_start = t_start
+        self._t: list[float] = []
+        self._a: list[float] = []
+        self._tracking = Tracking()  # only the counters and the edge figures: times/angles go to the buffer
+        self._fault: SensorFault | None = None
+        self._samples = 0
+        self._dropped = 0
+        self._early = 0
+        self._run = 0
+        self._max_run = 0
+        self._last_index: int | None = None
+        self._first_t = 0.0
+        self._last_t = -math.inf
+
+    def _set_fault(self, fault: SensorFault) -> None:
+        with self._lock:
+            if self._fault is None:
+                self._fault = fault
+                log.error("%s", fault)
+        self._capturing = False
+
+    def _process(self, frame: Frame) -> bool:
+        """Track one frame into the buffer and counters; False once the capture is faulted."""
+        if frame.t < self._t_start:
+            with self._lock:
+                self._early += 1  # exposed before start(): a driver buffer's stale frame
+            return True
+        obs = self._tracker.locate(frame.image)
+        theta = math.nan
+        reason, detail = obs.reason, obs.detail
+        if obs.found:
+            theta = float(angle_from_normalised(obs.x, self.config.marker, self.vision.yaw, 0.0))
+            if not math.isfinite(theta):
+                reason, detail = LOST, "beyond the cylinder's silhouette (check radius and distance in the camera file)"
+        with self._lock:
+            track = self._tracking
+            track.frames += 1
+            if self._last_index is not None and frame.index > self._last_index + 1:
+                self._dropped += frame.index - self._last_index - 1
+            self._last_index = frame.index
+            if math.isfinite(theta) and not (math.isfinite(frame.t) and frame.t > self._last_t):
+                # a trace needs strictly increasing time
+                theta, reason, detail = math.nan, CORRUPT, "timestamp out of order"
+            if math.isfinite(theta):
+                self._t.append(float(frame.t))
+                self._a.append(theta)
+                if self._samples == 0:
+                    self._first_t = float(frame.t)
+                self._last_t = float(frame.t)
+                self._samples += 1
+                self._run = 0
+                track.slope.append(obs.slope)
+                track.rows.append(obs.rows)
+                track.residual.append(obs.residual)
+                track.contrast.append(obs.contrast)
+                return True
+            if reason == CORRUPT:
+                track.corrupt += 1
+            else:
+                track.lost += 1
+            why = (detail or reason or "no marker").split(" (")[0]
+            track.reasons[why] += 1
+            self._run += 1
+            self._max_run = max(self._max_run, self._run)
+            if self._run < self.max_lost_frames:
+                return True
+            fault = SensorFault(
+                f"camera fault: no marker in {self._run} frames in a row ({self._run / self.fps:.2g} s at "
+                f"{self.fps:g} frames/s); last: {detail or reason}; lost {track.lost}, corrupt {track.corrupt} of "
+                f"{track.frames} frames (is the marker in view and lit? check with `moi camera-check`)")
+        self._set_fault(fault)
+        return False
+
+    def _reader(self, stop: threading.Event) -> None:
+        """Reader thread of a blocking camera: grab, track, buffer until ``stop`` is set or a fault."""
+        while not stop.is_set():
+            try:
+                frame = self.camera.grab()
+            except SensorFault as exc:
+                if not stop.is_set():
+                    self._set_fault(exc)
+                return
+            except Exception as exc:  # top of the thread: an unforeseen camera error must surface as a fault
+                log.exception("camera reader stopped")
+                if not stop.is_set():
+                    self._set_fault(SensorFault(f"camera fault: grab() failed: {type(exc).__name__}: {exc}"))
+                return
+            if stop.is_set():
+                return  # grabbed after stop(): not this capture's
+            if not self._process(frame):
+                return
