@@ -93,6 +93,7 @@ class CameraAngleSensor:
         # the camera counts from opening: only the frames of the current capture are this capture's
         self._threaded = not camera.nonblocking
         self._lock = threading.Lock()
+        self._arrived = threading.Condition(self._lock)  # notified on every sample and on a fault
         self._thread: threading.Thread | None = None
         self._stop_reading = threading.Event()
         self._capturing = False
@@ -172,6 +173,15 @@ class CameraAngleSensor:
             return tuple(flag for flag, n in ((LOST, self._tracking.lost), (CORRUPT, self._tracking.corrupt),
                                               (DROPPED, self._dropped)) if n)
 
+    def wait_for_samples(self, n: int, timeout: float) -> bool:
+        """Block until ``n`` samples were taken since ``start()`` (True), a fault, or ``timeout`` s of real time (False).
+
+        For a threaded (blocking) camera; a nonblocking one only takes samples inside ``read()``.
+        """
+        with self._arrived:
+            return self._arrived.wait_for(lambda: self._samples >= n or self._fault is not None, timeout) \
+                and self._fault is None
+
     def finish(self, trace: Trace) -> Trace:
         """The captured ``trace`` (t in s, angle in rad) with the camera yaw fitted and corrected.
 
@@ -237,6 +247,7 @@ class CameraAngleSensor:
             if self._fault is None:
                 self._fault = fault
                 log.error("%s", fault)
+            self._arrived.notify_all()
         self._capturing = False
 
     def _process(self, frame: Frame) -> bool:
@@ -273,6 +284,7 @@ class CameraAngleSensor:
                 track.rows.append(obs.rows)
                 track.residual.append(obs.residual)
                 track.contrast.append(obs.contrast)
+                self._arrived.notify_all()
                 return True
             if reason == CORRUPT:
                 track.corrupt += 1
