@@ -1,9 +1,14 @@
 """The angle-sensor seam between the sequencer and whatever records the swing.
 
 ``AngleSensor`` is what the sequencer captures from: the Modbus encoder
-(``drivers.encoder.ModbusEncoder``), a camera adapter, or the in-process
+(``drivers.encoder.ModbusEncoder``), the camera
+(``drivers.camera_sensor.CameraAngleSensor``), or the in-process
 ``SimulatedAngleSensor`` below (deterministic in simulated time, for the
 sequencer's state-machine tests).
+
+Optional beyond the protocol: ``finish(trace) -> Trace``, called once by the
+sequencer on the whole capture before identification (the camera fits its
+yaw there; see ``firmware_host``).
 
 Timestamps are seconds on the sensor's injected ``Clock`` (the same clock the
 sequencer runs on); angles are radians, positive in the rig's positive

@@ -63,10 +63,24 @@ sequencer goes to FAULT ("publishing failed: ..."). ``Measurement`` carries
 ``result`` (``measurement.IdentificationResult``); ``measurement.to_dict()`` is
 the result's JSON plus ``id``, ``requested_by`` and ``timing``. Encoder error
 counts are in ``result.acquisition["encoder"]`` and the flag
-``encoder_errors`` in ``result.flags``.
+``encoder_errors`` in ``result.flags``; the camera's frame counts, yaw and
+edge figures in ``result.acquisition["camera"]`` and its flags
+``marker_lost``, ``corrupt_frame``, ``dropped_frames``, ``camera_pose``.
 
-Faults never raise out of ``poll``: encoder faults (``drivers.errors.EncoderFault``),
-capture time-out, too short a capture, identification errors or time-out,
+Sensor (``drivers.sensor.AngleSensor``): ``ModbusEncoder``, ``CameraAngleSensor``
+(``drivers.camera_sensor``) or ``SimulatedAngleSensor``. Optional hook: a sensor
+that has ``finish(trace: Trace) -> Trace`` gets the captured trace once per
+measurement, after ``stop()`` and before identification, in the identification
+job (worker thread or inline; it counts toward ``identify_timeout``). The trace
+it returns is the one identified, put in the ``Measurement`` and published. The
+camera fits its yaw over the whole swing there and corrects the angles
+(``acquisition.camera.yaw_deg``, flag ``camera_pose``). If it raises, FAULT
+with "<source>: finishing the capture failed: ...". Sensors without it (the
+encoder) are unaffected.
+
+Faults never raise out of ``poll``: sensor faults (``drivers.errors.SensorFault``:
+``EncoderFault``; the camera's run of frames without the marker, or a camera
+that stops delivering), capture time-out, too short a capture, identification errors or time-out,
 sink errors and unexpected exceptions all end in FAULT with the reason in the
 event, ``seq.last_fault`` and ``status()``; the solenoid is off on every exit
 path. Only ``IllegalTransition`` (a bug here) propagates.

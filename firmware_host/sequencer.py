@@ -10,6 +10,11 @@ the daemon relies on. Design notes (why, not what):
 * ``poll()`` never blocks for long: the sensor acquires in its own thread
   (or is computed on demand in simulation) and identification runs in a
   worker thread, so the daemon loop keeps pinging its watchdog.
+* A sensor may finish the capture (``finish(trace) -> Trace``, optional, looked
+  up with ``getattr``): the camera needs the whole swing to fit its yaw. It
+  runs in the identification job, not in ``poll``, and its errors become a
+  ``SensorFault`` naming the sensor; the encoder has no such hook and is
+  untouched by it.
 * The solenoid is switched off on every way out of RELEASING: the normal
   end of the pulse, FAULT, ABORTED, ``close()`` and an exception anywhere in
   a step; ``abort()`` and ``fault()`` switch it off at once from the calling

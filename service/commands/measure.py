@@ -1,18 +1,27 @@
-"""`moi measure --sim [--rig RIG.toml] [--effects ...]`: one push-button measurement on the simulated rig.
+"""`moi measure --sim [--sensor encoder|camera] [--rig RIG.toml] [--effects ...]`: one push-button measurement on the simulated rig.
 
 Everything below the sequencer is simulated but real in kind: the GPIO pins
 are gpiozero mock pins (the button is pressed on its pin, the solenoid's
-on/off is recorded on its pin), the encoder is a pymodbus RTU server on a
-loopback socket read by the same Modbus client the device uses, and the
-pendulum swings according to the physics with the chosen effects. Time runs
-``--time-scale`` times faster than real time.
+on/off is recorded on its pin), the pendulum swings according to the physics
+with the chosen effects, and the swing is recorded by
+
+* ``--sensor encoder`` (default): a pymodbus RTU server on a loopback socket
+  read by the same Modbus client the device uses;
+* ``--sensor camera``: a mock camera rendering the marker (the renderer of
+  the vision tests, optionally yawed by ``--camera-yaw``) read by the same
+  ``CameraAngleSensor`` the device uses, which fits and corrects the yaw.
+
+Time runs ``--time-scale`` times faster than real time (default 5 with the
+encoder; 1 with the camera, whose frames are rendered in real time).
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
+from contextlib import ExitStack
 
 from measurement import Options, Pendulum, Rig
 from measurement.errors import InvalidInput
@@ -30,6 +39,14 @@ DEFAULT_EFFECTS = ["viscous=1.5e-4", "coulomb=1.2e-4"]
 #: exit status when the measurement ended in FAULT (not a bug: exit 1; not bad input: exit 2)
 EXIT_FAULT = 3
 
+#: the simulated camera when no --camera file is given: 640×480 at 100 frames/s, 56° field of view,
+#: the marker on a 0.10 m radius seen from 0.25 m (240 px per rad at rest)
+DEFAULT_CAMERA = {"camera": {"width": 640, "height": 480, "fps": 100.0, "fx": 600.0, "fy": 600.0,
+                             "cx": 319.5, "cy": 239.5, "distortion": [0.0, 0.0, 0.0, 0.0, 0.0]},
+                  "marker": {"radius": 0.10, "distance": 0.25}}
+#: default --time-scale per sensor
+DEFAULT_TIME_SCALE = {"encoder": 5.0, "camera": 1.0}
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sim", action="store_true",
@@ -46,16 +63,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pre-trigger", type=float, default=0.5, metavar="S", help="capture before the release, s (default 0.5)")
     p.add_argument("--decay-threshold", type=float, default=0.0, metavar="RAD",
                    help="end the capture early once the swing amplitude is below this, rad (default 0: off)")
-    p.add_argument("--time-scale", type=float, default=5.0, metavar="X",
-                   help="simulated seconds per wall-clock second (default 5)")
+    p.add_argument("--sensor", choices=("encoder", "camera"), default="encoder",
+                   help="what records the swing: the Modbus encoder (default) or the camera")
+    p.add_argument("--time-scale", type=float, default=None, metavar="X",
+                   help="simulated seconds per wall-clock second (default 5 with the encoder, 1 with the camera)")
+    p.add_argument("--camera", metavar="CAM.toml",
+                   help="camera file of the simulated camera (--sensor camera; default 640×480 px at 100 frames/s, "
+                        "fx = 600 px, marker radius 0.10 m at 0.25 m)")
+    p.add_argument("--camera-yaw", type=float, default=0.0, metavar="DEG",
+                   help="yaw of the simulated camera, degrees (--sensor camera; estimated and corrected; default 0)")
     p.add_argument("--bits", type=int, default=17, help="encoder resolution, bits per turn (default 17)")
     p.add_argument("--noise", type=float, default=0.0, metavar="RAD", help="encoder angle noise σ, rad (default 0)")
     p.add_argument("--latency", type=float, default=0.0002, metavar="S",
                    help="encoder reply latency, s of real time (default 0.0002)")
-    p.add_argument("--drop-rate", type=float, default=0.0, metavar="P", help="fraction of encoder replies lost (default 0)")
+    p.add_argument("--drop-rate", type=float, default=0.0, metavar="P",
+                   help="fraction of encoder replies (or camera frames) lost (default 0)")
     p.add_argument("--crc-rate", type=float, default=0.0, metavar="P",
                    help="fraction of encoder replies with a corrupted CRC (default 0)")
-    p.add_argument("--seed", type=int, default=None, help="random seed of the encoder noise and faults")
+    p.add_argument("--seed", type=int, default=None, help="random seed of the encoder or camera noise and faults")
     p.add_argument("--no-discover", action="store_true", help="fit the declared model only (no discovery loop)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object instead of the report")
 
@@ -63,6 +88,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if not args.sim:
         raise InvalidInput("moi measure: only --sim is available here; on the device the daemon (`moi run`) measures")
+    if args.time_scale is None:
+        args.time_scale = DEFAULT_TIME_SCALE[args.sensor]
     if not (0 < args.time_scale <= 100):
         raise InvalidInput(f"--time-scale must be in (0, 100], got {args.time_scale:g}")
     if not (args.duration > 0 and args.pre_trigger >= 0):
@@ -72,8 +99,6 @@ def run(args: argparse.Namespace) -> int:
     from drivers.backend import pin_factory
     from drivers.button import PushButton
     from drivers.clock import ScaledClock
-    from drivers.encoder import ModbusEncoder
-    from drivers.sim_encoder import SimEncoderConfig, SimEncoderServer
     from drivers.simrig import SimRig
     from drivers.solenoid import Solenoid
     from firmware_host import Sequencer, SequencerConfig
@@ -82,15 +107,13 @@ def run(args: argparse.Namespace) -> int:
     tokens = args.effects if args.effects is not None else ([] if args.rig else DEFAULT_EFFECTS)
     effects = parse_effects(tokens, rig.kind)
     truth = Pendulum(rig, args.inertia, effects)
+    camera_config = _camera_config(args) if args.sensor == "camera" else None
     # each lost encoder reply already costs a time-out; pymodbus would log every one as an error
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
     clock = ScaledClock(args.time_scale)
     factory = pin_factory("mock")  # --sim: the one place that picks mock pins
     sim = SimRig(truth, theta0=args.theta0, clock=clock, duration=args.pre_trigger + args.duration + 5.0)
-    server_config = SimEncoderConfig(counts_per_turn=1 << args.bits, registers=1 if args.bits <= 16 else 2,
-                                     noise_std=args.noise, latency=args.latency, drop_rate=args.drop_rate,
-                                     crc_error_rate=args.crc_rate, seed=args.seed)
     config = SequencerConfig(pre_trigger=args.pre_trigger, capture_duration=args.duration,
                              decay_threshold=args.decay_threshold, sample_timeout=max(1.0, 0.2 * args.time_scale))
     desc = ", ".join(f"{k}({', '.join(f'{p}={v:g}' for p, v in ps.items())})" for k, ps in effects.items()) or "no damping"
@@ -99,23 +122,27 @@ def run(args: argparse.Namespace) -> int:
           f"θ0 = {args.theta0:g} rad, time × {args.time_scale:g}", file=out)
 
     results = []
-    with Solenoid(17, pin_factory=factory) as solenoid, PushButton(27, bounce_time=None, pin_factory=factory) as button, \
-            SimEncoderServer(sim.angle, clock, server_config) as server:
+    with ExitStack() as stack:
+        solenoid = stack.enter_context(Solenoid(17, pin_factory=factory))
+        button = stack.enter_context(PushButton(27, bounce_time=None, pin_factory=factory))
         sim.attach(solenoid)
-        print(f"simulated encoder: Modbus RTU on {server.url}, {args.bits} bits", file=out)
-        with ModbusEncoder(server.encoder_config(timeout=0.02), clock) as encoder, \
-                Sequencer(clock=clock, solenoid=solenoid, sensor=encoder, rig=rig, sink=results.append, config=config,
-                          options=Options(discover=not args.no_discover), button=button) as seq:
-            t0 = clock.now()
-            seq.subscribe(lambda e: print(f"[{e.time - t0:7.2f} s] {e.state.value:<12} {e.reason}", file=out))
-            print("pressing the button", file=out)
-            button.pin.drive_low()   # pull-up button: pressed pulls the line low
-            button.pin.drive_high()
-            last = seq.run_until_settled(timeout=args.pre_trigger + args.duration + 120.0 * args.time_scale)
-            on_times = [s.timestamp for prev, s in zip(solenoid.pin.states, solenoid.pin.states[1:]) if prev.state]
-            print(f"solenoid: {len(on_times)} pulse(s), on for {', '.join(f'{x * 1e3:.1f}' for x in on_times)} ms "
-                  f"(real time), now {'ON' if solenoid.is_active else 'off'}", file=out)
-        sim.close()
+        stack.callback(sim.close)
+        if camera_config is None:
+            sensor = _open_encoder(stack, args, sim, clock, out)
+        else:
+            sensor = _open_camera(stack, args, camera_config, sim, clock, out)
+        seq = stack.enter_context(Sequencer(clock=clock, solenoid=solenoid, sensor=sensor, rig=rig,
+                                            sink=results.append, config=config,
+                                            options=Options(discover=not args.no_discover), button=button))
+        t0 = clock.now()
+        seq.subscribe(lambda e: print(f"[{e.time - t0:7.2f} s] {e.state.value:<12} {e.reason}", file=out))
+        print("pressing the button", file=out)
+        button.pin.drive_low()   # pull-up button: pressed pulls the line low
+        button.pin.drive_high()
+        last = seq.run_until_settled(timeout=args.pre_trigger + args.duration + 120.0 * args.time_scale)
+        on_times = [s.timestamp for prev, s in zip(solenoid.pin.states, solenoid.pin.states[1:]) if prev.state]
+        print(f"solenoid: {len(on_times)} pulse(s), on for {', '.join(f'{x * 1e3:.1f}' for x in on_times)} ms "
+              f"(real time), now {'ON' if solenoid.is_active else 'off'}", file=out)
 
     if not results:
         reason = seq.last_fault or (last.reason if last else "no result")
@@ -132,3 +159,41 @@ def run(args: argparse.Namespace) -> int:
     if m.result.J is not None:
         print(f"true J {truth.inertia:g} kg·m² → error {100 * (m.result.J / truth.inertia - 1):+.4f} %")
     return 0
+
+
+def _camera_config(args: argparse.Namespace):
+    """The simulated camera's file (--camera, else DEFAULT_CAMERA), checked before anything is opened."""
+    from measurement.vision.config import CameraConfig
+
+    from ..camera_config import read_camera
+    if not (abs(args.camera_yaw) < 20 and args.camera_yaw == args.camera_yaw):
+        raise InvalidInput(f"--camera-yaw must be within ±20°, got {args.camera_yaw:g}")
+    return read_camera(args.camera) if args.camera else CameraConfig.from_dict(DEFAULT_CAMERA)
+
+
+def _open_encoder(stack: ExitStack, args: argparse.Namespace, sim, clock, out):
+    """The simulated Modbus encoder server and the device's Modbus client on it (closed by ``stack``)."""
+    from drivers.encoder import ModbusEncoder
+    from drivers.sim_encoder import SimEncoderConfig, SimEncoderServer
+
+    server_config = SimEncoderConfig(counts_per_turn=1 << args.bits, registers=1 if args.bits <= 16 else 2,
+                                     noise_std=args.noise, latency=args.latency, drop_rate=args.drop_rate,
+                                     crc_error_rate=args.crc_rate, seed=args.seed)
+    server = stack.enter_context(SimEncoderServer(sim.angle, clock, server_config))
+    print(f"simulated encoder: Modbus RTU on {server.url}, {args.bits} bits", file=out)
+    return stack.enter_context(ModbusEncoder(server.encoder_config(timeout=0.02), clock))
+
+
+def _open_camera(stack: ExitStack, args: argparse.Namespace, config, sim, clock, out):
+    """A mock camera filming the simulated rig and the device's camera sensor on it (closed by ``stack``)."""
+    from drivers.camera import open_camera
+    from drivers.camera_sensor import CameraAngleSensor
+    from measurement.vision.render import CameraPose
+
+    camera = open_camera(config, angle_source=sim.angle, clock=clock, pose=CameraPose(yaw=math.radians(args.camera_yaw)),
+                         drop_probability=args.drop_rate, seed=args.seed)
+    sensor = stack.enter_context(CameraAngleSensor(camera, config, clock))
+    cam = config.camera
+    print(f"simulated camera: {cam.width}×{cam.height} px at {cam.fps:g} frames/s, yaw {args.camera_yaw:g}°, "
+          f"marker radius {config.marker.radius:g} m at {config.marker.distance:g} m", file=out)
+    return sensor
