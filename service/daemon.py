@@ -107,14 +107,13 @@ class Appliance:
             self.store = Store(cfg.state_dir)
             if cfg.modbus is not None:
                 self.modbus = ModbusServer(cfg.modbus, on_command=self.command)
-                self.modbus.start()
+                # until the main loop runs, the PLC sees STARTING and the true outbox backlog, not defaults
+                self.modbus.set_live(LiveStatus(state="STARTING", simulated=cfg.simulated,
+                                                outbox_pending=self.store.outbox_count()))
                 last = self.store.latest("ok")
                 if last is not None and last.payload is not None:
                     self.modbus.publish_result(last.payload)  # the PLC sees the last result after a restart too
-            if cfg.mqtt is not None:
-                self.mqtt = MqttService(cfg.mqtt, cfg.device_id, self.store, software_version=__version__,
-                                        on_command=self.command)
-                self.mqtt.start()
+                self.modbus.start()
             self.devices = self._devices or build_devices(cfg)
             d = self.devices
             # the button is wired through the command queue like the other sources, so every
@@ -126,6 +125,12 @@ class Appliance:
             if d.button is not None:
                 d.button.when_pressed = lambda: self.command("trigger", "button")
             self.sequencer.subscribe(self._on_event)
+            # MQTT last: its outbox sender starts delivering at once, and the live registers
+            # follow its progress only once the main loop runs (right after this)
+            if cfg.mqtt is not None:
+                self.mqtt = MqttService(cfg.mqtt, cfg.device_id, self.store, software_version=__version__,
+                                        on_command=self.command)
+                self.mqtt.start()
         except BaseException:
             self._shutdown_components()
             raise

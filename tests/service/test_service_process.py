@@ -86,7 +86,8 @@ def test_nothing_is_lost_when_the_daemon_is_killed_while_the_broker_is_down(tmp_
         assert list(consumer.unique_results()) == stored
         # the restarted daemon serves the last stored result to the PLC straight away
         assert read_snapshot(mb_port)["uuid"] == stored[-1]
-        wait_until(lambda: read_snapshot(mb_port).get("outbox_pending") == 0, 30, 0.05, "an empty outbox")
+        wait_until(lambda: (s := read_snapshot(mb_port)) and s["state"] == R.STATE_CODES["IDLE"]
+                   and s["outbox_pending"] == 0, 30, 0.05, "the daemon idle with an empty outbox")
         # killed while connected, the broker publishes the last will
         consumer.wait(lambda c: c.on("/status")[-1:] == [b"online"], 10, "online")
     finally:
