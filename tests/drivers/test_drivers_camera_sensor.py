@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 import pytest
 
-from drivers.camera import Camera, Frame, MockCamera, V4L2Camera
+from drivers.camera import Frame, MockCamera, V4L2Camera
 from drivers.camera_sensor import CameraAngleSensor
 from drivers.clock import ManualClock
 from drivers.errors import DriverConfigError, SensorFault
