@@ -78,8 +78,8 @@ def prepare(trace: Trace, options: Options = Options()) -> Prepared:
     if span == 0:
         raise TraceError(f"{trace.source}: the angle never changes; expected a free swing")
     floor = 1e-9 * span  # noise-free simulations still need a scale
-    spikes = spike_candidates(y_all, max(noise_floor(y_all, robust=True), floor))
-    noise = max(noise_floor(y_all, exclude=spikes), floor)
+    spikes = spike_candidates(y_all, max(noise_floor(y_all, robust=True, t=t_all), floor), t=t_all)
+    noise = max(noise_floor(y_all, exclude=spikes, t=t_all), floor)
     keep = np.ones(y_all.size, dtype=bool)
     keep[spikes] = False
     win = swing_window(t_all[keep], y_all[keep], noise)

@@ -24,8 +24,23 @@ def robust_std(x: np.ndarray) -> float:
     return float(_MAD_TO_SIGMA * np.median(np.abs(x - np.median(x))))
 
 
+def regular_windows(t: np.ndarray | None, n: int, k: int) -> np.ndarray:
+    """For each run of k+1 consecutive samples, whether it spans no gap.
+
+    A gap (dropped frames, failed encoder reads) is a sample interval over
+    1.5× the median; a difference or a local prediction across it measures
+    the swing, not the noise.
+    """
+    if t is None or n <= k:
+        return np.ones(max(n - k, 0), dtype=bool)
+    dt = np.diff(np.asarray(t, dtype=float))
+    bad = dt > 1.5 * float(np.median(dt))
+    count = np.concatenate([[0], np.cumsum(bad)])
+    return (count[k:] - count[:-k]) == 0 if k > 0 else np.ones(n, dtype=bool)
+
+
 def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bool = False,
-                orders: range = range(2, 7)) -> float:
+                orders: range = range(2, 7), t: np.ndarray | None = None) -> float:
     """White-noise σ of a densely sampled smooth signal, rad.
 
     k-th differences remove a smooth signal (it contributes ≈ A·(ω·Δt)^k) and
@@ -37,6 +52,7 @@ def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bo
     robust: use the median absolute deviation (immune to glitches, but
     itself quantised on encoder data: use it only to find glitches).
     exclude: indices of known glitches, masked out of the plain estimate.
+    t: sample times (s); differences spanning a gap are left out.
     """
     y = np.asarray(angle, dtype=float)
     best = math.inf
@@ -44,11 +60,13 @@ def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bo
         if y.size <= k + 10:
             break
         d = np.diff(y, n=k)
+        keep = regular_windows(t, y.size, k)
         if exclude is not None and len(exclude):
-            keep = np.ones(d.size, dtype=bool)
             for i in np.asarray(exclude, dtype=int):
                 keep[max(0, i - k): i + 1] = False
-            d = d[keep]
+        d = d[keep]
+        if d.size < 10:
+            continue
         norm = math.sqrt(comb(2 * k, k))
         s = robust_std(d) / norm if robust else float(np.sqrt(np.mean(d**2))) / norm
         if s == 0.0 and robust:
@@ -57,7 +75,8 @@ def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bo
     return float(best) if math.isfinite(best) else 0.0
 
 
-def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0) -> np.ndarray:
+def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
+                     t: np.ndarray | None = None) -> np.ndarray:
     """Indices of isolated glitches (tracking errors), found before any fit.
 
     Each sample is compared with the cubic through its two neighbours on
@@ -72,6 +91,8 @@ def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0) ->
     scale = sigma * math.sqrt(1.0 + 34.0 / 36.0)
     found: list[int] = []
     mask = np.zeros(n, dtype=bool)
+    # the 5-sample prediction is only valid on evenly spaced neighbours
+    mask[2:-2] = ~regular_windows(t, n, 4)
     for _ in range(max(1, n // 20)):
         pred = (-y[:-4] + 4 * y[1:-3] + 4 * y[3:-1] - y[4:]) / 6.0
         dev = np.abs(y[2:-2] - pred) / scale

@@ -138,3 +138,17 @@ def test_uneven_timestamps_are_used_as_they_are():
     r = identify(torsion_trace(viscous=0.01, t=t), torsion_rig())
     assert r.J == pytest.approx(J, rel=2e-4)
     assert r.added_effects == ()
+
+
+def test_gaps_from_dropped_samples_do_not_inflate_the_noise_floor():
+    # 6 % of samples missing in bursts of 1-5 (dropped frames, failed reads)
+    trace = torsion_trace(viscous=0.01, t=np.arange(0.0, 20.0, 1 / 100))
+    rng = np.random.default_rng(0)
+    keep = np.ones(trace.t.size, dtype=bool)
+    for start in rng.choice(trace.t.size - 10, 40, replace=False):
+        keep[start:start + rng.integers(1, 6)] = False
+    r = identify(Trace(trace.t[keep], trace.angle[keep], source="gappy"), torsion_rig())
+    assert abs(rms_vs_noise(r) - 1) < 0.2
+    assert r.noise_floor == pytest.approx(r.residual_rms, rel=0.2)
+    assert "outliers_removed" not in r.flags
+    assert r.J == pytest.approx(J, rel=2e-4)
