@@ -29,6 +29,7 @@ import math
 import socket
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -81,6 +82,10 @@ class EncoderConfig:
     timeout: s to wait for one reply. max_consecutive_errors: this many failed reads in
         a row is an EncoderFault.
     min_interval: s between the starts of two requests (0: as fast as the bus allows).
+    late_reply_sigma: a reply whose round trip exceeds the median of the last 64 by more than
+        this many robust σ (and by 10 % of the median) is dropped and counted in
+        ``late_replies``: its host timestamp, the midpoint of request and reply, is
+        then uncertain by half the excess, an angle error of θ'·Δt. 0 keeps every reply.
     """
 
     port: str
@@ -99,6 +104,7 @@ class EncoderConfig:
     timeout: float = 0.05
     max_consecutive_errors: int = 10
     min_interval: float = 0.0
+    late_reply_sigma: float = 5.0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.port, str) and self.port.strip()):
@@ -124,6 +130,8 @@ class EncoderConfig:
                 f"encoder: max_consecutive_errors must be an integer >= 1, got {self.max_consecutive_errors!r}")
         if not (isinstance(self.min_interval, (int, float)) and 0 <= self.min_interval <= 1):
             raise DriverConfigError(f"encoder: min_interval must be 0..1 s, got {self.min_interval!r}")
+        if not (isinstance(self.late_reply_sigma, (int, float)) and (self.late_reply_sigma == 0 or self.late_reply_sigma >= 2)):
+            raise DriverConfigError(f"encoder: late_reply_sigma must be 0 (off) or >= 2, got {self.late_reply_sigma!r}")
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "EncoderConfig":
@@ -206,6 +214,7 @@ class ModbusEncoder:
         self._rx = bytearray()  # bytes received for the request in flight (CRC check)
         self._counts = self._zero_counts()
         self._unwrap_last: float | None = None
+        self._rtts: deque[float] = deque(maxlen=64)  # recent round trips, clock s
 
     # -- AngleSensor ---------------------------------------------------------------
     def start(self) -> None:
@@ -296,7 +305,7 @@ class ModbusEncoder:
             raise EncoderFault(f"encoder fault: no answer from {self._where()} within {timeout:g} s") from None
         if isinstance(outcome, str):
             raise EncoderFault(f"encoder fault: {self._where()}: {outcome.partition(':')[2]}")
-        t, value = outcome
+        t, value, _ = outcome
         return t, self.config.counts_to_angle(value)
 
     # -- I/O thread -------------------------------------------------------------------
@@ -304,7 +313,7 @@ class ModbusEncoder:
     def _zero_counts() -> dict[str, Any]:
         return {"samples": 0, "requests": 0, "timeouts": 0, "crc_errors": 0, "exceptions": 0,
                 "connection_errors": 0, "max_run_of_errors": 0, "consecutive_errors": 0,
-                "first_t": 0.0, "last_t": 0.0, "rtt_max_s": 0.0}
+                "first_t": 0.0, "last_t": 0.0, "rtt_max_s": 0.0, "late_replies": 0}
 
     def _where(self) -> str:
         return f"device {self.config.device_id} on {self.config.port}"
@@ -410,8 +419,8 @@ class ModbusEncoder:
             _send_immediately(self._client)
         return None
 
-    async def _read_once(self) -> tuple[float, int] | str:
-        """One request; (t_mid on the clock, raw value) or a string naming the failure kind and details."""
+    async def _read_once(self) -> tuple[float, int, float] | str:
+        """One request; (t_mid on the clock, raw value, round trip in clock s) or a string naming the failure."""
         from pymodbus.exceptions import ConnectionException, ModbusIOException
         why = await self._connect()
         if why is not None:
@@ -446,10 +455,23 @@ class ModbusEncoder:
             value = (high << 16) | low
         with self._lock:
             self._counts["rtt_max_s"] = max(self._counts["rtt_max_s"], t_reply - t_send)
-        return 0.5 * (t_send + t_reply), value
+        return 0.5 * (t_send + t_reply), value, t_reply - t_send
+
+    def _late(self, rtt: float) -> bool:
+        """Whether this round trip is too long for its midpoint to date the sample."""
+        recent = self._rtts
+        late = False
+        if self.config.late_reply_sigma and len(recent) >= 16:
+            arr = np.fromiter(recent, dtype=float)
+            med = float(np.median(arr))
+            spread = 1.4826 * float(np.median(np.abs(arr - med)))
+            late = rtt - med > max(self.config.late_reply_sigma * spread, 0.1 * med)
+        recent.append(rtt)
+        return late
 
     async def _sample_loop(self) -> None:
         c = self.config
+        self._rtts.clear()
         next_start = 0.0
         while self._sampling:
             if c.min_interval > 0:
@@ -477,9 +499,12 @@ class ModbusEncoder:
                         log.error("%s", self._fault)
                         self._arrived.notify_all()
                         return
+                elif self._late(outcome[2]):
+                    counts["consecutive_errors"] = 0
+                    counts["late_replies"] += 1
                 else:
                     counts["consecutive_errors"] = 0
-                    t, value = outcome
+                    t, value, _ = outcome
                     angle = c.counts_to_angle(value)
                     if self._unwrap_last is not None:
                         # keep the angle continuous across the encoder's 0/full-turn wrap

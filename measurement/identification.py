@@ -2,7 +2,7 @@
 
     prepare  → noise floor, swing window (release … stop), glitches removed
     baseline → the declared model fitted to the whole record
-    discover → while the residual is above the noise floor or not white:
+    discover → while the residual is above the noise floor (> 1.1 × noise):
                fit every candidate effect, keep the one with the lowest BIC
                if it is a real improvement (ΔBIC < −10 and it explains a real
                share of the residual above the noise), else stop
@@ -172,9 +172,12 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options) -> tuple
     allowed = set(options.candidates) if options.candidates is not None else set(EFFECTS)
     for rnd in range(1, options.max_rounds + 1):
         diag = diagnose(current, prep.noise, prep.stuck)
-        if diag.at_noise_floor and diag.white:
+        if diag.at_noise_floor:
+            # what is left is no larger than the sensor's own noise: a further
+            # effect could only fit the noise's colour, not the pendulum
+            white = "white" if diag.white else "not white, but no larger than the noise"
             steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, {}, None, None, None, "",
-                                       f"residual at the noise floor and white ({diag.rms_ratio:.3g} × noise)"))
+                                       f"residual at the noise floor ({diag.rms_ratio:.3g} × noise; {white})"))
             break
         tried: dict[str, ModelFit] = {}
         for cand in candidate_effects(rig, current.model.effect_names):

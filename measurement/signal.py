@@ -11,7 +11,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import comb
 
 _MAD_TO_SIGMA = 1.482602218505602
 
@@ -24,54 +23,76 @@ def robust_std(x: np.ndarray) -> float:
     return float(_MAD_TO_SIGMA * np.median(np.abs(x - np.median(x))))
 
 
-def regular_windows(t: np.ndarray | None, n: int, k: int) -> np.ndarray:
-    """For each run of k+1 consecutive samples, whether it spans no gap.
+def loo_deviations(t: np.ndarray | None, y: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
+    """Leave-one-out deviations of each sample from its neighbours, at the true times.
 
-    A gap (dropped frames, failed encoder reads) is a sample interval over
-    1.5× the median; a difference or a local prediction across it measures
-    the swing, not the noise.
+    For i in [d, n − d): y[i] − P(t[i]), with P the polynomial of degree 2d − 1
+    through the d samples on each side, divided by sqrt(1 + Σw²) (w: the
+    Lagrange weights), so that white noise of σ gives deviations of σ while a
+    smooth swing leaves only ≈ A·(ω·Δt)^(2d). Exact for uneven timestamps,
+    where plain differences leak θ'·(timestamp jitter).
+    Returns (indices, normalised deviations).
     """
-    if t is None or n <= k:
-        return np.ones(max(n - k, 0), dtype=bool)
+    y = np.asarray(y, dtype=float)
+    n = y.size
+    if n < 2 * d + 1:
+        return np.zeros(0, dtype=int), np.zeros(0)
+    tt = np.arange(n, dtype=float) if t is None else np.asarray(t, dtype=float)
+    idx = np.arange(d, n - d)
+    offsets = [o for o in range(-d, d + 1) if o != 0]
+    nodes = np.stack([tt[idx + o] - tt[idx] for o in offsets], axis=1)
+    values = np.stack([y[idx + o] for o in offsets], axis=1)
+    weights = np.ones_like(nodes)
+    for j in range(len(offsets)):
+        for k in range(len(offsets)):
+            if k != j:
+                weights[:, j] *= -nodes[:, k] / (nodes[:, j] - nodes[:, k])
+    dev = y[idx] - np.sum(weights * values, axis=1)
+    return idx, dev / np.sqrt(1.0 + np.sum(weights**2, axis=1))
+
+
+def _gap_free(t: np.ndarray | None, idx: np.ndarray, d: int, n: int) -> np.ndarray:
+    """Whether the window idx ± d spans no gap (an interval over 3× the median)."""
+    if t is None:
+        return np.ones(idx.size, dtype=bool)
     dt = np.diff(np.asarray(t, dtype=float))
-    bad = dt > 1.5 * float(np.median(dt))
-    count = np.concatenate([[0], np.cumsum(bad)])
-    return (count[k:] - count[:-k]) == 0 if k > 0 else np.ones(n, dtype=bool)
+    bad = np.concatenate([[0], np.cumsum(dt > 3.0 * float(np.median(dt)))])
+    return (bad[idx + d] - bad[idx - d]) == 0
 
 
 def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bool = False,
-                orders: range = range(2, 7), t: np.ndarray | None = None) -> float:
+                t: np.ndarray | None = None, orders: tuple[int, ...] = (1, 2, 3)) -> float:
     """White-noise σ of a densely sampled smooth signal, rad.
 
-    k-th differences remove a smooth signal (it contributes ≈ A·(ω·Δt)^k) and
-    turn white noise of σ into noise of σ·sqrt(C(2k, k)). Each order gives an
-    estimate that can only be biased upwards by the signal, so the smallest
-    is kept. Quantisation counts as noise here: it is what the sensor cannot
-    resolve.
+    Each sample is predicted from its neighbours (``loo_deviations``, with d
+    neighbours a side for every d in ``orders``); the smooth swing cancels and
+    the noise remains. Each order gives an estimate that the signal can only
+    bias upwards, so the smallest is kept. Quantisation counts as noise here:
+    it is what the sensor cannot resolve.
 
     robust: use the median absolute deviation (immune to glitches, but
     itself quantised on encoder data: use it only to find glitches).
-    exclude: indices of known glitches, masked out of the plain estimate.
-    t: sample times (s); differences spanning a gap are left out.
+    exclude: indices of known glitches, left out with their neighbourhoods.
+    t: sample times (s), for uneven sampling and gaps.
     """
     y = np.asarray(angle, dtype=float)
     best = math.inf
-    for k in orders:
-        if y.size <= k + 10:
-            break
-        d = np.diff(y, n=k)
-        keep = regular_windows(t, y.size, k)
-        if exclude is not None and len(exclude):
-            for i in np.asarray(exclude, dtype=int):
-                keep[max(0, i - k): i + 1] = False
-        d = d[keep]
-        if d.size < 10:
+    for d in orders:
+        idx, dev = loo_deviations(t, y, d)
+        if idx.size < 10:
             continue
-        norm = math.sqrt(comb(2 * k, k))
-        s = robust_std(d) / norm if robust else float(np.sqrt(np.mean(d**2))) / norm
-        if s == 0.0 and robust:
-            s = float(np.sqrt(np.mean(d**2))) / norm
-        best = min(best, s)
+        keep = _gap_free(t, idx, d, y.size)
+        if exclude is not None and len(exclude):
+            near = np.zeros(y.size, dtype=bool)
+            for i in np.asarray(exclude, dtype=int):
+                near[max(0, i - d): i + d + 1] = True
+            keep &= ~near[idx]
+        dev = dev[keep]
+        if dev.size < 10:
+            continue
+        plain = float(np.sqrt(np.mean(dev**2)))
+        est = robust_std(dev) if robust else plain
+        best = min(best, est if est > 0 else plain)
     return float(best) if math.isfinite(best) else 0.0
 
 
@@ -80,32 +101,46 @@ def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
     """Indices of isolated glitches (tracking errors), found before any fit.
 
     Each sample is compared with the cubic through its two neighbours on
-    each side, (−y[i−2] + 4y[i−1] + 4y[i+1] − y[i+2])/6, which follows a
-    smooth swing; one glitch also disturbs its neighbours' predictions, so
-    only the worst sample of a run is taken and the test repeated.
+    each side (``loo_deviations`` with d = 2), which follows a smooth swing;
+    one glitch also disturbs its neighbours' predictions, so only the worst
+    sample of a run is taken, replaced by its prediction, and the test
+    repeated.
     """
     y = np.array(angle, dtype=float)
     n = y.size
     if n < 9 or sigma <= 0:
         return np.zeros(0, dtype=int)
-    scale = sigma * math.sqrt(1.0 + 34.0 / 36.0)
     found: list[int] = []
-    mask = np.zeros(n, dtype=bool)
-    # the 5-sample prediction is only valid on evenly spaced neighbours
-    mask[2:-2] = ~regular_windows(t, n, 4)
+    skip = np.zeros(n, dtype=bool)
+    idx, _ = loo_deviations(t, y, 2)
+    skip[idx[~_gap_free(t, idx, 2, n)]] = True  # no prediction across a gap
     for _ in range(max(1, n // 20)):
-        pred = (-y[:-4] + 4 * y[1:-3] + 4 * y[3:-1] - y[4:]) / 6.0
-        dev = np.abs(y[2:-2] - pred) / scale
-        dev[mask[2:-2]] = 0.0
-        i = int(np.argmax(dev))
-        if dev[i] < threshold:
+        idx, dev = loo_deviations(t, y, 2)
+        score = np.abs(dev) / sigma
+        score[skip[idx]] = 0.0
+        k = int(np.argmax(score))
+        if score[k] < threshold:
             break
-        j = i + 2
+        j = int(idx[k])
         found.append(j)
-        mask[j] = True
+        skip[j] = True
         # replace by the prediction so that the next pass sees a clean neighbourhood
-        y[j] = pred[i]
+        y[j] -= _raw_deviation(t, y, j)
     return np.array(sorted(found), dtype=int)
+
+
+def _raw_deviation(t: np.ndarray | None, y: np.ndarray, j: int) -> float:
+    """y[j] minus the cubic through its two neighbours on each side (not normalised)."""
+    tt = np.arange(y.size, dtype=float) if t is None else np.asarray(t, dtype=float)
+    nodes = [j - 2, j - 1, j + 1, j + 2]
+    pred = 0.0
+    for a in nodes:
+        w = 1.0
+        for b in nodes:
+            if b != a:
+                w *= (tt[j] - tt[b]) / (tt[a] - tt[b])
+        pred += w * y[a]
+    return float(y[j] - pred)
 
 
 @dataclass(frozen=True)

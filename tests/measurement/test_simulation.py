@@ -121,3 +121,12 @@ def test_simulated_trace_is_quantised_held_and_uneven():
 def test_pendulum_rejects_non_physical_inertia(bad):
     with pytest.raises(InvalidInput, match="inertia"):
         Pendulum(Rig(kind="torsion", stiffness=1.0), bad)
+
+
+def test_noise_floor_is_exact_on_uneven_timestamps():
+    from measurement.signal import noise_floor
+
+    rng = np.random.default_rng(4)
+    t = np.cumsum(rng.uniform(2e-3, 6e-3, 6000))  # an encoder polled as fast as the bus allows
+    y = 0.3 * np.cos(5.4 * t) + rng.normal(0, 1e-4, t.size)
+    assert noise_floor(y, t=t) == pytest.approx(1e-4, rel=0.05)
