@@ -8,6 +8,11 @@ commented example.
 
 Without a ``[hardware]`` table (or with ``--sim``) the appliance runs on the
 simulated rig described by ``[simulation]``.
+
+The angle sensor is the Modbus encoder (``[hardware.encoder]``) or a camera
+(``sensor = "camera"``, ``[hardware.camera]`` naming the V4L2 device and the
+camera file of docs/vision.md). Camera files are read and checked here, so a
+missing or malformed one is a configuration error naming both files.
 """
 
 from __future__ import annotations
@@ -33,6 +38,9 @@ from .registers import WORD_ORDERS
 
 REQUIRED = object()
 
+#: the angle sensors of ``[hardware] sensor``
+SENSORS = ("encoder", "camera")
+
 #: the rig simulated when ``[device] rig`` is not given (the demo rig of `moi demo`)
 DEFAULT_SIM_RIG = Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5043e-3, declared=("viscous",))
 
@@ -40,7 +48,7 @@ DEFAULT_SIM_RIG = Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5043e-3, 
 # --- a small declarative schema ------------------------------------------------------------
 @dataclass(frozen=True)
 class Key:
-    kind: str  # str | int | float | bool | path | strlist | table | effects
+    kind: str  # str | int | float | bool | path | strlist | table | effects | pinlike | videodevice
     default: Any = None
     doc: str = ""
     choices: tuple[Any, ...] | None = None
@@ -54,7 +62,8 @@ class Key:
         names = {"str": "a string", "path": "a path (string)", "int": "an integer", "float": "a number",
                  "bool": "true or false", "strlist": "a list of strings", "table": "a table",
                  "effects": "a table of effect = { parameter = value }",
-                 "pinlike": "a BCM pin number or a name like 'GPIO17'"}
+                 "pinlike": "a BCM pin number or a name like 'GPIO17'",
+                 "videodevice": "a video device path like '/dev/video0' or a device index >= 0"}
         text = names[self.kind]
         if self.min is not None and self.max is not None:
             text += f" in {'(' if self.min_open else '['}{self.min:g}, {self.max:g}]"
@@ -98,12 +107,15 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
     "hardware": {
         "gpio_backend": Key("str", None, "gpiozero pin factory (lgpio on a Pi, mock for tests; default: gpiozero's)"),
-        "sensor": Key("str", "encoder", "angle sensor", choices=("encoder",)),
+        "sensor": Key("str", "encoder", "angle sensor: the Modbus encoder ([hardware.encoder]) or a camera "
+                      "([hardware.camera])", choices=SENSORS),
         "solenoid": Key("table", REQUIRED, "[hardware.solenoid] pin, active_high, max_on_time"),
         "button": Key("table", None, "[hardware.button] pin, pull_up, bounce_time"),
         "indicator": Key("table", None, "[hardware.indicator] pin, kind, active_high"),
         "encoder": Key("table", None, "[hardware.encoder]: drivers.encoder.EncoderConfig (port, device_id, "
                        "baudrate, parity, register, registers, counts_per_turn, direction, zero, timeout, ...)"),
+        "camera": Key("table", None, "[hardware.camera] device, file, max_lost_time "
+                      "(required with sensor = \"camera\")"),
     },
     "hardware.solenoid": {
         "pin": Key("pinlike", REQUIRED, "BCM pin number or gpiozero pin name"),
@@ -120,6 +132,14 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "kind": Key("str", "led", "", choices=("led", "buzzer")),
         "active_high": Key("bool", True, ""),
     },
+    "hardware.camera": {
+        "device": Key("videodevice", REQUIRED, "V4L2 capture device: a path like \"/dev/video0\" (better: a stable "
+                      "/dev/v4l/by-id/... link) or an index"),
+        "file": Key("path", REQUIRED, "camera file: intrinsics, resolution and fps, marker radius and distance, "
+                    "optional [pose] (docs/vision.md); relative to this file"),
+        "max_lost_time": Key("float", 0.5, "no marker in the frames (lost or corrupt) for this long in a row → FAULT, "
+                             "s (at least 5 frames)", min=0, min_open=True),
+    },
     "simulation": {
         "inertia": Key("float", 0.0125, "true J of the simulated part, kg·m²", min=0, min_open=True),
         "effects": Key("effects", {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 1.2e-4}},
@@ -131,9 +151,16 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "time_scale": Key("float", 1.0, "simulated seconds per wall-clock second", min=0, max=1000, min_open=True),
         "seed": Key("int", None, "noise seed (default: random)"),
         "sensor": Key("str", "encoder", "\"encoder\": a simulated Modbus RTU encoder on a loopback socket read by the "
-                      "real encoder client; \"direct\": an in-process sensor sampling at rate (faster)",
-                      choices=("encoder", "direct")),
+                      "real encoder client; \"direct\": an in-process sensor sampling at rate (faster); \"camera\": "
+                      "a mock camera rendering the marker, read by the real camera sensor (keep time_scale = 1: "
+                      "frames are rendered in real time)",
+                      choices=("encoder", "direct", "camera")),
         "latency": Key("float", 0.0002, "simulated encoder reply latency, s of real time", min=0, max=1),
+        "camera": Key("path", None, "camera file of the simulated camera (sensor = \"camera\"; default: the camera of "
+                      "`moi measure --sensor camera`, 640×480 px at 100 frames/s, fx = 600 px, marker radius 0.10 m "
+                      "at 0.25 m); relative to this file"),
+        "camera_yaw_deg": Key("float", 0.0, "yaw of the simulated camera, degrees, within ±20 (estimated and "
+                              "corrected by the sensor)", min=-20, max=20),
     },
     "mqtt": {
         "enabled": Key("bool", True, "publish over MQTT (the table's presence enables it)"),
@@ -188,6 +215,19 @@ class SimulationSettings:
     seed: int | None = None
     sensor: str = "encoder"
     latency: float = 0.0002
+    camera: str | None = None        # camera file (resolved), None: the demo camera
+    camera_yaw_deg: float = 0.0
+    camera_config: Any = None        # the parsed camera file (CameraConfig) with sensor = "camera"
+
+
+@dataclass(frozen=True)
+class CameraSettings:
+    """``[hardware.camera]``: the V4L2 device, the camera file (path and parsed content), the lost-marker limit."""
+
+    device: str | int
+    file: str
+    max_lost_time: float
+    config: Any  # measurement.vision.CameraConfig (imported lazily: it loads OpenCV)
 
 
 @dataclass(frozen=True)
@@ -198,6 +238,7 @@ class HardwareSettings:
     button: Mapping[str, Any] | None
     indicator: Mapping[str, Any] | None
     encoder: Mapping[str, Any] | None
+    camera: CameraSettings | None = None
 
 
 @dataclass(frozen=True)
@@ -277,6 +318,11 @@ class _Checker:
         elif k == "pinlike":
             if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0) or v == "":
                 raise self.fail(table, key, f"expected a BCM pin number >= 0 or a name like 'GPIO17', got {v!r}")
+        elif k == "videodevice":
+            if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0) or v == "":
+                raise bad
+            if isinstance(v, str) and v.isdigit():
+                v = int(v)  # "0": the index, not a file named 0
         elif k == "bool":
             if not isinstance(v, bool):
                 raise bad
@@ -398,9 +444,22 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
                 raise c.fail("hardware", "encoder", "missing: sensor = \"encoder\" needs a [hardware.encoder] table "
                               "(port, device id, register, counts per turn)")
             _check_encoder_keys(c, enc)
-        hardware = HardwareSettings(hw["gpio_backend"], hw["sensor"], sol, btn, ind, enc)
+        camera = None
+        if hw["camera"] is not None:
+            cam = c.table("hardware.camera", hw["camera"], SCHEMA["hardware.camera"])
+            if hw["sensor"] == "camera":
+                file = _resolve(base, cam["file"])
+                camera = CameraSettings(device=cam["device"], file=file, max_lost_time=cam["max_lost_time"],
+                                        config=_read_camera(c, "hardware.camera", "file", file))
+        elif hw["sensor"] == "camera":
+            raise c.fail("hardware", "camera", "missing: sensor = \"camera\" needs a [hardware.camera] table "
+                          "(device = \"/dev/video0\", file = the camera file)")
+        hardware = HardwareSettings(hw["gpio_backend"], hw["sensor"], sol, btn, ind, enc, camera)
 
     sim_doc = c.table("simulation", doc.get("simulation", {}), SCHEMA["simulation"])
+    sim_doc["camera"] = _resolve(base, sim_doc["camera"])
+    if sim_doc["sensor"] == "camera":
+        sim_doc["camera_config"] = _read_camera(c, "simulation", "camera", sim_doc["camera"])
     simulation = SimulationSettings(**sim_doc)
     simulated = sim or hardware is None
 
@@ -471,6 +530,21 @@ def _check_encoder_keys(c: _Checker, enc: Mapping[str, Any]) -> None:
         raise c.fail("hardware.encoder", None, str(exc)) from None
 
 
+def _read_camera(c: _Checker, table: str, key: str, path: str | None) -> Any:
+    """The camera file at ``path`` (None: the demo camera of `moi measure`) as a ``CameraConfig``;
+    a missing or malformed file is a one-line error naming the config file, the key and the camera file."""
+    from measurement.vision.config import CameraConfig
+
+    from .camera_config import read_camera
+    if path is None:
+        from .commands.measure import DEFAULT_CAMERA
+        return CameraConfig.from_dict(DEFAULT_CAMERA)
+    try:
+        return read_camera(path)
+    except InvalidInput as exc:  # InputFileError (not found, not TOML) or VisionError (naming the file)
+        raise c.fail(table, key, str(exc)) from None
+
+
 def reference_markdown() -> str:
     """The configuration reference (the generated part of docs/service.md): every table and key."""
     L = ["| key | type | default | meaning |", "|---|---|---|---|"]
@@ -490,7 +564,8 @@ def reference_markdown() -> str:
                 default = ", ".join(f"{e} {p}" for e, p in spec.default.items())
             else:
                 default = f"`{spec.default!r}`".replace("'", '"') if isinstance(spec.default, str) else f"`{spec.default}`"
-            kind = {"pinlike": "int or str", "strlist": "list of str", "effects": "table", "path": "path"}.get(spec.kind, spec.kind)
+            kind = {"pinlike": "int or str", "videodevice": "str or int", "strlist": "list of str", "effects": "table",
+                    "path": "path"}.get(spec.kind, spec.kind)
             doc = spec.doc + (f" ({', '.join(repr(c) for c in spec.choices)})" if spec.choices else "")
             out.append(f"| `{k}` | {kind} | {default} | {doc.replace('|', '/')} |")
         out.append("")

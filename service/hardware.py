@@ -8,12 +8,19 @@ time. With ``[simulation] sensor = "encoder"`` (the default) it is read over a
 real Modbus RTU link: ``drivers.sim_encoder.SimEncoderServer`` on a loopback
 socket and the same ``drivers.encoder.ModbusEncoder`` the device uses; with
 ``"direct"`` an in-process ``drivers.SimulatedAngleSensor`` samples it at
-``rate`` (faster, for tests).
+``rate`` (faster, for tests); with ``"camera"`` a ``drivers.camera.MockCamera``
+renders the marker at the rig's angle (yawed by ``camera_yaw_deg``) and the
+same ``drivers.camera_sensor.CameraAngleSensor`` the device uses tracks it and
+fits the yaw in its ``finish`` hook.
+
+Hardware: the Modbus encoder of ``[hardware.encoder]``, or the V4L2 camera of
+``[hardware.camera]`` through ``CameraAngleSensor``.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -28,7 +35,7 @@ from drivers.solenoid import Solenoid
 from measurement import Pendulum
 
 from .config import Config
-from .errors import ConfigError
+from .errors import ConfigError, StartupError
 
 log = logging.getLogger("moi.hardware")
 
@@ -66,7 +73,13 @@ class Devices:
 
 class _RelatchingSensor:
     """A sensor on the simulated rig whose ``start()`` first re-latches the pendulum at θ0
-    (what the operator does between two measurements)."""
+    (what the operator does between two measurements).
+
+    Everything else is the inner sensor's, looked up on it: ``read``, ``stop``, ``stats``,
+    ``flags``, ``close`` and, when the inner sensor has one, the sequencer's optional
+    ``finish(trace)`` hook (the camera's yaw fit); a sensor without it has none here either,
+    so the sequencer's ``getattr(sensor, "finish", None)`` sees the truth.
+    """
 
     def __init__(self, inner: Any, rig: SimRig) -> None:
         self._inner = inner
@@ -116,6 +129,9 @@ def _simulated(config: Config) -> Devices:
             closers.insert(0, server.stop)
             # the client's time-out is real time: a scaled clock must not stretch it
             inner: Any = ModbusEncoder(server.encoder_config(timeout=0.05), clock)
+        elif sim.sensor == "camera":
+            inner = _simulated_camera(sim, rig, clock)
+            opened.append(inner.close)
         else:
             inner = SimulatedAngleSensor(rig.angle, clock, rate=sim.rate, noise_std=sim.noise,
                                          quantisation_bits=sim.bits or None, seed=sim.seed, source="encoder")
@@ -156,6 +172,8 @@ def _hardware(config: Config) -> Devices:
             except DriverConfigError as exc:
                 raise ConfigError(f"{config.source}: [hardware.encoder]: {exc}") from None
             sensor = ModbusEncoder(enc, clock)
+        elif hw.sensor == "camera":
+            sensor = _camera(config, clock)
         else:  # guarded by the config schema
             raise ConfigError(f"[hardware] sensor {hw.sensor!r} is not supported")
     except BaseException:
@@ -163,3 +181,66 @@ def _hardware(config: Config) -> Devices:
             obj.close()
         raise
     return Devices(clock=clock, solenoid=solenoid, sensor=sensor, button=button, indicator=indicator)
+
+
+def _simulated_camera(sim: Any, rig: SimRig, clock: Clock) -> Any:
+    """A mock camera filming the simulated rig (yawed by ``camera_yaw_deg``) and the device's camera sensor on it."""
+    from drivers.camera import open_camera
+    from drivers.camera_sensor import CameraAngleSensor
+    from measurement.vision.render import CameraPose
+
+    cfg = sim.camera_config
+    if cfg is None:  # SimulationSettings built by hand rather than by parse_config, which reads the file
+        from measurement.vision.config import CameraConfig
+
+        from .camera_config import read_camera
+        from .commands.measure import DEFAULT_CAMERA
+        cfg = read_camera(sim.camera) if sim.camera else CameraConfig.from_dict(DEFAULT_CAMERA)
+    if sim.time_scale != 1.0:
+        # frames are rendered on the main loop's thread (~5 ms each at 640×480); faster than real time,
+        # more frames fall due between two polls than the mock's 8-frame buffer holds: the rest are dropped
+        log.warning("simulated camera at time_scale %g: %g frames/s of swing to render per real second; "
+                    "expect dropped_frames (use time_scale = 1 with the camera)", sim.time_scale,
+                    cfg.camera.fps * sim.time_scale)
+    camera = open_camera(cfg, angle_source=rig.angle, clock=clock,
+                         pose=CameraPose(yaw=math.radians(sim.camera_yaw_deg)), seed=sim.seed)
+    try:
+        sensor = CameraAngleSensor(camera, cfg, clock)
+    except BaseException:
+        camera.close()
+        raise
+    cam = cfg.camera
+    log.info("simulated camera: %d×%d px at %g frames/s, yaw %g°, marker radius %g m at %g m", cam.width, cam.height,
+             cam.fps, sim.camera_yaw_deg, cfg.marker.radius, cfg.marker.distance)
+    return sensor
+
+
+def _camera(config: Config, clock: Clock) -> Any:
+    """The V4L2 camera of ``[hardware.camera]`` as the angle sensor.
+
+    The camera file was read and checked with the configuration; a device that is missing,
+    busy or cannot deliver the file's resolution is a ``StartupError`` (exit 3, systemd
+    restarts the daemon: a USB camera may still be enumerating) naming the setting.
+    """
+    from drivers.camera import open_camera
+    from drivers.camera_sensor import CameraAngleSensor
+
+    hw = config.hardware
+    assert hw is not None and hw.camera is not None, "guarded by the config: sensor = camera needs [hardware.camera]"
+    settings = hw.camera
+    try:
+        camera = open_camera(settings.config, settings.device)
+    except DriverConfigError as exc:
+        raise StartupError(f"{config.source}: [hardware.camera] device: {exc}") from None
+    try:
+        sensor = CameraAngleSensor(camera, settings.config, clock, max_lost_time=settings.max_lost_time)
+    except DriverConfigError as exc:
+        camera.close()
+        raise ConfigError(f"{config.source}: [hardware.camera]: {exc}") from None
+    except BaseException:
+        camera.close()
+        raise
+    cam = settings.config.camera
+    log.info("camera %s: %d×%d px at %g frames/s (camera file %s)", settings.device, cam.width, cam.height, cam.fps,
+             settings.file)
+    return sensor

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 #: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 1
+MAP_VERSION = 2  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other)
 
 WORD_ORDERS = ("big", "little")
 
@@ -53,6 +53,7 @@ FLAG_BITS: dict[str, int] = {
     "camera_pose": 6,
     "marker_lost": 7,
     "dropped_frames": 8,
+    "corrupt_frame": 9,   # map version 2; in version 1 it set bit 15 (other)
 }
 FLAG_OTHER_BIT = 15
 
