@@ -7,16 +7,12 @@ import os
 from measurement.errors import VisionError
 from measurement.vision.config import CameraConfig
 
-from .files import read_toml
+from .files import read_toml_as
 
 
 def read_camera(path: str | os.PathLike) -> CameraConfig:
     """The camera file at ``path``: intrinsics, distortion, marker radius and distance (and optional [pose])."""
-    doc = read_toml(path, "camera file")
-    try:
-        return CameraConfig.from_dict(doc)
-    except VisionError as exc:
-        raise VisionError(f"{path}: {exc}") from None
+    return read_toml_as(path, "camera file", CameraConfig.from_dict, VisionError)
 
 
 def camera_config(camera: str | os.PathLike | CameraConfig) -> CameraConfig:

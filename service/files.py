@@ -5,14 +5,17 @@ from __future__ import annotations
 import os
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, TypeVar
 
 import tomli_w
 
+from measurement.errors import RigError
 from measurement.rig import Rig
 from measurement.trace import Trace, parse_trace_csv
 
 from .errors import InputFileError
+
+T = TypeVar("T")
 
 
 def read_text(path: str | os.PathLike, what: str) -> str:
@@ -43,13 +46,18 @@ def read_trace(path: str | os.PathLike) -> Trace:
     return parse_trace_csv(text.splitlines(), source=str(path))
 
 
-def read_rig(path: str | os.PathLike) -> Rig:
-    doc = read_toml(path, "rig file")
-    from measurement.errors import RigError
+def read_toml_as(path: str | os.PathLike, what: str, parse: Callable[[dict], T], error: type[Exception]) -> T:
+    """Parse a TOML file with ``parse``; its ``error`` is re-raised with the file name in front."""
+    doc = read_toml(path, what)
     try:
-        return Rig.from_dict(doc)
-    except RigError as exc:
-        raise RigError(f"{path}: {exc}") from None
+        return parse(doc)
+    except error as exc:
+        raise error(f"{path}: {exc}") from None
+
+
+def read_rig(path: str | os.PathLike) -> Rig:
+    """The rig file of DESIGN.md (kind, constants, declared effects)."""
+    return read_toml_as(path, "rig file", Rig.from_dict, RigError)
 
 
 def write_rig(rig: Rig, path: str | os.PathLike, comment: str | None = None) -> None:
