@@ -238,8 +238,11 @@ def identify(trace: Trace, rig: Rig, options: Options = Options()) -> Identifica
         final, steps, spent = discover(base, prep, rig, options)
         nfev += spent
     # Glitches the pre-screen missed show in the final residual; judged there
-    # because a structured baseline residual is not Gaussian.
-    t_fit, y_fit, bad = _remove_outliers(final, prep, options)
+    # because a structured baseline residual is not Gaussian. While the final
+    # residual is itself structured, its peaks are not glitches: keep the data.
+    bad = np.zeros(0, dtype=int)
+    if not diagnose(final, prep.noise, prep.stuck).structured:
+        t_fit, y_fit, bad = _remove_outliers(final, prep, options)
     n_outliers = prep.outliers.size + bad.size
     if bad.size:
         final = fit_model(final.model, t_fit, y_fit, prep.noise, previous=final)
