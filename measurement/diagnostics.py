@@ -15,7 +15,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from .fit import ModelFit, autocorrelation
-from .signal import find_swings
+from .signal import find_swings, resample_uniform
 
 #: residual RMS / noise floor below which the model is "at the noise floor"
 AT_NOISE = 1.10
@@ -101,14 +101,6 @@ class Diagnostics:
         return out
 
 
-def _uniform(t: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float]:
-    dt = float(np.median(np.diff(t)))
-    if np.max(np.abs(np.diff(t) - dt)) <= 0.01 * dt:
-        return r, dt
-    tu = np.arange(t[0], t[-1], dt)
-    return np.interp(tu, t, r), dt
-
-
 def _envelope_law(times: np.ndarray, amps: np.ndarray) -> tuple[str | None, dict]:
     """Which decay law fits the peak amplitudes best: exponential, linear, hyperbolic."""
     if amps.size < 5:
@@ -189,7 +181,7 @@ def diagnose(fit: ModelFit, noise: float, stopped: bool = False) -> Diagnostics:
     sw_fit = find_swings(fit.t, fit.fitted, centre=offset, hysteresis=3 * noise)
     swing_hz = sw_fit.damped_frequency / (2 * math.pi) if math.isfinite(sw_fit.damped_frequency) else float("nan")
 
-    ru, dt = _uniform(fit.t, r)
+    _, ru, dt = resample_uniform(fit.t, r)
     spec = np.abs(np.fft.rfft(ru - ru.mean())) ** 2
     freqs = np.fft.rfftfreq(ru.size, dt)
     line_hz, line_fraction, low_fraction = None, 0.0, 0.0

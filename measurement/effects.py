@@ -137,10 +137,6 @@ class Effect:
         return out
 
 
-def _direction_of(omega: np.ndarray) -> np.ndarray:
-    return np.sign(omega)
-
-
 class Viscous(Effect):
     name = "viscous"
     role = "damping"
@@ -171,7 +167,7 @@ class Coulomb(Effect):
     law = "T_c·sgn θ' (torsion); μ·m·g·cos θ·sgn θ' (compound)"
 
     def basis(self, theta, omega):
-        s = _direction_of(omega)
+        s = np.sign(omega)  # the half-swing's direction
         if self.rig.kind == "compound":
             return (s * np.cos(theta))[:, None]
         return s[:, None]

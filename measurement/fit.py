@@ -25,7 +25,7 @@ from scipy.signal import savgol_filter
 
 from .errors import IdentificationError
 from .model import STATE_PARAMS, Model
-from .signal import find_swings
+from .signal import find_swings, resample_uniform
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,14 +91,6 @@ class ModelFit:
 # -- starting values ---------------------------------------------------------------
 
 
-def _uniform(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    dt = float(np.median(np.diff(t)))
-    if np.max(np.abs(np.diff(t) - dt)) <= 0.01 * dt:
-        return t, y, dt
-    tu = np.arange(t[0], t[-1], dt)
-    return tu, np.interp(tu, t, y), dt
-
-
 def _centre(t: np.ndarray, y: np.ndarray, sigma: float) -> float:
     sw = find_swings(t, y, hysteresis=3 * sigma)
     pv = sw.peak_values
@@ -115,7 +107,7 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float) -> t
     wd = sw.damped_frequency
     if not math.isfinite(wd) or wd <= 0:
         raise IdentificationError("no swing found: cannot estimate the frequency (fewer than two zero crossings)")
-    tu, yu, dt = _uniform(t, y)
+    tu, yu, dt = resample_uniform(t, y)
     period_samples = 2 * math.pi / wd / dt
     window = int(max(7, min(period_samples / 5.0, (tu.size // 3))))
     window += 1 - window % 2

@@ -240,8 +240,9 @@ def identify(trace: Trace, rig: Rig, options: Options = Options()) -> Identifica
     # Glitches the pre-screen missed show in the final residual; judged there
     # because a structured baseline residual is not Gaussian. While the final
     # residual is itself structured, its peaks are not glitches: keep the data.
+    diag: Diagnostics = diagnose(final, prep.noise, prep.stuck)
     bad = np.zeros(0, dtype=int)
-    if not diagnose(final, prep.noise, prep.stuck).structured:
+    if not diag.structured:
         t_fit, y_fit, bad = _remove_outliers(final, prep, options)
     n_outliers = prep.outliers.size + bad.size
     if bad.size:
@@ -252,7 +253,7 @@ def identify(trace: Trace, rig: Rig, options: Options = Options()) -> Identifica
             nfev += base.nfev
         else:
             base = final
-    diag: Diagnostics = diagnose(final, prep.noise, prep.stuck)
+        diag = diagnose(final, prep.noise, prep.stuck)
 
     w, ws = final.value("omega_n"), final.stdev("omega_n")
     J = _inertia(rig, w)

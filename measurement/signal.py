@@ -23,6 +23,19 @@ def robust_std(x: np.ndarray) -> float:
     return float(_MAD_TO_SIGMA * np.median(np.abs(x - np.median(x))))
 
 
+def resample_uniform(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(t, y, dt) on an even grid at the median interval dt (s); as given when already even to 1 %.
+
+    For the tools that need even spacing (Savitzky–Golay, FFT); the fit itself
+    always uses the true timestamps.
+    """
+    dt = float(np.median(np.diff(t)))
+    if np.max(np.abs(np.diff(t) - dt)) <= 0.01 * dt:
+        return t, y, dt
+    tu = np.arange(t[0], t[-1], dt)
+    return tu, np.interp(tu, t, y), dt
+
+
 def loo_deviations(t: np.ndarray | None, y: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
     """Leave-one-out deviations of each sample from its neighbours, at the true times.
 
@@ -51,7 +64,7 @@ def loo_deviations(t: np.ndarray | None, y: np.ndarray, d: int) -> tuple[np.ndar
     return idx, dev / np.sqrt(1.0 + np.sum(weights**2, axis=1))
 
 
-def _gap_free(t: np.ndarray | None, idx: np.ndarray, d: int, n: int) -> np.ndarray:
+def _gap_free(t: np.ndarray | None, idx: np.ndarray, d: int) -> np.ndarray:
     """Whether the window idx ± d spans no gap (an interval over 3× the median)."""
     if t is None:
         return np.ones(idx.size, dtype=bool)
@@ -81,7 +94,7 @@ def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bo
         idx, dev = loo_deviations(t, y, d)
         if idx.size < 10:
             continue
-        keep = _gap_free(t, idx, d, y.size)
+        keep = _gap_free(t, idx, d)
         if exclude is not None and len(exclude):
             near = np.zeros(y.size, dtype=bool)
             for i in np.asarray(exclude, dtype=int):
@@ -113,7 +126,7 @@ def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
     found: list[int] = []
     skip = np.zeros(n, dtype=bool)
     idx, _ = loo_deviations(t, y, 2)
-    skip[idx[~_gap_free(t, idx, 2, n)]] = True  # no prediction across a gap
+    skip[idx[~_gap_free(t, idx, 2)]] = True  # no prediction across a gap
     for _ in range(max(1, n // 20)):
         idx, dev = loo_deviations(t, y, 2)
         score = np.abs(dev) / sigma
