@@ -35,12 +35,10 @@ from drivers.solenoid import Solenoid
 from measurement import Pendulum
 
 from .config import Config
+from .defaults import SIM_BUTTON_PIN, SIM_SOLENOID_PIN, demo_camera
 from .errors import ConfigError, StartupError
 
 log = logging.getLogger("moi.hardware")
-
-SIM_SOLENOID_PIN = 17
-SIM_BUTTON_PIN = 27
 
 
 @dataclass
@@ -191,11 +189,8 @@ def _simulated_camera(sim: Any, rig: SimRig, clock: Clock) -> Any:
 
     cfg = sim.camera_config
     if cfg is None:  # SimulationSettings built by hand rather than by parse_config, which reads the file
-        from measurement.vision.config import CameraConfig
-
         from .camera_config import read_camera
-        from .commands.measure import DEFAULT_CAMERA
-        cfg = read_camera(sim.camera) if sim.camera else CameraConfig.from_dict(DEFAULT_CAMERA)
+        cfg = read_camera(sim.camera) if sim.camera else demo_camera()
     if sim.time_scale != 1.0:
         # frames are rendered on the main loop's thread (~5 ms each at 640×480); faster than real time,
         # more frames fall due between two polls than the mock's 8-frame buffer holds: the rest are dropped

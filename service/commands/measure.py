@@ -23,27 +23,23 @@ import math
 import sys
 from contextlib import ExitStack
 
-from measurement import Options, Pendulum, Rig
+from measurement import Options, Pendulum
 from measurement.errors import InvalidInput
 
+from ..defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, demo_camera
 from ..files import read_rig
 from .simulate import EFFECT_SYNTAX, parse_effects
 
 HELP = "one push-button measurement cycle on the simulated rig (solenoid, encoder, sequencer), printed"
 
-#: the demo rig of `moi demo` when no --rig is given
-DEFAULT_RIG = Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5043e-3, declared=("viscous",))
-DEFAULT_INERTIA = 0.0125
-DEFAULT_EFFECTS = ["viscous=1.5e-4", "coulomb=1.2e-4"]
+#: the demo rig, part and damping when no --rig is given
+DEFAULT_RIG = DEMO_RIG
+DEFAULT_INERTIA = DEMO_INERTIA
+DEFAULT_EFFECTS = [f"{name}:{p}={v:g}" for name, params in DEMO_EFFECTS.items() for p, v in params.items()]
 
 #: exit status when the measurement ended in FAULT (not a bug: exit 1; not bad input: exit 2)
 EXIT_FAULT = 3
 
-#: the simulated camera when no --camera file is given: 640×480 at 100 frames/s, 56° field of view,
-#: the marker on a 0.10 m radius seen from 0.25 m (240 px per rad at rest)
-DEFAULT_CAMERA = {"camera": {"width": 640, "height": 480, "fps": 100.0, "fx": 600.0, "fy": 600.0,
-                             "cx": 319.5, "cy": 239.5, "distortion": [0.0, 0.0, 0.0, 0.0, 0.0]},
-                  "marker": {"radius": 0.10, "distance": 0.25}}
 #: default --time-scale per sensor
 DEFAULT_TIME_SCALE = {"encoder": 5.0, "camera": 1.0}
 
@@ -162,13 +158,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _camera_config(args: argparse.Namespace):
-    """The simulated camera's file (--camera, else DEFAULT_CAMERA), checked before anything is opened."""
-    from measurement.vision.config import CameraConfig
-
+    """The simulated camera's file (--camera, else the demo camera), checked before anything is opened."""
     from ..camera_config import read_camera
     if not (abs(args.camera_yaw) < 20 and args.camera_yaw == args.camera_yaw):
         raise InvalidInput(f"--camera-yaw must be within ±20°, got {args.camera_yaw:g}")
-    return read_camera(args.camera) if args.camera else CameraConfig.from_dict(DEFAULT_CAMERA)
+    return read_camera(args.camera) if args.camera else demo_camera()
 
 
 def _open_encoder(stack: ExitStack, args: argparse.Namespace, sim, clock, out):

@@ -21,7 +21,7 @@ pytestmark = pytest.mark.broker
 def test_a_deeply_nested_json_command_neither_stops_mqtt_nor_its_acknowledgements(tmp_path, broker, appliance_factory,
                                                                                   consumer_factory):
     app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
-    assert app.app.mqtt.connected_event.wait(10)
+    assert app.app.mqtt.subscribed_event.wait(10)
     c = consumer_factory(broker.port, ["moi/test-rig/result"])
     c.wait_subscribed()
     c.publish("moi/test-rig/cmd/measure", "[" * 2000 + "]" * 2000)  # 4 kB; a RecursionError for json.loads
@@ -52,7 +52,7 @@ def test_an_exception_in_a_command_handler_is_logged_and_the_next_command_still_
                       "rig", store, on_command=on_command)
     svc.start()
     try:
-        assert svc.connected_event.wait(10)
+        assert svc.subscribed_event.wait(10)
         c = consumer_factory(broker.port, ["moi/rig/status"])
         c.wait_subscribed()
         c.publish("moi/rig/cmd/measure", "")
