@@ -223,6 +223,12 @@ class ModbusServer:
         self._ready.set()
         await server.serving
 
+    def client_count(self) -> int | None:
+        """Modbus TCP clients connected now (None for RTU or before the start)."""
+        server = self._server if self.settings.mode == "tcp" else None
+        conns = getattr(server, "active_connections", None)
+        return len(conns) if conns is not None else None
+
     def alive(self) -> bool:
         """True while the server thread runs (after a successful ``start``)."""
         return self._thread is not None and self._thread.is_alive()
