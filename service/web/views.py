@@ -210,7 +210,7 @@ class Views:
         sid, _ = made
         resp = web.HTTPSeeOther(self._next(request, str(form.get("next") or "")))
         resp.set_cookie(COOKIE, sid, max_age=int(SESSION_LIFETIME), httponly=True, samesite="Strict", path="/")
-        return resp
+        raise resp
 
     async def logout(self, request: web.Request) -> web.StreamResponse:
         self._same_origin(request)
@@ -219,7 +219,7 @@ class Views:
         self.server.guard.logout(request.cookies.get(COOKIE))
         resp = web.HTTPSeeOther("/")
         resp.del_cookie(COOKIE, path="/")
-        return resp
+        raise resp
 
     def _authorise(self, request: web.Request, form: Mapping[str, Any]) -> None:
         self._same_origin(request)
