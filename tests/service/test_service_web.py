@@ -18,6 +18,9 @@ from service.errors import StartupError
 from .conftest import appliance_doc
 
 
+ON = {"enabled": True}
+
+
 class Client:
     def __init__(self, url: str) -> None:
         self.base = url.rstrip("/")
@@ -40,7 +43,7 @@ class Client:
 
 @pytest.fixture
 def running(appliance_factory, tmp_path):
-    return appliance_factory(appliance_doc(tmp_path / "state"))
+    return appliance_factory(appliance_doc(tmp_path / "state", web=ON))
 
 
 def test_actions_need_the_token_and_the_csrf_token(running):
@@ -115,7 +118,7 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
 def test_setup_page_masks_secrets_and_reports_health(appliance_factory, tmp_path):
     token_file = tmp_path / "token"
     token_file.write_text("a-long-enough-token\n")
-    doc = appliance_doc(tmp_path / "state", web={"host": "127.0.0.1", "port": 0, "token_file": str(token_file)})
+    doc = appliance_doc(tmp_path / "state", web={**ON, "token_file": str(token_file)})
     running = appliance_factory(doc)
     c = Client(running.app.web.url)
     status, _, page = c.request("/setup")
@@ -130,7 +133,7 @@ def test_a_missing_token_file_stops_the_start(tmp_path):
     from service.config import parse_config
     from service.daemon import Appliance
 
-    doc = appliance_doc(tmp_path / "state", web={"port": 0, "token_file": str(tmp_path / "absent")})
+    doc = appliance_doc(tmp_path / "state", web={**ON, "token_file": str(tmp_path / "absent")})
     app = Appliance(parse_config(doc, source="test.toml"))
     with pytest.raises(StartupError, match="absent.*does not exist"):
         app.start()

@@ -45,7 +45,7 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     from selenium.webdriver.support.ui import WebDriverWait
 
     # slow enough that the page sees every state: about 1 s of capture
-    doc = appliance_doc(tmp_path / "state", time_scale=5.0,
+    doc = appliance_doc(tmp_path / "state", time_scale=5.0, web={"enabled": True},
                         simulation={"effects": {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 6e-4}}})
     running = appliance_factory(doc)
     app = running.app
