@@ -183,13 +183,13 @@ def test_the_connection_cap_closes_the_longest_idle_connection_first():
     try:
         for _ in range(3):
             socks.append(socket.create_connection(("127.0.0.1", srv.bound_port), timeout=5))
-        wait_until(lambda: srv.connections == 3, 5, what="three connections")
+        wait_until(lambda: srv.client_count() == 3, 5, what="three connections")
         _tcp_exchange(socks[0], 1, 1, struct.pack(">BHH", 4, 0, 2))  # the first one is active: not the oldest idle
         socks.append(socket.create_connection(("127.0.0.1", srv.bound_port), timeout=5))
         assert _closed_by_peer(socks[1], 5), "the longest idle connection was not closed"
         assert not _closed_by_peer(socks[2], 0.2) and not _closed_by_peer(socks[0], 0.05)
         assert len(_tcp_exchange(socks[3], 2, 1, struct.pack(">BHH", 4, 0, 2))) == 6  # the newcomer is served
-        assert srv.connections == 3 and srv.connections_dropped == 1
+        assert srv.client_count() == 3 and srv.connections_dropped == 1
     finally:
         for s in socks:
             s.close()
