@@ -44,6 +44,7 @@ from .files import read_rig, read_toml
 from .modbus_server import ModbusSettings
 from .mqtt import MqttSettings
 from .registers import WORD_ORDERS
+from .web.settings import WebSettings
 
 REQUIRED = object()
 
@@ -302,10 +303,17 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "stopbits": _doc("RTU stop bits", choices=(1, 2)),
         "bytesize": _doc("RTU data bits", choices=(7, 8)),
     }, extra={"enabled": Key("bool", True, "serve the registers")}),
+    "web": _schema(WebSettings, {
+        "host": _doc("listen address: 127.0.0.1 this machine only, 0.0.0.0 every interface (the LAN)"),
+        "port": _doc("TCP port (0: any free port)", min=0, max=65535),
+        "token_file": _doc("file holding the password/token every action (Measure, Abort) needs (default: "
+                           "web-token in the state directory, made with a random token on first start)", kind="path"),
+        "page_size": _doc("measurements per history page", min=1, max=500),
+    }, extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
 }
 
 #: tables that are plain key/value tables of SCHEMA (the others are sub-tables)
-TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus")
+TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus", "web")
 
 
 # --- the validated configuration ----------------------------------------------------------------
@@ -327,6 +335,7 @@ class Config:
     identification: Options
     mqtt: MqttSettings | None        # None: MQTT off
     modbus: ModbusSettings | None    # None: Modbus off
+    web: WebSettings | None          # None: no web page
     document: Mapping[str, Any]      # the parsed TOML, stored with every measurement
 
     def to_dict(self) -> dict[str, Any]:
@@ -345,6 +354,7 @@ class Config:
             "simulation": clean(self.simulation) if self.simulated else None,
             "hardware": clean(self.hardware), "sequencer": clean(self.sequencer),
             "identification": clean(self.identification), "mqtt": clean(self.mqtt), "modbus": clean(self.modbus),
+            "web": clean(self.web),
         }
 
 
@@ -576,13 +586,19 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
             raise c.fail("modbus", "serial_port", "missing: mode = \"rtu\" needs the serial device, e.g. /dev/ttyAMA0")
         modbus = ModbusSettings(**mb)
 
+    web = None
+    w = c.table("web", doc.get("web", {}), SCHEMA["web"])
+    if w.pop("enabled"):
+        w["token_file"] = _resolve(base, w["token_file"])
+        web = WebSettings(**w)
+
     sd = state_dir or _resolve(base, dev["state_dir"])
     return Config(
         source=source, device_id=dev["id"],
         state_dir=Path(sd) if sd else default_state_dir(environ),
         log_level=dev["log_level"], store_trace=dev["store_trace"],
         rig=rig, rig_path=rig_path, simulated=simulated, simulation=simulation, hardware=hardware,
-        sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, document=dict(doc),
+        sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, web=web, document=dict(doc),
     )
 
 

@@ -74,6 +74,7 @@ class Appliance:
         self.store: Store | None = None
         self.modbus: ModbusServer | None = None
         self.mqtt: MqttService | None = None
+        self.web: Any = None  # service.web.server.WebServer when [web] is enabled
         self.sequencer: Sequencer | None = None
         self._commands: queue.SimpleQueue[tuple[str, str]] = queue.SimpleQueue()
         self._wakeup = threading.Event()
@@ -125,6 +126,11 @@ class Appliance:
             if d.button is not None:
                 d.button.when_pressed = lambda: self.command("trigger", "button")
             self.sequencer.subscribe(self._on_event)
+            if cfg.web is not None:
+                from .web.server import WebServer  # aiohttp is loaded only when the page is served
+                self.web = WebServer(self, cfg.web)
+                self.web.start()
+                self.sequencer.subscribe(self.web.on_event)
             # MQTT last: its outbox sender starts delivering at once, and the live registers
             # follow its progress only once the main loop runs (right after this)
             if cfg.mqtt is not None:
@@ -142,6 +148,8 @@ class Appliance:
             m = cfg.modbus
             where.append(f"Modbus {m.mode.upper()} " + (f"{m.host}:{self.modbus.bound_port}" if m.mode == "tcp" else str(m.serial_port)))
         where.append(f"MQTT {cfg.mqtt.host}:{cfg.mqtt.port}" if cfg.mqtt else "MQTT off")
+        if self.web is not None:
+            where.append(f"web page {self.web.url}")
         log.info("moi %s ready (%s rig; %s; store %s)", __version__, "simulated" if cfg.simulated else "hardware",
                  ", ".join(where), self.store.path)
         self.notifier.ready(f"idle; {', '.join(where)}")
@@ -215,6 +223,8 @@ class Appliance:
     def _check_components(self) -> None:
         if self.modbus is not None and not self.modbus.alive():
             raise _Fatal("the Modbus server thread stopped")
+        if self.web is not None and not self.web.alive():
+            raise _Fatal("the web server thread stopped")
         if self.mqtt is not None and self.mqtt.sender.error is not None:
             raise _Fatal(f"the MQTT outbox sender failed: {self.mqtt.sender.error}")
         if self.mqtt is not None and not self.mqtt.network_thread_alive():
@@ -293,6 +303,8 @@ class Appliance:
             self.modbus.publish_result(stored.payload)
         if self.mqtt is not None:
             self.mqtt.wake()
+        if self.web is not None:
+            self.web.measurement_stored(m)  # its plot is drawn once, off this thread, and kept with it
         self._note_stored(m.id)
         log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, result.get("J"),
                  ", ".join(result.get("flags") or []) or "none")
@@ -377,6 +389,12 @@ class Appliance:
         self._shutdown_components()
 
     def _shutdown_components(self) -> None:
+        if self.web is not None:  # first: its handlers read the store and the devices
+            try:
+                self.web.stop()
+            except Exception:
+                log.exception("web server stop failed")
+            self.web = None
         if self.devices is not None:
             self.devices.close()  # solenoid first
             self.devices = None

@@ -243,6 +243,12 @@ class ModbusServer:
         log.info("Modbus server on %s (unit id %d)", where if self.bound_port is None else
                  f"TCP {s.host}:{self.bound_port}", s.unit_id)
 
+    def client_count(self) -> int | None:
+        """Modbus TCP clients connected now (None for RTU or before the start)."""
+        server = self._server if self.settings.mode == "tcp" else None
+        conns = getattr(server, "active_connections", None)
+        return len(conns) if conns is not None else None
+
     def alive(self) -> bool:
         """True while the server serves (after a successful ``start``)."""
         return self._io.running and self._server is not None and not self._server.serving.done()

@@ -73,6 +73,14 @@ CREATE TABLE IF NOT EXISTS outbox (
     attempts       INTEGER NOT NULL DEFAULT 0,
     last_attempt   REAL
 );
+CREATE TABLE IF NOT EXISTS attachments (
+    uuid       TEXT NOT NULL REFERENCES measurements (uuid),
+    name       TEXT NOT NULL,
+    media_type TEXT NOT NULL,
+    data       BLOB NOT NULL,
+    created_at REAL NOT NULL,
+    PRIMARY KEY (uuid, name)
+);
 """
 
 
@@ -353,3 +361,48 @@ class Store:
     def count(self) -> int:
         with self._lock:
             return int(self._db.execute("SELECT COUNT(*) FROM measurements").fetchone()[0])
+
+    # --- attachments (files kept with a measurement, e.g. its plot) ---------------
+    def put_attachment(self, uuid: str, name: str, data: bytes, media_type: str) -> None:
+        """Keep ``data`` with the measurement ``uuid`` under ``name`` (replaces one of the same name)."""
+        try:
+            with self._lock, self._tx() as db:
+                db.execute("INSERT OR REPLACE INTO attachments (uuid, name, media_type, data, created_at) "
+                           "VALUES (?,?,?,?,?)", (uuid, name, media_type, sqlite3.Binary(data), time.time()))
+        except sqlite3.Error as exc:
+            raise StoreError(f"cannot store {name!r} of measurement {uuid}: {exc}") from None
+
+    def get_attachment(self, uuid: str, name: str) -> tuple[bytes, str] | None:
+        """(data, media type) of an attachment, or None."""
+        with self._lock:
+            row = self._db.execute("SELECT data, media_type FROM attachments WHERE uuid = ? AND name = ?",
+                                   (uuid, name)).fetchone()
+        return (bytes(row[0]), row[1]) if row else None
+
+    def search(self, *, offset: int = 0, limit: int | None = 25, since: float | None = None,
+               until: float | None = None, status: str | None = None, flag: str | None = None,
+               payload_fields: Mapping[str, str] | None = None) -> tuple[list[Measurement], int]:
+        """One page of measurements, newest first, and how many match in all.
+
+        flag: only those carrying this quality flag. payload_fields: result-payload key → value the key must
+        equal (e.g. {"part_id": "A-17"}); a value that is itself an object matches on its ``name``.
+        """
+        clauses, args = [], []
+        for sql, value in (("finished_at >= ?", since), ("finished_at < ?", until), ("status = ?", status)):
+            if value is not None:
+                clauses.append(sql)
+                args.append(value)
+        if flag:
+            clauses.append("EXISTS (SELECT 1 FROM json_each(flags) WHERE value = ?)")
+            args.append(flag)
+        for key, value in (payload_fields or {}).items():
+            path = "$." + json.dumps(str(key))
+            clauses.append("(json_extract(payload, ?) = ? OR json_extract(payload, ? || '.name') = ?)")
+            args += [path, value, path, value]
+        where = ("WHERE " + " AND ".join(clauses)) if clauses else ""
+        with self._lock:
+            total = int(self._db.execute(f"SELECT COUNT(*) FROM measurements {where}", args).fetchone()[0])
+            page = f"LIMIT {int(limit)} OFFSET {int(offset)}" if limit is not None else ""
+            rows = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC {page}",
+                                    args).fetchall()
+        return [self._row(r, full=True, trace=False) for r in rows], total
