@@ -20,7 +20,7 @@ from aiohttp import web
 
 from .. import __version__
 from .auth import COOKIE, CSRF_HEADER, SESSION_LIFETIME
-from .live import Live, extras
+from .live import Live
 from .words import FLAG_WORDS, STATE_WORDS, flag_words
 
 if TYPE_CHECKING:  # pragma: no cover

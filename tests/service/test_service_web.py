@@ -159,3 +159,19 @@ def test_store_search_pages_and_filters_on_payload_fields(tmp_path):
         store.put_attachment(rows[0].uuid, "plot.png", b"\x89PNG...", "image/png")
         assert store.get_attachment(rows[0].uuid, "plot.png") == (b"\x89PNG...", "image/png")
         assert store.get_attachment(rows[0].uuid, "other") is None
+
+
+def test_a_taken_port_stops_the_start_with_a_clear_reason(tmp_path):
+    import socket
+
+    from service.config import parse_config
+    from service.daemon import Appliance
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        app = Appliance(parse_config(appliance_doc(tmp_path / "state", web={**ON, "port": port}), source="t.toml"))
+        with pytest.raises(StartupError, match=f"cannot serve the web page on 127.0.0.1:{port}"):
+            app.start()
+    assert app.web is None and app.store is None
