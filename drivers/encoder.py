@@ -27,7 +27,6 @@ import asyncio
 import logging
 import math
 import socket
-import threading
 import time
 from collections import deque
 from dataclasses import dataclass, fields
@@ -39,6 +38,7 @@ import numpy as np
 from .aioloop import LoopThread
 from .clock import Clock, MonotonicClock
 from .errors import DriverConfigError, EncoderFault
+from .sensor import SampleBuffer
 from .modbus_words import WORD_ORDERS, from_registers
 
 log = logging.getLogger("moi.drivers.encoder")
@@ -219,15 +219,12 @@ class ModbusEncoder:
     def __init__(self, config: EncoderConfig, clock: Clock | None = None):
         self.config = config
         self.clock = clock or MonotonicClock()
-        self._lock = threading.Lock()
-        self._arrived = threading.Condition(self._lock)  # notified on every sample and on a fault
+        self._buffer = SampleBuffer()
+        self._lock = self._buffer.lock  # also guards the counters
         self._io = LoopThread("moi-encoder-io")
         self._client = None
         self._task: asyncio.Task | None = None
         self._sampling = False
-        self._t: list[float] = []
-        self._angle: list[float] = []
-        self._fault: EncoderFault | None = None
         self._closed = False
         self._rx = bytearray()  # bytes received for the request in flight (CRC check)
         self._counts = self._zero_counts()
@@ -242,21 +239,14 @@ class ModbusEncoder:
         self._io.start()
         self._stop_task()
         with self._lock:
-            self._t.clear()
-            self._angle.clear()
-            self._fault = None
+            self._buffer.reset()
             self._counts = self._zero_counts()
             self._unwrap_last = None
         self._io.call(self._begin_sampling())
 
     def read(self) -> tuple[np.ndarray, np.ndarray]:
         """Samples since the last read: (t in s on the clock, angle in rad). Raises EncoderFault after a fault."""
-        with self._lock:
-            if self._fault is not None:
-                raise self._fault
-            t, a = self._t, self._angle
-            self._t, self._angle = [], []
-        return np.asarray(t, dtype=float), np.asarray(a, dtype=float)
+        return self._buffer.drain()
 
     def stop(self) -> None:
         """Stop sampling (keeps the port open for the next capture); samples already taken stay readable."""
@@ -265,16 +255,16 @@ class ModbusEncoder:
     def stats(self) -> dict:
         """Counters of the current/last capture: samples, requests and the failed reads by kind."""
         with self._lock:
-            c = dict(self._counts)
+            c = {"samples": self._buffer.count, **self._counts}
+            rate = self._buffer.rate()
         c["errors"] = c["timeouts"] + c["crc_errors"] + c["exceptions"] + c["connection_errors"]
         c["port"] = self.config.port
         c["device_id"] = self.config.device_id
         if c["requests"]:
             c["error_rate"] = c["errors"] / c["requests"]
-        if c["samples"] > 1 and c["last_t"] > c["first_t"]:
-            c["rate_hz"] = (c["samples"] - 1) / (c["last_t"] - c["first_t"])
-        for k in ("first_t", "last_t", "consecutive_errors"):
-            c.pop(k, None)
+        if rate is not None:
+            c["rate_hz"] = rate
+        c.pop("consecutive_errors", None)
         return c
 
     def flags(self) -> tuple[str, ...]:
@@ -282,9 +272,7 @@ class ModbusEncoder:
 
     def wait_for_samples(self, n: int, timeout: float) -> bool:
         """Block until ``n`` samples were taken since ``start()`` (True), a fault, or ``timeout`` s of real time (False)."""
-        with self._arrived:
-            return self._arrived.wait_for(lambda: self._counts["samples"] >= n or self._fault is not None, timeout) \
-                and self._fault is None
+        return self._buffer.wait_for(n, timeout)
 
     def close(self) -> None:
         """Stop sampling, close the port and the I/O thread; safe twice."""
@@ -321,9 +309,13 @@ class ModbusEncoder:
     # -- I/O thread -------------------------------------------------------------------
     @staticmethod
     def _zero_counts() -> dict[str, Any]:
-        return {"samples": 0, "requests": 0, "timeouts": 0, "crc_errors": 0, "exceptions": 0,
+        return {"requests": 0, "timeouts": 0, "crc_errors": 0, "exceptions": 0,
                 "connection_errors": 0, "max_run_of_errors": 0, "consecutive_errors": 0,
-                "first_t": 0.0, "last_t": 0.0, "rtt_max_s": 0.0, "late_replies": 0}
+                "rtt_max_s": 0.0, "late_replies": 0}
+
+    def _snapshot(self) -> dict[str, Any]:
+        """The counters as a fault carries them (call with the lock held)."""
+        return {"samples": self._buffer.count, **self._counts}
 
     def _where(self) -> str:
         return f"device {self.config.device_id} on {self.config.port}"
@@ -340,9 +332,8 @@ class ModbusEncoder:
         except Exception as exc:  # top of the I/O thread: an unforeseen client error must surface as a fault, not silence
             log.exception("encoder sampling stopped")
             with self._lock:
-                self._fault = EncoderFault(f"encoder fault: sampling stopped on {self._where()}: "
-                                           f"{type(exc).__name__}: {exc}", dict(self._counts))
-                self._arrived.notify_all()
+                self._buffer.fail(EncoderFault(f"encoder fault: sampling stopped on {self._where()}: "
+                                               f"{type(exc).__name__}: {exc}", self._snapshot()))
 
     async def _end_sampling(self) -> None:
         # A flag, not only cancel(): on Python 3.11 asyncio.wait_for (inside pymodbus) swallows a
@@ -475,14 +466,13 @@ class ModbusEncoder:
                     counts["consecutive_errors"] += 1
                     counts["max_run_of_errors"] = max(counts["max_run_of_errors"], counts["consecutive_errors"])
                     if counts["consecutive_errors"] >= c.max_consecutive_errors:
-                        snapshot = {k: v for k, v in counts.items() if k not in ("first_t", "last_t")}
-                        self._fault = EncoderFault(
+                        fault = EncoderFault(
                             f"encoder fault: {counts['consecutive_errors']} failed reads in a row from {self._where()}; "
                             f"last: {detail} (timeouts {counts['timeouts']}, CRC errors {counts['crc_errors']}, "
                             f"exception replies {counts['exceptions']}, connection errors {counts['connection_errors']})",
-                            snapshot)
-                        log.error("%s", self._fault)
-                        self._arrived.notify_all()
+                            self._snapshot())
+                        log.error("%s", fault)
+                        self._buffer.fail(fault)
                         return
                 elif self._late(outcome[2]):
                     counts["consecutive_errors"] = 0
@@ -495,13 +485,7 @@ class ModbusEncoder:
                         # keep the angle continuous across the encoder's 0/full-turn wrap
                         angle += 2 * math.pi * round((self._unwrap_last - angle) / (2 * math.pi))
                     self._unwrap_last = angle
-                    if counts["samples"] == 0:
-                        counts["first_t"] = t
-                    counts["last_t"] = t
-                    counts["samples"] += 1
-                    self._t.append(t)
-                    self._angle.append(angle)
-                    self._arrived.notify_all()
+                    self._buffer.add(t, angle)
             if failed is Failure.CONNECTION:
                 # a refused connection fails instantly: pace the retries at the request time-out
                 await asyncio.sleep(c.timeout)

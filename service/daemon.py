@@ -22,6 +22,7 @@ that died ends the daemon with status 3 so that systemd restarts it.
 
 from __future__ import annotations
 
+import concurrent.futures
 import logging
 import queue
 import threading
@@ -77,6 +78,7 @@ class Appliance:
         self.web: Any = None  # service.web.server.WebServer when [web] is enabled
         self.sequencer: Sequencer | None = None
         self._commands: queue.SimpleQueue[tuple[str, str]] = queue.SimpleQueue()
+        self._calls: queue.SimpleQueue[tuple[Callable[[], Any], concurrent.futures.Future]] = queue.SimpleQueue()
         self._wakeup = threading.Event()
         self._stop = threading.Event()
         self._started_runs = 0
@@ -95,6 +97,14 @@ class Appliance:
         """Queue "trigger" or "abort" from ``source`` ("button", "modbus", "mqtt", "cli")."""
         self._commands.put((name, source))
         self._wakeup.set()
+
+    def call_soon(self, fn: Callable[[], Any]) -> concurrent.futures.Future:
+        """Run ``fn()`` on the main loop between two iterations (any thread; never blocks): device access
+        that must not overlap a measurement, e.g. the web page's camera snapshot. The future has its result."""
+        fut: concurrent.futures.Future = concurrent.futures.Future()
+        self._calls.put((fn, fut))
+        self._wakeup.set()
+        return fut
 
     def request_stop(self) -> None:
         self._stop.set()
@@ -188,6 +198,7 @@ class Appliance:
         # poll first: a trigger that arrived during PUBLISHING finds the IDLE that follows it
         self.sequencer.poll()
         self._drain_commands()
+        self._run_calls()
         self._check_components()
         self._refresh_live()
         self.loop_iterations += 1
@@ -219,6 +230,18 @@ class Appliance:
                     log.info("abort from %s: nothing to abort", source)
             else:
                 log.warning("unknown command %r from %s", name, source)
+
+    def _run_calls(self) -> None:
+        while True:
+            try:
+                fn, fut = self._calls.get_nowait()
+            except queue.Empty:
+                return
+            if fut.set_running_or_notify_cancel():
+                try:
+                    fut.set_result(fn())
+                except Exception as exc:  # the caller gets it; the main loop goes on
+                    fut.set_exception(exc)
 
     def _check_components(self) -> None:
         if self.modbus is not None and not self.modbus.alive():

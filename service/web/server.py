@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
+from drivers.aioloop import LoopThread
+
 from ..errors import StartupError
 from .auth import Guard, read_token
 from .settings import DEFAULT_TOKEN_FILE_NAME, WebSettings
@@ -43,11 +45,8 @@ class WebServer:
         self.token_file = token_file
         self.guard = Guard(read_token(token_file, create=settings.token_file is None))
         self.bound_port: int | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
-        self._ready = threading.Event()
-        self._stop: asyncio.Event | None = None
-        self._error: BaseException | None = None
+        self._io = LoopThread("moi-web")
+        self._runner: web.AppRunner | None = None
         self._listeners: set[asyncio.Queue] = set()
         self._plotter = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="moi-plot")
         self._plots: dict[str, concurrent.futures.Future] = {}
@@ -62,61 +61,48 @@ class WebServer:
         return f"http://{shown}:{self.bound_port or self.settings.port}/"
 
     def start(self, timeout: float = 10.0) -> None:
-        self._thread = threading.Thread(target=self._run, name="moi-web", daemon=True)
-        self._thread.start()
-        if not self._ready.wait(timeout) or self._error is not None:
-            err = self._error
+        """Listen (StartupError when the address is taken or not allowed) and serve on the web loop thread."""
+        self._io.start()
+        try:
+            self._io.call(self._serve(), timeout)
+        except (OSError, TimeoutError) as exc:
             self.stop()
             s = self.settings
-            raise StartupError(f"cannot serve the web page on {s.host}:{s.port}: "
-                               f"{err if err is not None else 'no answer within %g s' % timeout}") from None
+            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+            raise StartupError(f"cannot serve the web page on {s.host}:{s.port}: {why} "
+                               f"(address in use, or no permission)") from None
+        log.info("web page on %s (actions need the token in %s)", self.url, self.token_file)
 
-    def _run(self) -> None:
-        try:
-            asyncio.run(self._main())
-        except BaseException as exc:  # reported to start(), or logged when it dies later
-            self._error = exc
-            if self._ready.is_set():
-                log.exception("the web server stopped")
-            self._ready.set()
-
-    async def _main(self) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._stop = asyncio.Event()
-        app = self.views.application()
-        runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
+    async def _serve(self) -> None:
+        runner = web.AppRunner(self.views.application(), access_log=None, handle_signals=False, shutdown_timeout=1.0)
         await runner.setup()
         site = web.TCPSite(runner, self.settings.host, self.settings.port)
         try:
             await site.start()
-        except OSError as exc:
+        except BaseException:
             await runner.cleanup()
-            raise StartupError(f"{exc.strerror or exc} (address in use, or no permission)") from None
-        sockets = getattr(site._server, "sockets", None) or []  # aiohttp keeps the asyncio server there
-        if sockets:
-            self.bound_port = sockets[0].getsockname()[1]
-        log.info("web page on %s (actions need the token in %s)", self.url, self.token_file)
-        self._ready.set()
-        try:
-            await self._stop.wait()
-        finally:
-            for q in list(self._listeners):
-                q.put_nowait(None)  # ends every live stream
-            await runner.cleanup()
+            raise
+        self._runner = runner
+        self.bound_port = runner.addresses[0][1] if runner.addresses else self.settings.port
+
+    async def _close(self) -> None:
+        for q in list(self._listeners):
+            q.put_nowait(None)  # ends every live stream
+        if self._runner is not None:
+            await self._runner.cleanup()
+            self._runner = None
 
     def alive(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
+        return self._io.running
 
     def stop(self, timeout: float = 5.0) -> None:
-        loop, stop = self._loop, self._stop
-        if loop is not None and stop is not None and not loop.is_closed():
+        """Close the live streams and the server, end the loop thread, let a plot in progress finish; safe twice."""
+        if self._io.running:
             try:
-                loop.call_soon_threadsafe(stop.set)
-            except RuntimeError:
-                pass  # the loop already ended
-        if self._thread is not None:
-            self._thread.join(timeout)
-            self._thread = None
+                self._io.call(self._close(), timeout)
+            except Exception:  # stopping: the loop goes whatever happened
+                log.exception("web server shutdown failed")
+        self._io.stop()
         self._plotter.shutdown(wait=True, cancel_futures=True)
 
     # --- from the daemon's main loop (never block) -----------------------------------
@@ -151,11 +137,10 @@ class WebServer:
                 self._plots.pop(uuid, None)
 
     def _call(self, fn) -> None:
-        loop = self._loop
-        if loop is None or loop.is_closed():
+        if not self._io.running:
             return
         try:
-            loop.call_soon_threadsafe(fn)
+            self._io.loop.call_soon_threadsafe(fn)
         except RuntimeError:
             pass  # stopping
 

@@ -20,11 +20,11 @@ from aiohttp import web
 
 from .. import __version__
 from .auth import COOKIE, CSRF_HEADER, SESSION_LIFETIME
-from .live import Live, extras
+from .live import Live
 from .words import FLAG_WORDS, STATE_WORDS, flag_words
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..store import Measurement
+    from ..store import StoredMeasurement as Measurement
     from .server import WebServer
 
 log = logging.getLogger("moi.web")
@@ -455,15 +455,21 @@ class Views:
         config = self._camera()
         if config is None:
             raise Refused(404, "this appliance has no camera")
-        seq = self.app.sequencer
-        if seq is not None and seq.busy:
-            raise Refused(409, "a measurement is running: the camera is busy; try again when it is idle")
-        grab = getattr(self.app.devices.sensor, "snapshot", None) if self.app.devices is not None else None
-        if grab is None:
+        camera = getattr(self.app.devices.sensor, "camera", None) if self.app.devices is not None else None
+        if camera is None:
             raise Refused(404, "this camera sensor gives no single frames")
-        loop = asyncio.get_running_loop()
+
+        def grab():  # on the main loop: never while a measurement reads the camera
+            if self.app.sequencer.busy:
+                raise Refused(409, "a measurement is running: the camera is busy; try again when it is idle")
+            return camera.grab().image
+
         try:
-            png = await loop.run_in_executor(None, lambda: _annotated_png(grab(), config))
+            image = await asyncio.wrap_future(self.app.call_soon(grab))
+            loop = asyncio.get_running_loop()
+            png = await loop.run_in_executor(None, lambda: _annotated_png(image, config))
+        except Refused:
+            raise
         except Exception as exc:
             raise Refused(503, f"camera snapshot failed: {exc}") from None
         return web.Response(body=png, content_type="image/png", headers={"Cache-Control": "no-store"})

@@ -159,3 +159,50 @@ def test_store_search_pages_and_filters_on_payload_fields(tmp_path):
         store.put_attachment(rows[0].uuid, "plot.png", b"\x89PNG...", "image/png")
         assert store.get_attachment(rows[0].uuid, "plot.png") == (b"\x89PNG...", "image/png")
         assert store.get_attachment(rows[0].uuid, "other") is None
+
+
+def test_a_taken_port_stops_the_start_with_a_clear_reason(tmp_path):
+    import socket
+
+    from service.config import parse_config
+    from service.daemon import Appliance
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        app = Appliance(parse_config(appliance_doc(tmp_path / "state", web={**ON, "port": port}), source="t.toml"))
+        with pytest.raises(StartupError, match=f"cannot serve the web page on 127.0.0.1:{port}"):
+            app.start()
+    assert app.web is None and app.store is None
+
+
+def test_setup_camera_snapshot_and_fault_shown_and_acknowledged(appliance_factory, tmp_path):
+    running = appliance_factory(appliance_doc(tmp_path / "state", time_scale=1.0, web=ON,
+                                              simulation={"sensor": "camera"}))
+    app = running.app
+    c = Client(app.web.url)
+    assert b"snapshot-button" in c.request("/setup")[2]
+    status, headers, png = c.request("/setup/snapshot.png")
+    assert status == 200 and headers["Content-Type"] == "image/png" and png[:4] == b"\x89PNG"
+    import cv2
+    import numpy as np
+    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+    assert img.shape[:2] == (480, 640)
+    # the fitted edge is drawn in red (B, G, R = 0, 0, 255): the marker was found in the frame
+    assert np.count_nonzero((img[:, :, 2] == 255) & (img[:, :, 1] == 0) & (img[:, :, 0] == 0)) > 20
+    # a FAULT is shown with its reason; the token acknowledges it
+    app.sequencer.fault("encoder fault: test cable pulled")
+    running.wait_event(lambda e: e.state.value == "FAULT", 10, what="FAULT")
+    status, state = c.json("/api/state")
+    assert state["state"] == "FAULT" and state["fault"] == "encoder fault: test cable pulled"
+    token = Path(app.web.token_file).read_text().strip()
+    assert c.json("/api/abort", method="POST", headers={"Authorization": f"Bearer {token}"})[0] == 202
+    running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")
+
+
+def test_setup_encoder_angle_now(appliance_factory, tmp_path):
+    running = appliance_factory(appliance_doc(tmp_path / "state", web=ON, simulation={"sensor": "encoder"}))
+    status, body = Client(running.app.web.url).json("/api/angle")
+    # the simulated pendulum is held at its release angle (0.25 rad) until a measurement fires the solenoid
+    assert status == 200 and body["source"] == "encoder" and body["angle_rad"] == pytest.approx(0.25, abs=1e-3)
