@@ -358,6 +358,45 @@ class Drift(Effect):
         return {}
 
 
+class Gain(Effect):
+    name = "gain"
+    role = "sensor"
+    parameters = (
+        Parameter("g_minus_1", "1", None, None, lower=-0.9, description="sensor scale error g − 1"),
+    )
+    #: a scale error is told apart from the amplitude only through the sin θ of a compound rig
+    rigs = ("compound",)
+    cause = "camera/encoder scale error (distance, focal length, marker geometry)"
+    law = "θ_meas = a + g·θ"
+    extra_units = {"g": "1"}
+    #: below this amplitude (rad) sin θ is too close to θ for g to be told from the amplitude
+    min_amplitude: ClassVar[float] = 0.5
+
+    def identifiable(self, amplitude):
+        return amplitude >= self.min_amplitude
+
+    def sensor_basis(self, t, theta):
+        return np.asarray(theta, dtype=float)[:, None]
+
+    @classmethod
+    def given_names(cls, kind):
+        return ("g", "g_minus_1")
+
+    def normalise(self, given, inertia):
+        if set(given) == {"g"}:
+            return [float(given["g"]) - 1.0]
+        return super().normalise(given, inertia)
+
+    def evidence(self, diag):
+        if abs(diag.freq_amp_t) >= 4:
+            return (f"the swing frequency depends on the amplitude differently from sin θ at the measured scale"
+                    f" (t = {diag.freq_amp_t:.1f}): the angle's scale is off")
+        return ""
+
+    def physical(self, values, inertia, omega_n):
+        return {"g": 1.0 + float(values[0])}
+
+
 def resolve_effects(names: Iterable[str], rig: "Rig") -> list[Effect]:
     """Instantiate effects by name for this rig, in library order.
 

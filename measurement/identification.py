@@ -62,7 +62,7 @@ class Options:
     bic_margin: float = 10.0
     outlier_sigma: float = 6.0
     robust_scale: float = 3.0
-    gap_periods: float = 3.0
+    gap_periods: float = 1.5
     max_rounds: int = 5
 
 
