@@ -2,23 +2,24 @@
 
 from __future__ import annotations
 
+import io
 import os
+from typing import BinaryIO
 
 import numpy as np
 
 from measurement.result import IdentificationResult
 
 
-def plot_result(result: IdentificationResult, path: str | os.PathLike) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")  # headless appliance: never needs a display
-    import matplotlib.pyplot as plt
+def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO, *, dpi: int = 110) -> None:
+    """Draw the result into ``path`` (a file name or a binary file object), PNG."""
+    # a Figure without pyplot: no global state, so the daemon's plot worker thread may draw too
+    from matplotlib.figure import Figure
 
     a = result.arrays
     t, y = a["t"], a["angle"]
-    fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True,
-                             gridspec_kw={"height_ratios": [2.2, 1, 1]}, constrained_layout=True)
+    fig = Figure(figsize=(10, 8), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [2.2, 1, 1]})
     ax = axes[0]
     ax.plot(a["trace_t"], a["trace_angle"], color="0.75", lw=0.8, label="trace (all samples)")
     ax.plot(t, y, ".", ms=1.5, color="k", label="fitted samples")
@@ -44,5 +45,11 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike) -> None:
     axes[2].set_xlabel("t [s]")
     if result.flags:
         axes[2].text(0.01, 0.03, "flags: " + ", ".join(result.flags), transform=axes[2].transAxes, fontsize=8, color="tab:red")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    fig.savefig(path, dpi=dpi, format="png")
+
+
+def render_png(result: IdentificationResult, *, dpi: int = 80) -> bytes:
+    """The picture of ``result`` as PNG bytes (what the result store keeps with the measurement)."""
+    buf = io.BytesIO()
+    plot_result(result, buf, dpi=dpi)
+    return buf.getvalue()

@@ -23,20 +23,15 @@ from pathlib import Path
 import numpy as np
 
 from measurement.errors import VisionError
-from measurement.vision.config import CameraConfig, CameraModel, MarkerGeometry
+from measurement.vision.config import CameraConfig
 from measurement.vision.geometry import angle_from_normalised
 from measurement.vision.locate import MarkerObservation, MarkerTracker
 
 from ..camera_config import read_camera
+from ..defaults import demo_camera
 from ..errors import InputFileError
 
 HELP = "find the marker in one camera frame: position, angle, annotated PNG for alignment"
-
-#: the camera of the demo rig (and of the mock camera when no camera file is given)
-DEFAULT_CAMERA = CameraConfig(
-    camera=CameraModel(width=640, height=480, fps=60.0, fx=600.0, fy=600.0, cx=319.5, cy=239.5),
-    marker=MarkerGeometry(radius=0.10, distance=0.25),
-)
 
 #: frames grabbed from a live camera before the one measured (exposure and gain settle)
 SETTLE_FRAMES = 5
@@ -127,13 +122,11 @@ def _annotate(img: np.ndarray, obs: MarkerObservation, config: CameraConfig, lin
     return out
 
 
-def run(args: argparse.Namespace) -> int:
-    import cv2
-
-    config = read_camera(args.camera) if args.camera else DEFAULT_CAMERA
-    img, where = _grab(args, config)
+def check_image(img: np.ndarray, config: CameraConfig) -> tuple[np.ndarray, dict, list[str]]:
+    """Find the marker in a grey frame: (the annotated BGR image, the facts, the lines of text drawn on it).
+    What the technician sees here and on the web page's set-up view."""
     obs = MarkerTracker(config.camera).locate(img, keep_points=True)
-    report: dict = {"source": where, "found": obs.found, "png": args.out}
+    report: dict = {"found": obs.found}
     if obs.found:
         theta = float(angle_from_normalised(obs.x, config.marker))
         offset_px = obs.x * config.camera.fx
@@ -151,7 +144,17 @@ def run(args: argparse.Namespace) -> int:
     else:
         report.update({"reason": obs.reason, "detail": obs.detail})
         lines = [f"marker NOT found: {obs.detail or obs.reason}"]
-    if not cv2.imwrite(args.out, _annotate(img, obs, config, lines)):
+    return _annotate(img, obs, config, lines), report, lines
+
+
+def run(args: argparse.Namespace) -> int:
+    import cv2
+
+    config = read_camera(args.camera) if args.camera else demo_camera()
+    img, where = _grab(args, config)
+    annotated, facts, lines = check_image(img, config)
+    report: dict = {"source": where, "png": args.out, **facts}
+    if not cv2.imwrite(args.out, annotated):
         raise InputFileError(f"cannot write {args.out!r} (directory missing or not writable, or not a .png name)")
     if args.json:
         sys.stdout.write(json.dumps(report) + "\n")
@@ -160,6 +163,6 @@ def run(args: argparse.Namespace) -> int:
         for line in lines:
             print(f"  {line}")
         print(f"  annotated image written to {args.out}")
-    if not obs.found:
-        raise VisionError(f"marker not found in {where}: {obs.detail or obs.reason} (see {args.out})")
+    if not facts["found"]:
+        raise VisionError(f"marker not found in {where}: {facts['detail'] or facts['reason']} (see {args.out})")
     return 0
