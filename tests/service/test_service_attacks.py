@@ -295,3 +295,24 @@ def test_listening_beyond_this_machine_is_a_stated_choice():
     assert "192.168.10.20" in network_exposure(ModbusSettings(host="0.0.0.0", allow_from=("192.168.10.20",)))
     with pytest.raises(ConfigError, match="allow_from: 'plc-1' is not an IP address"):
         parse_config({"modbus": {"allow_from": ["plc-1"]}}, source="bad.toml")
+
+
+# --- nothing leaves the device before it is durable -----------------------------------------------------------
+
+def test_a_result_that_cannot_be_stored_never_leaves_the_device(tmp_path, broker, appliance_factory, consumer_factory):
+    """A full disk, made by SQLite's own page limit: the store write fails, the measurement ends in FAULT,
+    and neither the MQTT state nor the result topic ever carried its J."""
+    c = consumer_factory(broker.port, ["moi/test-rig/#"])
+    c.wait_subscribed()
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
+    assert app.app.mqtt.subscribed_event.wait(10)
+    db = app.app.store._db
+    db.execute(f"PRAGMA max_page_count = {db.execute('PRAGMA page_count').fetchone()[0]}")  # the disk is full
+    app.press()
+    app.wait_event(lambda e: e.state.value == "FAULT", 30, what="FAULT after the failed store write")
+    c.wait(lambda c: any(json.loads(p).get("state") == "FAULT" for p in c.on("/state")), 10, "FAULT on MQTT")
+    measured = app.app.sequencer.last_measurement
+    published = [json.loads(p) for p in c.on("/state")]
+    assert [m["state"] for m in published][-3:] == ["IDENTIFYING", "PUBLISHING", "FAULT"]
+    assert all("J" not in m and "J =" not in (m.get("reason") or "") for m in published), published
+    assert c.results() == [] and measured is None
