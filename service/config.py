@@ -297,6 +297,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "port": _doc("TCP port (502 needs CAP_NET_BIND_SERVICE; 0: any free port)", min=0, max=65535),
         "unit_id": _doc("Modbus unit (device) id answered", min=1, max=247),
         "word_order": _doc("order of the two registers of a float32/uint32", choices=WORD_ORDERS),
+        "max_connections": _doc("TCP clients at once; one more closes the connection idle the longest", min=1, max=256),
+        "idle_timeout": _doc("close a TCP connection without a request for this long, s (0: never)", min=0),
         "serial_port": _doc("RTU: serial device, e.g. /dev/ttyAMA0"),
         "baudrate": _doc("RTU baud rate", min=300, max=4_000_000),
         "parity": _doc("RTU parity", choices=("N", "E", "O")),

@@ -97,8 +97,11 @@ def _unpack(b: bytes | None) -> np.ndarray | None:
 
 
 @dataclass(frozen=True)
-class Measurement:
-    """One stored measurement (times: Unix s; trace arrays: s and rad)."""
+class StoredMeasurement:
+    """One stored measurement as read back from the store (times: Unix s; trace arrays: s and rad).
+
+    Not ``firmware_host.Measurement``, which is what the sequencer hands to the store.
+    """
 
     id: int
     uuid: str
@@ -118,9 +121,9 @@ class Measurement:
     residual_rms: float | None
     flags: tuple[str, ...]
     error: str | None
-    payload: dict[str, Any] | None
-    rig: dict[str, Any] | None
-    config: dict[str, Any] | None
+    payload: dict[str, Any] | None = None
+    rig: dict[str, Any] | None = None
+    config: dict[str, Any] | None = None
     trace_t: np.ndarray | None = None
     trace_angle: np.ndarray | None = None
     trace_meta: dict[str, Any] | None = None
@@ -149,6 +152,11 @@ _LIST_COLUMNS = ("id, uuid, seq, status, trigger, device_id, software_version, s
                  "published_at, J, J_std, omega_n, damping_ratio, residual_rms, flags, error")
 _FULL_COLUMNS = _LIST_COLUMNS + ", payload, rig, config"
 _TRACE_COLUMNS = ", trace_t, trace_angle, trace_meta"
+
+
+def _names(columns: str) -> list[str]:
+    """The column names of a SELECT list above (they are the StoredMeasurement fields)."""
+    return [c.strip() for c in columns.split(",") if c.strip()]
 
 
 class Store:
@@ -228,7 +236,7 @@ class Store:
         trace_meta: Mapping[str, Any] | None = None,
         enqueue: Sequence[str] = (),
         uuid: str | None = None,
-    ) -> Measurement:
+    ) -> StoredMeasurement:
         """Store one measurement and queue its publications, atomically.
 
         build_payload(uuid, seq) makes the published payload once the sequence
@@ -302,19 +310,20 @@ class Store:
             return int(self._db.execute("SELECT COUNT(*) FROM outbox").fetchone()[0])
 
     # --- reading ------------------------------------------------------------------
-    def _row(self, row: Sequence[Any], full: bool, trace: bool) -> Measurement:
-        base = list(row[:18])
-        base[16] = tuple(json.loads(base[16] or "[]"))
-        payload = rig = config = None
-        t = a = meta = None
-        if full:
-            payload, rig, config = (json.loads(x) if x is not None else None for x in row[18:21])
-        if trace:
-            t, a = _unpack(row[21]), _unpack(row[22])
-            meta = json.loads(row[23]) if row[23] is not None else None
-        return Measurement(*base, payload, rig, config, t, a, meta)
+    def _row(self, row: Sequence[Any], full: bool, trace: bool) -> StoredMeasurement:
+        """A row selected with ``_FULL_COLUMNS`` (full) or ``_LIST_COLUMNS``, plus ``_TRACE_COLUMNS`` (trace)."""
+        names = _names(_FULL_COLUMNS if full else _LIST_COLUMNS) + (_names(_TRACE_COLUMNS) if trace else [])
+        d = dict(zip(names, row, strict=True))
+        d["flags"] = tuple(json.loads(d["flags"] or "[]"))
+        for k in ("payload", "rig", "config", "trace_meta"):
+            if d.get(k) is not None:
+                d[k] = json.loads(d[k])
+        for k in ("trace_t", "trace_angle"):
+            if k in d:
+                d[k] = _unpack(d[k])
+        return StoredMeasurement(**d)
 
-    def get(self, key: str | int, *, trace: bool = False) -> Measurement | None:
+    def get(self, key: str | int, *, trace: bool = False) -> StoredMeasurement | None:
         """A measurement by UUID (or a unique UUID prefix) or by sequence number."""
         cols = _FULL_COLUMNS + (_TRACE_COLUMNS if trace else "")
         with self._lock:
@@ -326,7 +335,7 @@ class Store:
             return None
         return self._row(rows[0], full=True, trace=trace)
 
-    def latest(self, status: str | None = "ok") -> Measurement | None:
+    def latest(self, status: str | None = "ok") -> StoredMeasurement | None:
         where = "WHERE status = ?" if status else ""
         args: tuple = (status,) if status else ()
         with self._lock:
@@ -334,7 +343,7 @@ class Store:
         return self._row(row, full=True, trace=False) if row else None
 
     def list(self, limit: int | None = 20, *, since: float | None = None, until: float | None = None,
-             status: str | None = None, full: bool = False) -> list[Measurement]:
+             status: str | None = None, full: bool = False) -> list[StoredMeasurement]:
         """Measurements, newest first (limit None: all)."""
         clauses, args = [], []
         if since is not None:
@@ -355,7 +364,7 @@ class Store:
             rows = self._db.execute(f"SELECT {cols} FROM measurements {where} ORDER BY seq DESC {lim}", args).fetchall()
         return [self._row(r, full=full, trace=False) for r in rows]
 
-    def iter_all(self, **kwargs: Any) -> Iterator[Measurement]:
+    def iter_all(self, **kwargs: Any) -> Iterator[StoredMeasurement]:
         yield from self.list(limit=None, **kwargs)
 
     def count(self) -> int:
@@ -381,7 +390,7 @@ class Store:
 
     def search(self, *, offset: int = 0, limit: int | None = 25, since: float | None = None,
                until: float | None = None, status: str | None = None, flag: str | None = None,
-               payload_fields: Mapping[str, str] | None = None) -> tuple[list[Measurement], int]:
+               payload_fields: Mapping[str, str] | None = None) -> tuple[list[StoredMeasurement], int]:
         """One page of measurements, newest first, and how many match in all.
 
         flag: only those carrying this quality flag. payload_fields: result-payload key → value the key must

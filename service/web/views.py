@@ -24,7 +24,7 @@ from .live import Live
 from .words import FLAG_WORDS, STATE_WORDS, flag_words
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..store import Measurement
+    from ..store import StoredMeasurement as Measurement
     from .server import WebServer
 
 log = logging.getLogger("moi.web")
