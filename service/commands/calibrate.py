@@ -23,7 +23,6 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
-from measurement import Options, identify
 from measurement.calibration import Cylinder, Reference, calibrate_torsion
 from measurement.errors import CalibrationError
 
@@ -49,6 +48,8 @@ def _number(ref_name: str, key: str, value, allow_zero: bool = True) -> float:
 
 
 def load_references(path: str, rig) -> list[Reference]:
+    from measurement import Options, identify  # scipy: only when a reference is a trace
+
     doc = read_toml(path, "calibration file")
     refs = doc.get("reference")
     if set(doc) - {"reference"} or not isinstance(refs, list) or not refs:
