@@ -27,6 +27,7 @@ import logging
 import queue
 import threading
 import time
+from collections import deque
 from typing import Any, Callable
 
 from firmware_host import Event, Measurement, Sequencer, State
@@ -88,6 +89,7 @@ class Appliance:
         self.loop_iterations = 0
         self.last_loop_error: str | None = None
         self.stored: list[str] = []  # UUIDs stored since start (ok, failed, aborted), in order
+        self._durable_results: deque[str] = deque(maxlen=16)  # UUIDs of the latest results the store holds
         self._stored_cond = threading.Condition()
         self.exit_status = EXIT_OK
         self._stopping = False
@@ -289,10 +291,21 @@ class Appliance:
 
     def _state_message(self, state: str, previous: str, reason: str, measurement_id: str | None,
                        event: Event | None = None) -> dict[str, Any]:
-        msg = event.to_dict() if event is not None else {"state": state, "previous": previous, "reason": reason,
-                                                          "measurement_id": measurement_id}
+        msg = self.public_event(event) if event is not None else {"state": state, "previous": previous,
+                                                                  "reason": reason, "measurement_id": measurement_id}
         now = self.wall_clock()
         msg.update({"device_id": self.config.device_id, "timestamp": now, "at": iso_utc(now)})
+        return msg
+
+    def public_event(self, event: Event) -> dict[str, Any]:
+        """``event.to_dict()`` for whatever leaves the device (MQTT state, the web page): the
+        result's values only once the store holds the result. PUBLISHING is delivered after the
+        store write; when that failed (a full disk), J must not go out while it is lost here."""
+        msg = event.to_dict()
+        if event.measurement is not None and event.measurement_id not in self._durable_results:
+            for key in ("J", "J_std", "omega_n"):
+                msg.pop(key, None)
+            msg["reason"] = "the result could not be stored"
         return msg
 
     def _clock_scale(self) -> float:
@@ -322,6 +335,7 @@ class Appliance:
             trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
             trace_meta=dict(trace.meta), enqueue=("result",) if self.mqtt is not None else (),
         )
+        self._durable_results.append(m.id)
         if self.modbus is not None and stored.payload is not None:
             self.modbus.publish_result(stored.payload)
         if self.mqtt is not None:
