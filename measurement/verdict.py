@@ -272,13 +272,14 @@ def judge_release(reading: Reading, spec: Specification, rules: QualityRules) ->
 class PartResult:
     """The part's result from its releases (kg·m²).
 
-    used: indices (0-based) of the releases combined. excluded: {index, reason}
-    for each release left out. mean, std (sample, ddof 1; None for one release),
+    values: every release's value (None without one). used: indices (0-based)
+    of the releases combined. excluded: {index, reason} for each release left out. mean, std (sample, ddof 1; None for one release),
     u_typeA = std/√n, u_fit = √(Σu_i²)/n, u_systematic, and the decision (its
     u_c and U). z: the agreement statistic per used release (None below 3).
     """
 
     releases: int
+    values: tuple[float | None, ...]
     used: tuple[int, ...]
     excluded: tuple[dict[str, Any], ...]
     mean: float | None
@@ -294,7 +295,7 @@ class PartResult:
         return self.decision.verdict
 
     def to_dict(self) -> dict[str, Any]:
-        return {"releases": self.releases, "used": list(self.used), "excluded": [dict(e) for e in self.excluded],
+        return {"releases": self.releases, "values": list(self.values), "used": list(self.used), "excluded": [dict(e) for e in self.excluded],
                 "mean": self.mean, "std": self.std, "u_typeA": self.u_typeA, "u_fit": self.u_fit,
                 "u_systematic": self.u_systematic, "z": list(self.z), **self.decision.to_dict()}
 
@@ -317,6 +318,7 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
     n = len(readings)
     if n == 0:
         raise VerdictError("a part needs at least one release")
+    values = tuple(r.value for r in readings)
     excluded: list[dict[str, Any]] = []
     usable: list[int] = []
     for i, r in enumerate(readings):
@@ -351,9 +353,10 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
     excluded.sort(key=lambda e: e["index"])
     if len(usable) < max(1, rules.min_valid_releases):
         part_reasons.append(f"{len(usable)} usable of {n} releases, fewer than {max(1, rules.min_valid_releases)}")
+        part_reasons += [f"release {e['index'] + 1}: {e['reason']}" for e in excluded]
     if not usable:
         dec = Decision(INVALID, None, None, None, None, None, spec.rule, tuple(part_reasons))
-        return PartResult(n, (), tuple(excluded), None, None, None, None, None, tuple(z), dec)
+        return PartResult(n, values, (), tuple(excluded), None, None, None, None, None, tuple(z), dec)
 
     vals = [float(readings[i].value) for i in usable]  # type: ignore[arg-type]
     m = len(vals)
@@ -368,4 +371,4 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
                        tuple(part_reasons))
     else:
         dec = decide(mean, u_c, spec)
-    return PartResult(n, tuple(usable), tuple(excluded), mean, std, u_a, u_fit, u_sys, tuple(z), dec)
+    return PartResult(n, values, tuple(usable), tuple(excluded), mean, std, u_a, u_fit, u_sys, tuple(z), dec)

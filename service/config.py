@@ -183,6 +183,12 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "home_assistant": Key("bool", False, "publish Home Assistant discovery messages"),
         "discovery_prefix": Key("str", "homeassistant", "Home Assistant discovery prefix"),
     },
+    "recipes": {
+        "directory": Key("path", None, "directory of the recipe files, one TOML file per part type (docs/service.md, "
+                         "Recipes); relative to this file"),
+        "active": Key("str", None, "recipe active at start (name or number); the PLC (register recipe_select) or "
+                      "MQTT (cmd/recipe) may change it"),
+    },
     "modbus": {
         "enabled": Key("bool", True, "serve the registers"),
         "mode": Key("str", "tcp", "Modbus TCP server or Modbus RTU slave on a serial line", choices=("tcp", "rtu")),
@@ -199,7 +205,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
 }
 
 #: tables that are plain key/value tables of SCHEMA (the others are sub-tables)
-TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus")
+TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus", "recipes")
 
 
 # --- the validated configuration ----------------------------------------------------------------
@@ -260,6 +266,8 @@ class Config:
     mqtt: MqttSettings | None        # None: MQTT off
     modbus: ModbusSettings | None    # None: Modbus off
     document: Mapping[str, Any]      # the parsed TOML, stored with every measurement
+    recipes: Any = None              # service.recipes.RecipeBook (every recipe of [recipes] directory, checked)
+    active_recipe: str | None = None  # [recipes] active
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary of what the daemon runs with (passwords left out)."""
@@ -277,6 +285,10 @@ class Config:
             "simulation": clean(self.simulation) if self.simulated else None,
             "hardware": clean(self.hardware), "sequencer": clean(self.sequencer),
             "identification": clean(self.identification), "mqtt": clean(self.mqtt), "modbus": clean(self.modbus),
+            "recipes": None if self.recipes is None else {
+                "directory": self.recipes.directory, "active": self.active_recipe,
+                "recipes": [{"name": r.name, "number": r.number, "version": r.version, "path": r.path}
+                            for r in self.recipes.recipes]},
         }
 
 
@@ -509,6 +521,15 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
             raise c.fail("modbus", "serial_port", "missing: mode = \"rtu\" needs the serial device, e.g. /dev/ttyAMA0")
         modbus = ModbusSettings(**mb)
 
+    from .recipes import RecipeBook
+    rc = c.table("recipes", doc.get("recipes", {}), SCHEMA["recipes"])
+    book = RecipeBook.load(_resolve(base, rc["directory"]))  # RecipeError: one line naming the recipe file
+    if rc["active"] is not None:
+        try:
+            book.find(rc["active"])
+        except ConfigError as exc:
+            raise c.fail("recipes", "active", str(exc)) from None
+
     sd = state_dir or _resolve(base, dev["state_dir"])
     return Config(
         source=source, device_id=dev["id"],
@@ -516,6 +537,7 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         log_level=dev["log_level"], store_trace=dev["store_trace"],
         rig=rig, rig_path=rig_path, simulated=simulated, simulation=simulation, hardware=hardware,
         sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, document=dict(doc),
+        recipes=book, active_recipe=rc["active"],
     )
 
 
