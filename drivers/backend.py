@@ -61,10 +61,3 @@ def pin_factory(backend: str | None = None) -> Factory:
                         "on a Raspberry Pi install the [pi] extra (lgpio), elsewhere use backend 'mock'") from None
         known = sorted({ep.name for ep in group})
         raise DriverConfigError(f"unknown GPIO backend {name!r}; expected one of {', '.join(known)}")
-
-
-def check_pin(pin: int | str, what: str) -> int | str:
-    """A GPIO pin number (BCM, >= 0) or a gpiozero pin name such as "GPIO17" or "BOARD11"."""
-    if isinstance(pin, bool) or not isinstance(pin, (int, str)) or (isinstance(pin, int) and pin < 0) or pin == "":
-        raise DriverConfigError(f"{what}: pin must be a BCM number >= 0 or a name like 'GPIO17', got {pin!r}")
-    return pin

@@ -14,8 +14,8 @@ from typing import Callable
 from gpiozero import Button
 from gpiozero.pins import Factory
 
-from .backend import check_pin, pin_factory as default_factory
-from .errors import DriverConfigError
+from .backend import pin_factory as default_factory
+from .settings import ButtonSettings
 
 log = logging.getLogger("moi.drivers.button")
 
@@ -31,9 +31,7 @@ class PushButton:
 
     def __init__(self, pin: int | str, *, pull_up: bool = True, bounce_time: float | None = 0.05,
                  pin_factory: Factory | None = None):
-        check_pin(pin, "button")
-        if bounce_time is not None and not (isinstance(bounce_time, (int, float)) and 0 < bounce_time <= 1):
-            raise DriverConfigError(f"button: bounce_time must be None or a time in (0, 1] s, got {bounce_time!r}")
+        ButtonSettings(pin, pull_up, bounce_time)  # checks them (the config derives its keys from it)
         self._lock = threading.Lock()
         self._when_pressed: Callable[[], None] | None = None
         self.presses = 0

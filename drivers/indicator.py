@@ -14,10 +14,9 @@ import threading
 from gpiozero import DigitalOutputDevice
 from gpiozero.pins import Factory
 
-from .backend import check_pin, pin_factory as default_factory
-from .errors import DriverConfigError
+from .backend import pin_factory as default_factory
+from .settings import INDICATOR_KINDS as KINDS, IndicatorSettings
 
-KINDS = ("led", "buzzer")
 _BUSY = {"ARMED", "RELEASING", "CAPTURING", "IDENTIFYING"}
 
 
@@ -30,9 +29,7 @@ class Indicator:
 
     def __init__(self, pin: int | str, *, kind: str = "led", active_high: bool = True,
                  pin_factory: Factory | None = None):
-        check_pin(pin, "indicator")
-        if kind not in KINDS:
-            raise DriverConfigError(f"indicator: kind must be one of {', '.join(KINDS)}, got {kind!r}")
+        IndicatorSettings(pin, kind, active_high)  # checks them (the config derives its keys from it)
         self.kind = kind
         self.shown: str | None = None
         self._lock = threading.Lock()

@@ -24,14 +24,11 @@ from typing import Callable
 from gpiozero import DigitalOutputDevice
 from gpiozero.pins import Factory
 
-from .backend import check_pin, pin_factory as default_factory
-from .errors import DeviceFault, DriverConfigError
+from .backend import pin_factory as default_factory
+from .errors import DeviceFault
+from .settings import ABSOLUTE_MAX_ON_TIME, SolenoidSettings  # noqa: F401  (re-exported)
 
 log = logging.getLogger("moi.drivers.solenoid")
-
-#: no configuration may allow a longer pulse than this, s (release solenoids are rated for short duty)
-ABSOLUTE_MAX_ON_TIME = 5.0
-
 
 class Solenoid:
     """Release solenoid on a GPIO line.
@@ -44,11 +41,7 @@ class Solenoid:
 
     def __init__(self, pin: int | str, *, active_high: bool = True, max_on_time: float = 0.5,
                  pin_factory: Factory | None = None):
-        check_pin(pin, "solenoid")
-        if not (isinstance(max_on_time, (int, float)) and not isinstance(max_on_time, bool)
-                and 0 < max_on_time <= ABSOLUTE_MAX_ON_TIME):
-            raise DriverConfigError(
-                f"solenoid: max_on_time must be a time in (0, {ABSOLUTE_MAX_ON_TIME:g}] s, got {max_on_time!r}")
+        SolenoidSettings(pin, active_high, max_on_time)  # checks them (the config derives its keys from it)
         self.max_on_time = float(max_on_time)
         self._lock = threading.RLock()
         self._listeners: list[Callable[[bool], None]] = []

@@ -17,19 +17,28 @@ missing or malformed one is a configuration error naming both files.
 
 from __future__ import annotations
 
+import collections.abc
+import copy
 import dataclasses
 import difflib
 import math
 import os
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from types import UnionType
+from typing import Any, Mapping, Union
 
 from firmware_host import SequencerConfig
 from measurement import Options, Rig
 from measurement.effects import EFFECTS
 from measurement.errors import InvalidInput
 
+from drivers.errors import DriverConfigError
+from drivers.settings import (ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSettings, IndicatorSettings,
+                              SolenoidSettings)
+
+from .defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, demo_camera
 from .errors import ConfigError
 from .files import read_rig, read_toml
 from .modbus_server import ModbusSettings
@@ -42,10 +51,74 @@ REQUIRED = object()
 SENSORS = ("encoder", "camera")
 
 #: the rig simulated when ``[device] rig`` is not given (the demo rig of `moi demo`)
-DEFAULT_SIM_RIG = Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5043e-3, declared=("viscous",))
+DEFAULT_SIM_RIG = DEMO_RIG
 
 
-# --- a small declarative schema ------------------------------------------------------------
+# --- the settings: each table of the file is one dataclass; its fields are the table's keys and defaults ----
+@dataclass(frozen=True)
+class DeviceSettings:
+    """``[device]``: the device id (an MQTT topic level), the store, the rig file, logging."""
+
+    id: str = "moi"
+    state_dir: str | None = None
+    rig: str | None = None
+    log_level: str = "info"
+    store_trace: bool = True
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """``[simulation]``: the simulated rig (SI units; see ``SCHEMA["simulation"]`` for each key)."""
+
+    inertia: float = DEMO_INERTIA
+    effects: Mapping[str, Mapping[str, float]] = field(default_factory=lambda: copy.deepcopy(DEMO_EFFECTS))
+    theta0: float = DEMO_THETA0
+    rate: float = 200.0
+    noise: float = 1e-4
+    bits: int = 17
+    time_scale: float = 1.0
+    seed: int | None = None
+    sensor: str = "encoder"
+    latency: float = 0.0002
+    camera: str | None = None        # camera file (resolved), None: the demo camera
+    camera_yaw_deg: float = 0.0
+    camera_config: Any = None        # the parsed camera file (CameraConfig) with sensor = "camera"
+    drop_rate: float = 0.0
+    crc_rate: float = 0.0
+
+
+@dataclass(frozen=True)
+class RecipeSettings:
+    """``[recipes]``: the recipe directory (one TOML file per part type) and the recipe active at start."""
+
+    directory: str | None = None
+    active: str | None = None
+
+
+@dataclass(frozen=True)
+class CameraSettings:
+    """``[hardware.camera]``: the V4L2 device, the camera file (path and parsed content), the lost-marker limit."""
+
+    device: str | int
+    file: str
+    max_lost_time: float = 0.5
+    config: Any = None  # measurement.vision.CameraConfig (imported lazily: it loads OpenCV)
+
+
+@dataclass(frozen=True, kw_only=True)
+class HardwareSettings:
+    """``[hardware]``: the GPIO backend, the angle sensor and the device tables (checked by the drivers' settings)."""
+
+    gpio_backend: str | None = None
+    sensor: str = "encoder"
+    solenoid: Mapping[str, Any]
+    button: Mapping[str, Any] | None = None
+    indicator: Mapping[str, Any] | None = None
+    encoder: Mapping[str, Any] | None = None
+    camera: CameraSettings | None = None
+
+
+# --- the schema, derived from the settings dataclasses ------------------------------------------
 @dataclass(frozen=True)
 class Key:
     kind: str  # str | int | float | bool | path | strlist | table | effects | pinlike | videodevice
@@ -72,7 +145,55 @@ class Key:
         return text
 
 
-def _seq_fields() -> dict[str, Key]:
+def _kind(hint: Any) -> str:
+    """The schema kind of a settings field's type (``int | None`` → "int", ``int | str`` → "pinlike")."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)] if typing.get_origin(hint) in (Union, UnionType) \
+        else [hint]
+    if set(args) == {int, str}:
+        return "pinlike"
+    (t,) = args
+    origin = typing.get_origin(t) or t
+    if origin in (tuple, list):
+        return "strlist"
+    if origin in (dict, Mapping, collections.abc.Mapping) or dataclasses.is_dataclass(origin):
+        return "table"
+    return {bool: "bool", int: "int", float: "float", str: "str"}[origin]
+
+
+def _schema(cls: type, keys: Mapping[str, Mapping[str, Any]], *, extra: Mapping[str, Key] | None = None,
+            defaults: Mapping[str, Any] | None = None) -> dict[str, Key]:
+    """The table of ``cls``: one key per field named in ``keys`` (the field's doc and limits), in the field order.
+
+    The key's type and default come from the field (a field without default is required);
+    ``keys[name]`` adds the doc, choices, min/max and, where the type alone does not say it, the
+    kind ("path", "effects", "videodevice"). Every key of ``keys`` must be a field of ``cls``.
+    """
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    missing = set(keys) - set(fields)
+    assert not missing, f"{cls.__name__} has no field(s) {sorted(missing)}"
+    out: dict[str, Key] = dict(extra or {})
+    for name, f in fields.items():
+        if name not in keys:
+            continue
+        if defaults and name in defaults:
+            default = defaults[name]
+        elif f.default is not dataclasses.MISSING:
+            default = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            default = f.default_factory()
+        else:
+            default = REQUIRED
+        spec = dict(keys[name])
+        out[name] = Key(spec.pop("kind", None) or _kind(hints[name]), default, **spec)
+    return out
+
+
+def _doc(doc: str = "", **limits: Any) -> dict[str, Any]:
+    return {"doc": doc, **limits}
+
+
+def _sequencer_keys() -> dict[str, dict[str, Any]]:
     docs = {
         "pre_trigger": "capture before the release, s", "release_pulse": "solenoid pulse asked for, s",
         "capture_duration": "capture after the release (at most), s",
@@ -81,127 +202,120 @@ def _seq_fields() -> dict[str, Key]:
         "sample_timeout": "no sample for this long → FAULT, s", "identify_timeout": "identification limit, s",
         "min_samples": "fewer samples → FAULT",
     }
-    out: dict[str, Key] = {}
-    for f in dataclasses.fields(SequencerConfig):
-        if f.name == "identify_in_worker":
-            continue  # the daemon always identifies in a worker (poll must stay responsive)
-        kind = "int" if isinstance(f.default, int) and not isinstance(f.default, bool) else "float"
-        out[f.name] = Key(kind, f.default, docs.get(f.name, ""), min=0)
-    return out
+    # identify_in_worker is not a key: the daemon always identifies in a worker (poll must stay responsive)
+    return {f.name: _doc(docs[f.name], min=0) for f in dataclasses.fields(SequencerConfig)
+            if f.name != "identify_in_worker"}
 
+
+_PIN = _doc("BCM pin number or gpiozero pin name")
 
 SCHEMA: dict[str, dict[str, Key]] = {
-    "device": {
-        "id": Key("str", "moi", "device id: names the MQTT topics and Home Assistant entities"),
-        "state_dir": Key("path", None, "result store directory (default $STATE_DIRECTORY, else ./moi-state)"),
-        "rig": Key("path", None, "rig TOML file (required with [hardware]; relative paths are relative to this file)"),
-        "log_level": Key("str", "info", "logging level", choices=("debug", "info", "warning", "error")),
-        "store_trace": Key("bool", True, "keep the raw trace of every measurement in the store"),
-    },
-    "sequencer": _seq_fields(),
-    "identification": {
-        "discover": Key("bool", True, "run the discovery loop"),
-        "candidates": Key("strlist", None, "effects the loop may add (default: all)"),
-        "min_swings": Key("float", 3.0, "fewer full swings is an input error", min=0),
-        "bic_margin": Key("float", 10.0, "an added effect must lower BIC by more than this", min=0),
-    },
-    "hardware": {
-        "gpio_backend": Key("str", None, "gpiozero pin factory (lgpio on a Pi, mock for tests; default: gpiozero's)"),
-        "sensor": Key("str", "encoder", "angle sensor: the Modbus encoder ([hardware.encoder]) or a camera "
-                      "([hardware.camera])", choices=SENSORS),
-        "solenoid": Key("table", REQUIRED, "[hardware.solenoid] pin, active_high, max_on_time"),
-        "button": Key("table", None, "[hardware.button] pin, pull_up, bounce_time"),
-        "indicator": Key("table", None, "[hardware.indicator] pin, kind, active_high"),
-        "encoder": Key("table", None, "[hardware.encoder]: drivers.encoder.EncoderConfig (port, device_id, "
-                       "baudrate, parity, register, registers, counts_per_turn, direction, zero, timeout, ...)"),
-        "camera": Key("table", None, "[hardware.camera] device, file, max_lost_time "
-                      "(required with sensor = \"camera\")"),
-    },
-    "hardware.solenoid": {
-        "pin": Key("pinlike", REQUIRED, "BCM pin number or gpiozero pin name"),
-        "active_high": Key("bool", True, "a high level energises the coil"),
-        "max_on_time": Key("float", 0.5, "hard limit of one pulse, s", min=0, max=5.0, min_open=True),
-    },
-    "hardware.button": {
-        "pin": Key("pinlike", REQUIRED, "BCM pin number or gpiozero pin name"),
-        "pull_up": Key("bool", True, "pressed pulls the line low"),
-        "bounce_time": Key("float", 0.05, "contact bounce suppression, s", min=0, max=1, min_open=True),
-    },
-    "hardware.indicator": {
-        "pin": Key("pinlike", REQUIRED, "BCM pin number or gpiozero pin name"),
-        "kind": Key("str", "led", "", choices=("led", "buzzer")),
-        "active_high": Key("bool", True, ""),
-    },
-    "hardware.camera": {
-        "device": Key("videodevice", REQUIRED, "V4L2 capture device: a path like \"/dev/video0\" (better: a stable "
-                      "/dev/v4l/by-id/... link) or an index"),
-        "file": Key("path", REQUIRED, "camera file: intrinsics, resolution and fps, marker radius and distance, "
-                    "optional [pose] (docs/vision.md); relative to this file"),
-        "max_lost_time": Key("float", 0.5, "no marker in the frames (lost or corrupt) for this long in a row → FAULT, "
-                             "s (at least 5 frames)", min=0, min_open=True),
-    },
-    "simulation": {
-        "inertia": Key("float", 0.0125, "true J of the simulated part, kg·m²", min=0, min_open=True),
-        "effects": Key("effects", {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 1.2e-4}},
-                       "true damping: effect = { parameter = value }"),
-        "theta0": Key("float", 0.25, "release angle, rad", min=0, max=3.0, min_open=True),
-        "rate": Key("float", 200.0, "sample rate of the direct sensor, Hz", min=0, max=10000, min_open=True),
-        "noise": Key("float", 1e-4, "angle noise σ, rad", min=0),
-        "bits": Key("int", 17, "encoder resolution, bits per turn (0: none)", min=0, max=32),
-        "time_scale": Key("float", 1.0, "simulated seconds per wall-clock second", min=0, max=1000, min_open=True),
-        "seed": Key("int", None, "noise seed (default: random)"),
-        "sensor": Key("str", "encoder", "\"encoder\": a simulated Modbus RTU encoder on a loopback socket read by the "
-                      "real encoder client; \"direct\": an in-process sensor sampling at rate (faster); \"camera\": "
-                      "a mock camera rendering the marker, read by the real camera sensor (keep time_scale = 1: "
-                      "frames are rendered in real time)",
-                      choices=("encoder", "direct", "camera")),
-        "latency": Key("float", 0.0002, "simulated encoder reply latency, s of real time", min=0, max=1),
-        "camera": Key("path", None, "camera file of the simulated camera (sensor = \"camera\"; default: the camera of "
-                      "`moi measure --sensor camera`, 640×480 px at 100 frames/s, fx = 600 px, marker radius 0.10 m "
-                      "at 0.25 m); relative to this file"),
-        "camera_yaw_deg": Key("float", 0.0, "yaw of the simulated camera, degrees, within ±20 (estimated and "
-                              "corrected by the sensor)", min=-20, max=20),
-    },
-    "mqtt": {
-        "enabled": Key("bool", True, "publish over MQTT (the table's presence enables it)"),
-        "host": Key("str", "localhost", "broker host"),
-        "port": Key("int", 1883, "broker port", min=1, max=65535),
-        "prefix": Key("str", "moi", "topic prefix: topics are <prefix>/<device id>/..."),
-        "client_id": Key("str", None, "MQTT client id (default moi-<device id>)"),
-        "username": Key("str", None, ""),
-        "password": Key("str", None, "prefer password_file"),
-        "password_file": Key("path", None, "file holding the password (e.g. a systemd credential)"),
-        "keepalive": Key("int", 30, "s", min=5, max=3600),
-        "tls": Key("bool", False, "connect with TLS"),
-        "ca_file": Key("path", None, "CA certificate(s) for the broker (default: the system's)"),
-        "cert_file": Key("path", None, "client certificate (mutual TLS)"),
-        "key_file": Key("path", None, "client key (mutual TLS)"),
-        "tls_insecure": Key("bool", False, "skip the broker host name check (testing only)"),
-        "reconnect_min": Key("float", 0.5, "first reconnect delay, s", min=0, min_open=True),
-        "reconnect_max": Key("float", 30.0, "longest reconnect delay, s", min=0, min_open=True),
-        "resend_after": Key("float", 30.0, "re-send a result not acknowledged after this, s", min=0, min_open=True),
-        "home_assistant": Key("bool", False, "publish Home Assistant discovery messages"),
-        "discovery_prefix": Key("str", "homeassistant", "Home Assistant discovery prefix"),
-    },
-    "recipes": {
-        "directory": Key("path", None, "directory of the recipe files, one TOML file per part type (docs/service.md, "
-                         "Recipes); relative to this file"),
-        "active": Key("str", None, "recipe active at start (name or number); the PLC (register recipe_select) or "
-                      "MQTT (cmd/recipe) may change it"),
-    },
-    "modbus": {
-        "enabled": Key("bool", True, "serve the registers"),
-        "mode": Key("str", "tcp", "Modbus TCP server or Modbus RTU slave on a serial line", choices=("tcp", "rtu")),
-        "host": Key("str", "0.0.0.0", "TCP listen address"),
-        "port": Key("int", 5020, "TCP port (502 needs CAP_NET_BIND_SERVICE; 0: any free port)", min=0, max=65535),
-        "unit_id": Key("int", 1, "Modbus unit (device) id answered", min=1, max=247),
-        "word_order": Key("str", "big", "order of the two registers of a float32/uint32", choices=WORD_ORDERS),
-        "serial_port": Key("str", None, "RTU: serial device, e.g. /dev/ttyAMA0"),
-        "baudrate": Key("int", 19200, "RTU baud rate", min=300, max=4_000_000),
-        "parity": Key("str", "E", "RTU parity", choices=("N", "E", "O")),
-        "stopbits": Key("int", 1, "RTU stop bits", choices=(1, 2)),
-        "bytesize": Key("int", 8, "RTU data bits", choices=(7, 8)),
-    },
+    "device": _schema(DeviceSettings, {
+        "id": _doc("device id: names the MQTT topics and Home Assistant entities"),
+        "state_dir": _doc("result store directory (default $STATE_DIRECTORY, else ./moi-state)", kind="path"),
+        "rig": _doc("rig TOML file (required with [hardware]; relative paths are relative to this file)", kind="path"),
+        "log_level": _doc("logging level", choices=("debug", "info", "warning", "error")),
+        "store_trace": _doc("keep the raw trace of every measurement in the store"),
+    }),
+    "sequencer": _schema(SequencerConfig, _sequencer_keys()),
+    "identification": _schema(Options, {
+        "discover": _doc("run the discovery loop"),
+        "candidates": _doc("effects the loop may add (default: all)"),
+        "min_swings": _doc("fewer full swings is an input error", min=0),
+        "bic_margin": _doc("an added effect must lower BIC by more than this", min=0),
+    }),
+    "hardware": _schema(HardwareSettings, {
+        "gpio_backend": _doc("gpiozero pin factory (lgpio on a Pi, mock for tests; default: gpiozero's)"),
+        "sensor": _doc("angle sensor: the Modbus encoder ([hardware.encoder]) or a camera ([hardware.camera])",
+                       choices=SENSORS),
+        "solenoid": _doc("[hardware.solenoid] pin, active_high, max_on_time"),
+        "button": _doc("[hardware.button] pin, pull_up, bounce_time"),
+        "indicator": _doc("[hardware.indicator] pin, kind, active_high"),
+        "encoder": _doc("[hardware.encoder]: drivers.encoder.EncoderConfig (port, device_id, baudrate, parity, "
+                        "register, registers, counts_per_turn, direction, zero, timeout, ...)"),
+        "camera": _doc("[hardware.camera] device, file, max_lost_time (required with sensor = \"camera\")"),
+    }),
+    # the GPIO tables: keys and defaults of the drivers' settings, which also check the values
+    "hardware.solenoid": _schema(SolenoidSettings, {
+        "pin": _PIN, "active_high": _doc("a high level energises the coil"),
+        "max_on_time": _doc(f"hard limit of one pulse, s (at most {ABSOLUTE_MAX_ON_TIME:g})"),
+    }),
+    "hardware.button": _schema(ButtonSettings, {
+        "pin": _PIN, "pull_up": _doc("pressed pulls the line low"),
+        "bounce_time": _doc("contact bounce suppression, s (at most 1)"),
+    }),
+    "hardware.indicator": _schema(IndicatorSettings, {
+        "pin": _PIN, "kind": _doc("", choices=INDICATOR_KINDS), "active_high": _doc(""),
+    }),
+    "hardware.camera": _schema(CameraSettings, {
+        "device": _doc("V4L2 capture device: a path like \"/dev/video0\" (better: a stable /dev/v4l/by-id/... link) "
+                       "or an index", kind="videodevice"),
+        "file": _doc("camera file: intrinsics, resolution and fps, marker radius and distance, optional [pose] "
+                     "(docs/vision.md); relative to this file", kind="path"),
+        "max_lost_time": _doc("no marker in the frames (lost or corrupt) for this long in a row → FAULT, s "
+                              "(at least 5 frames)", min=0, min_open=True),
+    }),
+    "simulation": _schema(SimulationSettings, {
+        "inertia": _doc("true J of the simulated part, kg·m²", min=0, min_open=True),
+        "effects": _doc("true damping: effect = { parameter = value }", kind="effects"),
+        "theta0": _doc("release angle, rad", min=0, max=3.0, min_open=True),
+        "rate": _doc("sample rate of the direct sensor, Hz", min=0, max=10000, min_open=True),
+        "noise": _doc("angle noise σ, rad", min=0),
+        "bits": _doc("encoder resolution, bits per turn (0: none)", min=0, max=32),
+        "time_scale": _doc("simulated seconds per wall-clock second", min=0, max=1000, min_open=True),
+        "seed": _doc("noise seed (default: random)"),
+        "sensor": _doc("\"encoder\": a simulated Modbus RTU encoder on a loopback socket read by the real encoder "
+                       "client; \"direct\": an in-process sensor sampling at rate (faster); \"camera\": a mock camera "
+                       "rendering the marker, read by the real camera sensor (keep time_scale = 1: frames are "
+                       "rendered in real time)", choices=("encoder", "direct", "camera")),
+        "latency": _doc("simulated encoder reply latency, s of real time", min=0, max=1),
+        "camera": _doc("camera file of the simulated camera (sensor = \"camera\"; default: the demo camera, 640×480 px "
+                       "at 100 frames/s, fx = 600 px, marker radius 0.10 m at 0.25 m); relative to this file",
+                       kind="path"),
+        "camera_yaw_deg": _doc("yaw of the simulated camera, degrees, within ±20 (estimated and corrected by the "
+                               "sensor)", min=-20, max=20),
+        "drop_rate": _doc("fraction of encoder replies (or camera frames) lost", min=0, max=1),
+        "crc_rate": _doc("fraction of encoder replies with a corrupted CRC", min=0, max=1),
+    }),
+    "mqtt": _schema(MqttSettings, {
+        "host": _doc("broker host"),
+        "port": _doc("broker port", min=1, max=65535),
+        "prefix": _doc("topic prefix: topics are <prefix>/<device id>/..."),
+        "client_id": _doc("MQTT client id (default moi-<device id>)"),
+        "username": _doc(""),
+        "password": _doc("prefer password_file"),
+        "password_file": _doc("file holding the password (e.g. a systemd credential)", kind="path"),
+        "keepalive": _doc("s", min=5, max=3600),
+        "tls": _doc("connect with TLS"),
+        "ca_file": _doc("CA certificate(s) for the broker (default: the system's)", kind="path"),
+        "cert_file": _doc("client certificate (mutual TLS)", kind="path"),
+        "key_file": _doc("client key (mutual TLS)", kind="path"),
+        "tls_insecure": _doc("skip the broker host name check (testing only)"),
+        "reconnect_min": _doc("first reconnect delay, s", min=0, min_open=True),
+        "reconnect_max": _doc("longest reconnect delay, s", min=0, min_open=True),
+        "resend_after": _doc("re-send a result not acknowledged after this, s", min=0, min_open=True),
+        "window": _doc("results in flight (published, not yet acknowledged) at most", min=1, max=1000),
+        "home_assistant": _doc("publish Home Assistant discovery messages"),
+        "discovery_prefix": _doc("Home Assistant discovery prefix"),
+    }, extra={"enabled": Key("bool", True, "publish over MQTT (the table's presence enables it)")}),
+    "recipes": _schema(RecipeSettings, {
+        "directory": _doc("directory of the recipe files, one TOML file per part type (docs/service.md, Recipes); "
+                          "relative to this file", kind="path"),
+        "active": _doc("recipe active at start (name or number); the PLC (register recipe_select) or MQTT "
+                       "(cmd/recipe) may change it"),
+    }),
+    "modbus": _schema(ModbusSettings, {
+        "mode": _doc("Modbus TCP server or Modbus RTU slave on a serial line", choices=("tcp", "rtu")),
+        "host": _doc("TCP listen address"),
+        "port": _doc("TCP port (502 needs CAP_NET_BIND_SERVICE; 0: any free port)", min=0, max=65535),
+        "unit_id": _doc("Modbus unit (device) id answered", min=1, max=247),
+        "word_order": _doc("order of the two registers of a float32/uint32", choices=WORD_ORDERS),
+        "serial_port": _doc("RTU: serial device, e.g. /dev/ttyAMA0"),
+        "baudrate": _doc("RTU baud rate", min=300, max=4_000_000),
+        "parity": _doc("RTU parity", choices=("N", "E", "O")),
+        "stopbits": _doc("RTU stop bits", choices=(1, 2)),
+        "bytesize": _doc("RTU data bits", choices=(7, 8)),
+    }, extra={"enabled": Key("bool", True, "serve the registers")}),
 }
 
 #: tables that are plain key/value tables of SCHEMA (the others are sub-tables)
@@ -209,44 +323,6 @@ TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation",
 
 
 # --- the validated configuration ----------------------------------------------------------------
-@dataclass(frozen=True)
-class SimulationSettings:
-    inertia: float = 0.0125
-    effects: Mapping[str, Mapping[str, float]] = field(default_factory=lambda: {"viscous": {"c": 1.5e-4}})
-    theta0: float = 0.25
-    rate: float = 200.0
-    noise: float = 1e-4
-    bits: int = 17
-    time_scale: float = 1.0
-    seed: int | None = None
-    sensor: str = "encoder"
-    latency: float = 0.0002
-    camera: str | None = None        # camera file (resolved), None: the demo camera
-    camera_yaw_deg: float = 0.0
-    camera_config: Any = None        # the parsed camera file (CameraConfig) with sensor = "camera"
-
-
-@dataclass(frozen=True)
-class CameraSettings:
-    """``[hardware.camera]``: the V4L2 device, the camera file (path and parsed content), the lost-marker limit."""
-
-    device: str | int
-    file: str
-    max_lost_time: float
-    config: Any  # measurement.vision.CameraConfig (imported lazily: it loads OpenCV)
-
-
-@dataclass(frozen=True)
-class HardwareSettings:
-    gpio_backend: str | None
-    sensor: str
-    solenoid: Mapping[str, Any]
-    button: Mapping[str, Any] | None
-    indicator: Mapping[str, Any] | None
-    encoder: Mapping[str, Any] | None
-    camera: CameraSettings | None = None
-
-
 @dataclass(frozen=True)
 class Config:
     """The whole validated configuration (SI units)."""
@@ -328,8 +404,7 @@ class _Checker:
             if not isinstance(v, str) or (k == "path" and not v):
                 raise bad
         elif k == "pinlike":
-            if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0) or v == "":
-                raise self.fail(table, key, f"expected a BCM pin number >= 0 or a name like 'GPIO17', got {v!r}")
+            pass  # checked with the rest of its table by the driver's settings (drivers.settings.check_pin)
         elif k == "videodevice":
             if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0) or v == "":
                 raise bad
@@ -441,15 +516,14 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         for name in ident["candidates"]:
             if name not in EFFECTS:
                 raise c.fail("identification", "candidates", f"unknown effect {name!r}; expected names from {', '.join(EFFECTS)}")
-    options = Options(discover=ident["discover"], candidates=ident["candidates"], min_swings=ident["min_swings"],
-                      bic_margin=ident["bic_margin"])
+    options = Options(**ident)
 
     hardware = None
     if "hardware" in doc:
         hw = c.table("hardware", doc["hardware"], SCHEMA["hardware"])
-        sol = c.table("hardware.solenoid", hw["solenoid"], SCHEMA["hardware.solenoid"])
-        btn = c.table("hardware.button", hw["button"], SCHEMA["hardware.button"]) if hw["button"] is not None else None
-        ind = c.table("hardware.indicator", hw["indicator"], SCHEMA["hardware.indicator"]) if hw["indicator"] is not None else None
+        sol = _device_table(c, "hardware.solenoid", hw["solenoid"], SolenoidSettings)
+        btn = _device_table(c, "hardware.button", hw["button"], ButtonSettings)
+        ind = _device_table(c, "hardware.indicator", hw["indicator"], IndicatorSettings)
         enc = hw["encoder"]
         if hw["sensor"] == "encoder":
             if enc is None:
@@ -466,7 +540,8 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         elif hw["sensor"] == "camera":
             raise c.fail("hardware", "camera", "missing: sensor = \"camera\" needs a [hardware.camera] table "
                           "(device = \"/dev/video0\", file = the camera file)")
-        hardware = HardwareSettings(hw["gpio_backend"], hw["sensor"], sol, btn, ind, enc, camera)
+        hardware = HardwareSettings(gpio_backend=hw["gpio_backend"], sensor=hw["sensor"], solenoid=sol, button=btn,
+                                    indicator=ind, encoder=enc, camera=camera)
 
     sim_doc = c.table("simulation", doc.get("simulation", {}), SCHEMA["simulation"])
     sim_doc["camera"] = _resolve(base, sim_doc["camera"])
@@ -485,7 +560,7 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         raise c.fail("device", "rig", "missing: a rig file (kind, stiffness or mass/com_distance, declared effects) "
                       "is required with [hardware]")
     else:
-        rig = DEFAULT_SIM_RIG
+        rig = DEMO_RIG
     if simulated:
         try:
             from measurement import Pendulum
@@ -541,10 +616,21 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
     )
 
 
+def _device_table(c: _Checker, table: str, doc: Any, settings: type) -> dict[str, Any] | None:
+    """A GPIO device table (None when absent), its values checked by the driver's settings dataclass."""
+    if doc is None:
+        return None
+    values = c.table(table, doc, SCHEMA[table])
+    try:
+        settings(**values)
+    except DriverConfigError as exc:
+        raise c.fail(table, None, str(exc)) from None
+    return values
+
+
 def _check_encoder_keys(c: _Checker, enc: Mapping[str, Any]) -> None:
     """[hardware.encoder] is the encoder driver's own settings table: let the driver check it."""
     from drivers.encoder import EncoderConfig
-    from drivers.errors import DriverConfigError
 
     try:
         EncoderConfig.from_dict(dict(enc))
@@ -553,14 +639,11 @@ def _check_encoder_keys(c: _Checker, enc: Mapping[str, Any]) -> None:
 
 
 def _read_camera(c: _Checker, table: str, key: str, path: str | None) -> Any:
-    """The camera file at ``path`` (None: the demo camera of `moi measure`) as a ``CameraConfig``;
+    """The camera file at ``path`` (None: the demo camera) as a ``CameraConfig``;
     a missing or malformed file is a one-line error naming the config file, the key and the camera file."""
-    from measurement.vision.config import CameraConfig
-
     from .camera_config import read_camera
     if path is None:
-        from .commands.measure import DEFAULT_CAMERA
-        return CameraConfig.from_dict(DEFAULT_CAMERA)
+        return demo_camera()
     try:
         return read_camera(path)
     except InvalidInput as exc:  # InputFileError (not found, not TOML) or VisionError (naming the file)

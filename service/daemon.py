@@ -253,6 +253,10 @@ class Appliance:
             raise _Fatal("the Modbus server thread stopped")
         if self.mqtt is not None and self.mqtt.sender.error is not None:
             raise _Fatal(f"the MQTT outbox sender failed: {self.mqtt.sender.error}")
+        if self.mqtt is not None and not self.mqtt.network_thread_alive():
+            # commands and acknowledgements are no longer read: stop feeding the watchdog and let
+            # systemd restart the daemon (the outbox keeps every unacknowledged result)
+            raise _Fatal("the MQTT network thread stopped")
 
     def _fault(self, reason: str) -> None:
         seq = self.sequencer

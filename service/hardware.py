@@ -30,17 +30,17 @@ from drivers.clock import Clock, MonotonicClock, ScaledClock
 from drivers.errors import DriverConfigError
 from drivers.indicator import Indicator
 from drivers.sensor import AngleSensor, SimulatedAngleSensor
+from drivers.settings import SolenoidSettings
 from drivers.simrig import SimRig
 from drivers.solenoid import Solenoid
-from measurement import Pendulum
+from firmware_host import SequencerConfig
+from measurement import Pendulum, Rig
 
-from .config import Config
+from .config import Config, HardwareSettings, SimulationSettings
+from .defaults import SIM_BUTTON_PIN, SIM_SOLENOID_PIN, demo_camera
 from .errors import ConfigError, StartupError
 
 log = logging.getLogger("moi.hardware")
-
-SIM_SOLENOID_PIN = 17
-SIM_BUTTON_PIN = 27
 
 
 @dataclass
@@ -54,6 +54,7 @@ class Devices:
     indicator: Indicator | None = None
     simulated: bool = False
     sim: Any = None  # the SimRig (tests read its truth)
+    notes: list[str] = field(default_factory=list)  # what was built, one line per device (printed by `moi measure`)
     _closers: list[Callable[[], None]] = field(default_factory=list)
 
     def close(self) -> None:
@@ -69,6 +70,12 @@ class Devices:
                 closer()
             except Exception:
                 log.exception("closing the simulation failed")
+
+    def __enter__(self) -> "Devices":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
 
 
 class _RelatchingSensor:
@@ -95,53 +102,71 @@ class _RelatchingSensor:
 
 
 def build_devices(config: Config) -> Devices:
-    return _simulated(config) if config.simulated else _hardware(config)
+    """The devices of ``config``: the simulated rig (``[simulation]``) or the hardware of ``[hardware]``."""
+    if config.simulated:
+        return build_simulated(config.rig, config.simulation, config.sequencer, config.hardware)
+    return _hardware(config)
 
 
-def _simulated(config: Config) -> Devices:
-    sim = config.simulation
-    hw = config.hardware
+#: the simulated encoder client's reply time-out, s of real time (a scaled clock must not stretch it)
+SIM_ENCODER_TIMEOUT = 0.05
+
+
+def build_simulated(rig: Rig, sim: SimulationSettings, sequencer: SequencerConfig,
+                    hardware: HardwareSettings | None = None) -> Devices:
+    """The simulated appliance: mock pins, the simulated pendulum and the angle sensor of ``sim.sensor``.
+
+    The one builder of the simulated rig, for `moi run` without hardware (or ``--sim``) and for
+    `moi measure --sim`. rig: the rig the pendulum swings on; sim: the simulated part, its damping,
+    the sensor and its imperfections; sequencer: how long a capture may last (the simulation runs
+    that long); hardware: when given (``--sim`` with a ``[hardware]`` table), its solenoid and button
+    pins and the solenoid's maximum on-time are used on the mock pins. ``Devices.notes`` says what
+    was built, one line per device.
+    """
     factory = pin_factory("mock")
     clock: Clock = ScaledClock(sim.time_scale) if sim.time_scale != 1.0 else MonotonicClock()
-    sol_pin = hw.solenoid["pin"] if hw else SIM_SOLENOID_PIN
-    btn_pin = hw.button["pin"] if hw and hw.button else SIM_BUTTON_PIN
-    max_on = hw.solenoid["max_on_time"] if hw else 0.5
+    sol = SolenoidSettings(SIM_SOLENOID_PIN) if hardware is None else SolenoidSettings(**hardware.solenoid)
+    btn_pin = hardware.button["pin"] if hardware and hardware.button else SIM_BUTTON_PIN
+    notes: list[str] = []
     opened: list[Callable[[], None]] = []
-    solenoid = Solenoid(sol_pin, max_on_time=max_on, pin_factory=factory)
+    solenoid = Solenoid(sol.pin, max_on_time=sol.max_on_time, pin_factory=factory)
     opened.append(solenoid.close)
     try:
         button = PushButton(btn_pin, pull_up=True, bounce_time=None, pin_factory=factory)
         opened.append(button.close)
-        duration = config.sequencer.pre_trigger + config.sequencer.capture_duration + 5.0
-        rig = SimRig(Pendulum(config.rig, sim.inertia, sim.effects), theta0=sim.theta0, clock=clock,
-                     duration=duration).attach(solenoid)
-        closers: list[Callable[[], None]] = [rig.close]
-        opened.append(rig.close)
+        duration = sequencer.pre_trigger + sequencer.capture_duration + 5.0
+        pendulum = SimRig(Pendulum(rig, sim.inertia, sim.effects), theta0=sim.theta0, clock=clock,
+                          duration=duration).attach(solenoid)
+        closers: list[Callable[[], None]] = [pendulum.close]
+        opened.append(pendulum.close)
         if sim.sensor == "encoder":
             from drivers.encoder import ModbusEncoder
             from drivers.sim_encoder import SimEncoderConfig, SimEncoderServer
 
             bits = sim.bits or 17
-            server = SimEncoderServer(rig.angle, clock, SimEncoderConfig(
+            server = SimEncoderServer(pendulum.angle, clock, SimEncoderConfig(
                 counts_per_turn=1 << bits, registers=1 if bits <= 16 else 2, noise_std=sim.noise,
-                latency=sim.latency, seed=sim.seed)).start()
+                latency=sim.latency, drop_rate=sim.drop_rate, crc_error_rate=sim.crc_rate, seed=sim.seed)).start()
             opened.append(server.stop)
             closers.insert(0, server.stop)
-            # the client's time-out is real time: a scaled clock must not stretch it
-            inner: Any = ModbusEncoder(server.encoder_config(timeout=0.05), clock)
+            notes.append(f"simulated encoder: Modbus RTU on {server.url}, {bits} bits")
+            inner: Any = ModbusEncoder(server.encoder_config(timeout=SIM_ENCODER_TIMEOUT), clock)
         elif sim.sensor == "camera":
-            inner = _simulated_camera(sim, rig, clock)
+            inner = _simulated_camera(sim, pendulum, clock, notes)
             opened.append(inner.close)
         else:
-            inner = SimulatedAngleSensor(rig.angle, clock, rate=sim.rate, noise_std=sim.noise,
+            inner = SimulatedAngleSensor(pendulum.angle, clock, rate=sim.rate, noise_std=sim.noise,
                                          quantisation_bits=sim.bits or None, seed=sim.seed, source="encoder")
-        sensor = _RelatchingSensor(inner, rig)
+            notes.append(f"simulated sensor: in process at {sim.rate:g} Hz")
+        sensor = _RelatchingSensor(inner, pendulum)
     except BaseException:
         for close in reversed(opened):
             close()
         raise
-    return Devices(clock=clock, solenoid=solenoid, sensor=sensor, button=button, simulated=True, sim=rig,
-                   _closers=closers)
+    for line in notes:
+        log.info("%s", line)
+    return Devices(clock=clock, solenoid=solenoid, sensor=sensor, button=button, simulated=True, sim=pendulum,
+                   notes=notes, _closers=closers)
 
 
 def _hardware(config: Config) -> Devices:
@@ -183,7 +208,7 @@ def _hardware(config: Config) -> Devices:
     return Devices(clock=clock, solenoid=solenoid, sensor=sensor, button=button, indicator=indicator)
 
 
-def _simulated_camera(sim: Any, rig: SimRig, clock: Clock) -> Any:
+def _simulated_camera(sim: SimulationSettings, rig: SimRig, clock: Clock, notes: list[str]) -> Any:
     """A mock camera filming the simulated rig (yawed by ``camera_yaw_deg``) and the device's camera sensor on it."""
     from drivers.camera import open_camera
     from drivers.camera_sensor import CameraAngleSensor
@@ -191,11 +216,8 @@ def _simulated_camera(sim: Any, rig: SimRig, clock: Clock) -> Any:
 
     cfg = sim.camera_config
     if cfg is None:  # SimulationSettings built by hand rather than by parse_config, which reads the file
-        from measurement.vision.config import CameraConfig
-
         from .camera_config import read_camera
-        from .commands.measure import DEFAULT_CAMERA
-        cfg = read_camera(sim.camera) if sim.camera else CameraConfig.from_dict(DEFAULT_CAMERA)
+        cfg = read_camera(sim.camera) if sim.camera else demo_camera()
     if sim.time_scale != 1.0:
         # frames are rendered on the main loop's thread (~5 ms each at 640×480); faster than real time,
         # more frames fall due between two polls than the mock's 8-frame buffer holds: the rest are dropped
@@ -203,15 +225,16 @@ def _simulated_camera(sim: Any, rig: SimRig, clock: Clock) -> Any:
                     "expect dropped_frames (use time_scale = 1 with the camera)", sim.time_scale,
                     cfg.camera.fps * sim.time_scale)
     camera = open_camera(cfg, angle_source=rig.angle, clock=clock,
-                         pose=CameraPose(yaw=math.radians(sim.camera_yaw_deg)), seed=sim.seed)
+                         pose=CameraPose(yaw=math.radians(sim.camera_yaw_deg)), drop_probability=sim.drop_rate,
+                         seed=sim.seed)
     try:
         sensor = CameraAngleSensor(camera, cfg, clock)
     except BaseException:
         camera.close()
         raise
     cam = cfg.camera
-    log.info("simulated camera: %d×%d px at %g frames/s, yaw %g°, marker radius %g m at %g m", cam.width, cam.height,
-             cam.fps, sim.camera_yaw_deg, cfg.marker.radius, cfg.marker.distance)
+    notes.append(f"simulated camera: {cam.width}×{cam.height} px at {cam.fps:g} frames/s, yaw {sim.camera_yaw_deg:g}°, "
+                 f"marker radius {cfg.marker.radius:g} m at {cfg.marker.distance:g} m")
     return sensor
 
 

@@ -12,16 +12,20 @@ Writes: only the two command coils and the part ID / recipe_select holding
 registers (``registers.WRITABLE``) are writable. The result image is declared
 read-only (pymodbus answers 0x02), so is everything between it and the
 writable block; coils other than the command coils are refused in the access
-hook with 0x02. A write to the part registers while a measurement runs (or a
-trigger is about to start one) gets 0x06 (server device busy): the part being
-measured cannot change; an unknown recipe number or a non-ASCII part ID gets
-0x03 (illegal data value).
+hook with 0x02. A single-coil write (function 5) must carry 0xFF00 (on) or
+0x0000 (off), anything else is answered with exception 03 and fires nothing,
+and its reply echoes the request (the coil itself reads back 0: the command
+coils are pulses). A write to the part registers while a measurement runs (or
+a trigger is about to start one) gets 0x06 (server device busy): the part
+being measured cannot change; an unknown recipe number or a non-ASCII part ID
+gets 0x03 (illegal data value).
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import struct
 import threading
 import time
 from dataclasses import dataclass
@@ -30,6 +34,8 @@ from typing import Any, Callable, Mapping
 from pymodbus.constants import ExcCodes
 from pymodbus.exceptions import NoSuchIdException
 from pymodbus.framer import FramerType
+from pymodbus.pdu import ExceptionResponse
+from pymodbus.pdu.bit_message import WriteSingleCoilRequest, WriteSingleCoilResponse
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 from pymodbus.simulator.simcore import SimCore
@@ -85,9 +91,36 @@ class _OneUnitCore(SimCore):
         return await super().async_getValues(device_id, func_code, address, count)
 
     async def async_setValues(self, device_id: int, func_code: int, address: int, values):
+        self.require_device(device_id)
+        return await super().async_setValues(device_id, func_code, address, values)
+
+    def require_device(self, device_id: int) -> None:
         if device_id not in self.devices:
             raise NoSuchIdException(f"unit id {device_id} is not served")
-        return await super().async_setValues(device_id, func_code, address, values)
+
+
+class _WriteSingleCoil(WriteSingleCoilRequest):
+    """Function 5 as the Modbus Application Protocol specification has it (section 6.5): the value
+    is 0xFF00 or 0x0000, anything else is exception 03 (ILLEGAL DATA VALUE); the normal
+    response is an echo of the request. pymodbus 3.16 reads any non-zero value as "on" and
+    answers with the coil's read-back value."""
+
+    value = 0x0000  # the value field as received
+
+    def decode(self, data: bytes) -> None:
+        self.address, self.value = struct.unpack(">HH", data[:4])
+        self.bits = [self.value == 0xFF00]
+
+    async def datastore_update(self, context, device_id: int):
+        if isinstance(context, _OneUnitCore):
+            context.require_device(device_id)  # another unit's request is not ours to refuse
+        if self.value not in (0x0000, 0xFF00):
+            return ExceptionResponse(self.function_code, ExcCodes.ILLEGAL_VALUE)
+        echo = list(self.bits)  # the access hook clears the written values (pulse coils)
+        response = await super().datastore_update(context, device_id)
+        if isinstance(response, WriteSingleCoilResponse):
+            response.bits = echo
+        return response
 
 
 class ModbusServer:
@@ -271,12 +304,13 @@ class ModbusServer:
         self._loop = asyncio.get_running_loop()
         device = self._device()
         if s.mode == "tcp":
-            server = ModbusTcpServer(device, address=(s.host, s.port), ignore_missing_devices=False)
+            server = ModbusTcpServer(device, address=(s.host, s.port), ignore_missing_devices=False,
+                                     custom_pdu=[_WriteSingleCoil])
             where = f"TCP {s.host}:{s.port}"
         elif s.mode == "rtu":
             server = ModbusSerialServer(device, framer=FramerType.RTU, port=s.serial_port or "", baudrate=s.baudrate,
                                         parity=s.parity, stopbits=s.stopbits, bytesize=s.bytesize,
-                                        ignore_missing_devices=True)
+                                        ignore_missing_devices=True, custom_pdu=[_WriteSingleCoil])
             where = f"RTU {s.serial_port} {s.baudrate} {s.bytesize}{s.parity}{s.stopbits}"
         else:
             raise ModbusServerError(f"unknown Modbus mode {s.mode!r}; expected tcp or rtu")

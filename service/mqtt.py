@@ -23,6 +23,7 @@ uncertainty, ω_n, the damping ratio, the state, each quality flag and a
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import ssl
@@ -41,6 +42,25 @@ from .registers import FLAG_BITS
 from .store import Store
 
 log = logging.getLogger("moi.mqtt")
+
+#: a command payload longer than this is a command without an id (its JSON is not parsed), bytes
+MAX_COMMAND_PAYLOAD = 1024
+
+
+def _never_raises(callback: Callable[..., None]) -> Callable[..., None]:
+    """Wrap a paho callback: an exception that escaped it would end paho's network thread
+    (no more commands, acknowledgements or reconnects), so it is logged and counted instead."""
+
+    @functools.wraps(callback)
+    def guarded(self: "MqttService", *args: Any) -> None:
+        try:
+            callback(self, *args)
+        except Exception as exc:  # a callback must never end the network thread
+            self.callback_errors += 1
+            self.last_error = f"{callback.__name__}: {type(exc).__name__}: {exc}"
+            log.exception("MQTT: %s failed (ignored; the connection goes on)", callback.__name__)
+
+    return guarded
 
 
 @dataclass(frozen=True)
@@ -113,6 +133,7 @@ class MqttService:
         self._seen_lock = threading.Lock()
         self.connected_event = threading.Event()
         self.last_error: str | None = None
+        self.callback_errors = 0  # exceptions caught in paho callbacks (each one logged)
         client_id = settings.client_id or f"moi-{device_id}"
         # clean session: the outbox, not the broker session, is what makes delivery durable
         self.client = mqtt.Client(CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=True)
@@ -171,7 +192,13 @@ class MqttService:
 
     @property
     def is_connected(self) -> bool:
-        return self.connected_event.is_set()
+        return self.connected_event.is_set() and self.network_thread_alive()
+
+    def network_thread_alive(self) -> bool:
+        """True while paho's network thread runs (after ``start``). paho keeps the thread in
+        ``_thread`` and sets it to None when loop_forever ends, normally or by an exception."""
+        thread = getattr(self.client, "_thread", None)
+        return thread is not None and thread.is_alive()
 
     # --- publishing --------------------------------------------------------------------
     def _publish_kind(self, kind: str, payload: str) -> int:
@@ -187,6 +214,7 @@ class MqttService:
         self.sender.wake()
 
     # --- paho callbacks (network thread) -----------------------------------------------------
+    @_never_raises
     def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
         if reason_code.is_failure:
             self.last_error = f"broker refused the connection: {reason_code}"
@@ -202,15 +230,18 @@ class MqttService:
         self.connected_event.set()
         self.sender.connected()
 
+    @_never_raises
     def _on_disconnect(self, client, userdata, flags, reason_code, properties) -> None:
         if self.connected_event.is_set():
             (log.warning if reason_code.is_failure else log.info)("MQTT disconnected: %s", reason_code)
         self.connected_event.clear()
         self.sender.disconnected()
 
+    @_never_raises
     def _on_publish(self, client, userdata, mid, reason_code, properties) -> None:
         self.sender.acked(mid)
 
+    @_never_raises
     def _on_message(self, client, userdata, message) -> None:
         if message.retain:
             log.warning("MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
@@ -222,12 +253,12 @@ class MqttService:
         cmd_id = None
         data: dict[str, Any] = {}
         doc: Any = None
-        if message.payload:
+        if message.payload and len(message.payload) <= MAX_COMMAND_PAYLOAD:
             try:
                 doc = json.loads(message.payload)
                 if isinstance(doc, dict) and doc.get("id") is not None:
-                    cmd_id = str(doc["id"])
-            except (ValueError, UnicodeDecodeError):
+                    cmd_id = str(doc["id"])[:128]
+            except (ValueError, UnicodeDecodeError, RecursionError):
                 pass  # any payload is a valid command; only a JSON "id" is used for dedupe
         if isinstance(doc, dict):
             data = {k: doc[k] for k in ("part_id", "recipe") if k in doc}

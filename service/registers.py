@@ -530,7 +530,9 @@ def markdown() -> str:
         L.append(f"| {a} | `{name}` | {meaning[name]} |")
     L.append("")
     L.append("Only these two coils are writable. Writing 0 to them does nothing; any other write anywhere on the "
-             "device, but the part ID and recipe_select registers, gets exception 0x02 (illegal data address).")
+             "device, but the part ID and recipe_select registers, gets exception 0x02 (illegal data address). "
+             "A single-coil write (FC 5) carries 0xFF00 or 0x0000, any other value gets exception 0x03 (illegal "
+             "data value); the reply echoes the request.")
     L.append("")
     L.append("## Discrete inputs (FC 2)")
     L.append("")

@@ -23,20 +23,15 @@ from pathlib import Path
 import numpy as np
 
 from measurement.errors import VisionError
-from measurement.vision.config import CameraConfig, CameraModel, MarkerGeometry
+from measurement.vision.config import CameraConfig
 from measurement.vision.geometry import angle_from_normalised
 from measurement.vision.locate import MarkerObservation, MarkerTracker
 
 from ..camera_config import read_camera
+from ..defaults import demo_camera
 from ..errors import InputFileError
 
 HELP = "find the marker in one camera frame: position, angle, annotated PNG for alignment"
-
-#: the camera of the demo rig (and of the mock camera when no camera file is given)
-DEFAULT_CAMERA = CameraConfig(
-    camera=CameraModel(width=640, height=480, fps=60.0, fx=600.0, fy=600.0, cx=319.5, cy=239.5),
-    marker=MarkerGeometry(radius=0.10, distance=0.25),
-)
 
 #: frames grabbed from a live camera before the one measured (exposure and gain settle)
 SETTLE_FRAMES = 5
@@ -130,7 +125,7 @@ def _annotate(img: np.ndarray, obs: MarkerObservation, config: CameraConfig, lin
 def run(args: argparse.Namespace) -> int:
     import cv2
 
-    config = read_camera(args.camera) if args.camera else DEFAULT_CAMERA
+    config = read_camera(args.camera) if args.camera else demo_camera()
     img, where = _grab(args, config)
     obs = MarkerTracker(config.camera).locate(img, keep_points=True)
     report: dict = {"source": where, "found": obs.found, "png": args.out}

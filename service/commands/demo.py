@@ -20,6 +20,7 @@ import threading
 import time
 
 from ..config import parse_config
+from ..defaults import DEMO_EFFECTS, DEMO_INERTIA
 from ..errors import InputFileError
 
 HELP = "the appliance on the simulated rig: one push-button measurement, printed with its Modbus registers (and MQTT)"
@@ -33,7 +34,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--time-scale", type=float, default=5.0, metavar="X",
                    help="simulated seconds per wall-clock second (default 5)")
     p.add_argument("--duration", type=float, default=20.0, metavar="S", help="capture after the release, simulated s (default 20)")
-    p.add_argument("--inertia", "-J", type=float, default=0.0125, metavar="KG_M2", help="true J of the simulated part (default 0.0125)")
+    p.add_argument("--inertia", "-J", type=float, default=DEMO_INERTIA, metavar="KG_M2",
+                   help=f"true J of the simulated part (default {DEMO_INERTIA:g})")
     p.add_argument("--seed", type=int, default=1, help="noise seed (default 1)")
     p.add_argument("--state-dir", metavar="DIR", help="keep the result store here (default: a temporary directory)")
     p.add_argument("--json", action="store_true", help="print the published result payload as JSON at the end")
@@ -45,7 +47,7 @@ def _doc(args: argparse.Namespace, state_dir: str) -> dict:
         "sequencer": {"pre_trigger": 0.5, "capture_duration": args.duration,
                       "sample_timeout": max(1.0, 0.2 * args.time_scale)},
         "simulation": {"inertia": args.inertia, "time_scale": args.time_scale, "seed": args.seed, "sensor": "encoder",
-                       "noise": 5e-5, "effects": {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 1.2e-4}}},
+                       "noise": 5e-5, "effects": DEMO_EFFECTS},
         "modbus": {"host": "127.0.0.1", "port": 0},
     }
     if args.mqtt:

@@ -19,31 +19,25 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import sys
-from contextlib import ExitStack
 
-from measurement import Options, Pendulum, Rig
+from measurement import Options, Pendulum
 from measurement.errors import InvalidInput
 
+from ..defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, demo_camera
 from ..files import read_rig
 from .simulate import EFFECT_SYNTAX, parse_effects
 
 HELP = "one push-button measurement cycle on the simulated rig (solenoid, encoder, sequencer), printed"
 
-#: the demo rig of `moi demo` when no --rig is given
-DEFAULT_RIG = Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5043e-3, declared=("viscous",))
-DEFAULT_INERTIA = 0.0125
-DEFAULT_EFFECTS = ["viscous=1.5e-4", "coulomb=1.2e-4"]
+#: the demo rig, part and damping when no --rig is given
+DEFAULT_RIG = DEMO_RIG
+DEFAULT_INERTIA = DEMO_INERTIA
+DEFAULT_EFFECTS = [f"{name}:{p}={v:g}" for name, params in DEMO_EFFECTS.items() for p, v in params.items()]
 
 #: exit status when the measurement ended in FAULT (not a bug: exit 1; not bad input: exit 2)
 EXIT_FAULT = 3
 
-#: the simulated camera when no --camera file is given: 640×480 at 100 frames/s, 56° field of view,
-#: the marker on a 0.10 m radius seen from 0.25 m (240 px per rad at rest)
-DEFAULT_CAMERA = {"camera": {"width": 640, "height": 480, "fps": 100.0, "fx": 600.0, "fy": 600.0,
-                             "cx": 319.5, "cy": 239.5, "distortion": [0.0, 0.0, 0.0, 0.0, 0.0]},
-                  "marker": {"radius": 0.10, "distance": 0.25}}
 #: default --time-scale per sensor
 DEFAULT_TIME_SCALE = {"encoder": 5.0, "camera": 1.0}
 
@@ -96,12 +90,10 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInput("--duration must be > 0 s and --pre-trigger >= 0 s")
 
     # imported here: `moi --help` must not pay for gpiozero/pymodbus
-    from drivers.backend import pin_factory
-    from drivers.button import PushButton
-    from drivers.clock import ScaledClock
-    from drivers.simrig import SimRig
-    from drivers.solenoid import Solenoid
     from firmware_host import Sequencer, SequencerConfig
+
+    from ..config import SimulationSettings
+    from ..hardware import build_simulated
 
     rig = read_rig(args.rig) if args.rig else DEFAULT_RIG
     tokens = args.effects if args.effects is not None else ([] if args.rig else DEFAULT_EFFECTS)
@@ -111,35 +103,30 @@ def run(args: argparse.Namespace) -> int:
     # each lost encoder reply already costs a time-out; pymodbus would log every one as an error
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
-    clock = ScaledClock(args.time_scale)
-    factory = pin_factory("mock")  # --sim: the one place that picks mock pins
-    sim = SimRig(truth, theta0=args.theta0, clock=clock, duration=args.pre_trigger + args.duration + 5.0)
     config = SequencerConfig(pre_trigger=args.pre_trigger, capture_duration=args.duration,
                              decay_threshold=args.decay_threshold, sample_timeout=max(1.0, 0.2 * args.time_scale))
+    simulation = SimulationSettings(
+        inertia=args.inertia, effects=effects, theta0=args.theta0, noise=args.noise, bits=args.bits,
+        time_scale=args.time_scale, seed=args.seed, sensor=args.sensor, latency=args.latency, camera=args.camera,
+        camera_yaw_deg=args.camera_yaw, camera_config=camera_config, drop_rate=args.drop_rate, crc_rate=args.crc_rate)
     desc = ", ".join(f"{k}({', '.join(f'{p}={v:g}' for p, v in ps.items())})" for k, ps in effects.items()) or "no damping"
     out = sys.stderr if args.json else sys.stdout
     print(f"simulated {rig.kind} rig: true J = {truth.inertia:g} kg·m², ω_n = {truth.omega_n:.6g} rad/s, {desc}; "
           f"θ0 = {args.theta0:g} rad, time × {args.time_scale:g}", file=out)
 
     results = []
-    with ExitStack() as stack:
-        solenoid = stack.enter_context(Solenoid(17, pin_factory=factory))
-        button = stack.enter_context(PushButton(27, bounce_time=None, pin_factory=factory))
-        sim.attach(solenoid)
-        stack.callback(sim.close)
-        if camera_config is None:
-            sensor = _open_encoder(stack, args, sim, clock, out)
-        else:
-            sensor = _open_camera(stack, args, camera_config, sim, clock, out)
-        seq = stack.enter_context(Sequencer(clock=clock, solenoid=solenoid, sensor=sensor, rig=rig,
-                                            sink=results.append, config=config,
-                                            options=Options(discover=not args.no_discover), button=button))
-        t0 = clock.now()
-        seq.subscribe(lambda e: print(f"[{e.time - t0:7.2f} s] {e.state.value:<12} {e.reason}", file=out))
-        print("pressing the button", file=out)
-        button.pin.drive_low()   # pull-up button: pressed pulls the line low
-        button.pin.drive_high()
-        last = seq.run_until_settled(timeout=args.pre_trigger + args.duration + 120.0 * args.time_scale)
+    with build_simulated(rig, simulation, config) as devices:
+        for line in devices.notes:
+            print(line, file=out)
+        clock, solenoid, button = devices.clock, devices.solenoid, devices.button
+        with Sequencer(clock=clock, solenoid=solenoid, sensor=devices.sensor, rig=rig, sink=results.append,
+                       config=config, options=Options(discover=not args.no_discover), button=button) as seq:
+            t0 = clock.now()
+            seq.subscribe(lambda e: print(f"[{e.time - t0:7.2f} s] {e.state.value:<12} {e.reason}", file=out))
+            print("pressing the button", file=out)
+            button.pin.drive_low()   # pull-up button: pressed pulls the line low
+            button.pin.drive_high()
+            last = seq.run_until_settled(timeout=args.pre_trigger + args.duration + 120.0 * args.time_scale)
         on_times = [s.timestamp for prev, s in zip(solenoid.pin.states, solenoid.pin.states[1:]) if prev.state]
         print(f"solenoid: {len(on_times)} pulse(s), on for {', '.join(f'{x * 1e3:.1f}' for x in on_times)} ms "
               f"(real time), now {'ON' if solenoid.is_active else 'off'}", file=out)
@@ -162,38 +149,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _camera_config(args: argparse.Namespace):
-    """The simulated camera's file (--camera, else DEFAULT_CAMERA), checked before anything is opened."""
-    from measurement.vision.config import CameraConfig
-
+    """The simulated camera's file (--camera, else the demo camera), checked before anything is opened."""
     from ..camera_config import read_camera
     if not (abs(args.camera_yaw) < 20 and args.camera_yaw == args.camera_yaw):
         raise InvalidInput(f"--camera-yaw must be within ±20°, got {args.camera_yaw:g}")
-    return read_camera(args.camera) if args.camera else CameraConfig.from_dict(DEFAULT_CAMERA)
-
-
-def _open_encoder(stack: ExitStack, args: argparse.Namespace, sim, clock, out):
-    """The simulated Modbus encoder server and the device's Modbus client on it (closed by ``stack``)."""
-    from drivers.encoder import ModbusEncoder
-    from drivers.sim_encoder import SimEncoderConfig, SimEncoderServer
-
-    server_config = SimEncoderConfig(counts_per_turn=1 << args.bits, registers=1 if args.bits <= 16 else 2,
-                                     noise_std=args.noise, latency=args.latency, drop_rate=args.drop_rate,
-                                     crc_error_rate=args.crc_rate, seed=args.seed)
-    server = stack.enter_context(SimEncoderServer(sim.angle, clock, server_config))
-    print(f"simulated encoder: Modbus RTU on {server.url}, {args.bits} bits", file=out)
-    return stack.enter_context(ModbusEncoder(server.encoder_config(timeout=0.02), clock))
-
-
-def _open_camera(stack: ExitStack, args: argparse.Namespace, config, sim, clock, out):
-    """A mock camera filming the simulated rig and the device's camera sensor on it (closed by ``stack``)."""
-    from drivers.camera import open_camera
-    from drivers.camera_sensor import CameraAngleSensor
-    from measurement.vision.render import CameraPose
-
-    camera = open_camera(config, angle_source=sim.angle, clock=clock, pose=CameraPose(yaw=math.radians(args.camera_yaw)),
-                         drop_probability=args.drop_rate, seed=args.seed)
-    sensor = stack.enter_context(CameraAngleSensor(camera, config, clock))
-    cam = config.camera
-    print(f"simulated camera: {cam.width}×{cam.height} px at {cam.fps:g} frames/s, yaw {args.camera_yaw:g}°, "
-          f"marker radius {config.marker.radius:g} m at {config.marker.distance:g} m", file=out)
-    return sensor
+    return read_camera(args.camera) if args.camera else demo_camera()

@@ -275,6 +275,6 @@ def test_the_camera_example_loads_for_the_device_and_for_the_simulation():
     assert sim.simulated and sim.simulation.sensor == "camera" and sim.simulation.camera_config == cam.config
     # without a camera file the simulation films with the demo camera of `moi measure --sensor camera`
     demo = parse_config({"simulation": {"sensor": "camera"}})
-    from service.commands.measure import DEFAULT_CAMERA
+    from service.defaults import DEMO_CAMERA as DEFAULT_CAMERA
     assert demo.simulation.camera is None and demo.simulation.camera_config.to_dict()["camera"]["fx"] == \
         DEFAULT_CAMERA["camera"]["fx"]

@@ -1,0 +1,43 @@
+"""The demo rig, part and camera: what the simulated appliance runs with when nothing else is given.
+
+One definition for `moi run` without a ``[hardware]`` table, ``[simulation]``'s
+defaults, `moi measure --sim`, `moi demo` and `moi camera-check` on the mock
+camera. The rig is the torsion rig of ``examples/torsion_rig.toml``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from measurement.rig import Rig
+
+#: the simulated rig when no rig file is given: torsion, k = 0.3651 N·m/rad, empty fixture 4.5043e-3 kg·m²
+DEMO_RIG = Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5043e-3, declared=("viscous",))
+
+#: true J of the simulated part, kg·m²
+DEMO_INERTIA = 0.0125
+
+#: true damping of the simulated rig: effect → {parameter: value} (viscous c in N·m·s/rad, Coulomb T_c in N·m)
+DEMO_EFFECTS: dict[str, dict[str, float]] = {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 1.2e-4}}
+
+#: release angle of the simulated pendulum, rad
+DEMO_THETA0 = 0.25
+
+#: the simulated camera when no camera file is given (the camera file's tables): 640×480 px at
+#: 100 frames/s, 56° field of view, the marker on a 0.10 m radius seen from 0.25 m (240 px per rad at rest)
+DEMO_CAMERA: dict[str, Any] = {
+    "camera": {"width": 640, "height": 480, "fps": 100.0, "fx": 600.0, "fy": 600.0, "cx": 319.5, "cy": 239.5,
+               "distortion": [0.0, 0.0, 0.0, 0.0, 0.0]},
+    "marker": {"radius": 0.10, "distance": 0.25},
+}
+
+#: BCM pins of the simulated solenoid and push button (mock pins) when no [hardware] table gives them
+SIM_SOLENOID_PIN = 17
+SIM_BUTTON_PIN = 27
+
+
+def demo_camera() -> Any:
+    """``DEMO_CAMERA`` as a ``measurement.vision.CameraConfig`` (imported here: the vision package loads OpenCV)."""
+    from measurement.vision.config import CameraConfig
+
+    return CameraConfig.from_dict(DEMO_CAMERA)
