@@ -192,6 +192,7 @@ def test_mqtt_selects_the_recipe_and_the_measure_command_carries_the_part_id(tmp
     # after each part the recipe's SPC summary is retained on spc/<recipe>
     c.wait(lambda c: len(c.on("/spc/rotor-big")) >= 1, 10, "the SPC summary after the first part")
     assert json.loads(c.on("/spc/rotor-big")[-1])["status"] == "fewer than 2 usable parts"
+    app.wait_done(1)  # a command while the first one is still PUBLISHING is refused, like the button
     c.publish("moi/test-rig/cmd/measure", json.dumps({"id": "m-2", "part_id": "MQ-43"}))
     c.wait(lambda c: len(c.on("/spc/rotor-big")) >= 2, 30, "the SPC summary after the second part")
     spc = json.loads(c.on("/spc/rotor-big")[-1])
