@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench install broker clean
+.PHONY: demo test bench install broker browser clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -24,10 +24,19 @@ broker:
 	    echo "note: could not install mosquitto; MQTT tests will be skipped"; \
 	  else echo "note: mosquitto missing and not root; MQTT tests will be skipped"; fi; }
 
+# The browser test drives Debian's headless Chromium with its chromedriver; install them the same way.
+browser:
+	@{ command -v chromium >/dev/null 2>&1 && command -v chromedriver >/dev/null 2>&1; } || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    (apt-get install -y -qq chromium chromium-driver >/dev/null 2>&1 || \
+	     (apt-get update -qq >/dev/null && apt-get install -y -qq chromium chromium-driver >/dev/null)) || \
+	    echo "note: could not install chromium/chromium-driver; the browser test will be skipped"; \
+	  else echo "note: chromium or chromedriver missing and not root; the browser test will be skipped"; fi; }
+
 demo: $(STAMP)
 	$(VENV)/bin/moi demo
 
-test: $(STAMP) broker
+test: $(STAMP) broker browser
 	$(PY) -m pytest -q
 
 bench: $(STAMP)

@@ -33,8 +33,11 @@ def is_mock(backend: str | None = None) -> bool:
     return backend_name(backend).lower() == MOCK
 
 
-def pin_factory(backend: str | None = None) -> Factory:
+def pin_factory(backend: str | None = None) -> Factory | None:
     """The gpiozero pin factory for ``backend`` ("mock", "lgpio", "rpigpio", "pigpio", "native" or None).
+
+    None (no backend named anywhere): gpiozero's own default, which gpiozero itself picks when
+    the first device is made with ``pin_factory=None`` (lgpio on a Pi); this returns None then.
 
     The mock factory is shared process-wide (``gpiozero.Device.pin_factory``)
     so that a test can reach the very pins a driver uses. Unknown names raise
@@ -47,9 +50,7 @@ def pin_factory(backend: str | None = None) -> Factory:
                 Device.pin_factory = MockFactory()
             return Device.pin_factory
         if name == "default":
-            if Device.pin_factory is None:
-                Device.pin_factory = Device._default_pin_factory()
-            return Device.pin_factory
+            return Device.pin_factory  # None until gpiozero has chosen its default for the first device
         group = entry_points(group="gpiozero_pin_factories")
         for ep in group:
             if ep.name == name or ep.name == name.lower():

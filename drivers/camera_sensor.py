@@ -49,6 +49,7 @@ from measurement.vision.pipeline import DROPPED, Tracking, VisionSettings, trace
 from .camera import Camera, Frame
 from .clock import Clock, MonotonicClock
 from .errors import DriverConfigError, SensorFault
+from .sensor import SampleBuffer
 
 log = logging.getLogger("moi.drivers.camera_sensor")
 
@@ -92,8 +93,8 @@ class CameraAngleSensor:
         self._stop_timeout = float(stop_timeout)
         # the camera counts from opening: only the frames of the current capture are this capture's
         self._threaded = not camera.nonblocking
-        self._lock = threading.Lock()
-        self._arrived = threading.Condition(self._lock)  # notified on every sample and on a fault
+        self._buffer = SampleBuffer()
+        self._lock = self._buffer.lock  # also guards the counters
         self._thread: threading.Thread | None = None
         self._stop_reading = threading.Event()
         self._capturing = False
@@ -125,7 +126,7 @@ class CameraAngleSensor:
 
         With a nonblocking camera the frames exposed by now are grabbed and tracked here.
         """
-        if not self._threaded and self._capturing and self._fault is None:
+        if not self._threaded and self._capturing and self._buffer.fault is None:
             try:
                 frames = self.camera.grab_ready()
             except SensorFault as exc:
@@ -134,12 +135,7 @@ class CameraAngleSensor:
                 for frame in frames:
                     if not self._process(frame):
                         break
-        with self._lock:
-            if self._fault is not None:
-                raise self._fault
-            t, a = self._t, self._a
-            self._t, self._a = [], []
-        return np.asarray(t, dtype=float), np.asarray(a, dtype=float)
+        return self._buffer.drain()
 
     def stop(self) -> None:
         """Stop grabbing (safe when not started, and twice); samples already taken stay readable."""
@@ -157,13 +153,14 @@ class CameraAngleSensor:
     def stats(self) -> dict:
         """Counters of the current/last capture (JSON-ready): frames, samples, lost/corrupt/dropped, rate."""
         with self._lock:
-            c = {"frames": self._tracking.frames, "samples": self._samples,
+            c = {"frames": self._tracking.frames, "samples": self._buffer.count,
                  "marker_lost": self._tracking.lost, "corrupt_frames": self._tracking.corrupt,
                  "dropped_frames": self._dropped, "max_run_without_marker": self._max_run,
                  "frames_before_start": self._early, "failures": dict(self._tracking.reasons),
                  "fps": self.fps, "reader": "thread" if self._threaded else "poll"}
-            if self._samples > 1 and self._last_t > self._first_t:
-                c["rate_hz"] = (self._samples - 1) / (self._last_t - self._first_t)
+            rate = self._buffer.rate()
+            if rate is not None:
+                c["rate_hz"] = rate
         c["device"] = str(self.camera.stats().get("device", type(self.camera).__name__))
         return c
 
@@ -178,9 +175,7 @@ class CameraAngleSensor:
 
         For a threaded (blocking) camera; a nonblocking one only takes samples inside ``read()``.
         """
-        with self._arrived:
-            return self._arrived.wait_for(lambda: self._samples >= n or self._fault is not None, timeout) \
-                and self._fault is None
+        return self._buffer.wait_for(n, timeout)
 
     def finish(self, trace: Trace) -> Trace:
         """The captured ``trace`` (t in s, angle in rad) with the camera yaw fitted and corrected.
@@ -229,25 +224,17 @@ class CameraAngleSensor:
     # -- internals -----------------------------------------------------------------
     def _reset(self, t_start: float) -> None:
         self._t_start = t_start
-        self._t: list[float] = []
-        self._a: list[float] = []
+        self._buffer.reset()
         self._tracking = Tracking()  # only the counters and the edge figures: times/angles go to the buffer
-        self._fault: SensorFault | None = None
-        self._samples = 0
         self._dropped = 0
         self._early = 0
         self._run = 0
         self._max_run = 0
         self._last_index: int | None = None
-        self._first_t = 0.0
-        self._last_t = -math.inf
 
     def _set_fault(self, fault: SensorFault) -> None:
-        with self._lock:
-            if self._fault is None:
-                self._fault = fault
-                log.error("%s", fault)
-            self._arrived.notify_all()
+        if self._buffer.fail(fault):
+            log.error("%s", fault)
         self._capturing = False
 
     def _process(self, frame: Frame) -> bool:
@@ -269,22 +256,16 @@ class CameraAngleSensor:
             if self._last_index is not None and frame.index > self._last_index + 1:
                 self._dropped += frame.index - self._last_index - 1
             self._last_index = frame.index
-            if math.isfinite(theta) and not (math.isfinite(frame.t) and frame.t > self._last_t):
+            if math.isfinite(theta) and not (math.isfinite(frame.t) and frame.t > self._buffer.last_t):
                 # a trace needs strictly increasing time
                 theta, reason, detail = math.nan, CORRUPT, "timestamp out of order"
             if math.isfinite(theta):
-                self._t.append(float(frame.t))
-                self._a.append(theta)
-                if self._samples == 0:
-                    self._first_t = float(frame.t)
-                self._last_t = float(frame.t)
-                self._samples += 1
+                self._buffer.add(frame.t, theta)
                 self._run = 0
                 track.slope.append(obs.slope)
                 track.rows.append(obs.rows)
                 track.residual.append(obs.residual)
                 track.contrast.append(obs.contrast)
-                self._arrived.notify_all()
                 return True
             if reason == CORRUPT:
                 track.corrupt += 1

@@ -27,22 +27,41 @@ import asyncio
 import logging
 import math
 import socket
-import threading
 import time
 from collections import deque
 from dataclasses import dataclass, fields
+from enum import Enum
 from typing import Any
 
 import numpy as np
 
+from .aioloop import LoopThread
 from .clock import Clock, MonotonicClock
 from .errors import DriverConfigError, EncoderFault
+from .sensor import SampleBuffer
+from .modbus_words import WORD_ORDERS, from_registers
 
 log = logging.getLogger("moi.drivers.encoder")
 
 REGISTER_TYPES = ("holding", "input")
-WORD_ORDERS = ("big", "little")
 PARITIES = ("N", "E", "O")
+
+
+class Failure(Enum):
+    """Why one read of the position failed; the value is its counter in ``stats()``."""
+
+    TIMEOUT = "timeouts"
+    CRC = "crc_errors"
+    EXCEPTION = "exceptions"
+    CONNECTION = "connection_errors"
+
+
+@dataclass(frozen=True)
+class ReadFailure:
+    """One failed read: its kind and what happened, in words."""
+
+    kind: Failure
+    detail: str
 
 
 def check_register_layout(device_id: Any, register: Any, registers: Any, word_order: Any, counts_per_turn: Any,
@@ -200,16 +219,12 @@ class ModbusEncoder:
     def __init__(self, config: EncoderConfig, clock: Clock | None = None):
         self.config = config
         self.clock = clock or MonotonicClock()
-        self._lock = threading.Lock()
-        self._arrived = threading.Condition(self._lock)  # notified on every sample and on a fault
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
+        self._buffer = SampleBuffer()
+        self._lock = self._buffer.lock  # also guards the counters
+        self._io = LoopThread("moi-encoder-io")
         self._client = None
         self._task: asyncio.Task | None = None
         self._sampling = False
-        self._t: list[float] = []
-        self._angle: list[float] = []
-        self._fault: EncoderFault | None = None
         self._closed = False
         self._rx = bytearray()  # bytes received for the request in flight (CRC check)
         self._counts = self._zero_counts()
@@ -221,24 +236,17 @@ class ModbusEncoder:
         """Start sampling (connects on the I/O thread; connection failures count toward a fault)."""
         if self._closed:
             raise EncoderFault("encoder fault: start() after close()")
-        self._ensure_loop()
+        self._io.start()
         self._stop_task()
         with self._lock:
-            self._t.clear()
-            self._angle.clear()
-            self._fault = None
+            self._buffer.reset()
             self._counts = self._zero_counts()
             self._unwrap_last = None
-        self._call(self._begin_sampling())
+        self._io.call(self._begin_sampling())
 
     def read(self) -> tuple[np.ndarray, np.ndarray]:
         """Samples since the last read: (t in s on the clock, angle in rad). Raises EncoderFault after a fault."""
-        with self._lock:
-            if self._fault is not None:
-                raise self._fault
-            t, a = self._t, self._angle
-            self._t, self._angle = [], []
-        return np.asarray(t, dtype=float), np.asarray(a, dtype=float)
+        return self._buffer.drain()
 
     def stop(self) -> None:
         """Stop sampling (keeps the port open for the next capture); samples already taken stay readable."""
@@ -247,16 +255,16 @@ class ModbusEncoder:
     def stats(self) -> dict:
         """Counters of the current/last capture: samples, requests and the failed reads by kind."""
         with self._lock:
-            c = dict(self._counts)
+            c = {"samples": self._buffer.count, **self._counts}
+            rate = self._buffer.rate()
         c["errors"] = c["timeouts"] + c["crc_errors"] + c["exceptions"] + c["connection_errors"]
         c["port"] = self.config.port
         c["device_id"] = self.config.device_id
         if c["requests"]:
             c["error_rate"] = c["errors"] / c["requests"]
-        if c["samples"] > 1 and c["last_t"] > c["first_t"]:
-            c["rate_hz"] = (c["samples"] - 1) / (c["last_t"] - c["first_t"])
-        for k in ("first_t", "last_t", "consecutive_errors"):
-            c.pop(k, None)
+        if rate is not None:
+            c["rate_hz"] = rate
+        c.pop("consecutive_errors", None)
         return c
 
     def flags(self) -> tuple[str, ...]:
@@ -264,9 +272,7 @@ class ModbusEncoder:
 
     def wait_for_samples(self, n: int, timeout: float) -> bool:
         """Block until ``n`` samples were taken since ``start()`` (True), a fault, or ``timeout`` s of real time (False)."""
-        with self._arrived:
-            return self._arrived.wait_for(lambda: self._counts["samples"] >= n or self._fault is not None, timeout) \
-                and self._fault is None
+        return self._buffer.wait_for(n, timeout)
 
     def close(self) -> None:
         """Stop sampling, close the port and the I/O thread; safe twice."""
@@ -274,17 +280,12 @@ class ModbusEncoder:
             return
         self._closed = True
         self._stop_task()
-        loop, thread = self._loop, self._thread
-        if loop is not None and thread is not None and thread.is_alive():
-            fut = asyncio.run_coroutine_threadsafe(self._close_client(), loop)
+        if self._io.running:
             try:
-                fut.result(2.0)
+                self._io.call(self._close_client(), 2.0)
             except Exception:  # closing a dead port: nothing more to do
                 log.debug("encoder close raised", exc_info=True)
-            loop.call_soon_threadsafe(loop.stop)
-            thread.join(2.0)
-        self._loop = None
-        self._thread = None
+        self._io.stop(2.0)
 
     def __enter__(self) -> "ModbusEncoder":
         return self
@@ -295,52 +296,29 @@ class ModbusEncoder:
     # -- one-off read (diagnostics) -------------------------------------------------
     def read_position(self, timeout: float = 2.0) -> tuple[float, float]:
         """One read outside a capture: (t in s on the clock, single-turn angle in rad). Raises EncoderFault."""
-        self._ensure_loop()
-        assert self._loop is not None
-        fut = asyncio.run_coroutine_threadsafe(self._read_once(), self._loop)
+        self._io.start()
         try:
-            outcome = fut.result(timeout)
+            outcome = self._io.call(self._read_once(), timeout)
         except TimeoutError:
-            fut.cancel()
             raise EncoderFault(f"encoder fault: no answer from {self._where()} within {timeout:g} s") from None
-        if isinstance(outcome, str):
-            raise EncoderFault(f"encoder fault: {self._where()}: {outcome.partition(':')[2]}")
+        if isinstance(outcome, ReadFailure):
+            raise EncoderFault(f"encoder fault: {self._where()}: {outcome.detail}")
         t, value, _ = outcome
         return t, self.config.counts_to_angle(value)
 
     # -- I/O thread -------------------------------------------------------------------
     @staticmethod
     def _zero_counts() -> dict[str, Any]:
-        return {"samples": 0, "requests": 0, "timeouts": 0, "crc_errors": 0, "exceptions": 0,
+        return {"requests": 0, "timeouts": 0, "crc_errors": 0, "exceptions": 0,
                 "connection_errors": 0, "max_run_of_errors": 0, "consecutive_errors": 0,
-                "first_t": 0.0, "last_t": 0.0, "rtt_max_s": 0.0, "late_replies": 0}
+                "rtt_max_s": 0.0, "late_replies": 0}
+
+    def _snapshot(self) -> dict[str, Any]:
+        """The counters as a fault carries them (call with the lock held)."""
+        return {"samples": self._buffer.count, **self._counts}
 
     def _where(self) -> str:
         return f"device {self.config.device_id} on {self.config.port}"
-
-    def _ensure_loop(self) -> None:
-        if self._thread is not None and self._thread.is_alive():
-            return
-        loop = asyncio.new_event_loop()
-        ready = threading.Event()
-
-        def run() -> None:
-            asyncio.set_event_loop(loop)
-            loop.call_soon(ready.set)
-            try:
-                loop.run_forever()
-            finally:
-                loop.close()
-
-        self._loop = loop
-        self._thread = threading.Thread(target=run, name="moi-encoder-io", daemon=True)
-        self._thread.start()
-        ready.wait(2.0)
-
-    def _call(self, coro, timeout: float = 5.0):
-        """Run a coroutine on the I/O loop and wait for it (real time)."""
-        assert self._loop is not None
-        return asyncio.run_coroutine_threadsafe(coro, self._loop).result(timeout)
 
     async def _begin_sampling(self) -> None:
         self._sampling = True
@@ -354,9 +332,8 @@ class ModbusEncoder:
         except Exception as exc:  # top of the I/O thread: an unforeseen client error must surface as a fault, not silence
             log.exception("encoder sampling stopped")
             with self._lock:
-                self._fault = EncoderFault(f"encoder fault: sampling stopped on {self._where()}: "
-                                           f"{type(exc).__name__}: {exc}", dict(self._counts))
-                self._arrived.notify_all()
+                self._buffer.fail(EncoderFault(f"encoder fault: sampling stopped on {self._where()}: "
+                                               f"{type(exc).__name__}: {exc}", self._snapshot()))
 
     async def _end_sampling(self) -> None:
         # A flag, not only cancel(): on Python 3.11 asyncio.wait_for (inside pymodbus) swallows a
@@ -378,9 +355,9 @@ class ModbusEncoder:
             log.error("encoder sampling ended with %r", task.exception())
 
     def _stop_task(self) -> None:
-        if self._task is None or self._loop is None or not (self._thread and self._thread.is_alive()):
+        if self._task is None or not self._io.running:
             return
-        self._call(self._end_sampling())
+        self._io.call(self._end_sampling())
 
     def _trace_packet(self, sending: bool, data: bytes) -> bytes:
         if not sending:
@@ -419,12 +396,12 @@ class ModbusEncoder:
             _send_immediately(self._client)
         return None
 
-    async def _read_once(self) -> tuple[float, int, float] | str:
-        """One request; (t_mid on the clock, raw value, round trip in clock s) or a string naming the failure."""
+    async def _read_once(self) -> tuple[float, int, float] | ReadFailure:
+        """One request; (t_mid on the clock, raw value, round trip in clock s) or the ``ReadFailure``."""
         from pymodbus.exceptions import ConnectionException, ModbusIOException
         why = await self._connect()
         if why is not None:
-            return "connection_errors:" + why
+            return ReadFailure(Failure.CONNECTION, why)
         c = self.config
         self._rx = bytearray()
         read = (self._client.read_holding_registers if c.register_type == "holding"
@@ -434,25 +411,24 @@ class ModbusEncoder:
             reply = await read(c.register, count=c.registers, device_id=c.device_id)
         except ModbusIOException:
             if bad_crc(bytes(self._rx)):
-                return f"crc_errors:reply with a bad CRC ({bytes(self._rx).hex(' ')})"
-            return f"timeouts:no reply within {c.timeout:g} s"
+                return ReadFailure(Failure.CRC, f"reply with a bad CRC ({bytes(self._rx).hex(' ')})")
+            return ReadFailure(Failure.TIMEOUT, f"no reply within {c.timeout:g} s")
         except ConnectionException as exc:
-            return f"connection_errors:link lost ({exc})"
+            return ReadFailure(Failure.CONNECTION, f"link lost ({exc})")
         t_reply = self.clock.now()
         if reply.isError():
             code = getattr(reply, "exception_code", None)
             meaning = {1: "illegal function", 2: "illegal data address", 3: "illegal data value",
                        4: "device failure", 6: "device busy"}.get(code, "exception")
-            return (f"exceptions:exception reply {code} ({meaning}) reading {c.registers} register(s) at "
-                    f"{c.register} ({c.register_type})")
+            return ReadFailure(Failure.EXCEPTION, f"exception reply {code} ({meaning}) reading {c.registers} "
+                                                  f"register(s) at {c.register} ({c.register_type})")
         regs = list(reply.registers)
         if len(regs) != c.registers:
-            return f"exceptions:expected {c.registers} register(s), got {len(regs)}"
+            return ReadFailure(Failure.EXCEPTION, f"expected {c.registers} register(s), got {len(regs)}")
         if c.registers == 1:
             value = regs[0]
         else:
-            high, low = (regs[0], regs[1]) if c.word_order == "big" else (regs[1], regs[0])
-            value = (high << 16) | low
+            value = from_registers(regs, "uint32", c.word_order)
         with self._lock:
             self._counts["rtt_max_s"] = max(self._counts["rtt_max_s"], t_reply - t_send)
         return 0.5 * (t_send + t_reply), value, t_reply - t_send
@@ -484,20 +460,19 @@ class ModbusEncoder:
             with self._lock:
                 counts = self._counts
                 counts["requests"] += 1
-                if isinstance(outcome, str):
-                    failed, _, detail = outcome.partition(":")
-                    counts[failed] += 1
+                if isinstance(outcome, ReadFailure):
+                    failed, detail = outcome.kind, outcome.detail
+                    counts[failed.value] += 1
                     counts["consecutive_errors"] += 1
                     counts["max_run_of_errors"] = max(counts["max_run_of_errors"], counts["consecutive_errors"])
                     if counts["consecutive_errors"] >= c.max_consecutive_errors:
-                        snapshot = {k: v for k, v in counts.items() if k not in ("first_t", "last_t")}
-                        self._fault = EncoderFault(
+                        fault = EncoderFault(
                             f"encoder fault: {counts['consecutive_errors']} failed reads in a row from {self._where()}; "
                             f"last: {detail} (timeouts {counts['timeouts']}, CRC errors {counts['crc_errors']}, "
                             f"exception replies {counts['exceptions']}, connection errors {counts['connection_errors']})",
-                            snapshot)
-                        log.error("%s", self._fault)
-                        self._arrived.notify_all()
+                            self._snapshot())
+                        log.error("%s", fault)
+                        self._buffer.fail(fault)
                         return
                 elif self._late(outcome[2]):
                     counts["consecutive_errors"] = 0
@@ -510,13 +485,7 @@ class ModbusEncoder:
                         # keep the angle continuous across the encoder's 0/full-turn wrap
                         angle += 2 * math.pi * round((self._unwrap_last - angle) / (2 * math.pi))
                     self._unwrap_last = angle
-                    if counts["samples"] == 0:
-                        counts["first_t"] = t
-                    counts["last_t"] = t
-                    counts["samples"] += 1
-                    self._t.append(t)
-                    self._angle.append(angle)
-                    self._arrived.notify_all()
-            if failed == "connection_errors":
+                    self._buffer.add(t, angle)
+            if failed is Failure.CONNECTION:
                 # a refused connection fails instantly: pace the retries at the request time-out
                 await asyncio.sleep(c.timeout)

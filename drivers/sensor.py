@@ -64,6 +64,72 @@ class AngleSensor(Protocol):
         """Release the device (safe twice)."""
 
 
+class SampleBuffer:
+    """The samples of one capture, taken on an acquisition thread and drained by ``read()`` on another.
+
+    ``add`` appends a sample (t in s, angle in rad) and wakes waiters; ``fail`` records the first
+    fault of the capture (``drain`` raises it from then on); ``drain`` returns and forgets the
+    samples since the previous drain; ``wait_for(n, timeout)`` blocks until ``n`` samples were
+    taken since ``reset`` or a fault. ``lock`` (re-entrant) also guards the owner's counters.
+    """
+
+    def __init__(self) -> None:
+        self.lock = threading.RLock()
+        self._arrived = threading.Condition(self.lock)  # notified on every sample and on a fault
+        self.reset()
+
+    def reset(self) -> None:
+        """Empty, no fault: a new capture."""
+        with self.lock:
+            self._t: list[float] = []
+            self._a: list[float] = []
+            self.count = 0              # samples taken since reset
+            self.first_t = 0.0          # s, time of the first and the last of them
+            self.last_t = -math.inf
+            self.fault: SensorFault | None = None
+
+    def add(self, t: float, angle: float) -> None:
+        with self.lock:
+            self._t.append(float(t))
+            self._a.append(float(angle))
+            if self.count == 0:
+                self.first_t = float(t)
+            self.last_t = float(t)
+            self.count += 1
+            self._arrived.notify_all()
+
+    def fail(self, fault: SensorFault) -> bool:
+        """Record ``fault`` unless the capture already has one; True when it is the first."""
+        with self.lock:
+            first = self.fault is None
+            if first:
+                self.fault = fault
+            self._arrived.notify_all()
+            return first
+
+    def drain(self) -> tuple[np.ndarray, np.ndarray]:
+        """The samples since the last drain: (t in s, angle in rad); raises the capture's fault, if any."""
+        with self.lock:
+            if self.fault is not None:
+                raise self.fault
+            t, a = self._t, self._a
+            self._t, self._a = [], []
+        return np.asarray(t, dtype=float), np.asarray(a, dtype=float)
+
+    def wait_for(self, n: int, timeout: float) -> bool:
+        """Block until ``n`` samples were taken (True), a fault, or ``timeout`` s of real time (False)."""
+        with self._arrived:
+            return self._arrived.wait_for(lambda: self.count >= n or self.fault is not None, timeout) \
+                and self.fault is None
+
+    def rate(self) -> float | None:
+        """Mean sample rate of the capture so far, Hz (None with fewer than 2 samples)."""
+        with self.lock:
+            if self.count > 1 and self.last_t > self.first_t:
+                return (self.count - 1) / (self.last_t - self.first_t)
+        return None
+
+
 class SimulatedAngleSensor:
     """An in-process sensor sampling an angle source at a fixed rate on the injected clock.
 

@@ -31,9 +31,11 @@ from pymodbus.framer import FramerType
 from pymodbus.server import ModbusSerialServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from .aioloop import LoopThread
 from .clock import Clock
 from .encoder import EncoderConfig, check_register_layout
 from .errors import DriverConfigError, DriverError
+from .modbus_words import to_registers
 from .sensor import AngleSource
 
 log = logging.getLogger("moi.drivers.sim_encoder")
@@ -139,8 +141,7 @@ class SimEncoderServer:
         self._angle = angle_source
         self._clock = clock
         self._rng = np.random.default_rng(self.config.seed)
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
+        self._io = LoopThread(f"moi-sim-encoder-{self.port}")
         self._server: ModbusSerialServer | None = None
         self._lock = threading.Lock()
         self.counts = {"reads": 0, "replies": 0, "dropped": 0, "corrupted": 0, "exceptions": 0}
@@ -153,7 +154,7 @@ class SimEncoderServer:
 
     @property
     def running(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
+        return self._io.running
 
     def encoder_config(self, **overrides: Any) -> EncoderConfig:
         """An ``EncoderConfig`` matching this server (port, id, registers, resolution, direction, zero)."""
@@ -168,35 +169,15 @@ class SimEncoderServer:
         """Start listening (returns when the port accepts connections)."""
         if self.running:
             return self
-        ready = threading.Event()
-        failure: list[BaseException] = []
-        loop = asyncio.new_event_loop()
-        self._loop = loop
-
-        def run() -> None:
-            asyncio.set_event_loop(loop)
-            try:
-                loop.run_until_complete(self._serve())
-            except BaseException as exc:  # reported to start() below
-                failure.append(exc)
-                ready.set()
-                loop.close()
-                return
-            ready.set()
-            try:
-                loop.run_forever()
-            finally:
-                loop.run_until_complete(loop.shutdown_asyncgens())
-                loop.close()
-
-        self._thread = threading.Thread(target=run, name=f"moi-sim-encoder-{self.port}", daemon=True)
-        self._thread.start()
-        if not ready.wait(timeout):
-            raise DriverError(f"simulated encoder did not start within {timeout:g} s on {self.url}")
-        if failure:
-            self._thread.join(1.0)
-            self._thread = None
-            raise DriverError(f"simulated encoder cannot listen on {self.url}: {failure[0]}") from failure[0]
+        self._io.start(timeout)
+        try:
+            self._io.call(self._serve(), timeout)
+        except TimeoutError:
+            self._io.stop()
+            raise DriverError(f"simulated encoder did not start within {timeout:g} s on {self.url}") from None
+        except Exception as exc:
+            self._io.stop()
+            raise DriverError(f"simulated encoder cannot listen on {self.url}: {exc}") from exc
         if not self._wait_listening(timeout):
             self.stop()
             raise DriverError(f"simulated encoder on {self.url} does not accept connections")
@@ -205,20 +186,13 @@ class SimEncoderServer:
 
     def stop(self, timeout: float = 5.0) -> None:
         """Stop serving and close the port (a connected client sees the connection drop)."""
-        loop, thread = self._loop, self._thread
-        if loop is None or thread is None:
-            return
-        if thread.is_alive() and self._server is not None:
+        if self._io.running and self._server is not None:
             try:
-                asyncio.run_coroutine_threadsafe(self._server.shutdown(), loop).result(timeout)
+                self._io.call(self._server.shutdown(), timeout)
             except Exception:  # the loop may already be going down; stopping it below is what matters
                 log.debug("simulated encoder shutdown raised", exc_info=True)
-        if thread.is_alive():
-            loop.call_soon_threadsafe(loop.stop)
-            thread.join(timeout)
         self._server = None
-        self._thread = None
-        self._loop = None
+        self._io.stop(timeout)
 
     def __enter__(self) -> "SimEncoderServer":
         return self.start()
@@ -266,8 +240,7 @@ class SimEncoderServer:
         if c.registers == 1:
             registers[offset] = value & 0xFFFF
         else:
-            high, low = (value >> 16) & 0xFFFF, value & 0xFFFF
-            registers[offset:offset + 2] = [high, low] if c.word_order == "big" else [low, high]
+            registers[offset:offset + 2] = to_registers(value, "uint32", c.word_order)
         with self._lock:
             self.counts["reads"] += 1
         delay = c.latency + reply_wire

@@ -303,6 +303,23 @@ class Sequencer:
                 **self.counts,
             }
 
+    def progress(self, start: int = 0) -> dict[str, Any]:
+        """What a live view draws (safe from any thread): the state, the run's times on the sequencer's
+        clock (s), the capture length asked for, and the samples captured so far from index ``start``
+        (``t`` on the sensor's clock, s; ``angle``, rad; ``next``: the index to ask from next time)."""
+        run = self._run
+        out: dict[str, Any] = {"state": self._state.value, "since": self._since, "now": self.clock.now(),
+                               "capture_duration": self.config.capture_duration, "measurement_id": None,
+                               "released_at": None, "identify_started_at": None, "t": [], "angle": [], "next": 0}
+        if run is not None:
+            # the lists only grow (appended on the polling thread): a slice up to a common length is consistent
+            n = min(len(run.t), len(run.angle))
+            start = max(0, min(int(start), n))
+            out.update(measurement_id=run.id, released_at=run.released_at,
+                       identify_started_at=run.identify_started_at,
+                       t=run.t[start:n], angle=run.angle[start:n], next=n)
+        return out
+
     # -- subscriptions -----------------------------------------------------------
     def subscribe(self, callback: Callable[[Event], None]) -> Callable[[], None]:
         """Call ``callback(event)`` after every transition (on the polling thread); returns an unsubscribe function.

@@ -44,6 +44,7 @@ from .files import read_rig, read_toml
 from .modbus_server import ModbusSettings
 from .mqtt import MqttSettings
 from .registers import WORD_ORDERS
+from .web.settings import WebSettings
 
 REQUIRED = object()
 
@@ -316,10 +317,18 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "stopbits": _doc("RTU stop bits", choices=(1, 2)),
         "bytesize": _doc("RTU data bits", choices=(7, 8)),
     }, extra={"enabled": Key("bool", True, "serve the registers")}),
+    "web": _schema(WebSettings, {
+        "host": _doc("listen address: 127.0.0.1 this machine only, 0.0.0.0 every interface (the LAN)"),
+        "port": _doc("TCP port (0: any free port)", min=0, max=65535),
+        "token_file": _doc("file holding the password/token every action (Measure, Abort) needs (default: "
+                           "web-token in the state directory, made with a random token on first start)", kind="path"),
+        "page_size": _doc("measurements per history page", min=1, max=500),
+    }, extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
 }
 
 #: tables that are plain key/value tables of SCHEMA (the others are sub-tables)
-TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus", "recipes")
+TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus", "web",
+              "recipes")
 
 
 # --- the validated configuration ----------------------------------------------------------------
@@ -341,6 +350,7 @@ class Config:
     identification: Options
     mqtt: MqttSettings | None        # None: MQTT off
     modbus: ModbusSettings | None    # None: Modbus off
+    web: WebSettings | None          # None: no web page
     document: Mapping[str, Any]      # the parsed TOML, stored with every measurement
     recipes: Any = None              # service.recipes.RecipeBook (every recipe of [recipes] directory, checked)
     active_recipe: str | None = None  # [recipes] active
@@ -365,6 +375,7 @@ class Config:
                 "directory": self.recipes.directory, "active": self.active_recipe,
                 "recipes": [{"name": r.name, "number": r.number, "version": r.version, "path": r.path}
                             for r in self.recipes.recipes]},
+            "web": clean(self.web),
         }
 
 
@@ -605,13 +616,19 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         except ConfigError as exc:
             raise c.fail("recipes", "active", str(exc)) from None
 
+    web = None
+    w = c.table("web", doc.get("web", {}), SCHEMA["web"])
+    if w.pop("enabled"):
+        w["token_file"] = _resolve(base, w["token_file"])
+        web = WebSettings(**w)
+
     sd = state_dir or _resolve(base, dev["state_dir"])
     return Config(
         source=source, device_id=dev["id"],
         state_dir=Path(sd) if sd else default_state_dir(environ),
         log_level=dev["log_level"], store_trace=dev["store_trace"],
         rig=rig, rig_path=rig_path, simulated=simulated, simulation=simulation, hardware=hardware,
-        sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, document=dict(doc),
+        sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, web=web, document=dict(doc),
         recipes=book, active_recipe=rc["active"],
     )
 

@@ -23,6 +23,7 @@ that died ends the daemon with status 3 so that systemd restarts it.
 from __future__ import annotations
 
 import datetime as _dt
+import concurrent.futures
 import logging
 import queue
 import threading
@@ -77,8 +78,10 @@ class Appliance:
         self.store: Store | None = None
         self.modbus: ModbusServer | None = None
         self.mqtt: MqttService | None = None
+        self.web: Any = None  # service.web.server.WebServer when [web] is enabled
         self.sequencer: Sequencer | None = None
         self._commands: queue.SimpleQueue[tuple[str, str, Mapping[str, Any] | None]] = queue.SimpleQueue()
+        self._calls: queue.SimpleQueue[tuple[Callable[[], Any], concurrent.futures.Future]] = queue.SimpleQueue()
         self._wakeup = threading.Event()
         self._stop = threading.Event()
         self._started_runs = 0
@@ -104,6 +107,14 @@ class Appliance:
         (data ``part_id``)."""
         self._commands.put((name, source, data))
         self._wakeup.set()
+
+    def call_soon(self, fn: Callable[[], Any]) -> concurrent.futures.Future:
+        """Run ``fn()`` on the main loop between two iterations (any thread; never blocks): device access
+        that must not overlap a measurement, e.g. the web page's camera snapshot. The future has its result."""
+        fut: concurrent.futures.Future = concurrent.futures.Future()
+        self._calls.put((fn, fut))
+        self._wakeup.set()
+        return fut
 
     def request_stop(self) -> None:
         self._stop.set()
@@ -136,6 +147,11 @@ class Appliance:
             if d.button is not None:
                 d.button.when_pressed = lambda: self.command("trigger", "button")
             self.sequencer.subscribe(self._on_event)
+            if cfg.web is not None:
+                from .web.server import WebServer  # aiohttp is loaded only when the page is served
+                self.web = WebServer(self, cfg.web)
+                self.web.start()
+                self.sequencer.subscribe(self.web.on_event)
             # MQTT last: its outbox sender starts delivering at once, and the live registers
             # follow its progress only once the main loop runs (right after this)
             if cfg.mqtt is not None:
@@ -153,6 +169,8 @@ class Appliance:
             m = cfg.modbus
             where.append(f"Modbus {m.mode.upper()} " + (f"{m.host}:{self.modbus.bound_port}" if m.mode == "tcp" else str(m.serial_port)))
         where.append(f"MQTT {cfg.mqtt.host}:{cfg.mqtt.port}" if cfg.mqtt else "MQTT off")
+        if self.web is not None:
+            where.append(f"web page {self.web.url}")
         log.info("moi %s ready (%s rig; %s; store %s)", __version__, "simulated" if cfg.simulated else "hardware",
                  ", ".join(where), self.store.path)
         self.notifier.ready(f"idle; {', '.join(where)}")
@@ -191,6 +209,7 @@ class Appliance:
         # poll first: a trigger that arrived during PUBLISHING finds the IDLE that follows it
         self.sequencer.poll()
         self._drain_commands()
+        self._run_calls()
         self._check_components()
         self._refresh_live()
         self.loop_iterations += 1
@@ -248,9 +267,23 @@ class Appliance:
             if self.modbus is not None:
                 self.modbus.set_inputs(part_id=self.parts.part_id or "")
 
+    def _run_calls(self) -> None:
+        while True:
+            try:
+                fn, fut = self._calls.get_nowait()
+            except queue.Empty:
+                return
+            if fut.set_running_or_notify_cancel():
+                try:
+                    fut.set_result(fn())
+                except Exception as exc:  # the caller gets it; the main loop goes on
+                    fut.set_exception(exc)
+
     def _check_components(self) -> None:
         if self.modbus is not None and not self.modbus.alive():
             raise _Fatal("the Modbus server thread stopped")
+        if self.web is not None and not self.web.alive():
+            raise _Fatal("the web server thread stopped")
         if self.mqtt is not None and self.mqtt.sender.error is not None:
             raise _Fatal(f"the MQTT outbox sender failed: {self.mqtt.sender.error}")
         if self.mqtt is not None and not self.mqtt.network_thread_alive():
@@ -340,6 +373,8 @@ class Appliance:
             self.modbus.publish_result(stored.payload)
         if self.mqtt is not None:
             self.mqtt.wake()
+        if self.web is not None:
+            self.web.measurement_stored(m)  # its plot is drawn once, off this thread, and kept with it
         self._note_stored(m.id)
         log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, result.get("J"),
                  ", ".join(result.get("flags") or []) or "none")
@@ -456,6 +491,12 @@ class Appliance:
         self._shutdown_components()
 
     def _shutdown_components(self) -> None:
+        if self.web is not None:  # first: its handlers read the store and the devices
+            try:
+                self.web.stop()
+            except Exception:
+                log.exception("web server stop failed")
+            self.web = None
         if self.devices is not None:
             self.devices.close()  # solenoid first
             self.devices = None

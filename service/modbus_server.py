@@ -1,7 +1,7 @@
 """The Modbus server the PLC polls (pymodbus 3.16, TCP or RTU).
 
 The register layout lives in ``service.registers``; this module serves it.
-The server runs its own asyncio loop in a thread. The daemon hands it a new
+The server runs on its own asyncio loop in a thread (``drivers.aioloop.LoopThread``). The daemon hands it a new
 result with ``publish_result`` and the live status with ``set_live``; both
 build a complete register image and swap it in with one assignment, and every
 request copies that image into pymodbus' datastore before pymodbus reads it,
@@ -23,7 +23,6 @@ gets 0x03 (illegal data value).
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import struct
 import threading
@@ -39,6 +38,8 @@ from pymodbus.pdu.bit_message import WriteSingleCoilRequest, WriteSingleCoilResp
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 from pymodbus.simulator.simcore import SimCore
+
+from drivers.aioloop import LoopThread
 
 from . import registers as R
 from .errors import ModbusServerError
@@ -150,11 +151,8 @@ class ModbusServer:
         self._image: tuple[int, ...] = ()
         self._status_bits = 0
         self._rebuild()
-        self._thread: threading.Thread | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
+        self._io = LoopThread("moi-modbus")
         self._server: ModbusTcpServer | ModbusSerialServer | None = None
-        self._ready = threading.Event()
-        self._error: BaseException | None = None
         self.bound_port: int | None = None
         self.requests = 0  # requests served (all function codes), for diagnostics
 
@@ -278,30 +276,20 @@ class ModbusServer:
     # --- lifecycle -------------------------------------------------------------------
     def start(self, timeout: float = 10.0) -> None:
         """Start serving; returns once the port is bound. Raises ModbusServerError if it cannot."""
-        if self._thread is not None:
+        if self._io.running:
             raise RuntimeError("Modbus server already started")
-        self._thread = threading.Thread(target=self._run, name="moi-modbus", daemon=True)
-        self._thread.start()
-        if not self._ready.wait(timeout):
-            raise ModbusServerError(f"Modbus server did not start within {timeout} s")
-        if self._error is not None:
-            self._thread.join(timeout)
-            self._thread = None
-            raise ModbusServerError(str(self._error)) from None
-
-    def _run(self) -> None:
+        self._io.start()
         try:
-            asyncio.run(self._main())
-        except BaseException as exc:  # reported to start(); after start it is logged
-            if not self._ready.is_set():
-                self._error = exc
-                self._ready.set()
-            else:
-                log.error("Modbus server stopped: %s", exc)
+            self._io.call(self._main(), timeout)
+        except TimeoutError:
+            self._io.stop()
+            raise ModbusServerError(f"Modbus server did not start within {timeout} s") from None
+        except BaseException as exc:
+            self._io.stop()
+            raise ModbusServerError(str(exc)) from None
 
     async def _main(self) -> None:
         s = self.settings
-        self._loop = asyncio.get_running_loop()
         device = self._device()
         if s.mode == "tcp":
             server = ModbusTcpServer(device, address=(s.host, s.port), ignore_missing_devices=False,
@@ -325,24 +313,26 @@ class ModbusServer:
             self.bound_port = sockets[0].getsockname()[1]
         log.info("Modbus server on %s (unit id %d)", where if self.bound_port is None else
                  f"TCP {s.host}:{self.bound_port}", s.unit_id)
-        self._ready.set()
-        await server.serving
+
+    def client_count(self) -> int | None:
+        """Modbus TCP clients connected now (None for RTU or before the start)."""
+        server = self._server if self.settings.mode == "tcp" else None
+        conns = getattr(server, "active_connections", None)
+        return len(conns) if conns is not None else None
 
     def alive(self) -> bool:
-        """True while the server thread runs (after a successful ``start``)."""
-        return self._thread is not None and self._thread.is_alive()
+        """True while the server serves (after a successful ``start``)."""
+        return self._io.running and self._server is not None and not self._server.serving.done()
 
     def stop(self, timeout: float = 5.0) -> None:
-        if self._thread is None:
+        if not self._io.running:
             return
-        if self._loop is not None and self._server is not None and self._loop.is_running():
-            fut = asyncio.run_coroutine_threadsafe(self._server.shutdown(), self._loop)
+        if self._server is not None:
             try:
-                fut.result(timeout)
+                self._io.call(self._server.shutdown(), timeout)
             except Exception as exc:  # shutting down: nothing else to do but say so
                 log.warning("Modbus server shutdown: %s", exc)
-        self._thread.join(timeout)
-        self._thread = None
+        self._io.stop(timeout)
 
     def __enter__(self) -> "ModbusServer":
         self.start()

@@ -66,6 +66,11 @@ class Notifier:
             return False
         return self._clock() - self._last_ping >= self.watchdog_period / 2
 
+    @property
+    def last_watchdog_ping(self) -> float | None:
+        """When the watchdog was last pinged (the clock's s, time.monotonic by default); None: never."""
+        return None if self._last_ping == float("-inf") else self._last_ping
+
     def watchdog(self) -> bool:
         """Ping the watchdog (call only when the main loop is healthy)."""
         self._last_ping = self._clock()

@@ -2,23 +2,24 @@
 
 from __future__ import annotations
 
+import io
 import os
+from typing import BinaryIO
 
 import numpy as np
 
 from measurement.result import IdentificationResult
 
 
-def plot_result(result: IdentificationResult, path: str | os.PathLike) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")  # headless appliance: never needs a display
-    import matplotlib.pyplot as plt
+def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO, *, dpi: int = 110) -> None:
+    """Draw the result into ``path`` (a file name or a binary file object), PNG."""
+    # a Figure without pyplot: no global state, so the daemon's plot worker thread may draw too
+    from matplotlib.figure import Figure
 
     a = result.arrays
     t, y = a["t"], a["angle"]
-    fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True,
-                             gridspec_kw={"height_ratios": [2.2, 1, 1]}, constrained_layout=True)
+    fig = Figure(figsize=(10, 8), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [2.2, 1, 1]})
     ax = axes[0]
     ax.plot(a["trace_t"], a["trace_angle"], color="0.75", lw=0.8, label="trace (all samples)")
     ax.plot(t, y, ".", ms=1.5, color="k", label="fitted samples")
@@ -44,22 +45,25 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike) -> None:
     axes[2].set_xlabel("t [s]")
     if result.flags:
         axes[2].text(0.01, 0.03, "flags: " + ", ".join(result.flags), transform=axes[2].transAxes, fontsize=8, color="tab:red")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    fig.savefig(path, dpi=dpi, format="png")
+
+
+def render_png(result: IdentificationResult, *, dpi: int = 80) -> bytes:
+    """The picture of ``result`` as PNG bytes (what the result store keeps with the measurement)."""
+    buf = io.BytesIO()
+    plot_result(result, buf, dpi=dpi)
+    return buf.getvalue()
 
 
 def plot_control_chart(summary, path: str | os.PathLike, title: str = "", unit: str = "kg·m²") -> None:
     """The control chart of a ``measurement.spc.SpcSummary``: points with centre, control and
     specification limits above (points outside or breaking a run rule in red), ranges below."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     s = summary
     x = np.arange(1, s.n_points + 1)
-    fig, (ax, axr) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, gridspec_kw={"height_ratios": [2, 1]},
-                                  constrained_layout=True)
+    fig = Figure(figsize=(10, 6.5), layout="constrained")
+    ax, axr = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [2, 1]})
     ax.plot(x, s.points, "o-", color="tab:blue", ms=4, lw=0.8, label="part value" if s.subgroup == 1
             else f"subgroup mean (n = {s.subgroup})")
     flagged = sorted({v.index for v in s.violations})
@@ -85,5 +89,4 @@ def plot_control_chart(summary, path: str | os.PathLike, title: str = "", unit: 
         axr.axhline(s.range_lcl, color="tab:red", ls="--", lw=1)
     axr.set_ylabel("moving range" if s.subgroup == 1 else "range")
     axr.set_xlabel("part")
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    fig.savefig(path, dpi=100, format="png")

@@ -19,13 +19,14 @@ import uuid as uuidlib
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
+from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, to_registers  # noqa: F401
+
 #: bumped whenever an address or an encoding in this file changes
 MAP_VERSION = 3  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other)
 # 3: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
 #    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
 #    holding registers; flag calibration_due (bit 10)
 
-WORD_ORDERS = ("big", "little")
 
 # --- enumerations ------------------------------------------------------------
 
@@ -247,26 +248,16 @@ _check_table()
 # --- encoding ----------------------------------------------------------------
 
 
-def _words32(raw: bytes, word_order: str) -> list[int]:
-    hi, lo = struct.unpack(">HH", raw)
-    return [hi, lo] if word_order == "big" else [lo, hi]
-
-
-def _unwords32(words: Sequence[int], word_order: str) -> bytes:
-    hi, lo = (words[0], words[1]) if word_order == "big" else (words[1], words[0])
-    return struct.pack(">HH", hi, lo)
-
-
 def encode_value(kind: str, value: Any, word_order: str) -> list[int]:
     """Registers for one value (None → NaN for floats, 0 for integers)."""
     if kind in ("uint16", "bits16"):
         return [int(value or 0) & 0xFFFF]
     if kind == "uint32":
-        return _words32(struct.pack(">I", int(value or 0) & 0xFFFFFFFF), word_order)
+        return to_registers(int(value or 0) & 0xFFFFFFFF, "uint32", word_order)
     if kind == "float32":
         v = float("nan") if value is None else float(value)
         # float32 rounding of a finite float64 beyond ±3.4e38 gives inf, which the PLC sees as such
-        return _words32(struct.pack(">f", v), word_order)
+        return to_registers(v, "float32", word_order)
     if kind == "uuid":
         b = uuidlib.UUID(str(value)).bytes if value else bytes(16)
         return list(struct.unpack(">8H", b))
@@ -290,10 +281,8 @@ def decode_ascii(words: Sequence[int]) -> str:
 def decode_value(kind: str, words: Sequence[int], word_order: str) -> Any:
     if kind in ("uint16", "bits16"):
         return int(words[0])
-    if kind == "uint32":
-        return struct.unpack(">I", _unwords32(words, word_order))[0]
-    if kind == "float32":
-        return struct.unpack(">f", _unwords32(words, word_order))[0]
+    if kind in ("uint32", "float32"):
+        return from_registers(words, kind, word_order)
     if kind == "uuid":
         b = struct.pack(">8H", *words[:8])
         return None if b == bytes(16) else str(uuidlib.UUID(bytes=b))
@@ -402,8 +391,7 @@ def decode_image(words: Sequence[int], word_order: str = "big", start: int = 0) 
 
 
 def _check_order(word_order: str) -> None:
-    if word_order not in WORD_ORDERS:
-        raise ValueError(f"word order must be one of {WORD_ORDERS}, got {word_order!r}")
+    check_word_order(word_order)
 
 
 # --- the reference client side of the snapshot protocol -----------------------

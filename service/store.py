@@ -87,6 +87,14 @@ CREATE TABLE IF NOT EXISTS outbox (
     attempts       INTEGER NOT NULL DEFAULT 0,
     last_attempt   REAL
 );
+CREATE TABLE IF NOT EXISTS attachments (
+    uuid       TEXT NOT NULL REFERENCES measurements (uuid),
+    name       TEXT NOT NULL,
+    media_type TEXT NOT NULL,
+    data       BLOB NOT NULL,
+    created_at REAL NOT NULL,
+    PRIMARY KEY (uuid, name)
+);
 """
 
 
@@ -103,8 +111,11 @@ def _unpack(b: bytes | None) -> np.ndarray | None:
 
 
 @dataclass(frozen=True)
-class Measurement:
-    """One stored measurement (times: Unix s; trace arrays: s and rad)."""
+class StoredMeasurement:
+    """One stored measurement as read back from the store (times: Unix s; trace arrays: s and rad).
+
+    Not ``firmware_host.Measurement``, which is what the sequencer hands to the store.
+    """
 
     id: int
     uuid: str
@@ -124,9 +135,9 @@ class Measurement:
     residual_rms: float | None
     flags: tuple[str, ...]
     error: str | None
-    payload: dict[str, Any] | None
-    rig: dict[str, Any] | None
-    config: dict[str, Any] | None
+    payload: dict[str, Any] | None = None
+    rig: dict[str, Any] | None = None
+    config: dict[str, Any] | None = None
     trace_t: np.ndarray | None = None
     trace_angle: np.ndarray | None = None
     trace_meta: dict[str, Any] | None = None
@@ -164,11 +175,15 @@ class OutboxItem:
 
 _BASE_COLUMNS = ("id, uuid, seq, status, trigger, device_id, software_version, started_at, finished_at, stored_at, "
                  "published_at, J, J_std, omega_n, damping_ratio, residual_rms, flags, error")
-_N_BASE = 18
 _PART_SELECT = ", ".join(name for name, _ in PART_COLUMNS)
 _LIST_COLUMNS = f"{_BASE_COLUMNS}, {_PART_SELECT}"
 _FULL_COLUMNS = _LIST_COLUMNS + ", payload, rig, config"
 _TRACE_COLUMNS = ", trace_t, trace_angle, trace_meta"
+
+
+def _names(columns: str) -> list[str]:
+    """The column names of a SELECT list above (they are the StoredMeasurement fields)."""
+    return [c.strip() for c in columns.split(",") if c.strip()]
 
 
 class Store:
@@ -256,7 +271,7 @@ class Store:
         enqueue: Sequence[str] = (),
         uuid: str | None = None,
         part: Mapping[str, Any] | None = None,
-    ) -> Measurement:
+    ) -> StoredMeasurement:
         """Store one measurement and queue its publications, atomically.
 
         build_payload(uuid, seq) makes the published payload once the sequence
@@ -336,21 +351,20 @@ class Store:
             return int(self._db.execute("SELECT COUNT(*) FROM outbox").fetchone()[0])
 
     # --- reading ------------------------------------------------------------------
-    def _row(self, row: Sequence[Any], full: bool, trace: bool) -> Measurement:
-        base = list(row[:_N_BASE])
-        base[16] = tuple(json.loads(base[16] or "[]"))
-        k = _N_BASE + len(PART_COLUMNS)
-        part = dict(zip((name for name, _ in PART_COLUMNS), row[_N_BASE:k]))
-        payload = rig = config = None
-        t = a = meta = None
-        if full:
-            payload, rig, config = (json.loads(x) if x is not None else None for x in row[k:k + 3])
-        if trace:
-            t, a = _unpack(row[k + 3]), _unpack(row[k + 4])
-            meta = json.loads(row[k + 5]) if row[k + 5] is not None else None
-        return Measurement(*base, payload, rig, config, t, a, meta, **part)
+    def _row(self, row: Sequence[Any], full: bool, trace: bool) -> StoredMeasurement:
+        """A row selected with ``_FULL_COLUMNS`` (full) or ``_LIST_COLUMNS``, plus ``_TRACE_COLUMNS`` (trace)."""
+        names = _names(_FULL_COLUMNS if full else _LIST_COLUMNS) + (_names(_TRACE_COLUMNS) if trace else [])
+        d = dict(zip(names, row, strict=True))
+        d["flags"] = tuple(json.loads(d["flags"] or "[]"))
+        for k in ("payload", "rig", "config", "trace_meta"):
+            if d.get(k) is not None:
+                d[k] = json.loads(d[k])
+        for k in ("trace_t", "trace_angle"):
+            if k in d:
+                d[k] = _unpack(d[k])
+        return StoredMeasurement(**d)
 
-    def get(self, key: str | int, *, trace: bool = False) -> Measurement | None:
+    def get(self, key: str | int, *, trace: bool = False) -> StoredMeasurement | None:
         """A measurement by UUID (or a unique UUID prefix) or by sequence number."""
         cols = _FULL_COLUMNS + (_TRACE_COLUMNS if trace else "")
         with self._lock:
@@ -362,7 +376,7 @@ class Store:
             return None
         return self._row(rows[0], full=True, trace=trace)
 
-    def latest(self, status: str | None = "ok") -> Measurement | None:
+    def latest(self, status: str | None = "ok") -> StoredMeasurement | None:
         where = "WHERE status = ?" if status else ""
         args: tuple = (status,) if status else ()
         with self._lock:
@@ -371,7 +385,7 @@ class Store:
 
     def list(self, limit: int | None = 20, *, since: float | None = None, until: float | None = None,
              status: str | None = None, full: bool = False, part_id: str | None = None,
-             recipe: str | None = None, parts_only: bool = False) -> list[Measurement]:
+             recipe: str | None = None, parts_only: bool = False) -> list[StoredMeasurement]:
         """Measurements, newest first (limit None: all). part_id / recipe: only those;
         parts_only: only the releases that completed a part (they carry the part verdict)."""
         clauses: list[str] = []
@@ -407,9 +421,54 @@ class Store:
                                     "GROUP BY recipe ORDER BY MIN(seq)").fetchall()
         return [r[0] for r in rows if r[0] is not None]
 
-    def iter_all(self, **kwargs: Any) -> Iterator[Measurement]:
+    def iter_all(self, **kwargs: Any) -> Iterator[StoredMeasurement]:
         yield from self.list(limit=None, **kwargs)
 
     def count(self) -> int:
         with self._lock:
             return int(self._db.execute("SELECT COUNT(*) FROM measurements").fetchone()[0])
+
+    # --- attachments (files kept with a measurement, e.g. its plot) ---------------
+    def put_attachment(self, uuid: str, name: str, data: bytes, media_type: str) -> None:
+        """Keep ``data`` with the measurement ``uuid`` under ``name`` (replaces one of the same name)."""
+        try:
+            with self._lock, self._tx() as db:
+                db.execute("INSERT OR REPLACE INTO attachments (uuid, name, media_type, data, created_at) "
+                           "VALUES (?,?,?,?,?)", (uuid, name, media_type, sqlite3.Binary(data), time.time()))
+        except sqlite3.Error as exc:
+            raise StoreError(f"cannot store {name!r} of measurement {uuid}: {exc}") from None
+
+    def get_attachment(self, uuid: str, name: str) -> tuple[bytes, str] | None:
+        """(data, media type) of an attachment, or None."""
+        with self._lock:
+            row = self._db.execute("SELECT data, media_type FROM attachments WHERE uuid = ? AND name = ?",
+                                   (uuid, name)).fetchone()
+        return (bytes(row[0]), row[1]) if row else None
+
+    def search(self, *, offset: int = 0, limit: int | None = 25, since: float | None = None,
+               until: float | None = None, status: str | None = None, flag: str | None = None,
+               payload_fields: Mapping[str, str] | None = None) -> tuple[list[StoredMeasurement], int]:
+        """One page of measurements, newest first, and how many match in all.
+
+        flag: only those carrying this quality flag. payload_fields: result-payload key → value the key must
+        equal (e.g. {"part_id": "A-17"}); a value that is itself an object matches on its ``name``.
+        """
+        clauses, args = [], []
+        for sql, value in (("finished_at >= ?", since), ("finished_at < ?", until), ("status = ?", status)):
+            if value is not None:
+                clauses.append(sql)
+                args.append(value)
+        if flag:
+            clauses.append("EXISTS (SELECT 1 FROM json_each(flags) WHERE value = ?)")
+            args.append(flag)
+        for key, value in (payload_fields or {}).items():
+            path = "$." + json.dumps(str(key))
+            clauses.append("(json_extract(payload, ?) = ? OR json_extract(payload, ? || '.name') = ?)")
+            args += [path, value, path, value]
+        where = ("WHERE " + " AND ".join(clauses)) if clauses else ""
+        with self._lock:
+            total = int(self._db.execute(f"SELECT COUNT(*) FROM measurements {where}", args).fetchone()[0])
+            page = f"LIMIT {int(limit)} OFFSET {int(offset)}" if limit is not None else ""
+            rows = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC {page}",
+                                    args).fetchall()
+        return [self._row(r, full=True, trace=False) for r in rows], total

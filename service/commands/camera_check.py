@@ -122,13 +122,11 @@ def _annotate(img: np.ndarray, obs: MarkerObservation, config: CameraConfig, lin
     return out
 
 
-def run(args: argparse.Namespace) -> int:
-    import cv2
-
-    config = read_camera(args.camera) if args.camera else demo_camera()
-    img, where = _grab(args, config)
+def check_image(img: np.ndarray, config: CameraConfig) -> tuple[np.ndarray, dict, list[str]]:
+    """Find the marker in a grey frame: (the annotated BGR image, the facts, the lines of text drawn on it).
+    What the technician sees here and on the web page's set-up view."""
     obs = MarkerTracker(config.camera).locate(img, keep_points=True)
-    report: dict = {"source": where, "found": obs.found, "png": args.out}
+    report: dict = {"found": obs.found}
     if obs.found:
         theta = float(angle_from_normalised(obs.x, config.marker))
         offset_px = obs.x * config.camera.fx
@@ -146,7 +144,17 @@ def run(args: argparse.Namespace) -> int:
     else:
         report.update({"reason": obs.reason, "detail": obs.detail})
         lines = [f"marker NOT found: {obs.detail or obs.reason}"]
-    if not cv2.imwrite(args.out, _annotate(img, obs, config, lines)):
+    return _annotate(img, obs, config, lines), report, lines
+
+
+def run(args: argparse.Namespace) -> int:
+    import cv2
+
+    config = read_camera(args.camera) if args.camera else demo_camera()
+    img, where = _grab(args, config)
+    annotated, facts, lines = check_image(img, config)
+    report: dict = {"source": where, "png": args.out, **facts}
+    if not cv2.imwrite(args.out, annotated):
         raise InputFileError(f"cannot write {args.out!r} (directory missing or not writable, or not a .png name)")
     if args.json:
         sys.stdout.write(json.dumps(report) + "\n")
@@ -155,6 +163,6 @@ def run(args: argparse.Namespace) -> int:
         for line in lines:
             print(f"  {line}")
         print(f"  annotated image written to {args.out}")
-    if not obs.found:
-        raise VisionError(f"marker not found in {where}: {obs.detail or obs.reason} (see {args.out})")
+    if not facts["found"]:
+        raise VisionError(f"marker not found in {where}: {facts['detail'] or facts['reason']} (see {args.out})")
     return 0

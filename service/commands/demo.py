@@ -12,12 +12,14 @@ MQTT is skipped with a note.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import sys
 import tempfile
 import threading
 import time
+from pathlib import Path
 
 from ..config import parse_config
 from ..defaults import DEMO_EFFECTS, DEMO_INERTIA
@@ -39,6 +41,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=1, help="noise seed (default 1)")
     p.add_argument("--state-dir", metavar="DIR", help="keep the result store here (default: a temporary directory)")
     p.add_argument("--json", action="store_true", help="print the published result payload as JSON at the end")
+    p.add_argument("--web-port", type=int, default=8080, metavar="PORT",
+                   help="serve the web page on 127.0.0.1:PORT (default 8080; a free port if it is taken; 0: any)")
+    p.add_argument("--serve", action="store_true",
+                   help="keep the appliance and its web page running after the measurement, until Ctrl-C")
 
 
 def _doc(args: argparse.Namespace, state_dir: str) -> dict:
@@ -49,6 +55,7 @@ def _doc(args: argparse.Namespace, state_dir: str) -> dict:
         "simulation": {"inertia": args.inertia, "time_scale": args.time_scale, "seed": args.seed, "sensor": "encoder",
                        "noise": 5e-5, "effects": DEMO_EFFECTS},
         "modbus": {"host": "127.0.0.1", "port": 0},
+        "web": {"host": "127.0.0.1", "port": args.web_port},
     }
     if args.mqtt:
         host, _, port = args.mqtt.rpartition(":") if ":" in args.mqtt else (args.mqtt, "", "1883")
@@ -74,6 +81,9 @@ def run(args: argparse.Namespace) -> int:
         state_dir = tmp.name
     try:
         config = parse_config(_doc(args, state_dir), source="moi demo")
+        if args.web_port and not _port_free(args.web_port):
+            print(f"port {args.web_port} is taken: the web page goes on a free port")
+            config = dataclasses.replace(config, web=dataclasses.replace(config.web, port=0))
         return _run(Appliance(config, stop_grace=5.0), args)
     finally:
         if tmp is not None:
@@ -116,6 +126,8 @@ def _run(app, args: argparse.Namespace) -> int:
         else:
             print(f"MQTT: broker {cfg.mqtt.host}:{cfg.mqtt.port}, topics moi/{cfg.device_id}/...")
         print(f"result store: {app.config.state_dir}/results.db")
+        token = Path(app.web.token_file).read_text(encoding="utf-8").strip()
+        print(f"web page: {app.web.url}  (open it now; actions need the token {token}, kept in {app.web.token_file})")
         print("pressing the push button (gpiozero mock pin)")
         pin = app.devices.button.pin
         pin.drive_low()
@@ -154,6 +166,14 @@ def _run(app, args: argparse.Namespace) -> int:
                                                          "not received within 15 s (is the broker reachable?)"))
         if args.json:
             print(json.dumps(payload, ensure_ascii=False))
+        print(f"the result page: {app.web.url}results/{payload['uuid']}")
+        if args.serve:
+            print("serving until Ctrl-C")
+            try:
+                while main.is_alive():
+                    main.join(0.5)
+            except KeyboardInterrupt:
+                pass
         status = 0
     finally:
         app.request_stop()
@@ -161,6 +181,17 @@ def _run(app, args: argparse.Namespace) -> int:
         if consumer is not None:
             consumer.close()
     return status if app.exit_status == 0 else app.exit_status
+
+
+def _port_free(port: int) -> bool:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        try:
+            sock.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
 
 
 class _consumer:

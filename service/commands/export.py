@@ -47,8 +47,7 @@ def run(args: argparse.Namespace) -> int:
                 raise InputFileError(f"no single measurement matches {args.trace!r}")
             if m.trace_t is None:
                 raise InputFileError(f"measurement {m.uuid} has no stored trace ({m.status}; or store_trace = false)")
-            text = Trace(m.trace_t, m.trace_angle, source=m.uuid).to_csv(
-                f"moi measurement {m.uuid} (seq {m.seq}), finished {fmt_time(m.finished_at)} UTC, device {m.device_id}")
+            text = trace_text(m)
         else:
             rows = list(reversed(store.list(
                 limit=None, full=True, status=args.status, part_id=args.part,
@@ -60,6 +59,12 @@ def run(args: argparse.Namespace) -> int:
     else:
         sys.stdout.write(text)
     return 0
+
+
+def trace_text(m) -> str:
+    """The raw trace of a stored measurement (with its trace) as trace CSV, with where it came from."""
+    return Trace(m.trace_t, m.trace_angle, source=m.uuid).to_csv(
+        f"moi measurement {m.uuid} (seq {m.seq}), finished {fmt_time(m.finished_at)} UTC, device {m.device_id}")
 
 
 def _json(rows) -> str:

@@ -225,6 +225,8 @@ def appliance_doc(state_dir: Path, *, mqtt_port: int | None = None, modbus_port:
         "simulation": {"time_scale": time_scale, "rate": 100.0, "seed": 7, "sensor": "direct",
                        "effects": {"viscous": {"c": 1.5e-4}}},
         "modbus": {"host": "127.0.0.1", "port": modbus_port},
+        # the web page only where a test asks for it (web={"enabled": True}); on a free port then
+        "web": {"host": "127.0.0.1", "port": 0, "enabled": False},
     }
     if mqtt_port is not None:
         doc["mqtt"] = {"host": "127.0.0.1", "port": mqtt_port, "reconnect_min": 0.1, "reconnect_max": 0.5,

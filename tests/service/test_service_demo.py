@@ -6,7 +6,7 @@ import pytest
 
 from service.cli import main
 
-FAST = ["--duration", "6", "--time-scale", "20"]
+FAST = ["--duration", "6", "--time-scale", "20", "--web-port", "0"]
 
 
 def test_demo_without_a_broker_measures_shows_the_registers_and_skips_mqtt(capsys):
@@ -16,6 +16,7 @@ def test_demo_without_a_broker_measures_shows_the_registers_and_skips_mqtt(capsy
     assert "pressing the push button" in out and "PUBLISHING" in out
     assert "[[Result]]" in out and "true J 0.0125 kg·m²" in out
     assert "Modbus registers read back over TCP (seq 1" in out
+    assert "web page: http://127.0.0.1:" in out and "the result page: http://127.0.0.1:" in out
 
 
 @pytest.mark.broker

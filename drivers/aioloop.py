@@ -1,0 +1,88 @@
+"""A private asyncio event loop on a daemon thread, for the drivers and servers built on async pymodbus.
+
+The rest of the appliance is threaded and blocking; pymodbus's clients and
+servers are asyncio. Each of them owns one ``LoopThread``: ``start()`` runs
+the loop, ``call(coro, timeout)`` runs a coroutine on it and waits for the
+result (real time), ``submit`` only schedules it, ``stop()`` ends the loop
+and joins the thread. ``start`` and ``stop`` are safe twice.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import logging
+import threading
+from typing import Any, Coroutine
+
+log = logging.getLogger("moi.drivers.aioloop")
+
+
+class LoopThread:
+    """An asyncio loop running forever on a daemon thread named ``name``."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def loop(self) -> asyncio.AbstractEventLoop:
+        if self._loop is None:
+            raise RuntimeError(f"{self.name}: the event loop is not started")
+        return self._loop
+
+    def start(self, timeout: float = 2.0) -> "LoopThread":
+        """Run the loop (returns once it runs, at most ``timeout`` s); nothing happens when it already does."""
+        if self.running:
+            return self
+        loop = asyncio.new_event_loop()
+        ready = threading.Event()
+
+        def run() -> None:
+            asyncio.set_event_loop(loop)
+            loop.call_soon(ready.set)
+            try:
+                loop.run_forever()
+            finally:
+                try:
+                    loop.run_until_complete(loop.shutdown_asyncgens())
+                finally:
+                    loop.close()
+
+        self._loop = loop
+        self._thread = threading.Thread(target=run, name=self.name, daemon=True)
+        self._thread.start()
+        ready.wait(timeout)
+        return self
+
+    def submit(self, coro: Coroutine[Any, Any, Any]) -> concurrent.futures.Future:
+        """Schedule ``coro`` on the loop; its future (``result(timeout)`` waits in real time)."""
+        return asyncio.run_coroutine_threadsafe(coro, self.loop)
+
+    def call(self, coro: Coroutine[Any, Any, Any], timeout: float = 5.0) -> Any:
+        """Run ``coro`` on the loop and wait for its result; raises what it raises, or ``TimeoutError``
+        after ``timeout`` s of real time (the coroutine is then cancelled)."""
+        fut = self.submit(coro)
+        try:
+            return fut.result(timeout)
+        except concurrent.futures.TimeoutError:
+            fut.cancel()
+            raise TimeoutError(f"{self.name}: no result within {timeout:g} s") from None
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Stop the loop and join the thread (at most ``timeout`` s); safe twice."""
+        loop, thread = self._loop, self._thread
+        self._loop = None
+        self._thread = None
+        if loop is None or thread is None:
+            return
+        if thread.is_alive():
+            loop.call_soon_threadsafe(loop.stop)
+            thread.join(timeout)
+            if thread.is_alive():
+                log.warning("%s: the event loop thread did not end within %g s", self.name, timeout)

@@ -1,0 +1,161 @@
+"""The web server inside the daemon: aiohttp in its own thread and event loop.
+
+Threads: the daemon's main loop delivers sequencer events (``on_event``) and
+stored measurements (``measurement_stored``); both only hand over to this
+server's loop or to the plot worker and never block. Handlers read the store
+(one short SQLite query each) and the appliance's live status; actions go
+through the daemon's command queue like the button, Modbus and MQTT.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import logging
+import threading
+from typing import TYPE_CHECKING, Any
+
+from aiohttp import web
+
+from drivers.aioloop import LoopThread
+
+from ..errors import StartupError
+from .auth import Guard, read_token
+from .settings import DEFAULT_TOKEN_FILE_NAME, WebSettings
+from .views import Views
+
+if TYPE_CHECKING:  # pragma: no cover
+    from firmware_host import Event, Measurement
+
+    from ..daemon import Appliance
+
+log = logging.getLogger("moi.web")
+
+#: the name of the plot kept with each measurement in the store
+PLOT_NAME = "plot.png"
+
+
+class WebServer:
+    """Serves the pages of ``appliance`` on ``settings.host``:``settings.port`` (``start`` / ``stop``)."""
+
+    def __init__(self, appliance: "Appliance", settings: WebSettings) -> None:
+        self.appliance = appliance
+        self.settings = settings
+        token_file = settings.token_file or str(appliance.config.state_dir / DEFAULT_TOKEN_FILE_NAME)
+        self.token_file = token_file
+        self.guard = Guard(read_token(token_file, create=settings.token_file is None))
+        self.bound_port: int | None = None
+        self._io = LoopThread("moi-web")
+        self._runner: web.AppRunner | None = None
+        self._listeners: set[asyncio.Queue] = set()
+        self._plotter = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="moi-plot")
+        self._plots: dict[str, concurrent.futures.Future] = {}
+        self._plots_lock = threading.Lock()
+        self.views = Views(self)
+
+    # --- life cycle ---------------------------------------------------------------
+    @property
+    def url(self) -> str:
+        host = self.settings.host
+        shown = "127.0.0.1" if host in ("0.0.0.0", "") else ("[::1]" if host == "::" else host)
+        return f"http://{shown}:{self.bound_port or self.settings.port}/"
+
+    def start(self, timeout: float = 10.0) -> None:
+        """Listen (StartupError when the address is taken or not allowed) and serve on the web loop thread."""
+        self._io.start()
+        try:
+            self._io.call(self._serve(), timeout)
+        except (OSError, TimeoutError) as exc:
+            self.stop()
+            s = self.settings
+            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+            raise StartupError(f"cannot serve the web page on {s.host}:{s.port}: {why} "
+                               f"(address in use, or no permission)") from None
+        log.info("web page on %s (actions need the token in %s)", self.url, self.token_file)
+
+    async def _serve(self) -> None:
+        runner = web.AppRunner(self.views.application(), access_log=None, handle_signals=False, shutdown_timeout=1.0)
+        await runner.setup()
+        site = web.TCPSite(runner, self.settings.host, self.settings.port)
+        try:
+            await site.start()
+        except BaseException:
+            await runner.cleanup()
+            raise
+        self._runner = runner
+        self.bound_port = runner.addresses[0][1] if runner.addresses else self.settings.port
+
+    async def _close(self) -> None:
+        for q in list(self._listeners):
+            q.put_nowait(None)  # ends every live stream
+        if self._runner is not None:
+            await self._runner.cleanup()
+            self._runner = None
+
+    def alive(self) -> bool:
+        return self._io.running
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Close the live streams and the server, end the loop thread, let a plot in progress finish; safe twice."""
+        if self._io.running:
+            try:
+                self._io.call(self._close(), timeout)
+            except Exception:  # stopping: the loop goes whatever happened
+                log.exception("web server shutdown failed")
+        self._io.stop()
+        self._plotter.shutdown(wait=True, cancel_futures=True)
+
+    # --- from the daemon's main loop (never block) -----------------------------------
+    def on_event(self, event: "Event") -> None:
+        """A sequencer transition: pushed to every open page at once."""
+        msg = self.views.live.event_message(event)
+        self._call(lambda: [q.put_nowait(msg) for q in self._listeners])
+
+    def measurement_stored(self, m: "Measurement") -> None:
+        """A measurement was stored: draw its plot once, in the plot worker, and keep it with it."""
+        self.submit_plot(m.id, lambda: m.result)
+
+    def submit_plot(self, uuid: str, get_result) -> concurrent.futures.Future:
+        with self._plots_lock:
+            fut = self._plots.get(uuid)
+            if fut is None:
+                fut = self._plotter.submit(self._draw, uuid, get_result)
+                self._plots[uuid] = fut
+        return fut
+
+    def _draw(self, uuid: str, get_result) -> bytes:
+        from ..plot import render_png
+
+        try:
+            png = render_png(get_result())
+            store = self.appliance.store
+            if store is not None:
+                store.put_attachment(uuid, PLOT_NAME, png, "image/png")
+            return png
+        finally:
+            with self._plots_lock:
+                self._plots.pop(uuid, None)
+
+    def _call(self, fn) -> None:
+        if not self._io.running:
+            return
+        try:
+            self._io.loop.call_soon_threadsafe(fn)
+        except RuntimeError:
+            pass  # stopping
+
+    # --- for the views -----------------------------------------------------------------
+    def listen(self) -> asyncio.Queue:
+        q: asyncio.Queue = asyncio.Queue()
+        self._listeners.add(q)
+        return q
+
+    def unlisten(self, q: asyncio.Queue) -> None:
+        self._listeners.discard(q)
+
+    def plot_future(self, uuid: str) -> concurrent.futures.Future | None:
+        with self._plots_lock:
+            return self._plots.get(uuid)
+
+    def stats(self) -> dict[str, Any]:
+        return {"url": self.url, "listeners": len(self._listeners), "token_file": self.token_file}

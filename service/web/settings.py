@@ -1,0 +1,21 @@
+"""``[web]``: the appliance's own web page (bind address, port, the token file for actions)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+#: the token file used when ``[web] token_file`` is not given: in the state directory, created on first start
+DEFAULT_TOKEN_FILE_NAME = "web-token"
+
+
+@dataclass(frozen=True)
+class WebSettings:
+    """host: the address the page is served on (127.0.0.1: this machine only; 0.0.0.0: every interface).
+    port: TCP port (0: any free port, for tests). token_file: the file holding the password/token that every
+    action (Measure, Abort, acknowledge) needs; None: ``<state_dir>/web-token``, made with a random token
+    on first start. page_size: measurements per history page."""
+
+    host: str = "127.0.0.1"
+    port: int = 8080
+    token_file: str | None = None
+    page_size: int = 25

@@ -1,0 +1,208 @@
+"""The web page over HTTP (urllib on loopback): who may act, clear 4xx answers, history filters, the plot kept
+with the measurement, secrets masked, the token file."""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+import urllib.error
+import urllib.request
+from http.cookiejar import CookieJar
+from pathlib import Path
+
+import pytest
+
+from service.errors import StartupError
+
+from .conftest import appliance_doc
+
+
+ON = {"enabled": True}
+
+
+class Client:
+    def __init__(self, url: str) -> None:
+        self.base = url.rstrip("/")
+        self.opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(CookieJar()))
+
+    def request(self, path: str, data: dict | bytes | None = None, headers: dict | None = None,
+                method: str | None = None) -> tuple[int, dict, bytes]:
+        body = data if isinstance(data, bytes) or data is None else urllib.parse.urlencode(data).encode()
+        req = urllib.request.Request(self.base + path, data=body, headers=headers or {}, method=method)
+        try:
+            with self.opener.open(req, timeout=30) as r:
+                return r.status, dict(r.headers), r.read()
+        except urllib.error.HTTPError as e:
+            return e.code, dict(e.headers), e.read()
+
+    def json(self, path: str, **kw) -> tuple[int, dict]:
+        status, _, body = self.request(path, headers={"Accept": "application/json", **kw.pop("headers", {})}, **kw)
+        return status, json.loads(body)
+
+
+@pytest.fixture
+def running(appliance_factory, tmp_path):
+    return appliance_factory(appliance_doc(tmp_path / "state", web=ON))
+
+
+def test_actions_need_the_token_and_the_csrf_token(running):
+    app = running.app
+    token = Path(app.web.token_file).read_text().strip()
+    assert stat.S_IMODE(os.stat(app.web.token_file).st_mode) == 0o600  # made on first start, owner only
+    c = Client(app.web.url)
+    assert c.json("/api/measure", method="POST") == (401, {"error": "log in first: this action needs the "
+                                                          "appliance's token", "status": 401})
+    assert c.json("/api/measure", method="POST", headers={"Authorization": "Bearer wrong-token"})[0] == 401
+    status, _, body = c.request("/login", {"token": "wrong-token"})
+    assert status == 401 and b"wrong token" in body and b"Traceback" not in body
+    # logged in, but without the page's CSRF token: refused (what a forged cross-site form would be)
+    status, _, _ = c.request("/login", {"token": token, "next": "/setup"})
+    assert status == 200
+    assert c.json("/api/measure", method="POST")[0] == 403
+    assert c.json("/api/abort", method="POST", headers={"X-CSRF-Token": "guess"})[0] == 403
+    # another site's page naming this appliance: refused whatever it carries
+    html = c.request("/")[2].decode()
+    csrf = html.split('name="csrf-token" content="')[1].split('"')[0]
+    assert len(csrf) > 20
+    assert c.json("/api/measure", method="POST", headers={"X-CSRF-Token": csrf,
+                                                         "Origin": "http://evil.example"})[0] == 403
+    assert app.store.count() == 0 and not app.sequencer.busy
+    # with it: accepted, and the measurement runs
+    status, body = c.json("/api/measure", method="POST", headers={"X-CSRF-Token": csrf})
+    assert (status, body["accepted"]) == (202, True)
+    running.wait_done(1, 60)
+    assert app.store.latest().trigger == "web"
+    # a script with the token as a bearer: no session, no CSRF needed
+    assert Client(app.web.url).json("/api/abort", method="POST",
+                                    headers={"Authorization": f"Bearer {token}"})[0] == 202
+
+
+def test_result_plot_kept_history_filters_and_clear_errors(running):
+    app = running.app
+    running.press()
+    running.wait_done(1, 60)
+    m = app.store.latest()
+    c = Client(app.web.url)
+    status, headers, png = c.request(f"/results/{m.uuid}/plot.png")
+    assert status == 200 and headers["Content-Type"] == "image/png" and png[:4] == b"\x89PNG"
+    assert app.store.get_attachment(m.uuid, "plot.png")[0] == png  # drawn once, kept with the measurement
+    status, _, page = c.request(f"/results/{m.seq}")
+    assert status == 200 and f"{m.J:.7g}".encode() in page
+    status, _, csv_text = c.request(f"/results/{m.uuid}/trace.csv")
+    assert status == 200 and b"t,angle" in csv_text
+    status, body = c.json(f"/results/{m.uuid[:8]}/result.json")
+    assert status == 200 and body["uuid"] == m.uuid and body["J"] == m.J
+    # history: newest first, filters in the query
+    assert m.uuid.encode() in c.request("/history")[2]
+    assert m.uuid.encode() not in c.request("/history?status=failed")[2]
+    assert m.uuid.encode() not in c.request("/history?since=2999-01-01")[2]
+    assert m.uuid.encode() not in c.request("/history?flag=fit_not_converged")[2]
+    assert m.uuid.encode() not in c.request("/history?part=no-such-part")[2]
+    status, _, export = c.request("/history/export.json?status=ok")
+    assert status == 200 and [r["uuid"] for r in json.loads(export)] == [m.uuid]
+    # bad requests: 4xx with what was wrong, never a traceback
+    for path, code, words in (("/history?since=yesterday", 400, b"expected a date YYYY-MM-DD"),
+                              ("/history?page=0", 400, b"page number"),
+                              ("/history?status=maybe", 400, b"expected ok, failed or aborted"),
+                              ("/results/no-such-id", 404, b"no measurement"),
+                              ("/results/a%27b", 400, b"bad measurement id"),
+                              ("/history/export.xml", 404, b"expected export.csv or export.json"),
+                              ("/nothing-here", 404, b"no page")):
+        status, _, body = c.request(path)
+        assert (status, words in body, b"Traceback" in body) == (code, True, False), (path, status, body[:300])
+    status, body = c.json("/api/measure", method="GET")
+    assert status == 405 and "not allowed" in body["error"]
+
+
+def test_setup_page_masks_secrets_and_reports_health(appliance_factory, tmp_path):
+    token_file = tmp_path / "token"
+    token_file.write_text("a-long-enough-token\n")
+    doc = appliance_doc(tmp_path / "state", web={**ON, "token_file": str(token_file)})
+    running = appliance_factory(doc)
+    c = Client(running.app.web.url)
+    status, _, page = c.request("/setup")
+    assert status == 200 and b"a-long-enough-token" not in page and b"client(s) connected" in page
+    status, health = c.json("/api/health")
+    assert status == 200 and health["modbus"]["clients"] == 0 and health["disk"]["free_bytes"] > 0
+    assert Client(running.app.web.url).json("/api/abort", method="POST", headers={
+        "Authorization": "Bearer a-long-enough-token"})[0] == 202
+
+
+def test_a_missing_token_file_stops_the_start(tmp_path):
+    from service.config import parse_config
+    from service.daemon import Appliance
+
+    doc = appliance_doc(tmp_path / "state", web={**ON, "token_file": str(tmp_path / "absent")})
+    app = Appliance(parse_config(doc, source="test.toml"))
+    with pytest.raises(StartupError, match="absent.*does not exist"):
+        app.start()
+    assert app.devices is None and app.store is None  # everything started was shut down again
+
+
+def test_store_search_pages_and_filters_on_payload_fields(tmp_path):
+    from service.store import Store
+
+    with Store(tmp_path) as store:
+        for i in range(7):
+            payload = {"J": 0.01 + i, "recipe": {"name": "rotor-a" if i % 2 else "rotor-b"}, "part_id": f"P{i}"}
+            store.record(status="ok", trigger="test", device_id="d", software_version="0", started_at=100.0 + i,
+                         finished_at=101.0 + i, result={"J": 0.01 + i, "flags": ["outliers_removed"] if i == 3 else []},
+                         build_payload=lambda uuid, seq, p=payload: {**p, "uuid": uuid, "seq": seq})
+        rows, total = store.search(offset=2, limit=2)
+        assert total == 7 and [m.seq for m in rows] == [5, 4]  # newest first, the second page
+        rows, total = store.search(payload_fields={"recipe": "rotor-a"})
+        assert total == 3 and {m.seq for m in rows} == {2, 4, 6}
+        assert [m.seq for m in store.search(payload_fields={"part_id": "P3"})[0]] == [4]
+        assert [m.seq for m in store.search(flag="outliers_removed")[0]] == [4]
+        assert store.search(since=105.0, until=107.0)[1] == 2
+        store.put_attachment(rows[0].uuid, "plot.png", b"\x89PNG...", "image/png")
+        assert store.get_attachment(rows[0].uuid, "plot.png") == (b"\x89PNG...", "image/png")
+        assert store.get_attachment(rows[0].uuid, "other") is None
+
+
+def test_a_taken_port_stops_the_start_with_a_clear_reason(tmp_path):
+    import socket
+
+    from service.config import parse_config
+    from service.daemon import Appliance
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        app = Appliance(parse_config(appliance_doc(tmp_path / "state", web={**ON, "port": port}), source="t.toml"))
+        with pytest.raises(StartupError, match=f"cannot serve the web page on 127.0.0.1:{port}"):
+            app.start()
+    assert app.web is None and app.store is None
+
+
+def test_setup_camera_snapshot_and_fault_shown_and_acknowledged(appliance_factory, tmp_path):
+    running = appliance_factory(appliance_doc(tmp_path / "state", time_scale=1.0, web=ON,
+                                              simulation={"sensor": "camera"}))
+    app = running.app
+    c = Client(app.web.url)
+    assert b"snapshot-button" in c.request("/setup")[2]
+    status, headers, png = c.request("/setup/snapshot.png")
+    assert status == 200 and headers["Content-Type"] == "image/png" and png[:4] == b"\x89PNG"
+    import cv2
+    import numpy as np
+    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+    assert img.shape[:2] == (480, 640)
+    # the fitted edge is drawn in red (B, G, R = 0, 0, 255): the marker was found in the frame
+    assert np.count_nonzero((img[:, :, 2] == 255) & (img[:, :, 1] == 0) & (img[:, :, 0] == 0)) > 20
+    # a FAULT is shown with its reason; the token acknowledges it
+    app.sequencer.fault("encoder fault: test cable pulled")
+    running.wait_event(lambda e: e.state.value == "FAULT", 10, what="FAULT")
+    status, state = c.json("/api/state")
+    assert state["state"] == "FAULT" and state["fault"] == "encoder fault: test cable pulled"
+    token = Path(app.web.token_file).read_text().strip()
+    assert c.json("/api/abort", method="POST", headers={"Authorization": f"Bearer {token}"})[0] == 202
+    running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")
+
+
+def test_setup_encoder_angle_now(appliance_factory, tmp_path):
+    running = appliance_factory(appliance_doc(tmp_path / "state", web=ON, simulation={"sensor": "encoder"}))
+    status, body = Client(running.app.web.url).json("/api/angle")
+    # the simulated pendulum is held at its release angle (0.25 rad) until a measurement fires the solenoid
+    assert status == 200 and body["source"] == "encoder" and body["angle_rad"] == pytest.approx(0.25, abs=1e-3)

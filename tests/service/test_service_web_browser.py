@@ -1,0 +1,96 @@
+"""The web page in a real browser: headless Debian Chromium driven by Selenium, against the daemon on the
+simulated rig. One scenario: refused without the token, log in, Measure, the live states, the result from
+the history with its plot, a screenshot of the result page."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from .conftest import appliance_doc
+
+pytestmark = pytest.mark.browser
+
+REPO = Path(__file__).resolve().parents[2]
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMEDRIVER = shutil.which("chromedriver") or ("/usr/bin/chromedriver" if os.path.exists("/usr/bin/chromedriver") else None)
+
+
+@pytest.fixture
+def browser():
+    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install -e '.[test]')")
+    if CHROMIUM is None or CHROMEDRIVER is None:
+        pytest.skip("headless Chromium is not installed: `make test` installs Debian's chromium and chromium-driver "
+                    "when run as root; otherwise apt-get install chromium chromium-driver")
+    from selenium.webdriver.chrome.service import Service
+
+    os.environ.setdefault("SE_OFFLINE", "true")  # Selenium Manager must never try to download a driver
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu",
+                "--window-size=1100,1900", "--no-first-run", "--disable-extensions"):
+        opts.add_argument(arg)
+    driver = webdriver.Chrome(options=opts, service=Service(CHROMEDRIVER))
+    driver.set_page_load_timeout(30)
+    yield driver
+    driver.quit()
+
+
+def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    # slow enough that the page sees every state: about 1 s of capture
+    doc = appliance_doc(tmp_path / "state", time_scale=5.0, web={"enabled": True},
+                        simulation={"effects": {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 6e-4}}})
+    running = appliance_factory(doc)
+    app = running.app
+    url = app.web.url
+    token = Path(app.web.token_file).read_text().strip()
+    wait = WebDriverWait(browser, 30, poll_frequency=0.05)
+
+    browser.get(url)
+    wait.until(lambda d: d.find_element(By.ID, "state").text == "IDLE")
+
+    # an action without the token is refused, and nothing moves
+    browser.find_element(By.ID, "measure").click()
+    wait.until(lambda d: "refused (401)" in d.find_element(By.ID, "message").text)
+    assert app.sequencer.state.value == "IDLE" and app.store.count() == 0
+
+    # log in with the token; back on the home page, logged in
+    browser.find_element(By.ID, "token").send_keys(token)
+    browser.find_element(By.ID, "login-button").click()
+    wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, ".who .ok"))
+    wait.until(lambda d: d.find_element(By.ID, "state").text == "IDLE")
+
+    browser.find_element(By.ID, "measure").click()
+    wait.until(lambda d: d.find_elements(By.ID, "latest-link") and "IDLE" in
+               [li.get_attribute("data-state") for li in d.find_elements(By.CSS_SELECTOR, "#log li")][1:])
+    seen = [li.get_attribute("data-state") for li in browser.find_elements(By.CSS_SELECTOR, "#log li")]
+    assert seen[:6] == ["ARMED", "RELEASING", "CAPTURING", "IDENTIFYING", "PUBLISHING", "IDLE"], seen
+    # the swing was drawn while it arrived
+    assert browser.execute_script("return document.getElementById('swing').toDataURL().length") > 5000
+
+    # the result, opened from the history
+    browser.find_element(By.LINK_TEXT, "History").click()
+    rows = wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, "#history td a"))
+    rows[0].click()
+    text = wait.until(lambda d: d.find_element(By.ID, "J")).text
+    J, J_std = (float(x) for x in re.match(r"J = ([0-9.e+-]+) ± ([0-9.e+-]+)", text).groups())
+    truth = app.devices.sim.inertia
+    assert abs(J - truth) <= max(5 * J_std, 1e-4 * truth), (J, J_std, truth)
+    added = app.store.latest().payload["added_effects"]
+    shown = [li.text for li in browser.find_elements(By.CSS_SELECTOR, ".steps li")]
+    assert [t.split(" ")[0] for t in shown] == added and all("evidence:" in t for t in shown), (added, shown)
+    wait.until(lambda d: d.execute_script(
+        "var i = document.getElementById('plot'); return i.complete && i.naturalWidth > 400;"))
+    shot = tmp_path / "result-page.png"
+    browser.save_screenshot(str(shot))
+    assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and shot.stat().st_size > 20_000
+    if os.environ.get("MOI_UPDATE_SCREENSHOT"):  # refresh the picture in the README
+        shutil.copy(shot, REPO / "docs" / "img" / "web-result.png")
+    assert app.store.count() == 1
