@@ -2,12 +2,13 @@
 
 Each reference is the empty fixture or the fixture with a known added
 inertia I_i, and a measured small-amplitude natural frequency ω_n,i (from a
-trace, or from seed 001's ω_m and ζ: ω_n² = ω_m² + ζ²). The model is
+trace, or from the main frequency ω_m and amplitude modulation ζ of the
+monocular-vision torsion pendulum paper ("Research on the Measurement Technology of Rotational Inertia of Rigid Body Based on the Principles of Monocular Vision and Torsion Pendulum"): ω_n² = ω_m² + ζ²). The model is
 
     1/ω_n,i² = (I0 + I_i)/k
 
 a straight line in I_i. It is fitted by (weighted) least squares over all
-references — not solved from one pair as seed 001 eq. 16 does, which also
+references — not solved from one pair as that paper's eq. 16 does, which also
 mistakes the total for the added load — so that k and I0 come with
 uncertainties and a residual that shows a bad reference.
 """
@@ -66,7 +67,7 @@ class Reference:
 
     @classmethod
     def from_damped(cls, name: str, added_inertia: float, omega_m: float, zeta: float) -> "Reference":
-        """From seed 001's main frequency ω_m (rad/s) and amplitude modulation ζ (1/s, either sign)."""
+        """From the main frequency ω_m (rad/s) and amplitude modulation ζ (1/s, either sign)."""
         return cls(name, added_inertia, math.sqrt(omega_m**2 + zeta**2))
 
 

@@ -12,9 +12,8 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.stats import chi2
-
-from .fit import ModelFit, autocorrelation
+from .fit import ModelFit
+from .noise import autocorrelation, ljung_box
 from .signal import find_swings, resample_uniform
 
 #: residual RMS / noise floor below which the model is "at the noise floor"
@@ -172,11 +171,10 @@ def diagnose(fit: ModelFit, noise: float, stopped: bool = False) -> Diagnostics:
     ratio = rms / noise if noise > 0 else math.inf
     lags = int(min(20, max(2, n // 10)))
     rho = autocorrelation(r, lags)
-    q = n * (n + 2) * float(np.sum(rho[1:] ** 2 / (n - np.arange(1, lags + 1))))
-    p = float(chi2.sf(q, lags))
+    _, p = ljung_box(r, lags)
     white = p > 1e-3
 
-    offset = float(fit.x[fit.model.n_dynamic])
+    offset = fit.value("offset")
     sw_data = find_swings(fit.t, fit.y, centre=offset, hysteresis=3 * noise)
     sw_fit = find_swings(fit.t, fit.fitted, centre=offset, hysteresis=3 * noise)
     swing_hz = sw_fit.damped_frequency / (2 * math.pi) if math.isfinite(sw_fit.damped_frequency) else float("nan")

@@ -1,6 +1,6 @@
 """The effect library: the parts a pendulum model is composed from.
 
-Equation of motion, normalised by the inertia J (DESIGN.md):
+Equation of motion, normalised by the inertia J:
 
     θ'' = −ω_n²·r(θ) − Σ_effects Σ_j p_j·φ_j(θ, θ', s)
 
@@ -8,24 +8,32 @@ with r(θ) = θ (torsion) or sin θ (compound) and s = ±1 the direction of the
 current half-swing. Every dynamic effect is linear in its normalised
 parameters p_j (torque / J), which is what makes the equation-error start and
 the discovery loop's diagnostics cheap. A sensor effect adds to the measured
-angle instead: θ_meas = θ + a + Σ q_j·ψ_j(t).
+angle instead: θ_meas = θ + a + Σ q_j·ψ_j(t, θ).
 
-Adding an effect is adding one small class below: it registers itself by
-``name``. The names are a contract (they appear in every output).
+Adding an effect is adding one small class below (and a line in the README's
+effect table): it registers itself by ``name`` and carries everything that is
+particular to it: its law (one expression, ``term``, from which both the
+integrator and the vectorised regressors are made), its bounds, its start
+value, how its physical values are given and reported, where it is
+identifiable, and its evidence in the residual. The names are a contract
+(they appear in every output).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar, Iterable, Sequence
+from typing import TYPE_CHECKING, ClassVar, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .errors import RigError, UnknownEffectError
+from .errors import InvalidInput, RigError, UnknownEffectError
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # effects need only the rig's attributes; the rig module imports this one
     from .rig import Rig
+
+#: names the effects' ``term`` expressions may use, in their numpy form
+_NUMPY_NAMES = {"cos": np.cos, "sin": np.sin, "abs": np.abs}
 
 #: name → effect class, filled by ``Effect.__init_subclass__`` in definition order.
 EFFECTS: dict[str, type["Effect"]] = {}
@@ -78,16 +86,28 @@ class Effect:
         return tuple(p.name for p in self.parameters)
 
     # -- dynamic effects -------------------------------------------------------
-    def basis(self, theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
-        """Regressors φ_j, shape (n, m): this effect's θ'' contribution is −φ·p (rad/s²)."""
-        raise NotImplementedError
-
-    #: This effect's θ'' term Σ p_j φ_j as one Python expression in x (θ, rad),
-    #: v (θ', rad/s), s (±1, direction of the half-swing) and p0, p1, ... (its
-    #: parameters), using cos/sin/abs. The integrator is generated from these
-    #: strings so that its inner loop makes no function calls; a test checks
-    #: each term against ``basis``.
+    #: This effect's θ'' term Σ p_j φ_j (the law) as one Python expression in x
+    #: (θ, rad), v (θ', rad/s), s (±1, direction of the half-swing) and p0, p1,
+    #: ... (its parameters), using cos/sin/abs. It is the one form of the law:
+    #: the integrator is generated from it (no function call in its inner
+    #: loop) and ``basis`` evaluates it on arrays.
     term: ClassVar[str] = ""
+
+    def basis(self, theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
+        """Regressors φ_j, shape (n, m): this effect's θ'' contribution is −φ·p (rad/s²).
+
+        The term is linear in its parameters, so column j is the term with
+        p_j = 1 and the others 0, evaluated on the arrays.
+        """
+        theta = np.asarray(theta, dtype=float)
+        omega = np.asarray(omega, dtype=float)
+        env = dict(_NUMPY_NAMES, x=theta, v=omega, s=np.sign(omega))
+        code = compile(self.term, f"<{self.name}.term>", "eval")
+        cols = []
+        for j in range(len(self.parameters)):
+            env.update({f"p{i}": float(i == j) for i in range(len(self.parameters))})
+            cols.append(np.broadcast_to(eval(code, env), theta.shape))  # noqa: S307 - library terms only
+        return np.stack(cols, axis=1)
     #: Static friction capacity at rest (rad/s², a θ'' magnitude) as an
     #: expression in x and p0...; empty when the effect cannot hold the pendulum.
     holding_term: ClassVar[str] = ""
@@ -96,9 +116,27 @@ class Effect:
         """c_eq/J (1/s) dissipating the same energy per cycle at this amplitude (rad) and ω (rad/s)."""
         return 0.0
 
+    def frequency_factor(self, values: Sequence[float], omega_n: float, amplitude: float) -> float:
+        """Highest swing frequency over ω_n at this amplitude (rad) (sets the integration step)."""
+        return 1.0
+
+    def fallback_start(self, peak_times: np.ndarray, peak_amplitudes: np.ndarray) -> list[float] | None:
+        """Start values when the equation-error regression is unusable (None: zeros).
+
+        peak_times (s) and |peak| amplitudes (rad) of the well-measured swings.
+        """
+        return None
+
+    def identifiable(self, amplitude: float) -> bool:
+        """Whether a record of this amplitude (rad) can tell the effect apart (else never a candidate)."""
+        return True
+
     # -- sensor effects --------------------------------------------------------
-    def sensor_basis(self, t: np.ndarray) -> np.ndarray:
-        """Regressors ψ_j(t), shape (n, m), added to the measured angle (rad)."""
+    def sensor_basis(self, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """Regressors ψ_j(t, θ), shape (n, m), added to the measured angle (rad).
+
+        t: time since the first fitted sample (s); theta: the pendulum's true angle (rad).
+        """
         raise NotImplementedError
 
     # -- reporting -------------------------------------------------------------
@@ -128,6 +166,36 @@ class Effect:
             why.append(f"the measured envelope decays {self.envelope}ly")
         return "; ".join(why)
 
+    @classmethod
+    def given_names(cls, kind: str) -> tuple[str, ...]:
+        """Names a user may give this effect's values by on a ``kind`` rig; the first is the default."""
+        out: list[str] = []
+        for p in cls.parameters:
+            out += [p.physical] if p.physical else []
+            out.append(p.name)
+        return tuple(out)
+
+    def normalise(self, given: Mapping[str, float], inertia: float | None) -> list[float]:
+        """Fitted (J-normalised) values from physical or normalised ones.
+
+        given: parameter name → value, by any of ``given_names``; physical
+        names need ``inertia`` (kg·m²).
+        """
+        extra = set(given) - set(self.given_names(self.rig.kind))
+        if extra:
+            raise InvalidInput(f"{self.name}: unknown parameter(s) {sorted(extra)}")
+        values = []
+        for p in self.parameters:
+            if p.name in given:
+                values.append(float(given[p.name]))
+            elif p.physical is not None and p.physical in given:
+                if inertia is None:
+                    raise InvalidInput(f"{self.name}: {p.physical} needs the inertia J; give {p.name} instead")
+                values.append(float(given[p.physical]) / inertia)
+            else:
+                raise InvalidInput(f"{self.name}: missing value; expected one of {', '.join(self.given_names(self.rig.kind))}")
+        return values
+
     def physical(self, values: Sequence[float], inertia: float | None, omega_n: float) -> dict[str, float | None]:
         """Torque-law values from the normalised ones; None where J is unknown."""
         out: dict[str, float | None] = {}
@@ -144,13 +212,17 @@ class Viscous(Effect):
     cause = "linear damping: eddy currents, material damping"
     law = "c·θ'"
 
-    def basis(self, theta, omega):
-        return omega[:, None]
-
     term = "p0 * v"
 
     def equivalent_viscous(self, values, amplitude, omega):
         return float(values[0])
+
+    def fallback_start(self, peak_times, peak_amplitudes):
+        # logarithmic decrement of the envelope: A ∝ exp(−c/(2J)·t)
+        if peak_amplitudes.size < 3:
+            return None
+        slope = np.polyfit(peak_times, np.log(peak_amplitudes), 1)[0]
+        return [max(0.0, -2.0 * float(slope))]
 
     decrement_order = 1
     decrement_words = "grows in proportion to the amplitude"
@@ -165,12 +237,6 @@ class Coulomb(Effect):
     )
     cause = "dry (bearing) friction"
     law = "T_c·sgn θ' (torsion); μ·m·g·cos θ·sgn θ' (compound)"
-
-    def basis(self, theta, omega):
-        s = np.sign(omega)  # the half-swing's direction
-        if self.rig.kind == "compound":
-            return (s * np.cos(theta))[:, None]
-        return s[:, None]
 
     @property
     def term(self) -> str:  # type: ignore[override]
@@ -197,6 +263,20 @@ class Coulomb(Effect):
             why.append("the pendulum stopped dead within the record, which only dry friction does")
         return "; ".join(why)
 
+    @classmethod
+    def given_names(cls, kind):
+        # on a compound rig the friction is given as μ (m): T = μ·m·g·cos θ
+        return ("mu",) + super().given_names(kind) if kind == "compound" else super().given_names(kind)
+
+    def normalise(self, given, inertia):
+        if self.rig.kind == "compound" and "mu" in given and not {"Tc", "Tc_per_J"} & set(given):
+            if set(given) != {"mu"}:
+                raise InvalidInput(f"coulomb: unknown parameter(s) {sorted(set(given) - {'mu'})}")
+            if inertia is None or self.rig.mass is None:
+                raise InvalidInput("coulomb: mu (m) needs the rig's mass and the inertia; give Tc_per_J instead")
+            return [float(given["mu"]) * self.rig.mass * self.rig.g / inertia]
+        return super().normalise(given, inertia)
+
     def physical(self, values, inertia, omega_n):
         b = float(values[0])
         if self.rig.kind == "compound":
@@ -215,9 +295,6 @@ class Quadratic(Effect):
     parameters = (Parameter("K_per_J", "1/rad", "K", "N·m·s²/rad²", description="air-drag coefficient over J"),)
     cause = "air drag"
     law = "K·θ'·|θ'|"
-
-    def basis(self, theta, omega):
-        return (omega * np.abs(omega))[:, None]
 
     # s·θ'² rather than θ'·|θ'|: identical within a half-swing and smooth for
     # the integrator's intermediate stages near a turning point.
@@ -244,10 +321,11 @@ class CubicStiffness(Effect):
     cause = "nonlinear (hardening or softening) spring"
     law = "k₃·θ³"
 
-    def basis(self, theta, omega):
-        return (theta**3)[:, None]
-
     term = "p0 * x * x * x"
+
+    def frequency_factor(self, values, omega_n, amplitude):
+        # a hardening spring raises the frequency at large amplitude
+        return math.sqrt(1.0 + 3.0 * max(float(values[0]), 0.0) / max(omega_n, 1e-9) ** 2 * amplitude**2)
 
     def evidence(self, diag):
         if abs(diag.freq_amp_t) >= 4:
@@ -265,7 +343,7 @@ class Drift(Effect):
     cause = "encoder/camera zero drift"
     law = "θ_meas = θ + a + b·t"
 
-    def sensor_basis(self, t):
+    def sensor_basis(self, t, theta):
         return (t - t[0])[:, None]
 
     def evidence(self, diag):
@@ -278,6 +356,45 @@ class Drift(Effect):
 
     def physical(self, values, inertia, omega_n):
         return {}
+
+
+class Gain(Effect):
+    name = "gain"
+    role = "sensor"
+    parameters = (
+        Parameter("g_minus_1", "1", None, None, lower=-0.9, description="sensor scale error g − 1"),
+    )
+    #: a scale error is told apart from the amplitude only through the sin θ of a compound rig
+    rigs = ("compound",)
+    cause = "camera/encoder scale error (distance, focal length, marker geometry)"
+    law = "θ_meas = a + g·θ"
+    extra_units = {"g": "1"}
+    #: below this amplitude (rad) sin θ is too close to θ for g to be told from the amplitude
+    min_amplitude: ClassVar[float] = 0.5
+
+    def identifiable(self, amplitude):
+        return amplitude >= self.min_amplitude
+
+    def sensor_basis(self, t, theta):
+        return np.asarray(theta, dtype=float)[:, None]
+
+    @classmethod
+    def given_names(cls, kind):
+        return ("g", "g_minus_1")
+
+    def normalise(self, given, inertia):
+        if set(given) == {"g"}:
+            return [float(given["g"]) - 1.0]
+        return super().normalise(given, inertia)
+
+    def evidence(self, diag):
+        if abs(diag.freq_amp_t) >= 4:
+            return (f"the swing frequency depends on the amplitude differently from sin θ at the measured scale"
+                    f" (t = {diag.freq_amp_t:.1f}): the angle's scale is off")
+        return ""
+
+    def physical(self, values, inertia, omega_n):
+        return {"g": 1.0 + float(values[0])}
 
 
 def resolve_effects(names: Iterable[str], rig: "Rig") -> list[Effect]:

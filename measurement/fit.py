@@ -1,17 +1,20 @@
-"""Whole-record fit of one model: starting values, least squares, uncertainties.
+"""Whole-record fit of one model: starting values, least squares, noise model, uncertainties.
 
 1. Starting values by equation error: θ, θ', θ'' from a Savitzky–Golay
    filter, then a bounded linear regression −θ'' = ω_n²·r(θ) + Σ p·φ(θ, θ')
    (every effect is linear in its normalised parameters). Falls back to
-   zero crossings and the envelope when the regression is unusable.
+   zero crossings and each effect's own fallback when the regression is
+   unusable.
 2. Output error: nonlinear least squares of the simulated response against
    every sample (scipy ``least_squares``, trust-region reflective, bounds
-   keep dissipation ≥ 0). The Jacobian is a forward difference of the
-   simulation for the dynamic parameters and exact for the offset and the
-   sensor terms, which enter linearly.
-3. Covariance s²·(JᵀJ)⁻¹, replaced by a Newey–West (HAC) sandwich when the
-   residual is autocorrelated: correlated residuals carry less information
-   than their count suggests, and the plain formula would understate σ.
+   keep dissipation ≥ 0), optionally with a robust loss (soft-L1) so that a
+   few wild samples cannot steer the fit. The Jacobian is a forward
+   difference of the simulation for the dynamic parameters and exact for the
+   offset and the sensor terms, which enter linearly.
+3. The residual's noise model (``noise.fit_noise``, AR(p) with the order
+   chosen by the data) gives the likelihood (BIC) and the covariance: the
+   sandwich with the AR covariance, which reduces to s²·(JᵀJ)⁻¹ when the
+   residual is white.
 """
 
 from __future__ import annotations
@@ -25,12 +28,21 @@ from scipy.signal import savgol_filter
 
 from .errors import IdentificationError
 from .model import STATE_PARAMS, Model
+from .noise import NoiseModel, autocorrelation, fit_noise
 from .signal import find_swings, resample_uniform
+
+__all__ = ["ModelFit", "fit_model", "initial_guess", "autocorrelation"]
 
 
 @dataclass(frozen=True, eq=False)
 class ModelFit:
-    """Outcome of fitting one model to the fitted samples (t, y)."""
+    """Outcome of fitting one model to the fitted samples (t, y).
+
+    residual: y_model − y (rad); effective: the residual as the loss sees it
+    (equal to residual without a robust loss; wild samples shrunk with one);
+    noise: the AR noise model of ``effective``; jac: the Jacobian (rad per
+    parameter unit) at the solution.
+    """
 
     model: Model
     x: np.ndarray
@@ -44,9 +56,15 @@ class ModelFit:
     message: str
     nfev: int
     max_step: float
+    noise: NoiseModel
+    effective: np.ndarray
+    jac: np.ndarray
+    scales: np.ndarray
     cov_method: str = "white"
     cov_inflation: float = 1.0
     at_bound: tuple[str, ...] = ()
+    f_scale: float | None = None
+    n_downweighted: int = 0
     extra: dict = field(default_factory=dict)
 
     @property
@@ -67,25 +85,40 @@ class ModelFit:
 
     @property
     def residual_rms(self) -> float:
-        return float(math.sqrt(self.rss / self.n))
+        return float(math.sqrt(float(self.residual @ self.residual) / self.n))
+
+    @property
+    def log_likelihood_term(self) -> float:
+        """n·log σ_e² (−2·log-likelihood up to a constant) under the AR noise model."""
+        return float(self.n * math.log(max(self.noise.innovation_var, 1e-300)))
+
+    @property
+    def n_params(self) -> int:
+        """Model parameters plus the noise model's AR coefficients."""
+        return self.k + self.noise.order
 
     @property
     def aic(self) -> float:
-        return float(self.n * math.log(self.rss / self.n) + 2 * self.k)
+        return self.log_likelihood_term + 2 * self.n_params
 
     @property
     def bic(self) -> float:
-        return float(self.n * math.log(self.rss / self.n) + self.k * math.log(self.n))
+        return self.log_likelihood_term + self.n_params * math.log(self.n)
 
     @property
     def std(self) -> np.ndarray:
         return np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
 
     def value(self, name: str) -> float:
-        return float(self.x[self.names.index(name)])
+        """A scalar parameter by name: "omega_n", "offset", "theta0", "coulomb.Tc_per_J", ..."""
+        return self.model.value(self.x, name)
 
     def stdev(self, name: str) -> float:
-        return float(self.std[self.names.index(name)])
+        return float(self.std[self.model.index(name)])
+
+    def effect(self, name: str) -> list[float]:
+        """An effect's fitted values (its ``parameters`` order)."""
+        return self.model.values(self.x, name)
 
 
 # -- starting values ---------------------------------------------------------------
@@ -144,31 +177,30 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float) -> t
         # the regression is biased by noise on θ''; trust it only near ω_d
         if not 0.7 * wd < omega_n < 1.4 * wd:
             regression_ok = False
+    values: dict[str, list[float]] = {}
     if regression_ok and coef is not None:
-        effect_values = list(coef[1:])
+        i = 1
+        for e in model.dynamic:
+            values[e.name] = list(coef[i:i + len(e.parameters)])
+            i += len(e.parameters)
     else:
         omega_n = omega_guess
-        effect_values = []
+        amps = np.abs(sw.peak_values)
+        good = amps > 10 * sigma
         for e in model.dynamic:
-            effect_values += [0.0] * len(e.parameters)
-        if model.dynamic and model.dynamic[0].name == "viscous" and sw.peak_values.size >= 4:
-            amps = np.abs(sw.peak_values)
-            good = amps > 10 * sigma
-            if good.sum() >= 3:
-                slope = np.polyfit(sw.peak_times[good], np.log(amps[good]), 1)[0]
-                effect_values[0] = max(0.0, -2.0 * slope)
+            start = e.fallback_start(sw.peak_times[good], amps[good]) if good.sum() >= 3 else None
+            values[e.name] = start if start is not None else [0.0] * len(e.parameters)
 
-    x = [theta0, omega0, omega_n] + effect_values + [centre] + [0.0] * (len(model.names) - model.n_dynamic - 1)
-    x = np.asarray(x, dtype=float)
-    scales = [max(amplitude, 1e-6), max(amplitude * omega_n, 1e-6), omega_n]
+    x = model.vector((theta0, omega0, omega_n), values, centre)
     restoring_rms = omega_n**2 * float(np.sqrt(np.mean(restoring**2)))
-    scales += list(restoring_rms / col_rms[1:])
-    scales.append(max(amplitude, 1e-6))
-    duration = float(t[-1] - t[0])
+    scales = np.empty(model.size)
+    scales[:3] = [max(amplitude, 1e-6), max(amplitude * omega_n, 1e-6), omega_n]
+    scales[3:model.n_dynamic] = restoring_rms / col_rms[1:]
+    scales[model.layout["offset"]] = max(amplitude, 1e-6)
     for e in model.sensor:
-        scales += [max(amplitude, 1e-6) / duration] * len(e.parameters)
-    scales = np.asarray(scales, dtype=float)
-
+        # a sensor term of the swing's size over the record
+        size = e.sensor_basis(t - t[0], np.full(t.size, amplitude))
+        scales[model.layout[e.name]] = max(amplitude, 1e-6) / np.maximum(np.max(np.abs(size), axis=0), 1e-12)
     lo_b, hi_b = model.bounds()
     x = np.clip(x, lo_b, hi_b)
     return x, scales
@@ -182,17 +214,20 @@ def start_candidates(model: Model, x: np.ndarray, previous: "ModelFit | None") -
     starts = [x]
     if previous is None:
         return starts
-    prev = dict(zip(previous.names, previous.x))
     lo_b, hi_b = model.bounds()
     full, state = x.copy(), x.copy()
-    for i, name in enumerate(model.names):
-        if name in prev:
-            full[i] = prev[name]
-            if i < 2 or i >= model.n_dynamic:
-                state[i] = prev[name]
+    pm = previous.model
+    for name in ("theta0", "omega0", "omega_n", "offset"):
+        full[model.index(name)] = previous.value(name)
+        if name != "omega_n":
+            state[model.index(name)] = previous.value(name)
+    for e in pm.effects:
+        if e.name in model.layout:
+            full[model.layout[e.name]] = previous.effect(e.name)
+            if e.role == "sensor":
+                state[model.layout[e.name]] = previous.effect(e.name)
     starts += [np.clip(full, lo_b, hi_b), np.clip(state, lo_b, hi_b)]
     return starts
-    return x, scales
 
 
 # -- least squares --------------------------------------------------------------------
@@ -201,8 +236,12 @@ def start_candidates(model: Model, x: np.ndarray, previous: "ModelFit | None") -
 def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
               x0: np.ndarray | None = None, scales: np.ndarray | None = None,
               previous: ModelFit | None = None, max_step: float | None = None,
-              max_nfev: int = 200) -> ModelFit:
-    """Fit ``model`` to every sample (t in s, y in rad); sigma: noise floor, rad."""
+              max_nfev: int = 200, f_scale: float | None = None) -> ModelFit:
+    """Fit ``model`` to every sample (t in s, y in rad); sigma: noise floor, rad.
+
+    f_scale: with a value (rad), a robust soft-L1 loss: residuals well beyond
+    f_scale count in proportion to their size rather than its square.
+    """
     starts = None
     if x0 is None or scales is None:
         x_reg, scales = initial_guess(model, t, y, sigma)
@@ -211,32 +250,29 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
     lo, hi = model.bounds()
     nd = model.n_dynamic
     if max_step is None:
-        amp = max(abs(x0[0]), float(np.max(np.abs(y - x0[nd]))))
-        k3_ratio = 0.0
-        if "cubic_stiffness" in model.effect_names:
-            k3_ratio = max(0.0, model.split(x0)["cubic_stiffness"][0]) / max(x0[2], 1e-9) ** 2
-        max_step = 0.05 / (x0[2] * math.sqrt(1 + 3 * k3_ratio * amp**2))
-    lin_cols = model.sensor_columns(t)
+        amp = max(abs(model.value(x0, "theta0")), float(np.max(np.abs(y - model.value(x0, "offset")))))
+        max_step = model.max_step(x0, amp)
+    ts = t - t[0]
     steps = 1e-7 * scales[:nd]
     nfev = [0]
 
     def simulate(x: np.ndarray) -> np.ndarray:
         nfev[0] += 1
-        theta, _ = model.dynamics(x).integrate(t, x[0], x[1], x[2], max_step)
-        return theta
+        return model.true_angle(x, t, max_step)[0]
 
     cache: dict[str, np.ndarray] = {}
 
     def fun(x: np.ndarray) -> np.ndarray:
         theta = simulate(x)
         cache["x"], cache["theta"] = x.copy(), theta
-        return theta + lin_cols @ x[nd:] - y
+        return model.measured(x, ts, theta) - y
 
     def jac(x: np.ndarray) -> np.ndarray:
         if "x" in cache and np.array_equal(cache["x"], x):
-            base = cache["theta"]
+            theta = cache["theta"]
         else:
-            base = simulate(x)
+            theta = simulate(x)
+        base = model.measured(x, ts, theta)
         J = np.empty((t.size, x.size))
         for j in range(nd):
             xp = x.copy()
@@ -245,16 +281,18 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
             if xp[j] + h > hi[j]:
                 h = -h
             xp[j] += h
-            J[:, j] = (simulate(xp) - base) / h
-        J[:, nd:] = lin_cols
+            J[:, j] = (model.measured(xp, ts, simulate(xp)) - base) / h
+        J[:, nd:] = model.sensor_columns(ts, theta)
         return J
 
     if starts is not None and len(starts) > 1:
         costs = [float(np.sum(fun(xs) ** 2)) for xs in starts]
         x0 = starts[int(np.argmin(costs))]
+    loss = "linear" if f_scale is None else "soft_l1"
     try:
         sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale=scales, method="trf",
-                            ftol=1e-12, xtol=1e-12, gtol=1e-10, max_nfev=max_nfev)
+                            ftol=1e-12, xtol=1e-12, gtol=1e-10, max_nfev=max_nfev,
+                            loss=loss, f_scale=1.0 if f_scale is None else f_scale)
     except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
         raise IdentificationError(f"least squares failed for model {model.effect_names}: {exc}") from exc
     x = sol.x
@@ -262,33 +300,41 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
     if not np.all(np.isfinite(residual)):
         raise IdentificationError(f"model {model.effect_names} diverged (non-finite simulation)")
     J = jac(x)
-    rss = float(residual @ residual)
-    cov, method, inflation = covariance(J, residual, scales)
+    effective, weight = robust_residual(residual, f_scale)
+    noise = fit_noise(effective)
+    cov, method, inflation = covariance(J * np.sqrt(weight)[:, None], effective, scales, noise)
     tol = 1e-9 * scales
     at_bound = tuple(n for n, v, l, s in zip(model.names, x, lo, tol) if np.isfinite(l) and v - l <= s)
     return ModelFit(
-        model=model, x=x, cov=cov, t=t, y=y, fitted=y + residual, residual=residual, rss=rss,
-        success=bool(sol.success), message=str(sol.message), nfev=nfev[0], max_step=max_step,
-        cov_method=method, cov_inflation=inflation, at_bound=at_bound,
+        model=model, x=x, cov=cov, t=t, y=y, fitted=y + residual, residual=residual,
+        rss=float(effective @ effective), success=bool(sol.success), message=str(sol.message), nfev=nfev[0],
+        max_step=max_step, noise=noise, effective=effective, jac=J, scales=scales,
+        cov_method=method, cov_inflation=inflation, at_bound=at_bound, f_scale=f_scale,
+        n_downweighted=int(np.sum(weight < 0.5)),
     )
 
 
-def autocorrelation(r: np.ndarray, max_lag: int) -> np.ndarray:
-    """Sample autocorrelation ρ(0..max_lag) of a residual (FFT, biased estimator)."""
-    r = np.asarray(r, dtype=float) - np.mean(r)
-    n = r.size
-    nfft = 1 << (2 * n - 1).bit_length()
-    f = np.fft.rfft(r, nfft)
-    ac = np.fft.irfft(f * np.conj(f), nfft)[: max_lag + 1]
-    return ac / ac[0] if ac[0] > 0 else np.zeros(max_lag + 1)
+def robust_residual(residual: np.ndarray, f_scale: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """(effective residual, weight) of the soft-L1 loss ρ(z) = 2(√(1+z) − 1), z = (r/f)².
+
+    The effective residual sign(r)·f·√ρ has the loss as its sum of squares (so
+    the noise model and BIC see what the fit minimised); the weight ρ'(z) =
+    1/√(1+z) is the share of a sample's information the fit used.
+    """
+    if f_scale is None:
+        return residual, np.ones_like(residual)
+    z = (residual / f_scale) ** 2
+    rho = 2.0 * (np.sqrt(1.0 + z) - 1.0)
+    return np.sign(residual) * f_scale * np.sqrt(rho), 1.0 / np.sqrt(1.0 + z)
 
 
-def covariance(J: np.ndarray, residual: np.ndarray, scales: np.ndarray) -> tuple[np.ndarray, str, float]:
-    """Parameter covariance; Newey–West when the residual is autocorrelated.
+def covariance(J: np.ndarray, residual: np.ndarray, scales: np.ndarray,
+               noise: NoiseModel | None = None) -> tuple[np.ndarray, str, float]:
+    """Parameter covariance of the least-squares estimate under the AR noise model.
 
-    Returns (cov, method, inflation) where inflation is the ratio of the
-    HAC to the white-noise standard deviation of the first-ranked parameter
-    (a measure of how much the correlation mattered).
+    cov = (JᵀJ)⁻¹·JᵀΣJ·(JᵀJ)⁻¹ with Σ = σ_e²·A⁻¹A⁻ᵀ (``noise``); for white
+    noise this is s²·(JᵀJ)⁻¹. Returns (cov, method, inflation): method
+    "white" or "ar(p)", inflation the largest ratio of a σ to its white-noise value.
     """
     n, k = J.shape
     Js = J * scales  # scaled for conditioning
@@ -297,25 +343,16 @@ def covariance(J: np.ndarray, residual: np.ndarray, scales: np.ndarray) -> tuple
         inv = np.linalg.inv(JtJ)
     except np.linalg.LinAlgError:
         inv = np.linalg.pinv(JtJ)
+    if noise is None:
+        noise = fit_noise(residual)
     s2 = float(residual @ residual) / max(n - k, 1)
     white = inv * s2
-    max_lag = min(n // 4, 4000)
-    rho = autocorrelation(residual, max_lag)
-    if abs(rho[1]) < 3.0 / math.sqrt(n):
+    if noise.order == 0:
         return white * np.outer(scales, scales), "white", 1.0
-    below = np.flatnonzero(np.abs(rho[1:]) < 0.05)
-    lag = int(min(max_lag, 2 * (below[0] + 1) if below.size else max_lag))
-    g = Js * residual[:, None]
-    # Γ_l(a, b) = Σ_t g[t+l, a]·g[t, b] for all lags at once, via FFT
-    nfft = 1 << (2 * n - 1).bit_length()
-    F = np.fft.rfft(g, nfft, axis=0)
-    C = np.fft.irfft(F[:, :, None] * np.conj(F[:, None, :]), nfft, axis=0)[: lag + 1]
-    w = 1.0 - np.arange(1, lag + 1) / (lag + 1.0)
-    cross = np.tensordot(w, C[1:], axes=(0, 0))
-    S = C[0] + cross + cross.T
-    hac = inv @ S @ inv * (n / max(n - k, 1))
-    cov = hac * np.outer(scales, scales)
-    d_white, d_hac = np.diag(white), np.diag(hac)
+    G = noise.colour_t(Js)
+    middle = noise.innovation_var * (G.T @ G) * (n / max(n - k, 1))
+    sandwich = inv @ middle @ inv
+    d_white, d_ar = np.diag(white), np.diag(sandwich)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratios = np.sqrt(np.where(d_white > 0, d_hac / d_white, 1.0))
-    return cov, "newey-west", float(np.max(ratios))
+        ratios = np.sqrt(np.where(d_white > 0, d_ar / d_white, 1.0))
+    return sandwich * np.outer(scales, scales), f"ar({noise.order})", float(np.max(ratios))

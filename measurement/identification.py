@@ -1,11 +1,18 @@
 """Identification of a recorded swing, with residual-driven model discovery.
 
-    prepare  → noise floor, swing window (release … stop), glitches removed
-    baseline → the declared model fitted to the whole record
-    discover → while the residual is above the noise floor (> 1.1 × noise):
-               fit every candidate effect, keep the one with the lowest BIC
-               if it is a real improvement (ΔBIC < −10 and it explains a real
-               share of the residual above the noise), else stop
+    prepare  → angle unwrapped, noise floor, glitches removed, swing window
+               (release … stop, or a long gap after which the swing does
+               not clearly continue)
+    baseline → the declared model fitted to the whole record; a robust
+               (soft-L1) loss from then on when wild samples are left
+    discover → each round, every candidate effect is scored against the
+               current fit (a Lagrange-multiplier test: the first-order
+               likelihood gain of adding it, whitened by the noise model);
+               those that could lower BIC are fitted, and the one with the
+               lowest BIC is added if it lowers BIC by more than the margin.
+               BIC is the likelihood under the AR noise model, so the power
+               grows with the record and coloured noise is not "explained"
+               by an effect; no ratio to the noise floor stops the loop.
     report   → before/after, the evidence of every step, and
                ``unmodeled_residual`` when structure is left that no library
                effect explains (never forced into a wrong effect).
@@ -19,10 +26,12 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from . import flags as F
 from .diagnostics import Diagnostics, diagnose
-from .effects import EFFECTS, candidate_effects, resolve_effects
+from .effects import EFFECTS, Effect, candidate_effects, resolve_effects
 from .errors import IdentificationError, TraceError, UnknownEffectError
 from .fit import ModelFit, fit_model
+from .noise import fit_noise
 from .model import Model
 from .result import DiscoveryStep, IdentificationResult, ModelSummary, Quantity
 from .rig import Rig
@@ -38,20 +47,23 @@ class Options:
     candidates: effects the loop may add (None: every library effect that
     exists on the rig).
     min_swings: fewer full swings in the record is an input error.
-    bic_margin: an added effect must lower BIC by more than this.
-    min_excess_explained: ... and explain at least this share of the
-    residual variance above the noise floor (guards against a wrong effect
-    absorbing a little of an unmodelled one).
+    bic_margin: an added effect must lower BIC (under the noise model) by
+    more than this: e^(−margin/2) is the Bayes factor it must beat.
     outlier_sigma: residuals beyond this many robust σ are glitches.
+    robust_scale: the soft-L1 loss's scale in robust σ of the declared
+    model's residual (used only when wild samples are left after the screen).
+    gap_periods: a gap of more than this many swing periods without samples
+    ends the window, unless the swing clearly continues after it.
     """
 
     discover: bool = True
     candidates: tuple[str, ...] | None = None
     min_swings: float = 3.0
     bic_margin: float = 10.0
-    min_excess_explained: float = 0.25
     outlier_sigma: float = 6.0
-    max_rounds: int = 4
+    robust_scale: float = 3.0
+    gap_periods: float = 1.5
+    max_rounds: int = 5
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,11 +79,43 @@ class Prepared:
     stopped: bool  # the window was cut before the end of the record
     stuck: bool    # ... because the pendulum came to rest
     outliers: np.ndarray  # indices into the original trace
+    n_unwrapped: int = 0  # 2π jumps removed from the angle
+    gap_cut_at: float | None = None  # s: the window ends at a long gap starting here
+
+
+def unwrap_angle(y: np.ndarray) -> tuple[np.ndarray, int]:
+    """Remove 2π jumps (an angle read in (−π, π] as the swing passes ±π); returns (angle, jumps)."""
+    jumps = int(np.sum(np.abs(np.diff(y)) > 1.5 * math.pi))
+    if not jumps:
+        return y, 0
+    return np.unwrap(y, discont=1.5 * math.pi), jumps
+
+
+def _gap_cut(t: np.ndarray, y: np.ndarray, noise: float, periods: float) -> int | None:
+    """Index after which a gap of more than ``periods`` swing periods ends the window (None: no such gap).
+
+    A gap is kept inside the window only when the swing clearly continues
+    after it: at least two full swings well above the noise (10σ).
+    """
+    sw = find_swings(t, y, hysteresis=3 * noise)
+    wd = sw.damped_frequency
+    if not (math.isfinite(wd) and wd > 0):
+        return None
+    long = np.flatnonzero(np.diff(t) > periods * 2 * math.pi / wd)
+    for g in long:
+        after_t, after_y = t[g + 1:], y[g + 1:]
+        if after_t.size >= 10:
+            sa = find_swings(after_t, after_y, centre=sw.centre, hysteresis=10 * noise)
+            if sa.count >= 2:
+                continue
+        return int(g)
+    return None
 
 
 def prepare(trace: Trace, options: Options = Options()) -> Prepared:
-    """Noise floor, swing window and glitch removal; raises TraceError when too little swings."""
-    t_all, y_all = trace.t, trace.angle
+    """Unwrapping, noise floor, swing window and glitch removal; raises TraceError when too little swings."""
+    t_all = trace.t
+    y_all, n_unwrapped = unwrap_angle(trace.angle)
     if len(trace) < 30:
         raise TraceError(f"{trace.source}: only {len(trace)} samples; expected at least 30 covering {options.min_swings:g} swings")
     span = float(np.ptp(y_all))
@@ -84,6 +128,11 @@ def prepare(trace: Trace, options: Options = Options()) -> Prepared:
     keep[spikes] = False
     win = swing_window(t_all[keep], y_all[keep], noise)
     idx = np.flatnonzero(keep)[win.start:win.stop]
+    gap_cut_at = None
+    cut = _gap_cut(t_all[idx], y_all[idx], noise, options.gap_periods)
+    if cut is not None and cut + 1 >= 30:
+        gap_cut_at = float(t_all[idx[cut]])
+        idx = idx[:cut + 1]
     t, y = t_all[idx], y_all[idx]
     sw = find_swings(t, y, hysteresis=3 * noise)
     if sw.count < options.min_swings:
@@ -97,8 +146,9 @@ def prepare(trace: Trace, options: Options = Options()) -> Prepared:
             f"{trace.source}: {per_period:.1f} samples per swing period; expected at least 6 (sample faster)"
         )
     return Prepared(t=t, y=y, noise=noise, start=int(idx[0]), stop=int(idx[-1]) + 1,
-                    release_detected=win.release_detected, stopped=win.stop_detected, stuck=win.stuck,
-                    outliers=np.asarray(spikes, dtype=int))
+                    release_detected=win.release_detected, stopped=win.stop_detected or gap_cut_at is not None,
+                    stuck=win.stuck, outliers=np.asarray(spikes, dtype=int), n_unwrapped=n_unwrapped,
+                    gap_cut_at=gap_cut_at)
 
 
 def _propagate(fn: Callable[[np.ndarray], float], x: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
@@ -120,30 +170,28 @@ def _inertia(rig: Rig, omega_n: float) -> float | None:
 
 
 def _effect_quantities(fit: ModelFit, rig: Rig, role: Sequence[str]) -> dict[str, dict[str, Quantity]]:
+    """Effect → its fitted (normalised) and physical values with uncertainties, for effects of ``role``."""
     model, x, cov = fit.model, fit.x, fit.cov
     out: dict[str, dict[str, Quantity]] = {}
-    offset_index = model.n_dynamic
-    index = 3
-    for e in model.dynamic + model.sensor:
-        if e.role == "sensor" and index < offset_index + 1:
-            index = offset_index + 1
+    for e in model.effects:
+        if e.role not in role:
+            continue
+        sl = model.layout[e.name]
         params: dict[str, Quantity] = {}
-        for j, p in enumerate(e.parameters):
-            params[p.name] = Quantity(float(x[index + j]), float(fit.std[index + j]), p.unit)
-        if e.role != "sensor":
-            names = list(e.physical(list(x[index:index + len(e.parameters)]), _inertia(rig, x[2]), x[2]))
-            for name in names:
-                def fn(xx: np.ndarray, _e=e, _i=index, _n=name) -> float:
-                    val = _e.physical(list(xx[_i:_i + len(_e.parameters)]), _inertia(rig, xx[2]), xx[2])[_n]
-                    return float("nan") if val is None else float(val)
-                if math.isnan(fn(x)):
-                    params[name] = Quantity(None, None, e.unit_of(name))
-                else:
-                    v, s = _propagate(fn, x, cov)
-                    params[name] = Quantity(v, s, e.unit_of(name))
-        if e.role in role:
-            out[e.name] = params
-        index += len(e.parameters)
+        for p, v, s in zip(e.parameters, x[sl], fit.std[sl]):
+            params[p.name] = Quantity(float(v), float(s), p.unit)
+
+        def physical(xx: np.ndarray, _e: Effect = e) -> dict[str, float | None]:
+            w = model.value(xx, "omega_n")
+            return _e.physical(model.values(xx, _e.name), _inertia(rig, w), w)
+
+        for name, val in physical(x).items():
+            if val is None:
+                params[name] = Quantity(None, None, e.unit_of(name))
+            else:
+                v, s = _propagate(lambda xx, _n=name: float(physical(xx)[_n]), x, cov)
+                params[name] = Quantity(v, s, e.unit_of(name))
+        out[e.name] = params
     return out
 
 
@@ -164,59 +212,121 @@ def _remove_outliers(fit: ModelFit, prep: Prepared, options: Options) -> tuple[n
     return fit.t[~bad], fit.y[~bad], np.flatnonzero(bad)
 
 
-def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options) -> tuple[ModelFit, list[DiscoveryStep], int]:
+@dataclass(frozen=True)
+class Score:
+    """First-order (linearised) value of adding an effect to a fit.
+
+    d_bic: the BIC change the linearised refit predicts, the noise model
+    refitted to the predicted residual as the full fit would; step: the
+    first-order parameter values of the effect.
+    """
+
+    d_bic: float
+    residual_rms: float
+    step: np.ndarray
+
+
+def score_effect(current: ModelFit, effect: Effect) -> Score:
+    """Score ``effect`` against ``current`` without fitting it (one simulation per dynamic parameter).
+
+    The effect's columns g = ∂y_model/∂p at p = 0 join the current Jacobian
+    in one linearised least-squares step (a Gauss–Newton step from the
+    current fit: the Lagrange-multiplier test in its likelihood-ratio form);
+    the predicted residual gets its own noise model, exactly as a fit would,
+    so that an AR model cannot hide a deterministic term the effect explains.
+    A parameter bounded below at 0 (a dissipation) that would have to go
+    negative gains nothing.
+    """
+    model = current.model
+    rig = model.rig
+    cand = Model(rig, tuple(resolve_effects(model.effect_names + (effect.name,), rig)))
+    x = cand.vector((current.value("theta0"), current.value("omega0"), current.value("omega_n")),
+                    {e.name: current.effect(e.name) for e in model.effects}, current.value("offset"))
+    t = current.t
+    ts = t - t[0]
+    theta, omega = cand.true_angle(x, t, current.max_step)
+    base = cand.measured(x, ts, theta)
+    sl = cand.layout[effect.name]
+    if effect.role == "sensor":
+        G = effect.sensor_basis(ts, theta)
+    else:
+        # a step whose torque is 1e-6 of the restoring one: linear, and far above round-off
+        w = current.value("omega_n")
+        restoring = np.sin(theta) if rig.kind == "compound" else theta
+        col = np.sqrt(np.mean(effect.basis(theta, omega) ** 2, axis=0))
+        h = 1e-6 * w**2 * float(np.sqrt(np.mean(restoring**2))) / np.where(col > 0, col, 1.0)
+        G = np.empty((t.size, sl.stop - sl.start))
+        for j in range(G.shape[1]):
+            xp = x.copy()
+            xp[sl.start + j] += h[j]
+            G[:, j] = (cand.measured(xp, ts, cand.true_angle(xp, t, current.max_step)[0]) - base) / h[j]
+    r = current.effective
+    q, _ = np.linalg.qr(current.jac * current.scales)
+    Gp = G - q @ (q.T @ G)
+    rp = r - q @ (q.T @ r)
+    step, *_ = np.linalg.lstsq(Gp, -rp, rcond=None)
+    lower = np.array([p.lower for p in effect.parameters])
+    step = np.where((lower >= 0) & (step < 0), 0.0, step)
+    predicted = rp + Gp @ step
+    noise = fit_noise(predicted)
+    n = current.n
+    bic = n * math.log(max(noise.innovation_var, 1e-300)) + (current.k + len(step) + noise.order) * math.log(n)
+    return Score(bic - current.bic, float(np.sqrt(np.mean(predicted**2))), step)
+
+
+def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
+             f_scale: float | None = None) -> tuple[ModelFit, list[DiscoveryStep], int]:
     """The discovery loop; returns the final fit, its steps and the simulations spent."""
     current = fit
     steps: list[DiscoveryStep] = []
     spent = 0
     allowed = set(options.candidates) if options.candidates is not None else set(EFFECTS)
+    amplitude = float(np.max(np.abs(fit.fitted - fit.value("offset"))))
     for rnd in range(1, options.max_rounds + 1):
         diag = diagnose(current, prep.noise, prep.stuck)
-        if diag.at_noise_floor:
-            # what is left is no larger than the sensor's own noise: a further
-            # effect could only fit the noise's colour, not the pendulum
-            white = "white" if diag.white else "not white, but no larger than the noise"
-            steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, {}, None, None, None, "",
-                                       f"residual at the noise floor ({diag.rms_ratio:.3g} × noise; {white})"))
-            break
         tried: dict[str, ModelFit] = {}
+        table: dict[str, dict[str, float]] = {}
+        floor = current.n * prep.noise**2
+        excess = max(current.rss - floor, 0.01 * current.rss)
         for cand in candidate_effects(rig, current.model.effect_names):
-            if cand.name not in allowed:
+            if cand.name not in allowed or not cand.identifiable(amplitude):
+                continue
+            score = score_effect(current, cand)
+            spent += len(cand.parameters)
+            if score.d_bic >= 0.0:
+                # the first-order gain cannot pay for the parameter: not worth a fit
+                table[cand.name] = {"bic": current.bic + score.d_bic, "screened": 1.0,
+                                    "residual_rms": score.residual_rms,
+                                    "excess_explained": (current.rss - current.n * score.residual_rms**2) / excess}
                 continue
             model = Model(rig, tuple(resolve_effects(current.model.effect_names + (cand.name,), rig)))
             try:
-                f = fit_model(model, current.t, current.y, prep.noise, previous=current)
+                f = fit_model(model, current.t, current.y, prep.noise, previous=current, f_scale=f_scale)
             except IdentificationError:
                 continue
             spent += f.nfev
             tried[cand.name] = f
+            table[cand.name] = {"bic": f.bic, "residual_rms": f.residual_rms,
+                                "excess_explained": (current.rss - f.rss) / excess}
         if not tried:
-            steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, {}, None, None, None, "",
-                                       "no candidate effect left to try"))
+            best_screen = min(table, key=lambda k: table[k]["bic"]) if table else None
+            reason = "no candidate effect left to try" if not table else (
+                f"no candidate could lower BIC (best first-order change: {best_screen} "
+                f"{table[best_screen]['bic'] - current.bic:+.1f})")
+            steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, table, None, None, None, "", reason))
             break
-        floor = current.n * prep.noise**2
-        excess = max(current.rss - floor, 0.01 * current.rss)
-        table = {
-            name: {"bic": f.bic, "residual_rms": f.residual_rms, "excess_explained": (current.rss - f.rss) / excess}
-            for name, f in tried.items()
-        }
         best = min(tried, key=lambda k: tried[k].bic)
         bf = tried[best]
         d_bic = bf.bic - current.bic
-        share = table[best]["excess_explained"]
         evidence = EFFECTS[best](rig).evidence(diag)
-        if d_bic < -options.bic_margin and share >= options.min_excess_explained:
-            reason = (f"BIC {d_bic:+.1f}, residual RMS {current.residual_rms:.3g} → {bf.residual_rms:.3g} rad,"
-                      f" explains {100 * share:.0f} % of the residual above the noise floor")
+        if d_bic < -options.bic_margin:
+            reason = (f"BIC {d_bic:+.1f} (noise model AR({bf.noise.order})), residual RMS "
+                      f"{current.residual_rms:.3g} → {bf.residual_rms:.3g} rad")
             steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, table, best, bf.residual_rms, bf.bic,
                                        evidence, reason))
             current = bf
             continue
-        if d_bic >= -options.bic_margin:
-            reason = f"best candidate {best} changes BIC by only {d_bic:+.1f}"
-        else:
-            reason = (f"best candidate {best} lowers BIC by {-d_bic:.1f} but explains only {100 * share:.0f} % of the"
-                      " residual above the noise floor: not the missing effect")
+        reason = f"best candidate {best} changes BIC by only {d_bic:+.1f} (needs < {-options.bic_margin:g})"
         steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, table, None, None, None, evidence, reason))
         break
     return current, steps, spent
@@ -232,17 +342,27 @@ def identify(trace: Trace, rig: Rig, options: Options = Options()) -> Identifica
     declared = Model.from_names(rig, rig.declared)
     base = fit_model(declared, prep.t, prep.y, prep.noise)
     nfev = base.nfev
+    # Wild samples the pre-screen left (bursts, a stalled tracker) must not
+    # steer the fit or pass for an effect: with any beyond outlier_sigma robust
+    # σ of the declared model's residual, every fit uses a soft-L1 loss whose
+    # scale is set once here (one loss for all models keeps their BIC comparable).
+    f_scale = None
+    scale = max(robust_std(base.residual), prep.noise)
+    if np.any(np.abs(base.residual - np.median(base.residual)) > options.outlier_sigma * scale):
+        f_scale = options.robust_scale * scale
+        base = fit_model(declared, prep.t, prep.y, prep.noise, previous=base, f_scale=f_scale)
+        nfev += base.nfev
     steps: list[DiscoveryStep] = []
     final = base
     if options.discover:
-        final, steps, spent = discover(base, prep, rig, options)
+        final, steps, spent = discover(base, prep, rig, options, f_scale)
         nfev += spent
     # Glitches the pre-screen missed show in the final residual; judged there
     # because a structured baseline residual is not Gaussian. While the final
     # residual is itself structured, its peaks are not glitches: keep the data.
     diag: Diagnostics = diagnose(final, prep.noise, prep.stuck)
     bad = np.zeros(0, dtype=int)
-    if not diag.structured:
+    if not diag.structured and f_scale is None:
         t_fit, y_fit, bad = _remove_outliers(final, prep, options)
     n_outliers = prep.outliers.size + bad.size
     if bad.size:
@@ -270,28 +390,34 @@ def identify(trace: Trace, rig: Rig, options: Options = Options()) -> Identifica
         J_ax = base_j - rig.object.mass * rig.object.axis_offset**2
         J_ax_std = J_obj_std if J_obj is not None else J_std
 
-    offset_i = final.model.n_dynamic
-    amp_ref = float(np.max(np.abs(final.fitted - final.x[offset_i])))
+    model = final.model
+    amp_ref = float(np.max(np.abs(final.fitted - final.value("offset"))))
 
     def ratio(xx: np.ndarray) -> float:
-        vals = final.model.split(xx)
-        c_eq = sum(e.equivalent_viscous(vals[e.name], amp_ref, xx[2]) for e in final.model.dynamic)
-        return c_eq / (2 * xx[2])
+        w = model.value(xx, "omega_n")
+        c_eq = sum(e.equivalent_viscous(model.values(xx, e.name), amp_ref, w) for e in model.dynamic)
+        return c_eq / (2 * w)
 
     zeta, zeta_std = _propagate(ratio, final.x, final.cov)
 
     flags: list[str] = list(trace.flags)
     if diag.structured:
-        flags.append("unmodeled_residual")
+        flags.append(F.UNMODELED_RESIDUAL)
     if n_outliers:
-        flags.append("outliers_removed")
+        flags.append(F.OUTLIERS_REMOVED)
+    if final.n_downweighted:
+        flags.append(F.OUTLIERS_DOWNWEIGHTED)
+    if prep.gap_cut_at is not None:
+        flags.append(F.WINDOW_CUT_AT_GAP)
+    if prep.n_unwrapped:
+        flags.append(F.ANGLE_UNWRAPPED)
     if not final.success:
-        flags.append("fit_not_converged")
+        flags.append(F.FIT_NOT_CONVERGED)
     effect_bounds = [n for n in final.at_bound if "." in n]
     if effect_bounds:
-        flags.append("parameter_at_bound")
+        flags.append(F.PARAMETER_AT_BOUND)
     if final.cov_method != "white":
-        flags.append("correlated_residual")
+        flags.append(F.CORRELATED_RESIDUAL)
 
     added = tuple(n for n in final.model.effect_names if n not in declared.effect_names)
     structure = diag.describe()
@@ -302,10 +428,13 @@ def identify(trace: Trace, rig: Rig, options: Options = Options()) -> Identifica
         "chi2": final.rss / prep.noise**2, "redchi": final.rss / prep.noise**2 / max(final.dof, 1),
         "aic": final.aic, "bic": final.bic, "nfev": nfev, "success": final.success, "message": final.message,
         "covariance": final.cov_method, "covariance_inflation": final.cov_inflation,
+        "noise_model_order": final.noise.order, "innovation_std": math.sqrt(final.noise.innovation_var),
+        "robust_loss_scale": final.f_scale,
     }
     window = {
         "t_start": float(final.t[0]), "t_stop": float(final.t[-1]), "n_used": final.n, "n_total": len(trace),
         "n_outliers": n_outliers, "release_detected": prep.release_detected, "stop_detected": prep.stopped, "came_to_rest": prep.stuck,
+        "n_downweighted": final.n_downweighted, "n_unwrapped": prep.n_unwrapped, "gap_cut_at": prep.gap_cut_at,
     }
     arrays = {
         "t": final.t, "angle": final.y, "fitted": final.fitted, "residual": final.residual,
@@ -317,7 +446,7 @@ def identify(trace: Trace, rig: Rig, options: Options = Options()) -> Identifica
         J=J, J_std=J_std, J_std_calibration=J_cal, J_object=J_obj, J_object_std=J_obj_std,
         J_object_axis=J_ax, J_object_axis_std=J_ax_std,
         omega_n=w, omega_n_std=ws, damping_ratio=zeta, damping_ratio_std=zeta_std, reference_amplitude=amp_ref,
-        offset=Quantity(float(final.x[offset_i]), float(final.std[offset_i]), "rad"),
+        offset=Quantity(final.value("offset"), final.stdev("offset"), "rad"),
         damping=_effect_quantities(final, rig, ("damping",)),
         stiffness=_effect_quantities(final, rig, ("stiffness",)),
         sensor=_effect_quantities(final, rig, ("sensor",)),

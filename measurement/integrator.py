@@ -6,11 +6,11 @@ integrated with the direction s of the current half-swing held fixed (the
 right-hand side is smooth there), a reversal inside a step is located by a
 safeguarded Newton iteration on θ'(τ) = 0, and at every turning point the
 pendulum sticks for good when the static friction can hold the restoring
-torque (|restoring| ≤ holding). This is the "sewing" of seed 000 done in the
-time domain.
+torque (|restoring| ≤ holding): the piecewise "sewing" of half-swings that
+compound-pendulum friction analyses do by hand, done in the time domain.
 
 The loop is generated once per model structure from the effects' one-line
-terms (see ``Effect.term``) and cached: it then runs with no function call
+terms (see ``Effect.term``, the one form of each law) and cached: it then runs with no function call
 per stage, about 3–4× faster than composing closures, which is what makes
 whole-record least squares affordable on a Raspberry Pi.
 """
@@ -186,9 +186,3 @@ class Dynamics:
         tl = t.tolist() if isinstance(t, np.ndarray) else [float(v) for v in t]
         x, v = self._run(tl, float(theta0), float(omega0), float(omega_n) ** 2, self.params, float(max_step))
         return np.asarray(x), np.asarray(v)
-
-
-def default_max_step(omega_n: float, amplitude: float = 0.0, stiffness_ratio: float = 0.0) -> float:
-    """Step (s) that keeps ω·h ≤ 0.05 including a hardening spring at this amplitude."""
-    omega_eff = omega_n * math.sqrt(1.0 + 3.0 * max(stiffness_ratio, 0.0) * amplitude**2)
-    return 0.05 / omega_eff

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -28,7 +29,12 @@ STATE_UNITS = {"theta0": "rad", "omega0": "rad/s", "omega_n": "rad/s", "offset":
 
 @dataclass(frozen=True)
 class Model:
-    """The equation of motion and sensor model made of ``effects`` on ``rig``."""
+    """The equation of motion and sensor model made of ``effects`` on ``rig``.
+
+    Its parameter vector has a named layout (``layout``: name → slice):
+    theta0, omega0, omega_n, each dynamic effect, offset, each sensor effect.
+    Read a vector by name with ``value(x, "omega_n")`` or ``values(x, "coulomb")``.
+    """
 
     rig: Rig
     effects: tuple[Effect, ...]
@@ -49,9 +55,44 @@ class Model:
     def sensor(self) -> tuple[Effect, ...]:
         return tuple(e for e in self.effects if e.role == "sensor")
 
+    @cached_property
+    def layout(self) -> dict[str, slice]:
+        """Name → slice of the parameter vector: the state, each effect (by its name) and the offset."""
+        out: dict[str, slice] = {}
+        i = 0
+        for name in STATE_PARAMS:
+            out[name] = slice(i, i + 1)
+            i += 1
+        for e in self.dynamic:
+            out[e.name] = slice(i, i + len(e.parameters))
+            i += len(e.parameters)
+        out["offset"] = slice(i, i + 1)
+        i += 1
+        for e in self.sensor:
+            out[e.name] = slice(i, i + len(e.parameters))
+            i += len(e.parameters)
+        return out
+
     @property
+    def size(self) -> int:
+        return max(s.stop for s in self.layout.values())
+
+    def index(self, name: str) -> int:
+        """Position of a scalar parameter: a state name, "offset" or "effect.parameter"."""
+        if name in STATE_PARAMS or name == "offset":
+            return self.layout[name].start
+        return self.names.index(name)
+
+    def value(self, x: Sequence[float], name: str) -> float:
+        return float(x[self.index(name)])
+
+    def values(self, x: Sequence[float], effect: str) -> list[float]:
+        """An effect's parameter values, in its ``parameters`` order."""
+        return [float(v) for v in np.asarray(x)[self.layout[effect]]]
+
+    @cached_property
     def names(self) -> tuple[str, ...]:
-        """Names of the parameter vector, in order."""
+        """Names of the parameter vector, in order ("effect.parameter" for an effect's)."""
         out = list(STATE_PARAMS)
         for e in self.dynamic:
             out += [f"{e.name}.{p.name}" for p in e.parameters]
@@ -63,89 +104,71 @@ class Model:
     @property
     def n_dynamic(self) -> int:
         """Parameters that need a simulation to differentiate (state + dynamic effects)."""
-        return len(STATE_PARAMS) + sum(len(e.parameters) for e in self.dynamic)
+        return self.layout["offset"].start
+
+    def _per_parameter(self, state: Sequence, offset, of_effect) -> list:
+        out = list(state)
+        for e in self.dynamic:
+            out += [of_effect(p) for p in e.parameters]
+        out.append(offset)
+        for e in self.sensor:
+            out += [of_effect(p) for p in e.parameters]
+        return out
 
     def units(self) -> tuple[str, ...]:
-        out = [STATE_UNITS[n] for n in STATE_PARAMS]
-        for e in self.dynamic:
-            out += [p.unit for p in e.parameters]
-        out.append("rad")
-        for e in self.sensor:
-            out += [p.unit for p in e.parameters]
-        return tuple(out)
+        return tuple(self._per_parameter([STATE_UNITS[n] for n in STATE_PARAMS], "rad", lambda p: p.unit))
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        lo = [-np.inf, -np.inf, 0.0]
-        for e in self.dynamic:
-            lo += [p.lower for p in e.parameters]
-        lo.append(-np.inf)
-        for e in self.sensor:
-            lo += [p.lower for p in e.parameters]
+        lo = self._per_parameter([-np.inf, -np.inf, 0.0], -np.inf, lambda p: p.lower)
         return np.asarray(lo, dtype=float), np.full(len(lo), np.inf)
 
     def split(self, x: Sequence[float]) -> dict[str, list[float]]:
         """Effect name → its parameter values, from a parameter vector."""
-        out: dict[str, list[float]] = {}
-        i = len(STATE_PARAMS)
+        return {e.name: self.values(x, e.name) for e in self.effects}
+
+    def vector(self, state: Sequence[float], effect_values: Mapping[str, Sequence[float]], offset: float = 0.0) -> np.ndarray:
+        """A parameter vector from (theta0, omega0, omega_n), effect name → values, and the offset."""
+        x = np.zeros(self.size)
+        x[: len(STATE_PARAMS)] = state
+        x[self.layout["offset"]] = offset
+        for e in self.effects:
+            x[self.layout[e.name]] = effect_values.get(e.name, [0.0] * len(e.parameters))
+        return x
+
+    def frequency_factor(self, x: Sequence[float], amplitude: float) -> float:
+        """Highest swing frequency over ω_n at this amplitude (rad), from every effect's own knowledge."""
+        w = self.value(x, "omega_n")
+        f = 1.0
         for e in self.dynamic:
-            out[e.name] = [float(v) for v in x[i:i + len(e.parameters)]]
-            i += len(e.parameters)
-        i += 1  # offset
-        for e in self.sensor:
-            out[e.name] = [float(v) for v in x[i:i + len(e.parameters)]]
-            i += len(e.parameters)
-        return out
+            f *= e.frequency_factor(self.values(x, e.name), w, amplitude)
+        return f
+
+    def max_step(self, x: Sequence[float], amplitude: float) -> float:
+        """Integration step (s) that keeps ω·h ≤ 0.05 at this amplitude (rad)."""
+        return 0.05 / (max(self.value(x, "omega_n"), 1e-9) * self.frequency_factor(x, amplitude))
 
     def dynamics(self, x: Sequence[float]) -> Dynamics:
-        values = self.split(x)
-        return Dynamics(self.rig.kind, self.dynamic, [values[e.name] for e in self.dynamic])
+        return Dynamics(self.rig.kind, self.dynamic, [self.values(x, e.name) for e in self.dynamic])
 
-    def sensor_columns(self, t: np.ndarray) -> np.ndarray:
+    def sensor_columns(self, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """Columns of the measured-angle model that are linear: offset, then sensor effects."""
-        cols = [np.ones_like(t)[:, None]] + [e.sensor_basis(t) for e in self.sensor]
+        cols = [np.ones_like(t)[:, None]] + [e.sensor_basis(t, theta) for e in self.sensor]
         return np.hstack(cols)
 
     def true_angle(self, x: Sequence[float], t: np.ndarray, max_step: float) -> tuple[np.ndarray, np.ndarray]:
         """θ, θ' of the pendulum itself (no sensor terms) at times t."""
-        return self.dynamics(x).integrate(t, x[0], x[1], x[2], max_step)
+        return self.dynamics(x).integrate(t, self.value(x, "theta0"), self.value(x, "omega0"),
+                                          self.value(x, "omega_n"), max_step)
+
+    def measured(self, x: Sequence[float], t: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """Measured angle θ + a + sensor terms (rad) from the true angle θ at times t."""
+        lin = np.asarray(x[self.n_dynamic:], dtype=float)
+        return theta + self.sensor_columns(t, theta) @ lin
 
     def predict(self, x: Sequence[float], t: np.ndarray, max_step: float) -> np.ndarray:
         """Measured angle θ + a + sensor terms at times t, rad."""
         theta, _ = self.true_angle(x, t, max_step)
-        lin = np.asarray(x[self.n_dynamic:], dtype=float)
-        return theta + self.sensor_columns(t) @ lin
-
-
-def normalise_effect_values(rig: Rig, effect: Effect, given: Mapping[str, float], inertia: float | None) -> list[float]:
-    """Fitted (J-normalised) values of an effect from physical or normalised ones.
-
-    given: parameter name → value; either the physical name (c, Tc, mu, K,
-    k3; needs ``inertia`` in kg·m²) or the normalised one (c_per_J, ...).
-    """
-    values = []
-    for p in effect.parameters:
-        if p.name in given:
-            values.append(float(given[p.name]))
-            continue
-        if effect.name == "coulomb" and rig.kind == "compound" and "mu" in given:
-            if inertia is None or rig.mass is None:
-                raise InvalidInput("coulomb: mu (m) needs the rig's mass and the inertia; give Tc_per_J instead")
-            values.append(float(given["mu"]) * rig.mass * rig.g / inertia)
-            continue
-        if p.physical is not None and p.physical in given:
-            if inertia is None:
-                raise InvalidInput(f"{effect.name}: {p.physical} needs the inertia J; give {p.name} instead")
-            values.append(float(given[p.physical]) / inertia)
-            continue
-        accepted = [p.name] + ([p.physical] if p.physical else []) + (["mu"] if effect.name == "coulomb" and rig.kind == "compound" else [])
-        raise InvalidInput(f"{effect.name}: missing value; expected one of {', '.join(accepted)}")
-    accepted_names = {p.name for p in effect.parameters} | {p.physical for p in effect.parameters if p.physical}
-    if effect.name == "coulomb" and rig.kind == "compound":
-        accepted_names.add("mu")
-    extra = set(given) - accepted_names
-    if extra:
-        raise InvalidInput(f"{effect.name}: unknown parameter(s) {sorted(extra)}")
-    return values
+        return self.measured(x, t, theta)
 
 
 def omega_n_of(rig: Rig, inertia: float) -> float:

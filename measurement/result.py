@@ -119,7 +119,7 @@ class IdentificationResult:
 
     J: total inertia about the pivot, kg·m² (None when the rig lacks k or m·S).
     J_object: J − tare_inertia (None without a tare).
-    J_object_axis: seed 000 eq. 2, J_object − m·L² about the object's own axis.
+    J_object_axis: the parallel-axis transfer J_object − m·L² about the object's own axis.
     omega_n: small-amplitude natural angular frequency, rad/s.
     damping_ratio: equivalent viscous damping ratio at ``reference_amplitude``.
     residual_rms / noise_floor: rad; baseline: the declared model's summary.

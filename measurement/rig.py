@@ -1,6 +1,6 @@
 """The rig: what swings and what restores it.
 
-Two kinds (DESIGN.md):
+Two kinds:
 
 * ``torsion``: restoring torque k·θ; J = k / ω_n².
 * ``compound``: restoring torque m·g·S·sin θ (exact, not small-angle);
@@ -17,6 +17,7 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping
 
+from .effects import resolve_effects
 from .errors import RigError
 
 STANDARD_GRAVITY = 9.80665  # m/s²
@@ -45,7 +46,7 @@ def _positive(name: str, value: Any, unit: str, *, allow_zero: bool = False) -> 
 
 @dataclass(frozen=True)
 class ObjectTransfer:
-    """Seed 000 eq. 2: J_S = J_D − m_D·L², the object's inertia about its own axis.
+    """Parallel-axis transfer J_S = J_D − m_D·L²: the object's inertia about its own axis.
 
     mass: m_D, kg. axis_offset: L, m, from the pivot to the object's own axis.
     """
@@ -148,8 +149,8 @@ class Rig:
             raise RigError("rig: mass/com_distance belong to a compound rig; kind is 'torsion'")
         if self.kind == "compound" and self.stiffness is not None:
             raise RigError("rig: stiffness belongs to a torsion rig; kind is 'compound'")
-        from .effects import resolve_effects  # late import: effects needs Rig only as a type
-
+        # the rig carries the model declaration; the effect library checks it
+        # (effects need only the rig's attributes, so the import runs one way)
         resolve_effects(self.declared, self)
 
     # -- derived constants ---------------------------------------------------
@@ -175,7 +176,7 @@ class Rig:
     # -- (de)serialisation ---------------------------------------------------
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> "Rig":
-        """Build a rig from the parsed TOML document of DESIGN.md."""
+        """Build a rig from the parsed rig TOML document ([rig], [object], [model], [calibration])."""
         unknown_tables = set(doc) - {"rig", "object", "model", "calibration"}
         if unknown_tables:
             raise RigError(f"rig file: unknown table(s) {sorted(unknown_tables)}; expected [rig], [object], [model], "
@@ -228,7 +229,7 @@ class Rig:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """The TOML document of DESIGN.md (None values left out)."""
+        """The rig TOML document (None values left out)."""
         rig: dict[str, Any] = {"kind": self.kind}
         for key in ("stiffness", "stiffness_std", "tare_inertia", "tare_inertia_std", "mass", "com_distance"):
             value = getattr(self, key)

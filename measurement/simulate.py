@@ -17,8 +17,7 @@ from scipy.interpolate import CubicHermiteSpline
 
 from .effects import resolve_effects
 from .errors import InvalidInput
-from .integrator import default_max_step
-from .model import Model, normalise_effect_values, omega_n_of
+from .model import Model, omega_n_of
 from .rig import Rig
 from .trace import Trace
 
@@ -51,33 +50,21 @@ class Pendulum:
 
     def parameter_vector(self, theta0: float, omega0: float = 0.0, offset: float = 0.0) -> np.ndarray:
         m = self.model
-        x = [theta0, omega0, self.omega_n]
-        for e in m.dynamic:
-            x += normalise_effect_values(self.rig, e, self.effects[e.name], self.inertia)
-        x.append(offset)
-        for e in m.sensor:
-            x += normalise_effect_values(self.rig, e, self.effects[e.name], self.inertia)
-        return np.asarray(x, dtype=float)
+        values = {e.name: e.normalise(self.effects[e.name], self.inertia) for e in m.effects}
+        return m.vector((theta0, omega0, self.omega_n), values, offset)
 
     def max_step(self, amplitude: float) -> float:
         """Integration step (s) accurate at this amplitude (rad)."""
-        k3_ratio = 0.0
-        if "cubic_stiffness" in self.effects:
-            eff = next(e for e in self.model.effects if e.name == "cubic_stiffness")
-            k3 = normalise_effect_values(self.rig, eff, self.effects["cubic_stiffness"], self.inertia)[0]
-            k3_ratio = k3 / self.omega_n**2
-        return default_max_step(self.omega_n, amplitude, k3_ratio)
+        return self.model.max_step(self.parameter_vector(amplitude), amplitude)
 
     def motion(self, t: np.ndarray, theta0: float, omega0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """True θ (rad) and θ' (rad/s) at times t (s), starting at t[0]; sensor effects excluded."""
         x = self.parameter_vector(theta0, omega0)
         return self.model.true_angle(x, np.asarray(t, dtype=float), self.max_step(abs(theta0)))
 
-    def sensor_terms(self, t: np.ndarray, offset: float = 0.0) -> np.ndarray:
-        """Offset plus sensor effects (e.g. drift) at times t, rad."""
-        m = self.model
-        x = self.parameter_vector(0.0, 0.0, offset)
-        return m.sensor_columns(np.asarray(t, dtype=float)) @ x[m.n_dynamic:]
+    def measured(self, t: np.ndarray, theta: np.ndarray, offset: float = 0.0) -> np.ndarray:
+        """What the sensor reads (rad) at times t (s, from the first sample) for the true angle θ (rad)."""
+        return self.model.measured(self.parameter_vector(0.0, 0.0, offset), np.asarray(t, dtype=float), theta)
 
 
 def quantise(angle: np.ndarray, bits: int) -> np.ndarray:
@@ -128,7 +115,7 @@ def simulate_trace(
     theta = np.empty_like(t)
     theta[:release] = theta0
     theta[release:], _ = pendulum.motion(t[release:], theta0, omega0)
-    measured = theta + pendulum.sensor_terms(t - t[0], offset)
+    measured = pendulum.measured(t - t[0], theta, offset)
     if noise_std:
         measured = measured + rng.normal(0.0, noise_std, t.size)
     if quantisation_bits:

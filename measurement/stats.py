@@ -1,4 +1,4 @@
-"""Statistics over repeated measurements (repeatability, seed 001 Table 3)."""
+"""Statistics over repeated measurements (repeatability: mean, sample standard deviation)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Angle traces: validation and the CSV format of DESIGN.md (parsing only, no file I/O)."""
+"""Angle traces: validation and the trace CSV format (parsing only, no file I/O)."""
 
 from __future__ import annotations
 
@@ -77,7 +77,7 @@ class Trace:
 
 
 def parse_trace_csv(lines: Iterable[str], source: str = "trace") -> Trace:
-    """Parse the trace CSV of DESIGN.md: a header row with columns t (s) and angle (rad).
+    """Parse a trace CSV: a header row with columns t (s) and angle (rad).
 
     Other columns are ignored, lines starting with '#' are comments.
     Raises TraceError naming the row and what was expected.

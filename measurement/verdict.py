@@ -53,6 +53,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
+from . import flags as F
 from .errors import InvalidInput
 
 OK, NOK, INVALID = "OK", "NOK", "INVALID"
@@ -65,7 +66,7 @@ RULES = ("guard_band", "simple")
 QUANTITIES = ("J", "J_object", "J_object_axis")
 
 #: flags that make a result INVALID unless a recipe says otherwise
-DEFAULT_INVALID_FLAGS = ("unmodeled_residual", "fit_not_converged", "calibration_due")
+DEFAULT_INVALID_FLAGS = (F.UNMODELED_RESIDUAL, F.FIT_NOT_CONVERGED, F.CALIBRATION_DUE)
 
 
 class VerdictError(InvalidInput):

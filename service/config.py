@@ -41,7 +41,7 @@ from drivers.settings import (ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSetti
 from .defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, demo_camera
 from .errors import ConfigError
 from .files import read_rig, read_toml
-from .modbus_server import ModbusSettings
+from .modbus_server import ModbusSettings, allowed_networks
 from .mqtt import MqttSettings
 from .registers import WORD_ORDERS
 from .web.settings import WebSettings
@@ -311,6 +311,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "port": _doc("TCP port (502 needs CAP_NET_BIND_SERVICE; 0: any free port)", min=0, max=65535),
         "unit_id": _doc("Modbus unit (device) id answered", min=1, max=247),
         "word_order": _doc("order of the two registers of a float32/uint32", choices=WORD_ORDERS),
+        "max_connections": _doc("TCP clients at once; one more closes the connection idle the longest", min=1, max=256),
+        "idle_timeout": _doc("close a TCP connection without a request for this long, s (0: never)", min=0),
+        "allow_from": _doc("TCP client addresses or networks allowed besides this machine, e.g. [\"192.168.10.20\", "
+                           "\"10.0.0.0/24\"] (empty: every client that reaches host)"),
         "serial_port": _doc("RTU: serial device, e.g. /dev/ttyAMA0"),
         "baudrate": _doc("RTU baud rate", min=300, max=4_000_000),
         "parity": _doc("RTU parity", choices=("N", "E", "O")),
@@ -605,6 +609,11 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
     if mb.pop("enabled"):
         if mb["mode"] == "rtu" and not mb["serial_port"]:
             raise c.fail("modbus", "serial_port", "missing: mode = \"rtu\" needs the serial device, e.g. /dev/ttyAMA0")
+        mb["allow_from"] = tuple(mb["allow_from"] or ())
+        try:
+            allowed_networks(mb["allow_from"])
+        except ValueError as exc:
+            raise c.fail("modbus", "allow_from", str(exc)) from None
         modbus = ModbusSettings(**mb)
 
     from .recipes import RecipeBook

@@ -28,10 +28,12 @@ import logging
 import queue
 import threading
 import time
+from collections import deque
 from typing import Any, Callable, Mapping
 
 from firmware_host import Event, Measurement, Sequencer, State
 from measurement import IdentificationResult, Rig, Trace, identify
+from measurement import flags as F
 from measurement.errors import InvalidInput
 
 from . import __version__
@@ -96,6 +98,7 @@ class Appliance:
         self.loop_iterations = 0
         self.last_loop_error: str | None = None
         self.stored: list[str] = []  # UUIDs stored since start (ok, failed, aborted), in order
+        self._durable_results: deque[str] = deque(maxlen=16)  # UUIDs of the latest results the store holds
         self._stored_cond = threading.Condition()
         self.exit_status = EXIT_OK
         self._stopping = False
@@ -329,10 +332,21 @@ class Appliance:
 
     def _state_message(self, state: str, previous: str, reason: str, measurement_id: str | None,
                        event: Event | None = None) -> dict[str, Any]:
-        msg = event.to_dict() if event is not None else {"state": state, "previous": previous, "reason": reason,
-                                                          "measurement_id": measurement_id}
+        msg = self.public_event(event) if event is not None else {"state": state, "previous": previous,
+                                                                  "reason": reason, "measurement_id": measurement_id}
         now = self.wall_clock()
         msg.update({"device_id": self.config.device_id, "timestamp": now, "at": iso_utc(now)})
+        return msg
+
+    def public_event(self, event: Event) -> dict[str, Any]:
+        """``event.to_dict()`` for whatever leaves the device (MQTT state, the web page): the
+        result's values only once the store holds the result. PUBLISHING is delivered after the
+        store write; when that failed (a full disk), J must not go out while it is lost here."""
+        msg = event.to_dict()
+        if event.measurement is not None and event.measurement_id not in self._durable_results:
+            for key in ("J", "J_std", "omega_n"):
+                msg.pop(key, None)
+            msg["reason"] = "the result could not be stored"
         return msg
 
     def _clock_scale(self) -> float:
@@ -351,8 +365,8 @@ class Appliance:
         part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
         rig = recipe.rig_for(cfg.rig) if recipe is not None else cfg.rig
         calibration = self._calibration_state(rig, finished)
-        if calibration is not None and calibration["due"] and "calibration_due" not in result["flags"]:
-            result["flags"] = [*result["flags"], "calibration_due"]
+        if calibration is not None and calibration["due"] and F.CALIBRATION_DUE not in result["flags"]:
+            result["flags"] = [*result["flags"], F.CALIBRATION_DUE]
         part = self.parts.release(result, m.id, part_id, recipe) | {"calibration": calibration}
 
         def build(uuid: str, seq: int) -> dict[str, Any]:
@@ -369,6 +383,7 @@ class Appliance:
             trace_meta=dict(trace.meta), enqueue=("result",) if self.mqtt is not None else (),
             part=_part_columns(part),
         )
+        self._durable_results.append(m.id)
         if self.modbus is not None and stored.payload is not None:
             self.modbus.publish_result(stored.payload)
         if self.mqtt is not None:

@@ -23,6 +23,8 @@ gets 0x03 (illegal data value).
 
 from __future__ import annotations
 
+import asyncio
+import ipaddress
 import logging
 import struct
 import threading
@@ -36,6 +38,7 @@ from pymodbus.framer import FramerType
 from pymodbus.pdu import ExceptionResponse
 from pymodbus.pdu.bit_message import WriteSingleCoilRequest, WriteSingleCoilResponse
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
 from pymodbus.simulator.simcore import SimCore
 
@@ -60,6 +63,14 @@ class ModbusSettings:
     """Where and how to serve (see ``[modbus]`` in docs/service.md).
 
     mode: "tcp" | "rtu". host/port: TCP listen address (port 0: any free port).
+    max_connections: TCP clients served at once; one more closes the connection idle the
+    longest. idle_timeout: a TCP connection without a request for this long is closed, s
+    (0: never). Both keep the descriptors a client can hold bounded.
+    allow_from: TCP client addresses or networks ("192.168.10.20", "10.0.0.0/24") allowed
+    to connect besides this machine (127.0.0.1, ::1); empty: every client that reaches
+    ``host``. Modbus has no authentication: the default host 127.0.0.1 keeps the trigger
+    and abort coils on this machine, and opening them to a network is a choice made by
+    setting ``host``, best with ``allow_from``.
     serial_port, baudrate, parity ("N"|"E"|"O"), stopbits, bytesize: RTU line
     (serial_port may be "socket://HOST:PORT" for a serial-over-TCP bridge).
     unit_id: the Modbus device id answered. word_order: "big" | "little".
@@ -70,6 +81,9 @@ class ModbusSettings:
     port: int = 5020
     unit_id: int = 1
     word_order: str = "big"
+    max_connections: int = 16
+    idle_timeout: float = 60.0
+    allow_from: tuple[str, ...] = ()
     serial_port: str | None = None
     baudrate: int = 19200
     parity: str = "E"
@@ -124,6 +138,125 @@ class _WriteSingleCoil(WriteSingleCoilRequest):
         return response
 
 
+#: clients on this machine are always allowed (local tools: ``moi modbus-map --read``, the web page)
+_THIS_MACHINE = (ipaddress.ip_network("127.0.0.1/32"), ipaddress.ip_network("::1/128"))
+
+
+def allowed_networks(allow_from: tuple[str, ...]) -> tuple[ipaddress.IPv4Network | ipaddress.IPv6Network, ...]:
+    """The networks of ``allow_from`` (ValueError naming a malformed entry)."""
+    nets = []
+    for entry in allow_from:
+        try:
+            nets.append(ipaddress.ip_network(entry.strip(), strict=False))
+        except ValueError:
+            raise ValueError(f"{entry!r} is not an IP address or network (e.g. \"192.168.10.20\", "
+                             "\"10.0.0.0/24\")") from None
+    return tuple(nets)
+
+
+def network_exposure(settings: "ModbusSettings") -> str | None:
+    """A warning when the TCP server is reachable beyond this machine, else None."""
+    if settings.mode != "tcp":
+        return None
+    try:
+        if ipaddress.ip_address(settings.host).is_loopback:
+            return None
+    except ValueError:
+        if settings.host == "localhost":
+            return None
+    who = ("clients in allow_from " + ", ".join(settings.allow_from)) if settings.allow_from else "every client that reaches it"
+    return (f"Modbus TCP listens on {settings.host}, not only on this machine: {who} can trigger and abort "
+            "measurements (Modbus has no authentication)")
+
+
+def _is_allowed(peer: str, networks: tuple) -> bool:
+    try:
+        addr = ipaddress.ip_address(peer.split("%", 1)[0])
+    except ValueError:
+        return False
+    if isinstance(addr, ipaddress.IPv6Address) and addr.ipv4_mapped is not None:
+        addr = addr.ipv4_mapped
+    return any(addr in net for net in _THIS_MACHINE + networks)
+
+
+class _TrackedHandler(ServerRequestHandler):
+    """A client connection that remembers when it last sent something (monotonic s)."""
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.last_activity = time.monotonic()
+
+    def connection_made(self, transport: Any) -> None:
+        super().connection_made(transport)
+        server = self.server
+        if not isinstance(server, _BoundedTcpServer):
+            return
+        if server.allowed is not None:
+            peer = (transport.get_extra_info("peername") or ("",))[0]
+            if not _is_allowed(str(peer), server.allowed):
+                server.refuse(self, str(peer))  # before the cap: a refused client never displaces an allowed one
+                return
+        server.make_room(self)
+
+    def callback_data(self, data: bytes, addr: tuple | None = None) -> int:
+        self.last_activity = time.monotonic()
+        return super().callback_data(data, addr)
+
+
+class _BoundedTcpServer(ModbusTcpServer):
+    """ModbusTcpServer with a connection cap and an idle time-out: without them a client that
+    opens connections and never closes them runs the process out of file descriptors (no new
+    PLC connection, no MQTT reconnect). Beyond ``max_connections`` the connection idle the
+    longest is closed to make room, so a PLC reconnecting always gets in."""
+
+    def __init__(self, *args: Any, max_connections: int, idle_timeout: float, allow_from: tuple[str, ...] = (),
+                 **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.max_connections = max(1, max_connections)
+        self.idle_timeout = idle_timeout
+        self.dropped = 0  # connections closed for the cap or the idle time-out
+        self.refused = 0  # connections from addresses outside allow_from
+        self._last_warning = -float("inf")
+        self._last_refusal_log = -float("inf")
+        self.allowed = allowed_networks(allow_from) if allow_from else None
+
+    def refuse(self, conn: Any, peer: str) -> None:
+        self.refused += 1
+        now = time.monotonic()
+        if now - self._last_refusal_log >= 10.0:
+            self._last_refusal_log = now
+            log.warning("Modbus: refused a connection from %s (not in allow_from; %d refused so far)", peer,
+                        self.refused)
+        conn.close()
+
+    def callback_new_connection(self) -> _TrackedHandler:
+        return _TrackedHandler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+
+    def make_room(self, new: Any) -> None:
+        """Close the connections idle the longest until ``new`` fits under the cap."""
+        others = [c for c in self.active_connections.values() if c is not new]
+        while len(others) >= self.max_connections:
+            oldest = min(others, key=lambda c: getattr(c, "last_activity", 0.0))
+            others.remove(oldest)
+            self._drop(oldest, f"more than {self.max_connections} connections")
+
+    def close_idle(self) -> None:
+        if self.idle_timeout <= 0:
+            return
+        now = time.monotonic()
+        for conn in list(self.active_connections.values()):
+            if now - getattr(conn, "last_activity", now) > self.idle_timeout:
+                self._drop(conn, f"idle for more than {self.idle_timeout:g} s")
+
+    def _drop(self, conn: Any, why: str) -> None:
+        self.dropped += 1
+        now = time.monotonic()
+        if now - self._last_warning >= 10.0:  # one line per 10 s, however hard a client tries
+            self._last_warning = now
+            log.warning("Modbus: closed a client connection (%s; %d closed so far)", why, self.dropped)
+        conn.close()
+
+
 class ModbusServer:
     """Serves the register image of ``service.registers``.
 
@@ -153,6 +286,7 @@ class ModbusServer:
         self._rebuild()
         self._io = LoopThread("moi-modbus")
         self._server: ModbusTcpServer | ModbusSerialServer | None = None
+        self._idle_task: asyncio.Task | None = None
         self.bound_port: int | None = None
         self.requests = 0  # requests served (all function codes), for diagnostics
 
@@ -292,8 +426,9 @@ class ModbusServer:
         s = self.settings
         device = self._device()
         if s.mode == "tcp":
-            server = ModbusTcpServer(device, address=(s.host, s.port), ignore_missing_devices=False,
-                                     custom_pdu=[_WriteSingleCoil])
+            server = _BoundedTcpServer(device, address=(s.host, s.port), ignore_missing_devices=False,
+                                       custom_pdu=[_WriteSingleCoil], max_connections=s.max_connections,
+                                       idle_timeout=s.idle_timeout, allow_from=tuple(s.allow_from))
             where = f"TCP {s.host}:{s.port}"
         elif s.mode == "rtu":
             server = ModbusSerialServer(device, framer=FramerType.RTU, port=s.serial_port or "", baudrate=s.baudrate,
@@ -313,12 +448,35 @@ class ModbusServer:
             self.bound_port = sockets[0].getsockname()[1]
         log.info("Modbus server on %s (unit id %d)", where if self.bound_port is None else
                  f"TCP {s.host}:{self.bound_port}", s.unit_id)
+        if (exposure := network_exposure(s)) is not None:
+            log.warning("%s", exposure)
+        if isinstance(server, _BoundedTcpServer) and s.idle_timeout > 0:
+            # a reference is kept: the loop holds tasks only weakly
+            self._idle_task = asyncio.get_running_loop().create_task(self._close_idle(server, s.idle_timeout))
+
+    @staticmethod
+    async def _close_idle(server: "_BoundedTcpServer", idle_timeout: float) -> None:
+        while not server.serving.done():
+            await asyncio.wait([server.serving], timeout=min(1.0, idle_timeout / 4))
+            server.close_idle()
 
     def client_count(self) -> int | None:
         """Modbus TCP clients connected now (None for RTU or before the start)."""
         server = self._server if self.settings.mode == "tcp" else None
         conns = getattr(server, "active_connections", None)
         return len(conns) if conns is not None else None
+
+    @property
+    def connections_refused(self) -> int:
+        """TCP connections refused since start (client address not in ``allow_from``)."""
+        server = self._server
+        return server.refused if isinstance(server, _BoundedTcpServer) else 0
+
+    @property
+    def connections_dropped(self) -> int:
+        """TCP client connections closed for the cap or the idle time-out since start."""
+        server = self._server
+        return server.dropped if isinstance(server, _BoundedTcpServer) else 0
 
     def alive(self) -> bool:
         """True while the server serves (after a successful ``start``)."""

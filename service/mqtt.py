@@ -132,6 +132,7 @@ class MqttService:
         self._seen_ids: deque[str] = deque(maxlen=256)
         self._seen_lock = threading.Lock()
         self.connected_event = threading.Event()
+        self.subscribed_event = threading.Event()  # the broker confirmed the command subscriptions
         self.last_error: str | None = None
         self.callback_errors = 0  # exceptions caught in paho callbacks (each one logged)
         client_id = settings.client_id or f"moi-{device_id}"
@@ -145,6 +146,7 @@ class MqttService:
         self.client.on_disconnect = self._on_disconnect
         self.client.on_publish = self._on_publish
         self.client.on_message = self._on_message
+        self.client.on_subscribe = self._on_subscribe
         self.sender = OutboxSender(store, self._publish_kind, window=settings.window,
                                    resend_after=settings.resend_after, on_delivered=on_delivered)
 
@@ -235,7 +237,16 @@ class MqttService:
         if self.connected_event.is_set():
             (log.warning if reason_code.is_failure else log.info)("MQTT disconnected: %s", reason_code)
         self.connected_event.clear()
+        self.subscribed_event.clear()
         self.sender.disconnected()
+
+    @_never_raises
+    def _on_subscribe(self, client, userdata, mid, reason_codes, properties) -> None:
+        if any(rc.is_failure for rc in reason_codes):
+            self.last_error = f"broker refused the command subscriptions: {', '.join(map(str, reason_codes))}"
+            log.warning("MQTT: %s", self.last_error)
+            return
+        self.subscribed_event.set()
 
     @_never_raises
     def _on_publish(self, client, userdata, mid, reason_code, properties) -> None:

@@ -20,12 +20,13 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, to_registers  # noqa: F401
+from measurement import flags as F
 
 #: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 3  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other)
-# 3: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
+MAP_VERSION = 4  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
+# 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
 #    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
-#    holding registers; flag calibration_due (bit 10)
+#    holding registers; flag calibration_due (bit 13)
 
 
 # --- enumerations ------------------------------------------------------------
@@ -45,20 +46,23 @@ STATE_CODES: dict[str, int] = {
 }
 STATE_OTHER = 255
 
-#: quality flag (IdentificationResult.flags) → bit in register `flags`.
+#: quality flag (``measurement.flags.FLAGS``, which says what each means) → bit in register `flags`.
 #: A flag not in this table sets FLAG_OTHER_BIT, so a new flag is never silently lost.
 FLAG_BITS: dict[str, int] = {
-    "unmodeled_residual": 0,
-    "outliers_removed": 1,
-    "parameter_at_bound": 2,
-    "fit_not_converged": 3,
-    "correlated_residual": 4,
-    "encoder_errors": 5,
-    "camera_pose": 6,
-    "marker_lost": 7,
-    "dropped_frames": 8,
-    "corrupt_frame": 9,   # map version 2; in version 1 it set bit 15 (other)
-    "calibration_due": 10,  # map version 3: the rig's calibration is past its validity period
+    F.UNMODELED_RESIDUAL: 0,
+    F.OUTLIERS_REMOVED: 1,
+    F.PARAMETER_AT_BOUND: 2,
+    F.FIT_NOT_CONVERGED: 3,
+    F.CORRELATED_RESIDUAL: 4,
+    F.ENCODER_ERRORS: 5,
+    F.CAMERA_POSE: 6,
+    F.MARKER_LOST: 7,
+    F.DROPPED_FRAMES: 8,
+    F.CORRUPT_FRAME: 9,   # map version 2; in version 1 it set bit 15 (other)
+    F.OUTLIERS_DOWNWEIGHTED: 10,  # map version 3
+    F.WINDOW_CUT_AT_GAP: 11,
+    F.ANGLE_UNWRAPPED: 12,
+    F.CALIBRATION_DUE: 13,  # map version 4: the rig's calibration is past its validity period
 }
 FLAG_OTHER_BIT = 15
 
@@ -69,6 +73,7 @@ EFFECT_BITS: dict[str, int] = {
     "quadratic": 2,
     "cubic_stiffness": 3,
     "drift": 4,
+    "gain": 5,  # map version 3
 }
 EFFECT_OTHER_BIT = 15
 
@@ -533,11 +538,11 @@ def markdown() -> str:
     L.append("")
     L.append("## Quality flags (register `flags`)")
     L.append("")
-    L.append("| bit | flag |")
-    L.append("|---:|---|")
+    L.append("| bit | flag | meaning |")
+    L.append("|---:|---|---|")
     for name, b in FLAG_BITS.items():
-        L.append(f"| {b} | `{name}` |")
-    L.append(f"| {FLAG_OTHER_BIT} | any other flag (see the MQTT result's `flags` list for its name) |")
+        L.append(f"| {b} | `{name}` | {F.describe(name)} |")
+    L.append(f"| {FLAG_OTHER_BIT} | any other flag | see the MQTT result's `flags` list for its name |")
     L.append("")
     L.append("## Consistent-snapshot protocol")
     L.append("")

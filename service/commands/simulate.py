@@ -37,10 +37,7 @@ def parse_effects(tokens: list[str], rig_kind: str) -> dict[str, dict[str, float
             if not math.isfinite(v):
                 raise InvalidInput(f"effect {token!r}: value must be finite")
             if not param:
-                first = EFFECTS[name].parameters[0]
-                param = first.physical or first.name
-                if name == "coulomb" and rig_kind == "compound":
-                    param = "mu"
+                param = EFFECTS[name].given_names(rig_kind)[0]
             out.setdefault(name, {})[param] = v
     return out
 

@@ -1,4 +1,4 @@
-"""The discovery loop (issue 3) on data with effects nobody declared.
+"""The discovery loop on data with effects nobody declared.
 
 Data come from the independent reference solver (tests/measurement/reference.py),
 not from the simulator the fit uses, with realistic noise and a 17-bit encoder.

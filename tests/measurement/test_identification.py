@@ -1,4 +1,4 @@
-"""Whole-record identification (issue 2): accuracy and honest uncertainties."""
+"""Whole-record identification: accuracy and honest uncertainties."""
 
 import math
 
@@ -21,7 +21,7 @@ def test_seed000_fig3_example_identified_with_declared_coulomb_quadratic():
     t = np.arange(0.0, 30.0, 0.01)
     theta = reference_motion("compound", omega_n, t, -0.5, coulomb=mu * m * g / J, quadratic=K / J)
     rng = np.random.default_rng(7)
-    trace = Trace(t, sensor(rng, theta, 1e-4, bits=17), source="seed000-fig3")
+    trace = Trace(t, sensor(rng, theta, 1e-4, bits=17), source="compound-friction-drag")
     r = identify(trace, rig, Options(discover=False))
     assert r.J == pytest.approx(J, rel=5e-4)
     assert r.damping["coulomb"]["mu"].value == pytest.approx(mu, rel=0.05)

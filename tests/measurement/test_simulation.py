@@ -95,7 +95,7 @@ def test_every_effect_term_matches_its_basis(name):
         eff = EFFECTS[name](Rig(kind=kind, stiffness=1.0) if kind == "torsion" else Rig(kind=kind))
         if eff.role == "sensor":
             t = np.linspace(0, 1, 5)
-            assert eff.sensor_basis(t).shape == (5, len(eff.parameters))
+            assert eff.sensor_basis(t, np.sin(t)).shape == (5, len(eff.parameters))
             continue
         rng = np.random.default_rng(0)
         th, om = rng.uniform(-1, 1, 50), rng.uniform(-2, 2, 50)

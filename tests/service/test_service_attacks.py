@@ -21,7 +21,7 @@ pytestmark = pytest.mark.broker
 def test_a_deeply_nested_json_command_neither_stops_mqtt_nor_its_acknowledgements(tmp_path, broker, appliance_factory,
                                                                                   consumer_factory):
     app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
-    assert app.app.mqtt.connected_event.wait(10)
+    assert app.app.mqtt.subscribed_event.wait(10)
     c = consumer_factory(broker.port, ["moi/test-rig/result"])
     c.wait_subscribed()
     c.publish("moi/test-rig/cmd/measure", "[" * 2000 + "]" * 2000)  # 4 kB; a RecursionError for json.loads
@@ -52,7 +52,7 @@ def test_an_exception_in_a_command_handler_is_logged_and_the_next_command_still_
                       "rig", store, on_command=on_command)
     svc.start()
     try:
-        assert svc.connected_event.wait(10)
+        assert svc.subscribed_event.wait(10)
         c = consumer_factory(broker.port, ["moi/rig/status"])
         c.wait_subscribed()
         c.publish("moi/rig/cmd/measure", "")
@@ -155,3 +155,164 @@ def test_rtu_single_coil_writes_are_echoed_and_illegal_values_refused():
     finally:
         srv.stop()
     assert commands == ["trigger"]
+
+
+# --- Modbus: connection floods ------------------------------------------------------------------------------
+
+def _closed_by_peer(sock: socket.socket, timeout: float) -> bool:
+    """True if the server closes ``sock`` within ``timeout`` s (a read returns end of file or a reset)."""
+    sock.settimeout(timeout)
+    try:
+        return sock.recv(1) == b""
+    except ConnectionResetError:
+        return True
+    except TimeoutError:
+        return False
+
+
+def _read_request(tid: int) -> bytes:
+    return _mbap(tid, 1, struct.pack(">BHH", 4, 0, 2))
+
+
+def test_the_connection_cap_closes_the_longest_idle_connection_first():
+    from service.modbus_server import ModbusServer, ModbusSettings
+
+    srv = ModbusServer(ModbusSettings(host="127.0.0.1", port=0, max_connections=3, idle_timeout=0))
+    srv.start()
+    socks = []
+    try:
+        for _ in range(3):
+            socks.append(socket.create_connection(("127.0.0.1", srv.bound_port), timeout=5))
+        wait_until(lambda: srv.client_count() == 3, 5, what="three connections")
+        _tcp_exchange(socks[0], 1, 1, struct.pack(">BHH", 4, 0, 2))  # the first one is active: not the oldest idle
+        socks.append(socket.create_connection(("127.0.0.1", srv.bound_port), timeout=5))
+        assert _closed_by_peer(socks[1], 5), "the longest idle connection was not closed"
+        assert not _closed_by_peer(socks[2], 0.2) and not _closed_by_peer(socks[0], 0.05)
+        assert len(_tcp_exchange(socks[3], 2, 1, struct.pack(">BHH", 4, 0, 2))) == 6  # the newcomer is served
+        assert srv.client_count() == 3 and srv.connections_dropped == 1
+    finally:
+        for s in socks:
+            s.close()
+        srv.stop()
+
+
+def test_an_idle_connection_is_closed_and_an_active_one_is_not():
+    from service.modbus_server import ModbusServer, ModbusSettings
+
+    srv = ModbusServer(ModbusSettings(host="127.0.0.1", port=0, idle_timeout=0.5))
+    srv.start()
+    try:
+        with socket.create_connection(("127.0.0.1", srv.bound_port), timeout=5) as idle, \
+                socket.create_connection(("127.0.0.1", srv.bound_port), timeout=5) as busy:
+            for tid in range(12):  # 1.2 s of polling every 0.1 s: longer than the time-out
+                assert len(_tcp_exchange(busy, tid, 1, struct.pack(">BHH", 4, 0, 2))) == 6
+                if _closed_by_peer(idle, 0.1):
+                    break
+            else:
+                raise AssertionError("the idle connection was not closed")
+            assert len(_tcp_exchange(busy, 99, 1, struct.pack(">BHH", 4, 0, 2))) == 6
+    finally:
+        srv.stop()
+
+
+def test_a_flood_of_idle_connections_does_not_lock_the_plc_or_mqtt_out(tmp_path, broker, consumer_factory):
+    """1,100 idle connections against the daemon process (its descriptor limit 1024, LimitNOFILE of the
+    unit): a PLC still connects and reads, a measurement still goes out on MQTT."""
+    import resource
+    import time
+
+    from .conftest import moi_subprocess, port_open, write_toml
+
+    mb_port = free_port()
+    cfg = write_toml(tmp_path / "appliance.toml", appliance_doc(tmp_path / "state", mqtt_port=broker.port,
+                                                                modbus_port=mb_port))
+    c = consumer_factory(broker.port, ["moi/test-rig/result", "moi/test-rig/status"])
+    c.wait_subscribed()
+    daemon = moi_subprocess(["run", "--config", str(cfg)],
+                            preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024)))
+    flood: list[socket.socket] = []
+    try:
+        wait_until(lambda: port_open(mb_port) or daemon.poll() is not None, 30, what="the daemon's Modbus port")
+        assert daemon.poll() is None
+        c.wait(lambda c: c.on("/status")[-1:] == [b"online"], 20, "online")
+        for _ in range(1100):
+            try:
+                flood.append(socket.create_connection(("127.0.0.1", mb_port), timeout=5))
+            except OSError:
+                break  # the listen backlog is full: the attacker could not even queue more
+        assert len(flood) > 1024, f"only {len(flood)} attack connections: the attack proved nothing"
+        t0 = time.monotonic()
+        with socket.create_connection(("127.0.0.1", mb_port), timeout=5) as plc:
+            reply = _tcp_exchange(plc, 1, 1, struct.pack(">BHH", 4, 0, R.IMAGE_SIZE))
+            plc_ms = (time.monotonic() - t0) * 1e3
+            assert len(reply) == 2 + 2 * R.IMAGE_SIZE
+            status = R.decode_image(list(struct.unpack(f">{R.IMAGE_SIZE}H", reply[2:])))["status"]
+            assert status & (1 << R.STATUS_BITS["mqtt_connected"])
+            trigger = struct.pack(">BHH", 5, R.COILS["trigger"], 0xFF00)
+            assert _tcp_exchange(plc, 2, 1, trigger) == trigger
+        c.wait(lambda c: len(c.unique_results()) == 1, 60, "the result on MQTT")
+        print(f"{len(flood)} idle connections: a PLC connected and read the map in {plc_ms:.0f} ms")
+    finally:
+        for s in flood:
+            s.close()
+        daemon.terminate()
+        daemon.communicate(timeout=30)
+
+
+def _connect_from(source: str, port: int) -> socket.socket:
+    s = socket.socket()
+    s.settimeout(5)
+    s.bind((source, 0))
+    s.connect(("127.0.0.1", port))
+    return s
+
+
+def test_only_this_machine_and_the_allow_list_get_in():
+    """Clients bound to other loopback addresses stand for other hosts: 127.0.0.3 is allowed, 127.0.0.2 is not."""
+    from service.modbus_server import ModbusServer, ModbusSettings
+
+    srv = ModbusServer(ModbusSettings(host="127.0.0.1", port=0, allow_from=("127.0.0.3",)))
+    srv.start()
+    try:
+        with _connect_from("127.0.0.2", srv.bound_port) as stranger:
+            assert _closed_by_peer(stranger, 5), "a client outside allow_from was served"
+        for source in ("127.0.0.3", "127.0.0.1"):
+            with _connect_from(source, srv.bound_port) as friend:
+                assert len(_tcp_exchange(friend, 1, 1, struct.pack(">BHH", 4, 0, 2))) == 6
+        assert srv.connections_refused == 1
+    finally:
+        srv.stop()
+
+
+def test_listening_beyond_this_machine_is_a_stated_choice():
+    from service.config import parse_config
+    from service.errors import ConfigError
+    from service.modbus_server import ModbusSettings, network_exposure
+
+    assert parse_config({}, source="empty.toml").modbus.host == "127.0.0.1"
+    assert network_exposure(ModbusSettings()) is None
+    assert "every client" in network_exposure(ModbusSettings(host="0.0.0.0"))
+    assert "192.168.10.20" in network_exposure(ModbusSettings(host="0.0.0.0", allow_from=("192.168.10.20",)))
+    with pytest.raises(ConfigError, match="allow_from: 'plc-1' is not an IP address"):
+        parse_config({"modbus": {"allow_from": ["plc-1"]}}, source="bad.toml")
+
+
+# --- nothing leaves the device before it is durable -----------------------------------------------------------
+
+def test_a_result_that_cannot_be_stored_never_leaves_the_device(tmp_path, broker, appliance_factory, consumer_factory):
+    """A full disk, made by SQLite's own page limit: the store write fails, the measurement ends in FAULT,
+    and neither the MQTT state nor the result topic ever carried its J."""
+    c = consumer_factory(broker.port, ["moi/test-rig/#"])
+    c.wait_subscribed()
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
+    assert app.app.mqtt.subscribed_event.wait(10)
+    db = app.app.store._db
+    db.execute(f"PRAGMA max_page_count = {db.execute('PRAGMA page_count').fetchone()[0]}")  # the disk is full
+    app.press()
+    app.wait_event(lambda e: e.state.value == "FAULT", 30, what="FAULT after the failed store write")
+    c.wait(lambda c: any(json.loads(p).get("state") == "FAULT" for p in c.on("/state")), 10, "FAULT on MQTT")
+    measured = app.app.sequencer.last_measurement
+    published = [json.loads(p) for p in c.on("/state")]
+    assert [m["state"] for m in published][-3:] == ["IDENTIFYING", "PUBLISHING", "FAULT"]
+    assert all("J" not in m and "J =" not in (m.get("reason") or "") for m in published), published
+    assert c.results() == [] and measured is None

@@ -37,6 +37,10 @@ def test_the_unit_is_a_notify_service_with_a_watchdog_and_restart():
     assert u["NoNewPrivileges"] == ["yes"] and u["ProtectSystem"] == ["strict"]
     # the stop timeout leaves room for the graceful stop (10 s identification + 2 s MQTT flush)
     assert int(u["TimeoutStopSec"][0].rstrip("s")) >= 20
+    # a bounded number of descriptors (the Modbus connection cap keeps a client flood far below it)
+    assert 256 <= int(u["LimitNOFILE"][0]) <= 4096
+    # lgpio writes its notification pipes into the working directory: the (writable) state directory
+    assert u["WorkingDirectory"] == ["/var/lib/moi"] and "LG_WD=/var/lib/moi" in u["Environment"]
 
 
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze not installed")

@@ -1,0 +1,50 @@
+"""Quality flags: every flag a result can carry, with its meaning, in one table.
+
+A flag is a short lower-case name in ``IdentificationResult.flags`` (and so in
+the JSON, the MQTT payload and, as a bit, in the Modbus register ``flags``).
+Whoever raises a flag uses the constant below; the Modbus map gives every
+flag of this table a bit (a test fails when one is missing).
+"""
+
+from __future__ import annotations
+
+# -- identification ---------------------------------------------------------------
+UNMODELED_RESIDUAL = "unmodeled_residual"
+OUTLIERS_REMOVED = "outliers_removed"
+PARAMETER_AT_BOUND = "parameter_at_bound"
+FIT_NOT_CONVERGED = "fit_not_converged"
+CORRELATED_RESIDUAL = "correlated_residual"
+OUTLIERS_DOWNWEIGHTED = "outliers_downweighted"
+WINDOW_CUT_AT_GAP = "window_cut_at_gap"
+ANGLE_UNWRAPPED = "angle_unwrapped"
+# -- acquisition --------------------------------------------------------------------
+ENCODER_ERRORS = "encoder_errors"
+CAMERA_POSE = "camera_pose"
+MARKER_LOST = "marker_lost"
+DROPPED_FRAMES = "dropped_frames"
+CORRUPT_FRAME = "corrupt_frame"
+# -- the rig ---------------------------------------------------------------------------
+CALIBRATION_DUE = "calibration_due"
+
+#: flag → what it tells the user (the Modbus map and the docs print these)
+FLAGS: dict[str, str] = {
+    UNMODELED_RESIDUAL: "the residual is above the noise and structured: something no library effect explains is left",
+    OUTLIERS_REMOVED: "isolated glitch samples were left out of the fit (count in window.n_outliers)",
+    PARAMETER_AT_BOUND: "an effect's parameter sits at its physical bound (e.g. a damping of zero)",
+    FIT_NOT_CONVERGED: "the least-squares fit stopped before converging",
+    CORRELATED_RESIDUAL: "the residual is coloured; uncertainties and BIC use the fitted noise model",
+    OUTLIERS_DOWNWEIGHTED: "the robust loss gave samples far off the model a reduced weight (count in window.n_downweighted)",
+    WINDOW_CUT_AT_GAP: "the fit window ends at a long gap in the samples (window.gap_cut_at gives the time)",
+    ANGLE_UNWRAPPED: "jumps of 2π in the angle (a swing through ±π) were unwrapped (count in window.n_unwrapped)",
+    ENCODER_ERRORS: "the encoder had time-outs, CRC errors or late replies (counts in acquisition)",
+    CAMERA_POSE: "the camera's yaw or tilt was large enough to matter and was corrected",
+    MARKER_LOST: "the tracker lost the marker in some frames",
+    DROPPED_FRAMES: "the camera dropped frames (gaps in the frame timestamps)",
+    CORRUPT_FRAME: "some frames were unreadable or corrupt",
+    CALIBRATION_DUE: "the rig's calibration is past its validity period ([calibration] date + valid_days of the rig file)",
+}
+
+
+def describe(flag: str) -> str:
+    """The meaning of ``flag`` ("" for a flag outside the table)."""
+    return FLAGS.get(flag, "")

@@ -1,0 +1,28 @@
+"""Every quality flag has one meaning (measurement.flags) and one Modbus bit (service.registers)."""
+
+from measurement import flags as F
+from measurement.effects import EFFECTS
+from service import registers as R
+
+
+def test_every_flag_has_a_description_and_a_bit():
+    assert set(F.FLAGS) == set(R.FLAG_BITS), "a flag without a bit, or a bit without a described flag"
+    for name, meaning in F.FLAGS.items():
+        assert meaning.strip(), name
+    bits = list(R.FLAG_BITS.values())
+    assert len(bits) == len(set(bits)) and R.FLAG_OTHER_BIT not in bits
+
+
+def test_every_library_effect_has_a_bit():
+    assert set(EFFECTS) <= set(R.EFFECT_BITS)
+    bits = list(R.EFFECT_BITS.values())
+    assert len(bits) == len(set(bits)) and R.EFFECT_OTHER_BIT not in bits
+
+
+def test_identification_raises_only_described_flags():
+    import inspect
+
+    from measurement import identification
+
+    src = inspect.getsource(identification)
+    assert '"unmodeled_residual"' not in src and "flags.append(\"" not in src  # constants from the table only

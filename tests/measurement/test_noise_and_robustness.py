@@ -1,0 +1,105 @@
+"""The noise model, the robust window and loss, and the sensor gain, on simulated data."""
+
+import math
+
+import numpy as np
+import pytest
+
+from measurement import Pendulum, Rig, Trace, identify, quantise, simulate_trace
+from measurement.noise import fit_noise, ljung_box
+
+from .reference import reference_motion, sensor
+
+K, J = 0.3651, 0.0125
+W = math.sqrt(K / J)
+
+
+def ar1(rng, n, sigma, phi=0.7):
+    w = rng.normal(0.0, sigma * math.sqrt(1 - phi**2), n)
+    e = np.empty(n)
+    e[0] = rng.normal(0.0, sigma)
+    for i in range(1, n):
+        e[i] = phi * e[i - 1] + w[i]
+    return e
+
+
+def test_noise_model_order_follows_the_data():
+    rng = np.random.default_rng(0)
+    assert fit_noise(rng.normal(0, 1e-4, 4000)).order == 0
+    m = fit_noise(ar1(rng, 4000, 1e-4))
+    assert m.order >= 1 and m.a[1] == pytest.approx(-0.7, abs=0.05)
+    assert math.sqrt(m.innovation_var) == pytest.approx(1e-4 * math.sqrt(1 - 0.49), rel=0.05)
+
+
+def test_ljung_box_p_value_is_the_chi2_tail():
+    from scipy.stats import chi2
+
+    r = np.random.default_rng(1).normal(size=500)
+    q, p = ljung_box(r, 20)
+    assert p == pytest.approx(float(chi2.sf(q, 20)), rel=1e-9)
+
+
+def test_coloured_quantised_noise_adds_no_effect_and_widens_J_std():
+    rig = Rig(kind="torsion", stiffness=K, declared=("viscous",))
+    t = np.arange(0.0, 20.0, 1 / 200)
+    theta = reference_motion("torsion", W, t, 0.25, viscous=0.012)
+    for seed in (1, 2):
+        rng = np.random.default_rng(seed)
+        y = quantise(theta + ar1(rng, t.size, 2e-4), 17)
+        r = identify(Trace(t, y, source="coloured"), rig)
+        assert r.added_effects == (), r.report()
+        assert r.statistics["covariance"].startswith("ar(") and r.statistics["noise_model_order"] >= 1
+        assert "correlated_residual" in r.flags
+        assert abs(r.J / J - 1) < 4 * r.J_std / J
+
+
+def test_sensor_gain_is_found_on_a_compound_rig_and_not_offered_at_small_amplitude():
+    rig = Rig(kind="compound", mass=1.5, com_distance=0.25, declared=("viscous",))
+    p = Pendulum(rig, 0.12, {"viscous": {"c": 1e-3}, "gain": {"g": 1.02}})
+    big = simulate_trace(p, theta0=0.8, duration=20, rate=100, noise_std=2e-4, seed=3)
+    r = identify(big, rig)
+    assert r.added_effects == ("gain",)
+    assert r.sensor["gain"]["g"].value == pytest.approx(1.02, abs=1e-3)
+    assert r.J == pytest.approx(0.12, rel=1e-3)
+    clean = simulate_trace(Pendulum(rig, 0.12, {"viscous": {"c": 1e-3}}), theta0=0.8, duration=20, rate=100,
+                           noise_std=2e-4, seed=4)
+    assert identify(clean, rig).added_effects == ()
+    small = simulate_trace(p, theta0=0.3, duration=20, rate=100, noise_std=2e-4, seed=3)
+    rs = identify(small, rig)
+    assert all("gain" not in s.candidates for s in rs.steps)
+
+
+def _torsion(seed=1, t=None):
+    t = np.arange(0.0, 20.0, 1 / 200) if t is None else t
+    theta = reference_motion("torsion", W, t, 0.25, viscous=0.01)
+    return t, sensor(np.random.default_rng(seed), theta, 1e-4)
+
+
+def test_a_burst_of_wild_samples_is_downweighted_not_taken_for_an_effect():
+    t, y = _torsion()
+    y = y.copy()
+    y[1500:1512] += 0.03  # the tracker stalled on a wrong edge for 12 samples
+    y[2600:2606] -= 0.05
+    r = identify(Trace(t, y, source="burst"), Rig(kind="torsion", stiffness=K))
+    assert r.added_effects == ()
+    assert {"outliers_removed", "outliers_downweighted"} & set(r.flags)
+    assert r.J == pytest.approx(J, rel=2e-4)
+
+
+def test_window_ends_at_a_long_gap_with_wild_samples_after_it():
+    t, y = _torsion()
+    keep = t < 15.0
+    t2 = np.concatenate([t[keep], [17.5, 17.6]])  # 2.5 s (2 periods) of nothing, then two wild samples
+    y2 = np.concatenate([y[keep], [0.4, -0.3]])
+    r = identify(Trace(t2, y2, source="gap"), Rig(kind="torsion", stiffness=K), )
+    assert "window_cut_at_gap" in r.flags and r.window["t_stop"] < 15.0
+    assert r.added_effects == ()
+    assert r.J == pytest.approx(J, rel=2e-4)
+
+
+def test_angle_wrapped_at_pi_is_unwrapped():
+    t, y = _torsion()
+    wrapped = np.angle(np.exp(1j * (y + math.pi - 0.1)))  # the rest angle near ±π: the reading jumps by 2π
+    r = identify(Trace(t, wrapped, source="wrapped"), Rig(kind="torsion", stiffness=K))
+    assert "angle_unwrapped" in r.flags and r.window["n_unwrapped"] > 10
+    assert r.J == pytest.approx(J, rel=2e-4)
