@@ -26,6 +26,7 @@ COMMANDS = {
     "run": "service.commands.run",
     "results": "service.commands.results",
     "export": "service.commands.export",
+    "spc": "service.commands.spc",
     "modbus-map": "service.commands.modbus_map",
     "demo": "service.commands.demo",
 }
