@@ -56,7 +56,7 @@ def read_toml_as(path: str | os.PathLike, what: str, parse: Callable[[dict], T],
 
 
 def read_rig(path: str | os.PathLike) -> Rig:
-    """The rig file of DESIGN.md (kind, constants, declared effects)."""
+    """The rig file (TOML: [rig] kind and constants, [model] declared effects; see README.md)."""
     return read_toml_as(path, "rig file", Rig.from_dict, RigError)
 
 

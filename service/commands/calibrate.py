@@ -1,7 +1,8 @@
 """`moi calibrate CAL.toml --rig RIG.toml --out RIG_OUT.toml`: k and tare inertia of a torsion rig.
 
 CAL.toml lists the references, each with a known added inertia and either a
-trace (identified here) or seed 001's ω_m and ζ:
+trace (identified here) or the damped main frequency ω_m and amplitude
+modulation ζ as a monocular-vision torsion pendulum reports them:
 
     [[reference]]
     name = "empty"
