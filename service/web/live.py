@@ -39,7 +39,7 @@ class Live:
         self.app = app
 
     def event_message(self, event: "Event") -> dict[str, Any]:
-        d = event.to_dict()
+        d = self.app.public_event(event)  # a result's values only once it is stored
         d["type"] = "state"
         d["words"] = STATE_WORDS.get(d["state"], "")
         d["wall"] = time.time()
