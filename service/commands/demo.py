@@ -23,7 +23,6 @@ import threading
 import time
 from pathlib import Path
 
-from ..config import parse_config
 from ..defaults import DEMO_EFFECTS, DEMO_INERTIA
 from ..errors import InputFileError
 
@@ -103,6 +102,8 @@ def run(args: argparse.Namespace) -> int:
         tmp = tempfile.TemporaryDirectory(prefix="moi-demo-")
         state_dir = tmp.name
     try:
+        from ..config import parse_config
+
         _write_recipe(args, state_dir)
         config = parse_config(_doc(args, state_dir), source="moi demo")
         if args.web_port and not _port_free(args.web_port):
