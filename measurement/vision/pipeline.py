@@ -27,17 +27,43 @@ DROPPED = "dropped_frames"
 POSE = "camera_pose"
 
 
-def count_dropped(t: np.ndarray, fps: float, tolerance: float = 0.5) -> int:
-    """Frames missing from timestamps t (s) of a camera running at ``fps`` frames/s.
+#: a gap between two frames longer than this many frame periods means frames were lost (shorter: jitter)
+DROP_GAP = 1.5
 
-    A gap of n frame periods (rounded) hides n − 1 frames; gaps within
-    (1 + tolerance) periods are jitter, not drops.
+
+class DropCounter:
+    """Counts the frames missing between consecutive timestamps of a camera running at ``fps`` frames/s.
+
+    The one rule for dropped frames: a gap of n frame periods (rounded) hides n − 1 frames; gaps
+    up to ``DROP_GAP`` periods are jitter, not drops. Used live (the V4L2 camera numbers its
+    frames with it) and on a finished record (``count_dropped``).
     """
-    t = np.asarray(t, dtype=float)
-    if t.size < 2 or not fps > 0:
+
+    def __init__(self, fps: float):
+        self.period = 1.0 / fps
+        self.last: float | None = None
+        self.dropped = 0
+
+    def add(self, t: float) -> int:
+        """Record a frame time (s); returns how many frames went missing just before it."""
+        missing = 0
+        if self.last is not None:
+            gap = (t - self.last) / self.period
+            if gap > DROP_GAP:
+                missing = int(round(gap)) - 1
+                self.dropped += missing
+        self.last = t
+        return missing
+
+
+def count_dropped(t: np.ndarray, fps: float) -> int:
+    """Frames missing from timestamps t (s, increasing) of a camera running at ``fps`` frames/s (``DropCounter``)."""
+    if not fps > 0:
         return 0
-    gaps = np.diff(t) * fps
-    return int(np.sum(np.where(gaps > 1.0 + tolerance, np.rint(gaps) - 1, 0)))
+    counter = DropCounter(fps)
+    for x in np.asarray(t, dtype=float):
+        counter.add(float(x))
+    return counter.dropped
 
 
 @dataclass
