@@ -90,7 +90,12 @@ class Tracking:
     seen_times: list[float] = field(default_factory=list)
     untimed: int = 0
 
-    def add(self, t: float | None, obs: MarkerObservation) -> None:
+    def add(self, t: float | None, obs: MarkerObservation) -> bool:
+        """The tracking step of one frame (time in s or None, its observation): True when it gave a position.
+
+        A position with a missing, repeated or out-of-order time cannot be placed in a trace and
+        counts as corrupt; a frame without the marker counts as lost (or corrupt, by its reason).
+        """
         self.frames += 1
         if t is not None and math.isfinite(t):
             self.seen_times.append(float(t))
@@ -101,19 +106,33 @@ class Tracking:
                 # a repeated or out-of-order timestamp cannot be placed in a trace
                 self.corrupt += 1
                 self.reasons["timestamp out of order"] += 1
-                return
+                return False
             self.t.append(float(t))
             self.x.append(obs.x)
             self.slope.append(obs.slope)
             self.rows.append(obs.rows)
             self.residual.append(obs.residual)
             self.contrast.append(obs.contrast)
-            return
+            return True
         if obs.reason == CORRUPT or t is None:
             self.corrupt += 1
         else:
             self.lost += 1
-        self.reasons[(obs.detail or obs.reason).split(" (")[0]] += 1
+        self.reasons[(obs.detail or obs.reason or "no marker").split(" (")[0]] += 1
+        return False
+
+    def subset(self, keep: np.ndarray) -> "Tracking":
+        """A copy keeping only the positions where the boolean mask ``keep`` (one per position) is true;
+        the frame counters are copied unchanged."""
+        pick = np.flatnonzero(keep)
+
+        def take(values: list) -> list:
+            return [values[i] for i in pick]
+
+        return Tracking(t=take(self.t), x=take(self.x), slope=take(self.slope), rows=take(self.rows),
+                        residual=take(self.residual), contrast=take(self.contrast), frames=self.frames,
+                        lost=self.lost, corrupt=self.corrupt, reasons=Counter(self.reasons),
+                        seen_times=list(self.seen_times), untimed=self.untimed)
 
 
 def track_frames(frames: Iterable[tuple[float | None, np.ndarray | None]], config: CameraConfig,
