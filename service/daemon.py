@@ -375,14 +375,18 @@ class Appliance:
                                   timing=timing, part=part)
 
         trace = m.trace
-        stored = self.store.record(
-            uuid=m.id, status="ok", trigger=m.requested_by, device_id=cfg.device_id, software_version=__version__,
-            started_at=started, finished_at=finished, result=result, build_payload=build,
-            rig=rig.to_dict(), config=cfg.to_dict(),
-            trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
-            trace_meta=dict(trace.meta), enqueue=("result",) if self.mqtt is not None else (),
-            part=_part_columns(part),
-        )
+        try:
+            stored = self.store.record(
+                uuid=m.id, status="ok", trigger=m.requested_by, device_id=cfg.device_id,
+                software_version=__version__, started_at=started, finished_at=finished, result=result,
+                build_payload=build, rig=rig.to_dict(), config=cfg.to_dict(),
+                trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
+                trace_meta=dict(trace.meta), enqueue=("result",) if self.mqtt is not None else (),
+                part=_part_columns(part),
+            )
+        except BaseException:
+            self.parts.undo_last()  # not stored: the release does not count for the part
+            raise
         self._durable_results.append(m.id)
         if self.modbus is not None and stored.payload is not None:
             self.modbus.publish_result(stored.payload)
