@@ -8,12 +8,17 @@ request copies that image into pymodbus' datastore before pymodbus reads it,
 so one request never mixes two images (see the snapshot protocol in
 docs/modbus.md).
 
-Writes: only the two command coils are writable. Holding registers are
-declared read-only (pymodbus answers 0x02), coils other than the command
-coils are refused in the access hook with 0x02. A single-coil write (function
-5) must carry 0xFF00 (on) or 0x0000 (off), anything else is answered with
-exception 03 and fires nothing, and its reply echoes the request (the coil
-itself reads back 0: the command coils are pulses).
+Writes: only the two command coils and the part ID / recipe_select holding
+registers (``registers.WRITABLE``) are writable. The result image is declared
+read-only (pymodbus answers 0x02), so is everything between it and the
+writable block; coils other than the command coils are refused in the access
+hook with 0x02. A single-coil write (function 5) must carry 0xFF00 (on) or
+0x0000 (off), anything else is answered with exception 03 and fires nothing,
+and its reply echoes the request (the coil itself reads back 0: the command
+coils are pulses). A write to the part registers while a measurement runs (or
+a trigger is about to start one) gets 0x06 (server device busy): the part
+being measured cannot change; an unknown recipe number or a non-ASCII part ID
+gets 0x03 (illegal data value).
 """
 
 from __future__ import annotations
@@ -47,6 +52,10 @@ log = logging.getLogger("moi.modbus")
 _READ_REGISTERS = {3, 4}
 _READ_DISCRETE = {2}
 _WRITE_COILS = {5, 15}
+_WRITE_REGISTERS = {6, 16}
+
+#: after a trigger coil write, part writes are refused this long (s) until the daemon reports busy
+TRIGGER_HOLD = 0.5
 
 
 @dataclass(frozen=True)
@@ -251,18 +260,26 @@ class _BoundedTcpServer(ModbusTcpServer):
 class ModbusServer:
     """Serves the register image of ``service.registers``.
 
-    on_command(name, source) is called from the server thread when the PLC
-    writes 1 to a command coil (name "trigger" or "abort"); it must not block.
+    on_command(name, source, data) is called from the server thread when the PLC
+    writes 1 to a command coil (name "trigger" or "abort"; called with two
+    arguments), a part ID (name "part_id", data {"part_id": text}) or a recipe
+    number ("recipe", {"recipe": number}); it must not block.
+    ``recipe_numbers``: the recipe numbers the PLC may select (0 deselects).
     """
 
-    def __init__(self, settings: ModbusSettings, on_command: Callable[[str, str], None] | None = None) -> None:
+    def __init__(self, settings: ModbusSettings, on_command: Callable[..., None] | None = None,
+                 recipe_numbers: frozenset[int] = frozenset()) -> None:
         if settings.word_order not in R.WORD_ORDERS:
             raise ValueError(f"word_order must be one of {R.WORD_ORDERS}")
         self.settings = settings
-        self._on_command = on_command or (lambda name, source: None)
+        self._on_command = on_command or (lambda name, source, data=None: None)
+        self.recipe_numbers = recipe_numbers
         self._lock = threading.Lock()
         self._live = R.LiveStatus()
         self._snapshot = R.encode_snapshot(None, settings.word_order)
+        self._verdict: str | None = None
+        self._inputs = [0] * (R.WRITABLE_END - R.WRITABLE_START)  # the writable holding registers
+        self._hold_until = 0.0  # monotonic time until which part writes are refused after a trigger
         self._result_valid = False
         self._image: tuple[int, ...] = ()
         self._status_bits = 0
@@ -279,10 +296,29 @@ class ModbusServer:
         words = R.encode_snapshot(payload, self.settings.word_order)
         with self._lock:
             self._snapshot = words
+            self._verdict = payload.get("verdict")
             self._result_valid = True
             self._rebuild()
 
+    def set_inputs(self, *, part_id: str | None = None, recipe: int | None = None) -> None:
+        """Show a part ID / recipe set by another source (MQTT, config) in the writable registers."""
+        with self._lock:
+            if part_id is not None:
+                a, n = R.WRITABLE["part_id"]
+                self._inputs[a - R.WRITABLE_START: a - R.WRITABLE_START + n] = R.encode_ascii(part_id, 2 * n)
+            if recipe is not None:
+                self._inputs[R.WRITABLE["recipe_select"][0] - R.WRITABLE_START] = int(recipe) & 0xFFFF
+
+    def inputs(self) -> dict[str, object]:
+        """The writable registers as now: part_id (text) and recipe_select (number)."""
+        a, n = R.WRITABLE["part_id"]
+        words = self._inputs
+        return {"part_id": R.decode_ascii(words[a - R.WRITABLE_START: a - R.WRITABLE_START + n]),
+                "recipe_select": words[R.WRITABLE["recipe_select"][0] - R.WRITABLE_START]}
+
     def set_live(self, live: R.LiveStatus) -> None:
+        if live.busy:
+            self._hold_until = 0.0  # the daemon took the trigger: busy protects the part from here on
         with self._lock:
             if live != self._live:
                 self._live = live
@@ -297,10 +333,10 @@ class ModbusServer:
         return self._image
 
     def _rebuild(self) -> None:
-        live = R.encode_live(self._live, self._result_valid, self.settings.word_order)
+        live = R.encode_live(self._live, self._result_valid, self.settings.word_order, self._verdict)
         # one assignment: a request handler sees the old or the new tuple, never a mix
         self._image = tuple(live + self._snapshot)
-        self._status_bits = self._live.status_bits(self._result_valid)
+        self._status_bits = self._live.status_bits(self._result_valid, self._verdict)
 
     # --- pymodbus access hook (runs in the server's event loop) -------------------
     async def _action(self, func_code: int, start_address: int, address: int, count: int,
@@ -309,7 +345,11 @@ class ModbusServer:
         if func_code in _READ_REGISTERS:
             image = self._image
             current[0: len(image)] = image  # the block starts at address 0
+            if func_code == 3:
+                current[R.WRITABLE_START: R.WRITABLE_END] = self._inputs
             return None
+        if func_code in _WRITE_REGISTERS and values is not None:
+            return self._write_inputs(address, values)
         if func_code in _READ_DISCRETE:
             current[0] = self._status_bits
             return None
@@ -319,9 +359,37 @@ class ModbusServer:
             names = {a: n for n, a in R.COILS.items()}
             for i, v in enumerate(values):
                 if v:
-                    self._on_command(names[address + i], "modbus")
+                    name = names[address + i]
+                    if name == "trigger":  # the part ID written before it is queued before it: it applies
+                        self._hold_until = time.monotonic() + TRIGGER_HOLD
+                    self._on_command(name, "modbus")
                 values[i] = False  # command coils are pulses: they read back 0
             return None
+        return None
+
+    def _write_inputs(self, address: int, values: list) -> ExcCodes | None:
+        """FC 6 / FC 16 to the part ID / recipe_select registers (pymodbus refused every other address)."""
+        if address < R.WRITABLE_START or address + len(values) > R.WRITABLE_END:
+            return ExcCodes.ILLEGAL_ADDRESS
+        if self._live.busy or time.monotonic() < self._hold_until:
+            return ExcCodes.DEVICE_BUSY  # the part being measured cannot change
+        new = list(self._inputs)
+        new[address - R.WRITABLE_START: address - R.WRITABLE_START + len(values)] = [int(v) & 0xFFFF for v in values]
+        a, n = R.WRITABLE["part_id"]
+        part_words = new[a - R.WRITABLE_START: a - R.WRITABLE_START + n]
+        raw = b"".join(w.to_bytes(2, "big") for w in part_words).replace(b"\0", b"")
+        if any(not 32 <= ch < 127 for ch in raw):
+            return ExcCodes.ILLEGAL_VALUE
+        recipe = new[R.WRITABLE["recipe_select"][0] - R.WRITABLE_START]
+        touched = range(address, address + len(values))
+        recipe_written = R.WRITABLE["recipe_select"][0] in touched
+        if recipe_written and recipe != 0 and recipe not in self.recipe_numbers:
+            return ExcCodes.ILLEGAL_VALUE
+        self._inputs = new
+        if any(a <= t < a + n for t in touched):
+            self._on_command("part_id", "modbus", {"part_id": R.decode_ascii(part_words)})
+        if recipe_written:
+            self._on_command("recipe", "modbus", {"recipe": recipe})
         return None
 
     def _device(self) -> SimDevice:
@@ -331,7 +399,9 @@ class ModbusServer:
             simdata=(
                 [SimData(0, count=n_coil_regs, values=False, datatype=DataType.BITS)],
                 [SimData(0, count=len(R.STATUS_BITS), values=False, datatype=DataType.BITS)],
-                [SimData(0, count=R.IMAGE_SIZE, values=0, datatype=DataType.REGISTERS, readonly=True)],
+                [SimData(0, count=R.IMAGE_SIZE, values=0, datatype=DataType.REGISTERS, readonly=True),
+                 SimData(R.WRITABLE_START, count=R.WRITABLE_END - R.WRITABLE_START, values=0,
+                         datatype=DataType.REGISTERS)],
                 [SimData(0, count=R.IMAGE_SIZE, values=0, datatype=DataType.REGISTERS, readonly=True)],
             ),
             action=self._action,

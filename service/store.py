@@ -29,7 +29,21 @@ import numpy as np
 from .errors import StoreError
 
 DB_NAME = "results.db"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: part, recipe and verdict columns (added in place to a version-1 store)
+
+#: the part/recipe/verdict columns (schema 2), added to an older store by ``ALTER TABLE`` at open
+PART_COLUMNS = (
+    ("part_id", "TEXT"),          # the part's serial number (PLC / MQTT), None when none was given
+    ("part_uuid", "TEXT"),        # the part: every release of one part shares it
+    ("recipe", "TEXT"),           # recipe name
+    ("recipe_version", "TEXT"),   # hash of the recipe file as used
+    ("release_index", "INTEGER"), # 1 … releases
+    ("releases", "INTEGER"),      # releases per part of the recipe
+    ("verdict", "TEXT"),          # this release's verdict: OK / NOK / INVALID
+    ("part_verdict", "TEXT"),     # the part's verdict, on the release that completed the part
+    ("part_value", "REAL"),       # the part's combined value of the recipe quantity, kg·m²
+    ("part_U", "REAL"),           # its expanded uncertainty, kg·m²
+)
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -127,6 +141,16 @@ class StoredMeasurement:
     trace_t: np.ndarray | None = None
     trace_angle: np.ndarray | None = None
     trace_meta: dict[str, Any] | None = None
+    part_id: str | None = None
+    part_uuid: str | None = None
+    recipe: str | None = None
+    recipe_version: str | None = None
+    release_index: int | None = None
+    releases: int | None = None
+    verdict: str | None = None
+    part_verdict: str | None = None
+    part_value: float | None = None
+    part_U: float | None = None
 
     def summary(self) -> dict[str, Any]:
         """The listing fields (no payload, no trace)."""
@@ -136,6 +160,7 @@ class StoredMeasurement:
             "started_at": self.started_at, "finished_at": self.finished_at, "published_at": self.published_at,
             "J": self.J, "J_std": self.J_std, "omega_n": self.omega_n, "damping_ratio": self.damping_ratio,
             "residual_rms": self.residual_rms, "flags": list(self.flags), "error": self.error,
+            **{name: getattr(self, name) for name, _ in PART_COLUMNS},
         }
 
 
@@ -148,8 +173,10 @@ class OutboxItem:
     attempts: int
 
 
-_LIST_COLUMNS = ("id, uuid, seq, status, trigger, device_id, software_version, started_at, finished_at, stored_at, "
+_BASE_COLUMNS = ("id, uuid, seq, status, trigger, device_id, software_version, started_at, finished_at, stored_at, "
                  "published_at, J, J_std, omega_n, damping_ratio, residual_rms, flags, error")
+_PART_SELECT = ", ".join(name for name, _ in PART_COLUMNS)
+_LIST_COLUMNS = f"{_BASE_COLUMNS}, {_PART_SELECT}"
 _FULL_COLUMNS = _LIST_COLUMNS + ", payload, rig, config"
 _TRACE_COLUMNS = ", trace_t, trace_angle, trace_meta"
 
@@ -175,12 +202,19 @@ class Store:
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.execute("PRAGMA foreign_keys=ON")
             self._db.executescript(_SCHEMA)  # idempotent (IF NOT EXISTS)
+            have = {row[1] for row in self._db.execute("PRAGMA table_info(measurements)")}
+            for name, kind in PART_COLUMNS:
+                if name not in have:
+                    self._db.execute(f"ALTER TABLE measurements ADD COLUMN {name} {kind}")
+            self._db.execute("CREATE INDEX IF NOT EXISTS measurements_part ON measurements (part_id)")
             with self._tx():
                 row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
                 if row is None:
                     self._db.execute("INSERT INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),))
                 elif int(row[0]) > SCHEMA_VERSION:
                     raise StoreError(f"{self.path}: result store schema {row[0]} is newer than this software ({SCHEMA_VERSION})")
+                elif int(row[0]) < SCHEMA_VERSION:
+                    self._db.execute("UPDATE meta SET value = ? WHERE key='schema'", (str(SCHEMA_VERSION),))
         except sqlite3.Error as exc:
             raise StoreError(f"cannot open the result store {str(self.path)!r}: {exc}") from None
         except OSError as exc:
@@ -236,12 +270,14 @@ class Store:
         trace_meta: Mapping[str, Any] | None = None,
         enqueue: Sequence[str] = (),
         uuid: str | None = None,
+        part: Mapping[str, Any] | None = None,
     ) -> StoredMeasurement:
         """Store one measurement and queue its publications, atomically.
 
         build_payload(uuid, seq) makes the published payload once the sequence
         number is known (ok results). enqueue: outbox kinds to queue (e.g.
-        ("result",)); the payload is queued as it is stored.
+        ("result",)); the payload is queued as it is stored. part: values of
+        the PART_COLUMNS (part ID, recipe, verdicts...), missing keys are NULL.
         """
         from .payload import dumps
 
@@ -270,6 +306,11 @@ class Store:
                      json.dumps(trace_meta, default=str) if trace_meta is not None else None),
                 )
                 mid = cur.lastrowid
+                if part:
+                    cols = [name for name, _ in PART_COLUMNS if part.get(name) is not None]
+                    if cols:
+                        db.execute(f"UPDATE measurements SET {', '.join(c + ' = ?' for c in cols)} WHERE id = ?",
+                                   (*[part[c] for c in cols], mid))
                 if payload_text is not None:
                     for kind in enqueue:
                         db.execute("INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at) VALUES (?,?,?,?,?)",
@@ -343,9 +384,18 @@ class Store:
         return self._row(row, full=True, trace=False) if row else None
 
     def list(self, limit: int | None = 20, *, since: float | None = None, until: float | None = None,
-             status: str | None = None, full: bool = False) -> list[StoredMeasurement]:
-        """Measurements, newest first (limit None: all)."""
-        clauses, args = [], []
+             status: str | None = None, full: bool = False, part_id: str | None = None,
+             recipe: str | None = None, parts_only: bool = False) -> list[StoredMeasurement]:
+        """Measurements, newest first (limit None: all). part_id / recipe: only those;
+        parts_only: only the releases that completed a part (they carry the part verdict)."""
+        clauses: list[str] = []
+        args: list[Any] = []
+        for column, value in (("part_id", part_id), ("recipe", recipe)):
+            if value is not None:
+                clauses.append(f"{column} = ?")
+                args.append(value)
+        if parts_only:
+            clauses.append("part_verdict IS NOT NULL")
         if since is not None:
             clauses.append("finished_at >= ?")
             args.append(since)
@@ -363,6 +413,13 @@ class Store:
         with self._lock:
             rows = self._db.execute(f"SELECT {cols} FROM measurements {where} ORDER BY seq DESC {lim}", args).fetchall()
         return [self._row(r, full=full, trace=False) for r in rows]
+
+    def recipes(self) -> list[str]:
+        """Names of the recipes of the completed parts in the store, in order of first use."""
+        with self._lock:
+            rows = self._db.execute("SELECT recipe FROM measurements WHERE part_verdict IS NOT NULL "
+                                    "GROUP BY recipe ORDER BY MIN(seq)").fetchall()
+        return [r[0] for r in rows if r[0] is not None]
 
     def iter_all(self, **kwargs: Any) -> Iterator[StoredMeasurement]:
         yield from self.list(limit=None, **kwargs)

@@ -1,7 +1,7 @@
 """Experiment behind docs/measured-data.md: is the wood trace's residual a sensor gain?
 
-Not part of the effect library (DESIGN.md fixes it): this adds a gain g to the
-final model, θ_meas = g·θ + a, fits it, and prints the residual and BIC.
+Written before the library had its `gain` effect: this adds a gain g to the
+final model by hand, θ_meas = g·θ + a, fits it, and prints the residual and BIC.
 Run from the repository root: `.venv/bin/python docs/experiments/wood_sensor_gain.py`.
 """
 

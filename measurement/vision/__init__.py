@@ -11,12 +11,40 @@ Pure numpy/scipy/opencv: decoding files and talking to cameras live in
 ``service.video`` and ``drivers.camera``.
 """
 
-from .config import CameraConfig, CameraModel, MarkerGeometry, PoseSettings
-from .geometry import angle_from_normalised, normalised_from_angle
-from .locate import MarkerObservation, MarkerTracker, TrackerSettings
-from .pipeline import Tracking, VisionSettings, count_dropped, trace_from_tracking, track_frames
-from .pose import PoseEstimate, estimate_yaw
-from .render import CameraPose, Imaging, MarkerPattern, MarkerRenderer
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: public name → its submodule, imported on first use (PEP 562): reading a camera file
+#: (``measurement.vision.config``) must not load OpenCV and scipy.
+_WHERE = {
+    **dict.fromkeys(("CameraConfig", "CameraModel", "MarkerGeometry", "PoseSettings"), "config"),
+    **dict.fromkeys(("angle_from_normalised", "normalised_from_angle"), "geometry"),
+    **dict.fromkeys(("MarkerObservation", "MarkerTracker", "TrackerSettings"), "locate"),
+    **dict.fromkeys(("Tracking", "VisionSettings", "count_dropped", "trace_from_tracking", "track_frames"), "pipeline"),
+    **dict.fromkeys(("PoseEstimate", "estimate_yaw"), "pose"),
+    **dict.fromkeys(("CameraPose", "Imaging", "MarkerPattern", "MarkerRenderer"), "render"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _WHERE:
+        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
+
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .config import CameraConfig, CameraModel, MarkerGeometry, PoseSettings
+    from .geometry import angle_from_normalised, normalised_from_angle
+    from .locate import MarkerObservation, MarkerTracker, TrackerSettings
+    from .pipeline import Tracking, VisionSettings, count_dropped, trace_from_tracking, track_frames
+    from .pose import PoseEstimate, estimate_yaw
+    from .render import CameraPose, Imaging, MarkerPattern, MarkerRenderer
 
 __all__ = [
     "CameraConfig", "CameraModel", "MarkerGeometry", "PoseSettings", "angle_from_normalised",

@@ -7,7 +7,6 @@ import os
 from datetime import datetime, timezone
 from pathlib import Path
 
-from ..config import load_config
 from ..errors import InputFileError, StoreError
 from ..store import DB_NAME, Store
 
@@ -26,6 +25,8 @@ def open_store(args: argparse.Namespace) -> Store:
     if args.state_dir:
         candidates = [Path(args.state_dir)]
     elif args.config:
+        from ..config import load_config  # only with --config: it loads the drivers' settings
+
         candidates = [load_config(args.config).state_dir]
     else:
         env = os.environ.get("STATE_DIRECTORY")

@@ -1,7 +1,8 @@
 """`moi calibrate CAL.toml --rig RIG.toml --out RIG_OUT.toml`: k and tare inertia of a torsion rig.
 
 CAL.toml lists the references, each with a known added inertia and either a
-trace (identified here) or seed 001's ω_m and ζ:
+trace (identified here) or the damped main frequency ω_m and amplitude
+modulation ζ as a monocular-vision torsion pendulum reports them:
 
     [[reference]]
     name = "empty"
@@ -23,7 +24,6 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
-from measurement import Options, identify
 from measurement.calibration import Cylinder, Reference, calibrate_torsion
 from measurement.errors import CalibrationError
 
@@ -49,6 +49,8 @@ def _number(ref_name: str, key: str, value, allow_zero: bool = True) -> float:
 
 
 def load_references(path: str, rig) -> list[Reference]:
+    from measurement import Options, identify  # scipy: only when a reference is a trace
+
     doc = read_toml(path, "calibration file")
     refs = doc.get("reference")
     if set(doc) - {"reference"} or not isinstance(refs, list) or not refs:

@@ -21,7 +21,6 @@ import threading
 import time
 from pathlib import Path
 
-from ..config import parse_config
 from ..defaults import DEMO_EFFECTS, DEMO_INERTIA
 from ..errors import InputFileError
 
@@ -80,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
         tmp = tempfile.TemporaryDirectory(prefix="moi-demo-")
         state_dir = tmp.name
     try:
+        from ..config import parse_config
+
         config = parse_config(_doc(args, state_dir), source="moi demo")
         if args.web_port and not _port_free(args.web_port):
             print(f"port {args.web_port} is taken: the web page goes on a free port")

@@ -65,7 +65,9 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     browser.find_element(By.ID, "token").send_keys(token)
     browser.find_element(By.ID, "login-button").click()
     wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, ".who .ok"))
-    wait.until(lambda d: d.find_element(By.ID, "state").text == "IDLE")
+    # the live stream is connected (its first tick arrived): no transition can be missed from here on
+    wait.until(lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-live") == "1")
+    assert browser.find_element(By.ID, "state").text == "IDLE"
 
     browser.find_element(By.ID, "measure").click()
     wait.until(lambda d: d.find_elements(By.ID, "latest-link") and "IDLE" in
@@ -83,9 +85,10 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     J, J_std = (float(x) for x in re.match(r"J = ([0-9.e+-]+) ± ([0-9.e+-]+)", text).groups())
     truth = app.devices.sim.inertia
     assert abs(J - truth) <= max(5 * J_std, 1e-4 * truth), (J, J_std, truth)
-    added = app.store.latest().payload["added_effects"]
+    steps = [st for st in app.store.latest().payload["steps"] if st["chosen"]]
     shown = [li.text for li in browser.find_elements(By.CSS_SELECTOR, ".steps li")]
-    assert [t.split(" ")[0] for t in shown] == added and all("evidence:" in t for t in shown), (added, shown)
+    assert [t.split(" ")[0] for t in shown] == [st["chosen"] for st in steps], (steps, shown)
+    assert all(st["reason"] in t and st["evidence"] in t for st, t in zip(steps, shown)), (steps, shown)
     wait.until(lambda d: d.execute_script(
         "var i = document.getElementById('plot'); return i.complete && i.naturalWidth > 400;"))
     shot = tmp_path / "result-page.png"

@@ -86,6 +86,7 @@ var moi = (function () {
     es.addEventListener("state", function (e) { var s = JSON.parse(e.data); logState(s); show(s); });
     es.addEventListener("tick", function (e) {
       var s = JSON.parse(e.data);
+      document.body.setAttribute("data-live", "1");  // connected: every transition from now on is shown
       show(s);
       if (s.samples) {
         if (s.reset || s.measurement_id !== mid) { mid = s.measurement_id; swing.reset(s.capture_duration + (s.pre_trigger || 0)); }
