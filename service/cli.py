@@ -15,6 +15,7 @@ import sys
 from typing import Sequence
 
 from measurement.errors import InvalidInput
+from service.errors import StoreError
 
 #: subcommand → module (in the order `moi --help` lists them)
 COMMANDS = {
@@ -27,6 +28,7 @@ COMMANDS = {
     "results": "service.commands.results",
     "export": "service.commands.export",
     "spc": "service.commands.spc",
+    "store": "service.commands.store",
     "modbus-map": "service.commands.modbus_map",
     "demo": "service.commands.demo",
 }
@@ -72,7 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args._run(args) or 0)
-    except InvalidInput as exc:
+    except (InvalidInput, StoreError) as exc:  # a damaged or unusable store is the user's file: one line
         print(f"moi {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

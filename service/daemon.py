@@ -38,7 +38,7 @@ from measurement.errors import InvalidInput
 
 from . import __version__
 from .config import Config
-from .errors import ServiceError
+from .errors import ServiceError, StoreDamaged
 from .hardware import Devices, build_devices
 from .modbus_server import ModbusServer
 from .mqtt import MqttService
@@ -46,7 +46,7 @@ from .notify import Notifier
 from .payload import iso_utc, result_payload
 from .recipes import SPC_WINDOW, PartTracker, Recipe, RecipeBook, recipe_spc
 from .registers import LiveStatus
-from .store import Store
+from .store import Store, quarantine_store
 
 log = logging.getLogger("moi.daemon")
 
@@ -128,7 +128,7 @@ class Appliance:
         """Open the store, start Modbus and MQTT, build the devices and the sequencer; then READY."""
         cfg = self.config
         try:
-            self.store = Store(cfg.state_dir)
+            self.store = self._open_store()
             if cfg.modbus is not None:
                 self.modbus = ModbusServer(cfg.modbus, on_command=self.command, recipe_numbers=self.parts.book.numbers)
                 self.modbus.set_inputs(recipe=self.parts.recipe.number if self.parts.recipe else 0)
@@ -177,6 +177,28 @@ class Appliance:
         log.info("moi %s ready (%s rig; %s; store %s)", __version__, "simulated" if cfg.simulated else "hardware",
                  ", ".join(where), self.store.path)
         self.notifier.ready(f"idle; {', '.join(where)}")
+
+    def _open_store(self) -> Store:
+        """The store, after the reads a start does; a damaged one is moved aside and what can be
+        read is salvaged into a new one (a restart loop on a damaged file would stop the appliance
+        for good, and deleting it would lose results)."""
+        state_dir = self.config.state_dir
+        try:
+            store = Store(state_dir)
+            try:
+                store.outbox_count()
+                store.latest("ok")
+                store.outbox_pending(limit=10)
+            except BaseException:
+                store.close()
+                raise
+            return store
+        except StoreDamaged as exc:
+            log.error("%s", exc)
+        aside, health = quarantine_store(state_dir, self.wall_clock)
+        log.error("the damaged result store was moved to %s; a new store holds what could be read (%s)", aside,
+                  health.summary())
+        return Store(state_dir)
 
     # --- the main loop ---------------------------------------------------------------------------------
     def run(self, until: Callable[[], bool] | None = None) -> int:
@@ -375,14 +397,18 @@ class Appliance:
                                   timing=timing, part=part)
 
         trace = m.trace
-        stored = self.store.record(
-            uuid=m.id, status="ok", trigger=m.requested_by, device_id=cfg.device_id, software_version=__version__,
-            started_at=started, finished_at=finished, result=result, build_payload=build,
-            rig=rig.to_dict(), config=cfg.to_dict(),
-            trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
-            trace_meta=dict(trace.meta), enqueue=("result",) if self.mqtt is not None else (),
-            part=_part_columns(part),
-        )
+        try:
+            stored = self.store.record(
+                uuid=m.id, status="ok", trigger=m.requested_by, device_id=cfg.device_id,
+                software_version=__version__, started_at=started, finished_at=finished, result=result,
+                build_payload=build, rig=rig.to_dict(), config=cfg.to_dict(),
+                trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
+                trace_meta=dict(trace.meta), enqueue=("result",) if self.mqtt is not None else (),
+                part=_part_columns(part),
+            )
+        except BaseException:
+            self.parts.undo_last()  # not stored: the release does not count for the part
+            raise
         self._durable_results.append(m.id)
         if self.modbus is not None and stored.payload is not None:
             self.modbus.publish_result(stored.payload)

@@ -36,7 +36,8 @@ A part is identified by its serial number (``part_id``, up to
 MQTT measure command. ``PartTracker`` counts the releases of the open part:
 the same part ID and recipe continue the part until it has ``releases``
 releases; a different part ID or recipe starts a new part (an unfinished part
-is reported as abandoned in the log and in the next payload).
+is reported as abandoned in the log and in the next payload's
+``release.abandoned``).
 """
 
 from __future__ import annotations
@@ -326,6 +327,7 @@ class PartTracker:
         self.recipe: Recipe | None = book.find(active) if active is not None else None
         self.part_id: str | None = None
         self._open: _OpenPart | None = None
+        self._undo: tuple[_OpenPart | None, int] | None = None
         self.last_part: PartResult | None = None
 
     def select(self, key: str | int) -> Recipe:
@@ -352,12 +354,14 @@ class PartTracker:
         """Count one release; returns the payload keys (the part's verdict once it is complete)."""
         out: dict[str, Any] = {"part_id": part_id, "recipe": recipe.to_dict() if recipe else None,
                                "release": None, "part": None, "verdict": None}
+        o = self._open
+        self._undo = (o, len(o.readings) if o is not None else 0)
         if recipe is None:
             self._abandon("no recipe is active")
             return out
-        o = self._open
+        abandoned = None
         if o is not None and (o.part_id != part_id or o.recipe.version != recipe.version):
-            self._abandon("a different part ID or recipe")
+            abandoned = self._abandon("a different part ID or recipe")
             o = None
         if o is None:
             o = self._open = _OpenPart(str(uuidlib.uuid4()), part_id, recipe)
@@ -366,7 +370,7 @@ class PartTracker:
         o.measurements.append(measurement_id)
         decision = judge_release(reading, recipe.spec, recipe.quality)
         out["release"] = {"index": len(o.readings), "of": recipe.releases, "part_uuid": o.uuid,
-                          "quantity": recipe.spec.quantity, **decision.to_dict()}
+                          "quantity": recipe.spec.quantity, **decision.to_dict(), "abandoned": abandoned}
         if len(o.readings) >= recipe.releases:
             part = combine(o.readings, recipe.spec, recipe.quality)
             self.last_part = part
@@ -378,12 +382,26 @@ class PartTracker:
             self._open = None
         return out
 
-    def _abandon(self, why: str) -> None:
-        o = self._open
+    def undo_last(self) -> None:
+        """Forget the last ``release`` (its measurement could not be stored)."""
+        if self._undo is None:
+            return
+        o, n = self._undo
         if o is not None:
-            log.warning("part %s (%s) abandoned after %d of %d releases: %s", o.part_id or "(no ID)", o.recipe.name,
-                        len(o.readings), o.recipe.releases, why)
-            self._open = None
+            del o.readings[n:]
+            del o.measurements[n:]
+        self._open = o
+        self._undo = None
+
+    def _abandon(self, why: str) -> dict[str, Any] | None:
+        o = self._open
+        if o is None:
+            return None
+        log.warning("part %s (%s) abandoned after %d of %d releases: %s", o.part_id or "(no ID)", o.recipe.name,
+                    len(o.readings), o.recipe.releases, why)
+        self._open = None
+        return {"part_uuid": o.uuid, "part_id": o.part_id, "recipe": o.recipe.name, "done": len(o.readings),
+                "of": o.recipe.releases, "reason": why}
 
 
 # --- SPC of a recipe's parts ---------------------------------------------------------------------------------------

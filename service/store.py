@@ -14,7 +14,9 @@ row). One connection guarded by a lock is shared by the daemon's threads.
 
 from __future__ import annotations
 
+import functools
 import json
+import os
 import sqlite3
 import threading
 import time
@@ -26,7 +28,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .errors import StoreError
+from .errors import StoreDamaged, StoreError
 
 DB_NAME = "results.db"
 SCHEMA_VERSION = 2  # 2: part, recipe and verdict columns (added in place to a version-1 store)
@@ -96,6 +98,39 @@ CREATE TABLE IF NOT EXISTS attachments (
     PRIMARY KEY (uuid, name)
 );
 """
+
+
+#: SQLite's primary result codes that mean a damaged file (SQLITE_CORRUPT, SQLITE_NOTADB)
+_DAMAGED_CODES = {11, 26}
+
+
+def _is_damage(exc: BaseException) -> bool:
+    if isinstance(exc, sqlite3.Error):
+        code = getattr(exc, "sqlite_errorcode", None)
+        return code is not None and code & 0xFF in _DAMAGED_CODES
+    return isinstance(exc, (zlib.error, json.JSONDecodeError))  # a blob or a JSON text that no longer decodes
+
+
+def _store_errors(what: str) -> Callable:
+    """Method decorator: an SQLite error (or a stored value that no longer decodes) becomes one
+    StoreError line naming the file and what was being done; StoreDamaged when the file is damaged."""
+
+    def wrap(method: Callable) -> Callable:
+        @functools.wraps(method)
+        def guarded(self: "Store", *args: Any, **kwargs: Any) -> Any:
+            try:
+                return method(self, *args, **kwargs)
+            except StoreError:
+                raise
+            except (sqlite3.Error, zlib.error, json.JSONDecodeError) as exc:
+                if _is_damage(exc):
+                    raise StoreDamaged(f"the result store {str(self.path)!r} is damaged ({exc}) while {what}; "
+                                       "`moi store check` tells what can be read, `moi store salvage` keeps it") from None
+                raise StoreError(f"cannot use the result store {str(self.path)!r} while {what}: {exc}") from None
+
+        return guarded
+
+    return wrap
 
 
 def _pack(a: np.ndarray | None) -> bytes | None:
@@ -216,6 +251,8 @@ class Store:
                 elif int(row[0]) < SCHEMA_VERSION:
                     self._db.execute("UPDATE meta SET value = ? WHERE key='schema'", (str(SCHEMA_VERSION),))
         except sqlite3.Error as exc:
+            if _is_damage(exc):
+                raise StoreDamaged(f"the result store {str(self.path)!r} is damaged ({exc})") from None
             raise StoreError(f"cannot open the result store {str(self.path)!r}: {exc}") from None
         except OSError as exc:
             raise StoreError(f"cannot create the state directory {str(self.state_dir)!r}: {exc.strerror}") from None
@@ -322,6 +359,7 @@ class Store:
         return m
 
     # --- outbox -------------------------------------------------------------------
+    @_store_errors("reading the MQTT outbox")
     def outbox_pending(self, limit: int = 100, exclude: Sequence[int] = ()) -> list[OutboxItem]:
         """Oldest unacknowledged publications first."""
         with self._lock:
@@ -331,10 +369,12 @@ class Store:
         skip = set(exclude)
         return [OutboxItem(*row) for row in rows if row[0] not in skip][:limit]
 
+    @_store_errors("updating the MQTT outbox")
     def outbox_attempt(self, item_id: int) -> None:
         with self._lock, self._tx() as db:
             db.execute("UPDATE outbox SET attempts = attempts + 1, last_attempt = ? WHERE id = ?", (time.time(), item_id))
 
+    @_store_errors("updating the MQTT outbox")
     def outbox_ack(self, item_id: int) -> bool:
         """The broker acknowledged the publication: drop it from the outbox. False if it was not there."""
         now = time.time()
@@ -346,6 +386,7 @@ class Store:
             db.execute("UPDATE measurements SET published_at = COALESCE(published_at, ?) WHERE id = ?", (now, row[0]))
         return True
 
+    @_store_errors("counting the MQTT outbox")
     def outbox_count(self) -> int:
         with self._lock:
             return int(self._db.execute("SELECT COUNT(*) FROM outbox").fetchone()[0])
@@ -364,6 +405,7 @@ class Store:
                 d[k] = _unpack(d[k])
         return StoredMeasurement(**d)
 
+    @_store_errors("reading a measurement")
     def get(self, key: str | int, *, trace: bool = False) -> StoredMeasurement | None:
         """A measurement by UUID (or a unique UUID prefix) or by sequence number."""
         cols = _FULL_COLUMNS + (_TRACE_COLUMNS if trace else "")
@@ -376,6 +418,7 @@ class Store:
             return None
         return self._row(rows[0], full=True, trace=trace)
 
+    @_store_errors("reading the latest measurement")
     def latest(self, status: str | None = "ok") -> StoredMeasurement | None:
         where = "WHERE status = ?" if status else ""
         args: tuple = (status,) if status else ()
@@ -383,6 +426,7 @@ class Store:
             row = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC LIMIT 1", args).fetchone()
         return self._row(row, full=True, trace=False) if row else None
 
+    @_store_errors("listing measurements")
     def list(self, limit: int | None = 20, *, since: float | None = None, until: float | None = None,
              status: str | None = None, full: bool = False, part_id: str | None = None,
              recipe: str | None = None, parts_only: bool = False) -> list[StoredMeasurement]:
@@ -424,6 +468,7 @@ class Store:
     def iter_all(self, **kwargs: Any) -> Iterator[StoredMeasurement]:
         yield from self.list(limit=None, **kwargs)
 
+    @_store_errors("counting measurements")
     def count(self) -> int:
         with self._lock:
             return int(self._db.execute("SELECT COUNT(*) FROM measurements").fetchone()[0])
@@ -438,6 +483,7 @@ class Store:
         except sqlite3.Error as exc:
             raise StoreError(f"cannot store {name!r} of measurement {uuid}: {exc}") from None
 
+    @_store_errors("reading an attachment")
     def get_attachment(self, uuid: str, name: str) -> tuple[bytes, str] | None:
         """(data, media type) of an attachment, or None."""
         with self._lock:
@@ -445,6 +491,7 @@ class Store:
                                    (uuid, name)).fetchone()
         return (bytes(row[0]), row[1]) if row else None
 
+    @_store_errors("searching measurements")
     def search(self, *, offset: int = 0, limit: int | None = 25, since: float | None = None,
                until: float | None = None, status: str | None = None, flag: str | None = None,
                payload_fields: Mapping[str, str] | None = None) -> tuple[list[StoredMeasurement], int]:
@@ -472,3 +519,171 @@ class Store:
             rows = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC {page}",
                                     args).fetchall()
         return [self._row(r, full=True, trace=False) for r in rows], total
+
+
+# --- a damaged store: check, salvage, quarantine ------------------------------------------------------------------
+#: tables read back by check and salvage, in the order rows are copied (foreign keys point backwards)
+_TABLES = ("measurements", "outbox", "attachments")
+
+
+@dataclass
+class StoreHealth:
+    """What ``check_store``/``salvage_store`` could read: rows per table, rows lost, SQLite's own findings."""
+
+    path: str
+    readable: dict[str, int]
+    lost: dict[str, int]
+    problems: list[str]
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems and not any(self.lost.values())
+
+    def summary(self) -> str:
+        read = ", ".join(f"{n} {t}" for t, n in self.readable.items())
+        lost = ", ".join(f"{n} {t}" for t, n in self.lost.items() if n)
+        return f"{self.path}: " + ("intact" if self.ok else "damaged") + f"; readable: {read}" + \
+            (f"; lost: {lost}" if lost else "")
+
+
+def _open_read_only(path: Path) -> sqlite3.Connection:
+    if not path.exists():
+        raise StoreError(f"no result store at {str(path)!r}")
+    return sqlite3.connect(f"file:{path}?mode=ro", uri=True, check_same_thread=False)
+
+
+def _rowids(db: sqlite3.Connection, table: str, max_probes: int = 100_000) -> Iterator[int]:
+    """The rowids of ``table`` that can be reached. A scan stops at a damaged page; the rowids
+    after it are found by seeking past it (bounded number of seeks)."""
+    last = 0
+    probes = 0
+    while probes < max_probes:
+        try:
+            for (rowid,) in db.execute(f"SELECT rowid FROM {table} WHERE rowid > ? ORDER BY rowid", (last,)):
+                last = rowid
+                yield rowid
+            return
+        except sqlite3.DatabaseError:
+            probes += 1
+            last += 1  # step over the rowid the damaged page hides
+
+
+def _read_rows(db: sqlite3.Connection, table: str, health: StoreHealth) -> Iterator[tuple[list[str], tuple]]:
+    """Every readable row of ``table`` (column names, values); unreadable ones are counted as lost."""
+    try:
+        columns = [r[1] for r in db.execute(f"PRAGMA table_info({table})")]
+        ids = list(_rowids(db, table))
+    except sqlite3.DatabaseError as exc:
+        health.problems.append(f"{table}: not readable ({exc})")
+        return
+    for rowid in ids:
+        row = _read_row(db, table, columns, rowid)
+        if row is None and table == "measurements":
+            # the trace's pages are the bulk of the file: keep the result without it rather than nothing
+            row = _read_row(db, table, columns, rowid, without=("trace_t", "trace_angle"))
+            if row is not None:
+                health.problems.append(f"measurement row {rowid}: trace not readable (kept without it)")
+        if row is None:
+            health.lost[table] += 1
+            continue
+        health.readable[table] += 1
+        yield columns, row
+
+
+def _read_row(db: sqlite3.Connection, table: str, columns: list[str], rowid: int,
+              without: tuple[str, ...] = ()) -> tuple | None:
+    """One row whose blobs and JSON texts decode, or None; the columns in ``without`` read as NULL."""
+    wanted = [c if c not in without else "NULL" for c in columns]
+    try:
+        row = db.execute(f"SELECT {', '.join(wanted)} FROM {table} WHERE rowid = ?", (rowid,)).fetchone()
+        if row is not None and table == "measurements":
+            d = dict(zip(columns, row))
+            for k in ("flags", "payload", "rig", "config", "trace_meta"):
+                if d.get(k) is not None:
+                    json.loads(d[k])
+            for k in ("trace_t", "trace_angle"):
+                _unpack(d.get(k))
+        return row
+    except (sqlite3.DatabaseError, zlib.error, json.JSONDecodeError, UnicodeDecodeError):
+        return None
+
+
+def check_store(path: str | Path) -> StoreHealth:
+    """Read every row of the store at ``path`` (results.db) without changing it; say what is damaged."""
+    path = Path(path)
+    health = StoreHealth(str(path), {t: 0 for t in _TABLES}, {t: 0 for t in _TABLES}, [])
+    db = _open_read_only(path)
+    try:
+        try:
+            found = [r[0] for r in db.execute("PRAGMA integrity_check(20)")]
+            if found != ["ok"]:
+                health.problems += found
+        except sqlite3.DatabaseError as exc:
+            health.problems.append(str(exc))
+        for table in _TABLES:
+            for _ in _read_rows(db, table, health):
+                pass
+    finally:
+        db.close()
+    return health
+
+
+def salvage_store(path: str | Path, dest_dir: str | Path) -> StoreHealth:
+    """Copy every readable row of the store at ``path`` into a new store in ``dest_dir`` (which
+    must not hold one yet). Sequence numbers are kept and never reused."""
+    path, dest = Path(path), Path(dest_dir)
+    if (dest / DB_NAME).exists():
+        raise StoreError(f"{str(dest / DB_NAME)!r} exists already: salvage into an empty directory")
+    health = StoreHealth(str(path), {t: 0 for t in _TABLES}, {t: 0 for t in _TABLES}, [])
+    src = _open_read_only(path)
+    try:
+        with Store(dest) as new:
+            db = new._db
+            with new._lock, new._tx():
+                max_seq = 0
+                for table in _TABLES:
+                    for columns, row in _read_rows(src, table, health):
+                        try:
+                            db.execute(f"INSERT OR IGNORE INTO {table} ({', '.join(columns)}) "
+                                       f"VALUES ({', '.join('?' * len(columns))})", row)
+                        except sqlite3.IntegrityError:  # e.g. an outbox row whose measurement was lost
+                            health.readable[table] -= 1
+                            health.lost[table] += 1
+                            continue
+                        if table == "measurements":
+                            max_seq = max(max_seq, int(row[columns.index("seq")]))
+                outbox_used = health.readable["outbox"] + health.lost["outbox"] > 0 or \
+                    any(p.startswith("outbox:") for p in health.problems)
+                if outbox_used:
+                    # an unsent result whose outbox row was on a lost page is queued again from its stored
+                    # payload (consumers dedupe by uuid); without MQTT in use nothing was ever queued
+                    requeued = db.execute(
+                        "INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at) "
+                        "SELECT id, uuid, 'result', payload, stored_at FROM measurements m WHERE status = 'ok' "
+                        "AND payload IS NOT NULL AND published_at IS NULL "
+                        "AND NOT EXISTS (SELECT 1 FROM outbox o WHERE o.measurement_id = m.id)").rowcount
+                    if requeued:
+                        health.problems.append(f"outbox: {requeued} unsent result(s) queued again from their "
+                                               "stored payload")
+                try:
+                    counter = src.execute("SELECT value FROM meta WHERE key='last_seq'").fetchone()
+                    max_seq = max(max_seq, int(counter[0])) if counter else max_seq
+                except (sqlite3.DatabaseError, ValueError):
+                    pass  # the counter is lost: the largest salvaged seq is the floor
+                db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('last_seq', ?)", (str(max_seq),))
+    finally:
+        src.close()
+    return health
+
+
+def quarantine_store(state_dir: str | Path, clock: Callable[[], float] = time.time) -> tuple[Path, StoreHealth]:
+    """Move a damaged results.db (with its -wal and -shm files) aside and salvage what can be read
+    into a new results.db. Returns (where the damaged file now is, what was salvaged)."""
+    state = Path(state_dir)
+    db = state / DB_NAME
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(clock()))
+    aside = state / f"{DB_NAME}.damaged-{stamp}"
+    for suffix in ("", "-wal", "-shm"):  # SQLite pairs "<name>-wal" with "<name>": they move together
+        if Path(f"{db}{suffix}").exists():
+            os.replace(f"{db}{suffix}", f"{aside}{suffix}")
+    return aside, salvage_store(aside, state)

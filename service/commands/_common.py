@@ -22,6 +22,16 @@ def add_store_arguments(p: argparse.ArgumentParser) -> None:
 
 def open_store(args: argparse.Namespace) -> Store:
     """The store named by --state-dir / --config, else $STATE_DIRECTORY, ./moi-state or /var/lib/moi."""
+    d = find_store_dir(args)
+    try:
+        return Store(d, create=False)
+    except StoreError as exc:
+        raise InputFileError(str(exc)) from None
+
+
+def find_store_dir(args: argparse.Namespace) -> Path:
+    """The directory of the store named by --state-dir / --config, else $STATE_DIRECTORY, ./moi-state
+    or /var/lib/moi (the first that holds one)."""
     if args.state_dir:
         candidates = [Path(args.state_dir)]
     elif args.config:
@@ -33,10 +43,7 @@ def open_store(args: argparse.Namespace) -> Store:
         candidates = ([Path(env.split(":")[0])] if env else []) + [Path("moi-state"), SYSTEM_STATE_DIR]
     for d in candidates:
         if (d / DB_NAME).exists():
-            try:
-                return Store(d, create=False)
-            except StoreError as exc:
-                raise InputFileError(str(exc)) from None
+            return d
     tried = ", ".join(str(d / DB_NAME) for d in candidates)
     raise InputFileError(f"no result store found (looked for {tried}); give --state-dir DIR or --config FILE")
 

@@ -249,3 +249,26 @@ def test_moi_run_check_validates_every_recipe(tmp_path):
     p = moi_subprocess(["run", "--check", "--config", str(cfg)])
     out, err = p.communicate(timeout=60)
     assert p.returncode == 2 and "[recipes] active: " in err.decode() and "no recipe 'nope'" in err.decode()
+
+
+def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_an_unstored_release(tmp_path):
+    from service.recipes import PartTracker
+
+    d = tmp_path / "recipes"
+    write(d / "r.toml", recipe("r", 1, J_TRUE, tolerance_percent=1.0, releases=2))
+    tracker = PartTracker(RecipeBook.load(d), "r")
+    result = {"J": J_TRUE, "J_std": 1e-7, "flags": [], "omega_n": 5.4, "window": {"t_start": 0.0, "t_stop": 10.0}}
+    r = tracker.recipe
+    first = tracker.release(result, "m1", "A", r)
+    assert first["release"]["index"] == 1 and first["verdict"] is None and tracker.open_part["done"] == 1
+    tracker.undo_last()  # m1 could not be stored
+    assert tracker.open_part is None
+    tracker.release(result, "m1b", "A", r)
+    other = tracker.release(result, "m2", "B", r)  # a new part ID before A was complete
+    abandoned = other["release"]["abandoned"]
+    assert abandoned["part_id"] == "A" and abandoned["done"] == 1 and abandoned["of"] == 2
+    assert abandoned["part_uuid"] != other["release"]["part_uuid"] and "different part ID" in abandoned["reason"]
+    done = tracker.release(result, "m3", "B", r)
+    assert done["verdict"] == "OK" and done["part"]["measurements"] == ["m2", "m3"]
+    with pytest.raises(RecipeError, match="no recipe 'x'"):
+        tracker.select("x")
