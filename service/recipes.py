@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import hashlib
 import logging
-import math
 import uuid as uuidlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,7 +51,7 @@ from typing import Any, Mapping
 
 from measurement import Rig
 from measurement.errors import InvalidInput
-from measurement.verdict import (DEFAULT_INVALID_FLAGS, QUANTITIES, RULES, PartResult, QualityRules, Reading,
+from measurement.verdict import (QUANTITIES, RULES, PartResult, QualityRules, Reading,
                                  Specification, combine, judge_release)
 
 from .errors import ConfigError
@@ -108,160 +107,109 @@ class Recipe:
 
 
 # --- reading and checking recipe files -------------------------------------------------------------------------
-_TABLES = {
-    "recipe": {"name", "number", "description", "quantity", "nominal", "tolerance", "tolerance_percent", "releases",
-               "rig", "declared"},
-    "decision": {"rule", "uncertain", "coverage_factor"},
-    "quality": {"invalid_flags", "max_J_std", "max_J_std_percent", "min_swings", "consistency_limit",
-                "min_valid_releases"},
-}
+def _schemas() -> dict[str, dict[str, Any]]:
+    """The keys of a recipe file: [recipe] here, [decision] and [quality] from the settings they fill
+    (``Specification``, ``QualityRules``: their defaults are the recipe's)."""
+    from .config import REQUIRED, Key, _doc, _schema
 
-
-class _Doc:
-    """One-line errors: '<file>: [table] key: expected ..., got ...'."""
-
-    def __init__(self, path: str, doc: Mapping[str, Any]) -> None:
-        self.path = path
-        self.doc = doc
-        for t in doc:
-            if t not in _TABLES:
-                raise self.fail(None, None, f"unknown table [{t}]; expected [recipe], [decision], [quality]")
-        for t, keys in _TABLES.items():
-            table = doc.get(t, {})
-            if not isinstance(table, Mapping):
-                raise self.fail(t, None, "expected a table")
-            for k in table:
-                if k not in keys:
-                    raise self.fail(t, k, f"unknown key; expected one of {', '.join(sorted(keys))}")
-
-    def fail(self, table: str | None, key: str | None, message: str) -> RecipeError:
-        where = (f"[{table}]" if table else "") + (f" {key}" if key else "")
-        return RecipeError(f"{self.path}: {where + ': ' if where else ''}{message}")
-
-    def get(self, table: str, key: str, kind: str, default: Any = ..., *, positive: bool = False,
-            minimum: float | None = None, choices: tuple | None = None) -> Any:
-        t = self.doc.get(table, {})
-        if key not in t:
-            if default is ...:
-                raise self.fail(table, key, f"missing; expected {self._expected(kind, positive, minimum, choices)}")
-            return default
-        v = t[key]
-        ok = True
-        if kind == "str":
-            ok = isinstance(v, str) and v != ""
-        elif kind == "int":
-            ok = isinstance(v, int) and not isinstance(v, bool)
-        elif kind == "float":
-            ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-            v = float(v) if ok else v
-        elif kind == "strlist":
-            ok = isinstance(v, list) and all(isinstance(x, str) for x in v)
-            v = tuple(v) if ok else v
-        if ok and choices is not None:
-            ok = v in choices
-        if ok and positive:
-            ok = v > 0
-        if ok and minimum is not None:
-            ok = v >= minimum
-        if not ok:
-            raise self.fail(table, key, f"expected {self._expected(kind, positive, minimum, choices)}, got {v!r}")
-        return v
-
-    @staticmethod
-    def _expected(kind: str, positive: bool, minimum: float | None, choices: tuple | None) -> str:
-        if choices:
-            return "one of " + ", ".join(repr(c) for c in choices)
-        text = {"str": "a non-empty string", "int": "an integer", "float": "a number",
-                "strlist": "a list of strings"}[kind]
-        if positive:
-            text += " > 0"
-        elif minimum is not None:
-            text += f" >= {minimum:g}"
-        return text
+    return {
+        "recipe": {
+            "name": Key("str", REQUIRED, "unique; names the SPC topic and chart"),
+            "number": Key("int", REQUIRED, "what the PLC writes to recipe_select", min=1, max=0xFFFF),
+            "description": Key("str", "", ""),
+            "quantity": Key("str", "J", "", choices=QUANTITIES),
+            "nominal": Key("float", REQUIRED, "kg·m²", min=0, min_open=True),
+            "tolerance": Key("float", None, "± kg·m²", min=0, min_open=True),
+            "tolerance_percent": Key("float", None, "± % of the nominal", min=0, min_open=True),
+            "releases": Key("int", 1, "releases per part", min=1, max=20),
+            "rig": Key("path", None, "rig file of this part type, relative to the recipe file"),
+            "declared": Key("strlist", None, "declared model"),
+        },
+        "decision": _schema(Specification, {
+            "rule": _doc("", choices=RULES), "uncertain": _doc("", choices=("NOK", "INVALID")),
+            "coverage_factor": _doc("k of U = k·u_c", min=1.0)}),
+        "quality": _schema(QualityRules, {
+            "invalid_flags": _doc(""), "min_swings": _doc("", min=0.0),
+            "consistency_limit": _doc("", min=0, min_open=True),
+            "min_valid_releases": _doc("default: releases − 1, at least 1", min=1)},
+            defaults={"min_valid_releases": None},
+            extra={"max_J_std": Key("float", None, "kg·m²", min=0, min_open=True),
+                   "max_J_std_percent": Key("float", None, "% of J", min=0, min_open=True)}),
+    }
 
 
 def load_recipe(path: str | Path) -> Recipe:
     """Read and check one recipe file (``RecipeError`` naming the file, table and key)."""
-    import tomllib
-
     from measurement.effects import EFFECTS
 
+    from .config import _Checker
+    from .files import read_toml
+
+    class Checker(_Checker):
+        def fail(self, table: str | None, key: str | None, message: str) -> RecipeError:
+            where = (f"[{table}]" if table else "") + (f" {key}" if key else "")
+            return RecipeError(f"{self.source}: {where + ': ' if where else ''}{message}")
+
     p = Path(path)
-    text = read_text(p, "recipe file")
-    raw = text.encode("utf-8")
+    raw = read_text(p, "recipe file").encode("utf-8")
     try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RecipeError(f"{p}: not valid TOML: {exc}") from None
-    d = _Doc(str(p), doc)
+        doc = read_toml(p, "recipe file")
+    except InvalidInput as exc:
+        raise RecipeError(str(exc)) from None
+    c = Checker(str(p))
+    schemas = _schemas()
+    for t in doc:
+        if t not in schemas:
+            raise c.fail(None, None, f"unknown table [{t}]; expected [recipe], [decision], [quality]")
     if "recipe" not in doc:
-        raise d.fail(None, None, "missing [recipe] table (name, number, quantity, nominal, tolerance, releases)")
-    name = d.get("recipe", "name", "str")
-    if any(ch in name for ch in "/#+") or len(name) > 64 or name != name.strip():
-        raise d.fail("recipe", "name", f"expected 1–64 characters without '/', '#', '+' (it names an MQTT topic level), "
-                     f"got {name!r}")
-    number = d.get("recipe", "number", "int")
-    if not 1 <= number <= 0xFFFF:
-        raise d.fail("recipe", "number", f"expected an integer in [1, 65535] (register recipe_select), got {number!r}")
-    quantity = d.get("recipe", "quantity", "str", "J", choices=QUANTITIES)
-    nominal = d.get("recipe", "nominal", "float", positive=True)
-    rec = doc["recipe"]
-    if ("tolerance" in rec) == ("tolerance_percent" in rec):
-        raise d.fail("recipe", "tolerance", "give exactly one of tolerance (± kg·m²) or tolerance_percent (± % of nominal)")
-    if "tolerance" in rec:
-        tol = d.get("recipe", "tolerance", "float", positive=True)
-    else:
-        tol = nominal * d.get("recipe", "tolerance_percent", "float", positive=True) / 100.0
+        raise c.fail(None, None, "missing [recipe] table (name, number, quantity, nominal, tolerance, releases)")
+    rec = c.table("recipe", doc["recipe"], schemas["recipe"])
+    dec = c.table("decision", doc.get("decision", {}), schemas["decision"])
+    qual = c.table("quality", doc.get("quality", {}), schemas["quality"])
+    name = rec["name"]
+    if not name or any(ch in name for ch in "/#+") or len(name) > 64 or name != name.strip():
+        raise c.fail("recipe", "name", f"expected 1–64 characters without '/', '#', '+' (it names an MQTT topic "
+                     f"level), got {name!r}")
+    if (rec["tolerance"] is None) == (rec["tolerance_percent"] is None):
+        raise c.fail("recipe", "tolerance", "give exactly one of tolerance (± kg·m²) or tolerance_percent "
+                     "(± % of nominal)")
+    nominal = rec["nominal"]
+    tol = rec["tolerance"] if rec["tolerance"] is not None else nominal * rec["tolerance_percent"] / 100.0
     if tol >= nominal:
-        raise d.fail("recipe", "tolerance", f"expected less than the nominal {nominal:g} kg·m², got {tol:g}")
-    releases = d.get("recipe", "releases", "int", 1, positive=True)
-    if releases > 20:
-        raise d.fail("recipe", "releases", f"expected at most 20 releases per part, got {releases}")
+        raise c.fail("recipe", "tolerance", f"expected less than the nominal {nominal:g} kg·m², got {tol:g}")
+    releases = rec["releases"]
     rig = rig_path = None
-    if "rig" in rec:
-        rig_path = str((p.parent / d.get("recipe", "rig", "str")).resolve())
+    if rec["rig"] is not None:
+        rig_path = str((p.parent / rec["rig"]).resolve())
         try:
             rig = read_rig(rig_path)
         except InvalidInput as exc:
-            raise d.fail("recipe", "rig", str(exc)) from None
-    declared = d.get("recipe", "declared", "strlist", None)
+            raise c.fail("recipe", "rig", str(exc)) from None
+    declared = rec["declared"]
+    for e in declared or ():
+        if e not in EFFECTS:
+            raise c.fail("recipe", "declared", f"unknown effect {e!r}; expected names from {', '.join(EFFECTS)}")
     if declared is not None:
-        for e in declared:
-            if e not in EFFECTS:
-                raise d.fail("recipe", "declared", f"unknown effect {e!r}; expected names from {', '.join(EFFECTS)}")
-    try:
-        spec = Specification.symmetric(
-            quantity, nominal, tol,
-            rule=d.get("decision", "rule", "str", "guard_band", choices=RULES),
-            uncertain=d.get("decision", "uncertain", "str", "NOK", choices=("NOK", "INVALID")),
-            coverage_factor=d.get("decision", "coverage_factor", "float", 2.0, minimum=1.0))
-    except InvalidInput as exc:
-        raise d.fail("recipe", None, str(exc)) from None
-    q = doc.get("quality", {})
-    if "max_J_std" in q and "max_J_std_percent" in q:
-        raise d.fail("quality", "max_J_std", "give max_J_std (kg·m²) or max_J_std_percent, not both")
-    pct = d.get("quality", "max_J_std_percent", "float", None, positive=True)
-    flags = d.get("quality", "invalid_flags", "strlist", DEFAULT_INVALID_FLAGS)
-    quality = QualityRules(
-        invalid_flags=tuple(flags),
-        max_std=d.get("quality", "max_J_std", "float", None, positive=True),
-        max_std_relative=None if pct is None else pct / 100.0,
-        min_swings=d.get("quality", "min_swings", "float", 3.0, minimum=0.0),
-        consistency_limit=d.get("quality", "consistency_limit", "float", 3.0, positive=True),
-        min_valid_releases=d.get("quality", "min_valid_releases", "int", max(1, releases - 1), positive=True),
-    )
-    if quality.min_valid_releases > releases:
-        raise d.fail("quality", "min_valid_releases", f"expected at most releases = {releases}, "
-                     f"got {quality.min_valid_releases}")
-    if rig is not None or declared is not None:
         try:  # the declared model must resolve on the rig it is used with
-            (rig or Rig(kind="torsion")).with_declared(declared or (rig.declared if rig else ("viscous",)))
+            (rig or Rig(kind="torsion")).with_declared(declared)
         except InvalidInput as exc:
-            raise d.fail("recipe", "declared", str(exc)) from None
-    version = hashlib.sha256(raw).hexdigest()[:16]
-    return Recipe(name=name, number=number, description=d.get("recipe", "description", "str", ""), path=str(p),
-                  version=version, releases=releases, spec=spec, quality=quality, rig=rig, rig_path=rig_path,
-                  declared=None if declared is None else tuple(declared))
+            raise c.fail("recipe", "declared", str(exc)) from None
+    if qual["max_J_std"] is not None and qual["max_J_std_percent"] is not None:
+        raise c.fail("quality", "max_J_std", "give max_J_std (kg·m²) or max_J_std_percent, not both")
+    min_valid = qual["min_valid_releases"] if qual["min_valid_releases"] is not None else max(1, releases - 1)
+    if min_valid > releases:
+        raise c.fail("quality", "min_valid_releases", f"expected at most releases = {releases}, got {min_valid}")
+    pct = qual["max_J_std_percent"]
+    quality = QualityRules(invalid_flags=tuple(qual["invalid_flags"]), max_std=qual["max_J_std"],
+                           max_std_relative=None if pct is None else pct / 100.0, min_swings=qual["min_swings"],
+                           consistency_limit=qual["consistency_limit"], min_valid_releases=min_valid)
+    try:
+        spec = Specification.symmetric(rec["quantity"], nominal, tol, **dec)
+    except InvalidInput as exc:
+        raise c.fail("recipe", None, str(exc)) from None
+    return Recipe(name=name, number=rec["number"], description=rec["description"], path=str(p),
+                  version=hashlib.sha256(raw).hexdigest()[:16], releases=releases, spec=spec, quality=quality,
+                  rig=rig, rig_path=rig_path, declared=None if declared is None else tuple(declared))
 
 
 @dataclass(frozen=True)

@@ -209,7 +209,7 @@ def test_recipe_files_are_checked_with_one_line_errors(tmp_path):
     cases = {
         "no-tolerance": (recipe("a", 1, 0.01), "give exactly one of tolerance"),
         "bad-number": (recipe("a", 0, 0.01, tolerance=1e-4), "[recipe] number: expected an integer in [1, 65535]"),
-        "unknown-key": (recipe("a", 1, 0.01, tolerance=1e-4, tolerence=1), "[recipe] tolerence: unknown key"),
+        "unknown-key": (recipe("a", 1, 0.01, tolerance=1e-4, tolerence=1), "[recipe]: unknown key 'tolerence' (did you mean 'tolerance'?)"),
         "negative": (recipe("a", 1, 0.01, tolerance=-1e-4), "[recipe] tolerance: expected a number > 0, got -0.0001"),
         "rule": (recipe("a", 1, 0.01, tolerance=1e-4) + '[decision]\nrule = "lenient"\n', "[decision] rule: expected one of"),
         "effect": (recipe("a", 1, 0.01, tolerance=1e-4, declared=["magic"]), "unknown effect 'magic'"),
