@@ -272,3 +272,18 @@ def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_
     assert done["verdict"] == "OK" and done["part"]["measurements"] == ["m2", "m3"]
     with pytest.raises(RecipeError, match="no recipe 'x'"):
         tracker.select("x")
+
+
+def test_a_part_whose_swing_carries_an_unmodelled_effect_is_invalid(tmp_path, recipe_dir, appliance_factory):
+    # the part rubs (Coulomb friction) but the model may not learn it: the residual keeps the structure
+    doc = appliance_doc(tmp_path / "state", recipes={"directory": str(recipe_dir), "active": "rotor-big"},
+                        identification={"discover": False},
+                        simulation={"effects": {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 4e-4}}})
+    app = appliance_factory(doc)
+    app.app.command("part_id", "test", {"part_id": "RUB-1"})
+    app.press()
+    app.wait_done(1)
+    [row] = app.app.store.list(full=True)
+    p = row.payload
+    assert "unmodeled_residual" in p["flags"] and row.part_id == "RUB-1"
+    assert p["verdict"] == row.part_verdict == "INVALID" and p["release"]["reasons"] == ["flag unmodeled_residual"]
