@@ -15,7 +15,7 @@ from service import registers as R
 from service.errors import ConfigError
 from service.recipes import RecipeBook, RecipeError, load_recipe
 
-from .conftest import appliance_doc, moi_subprocess, wait_until
+from .conftest import appliance_doc, wait_until
 
 J_TRUE = 0.0125  # the simulated part (appliance_doc's default [simulation] inertia)
 
@@ -230,25 +230,23 @@ def test_recipe_files_are_checked_with_one_line_errors(tmp_path):
     assert isinstance(RecipeError("x"), ConfigError)
 
 
-def test_moi_run_check_validates_every_recipe(tmp_path):
+def test_moi_run_check_validates_every_recipe(tmp_path, capsys):
+    from service.cli import main
+
     d = tmp_path / "recipes"
     write(d / "good.toml", recipe("good", 1, 0.01, tolerance=1e-4))
     bad = write(d / "bad.toml", recipe("bad", 2, 0.01, tolerance_percent=0))
-    cfg = write(tmp_path / "appliance.toml", f'[recipes]\ndirectory = "recipes"\nactive = "good"\n')
-    p = moi_subprocess(["run", "--check", "--config", str(cfg)])
-    out, err = p.communicate(timeout=60)
-    assert p.returncode == 2, err
-    lines = err.decode().strip().splitlines()
+    cfg = write(tmp_path / "appliance.toml", '[recipes]\ndirectory = "recipes"\nactive = "good"\n')
+    assert main(["run", "--check", "--config", str(cfg)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and str(bad) in lines[0] and "tolerance_percent: expected a number > 0" in lines[0]
     bad.unlink()
-    p = moi_subprocess(["run", "--check", "--config", str(cfg)])
-    out, err = p.communicate(timeout=60)
-    assert p.returncode == 0, err
-    assert json.loads(out)["recipes"]["recipes"][0]["name"] == "good"
+    assert main(["run", "--check", "--config", str(cfg)]) == 0
+    assert json.loads(capsys.readouterr().out)["recipes"]["recipes"][0]["name"] == "good"
     write(tmp_path / "appliance.toml", '[recipes]\ndirectory = "recipes"\nactive = "nope"\n')
-    p = moi_subprocess(["run", "--check", "--config", str(cfg)])
-    out, err = p.communicate(timeout=60)
-    assert p.returncode == 2 and "[recipes] active: " in err.decode() and "no recipe 'nope'" in err.decode()
+    assert main(["run", "--check", "--config", str(cfg)]) == 2
+    err = capsys.readouterr().err
+    assert "[recipes] active: " in err and "no recipe 'nope'" in err
 
 
 def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_an_unstored_release(tmp_path):
