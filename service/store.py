@@ -432,24 +432,8 @@ class Store:
              recipe: str | None = None, parts_only: bool = False) -> list[StoredMeasurement]:
         """Measurements, newest first (limit None: all). part_id / recipe: only those;
         parts_only: only the releases that completed a part (they carry the part verdict)."""
-        clauses: list[str] = []
-        args: list[Any] = []
-        for column, value in (("part_id", part_id), ("recipe", recipe)):
-            if value is not None:
-                clauses.append(f"{column} = ?")
-                args.append(value)
-        if parts_only:
-            clauses.append("part_verdict IS NOT NULL")
-        if since is not None:
-            clauses.append("finished_at >= ?")
-            args.append(since)
-        if until is not None:
-            clauses.append("finished_at < ?")
-            args.append(until)
-        if status is not None:
-            clauses.append("status = ?")
-            args.append(status)
-        where = ("WHERE " + " AND ".join(clauses)) if clauses else ""
+        where, args = _where(since=since, until=until, status=status, part_id=part_id, recipe=recipe,
+                             parts_only=parts_only)
         lim = "LIMIT ?" if limit is not None else ""
         if limit is not None:
             args.append(int(limit))
@@ -494,31 +478,33 @@ class Store:
     @_store_errors("searching measurements")
     def search(self, *, offset: int = 0, limit: int | None = 25, since: float | None = None,
                until: float | None = None, status: str | None = None, flag: str | None = None,
-               payload_fields: Mapping[str, str] | None = None) -> tuple[list[StoredMeasurement], int]:
-        """One page of measurements, newest first, and how many match in all.
-
-        flag: only those carrying this quality flag. payload_fields: result-payload key → value the key must
-        equal (e.g. {"part_id": "A-17"}); a value that is itself an object matches on its ``name``.
-        """
-        clauses, args = [], []
-        for sql, value in (("finished_at >= ?", since), ("finished_at < ?", until), ("status = ?", status)):
-            if value is not None:
-                clauses.append(sql)
-                args.append(value)
-        if flag:
-            clauses.append("EXISTS (SELECT 1 FROM json_each(flags) WHERE value = ?)")
-            args.append(flag)
-        for key, value in (payload_fields or {}).items():
-            path = "$." + json.dumps(str(key))
-            clauses.append("(json_extract(payload, ?) = ? OR json_extract(payload, ? || '.name') = ?)")
-            args += [path, value, path, value]
-        where = ("WHERE " + " AND ".join(clauses)) if clauses else ""
+               part_id: str | None = None, recipe: str | None = None) -> tuple[list[StoredMeasurement], int]:
+        """One page of measurements (with payloads), newest first, and how many match in all.
+        The filters of ``list``, and flag: only those carrying this quality flag."""
+        where, args = _where(since=since, until=until, status=status, part_id=part_id, recipe=recipe, flag=flag)
         with self._lock:
             total = int(self._db.execute(f"SELECT COUNT(*) FROM measurements {where}", args).fetchone()[0])
             page = f"LIMIT {int(limit)} OFFSET {int(offset)}" if limit is not None else ""
             rows = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC {page}",
                                     args).fetchall()
         return [self._row(r, full=True, trace=False) for r in rows], total
+
+
+def _where(*, since: float | None = None, until: float | None = None, status: str | None = None,
+           part_id: str | None = None, recipe: str | None = None, parts_only: bool = False,
+           flag: str | None = None) -> tuple[str, list[Any]]:
+    """The WHERE clause (and its arguments) of the measurement filters of ``Store.list`` and ``Store.search``."""
+    clauses: list[str] = []
+    args: list[Any] = []
+    for sql, value in (("part_id = ?", part_id), ("recipe = ?", recipe), ("finished_at >= ?", since),
+                       ("finished_at < ?", until), ("status = ?", status),
+                       ("EXISTS (SELECT 1 FROM json_each(flags) WHERE value = ?)", flag)):
+        if value is not None:
+            clauses.append(sql)
+            args.append(value)
+    if parts_only:
+        clauses.append("part_verdict IS NOT NULL")
+    return ("WHERE " + " AND ".join(clauses)) if clauses else "", args
 
 
 # --- a damaged store: check, salvage, quarantine ------------------------------------------------------------------

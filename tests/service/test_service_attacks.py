@@ -316,3 +316,23 @@ def test_a_result_that_cannot_be_stored_never_leaves_the_device(tmp_path, broker
     assert [m["state"] for m in published][-3:] == ["IDENTIFYING", "PUBLISHING", "FAULT"]
     assert all("J" not in m and "J =" not in (m.get("reason") or "") for m in published), published
     assert c.results() == [] and measured is None
+
+
+# --- runaway captures -----------------------------------------------------------------------------------------
+
+def test_the_capture_is_bounded_by_sample_time_at_the_largest_time_scale(tmp_path, appliance_factory):
+    """At 1000× a 20 ms poll is 20 simulated seconds: the record must still end 20 s after the release
+    (it ran to 2,300 s and 230,000 rows when the capture was bounded by poll time only)."""
+    pre, duration, rate = 0.2, 20.0, 100.0
+    app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=1000.0,
+                                          sequencer={"pre_trigger": pre, "capture_duration": duration},
+                                          simulation={"rate": rate}))
+    app.press()
+    app.wait_done(1, timeout=60)
+    m = app.app.store.latest("ok")
+    stored = app.app.store.get(m.uuid, trace=True)
+    span = stored.trace_t[-1] - stored.trace_t[0]
+    assert span <= pre + duration + 1e-9, span
+    assert len(stored.trace_t) <= (pre + duration) * rate + 2
+    release = stored.trace_meta["sequencer"]["release_t"]
+    assert stored.trace_t[-1] - release == pytest.approx(duration, abs=2 / rate)  # the whole window is there
