@@ -336,3 +336,27 @@ def test_the_capture_is_bounded_by_sample_time_at_the_largest_time_scale(tmp_pat
     assert len(stored.trace_t) <= (pre + duration) * rate + 2
     release = stored.trace_meta["sequencer"]["release_t"]
     assert stored.trace_t[-1] - release == pytest.approx(duration, abs=2 / rate)  # the whole window is there
+
+
+# --- two daemons on one state directory -------------------------------------------------------------------------
+
+def test_a_second_daemon_on_the_same_state_directory_stops_with_one_line(tmp_path):
+    from .conftest import moi_subprocess, port_open, write_toml
+
+    first_port, second_port = free_port(), free_port()
+    state = tmp_path / "state"
+    first_cfg = write_toml(tmp_path / "first.toml", appliance_doc(state, modbus_port=first_port))
+    second_cfg = write_toml(tmp_path / "second.toml", appliance_doc(state, modbus_port=second_port))
+    first = moi_subprocess(["run", "--config", str(first_cfg)])
+    try:
+        wait_until(lambda: port_open(first_port) or first.poll() is not None, 30, what="the first daemon")
+        assert first.poll() is None
+        second = moi_subprocess(["run", "--config", str(second_cfg)])
+        _, err = second.communicate(timeout=60)
+        lines = [line for line in err.decode().splitlines() if line.startswith("moi run:")]
+        assert second.returncode == 3 and len(lines) == 1 and "another moi daemon (pid" in lines[0], err.decode()
+        assert "Traceback" not in err.decode() and not port_open(second_port)
+    finally:
+        first.terminate()
+        first.communicate(timeout=30)
+    assert first.returncode == 0
