@@ -62,7 +62,7 @@ def _grab(args: argparse.Namespace, config: CameraConfig) -> tuple[np.ndarray, s
         path = Path(args.source)
         if not path.exists():
             raise InputFileError(f"source {str(path)!r} not found")
-        from ..video import IMAGE_SUFFIXES, FrameSource
+        from drivers.video_file import IMAGE_SUFFIXES, FrameSource
 
         if path.is_file() and path.suffix.lower() in IMAGE_SUFFIXES:
             img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
