@@ -229,6 +229,14 @@ def test_recipe_files_are_checked_with_one_line_errors(tmp_path):
     with pytest.raises(RecipeError, match="number: 1 is already used by"):
         RecipeBook.load(d)
     assert isinstance(RecipeError("x"), ConfigError)
+    # the quantity must be one the rig can give: J_object needs a tare
+    from measurement import Rig
+    r = load_recipe(write(tmp_path / "obj.toml", recipe("o", 5, 0.01, tolerance=1e-4, quantity="J_object")))
+    with pytest.raises(RecipeError, match=r"obj.toml: \[recipe\] quantity: J_object needs the rig's tare_inertia"):
+        r.check_rig(Rig(kind="torsion", stiffness=0.3651))
+    r.check_rig(Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5e-3))
+    with pytest.raises(RecipeError, match="the rig gives no J"):
+        r.check_rig(Rig(kind="torsion"))
 
 
 def test_moi_run_check_validates_every_recipe(tmp_path, capsys):
