@@ -316,3 +316,47 @@ def test_a_result_that_cannot_be_stored_never_leaves_the_device(tmp_path, broker
     assert [m["state"] for m in published][-3:] == ["IDENTIFYING", "PUBLISHING", "FAULT"]
     assert all("J" not in m and "J =" not in (m.get("reason") or "") for m in published), published
     assert c.results() == [] and measured is None
+
+
+# --- runaway captures -----------------------------------------------------------------------------------------
+
+def test_the_capture_is_bounded_by_sample_time_at_the_largest_time_scale(tmp_path, appliance_factory):
+    """At 1000× a 20 ms poll is 20 simulated seconds: the record must still end 20 s after the release
+    (it ran to 2,300 s and 230,000 rows when the capture was bounded by poll time only)."""
+    pre, duration, rate = 0.2, 20.0, 100.0
+    app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=1000.0,
+                                          sequencer={"pre_trigger": pre, "capture_duration": duration},
+                                          simulation={"rate": rate}))
+    app.press()
+    app.wait_done(1, timeout=60)
+    m = app.app.store.latest("ok")
+    stored = app.app.store.get(m.uuid, trace=True)
+    span = stored.trace_t[-1] - stored.trace_t[0]
+    assert span <= pre + duration + 1e-9, span
+    assert len(stored.trace_t) <= (pre + duration) * rate + 2
+    release = stored.trace_meta["sequencer"]["release_t"]
+    assert stored.trace_t[-1] - release == pytest.approx(duration, abs=2 / rate)  # the whole window is there
+
+
+# --- two daemons on one state directory -------------------------------------------------------------------------
+
+def test_a_second_daemon_on_the_same_state_directory_stops_with_one_line(tmp_path):
+    from .conftest import moi_subprocess, port_open, write_toml
+
+    first_port, second_port = free_port(), free_port()
+    state = tmp_path / "state"
+    first_cfg = write_toml(tmp_path / "first.toml", appliance_doc(state, modbus_port=first_port))
+    second_cfg = write_toml(tmp_path / "second.toml", appliance_doc(state, modbus_port=second_port))
+    first = moi_subprocess(["run", "--config", str(first_cfg)])
+    try:
+        wait_until(lambda: port_open(first_port) or first.poll() is not None, 30, what="the first daemon")
+        assert first.poll() is None
+        second = moi_subprocess(["run", "--config", str(second_cfg)])
+        _, err = second.communicate(timeout=60)
+        lines = [line for line in err.decode().splitlines() if line.startswith("moi run:")]
+        assert second.returncode == 3 and len(lines) == 1 and "another moi daemon (pid" in lines[0], err.decode()
+        assert "Traceback" not in err.decode() and not port_open(second_port)
+    finally:
+        first.terminate()
+        first.communicate(timeout=30)
+    assert first.returncode == 0
