@@ -326,6 +326,13 @@ def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
     out.append((f"{dp}/sensor/{node}/state/config", {
         "name": "Sequencer state", "unique_id": f"moi_{node}_state", "object_id": f"moi_{node}_state",
         "state_topic": topics.state, "value_template": "{{ value_json.state }}", **common}))
+    # the part: its ID and its verdict (OK / NOK / INVALID once complete, "pending" before, "none" without a recipe)
+    for key, name, template in (
+            ("part_id", "Part ID", "{{ value_json.part_id or '' }}"),
+            ("verdict", "Part verdict", "{{ value_json.verdict or ('pending' if value_json.recipe else 'none') }}")):
+        out.append((f"{dp}/sensor/{node}/{key}/config", {
+            "name": name, "unique_id": f"moi_{node}_{key}", "object_id": f"moi_{node}_{key}",
+            "state_topic": topics.result, "value_template": template, **common}))
     for flag in FLAG_BITS:
         out.append((f"{dp}/binary_sensor/{node}/{flag}/config", {
             "name": f"Flag {flag.replace('_', ' ')}", "unique_id": f"moi_{node}_flag_{flag}",
