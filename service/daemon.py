@@ -533,7 +533,8 @@ class Appliance:
         seq = self.sequencer
         parts = [seq.state.value.lower() if seq else "starting"]
         if self.mqtt is not None:
-            parts.append("mqtt connected" if self.mqtt.is_connected else "mqtt disconnected")
+            parts.append("mqtt connected" if self.mqtt.is_connected else
+                         "mqtt disconnected" + (f" ({self.mqtt.last_error})" if self.mqtt.last_error else ""))
             if self.mqtt.sender.pending:
                 parts.append(f"{self.mqtt.sender.pending} result(s) waiting for the broker")
         return "; ".join(parts)

@@ -360,3 +360,31 @@ def test_a_second_daemon_on_the_same_state_directory_stops_with_one_line(tmp_pat
         first.terminate()
         first.communicate(timeout=30)
     assert first.returncode == 0
+
+
+# --- MQTT connection failures are said --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("case", ["port refused", "TLS against a plain broker"])
+def test_mqtt_connection_failures_are_logged_once_and_shown_in_the_status(tmp_path, broker, caplog, case):
+    import logging
+
+    caplog.set_level(logging.WARNING, logger="moi.mqtt")
+    port = free_port() if case == "port refused" else broker.port
+    settings = MqttSettings(host="127.0.0.1", port=port, reconnect_min=0.05, reconnect_max=0.1,
+                            tls=case != "port refused")
+    store = Store(tmp_path / "state")
+    attempts: list[str] = []
+    svc = MqttService(settings, "rig", store)
+    forward = svc.client.on_connect_error
+    svc.client.on_connect_error = lambda exc: (attempts.append(type(exc).__name__), forward(exc))
+    svc.start()
+    try:
+        wait_until(lambda: len(attempts) >= 3, 20, what="three connection attempts")
+        expected = "ConnectionRefusedError" if case == "port refused" else "ConnectionResetError"  # the TLS hello rejected
+        assert expected in (svc.last_error or ""), svc.last_error
+        said = [r.getMessage() for r in caplog.records if "cannot connect" in r.getMessage()]
+        assert len(said) == 1 and expected in said[0] and f"127.0.0.1:{port}" in said[0], said
+        assert not svc.is_connected
+    finally:
+        svc.stop()
+        store.close()
