@@ -54,6 +54,9 @@ log = logging.getLogger("moi.daemon")
 EXIT_OK = 0
 EXIT_RUNTIME_FAILURE = 3
 
+#: at most one "trigger ignored" line per this many seconds, s
+IGNORED_LOG_INTERVAL = 10.0
+
 #: the lock file in the state directory that makes a second daemon on it stop at start
 LOCK_NAME = "moi.lock"
 
@@ -106,6 +109,8 @@ class Appliance:
         self.exit_status = EXIT_OK
         self._stopping = False
         self._lock_fd: int | None = None
+        self._ignored_triggers = 0
+        self._ignored_logged_at = -float("inf")
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
@@ -305,7 +310,12 @@ class Appliance:
                     self._accepted_source = source
                     self._accepted_part = (self.parts.part_id, self.parts.recipe)
                 else:
-                    log.info("trigger from %s ignored (state %s)", source, seq.state.value)
+                    self._ignored_triggers += 1
+                    now = time.monotonic()
+                    if now - self._ignored_logged_at >= IGNORED_LOG_INTERVAL:  # a stuck button or a looping PLC
+                        log.info("trigger from %s ignored (state %s; %d ignored since the last such line)", source,
+                                 seq.state.value, self._ignored_triggers)
+                        self._ignored_logged_at, self._ignored_triggers = now, 0
             elif name == "abort":
                 if seq.state is State.FAULT:
                     seq.abort(f"fault acknowledged by {source}")

@@ -173,7 +173,11 @@ class MqttService:
         password = s.password
         if s.password_file:
             try:
-                password = Path(s.password_file).read_text(encoding="utf-8").strip()
+                path = Path(s.password_file)
+                password = path.read_text(encoding="utf-8").strip()
+                if path.stat().st_mode & 0o004:
+                    log.warning("MQTT: password_file %s is readable by every user (mode %o); "
+                                "chmod 600 it", s.password_file, path.stat().st_mode & 0o777)
             except OSError as exc:
                 raise ConfigError(f"[mqtt] password_file {s.password_file!r} cannot be read: {exc.strerror}") from None
         if s.username is not None:

@@ -388,3 +388,47 @@ def test_mqtt_connection_failures_are_logged_once_and_shown_in_the_status(tmp_pa
     finally:
         svc.stop()
         store.close()
+
+
+# --- minor items ----------------------------------------------------------------------------------------------
+
+def test_a_measurement_key_is_a_literal_prefix_not_a_pattern(tmp_path, capsys):
+    from service.cli import main
+
+    with Store(tmp_path / "s") as s:
+        s.record(status="failed", trigger="button", device_id="rig", software_version="t", started_at=1.0,
+                 finished_at=2.0, error="test")
+    for key in ("%", "_", "%%%"):
+        assert main(["results", key, "--state-dir", str(tmp_path / "s")]) == 2
+        assert "no single measurement matches" in capsys.readouterr().err
+
+
+def test_a_world_readable_password_file_is_warned_about(tmp_path, caplog):
+    import logging
+
+    secret = tmp_path / "mqtt-password"
+    secret.write_text("hunter2\n")
+    secret.chmod(0o644)
+    store = Store(tmp_path / "state")
+    try:
+        with caplog.at_level(logging.WARNING, logger="moi.mqtt"):
+            MqttService(MqttSettings(username="moi", password_file=str(secret)), "rig", store)
+        assert any("readable by every user" in r.getMessage() for r in caplog.records)
+        assert all("hunter2" not in r.getMessage() for r in caplog.records)
+    finally:
+        store.close()
+
+
+def test_ignored_triggers_are_logged_at_most_once_per_interval(tmp_path, appliance_factory, caplog):
+    import logging
+
+    caplog.set_level(logging.INFO, logger="moi.daemon")
+    app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=5.0))
+    app.press()
+    app.wait_event(lambda e: e.state.value == "CAPTURING", 20)
+    for _ in range(50):
+        app.app.command("trigger", "modbus")  # a PLC holding the trigger
+    wait_until(lambda: app.app.sequencer.counts["ignored_requests"] >= 50, 20, what="50 ignored triggers")
+    lines = [r for r in caplog.records if r.getMessage().startswith("trigger from")]
+    assert len(lines) == 1, [r.getMessage() for r in lines]
+    app.wait_done(1)
