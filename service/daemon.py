@@ -35,6 +35,7 @@ from firmware_host import Event, Measurement, Sequencer, State
 from measurement import IdentificationResult, Rig, Trace, identify
 from measurement import flags as F
 from measurement.errors import InvalidInput
+from measurement.integrator import warm_up
 
 from . import __version__
 from .config import Config
@@ -150,6 +151,9 @@ class Appliance:
             if d.button is not None:
                 d.button.when_pressed = lambda: self.command("trigger", "button")
             self.sequencer.subscribe(self._on_event)
+            # the integrator's compiled kernel is loaded (on a device's first run: compiled,
+            # ~10 s on a Pi) on the side now, not when the first swing waits for its result
+            threading.Thread(target=warm_up, args=(cfg.rig.kind,), name="moi-warm-up", daemon=True).start()
             if cfg.web is not None:
                 from .web.server import WebServer  # aiohttp is loaded only when the page is served
                 self.web = WebServer(self, cfg.web)
