@@ -243,8 +243,10 @@ def kernel(kind: str) -> ModuleType:
         src = kernel_source(kind)
         digest = hashlib.sha256(src.encode()).hexdigest()[:16]
         folder = cache_dir()
-        if not _writable(folder):  # a read-only home: compile in every process rather than fail
-            folder = Path(tempfile.mkdtemp(prefix="moi-kernels-"))
+        if not _writable(folder):  # a read-only home: a cache until the next reboot rather than none
+            folder = Path(tempfile.gettempdir()) / f"moi-kernels-{os.getuid()}"
+            if not _writable(folder):
+                folder = Path(tempfile.mkdtemp(prefix="moi-kernels-"))
         name = f"moi_kernel_{kind}_{digest}"
         path = folder / f"{name}.py"
         if not path.exists() or path.read_text() != src:
