@@ -9,8 +9,9 @@ Public entry points:
     calibrate_torsion                   stiffness and tare from reference loads
 """
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from ._lazy import lazy_exports
 
 #: public name → the submodule that defines it. Imported on first use (PEP 562), so that
 #: ``import measurement.errors`` or ``measurement.rig`` does not load scipy: commands that do
@@ -26,16 +27,7 @@ _WHERE = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    if name in _WHERE:
-        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _WHERE)
 
 
 if TYPE_CHECKING:  # pragma: no cover

@@ -412,14 +412,11 @@ class ModbusServer:
         """Start serving; returns once the port is bound. Raises ModbusServerError if it cannot."""
         if self._io.running:
             raise RuntimeError("Modbus server already started")
-        self._io.start()
         try:
-            self._io.call(self._main(), timeout)
+            self._io.start_serving(self._main(), timeout)
         except TimeoutError:
-            self._io.stop()
             raise ModbusServerError(f"Modbus server did not start within {timeout} s") from None
-        except BaseException as exc:
-            self._io.stop()
+        except Exception as exc:
             raise ModbusServerError(str(exc)) from None
 
     async def _main(self) -> None:

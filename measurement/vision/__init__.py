@@ -8,11 +8,12 @@
     render     ray-traced synthetic frames: the truth for tests, bench and the mock camera
 
 Pure numpy/scipy/opencv: decoding files and talking to cameras live in
-``service.video`` and ``drivers.camera``.
+``drivers.video_file`` and ``drivers.camera``.
 """
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from .._lazy import lazy_exports
 
 #: public name → its submodule, imported on first use (PEP 562): reading a camera file
 #: (``measurement.vision.config``) must not load OpenCV and scipy.
@@ -26,16 +27,7 @@ _WHERE = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    if name in _WHERE:
-        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _WHERE)
 
 
 if TYPE_CHECKING:  # pragma: no cover

@@ -1,6 +1,6 @@
 """Frames to an angle trace: track the marker, convert with the exact geometry, correct the camera yaw.
 
-Pure: the caller decodes the frames (``service/video.py`` from a file,
+Pure: the caller decodes the frames (``drivers/video_file.py`` from a file,
 ``drivers/camera.py`` live) and hands over (time, grey frame) pairs; a
 frame that could not be decoded is passed as ``None`` and counted as
 corrupt. Frames without a marker leave a gap in the trace (timestamps may
