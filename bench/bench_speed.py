@@ -85,46 +85,30 @@ def _daemon_worker(args: argparse.Namespace) -> None:
     os.environ.setdefault("GPIOZERO_PIN_FACTORY", "mock")
     logging.basicConfig(level=logging.ERROR)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+    from _appliance import Finished, simulated_doc
     from service.config import parse_config
     from service.daemon import Appliance
 
     work = Path(tempfile.mkdtemp(prefix="moi-bench-rss-"))
-    doc = {
-        "device": {"id": "bench", "state_dir": str(work / "state"), "log_level": "error"},
-        "sequencer": {"pre_trigger": 0.2, "capture_duration": 5.0},
-        "simulation": {"time_scale": 25.0, "rate": 100.0, "seed": 1, "sensor": "direct",
-                       "effects": {"viscous": {"c": 1.5e-4}}},
-        "modbus": {"host": "127.0.0.1", "port": 0},
-        "web": {"enabled": False},
-    }
+    doc = simulated_doc(work / "state", log_level="error")
     app = Appliance(parse_config(doc, source="bench"), poll_interval=0.02)
     app.start()
     loop = threading.Thread(target=app.run, daemon=True)
     loop.start()
-    idle = threading.Condition()
-    done = [0]
-
-    def on_event(e):
-        if e.state.value == "IDLE" and e.previous.value == "PUBLISHING":
-            with idle:
-                done[0] += 1
-                idle.notify_all()
-
-    app.sequencer.subscribe(on_event)
+    finished = Finished(app)
     rss = {}
     t0 = time.perf_counter()
     for i in range(1, args.count + 1):
         app.command("trigger", "bench")
-        with idle:
-            if not idle.wait_for(lambda: done[0] >= i, 120):
-                break
+        if not finished.wait(i, 120):
+            break
         if i in (1, 10) or i % 25 == 0:
             rss[i] = [_status_kb("VmRSS"), _status_kb("RssAnon")]
     wall = time.perf_counter() - t0
     app.request_stop()
     loop.join(30)
     shutil.rmtree(work, ignore_errors=True)
-    print(json.dumps({"rss_kb": rss, "peak_kb": _status_kb("VmHWM"), "done": done[0], "wall": wall}))
+    print(json.dumps({"rss_kb": rss, "peak_kb": _status_kb("VmHWM"), "done": finished.count, "wall": wall}))
 
 
 def _status_kb(field: str) -> int:
