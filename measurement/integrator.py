@@ -229,6 +229,23 @@ def _writable(folder: Path) -> bool:
         return False
 
 
+def _kernel_path(kind: str, src: str) -> Path:
+    """Where the kernel with this source lives: named by its hash, in the first writable cache folder."""
+    digest = hashlib.sha256(src.encode()).hexdigest()[:16]
+    folder = cache_dir()
+    if not _writable(folder):  # a read-only home: a cache until the next reboot rather than none
+        folder = Path(tempfile.gettempdir()) / f"moi-kernels-{os.getuid()}"
+        if not _writable(folder):
+            folder = Path(tempfile.mkdtemp(prefix="moi-kernels-"))
+    return folder / f"moi_kernel_{kind}_{digest}.py"
+
+
+def is_compiled(kind: str) -> bool:
+    """Whether the ``kind`` kernel's machine code is in the on-disk cache (a process only loads it)."""
+    path = _kernel_path(kind, kernel_source(kind))
+    return any((path.parent / "__pycache__").glob(f"{path.stem}.run-*.nbi"))
+
+
 def kernel(kind: str) -> ModuleType:
     """The compiled kernel module of a ``kind`` rig, generated and imported once per process
     (and again should an effect class be added to the library later)."""
@@ -241,14 +258,9 @@ def kernel(kind: str) -> ModuleType:
         if mod is not None:
             return mod
         src = kernel_source(kind)
-        digest = hashlib.sha256(src.encode()).hexdigest()[:16]
-        folder = cache_dir()
-        if not _writable(folder):  # a read-only home: a cache until the next reboot rather than none
-            folder = Path(tempfile.gettempdir()) / f"moi-kernels-{os.getuid()}"
-            if not _writable(folder):
-                folder = Path(tempfile.mkdtemp(prefix="moi-kernels-"))
-        name = f"moi_kernel_{kind}_{digest}"
-        path = folder / f"{name}.py"
+        path = _kernel_path(kind, src)
+        name = path.stem
+        folder = path.parent
         if not path.exists() or path.read_text() != src:
             # written whole then renamed: a concurrent process never imports half a file,
             # and an unchanged file keeps the stamp numba's cache index checks
@@ -264,7 +276,12 @@ def kernel(kind: str) -> ModuleType:
 
 
 def warm_up(kind: str) -> None:
-    """Load the ``kind`` kernel now (compile it, on a device's very first run) rather than in the first measurement."""
+    """Load the ``kind`` kernel now (compile it, on a device's very first run) rather than in the first measurement.
+
+    Also ``python -m measurement.integrator KIND``: the daemon compiles a
+    missing kernel in such a child process, whose imports and compilation
+    cannot take the interpreter lock from a capture running meanwhile.
+    """
     Dynamics(kind, (), ()).integrate(np.array([0.0, 0.01]), 0.1, 0.0, 1.0, 0.01)
 
 
@@ -308,3 +325,8 @@ class Dynamics:
         kernel(self.kind).run(t, float(theta0), float(omega0), float(omega_n) ** 2, self.params,
                               self.holding, float(max_step), x, v)
         return x, v
+
+
+if __name__ == "__main__":
+    for _kind in sys.argv[1:]:
+        warm_up(_kind)

@@ -4,6 +4,7 @@ import numpy as np
 
 from measurement import Rig
 from measurement.effects import EFFECTS, Effect, Parameter
+from measurement.integrator import is_compiled
 from measurement.model import Model
 
 
@@ -18,6 +19,7 @@ def test_an_effect_added_to_the_library_is_integrated_by_its_term(tmp_path, monk
         term = "p0 * x"
 
     try:
+        assert not is_compiled("torsion")  # a new library: a new kernel, compiled on first use
         t = np.linspace(0.0, 20.0, 2001)
         spring = Model.from_names(rig, ("viscous", ExtraSpring.name))
         x = spring.vector((0.3, 0.0, 2.0), {"viscous": [0.05], ExtraSpring.name: [5.0]})
@@ -27,6 +29,7 @@ def test_an_effect_added_to_the_library_is_integrated_by_its_term(tmp_path, monk
         expected, _ = plain.true_angle(same, t, 0.005)
         assert np.max(np.abs(theta - expected)) < 1e-12
         assert list(tmp_path.glob("moi_kernel_torsion_*.py"))  # generated into the cache directory
+        assert is_compiled("torsion")  # and its machine code cached beside it for the next process
     finally:
         EFFECTS.pop(ExtraSpring.name)
 
