@@ -41,12 +41,13 @@ def main():
         r, loop_min, _ = timed(lambda: identify(trace, rig))
         print(f"{name:<26}{fit_min:>17.2f}{loop_min:>16.2f}{','.join(r.added_effects) or '-':>18}"
               f"{1e6 * (r.J / J - 1):>+9.2f} ppm{1e6 * r.J_std / J:>7.2f} ppm")
-    # compound pendulum with bearing friction and air drag (J = 1000 kg·m², μ = 0.01 m, K = 10 N·m·s²)
+    # the compound pendulum of Hou Wen, "Measuring Moment of Inertia Based on Identification of Nonlinear System
+    # Featuring Naught Excitation" (WSEAS 2006), Fig. 3 (declared coulomb + quadratic)
     crig = Rig(kind="compound", mass=500.0, com_distance=1.0, g=9.8, declared=("coulomb", "quadratic"))
     trace = simulate_trace(Pendulum(crig, 1000.0, {"coulomb": {"mu": 0.01}, "quadratic": {"K": 10.0}}), theta0=-0.5,
                            duration=30, rate=200, noise_std=1e-4, quantisation_bits=17, seed=3)
     r, loop_min, _ = timed(lambda: identify(trace, crig))
-    print(f"{'compound friction + drag':<26}{'':>17}{loop_min:>16.2f}{','.join(r.added_effects) or '-':>18}"
+    print(f"{'Hou 2006 Fig. 3':<26}{'':>17}{loop_min:>16.2f}{','.join(r.added_effects) or '-':>18}"
           f"{1e6 * (r.J / 1000 - 1):>+9.2f} ppm{1e6 * r.J_std / 1000:>7.2f} ppm  "
           f"mu {r.damping['coulomb']['mu'].value:.5f} m, K {r.damping['quadratic']['K'].value:.3f} N·m·s²")
     from pathlib import Path

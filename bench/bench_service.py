@@ -87,6 +87,7 @@ def main() -> None:
         "simulation": {"time_scale": 25.0, "rate": 100.0, "seed": 1, "sensor": "direct",
                        "effects": {"viscous": {"c": 1.5e-4}}},
         "modbus": {"host": "127.0.0.1", "port": 0},
+        "web": {"enabled": False},  # its plot worker would share the CPU with what is timed here
     }
     if mqtt_port:
         doc["mqtt"] = {"host": "127.0.0.1", "port": mqtt_port}

@@ -1,4 +1,4 @@
-"""Vision bench: tracker speed (one core, with and without the ROI) and the accuracy figures of issue 4.
+"""Vision bench: tracker speed (one core, with and without the ROI) and the vision path's accuracy figures.
 
 Run: .venv/bin/python bench/bench_vision.py   (or `make bench`, which runs every bench_*.py)
 

@@ -6,6 +6,7 @@
     ModbusEncoder     RS-485 Modbus RTU absolute encoder, sampling thread   (drivers.encoder)
     SimEncoderServer  simulated encoder: a real pymodbus RTU server         (drivers.sim_encoder)
     SimRig            simulated rig coupling the mocks to the physics       (drivers.simrig)
+    FrameSource       file-backed camera: video file or image folder        (drivers.video_file)
     AngleSensor       what the sequencer captures from                      (drivers.sensor)
     CameraAngleSensor a Camera as an AngleSensor (tracking, yaw fit)        (drivers.camera_sensor)
     Clock             MonotonicClock, ManualClock, ScaledClock              (drivers.clock)

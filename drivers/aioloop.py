@@ -74,6 +74,16 @@ class LoopThread:
             fut.cancel()
             raise TimeoutError(f"{self.name}: no result within {timeout:g} s") from None
 
+    def start_serving(self, serve: Coroutine[Any, Any, Any], timeout: float = 5.0) -> Any:
+        """Start the loop and run ``serve`` (a server's start-up) on it; returns its result. On any
+        failure (``TimeoutError`` after ``timeout`` s of real time) the loop is stopped and it re-raises."""
+        self.start(timeout)
+        try:
+            return self.call(serve, timeout)
+        except BaseException:
+            self.stop()
+            raise
+
     def stop(self, timeout: float = 2.0) -> None:
         """Stop the loop and join the thread (at most ``timeout`` s); safe twice."""
         loop, thread = self._loop, self._thread

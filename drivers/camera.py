@@ -35,6 +35,7 @@ import numpy as np
 
 from measurement.vision.config import CameraConfig, CameraModel
 from measurement.vision.locate import to_grey
+from measurement.vision.pipeline import DropCounter
 from measurement.vision.render import CameraPose, Imaging, MarkerPattern, MarkerRenderer
 
 from .errors import DriverConfigError, SensorFault
@@ -44,8 +45,6 @@ log = logging.getLogger("moi.drivers.camera")
 #: time (s on the clock) → true swing angle (rad)
 AngleSource = Callable[[float], float]
 
-#: a gap longer than this many frame periods means frames were lost
-DROP_GAP = 1.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,26 +58,6 @@ class Frame:
     t: float
     image: np.ndarray
     index: int
-
-
-class DropCounter:
-    """Counts frames missing between consecutive timestamps of a camera running at ``fps``."""
-
-    def __init__(self, fps: float):
-        self.period = 1.0 / fps
-        self.last: float | None = None
-        self.dropped = 0
-
-    def add(self, t: float) -> int:
-        """Record a frame time (s); returns how many frames went missing just before it."""
-        missing = 0
-        if self.last is not None:
-            gap = (t - self.last) / self.period
-            if gap > DROP_GAP:
-                missing = int(round(gap)) - 1
-                self.dropped += missing
-        self.last = t
-        return missing
 
 
 class Camera(ABC):

@@ -35,14 +35,14 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from collections import Counter
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from measurement.trace import Trace
 from measurement.vision.config import CameraConfig
-from measurement.vision.geometry import angle_from_normalised, normalised_from_angle
+from measurement.vision.geometry import angle_from_normalised
 from measurement.vision.locate import CORRUPT, LOST, MarkerTracker, TrackerSettings
 from measurement.vision.pipeline import DROPPED, Tracking, VisionSettings, trace_from_tracking
 
@@ -181,21 +181,19 @@ class CameraAngleSensor:
         """The captured ``trace`` (t in s, angle in rad) with the camera yaw fitted and corrected.
 
         Called once per capture by the sequencer, after ``stop()``, before identification. The
-        angles are turned back into image coordinates (the exact inverse of the live conversion),
-        the yaw is fitted over the whole swing and the angles recomputed with it. Returns a new
+        marker positions tracked for the trace's samples (image coordinates, kept by the tracking
+        step) are fitted for the yaw over the whole swing and turned into angles with it. Returns a new
         trace: same source, ``meta`` with ``meta["camera"]`` extended by the pose and edge figures,
         flags plus ``camera_pose`` when |yaw| > the limit. Raises ``VisionError`` (a
         ``MeasurementError``) when too few samples are left.
         """
-        marker = self.config.marker
         with self._lock:
             live = self._tracking
-            tracking = Tracking(t=[float(v) for v in trace.t],
-                                x=np.asarray(normalised_from_angle(trace.angle, marker, self.vision.yaw, 0.0),
-                                             dtype=float).tolist(),
-                                slope=list(live.slope), rows=list(live.rows), residual=list(live.residual),
-                                contrast=list(live.contrast), frames=live.frames, lost=live.lost,
-                                corrupt=live.corrupt, reasons=Counter(live.reasons))
+            # the sequencer's trace counts time from its first sample, the capture's first tracked position
+            t_rel = np.asarray(live.t, dtype=float) - (live.t[0] if live.t else 0.0)
+            keep = np.isin(t_rel, trace.t)
+            tracking = live.subset(keep)
+            tracking.t = t_rel[keep].tolist()
             dropped = self._dropped
         fitted = trace_from_tracking(tracking, self.config, source=trace.source, settings=self.vision,
                                      dropped=dropped)
@@ -245,34 +243,21 @@ class CameraAngleSensor:
             return True
         obs = self._tracker.locate(frame.image)
         theta = math.nan
-        reason, detail = obs.reason, obs.detail
         if obs.found:
             theta = float(angle_from_normalised(obs.x, self.config.marker, self.vision.yaw, 0.0))
             if not math.isfinite(theta):
-                reason, detail = LOST, "beyond the cylinder's silhouette (check radius and distance in the camera file)"
+                obs = replace(obs, found=False, reason=LOST,
+                              detail="beyond the cylinder's silhouette (check radius and distance in the camera file)")
         with self._lock:
             track = self._tracking
-            track.frames += 1
             if self._last_index is not None and frame.index > self._last_index + 1:
                 self._dropped += frame.index - self._last_index - 1
             self._last_index = frame.index
-            if math.isfinite(theta) and not (math.isfinite(frame.t) and frame.t > self._buffer.last_t):
-                # a trace needs strictly increasing time
-                theta, reason, detail = math.nan, CORRUPT, "timestamp out of order"
-            if math.isfinite(theta):
+            if track.add(frame.t, obs):  # the tracking step of measurement.vision.pipeline, shared with files
                 self._buffer.add(frame.t, theta)
                 self._run = 0
-                track.slope.append(obs.slope)
-                track.rows.append(obs.rows)
-                track.residual.append(obs.residual)
-                track.contrast.append(obs.contrast)
                 return True
-            if reason == CORRUPT:
-                track.corrupt += 1
-            else:
-                track.lost += 1
-            why = (detail or reason or "no marker").split(" (")[0]
-            track.reasons[why] += 1
+            detail, reason = ("timestamp out of order", CORRUPT) if obs.found else (obs.detail, obs.reason)
             self._run += 1
             self._max_run = max(self._max_run, self._run)
             if self._run < self.max_lost_frames:

@@ -20,6 +20,10 @@ class DriverConfigError(DriverError, InvalidInput):
     """A driver setting is unusable (pin, port, register, limit); the message says what was expected."""
 
 
+class VideoFileError(DriverError, InvalidInput):
+    """A video file or image folder is missing, unreadable or malformed; the message says which and why."""
+
+
 class DeviceFault(DriverError):
     """A device misbehaved at run time; the message says which device and why."""
 

@@ -169,14 +169,11 @@ class SimEncoderServer:
         """Start listening (returns when the port accepts connections)."""
         if self.running:
             return self
-        self._io.start(timeout)
         try:
-            self._io.call(self._serve(), timeout)
+            self._io.start_serving(self._serve(), timeout)
         except TimeoutError:
-            self._io.stop()
             raise DriverError(f"simulated encoder did not start within {timeout:g} s on {self.url}") from None
         except Exception as exc:
-            self._io.stop()
             raise DriverError(f"simulated encoder cannot listen on {self.url}: {exc}") from exc
         if not self._wait_listening(timeout):
             self.stop()

@@ -23,6 +23,8 @@ CAMERA_POSE = "camera_pose"
 MARKER_LOST = "marker_lost"
 DROPPED_FRAMES = "dropped_frames"
 CORRUPT_FRAME = "corrupt_frame"
+# -- the rig ---------------------------------------------------------------------------
+CALIBRATION_DUE = "calibration_due"
 
 #: flag → what it tells the user (the Modbus map and the docs print these)
 FLAGS: dict[str, str] = {
@@ -39,6 +41,7 @@ FLAGS: dict[str, str] = {
     MARKER_LOST: "the tracker lost the marker in some frames",
     DROPPED_FRAMES: "the camera dropped frames (gaps in the frame timestamps)",
     CORRUPT_FRAME: "some frames were unreadable or corrupt",
+    CALIBRATION_DUE: "the rig's calibration is past its validity period ([calibration] date + valid_days of the rig file)",
 }
 
 

@@ -21,10 +21,14 @@
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Callable, Sequence
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from . import flags as F
 from .diagnostics import Diagnostics, diagnose
@@ -274,6 +278,29 @@ def score_effect(current: ModelFit, effect: Effect) -> Score:
     return Score(bic - current.bic, float(np.sqrt(np.mean(predicted**2))), step)
 
 
+def usable_cores() -> int:
+    """Cores this process may run on (a ``taskset`` or a container's CPU set counts)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def parallel_map(fn: Callable, items: Sequence) -> list:
+    """[fn(item) for item in items], on threads when more than one core is usable.
+
+    Threads, not processes: the integrator's compiled kernel and the BLAS
+    calls release the GIL, and threads cost no start-up, no pickling and no
+    second copy of numpy, scipy and the kernels in memory. On one core the
+    items run one after the other in this thread.
+    """
+    workers = min(len(items), usable_cores())
+    if workers <= 1:
+        return [fn(item) for item in items]
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="moi-fit") as pool:
+        return list(pool.map(fn, items))
+
+
 def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
              f_scale: float | None = None) -> tuple[ModelFit, list[DiscoveryStep], int]:
     """The discovery loop; returns the final fit, its steps and the simulations spent."""
@@ -288,10 +315,21 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
         table: dict[str, dict[str, float]] = {}
         floor = current.n * prep.noise**2
         excess = max(current.rss - floor, 0.01 * current.rss)
-        for cand in candidate_effects(rig, current.model.effect_names):
-            if cand.name not in allowed or not cand.identifiable(amplitude):
-                continue
+        cands = [c for c in candidate_effects(rig, current.model.effect_names)
+                 if c.name in allowed and c.identifiable(amplitude)]
+
+        def trial(cand: Effect, current: ModelFit = current) -> tuple[Score, ModelFit | None]:
             score = score_effect(current, cand)
+            if score.d_bic >= 0.0:
+                return score, None
+            model = Model(rig, tuple(resolve_effects(current.model.effect_names + (cand.name,), rig)))
+            try:
+                return score, fit_model(model, current.t, current.y, prep.noise, previous=current, f_scale=f_scale)
+            except IdentificationError:
+                return score, None
+
+        # the candidates are independent: fitted side by side, read back in library order
+        for cand, (score, f) in zip(cands, parallel_map(trial, cands)):
             spent += len(cand.parameters)
             if score.d_bic >= 0.0:
                 # the first-order gain cannot pay for the parameter: not worth a fit
@@ -299,10 +337,7 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
                                     "residual_rms": score.residual_rms,
                                     "excess_explained": (current.rss - current.n * score.residual_rms**2) / excess}
                 continue
-            model = Model(rig, tuple(resolve_effects(current.model.effect_names + (cand.name,), rig)))
-            try:
-                f = fit_model(model, current.t, current.y, prep.noise, previous=current, f_scale=f_scale)
-            except IdentificationError:
+            if f is None:
                 continue
             spent += f.nfev
             tried[cand.name] = f
@@ -334,6 +369,20 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
 
 def identify(trace: Trace, rig: Rig, options: Options = Options()) -> IdentificationResult:
     """Identify J, ω_n and the damping of ``trace`` on ``rig`` (see module doc)."""
+    # The matrices here are tall and thin (samples × a few parameters): BLAS
+    # threads only contend with each other and with the candidate fits'
+    # threads, on a busy machine by a factor of 30 for an SVD.
+    with _blas().limit(limits=1, user_api="blas"):
+        return _identify(trace, rig, options)
+
+
+@lru_cache(maxsize=1)
+def _blas() -> ThreadpoolController:
+    # finding the loaded BLAS libraries walks every shared object: once per process
+    return ThreadpoolController()
+
+
+def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     if options.candidates is not None:
         unknown = [c for c in options.candidates if c not in EFFECTS]
         if unknown:

@@ -12,6 +12,7 @@ damping normalised by J are still identified, J is then unknown (None).
 
 from __future__ import annotations
 
+import datetime as _dt
 import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping
@@ -29,6 +30,7 @@ _RIG_KEYS = {
 }
 _OBJECT_KEYS = {"mass", "axis_offset"}
 _MODEL_KEYS = {"declared"}
+_CALIBRATION_KEYS = {"date", "valid_days", "references", "source"}
 
 
 def _positive(name: str, value: Any, unit: str, *, allow_zero: bool = False) -> float:
@@ -54,6 +56,65 @@ class ObjectTransfer:
 
 
 @dataclass(frozen=True)
+class CalibrationRecord:
+    """When the rig was calibrated and for how long that holds (``[calibration]`` of the rig file).
+
+    date: the calibration date. valid_days: validity period, days (None: no
+    expiry). references: what was used (name, added inertia and its 1σ in
+    kg·m², ω_n and its 1σ in rad/s...), as recorded by ``moi calibrate``.
+    source: the calibration file it came from.
+    """
+
+    date: _dt.date
+    valid_days: int | None = None
+    references: tuple[dict[str, Any], ...] = ()
+    source: str | None = None
+
+    @property
+    def valid_until(self) -> _dt.date | None:
+        """The last day the calibration holds (None: no expiry)."""
+        return None if self.valid_days is None else self.date + _dt.timedelta(days=self.valid_days)
+
+    def due(self, today: _dt.date) -> bool:
+        """True when ``today`` is past the validity period: results carry the flag ``calibration_due``."""
+        until = self.valid_until
+        return until is not None and today > until
+
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"date": self.date.isoformat()}
+        if self.valid_days is not None:
+            d["valid_days"] = self.valid_days
+        if self.source is not None:
+            d["source"] = self.source
+        if self.references:
+            d["references"] = [dict(r) for r in self.references]
+        return d
+
+    @classmethod
+    def from_dict(cls, doc: Any) -> "CalibrationRecord":
+        if not isinstance(doc, Mapping) or set(doc) - _CALIBRATION_KEYS or "date" not in doc:
+            raise RigError("rig file: [calibration] needs date = YYYY-MM-DD, optional valid_days, references, source")
+        date = doc["date"]
+        if isinstance(date, _dt.datetime):
+            date = date.date()
+        elif isinstance(date, str):
+            try:
+                date = _dt.date.fromisoformat(date)
+            except ValueError:
+                raise RigError(f"rig file: [calibration] date must be a date like 2026-01-31, got {date!r}") from None
+        if not isinstance(date, _dt.date):
+            raise RigError(f"rig file: [calibration] date must be a date like 2026-01-31, got {date!r}")
+        valid = doc.get("valid_days")
+        if valid is not None and (isinstance(valid, bool) or not isinstance(valid, int) or valid <= 0):
+            raise RigError(f"rig file: [calibration] valid_days must be a whole number of days > 0, got {valid!r}")
+        refs = doc.get("references", [])
+        if not isinstance(refs, list) or not all(isinstance(r, Mapping) for r in refs):
+            raise RigError("rig file: [calibration] references must be a list of tables")
+        source = doc.get("source")
+        return cls(date, valid, tuple(dict(r) for r in refs), None if source is None else str(source))
+
+
+@dataclass(frozen=True)
 class Rig:
     """A pendulum rig. SI units throughout.
 
@@ -64,6 +125,7 @@ class Rig:
     mass, com_distance: m (kg) and S (m) of the swinging body (compound).
     g: local gravity, m/s².
     declared: effect names the user declares (from ``[model] declared``).
+    calibration: date, validity and references of the calibration (``[calibration]``), optional.
     """
 
     kind: str
@@ -76,6 +138,7 @@ class Rig:
     g: float = STANDARD_GRAVITY
     object: ObjectTransfer | None = None
     declared: tuple[str, ...] = field(default=("viscous",))
+    calibration: CalibrationRecord | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in RIG_KINDS:
@@ -113,10 +176,11 @@ class Rig:
     # -- (de)serialisation ---------------------------------------------------
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> "Rig":
-        """Build a rig from the parsed rig TOML document ([rig], [object], [model])."""
-        unknown_tables = set(doc) - {"rig", "object", "model"}
+        """Build a rig from the parsed rig TOML document ([rig], [object], [model], [calibration])."""
+        unknown_tables = set(doc) - {"rig", "object", "model", "calibration"}
         if unknown_tables:
-            raise RigError(f"rig file: unknown table(s) {sorted(unknown_tables)}; expected [rig], [object], [model]")
+            raise RigError(f"rig file: unknown table(s) {sorted(unknown_tables)}; expected [rig], [object], [model], "
+                           "[calibration]")
         rig = doc.get("rig")
         if not isinstance(rig, Mapping):
             raise RigError("rig file: missing [rig] table")
@@ -161,6 +225,7 @@ class Rig:
             g=opt("g", "m/s²") or STANDARD_GRAVITY,
             object=obj,
             declared=declared,
+            calibration=CalibrationRecord.from_dict(doc["calibration"]) if "calibration" in doc else None,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -176,4 +241,6 @@ class Rig:
         if self.object is not None:
             doc["object"] = {"mass": self.object.mass, "axis_offset": self.object.axis_offset}
         doc["model"] = {"declared": list(self.declared)}
+        if self.calibration is not None:
+            doc["calibration"] = self.calibration.to_dict()
         return doc

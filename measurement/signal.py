@@ -197,30 +197,27 @@ def find_swings(t: np.ndarray, angle: np.ndarray, centre: float | None = None, h
     t = np.asarray(t, dtype=float)
     c = float(np.median(y)) if centre is None else float(centre)
     z = y - c
+    # Vectorised hysteresis: a sample beyond ±hysteresis sets the lobe's sign,
+    # one inside the band keeps the current lobe; a lobe starts where the sign
+    # of the samples beyond the band changes, and its extremum is its first
+    # sample of largest excursion.
+    side = np.where(z > hysteresis, 1, np.where(z < -hysteresis, -1, 0))
+    beyond = np.flatnonzero(side)
     crossings: list[float] = []
     peaks_t: list[float] = []
     peaks_v: list[float] = []
-    state = 0  # sign of the current lobe once it passed the hysteresis
-    lobe_i = -1
-    for i in range(z.size):
-        zi = z[i]
-        if state >= 0 and zi < -hysteresis:
-            if state == 1:
-                crossings.append(_crossing_time(t, z, i))
-                peaks_t.append(t[lobe_i])
-                peaks_v.append(z[lobe_i])
-            state, lobe_i = -1, i
-        elif state <= 0 and zi > hysteresis:
-            if state == -1:
-                crossings.append(_crossing_time(t, z, i))
-                peaks_t.append(t[lobe_i])
-                peaks_v.append(z[lobe_i])
-            state, lobe_i = 1, i
-        elif state != 0 and state * zi > state * z[lobe_i]:
-            lobe_i = i
-    if state != 0 and lobe_i >= 0:
-        peaks_t.append(t[lobe_i])
-        peaks_v.append(z[lobe_i])
+    if beyond.size:
+        sb = side[beyond]
+        starts = beyond[np.concatenate(([True], sb[1:] != sb[:-1]))]
+        signs = side[starts]
+        lengths = np.diff(np.append(starts, z.size))
+        excursion = np.repeat(signs, lengths) * z[starts[0]:]
+        best = np.maximum.reduceat(excursion, starts - starts[0])
+        at_best = np.flatnonzero(excursion == np.repeat(best, lengths)) + starts[0]
+        lobe = at_best[np.searchsorted(at_best, starts)]
+        crossings = [_crossing_time(t, z, int(i)) for i in starts[1:]]
+        peaks_t = list(t[lobe])
+        peaks_v = list(z[lobe])
     complete = np.ones(len(peaks_v), dtype=bool)
     if complete.size:
         complete[-1] = False

@@ -1,8 +1,18 @@
 """moi service: the daemon and the user's front (CLI, config, store, MQTT, Modbus)."""
 
-from importlib.metadata import PackageNotFoundError, version
+from typing import Any
 
-try:
-    __version__ = version("moi")
-except PackageNotFoundError:  # running from a source tree without installation
-    __version__ = "0.0.0+source"
+
+def __getattr__(name: str) -> Any:
+    # the installed version, looked up on first use: importlib.metadata is slow to import, and
+    # `moi --help` does not need it
+    if name == "__version__":
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            value = version("moi")
+        except PackageNotFoundError:  # running from a source tree without installation
+            value = "0.0.0+source"
+        globals()["__version__"] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,4 +1,5 @@
-"""Reading the camera file (TOML, DESIGN.md) with errors that name the file and the key."""
+"""Reading the camera file (TOML: [camera], [marker], optional [pose]; see docs/vision.md) with errors that
+name the file and the key."""
 
 from __future__ import annotations
 

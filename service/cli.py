@@ -15,6 +15,7 @@ import sys
 from typing import Sequence
 
 from measurement.errors import InvalidInput
+from service.errors import StoreError
 
 #: subcommand → module (in the order `moi --help` lists them)
 COMMANDS = {
@@ -26,6 +27,8 @@ COMMANDS = {
     "run": "service.commands.run",
     "results": "service.commands.results",
     "export": "service.commands.export",
+    "spc": "service.commands.spc",
+    "store": "service.commands.store",
     "modbus-map": "service.commands.modbus_map",
     "demo": "service.commands.demo",
 }
@@ -39,11 +42,24 @@ def _modules():
         yield name, importlib.import_module(path)
 
 
+class _Version(argparse.Action):
+    """``--version``, looking the installed version up only when asked."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str = argparse.SUPPRESS,
+                 default: str = argparse.SUPPRESS, help: str | None = None) -> None:
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        from service import __version__
+        print(f"moi {__version__}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="moi", description="Measure the moment of inertia of a part from a free pendulum swing.")
-    from service import __version__
-    parser.add_argument("--version", action="version", version=f"moi {__version__}")
+    parser.add_argument("--version", action=_Version, help="show the version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name, module in _modules():
@@ -58,7 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args._run(args) or 0)
-    except InvalidInput as exc:
+    except (InvalidInput, StoreError) as exc:  # a damaged or unusable store is the user's file: one line
         print(f"moi {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

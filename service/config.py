@@ -41,7 +41,7 @@ from drivers.settings import (ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSetti
 from .defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, demo_camera
 from .errors import ConfigError
 from .files import read_rig, read_toml
-from .modbus_server import ModbusSettings
+from .modbus_server import ModbusSettings, allowed_networks
 from .mqtt import MqttSettings
 from .registers import WORD_ORDERS
 from .web.settings import WebSettings
@@ -86,6 +86,14 @@ class SimulationSettings:
     camera_config: Any = None        # the parsed camera file (CameraConfig) with sensor = "camera"
     drop_rate: float = 0.0
     crc_rate: float = 0.0
+
+
+@dataclass(frozen=True)
+class RecipeSettings:
+    """``[recipes]``: the recipe directory (one TOML file per part type) and the recipe active at start."""
+
+    directory: str | None = None
+    active: str | None = None
 
 
 @dataclass(frozen=True)
@@ -291,6 +299,12 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "home_assistant": _doc("publish Home Assistant discovery messages"),
         "discovery_prefix": _doc("Home Assistant discovery prefix"),
     }, extra={"enabled": Key("bool", True, "publish over MQTT (the table's presence enables it)")}),
+    "recipes": _schema(RecipeSettings, {
+        "directory": _doc("directory of the recipe files, one TOML file per part type (docs/service.md, Recipes); "
+                          "relative to this file", kind="path"),
+        "active": _doc("recipe active at start (name or number); the PLC (register recipe_select) or MQTT "
+                       "(cmd/recipe) may change it"),
+    }),
     "modbus": _schema(ModbusSettings, {
         "mode": _doc("Modbus TCP server or Modbus RTU slave on a serial line", choices=("tcp", "rtu")),
         "host": _doc("TCP listen address"),
@@ -299,6 +313,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "word_order": _doc("order of the two registers of a float32/uint32", choices=WORD_ORDERS),
         "max_connections": _doc("TCP clients at once; one more closes the connection idle the longest", min=1, max=256),
         "idle_timeout": _doc("close a TCP connection without a request for this long, s (0: never)", min=0),
+        "allow_from": _doc("TCP client addresses or networks allowed besides this machine, e.g. [\"192.168.10.20\", "
+                           "\"10.0.0.0/24\"] (empty: every client that reaches host)"),
         "serial_port": _doc("RTU: serial device, e.g. /dev/ttyAMA0"),
         "baudrate": _doc("RTU baud rate", min=300, max=4_000_000),
         "parity": _doc("RTU parity", choices=("N", "E", "O")),
@@ -315,7 +331,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
 }
 
 #: tables that are plain key/value tables of SCHEMA (the others are sub-tables)
-TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus", "web")
+TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus", "web",
+              "recipes")
 
 
 # --- the validated configuration ----------------------------------------------------------------
@@ -339,6 +356,8 @@ class Config:
     modbus: ModbusSettings | None    # None: Modbus off
     web: WebSettings | None          # None: no web page
     document: Mapping[str, Any]      # the parsed TOML, stored with every measurement
+    recipes: Any = None              # service.recipes.RecipeBook (every recipe of [recipes] directory, checked)
+    active_recipe: str | None = None  # [recipes] active
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary of what the daemon runs with (passwords left out)."""
@@ -356,6 +375,10 @@ class Config:
             "simulation": clean(self.simulation) if self.simulated else None,
             "hardware": clean(self.hardware), "sequencer": clean(self.sequencer),
             "identification": clean(self.identification), "mqtt": clean(self.mqtt), "modbus": clean(self.modbus),
+            "recipes": None if self.recipes is None else {
+                "directory": self.recipes.directory, "active": self.active_recipe,
+                "recipes": [{"name": r.name, "number": r.number, "version": r.version, "path": r.path}
+                            for r in self.recipes.recipes]},
             "web": clean(self.web),
         }
 
@@ -586,7 +609,21 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
     if mb.pop("enabled"):
         if mb["mode"] == "rtu" and not mb["serial_port"]:
             raise c.fail("modbus", "serial_port", "missing: mode = \"rtu\" needs the serial device, e.g. /dev/ttyAMA0")
+        mb["allow_from"] = tuple(mb["allow_from"] or ())
+        try:
+            allowed_networks(mb["allow_from"])
+        except ValueError as exc:
+            raise c.fail("modbus", "allow_from", str(exc)) from None
         modbus = ModbusSettings(**mb)
+
+    from .recipes import RecipeBook
+    rc = c.table("recipes", doc.get("recipes", {}), SCHEMA["recipes"])
+    book = RecipeBook.load(_resolve(base, rc["directory"]))  # RecipeError: one line naming the recipe file
+    if rc["active"] is not None:
+        try:
+            book.find(rc["active"])
+        except ConfigError as exc:
+            raise c.fail("recipes", "active", str(exc)) from None
 
     web = None
     w = c.table("web", doc.get("web", {}), SCHEMA["web"])
@@ -601,6 +638,7 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         log_level=dev["log_level"], store_trace=dev["store_trace"],
         rig=rig, rig_path=rig_path, simulated=simulated, simulation=simulation, hardware=hardware,
         sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, web=web, document=dict(doc),
+        recipes=book, active_recipe=rc["active"],
     )
 
 

@@ -22,26 +22,31 @@ that died ends the daemon with status 3 so that systemd restarts it.
 
 from __future__ import annotations
 
+import datetime as _dt
 import concurrent.futures
 import logging
 import queue
 import threading
 import time
-from typing import Any, Callable
+from collections import deque
+from typing import Any, Callable, Mapping
 
 from firmware_host import Event, Measurement, Sequencer, State
 from measurement import IdentificationResult, Rig, Trace, identify
+from measurement import flags as F
+from measurement.errors import InvalidInput
 
 from . import __version__
 from .config import Config
-from .errors import ServiceError
+from .errors import ServiceError, StoreDamaged
 from .hardware import Devices, build_devices
 from .modbus_server import ModbusServer
 from .mqtt import MqttService
 from .notify import Notifier
 from .payload import iso_utc, result_payload
+from .recipes import SPC_WINDOW, PartTracker, Recipe, RecipeBook, recipe_spc
 from .registers import LiveStatus
-from .store import Store
+from .store import Store, quarantine_store
 
 log = logging.getLogger("moi.daemon")
 
@@ -77,25 +82,33 @@ class Appliance:
         self.mqtt: MqttService | None = None
         self.web: Any = None  # service.web.server.WebServer when [web] is enabled
         self.sequencer: Sequencer | None = None
-        self._commands: queue.SimpleQueue[tuple[str, str]] = queue.SimpleQueue()
+        self._commands: queue.SimpleQueue[tuple[str, str, Mapping[str, Any] | None]] = queue.SimpleQueue()
         self._calls: queue.SimpleQueue[tuple[Callable[[], Any], concurrent.futures.Future]] = queue.SimpleQueue()
         self._wakeup = threading.Event()
         self._stop = threading.Event()
         self._started_runs = 0
         self._run_started: dict[str, tuple[float, str]] = {}  # measurement id → (wall time of ARMED, trigger source)
         self._accepted_source = "unknown"  # source of the last accepted trigger (paired with the next ARMED)
+        # the part ID and recipe of the last accepted trigger, and of each run (measurement id → them)
+        self.parts = PartTracker(config.recipes or RecipeBook(None), config.active_recipe)
+        self._accepted_part: tuple[str | None, Recipe | None] = (None, None)
+        self._run_part: dict[str, tuple[str | None, Recipe | None]] = {}
+        self._current_recipe: Recipe | None = None
         self._last_status = ""
         self.loop_iterations = 0
         self.last_loop_error: str | None = None
         self.stored: list[str] = []  # UUIDs stored since start (ok, failed, aborted), in order
+        self._durable_results: deque[str] = deque(maxlen=16)  # UUIDs of the latest results the store holds
         self._stored_cond = threading.Condition()
         self.exit_status = EXIT_OK
         self._stopping = False
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
-    def command(self, name: str, source: str) -> None:
-        """Queue "trigger" or "abort" from ``source`` ("button", "modbus", "mqtt", "cli")."""
-        self._commands.put((name, source))
+    def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
+        """Queue a command from ``source`` ("button", "modbus", "mqtt", "cli"): "trigger" (data may carry
+        ``part_id``, and ``recipe`` as a name or number), "abort", "recipe" (data ``recipe``) or "part_id"
+        (data ``part_id``)."""
+        self._commands.put((name, source, data))
         self._wakeup.set()
 
     def call_soon(self, fn: Callable[[], Any]) -> concurrent.futures.Future:
@@ -115,9 +128,10 @@ class Appliance:
         """Open the store, start Modbus and MQTT, build the devices and the sequencer; then READY."""
         cfg = self.config
         try:
-            self.store = Store(cfg.state_dir)
+            self.store = self._open_store()
             if cfg.modbus is not None:
-                self.modbus = ModbusServer(cfg.modbus, on_command=self.command)
+                self.modbus = ModbusServer(cfg.modbus, on_command=self.command, recipe_numbers=self.parts.book.numbers)
+                self.modbus.set_inputs(recipe=self.parts.recipe.number if self.parts.recipe else 0)
                 # until the main loop runs, the PLC sees STARTING and the true outbox backlog, not defaults
                 self.modbus.set_live(LiveStatus(state="STARTING", simulated=cfg.simulated,
                                                 outbox_pending=self.store.outbox_count()))
@@ -163,6 +177,28 @@ class Appliance:
         log.info("moi %s ready (%s rig; %s; store %s)", __version__, "simulated" if cfg.simulated else "hardware",
                  ", ".join(where), self.store.path)
         self.notifier.ready(f"idle; {', '.join(where)}")
+
+    def _open_store(self) -> Store:
+        """The store, after the reads a start does; a damaged one is moved aside and what can be
+        read is salvaged into a new one (a restart loop on a damaged file would stop the appliance
+        for good, and deleting it would lose results)."""
+        state_dir = self.config.state_dir
+        try:
+            store = Store(state_dir)
+            try:
+                store.outbox_count()
+                store.latest("ok")
+                store.outbox_pending(limit=10)
+            except BaseException:
+                store.close()
+                raise
+            return store
+        except StoreDamaged as exc:
+            log.error("%s", exc)
+        aside, health = quarantine_store(state_dir, self.wall_clock)
+        log.error("the damaged result store was moved to %s; a new store holds what could be read (%s)", aside,
+                  health.summary())
+        return Store(state_dir)
 
     # --- the main loop ---------------------------------------------------------------------------------
     def run(self, until: Callable[[], bool] | None = None) -> int:
@@ -215,12 +251,25 @@ class Appliance:
         assert seq is not None
         while True:
             try:
-                name, source = self._commands.get_nowait()
+                name, source, data = self._commands.get_nowait()
             except queue.Empty:
                 return
+            if name in ("recipe", "part_id") or (name == "trigger" and data):
+                if seq.busy:
+                    log.warning("%s from %s refused: a measurement runs (the part cannot change during it)",
+                                name, source)
+                    continue
+                try:
+                    self._apply_part_data(data or {})
+                except InvalidInput as exc:
+                    log.warning("%s from %s refused: %s", name, source, exc)
+                    continue
+                if name != "trigger":
+                    continue
             if name == "trigger":
                 if seq.request_measurement(source):
                     self._accepted_source = source
+                    self._accepted_part = (self.parts.part_id, self.parts.recipe)
                 else:
                     log.info("trigger from %s ignored (state %s)", source, seq.state.value)
             elif name == "abort":
@@ -230,6 +279,18 @@ class Appliance:
                     log.info("abort from %s: nothing to abort", source)
             else:
                 log.warning("unknown command %r from %s", name, source)
+
+    def _apply_part_data(self, data: Mapping[str, Any]) -> None:
+        """Select a recipe and/or set the part ID (InvalidInput when unknown or malformed)."""
+        if data.get("recipe") is not None:
+            r = self.parts.select(data["recipe"])
+            log.info("recipe %s", f"{r.number} {r.name!r} (version {r.version}) active" if r else "deselected")
+            if self.modbus is not None:
+                self.modbus.set_inputs(recipe=r.number if r else 0)
+        if "part_id" in data:
+            self.parts.set_part_id(data["part_id"])
+            if self.modbus is not None:
+                self.modbus.set_inputs(part_id=self.parts.part_id or "")
 
     def _run_calls(self) -> None:
         while True:
@@ -267,10 +328,12 @@ class Appliance:
 
     # --- sequencer callbacks (main loop thread) ------------------------------------------------------------
     def _identify(self, trace: Trace, rig: Rig) -> IdentificationResult:
-        """Identification (in the sequencer's worker thread), then wake the main loop so that the
-        result is stored and published at once rather than at the next poll tick."""
+        """Identification (in the sequencer's worker thread) with the run's recipe rig and model,
+        then wake the main loop so that the result is stored and published at once rather than at
+        the next poll tick."""
+        recipe = self._current_recipe
         try:
-            return self._identifier(trace, rig)
+            return self._identifier(trace, recipe.rig_for(rig) if recipe is not None else rig)
         finally:
             self._wakeup.set()
 
@@ -279,6 +342,8 @@ class Appliance:
             self._started_runs += 1
             if event.measurement_id:
                 self._run_started[event.measurement_id] = (self.wall_clock(), self._accepted_source)
+                self._run_part[event.measurement_id] = self._accepted_part
+                self._current_recipe = self._accepted_part[1]
         if event.state in (State.FAULT, State.ABORTED) and event.measurement_id \
                 and event.measurement_id in self._run_started:
             self._store_failure(event)
@@ -289,10 +354,21 @@ class Appliance:
 
     def _state_message(self, state: str, previous: str, reason: str, measurement_id: str | None,
                        event: Event | None = None) -> dict[str, Any]:
-        msg = event.to_dict() if event is not None else {"state": state, "previous": previous, "reason": reason,
-                                                          "measurement_id": measurement_id}
+        msg = self.public_event(event) if event is not None else {"state": state, "previous": previous,
+                                                                  "reason": reason, "measurement_id": measurement_id}
         now = self.wall_clock()
         msg.update({"device_id": self.config.device_id, "timestamp": now, "at": iso_utc(now)})
+        return msg
+
+    def public_event(self, event: Event) -> dict[str, Any]:
+        """``event.to_dict()`` for whatever leaves the device (MQTT state, the web page): the
+        result's values only once the store holds the result. PUBLISHING is delivered after the
+        store write; when that failed (a full disk), J must not go out while it is lost here."""
+        msg = event.to_dict()
+        if event.measurement is not None and event.measurement_id not in self._durable_results:
+            for key in ("J", "J_std", "omega_n"):
+                msg.pop(key, None)
+            msg["reason"] = "the result could not be stored"
         return msg
 
     def _clock_scale(self) -> float:
@@ -308,20 +384,32 @@ class Appliance:
         cfg = self.config
         result = m.result.to_dict()
         timing = m.to_dict().get("timing", {})
+        part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
+        rig = recipe.rig_for(cfg.rig) if recipe is not None else cfg.rig
+        calibration = self._calibration_state(rig, finished)
+        if calibration is not None and calibration["due"] and F.CALIBRATION_DUE not in result["flags"]:
+            result["flags"] = [*result["flags"], F.CALIBRATION_DUE]
+        part = self.parts.release(result, m.id, part_id, recipe) | {"calibration": calibration}
 
         def build(uuid: str, seq: int) -> dict[str, Any]:
             return result_payload(result, uuid=uuid, seq=seq, device_id=cfg.device_id, trigger=m.requested_by,
                                   started_at=started, finished_at=finished, software_version=__version__,
-                                  timing=timing)
+                                  timing=timing, part=part)
 
         trace = m.trace
-        stored = self.store.record(
-            uuid=m.id, status="ok", trigger=m.requested_by, device_id=cfg.device_id, software_version=__version__,
-            started_at=started, finished_at=finished, result=result, build_payload=build,
-            rig=cfg.rig.to_dict(), config=cfg.to_dict(),
-            trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
-            trace_meta=dict(trace.meta), enqueue=("result",) if self.mqtt is not None else (),
-        )
+        try:
+            stored = self.store.record(
+                uuid=m.id, status="ok", trigger=m.requested_by, device_id=cfg.device_id,
+                software_version=__version__, started_at=started, finished_at=finished, result=result,
+                build_payload=build, rig=rig.to_dict(), config=cfg.to_dict(),
+                trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
+                trace_meta=dict(trace.meta), enqueue=("result",) if self.mqtt is not None else (),
+                part=_part_columns(part),
+            )
+        except BaseException:
+            self.parts.undo_last()  # not stored: the release does not count for the part
+            raise
+        self._durable_results.append(m.id)
         if self.modbus is not None and stored.payload is not None:
             self.modbus.publish_result(stored.payload)
         if self.mqtt is not None:
@@ -331,16 +419,46 @@ class Appliance:
         self._note_stored(m.id)
         log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, result.get("J"),
                  ", ".join(result.get("flags") or []) or "none")
+        if part["verdict"] is not None and recipe is not None:
+            log.info("part %s (%s): %s", part_id or "(no ID)", recipe.name, part["verdict"])
+            if self.mqtt is not None:
+                self._publish_spc(recipe)
+
+    def _publish_spc(self, recipe: Recipe) -> None:
+        """The retained SPC summary of a recipe's latest parts (after each completed part)."""
+        assert self.store is not None and self.mqtt is not None
+        spc = recipe_spc(self.store, recipe.name, limit=SPC_WINDOW)
+        doc: dict[str, Any] = {"recipe": recipe.name, "version": recipe.version, "window": SPC_WINDOW,
+                               "device_id": self.config.device_id, "timestamp": self.wall_clock()}
+        if spc is None:
+            doc["status"] = "fewer than 2 usable parts"
+        else:
+            doc |= spc.to_dict() | {"recipe": recipe.name, "status": "ok"}
+        self.mqtt.publish_retained(self.mqtt.topics.spc(recipe.name), doc)
+
+    @staticmethod
+    def _calibration_state(rig: Rig, now: float) -> dict[str, Any] | None:
+        """The rig's calibration as of ``now`` (Unix s): date, validity, whether it is due."""
+        cal = rig.calibration
+        if cal is None:
+            return None
+        today = _dt.datetime.fromtimestamp(now, _dt.timezone.utc).date()
+        until = cal.valid_until
+        return {"date": cal.date.isoformat(), "valid_until": until.isoformat() if until else None,
+                "due": cal.due(today), "stiffness": rig.stiffness, "stiffness_std": rig.stiffness_std}
 
     def _store_failure(self, event: Event) -> None:
         assert self.store is not None and event.measurement_id is not None
         started, trigger = self._run_started.pop(event.measurement_id)
+        part_id, recipe = self._run_part.pop(event.measurement_id, (None, None))
         status = "failed" if event.state is State.FAULT else "aborted"
         try:
             self.store.record(uuid=event.measurement_id, status=status, trigger=trigger,
                               device_id=self.config.device_id, software_version=__version__, started_at=started,
                               finished_at=self.wall_clock(), error=event.reason, rig=self.config.rig.to_dict(),
-                              config=self.config.to_dict())
+                              config=self.config.to_dict(),
+                              part={"part_id": part_id, "recipe": recipe.name if recipe else None,
+                                    "recipe_version": recipe.version if recipe else None})
             self._note_stored(event.measurement_id)
         except ServiceError:
             log.exception("could not store the %s measurement %s", status, event.measurement_id)
@@ -369,6 +487,8 @@ class Appliance:
             state="STOPPING" if self._stopping else state, busy=bool(seq and seq.busy), fault=state == "FAULT",
             mqtt_connected=bool(self.mqtt and self.mqtt.is_connected), simulated=self.config.simulated,
             outbox_pending=self.mqtt.sender.pending if self.mqtt is not None else 0, started=self._started_runs,
+            recipe=self.parts.recipe.number if self.parts.recipe else 0,
+            releases_done=(self.parts.open_part or {}).get("done", 0),
         )
 
     def _refresh_live(self) -> None:
@@ -434,6 +554,15 @@ class Appliance:
             self.store.close()
             self.store = None
         self.notifier.close()
+
+
+def _part_columns(part: Mapping[str, Any]) -> dict[str, Any]:
+    """The store's part columns from the payload's part keys."""
+    recipe, release, whole = part.get("recipe") or {}, part.get("release") or {}, part.get("part") or {}
+    return {"part_id": part.get("part_id"), "part_uuid": release.get("part_uuid"), "recipe": recipe.get("name"),
+            "recipe_version": recipe.get("version"), "release_index": release.get("index"),
+            "releases": release.get("of"), "verdict": release.get("verdict"), "part_verdict": part.get("verdict"),
+            "part_value": whole.get("mean"), "part_U": whole.get("U")}
 
 
 class _Fatal(ServiceError):

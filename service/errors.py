@@ -29,4 +29,8 @@ class ModbusServerError(StartupError):
 
 
 class StoreError(ServiceError):
-    """The result store (SQLite) cannot be opened or written."""
+    """The result store (SQLite) cannot be opened, read or written."""
+
+
+class StoreDamaged(StoreError):
+    """The result store's file is damaged (SQLite reports corruption, or a stored blob does not decode)."""

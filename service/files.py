@@ -56,7 +56,7 @@ def read_toml_as(path: str | os.PathLike, what: str, parse: Callable[[dict], T],
 
 
 def read_rig(path: str | os.PathLike) -> Rig:
-    """The rig file of DESIGN.md (kind, constants, declared effects)."""
+    """The rig file (TOML: [rig] kind and constants, [model] declared effects; see README.md)."""
     return read_toml_as(path, "rig file", Rig.from_dict, RigError)
 
 
@@ -73,17 +73,3 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     tmp = p.with_name(f".{p.name}.tmp")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, p)
-
-
-VIDEO_SUFFIXES = {".avi", ".mp4", ".mkv", ".mov", ".m4v", ".webm", ".mjpg", ".mjpeg", ".ogv"}
-
-
-def load_source(path: str | os.PathLike, camera: str | os.PathLike | None = None, rig: Rig | None = None) -> Trace:
-    """SOURCE of `moi identify`: a trace CSV, a video file or an image-sequence folder."""
-    p = Path(path)
-    if p.is_dir() or p.suffix.lower() in VIDEO_SUFFIXES:
-        if camera is None:
-            raise InputFileError(f"{str(p)!r} is a video source; expected --camera CAM.toml with the camera and marker geometry")
-        from .video import video_trace  # the vision path (issue 4)
-        return video_trace(p, camera)
-    return read_trace(p)

@@ -9,7 +9,12 @@ Topics under ``<prefix>/<device_id>/`` (prefix default "moi"):
 * ``cmd/measure`` a message here starts one measurement (like the push button);
   ``cmd/abort`` aborts the running one. Retained messages are ignored (a stale
   retained command must not fire at every reconnect); a JSON payload with an
-  ``"id"`` is acted on once per id (QoS 1 may deliver twice).
+  ``"id"`` is acted on once per id (QoS 1 may deliver twice). A JSON measure
+  command may carry ``"part_id"`` (the part's serial number) and ``"recipe"``.
+* ``cmd/recipe``  makes a recipe active: its name or number as the payload, or
+  JSON ``{"recipe": name or number}`` (0 or "" deselects).
+* ``spc/<recipe>`` the SPC summary of a recipe's parts, retained, republished
+  after each completed part.
 
 Optional Home Assistant MQTT discovery (retained config messages) for J, its
 uncertainty, ω_n, the damping ratio, the state, each quality flag and a
@@ -95,6 +100,11 @@ class Topics:
         self.state = f"{base}/state"
         self.cmd_measure = f"{base}/cmd/measure"
         self.cmd_abort = f"{base}/cmd/abort"
+        self.cmd_recipe = f"{base}/cmd/recipe"
+
+    def spc(self, recipe: str) -> str:
+        """The retained SPC summary topic of a recipe."""
+        return f"{self.base}/spc/{recipe}"
 
     def for_kind(self, kind: str) -> str:
         if kind == "result":
@@ -105,8 +115,10 @@ class Topics:
 class MqttService:
     """The MQTT client of the daemon: durable result delivery, status, state, commands.
 
-    on_command(name, source) is called from paho's thread for a command
-    message ("trigger" or "abort", source "mqtt"); it must not block.
+    on_command(name, source[, data]) is called from paho's thread for a command
+    message ("trigger" or "abort", source "mqtt"; "trigger" with data when the
+    message carries a part ID or recipe, "recipe" with data {"recipe": ...});
+    it must not block.
     """
 
     def __init__(self, settings: MqttSettings, device_id: str, store: Store, *, software_version: str = "",
@@ -213,7 +225,7 @@ class MqttService:
         self.last_error = None
         log.info("MQTT connected to %s:%d", self.settings.host, self.settings.port)
         client.publish(self.topics.status, "online", qos=1, retain=True)
-        client.subscribe([(self.topics.cmd_measure, 1), (self.topics.cmd_abort, 1)])
+        client.subscribe([(self.topics.cmd_measure, 1), (self.topics.cmd_abort, 1), (self.topics.cmd_recipe, 1)])
         if self.settings.home_assistant:
             for topic, config in discovery_messages(self.settings, self.topics, self.device_id, self.software_version):
                 client.publish(topic, json.dumps(config), qos=1, retain=True)
@@ -245,10 +257,13 @@ class MqttService:
         if message.retain:
             log.warning("MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
             return
-        name = {self.topics.cmd_measure: "trigger", self.topics.cmd_abort: "abort"}.get(message.topic)
+        name = {self.topics.cmd_measure: "trigger", self.topics.cmd_abort: "abort",
+                self.topics.cmd_recipe: "recipe"}.get(message.topic)
         if name is None:
             return
         cmd_id = None
+        data: dict[str, Any] = {}
+        doc: Any = None
         if message.payload and len(message.payload) <= MAX_COMMAND_PAYLOAD:
             try:
                 doc = json.loads(message.payload)
@@ -256,13 +271,29 @@ class MqttService:
                     cmd_id = str(doc["id"])[:128]
             except (ValueError, UnicodeDecodeError, RecursionError):
                 pass  # any payload is a valid command; only a JSON "id" is used for dedupe
+        if isinstance(doc, dict):
+            data = {k: doc[k] for k in ("part_id", "recipe") if k in doc}
+        if name == "recipe":
+            if not isinstance(doc, dict):  # a bare name or number
+                data = {"recipe": message.payload.decode("utf-8", errors="replace").strip()}
+            if "recipe" not in data:
+                log.warning("MQTT: %s without a recipe name or number ignored", message.topic)
+                return
         if cmd_id is not None:
             with self._seen_lock:
                 if (name, cmd_id) in self._seen_ids:
                     log.info("MQTT: duplicate %s command id %s ignored", name, cmd_id)
                     return
                 self._seen_ids.append((name, cmd_id))
-        self._on_command(name, "mqtt")
+        if data:
+            self._on_command(name, "mqtt", data)
+        else:
+            self._on_command(name, "mqtt")
+
+    def publish_retained(self, topic: str, doc: dict[str, Any]) -> None:
+        """A retained JSON document (QoS 1), e.g. the SPC summary of a recipe; dropped while disconnected
+        (the next part republishes it)."""
+        self.client.publish(topic, json.dumps(doc, allow_nan=False, default=str), qos=1, retain=True)
 
 
 def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,

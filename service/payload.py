@@ -15,14 +15,17 @@ from typing import Any, Mapping
 
 from .registers import flag_bits
 
-PAYLOAD_SCHEMA = 1
+PAYLOAD_SCHEMA = 2  # 2: part_id, recipe, release, part, verdict, calibration
 
 #: keys the envelope adds on top of the result's own keys
 ENVELOPE_KEYS = (
     "payload_schema", "uuid", "seq", "device_id", "software_version", "trigger", "status",
     "started_at", "finished_at", "timestamp", "duration",
     "residual_rms_before", "residual_rms_after", "flag_bits", "timing",
-)
+) + ("part_id", "recipe", "release", "part", "verdict", "calibration")
+
+#: the part keys of the envelope (``service.recipes.PartTracker.release`` and the rig's calibration state)
+PART_KEYS = ENVELOPE_KEYS[-6:]
 
 
 def iso_utc(t: float) -> str:
@@ -32,8 +35,12 @@ def iso_utc(t: float) -> str:
 
 def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id: str, trigger: str,
                    started_at: float, finished_at: float, software_version: str,
-                   timing: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """The result payload (JSON-ready dict). started_at/finished_at: Unix time, s."""
+                   timing: Mapping[str, Any] | None = None, part: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The result payload (JSON-ready dict). started_at/finished_at: Unix time, s.
+
+    part: the part keys (PART_KEYS: part_id, recipe, release, part, verdict,
+    calibration); missing ones are null, so every payload has them.
+    """
     clash = set(ENVELOPE_KEYS) & set(result)
     if clash:  # the result object grew a key the envelope uses: fail loudly rather than overwrite
         raise ValueError(f"result keys {sorted(clash)} collide with the payload envelope")
@@ -55,6 +62,11 @@ def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id:
         "flag_bits": flag_bits(result.get("flags") or ()),
         "timing": dict(timing or {}),
     }
+    part = part or {}
+    unknown = set(part) - set(PART_KEYS)
+    if unknown:
+        raise ValueError(f"unknown part keys {sorted(unknown)}; expected {PART_KEYS}")
+    envelope.update({k: part.get(k) for k in PART_KEYS})
     return {**envelope, **result}
 
 

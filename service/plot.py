@@ -53,3 +53,40 @@ def render_png(result: IdentificationResult, *, dpi: int = 80) -> bytes:
     buf = io.BytesIO()
     plot_result(result, buf, dpi=dpi)
     return buf.getvalue()
+
+
+def plot_control_chart(summary, path: str | os.PathLike, title: str = "", unit: str = "kg·m²") -> None:
+    """The control chart of a ``measurement.spc.SpcSummary``: points with centre, control and
+    specification limits above (points outside or breaking a run rule in red), ranges below."""
+    from matplotlib.figure import Figure
+
+    s = summary
+    x = np.arange(1, s.n_points + 1)
+    fig = Figure(figsize=(10, 6.5), layout="constrained")
+    ax, axr = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    ax.plot(x, s.points, "o-", color="tab:blue", ms=4, lw=0.8, label="part value" if s.subgroup == 1
+            else f"subgroup mean (n = {s.subgroup})")
+    flagged = sorted({v.index for v in s.violations})
+    if flagged:
+        ax.plot(x[flagged], np.asarray(s.points)[flagged], "o", color="tab:red", ms=7, label="outside / run rule")
+    ax.axhline(s.mean, color="k", lw=1, label=f"centre {s.mean:.6g}")
+    for v, name in ((s.ucl, "UCL"), (s.lcl, "LCL")):
+        ax.axhline(v, color="tab:red", ls="--", lw=1)
+        ax.text(x[-1] + 0.1, v, f" {name} {v:.6g}", va="center", fontsize=8, color="tab:red")
+    for v, name in ((s.usl, "USL"), (s.lsl, "LSL")):
+        if v is not None:
+            ax.axhline(v, color="tab:orange", ls=":", lw=1.2)
+            ax.text(x[0] - 0.1, v, f"{name} {v:.6g} ", va="center", ha="right", fontsize=8, color="tab:orange")
+    cap = f"Cp {s.cp:.3g}, Cpk {s.cpk:.3g}" if s.cp is not None and s.cpk is not None else "Cp n/a"
+    ax.set_title(f"{title}  {s.chart}: {s.n_points} points, σ within {s.sigma_within:.3g} {unit}, {cap}".strip())
+    ax.set_ylabel(unit)
+    ax.legend(loc="upper left", fontsize=8)
+    xr = x[1:] if s.subgroup == 1 else x
+    axr.plot(xr, s.ranges, "o-", color="tab:gray", ms=3, lw=0.8)
+    axr.axhline(s.range_mean, color="k", lw=1)
+    axr.axhline(s.range_ucl, color="tab:red", ls="--", lw=1)
+    if s.range_lcl > 0:
+        axr.axhline(s.range_lcl, color="tab:red", ls="--", lw=1)
+    axr.set_ylabel("moving range" if s.subgroup == 1 else "range")
+    axr.set_xlabel("part")
+    fig.savefig(path, dpi=100, format="png")

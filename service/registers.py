@@ -23,7 +23,10 @@ from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, 
 from measurement import flags as F
 
 #: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 3  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
+MAP_VERSION = 4  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
+# 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
+#    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
+#    holding registers; flag calibration_due (bit 13)
 
 
 # --- enumerations ------------------------------------------------------------
@@ -59,6 +62,7 @@ FLAG_BITS: dict[str, int] = {
     F.OUTLIERS_DOWNWEIGHTED: 10,  # map version 3
     F.WINDOW_CUT_AT_GAP: 11,
     F.ANGLE_UNWRAPPED: 12,
+    F.CALIBRATION_DUE: 13,  # map version 4: the rig's calibration is past its validity period
 }
 FLAG_OTHER_BIT = 15
 
@@ -81,7 +85,24 @@ STATUS_BITS: dict[str, int] = {
     "mqtt_connected": 3,  # the MQTT client is connected to its broker
     "simulated": 4,       # the appliance runs on the simulated rig
     "outbox_pending": 5,  # results wait in the outbox for the broker
+    "part_ok": 6,         # the snapshot's part verdict is OK (a PLC latches on it)
+    "part_nok": 7,        # ... NOK
+    "part_invalid": 8,    # ... INVALID (not trustworthy: measure again)
 }
+
+#: verdict → code in registers `verdict` and `release_verdict` (0: none yet / part not complete / no recipe)
+VERDICT_CODES: dict[str, int] = {"OK": 1, "NOK": 2, "INVALID": 3}
+
+#: characters of the part ID block (2 ASCII characters per register, first character in the high byte)
+PART_ID_CHARS = 20
+
+#: the only writable holding registers (FC 6 / FC 16): name → (address, count). Read back with FC 3.
+WRITABLE: dict[str, tuple[int, int]] = {
+    "part_id": (100, PART_ID_CHARS // 2),  # the next part's serial number, ASCII, NUL-padded
+    "recipe_select": (110, 1),             # the recipe number to make active (0: none)
+}
+WRITABLE_START = min(a for a, _ in WRITABLE.values())
+WRITABLE_END = max(a + n for a, n in WRITABLE.values())  # exclusive
 
 #: coils (FC1 read, FC5/FC15 write). Only these are writable on the whole device.
 COILS: dict[str, int] = {
@@ -125,14 +146,15 @@ def modbus_seq(seq: int) -> int:
 
 # --- register table ----------------------------------------------------------
 
-_KIND_COUNT = {"uint16": 1, "bits16": 1, "uint32": 2, "float32": 2, "uuid": 8}
+_KIND_COUNT = {"uint16": 1, "bits16": 1, "uint32": 2, "float32": 2, "uuid": 8, "ascii20": PART_ID_CHARS // 2}
 
 
 @dataclass(frozen=True)
 class Register:
     """One value in the input-register image.
 
-    kind: uint16 | bits16 | uint32 | float32 | uuid (16 bytes, 8 registers, RFC 4122 byte order).
+    kind: uint16 | bits16 | uint32 | float32 | uuid (16 bytes, 8 registers, RFC 4122 byte order) |
+    ascii20 (20 ASCII characters, 2 per register, first in the high byte, NUL-padded).
     source: the payload/live key the value comes from (documentation and encoder).
     """
 
@@ -165,6 +187,9 @@ def _table() -> tuple[Register, ...]:
         "measurements started since the daemon started (wraps at 65536); increments when a trigger is accepted")
     add("live", 4, "outbox_pending", "uint16", "count", "outbox_pending",
         "results not yet acknowledged by the MQTT broker (saturates at 65535)")
+    add("live", 5, "recipe", "uint16", "", "recipe", "number of the active recipe (0: none)")
+    add("live", 6, "part_releases_done", "uint16", "count", "releases_done",
+        "releases of the part in progress so far (0 when no part is open)")
 
     # Result snapshot: written as one unit (see the snapshot protocol).
     add("snapshot", 10, "seq", "uint16", "count", "seq",
@@ -189,7 +214,18 @@ def _table() -> tuple[Register, ...]:
     add("snapshot", 34, "effects", "bits16", "bits", "effects",
         "effects of the final model: " + ", ".join(f"bit {b} {n}" for n, b in EFFECT_BITS.items()) + f", bit {EFFECT_OTHER_BIT} other")
     add("snapshot", 35, "uuid", "uuid", "", "uuid", "result UUID (the MQTT `uuid`), 16 bytes big-endian, 2 bytes per register")
-    add("snapshot", 43, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
+    codes = ", ".join(f"{v} {k}" for k, v in VERDICT_CODES.items())
+    add("snapshot", 43, "verdict", "uint16", "enum", "verdict",
+        f"the part's verdict once this release completed it: {codes}; 0 while the part is incomplete or without a recipe")
+    add("snapshot", 44, "release_verdict", "uint16", "enum", "release_verdict", f"this release's own verdict: {codes}; 0 without a recipe")
+    add("snapshot", 45, "release_index", "uint16", "count", "release_index", "this release is number … of the part (1-based; 0 without a recipe)")
+    add("snapshot", 46, "releases", "uint16", "count", "releases", "releases per part of the recipe")
+    add("snapshot", 47, "recipe_number", "uint16", "", "recipe_number", "number of the recipe the release was judged with (0: none)")
+    add("snapshot", 48, "part_value", "float32", "kg·m²", "part_value",
+        "the part's value of the recipe quantity (mean of its usable releases; NaN until complete)")
+    add("snapshot", 50, "part_U", "float32", "kg·m²", "part_U", "expanded uncertainty U of part_value (NaN until complete)")
+    add("snapshot", 52, "part_id", "ascii20", "", "part_id", "the part ID the release was measured for (echo of registers 100–109)")
+    add("snapshot", 62, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
     return tuple(rows)
 
 
@@ -230,7 +266,21 @@ def encode_value(kind: str, value: Any, word_order: str) -> list[int]:
     if kind == "uuid":
         b = uuidlib.UUID(str(value)).bytes if value else bytes(16)
         return list(struct.unpack(">8H", b))
+    if kind == "ascii20":
+        return encode_ascii(value or "", PART_ID_CHARS)
     raise ValueError(f"unknown register kind {kind!r}")
+
+
+def encode_ascii(text: str, chars: int) -> list[int]:
+    """ASCII text in chars/2 registers: 2 characters each, the first in the high byte, NUL-padded."""
+    b = text.encode("ascii")[:chars].ljust(chars, b"\0")
+    return list(struct.unpack(f">{chars // 2}H", b))
+
+
+def decode_ascii(words: Sequence[int]) -> str:
+    """The text of an ASCII register block (NULs and trailing blanks dropped; non-ASCII bytes as '?')."""
+    b = struct.pack(f">{len(words)}H", *(int(w) & 0xFFFF for w in words))
+    return b.replace(b"\0", b"").decode("ascii", errors="replace").replace("\ufffd", "?").strip()
 
 
 def decode_value(kind: str, words: Sequence[int], word_order: str) -> Any:
@@ -241,6 +291,8 @@ def decode_value(kind: str, words: Sequence[int], word_order: str) -> Any:
     if kind == "uuid":
         b = struct.pack(">8H", *words[:8])
         return None if b == bytes(16) else str(uuidlib.UUID(bytes=b))
+    if kind == "ascii20":
+        return decode_ascii(words[:PART_ID_CHARS // 2])
     raise ValueError(f"unknown register kind {kind!r}")
 
 
@@ -260,6 +312,22 @@ def _snapshot_values(payload: Mapping[str, Any] | None) -> dict[str, Any]:
         "flags": flag_bits(payload.get("flags") or ()),
         "effects": effect_bits(payload.get("effects") or ()),
         "uuid": payload.get("uuid"),
+        **_part_values(payload),
+    }
+
+
+def _part_values(payload: Mapping[str, Any]) -> dict[str, Any]:
+    """The part/verdict registers from the payload's part keys (service.payload.PART_KEYS)."""
+    release = payload.get("release") or {}
+    part = payload.get("part") or {}
+    recipe = payload.get("recipe") or {}
+    return {
+        "verdict": VERDICT_CODES.get(payload.get("verdict") or "", 0),
+        "release_verdict": VERDICT_CODES.get(release.get("verdict") or "", 0),
+        "release_index": release.get("index") or 0, "releases": release.get("of") or 0,
+        "recipe_number": recipe.get("number") or 0,
+        "part_value": part.get("mean"), "part_U": part.get("U"),
+        "part_id": payload.get("part_id") or "",
     }
 
 
@@ -274,12 +342,16 @@ class LiveStatus:
     simulated: bool = False
     outbox_pending: int = 0
     started: int = 0
+    recipe: int = 0          # active recipe number (0: none)
+    releases_done: int = 0   # releases of the part in progress
 
-    def status_bits(self, result_valid: bool) -> int:
+    def status_bits(self, result_valid: bool, verdict: str | None = None) -> int:
+        """The status bits; ``verdict``: the snapshot's part verdict (sets part_ok / part_nok / part_invalid)."""
         bits = {
             "busy": self.busy, "result_valid": result_valid, "fault": self.fault,
             "mqtt_connected": self.mqtt_connected, "simulated": self.simulated,
             "outbox_pending": self.outbox_pending > 0,
+            "part_ok": verdict == "OK", "part_nok": verdict == "NOK", "part_invalid": verdict == "INVALID",
         }
         return sum(1 << STATUS_BITS[k] for k, v in bits.items() if v)
 
@@ -297,12 +369,13 @@ def encode_snapshot(payload: Mapping[str, Any] | None, word_order: str = "big") 
     return out
 
 
-def encode_live(live: LiveStatus, result_valid: bool, word_order: str = "big") -> list[int]:
-    """Registers LIVE_START … SNAPSHOT_START-1."""
+def encode_live(live: LiveStatus, result_valid: bool, word_order: str = "big", verdict: str | None = None) -> list[int]:
+    """Registers LIVE_START … SNAPSHOT_START-1 (verdict: the snapshot's part verdict, for the status bits)."""
     _check_order(word_order)
     values = {
-        "constant": MAP_VERSION, "state": state_code(live.state), "status": live.status_bits(result_valid),
+        "constant": MAP_VERSION, "state": state_code(live.state), "status": live.status_bits(result_valid, verdict),
         "started": live.started & 0xFFFF, "outbox_pending": min(int(live.outbox_pending), 0xFFFF),
+        "recipe": live.recipe & 0xFFFF, "releases_done": min(int(live.releases_done), 0xFFFF),
     }
     out = [0] * (SNAPSHOT_START - LIVE_START)
     for r in REGISTERS:
@@ -384,8 +457,9 @@ def markdown() -> str:
     L.append("## Input registers (FC 4), also readable as holding registers (FC 3)")
     L.append("")
     L.append("The same image is served by FC 4 and FC 3, so PLCs that only read holding registers work too. "
-             "Every register is read-only: FC 6/16/22/23 get exception 0x02 (illegal data address). "
-             "Unlisted addresses inside 0…" f"{IMAGE_SIZE - 1} read as 0; addresses beyond get exception 0x02.")
+             "Every register of the image is read-only: FC 6/16/22/23 get exception 0x02 (illegal data address). "
+             "Unlisted addresses inside 0…" f"{IMAGE_SIZE - 1} read as 0; addresses beyond get exception 0x02 "
+             f"(except the writable holding registers {WRITABLE_START}–{WRITABLE_END - 1} below).")
     L.append("")
     L.append("| address | registers | name | type | unit | meaning |")
     L.append("|---:|---:|---|---|---|---|")
@@ -395,6 +469,45 @@ def markdown() -> str:
     L.append("")
     L.append(f"Registers {LIVE_START}–{SNAPSHOT_START - 1} are live status; registers {SNAPSHOT_START}–"
              f"{SNAPSHOT_END - 1} are the result snapshot of the latest successful measurement.")
+    L.append("")
+    L.append(f"## Writable holding registers (FC 6 / FC 16 write, FC 3 read back)")
+    L.append("")
+    L.append("| address | registers | name | meaning |")
+    L.append("|---:|---:|---|---|")
+    wmeaning = {
+        "part_id": f"the part's serial number, up to {PART_ID_CHARS} ASCII characters, 2 per register (first character "
+                   "in the high byte), padded with NUL (0); write it before setting the trigger coil. It is stored "
+                   "with the measurement and echoed in `part_id` of the snapshot and in every MQTT payload",
+        "recipe_select": "the number of the recipe (part type) to make active; 0: none. An unknown number gets "
+                         "exception 0x03 (illegal data value). The active recipe reads back here and in `recipe`",
+    }
+    for name, (a, n) in WRITABLE.items():
+        span = f"{a}" if n == 1 else f"{a}–{a + n - 1}"
+        L.append(f"| {span} | {n} | `{name}` | {wmeaning[name]} |")
+    L.append("")
+    L.append("These are the only writable registers. A write to them while a measurement runs (from the trigger "
+             "until the result is published) gets exception 0x06 (server device busy): the part being measured "
+             "cannot change. A part ID with bytes outside printable ASCII gets 0x03. Reading them with FC 3 gives "
+             "the part ID and recipe now in force (also when set over MQTT).")
+    L.append("")
+    L.append("## Verdicts (registers `verdict`, `release_verdict`; status bits 6–8)")
+    L.append("")
+    L.append("| code | verdict | meaning |")
+    L.append("|---:|---|---|")
+    L.append("| 0 | – | no verdict: the part is not complete yet, or no recipe is active |")
+    vmeaning = {"OK": "conformance proven: the part value with its expanded uncertainty U lies inside the "
+                      "tolerance (guard band, ISO 14253-1; the recipe's decision rule)",
+                "NOK": "nonconformance, or conformance not proven (in the uncertainty range)",
+                "INVALID": "the result cannot be trusted (a flag the recipe names, too large an uncertainty, too few "
+                           "swings, releases that disagree, too few usable releases): measure the part again"}
+    for name, code in VERDICT_CODES.items():
+        L.append(f"| {code} | {name} | {vmeaning[name]} |")
+    L.append("")
+    L.append("A recipe asks for N releases per part: the appliance counts the releases of the same part ID and "
+             "recipe; `release_index` of `releases` tells where the part stands, `part_releases_done` (live) too. "
+             "`verdict` is set on the snapshot of the release that completes the part, with `part_value` (mean "
+             "of the usable releases) and `part_U`; the status bits `part_ok`, `part_nok`, `part_invalid` (also "
+             "discrete inputs 6–8) repeat it until the next result.")
     L.append("")
     L.append("## Coils (FC 1 read, FC 5 / FC 15 write)")
     L.append("")
@@ -410,8 +523,9 @@ def markdown() -> str:
         L.append(f"| {a} | `{name}` | {meaning[name]} |")
     L.append("")
     L.append("Only these two coils are writable. Writing 0 to them does nothing; any other write anywhere on the "
-             "device gets exception 0x02 (illegal data address). A single-coil write (FC 5) carries 0xFF00 or "
-             "0x0000, any other value gets exception 0x03 (illegal data value); the reply echoes the request.")
+             "device, but the part ID and recipe_select registers, gets exception 0x02 (illegal data address). "
+             "A single-coil write (FC 5) carries 0xFF00 or 0x0000, any other value gets exception 0x03 (illegal "
+             "data value); the reply echoes the request.")
     L.append("")
     L.append("## Discrete inputs (FC 2)")
     L.append("")
@@ -449,13 +563,19 @@ def markdown() -> str:
     L.append("A result takes far longer than a PLC scan to produce (a swing lasts seconds), so the retry "
              "terminates at once. `seq` numbers every measurement the appliance stores (failed and aborted ones "
              "too, so it can jump by more than 1); a change of `seq` is the PLC's \"new result\" event. The same counter is `seq` in the MQTT result, and `uuid` "
-             "(registers 35–42) equals the MQTT `uuid`, so a PLC record can be joined with the broker's.")
+             f"(registers {BY_NAME['uuid'].address}–{BY_NAME['uuid'].address + 7}) equals the MQTT `uuid`, so a PLC record can be joined with the broker's.")
     L.append("")
     L.append("## Typical PLC sequence")
     L.append("")
-    L.append("1. wait for `state` = 1 (IDLE);")
-    L.append("2. write coil 0 (`trigger`) = 1, or let the operator press the button;")
-    L.append("3. poll `state` / `seq`; when `seq` changes, read the snapshot as above;")
-    L.append("4. check `flags` = 0 (or decide which flags are acceptable) before using J.")
+    L.append("1. once per part type: write the recipe number to `recipe_select` (register "
+             f"{WRITABLE['recipe_select'][0]});")
+    L.append("2. wait for `state` = 1 (IDLE);")
+    L.append(f"3. write the part ID to registers {WRITABLE['part_id'][0]}–"
+             f"{WRITABLE['part_id'][0] + WRITABLE['part_id'][1] - 1} (one FC 16);")
+    L.append("4. write coil 0 (`trigger`) = 1, or let the operator press the button;")
+    L.append("5. poll `state` / `seq`; when `seq` changes, read the snapshot as above;")
+    L.append("6. if `release_index` < `releases`, go to 2 (re-latch and trigger the same part again);")
+    L.append("7. latch `verdict` (or the status bits `part_ok` / `part_nok` / `part_invalid`); without a recipe, "
+             "check `flags` = 0 (or decide which flags are acceptable) before using J.")
     L.append("")
     return "\n".join(L)

@@ -14,7 +14,9 @@ row). One connection guarded by a lock is shared by the daemon's threads.
 
 from __future__ import annotations
 
+import functools
 import json
+import os
 import sqlite3
 import threading
 import time
@@ -26,10 +28,24 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .errors import StoreError
+from .errors import StoreDamaged, StoreError
 
 DB_NAME = "results.db"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: part, recipe and verdict columns (added in place to a version-1 store)
+
+#: the part/recipe/verdict columns (schema 2), added to an older store by ``ALTER TABLE`` at open
+PART_COLUMNS = (
+    ("part_id", "TEXT"),          # the part's serial number (PLC / MQTT), None when none was given
+    ("part_uuid", "TEXT"),        # the part: every release of one part shares it
+    ("recipe", "TEXT"),           # recipe name
+    ("recipe_version", "TEXT"),   # hash of the recipe file as used
+    ("release_index", "INTEGER"), # 1 … releases
+    ("releases", "INTEGER"),      # releases per part of the recipe
+    ("verdict", "TEXT"),          # this release's verdict: OK / NOK / INVALID
+    ("part_verdict", "TEXT"),     # the part's verdict, on the release that completed the part
+    ("part_value", "REAL"),       # the part's combined value of the recipe quantity, kg·m²
+    ("part_U", "REAL"),           # its expanded uncertainty, kg·m²
+)
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -84,6 +100,39 @@ CREATE TABLE IF NOT EXISTS attachments (
 """
 
 
+#: SQLite's primary result codes that mean a damaged file (SQLITE_CORRUPT, SQLITE_NOTADB)
+_DAMAGED_CODES = {11, 26}
+
+
+def _is_damage(exc: BaseException) -> bool:
+    if isinstance(exc, sqlite3.Error):
+        code = getattr(exc, "sqlite_errorcode", None)
+        return code is not None and code & 0xFF in _DAMAGED_CODES
+    return isinstance(exc, (zlib.error, json.JSONDecodeError))  # a blob or a JSON text that no longer decodes
+
+
+def _store_errors(what: str) -> Callable:
+    """Method decorator: an SQLite error (or a stored value that no longer decodes) becomes one
+    StoreError line naming the file and what was being done; StoreDamaged when the file is damaged."""
+
+    def wrap(method: Callable) -> Callable:
+        @functools.wraps(method)
+        def guarded(self: "Store", *args: Any, **kwargs: Any) -> Any:
+            try:
+                return method(self, *args, **kwargs)
+            except StoreError:
+                raise
+            except (sqlite3.Error, zlib.error, json.JSONDecodeError) as exc:
+                if _is_damage(exc):
+                    raise StoreDamaged(f"the result store {str(self.path)!r} is damaged ({exc}) while {what}; "
+                                       "`moi store check` tells what can be read, `moi store salvage` keeps it") from None
+                raise StoreError(f"cannot use the result store {str(self.path)!r} while {what}: {exc}") from None
+
+        return guarded
+
+    return wrap
+
+
 def _pack(a: np.ndarray | None) -> bytes | None:
     if a is None:
         return None
@@ -127,6 +176,16 @@ class StoredMeasurement:
     trace_t: np.ndarray | None = None
     trace_angle: np.ndarray | None = None
     trace_meta: dict[str, Any] | None = None
+    part_id: str | None = None
+    part_uuid: str | None = None
+    recipe: str | None = None
+    recipe_version: str | None = None
+    release_index: int | None = None
+    releases: int | None = None
+    verdict: str | None = None
+    part_verdict: str | None = None
+    part_value: float | None = None
+    part_U: float | None = None
 
     def summary(self) -> dict[str, Any]:
         """The listing fields (no payload, no trace)."""
@@ -136,6 +195,7 @@ class StoredMeasurement:
             "started_at": self.started_at, "finished_at": self.finished_at, "published_at": self.published_at,
             "J": self.J, "J_std": self.J_std, "omega_n": self.omega_n, "damping_ratio": self.damping_ratio,
             "residual_rms": self.residual_rms, "flags": list(self.flags), "error": self.error,
+            **{name: getattr(self, name) for name, _ in PART_COLUMNS},
         }
 
 
@@ -148,8 +208,10 @@ class OutboxItem:
     attempts: int
 
 
-_LIST_COLUMNS = ("id, uuid, seq, status, trigger, device_id, software_version, started_at, finished_at, stored_at, "
+_BASE_COLUMNS = ("id, uuid, seq, status, trigger, device_id, software_version, started_at, finished_at, stored_at, "
                  "published_at, J, J_std, omega_n, damping_ratio, residual_rms, flags, error")
+_PART_SELECT = ", ".join(name for name, _ in PART_COLUMNS)
+_LIST_COLUMNS = f"{_BASE_COLUMNS}, {_PART_SELECT}"
 _FULL_COLUMNS = _LIST_COLUMNS + ", payload, rig, config"
 _TRACE_COLUMNS = ", trace_t, trace_angle, trace_meta"
 
@@ -175,13 +237,22 @@ class Store:
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.execute("PRAGMA foreign_keys=ON")
             self._db.executescript(_SCHEMA)  # idempotent (IF NOT EXISTS)
+            have = {row[1] for row in self._db.execute("PRAGMA table_info(measurements)")}
+            for name, kind in PART_COLUMNS:
+                if name not in have:
+                    self._db.execute(f"ALTER TABLE measurements ADD COLUMN {name} {kind}")
+            self._db.execute("CREATE INDEX IF NOT EXISTS measurements_part ON measurements (part_id)")
             with self._tx():
                 row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
                 if row is None:
                     self._db.execute("INSERT INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),))
                 elif int(row[0]) > SCHEMA_VERSION:
                     raise StoreError(f"{self.path}: result store schema {row[0]} is newer than this software ({SCHEMA_VERSION})")
+                elif int(row[0]) < SCHEMA_VERSION:
+                    self._db.execute("UPDATE meta SET value = ? WHERE key='schema'", (str(SCHEMA_VERSION),))
         except sqlite3.Error as exc:
+            if _is_damage(exc):
+                raise StoreDamaged(f"the result store {str(self.path)!r} is damaged ({exc})") from None
             raise StoreError(f"cannot open the result store {str(self.path)!r}: {exc}") from None
         except OSError as exc:
             raise StoreError(f"cannot create the state directory {str(self.state_dir)!r}: {exc.strerror}") from None
@@ -236,12 +307,14 @@ class Store:
         trace_meta: Mapping[str, Any] | None = None,
         enqueue: Sequence[str] = (),
         uuid: str | None = None,
+        part: Mapping[str, Any] | None = None,
     ) -> StoredMeasurement:
         """Store one measurement and queue its publications, atomically.
 
         build_payload(uuid, seq) makes the published payload once the sequence
         number is known (ok results). enqueue: outbox kinds to queue (e.g.
-        ("result",)); the payload is queued as it is stored.
+        ("result",)); the payload is queued as it is stored. part: values of
+        the PART_COLUMNS (part ID, recipe, verdicts...), missing keys are NULL.
         """
         from .payload import dumps
 
@@ -270,6 +343,11 @@ class Store:
                      json.dumps(trace_meta, default=str) if trace_meta is not None else None),
                 )
                 mid = cur.lastrowid
+                if part:
+                    cols = [name for name, _ in PART_COLUMNS if part.get(name) is not None]
+                    if cols:
+                        db.execute(f"UPDATE measurements SET {', '.join(c + ' = ?' for c in cols)} WHERE id = ?",
+                                   (*[part[c] for c in cols], mid))
                 if payload_text is not None:
                     for kind in enqueue:
                         db.execute("INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at) VALUES (?,?,?,?,?)",
@@ -281,6 +359,7 @@ class Store:
         return m
 
     # --- outbox -------------------------------------------------------------------
+    @_store_errors("reading the MQTT outbox")
     def outbox_pending(self, limit: int = 100, exclude: Sequence[int] = ()) -> list[OutboxItem]:
         """Oldest unacknowledged publications first."""
         with self._lock:
@@ -290,10 +369,12 @@ class Store:
         skip = set(exclude)
         return [OutboxItem(*row) for row in rows if row[0] not in skip][:limit]
 
+    @_store_errors("updating the MQTT outbox")
     def outbox_attempt(self, item_id: int) -> None:
         with self._lock, self._tx() as db:
             db.execute("UPDATE outbox SET attempts = attempts + 1, last_attempt = ? WHERE id = ?", (time.time(), item_id))
 
+    @_store_errors("updating the MQTT outbox")
     def outbox_ack(self, item_id: int) -> bool:
         """The broker acknowledged the publication: drop it from the outbox. False if it was not there."""
         now = time.time()
@@ -305,6 +386,7 @@ class Store:
             db.execute("UPDATE measurements SET published_at = COALESCE(published_at, ?) WHERE id = ?", (now, row[0]))
         return True
 
+    @_store_errors("counting the MQTT outbox")
     def outbox_count(self) -> int:
         with self._lock:
             return int(self._db.execute("SELECT COUNT(*) FROM outbox").fetchone()[0])
@@ -323,6 +405,7 @@ class Store:
                 d[k] = _unpack(d[k])
         return StoredMeasurement(**d)
 
+    @_store_errors("reading a measurement")
     def get(self, key: str | int, *, trace: bool = False) -> StoredMeasurement | None:
         """A measurement by UUID (or a unique UUID prefix) or by sequence number."""
         cols = _FULL_COLUMNS + (_TRACE_COLUMNS if trace else "")
@@ -335,6 +418,7 @@ class Store:
             return None
         return self._row(rows[0], full=True, trace=trace)
 
+    @_store_errors("reading the latest measurement")
     def latest(self, status: str | None = "ok") -> StoredMeasurement | None:
         where = "WHERE status = ?" if status else ""
         args: tuple = (status,) if status else ()
@@ -342,20 +426,14 @@ class Store:
             row = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC LIMIT 1", args).fetchone()
         return self._row(row, full=True, trace=False) if row else None
 
+    @_store_errors("listing measurements")
     def list(self, limit: int | None = 20, *, since: float | None = None, until: float | None = None,
-             status: str | None = None, full: bool = False) -> list[StoredMeasurement]:
-        """Measurements, newest first (limit None: all)."""
-        clauses, args = [], []
-        if since is not None:
-            clauses.append("finished_at >= ?")
-            args.append(since)
-        if until is not None:
-            clauses.append("finished_at < ?")
-            args.append(until)
-        if status is not None:
-            clauses.append("status = ?")
-            args.append(status)
-        where = ("WHERE " + " AND ".join(clauses)) if clauses else ""
+             status: str | None = None, full: bool = False, part_id: str | None = None,
+             recipe: str | None = None, parts_only: bool = False) -> list[StoredMeasurement]:
+        """Measurements, newest first (limit None: all). part_id / recipe: only those;
+        parts_only: only the releases that completed a part (they carry the part verdict)."""
+        where, args = _where(since=since, until=until, status=status, part_id=part_id, recipe=recipe,
+                             parts_only=parts_only)
         lim = "LIMIT ?" if limit is not None else ""
         if limit is not None:
             args.append(int(limit))
@@ -364,9 +442,17 @@ class Store:
             rows = self._db.execute(f"SELECT {cols} FROM measurements {where} ORDER BY seq DESC {lim}", args).fetchall()
         return [self._row(r, full=full, trace=False) for r in rows]
 
+    def recipes(self) -> list[str]:
+        """Names of the recipes of the completed parts in the store, in order of first use."""
+        with self._lock:
+            rows = self._db.execute("SELECT recipe FROM measurements WHERE part_verdict IS NOT NULL "
+                                    "GROUP BY recipe ORDER BY MIN(seq)").fetchall()
+        return [r[0] for r in rows if r[0] is not None]
+
     def iter_all(self, **kwargs: Any) -> Iterator[StoredMeasurement]:
         yield from self.list(limit=None, **kwargs)
 
+    @_store_errors("counting measurements")
     def count(self) -> int:
         with self._lock:
             return int(self._db.execute("SELECT COUNT(*) FROM measurements").fetchone()[0])
@@ -381,6 +467,7 @@ class Store:
         except sqlite3.Error as exc:
             raise StoreError(f"cannot store {name!r} of measurement {uuid}: {exc}") from None
 
+    @_store_errors("reading an attachment")
     def get_attachment(self, uuid: str, name: str) -> tuple[bytes, str] | None:
         """(data, media type) of an attachment, or None."""
         with self._lock:
@@ -388,30 +475,201 @@ class Store:
                                    (uuid, name)).fetchone()
         return (bytes(row[0]), row[1]) if row else None
 
+    @_store_errors("searching measurements")
     def search(self, *, offset: int = 0, limit: int | None = 25, since: float | None = None,
                until: float | None = None, status: str | None = None, flag: str | None = None,
-               payload_fields: Mapping[str, str] | None = None) -> tuple[list[StoredMeasurement], int]:
-        """One page of measurements, newest first, and how many match in all.
-
-        flag: only those carrying this quality flag. payload_fields: result-payload key → value the key must
-        equal (e.g. {"part_id": "A-17"}); a value that is itself an object matches on its ``name``.
-        """
-        clauses, args = [], []
-        for sql, value in (("finished_at >= ?", since), ("finished_at < ?", until), ("status = ?", status)):
-            if value is not None:
-                clauses.append(sql)
-                args.append(value)
-        if flag:
-            clauses.append("EXISTS (SELECT 1 FROM json_each(flags) WHERE value = ?)")
-            args.append(flag)
-        for key, value in (payload_fields or {}).items():
-            path = "$." + json.dumps(str(key))
-            clauses.append("(json_extract(payload, ?) = ? OR json_extract(payload, ? || '.name') = ?)")
-            args += [path, value, path, value]
-        where = ("WHERE " + " AND ".join(clauses)) if clauses else ""
+               part_id: str | None = None, recipe: str | None = None) -> tuple[list[StoredMeasurement], int]:
+        """One page of measurements (with payloads), newest first, and how many match in all.
+        The filters of ``list``, and flag: only those carrying this quality flag."""
+        where, args = _where(since=since, until=until, status=status, part_id=part_id, recipe=recipe, flag=flag)
         with self._lock:
             total = int(self._db.execute(f"SELECT COUNT(*) FROM measurements {where}", args).fetchone()[0])
             page = f"LIMIT {int(limit)} OFFSET {int(offset)}" if limit is not None else ""
             rows = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC {page}",
                                     args).fetchall()
         return [self._row(r, full=True, trace=False) for r in rows], total
+
+
+def _where(*, since: float | None = None, until: float | None = None, status: str | None = None,
+           part_id: str | None = None, recipe: str | None = None, parts_only: bool = False,
+           flag: str | None = None) -> tuple[str, list[Any]]:
+    """The WHERE clause (and its arguments) of the measurement filters of ``Store.list`` and ``Store.search``."""
+    clauses: list[str] = []
+    args: list[Any] = []
+    for sql, value in (("part_id = ?", part_id), ("recipe = ?", recipe), ("finished_at >= ?", since),
+                       ("finished_at < ?", until), ("status = ?", status),
+                       ("EXISTS (SELECT 1 FROM json_each(flags) WHERE value = ?)", flag)):
+        if value is not None:
+            clauses.append(sql)
+            args.append(value)
+    if parts_only:
+        clauses.append("part_verdict IS NOT NULL")
+    return ("WHERE " + " AND ".join(clauses)) if clauses else "", args
+
+
+# --- a damaged store: check, salvage, quarantine ------------------------------------------------------------------
+#: tables read back by check and salvage, in the order rows are copied (foreign keys point backwards)
+_TABLES = ("measurements", "outbox", "attachments")
+
+
+@dataclass
+class StoreHealth:
+    """What ``check_store``/``salvage_store`` could read: rows per table, rows lost, SQLite's own findings."""
+
+    path: str
+    readable: dict[str, int]
+    lost: dict[str, int]
+    problems: list[str]
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems and not any(self.lost.values())
+
+    def summary(self) -> str:
+        read = ", ".join(f"{n} {t}" for t, n in self.readable.items())
+        lost = ", ".join(f"{n} {t}" for t, n in self.lost.items() if n)
+        return f"{self.path}: " + ("intact" if self.ok else "damaged") + f"; readable: {read}" + \
+            (f"; lost: {lost}" if lost else "")
+
+
+def _open_read_only(path: Path) -> sqlite3.Connection:
+    if not path.exists():
+        raise StoreError(f"no result store at {str(path)!r}")
+    return sqlite3.connect(f"file:{path}?mode=ro", uri=True, check_same_thread=False)
+
+
+def _rowids(db: sqlite3.Connection, table: str, max_probes: int = 100_000) -> Iterator[int]:
+    """The rowids of ``table`` that can be reached. A scan stops at a damaged page; the rowids
+    after it are found by seeking past it (bounded number of seeks)."""
+    last = 0
+    probes = 0
+    while probes < max_probes:
+        try:
+            for (rowid,) in db.execute(f"SELECT rowid FROM {table} WHERE rowid > ? ORDER BY rowid", (last,)):
+                last = rowid
+                yield rowid
+            return
+        except sqlite3.DatabaseError:
+            probes += 1
+            last += 1  # step over the rowid the damaged page hides
+
+
+def _read_rows(db: sqlite3.Connection, table: str, health: StoreHealth) -> Iterator[tuple[list[str], tuple]]:
+    """Every readable row of ``table`` (column names, values); unreadable ones are counted as lost."""
+    try:
+        columns = [r[1] for r in db.execute(f"PRAGMA table_info({table})")]
+        ids = list(_rowids(db, table))
+    except sqlite3.DatabaseError as exc:
+        health.problems.append(f"{table}: not readable ({exc})")
+        return
+    for rowid in ids:
+        row = _read_row(db, table, columns, rowid)
+        if row is None and table == "measurements":
+            # the trace's pages are the bulk of the file: keep the result without it rather than nothing
+            row = _read_row(db, table, columns, rowid, without=("trace_t", "trace_angle"))
+            if row is not None:
+                health.problems.append(f"measurement row {rowid}: trace not readable (kept without it)")
+        if row is None:
+            health.lost[table] += 1
+            continue
+        health.readable[table] += 1
+        yield columns, row
+
+
+def _read_row(db: sqlite3.Connection, table: str, columns: list[str], rowid: int,
+              without: tuple[str, ...] = ()) -> tuple | None:
+    """One row whose blobs and JSON texts decode, or None; the columns in ``without`` read as NULL."""
+    wanted = [c if c not in without else "NULL" for c in columns]
+    try:
+        row = db.execute(f"SELECT {', '.join(wanted)} FROM {table} WHERE rowid = ?", (rowid,)).fetchone()
+        if row is not None and table == "measurements":
+            d = dict(zip(columns, row))
+            for k in ("flags", "payload", "rig", "config", "trace_meta"):
+                if d.get(k) is not None:
+                    json.loads(d[k])
+            for k in ("trace_t", "trace_angle"):
+                _unpack(d.get(k))
+        return row
+    except (sqlite3.DatabaseError, zlib.error, json.JSONDecodeError, UnicodeDecodeError):
+        return None
+
+
+def check_store(path: str | Path) -> StoreHealth:
+    """Read every row of the store at ``path`` (results.db) without changing it; say what is damaged."""
+    path = Path(path)
+    health = StoreHealth(str(path), {t: 0 for t in _TABLES}, {t: 0 for t in _TABLES}, [])
+    db = _open_read_only(path)
+    try:
+        try:
+            found = [r[0] for r in db.execute("PRAGMA integrity_check(20)")]
+            if found != ["ok"]:
+                health.problems += found
+        except sqlite3.DatabaseError as exc:
+            health.problems.append(str(exc))
+        for table in _TABLES:
+            for _ in _read_rows(db, table, health):
+                pass
+    finally:
+        db.close()
+    return health
+
+
+def salvage_store(path: str | Path, dest_dir: str | Path) -> StoreHealth:
+    """Copy every readable row of the store at ``path`` into a new store in ``dest_dir`` (which
+    must not hold one yet). Sequence numbers are kept and never reused."""
+    path, dest = Path(path), Path(dest_dir)
+    if (dest / DB_NAME).exists():
+        raise StoreError(f"{str(dest / DB_NAME)!r} exists already: salvage into an empty directory")
+    health = StoreHealth(str(path), {t: 0 for t in _TABLES}, {t: 0 for t in _TABLES}, [])
+    src = _open_read_only(path)
+    try:
+        with Store(dest) as new:
+            db = new._db
+            with new._lock, new._tx():
+                max_seq = 0
+                for table in _TABLES:
+                    for columns, row in _read_rows(src, table, health):
+                        try:
+                            db.execute(f"INSERT OR IGNORE INTO {table} ({', '.join(columns)}) "
+                                       f"VALUES ({', '.join('?' * len(columns))})", row)
+                        except sqlite3.IntegrityError:  # e.g. an outbox row whose measurement was lost
+                            health.readable[table] -= 1
+                            health.lost[table] += 1
+                            continue
+                        if table == "measurements":
+                            max_seq = max(max_seq, int(row[columns.index("seq")]))
+                outbox_used = health.readable["outbox"] + health.lost["outbox"] > 0 or \
+                    any(p.startswith("outbox:") for p in health.problems)
+                if outbox_used:
+                    # an unsent result whose outbox row was on a lost page is queued again from its stored
+                    # payload (consumers dedupe by uuid); without MQTT in use nothing was ever queued
+                    requeued = db.execute(
+                        "INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at) "
+                        "SELECT id, uuid, 'result', payload, stored_at FROM measurements m WHERE status = 'ok' "
+                        "AND payload IS NOT NULL AND published_at IS NULL "
+                        "AND NOT EXISTS (SELECT 1 FROM outbox o WHERE o.measurement_id = m.id)").rowcount
+                    if requeued:
+                        health.problems.append(f"outbox: {requeued} unsent result(s) queued again from their "
+                                               "stored payload")
+                try:
+                    counter = src.execute("SELECT value FROM meta WHERE key='last_seq'").fetchone()
+                    max_seq = max(max_seq, int(counter[0])) if counter else max_seq
+                except (sqlite3.DatabaseError, ValueError):
+                    pass  # the counter is lost: the largest salvaged seq is the floor
+                db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('last_seq', ?)", (str(max_seq),))
+    finally:
+        src.close()
+    return health
+
+
+def quarantine_store(state_dir: str | Path, clock: Callable[[], float] = time.time) -> tuple[Path, StoreHealth]:
+    """Move a damaged results.db (with its -wal and -shm files) aside and salvage what can be read
+    into a new results.db. Returns (where the damaged file now is, what was salvaged)."""
+    state = Path(state_dir)
+    db = state / DB_NAME
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(clock()))
+    aside = state / f"{DB_NAME}.damaged-{stamp}"
+    for suffix in ("", "-wal", "-shm"):  # SQLite pairs "<name>-wal" with "<name>": they move together
+        if Path(f"{db}{suffix}").exists():
+            os.replace(f"{db}{suffix}", f"{aside}{suffix}")
+    return aside, salvage_store(aside, state)

@@ -8,15 +8,35 @@
     render     ray-traced synthetic frames: the truth for tests, bench and the mock camera
 
 Pure numpy/scipy/opencv: decoding files and talking to cameras live in
-``service.video`` and ``drivers.camera``.
+``drivers.video_file`` and ``drivers.camera``.
 """
 
-from .config import CameraConfig, CameraModel, MarkerGeometry, PoseSettings
-from .geometry import angle_from_normalised, normalised_from_angle
-from .locate import MarkerObservation, MarkerTracker, TrackerSettings
-from .pipeline import Tracking, VisionSettings, count_dropped, trace_from_tracking, track_frames
-from .pose import PoseEstimate, estimate_yaw
-from .render import CameraPose, Imaging, MarkerPattern, MarkerRenderer
+from typing import TYPE_CHECKING
+
+from .._lazy import lazy_exports
+
+#: public name → its submodule, imported on first use (PEP 562): reading a camera file
+#: (``measurement.vision.config``) must not load OpenCV and scipy.
+_WHERE = {
+    **dict.fromkeys(("CameraConfig", "CameraModel", "MarkerGeometry", "PoseSettings"), "config"),
+    **dict.fromkeys(("angle_from_normalised", "normalised_from_angle"), "geometry"),
+    **dict.fromkeys(("MarkerObservation", "MarkerTracker", "TrackerSettings"), "locate"),
+    **dict.fromkeys(("Tracking", "VisionSettings", "count_dropped", "trace_from_tracking", "track_frames"), "pipeline"),
+    **dict.fromkeys(("PoseEstimate", "estimate_yaw"), "pose"),
+    **dict.fromkeys(("CameraPose", "Imaging", "MarkerPattern", "MarkerRenderer"), "render"),
+}
+
+
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _WHERE)
+
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .config import CameraConfig, CameraModel, MarkerGeometry, PoseSettings
+    from .geometry import angle_from_normalised, normalised_from_angle
+    from .locate import MarkerObservation, MarkerTracker, TrackerSettings
+    from .pipeline import Tracking, VisionSettings, count_dropped, trace_from_tracking, track_frames
+    from .pose import PoseEstimate, estimate_yaw
+    from .render import CameraPose, Imaging, MarkerPattern, MarkerRenderer
 
 __all__ = [
     "CameraConfig", "CameraModel", "MarkerGeometry", "PoseSettings", "angle_from_normalised",

@@ -1,4 +1,4 @@
-"""The camera file of DESIGN.md, parsed and checked (no file I/O here).
+"""The camera file (TOML), parsed and checked (no file I/O here).
 
 ```toml
 [camera]

@@ -15,8 +15,9 @@ exactly for φ (R·sin(φ + α) = L·sin α):
 
     φ = arcsin((L/R)·sin α) − α
 
-(seed 001 eq. 11–14 put R·tan θ for the lateral position: that is not where
-a point on a cylinder goes; the error is 0.4 % of the amplitude at 5°.)
+(the monocular-vision torsion pendulum paper, "Research on the Measurement Technology of Rotational Inertia of Rigid Body Based on the Principles of Monocular Vision and Torsion Pendulum",
+eq. 11–14, puts R·tan θ for the lateral position: that is not where a point on a cylinder goes;
+the error is 0.4 % of the amplitude at 5°.)
 
 The camera's optical axis may be yawed by ψ from the camera–axis line
 (ψ > 0 turns it towards +u). A ray seen at the ideal normalised image

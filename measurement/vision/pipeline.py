@@ -1,6 +1,6 @@
 """Frames to an angle trace: track the marker, convert with the exact geometry, correct the camera yaw.
 
-Pure: the caller decodes the frames (``service/video.py`` from a file,
+Pure: the caller decodes the frames (``drivers/video_file.py`` from a file,
 ``drivers/camera.py`` live) and hands over (time, grey frame) pairs; a
 frame that could not be decoded is passed as ``None`` and counted as
 corrupt. Frames without a marker leave a gap in the trace (timestamps may
@@ -27,17 +27,43 @@ DROPPED = "dropped_frames"
 POSE = "camera_pose"
 
 
-def count_dropped(t: np.ndarray, fps: float, tolerance: float = 0.5) -> int:
-    """Frames missing from timestamps t (s) of a camera running at ``fps`` frames/s.
+#: a gap between two frames longer than this many frame periods means frames were lost (shorter: jitter)
+DROP_GAP = 1.5
 
-    A gap of n frame periods (rounded) hides n − 1 frames; gaps within
-    (1 + tolerance) periods are jitter, not drops.
+
+class DropCounter:
+    """Counts the frames missing between consecutive timestamps of a camera running at ``fps`` frames/s.
+
+    The one rule for dropped frames: a gap of n frame periods (rounded) hides n − 1 frames; gaps
+    up to ``DROP_GAP`` periods are jitter, not drops. Used live (the V4L2 camera numbers its
+    frames with it) and on a finished record (``count_dropped``).
     """
-    t = np.asarray(t, dtype=float)
-    if t.size < 2 or not fps > 0:
+
+    def __init__(self, fps: float):
+        self.period = 1.0 / fps
+        self.last: float | None = None
+        self.dropped = 0
+
+    def add(self, t: float) -> int:
+        """Record a frame time (s); returns how many frames went missing just before it."""
+        missing = 0
+        if self.last is not None:
+            gap = (t - self.last) / self.period
+            if gap > DROP_GAP:
+                missing = int(round(gap)) - 1
+                self.dropped += missing
+        self.last = t
+        return missing
+
+
+def count_dropped(t: np.ndarray, fps: float) -> int:
+    """Frames missing from timestamps t (s, increasing) of a camera running at ``fps`` frames/s (``DropCounter``)."""
+    if not fps > 0:
         return 0
-    gaps = np.diff(t) * fps
-    return int(np.sum(np.where(gaps > 1.0 + tolerance, np.rint(gaps) - 1, 0)))
+    counter = DropCounter(fps)
+    for x in np.asarray(t, dtype=float):
+        counter.add(float(x))
+    return counter.dropped
 
 
 @dataclass
@@ -64,7 +90,12 @@ class Tracking:
     seen_times: list[float] = field(default_factory=list)
     untimed: int = 0
 
-    def add(self, t: float | None, obs: MarkerObservation) -> None:
+    def add(self, t: float | None, obs: MarkerObservation) -> bool:
+        """The tracking step of one frame (time in s or None, its observation): True when it gave a position.
+
+        A position with a missing, repeated or out-of-order time cannot be placed in a trace and
+        counts as corrupt; a frame without the marker counts as lost (or corrupt, by its reason).
+        """
         self.frames += 1
         if t is not None and math.isfinite(t):
             self.seen_times.append(float(t))
@@ -75,19 +106,33 @@ class Tracking:
                 # a repeated or out-of-order timestamp cannot be placed in a trace
                 self.corrupt += 1
                 self.reasons["timestamp out of order"] += 1
-                return
+                return False
             self.t.append(float(t))
             self.x.append(obs.x)
             self.slope.append(obs.slope)
             self.rows.append(obs.rows)
             self.residual.append(obs.residual)
             self.contrast.append(obs.contrast)
-            return
+            return True
         if obs.reason == CORRUPT or t is None:
             self.corrupt += 1
         else:
             self.lost += 1
-        self.reasons[(obs.detail or obs.reason).split(" (")[0]] += 1
+        self.reasons[(obs.detail or obs.reason or "no marker").split(" (")[0]] += 1
+        return False
+
+    def subset(self, keep: np.ndarray) -> "Tracking":
+        """A copy keeping only the positions where the boolean mask ``keep`` (one per position) is true;
+        the frame counters are copied unchanged."""
+        pick = np.flatnonzero(keep)
+
+        def take(values: list) -> list:
+            return [values[i] for i in pick]
+
+        return Tracking(t=take(self.t), x=take(self.x), slope=take(self.slope), rows=take(self.rows),
+                        residual=take(self.residual), contrast=take(self.contrast), frames=self.frames,
+                        lost=self.lost, corrupt=self.corrupt, reasons=Counter(self.reasons),
+                        seen_times=list(self.seen_times), untimed=self.untimed)
 
 
 def track_frames(frames: Iterable[tuple[float | None, np.ndarray | None]], config: CameraConfig,

@@ -8,8 +8,8 @@ swing axis is odd too. A yawed camera's is not: the angle computed with the
 wrong yaw ψ' is θ + (ψ' − ψ)·∂θ/∂ψ, and ∂θ/∂ψ grows with θ² (it is
 (L/R)·cos α / sqrt(1 − ((L/R)·sin α)²) − 1), so the half-swings on the two
 sides differ and a second harmonic appears whose size is proportional to
-the yaw error and to the amplitude squared (seed 001 §4.3 sees the same
-asymmetry in its two envelopes).
+the yaw error and to the amplitude squared (the monocular-vision torsion pendulum
+paper cited in geometry.py sees the same asymmetry in its two envelopes, §4.3).
 
 The fit (yaw as a parameter of the projection, not two envelope points):
 the measured image coordinate x(t) is turned into an angle with the exact

@@ -7,7 +7,6 @@ import os
 from datetime import datetime, timezone
 from pathlib import Path
 
-from ..config import load_config
 from ..errors import InputFileError, StoreError
 from ..store import DB_NAME, Store
 
@@ -23,19 +22,28 @@ def add_store_arguments(p: argparse.ArgumentParser) -> None:
 
 def open_store(args: argparse.Namespace) -> Store:
     """The store named by --state-dir / --config, else $STATE_DIRECTORY, ./moi-state or /var/lib/moi."""
+    d = find_store_dir(args)
+    try:
+        return Store(d, create=False)
+    except StoreError as exc:
+        raise InputFileError(str(exc)) from None
+
+
+def find_store_dir(args: argparse.Namespace) -> Path:
+    """The directory of the store named by --state-dir / --config, else $STATE_DIRECTORY, ./moi-state
+    or /var/lib/moi (the first that holds one)."""
     if args.state_dir:
         candidates = [Path(args.state_dir)]
     elif args.config:
+        from ..config import load_config  # only with --config: it loads the drivers' settings
+
         candidates = [load_config(args.config).state_dir]
     else:
         env = os.environ.get("STATE_DIRECTORY")
         candidates = ([Path(env.split(":")[0])] if env else []) + [Path("moi-state"), SYSTEM_STATE_DIR]
     for d in candidates:
         if (d / DB_NAME).exists():
-            try:
-                return Store(d, create=False)
-            except StoreError as exc:
-                raise InputFileError(str(exc)) from None
+            return d
     tried = ", ".join(str(d / DB_NAME) for d in candidates)
     raise InputFileError(f"no result store found (looked for {tried}); give --state-dir DIR or --config FILE")
 

@@ -1,12 +1,14 @@
 """`moi calibrate CAL.toml --rig RIG.toml --out RIG_OUT.toml`: k and tare inertia of a torsion rig.
 
 CAL.toml lists the references, each with a known added inertia and either a
-trace (identified here) or seed 001's ω_m and ζ:
+trace (identified here) or the damped main frequency ω_m and amplitude
+modulation ζ as a monocular-vision torsion pendulum reports them:
 
     [[reference]]
     name = "empty"
     trace = "empty.csv"            # path relative to CAL.toml
     added_inertia = 0.0            # kg·m²
+    added_inertia_std = 0.0        # optional: 1σ of the known inertia, kg·m² (recorded)
 
     [[reference]]
     name = "two cylinders, L = 50 mm"
@@ -14,24 +16,33 @@ trace (identified here) or seed 001's ω_m and ζ:
     zeta = -0.06017                # amplitude modulation ζ, 1/s (either sign)
     cylinders = [{ mass = 0.5021, diameter = 0.06007, distance = 0.05 },
                  { mass = 0.5006, diameter = 0.06004, distance = 0.05 }]
+
+With ``--out`` the rig file gets the calibrated k and I0 with their 1σ and a
+``[calibration]`` table: the date (``--date``, default today, UTC), the
+validity period (``--valid-days``, default 365), the calibration file and
+every reference used with its known inertia, its uncertainty, the measured
+ω_n ± 1σ and the fit's misfit. Results measured after date + valid_days
+carry the flag ``calibration_due``; the 1σ of k enters every J's expanded
+uncertainty (``J_std_calibration``).
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime as dt
 import json
 from dataclasses import replace
 from pathlib import Path
 
-from measurement import Options, identify
 from measurement.calibration import Cylinder, Reference, calibrate_torsion
 from measurement.errors import CalibrationError
+from measurement.rig import CalibrationRecord
 
 from ..files import read_rig, read_toml, read_trace, write_rig
 
 HELP = "calibrate a torsion rig's stiffness and tare inertia from reference loads"
 
-_REF_KEYS = {"name", "trace", "added_inertia", "cylinders", "omega", "zeta", "omega_n"}
+_REF_KEYS = {"name", "trace", "added_inertia", "added_inertia_std", "cylinders", "omega", "zeta", "omega_n"}
 _CYL_KEYS = {"mass", "diameter", "distance", "own_inertia"}
 
 
@@ -40,6 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rig", required=True, metavar="RIG.toml", help="the torsion rig (its stiffness may be absent)")
     p.add_argument("--out", metavar="RIG_OUT.toml", help="write the rig with the calibrated stiffness and tare_inertia")
     p.add_argument("--json", action="store_true", help="print the calibration as JSON")
+    p.add_argument("--date", metavar="YYYY-MM-DD", help="date of the calibration (default: today, UTC)")
+    p.add_argument("--valid-days", type=int, default=365, metavar="DAYS",
+                   help="validity period of the calibration, days (default 365); later results carry calibration_due")
 
 
 def _number(ref_name: str, key: str, value, allow_zero: bool = True) -> float:
@@ -48,7 +62,10 @@ def _number(ref_name: str, key: str, value, allow_zero: bool = True) -> float:
     return float(value)
 
 
-def load_references(path: str, rig) -> list[Reference]:
+def load_references(path: str, rig, stds: dict[str, float] | None = None) -> list[Reference]:
+    """The references of CAL.toml; ``stds`` (if given) receives name → added_inertia_std (kg·m²)."""
+    from measurement import Options, identify  # scipy: only when a reference is a trace
+
     doc = read_toml(path, "calibration file")
     refs = doc.get("reference")
     if set(doc) - {"reference"} or not isinstance(refs, list) or not refs:
@@ -69,6 +86,12 @@ def load_references(path: str, rig) -> list[Reference]:
             added = sum(Cylinder(**c).inertia for c in cyls)
         else:
             added = _number(name, "added_inertia", r["added_inertia"])
+        if "added_inertia_std" in r:
+            u = _number(name, "added_inertia_std", r["added_inertia_std"])
+            if u < 0:
+                raise CalibrationError(f"reference {name!r}: added_inertia_std must be >= 0 kg·m², got {u!r}")
+            if stds is not None:
+                stds[name] = u
         if "trace" in r:
             trace = read_trace(base / str(r["trace"]))
             result = identify(trace, replace(rig, stiffness=None, stiffness_std=None), Options())
@@ -86,15 +109,31 @@ def run(args: argparse.Namespace) -> int:
     rig = read_rig(args.rig)
     if rig.kind != "torsion":
         raise CalibrationError(f"{args.rig}: calibration fits k and I0 of a torsion rig; this rig is {rig.kind}")
-    cal = calibrate_torsion(load_references(args.calibration, rig))
+    if args.valid_days <= 0:
+        raise CalibrationError(f"--valid-days must be > 0, got {args.valid_days}")
+    try:
+        date = dt.date.fromisoformat(args.date) if args.date else dt.datetime.now(dt.timezone.utc).date()
+    except ValueError:
+        raise CalibrationError(f"--date must be a date like 2026-01-31, got {args.date!r}") from None
+    stds: dict[str, float] = {}
+    cal = calibrate_torsion(load_references(args.calibration, rig, stds))
+    references = []
+    for ref in cal.to_dict()["references"]:
+        entry = {k: v for k, v in ref.items() if v is not None}
+        if ref["name"] in stds:
+            entry["added_inertia_std"] = stds[ref["name"]]
+        references.append(entry)
+    record = CalibrationRecord(date, args.valid_days, tuple(references), str(args.calibration))
     if args.out:
         new = replace(rig, stiffness=cal.stiffness, stiffness_std=cal.stiffness_std,
-                      tare_inertia=cal.tare_inertia, tare_inertia_std=cal.tare_inertia_std)
+                      tare_inertia=cal.tare_inertia, tare_inertia_std=cal.tare_inertia_std, calibration=record)
         write_rig(new, args.out, comment=f"calibrated by moi calibrate from {args.calibration}")
     if args.json:
-        print(json.dumps(cal.to_dict()))
+        print(json.dumps(cal.to_dict() | {"date": date.isoformat(), "valid_days": args.valid_days,
+                                          "valid_until": record.valid_until.isoformat()}))
     else:
         print(cal.report())
+        print(f"    calibrated on {date.isoformat()}, valid until {record.valid_until.isoformat()}")
         if args.out:
             print(f"rig written to {args.out}")
     return 0

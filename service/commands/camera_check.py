@@ -20,16 +20,19 @@ import math
 import sys
 from pathlib import Path
 
-import numpy as np
+from typing import TYPE_CHECKING
 
 from measurement.errors import VisionError
-from measurement.vision.config import CameraConfig
-from measurement.vision.geometry import angle_from_normalised
-from measurement.vision.locate import MarkerObservation, MarkerTracker
 
 from ..camera_config import read_camera
 from ..defaults import demo_camera
 from ..errors import InputFileError
+
+if TYPE_CHECKING:  # the vision modules load OpenCV: imported where used, not for `moi --help`
+    import numpy as np
+
+    from measurement.vision.config import CameraConfig
+    from measurement.vision.locate import MarkerObservation
 
 HELP = "find the marker in one camera frame: position, angle, annotated PNG for alignment"
 
@@ -51,6 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _grab(args: argparse.Namespace, config: CameraConfig) -> tuple[np.ndarray, str]:
     import cv2
+    import numpy as np
 
     from measurement.vision.locate import to_grey
 
@@ -58,7 +62,7 @@ def _grab(args: argparse.Namespace, config: CameraConfig) -> tuple[np.ndarray, s
         path = Path(args.source)
         if not path.exists():
             raise InputFileError(f"source {str(path)!r} not found")
-        from ..video import IMAGE_SUFFIXES, FrameSource
+        from drivers.video_file import IMAGE_SUFFIXES, FrameSource
 
         if path.is_file() and path.suffix.lower() in IMAGE_SUFFIXES:
             img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
@@ -91,6 +95,7 @@ def _grab(args: argparse.Namespace, config: CameraConfig) -> tuple[np.ndarray, s
 
 def _annotate(img: np.ndarray, obs: MarkerObservation, config: CameraConfig, lines: list[str]) -> np.ndarray:
     import cv2
+    import numpy as np
 
     out = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
     cam = config.camera
@@ -125,6 +130,9 @@ def _annotate(img: np.ndarray, obs: MarkerObservation, config: CameraConfig, lin
 def check_image(img: np.ndarray, config: CameraConfig) -> tuple[np.ndarray, dict, list[str]]:
     """Find the marker in a grey frame: (the annotated BGR image, the facts, the lines of text drawn on it).
     What the technician sees here and on the web page's set-up view."""
+    from measurement.vision.geometry import angle_from_normalised
+    from measurement.vision.locate import MarkerTracker
+
     obs = MarkerTracker(config.camera).locate(img, keep_points=True)
     report: dict = {"found": obs.found}
     if obs.found:

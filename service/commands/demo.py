@@ -1,4 +1,4 @@
-"""`moi demo` (what `make demo` runs): the whole appliance on the simulated rig, one push-button measurement.
+"""`moi demo` (what `make demo` runs): the whole appliance on the simulated rig, one part measured with push-button releases.
 
 The real daemon (``service.daemon.Appliance``) runs with a temporary result
 store: the sequencer, the gpiozero mock pins (the button is pressed on its
@@ -6,7 +6,9 @@ pin), the simulated pendulum read over a loopback Modbus RTU encoder link,
 the identification, the SQLite store, the Modbus server on a free loopback
 port (read back here with a real pymodbus client) and, when a broker is
 given, MQTT (the result is received back from the broker). Without a broker
-MQTT is skipped with a note.
+MQTT is skipped with a note. The part is judged with a demo recipe (nominal =
+the simulated J, ±1 %, ``--releases`` releases, the guard-band rule): each
+release and the part's verdict are printed, with the verdict registers.
 """
 
 from __future__ import annotations
@@ -21,7 +23,6 @@ import threading
 import time
 from pathlib import Path
 
-from ..config import parse_config
 from ..defaults import DEMO_EFFECTS, DEMO_INERTIA
 from ..errors import InputFileError
 
@@ -39,6 +40,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inertia", "-J", type=float, default=DEMO_INERTIA, metavar="KG_M2",
                    help=f"true J of the simulated part (default {DEMO_INERTIA:g})")
     p.add_argument("--seed", type=int, default=1, help="noise seed (default 1)")
+    p.add_argument("--releases", type=int, default=3, metavar="N",
+                   help="releases of the demo part (its recipe asks for N; default 3)")
+    p.add_argument("--nominal", type=float, metavar="KG_M2",
+                   help="nominal J of the demo recipe (default: the simulated part's J; ±1 %% tolerance)")
     p.add_argument("--state-dir", metavar="DIR", help="keep the result store here (default: a temporary directory)")
     p.add_argument("--json", action="store_true", help="print the published result payload as JSON at the end")
     p.add_argument("--web-port", type=int, default=8080, metavar="PORT",
@@ -56,6 +61,7 @@ def _doc(args: argparse.Namespace, state_dir: str) -> dict:
                        "noise": 5e-5, "effects": DEMO_EFFECTS},
         "modbus": {"host": "127.0.0.1", "port": 0},
         "web": {"host": "127.0.0.1", "port": args.web_port},
+        "recipes": {"directory": str(Path(state_dir) / "recipes"), "active": DEMO_RECIPE},
     }
     if args.mqtt:
         host, _, port = args.mqtt.rpartition(":") if ":" in args.mqtt else (args.mqtt, "", "1883")
@@ -66,9 +72,25 @@ def _doc(args: argparse.Namespace, state_dir: str) -> dict:
     return doc
 
 
+DEMO_RECIPE = "demo-part"
+DEMO_PART_ID = "DEMO-0001"
+
+
+def _write_recipe(args: argparse.Namespace, state_dir: str) -> None:
+    d = Path(state_dir) / "recipes"
+    d.mkdir(parents=True, exist_ok=True)
+    nominal = args.nominal if args.nominal is not None else args.inertia
+    (d / f"{DEMO_RECIPE}.toml").write_text(
+        "# the part type of `moi demo`: nominal ± 1 %, judged with the guard band of ISO 14253-1\n"
+        f'[recipe]\nname = "{DEMO_RECIPE}"\nnumber = 1\nquantity = "J"\nnominal = {nominal!r}\n'
+        f"tolerance_percent = 1.0\nreleases = {args.releases}\n", encoding="utf-8")
+
+
 def run(args: argparse.Namespace) -> int:
     if not (0 < args.time_scale <= 50):
         raise InputFileError(f"--time-scale must be in (0, 50], got {args.time_scale:g}")
+    if not 1 <= args.releases <= 10:
+        raise InputFileError(f"--releases must be in [1, 10], got {args.releases}")
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     from ..daemon import Appliance
@@ -80,6 +102,9 @@ def run(args: argparse.Namespace) -> int:
         tmp = tempfile.TemporaryDirectory(prefix="moi-demo-")
         state_dir = tmp.name
     try:
+        from ..config import parse_config
+
+        _write_recipe(args, state_dir)
         config = parse_config(_doc(args, state_dir), source="moi demo")
         if args.web_port and not _port_free(args.web_port):
             print(f"port {args.web_port} is taken: the web page goes on a free port")
@@ -128,18 +153,28 @@ def _run(app, args: argparse.Namespace) -> int:
         print(f"result store: {app.config.state_dir}/results.db")
         token = Path(app.web.token_file).read_text(encoding="utf-8").strip()
         print(f"web page: {app.web.url}  (open it now; actions need the token {token}, kept in {app.web.token_file})")
-        print("pressing the push button (gpiozero mock pin)")
+        recipe = app.parts.recipe
+        print(f"recipe {recipe.name} (version {recipe.version}): {recipe.spec.quantity} = {recipe.spec.nominal:g} "
+              f"± {recipe.spec.upper - recipe.spec.nominal:.3g} kg·m², {recipe.releases} release(s) per part, "
+              f"decision rule {recipe.spec.rule} (U = {recipe.spec.coverage_factor:g}·u_c)")
+        app.command("part_id", "cli", {"part_id": DEMO_PART_ID})  # as the PLC writes it before the trigger
         pin = app.devices.button.pin
-        pin.drive_low()
-        pin.drive_high()
         limit = 60.0 + (cfg.sequencer.pre_trigger + cfg.sequencer.capture_duration) / cfg.simulation.time_scale
-        if not done.wait(limit):
-            print(f"moi demo: no result within {limit:.0f} s", file=sys.stderr)
-            return EXIT_FAULT
-        if not published:
-            print(f"moi demo: the measurement failed: {app.sequencer.last_fault}", file=sys.stderr)
-            return EXIT_FAULT
-        m = published[0]
+        for i in range(1, recipe.releases + 1):
+            done.clear()
+            print(f"part {DEMO_PART_ID}, release {i} of {recipe.releases}: pressing the push button (gpiozero mock pin)")
+            pin.drive_low()
+            pin.drive_high()
+            if not done.wait(limit):
+                print(f"moi demo: no result within {limit:.0f} s", file=sys.stderr)
+                return EXIT_FAULT
+            if len(published) < i:
+                print(f"moi demo: the measurement failed: {app.sequencer.last_fault}", file=sys.stderr)
+                return EXIT_FAULT
+            rel = app.store.get(published[-1].id).payload["release"]
+            print(f"  release {i}: {rel['quantity']} = {_g(rel['value'], '.7g')} kg·m², u_c {_g(rel['u_c'])}, "
+                  f"U {_g(rel['U'])} → {rel['verdict']}" + (f" ({'; '.join(rel['reasons'])})" if rel["reasons"] else ""))
+        m = published[-1]
         print()
         print(m.result.report())
         if m.result.J is not None:
@@ -160,6 +195,23 @@ def _run(app, args: argparse.Namespace) -> int:
             print(f"  {a:>3}–{a + 1:<3} {reg:<14} {snap[reg]:.8g}   (JSON {payload[key]!r})")
         print(f"  {R.BY_NAME['flags'].address:>3}     flags          0x{snap['flags']:04x} "
               f"{R.flags_from_bits(snap['flags']) or '(none)'}")
+        codes = {v: k for k, v in R.VERDICT_CODES.items()}
+        for reg in ("verdict", "release_index", "releases", "part_id", "part_value", "part_U"):
+            a = R.BY_NAME[reg].address
+            value = codes.get(snap[reg], snap[reg]) if reg == "verdict" else snap[reg]
+            print(f"  {a:>3}     {reg:<14} {value}")
+        part = payload.get("part")
+        if part is not None:
+            print()
+            print(f"part {payload['part_id']}: {part['quantity']} = {_g(part['mean'], '.7g')} kg·m² (mean of releases "
+                  f"{[i + 1 for i in part['used']]}), s = {_g(part['std'])}, Type A u = {_g(part['u_typeA'])}, "
+                  f"fit u = {_g(part['u_fit'])}, calibration u = {_g(part['u_systematic'])}, U = {_g(part['U'])} kg·m²")
+            for e in part["excluded"]:
+                print(f"  excluded release {e['index'] + 1}: {e['reason']}")
+            spec = payload["recipe"]
+            print(f"  tolerance [{spec['lower']:.7g}, {spec['upper']:.7g}], deviation {_g(part['deviation'], '+.3g')}, "
+                  f"zone {part['zone']} → VERDICT {part['verdict']}"
+                  + (f" ({'; '.join(part['reasons'])})" if part["reasons"] else ""))
         if consumer is not None:
             got = consumer.wait(payload["uuid"], 15)
             print(f"MQTT: result {payload['uuid']} " + ("received back from the broker" if got else
@@ -181,6 +233,10 @@ def _run(app, args: argparse.Namespace) -> int:
         if consumer is not None:
             consumer.close()
     return status if app.exit_status == 0 else app.exit_status
+
+
+def _g(v, fmt: str = ".2g") -> str:
+    return "-" if v is None else format(v, fmt)
 
 
 def _port_free(port: int) -> bool:

@@ -22,6 +22,8 @@ CSV_COLUMNS = (
     "published_at", "J", "J_std", "J_object", "J_object_std", "omega_n", "omega_n_std", "damping_ratio",
     "damping_ratio_std", "residual_rms_before", "residual_rms_after", "noise_floor", "effects",
     "added_effects", "flags", "error",
+    "part_id", "part_uuid", "recipe", "recipe_version", "release_index", "releases", "verdict", "part_verdict",
+    "part_value", "part_U", "calibration_date",
 )
 
 
@@ -32,6 +34,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--since", metavar="DATE", help="only measurements finished at or after DATE (ISO 8601, UTC)")
     p.add_argument("--until", metavar="DATE", help="only measurements finished before DATE")
     p.add_argument("--status", choices=("ok", "failed", "aborted"), help="only this status")
+    p.add_argument("--part", metavar="SERIAL", help="only the measurements of this part ID")
     p.add_argument("--trace", metavar="ID", help="export the raw trace of one measurement (UUID or seq) as trace CSV "
                                                  "(t in s, angle in rad; `moi identify` reads it)")
 
@@ -47,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
             text = trace_text(m)
         else:
             rows = list(reversed(store.list(
-                limit=None, full=True, status=args.status,
+                limit=None, full=True, status=args.status, part_id=args.part,
                 since=parse_time(args.since) if args.since else None,
                 until=parse_time(args.until) if args.until else None)))  # oldest first
             text = _json(rows) if args.format == "json" else _csv(rows)
@@ -80,6 +83,7 @@ def _csv(rows) -> str:
         rec["effects"] = " ".join(p.get("effects") or [])
         rec["added_effects"] = " ".join(p.get("added_effects") or [])
         rec["flags"] = " ".join(m.flags)
+        rec["calibration_date"] = (p.get("calibration") or {}).get("date")
         for k in ("started_at", "finished_at", "published_at"):
             rec[k] = iso_utc(s[k]) if s[k] is not None else ""
         w.writerow(["" if rec.get(k) is None else (repr(rec[k]) if isinstance(rec[k], float) else rec[k])

@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from measurement import Options, identify
 from measurement.effects import EFFECTS
 
-from ..files import load_source, read_rig
+from ..files import read_rig
 
 HELP = "identify J, ω_n and the damping from a trace CSV or a video"
 
@@ -25,6 +24,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from measurement import Options, identify  # scipy: only when identifying
+
+    from ..sources import load_source
+
     rig = read_rig(args.rig)
     trace = load_source(args.source, camera=args.camera, rig=rig)
     candidates = None

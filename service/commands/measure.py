@@ -21,7 +21,6 @@ import argparse
 import logging
 import sys
 
-from measurement import Options, Pendulum
 from measurement.errors import InvalidInput
 
 from ..defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, demo_camera
@@ -91,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
 
     # imported here: `moi --help` must not pay for gpiozero/pymodbus
     from firmware_host import Sequencer, SequencerConfig
+    from measurement import Options, Pendulum
 
     from ..config import SimulationSettings
     from ..hardware import build_simulated

@@ -1,4 +1,5 @@
-"""`moi results [ID]`: list past measurements, or show one (UUID, UUID prefix or sequence number)."""
+"""`moi results [ID]`: list past measurements, or show one (UUID, UUID prefix or sequence number);
+`moi results --part SERIAL`: every measurement of a part, with its releases, verdicts, recipe version and calibration."""
 
 from __future__ import annotations
 
@@ -17,6 +18,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--limit", "-n", type=int, default=20, help="list at most this many, newest first (default 20)")
     p.add_argument("--since", metavar="DATE", help="only measurements finished at or after DATE (ISO 8601, UTC)")
     p.add_argument("--status", choices=("ok", "failed", "aborted"), help="only measurements with this status")
+    p.add_argument("--part", metavar="SERIAL", help="every measurement of this part ID: releases, verdicts, recipe "
+                                                   "version, calibration")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table/report")
 
 
@@ -24,8 +27,50 @@ def _num(v, fmt: str) -> str:
     return "-" if v is None else format(v, fmt)
 
 
+def _part(store, serial: str, as_json: bool) -> int:
+    rows = list(reversed(store.list(limit=None, part_id=serial, full=True)))  # oldest first
+    if not rows:
+        raise InputFileError(f"no measurement of part {serial!r} in {store.path}")
+    if as_json:
+        keys = ("part_id", "recipe", "release", "part", "verdict", "calibration")
+        docs = [m.summary() | {k: (m.payload or {}).get(k) for k in keys} for m in rows]
+        print(json.dumps(docs, indent=2, ensure_ascii=False))
+        return 0
+    groups: dict[str, list] = {}
+    for m in rows:
+        groups.setdefault(m.part_uuid or m.uuid, []).append(m)
+    print(f"part {serial}: {len(rows)} measurement(s) in {len(groups)} measuring run(s)")
+    for part_uuid, ms in groups.items():
+        first = ms[0]
+        print(f"\n  part run {part_uuid[:8]}  recipe {first.recipe or '-'} (version {first.recipe_version or '-'})")
+        for m in ms:
+            p = m.payload or {}
+            rel = p.get("release") or {}
+            cal = p.get("calibration") or {}
+            value = rel.get("value")
+            print(f"    seq {m.seq:>5}  {fmt_time(m.finished_at)} UTC  release {m.release_index or '-'}/"
+                  f"{m.releases or '-'}  {m.status:7}  {rel.get('quantity', 'J')} = {_num(value, '.7g')} "
+                  f"± {_num(rel.get('u_c'), '.2g')}  {m.verdict or '-':7}  calibration "
+                  f"{cal.get('date', '-')}{' (due)' if cal.get('due') else ''}"
+                  + (f"  {'; '.join(rel.get('reasons') or [])}" if rel.get("reasons") else "")
+                  + (f"  error: {m.error}" if m.error else ""))
+        last = ms[-1]
+        part = (last.payload or {}).get("part")
+        if part:
+            print(f"    part verdict {last.part_verdict}: {part['quantity']} = {_num(part.get('mean'), '.7g')} "
+                  f"± U {_num(part.get('U'), '.2g')} (k = {((last.payload or {}).get('recipe') or {}).get('coverage_factor')}), "
+                  f"releases used {[i + 1 for i in part['used']]}"
+                  + "".join(f"\n      excluded release {e['index'] + 1}: {e['reason']}" for e in part["excluded"])
+                  + "".join(f"\n      {r}" for r in part.get("reasons") or []))
+        else:
+            print(f"    incomplete: {len(ms)} of {first.releases or '?'} releases")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     with open_store(args) as store:
+        if args.part:
+            return _part(store, args.part, args.json)
         if args.id:
             m = store.get(args.id)
             if m is None:
@@ -50,6 +95,11 @@ def run(args: argparse.Namespace) -> int:
                 print(f"  residual RMS  : {_num(p.get('residual_rms_before'), '.3g')} rad declared model → "
                       f"{_num(p.get('residual_rms_after'), '.3g')} rad final; noise floor {_num(p.get('noise_floor'), '.3g')} rad")
                 print(f"  flags         : {', '.join(p.get('flags') or []) or 'none'}")
+                if p.get("recipe"):
+                    rel = p.get("release") or {}
+                    print(f"  part          : {p.get('part_id') or '-'}, recipe {p['recipe']['name']} (version "
+                          f"{p['recipe']['version']}), release {rel.get('index')}/{rel.get('of')} {rel.get('verdict')}"
+                          + (f", part verdict {p['verdict']}" if p.get("verdict") else ""))
             return 0
         since = parse_time(args.since) if args.since else None
         rows = store.list(limit=args.limit, since=since, status=args.status)

@@ -7,7 +7,6 @@ import logging
 import signal
 import sys
 
-from ..config import load_config
 from ..errors import StartupError, StoreError
 
 HELP = "run the appliance daemon: sequencer, result store, MQTT, Modbus server, systemd notify"
@@ -39,6 +38,8 @@ def run(args: argparse.Namespace) -> int:
         from ..config import reference_markdown
         sys.stdout.write(reference_markdown())
         return 0
+    from ..config import load_config  # the drivers' and servers' settings: not for `moi --help`
+
     config = load_config(args.config, sim=args.sim, state_dir=args.state_dir)
     if args.check:
         import json

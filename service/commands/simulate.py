@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import math
 
-from measurement import Pendulum, simulate_trace
 from measurement.effects import EFFECTS
 from measurement.errors import InvalidInput, UnknownEffectError
 
@@ -59,6 +58,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from measurement import Pendulum, simulate_trace  # scipy: only when simulating
+
     rig = read_rig(args.rig)
     effects = parse_effects(args.effects, rig.kind)
     pendulum = Pendulum(rig, args.inertia, effects)

@@ -17,21 +17,12 @@ MAX_SAMPLES_PER_TICK = 4000
 
 
 def extras(app: "Appliance") -> dict[str, Any]:
-    """The active recipe and part ID, where the appliance has them (read generically: attributes
-    ``active_recipe`` / ``recipe`` and ``part_id``, as objects with a ``name`` or as plain values)."""
-    out: dict[str, Any] = {}
-    for key, names in (("recipe", ("active_recipe", "recipe")), ("part_id", ("part_id", "active_part_id"))):
-        for name in names:
-            value = getattr(app, name, None)
-            if callable(value):
-                try:
-                    value = value()
-                except Exception:  # a view must never take the page down
-                    value = None
-            if value is not None:
-                out[key] = getattr(value, "name", value) if not isinstance(value, (str, int, float)) else value
-                break
-    return out
+    """The active recipe (name, number) and part ID, where the appliance has them."""
+    parts = getattr(app, "parts", None)
+    if parts is None:
+        return {}
+    r = parts.recipe
+    return {"recipe": {"name": r.name, "number": r.number} if r is not None else None, "part_id": parts.part_id}
 
 
 class Live:
@@ -39,7 +30,7 @@ class Live:
         self.app = app
 
     def event_message(self, event: "Event") -> dict[str, Any]:
-        d = event.to_dict()
+        d = self.app.public_event(event)  # a result's values only once it is stored
         d["type"] = "state"
         d["words"] = STATE_WORDS.get(d["state"], "")
         d["wall"] = time.time()

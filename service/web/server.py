@@ -13,6 +13,7 @@ import asyncio
 import concurrent.futures
 import logging
 import threading
+import time
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
@@ -33,6 +34,8 @@ log = logging.getLogger("moi.web")
 
 #: the name of the plot kept with each measurement in the store
 PLOT_NAME = "plot.png"
+#: no plot is drawn while the sequencer is in one of these (the sensor is being read)
+CAPTURE_STATES = ("ARMED", "RELEASING", "CAPTURING")
 
 
 class WebServer:
@@ -127,6 +130,7 @@ class WebServer:
         from ..plot import render_png
 
         try:
+            self._wait_for_no_capture()
             png = render_png(get_result())
             store = self.appliance.store
             if store is not None:
@@ -135,6 +139,16 @@ class WebServer:
         finally:
             with self._plots_lock:
                 self._plots.pop(uuid, None)
+
+    def _wait_for_no_capture(self, limit: float = 300.0) -> None:
+        """Draw between captures: matplotlib holds the GIL for a good part of a second, which would add
+        jitter to the sample times of a capture that started right after the last result."""
+        deadline = time.monotonic() + limit
+        while self._io.running and time.monotonic() < deadline:
+            seq = self.appliance.sequencer
+            if seq is None or seq.state.value not in CAPTURE_STATES:
+                return
+            time.sleep(0.1)
 
     def _call(self, fn) -> None:
         if not self._io.running:

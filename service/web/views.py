@@ -32,8 +32,6 @@ log = logging.getLogger("moi.web")
 HERE = Path(__file__).parent
 #: a tick of the live stream every this many s (elapsed time, new samples)
 TICK = 0.25
-#: result-payload keys shown as the part's identity and verdict where a result carries them
-PART_KEYS = ("recipe", "part_id", "verdict")
 #: keys whose values the set-up page never shows
 SECRET_WORDS = ("password", "token", "secret")
 
@@ -102,6 +100,7 @@ class Views:
         r.add_post("/logout", self.logout)
         r.add_post("/api/measure", self.measure)
         r.add_post("/api/abort", self.abort)
+        r.add_post("/api/part", self.part)
         r.add_get("/history", self.history)
         r.add_get("/history/export.{fmt}", self.export)
         r.add_get("/results/{key}", self.result)
@@ -155,7 +154,8 @@ class Views:
     # --- home and live state ---------------------------------------------------------------------
     async def home(self, request: web.Request) -> web.Response:
         last = self.app.store.latest("ok") if self.app.store is not None else None
-        return self._page(request, "home.html", title="Home", state=self.live.snapshot(), last=last)
+        return self._page(request, "home.html", title="Home", state=self.live.snapshot(), last=last,
+                          recipes=self.app.parts.book.recipes)
 
     async def api_state(self, request: web.Request) -> web.Response:
         return web.json_response(self.live.snapshot())
@@ -252,6 +252,35 @@ class Views:
     async def abort(self, request: web.Request) -> web.Response:
         return await self._action(request, "abort")
 
+    async def part(self, request: web.Request) -> web.Response:
+        """Select the recipe (name or number; 0 deselects) and/or set the part ID of the next measurements."""
+        from measurement.errors import InvalidInput
+
+        from ..recipes import check_part_id
+
+        form = await request.post()
+        self._authorise(request, form)
+        data: dict[str, Any] = {}
+        recipe = str(form.get("recipe") or "").strip()
+        if recipe:
+            if recipe not in ("0",):
+                try:
+                    self.app.parts.book.find(recipe)
+                except InvalidInput as exc:
+                    raise Refused(400, str(exc)) from None
+            data["recipe"] = recipe
+        if "part_id" in form:
+            try:
+                data["part_id"] = check_part_id(str(form["part_id"])) or None
+            except InvalidInput as exc:
+                raise Refused(400, str(exc)) from None
+        if not data:
+            raise Refused(400, "nothing to change: give recipe and/or part_id")
+        if self.app.sequencer is not None and self.app.sequencer.busy:
+            raise Refused(409, "a measurement runs: the recipe and the part ID cannot change during it")
+        self.app.command("recipe", "web", data)
+        return web.json_response({"accepted": True, "command": "part", **data}, status=202)
+
     # --- results ----------------------------------------------------------------------------------
     def _get(self, key: str, trace: bool = False) -> "Measurement":
         if not key or len(key) > 64 or not all(c.isalnum() or c == "-" for c in key):
@@ -266,8 +295,7 @@ class Views:
         m = self._get(request.match_info["key"])
         p = m.payload or {}
         steps = [s for s in p.get("steps") or () if s.get("chosen")]
-        part = {k: p.get(k) for k in PART_KEYS if p.get(k) is not None}
-        return self._page(request, "result.html", title=f"Result {m.seq}", m=m, p=p, steps=steps, part=part,
+        return self._page(request, "result.html", title=f"Result {m.seq}", m=m, p=p, steps=steps,
                           flags=flag_words(m.flags), baseline=p.get("baseline") or {},
                           has_trace=self.app.config.store_trace)
 
@@ -338,14 +366,11 @@ class Views:
         if len(flag) > 64:
             raise Refused(400, "flag: at most 64 characters")
         out["flag"] = flag or None
-        fields = {}
         for param, key in (("recipe", "recipe"), ("part", "part_id")):
             v = q.get(param, "").strip()
             if len(v) > 128:
                 raise Refused(400, f"{param}: at most 128 characters")
-            if v:
-                fields[key] = v
-        out["payload_fields"] = fields
+            out[key] = v or None
         return out
 
     def _query_args(self, request: web.Request) -> dict[str, str]:
@@ -370,7 +395,7 @@ class Views:
         export = urlencode(args)
         return self._page(request, "history.html", title="History", rows=rows, total=total, page=page, pages=pages,
                           q=self._query_args(request), link=link, export=export, flag_names=sorted(FLAG_WORDS),
-                          part_keys=PART_KEYS)
+                          recipes=self.app.store.recipes())
 
     async def export(self, request: web.Request) -> web.Response:
         fmt = request.match_info["fmt"]

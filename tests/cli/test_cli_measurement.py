@@ -82,6 +82,45 @@ cylinders = [{mass = 0.5021, diameter = 0.06007, distance = 0.10}, {mass = 0.500
     assert rig["stiffness"] == pytest.approx(d["stiffness"]) and rig["tare_inertia"] == pytest.approx(4.5043e-3, rel=1e-3)
 
 
+def test_calibrate_records_date_validity_and_references_and_an_expired_one_flags_calibration_due(tmp_path):
+    cal = tmp_path / "cal.toml"
+    cal.write_text("""
+[[reference]]
+name = "empty"
+omega_n = 9.0
+added_inertia = 0.0
+[[reference]]
+name = "disc A"
+omega_n = 7.0
+added_inertia = 0.00295
+added_inertia_std = 2e-6
+[[reference]]
+name = "disc B"
+omega_n = 5.9
+added_inertia = 0.00584
+added_inertia_std = 3e-6
+""")
+    (tmp_path / "rig.toml").write_text('[rig]\nkind = "torsion"\n')
+    r = moi("calibrate", cal, "--rig", tmp_path / "rig.toml", "--out", tmp_path / "out.toml", "--date", "2024-03-01",
+            "--valid-days", "180", "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["valid_until"] == "2024-08-28"
+    import datetime
+    import tomllib
+
+    from measurement.rig import Rig
+    doc = tomllib.loads((tmp_path / "out.toml").read_text())
+    assert doc["calibration"]["date"] == "2024-03-01" and doc["calibration"]["valid_days"] == 180
+    refs = {r["name"]: r for r in doc["calibration"]["references"]}
+    assert refs["disc B"]["added_inertia_std"] == 3e-6 and refs["disc A"]["omega_n"] == 7.0
+    assert "added_inertia_std" not in refs["empty"] and "inertia_residual" in refs["empty"]
+    assert doc["rig"]["stiffness_std"] > 0  # three references: k has an uncertainty, which enters U
+    rig = Rig.from_dict(doc)
+    assert rig.calibration.due(datetime.date(2024, 8, 29)) and not rig.calibration.due(datetime.date(2024, 8, 28))
+    r = moi("calibrate", cal, "--rig", tmp_path / "rig.toml", "--date", "March 1st")
+    assert r.returncode == 2 and "--date must be a date" in r.stderr
+
+
 GOOD_HEADER = "t,angle\n"
 
 

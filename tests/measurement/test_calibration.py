@@ -1,4 +1,5 @@
-"""Seed 001 Table 2 (calibration) and Table 3 (repeatability)."""
+"""Table 2 (calibration) and Table 3 (repeatability) of the monocular-vision torsion pendulum paper:
+"Research on the Measurement Technology of Rotational Inertia of Rigid Body Based on the Principles of Monocular Vision and Torsion Pendulum"."""
 
 import pytest
 
@@ -25,7 +26,7 @@ def test_paper_table2_calibration_within_0_1_percent():
     assert cal.stiffness == pytest.approx(0.3651, rel=1e-3)
     assert cal.tare_inertia == pytest.approx(4.5043e-3, rel=1e-3)
     assert cal.stiffness_std is not None and 0 < cal.stiffness_std < 1e-3
-    # Table 2's "relative true value" is the TOTAL inertia (NOTES.md): I0 + load
+    # Table 2's "relative true value" is the TOTAL inertia (empty table plus load, as its specimen data show): I0 + load
     assert references()[1].added_inertia + 4.5043e-3 == pytest.approx(7.4631e-3, rel=1e-4)
 
 

@@ -10,12 +10,16 @@ from measurement import Pendulum, Rig, simulate_trace
 from measurement.effects import EFFECTS
 from measurement.errors import InvalidInput
 
-# Seed 000, Fig. 3
+# Hou Wen, "Measuring Moment of Inertia Based on Identification of Nonlinear System Featuring Naught Excitation" (WSEAS, 2006), Fig. 3
 G, J, MU, M, S, K, PHI0 = 9.8, 1000.0, 0.01, 500.0, 1.0, 10.0, -0.5
 
 
 def phase_plane_u(x, x0, direction, a, b, c):
-    """Seed 000 eq. 13/14: y² on the half-swing that starts at rest at x0 (NOTES.md)."""
+    """Hou Wen (WSEAS 2006) eq. 13/14: y² = φ'² on the half-swing that starts at rest at x0.
+
+    With u = y² the equation is linear in u: du/dx = −2a·sin x − 2b·cos x − 2c·u for y ≥ 0 (the b and c
+    terms flip sign for y < 0), a = m·g·S/J, b = μ·m·g/J, c = K/J; p1 = a − 2bc, p2 = 2ac + b, p3 = 2c² + 0.5.
+    """
     b, c = b * direction, c * direction
     p1, p2, p3 = a - 2 * b * c, 2 * a * c + b, 2 * c * c + 0.5
     part = lambda xx: (p1 * np.cos(xx) - p2 * np.sin(xx)) / p3  # noqa: E731

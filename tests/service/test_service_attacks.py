@@ -257,3 +257,62 @@ def test_a_flood_of_idle_connections_does_not_lock_the_plc_or_mqtt_out(tmp_path,
             s.close()
         daemon.terminate()
         daemon.communicate(timeout=30)
+
+
+def _connect_from(source: str, port: int) -> socket.socket:
+    s = socket.socket()
+    s.settimeout(5)
+    s.bind((source, 0))
+    s.connect(("127.0.0.1", port))
+    return s
+
+
+def test_only_this_machine_and_the_allow_list_get_in():
+    """Clients bound to other loopback addresses stand for other hosts: 127.0.0.3 is allowed, 127.0.0.2 is not."""
+    from service.modbus_server import ModbusServer, ModbusSettings
+
+    srv = ModbusServer(ModbusSettings(host="127.0.0.1", port=0, allow_from=("127.0.0.3",)))
+    srv.start()
+    try:
+        with _connect_from("127.0.0.2", srv.bound_port) as stranger:
+            assert _closed_by_peer(stranger, 5), "a client outside allow_from was served"
+        for source in ("127.0.0.3", "127.0.0.1"):
+            with _connect_from(source, srv.bound_port) as friend:
+                assert len(_tcp_exchange(friend, 1, 1, struct.pack(">BHH", 4, 0, 2))) == 6
+        assert srv.connections_refused == 1
+    finally:
+        srv.stop()
+
+
+def test_listening_beyond_this_machine_is_a_stated_choice():
+    from service.config import parse_config
+    from service.errors import ConfigError
+    from service.modbus_server import ModbusSettings, network_exposure
+
+    assert parse_config({}, source="empty.toml").modbus.host == "127.0.0.1"
+    assert network_exposure(ModbusSettings()) is None
+    assert "every client" in network_exposure(ModbusSettings(host="0.0.0.0"))
+    assert "192.168.10.20" in network_exposure(ModbusSettings(host="0.0.0.0", allow_from=("192.168.10.20",)))
+    with pytest.raises(ConfigError, match="allow_from: 'plc-1' is not an IP address"):
+        parse_config({"modbus": {"allow_from": ["plc-1"]}}, source="bad.toml")
+
+
+# --- nothing leaves the device before it is durable -----------------------------------------------------------
+
+def test_a_result_that_cannot_be_stored_never_leaves_the_device(tmp_path, broker, appliance_factory, consumer_factory):
+    """A full disk, made by SQLite's own page limit: the store write fails, the measurement ends in FAULT,
+    and neither the MQTT state nor the result topic ever carried its J."""
+    c = consumer_factory(broker.port, ["moi/test-rig/#"])
+    c.wait_subscribed()
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
+    assert app.app.mqtt.subscribed_event.wait(10)
+    db = app.app.store._db
+    db.execute(f"PRAGMA max_page_count = {db.execute('PRAGMA page_count').fetchone()[0]}")  # the disk is full
+    app.press()
+    app.wait_event(lambda e: e.state.value == "FAULT", 30, what="FAULT after the failed store write")
+    c.wait(lambda c: any(json.loads(p).get("state") == "FAULT" for p in c.on("/state")), 10, "FAULT on MQTT")
+    measured = app.app.sequencer.last_measurement
+    published = [json.loads(p) for p in c.on("/state")]
+    assert [m["state"] for m in published][-3:] == ["IDENTIFYING", "PUBLISHING", "FAULT"]
+    assert all("J" not in m and "J =" not in (m.get("reason") or "") for m in published), published
+    assert c.results() == [] and measured is None

@@ -6,7 +6,7 @@ import pytest
 
 from service.cli import main
 
-FAST = ["--duration", "6", "--time-scale", "20", "--web-port", "0"]
+FAST = ["--duration", "6", "--time-scale", "20", "--web-port", "0", "--releases", "1"]
 
 
 def test_demo_without_a_broker_measures_shows_the_registers_and_skips_mqtt(capsys):
@@ -16,6 +16,9 @@ def test_demo_without_a_broker_measures_shows_the_registers_and_skips_mqtt(capsy
     assert "pressing the push button" in out and "PUBLISHING" in out
     assert "[[Result]]" in out and "true J 0.0125 kg·m²" in out
     assert "Modbus registers read back over TCP (seq 1" in out
+    # the part and its verdict, in the registers too (one release here: the encoder link in real time is slow)
+    assert "recipe demo-part" in out and "release 1 of 1" in out and "  release 1: J = " in out
+    assert "part DEMO-0001: J = " in out and "→ VERDICT " in out and "part_id        DEMO-0001" in out
     assert "web page: http://127.0.0.1:" in out and "the result page: http://127.0.0.1:" in out
 
 

@@ -140,20 +140,20 @@ def test_a_missing_token_file_stops_the_start(tmp_path):
     assert app.devices is None and app.store is None  # everything started was shut down again
 
 
-def test_store_search_pages_and_filters_on_payload_fields(tmp_path):
+def test_store_search_pages_and_filters(tmp_path):
     from service.store import Store
 
     with Store(tmp_path) as store:
         for i in range(7):
-            payload = {"J": 0.01 + i, "recipe": {"name": "rotor-a" if i % 2 else "rotor-b"}, "part_id": f"P{i}"}
             store.record(status="ok", trigger="test", device_id="d", software_version="0", started_at=100.0 + i,
                          finished_at=101.0 + i, result={"J": 0.01 + i, "flags": ["outliers_removed"] if i == 3 else []},
-                         build_payload=lambda uuid, seq, p=payload: {**p, "uuid": uuid, "seq": seq})
+                         build_payload=lambda uuid, seq: {"uuid": uuid, "seq": seq},
+                         part={"recipe": "rotor-a" if i % 2 else "rotor-b", "part_id": f"P{i}"})
         rows, total = store.search(offset=2, limit=2)
         assert total == 7 and [m.seq for m in rows] == [5, 4]  # newest first, the second page
-        rows, total = store.search(payload_fields={"recipe": "rotor-a"})
+        rows, total = store.search(recipe="rotor-a")
         assert total == 3 and {m.seq for m in rows} == {2, 4, 6}
-        assert [m.seq for m in store.search(payload_fields={"part_id": "P3"})[0]] == [4]
+        assert [m.seq for m in store.search(part_id="P3")[0]] == [4]
         assert [m.seq for m in store.search(flag="outliers_removed")[0]] == [4]
         assert store.search(since=105.0, until=107.0)[1] == 2
         store.put_attachment(rows[0].uuid, "plot.png", b"\x89PNG...", "image/png")
@@ -206,3 +206,29 @@ def test_setup_encoder_angle_now(appliance_factory, tmp_path):
     status, body = Client(running.app.web.url).json("/api/angle")
     # the simulated pendulum is held at its release angle (0.25 rad) until a measurement fires the solenoid
     assert status == 200 and body["source"] == "encoder" and body["angle_rad"] == pytest.approx(0.25, abs=1e-3)
+
+
+def test_recipe_and_part_id_set_from_the_page_reach_the_result_and_the_history(appliance_factory, tmp_path):
+    d = tmp_path / "recipes"
+    d.mkdir()
+    (d / "a.toml").write_text('[recipe]\nname = "rotor-a"\nnumber = 3\nnominal = 0.0125\ntolerance_percent = 2.0\n')
+    running = appliance_factory(appliance_doc(tmp_path / "state", web=ON, recipes={"directory": str(d)}))
+    app = running.app
+    bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
+    c = Client(app.web.url)
+    assert b"rotor-a" in c.request("/")[2]  # offered on the home page
+    status, body = c.json("/api/part", data={"recipe": "rotor-b"}, headers=bearer)
+    assert status == 400 and "no recipe 'rotor-b'" in body["error"]
+    assert c.json("/api/part", data={"part_id": "x" * 200}, headers=bearer)[0] == 400
+    assert c.json("/api/part", data={"recipe": "rotor-a"})[0] == 401  # no token, no change
+    assert c.json("/api/part", data={"recipe": "rotor-a", "part_id": "SN-0042"}, headers=bearer)[0] == 202
+    assert c.json("/api/measure", method="POST", headers=bearer)[0] == 202  # queued after the part: it has it
+    running.wait_done(1, 60)
+    state = c.json("/api/state")[1]
+    assert state["recipe"] == {"name": "rotor-a", "number": 3} and state["part_id"] == "SN-0042"
+    m = app.store.latest()
+    assert (m.recipe, m.part_id, m.part_verdict) == ("rotor-a", "SN-0042", "OK")
+    page = c.request(f"/results/{m.uuid}")[2].decode()
+    assert 'id="verdict">part OK' in page and "SN-0042" in page and "release 1 of 1" in page
+    assert m.uuid in c.request("/history?recipe=rotor-a&part=SN-0042")[2].decode()
+    assert m.uuid not in c.request("/history?part=SN-0043")[2].decode()

@@ -45,7 +45,12 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     from selenium.webdriver.support.ui import WebDriverWait
 
     # slow enough that the page sees every state: about 1 s of capture
+    recipes = tmp_path / "recipes"
+    recipes.mkdir()
+    (recipes / "rotor.toml").write_text('[recipe]\nname = "rotor-12"\nnumber = 12\nnominal = 0.0125\n'
+                                        'tolerance_percent = 1.0\n')
     doc = appliance_doc(tmp_path / "state", time_scale=5.0, web={"enabled": True},
+                        recipes={"directory": str(recipes), "active": "rotor-12"},
                         simulation={"effects": {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 6e-4}}})
     running = appliance_factory(doc)
     app = running.app
@@ -65,7 +70,15 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     browser.find_element(By.ID, "token").send_keys(token)
     browser.find_element(By.ID, "login-button").click()
     wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, ".who .ok"))
-    wait.until(lambda d: d.find_element(By.ID, "state").text == "IDLE")
+    # the live stream is connected (its first tick arrived): no transition can be missed from here on
+    wait.until(lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-live") == "1")
+    assert browser.find_element(By.ID, "state").text == "IDLE"
+    assert browser.find_element(By.ID, "recipe").text == "12 rotor-12"
+
+    # the part's serial number, set on the page, shows on it as the appliance's
+    browser.find_element(By.ID, "part-id-input").send_keys("SN-0042")
+    browser.find_element(By.CSS_SELECTOR, "#part-form button").click()
+    wait.until(lambda d: d.find_element(By.ID, "part-id").text == "SN-0042")
 
     browser.find_element(By.ID, "measure").click()
     wait.until(lambda d: d.find_elements(By.ID, "latest-link") and "IDLE" in
@@ -81,11 +94,14 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     rows[0].click()
     text = wait.until(lambda d: d.find_element(By.ID, "J")).text
     J, J_std = (float(x) for x in re.match(r"J = ([0-9.e+-]+) ± ([0-9.e+-]+)", text).groups())
+    assert browser.find_element(By.ID, "verdict").text == "part OK"
+    assert browser.find_element(By.ID, "part-id").text == "SN-0042"
     truth = app.devices.sim.inertia
     assert abs(J - truth) <= max(5 * J_std, 1e-4 * truth), (J, J_std, truth)
-    added = app.store.latest().payload["added_effects"]
+    steps = [st for st in app.store.latest().payload["steps"] if st["chosen"]]
     shown = [li.text for li in browser.find_elements(By.CSS_SELECTOR, ".steps li")]
-    assert [t.split(" ")[0] for t in shown] == added and all("evidence:" in t for t in shown), (added, shown)
+    assert [t.split(" ")[0] for t in shown] == [st["chosen"] for st in steps], (steps, shown)
+    assert all(st["reason"] in t and st["evidence"] in t for st, t in zip(steps, shown)), (steps, shown)
     wait.until(lambda d: d.execute_script(
         "var i = document.getElementById('plot'); return i.complete && i.naturalWidth > 400;"))
     shot = tmp_path / "result-page.png"

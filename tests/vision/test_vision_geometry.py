@@ -42,7 +42,7 @@ def test_inverse_is_exact(yaw_deg, rest_deg):
 
 
 def test_sin_geometry_not_seed_tan_formula():
-    """Seed 001 eq. 13 (R·tan θ lateral) reads 0.4 % short at 5° and worse beyond; the exact inverse does not."""
+    """The small-angle R·tan θ lateral position of the monocular-vision torsion pendulum paper reads 0.4 % short at 5° and worse beyond; the exact inverse does not."""
     theta = math.radians(5.0)
     x = normalised_from_angle(theta, MARKER)
     R, U0 = MARKER.radius, MARKER.distance

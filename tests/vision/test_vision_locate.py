@@ -1,4 +1,4 @@
-"""Frame → marker position → angle, on rendered frames with known angles (issue 4's accuracy figures)."""
+"""Frame → marker position → angle, on rendered frames with known angles (the vision path's accuracy figures)."""
 
 import math
 
@@ -58,7 +58,7 @@ def test_no_bias_growing_with_amplitude(straight):
     a, b = bias_vs_amplitude(angles, est - angles)
     worst = abs(a * 0.3 + b * 0.3**3)  # at the largest amplitude, rad
     assert math.degrees(worst) < 0.002
-    # the test has the power to see seed 001's tan formula: it would read this many degrees short at 0.3 rad
+    # the test has the power to see the small-angle R·tan θ formula: it would read this many degrees short at 0.3 rad
     x = np.array([math.sin(0.3) * MARKER.radius / (MARKER.distance + MARKER.radius * (1 - math.cos(0.3)))])
     tan_reading = math.atan(x[0] * (MARKER.distance + MARKER.radius * (1 - math.cos(0.3))) / MARKER.radius)
     assert math.degrees(0.3 - tan_reading) > 50 * math.degrees(worst)

@@ -6,12 +6,14 @@ var moi = (function () {
   function say(text, bad) { var m = $("message"); if (m) { m.textContent = text; m.className = "message" + (bad ? " bad" : ""); } }
 
   // POST an action with the session's CSRF token; the answer (or the refusal) is shown in words
-  function act(url) {
+  function act(url, body) {
     return fetch(url, {method: "POST", headers: {"X-CSRF-Token": csrf(), "Accept": "application/json"},
-                       credentials: "same-origin"})
+                       credentials: "same-origin", body: body})
       .then(function (r) { return r.json().then(function (body) { return {ok: r.ok, status: r.status, body: body}; }); })
       .then(function (r) {
-        if (r.ok) { say(r.body.command === "trigger" ? "measurement requested" : "abort / acknowledge sent"); }
+        if (r.ok) {
+          say({trigger: "measurement requested", abort: "abort / acknowledge sent", part: "recipe / part ID set"}[r.body.command]);
+        }
         else { say("refused (" + r.status + "): " + r.body.error, true); }
       })
       .catch(function (e) { say("no answer from the appliance: " + e, true); });
@@ -54,8 +56,8 @@ var moi = (function () {
       $("words").textContent = s.words || "";
       var f = $("fault");
       if (s.state === "FAULT" && s.fault) { f.textContent = s.fault; f.hidden = false; } else { f.hidden = true; }
-      if (s.recipe !== undefined) { $("recipe").textContent = (s.recipe && s.recipe.name) || s.recipe; }
-      if (s.part_id !== undefined) { $("part-id").textContent = s.part_id; }
+      if (s.recipe !== undefined) { $("recipe").textContent = s.recipe ? s.recipe.number + " " + s.recipe.name : "–"; }
+      if (s.part_id !== undefined) { $("part-id").textContent = s.part_id || "–"; }
       var box = $("progress-box"), bar = $("progress-bar"), txt = $("progress-text");
       if (s.state === "CAPTURING" && s.elapsed !== undefined) {
         box.hidden = false; bar.style.width = Math.min(100, 100 * s.elapsed / s.capture_duration) + "%";
@@ -82,10 +84,20 @@ var moi = (function () {
         p.appendChild(a);
       }
     }
+    var pf = $("part-form");
+    if (pf) {
+      pf.addEventListener("submit", function (e) {
+        e.preventDefault();
+        var fd = new FormData(pf);
+        if (!fd.get("part_id")) { fd.delete("part_id"); }
+        act(pf.getAttribute("data-action"), new URLSearchParams(fd));
+      });
+    }
     var es = new EventSource("/events");
     es.addEventListener("state", function (e) { var s = JSON.parse(e.data); logState(s); show(s); });
     es.addEventListener("tick", function (e) {
       var s = JSON.parse(e.data);
+      document.body.setAttribute("data-live", "1");  // connected: every transition from now on is shown
       show(s);
       if (s.samples) {
         if (s.reset || s.measurement_id !== mid) { mid = s.measurement_id; swing.reset(s.capture_duration + (s.pre_trigger || 0)); }

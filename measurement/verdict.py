@@ -1,0 +1,375 @@
+"""Conformity decisions: OK / NOK / INVALID for one release and for a part measured N times.
+
+Pure and hardware-free: numbers in, a decision object out. SI units; the
+measurand is J, J_object or J_object_axis of a result (kg·m²).
+
+The decision rule (ISO 14253-1:2017, "Geometrical product specifications —
+Inspection by measurement of workpieces and measuring equipment — Part 1:
+Decision rules for verifying conformity or nonconformity with specifications")
+------------------------------------------------------------------------------
+Specification zone: LSL ≤ x ≤ USL (a recipe gives nominal ± tolerance).
+U = k·u_c is the expanded uncertainty (coverage factor k, default 2 ≈ 95 %),
+u_c the combined standard uncertainty of the part's value: the random part
+(identification fit, repeatability of the releases) and the systematic part
+common to every release (calibration of the rig's stiffness k, tare inertia).
+
+* ``guard_band`` (default): conformance is proven only when the whole
+  uncertainty interval lies in the zone, LSL + U ≤ x ≤ USL − U → OK;
+  nonconformance is proven when it lies wholly outside, x < LSL − U or
+  x > USL + U → NOK; in between (the uncertainty range) the result proves
+  neither, and the recipe's ``uncertain`` verdict applies: NOK by default (the
+  supplier must prove conformance; an unproven part is rejected) or INVALID
+  (measure again).
+* ``simple``: OK when LSL ≤ x ≤ USL (shared risk; U is reported, not used).
+
+A result is INVALID before any comparison when it cannot be trusted: a flag
+the recipe names (e.g. ``unmodeled_residual``, ``calibration_due``), no value
+(a rig without k), its standard uncertainty above the recipe's limit, or fewer
+swings than the recipe asks for.
+
+Repeat measurements (``combine``)
+---------------------------------
+The part value is the arithmetic mean of the usable releases. Its random
+standard uncertainty is the larger of the Type A standard deviation of the
+mean s/√n (GUM 4.2.3) and the releases' own fit uncertainties propagated
+through the mean √(Σu_i²)/n: with n = 3 the Type A estimate has 2 degrees of
+freedom and may come out far too small by chance. The systematic part (the
+calibration) is common to all releases and does not average down; it is added
+in quadrature once.
+
+Agreement of the releases: release i is compared with the mean of the others,
+z_i = (x_i − x̄_−i) / √(u_i² + u(x̄_−i)²), with u(x̄_−i) = √(Σ_{j≠i} u_j²)/(n−1).
+With at least 3 usable releases, the one with the largest |z| above the
+recipe's ``consistency_limit`` (default 3) is excluded and reported, once per
+part; if the rest still disagree, or if 2 releases disagree (no way to tell
+which one is wrong), the part is INVALID. Invalid releases are excluded with
+their reasons. Fewer usable releases than ``min_valid_releases`` make the part
+INVALID. Nothing is excluded silently: every exclusion is in ``excluded``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+from . import flags as F
+from .errors import InvalidInput
+
+OK, NOK, INVALID = "OK", "NOK", "INVALID"
+VERDICTS = (OK, NOK, INVALID)
+
+#: decision rules (see the module docstring)
+RULES = ("guard_band", "simple")
+
+#: what a result's ``J_*`` key means (the recipe's ``quantity``)
+QUANTITIES = ("J", "J_object", "J_object_axis")
+
+#: flags that make a result INVALID unless a recipe says otherwise
+DEFAULT_INVALID_FLAGS = (F.UNMODELED_RESIDUAL, F.FIT_NOT_CONVERGED, F.CALIBRATION_DUE)
+
+
+class VerdictError(InvalidInput):
+    """A specification or quality rule that cannot be used (says what was expected)."""
+
+
+@dataclass(frozen=True)
+class Specification:
+    """What the part must be, and how conformity is decided.
+
+    quantity: "J" | "J_object" | "J_object_axis". nominal, lower, upper: kg·m²
+    (lower ≤ nominal ≤ upper). rule: "guard_band" | "simple". uncertain: the
+    verdict in the uncertainty range of the guard-band rule ("NOK" | "INVALID").
+    coverage_factor: k of U = k·u_c.
+    """
+
+    quantity: str
+    nominal: float
+    lower: float
+    upper: float
+    rule: str = "guard_band"
+    uncertain: str = NOK
+    coverage_factor: float = 2.0
+
+    def __post_init__(self) -> None:
+        if self.quantity not in QUANTITIES:
+            raise VerdictError(f"quantity must be one of {', '.join(QUANTITIES)}, got {self.quantity!r}")
+        if not all(math.isfinite(v) for v in (self.nominal, self.lower, self.upper)):
+            raise VerdictError("nominal and limits must be finite numbers")
+        if not self.lower < self.upper or not self.lower <= self.nominal <= self.upper:
+            raise VerdictError(f"limits must satisfy lower < upper and lower <= nominal <= upper, got "
+                               f"{self.lower:g} … {self.nominal:g} … {self.upper:g}")
+        if self.rule not in RULES:
+            raise VerdictError(f"decision rule must be one of {', '.join(RULES)}, got {self.rule!r}")
+        if self.uncertain not in (NOK, INVALID):
+            raise VerdictError(f"uncertain must be 'NOK' or 'INVALID', got {self.uncertain!r}")
+        if not (math.isfinite(self.coverage_factor) and self.coverage_factor >= 1):
+            raise VerdictError(f"coverage_factor must be >= 1, got {self.coverage_factor!r}")
+
+    @classmethod
+    def symmetric(cls, quantity: str, nominal: float, tolerance: float, **kwargs: Any) -> "Specification":
+        """nominal ± tolerance (kg·m²)."""
+        if not (math.isfinite(tolerance) and tolerance > 0):
+            raise VerdictError(f"tolerance must be > 0, got {tolerance!r}")
+        return cls(quantity, nominal, nominal - tolerance, nominal + tolerance, **kwargs)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"quantity": self.quantity, "nominal": self.nominal, "lower": self.lower, "upper": self.upper,
+                "rule": self.rule, "uncertain": self.uncertain, "coverage_factor": self.coverage_factor}
+
+
+@dataclass(frozen=True)
+class QualityRules:
+    """When a result is not trustworthy (INVALID), and how releases are combined.
+
+    invalid_flags: result flags that make it INVALID. max_std: largest 1σ of the
+    measurand, kg·m² (None: no limit). max_std_relative: the same relative to
+    the value (None: no limit). min_swings: fewest full swings in the fitted
+    window. consistency_limit: |z| above which releases disagree.
+    min_valid_releases: fewest usable releases for a part verdict.
+    """
+
+    invalid_flags: tuple[str, ...] = DEFAULT_INVALID_FLAGS
+    max_std: float | None = None
+    max_std_relative: float | None = None
+    min_swings: float = 3.0
+    consistency_limit: float = 3.0
+    min_valid_releases: int = 1
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"invalid_flags": list(self.invalid_flags), "max_std": self.max_std,
+                "max_std_relative": self.max_std_relative, "min_swings": self.min_swings,
+                "consistency_limit": self.consistency_limit, "min_valid_releases": self.min_valid_releases}
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One release's measurand (kg·m²) with its uncertainty split into random and systematic parts.
+
+    value: None when the rig gives no J. u_random: 1σ of the identification.
+    u_systematic: 1σ common to every release (calibration of k, tare).
+    swings: full swings in the fitted window (ω_n·T/2π).
+    """
+
+    value: float | None
+    u_random: float | None
+    u_systematic: float = 0.0
+    flags: tuple[str, ...] = ()
+    swings: float | None = None
+
+    @classmethod
+    def from_result(cls, result: Mapping[str, Any], quantity: str) -> "Reading":
+        """From ``IdentificationResult.to_dict()`` (or a payload that contains it)."""
+        if quantity not in QUANTITIES:
+            raise VerdictError(f"quantity must be one of {', '.join(QUANTITIES)}, got {quantity!r}")
+        J_std = result.get("J_std")
+        cal = result.get("J_std_calibration") or 0.0
+        value = result.get(quantity)
+        tare = 0.0
+        if quantity != "J" and result.get("J_object") is not None:
+            # J_object_std = √(J_std² + u_tare²): the tare's part is systematic (same fixture every release)
+            jo_std = result.get("J_object_std") or 0.0
+            tare = math.sqrt(max(jo_std**2 - (J_std or 0.0) ** 2, 0.0))
+        omega = result.get("omega_n")
+        window = result.get("window") or {}
+        swings = None
+        if omega and window.get("t_start") is not None and window.get("t_stop") is not None:
+            swings = float(omega) * (float(window["t_stop"]) - float(window["t_start"])) / (2 * math.pi)
+        return cls(None if value is None else float(value), None if J_std is None else float(J_std),
+                   math.hypot(cal, tare), tuple(result.get("flags") or ()), swings)
+
+    @property
+    def u_combined(self) -> float | None:
+        if self.u_random is None:
+            return None
+        return math.hypot(self.u_random, self.u_systematic)
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A verdict with everything it was decided from (kg·m²).
+
+    value: the measurand (None when unknown). u_c: combined standard uncertainty;
+    U = k·u_c. deviation: value − nominal. zone: "conformance" (proven in),
+    "nonconformance" (proven out), "uncertainty" (neither proven) or None.
+    reasons: why INVALID / NOK, in words.
+    """
+
+    verdict: str
+    value: float | None
+    u_c: float | None
+    U: float | None
+    deviation: float | None
+    zone: str | None
+    rule: str
+    reasons: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"verdict": self.verdict, "value": self.value, "u_c": self.u_c, "U": self.U,
+                "deviation": self.deviation, "zone": self.zone, "rule": self.rule, "reasons": list(self.reasons)}
+
+
+def decide(value: float, u_c: float, spec: Specification) -> Decision:
+    """The conformity decision for a trustworthy value with its combined standard uncertainty."""
+    U = spec.coverage_factor * u_c
+    if spec.lower + U <= value <= spec.upper - U:
+        zone = "conformance"
+    elif value < spec.lower - U or value > spec.upper + U:
+        zone = "nonconformance"
+    else:
+        zone = "uncertainty"
+    inside = spec.lower <= value <= spec.upper
+    reasons: list[str] = []
+    if spec.rule == "simple":
+        verdict = OK if inside else NOK
+        if not inside:
+            reasons.append(_outside(value, spec))
+    elif zone == "conformance":
+        verdict = OK
+    elif zone == "nonconformance":
+        verdict = NOK
+        reasons.append(_outside(value, spec))
+    else:
+        verdict = spec.uncertain
+        reasons.append(f"conformance not proven: {value:.7g} with U = {U:.2g} reaches beyond "
+                       f"[{spec.lower:.7g}, {spec.upper:.7g}] (guard band, ISO 14253-1)")
+    return Decision(verdict, value, u_c, U, value - spec.nominal, zone, spec.rule, tuple(reasons))
+
+
+def _outside(value: float, spec: Specification) -> str:
+    side = "below the lower limit" if value < spec.lower else "above the upper limit"
+    limit = spec.lower if value < spec.lower else spec.upper
+    return f"{value:.7g} {side} {limit:.7g}"
+
+
+def invalid_reasons(reading: Reading, rules: QualityRules) -> list[str]:
+    """Why a reading cannot be trusted (empty: it can)."""
+    reasons = [f"flag {f}" for f in reading.flags if f in rules.invalid_flags]
+    if reading.value is None or reading.u_random is None:
+        reasons.append("no value: the rig gives no J (stiffness or mass·com_distance missing)")
+        return reasons
+    if rules.max_std is not None and reading.u_random > rules.max_std:
+        reasons.append(f"standard uncertainty {reading.u_random:.2g} above the limit {rules.max_std:.2g} kg·m²")
+    if rules.max_std_relative is not None and reading.value != 0 \
+            and reading.u_random / abs(reading.value) > rules.max_std_relative:
+        reasons.append(f"relative standard uncertainty {reading.u_random / abs(reading.value):.2g} above the limit "
+                       f"{rules.max_std_relative:.2g}")
+    if reading.swings is not None and reading.swings < rules.min_swings:
+        reasons.append(f"{reading.swings:.1f} swings, fewer than {rules.min_swings:g}")
+    return reasons
+
+
+def judge_release(reading: Reading, spec: Specification, rules: QualityRules) -> Decision:
+    """The verdict of one release on its own."""
+    bad = invalid_reasons(reading, rules)
+    if bad:
+        return Decision(INVALID, reading.value, reading.u_combined, None,
+                        None if reading.value is None else reading.value - spec.nominal, None, spec.rule, tuple(bad))
+    assert reading.value is not None and reading.u_combined is not None
+    return decide(reading.value, reading.u_combined, spec)
+
+
+@dataclass(frozen=True)
+class PartResult:
+    """The part's result from its releases (kg·m²).
+
+    values: every release's value (None without one). used: indices (0-based)
+    of the releases combined. excluded: {index, reason} for each release left out. mean, std (sample, ddof 1; None for one release),
+    u_typeA = std/√n, u_fit = √(Σu_i²)/n, u_systematic, and the decision (its
+    u_c and U). z: the agreement statistic per used release (None below 3).
+    """
+
+    releases: int
+    values: tuple[float | None, ...]
+    used: tuple[int, ...]
+    excluded: tuple[dict[str, Any], ...]
+    mean: float | None
+    std: float | None
+    u_typeA: float | None
+    u_fit: float | None
+    u_systematic: float | None
+    z: tuple[float | None, ...]
+    decision: Decision
+
+    @property
+    def verdict(self) -> str:
+        return self.decision.verdict
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"releases": self.releases, "values": list(self.values), "used": list(self.used), "excluded": [dict(e) for e in self.excluded],
+                "mean": self.mean, "std": self.std, "u_typeA": self.u_typeA, "u_fit": self.u_fit,
+                "u_systematic": self.u_systematic, "z": list(self.z), **self.decision.to_dict()}
+
+
+def agreement(values: Sequence[float], u: Sequence[float]) -> list[float]:
+    """z_i of each value against the mean of the others (see the module docstring); n >= 2."""
+    n = len(values)
+    out = []
+    for i in range(n):
+        others = [j for j in range(n) if j != i]
+        m = sum(values[j] for j in others) / (n - 1)
+        u_m = math.sqrt(sum(u[j] ** 2 for j in others)) / (n - 1)
+        den = math.hypot(u[i], u_m)
+        out.append((values[i] - m) / den if den > 0 else (0.0 if values[i] == m else math.inf))
+    return out
+
+
+def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRules) -> PartResult:
+    """The part verdict from its releases (the rule is in the module docstring)."""
+    n = len(readings)
+    if n == 0:
+        raise VerdictError("a part needs at least one release")
+    values = tuple(r.value for r in readings)
+    excluded: list[dict[str, Any]] = []
+    usable: list[int] = []
+    for i, r in enumerate(readings):
+        bad = invalid_reasons(r, rules)
+        if bad:
+            excluded.append({"index": i, "reason": "invalid: " + "; ".join(bad)})
+        else:
+            usable.append(i)
+    part_reasons: list[str] = []
+    z: list[float | None] = []
+    if len(usable) >= 2:
+        vals = [float(readings[i].value) for i in usable]  # type: ignore[arg-type]
+        us = [float(readings[i].u_random) for i in usable]  # type: ignore[arg-type]
+        zs = agreement(vals, us)
+        worst = max(range(len(zs)), key=lambda k: abs(zs[k]))
+        if abs(zs[worst]) > rules.consistency_limit:
+            if len(usable) >= 3:
+                excluded.append({"index": usable[worst], "reason": f"disagrees with the other releases: "
+                                 f"z = {zs[worst]:+.2f}, limit ±{rules.consistency_limit:g}"})
+                usable.pop(worst)
+                vals.pop(worst)
+                us.pop(worst)
+                zs = agreement(vals, us)
+                if max(abs(v) for v in zs) > rules.consistency_limit:
+                    part_reasons.append(f"releases disagree beyond ±{rules.consistency_limit:g} even after "
+                                        "excluding the worst one")
+            else:
+                part_reasons.append(f"the 2 releases disagree: z = {abs(zs[worst]):.2f} > {rules.consistency_limit:g}")
+        z = [float(v) for v in zs] if len(usable) >= 3 else [None] * len(usable)
+    else:
+        z = [None] * len(usable)
+    excluded.sort(key=lambda e: e["index"])
+    if len(usable) < max(1, rules.min_valid_releases):
+        part_reasons.append(f"{len(usable)} usable of {n} releases, fewer than {max(1, rules.min_valid_releases)}")
+        part_reasons += [f"release {e['index'] + 1}: {e['reason']}" for e in excluded]
+    if not usable:
+        dec = Decision(INVALID, None, None, None, None, None, spec.rule, tuple(part_reasons))
+        return PartResult(n, values, (), tuple(excluded), None, None, None, None, None, tuple(z), dec)
+
+    vals = [float(readings[i].value) for i in usable]  # type: ignore[arg-type]
+    m = len(vals)
+    mean = sum(vals) / m
+    std = math.sqrt(sum((v - mean) ** 2 for v in vals) / (m - 1)) if m > 1 else None
+    u_a = std / math.sqrt(m) if std is not None else None
+    u_fit = math.sqrt(sum(float(readings[i].u_random) ** 2 for i in usable)) / m  # type: ignore[arg-type]
+    u_sys = max(readings[i].u_systematic for i in usable)
+    u_c = math.hypot(max(u_a or 0.0, u_fit), u_sys)
+    if part_reasons:
+        dec = Decision(INVALID, mean, u_c, spec.coverage_factor * u_c, mean - spec.nominal, None, spec.rule,
+                       tuple(part_reasons))
+    else:
+        dec = decide(mean, u_c, spec)
+    return PartResult(n, values, tuple(usable), tuple(excluded), mean, std, u_a, u_fit, u_sys, tuple(z), dec)

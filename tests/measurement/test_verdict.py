@@ -1,0 +1,97 @@
+"""The conformity decision (guard band per ISO 14253-1) and the combination of repeat releases, by hand."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from measurement.verdict import (INVALID, NOK, OK, QualityRules, Reading, Specification, VerdictError, combine,
+                                 decide, judge_release)
+
+SPEC = Specification.symmetric("J", 0.0125, 0.0001)  # 0.0124 … 0.0126 kg·m², guard band, k = 2
+
+
+def test_guard_band_proves_conformance_only_inside_the_zone_shrunk_by_U():
+    # |x − nominal| + U = 0.00006 + 0.00002 ≤ 0.0001 → conformance proven
+    d = decide(0.01256, 1e-5, SPEC)
+    assert d.verdict == OK and d.zone == "conformance" and d.U == pytest.approx(2e-5)
+    assert d.deviation == pytest.approx(6e-5)
+    # inside the tolerance, but |x − nominal| + U = 0.00009 + 0.00002 > 0.0001: plain comparison says OK, the rule NOK
+    d = decide(0.01259, 1e-5, SPEC)
+    assert d.verdict == NOK and d.zone == "uncertainty" and "not proven" in d.reasons[0]
+    assert decide(0.01259, 1e-5, Specification.symmetric("J", 0.0125, 0.0001, rule="simple")).verdict == OK
+    # the recipe may ask for a re-measurement instead
+    assert decide(0.01259, 1e-5, Specification.symmetric("J", 0.0125, 0.0001, uncertain=INVALID)).verdict == INVALID
+    # |x − nominal| − U > T: nonconformance proven
+    d = decide(0.01263, 1e-5, SPEC)
+    assert d.verdict == NOK and d.zone == "nonconformance" and "above the upper limit" in d.reasons[0]
+    assert decide(0.01237, 1e-5, SPEC).reasons[0].count("below the lower limit") == 1
+
+
+def test_specification_errors_say_what_was_expected():
+    with pytest.raises(VerdictError, match="tolerance must be > 0"):
+        Specification.symmetric("J", 0.0125, -1.0)
+    with pytest.raises(VerdictError, match="quantity must be one of"):
+        Specification.symmetric("mass", 0.0125, 1e-4)
+    with pytest.raises(VerdictError, match="lower <= nominal <= upper"):
+        Specification("J", 0.02, 0.01, 0.015)
+
+
+def test_a_release_is_invalid_for_a_recipe_flag_a_large_std_or_too_few_swings():
+    rules = QualityRules(max_std=5e-6, min_swings=3)
+    assert judge_release(Reading(0.0125, 1e-6, 0.0, (), 20.0), SPEC, rules).verdict == OK
+    d = judge_release(Reading(0.0125, 1e-6, 0.0, ("unmodeled_residual", "outliers_removed"), 20.0), SPEC, rules)
+    assert d.verdict == INVALID and d.reasons == ("flag unmodeled_residual",)
+    d = judge_release(Reading(0.0125, 6e-6, 0.0, (), 20.0), SPEC, rules)
+    assert d.verdict == INVALID and "above the limit" in d.reasons[0]
+    d = judge_release(Reading(0.0125, 1e-6, 0.0, (), 2.5), SPEC, rules)
+    assert d.verdict == INVALID and "2.5 swings" in d.reasons[0]
+    assert judge_release(Reading(None, None), SPEC, rules).verdict == INVALID
+
+
+def test_reading_splits_calibration_and_tare_from_the_fit_uncertainty():
+    result = {"J": 0.0170, "J_std": 3e-6, "J_std_calibration": 4e-6, "J_object": 0.0125, "J_object_std": 5e-6,
+              "omega_n": 4.6, "window": {"t_start": 0.1, "t_stop": 10.1}, "flags": ["calibration_due"]}
+    r = Reading.from_result(result, "J_object")
+    assert r.value == 0.0125 and r.u_random == 3e-6
+    assert r.u_systematic == pytest.approx(math.hypot(4e-6, 4e-6))  # tare 1σ = √(5² − 3²) µ = 4 µ
+    assert r.swings == pytest.approx(4.6 * 10 / (2 * math.pi)) and r.flags == ("calibration_due",)
+    assert Reading.from_result(result, "J").u_systematic == pytest.approx(4e-6)
+
+
+def test_three_agreeing_releases_combine_with_type_a_std_of_the_mean():
+    vals = [0.012500, 0.012502, 0.012498]
+    part = combine([Reading(v, 1e-6, 2e-6) for v in vals], SPEC, QualityRules())
+    s = math.sqrt(sum((v - 0.0125) ** 2 for v in vals) / 2)  # 2e-6
+    assert part.mean == pytest.approx(0.0125) and part.std == pytest.approx(s)
+    assert part.u_typeA == pytest.approx(s / math.sqrt(3))
+    assert part.u_fit == pytest.approx(math.sqrt(3) * 1e-6 / 3)
+    # the larger random estimate (Type A here) with the common calibration part in quadrature, once
+    assert part.decision.u_c == pytest.approx(math.hypot(s / math.sqrt(3), 2e-6))
+    assert part.verdict == OK and part.used == (0, 1, 2) and part.excluded == ()
+
+
+def test_a_release_that_disagrees_is_excluded_and_reported():
+    readings = [Reading(0.012500, 1e-6), Reading(0.012501, 1e-6), Reading(0.012530, 1e-6)]
+    part = combine(readings, SPEC, QualityRules(consistency_limit=3))
+    assert part.used == (0, 1) and part.excluded[0]["index"] == 2
+    assert "disagrees with the other releases" in part.excluded[0]["reason"]
+    assert part.mean == pytest.approx(0.0125005) and part.verdict == OK
+
+
+def test_two_disagreeing_releases_make_the_part_invalid():
+    part = combine([Reading(0.012500, 1e-6), Reading(0.012530, 1e-6)], SPEC, QualityRules())
+    assert part.verdict == INVALID and "disagree" in part.decision.reasons[0]
+
+
+def test_invalid_releases_are_excluded_and_too_few_usable_make_the_part_invalid():
+    readings = [Reading(0.0125, 1e-6, flags=("unmodeled_residual",)), Reading(0.012501, 1e-6),
+                Reading(0.012499, 1e-6)]
+    part = combine(readings, SPEC, QualityRules(min_valid_releases=2))
+    assert part.verdict == OK and part.used == (1, 2)
+    assert part.excluded == ({"index": 0, "reason": "invalid: flag unmodeled_residual"},)
+    part = combine(readings, SPEC, QualityRules(min_valid_releases=3))
+    assert part.verdict == INVALID and "2 usable of 3 releases" in part.decision.reasons[0]
+    every = [Reading(0.0125, 1e-6, flags=("unmodeled_residual",))] * 3
+    assert combine(every, SPEC, QualityRules()).verdict == INVALID
