@@ -180,7 +180,13 @@ class SimulatedAngleSensor:
             k = np.arange(self._next, last + 1)
             self._next = last + 1
         t = self._t0 + k / self._rate
-        angle = np.array([self._angle(float(x)) for x in t], dtype=float)
+        # a source with a vectorised form (SimRig.angles) is asked once per read: at a fast simulated
+        # clock one read covers thousands of samples, and a per-sample loop made the poll fall behind
+        many = getattr(getattr(self._angle, "__self__", None), "angles", None)
+        if many is not None and getattr(self._angle, "__name__", "") == "angle":
+            angle = np.asarray(many(t), dtype=float)
+        else:
+            angle = np.array([self._angle(float(x)) for x in t], dtype=float)
         if self._noise:
             angle = angle + self._rng.normal(0.0, self._noise, angle.size)
         if self._bits:

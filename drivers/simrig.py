@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import math
 import threading
+
+import numpy as np
 from typing import Any, Callable, Mapping
 
 from measurement import Pendulum, Rig, Swing
@@ -76,6 +78,14 @@ class SimRig:
         if released is None or t <= released:
             return self.theta0
         return float(self.swing.angle(t - released))
+
+    def angles(self, t: np.ndarray) -> np.ndarray:
+        """``angle`` at many times at once (rad): a fast simulated clock asks for thousands per read."""
+        t = np.asarray(t, dtype=float)
+        released = self._released_at
+        if released is None:
+            return np.full(t.shape, self.theta0)
+        return np.asarray(self.swing.angle(t - released), dtype=float).reshape(t.shape)
 
     # -- coupling ---------------------------------------------------------------------
     def attach(self, solenoid: Any) -> "SimRig":

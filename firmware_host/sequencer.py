@@ -209,6 +209,8 @@ class _Run:
     angle: list[float] = field(default_factory=list)
     last_sample_at: float | None = None  # clock time a new sample last arrived
     dropped_out_of_order: int = 0
+    beyond_window: int = 0  # samples later than release + capture_duration (not kept)
+    outside_window: int = 0  # samples not kept: before release − pre_trigger or after release + capture_duration
     trace: Trace | None = None
     job: _Job | None = None
     identify_started_at: float | None = None
@@ -598,21 +600,30 @@ class Sequencer:
 
     def _collect(self, run: _Run, now: float) -> None:
         t, angle = self.sensor.read()  # SensorFault propagates to poll → FAULT
+        t = np.asarray(t, float).ravel()
+        angle = np.asarray(angle, float).ravel()
+        if len(t) == 0:
+            return
+        finite = np.isfinite(t) & np.isfinite(angle)
+        t, angle = t[finite], angle[finite]
+        if run.released_at is not None:
+            # the capture is bounded by sample time, not by when poll() gets round to it: a sample
+            # loop that fell behind must not stretch the record (or the work) beyond the window
+            inside = t <= run.released_at + self.config.capture_duration
+            beyond = int(len(t) - np.count_nonzero(inside))
+            run.beyond_window += beyond
+            run.outside_window += beyond
+            t, angle = t[inside], angle[inside]
         if len(t) == 0:
             return
         last = run.t[-1] if run.t else -math.inf
-        added = 0
-        for ti, ai in zip(np.asarray(t, float).tolist(), np.asarray(angle, float).tolist()):
-            if not (math.isfinite(ti) and math.isfinite(ai)):
-                continue
-            if ti <= last:  # Trace needs strictly increasing time
-                run.dropped_out_of_order += 1
-                continue
-            run.t.append(ti)
-            run.angle.append(ai)
-            last = ti
-            added += 1
-        if added:
+        # Trace needs strictly increasing time: a sample is kept when it is later than every one before it
+        before = np.maximum.accumulate(np.concatenate(([last], t)))[:-1]
+        keep = t > before
+        run.dropped_out_of_order += int(len(t) - np.count_nonzero(keep))
+        if keep.any():
+            run.t.extend(t[keep].tolist())
+            run.angle.extend(angle[keep].tolist())
             run.last_sample_at = now
 
     def _check_sample_timeout(self, run: _Run, now: float) -> None:
@@ -627,7 +638,8 @@ class Sequencer:
     def _capture_end(self, run: _Run, now: float) -> str | None:
         cfg = self.config
         elapsed = now - run.released_at
-        if elapsed >= cfg.capture_duration:
+        if elapsed >= cfg.capture_duration or (run.t and run.t[-1] >= run.released_at + cfg.capture_duration) \
+                or run.beyond_window:
             return f"capture complete: {cfg.capture_duration:g} s after the release"
         if cfg.decay_threshold > 0 and elapsed >= cfg.min_capture and run.t:
             t_end = run.t[-1]
@@ -648,6 +660,11 @@ class Sequencer:
         self._collect(run, now)  # what the sensor buffered up to the stop
         run.capture_ended_at = now
         run.capture_end = why
+        if run.released_at is not None and run.t and run.t[0] < run.released_at - self.config.pre_trigger:
+            # the pre-trigger record is bounded by sample time too (the release waited for a poll)
+            first = bisect.bisect_left(run.t, run.released_at - self.config.pre_trigger)
+            del run.t[:first], run.angle[:first]
+            run.outside_window += first
         if len(run.t) < self.config.min_samples:
             raise CaptureTooShort(
                 f"capture too short: {len(run.t)} samples from the {self.sensor.source}; "
@@ -657,6 +674,8 @@ class Sequencer:
         stats = dict(self.sensor.stats())
         if run.dropped_out_of_order:
             stats["dropped_out_of_order"] = run.dropped_out_of_order
+        if run.outside_window:
+            stats["outside_window"] = run.outside_window
         meta = {
             self.sensor.source: stats,
             "sequencer": {

@@ -246,7 +246,8 @@ def invalid_reasons(reading: Reading, rules: QualityRules) -> list[str]:
     """Why a reading cannot be trusted (empty: it can)."""
     reasons = [f"flag {f}" for f in reading.flags if f in rules.invalid_flags]
     if reading.value is None or reading.u_random is None:
-        reasons.append("no value: the rig gives no J (stiffness or mass·com_distance missing)")
+        reasons.append("no value: the rig gives no J (stiffness or mass·com_distance missing), or no tare / "
+                       "[object] for J_object / J_object_axis")
         return reasons
     if rules.max_std is not None and reading.u_random > rules.max_std:
         reasons.append(f"standard uncertainty {reading.u_random:.2g} above the limit {rules.max_std:.2g} kg·m²")

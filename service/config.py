@@ -624,6 +624,8 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
             book.find(rc["active"])
         except ConfigError as exc:
             raise c.fail("recipes", "active", str(exc)) from None
+    for r in book.recipes:
+        r.check_rig(rig)  # the quantity must be one the rig it measures with can give
 
     web = None
     w = c.table("web", doc.get("web", {}), SCHEMA["web"])

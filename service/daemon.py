@@ -38,7 +38,7 @@ from measurement.errors import InvalidInput
 
 from . import __version__
 from .config import Config
-from .errors import ServiceError, StoreDamaged
+from .errors import ServiceError, StartupError, StoreDamaged
 from .hardware import Devices, build_devices
 from .modbus_server import ModbusServer
 from .mqtt import MqttService
@@ -53,6 +53,12 @@ log = logging.getLogger("moi.daemon")
 #: exit statuses of ``run``
 EXIT_OK = 0
 EXIT_RUNTIME_FAILURE = 3
+
+#: at most one "trigger ignored" line per this many seconds, s
+IGNORED_LOG_INTERVAL = 10.0
+
+#: the lock file in the state directory that makes a second daemon on it stop at start
+LOCK_NAME = "moi.lock"
 
 #: consecutive failing loop iterations after which the daemon gives up (systemd restarts it)
 MAX_LOOP_FAILURES = 20
@@ -102,6 +108,9 @@ class Appliance:
         self._stored_cond = threading.Condition()
         self.exit_status = EXIT_OK
         self._stopping = False
+        self._lock_fd: int | None = None
+        self._ignored_triggers = 0
+        self._ignored_logged_at = -float("inf")
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
@@ -128,6 +137,7 @@ class Appliance:
         """Open the store, start Modbus and MQTT, build the devices and the sequencer; then READY."""
         cfg = self.config
         try:
+            self._lock_state_dir()
             self.store = self._open_store()
             if cfg.modbus is not None:
                 self.modbus = ModbusServer(cfg.modbus, on_command=self.command, recipe_numbers=self.parts.book.numbers)
@@ -177,6 +187,35 @@ class Appliance:
         log.info("moi %s ready (%s rig; %s; store %s)", __version__, "simulated" if cfg.simulated else "hardware",
                  ", ".join(where), self.store.path)
         self.notifier.ready(f"idle; {', '.join(where)}")
+
+    def _lock_state_dir(self) -> None:
+        """One daemon per state directory: a second one would take over the MQTT client id and
+        deliver every result twice. The lock is the kernel's (flock): it goes with the process."""
+        import fcntl
+        import os
+
+        state = self.config.state_dir
+        try:
+            state.mkdir(parents=True, exist_ok=True)
+            fd = os.open(state / LOCK_NAME, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o640)
+        except OSError as exc:
+            raise StartupError(f"cannot create the lock file in {str(state)!r}: {exc.strerror}") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            other = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise StartupError(f"another moi daemon (pid {other}) runs on the state directory {str(state)!r}; "
+                               "stop it first, or give this one its own state_dir") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        self._lock_fd = fd
+
+    def _unlock_state_dir(self) -> None:
+        if self._lock_fd is not None:
+            import os
+            os.close(self._lock_fd)  # closing the descriptor releases the lock
+            self._lock_fd = None
 
     def _open_store(self) -> Store:
         """The store, after the reads a start does; a damaged one is moved aside and what can be
@@ -271,7 +310,12 @@ class Appliance:
                     self._accepted_source = source
                     self._accepted_part = (self.parts.part_id, self.parts.recipe)
                 else:
-                    log.info("trigger from %s ignored (state %s)", source, seq.state.value)
+                    self._ignored_triggers += 1
+                    now = time.monotonic()
+                    if now - self._ignored_logged_at >= IGNORED_LOG_INTERVAL:  # a stuck button or a looping PLC
+                        log.info("trigger from %s ignored (state %s; %d ignored since the last such line)", source,
+                                 seq.state.value, self._ignored_triggers)
+                        self._ignored_logged_at, self._ignored_triggers = now, 0
             elif name == "abort":
                 if seq.state is State.FAULT:
                     seq.abort(f"fault acknowledged by {source}")
@@ -499,7 +543,8 @@ class Appliance:
         seq = self.sequencer
         parts = [seq.state.value.lower() if seq else "starting"]
         if self.mqtt is not None:
-            parts.append("mqtt connected" if self.mqtt.is_connected else "mqtt disconnected")
+            parts.append("mqtt connected" if self.mqtt.is_connected else
+                         "mqtt disconnected" + (f" ({self.mqtt.last_error})" if self.mqtt.last_error else ""))
             if self.mqtt.sender.pending:
                 parts.append(f"{self.mqtt.sender.pending} result(s) waiting for the broker")
         return "; ".join(parts)
@@ -553,6 +598,7 @@ class Appliance:
         if self.store is not None:
             self.store.close()
             self.store = None
+        self._unlock_state_dir()
         self.notifier.close()
 
 

@@ -98,6 +98,19 @@ class Recipe:
         rig = self.rig or device_rig
         return rig.with_declared(self.declared) if self.declared is not None else rig
 
+    def check_rig(self, device_rig: Rig) -> None:
+        """RecipeError when the rig it measures with cannot give the recipe's quantity."""
+        rig = self.rig_for(device_rig)
+        q = self.spec.quantity
+        if rig.restoring_constant is None:
+            raise RecipeError(f"{self.path}: [recipe] quantity: the rig gives no J (no stiffness, or no mass and "
+                              "com_distance); calibrate it or name a calibrated rig")
+        if q == "J_object" and rig.tare_inertia is None:
+            raise RecipeError(f"{self.path}: [recipe] quantity: J_object needs the rig's tare_inertia")
+        if q == "J_object_axis" and rig.object is None:
+            raise RecipeError(f"{self.path}: [recipe] quantity: J_object_axis needs the rig's [object] mass and "
+                              "axis_offset")
+
     def to_dict(self) -> dict[str, Any]:
         """What every payload of this recipe carries (JSON-ready)."""
         return {"name": self.name, "number": self.number, "version": self.version, "path": self.path,

@@ -100,6 +100,27 @@ CREATE TABLE IF NOT EXISTS attachments (
 """
 
 
+def _read_only_connection(path: Path) -> sqlite3.Connection:
+    """A connection that never writes. WAL mode needs the -shm file, which a read-only directory
+    cannot get; with no -wal file nothing waits to be checkpointed, so the file is read as it is."""
+    def connect(mode: str) -> sqlite3.Connection:
+        db = sqlite3.connect(f"file:{path}?{mode}", uri=True, isolation_level=None, check_same_thread=False,
+                             timeout=10.0)
+        try:
+            db.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchall()
+        except BaseException:
+            db.close()
+            raise
+        return db
+
+    try:
+        return connect("mode=ro")
+    except sqlite3.OperationalError:
+        if Path(f"{path}-wal").exists():
+            raise
+        return connect("mode=ro&immutable=1")
+
+
 #: SQLite's primary result codes that mean a damaged file (SQLITE_CORRUPT, SQLITE_NOTADB)
 _DAMAGED_CODES = {11, 26}
 
@@ -224,11 +245,15 @@ def _names(columns: str) -> list[str]:
 class Store:
     """The SQLite result store and outbox in ``state_dir``/results.db."""
 
-    def __init__(self, state_dir: str | Path, *, create: bool = True) -> None:
+    def __init__(self, state_dir: str | Path, *, create: bool = True, read_only: bool = False) -> None:
         self.state_dir = Path(state_dir)
         self.path = self.state_dir / DB_NAME
-        if not create and not self.path.exists():
+        if (not create or read_only) and not self.path.exists():
             raise StoreError(f"no result store at {str(self.path)!r}")
+        self._lock = threading.RLock()
+        if read_only:
+            self._open_read_only()
+            return
         try:
             self.state_dir.mkdir(parents=True, exist_ok=True)
             # isolation_level=None: explicit BEGIN/COMMIT, no implicit transactions
@@ -256,7 +281,24 @@ class Store:
             raise StoreError(f"cannot open the result store {str(self.path)!r}: {exc}") from None
         except OSError as exc:
             raise StoreError(f"cannot create the state directory {str(self.state_dir)!r}: {exc.strerror}") from None
-        self._lock = threading.RLock()
+
+    def _open_read_only(self) -> None:
+        """For the reading commands: nothing is written (no schema, no journal mode, no write lock),
+        so a store the user may only read (another user's, a copy on read-only media) opens too."""
+        try:
+            self._db = _read_only_connection(self.path)
+            try:
+                row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
+            except BaseException:
+                self._db.close()
+                raise
+        except sqlite3.Error as exc:
+            if _is_damage(exc):
+                raise StoreDamaged(f"the result store {str(self.path)!r} is damaged ({exc})") from None
+            raise StoreError(f"cannot read the result store {str(self.path)!r}: {exc}") from None
+        if row is not None and int(row[0]) > SCHEMA_VERSION:
+            raise StoreError(f"{self.path}: result store schema {row[0]} is newer than this software ({SCHEMA_VERSION})")
+        self.read_only = True
 
     # --- plumbing -----------------------------------------------------------------
     class _Tx:
@@ -273,8 +315,13 @@ class Store:
     def _tx(self) -> "_Tx":
         return Store._Tx(self._db)
 
+    read_only = False
+
     def close(self) -> None:
         with self._lock:
+            if self.read_only:
+                self._db.close()
+                return
             try:
                 self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
             except sqlite3.Error:
@@ -413,7 +460,9 @@ class Store:
             if isinstance(key, int) or (isinstance(key, str) and key.isdigit()):
                 rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE seq = ?", (int(key),)).fetchall()
             else:
-                rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE uuid LIKE ? || '%'", (str(key),)).fetchall()
+                # a prefix, compared literally: '%' and '_' in the key are not wildcards
+                rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE substr(uuid, 1, length(?)) = ?",
+                                        (str(key), str(key))).fetchall()
         if len(rows) != 1:
             return None
         return self._row(rows[0], full=True, trace=trace)
@@ -535,7 +584,10 @@ class StoreHealth:
 def _open_read_only(path: Path) -> sqlite3.Connection:
     if not path.exists():
         raise StoreError(f"no result store at {str(path)!r}")
-    return sqlite3.connect(f"file:{path}?mode=ro", uri=True, check_same_thread=False)
+    try:
+        return _read_only_connection(path)
+    except sqlite3.Error as exc:
+        raise StoreError(f"cannot read {str(path)!r}: {exc}") from None
 
 
 def _rowids(db: sqlite3.Connection, table: str, max_probes: int = 100_000) -> Iterator[int]:

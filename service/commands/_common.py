@@ -24,7 +24,7 @@ def open_store(args: argparse.Namespace) -> Store:
     """The store named by --state-dir / --config, else $STATE_DIRECTORY, ./moi-state or /var/lib/moi."""
     d = find_store_dir(args)
     try:
-        return Store(d, create=False)
+        return Store(d, read_only=True)  # the reading commands never write (a read-only store opens)
     except StoreError as exc:
         raise InputFileError(str(exc)) from None
 

@@ -113,6 +113,10 @@ def run(args: argparse.Namespace) -> int:
               f"{'ω_n [rad/s]':>11}  {'ζ':>9}  {'pub':3}  {'uuid':8}  flags / error")
         for m in rows:
             note = m.error if m.error else ", ".join(m.flags)
+            if m.recipe:  # the part: ID, recipe, release i/N and its verdict (the part's on its last release)
+                part = (f"{m.part_id or '-'} {m.recipe} {m.release_index or '-'}/{m.releases or '-'} "
+                        f"{m.verdict or '-'}" + (f" part {m.part_verdict}" if m.part_verdict else ""))
+                note = f"[{part}] {note}".rstrip()
             print(f"{m.seq:>6}  {fmt_time(m.finished_at):19}  {m.status:7}  {m.trigger:7}  {_num(m.J, '13.7g')}  "
                   f"{_num(m.J_std, '8.2g')}  {_num(m.omega_n, '11.6g')}  {_num(m.damping_ratio, '9.3g')}  "
                   f"{'yes' if m.published_at else 'no':3}  {m.uuid[:8]}  {note}")

@@ -198,7 +198,8 @@ class Views:
 
     def _next(self, request: web.Request, value: str | None) -> str:
         # only a path on this appliance: never an open redirect
-        return value if value and value.startswith("/") and not value.startswith("//") else "/"
+        ok = value and value.startswith("/") and not value.startswith(("//", "/\\")) and "\\" not in value
+        return value if ok else "/"
 
     async def login(self, request: web.Request) -> web.StreamResponse:
         self._same_origin(request)

@@ -316,3 +316,119 @@ def test_a_result_that_cannot_be_stored_never_leaves_the_device(tmp_path, broker
     assert [m["state"] for m in published][-3:] == ["IDENTIFYING", "PUBLISHING", "FAULT"]
     assert all("J" not in m and "J =" not in (m.get("reason") or "") for m in published), published
     assert c.results() == [] and measured is None
+
+
+# --- runaway captures -----------------------------------------------------------------------------------------
+
+def test_the_capture_is_bounded_by_sample_time_at_the_largest_time_scale(tmp_path, appliance_factory):
+    """At 1000× a 20 ms poll is 20 simulated seconds: the record must still end 20 s after the release
+    (it ran to 2,300 s and 230,000 rows when the capture was bounded by poll time only)."""
+    pre, duration, rate = 0.2, 20.0, 100.0
+    app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=1000.0,
+                                          sequencer={"pre_trigger": pre, "capture_duration": duration},
+                                          simulation={"rate": rate}))
+    app.press()
+    app.wait_done(1, timeout=60)
+    m = app.app.store.latest("ok")
+    stored = app.app.store.get(m.uuid, trace=True)
+    span = stored.trace_t[-1] - stored.trace_t[0]
+    assert span <= pre + duration + 1e-9, span
+    assert len(stored.trace_t) <= (pre + duration) * rate + 2
+    release = stored.trace_meta["sequencer"]["release_t"]
+    assert stored.trace_t[-1] - release == pytest.approx(duration, abs=2 / rate)  # the whole window is there
+
+
+# --- two daemons on one state directory -------------------------------------------------------------------------
+
+def test_a_second_daemon_on_the_same_state_directory_stops_with_one_line(tmp_path):
+    from .conftest import moi_subprocess, port_open, write_toml
+
+    first_port, second_port = free_port(), free_port()
+    state = tmp_path / "state"
+    first_cfg = write_toml(tmp_path / "first.toml", appliance_doc(state, modbus_port=first_port))
+    second_cfg = write_toml(tmp_path / "second.toml", appliance_doc(state, modbus_port=second_port))
+    first = moi_subprocess(["run", "--config", str(first_cfg)])
+    try:
+        wait_until(lambda: port_open(first_port) or first.poll() is not None, 30, what="the first daemon")
+        assert first.poll() is None
+        second = moi_subprocess(["run", "--config", str(second_cfg)])
+        _, err = second.communicate(timeout=60)
+        lines = [line for line in err.decode().splitlines() if line.startswith("moi run:")]
+        assert second.returncode == 3 and len(lines) == 1 and "another moi daemon (pid" in lines[0], err.decode()
+        assert "Traceback" not in err.decode() and not port_open(second_port)
+    finally:
+        first.terminate()
+        first.communicate(timeout=30)
+    assert first.returncode == 0
+
+
+# --- MQTT connection failures are said --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("case", ["port refused", "TLS against a plain broker"])
+def test_mqtt_connection_failures_are_logged_once_and_shown_in_the_status(tmp_path, broker, caplog, case):
+    import logging
+
+    caplog.set_level(logging.WARNING, logger="moi.mqtt")
+    port = free_port() if case == "port refused" else broker.port
+    settings = MqttSettings(host="127.0.0.1", port=port, reconnect_min=0.05, reconnect_max=0.1,
+                            tls=case != "port refused")
+    store = Store(tmp_path / "state")
+    attempts: list[str] = []
+    svc = MqttService(settings, "rig", store)
+    forward = svc.client.on_connect_error
+    svc.client.on_connect_error = lambda exc: (attempts.append(type(exc).__name__), forward(exc))
+    svc.start()
+    try:
+        wait_until(lambda: len(attempts) >= 3, 20, what="three connection attempts")
+        expected = "ConnectionRefusedError" if case == "port refused" else "ConnectionResetError"  # the TLS hello rejected
+        assert expected in (svc.last_error or ""), svc.last_error
+        said = [r.getMessage() for r in caplog.records if "cannot connect" in r.getMessage()]
+        assert len(said) == 1 and expected in said[0] and f"127.0.0.1:{port}" in said[0], said
+        assert not svc.is_connected
+    finally:
+        svc.stop()
+        store.close()
+
+
+# --- minor items ----------------------------------------------------------------------------------------------
+
+def test_a_measurement_key_is_a_literal_prefix_not_a_pattern(tmp_path, capsys):
+    from service.cli import main
+
+    with Store(tmp_path / "s") as s:
+        s.record(status="failed", trigger="button", device_id="rig", software_version="t", started_at=1.0,
+                 finished_at=2.0, error="test")
+    for key in ("%", "_", "%%%"):
+        assert main(["results", key, "--state-dir", str(tmp_path / "s")]) == 2
+        assert "no single measurement matches" in capsys.readouterr().err
+
+
+def test_a_world_readable_password_file_is_warned_about(tmp_path, caplog):
+    import logging
+
+    secret = tmp_path / "mqtt-password"
+    secret.write_text("hunter2\n")
+    secret.chmod(0o644)
+    store = Store(tmp_path / "state")
+    try:
+        with caplog.at_level(logging.WARNING, logger="moi.mqtt"):
+            MqttService(MqttSettings(username="moi", password_file=str(secret)), "rig", store)
+        assert any("readable by every user" in r.getMessage() for r in caplog.records)
+        assert all("hunter2" not in r.getMessage() for r in caplog.records)
+    finally:
+        store.close()
+
+
+def test_ignored_triggers_are_logged_at_most_once_per_interval(tmp_path, appliance_factory, caplog):
+    import logging
+
+    caplog.set_level(logging.INFO, logger="moi.daemon")
+    app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=5.0))
+    app.press()
+    app.wait_event(lambda e: e.state.value == "CAPTURING", 20)
+    for _ in range(50):
+        app.app.command("trigger", "modbus")  # a PLC holding the trigger
+    wait_until(lambda: app.app.sequencer.counts["ignored_requests"] >= 50, 20, what="50 ignored triggers")
+    lines = [r for r in caplog.records if r.getMessage().startswith("trigger from")]
+    assert len(lines) == 1, [r.getMessage() for r in lines]
+    app.wait_done(1)

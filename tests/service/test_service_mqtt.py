@@ -121,6 +121,8 @@ def test_home_assistant_discovery_is_retained_and_names_the_result_topic(tmp_pat
         assert j["unit_of_measurement"] == "kg·m²"
         flags = [t for t, _, _ in late.messages if t.startswith("homeassistant/binary_sensor/")]
         assert "homeassistant/binary_sensor/d1/unmodeled_residual/config" in flags
+        verdict = json.loads(dict((t, p) for t, p, _ in late.messages)["homeassistant/sensor/d1/verdict/config"])
+        assert verdict["state_topic"] == "moi/d1/result" and "value_json.verdict" in verdict["value_template"]
     finally:
         svc.stop()
         store.close()

@@ -15,7 +15,7 @@ from service import registers as R
 from service.errors import ConfigError
 from service.recipes import RecipeBook, RecipeError, load_recipe
 
-from .conftest import appliance_doc, moi_subprocess, wait_until
+from .conftest import appliance_doc, wait_until
 
 J_TRUE = 0.0125  # the simulated part (appliance_doc's default [simulation] inertia)
 
@@ -82,7 +82,7 @@ def write_part_id(c: ModbusTcpClient, text: str):
 
 def test_a_plc_selects_a_recipe_writes_a_part_id_and_reads_the_verdict_of_three_releases(tmp_path, recipe_dir,
                                                                                       appliance_factory):
-    app = appliance_factory(appliance_doc(tmp_path / "state", recipes={"directory": str(recipe_dir)}))
+    app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=10.0, recipes={"directory": str(recipe_dir)}))
     c = plc(app)
     try:
         select(c, 7)
@@ -98,7 +98,8 @@ def test_a_plc_selects_a_recipe_writes_a_part_id_and_reads_the_verdict_of_three_
             app.wait_done(i)
             s = snapshot(c)
             assert s["release_index"] == i and s["releases"] == 3 and s["part_id"] == "SN-0001"
-            assert s["recipe_number"] == 7 and s["release_verdict"] == R.VERDICT_CODES["OK"]
+            assert s["recipe_number"] == 7 and s["release_verdict"] == R.VERDICT_CODES["OK"], \
+                app.app.store.get(s["uuid"]).payload["release"]
             if i < 3:
                 assert s["verdict"] == 0 and math.isnan(s["part_value"])  # the part is not complete yet
                 assert R.decode_image(c.read_input_registers(0, count=10, device_id=1).registers)["part_releases_done"] == i
@@ -123,7 +124,7 @@ def test_a_plc_selects_a_recipe_writes_a_part_id_and_reads_the_verdict_of_three_
 
 
 def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recipe_dir, appliance_factory):
-    app = appliance_factory(appliance_doc(tmp_path / "state", recipes={"directory": str(recipe_dir)}))
+    app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=10.0, recipes={"directory": str(recipe_dir)}))
     c = plc(app)
     verdicts = {}
     try:
@@ -146,12 +147,12 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
         c.close()
     code = R.VERDICT_CODES
     verdict, p = verdicts[8]
-    assert verdict == code["NOK"] and p["part"]["zone"] == "nonconformance"
+    assert verdict == code["NOK"] and p["part"]["zone"] == "nonconformance", (p["flags"], p["part"])
     # the guard band: inside the tolerance, so the plain comparison says OK; with U it is not proven
     verdict, p = verdicts[9]
     part = p["part"]
     spec = p["recipe"]
-    assert verdict == code["NOK"] and part["zone"] == "uncertainty"
+    assert verdict == code["NOK"] and part["zone"] == "uncertainty", (p["flags"], p["part"])
     assert abs(part["mean"] - spec["nominal"]) <= spec["upper"] - spec["nominal"]
     assert decide(part["mean"], part["u_c"], Specification("J", spec["nominal"], spec["lower"], spec["upper"],
                                                            rule="simple")).verdict == "OK"
@@ -161,9 +162,9 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
     assert p["flag_bits"] & (1 << R.FLAG_BITS["calibration_due"])
     # ... the next one makes it INVALID
     verdict, p = verdicts[10]
-    assert verdict == code["INVALID"] and p["part"]["reasons"][-1] == "release 1: invalid: flag calibration_due"
+    assert verdict == code["INVALID"] and p["part"]["reasons"][-1] == "release 1: invalid: flag calibration_due", (p["flags"], p["part"])
     verdict, p = verdicts[11]
-    assert verdict == code["INVALID"] and "above the limit" in p["part"]["excluded"][0]["reason"]
+    assert verdict == code["INVALID"] and "above the limit" in p["part"]["excluded"][0]["reason"], (p["flags"], p["part"])
 
 
 @pytest.mark.broker
@@ -171,7 +172,7 @@ def test_mqtt_selects_the_recipe_and_the_measure_command_carries_the_part_id(tmp
                                                                             appliance_factory, consumer_factory):
     c = consumer_factory(broker.port, ["moi/test-rig/#"])
     c.wait_subscribed()
-    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port,
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port, time_scale=10.0,
                                           recipes={"directory": str(recipe_dir), "active": "rotor-ok"}))
     assert app.app.mqtt.connected_event.wait(10)
     # the daemon subscribes right after it connected: repeat the (idempotent) selection until it is seen
@@ -228,27 +229,33 @@ def test_recipe_files_are_checked_with_one_line_errors(tmp_path):
     with pytest.raises(RecipeError, match="number: 1 is already used by"):
         RecipeBook.load(d)
     assert isinstance(RecipeError("x"), ConfigError)
+    # the quantity must be one the rig can give: J_object needs a tare
+    from measurement import Rig
+    r = load_recipe(write(tmp_path / "obj.toml", recipe("o", 5, 0.01, tolerance=1e-4, quantity="J_object")))
+    with pytest.raises(RecipeError, match=r"obj.toml: \[recipe\] quantity: J_object needs the rig's tare_inertia"):
+        r.check_rig(Rig(kind="torsion", stiffness=0.3651))
+    r.check_rig(Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5e-3))
+    with pytest.raises(RecipeError, match="the rig gives no J"):
+        r.check_rig(Rig(kind="torsion"))
 
 
-def test_moi_run_check_validates_every_recipe(tmp_path):
+def test_moi_run_check_validates_every_recipe(tmp_path, capsys):
+    from service.cli import main
+
     d = tmp_path / "recipes"
     write(d / "good.toml", recipe("good", 1, 0.01, tolerance=1e-4))
     bad = write(d / "bad.toml", recipe("bad", 2, 0.01, tolerance_percent=0))
-    cfg = write(tmp_path / "appliance.toml", f'[recipes]\ndirectory = "recipes"\nactive = "good"\n')
-    p = moi_subprocess(["run", "--check", "--config", str(cfg)])
-    out, err = p.communicate(timeout=60)
-    assert p.returncode == 2, err
-    lines = err.decode().strip().splitlines()
+    cfg = write(tmp_path / "appliance.toml", '[recipes]\ndirectory = "recipes"\nactive = "good"\n')
+    assert main(["run", "--check", "--config", str(cfg)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and str(bad) in lines[0] and "tolerance_percent: expected a number > 0" in lines[0]
     bad.unlink()
-    p = moi_subprocess(["run", "--check", "--config", str(cfg)])
-    out, err = p.communicate(timeout=60)
-    assert p.returncode == 0, err
-    assert json.loads(out)["recipes"]["recipes"][0]["name"] == "good"
+    assert main(["run", "--check", "--config", str(cfg)]) == 0
+    assert json.loads(capsys.readouterr().out)["recipes"]["recipes"][0]["name"] == "good"
     write(tmp_path / "appliance.toml", '[recipes]\ndirectory = "recipes"\nactive = "nope"\n')
-    p = moi_subprocess(["run", "--check", "--config", str(cfg)])
-    out, err = p.communicate(timeout=60)
-    assert p.returncode == 2 and "[recipes] active: " in err.decode() and "no recipe 'nope'" in err.decode()
+    assert main(["run", "--check", "--config", str(cfg)]) == 2
+    err = capsys.readouterr().err
+    assert "[recipes] active: " in err and "no recipe 'nope'" in err
 
 
 def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_an_unstored_release(tmp_path):
@@ -272,3 +279,19 @@ def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_
     assert done["verdict"] == "OK" and done["part"]["measurements"] == ["m2", "m3"]
     with pytest.raises(RecipeError, match="no recipe 'x'"):
         tracker.select("x")
+
+
+def test_a_part_whose_swing_carries_an_unmodelled_effect_is_invalid(tmp_path, recipe_dir, appliance_factory):
+    # the part rubs (Coulomb friction) but the model may not learn it: the residual keeps the structure
+    doc = appliance_doc(tmp_path / "state", time_scale=10.0,
+                        recipes={"directory": str(recipe_dir), "active": "rotor-big"},
+                        identification={"discover": False},
+                        simulation={"effects": {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 4e-4}}})
+    app = appliance_factory(doc)
+    app.app.command("part_id", "test", {"part_id": "RUB-1"})
+    app.press()
+    app.wait_done(1)
+    [row] = app.app.store.list(full=True)
+    p = row.payload
+    assert "unmodeled_residual" in p["flags"] and row.part_id == "RUB-1"
+    assert p["verdict"] == row.part_verdict == "INVALID" and p["release"]["reasons"] == ["flag unmodeled_residual"]

@@ -99,3 +99,6 @@ def test_results_by_part_shows_releases_verdict_recipe_version_and_calibration(t
     assert len(lines) == 4 and last["part_verdict"] == "NOK" and last["recipe_version"] == "abc123"
     assert last["calibration_date"] == "2026-01-01" and last["part_id"] == "SN-7"
     assert main(["results", "--state-dir", str(tmp_path / "s"), "--part", "nope"]) == 2
+    capsys.readouterr()
+    assert main(["results", "--state-dir", str(tmp_path / "s")]) == 0
+    assert "[SN-7 disc 3/3 OK part NOK]" in capsys.readouterr().out

@@ -112,3 +112,35 @@ def test_an_intact_store_checks_ok(tmp_path, capsys):
     fill(tmp_path / "s", 3)
     assert main(["store", "check", "--state-dir", str(tmp_path / "s")]) == 0
     assert "intact" in capsys.readouterr().out
+
+
+@pytest.fixture
+def read_only_store(tmp_path):
+    """A store this process may only read: mode 0555/0444, or for root (whom modes do not stop) the
+    immutable attribute; skipped where neither is possible."""
+    import os
+    import subprocess
+
+    d = tmp_path / "ro"
+    fill(d, 3)
+    paths = [d / DB_NAME, d]
+    if os.geteuid() != 0:
+        (d / DB_NAME).chmod(0o444)
+        d.chmod(0o555)
+        yield d
+        d.chmod(0o755)
+        return
+    if subprocess.run(["chattr", "+i", *map(str, paths)], capture_output=True).returncode != 0:
+        pytest.skip("cannot make the store read-only here (chattr +i refused)")
+    try:
+        yield d
+    finally:
+        subprocess.run(["chattr", "-i", *map(str, paths)], capture_output=True)
+
+
+def test_reading_commands_work_on_a_read_only_store(read_only_store, tmp_path, capsys):
+    assert main(["results", "--state-dir", str(read_only_store)]) == 0
+    assert len([line for line in capsys.readouterr().out.splitlines() if "button" in line]) == 3
+    assert main(["export", "--state-dir", str(read_only_store), "--format", "json",
+                 "--out", str(tmp_path / "all.json")]) == 0
+    assert main(["store", "check", "--state-dir", str(read_only_store)]) == 0

@@ -59,6 +59,15 @@ def test_actions_need_the_token_and_the_csrf_token(running):
     # logged in, but without the page's CSRF token: refused (what a forged cross-site form would be)
     status, _, _ = c.request("/login", {"token": token, "next": "/setup"})
     assert status == 200
+    # after a login only a page of this appliance: never a redirect to another site
+    no_follow = urllib.request.build_opener(type("NoRedirect", (urllib.request.HTTPRedirectHandler,),
+                                                 {"redirect_request": lambda *a, **k: None}))
+    for target in ("//evil.example/", "/\\evil.example/", "http://evil.example/"):
+        req = urllib.request.Request(app.web.url + "login", data=urllib.parse.urlencode(
+            {"token": token, "next": target}).encode())
+        with pytest.raises(urllib.error.HTTPError) as got:
+            no_follow.open(req, timeout=10)
+        assert (got.value.code, got.value.headers["Location"]) == (303, "/")
     assert c.json("/api/measure", method="POST")[0] == 403
     assert c.json("/api/abort", method="POST", headers={"X-CSRF-Token": "guess"})[0] == 403
     # another site's page naming this appliance: refused whatever it carries
@@ -232,3 +241,16 @@ def test_recipe_and_part_id_set_from_the_page_reach_the_result_and_the_history(a
     assert 'id="verdict">part OK' in page and "SN-0042" in page and "release 1 of 1" in page
     assert m.uuid in c.request("/history?recipe=rotor-a&part=SN-0042")[2].decode()
     assert m.uuid not in c.request("/history?part=SN-0043")[2].decode()
+
+
+def test_a_result_stored_without_its_plot_gets_it_drawn_once_from_its_trace(appliance_factory, tmp_path):
+    off = appliance_factory(appliance_doc(tmp_path / "state"))  # the page off: no plot is drawn
+    off.press()
+    off.wait_done(1, 60)
+    uid = off.app.store.latest().uuid
+    off.stop()
+    running = appliance_factory(appliance_doc(tmp_path / "state", web=ON))
+    assert running.app.store.get_attachment(uid, "plot.png") is None
+    status, _, png = Client(running.app.web.url).request(f"/results/{uid}/plot.png")
+    assert status == 200 and png[:4] == b"\x89PNG"
+    assert running.app.store.get_attachment(uid, "plot.png")[0] == png  # kept: the next view shows the same
