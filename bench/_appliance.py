@@ -1,0 +1,37 @@
+"""Bench helpers for the appliance on the simulated rig: its configuration, and its finished measurements."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+
+def simulated_doc(state_dir: Path, log_level: str = "warning") -> dict:
+    """The appliance on the simulated rig (5 s swings at 100 Hz, time × 25), Modbus TCP on a free loopback port."""
+    return {
+        "device": {"id": "bench", "state_dir": str(state_dir), "log_level": log_level},
+        "sequencer": {"pre_trigger": 0.2, "capture_duration": 5.0},
+        "simulation": {"time_scale": 25.0, "rate": 100.0, "seed": 1, "sensor": "direct",
+                       "effects": {"viscous": {"c": 1.5e-4}}},
+        "modbus": {"host": "127.0.0.1", "port": 0},
+        "web": {"enabled": False},  # its plot worker would share the CPU with what is timed
+    }
+
+
+class Finished:
+    """Subscribed to ``app.sequencer``; ``wait(n, timeout)`` returns once n measurements have finished."""
+
+    def __init__(self, app) -> None:
+        self.count = 0
+        self._cond = threading.Condition()
+        app.sequencer.subscribe(self._on_event)
+
+    def _on_event(self, event) -> None:
+        if event.state.value == "IDLE" and event.previous.value == "PUBLISHING":
+            with self._cond:
+                self.count += 1
+                self._cond.notify_all()
+
+    def wait(self, n: int, timeout: float) -> bool:
+        with self._cond:
+            return self._cond.wait_for(lambda: self.count >= n, timeout)
