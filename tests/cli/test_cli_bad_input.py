@@ -130,3 +130,24 @@ def test_a_reader_that_goes_away_is_no_traceback(store_dir):
     p.stdout.close()  # like `| head` that already exited: every write meets a closed pipe
     err = p.stderr.read().decode()
     assert p.wait(60) == 141 and "Traceback" not in err, err
+
+
+def test_results_list_and_show_J_object(tmp_path, capsys):
+    d = tmp_path / "s"
+    with Store(d) as s:
+        s.record(status="ok", trigger="button", device_id="rig", software_version="t", started_at=1e9,
+                 finished_at=1e9 + 1, result={"J": 0.0125, "flags": []},
+                 build_payload=lambda u, q: {"uuid": u, "seq": q, "J": 0.0125, "J_object": 0.0079957,
+                                             "J_object_std": 1e-6, "timestamp": 1e9})
+    assert main(["results", "--state-dir", str(d)]) == 0
+    out = capsys.readouterr().out
+    assert "J_object" in out.splitlines()[0] and "0.0079957" in out
+    assert main(["results", "1", "--state-dir", str(d)]) == 0
+    assert "J_object      = 0.0079957" in capsys.readouterr().out
+
+
+def test_the_license_is_an_spdx_expression():
+    import tomllib
+
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+    assert isinstance(project["license"], str)  # a table prints a deprecation banner on every install
