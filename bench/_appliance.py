@@ -19,17 +19,28 @@ def simulated_doc(state_dir: Path, log_level: str = "warning") -> dict:
 
 
 class Finished:
-    """Subscribed to ``app.sequencer``; ``wait(n, timeout)`` returns once n measurements have finished."""
+    """Subscribed to ``app.sequencer``; ``wait(n, timeout)`` returns once n measurements have ended.
+
+    A measurement ends in IDLE right after PUBLISHING, or in FAULT (counted in
+    ``faults``, the reasons in ``fault_reasons``; leave it with the "abort" command).
+    """
 
     def __init__(self, app) -> None:
         self.count = 0
+        self.faults = 0
+        self.fault_reasons: list[str] = []
         self._cond = threading.Condition()
         app.sequencer.subscribe(self._on_event)
 
     def _on_event(self, event) -> None:
-        if event.state.value == "IDLE" and event.previous.value == "PUBLISHING":
+        published = event.state.value == "IDLE" and event.previous.value == "PUBLISHING"
+        fault = event.state.value == "FAULT"
+        if published or fault:
             with self._cond:
                 self.count += 1
+                if fault:
+                    self.faults += 1
+                    self.fault_reasons.append(str(getattr(event, "reason", "")))
                 self._cond.notify_all()
 
     def wait(self, n: int, timeout: float) -> bool:

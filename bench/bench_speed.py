@@ -99,16 +99,20 @@ def _daemon_worker(args: argparse.Namespace) -> None:
     rss = {}
     t0 = time.perf_counter()
     for i in range(1, args.count + 1):
+        faults = finished.faults
         app.command("trigger", "bench")
         if not finished.wait(i, 120):
             break
+        if finished.faults > faults:
+            app.command("abort", "bench")  # FAULT is latched: clear it for the next one
         if i in (1, 10) or i % 25 == 0:
             rss[i] = [_status_kb("VmRSS"), _status_kb("RssAnon")]
     wall = time.perf_counter() - t0
     app.request_stop()
     loop.join(30)
     shutil.rmtree(work, ignore_errors=True)
-    print(json.dumps({"rss_kb": rss, "peak_kb": _status_kb("VmHWM"), "done": finished.count, "wall": wall}))
+    print(json.dumps({"rss_kb": rss, "peak_kb": _status_kb("VmHWM"), "done": finished.count, "wall": wall,
+                      "faults": finished.fault_reasons}))
 
 
 def _status_kb(field: str) -> int:
@@ -310,7 +314,9 @@ def _report(args: argparse.Namespace, work: Path) -> None:
             print(f"  {name}: {exc}")
             continue
         rss = "  ".join(f"{k}: {v[0] / 1024:.0f} ({v[1] / 1024:.0f})" for k, v in r["rss_kb"].items())
-        print(f"  {name:<7}{rss}; peak {r['peak_kb'] / 1024:.0f} MB ({r['done']} measurements in {r['wall']:.0f} s)")
+        faults = r.get("faults") or []
+        print(f"  {name:<7}{rss}; peak {r['peak_kb'] / 1024:.0f} MB ({r['done']} measurements in {r['wall']:.0f} s"
+              + (f", {len(faults)} ended in FAULT: {faults[0]}" if faults else "") + ")")
 
 
 if __name__ == "__main__":
