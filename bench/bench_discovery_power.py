@@ -15,8 +15,9 @@ For every library effect at several strengths × seeds, on a torsion rig
 * J_std coverage: the share of 40 seeds with |J − J_true| < 2·J_std, white
   and coloured (goal 90–98 %; 95.4 % for a Gaussian estimate).
 
-Run: `.venv/bin/python bench/bench_discovery_power.py [--quick]` (a few
-minutes on 2 cores; --quick: one seed, fewer traces).
+Run: `.venv/bin/python bench/bench_discovery_power.py [--quick | --seeds N]`
+(one seed per case by default, a few minutes on 2 idle cores; --seeds 2
+doubles the power cases; --quick: fewer clean and coverage traces).
 """
 
 from __future__ import annotations
@@ -108,7 +109,8 @@ def coverage_case(args):
 
 def main() -> None:
     quick = "--quick" in sys.argv
-    seeds = [1] if quick else [1, 2]
+    n_seeds = int(sys.argv[sys.argv.index("--seeds") + 1]) if "--seeds" in sys.argv else 1
+    seeds = list(range(1, n_seeds + 1))
     n_clean = 4 if quick else 10  # per rig and noise kind: 2 rigs × 2 kinds × 10 = 40
     n_cov = 10 if quick else 40
     t0 = time.perf_counter()

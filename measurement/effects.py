@@ -168,12 +168,18 @@ class Effect:
 
     @classmethod
     def given_names(cls, kind: str) -> tuple[str, ...]:
-        """Names a user may give this effect's values by on a ``kind`` rig; the first is the default."""
+        """Names a user may give this effect's values by on a ``kind`` rig (normalised, then physical)."""
         out: list[str] = []
         for p in cls.parameters:
-            out += [p.physical] if p.physical else []
             out.append(p.name)
+            out += [p.physical] if p.physical else []
         return tuple(out)
+
+    @classmethod
+    def default_given(cls, kind: str) -> str:
+        """The name a value given without one (``viscous=2e-4``) is taken for: the first physical one."""
+        first = cls.parameters[0]
+        return first.physical or first.name
 
     def normalise(self, given: Mapping[str, float], inertia: float | None) -> list[float]:
         """Fitted (J-normalised) values from physical or normalised ones.
@@ -181,9 +187,6 @@ class Effect:
         given: parameter name → value, by any of ``given_names``; physical
         names need ``inertia`` (kg·m²).
         """
-        extra = set(given) - set(self.given_names(self.rig.kind))
-        if extra:
-            raise InvalidInput(f"{self.name}: unknown parameter(s) {sorted(extra)}")
         values = []
         for p in self.parameters:
             if p.name in given:
@@ -194,6 +197,9 @@ class Effect:
                 values.append(float(given[p.physical]) / inertia)
             else:
                 raise InvalidInput(f"{self.name}: missing value; expected one of {', '.join(self.given_names(self.rig.kind))}")
+        extra = set(given) - set(self.given_names(self.rig.kind))
+        if extra:
+            raise InvalidInput(f"{self.name}: unknown parameter(s) {sorted(extra)}")
         return values
 
     def physical(self, values: Sequence[float], inertia: float | None, omega_n: float) -> dict[str, float | None]:
@@ -265,8 +271,12 @@ class Coulomb(Effect):
 
     @classmethod
     def given_names(cls, kind):
-        # on a compound rig the friction is given as μ (m): T = μ·m·g·cos θ
-        return ("mu",) + super().given_names(kind) if kind == "compound" else super().given_names(kind)
+        # on a compound rig the friction may be given as μ (m): T = μ·m·g·cos θ
+        return super().given_names(kind) + ("mu",) if kind == "compound" else super().given_names(kind)
+
+    @classmethod
+    def default_given(cls, kind):
+        return "mu" if kind == "compound" else super().default_given(kind)
 
     def normalise(self, given, inertia):
         if self.rig.kind == "compound" and "mu" in given and not {"Tc", "Tc_per_J"} & set(given):
@@ -380,7 +390,11 @@ class Gain(Effect):
 
     @classmethod
     def given_names(cls, kind):
-        return ("g", "g_minus_1")
+        return ("g_minus_1", "g")
+
+    @classmethod
+    def default_given(cls, kind):
+        return "g"
 
     def normalise(self, given, inertia):
         if set(given) == {"g"}:

@@ -13,6 +13,13 @@ import numpy as np
 from .errors import TraceError
 
 
+#: the smallest time step a trace may have, s (the trace CSV writes t with 1 ns resolution)
+MIN_STEP = 1e-9
+#: bounds of a plausible trace: Unix times fit, a swing's angle is a few rad
+MAX_ABS_TIME = 1e10
+MAX_ABS_ANGLE = 1e3
+
+
 @dataclass(frozen=True, eq=False)
 class Trace:
     """A recorded swing: times t (s, strictly increasing, possibly uneven) and angle (rad).
@@ -47,6 +54,18 @@ class Trace:
             raise TraceError(
                 f"{self.source}: time is not strictly increasing at row {i + 2} "
                 f"(t={t[i + 1]!r} after {t[i]!r}); expected increasing timestamps in s"
+            )
+        if (dt < MIN_STEP).any():
+            i = int(np.argmax(dt < MIN_STEP))
+            raise TraceError(
+                f"{self.source}: samples {float(dt[i])!r} s apart at row {i + 2}; expected timestamps in s "
+                f"at least {MIN_STEP:g} s apart (the trace CSV's resolution)"
+            )
+        big_t, big_a = float(np.max(np.abs(t))), float(np.max(np.abs(a)))
+        if big_t > MAX_ABS_TIME or big_a > MAX_ABS_ANGLE:
+            raise TraceError(
+                f"{self.source}: |t| up to {big_t:.3g} s and |angle| up to {big_a:.3g} rad; expected |t| <= "
+                f"{MAX_ABS_TIME:g} s and |angle| <= {MAX_ABS_ANGLE:g} rad (angles in rad, not counts or degrees)"
             )
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "angle", a)

@@ -26,6 +26,8 @@ import datetime as _dt
 import concurrent.futures
 import logging
 import queue
+import subprocess
+import sys
 import threading
 import time
 from collections import deque
@@ -35,6 +37,7 @@ from firmware_host import Event, Measurement, Sequencer, State
 from measurement import IdentificationResult, Rig, Trace, identify
 from measurement import flags as F
 from measurement.errors import InvalidInput
+from measurement.integrator import is_compiled
 
 from . import __version__
 from .config import Config
@@ -53,6 +56,9 @@ log = logging.getLogger("moi.daemon")
 #: exit statuses of ``run``
 EXIT_OK = 0
 EXIT_RUNTIME_FAILURE = 3
+
+#: at most one "trigger ignored" line per this many seconds, s
+IGNORED_LOG_INTERVAL = 10.0
 
 #: the lock file in the state directory that makes a second daemon on it stop at start
 LOCK_NAME = "moi.lock"
@@ -89,6 +95,7 @@ class Appliance:
         self._calls: queue.SimpleQueue[tuple[Callable[[], Any], concurrent.futures.Future]] = queue.SimpleQueue()
         self._wakeup = threading.Event()
         self._stop = threading.Event()
+        self._compiling: subprocess.Popen | None = None  # the integrator compiled on a first run
         self._started_runs = 0
         self._run_started: dict[str, tuple[float, str]] = {}  # measurement id → (wall time of ARMED, trigger source)
         self._accepted_source = "unknown"  # source of the last accepted trigger (paired with the next ARMED)
@@ -106,6 +113,8 @@ class Appliance:
         self.exit_status = EXIT_OK
         self._stopping = False
         self._lock_fd: int | None = None
+        self._ignored_triggers = 0
+        self._ignored_logged_at = -float("inf")
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
@@ -155,6 +164,13 @@ class Appliance:
             if d.button is not None:
                 d.button.when_pressed = lambda: self.command("trigger", "button")
             self.sequencer.subscribe(self._on_event)
+            if not is_compiled(cfg.rig.kind):
+                # a device's first run: the integrator is compiled (some 10 s on a Pi) in a child
+                # process now, not while the first swing waits for its result, and not on a thread
+                # here, whose imports would hold the interpreter lock against a capture's reader
+                self._compiling = subprocess.Popen([sys.executable, "-m", "measurement.integrator", cfg.rig.kind],
+                                                   stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                                   stderr=subprocess.DEVNULL)
             if cfg.web is not None:
                 from .web.server import WebServer  # aiohttp is loaded only when the page is served
                 self.web = WebServer(self, cfg.web)
@@ -305,7 +321,12 @@ class Appliance:
                     self._accepted_source = source
                     self._accepted_part = (self.parts.part_id, self.parts.recipe)
                 else:
-                    log.info("trigger from %s ignored (state %s)", source, seq.state.value)
+                    self._ignored_triggers += 1
+                    now = time.monotonic()
+                    if now - self._ignored_logged_at >= IGNORED_LOG_INTERVAL:  # a stuck button or a looping PLC
+                        log.info("trigger from %s ignored (state %s; %d ignored since the last such line)", source,
+                                 seq.state.value, self._ignored_triggers)
+                        self._ignored_logged_at, self._ignored_triggers = now, 0
             elif name == "abort":
                 if seq.state is State.FAULT:
                     seq.abort(f"fault acknowledged by {source}")
@@ -533,7 +554,8 @@ class Appliance:
         seq = self.sequencer
         parts = [seq.state.value.lower() if seq else "starting"]
         if self.mqtt is not None:
-            parts.append("mqtt connected" if self.mqtt.is_connected else "mqtt disconnected")
+            parts.append("mqtt connected" if self.mqtt.is_connected else
+                         "mqtt disconnected" + (f" ({self.mqtt.last_error})" if self.mqtt.last_error else ""))
             if self.mqtt.sender.pending:
                 parts.append(f"{self.mqtt.sender.pending} result(s) waiting for the broker")
         return "; ".join(parts)

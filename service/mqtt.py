@@ -112,6 +112,22 @@ class Topics:
         raise ValueError(f"unknown outbox kind {kind!r}")
 
 
+class _Client(mqtt.Client):
+    """paho's client, telling why a connection attempt failed: paho swallows the error of every
+    attempt before the first success (an unresolvable host, a refused port, a TLS failure) and
+    reports later ones without the cause."""
+
+    on_connect_error: Callable[[OSError], None] | None = None
+
+    def reconnect(self):  # type: ignore[override]
+        try:
+            return super().reconnect()
+        except OSError as exc:  # socket.gaierror, ConnectionRefusedError, ssl.SSLError, TimeoutError ...
+            if self.on_connect_error is not None:
+                self.on_connect_error(exc)
+            raise
+
+
 class MqttService:
     """The MQTT client of the daemon: durable result delivery, status, state, commands.
 
@@ -137,7 +153,9 @@ class MqttService:
         self.callback_errors = 0  # exceptions caught in paho callbacks (each one logged)
         client_id = settings.client_id or f"moi-{device_id}"
         # clean session: the outbox, not the broker session, is what makes delivery durable
-        self.client = mqtt.Client(CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=True)
+        self.client = _Client(CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=True)
+        self.client.on_connect_error = self._on_connect_error
+        self._last_logged_error: str | None = None
         self._configure_auth()
         self.client.will_set(self.topics.status, "offline", qos=1, retain=True)
         # the type hints say int, but paho only sleeps for these: sub-second backoff works
@@ -155,7 +173,11 @@ class MqttService:
         password = s.password
         if s.password_file:
             try:
-                password = Path(s.password_file).read_text(encoding="utf-8").strip()
+                path = Path(s.password_file)
+                password = path.read_text(encoding="utf-8").strip()
+                if path.stat().st_mode & 0o004:
+                    log.warning("MQTT: password_file %s is readable by every user (mode %o); "
+                                "chmod 600 it", s.password_file, path.stat().st_mode & 0o777)
             except OSError as exc:
                 raise ConfigError(f"[mqtt] password_file {s.password_file!r} cannot be read: {exc.strerror}") from None
         if s.username is not None:
@@ -223,6 +245,7 @@ class MqttService:
             log.warning("MQTT: %s", self.last_error)
             return
         self.last_error = None
+        self._last_logged_error = None
         log.info("MQTT connected to %s:%d", self.settings.host, self.settings.port)
         client.publish(self.topics.status, "online", qos=1, retain=True)
         client.subscribe([(self.topics.cmd_measure, 1), (self.topics.cmd_abort, 1), (self.topics.cmd_recipe, 1)])
@@ -231,6 +254,14 @@ class MqttService:
                 client.publish(topic, json.dumps(config), qos=1, retain=True)
         self.connected_event.set()
         self.sender.connected()
+
+    @_never_raises
+    def _on_connect_error(self, exc: OSError) -> None:
+        s = self.settings
+        self.last_error = f"cannot connect to {s.host}:{s.port}: {type(exc).__name__}: {exc}"
+        if self.last_error != self._last_logged_error:  # once per distinct cause, not at every retry
+            self._last_logged_error = self.last_error
+            log.warning("MQTT: %s (retrying every %g–%g s)", self.last_error, s.reconnect_min, s.reconnect_max)
 
     @_never_raises
     def _on_disconnect(self, client, userdata, flags, reason_code, properties) -> None:

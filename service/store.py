@@ -460,7 +460,9 @@ class Store:
             if isinstance(key, int) or (isinstance(key, str) and key.isdigit()):
                 rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE seq = ?", (int(key),)).fetchall()
             else:
-                rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE uuid LIKE ? || '%'", (str(key),)).fetchall()
+                # a prefix, compared literally: '%' and '_' in the key are not wildcards
+                rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE substr(uuid, 1, length(?)) = ?",
+                                        (str(key), str(key))).fetchall()
         if len(rows) != 1:
             return None
         return self._row(rows[0], full=True, trace=trace)

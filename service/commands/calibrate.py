@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -57,8 +58,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _number(ref_name: str, key: str, value, allow_zero: bool = True) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise CalibrationError(f"reference {ref_name!r}: {key} must be a number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise CalibrationError(f"reference {ref_name!r}: {key} must be a finite number, got {value!r}")
     return float(value)
 
 
@@ -73,6 +74,8 @@ def load_references(path: str, rig, stds: dict[str, float] | None = None) -> lis
     base = Path(path).parent
     out = []
     for i, r in enumerate(refs, start=1):
+        if not isinstance(r, dict):
+            raise CalibrationError(f"{path}: reference {i} is {r!r}; expected a [[reference]] table")
         name = str(r.get("name", f"reference {i}"))
         unknown = set(r) - _REF_KEYS
         if unknown:

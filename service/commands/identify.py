@@ -7,7 +7,8 @@ import sys
 
 from measurement.effects import EFFECTS
 
-from ..files import read_rig
+from ..errors import InputFileError
+from ..files import check_output_path, read_rig, write_atomic
 
 HELP = "identify J, ω_n and the damping from a trace CSV or a video"
 
@@ -28,19 +29,25 @@ def run(args: argparse.Namespace) -> int:
 
     from ..sources import load_source
 
+    if args.plot:  # a bad plot path is refused before the work, not after it
+        if not args.plot.lower().endswith(".png"):
+            raise InputFileError(f"--plot {args.plot!r}: the plot is a PNG; give a file name ending in .png")
+        check_output_path(args.plot, "plot file")
     rig = read_rig(args.rig)
     trace = load_source(args.source, camera=args.camera, rig=rig)
     candidates = None
     if args.candidates is not None:
         candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
     result = identify(trace, rig, Options(discover=not args.no_discover, candidates=candidates))
-    if args.plot:
-        from ..plot import plot_result
-        plot_result(result, args.plot)
+    # the result first: a plot that cannot be written must not lose it
     if args.json:
         sys.stdout.write(result.to_json() + "\n")
     else:
         print(result.report())
-        if args.plot:
+    sys.stdout.flush()
+    if args.plot:
+        from ..plot import render_png
+        write_atomic(args.plot, render_png(result, dpi=110), "plot file")
+        if not args.json:
             print(f"plot written to {args.plot}")
     return 0

@@ -9,16 +9,15 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
 from .. import registers as R
-from ..errors import InputFileError
+from ..files import read_text, write_text_atomic
 
 HELP = "print the Modbus register map (Markdown, as in docs/modbus.md), check the doc, or read a live appliance"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--check", metavar="FILE", help="compare FILE with the generated map; exit 1 if it differs")
+    p.add_argument("--check", metavar="FILE", help="compare FILE with the generated map; exit 2 if it differs")
     p.add_argument("--out", metavar="FILE", help="write the map to FILE instead of stdout")
     p.add_argument("--read", metavar="HOST[:PORT]", help="read the registers of a running appliance (Modbus TCP)")
     p.add_argument("--unit", type=int, default=1, help="unit id for --read (default 1)")
@@ -30,17 +29,15 @@ def run(args: argparse.Namespace) -> int:
         return _read(args)
     text = R.markdown()
     if args.check:
-        path = Path(args.check)
-        if not path.exists():
-            raise InputFileError(f"{args.check!r} not found")
-        if path.read_text(encoding="utf-8") != text:
+        if read_text(args.check, "register map") != text:
+            # a stale document is the user's file, not a bug: exit 2 (exit 1 means a bug)
             print(f"moi modbus-map: {args.check} differs from the register map in the code; "
                   f"regenerate it with `moi modbus-map --out {args.check}`", file=sys.stderr)
-            return 1
+            return 2
         print(f"{args.check} matches the register map (version {R.MAP_VERSION})")
         return 0
     if args.out:
-        Path(args.out).write_text(text, encoding="utf-8")
+        write_text_atomic(args.out, text)
         return 0
     sys.stdout.write(text)
     return 0

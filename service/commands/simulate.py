@@ -36,7 +36,7 @@ def parse_effects(tokens: list[str], rig_kind: str) -> dict[str, dict[str, float
             if not math.isfinite(v):
                 raise InvalidInput(f"effect {token!r}: value must be finite")
             if not param:
-                param = EFFECTS[name].given_names(rig_kind)[0]
+                param = EFFECTS[name].default_given(rig_kind)
             out.setdefault(name, {})[param] = v
     return out
 

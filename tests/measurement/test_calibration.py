@@ -21,7 +21,7 @@ def references():
     return refs
 
 
-def test_seed001_table2_calibration_within_0_1_percent():
+def test_paper_table2_calibration_within_0_1_percent():
     cal = calibrate_torsion(references())
     assert cal.stiffness == pytest.approx(0.3651, rel=1e-3)
     assert cal.tare_inertia == pytest.approx(4.5043e-3, rel=1e-3)
@@ -43,7 +43,7 @@ def test_calibration_needs_distinct_loads():
         calibrate_torsion([Reference("a", 0.0, 9.0), Reference("b", 0.0, 8.0)])
 
 
-def test_seed001_table3_standard_deviations_as_printed():
+def test_paper_table3_standard_deviations_as_printed():
     sphere = [14.6872, 14.6729, 14.6681, 14.6894, 14.6599, 14.6672, 14.7093, 14.6962, 14.6877, 14.6773]
     sleeve = [46.0383, 45.9521, 46.0302, 45.8871, 45.9772, 45.9634, 45.8694, 46.0435, 45.8739, 46.0084]
     uav = [22.3655, 22.3394, 22.3472, 22.3802, 22.3401, 22.3779, 22.3205, 22.2957, 22.3119, 22.3820]

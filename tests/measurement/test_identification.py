@@ -13,7 +13,7 @@ from .reference import reference_motion, sensor
 K_SEED001 = 0.3651
 
 
-def test_seed000_fig3_example_identified_with_declared_coulomb_quadratic():
+def test_compound_friction_drag_example_identified_with_declared_coulomb_quadratic():
     # Data from the independent reference solver, with encoder-like noise.
     g, J, mu, m, S, K = 9.8, 1000.0, 0.01, 500.0, 1.0, 10.0
     rig = Rig(kind="compound", mass=m, com_distance=S, g=g, declared=("coulomb", "quadratic"))
@@ -70,7 +70,7 @@ def test_result_object_is_complete_and_serialisable():
     assert "J" in r.report() and "kg·m²" in r.report()
 
 
-def test_parallel_axis_transfer_of_seed000_eq2():
+def test_parallel_axis_transfer():
     rig, trace = _viscous_trace(2)
     doc = {"rig": {"kind": "torsion", "stiffness": K_SEED001, "tare_inertia": 4.5e-3},
            "object": {"mass": 12.0, "axis_offset": 0.01}, "model": {"declared": ["viscous"]}}

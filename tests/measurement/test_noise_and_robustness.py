@@ -49,7 +49,7 @@ def test_coloured_quantised_noise_adds_no_effect_and_widens_J_std():
         r = identify(Trace(t, y, source="coloured"), rig)
         assert r.added_effects == (), r.report()
         assert r.statistics["covariance"].startswith("ar(") and r.statistics["noise_model_order"] >= 1
-        assert "correlated_residual" in r.flags
+        assert "correlated_residual" in r.flags and "unmodeled_residual" not in r.flags  # colour is not structure
         assert abs(r.J / J - 1) < 4 * r.J_std / J
 
 

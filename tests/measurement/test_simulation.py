@@ -27,7 +27,7 @@ def phase_plane_u(x, x0, direction, a, b, c):
     return part(x) + const * np.exp(-2 * c * x)
 
 
-def test_simulator_matches_seed000_phase_plane_to_1e_6():
+def test_simulator_matches_the_exact_phase_plane_solution_to_1e_6():
     rig = Rig(kind="compound", mass=M, com_distance=S, g=G)
     pendulum = Pendulum(rig, J, {"coulomb": {"mu": MU}, "quadratic": {"K": K}})
     a, b, c = M * G * S / J, MU * M * G / J, K / J

@@ -4,6 +4,7 @@ illegal Modbus writes, connection floods. Each attack is bounded in count and ti
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import socket
 import struct
 
@@ -360,3 +361,116 @@ def test_a_second_daemon_on_the_same_state_directory_stops_with_one_line(tmp_pat
         first.terminate()
         first.communicate(timeout=30)
     assert first.returncode == 0
+
+
+# --- MQTT connection failures are said --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("case", ["port refused", "TLS against a plain broker"])
+def test_mqtt_connection_failures_are_logged_once_and_shown_in_the_status(tmp_path, broker, caplog, case):
+    import logging
+
+    caplog.set_level(logging.WARNING, logger="moi.mqtt")
+    port = free_port() if case == "port refused" else broker.port
+    settings = MqttSettings(host="127.0.0.1", port=port, reconnect_min=0.05, reconnect_max=0.1,
+                            tls=case != "port refused")
+    store = Store(tmp_path / "state")
+    attempts: list[str] = []
+    svc = MqttService(settings, "rig", store)
+    forward = svc.client.on_connect_error
+    svc.client.on_connect_error = lambda exc: (attempts.append(type(exc).__name__), forward(exc))
+    svc.start()
+    try:
+        wait_until(lambda: len(attempts) >= 3, 20, what="three connection attempts")
+        expected = "ConnectionRefusedError" if case == "port refused" else "ConnectionResetError"  # the TLS hello rejected
+        assert expected in (svc.last_error or ""), svc.last_error
+        said = [r.getMessage() for r in caplog.records if "cannot connect" in r.getMessage()]
+        assert len(said) == 1 and expected in said[0] and f"127.0.0.1:{port}" in said[0], said
+        assert not svc.is_connected
+    finally:
+        svc.stop()
+        store.close()
+
+
+# --- minor items ----------------------------------------------------------------------------------------------
+
+def test_a_measurement_key_is_a_literal_prefix_not_a_pattern(tmp_path, capsys):
+    from service.cli import main
+
+    with Store(tmp_path / "s") as s:
+        s.record(status="failed", trigger="button", device_id="rig", software_version="t", started_at=1.0,
+                 finished_at=2.0, error="test")
+    for key in ("%", "_", "%%%"):
+        assert main(["results", key, "--state-dir", str(tmp_path / "s")]) == 2
+        assert "no single measurement matches" in capsys.readouterr().err
+
+
+def test_a_world_readable_password_file_is_warned_about(tmp_path, caplog):
+    import logging
+
+    secret = tmp_path / "mqtt-password"
+    secret.write_text("hunter2\n")
+    secret.chmod(0o644)
+    store = Store(tmp_path / "state")
+    try:
+        with caplog.at_level(logging.WARNING, logger="moi.mqtt"):
+            MqttService(MqttSettings(username="moi", password_file=str(secret)), "rig", store)
+        assert any("readable by every user" in r.getMessage() for r in caplog.records)
+        assert all("hunter2" not in r.getMessage() for r in caplog.records)
+    finally:
+        store.close()
+
+
+def test_ignored_triggers_are_logged_at_most_once_per_interval(tmp_path, appliance_factory, caplog):
+    import logging
+
+    caplog.set_level(logging.INFO, logger="moi.daemon")
+    app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=5.0))
+    app.press()
+    app.wait_event(lambda e: e.state.value == "CAPTURING", 20)
+    for _ in range(50):
+        app.app.command("trigger", "modbus")  # a PLC holding the trigger
+    wait_until(lambda: app.app.sequencer.counts["ignored_requests"] >= 50, 20, what="50 ignored triggers")
+    lines = [r for r in caplog.records if r.getMessage().startswith("trigger from")]
+    assert len(lines) == 1, [r.getMessage() for r in lines]
+    app.wait_done(1)
+
+
+# --- moi run --check ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("hardware,mqtt,expected", [
+    ('solenoid = { pin = 17 }\nbutton = { pin = "GPIO17" }', "", "already the solenoid's pin"),
+    ("solenoid = { pin = 99999 }", "", "99999 is not a GPIO pin"),
+    ('solenoid = { pin = "BANANA" }', "", "'BANANA' is not a GPIO pin"),
+    ("solenoid = { pin = 17 }", 'username = "moi"\npassword_file = "/nonexistent/secret"',
+     "password_file: /nonexistent/secret does not exist"),
+    ("solenoid = { pin = 17 }", 'tls = true\nca_file = "/nonexistent/ca.pem"', "ca_file: /nonexistent/ca.pem does not exist"),
+])
+def test_check_finds_what_would_crash_the_start(tmp_path, capsys, hardware, mqtt, expected):
+    from service.cli import main
+
+    rig = tmp_path.parent / "rig.toml"
+    cfg = tmp_path / "appliance.toml"
+    cfg.write_text(f'[device]\nrig = "{Path(__file__).resolve().parents[2] / "examples" / "torsion_rig.toml"}"\n'
+                   f'state_dir = "{tmp_path / "state"}"\n[hardware]\ngpio_backend = "mock"\nsensor = "encoder"\n'
+                   f'encoder = {{ port = "socket://127.0.0.1:1" }}\n{hardware}\n'
+                   f'[modbus]\nport = 0\n[web]\nenabled = false\n'
+                   + (f'[mqtt]\nhost = "127.0.0.1"\n{mqtt}\n' if mqtt else ""))
+    assert main(["run", "--check", "--config", str(cfg)]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and expected in lines[0], captured.err
+    assert "PROBLEM" in captured.out and "ok " in captured.out  # the human summary
+    assert not rig.exists()
+    if "pin" in expected:  # starting is the same clear line, not a gpiozero traceback
+        assert main(["run", "--config", str(cfg)]) == 2
+        assert expected in capsys.readouterr().err
+
+
+def test_check_passes_a_good_configuration_and_says_so_as_json(tmp_path, capsys):
+    from service.cli import main
+
+    cfg = tmp_path / "appliance.toml"
+    cfg.write_text(f'[device]\nstate_dir = "{tmp_path / "state"}"\n[modbus]\nport = 0\n[web]\nenabled = false\n')
+    assert main(["run", "--check", "--json", "--config", str(cfg)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["checks"] and all(c["ok"] for c in doc["checks"])

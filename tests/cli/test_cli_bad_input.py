@@ -1,0 +1,132 @@
+"""Bad input to the CLI is one line on stderr and exit status 2, never a traceback (exit 1 is a bug):
+output paths that are not regular files, plots, degenerate traces, deep TOML, huge inputs, calibration
+files; and the rough edges of everyday use (spreadsheet CSV, a closed pipe)."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from service.cli import main
+from service.store import Store
+
+REPO = Path(__file__).resolve().parents[2]
+RIG = str(REPO / "examples" / "torsion_rig.toml")
+
+
+def one_error_line(capsys) -> str:
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def write_swing(path: Path, dt: float = 0.01, n: int = 2000, bom: bool = False) -> Path:
+    rows = [f"{i * dt!r},{0.2 * math.cos(i * 0.05) * math.exp(-i * 0.001)!r}" for i in range(n)]
+    path.write_bytes(("\ufeff" if bom else "").encode() + ("t,angle\n" + "\n".join(rows) + "\n").encode())
+    return path
+
+
+@pytest.fixture
+def store_dir(tmp_path):
+    d = tmp_path / "state"
+    with Store(d) as s:
+        t = np.linspace(0.0, 60.0, 12_000)
+        s.record(status="ok", trigger="button", device_id="rig", software_version="t", started_at=1e9,
+                 finished_at=1e9 + 60, result={"J": 0.0125, "flags": []},
+                 build_payload=lambda u, q: {"uuid": u, "seq": q, "J": 0.0125, "timestamp": 1e9},
+                 trace_t=t, trace_angle=0.2 * np.cos(5 * t))
+    return d
+
+
+def test_export_refuses_targets_that_are_not_regular_files_and_leaves_nothing_behind(store_dir, tmp_path, capsys):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    link = tmp_path / "link.csv"
+    link.symlink_to(victim)
+    (tmp_path / "adir").mkdir()
+    for target, expected in ((tmp_path / "adir", "is a directory"), (link, "symbolic link"),
+                             (Path("/dev/null"), "not a regular file"), (tmp_path / "nodir" / "x.csv", "does not exist")):
+        assert main(["export", "--state-dir", str(store_dir), "--out", str(target)]) == 2
+        assert expected in one_error_line(capsys)
+    assert victim.read_text() == "keep me" and link.is_symlink()
+    assert main(["export", "--state-dir", str(store_dir), "--out", str(tmp_path / "all.csv")]) == 0
+    assert (tmp_path / "all.csv").read_text().startswith("seq,uuid")
+    assert not list(tmp_path.glob("*.tmp")) and not list(tmp_path.glob(".*.tmp"))
+
+
+def test_identify_plot_paths_are_checked_first_and_the_result_survives_a_failed_plot(tmp_path, capsys, monkeypatch):
+    trace = write_swing(tmp_path / "swing.csv")
+    assert main(["identify", str(trace), "--rig", RIG, "--plot", str(tmp_path / "plot.jpg")]) == 2
+    assert "ending in .png" in one_error_line(capsys)
+    assert main(["identify", str(trace), "--rig", RIG, "--plot", str(tmp_path / "no" / "plot.png")]) == 2
+    assert "does not exist" in one_error_line(capsys)
+
+    from service.commands import identify as identify_cmd
+    from service.errors import InputFileError
+
+    def disk_full(path, data, what="output file"):
+        raise InputFileError(f"cannot write {what} {str(path)!r}: No space left on device")
+
+    monkeypatch.setattr(identify_cmd, "write_atomic", disk_full)
+    assert main(["identify", str(trace), "--rig", RIG, "--json", "--plot", str(tmp_path / "plot.png")]) == 2
+    captured = capsys.readouterr()
+    assert '"J"' in captured.out and "No space left" in captured.err  # the result was printed first
+
+
+@pytest.mark.parametrize("case", ["timestamps 1e-300 apart", "angles in counts", "deep TOML rig", "/dev/zero"])
+def test_degenerate_and_hostile_inputs_are_one_line(tmp_path, capsys, case):
+    rig = RIG
+    if case == "timestamps 1e-300 apart":
+        source = str(write_swing(tmp_path / "t.csv", dt=1e-300, n=400))
+    elif case == "angles in counts":
+        source = str(tmp_path / "t.csv")
+        Path(source).write_text("t,angle\n" + "".join(f"{i * 0.01},{1e300 * (-1) ** i}\n" for i in range(400)))
+    elif case == "deep TOML rig":
+        source = str(write_swing(tmp_path / "t.csv"))
+        rig = str(tmp_path / "deep.toml")
+        Path(rig).write_text("a = " + "[" * 3000 + "]" * 3000 + "\n")
+    else:
+        if not os.path.exists("/dev/zero"):
+            pytest.skip("no /dev/zero")
+        source = "/dev/zero"
+    assert main(["identify", source, "--rig", rig]) == 2
+    one_error_line(capsys)
+
+
+def test_a_trace_as_spreadsheet_programs_write_it_is_read(tmp_path, capsys):
+    assert main(["identify", str(write_swing(tmp_path / "excel.csv", bom=True)), "--rig", RIG, "--json"]) == 0
+    assert '"J"' in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("body,expected", [
+    ("reference = [1, 2]\n", "expected a [[reference]] table"),
+    ('[[reference]]\nname = "a"\nomega = 7.0\nzeta = -0.06\nadded_inertia = nan\n', "finite number"),
+])
+def test_bad_calibration_files_are_one_line(tmp_path, capsys, body, expected):
+    cal = tmp_path / "cal.toml"
+    cal.write_text(body)
+    assert main(["calibrate", str(cal), "--rig", RIG]) == 2
+    assert expected in one_error_line(capsys)
+
+
+def test_a_stale_register_map_document_is_exit_2(tmp_path, capsys):
+    doc = tmp_path / "modbus.md"
+    doc.write_text("# an old map\n")
+    assert main(["modbus-map", "--check", str(doc)]) == 2
+    assert "differs" in one_error_line(capsys)
+
+
+def test_a_reader_that_goes_away_is_no_traceback(store_dir):
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.Popen([sys.executable, "-m", "service.cli", "export", "--state-dir", str(store_dir), "--trace", "1"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=str(REPO), env=env)
+    p.stdout.close()  # like `| head` that already exited: every write meets a closed pipe
+    err = p.stderr.read().decode()
+    assert p.wait(60) == 141 and "Traceback" not in err, err

@@ -1,0 +1,36 @@
+"""Commands that do not identify start without the heavy libraries (the appliance is a Raspberry Pi)."""
+
+import subprocess
+import sys
+
+import pytest
+
+from service.cli import COMMANDS, build_parser
+
+HEAVY = ("scipy", "cv2", "matplotlib")
+
+PROBE = """
+import sys
+from service.cli import main
+try:
+    main(sys.argv[1:])
+except SystemExit:
+    pass
+sys.stderr.write("LOADED:" + " ".join(m for m in {heavy!r} if m in sys.modules) + "\\n")
+"""
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["results", "--help"], ["export", "--help"], ["modbus-map"]],
+                         ids=lambda a: " ".join(a))
+def test_commands_that_do_not_identify_import_no_scipy_opencv_or_matplotlib(argv):
+    err = subprocess.run([sys.executable, "-c", PROBE.format(heavy=HEAVY), *argv], capture_output=True, text=True,
+                         timeout=120, check=True).stderr
+    loaded = next(line for line in err.splitlines() if line.startswith("LOADED:"))[len("LOADED:"):]
+    assert loaded == "", f"moi {' '.join(argv)} imported {loaded}"
+
+
+def test_every_command_is_listed():
+    # a command module that fails to import raises instead of silently vanishing from `moi --help`
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    assert list(sub.choices) == list(COMMANDS)
