@@ -74,6 +74,7 @@ def main() -> None:
     from paho.mqtt.enums import CallbackAPIVersion
     from pymodbus.client import ModbusTcpClient
 
+    from _appliance import Finished, simulated_doc
     from measurement import identify
     from service import registers as R
     from service.config import parse_config
@@ -81,14 +82,7 @@ def main() -> None:
 
     work = Path(tempfile.mkdtemp(prefix="moi-bench-service-"))
     broker, mqtt_port = _start_broker(work)
-    doc = {
-        "device": {"id": "bench", "state_dir": str(work / "state"), "log_level": "warning"},
-        "sequencer": {"pre_trigger": 0.2, "capture_duration": 5.0},
-        "simulation": {"time_scale": 25.0, "rate": 100.0, "seed": 1, "sensor": "direct",
-                       "effects": {"viscous": {"c": 1.5e-4}}},
-        "modbus": {"host": "127.0.0.1", "port": 0},
-        "web": {"enabled": False},  # its plot worker would share the CPU with what is timed here
-    }
+    doc = simulated_doc(work / "state")
     if mqtt_port:
         doc["mqtt"] = {"host": "127.0.0.1", "port": mqtt_port}
     else:
@@ -164,21 +158,11 @@ def main() -> None:
 
     reader = threading.Thread(target=plc, daemon=True)
     reader.start()
-    idle = threading.Condition()
-    done = [0]
-
-    def on_event(e):
-        if e.state.value == "IDLE" and e.previous.value == "PUBLISHING":
-            with idle:
-                done[0] += 1
-                idle.notify_all()
-
-    app.sequencer.subscribe(on_event)
+    finished = Finished(app)
     t_wall0 = time.perf_counter()
     for i in range(1, N + 1):
         app.command("trigger", "bench")
-        with idle:
-            idle.wait_for(lambda: done[0] >= i, 60)
+        finished.wait(i, 60)
     if sub is not None:
         with mqtt_cond:
             mqtt_cond.wait_for(lambda: len(t_mqtt) >= N, 30)

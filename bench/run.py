@@ -13,6 +13,7 @@ HERE = pathlib.Path(__file__).resolve().parent
 
 def main() -> int:
     sys.path.insert(0, str(HERE.parent))
+    sys.path.insert(1, str(HERE))  # the benches' shared helpers (bench_startup, _appliance)
     failures = 0
     for path in sorted(HERE.glob("bench_*.py")):
         print(f"=== {path.name}")

@@ -32,6 +32,7 @@ import re
 import sys
 import tempfile
 import threading
+from functools import lru_cache
 from pathlib import Path
 from types import ModuleType, SimpleNamespace
 from typing import Sequence
@@ -164,12 +165,17 @@ def _substitute(expr: str, names: dict[str, str]) -> str:
     return re.sub(r"\bp(\d+)\b", lambda m: names[m.group(0)], expr)
 
 
-def library(kind: str) -> list:
+def library(kind: str) -> tuple:
     """Every dynamic effect of the library that exists on a ``kind`` rig, in library order."""
     from .effects import EFFECTS
 
+    return _library(kind, tuple(EFFECTS.values()))
+
+
+@lru_cache(maxsize=None)
+def _library(kind: str, classes: tuple) -> tuple:
     rig = SimpleNamespace(kind=kind)  # an effect's law needs only the rig's kind
-    return [cls(rig) for cls in EFFECTS.values() if kind in cls.rigs and cls.role != "sensor"]
+    return tuple(cls(rig) for cls in classes if kind in cls.rigs and cls.role != "sensor")
 
 
 def kernel_source(kind: str) -> str:
@@ -196,16 +202,20 @@ def kernel_source(kind: str) -> str:
 
 
 def cache_dir() -> Path:
-    """Where the generated kernels and numba's machine code are kept (``MOI_CACHE_DIR``, else ~/.cache/moi)."""
-    env = os.environ.get("MOI_CACHE_DIR")
-    if env:
-        return Path(env)
+    """Where the generated kernels and numba's machine code are kept.
+
+    ``MOI_CACHE_DIR``, else the service's cache directory (systemd's
+    ``CacheDirectory=`` sets ``CACHE_DIRECTORY``), else ~/.cache/moi.
+    """
+    for env in ("MOI_CACHE_DIR", "CACHE_DIRECTORY"):
+        if os.environ.get(env):
+            return Path(os.environ[env].split(":")[0])
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "moi"
 
 
 _LOCK = threading.Lock()
-_KERNELS: dict[str, ModuleType] = {}
+_KERNELS: dict[tuple, ModuleType] = {}
 
 
 def _writable(folder: Path) -> bool:
@@ -219,22 +229,38 @@ def _writable(folder: Path) -> bool:
         return False
 
 
+def _kernel_path(kind: str, src: str) -> Path:
+    """Where the kernel with this source lives: named by its hash, in the first writable cache folder."""
+    digest = hashlib.sha256(src.encode()).hexdigest()[:16]
+    folder = cache_dir()
+    if not _writable(folder):  # a read-only home: a cache until the next reboot rather than none
+        folder = Path(tempfile.gettempdir()) / f"moi-kernels-{os.getuid()}"
+        if not _writable(folder):
+            folder = Path(tempfile.mkdtemp(prefix="moi-kernels-"))
+    return folder / f"moi_kernel_{kind}_{digest}.py"
+
+
+def is_compiled(kind: str) -> bool:
+    """Whether the ``kind`` kernel's machine code is in the on-disk cache (a process only loads it)."""
+    path = _kernel_path(kind, kernel_source(kind))
+    return any((path.parent / "__pycache__").glob(f"{path.stem}.run-*.nbi"))
+
+
 def kernel(kind: str) -> ModuleType:
-    """The compiled kernel module of a ``kind`` rig, generated and imported once per process."""
-    mod = _KERNELS.get(kind)
+    """The compiled kernel module of a ``kind`` rig, generated and imported once per process
+    (and again should an effect class be added to the library later)."""
+    key = (kind, library(kind))
+    mod = _KERNELS.get(key)
     if mod is not None:
         return mod
     with _LOCK:  # candidate fits on threads must not generate the same kernel twice
-        mod = _KERNELS.get(kind)
+        mod = _KERNELS.get(key)
         if mod is not None:
             return mod
         src = kernel_source(kind)
-        digest = hashlib.sha256(src.encode()).hexdigest()[:16]
-        folder = cache_dir()
-        if not _writable(folder):  # a read-only home: compile in every process rather than fail
-            folder = Path(tempfile.mkdtemp(prefix="moi-kernels-"))
-        name = f"moi_kernel_{kind}_{digest}"
-        path = folder / f"{name}.py"
+        path = _kernel_path(kind, src)
+        name = path.stem
+        folder = path.parent
         if not path.exists() or path.read_text() != src:
             # written whole then renamed: a concurrent process never imports half a file,
             # and an unchanged file keeps the stamp numba's cache index checks
@@ -245,8 +271,31 @@ def kernel(kind: str) -> ModuleType:
         mod = importlib.util.module_from_spec(spec)
         sys.modules[name] = mod  # numba's cache locates a function's module by name
         spec.loader.exec_module(mod)
-        _KERNELS[kind] = mod
+        _KERNELS[key] = mod
         return mod
+
+
+def warm_up(kind: str) -> None:
+    """Load the ``kind`` kernel now (compile it, on a device's very first run) rather than in the first measurement.
+
+    Also ``python -m measurement.integrator KIND``: the daemon compiles a
+    missing kernel in such a child process, whose imports and compilation
+    cannot take the interpreter lock from a capture running meanwhile.
+    """
+    Dynamics(kind, (), ()).integrate(np.array([0.0, 0.01]), 0.1, 0.0, 1.0, 0.01)
+
+
+@lru_cache(maxsize=256)
+def _layout(kind: str, lib: tuple, names: tuple[str, ...]) -> tuple[int, list[slice], bool]:
+    """The kernel's parameter vector: its size, each named effect's slice in it, whether one can hold the pendulum."""
+    where, size = {}, 0
+    for eff in lib:
+        where[eff.name] = (slice(size, size + len(eff.parameters)), bool(eff.holding_term))
+        size += len(eff.parameters)
+    missing = [n for n in names if n not in where]
+    if missing:
+        raise ValueError(f"effects {missing} have no law on a {kind} rig")
+    return size, [where[n][0] for n in names], any(where[n][1] for n in names)
 
 
 class Dynamics:
@@ -257,15 +306,11 @@ class Dynamics:
     """
 
     def __init__(self, kind: str, effects: Sequence, values: Sequence[Sequence[float]]):
-        given = {e.name: [float(v) for v in vals] for e, vals in zip(effects, values)}
-        params: list[float] = []
-        for eff in library(kind):
-            params += given.pop(eff.name, [0.0] * len(eff.parameters))
-        if given:
-            raise ValueError(f"effects {sorted(given)} have no law on a {kind} rig")
+        size, slots, self.holding = _layout(kind, library(kind), tuple(e.name for e in effects))
         self.kind = kind
-        self.params = np.asarray(params, dtype=float)
-        self.holding = any(e.holding_term for e in effects)
+        self.params = np.zeros(size)
+        for sl, vals in zip(slots, values):
+            self.params[sl] = vals
 
     def integrate(self, t: np.ndarray | Sequence[float], theta0: float, omega0: float, omega_n: float,
                   max_step: float) -> tuple[np.ndarray, np.ndarray]:
@@ -280,3 +325,8 @@ class Dynamics:
         kernel(self.kind).run(t, float(theta0), float(omega0), float(omega_n) ** 2, self.params,
                               self.holding, float(max_step), x, v)
         return x, v
+
+
+if __name__ == "__main__":
+    for _kind in sys.argv[1:]:
+        warm_up(_kind)

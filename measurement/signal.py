@@ -53,15 +53,17 @@ def loo_deviations(t: np.ndarray | None, y: np.ndarray, d: int) -> tuple[np.ndar
     tt = np.arange(n, dtype=float) if t is None else np.asarray(t, dtype=float)
     idx = np.arange(d, n - d)
     offsets = [o for o in range(-d, d + 1) if o != 0]
-    nodes = np.stack([tt[idx + o] - tt[idx] for o in offsets], axis=1)
-    values = np.stack([y[idx + o] for o in offsets], axis=1)
+    # one contiguous row per neighbour: the loops below run over whole rows
+    centre = slice(d, n - d)
+    nodes = np.stack([tt[d + o:n - d + o] - tt[centre] for o in offsets])
+    values = np.stack([y[d + o:n - d + o] for o in offsets])
     weights = np.ones_like(nodes)
     for j in range(len(offsets)):
         for k in range(len(offsets)):
             if k != j:
-                weights[:, j] *= -nodes[:, k] / (nodes[:, j] - nodes[:, k])
-    dev = y[idx] - np.sum(weights * values, axis=1)
-    return idx, dev / np.sqrt(1.0 + np.sum(weights**2, axis=1))
+                weights[j] *= -nodes[k] / (nodes[j] - nodes[k])
+    dev = y[centre] - np.sum(weights * values, axis=0)
+    return idx, dev / np.sqrt(1.0 + np.sum(weights**2, axis=0))
 
 
 def _gap_free(t: np.ndarray | None, idx: np.ndarray, d: int) -> np.ndarray:
@@ -215,7 +217,7 @@ def find_swings(t: np.ndarray, angle: np.ndarray, centre: float | None = None, h
         best = np.maximum.reduceat(excursion, starts - starts[0])
         at_best = np.flatnonzero(excursion == np.repeat(best, lengths)) + starts[0]
         lobe = at_best[np.searchsorted(at_best, starts)]
-        crossings = [_crossing_time(t, z, int(i)) for i in starts[1:]]
+        crossings = _crossing_times(t, z, starts[1:])
         peaks_t = list(t[lobe])
         peaks_v = list(z[lobe])
     complete = np.ones(len(peaks_v), dtype=bool)
@@ -226,16 +228,25 @@ def find_swings(t: np.ndarray, angle: np.ndarray, centre: float | None = None, h
     return Swings(c, np.asarray(crossings), np.asarray(peaks_t), np.asarray(peaks_v), complete)
 
 
-def _crossing_time(t: np.ndarray, z: np.ndarray, i: int) -> float:
-    # walk back to the sign change just before i and interpolate linearly
-    j = i
-    while j > 0 and np.sign(z[j - 1]) == np.sign(z[i]):
-        j -= 1
-    if j == 0:
-        return float(t[i])
-    z0, z1 = z[j - 1], z[j]
-    frac = z0 / (z0 - z1) if z0 != z1 else 0.5
-    return float(t[j - 1] + frac * (t[j] - t[j - 1]))
+def _crossing_times(t: np.ndarray, z: np.ndarray, at: np.ndarray) -> list[float]:
+    """For each index i in ``at``: walk back to the sign change just before i and interpolate linearly."""
+    sg = np.sign(z)
+    pos = np.arange(z.size)
+    out = np.empty(at.size)
+    for sign in (1.0, -1.0):
+        mine = sg[at] == sign
+        if not mine.any():
+            continue
+        # the last sample at or before each index whose sign differs from ``sign`` (−1: none)
+        other = np.maximum.accumulate(np.where(sg != sign, pos, -1))
+        i = at[mine]
+        j = other[i - 1] + 1  # the sign change is between j − 1 and j (j = 0: none before i)
+        jj = np.maximum(j, 1)
+        z0, z1 = z[jj - 1], z[jj]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(z0 != z1, z0 / (z0 - z1), 0.5)
+        out[mine] = np.where(j == 0, t[i], t[jj - 1] + frac * (t[jj] - t[jj - 1]))
+    return [float(v) for v in out]
 
 
 @dataclass(frozen=True)

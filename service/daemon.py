@@ -26,6 +26,8 @@ import datetime as _dt
 import concurrent.futures
 import logging
 import queue
+import subprocess
+import sys
 import threading
 import time
 from collections import deque
@@ -35,6 +37,7 @@ from firmware_host import Event, Measurement, Sequencer, State
 from measurement import IdentificationResult, Rig, Trace, identify
 from measurement import flags as F
 from measurement.errors import InvalidInput
+from measurement.integrator import is_compiled
 
 from . import __version__
 from .config import Config
@@ -92,6 +95,7 @@ class Appliance:
         self._calls: queue.SimpleQueue[tuple[Callable[[], Any], concurrent.futures.Future]] = queue.SimpleQueue()
         self._wakeup = threading.Event()
         self._stop = threading.Event()
+        self._compiling: subprocess.Popen | None = None  # the integrator compiled on a first run
         self._started_runs = 0
         self._run_started: dict[str, tuple[float, str]] = {}  # measurement id → (wall time of ARMED, trigger source)
         self._accepted_source = "unknown"  # source of the last accepted trigger (paired with the next ARMED)
@@ -160,6 +164,13 @@ class Appliance:
             if d.button is not None:
                 d.button.when_pressed = lambda: self.command("trigger", "button")
             self.sequencer.subscribe(self._on_event)
+            if not is_compiled(cfg.rig.kind):
+                # a device's first run: the integrator is compiled (some 10 s on a Pi) in a child
+                # process now, not while the first swing waits for its result, and not on a thread
+                # here, whose imports would hold the interpreter lock against a capture's reader
+                self._compiling = subprocess.Popen([sys.executable, "-m", "measurement.integrator", cfg.rig.kind],
+                                                   stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                                   stderr=subprocess.DEVNULL)
             if cfg.web is not None:
                 from .web.server import WebServer  # aiohttp is loaded only when the page is served
                 self.web = WebServer(self, cfg.web)

@@ -18,7 +18,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sim", action="store_true",
                    help="run on the simulated rig even when [hardware] is configured (default without [hardware])")
     p.add_argument("--state-dir", metavar="DIR", help="result store directory (overrides [device] state_dir)")
-    p.add_argument("--check", action="store_true", help="validate the configuration, print a summary and exit")
+    p.add_argument("--check", action="store_true",
+                   help="validate the configuration and what it names (pins, files, GPIO backend, serial port or "
+                        "camera, ports), print a summary and exit (2 if anything is wrong)")
+    p.add_argument("--json", action="store_true", help="with --check: print the configuration and the checks as JSON")
     p.add_argument("--log-level", choices=("debug", "info", "warning", "error"), help="overrides [device] log_level")
     p.add_argument("--config-reference", action="store_true",
                    help="print every table and key of the configuration file (Markdown) and exit")
@@ -41,10 +44,22 @@ def run(args: argparse.Namespace) -> int:
     from ..config import load_config  # the drivers' and servers' settings: not for `moi --help`
 
     config = load_config(args.config, sim=args.sim, state_dir=args.state_dir)
+    from ..check import check_config, pin_problems
+    from ..errors import ConfigError
+
     if args.check:
         import json
-        print(json.dumps(config.to_dict(), indent=2, default=str))
+        checks = check_config(config)
+        problems = [c for c in checks if not c.ok]
+        if args.json:
+            print(json.dumps(config.to_dict() | {"checks": [c.__dict__ for c in checks]}, indent=2, default=str))
+        else:
+            print("\n".join(c.line() for c in checks))
+        if problems:
+            raise ConfigError(f"{len(problems)} problem(s): " + "; ".join(f"{c.what}: {c.detail}" for c in problems))
         return 0
+    if pin_problems(config):  # gpiozero would fail with a traceback when building the devices
+        raise ConfigError("; ".join(pin_problems(config)))
     setup_logging(args.log_level or config.log_level)
     from ..daemon import Appliance
 

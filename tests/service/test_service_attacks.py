@@ -4,6 +4,7 @@ illegal Modbus writes, connection floods. Each attack is bounded in count and ti
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import socket
 import struct
 
@@ -432,3 +433,44 @@ def test_ignored_triggers_are_logged_at_most_once_per_interval(tmp_path, applian
     lines = [r for r in caplog.records if r.getMessage().startswith("trigger from")]
     assert len(lines) == 1, [r.getMessage() for r in lines]
     app.wait_done(1)
+
+
+# --- moi run --check ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("hardware,mqtt,expected", [
+    ('solenoid = { pin = 17 }\nbutton = { pin = "GPIO17" }', "", "already the solenoid's pin"),
+    ("solenoid = { pin = 99999 }", "", "99999 is not a GPIO pin"),
+    ('solenoid = { pin = "BANANA" }', "", "'BANANA' is not a GPIO pin"),
+    ("solenoid = { pin = 17 }", 'username = "moi"\npassword_file = "/nonexistent/secret"',
+     "password_file: /nonexistent/secret does not exist"),
+    ("solenoid = { pin = 17 }", 'tls = true\nca_file = "/nonexistent/ca.pem"', "ca_file: /nonexistent/ca.pem does not exist"),
+])
+def test_check_finds_what_would_crash_the_start(tmp_path, capsys, hardware, mqtt, expected):
+    from service.cli import main
+
+    rig = tmp_path.parent / "rig.toml"
+    cfg = tmp_path / "appliance.toml"
+    cfg.write_text(f'[device]\nrig = "{Path(__file__).resolve().parents[2] / "examples" / "torsion_rig.toml"}"\n'
+                   f'state_dir = "{tmp_path / "state"}"\n[hardware]\ngpio_backend = "mock"\nsensor = "encoder"\n'
+                   f'encoder = {{ port = "socket://127.0.0.1:1" }}\n{hardware}\n'
+                   f'[modbus]\nport = 0\n[web]\nenabled = false\n'
+                   + (f'[mqtt]\nhost = "127.0.0.1"\n{mqtt}\n' if mqtt else ""))
+    assert main(["run", "--check", "--config", str(cfg)]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and expected in lines[0], captured.err
+    assert "PROBLEM" in captured.out and "ok " in captured.out  # the human summary
+    assert not rig.exists()
+    if "pin" in expected:  # starting is the same clear line, not a gpiozero traceback
+        assert main(["run", "--config", str(cfg)]) == 2
+        assert expected in capsys.readouterr().err
+
+
+def test_check_passes_a_good_configuration_and_says_so_as_json(tmp_path, capsys):
+    from service.cli import main
+
+    cfg = tmp_path / "appliance.toml"
+    cfg.write_text(f'[device]\nstate_dir = "{tmp_path / "state"}"\n[modbus]\nport = 0\n[web]\nenabled = false\n')
+    assert main(["run", "--check", "--json", "--config", str(cfg)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["checks"] and all(c["ok"] for c in doc["checks"])

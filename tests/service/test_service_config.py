@@ -116,7 +116,7 @@ def test_a_missing_config_file_is_one_line(tmp_path, capsys):
 
 def test_check_prints_the_configuration_without_secrets(tmp_path, capsys):
     path = write(tmp_path, "[mqtt]\nusername = 'moi'\npassword = 'hunter2'\n")
-    assert main(["run", "--config", str(path), "--check"]) == 0
+    assert main(["run", "--config", str(path), "--check", "--json"]) == 0
     out = capsys.readouterr().out
     assert '"simulated": true' in out and "hunter2" not in out and '"***"' in out
 

@@ -250,7 +250,7 @@ def test_moi_run_check_validates_every_recipe(tmp_path, capsys):
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and str(bad) in lines[0] and "tolerance_percent: expected a number > 0" in lines[0]
     bad.unlink()
-    assert main(["run", "--check", "--config", str(cfg)]) == 0
+    assert main(["run", "--check", "--json", "--config", str(cfg)]) == 0
     assert json.loads(capsys.readouterr().out)["recipes"]["recipes"][0]["name"] == "good"
     write(tmp_path / "appliance.toml", '[recipes]\ndirectory = "recipes"\nactive = "nope"\n')
     assert main(["run", "--check", "--config", str(cfg)]) == 2
