@@ -256,15 +256,17 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
     steps = 1e-7 * scales[:nd]
     nfev = [0]
 
+    cache: dict[str, np.ndarray] = {}
+
     def simulate(x: np.ndarray) -> np.ndarray:
         nfev[0] += 1
-        return model.true_angle(x, t, max_step)[0]
-
-    cache: dict[str, np.ndarray] = {}
+        theta, omega = model.true_angle(x, t, max_step)
+        cache["omega"] = omega
+        return theta
 
     def fun(x: np.ndarray) -> np.ndarray:
         theta = simulate(x)
-        cache["x"], cache["theta"] = x.copy(), theta
+        cache["x"], cache["theta"], cache["rate"] = x.copy(), theta, cache["omega"]
         return model.measured(x, ts, theta) - y
 
     def jac(x: np.ndarray) -> np.ndarray:
@@ -311,6 +313,7 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
         max_step=max_step, noise=noise, effective=effective, jac=J, scales=scales,
         cov_method=method, cov_inflation=inflation, at_bound=at_bound, f_scale=f_scale,
         n_downweighted=int(np.sum(weight < 0.5)),
+        extra={"theta": cache["theta"], "omega": cache["rate"]},  # the true swing at x (rad, rad/s)
     )
 
 

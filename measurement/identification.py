@@ -248,8 +248,9 @@ def score_effect(current: ModelFit, effect: Effect) -> Score:
                     {e.name: current.effect(e.name) for e in model.effects}, current.value("offset"))
     t = current.t
     ts = t - t[0]
-    theta, omega = cand.true_angle(x, t, current.max_step)
-    base = cand.measured(x, ts, theta)
+    # with the effect at 0 the candidate's swing is the current fit's (kept on the fit: no simulation)
+    theta, omega = current.extra["theta"], current.extra["omega"]
+    base = current.fitted
     sl = cand.layout[effect.name]
     if effect.role == "sensor":
         G = effect.sensor_basis(ts, theta)

@@ -50,7 +50,7 @@ INVALID. Nothing is excluded silently: every exclusion is in ``excluded``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 from . import flags as F
