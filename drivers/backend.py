@@ -56,9 +56,14 @@ def pin_factory(backend: str | None = None) -> Factory | None:
             if ep.name == name or ep.name == name.lower():
                 try:
                     return ep.load()()
-                except Exception as exc:  # a missing Pi library: say which and how to get it
+                except ImportError as exc:  # a missing Pi library: say which and how to get it
                     raise DriverConfigError(
                         f"GPIO backend {name!r} cannot start ({type(exc).__name__}: {exc}); "
                         "on a Raspberry Pi install the [pi] extra (lgpio), elsewhere use backend 'mock'") from None
+                except Exception as exc:  # the library is there but failed: its own reason, not "install it"
+                    raise DriverConfigError(
+                        f"GPIO backend {name!r} cannot start: {type(exc).__name__}: {exc} (lgpio creates its "
+                        "notification pipes in the working directory or $LG_WD, which must be writable; "
+                        "the GPIO chip must be accessible to this user)") from None
         known = sorted({ep.name for ep in group})
         raise DriverConfigError(f"unknown GPIO backend {name!r}; expected one of {', '.join(known)}")

@@ -210,7 +210,7 @@ class _Run:
     last_sample_at: float | None = None  # clock time a new sample last arrived
     dropped_out_of_order: int = 0
     beyond_window: int = 0  # samples later than release + capture_duration (not kept)
-    outside_window: int = 0  # samples not kept: before release − pre_trigger or after release + capture_duration
+    outside_window: int = 0  # samples not kept: after release + capture_duration
     trace: Trace | None = None
     job: _Job | None = None
     identify_started_at: float | None = None
@@ -660,11 +660,6 @@ class Sequencer:
         self._collect(run, now)  # what the sensor buffered up to the stop
         run.capture_ended_at = now
         run.capture_end = why
-        if run.released_at is not None and run.t and run.t[0] < run.released_at - self.config.pre_trigger:
-            # the pre-trigger record is bounded by sample time too (the release waited for a poll)
-            first = bisect.bisect_left(run.t, run.released_at - self.config.pre_trigger)
-            del run.t[:first], run.angle[:first]
-            run.outside_window += first
         if len(run.t) < self.config.min_samples:
             raise CaptureTooShort(
                 f"capture too short: {len(run.t)} samples from the {self.sensor.source}; "

@@ -136,18 +136,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"solenoid: {len(on_times)} pulse(s), on for {', '.join(f'{x * 1e3:.1f}' for x in on_times)} ms "
               f"(real time), now {'ON' if solenoid.is_active else 'off'}", file=out)
 
-    if not results:
-        reason = seq.last_fault or (last.reason if last else "no result")
-        print(f"moi measure: measurement failed: {reason}", file=sys.stderr)
-        return EXIT_FAULT
+    status = _print_result(results, seq, last, args.json,
+                           {"J": truth.inertia, "omega_n": truth.omega_n, "effects": effects})
+    if status != 0 or args.json:
+        return status
     m = results[0]
-    if args.json:
-        import json
-        d = m.to_dict()
-        d["truth"] = {"J": truth.inertia, "omega_n": truth.omega_n, "effects": effects}
-        sys.stdout.write(json.dumps(d, ensure_ascii=False, allow_nan=False) + "\n")
-        return 0
-    print(m.result.report())
     if m.result.J is not None:
         print(f"true J {truth.inertia:g} kg·m² → error {100 * (m.result.J / truth.inertia - 1):+.4f} %")
     return 0
@@ -189,14 +182,20 @@ def _measure_configured(args: argparse.Namespace) -> int:
     finally:
         import os
         os.close(lock)
+    return _print_result(results, seq, last, args.json)
+
+
+def _print_result(results: list, seq, last, as_json: bool, truth: dict | None = None) -> int:
+    """The one measurement's result (report, or JSON with the truth of a simulation); EXIT_FAULT without one."""
     if not results:
         reason = seq.last_fault or (last.reason if last else "no result")
         print(f"moi measure: measurement failed: {reason}", file=sys.stderr)
         return EXIT_FAULT
     m = results[0]
-    if args.json:
+    if as_json:
         import json
-        sys.stdout.write(json.dumps(m.to_dict(), ensure_ascii=False, allow_nan=False) + "\n")
+        d = m.to_dict() | ({"truth": truth} if truth is not None else {})
+        sys.stdout.write(json.dumps(d, ensure_ascii=False, allow_nan=False) + "\n")
     else:
         print(m.result.report())
     return 0

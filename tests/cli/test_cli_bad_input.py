@@ -176,3 +176,21 @@ def test_json_and_csv_exports_carry_the_same_iso_times(store_dir, tmp_path):
     doc = json.loads((tmp_path / "a.json").read_text())[0]
     row = next(csv.DictReader((tmp_path / "a.csv").open()))
     assert doc["finished_at_utc"] == row["finished_at"] and doc["finished_at"] == 1e9 + 60
+
+
+def test_a_gpio_library_that_is_installed_but_fails_says_why_not_install_it(monkeypatch):
+    import drivers.backend as backend
+    from drivers.errors import DriverConfigError
+
+    class BrokenLgpio:
+        name = "lgpio"
+
+        def load(self):
+            def factory():
+                raise OSError(30, "Read-only file system: '.lgd-nfy0'")
+            return factory
+
+    monkeypatch.setattr(backend, "entry_points", lambda group: [BrokenLgpio()])
+    with pytest.raises(DriverConfigError) as err:
+        backend.pin_factory("lgpio")
+    assert "Read-only file system" in str(err.value) and "[pi] extra" not in str(err.value)
