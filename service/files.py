@@ -80,11 +80,32 @@ def read_rig(path: str | os.PathLike) -> Rig:
     return read_toml_as(path, "rig file", Rig.from_dict, RigError)
 
 
-def write_rig(rig: Rig, path: str | os.PathLike, comment: str | None = None) -> None:
-    text = tomli_w.dumps(rig.to_dict())
-    if comment:
-        text = "".join(f"# {line}\n" for line in comment.splitlines()) + text
+def write_rig(rig: Rig, path: str | os.PathLike, comment: str | None = None,
+              keep_from: str | os.PathLike | None = None) -> None:
+    """Write ``rig`` as a rig file. keep_from: the rig file it came from; its comments, key order
+    and layout are kept (tomlkit edits the document in place) and only the values change."""
+    if keep_from is not None:
+        import tomlkit
+
+        doc = tomlkit.parse(read_text(keep_from, "rig file"))
+        _update_toml(doc, rig.to_dict())
+        text = tomlkit.dumps(doc)
+        if comment and comment not in text:
+            text = "".join(f"# {line}\n" for line in comment.splitlines()) + text
+    else:
+        text = tomli_w.dumps(rig.to_dict())
+        if comment:
+            text = "".join(f"# {line}\n" for line in comment.splitlines()) + text
     write_atomic(path, text, "rig file")
+
+
+def _update_toml(doc: Any, values: dict[str, Any]) -> None:
+    """Set ``values`` in the tomlkit document ``doc``, table by table, keeping what is not set."""
+    for key, value in values.items():
+        if isinstance(value, dict) and key in doc and hasattr(doc[key], "items") and value:
+            _update_toml(doc[key], value)
+        else:
+            doc[key] = value
 
 
 def check_output_path(path: str | os.PathLike, what: str = "output file") -> Path:

@@ -16,9 +16,13 @@ Topics under ``<prefix>/<device_id>/`` (prefix default "moi"):
 * ``spc/<recipe>`` the SPC summary of a recipe's parts, retained, republished
   after each completed part.
 
+* ``result/last`` a retained copy of the latest delivered result (what Home
+  Assistant's sensors read, so they are known again after its restart).
+
 Optional Home Assistant MQTT discovery (retained config messages) for J, its
-uncertainty, ω_n, the damping ratio, the state, each quality flag and a
-"measure" button.
+uncertainty, J_object, ω_n, the damping ratio, the state, the part, each
+quality flag (device class "problem" only for the flags that invalidate a
+result), a "measure" and an "abort / acknowledge" button.
 """
 
 from __future__ import annotations
@@ -38,6 +42,8 @@ from paho.mqtt.enums import CallbackAPIVersion
 
 from .errors import ConfigError
 from .outbox import OutboxSender
+from measurement.verdict import DEFAULT_INVALID_FLAGS
+
 from .registers import FLAG_BITS
 from .store import Store
 
@@ -96,6 +102,7 @@ class Topics:
         base = f"{prefix.strip('/')}/{device_id}" if prefix.strip("/") else device_id
         self.base = base
         self.result = f"{base}/result"
+        self.last_result = f"{base}/result/last"  # retained copy of the latest delivered result
         self.status = f"{base}/status"
         self.state = f"{base}/state"
         self.cmd_measure = f"{base}/cmd/measure"
@@ -227,6 +234,8 @@ class MqttService:
     # --- publishing --------------------------------------------------------------------
     def _publish_kind(self, kind: str, payload: str) -> int:
         info = self.client.publish(self.topics.for_kind(kind), payload, qos=1, retain=False)
+        if kind == "result":  # the outbox sends oldest first: the retained copy ends at the newest
+            self.client.publish(self.topics.last_result, payload, qos=1, retain=True)
         return info.mid
 
     def publish_state(self, event: dict[str, Any]) -> None:
@@ -336,41 +345,44 @@ def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
               "model": "pendulum inertia appliance", "sw_version": software_version}
     common = {"availability_topic": topics.status, "payload_available": "online",
               "payload_not_available": "offline", "device": device}
+    origin = {"name": "moi", "sw_version": software_version}
     out: list[tuple[str, dict[str, Any]]] = []
+
+    def entity(domain: str, key: str, topic_key: str | None = None, **cfg: Any) -> None:
+        oid = f"moi_{node}_{key}"
+        # object_id is deprecated in favour of default_entity_id; both until Home Assistant drops object_id
+        doc = {"unique_id": oid, "object_id": oid, "default_entity_id": f"{domain}.{oid}", **cfg,
+               "origin": origin, **common}
+        out.append((f"{dp}/{domain}/{node}/{topic_key or key}/config", {k: v for k, v in doc.items() if v is not None}))
+
+    # the result sensors read the retained copy of the latest result: known again right after a
+    # Home Assistant restart, not "unknown" until the next measurement
     sensors = [
         ("J", "Moment of inertia", "kg·m²", "{{ value_json.J }}"),
         ("J_std", "Moment of inertia uncertainty", "kg·m²", "{{ value_json.J_std }}"),
+        ("J_object", "Moment of inertia of the part (J − tare)", "kg·m²", "{{ value_json.J_object }}"),
         ("omega_n", "Natural angular frequency", "rad/s", "{{ value_json.omega_n }}"),
         ("damping_ratio", "Damping ratio", None, "{{ value_json.damping_ratio }}"),
         ("residual_rms", "Fit residual RMS", "rad", "{{ value_json.residual_rms_after }}"),
     ]
     for key, name, unit, template in sensors:
-        cfg = {"name": name, "unique_id": f"moi_{node}_{key}", "object_id": f"moi_{node}_{key}",
-               "state_topic": topics.result, "value_template": template, "state_class": "measurement",
-               "json_attributes_topic": topics.result if key == "J" else None, **common}
-        if key == "J":
-            cfg["json_attributes_template"] = ("{{ {'uuid': value_json.uuid, 'seq': value_json.seq, "
-                                               "'finished_at': value_json.finished_at, 'flags': value_json.flags} | tojson }}")
-        if unit:
-            cfg["unit_of_measurement"] = unit
-        out.append((f"{dp}/sensor/{node}/{key}/config", {k: v for k, v in cfg.items() if v is not None}))
-    out.append((f"{dp}/sensor/{node}/state/config", {
-        "name": "Sequencer state", "unique_id": f"moi_{node}_state", "object_id": f"moi_{node}_state",
-        "state_topic": topics.state, "value_template": "{{ value_json.state }}", **common}))
+        entity("sensor", key, name=name, state_topic=topics.last_result, value_template=template,
+               state_class="measurement", unit_of_measurement=unit,
+               json_attributes_topic=topics.last_result if key == "J" else None,
+               json_attributes_template=("{{ {'uuid': value_json.uuid, 'seq': value_json.seq, "
+                                         "'finished_at': value_json.finished_at, 'flags': value_json.flags} | tojson }}")
+               if key == "J" else None)
+    entity("sensor", "state", name="Sequencer state", state_topic=topics.state, value_template="{{ value_json.state }}")
     # the part: its ID and its verdict (OK / NOK / INVALID once complete, "pending" before, "none" without a recipe)
     for key, name, template in (
             ("part_id", "Part ID", "{{ value_json.part_id or '' }}"),
             ("verdict", "Part verdict", "{{ value_json.verdict or ('pending' if value_json.recipe else 'none') }}")):
-        out.append((f"{dp}/sensor/{node}/{key}/config", {
-            "name": name, "unique_id": f"moi_{node}_{key}", "object_id": f"moi_{node}_{key}",
-            "state_topic": topics.result, "value_template": template, **common}))
+        entity("sensor", key, name=name, state_topic=topics.last_result, value_template=template)
     for flag in FLAG_BITS:
-        out.append((f"{dp}/binary_sensor/{node}/{flag}/config", {
-            "name": f"Flag {flag.replace('_', ' ')}", "unique_id": f"moi_{node}_flag_{flag}",
-            "object_id": f"moi_{node}_flag_{flag}", "device_class": "problem",
-            "state_topic": topics.result,
-            "value_template": "{{ 'ON' if '" + flag + "' in value_json.flags else 'OFF' }}", **common}))
-    out.append((f"{dp}/button/{node}/measure/config", {
-        "name": "Measure", "unique_id": f"moi_{node}_measure", "object_id": f"moi_{node}_measure",
-        "command_topic": topics.cmd_measure, "payload_press": "{}", **common}))
+        # "problem" only for the flags that make a result invalid; the others are information
+        entity("binary_sensor", f"flag_{flag}", flag, name=f"Flag {flag.replace('_', ' ')}",
+               device_class="problem" if flag in DEFAULT_INVALID_FLAGS else None, state_topic=topics.last_result,
+               value_template="{{ 'ON' if '" + flag + "' in value_json.flags else 'OFF' }}")
+    entity("button", "measure", name="Measure", command_topic=topics.cmd_measure, payload_press="{}")
+    entity("button", "abort", name="Abort / acknowledge fault", command_topic=topics.cmd_abort, payload_press="{}")
     return out

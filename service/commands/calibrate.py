@@ -48,7 +48,10 @@ _CYL_KEYS = {"mass", "diameter", "distance", "own_inertia"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("calibration", metavar="CAL.toml", help="reference loads (see `moi calibrate --help`)")
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
+    p.epilog = ("the calibration file (an example: examples/calibration.toml):\n"
+                + __doc__.split("\n\n", 1)[1])
+    p.add_argument("calibration", metavar="CAL.toml", help="reference loads (file format below)")
     p.add_argument("--rig", required=True, metavar="RIG.toml", help="the torsion rig (its stiffness may be absent)")
     p.add_argument("--out", metavar="RIG_OUT.toml", help="write the rig with the calibrated stiffness and tare_inertia")
     p.add_argument("--json", action="store_true", help="print the calibration as JSON")
@@ -130,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         new = replace(rig, stiffness=cal.stiffness, stiffness_std=cal.stiffness_std,
                       tare_inertia=cal.tare_inertia, tare_inertia_std=cal.tare_inertia_std, calibration=record)
-        write_rig(new, args.out, comment=f"calibrated by moi calibrate from {args.calibration}")
+        write_rig(new, args.out, comment=f"calibrated by moi calibrate from {args.calibration}", keep_from=args.rig)
     if args.json:
         print(json.dumps(cal.to_dict() | {"date": date.isoformat(), "valid_days": args.valid_days,
                                           "valid_until": record.valid_until.isoformat()}))

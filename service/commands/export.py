@@ -68,7 +68,10 @@ def trace_text(m) -> str:
 
 
 def _json(rows) -> str:
-    docs = [m.summary() | {"payload": m.payload, "rig": m.rig} for m in rows]
+    # the times as Unix seconds and, as in the CSV, as ISO 8601 UTC
+    docs = [m.summary() | {f"{k}_utc": iso_utc(getattr(m, k)) if getattr(m, k) is not None else None
+                           for k in ("started_at", "finished_at", "published_at")}
+            | {"payload": m.payload, "rig": m.rig} for m in rows]
     return json.dumps(docs, indent=2, ensure_ascii=False) + "\n"
 
 

@@ -88,6 +88,9 @@ def run(args: argparse.Namespace) -> int:
             p = m.payload or {}
             if p:
                 print(f"  J             = {_num(p.get('J'), '.7g')} ± {_num(p.get('J_std'), '.2g')} kg·m²")
+                if p.get("J_object") is not None:
+                    print(f"  J_object      = {_num(p.get('J_object'), '.7g')} ± {_num(p.get('J_object_std'), '.2g')} "
+                          "kg·m² (J − tare)")
                 print(f"  omega_n       = {_num(p.get('omega_n'), '.7g')} ± {_num(p.get('omega_n_std'), '.2g')} rad/s")
                 print(f"  damping ratio = {_num(p.get('damping_ratio'), '.4g')} ± {_num(p.get('damping_ratio_std'), '.2g')}")
                 print(f"  effects       : {', '.join(p.get('effects') or []) or '-'} "
@@ -102,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
                           + (f", part verdict {p['verdict']}" if p.get("verdict") else ""))
             return 0
         since = parse_time(args.since) if args.since else None
-        rows = store.list(limit=args.limit, since=since, status=args.status)
+        rows = store.list(limit=args.limit, since=since, status=args.status, full=True)  # full: J_object
         if args.json:
             print(json.dumps([m.summary() for m in rows], indent=2, ensure_ascii=False))
             return 0
@@ -110,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"no measurements in {store.path}")
             return 0
         print(f"{'seq':>6}  {'finished (UTC)':19}  {'status':7}  {'trigger':7}  {'J [kg·m²]':>13}  {'±':>8}  "
-              f"{'ω_n [rad/s]':>11}  {'ζ':>9}  {'pub':3}  {'uuid':8}  flags / error")
+              f"{'J_object':>13}  {'ω_n [rad/s]':>11}  {'ζ':>9}  {'pub':3}  {'uuid':8}  flags / error")
         for m in rows:
             note = m.error if m.error else ", ".join(m.flags)
             if m.recipe:  # the part: ID, recipe, release i/N and its verdict (the part's on its last release)
@@ -118,6 +121,6 @@ def run(args: argparse.Namespace) -> int:
                         f"{m.verdict or '-'}" + (f" part {m.part_verdict}" if m.part_verdict else ""))
                 note = f"[{part}] {note}".rstrip()
             print(f"{m.seq:>6}  {fmt_time(m.finished_at):19}  {m.status:7}  {m.trigger:7}  {_num(m.J, '13.7g')}  "
-                  f"{_num(m.J_std, '8.2g')}  {_num(m.omega_n, '11.6g')}  {_num(m.damping_ratio, '9.3g')}  "
+                  f"{_num(m.J_std, '8.2g')}  {_num((m.payload or {}).get('J_object'), '13.7g')}  {_num(m.omega_n, '11.6g')}  {_num(m.damping_ratio, '9.3g')}  "
                   f"{'yes' if m.published_at else 'no':3}  {m.uuid[:8]}  {note}")
     return 0

@@ -474,3 +474,23 @@ def test_check_passes_a_good_configuration_and_says_so_as_json(tmp_path, capsys)
     assert main(["run", "--check", "--json", "--config", str(cfg)]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["checks"] and all(c["ok"] for c in doc["checks"])
+
+
+def test_the_latest_delivered_result_is_retained_for_home_assistant(tmp_path, broker, consumer_factory):
+    store = Store(tmp_path / "state")
+    svc = MqttService(MqttSettings(host="127.0.0.1", port=broker.port, reconnect_min=0.1, reconnect_max=0.5),
+                      "rig", store)
+    svc.start()
+    try:
+        for i in range(2):
+            store.record(status="ok", trigger="button", device_id="rig", software_version="t", started_at=1e9 + i,
+                         finished_at=1e9 + i + 1, result={"J": 0.01 + i, "flags": []}, enqueue=("result",),
+                         build_payload=lambda u, q: {"uuid": u, "seq": q, "J": 0.01 + q, "timestamp": 1e9})
+        svc.wake()
+        wait_until(lambda: store.outbox_count() == 0, 20, what="both results delivered")
+        late = consumer_factory(broker.port, ["moi/rig/result/last"], client_id="home-assistant-restarted")
+        late.wait(lambda c: c.on("/result/last"), 10, "the retained last result")
+        assert json.loads(late.on("/result/last")[-1])["seq"] == 2 and late.messages[-1][2]  # retained, newest
+    finally:
+        svc.stop()
+        store.close()

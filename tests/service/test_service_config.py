@@ -47,6 +47,7 @@ def test_the_example_configs_load():
     assert sim.simulated and sim.hardware is not None  # --sim keeps the hardware table validated
     demo = load_config(REPO / "examples" / "appliance-sim.toml")
     assert demo.simulated and demo.mqtt is None and demo.modbus.host == "127.0.0.1"
+    assert REPO not in demo.state_dir.parents  # trying the example does not write into the source tree
 
 
 def test_no_config_means_a_simulated_appliance_without_mqtt(monkeypatch, tmp_path):
