@@ -189,8 +189,11 @@ class CameraAngleSensor:
         """
         with self._lock:
             live = self._tracking
-            # the sequencer's trace counts time from its first sample, the capture's first tracked position
-            t_rel = np.asarray(live.t, dtype=float) - (live.t[0] if live.t else 0.0)
+            # the sequencer's trace counts time from its first kept sample (meta "sequencer.t0", clock
+            # time in s), which is not the first tracked frame when the pre-trigger window was trimmed
+            first = live.t[0] if live.t else 0.0
+            origin = float((trace.meta.get("sequencer") or {}).get("t0", first))
+            t_rel = np.asarray(live.t, dtype=float) - origin
             keep = np.isin(t_rel, trace.t)
             tracking = live.subset(keep)
             tracking.t = t_rel[keep].tolist()

@@ -681,6 +681,7 @@ class Sequencer:
             "sequencer": {
                 "measurement_id": run.id,
                 "requested_by": run.requested_by,
+                "t0": float(t0),  # clock time of the first sample, s: the trace's time origin
                 "release_t": float(run.released_at - t0),
                 "release_pulse_s": run.granted_pulse,
                 "capture_end": why,

@@ -30,6 +30,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 from collections import deque
 from typing import Any, Callable, Mapping
 
@@ -200,27 +201,7 @@ class Appliance:
         self.notifier.ready(f"idle; {', '.join(where)}")
 
     def _lock_state_dir(self) -> None:
-        """One daemon per state directory: a second one would take over the MQTT client id and
-        deliver every result twice. The lock is the kernel's (flock): it goes with the process."""
-        import fcntl
-        import os
-
-        state = self.config.state_dir
-        try:
-            state.mkdir(parents=True, exist_ok=True)
-            fd = os.open(state / LOCK_NAME, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o640)
-        except OSError as exc:
-            raise StartupError(f"cannot create the lock file in {str(state)!r}: {exc.strerror}") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            other = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
-            os.close(fd)
-            raise StartupError(f"another moi daemon (pid {other}) runs on the state directory {str(state)!r}; "
-                               "stop it first, or give this one its own state_dir") from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-        self._lock_fd = fd
+        self._lock_fd = lock_state_dir(self.config.state_dir)
 
     def _unlock_state_dir(self) -> None:
         if self._lock_fd is not None:
@@ -620,6 +601,30 @@ def _part_columns(part: Mapping[str, Any]) -> dict[str, Any]:
             "recipe_version": recipe.get("version"), "release_index": release.get("index"),
             "releases": release.get("of"), "verdict": release.get("verdict"), "part_verdict": part.get("verdict"),
             "part_value": whole.get("mean"), "part_U": whole.get("U")}
+
+
+def lock_state_dir(state: Path) -> int:
+    """Take the state directory's lock (the descriptor holds it; closing it releases it). One daemon
+    per state directory: a second one would take over the MQTT client id and deliver every result
+    twice. The lock is the kernel's (flock): it goes with the process."""
+    import fcntl
+    import os
+
+    try:
+        state.mkdir(parents=True, exist_ok=True)
+        fd = os.open(state / LOCK_NAME, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o640)
+    except OSError as exc:
+        raise StartupError(f"cannot create the lock file in {str(state)!r}: {exc.strerror}") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        other = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+        os.close(fd)
+        raise StartupError(f"another moi daemon (pid {other}) runs on the state directory {str(state)!r}; "
+                           "stop it first, or give this one its own state_dir") from None
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    return fd
 
 
 class _Fatal(ServiceError):

@@ -454,12 +454,16 @@ class Store:
 
     @_store_errors("reading a measurement")
     def get(self, key: str | int, *, trace: bool = False) -> StoredMeasurement | None:
-        """A measurement by UUID (or a unique UUID prefix) or by sequence number."""
+        """A measurement by UUID (or a unique UUID prefix) or by sequence number.
+
+        A key of digits only is a sequence number first and a UUID prefix when no measurement has that
+        number (a UUID may start with eight digits)."""
         cols = _FULL_COLUMNS + (_TRACE_COLUMNS if trace else "")
         with self._lock:
+            rows = []
             if isinstance(key, int) or (isinstance(key, str) and key.isdigit()):
                 rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE seq = ?", (int(key),)).fetchall()
-            else:
+            if not rows and isinstance(key, str):
                 # a prefix, compared literally: '%' and '_' in the key are not wildcards
                 rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE substr(uuid, 1, length(?)) = ?",
                                         (str(key), str(key))).fetchall()

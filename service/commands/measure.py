@@ -43,7 +43,10 @@ DEFAULT_TIME_SCALE = {"encoder": 5.0, "camera": 1.0}
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sim", action="store_true",
-                   help="use the simulated rig (required: on the device the daemon `moi run` measures)")
+                   help="use the simulated rig (or give --config for the configured hardware)")
+    p.add_argument("--config", "-c", metavar="appliance.toml",
+                   help="one measurement on the hardware of this configuration (commissioning: no daemon, no "
+                        "store, no MQTT or Modbus); stop the daemon first")
     p.add_argument("--rig", metavar="RIG.toml",
                    help="rig file (default: the torsion demo rig, k = 0.3651 N·m/rad, declared viscous)")
     p.add_argument("--inertia", "-J", type=float, default=DEFAULT_INERTIA, metavar="KG_M2",
@@ -79,8 +82,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.config:
+        return _measure_configured(args)
     if not args.sim:
-        raise InvalidInput("moi measure: only --sim is available here; on the device the daemon (`moi run`) measures")
+        raise InvalidInput("moi measure: give --sim (the simulated rig) or --config FILE (the configured hardware)")
     if args.time_scale is None:
         args.time_scale = DEFAULT_TIME_SCALE[args.sensor]
     if not (0 < args.time_scale <= 100):
@@ -145,6 +150,55 @@ def run(args: argparse.Namespace) -> int:
     print(m.result.report())
     if m.result.J is not None:
         print(f"true J {truth.inertia:g} kg·m² → error {100 * (m.result.J / truth.inertia - 1):+.4f} %")
+    return 0
+
+
+def _measure_configured(args: argparse.Namespace) -> int:
+    """One measurement on the devices of the configuration, built by the daemon's own builder."""
+    from firmware_host import Sequencer
+
+    from ..check import pin_problems
+    from ..config import load_config
+    from ..daemon import lock_state_dir
+    from ..errors import ConfigError, StartupError
+    from ..hardware import build_devices
+
+    config = load_config(args.config)
+    if pin_problems(config):
+        raise ConfigError("; ".join(pin_problems(config)))
+    out = sys.stderr if args.json else sys.stdout
+    try:
+        lock = lock_state_dir(config.state_dir)  # not while the daemon drives the same solenoid
+    except StartupError as exc:
+        print(f"moi measure: error: {exc}", file=sys.stderr)
+        return EXIT_FAULT
+    results: list = []
+    try:
+        with build_devices(config) as devices:
+            for line in devices.notes:
+                print(line, file=out)
+            with Sequencer(clock=devices.clock, solenoid=devices.solenoid, sensor=devices.sensor, rig=config.rig,
+                           sink=results.append, config=config.sequencer, options=config.identification,
+                           indicator=devices.indicator) as seq:
+                t0 = devices.clock.now()
+                seq.subscribe(lambda e: print(f"[{e.time - t0:7.2f} s] {e.state.value:<12} {e.reason}", file=out))
+                print(f"{'simulated' if config.simulated else 'hardware'} rig of {args.config}: releasing", file=out)
+                seq.request_measurement("cli")
+                c = config.sequencer
+                last = seq.run_until_settled(timeout=c.pre_trigger + c.capture_duration + c.identify_timeout + 30.0)
+    finally:
+        import os
+        os.close(lock)
+    if not results:
+        reason = seq.last_fault or (last.reason if last else "no result")
+        print(f"moi measure: measurement failed: {reason}", file=sys.stderr)
+        return EXIT_FAULT
+    m = results[0]
+    if args.json:
+        import json
+        sys.stdout.write(json.dumps(m.to_dict(), ensure_ascii=False, allow_nan=False) + "\n")
+    else:
+        print(m.result.report())
     return 0
 
 

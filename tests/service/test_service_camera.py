@@ -82,7 +82,7 @@ def test_the_daemon_measures_J_with_the_simulated_camera_triggered_by_the_plc(tm
     # the raw trace is the camera's (yaw-corrected), the configuration used is recorded with it
     with_trace = app.app.store.get(stored.uuid, trace=True)
     assert with_trace.trace_meta["sensor"] == "camera" and with_trace.trace_meta["camera"]["yaw_deg"] == cam["yaw_deg"]
-    assert len(with_trace.trace_t) == cam["samples"]
+    assert len(with_trace.trace_t) == cam["samples"] - cam.get("outside_window", 0) == cam["frames_used"]
     assert stored.config["simulation"]["sensor"] == "camera"
     assert stored.config["simulation"]["camera_config"]["camera"]["fps"] == 100.0
     assert app.stop() == 0

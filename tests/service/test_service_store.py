@@ -125,3 +125,17 @@ def test_export_csv_json_and_trace(tmp_path, result, capsys):
     t = read_trace(trace_csv)
     np.testing.assert_allclose(t.t, result[1].t, atol=1e-9)
     np.testing.assert_allclose(t.angle, result[1].angle, rtol=1e-11, atol=1e-15)
+
+
+def test_a_uuid_that_starts_with_digits_is_found_by_its_prefix(tmp_path, result, monkeypatch):
+    import uuid as uuidlib
+
+    import service.store as store_module
+
+    fixed = uuidlib.UUID("12345678-9abc-4def-8123-456789abcdef")
+    monkeypatch.setattr(store_module.uuidlib, "uuid4", lambda: fixed)
+    with Store(tmp_path) as store:
+        m = store_one(store, result)
+        assert m.uuid == str(fixed) and m.seq == 1
+        assert store.get("12345678").uuid == m.uuid   # no measurement 12345678: the UUID prefix
+        assert store.get("1").uuid == m.uuid          # digits that are a sequence number
