@@ -401,6 +401,8 @@ class Appliance:
         result's values only once the store holds the result. PUBLISHING is delivered after the
         store write; when that failed (a full disk), J must not go out while it is lost here."""
         msg = event.to_dict()
+        # the sequencer's count of transitions, named apart from a result's seq (which counts measurements)
+        msg["transition"] = msg.pop("seq", None)
         if event.measurement is not None and event.measurement_id not in self._durable_results:
             for key in ("J", "J_std", "omega_n"):
                 msg.pop(key, None)

@@ -495,3 +495,20 @@ def test_the_latest_delivered_result_is_retained_for_home_assistant(tmp_path, br
     finally:
         svc.stop()
         store.close()
+
+
+def test_state_messages_name_their_counter_apart_from_the_result_seq(tmp_path, broker, appliance_factory,
+                                                                     consumer_factory):
+    c = consumer_factory(broker.port, ["moi/test-rig/state", "moi/test-rig/result"])
+    c.wait_subscribed()
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
+    assert app.app.mqtt.subscribed_event.wait(10)
+    app.press()
+    app.wait_done(1)
+    c.wait(lambda c: c.results(), 20, "the result")
+    c.wait(lambda c: any(json.loads(p)["state"] == "IDLE" and json.loads(p).get("measurement_id")
+                         for p in c.on("/state")), 10, "IDLE after the measurement")
+    states = [json.loads(p) for p in c.on("/state")]
+    events = [s for s in states if s.get("measurement_id")]
+    assert events and all("seq" not in s and isinstance(s["transition"], int) for s in events), events
+    assert c.results()[0]["seq"] == 1
