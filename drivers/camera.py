@@ -33,6 +33,7 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 
+from measurement.flags import DROPPED_FRAMES
 from measurement.vision.config import CameraConfig, CameraModel
 from measurement.vision.locate import to_grey
 from measurement.vision.pipeline import DropCounter
@@ -86,7 +87,7 @@ class Camera(ABC):
 
     def flags(self) -> tuple[str, ...]:
         """Quality flags for a trace (``dropped_frames``)."""
-        return ("dropped_frames",) if self.stats().get("dropped_frames") else ()
+        return (DROPPED_FRAMES,) if self.stats().get("dropped_frames") else ()
 
     @abstractmethod
     def close(self) -> None:

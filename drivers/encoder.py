@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from measurement.flags import ENCODER_ERRORS
+
 from .aioloop import LoopThread
 from .clock import Clock, MonotonicClock
 from .errors import DriverConfigError, EncoderFault
@@ -268,7 +270,7 @@ class ModbusEncoder:
         return c
 
     def flags(self) -> tuple[str, ...]:
-        return ("encoder_errors",) if self.stats()["errors"] else ()
+        return (ENCODER_ERRORS,) if self.stats()["errors"] else ()
 
     def wait_for_samples(self, n: int, timeout: float) -> bool:
         """Block until ``n`` samples were taken since ``start()`` (True), a fault, or ``timeout`` s of real time (False)."""

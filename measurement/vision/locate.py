@@ -32,11 +32,12 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from ..flags import CORRUPT_FRAME, MARKER_LOST
 from .config import CameraModel
 
 # reasons a frame yields no position (strings go into counts and flags)
-CORRUPT = "corrupt_frame"
-LOST = "marker_lost"
+CORRUPT = CORRUPT_FRAME
+LOST = MARKER_LOST
 
 
 @dataclass(frozen=True)

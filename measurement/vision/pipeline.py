@@ -17,14 +17,15 @@ from typing import Iterable
 import numpy as np
 
 from ..errors import VisionError
+from ..flags import CAMERA_POSE, DROPPED_FRAMES
 from ..trace import Trace
 from .config import CameraConfig
 from .geometry import angle_from_normalised
 from .locate import CORRUPT, LOST, MarkerObservation, MarkerTracker, TrackerSettings
 from .pose import PoseEstimate, estimate_yaw
 
-DROPPED = "dropped_frames"
-POSE = "camera_pose"
+DROPPED = DROPPED_FRAMES
+POSE = CAMERA_POSE
 
 
 #: a gap between two frames longer than this many frame periods means frames were lost (shorter: jitter)

@@ -21,7 +21,9 @@ from aiohttp import web
 from .. import __version__
 from .auth import COOKIE, CSRF_HEADER, SESSION_LIFETIME
 from .live import Live
-from .words import FLAG_WORDS, STATE_WORDS, flag_words
+from measurement.flags import FLAGS
+
+from .words import STATE_WORDS, flag_words
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..store import StoredMeasurement as Measurement
@@ -395,7 +397,7 @@ class Views:
 
         export = urlencode(args)
         return self._page(request, "history.html", title="History", rows=rows, total=total, page=page, pages=pages,
-                          q=self._query_args(request), link=link, export=export, flag_names=sorted(FLAG_WORDS),
+                          q=self._query_args(request), link=link, export=export, flag_names=sorted(FLAGS),
                           recipes=self.app.store.recipes())
 
     async def export(self, request: web.Request) -> web.Response:
