@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         with Sequencer(clock=clock, solenoid=solenoid, sensor=devices.sensor, rig=rig, sink=results.append,
                        config=config, options=Options(discover=not args.no_discover), button=button) as seq:
             t0 = clock.now()
-            seq.subscribe(lambda e: print(f"[{e.time - t0:7.2f} s] {e.state.value:<12} {e.reason}", file=out))
+            seq.subscribe(_state_printer(t0, args.time_scale, out))
             print("pressing the button", file=out)
             button.pin.drive_low()   # pull-up button: pressed pulls the line low
             button.pin.drive_high()
@@ -174,7 +174,7 @@ def _measure_configured(args: argparse.Namespace) -> int:
                            sink=results.append, config=config.sequencer, options=config.identification,
                            indicator=devices.indicator) as seq:
                 t0 = devices.clock.now()
-                seq.subscribe(lambda e: print(f"[{e.time - t0:7.2f} s] {e.state.value:<12} {e.reason}", file=out))
+                seq.subscribe(_state_printer(t0, config.simulation.time_scale if config.simulated else 1.0, out))
                 print(f"{'simulated' if config.simulated else 'hardware'} rig of {args.config}: releasing", file=out)
                 seq.request_measurement("cli")
                 c = config.sequencer
@@ -183,6 +183,21 @@ def _measure_configured(args: argparse.Namespace) -> int:
         import os
         os.close(lock)
     return _print_result(results, seq, last, args.json)
+
+
+def _state_printer(t0: float, time_scale: float, out):
+    """Each state as a line: the sequencer's clock (simulated seconds on the simulated rig) and, when
+    that clock runs faster, the real seconds too, so a 30 s identification reads as the 6 s it took."""
+    import time
+
+    wall0 = time.monotonic()
+
+    def show(e) -> None:
+        real = f"  ({time.monotonic() - wall0:.1f} s real time)" if time_scale != 1.0 else ""
+        hint = "; identifying…" if e.state.value == "IDENTIFYING" else ""
+        print(f"[{e.time - t0:7.2f} s] {e.state.value:<12} {e.reason}{hint}{real}", file=out, flush=True)
+
+    return show
 
 
 def _print_result(results: list, seq, last, as_json: bool, truth: dict | None = None) -> int:
