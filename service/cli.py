@@ -1,7 +1,7 @@
 """The `moi` command.
 
 Each subcommand lives in its own module under ``service.commands`` with
-``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int``.
+``add_arguments(parser)`` and ``run(args) -> int``; its one-line help is in ``COMMANDS``.
 Bad input (``measurement.errors.InvalidInput`` and its subclasses) gives one
 line on stderr and exit status 2; anything else escaping is a bug (exit 1,
 with its traceback).
@@ -17,29 +17,40 @@ from typing import Sequence
 from measurement.errors import InvalidInput
 from service.errors import StoreError
 
-#: subcommand → module (in the order `moi --help` lists them)
-COMMANDS = {
-    "identify": "service.commands.identify",
-    "simulate": "service.commands.simulate",
-    "calibrate": "service.commands.calibrate",
-    "camera-check": "service.commands.camera_check",
-    "measure": "service.commands.measure",
-    "run": "service.commands.run",
-    "results": "service.commands.results",
-    "export": "service.commands.export",
-    "spc": "service.commands.spc",
-    "store": "service.commands.store",
-    "modbus-map": "service.commands.modbus_map",
-    "demo": "service.commands.demo",
+#: subcommand → (module, one-line help), in the order `moi --help` lists them. A module is imported
+#: only when its command runs (or its own --help is asked): `moi --help` loads no command.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "identify": ("service.commands.identify",
+        "identify J, ω_n and the damping from a trace CSV or a video"),
+    "simulate": ("service.commands.simulate",
+        "simulate a free swing with chosen effects, noise, quantisation and sample rate"),
+    "calibrate": ("service.commands.calibrate",
+        "calibrate a torsion rig's stiffness and tare inertia from reference loads"),
+    "camera-check": ("service.commands.camera_check",
+        "find the marker in one camera frame: position, angle, annotated PNG for alignment"),
+    "measure": ("service.commands.measure",
+        "one push-button measurement cycle, on the simulated rig (--sim) or the configured devices (--config), printed"),
+    "run": ("service.commands.run",
+        "run the appliance daemon: sequencer, result store, MQTT, Modbus server, systemd notify"),
+    "results": ("service.commands.results",
+        "list the stored measurements, or show one in full"),
+    "export": ("service.commands.export",
+        "export stored measurements to CSV or JSON, or one measurement's raw trace"),
+    "spc": ("service.commands.spc",
+        "SPC per recipe: control chart numbers, capability, run rules and a control-chart PNG"),
+    "store": ("service.commands.store",
+        "check a result store for damage, or salvage what can be read into a new one"),
+    "modbus-map": ("service.commands.modbus_map",
+        "print the Modbus register map (Markdown, as in docs/modbus.md), check the doc, or read a live appliance"),
+    "demo": ("service.commands.demo",
+        "the appliance on the simulated rig: one push-button measurement, printed with its Modbus registers (and MQTT)"),
 }
 
 
-def _modules():
-    """Every command module, in ``COMMANDS`` order. One that fails to import is a bug and raises:
-    `moi` never lists fewer commands than it has. The modules import only what their arguments
-    need; the heavy libraries (scipy, OpenCV, pymodbus...) are imported inside ``run``."""
-    for name, path in COMMANDS.items():
-        yield name, importlib.import_module(path)
+def _chosen(argv: Sequence[str]) -> str | None:
+    """The subcommand named on the command line: the first word that is not an option (None if none)."""
+    word = next((w for w in argv if not w.startswith("-")), None)
+    return word if word in COMMANDS else None
 
 
 class _Version(argparse.Action):
@@ -56,21 +67,26 @@ class _Version(argparse.Action):
         parser.exit()
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The `moi` parser. Every command is listed; only the one that ``argv`` names (default: the
+    process's arguments) has its module imported and its arguments added."""
     parser = argparse.ArgumentParser(
         prog="moi", description="Measure the moment of inertia of a part from a free pendulum swing.")
     parser.add_argument("--version", action=_Version, help="show the version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name, module in _modules():
-        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
-        module.add_arguments(p)
-        p.set_defaults(_run=module.run)
+    chosen = _chosen(sys.argv[1:] if argv is None else argv)
+    for name, (path, text) in COMMANDS.items():
+        p = sub.add_parser(name, help=text, description=text)
+        if name == chosen:
+            module = importlib.import_module(path)  # an import error here is a bug: it raises
+            module.add_arguments(p)
+            p.set_defaults(_run=module.run)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     try:
         return int(args._run(args) or 0)

@@ -41,7 +41,6 @@ from measurement.rig import CalibrationRecord
 
 from ..files import read_rig, read_toml, read_trace, write_rig
 
-HELP = "calibrate a torsion rig's stiffness and tare inertia from reference loads"
 
 _REF_KEYS = {"name", "trace", "added_inertia", "added_inertia_std", "cylinders", "omega", "zeta", "omega_n"}
 _CYL_KEYS = {"mass", "diameter", "distance", "own_inertia"}

@@ -34,7 +34,6 @@ if TYPE_CHECKING:  # the vision modules load OpenCV: imported where used, not fo
     from measurement.vision.config import CameraConfig
     from measurement.vision.locate import MarkerObservation
 
-HELP = "find the marker in one camera frame: position, angle, annotated PNG for alignment"
 
 #: frames grabbed from a live camera before the one measured (exposure and gain settle)
 SETTLE_FRAMES = 5

@@ -26,7 +26,6 @@ from pathlib import Path
 from ..defaults import DEMO_EFFECTS, DEMO_INERTIA
 from ..errors import InputFileError
 
-HELP = "the appliance on the simulated rig: one push-button measurement, printed with its Modbus registers (and MQTT)"
 
 EXIT_FAULT = 3
 

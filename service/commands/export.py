@@ -15,7 +15,6 @@ from ..files import write_text_atomic
 from ..payload import iso_utc
 from ._common import add_store_arguments, fmt_time, open_store, parse_time
 
-HELP = "export stored measurements to CSV or JSON, or one measurement's raw trace"
 
 CSV_COLUMNS = (
     "seq", "uuid", "status", "trigger", "device_id", "software_version", "started_at", "finished_at",

@@ -10,8 +10,6 @@ from measurement.effects import EFFECTS
 from ..errors import InputFileError
 from ..files import check_output_path, read_rig, write_atomic
 
-HELP = "identify J, ω_n and the damping from a trace CSV or a video"
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("source", metavar="SOURCE", help="trace CSV (t in s, angle in rad), video file or image folder")

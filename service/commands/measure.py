@@ -27,7 +27,6 @@ from ..defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, demo_camera
 from ..files import read_rig
 from .simulate import EFFECT_SYNTAX, parse_effects
 
-HELP = "one push-button measurement cycle on the simulated rig (solenoid, encoder, sequencer), printed"
 
 #: the demo rig, part and damping when no --rig is given
 DEFAULT_RIG = DEMO_RIG

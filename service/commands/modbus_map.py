@@ -13,8 +13,6 @@ import sys
 from .. import registers as R
 from ..files import read_text, write_text_atomic
 
-HELP = "print the Modbus register map (Markdown, as in docs/modbus.md), check the doc, or read a live appliance"
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--check", metavar="FILE", help="compare FILE with the generated map; exit 2 if it differs")

@@ -9,8 +9,6 @@ import json
 from ..errors import InputFileError
 from ._common import add_store_arguments, fmt_time, open_store, parse_time
 
-HELP = "list the stored measurements, or show one in full"
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("id", nargs="?", metavar="ID", help="UUID, UUID prefix or sequence number to show in full")

@@ -9,8 +9,6 @@ import sys
 
 from ..errors import StartupError, StoreError
 
-HELP = "run the appliance daemon: sequencer, result store, MQTT, Modbus server, systemd notify"
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", "-c", metavar="appliance.toml",

@@ -10,7 +10,6 @@ from measurement.errors import InvalidInput, UnknownEffectError
 
 from ..files import read_rig, write_text_atomic
 
-HELP = "simulate a free swing with chosen effects, noise, quantisation and sample rate"
 
 EFFECT_SYNTAX = (
     "effects as NAME=VALUE (the effect's physical parameter: viscous c [N·m·s/rad], coulomb Tc [N·m] "

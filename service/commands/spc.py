@@ -18,8 +18,6 @@ from ..errors import InputFileError
 from ..recipes import recipe_spc
 from ._common import add_store_arguments, fmt_time, open_store, parse_time
 
-HELP = "SPC per recipe: control chart numbers, capability, run rules and a control-chart PNG"
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_store_arguments(p)

@@ -9,8 +9,6 @@ from pathlib import Path
 from ..errors import InputFileError
 from ._common import add_store_arguments, find_store_dir
 
-HELP = "check a result store for damage, or salvage what can be read into a new one"
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("action", choices=("check", "salvage"),
