@@ -25,6 +25,7 @@ DROPPED_FRAMES = "dropped_frames"
 CORRUPT_FRAME = "corrupt_frame"
 # -- the rig ---------------------------------------------------------------------------
 CALIBRATION_DUE = "calibration_due"
+NEGATIVE_INERTIA = "negative_inertia"
 
 #: flag → what it tells the user (the Modbus map and the docs print these)
 FLAGS: dict[str, str] = {
@@ -41,6 +42,8 @@ FLAGS: dict[str, str] = {
     MARKER_LOST: "the tracker lost the marker in some frames",
     DROPPED_FRAMES: "the camera dropped frames (gaps in the frame timestamps)",
     CORRUPT_FRAME: "some frames were unreadable or corrupt",
+    NEGATIVE_INERTIA: "J_object (J − tare) or J_object_axis came out negative, which no part can have: the rig file's tare "
+                      "inertia or [object] mass/axis_offset does not fit this set-up",
     CALIBRATION_DUE: "the rig's calibration is past its validity period ([calibration] date + valid_days of the rig file)",
 }
 

@@ -468,6 +468,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         flags.append(F.PARAMETER_AT_BOUND)
     if final.cov_method != "white":
         flags.append(F.CORRELATED_RESIDUAL)
+    if any(v is not None and v < 0 for v in (J_obj, J_ax)):
+        flags.append(F.NEGATIVE_INERTIA)
 
     added = tuple(n for n in final.model.effect_names if n not in declared.effect_names)
     structure = diag.describe()

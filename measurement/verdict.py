@@ -66,7 +66,7 @@ RULES = ("guard_band", "simple")
 QUANTITIES = ("J", "J_object", "J_object_axis")
 
 #: flags that make a result INVALID unless a recipe says otherwise
-DEFAULT_INVALID_FLAGS = (F.UNMODELED_RESIDUAL, F.FIT_NOT_CONVERGED, F.CALIBRATION_DUE)
+DEFAULT_INVALID_FLAGS = (F.UNMODELED_RESIDUAL, F.FIT_NOT_CONVERGED, F.CALIBRATION_DUE, F.NEGATIVE_INERTIA)
 
 
 class VerdictError(InvalidInput):

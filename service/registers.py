@@ -63,6 +63,7 @@ FLAG_BITS: dict[str, int] = {
     F.WINDOW_CUT_AT_GAP: 11,
     F.ANGLE_UNWRAPPED: 12,
     F.CALIBRATION_DUE: 13,  # map version 4: the rig's calibration is past its validity period
+    F.NEGATIVE_INERTIA: 14,  # map version 4
 }
 FLAG_OTHER_BIT = 15
 

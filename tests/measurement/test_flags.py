@@ -26,3 +26,16 @@ def test_identification_raises_only_described_flags():
 
     src = inspect.getsource(identification)
     assert '"unmodeled_residual"' not in src and "flags.append(\"" not in src  # constants from the table only
+
+
+def test_a_tare_larger_than_J_is_flagged_not_published_silently():
+    from measurement import Pendulum, Rig, identify, simulate_trace
+
+    truth = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
+    trace = simulate_trace(Pendulum(truth, 0.0125, {"viscous": {"c": 1.5e-4}}), theta0=0.2, duration=8, rate=100,
+                           noise_std=1e-4, seed=2)
+    right = identify(trace, Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5e-3, declared=("viscous",)))
+    wrong = identify(trace, Rig(kind="torsion", stiffness=0.3651, tare_inertia=0.02, declared=("viscous",)))
+    assert right.J_object > 0 and F.NEGATIVE_INERTIA not in right.flags
+    assert wrong.J_object < 0 and F.NEGATIVE_INERTIA in wrong.flags
+    assert wrong.J == right.J   # J itself is unaffected: only the subtraction is suspect
