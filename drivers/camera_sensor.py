@@ -190,7 +190,7 @@ class CameraAngleSensor:
         with self._lock:
             live = self._tracking
             # the sequencer's trace counts time from its first kept sample (meta "sequencer.t0", clock
-            # time in s), which is not the first tracked frame when the pre-trigger window was trimmed
+            # time in s), which need not be the first tracked frame: the sequencer may not keep every sample
             first = live.t[0] if live.t else 0.0
             origin = float((trace.meta.get("sequencer") or {}).get("t0", first))
             t_rel = np.asarray(live.t, dtype=float) - origin
