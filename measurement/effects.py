@@ -33,7 +33,7 @@ if TYPE_CHECKING:  # effects need only the rig's attributes; the rig module impo
     from .rig import Rig
 
 #: names the effects' ``term`` expressions may use, in their numpy form
-_NUMPY_NAMES = {"cos": np.cos, "sin": np.sin, "abs": np.abs}
+_NUMPY_NAMES = {"cos": np.cos, "sin": np.sin, "abs": np.abs, "exp": np.exp}
 
 #: name → effect class, filled by ``Effect.__init_subclass__`` in definition order.
 EFFECTS: dict[str, type["Effect"]] = {}
@@ -47,6 +47,7 @@ class Parameter:
     physical/physical_unit: the torque-law quantity reported when J is known
     (e.g. c in N·m·s/rad); None when the fitted quantity is already physical.
     lower: lower bound used in fitting (dissipation cannot be negative).
+    upper: upper bound (where the law stops meaning what its name says).
     """
 
     name: str
@@ -55,6 +56,8 @@ class Parameter:
     physical_unit: str | None
     lower: float = 0.0
     description: str = ""
+    #: upper bound used in fitting
+    upper: float = math.inf
 
 
 class Effect:
@@ -111,6 +114,30 @@ class Effect:
     #: Static friction capacity at rest (rad/s², a θ'' magnitude) as an
     #: expression in x and p0...; empty when the effect cannot hold the pendulum.
     holding_term: ClassVar[str] = ""
+    #: An effect that remembers the last turning point (``term`` then also
+    #: uses xr, where it was, rad, and zr, a state it had there): ``memory`` is
+    #: the new zr at a reversal at x reached in direction s, ``memory_force``
+    #: its θ'' contribution at rest there (in x, zr, p0...). One effect at most.
+    memory: ClassVar[str] = ""
+    memory_force: ClassVar[str] = ""
+    #: condition (in p0...) under which the remembered force turns over within a
+    #: small fraction of a step after a reversal
+    memory_sharp: ClassVar[str] = "False"
+    #: The effect this one generalises (it contains it as a limit and replaces
+    #: it in a model): offered as a candidate only where that one is present.
+    refines: ClassVar[str | None] = None
+
+    def refined_start(self, refined_values: Sequence[float], amplitudes: Sequence[float]) -> list[list[float]]:
+        """Start values that reproduce (nearly) the refined effect with ``refined_values``.
+
+        amplitudes: (largest, smallest) swing amplitude of the record, rad.
+        Several starts may be given; the fit keeps the best.
+        """
+        raise NotImplementedError
+
+    def parameter_scales(self, amplitude: float) -> list[float | None]:
+        """Typical size of each parameter at this amplitude (rad); None: from the regressors."""
+        return [None] * len(self.parameters)
 
     def equivalent_viscous(self, values: Sequence[float], amplitude: float, omega: float) -> float:
         """c_eq/J (1/s) dissipating the same energy per cycle at this amplitude (rad) and ω (rad/s)."""
@@ -299,6 +326,92 @@ class Coulomb(Effect):
         return {"Tc": None if inertia is None else b * inertia}
 
 
+class Dahl(Coulomb):
+    name = "dahl"
+    role = "damping"
+    parameters = (
+        Parameter("Tc_per_J", "rad/s²", "Tc", "N·m", description="sliding friction torque over J (compound: μ·m·g/J)"),
+        Parameter("theta_c", "rad", None, None, upper=0.5,
+                  description="pre-sliding angle: the friction reaches 63 % of T_c this far from a turning point"
+                              " (beyond 0.5 rad it would be a spring, not friction)"),
+    )
+    cause = "pre-sliding (micro-slip) stiffness of a dry bearing, or a cable: a spring at small amplitude, "\
+            "dry friction at large"
+    law = "dT/dθ = (T_c/θ_c)·(1 − T/T_c·sgn θ') (Dahl; compound: T_c ∝ cos θ)"
+    refines = "coulomb"
+
+    # The Dahl law integrates in closed form over a half-swing: with z = T/T_c
+    # and z_r its value at the last turning point x_r,
+    #     z = s − s·(1 − s·z_r)·exp(−|x − x_r|/θ_c),
+    # so the friction is a function of the angle travelled since the reversal
+    # and the integrator needs no third state. θ_c = 0 is Coulomb friction.
+    _z = "(s - s * (1.0 - s * zr) * exp(-abs(x - xr) / p1) if p1 > 0.0 else s)"
+    memory = _z
+    memory_sharp = "p0 != 0.0 and p1 > 0.0"
+
+    @property
+    def term(self) -> str:  # type: ignore[override]
+        return f"p0 * {self._z} * cos(x)" if self.rig.kind == "compound" else f"p0 * {self._z}"
+
+    @property
+    def holding_term(self) -> str:  # type: ignore[override]
+        return ""  # a pre-sliding spring does not stick: it keeps oscillating, less and less
+
+    @property
+    def memory_force(self) -> str:  # type: ignore[override]
+        return "p0 * zr * cos(x)" if self.rig.kind == "compound" else "p0 * zr"
+
+    def basis(self, theta, omega):
+        # Linear in T_c only: its regressor is the sliding (Coulomb) one; θ_c
+        # enters through refined_start and parameter_scales, not a regression.
+        theta = np.asarray(theta, dtype=float)
+        col = np.sign(np.asarray(omega, dtype=float)) * (np.cos(theta) if self.rig.kind == "compound" else 1.0)
+        return np.stack([np.broadcast_to(col, theta.shape), np.zeros_like(theta)], axis=1)
+
+    def refined_start(self, refined_values, amplitudes):
+        smallest = max(float(amplitudes[1]), 1e-6)
+        # the pre-sliding angle shows where the swings come down to it
+        return [[float(refined_values[0]), f * smallest] for f in (0.1, 0.3, 1.0)]
+
+    def parameter_scales(self, amplitude):
+        return [None, 0.1 * max(amplitude, 1e-6)]
+
+    def frequency_factor(self, values, omega_n, amplitude):
+        # below θ_c the friction is a spring T_c/θ_c: the swing is faster there
+        tc, thc = float(values[0]), float(values[1])
+        if thc <= 0.0:
+            return 1.0
+        return min(math.sqrt(1.0 + max(tc, 0.0) / (thc * max(omega_n, 1e-9) ** 2)), 10.0)
+
+    def equivalent_viscous(self, values, amplitude, omega):
+        # sliding over all but ≈θ_c of each half-swing
+        thc = float(values[1])
+        return super().equivalent_viscous(values, amplitude, omega) * max(0.0, 1.0 - thc / amplitude) if amplitude > 0 else 0.0
+
+    extra_units = {**Coulomb.extra_units, "presliding_stiffness": "N·m/rad", "presliding_stiffness_per_J": "1/s²"}
+
+    def evidence(self, diag):
+        if diag.freq_amp_t <= -4:
+            return (f"the swing frequency rises as the swing decays, beyond the model (t = {diag.freq_amp_t:.1f}):"
+                    f" a stiffness that acts only at small amplitude, as a bearing's pre-sliding spring")
+        return ""
+
+    def normalise(self, given, inertia):
+        if "theta_c" not in given:
+            raise InvalidInput("dahl: missing value theta_c (rad), the pre-sliding angle")
+        # the sliding friction is given as for dry friction
+        rest = {k: v for k, v in given.items() if k != "theta_c"}
+        return Coulomb(self.rig).normalise(rest, inertia) + [float(given["theta_c"])]
+
+    def physical(self, values, inertia, omega_n):
+        out = super().physical(values, inertia, omega_n)
+        tc, thc = float(values[0]), float(values[1])
+        k = tc / thc if thc > 0 else math.inf
+        out["presliding_stiffness_per_J"] = k
+        out["presliding_stiffness"] = None if inertia is None else k * inertia
+        return out
+
+
 class Quadratic(Effect):
     name = "quadratic"
     role = "damping"
@@ -420,6 +533,10 @@ def resolve_effects(names: Iterable[str], rig: "Rig") -> list[Effect]:
     names = list(names)
     seen: set[str] = set()
     for n in names:
+        other = getattr(EFFECTS.get(n), "refines", None)
+        if other is not None and other in names:
+            raise UnknownEffectError(f"effects {n!r} and {other!r} exclude each other: {n} contains {other} as a limit")
+    for n in names:
         if n not in EFFECTS:
             hint = " (the zero offset is always fitted; it is not an effect)" if n in ("offset", "zero_offset") else ""
             raise UnknownEffectError(f"unknown effect {n!r}{hint}; expected one of {', '.join(EFFECTS)}")
@@ -434,4 +551,12 @@ def resolve_effects(names: Iterable[str], rig: "Rig") -> list[Effect]:
 def candidate_effects(rig: "Rig", present: Iterable[str]) -> list[Effect]:
     """Library effects that apply to this rig and are not already in the model."""
     present = set(present)
-    return [cls(rig) for n, cls in EFFECTS.items() if n not in present and rig.kind in cls.rigs]
+    contained = {EFFECTS[n].refines for n in present if n in EFFECTS}
+    return [cls(rig) for n, cls in EFFECTS.items()
+            if n not in present and n not in contained and rig.kind in cls.rigs
+            and (cls.refines is None or cls.refines in present)]
+
+
+def with_effect(present: Iterable[str], effect: Effect) -> tuple[str, ...]:
+    """The effect names of a model after adding ``effect`` (which replaces the effect it refines)."""
+    return tuple(n for n in present if n != effect.refines) + (effect.name,)

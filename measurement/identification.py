@@ -32,7 +32,7 @@ from threadpoolctl import ThreadpoolController
 
 from . import flags as F
 from .diagnostics import Diagnostics, diagnose
-from .effects import EFFECTS, Effect, candidate_effects, resolve_effects
+from .effects import EFFECTS, Effect, candidate_effects, resolve_effects, with_effect
 from .errors import IdentificationError, TraceError, UnknownEffectError
 from .fit import ModelFit, fit_model
 from .noise import fit_noise
@@ -243,9 +243,13 @@ def score_effect(current: ModelFit, effect: Effect) -> Score:
     """
     model = current.model
     rig = model.rig
-    cand = Model(rig, tuple(resolve_effects(model.effect_names + (effect.name,), rig)))
+    cand = Model(rig, tuple(resolve_effects(with_effect(model.effect_names, effect), rig)))
+    values = {e.name: current.effect(e.name) for e in model.effects}
+    if effect.refines is not None:
+        # at its other parameters' zero the effect is the one it refines, with the same values
+        values[effect.name] = current.effect(effect.refines) + [0.0] * (len(effect.parameters) - 1)
     x = cand.vector((current.value("theta0"), current.value("omega0"), current.value("omega_n")),
-                    {e.name: current.effect(e.name) for e in model.effects}, current.value("offset"))
+                    values, current.value("offset"))
     t = current.t
     ts = t - t[0]
     # with the effect at 0 the candidate's swing is the current fit's (kept on the fit: no simulation)
@@ -260,6 +264,9 @@ def score_effect(current: ModelFit, effect: Effect) -> Score:
         restoring = np.sin(theta) if rig.kind == "compound" else theta
         col = np.sqrt(np.mean(effect.basis(theta, omega) ** 2, axis=0))
         h = 1e-6 * w**2 * float(np.sqrt(np.mean(restoring**2))) / np.where(col > 0, col, 1.0)
+        # a parameter the effect is not linear in is screened by a secant of its typical size
+        amplitude = float(np.max(np.abs(theta)))
+        h = np.array([hj if size is None else size for hj, size in zip(h, effect.parameter_scales(amplitude))])
         G = np.empty((t.size, sl.stop - sl.start))
         for j in range(G.shape[1]):
             xp = x.copy()
@@ -323,7 +330,7 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
             score = score_effect(current, cand)
             if score.d_bic >= 0.0:
                 return score, None
-            model = Model(rig, tuple(resolve_effects(current.model.effect_names + (cand.name,), rig)))
+            model = Model(rig, tuple(resolve_effects(with_effect(current.model.effect_names, cand), rig)))
             try:
                 return score, fit_model(model, current.t, current.y, prep.noise, previous=current, f_scale=f_scale)
             except IdentificationError:

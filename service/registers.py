@@ -23,9 +23,10 @@ from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, 
 from measurement import flags as F
 
 #: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 4  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
+MAP_VERSION = 5  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
 # 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
 #    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
+# 5: bit 6 of `effects` (dahl; it set bit 15, other, before)
 #    holding registers; flag calibration_due (bit 13)
 
 
@@ -75,6 +76,7 @@ EFFECT_BITS: dict[str, int] = {
     "cubic_stiffness": 3,
     "drift": 4,
     "gain": 5,  # map version 3
+    "dahl": 6,  # map version 5
 }
 EFFECT_OTHER_BIT = 15
 
