@@ -524,6 +524,40 @@ class Gain(Effect):
         return {"g": 1.0 + float(values[0])}
 
 
+class View(Effect):
+    name = "view"
+    role = "sensor"
+    parameters = (
+        Parameter("stretch", "1", None, None, lower=-0.5, upper=0.5,
+                  description="image stretched along the horizontal against the vertical (e₁)"),
+        Parameter("shear", "1", None, None, lower=-0.5, upper=0.5,
+                  description="image stretched along a diagonal (e₂): makes the two half-swings unequal"),
+    )
+    #: told apart from the swing only at large angles, where sin 2θ and cos 2θ are not θ and θ²
+    rigs = ("compound",)
+    cause = "camera not square to the swing plane (oblique view, lens): the image of the swing is an ellipse"
+    law = "θ_meas = a + θ + e₁·sin 2θ + e₂·(cos 2θ − 1) (an affine image of the marker's direction, to first order)"
+    min_amplitude: ClassVar[float] = 0.5
+
+    def identifiable(self, amplitude):
+        return amplitude >= self.min_amplitude
+
+    def sensor_basis(self, t, theta):
+        # the direction (sin θ, cos θ) seen through the image map [[1+e₁, e₂], [e₂, 1−e₁]]:
+        # ∂θ_meas/∂e₁ = sin 2θ, ∂θ_meas/∂e₂ = cos 2θ (minus 1: the offset is fitted apart)
+        theta = np.asarray(theta, dtype=float)
+        return np.stack([np.sin(2 * theta), np.cos(2 * theta) - 1.0], axis=1)
+
+    def evidence(self, diag):
+        if abs(diag.asymmetry_t) >= 4:
+            return (f"the two half-swings differ in amplitude by {diag.asymmetry:+.2g} rad (t = {diag.asymmetry_t:.1f}),"
+                    f" as an oblique view of the swing makes them")
+        return ""
+
+    def physical(self, values, inertia, omega_n):
+        return {}
+
+
 def resolve_effects(names: Iterable[str], rig: "Rig") -> list[Effect]:
     """Instantiate effects by name for this rig, in library order.
 

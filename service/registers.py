@@ -26,7 +26,7 @@ from measurement import flags as F
 MAP_VERSION = 5  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
 # 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
 #    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
-# 5: bit 6 of `effects` (dahl; it set bit 15, other, before)
+# 5: bits 6-7 of `effects` (dahl, view; they set bit 15, other, before)
 #    holding registers; flag calibration_due (bit 13)
 
 
@@ -77,6 +77,7 @@ EFFECT_BITS: dict[str, int] = {
     "drift": 4,
     "gain": 5,  # map version 3
     "dahl": 6,  # map version 5
+    "view": 7,  # map version 5
 }
 EFFECT_OTHER_BIT = 15
 
