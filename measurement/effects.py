@@ -123,6 +123,8 @@ class Effect:
     #: condition (in p0...) under which the remembered force turns over within a
     #: small fraction of a step after a reversal
     memory_sharp: ClassVar[str] = "False"
+    #: sensor parameters that change the angle's scale (nominal 0): ω_n is read through them
+    scale_parameters: ClassVar[tuple[str, ...]] = ()
     #: The effect this one generalises (it contains it as a limit and replaces
     #: it in a model): offered as a candidate only where that one is present.
     refines: ClassVar[str | None] = None
@@ -490,6 +492,7 @@ class Gain(Effect):
     #: a scale error is told apart from the amplitude only through the sin θ of a compound rig
     rigs = ("compound",)
     cause = "camera/encoder scale error (distance, focal length, marker geometry)"
+    scale_parameters = ("g_minus_1",)
     law = "θ_meas = a + g·θ"
     extra_units = {"g": "1"}
     #: below this amplitude (rad) sin θ is too close to θ for g to be told from the amplitude
@@ -535,6 +538,7 @@ class View(Effect):
     )
     #: told apart from the swing only at large angles, where sin 2θ and cos 2θ are not θ and θ²
     rigs = ("compound",)
+    scale_parameters = ("stretch",)
     cause = "camera not square to the swing plane (oblique view, lens): the image of the swing is an ellipse"
     law = "θ_meas = a + θ + e₁·sin 2θ + e₂·(cos 2θ − 1) (an affine image of the marker's direction, to first order)"
     min_amplitude: ClassVar[float] = 0.5

@@ -209,6 +209,28 @@ def _summary(fit: ModelFit, rig: Rig) -> ModelSummary:
     )
 
 
+def _omega_n_at_nominal_scale(fit: ModelFit) -> tuple[list[str], float] | None:
+    """ω_n (rad/s) the fit implies were the sensor's scale parameters at their nominal 0, and their names.
+
+    The conditional mean under the fit's Gaussian uncertainty: ω_n − Σ_ωs·Σ_ss⁻¹·s.
+    None when the model fits no scale.
+    """
+    model = fit.model
+    names = [f"{e.name}.{p}" for e in model.sensor for p in e.scale_parameters]
+    if not names:
+        return None
+    iw = model.index("omega_n")
+    idx = [model.index(n) for n in names]
+    s = fit.x[idx]
+    cov_ss = fit.cov[np.ix_(idx, idx)]
+    cov_ws = fit.cov[iw, idx]
+    try:
+        shift = float(cov_ws @ np.linalg.solve(cov_ss, s))
+    except np.linalg.LinAlgError:
+        return None
+    return names, float(fit.x[iw]) - shift
+
+
 def _remove_outliers(fit: ModelFit, prep: Prepared, options: Options) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r = fit.residual
     scale = max(robust_std(r), prep.noise)
@@ -482,6 +504,13 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     structure = diag.describe()
     if diag.structured:
         structure.append("left unexplained: no effect of the library accounts for this structure (flag unmodeled_residual)")
+    nominal = _omega_n_at_nominal_scale(final)
+    if nominal is not None:
+        flags.append(F.SENSOR_SCALE_FITTED)
+        names, w_nom = nominal
+        structure.append(f"the angle's scale was fitted from the swing ({', '.join(names)}): with the sensor at its "
+                         f"nominal scale ω_n would read {w_nom:.6g} rad/s ({(w_nom - w) / ws:+.1f} σ, "
+                         f"{100 * (w_nom - w) / w:+.2f} %); calibrate the sensor's scale (flag sensor_scale_fitted)")
     statistics = {
         "n": final.n, "k": final.k, "dof": final.dof, "rss": final.rss,
         "chi2": final.rss / prep.noise**2, "redchi": final.rss / prep.noise**2 / max(final.dof, 1),
