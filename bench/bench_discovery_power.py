@@ -58,7 +58,7 @@ STRENGTHS = {
         "drift": [("rate", v) for v in (2e-6, 6e-6, 2e-5)],
         "gain": [("g", v) for v in (1.002, 1.006, 1.02)],
         "dahl": [("theta_c", v) for v in (0.01, 0.03, 0.1)],
-        "view": [("shear", v) for v in (0.001, 0.003, 0.01)],
+        "view": [("shear", v) for v in (1e-4, 3e-4, 1e-3)],
     },
 }
 #: values held fixed while the strength above varies (Dahl friction: its sliding torque)
