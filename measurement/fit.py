@@ -256,25 +256,37 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
     steps = 1e-7 * scales[:nd]
     nfev = [0]
 
-    cache: dict[str, np.ndarray] = {}
+    # The last few evaluations by x: scipy evaluates the residual and the
+    # Jacobian at the solution before it returns, the starting-value choice
+    # evaluates the start least_squares begins with, and the fit's outputs
+    # need both at the solution again; each is simulated once. Copies go
+    # out: a robust loss scales scipy's arrays in place.
+    evaluated: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # x → (measured, θ, θ')
+    last_jac: dict[bytes, np.ndarray] = {}
 
-    def simulate(x: np.ndarray) -> np.ndarray:
+    def simulate(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         nfev[0] += 1
-        theta, omega = model.true_angle(x, t, max_step)
-        cache["omega"] = omega
-        return theta
+        return model.true_angle(x, t, max_step)
+
+    def evaluate(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        key = x.tobytes()
+        hit = evaluated.get(key)
+        if hit is None:
+            theta, omega = simulate(x)
+            hit = (model.measured(x, ts, theta), theta, omega)
+            if len(evaluated) >= 4:
+                del evaluated[next(iter(evaluated))]
+            evaluated[key] = hit
+        return hit
 
     def fun(x: np.ndarray) -> np.ndarray:
-        theta = simulate(x)
-        cache["x"], cache["theta"], cache["rate"] = x.copy(), theta, cache["omega"]
-        return model.measured(x, ts, theta) - y
+        return evaluate(x)[0] - y
 
     def jac(x: np.ndarray) -> np.ndarray:
-        if "x" in cache and np.array_equal(cache["x"], x):
-            theta = cache["theta"]
-        else:
-            theta = simulate(x)
-        base = model.measured(x, ts, theta)
+        key = x.tobytes()
+        if key in last_jac:
+            return last_jac[key].copy()
+        base, theta, _ = evaluate(x)
         J = np.empty((t.size, x.size))
         for j in range(nd):
             xp = x.copy()
@@ -283,8 +295,10 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
             if xp[j] + h > hi[j]:
                 h = -h
             xp[j] += h
-            J[:, j] = (model.measured(xp, ts, simulate(xp)) - base) / h
+            J[:, j] = (model.measured(xp, ts, simulate(xp)[0]) - base) / h
         J[:, nd:] = model.sensor_columns(ts, theta)
+        last_jac.clear()
+        last_jac[key] = J.copy()
         return J
 
     if starts is not None and len(starts) > 1:
@@ -298,6 +312,7 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
     except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
         raise IdentificationError(f"least squares failed for model {model.effect_names}: {exc}") from exc
     x = sol.x
+    _, theta, omega = evaluate(x)
     residual = fun(x)
     if not np.all(np.isfinite(residual)):
         raise IdentificationError(f"model {model.effect_names} diverged (non-finite simulation)")
@@ -313,7 +328,7 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
         max_step=max_step, noise=noise, effective=effective, jac=J, scales=scales,
         cov_method=method, cov_inflation=inflation, at_bound=at_bound, f_scale=f_scale,
         n_downweighted=int(np.sum(weight < 0.5)),
-        extra={"theta": cache["theta"], "omega": cache["rate"]},  # the true swing at x (rad, rad/s)
+        extra={"theta": theta, "omega": omega},  # the true swing at x (rad, rad/s)
     )
 
 
