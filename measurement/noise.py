@@ -38,10 +38,13 @@ def autocorrelation(r: np.ndarray, max_lag: int) -> np.ndarray:
     return ac / ac[0] if ac[0] > 0 else np.zeros(max_lag + 1)
 
 
-def ljung_box(r: np.ndarray, lags: int) -> tuple[float, float]:
-    """Ljung–Box statistic Q and its p-value (χ² with ``lags`` degrees of freedom) for whiteness."""
+def ljung_box(r: np.ndarray, lags: int, rho: np.ndarray | None = None) -> tuple[float, float]:
+    """Ljung–Box statistic Q and its p-value (χ² with ``lags`` degrees of freedom) for whiteness.
+
+    rho: r's ``autocorrelation`` to at least ``lags``, when the caller has it already.
+    """
     n = r.size
-    rho = autocorrelation(r, lags)
+    rho = autocorrelation(r, lags) if rho is None else rho[: lags + 1]
     q = n * (n + 2) * float(np.sum(rho[1:] ** 2 / (n - np.arange(1, lags + 1))))
     # the χ² survival function is the regularised upper incomplete gamma function
     return q, float(gammaincc(lags / 2.0, q / 2.0))
