@@ -39,7 +39,7 @@ from .noise import fit_noise
 from .model import Model
 from .result import DiscoveryStep, IdentificationResult, ModelSummary, Quantity
 from .rig import Rig
-from .signal import find_swings, noise_floor, robust_std, spike_candidates, swing_window
+from .signal import Swings, deviation_table, find_swings, noise_floor, robust_std, spike_candidates, swing_window
 from .trace import Trace
 
 
@@ -85,6 +85,7 @@ class Prepared:
     outliers: np.ndarray  # indices into the original trace
     n_unwrapped: int = 0  # 2π jumps removed from the angle
     gap_cut_at: float | None = None  # s: the window ends at a long gap starting here
+    swings: Swings | None = None  # of (t, y) about their median, hysteresis 3·noise
 
 
 def unwrap_angle(y: np.ndarray) -> tuple[np.ndarray, int]:
@@ -95,13 +96,13 @@ def unwrap_angle(y: np.ndarray) -> tuple[np.ndarray, int]:
     return np.unwrap(y, discont=1.5 * math.pi), jumps
 
 
-def _gap_cut(t: np.ndarray, y: np.ndarray, noise: float, periods: float) -> int | None:
+def _gap_cut(t: np.ndarray, y: np.ndarray, noise: float, periods: float, sw: Swings) -> int | None:
     """Index after which a gap of more than ``periods`` swing periods ends the window (None: no such gap).
 
     A gap is kept inside the window only when the swing clearly continues
     after it: at least two full swings well above the noise (10σ).
+    sw: ``find_swings(t, y, hysteresis=3 * noise)``.
     """
-    sw = find_swings(t, y, hysteresis=3 * noise)
     wd = sw.damped_frequency
     if not (math.isfinite(wd) and wd > 0):
         return None
@@ -126,19 +127,23 @@ def prepare(trace: Trace, options: Options = Options()) -> Prepared:
     if span == 0:
         raise TraceError(f"{trace.source}: the angle never changes; expected a free swing")
     floor = 1e-9 * span  # noise-free simulations still need a scale
-    spikes = spike_candidates(y_all, max(noise_floor(y_all, robust=True, t=t_all), floor), t=t_all)
-    noise = max(noise_floor(y_all, exclude=spikes, t=t_all), floor)
+    table = deviation_table(y_all, t_all)  # the neighbour predictions both floors and the glitch screen read
+    spikes = spike_candidates(y_all, max(noise_floor(y_all, robust=True, t=t_all, table=table), floor), t=t_all,
+                              table=table)
+    noise = max(noise_floor(y_all, exclude=spikes, t=t_all, table=table), floor)
     keep = np.ones(y_all.size, dtype=bool)
     keep[spikes] = False
     win = swing_window(t_all[keep], y_all[keep], noise)
     idx = np.flatnonzero(keep)[win.start:win.stop]
     gap_cut_at = None
-    cut = _gap_cut(t_all[idx], y_all[idx], noise, options.gap_periods)
+    t, y = t_all[idx], y_all[idx]
+    sw = find_swings(t, y, hysteresis=3 * noise)
+    cut = _gap_cut(t, y, noise, options.gap_periods, sw)
     if cut is not None and cut + 1 >= 30:
         gap_cut_at = float(t_all[idx[cut]])
         idx = idx[:cut + 1]
-    t, y = t_all[idx], y_all[idx]
-    sw = find_swings(t, y, hysteresis=3 * noise)
+        t, y = t_all[idx], y_all[idx]
+        sw = find_swings(t, y, hysteresis=3 * noise)
     if sw.count < options.min_swings:
         raise TraceError(
             f"{trace.source}: only {sw.count:g} full swing(s) found; expected at least {options.min_swings:g} "
@@ -152,7 +157,7 @@ def prepare(trace: Trace, options: Options = Options()) -> Prepared:
     return Prepared(t=t, y=y, noise=noise, start=int(idx[0]), stop=int(idx[-1]) + 1,
                     release_detected=win.release_detected, stopped=win.stop_detected or gap_cut_at is not None,
                     stuck=win.stuck, outliers=np.asarray(spikes, dtype=int), n_unwrapped=n_unwrapped,
-                    gap_cut_at=gap_cut_at)
+                    gap_cut_at=gap_cut_at, swings=sw)
 
 
 def _propagate(fn: Callable[[np.ndarray], float], x: np.ndarray, cov: np.ndarray) -> tuple[float, float]:

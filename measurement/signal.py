@@ -66,17 +66,30 @@ def loo_deviations(t: np.ndarray | None, y: np.ndarray, d: int) -> tuple[np.ndar
     return idx, dev / np.sqrt(1.0 + np.sum(weights**2, axis=0))
 
 
-def _gap_free(t: np.ndarray | None, idx: np.ndarray, d: int) -> np.ndarray:
-    """Whether the window idx ± d spans no gap (an interval over 3× the median)."""
-    if t is None:
-        return np.ones(idx.size, dtype=bool)
-    dt = np.diff(np.asarray(t, dtype=float))
-    bad = np.concatenate([[0], np.cumsum(dt > 3.0 * float(np.median(dt)))])
-    return (bad[idx + d] - bad[idx - d]) == 0
+Deviations = dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+def deviation_table(angle: np.ndarray, t: np.ndarray | None = None, orders: tuple[int, ...] = (1, 2, 3)) -> Deviations:
+    """d → (indices, ``loo_deviations``, whether each window is gap-free) for each d in ``orders``.
+
+    Computed once for a record and handed to ``noise_floor`` and
+    ``spike_candidates`` (``table=``), which otherwise each compute the same.
+    """
+    y = np.asarray(angle, dtype=float)
+    bad = None
+    if t is not None:
+        dt = np.diff(np.asarray(t, dtype=float))
+        bad = np.concatenate([[0], np.cumsum(dt > 3.0 * float(np.median(dt)))])
+    out: Deviations = {}
+    for d in orders:
+        idx, dev = loo_deviations(t, y, d)
+        out[d] = (idx, dev, np.ones(idx.size, dtype=bool) if bad is None else (bad[idx + d] - bad[idx - d]) == 0)
+    return out
 
 
 def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bool = False,
-                t: np.ndarray | None = None, orders: tuple[int, ...] = (1, 2, 3)) -> float:
+                t: np.ndarray | None = None, orders: tuple[int, ...] = (1, 2, 3),
+                table: Deviations | None = None) -> float:
     """White-noise σ of a densely sampled smooth signal, rad.
 
     Each sample is predicted from its neighbours (``loo_deviations``, with d
@@ -89,19 +102,21 @@ def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bo
     itself quantised on encoder data: use it only to find glitches).
     exclude: indices of known glitches, left out with their neighbourhoods.
     t: sample times (s), for uneven sampling and gaps.
+    table: ``deviation_table(angle, t, orders)`` when the caller has it.
     """
     y = np.asarray(angle, dtype=float)
+    if table is None:
+        table = deviation_table(y, t, orders)
     best = math.inf
     for d in orders:
-        idx, dev = loo_deviations(t, y, d)
+        idx, dev, keep = table[d]
         if idx.size < 10:
             continue
-        keep = _gap_free(t, idx, d)
         if exclude is not None and len(exclude):
             near = np.zeros(y.size, dtype=bool)
             for i in np.asarray(exclude, dtype=int):
                 near[max(0, i - d): i + d + 1] = True
-            keep &= ~near[idx]
+            keep = keep & ~near[idx]
         dev = dev[keep]
         if dev.size < 10:
             continue
@@ -112,14 +127,14 @@ def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bo
 
 
 def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
-                     t: np.ndarray | None = None) -> np.ndarray:
+                     t: np.ndarray | None = None, table: Deviations | None = None) -> np.ndarray:
     """Indices of isolated glitches (tracking errors), found before any fit.
 
     Each sample is compared with the cubic through its two neighbours on
     each side (``loo_deviations`` with d = 2), which follows a smooth swing;
     one glitch also disturbs its neighbours' predictions, so only the worst
     sample of a run is taken, replaced by its prediction, and the test
-    repeated.
+    repeated. table: ``deviation_table(angle, t)`` when the caller has it.
     """
     y = np.array(angle, dtype=float)
     n = y.size
@@ -127,10 +142,11 @@ def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
         return np.zeros(0, dtype=int)
     found: list[int] = []
     skip = np.zeros(n, dtype=bool)
-    idx, _ = loo_deviations(t, y, 2)
-    skip[idx[~_gap_free(t, idx, 2)]] = True  # no prediction across a gap
+    idx, dev, gap_free = table[2] if table is not None and 2 in table else deviation_table(y, t, (2,))[2]
+    skip[idx[~gap_free]] = True  # no prediction across a gap
     for _ in range(max(1, n // 20)):
-        idx, dev = loo_deviations(t, y, 2)
+        if found:  # the last glitch was replaced: its neighbours' deviations change
+            idx, dev = loo_deviations(t, y, 2)
         score = np.abs(dev) / sigma
         score[skip[idx]] = 0.0
         k = int(np.argmax(score))
