@@ -395,7 +395,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
             raise UnknownEffectError(f"unknown candidate effect(s) {unknown}; expected names from {', '.join(EFFECTS)}")
     prep = prepare(trace, options)
     declared = Model.from_names(rig, rig.declared)
-    base = fit_model(declared, prep.t, prep.y, prep.noise)
+    base = fit_model(declared, prep.t, prep.y, prep.noise, swings=prep.swings)
     nfev = base.nfev
     # Wild samples the pre-screen left (bursts, a stalled tracker) must not
     # steer the fit or pass for an effect: with any beyond outlier_sigma robust
