@@ -28,13 +28,27 @@ from scipy.special import gammaincc
 MAX_ORDER = 12
 
 
+def lagged_products(rc: np.ndarray, max_lag: int) -> np.ndarray:
+    """Σ_i rc[i]·rc[i+k] for k = 0..max_lag (the biased autocovariance times n).
+
+    The few lags the noise model and the whiteness test need are direct dot
+    products; many lags (of a long one) go by FFT, zero-padded so that the
+    circular correlation equals the linear one.
+    """
+    n = rc.size
+    max_lag = min(max_lag, n - 1)
+    if max_lag <= 32:
+        return np.array([float(rc[: n - k] @ rc[k:]) for k in range(max_lag + 1)])
+    nfft = 1 << (n + max_lag).bit_length()
+    f = np.fft.rfft(rc, nfft)
+    return np.fft.irfft(f * np.conj(f), nfft)[: max_lag + 1]
+
+
 def autocorrelation(r: np.ndarray, max_lag: int) -> np.ndarray:
-    """Sample autocorrelation ρ(0..max_lag) of a residual (FFT, biased estimator)."""
+    """Sample autocorrelation ρ(0..max_lag) of a residual (biased estimator)."""
     r = np.asarray(r, dtype=float) - np.mean(r)
-    n = r.size
-    nfft = 1 << (2 * n - 1).bit_length()
-    f = np.fft.rfft(r, nfft)
-    ac = np.fft.irfft(f * np.conj(f), nfft)[: max_lag + 1]
+    ac = np.zeros(max_lag + 1)
+    ac[: min(max_lag, r.size - 1) + 1] = lagged_products(r, max_lag)
     return ac / ac[0] if ac[0] > 0 else np.zeros(max_lag + 1)
 
 
@@ -104,9 +118,7 @@ def fit_noise(r: np.ndarray, max_order: int = MAX_ORDER) -> NoiseModel:
     n = r.size
     max_order = int(min(max_order, max(0, n // 50)))
     rc = r - r.mean()
-    nfft = 1 << (2 * n - 1).bit_length()
-    f = np.fft.rfft(rc, nfft)
-    acov = np.fft.irfft(f * np.conj(f), nfft)[: max_order + 1] / n
+    acov = lagged_products(rc, max_order) / n
     var = float(np.mean(r * r))
     if acov[0] <= 0:
         return NoiseModel(np.array([1.0]), var, var)
