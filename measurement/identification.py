@@ -235,7 +235,7 @@ class Score:
     step: np.ndarray
 
 
-def score_effect(current: ModelFit, effect: Effect) -> Score:
+def score_effect(current: ModelFit, effect: Effect, q: np.ndarray | None = None) -> Score:
     """Score ``effect`` against ``current`` without fitting it (one simulation per dynamic parameter).
 
     The effect's columns g = ∂y_model/∂p at p = 0 join the current Jacobian
@@ -244,7 +244,8 @@ def score_effect(current: ModelFit, effect: Effect) -> Score:
     the predicted residual gets its own noise model, exactly as a fit would,
     so that an AR model cannot hide a deterministic term the effect explains.
     A parameter bounded below at 0 (a dissipation) that would have to go
-    negative gains nothing.
+    negative gains nothing. q: the orthonormal basis of the current scaled
+    Jacobian (``current_basis``), the same for every candidate of a round.
     """
     model = current.model
     rig = model.rig
@@ -271,7 +272,8 @@ def score_effect(current: ModelFit, effect: Effect) -> Score:
             xp[sl.start + j] += h[j]
             G[:, j] = (cand.measured(xp, ts, cand.true_angle(xp, t, current.max_step)[0]) - base) / h[j]
     r = current.effective
-    q, _ = np.linalg.qr(current.jac * current.scales)
+    if q is None:
+        q = current_basis(current)
     Gp = G - q @ (q.T @ G)
     rp = r - q @ (q.T @ r)
     step, *_ = np.linalg.lstsq(Gp, -rp, rcond=None)
@@ -282,6 +284,12 @@ def score_effect(current: ModelFit, effect: Effect) -> Score:
     n = current.n
     bic = n * math.log(max(noise.innovation_var, 1e-300)) + (current.k + len(step) + noise.order) * math.log(n)
     return Score(bic - current.bic, float(np.sqrt(np.mean(predicted**2))), step)
+
+
+def current_basis(current: ModelFit) -> np.ndarray:
+    """Orthonormal basis (QR) of the scaled Jacobian of ``current``: what a candidate's columns are projected off."""
+    q, _ = np.linalg.qr(current.jac * current.scales)
+    return q
 
 
 def usable_cores() -> int:
@@ -308,15 +316,22 @@ def parallel_map(fn: Callable, items: Sequence) -> list:
 
 
 def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
-             f_scale: float | None = None) -> tuple[ModelFit, list[DiscoveryStep], int]:
-    """The discovery loop; returns the final fit, its steps and the simulations spent."""
+             f_scale: float | None = None,
+             diagnosis: Callable[[ModelFit], Diagnostics] | None = None) -> tuple[ModelFit, list[DiscoveryStep], int]:
+    """The discovery loop; returns the final fit, its steps and the simulations spent.
+
+    diagnosis: ``diagnose`` of a fit with the record's noise floor (the
+    caller's, to diagnose the final fit only once).
+    """
+    if diagnosis is None:
+        def diagnosis(f: ModelFit) -> Diagnostics:
+            return diagnose(f, prep.noise, prep.stuck)
     current = fit
     steps: list[DiscoveryStep] = []
     spent = 0
     allowed = set(options.candidates) if options.candidates is not None else set(EFFECTS)
     amplitude = float(np.max(np.abs(fit.fitted - fit.value("offset"))))
     for rnd in range(1, options.max_rounds + 1):
-        diag = diagnose(current, prep.noise, prep.stuck)
         tried: dict[str, ModelFit] = {}
         table: dict[str, dict[str, float]] = {}
         floor = current.n * prep.noise**2
@@ -324,8 +339,10 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
         cands = [c for c in candidate_effects(rig, current.model.effect_names)
                  if c.name in allowed and c.identifiable(amplitude)]
 
-        def trial(cand: Effect, current: ModelFit = current) -> tuple[Score, ModelFit | None]:
-            score = score_effect(current, cand)
+        q = current_basis(current) if cands else None
+
+        def trial(cand: Effect, current: ModelFit = current, q: np.ndarray | None = q) -> tuple[Score, ModelFit | None]:
+            score = score_effect(current, cand, q)
             if score.d_bic >= 0.0:
                 return score, None
             model = Model(rig, tuple(resolve_effects(current.model.effect_names + (cand.name,), rig)))
@@ -359,7 +376,7 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
         best = min(tried, key=lambda k: tried[k].bic)
         bf = tried[best]
         d_bic = bf.bic - current.bic
-        evidence = EFFECTS[best](rig).evidence(diag)
+        evidence = EFFECTS[best](rig).evidence(diagnosis(current))
         if d_bic < -options.bic_margin:
             reason = (f"BIC {d_bic:+.1f} (noise model AR({bf.noise.order})), residual RMS "
                       f"{current.residual_rms:.3g} → {bf.residual_rms:.3g} rad")
@@ -409,13 +426,21 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         nfev += base.nfev
     steps: list[DiscoveryStep] = []
     final = base
+    diagnosed: dict[int, tuple[ModelFit, Diagnostics]] = {}  # by id, the fit kept so its id is not reused
+
+    def diagnosis(fit: ModelFit) -> Diagnostics:
+        # the loop's last round may have diagnosed the final fit already
+        if id(fit) not in diagnosed:
+            diagnosed[id(fit)] = (fit, diagnose(fit, prep.noise, prep.stuck))
+        return diagnosed[id(fit)][1]
+
     if options.discover:
-        final, steps, spent = discover(base, prep, rig, options, f_scale)
+        final, steps, spent = discover(base, prep, rig, options, f_scale, diagnosis)
         nfev += spent
     # Glitches the pre-screen missed show in the final residual; judged there
     # because a structured baseline residual is not Gaussian. While the final
     # residual is itself structured, its peaks are not glitches: keep the data.
-    diag: Diagnostics = diagnose(final, prep.noise, prep.stuck)
+    diag: Diagnostics = diagnosis(final)
     bad = np.zeros(0, dtype=int)
     if not diag.structured and f_scale is None:
         t_fit, y_fit, bad = _remove_outliers(final, prep, options)
