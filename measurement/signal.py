@@ -144,9 +144,8 @@ def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
     skip = np.zeros(n, dtype=bool)
     idx, dev, gap_free = table[2] if table is not None and 2 in table else deviation_table(y, t, (2,))[2]
     skip[idx[~gap_free]] = True  # no prediction across a gap
+    dev = dev.copy()  # updated below; the table's stays that of the record
     for _ in range(max(1, n // 20)):
-        if found:  # the last glitch was replaced: its neighbours' deviations change
-            idx, dev = loo_deviations(t, y, 2)
         score = np.abs(dev) / sigma
         score[skip[idx]] = 0.0
         k = int(np.argmax(score))
@@ -157,6 +156,10 @@ def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
         skip[j] = True
         # replace by the prediction so that the next pass sees a clean neighbourhood
         y[j] -= _raw_deviation(t, y, j)
+        # only the samples with j among their two neighbours a side see the change (idx[p] = p + 2)
+        lo, hi = max(0, j - 4), min(n, j + 5)
+        near, near_dev = loo_deviations(None if t is None else t[lo:hi], y[lo:hi], 2)
+        dev[near + lo - 2] = near_dev
     return np.array(sorted(found), dtype=int)
 
 
