@@ -224,9 +224,7 @@ def find_swings(t: np.ndarray, angle: np.ndarray, centre: float | None = None, h
     # sample of largest excursion.
     side = np.where(z > hysteresis, 1, np.where(z < -hysteresis, -1, 0))
     beyond = np.flatnonzero(side)
-    crossings: list[float] = []
-    peaks_t: list[float] = []
-    peaks_v: list[float] = []
+    crossings = peaks_t = peaks_v = np.zeros(0)
     if beyond.size:
         sb = side[beyond]
         starts = beyond[np.concatenate(([True], sb[1:] != sb[:-1]))]
@@ -237,35 +235,28 @@ def find_swings(t: np.ndarray, angle: np.ndarray, centre: float | None = None, h
         at_best = np.flatnonzero(excursion == np.repeat(best, lengths)) + starts[0]
         lobe = at_best[np.searchsorted(at_best, starts)]
         crossings = _crossing_times(t, z, starts[1:])
-        peaks_t = list(t[lobe])
-        peaks_v = list(z[lobe])
-    complete = np.ones(len(peaks_v), dtype=bool)
+        peaks_t = t[lobe]
+        peaks_v = z[lobe]
+    complete = np.ones(peaks_v.size, dtype=bool)
     if complete.size:
         complete[-1] = False
         # the first lobe's extremum at the very first sample may be mid-swing
         complete[0] = peaks_t[0] > t[0]
-    return Swings(c, np.asarray(crossings), np.asarray(peaks_t), np.asarray(peaks_v), complete)
+    return Swings(c, crossings, peaks_t, peaks_v, complete)
 
 
-def _crossing_times(t: np.ndarray, z: np.ndarray, at: np.ndarray) -> list[float]:
+def _crossing_times(t: np.ndarray, z: np.ndarray, at: np.ndarray) -> np.ndarray:
     """For each index i in ``at``: walk back to the sign change just before i and interpolate linearly."""
     sg = np.sign(z)
-    pos = np.arange(z.size)
-    out = np.empty(at.size)
-    for sign in (1.0, -1.0):
-        mine = sg[at] == sign
-        if not mine.any():
-            continue
-        # the last sample at or before each index whose sign differs from ``sign`` (−1: none)
-        other = np.maximum.accumulate(np.where(sg != sign, pos, -1))
-        i = at[mine]
-        j = other[i - 1] + 1  # the sign change is between j − 1 and j (j = 0: none before i)
-        jj = np.maximum(j, 1)
-        z0, z1 = z[jj - 1], z[jj]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            frac = np.where(z0 != z1, z0 / (z0 - z1), 0.5)
-        out[mine] = np.where(j == 0, t[i], t[jj - 1] + frac * (t[jj] - t[jj - 1]))
-    return [float(v) for v in out]
+    # where each run of samples of one sign begins; i's run begins at j, so the
+    # sign changes between j − 1 and j (j = 0: no change before i)
+    runs = np.concatenate(([0], np.flatnonzero(sg[1:] != sg[:-1]) + 1))
+    j = runs[np.searchsorted(runs, at, side="right") - 1]
+    jj = np.maximum(j, 1)
+    z0, z1 = z[jj - 1], z[jj]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.where(z0 != z1, z0 / (z0 - z1), 0.5)
+    return np.where(j == 0, t[at], t[jj - 1] + frac * (t[jj] - t[jj - 1]))
 
 
 @dataclass(frozen=True)
