@@ -156,9 +156,12 @@ class Effect:
         """
         return None
 
+    #: below this amplitude (rad) the effect cannot be told apart from the swing
+    min_amplitude: ClassVar[float] = 0.0
+
     def identifiable(self, amplitude: float) -> bool:
         """Whether a record of this amplitude (rad) can tell the effect apart (else never a candidate)."""
-        return True
+        return amplitude >= self.min_amplitude
 
     # -- sensor effects --------------------------------------------------------
     def sensor_basis(self, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -495,11 +498,8 @@ class Gain(Effect):
     scale_parameters = ("g_minus_1",)
     law = "θ_meas = a + g·θ"
     extra_units = {"g": "1"}
-    #: below this amplitude (rad) sin θ is too close to θ for g to be told from the amplitude
-    min_amplitude: ClassVar[float] = 0.5
-
-    def identifiable(self, amplitude):
-        return amplitude >= self.min_amplitude
+    #: below this amplitude sin θ is too close to θ for g to be told from the amplitude
+    min_amplitude = 0.5
 
     def sensor_basis(self, t, theta):
         return np.asarray(theta, dtype=float)[:, None]
@@ -541,10 +541,7 @@ class View(Effect):
     scale_parameters = ("stretch",)
     cause = "camera not square to the swing plane (oblique view, lens): the image of the swing is an ellipse"
     law = "θ_meas = a + θ + e₁·sin 2θ + e₂·(cos 2θ − 1) (an affine image of the marker's direction, to first order)"
-    min_amplitude: ClassVar[float] = 0.5
-
-    def identifiable(self, amplitude):
-        return amplitude >= self.min_amplitude
+    min_amplitude = 0.5
 
     def sensor_basis(self, t, theta):
         # the direction (sin θ, cos θ) seen through the image map [[1+e₁, e₂], [e₂, 1−e₁]]:
