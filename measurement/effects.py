@@ -360,7 +360,11 @@ class Dahl(Coulomb):
 
     @property
     def holding_term(self) -> str:  # type: ignore[override]
-        return ""  # a pre-sliding spring does not stick: it keeps oscillating, less and less
+        # A pre-sliding spring does not stick: it keeps oscillating, less and less. At θ_c = 0
+        # it is Coulomb friction, which must stick as Coulomb's does: without that, the
+        # friction would flip at every reversal near rest, ever faster (a Zeno chatter).
+        cap = "p0 * abs(cos(x))" if self.rig.kind == "compound" else "p0"
+        return f"({cap} if p1 <= 0.0 else 0.0)"
 
     @property
     def memory_force(self) -> str:  # type: ignore[override]

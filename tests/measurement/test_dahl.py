@@ -26,10 +26,13 @@ def _swing(kind, names, values, theta_c_step=1.0):
 
 
 @pytest.mark.parametrize("kind", ["torsion", "compound"])
-def test_zero_presliding_angle_is_coulomb_friction_exactly(kind):
-    _, coulomb = _swing(kind, ("viscous", "coulomb"), [[0.05], [0.1]])
-    _, dahl = _swing(kind, ("viscous", "dahl"), [[0.05], [0.1, 0.0]])
+@pytest.mark.parametrize("tc", [0.1, 1.0])
+def test_zero_presliding_angle_is_coulomb_friction_exactly(kind, tc):
+    _, coulomb = _swing(kind, ("viscous", "coulomb"), [[0.05], [tc]])
+    _, dahl = _swing(kind, ("viscous", "dahl"), [[0.05], [tc, 0.0]])
     assert np.array_equal(coulomb, dahl)
+    if tc == 1.0:  # strong enough to hold the pendulum: it sticks, as dry friction does
+        assert np.all(dahl[-100:] == dahl[-1])
 
 
 @pytest.mark.parametrize("kind", ["torsion", "compound"])
