@@ -362,9 +362,14 @@ class Dahl(Coulomb):
     def holding_term(self) -> str:  # type: ignore[override]
         # A pre-sliding spring does not stick: it keeps oscillating, less and less. At θ_c = 0
         # it is Coulomb friction, which must stick as Coulomb's does: without that, the
-        # friction would flip at every reversal near rest, ever faster (a Zeno chatter).
+        # friction would flip at every reversal near rest, ever faster (a Zeno chatter). Below
+        # a micro-radian the spring is stiffer than any record resolves and its oscillation
+        # near rest would take millions of reversals: it holds as dry friction does.
         cap = "p0 * abs(cos(x))" if self.rig.kind == "compound" else "p0"
-        return f"({cap} if p1 <= 0.0 else 0.0)"
+        return f"({cap} if p1 <= {self.stiff_below!r} else 0.0)"
+
+    #: pre-sliding angle (rad) below which the friction holds the pendulum at rest as Coulomb's does
+    stiff_below: ClassVar[float] = 1e-6
 
     @property
     def memory_force(self) -> str:  # type: ignore[override]

@@ -101,3 +101,11 @@ def test_dry_friction_without_presliding_stays_coulomb(seed):
     assert r.added_effects == ("coulomb",)
     tried = {name for s in r.steps for name in s.candidates}
     assert "dahl" in tried  # offered, and refused
+
+
+def test_a_presliding_angle_below_a_microradian_holds_like_dry_friction():
+    # stiffer than any record resolves: near rest it would chatter through millions of reversals
+    _, x = _swing("compound", ("viscous", "dahl"), [[0.05], [1.0, 1e-9]])
+    _, coulomb = _swing("compound", ("viscous", "coulomb"), [[0.05], [1.0]])
+    assert np.all(x[-100:] == x[-1])
+    assert abs(x[-1] - coulomb[-1]) < 1e-4
