@@ -420,9 +420,9 @@ class Dahl(Coulomb):
     def physical(self, values, inertia, omega_n):
         out = super().physical(values, inertia, omega_n)
         tc, thc = float(values[0]), float(values[1])
-        k = tc / thc if thc > 0 else math.inf
+        k = tc / thc if thc > 0 else None  # θ_c = 0: dry friction, no spring to report
         out["presliding_stiffness_per_J"] = k
-        out["presliding_stiffness"] = None if inertia is None else k * inertia
+        out["presliding_stiffness"] = None if inertia is None or k is None else k * inertia
         return out
 
 

@@ -198,7 +198,9 @@ def _effect_quantities(fit: ModelFit, rig: Rig, role: Sequence[str]) -> dict[str
             if val is None:
                 params[name] = Quantity(None, None, e.unit_of(name))
             else:
-                v, s = _propagate(lambda xx, _n=name: float(physical(xx)[_n]), x, cov)
+                # a quantity undefined beside x (Dahl's spring as θ_c crosses 0) has no uncertainty
+                v, s = _propagate(lambda xx, _n=name: float(physical(xx)[_n] if physical(xx)[_n] is not None
+                                                            else math.nan), x, cov)
                 params[name] = Quantity(v, s, e.unit_of(name))
         out[e.name] = params
     return out

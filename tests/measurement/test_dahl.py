@@ -109,3 +109,19 @@ def test_a_presliding_angle_below_a_microradian_holds_like_dry_friction():
     _, coulomb = _swing("compound", ("viscous", "coulomb"), [[0.05], [1.0]])
     assert np.all(x[-100:] == x[-1])
     assert abs(x[-1] - coulomb[-1]) < 1e-4
+
+
+def test_dry_friction_declared_as_dahl_reports_cleanly():
+    """A coulomb record fitted with dahl declared: θ_c near 0, its spring's stiffness huge or undefined, the JSON still strict."""
+    import json
+
+    from measurement import Options
+
+    rig = Rig(kind="compound", mass=1.0, com_distance=1.0, g=9.81, declared=("viscous", "dahl"))
+    truth = {"viscous": {"c_per_J": 0.1}, "coulomb": {"Tc_per_J": 0.19}}
+    trace = simulate_trace(Pendulum(rig, J, truth), theta0=1.0, duration=28, rate=60, noise_std=0.005, seed=1)
+    r = identify(trace, rig, Options(discover=False))
+    assert r.damping["dahl"]["theta_c"].value < 3 * r.damping["dahl"]["theta_c"].std + 1e-3
+    assert abs(r.damping["dahl"]["Tc_per_J"].value - 0.19) < 4 * r.damping["dahl"]["Tc_per_J"].std
+    json.dumps(r.to_dict(), allow_nan=False)
+    assert EFFECTS["dahl"](rig).physical([0.19, 0.0], 1.0, 5.8)["presliding_stiffness"] is None
