@@ -152,6 +152,30 @@ def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
     idx, dev, gap_free = table[2] if table is not None and 2 in table else deviation_table(y, t, (2,))[2]
     skip[idx[~gap_free]] = True  # no prediction across a gap
     dev = dev.copy()  # updated below; the table's stays that of the record
+
+    def replace(j: int, deviation: float) -> None:
+        found.append(j)
+        skip[j] = True
+        # replace by the prediction so that the next pass sees a clean neighbourhood
+        y[j] -= deviation
+        # only the samples with j among their two neighbours a side see the change (idx[p] = p + 2)
+        lo, hi = max(0, j - 4), min(n, j + 5)
+        near, near_dev = loo_deviations(None if t is None else t[lo:hi], y[lo:hi], 2)
+        dev[near + lo - 2] = near_dev
+
+    # The two samples at each end have no neighbours on one side: each is compared with the
+    # parabola through the three samples inward of it, the inner one first, before the interior
+    # (a tracker that starts on the wrong blob gives a record whose first samples jump by a
+    # large angle, and the interior test would then blame their good neighbours).
+    typical = None if t is None else float(np.median(np.diff(t)))
+    for j in (1, 0, n - 2, n - 1):
+        step = 1 if j < n // 2 else -1
+        nodes = [j + step, j + 2 * step, j + 3 * step]
+        if typical is not None and np.max(np.abs(np.diff(t[[j] + nodes]))) > 3 * typical:
+            continue  # no extrapolation across a gap (the window's gap rule judges what lies beyond)
+        d = _lagrange_deviation(t, y, j, nodes)
+        if abs(d) / (_EDGE_GAIN * sigma) >= threshold:
+            replace(j, d)
     for _ in range(max(1, n // 20)):
         score = np.abs(dev) / sigma
         score[skip[idx]] = 0.0
@@ -159,21 +183,17 @@ def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
         if score[k] < threshold:
             break
         j = int(idx[k])
-        found.append(j)
-        skip[j] = True
-        # replace by the prediction so that the next pass sees a clean neighbourhood
-        y[j] -= _raw_deviation(t, y, j)
-        # only the samples with j among their two neighbours a side see the change (idx[p] = p + 2)
-        lo, hi = max(0, j - 4), min(n, j + 5)
-        near, near_dev = loo_deviations(None if t is None else t[lo:hi], y[lo:hi], 2)
-        dev[near + lo - 2] = near_dev
+        replace(j, _raw_deviation(t, y, j))
     return np.array(sorted(found), dtype=int)
 
 
-def _raw_deviation(t: np.ndarray | None, y: np.ndarray, j: int) -> float:
-    """y[j] minus the cubic through its two neighbours on each side (not normalised)."""
+#: noise gain of the one-step extrapolation by a parabola through three equally spaced samples (√(3² + 3² + 1²))
+_EDGE_GAIN = math.sqrt(19.0)
+
+
+def _lagrange_deviation(t: np.ndarray | None, y: np.ndarray, j: int, nodes: list[int]) -> float:
+    """y[j] minus the polynomial through y at ``nodes`` (Lagrange form), rad."""
     tt = np.arange(y.size, dtype=float) if t is None else np.asarray(t, dtype=float)
-    nodes = [j - 2, j - 1, j + 1, j + 2]
     pred = 0.0
     for a in nodes:
         w = 1.0
@@ -182,6 +202,11 @@ def _raw_deviation(t: np.ndarray | None, y: np.ndarray, j: int) -> float:
                 w *= (tt[j] - tt[b]) / (tt[a] - tt[b])
         pred += w * y[a]
     return float(y[j] - pred)
+
+
+def _raw_deviation(t: np.ndarray | None, y: np.ndarray, j: int) -> float:
+    """y[j] minus the cubic through its two neighbours on each side (not normalised)."""
+    return _lagrange_deviation(t, y, j, [j - 2, j - 1, j + 1, j + 2])
 
 
 @dataclass(frozen=True)

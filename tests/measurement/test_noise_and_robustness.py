@@ -103,3 +103,16 @@ def test_angle_wrapped_at_pi_is_unwrapped():
     r = identify(Trace(t, wrapped, source="wrapped"), Rig(kind="torsion", stiffness=K))
     assert "angle_unwrapped" in r.flags and r.window["n_unwrapped"] > 10
     assert r.J == pytest.approx(J, rel=2e-4)
+
+
+def test_wild_samples_at_the_ends_of_the_record_are_glitches_not_the_swing():
+    """A tracker that starts (or ends) on the wrong blob: the first two and last two samples jump by a large angle."""
+    t, y = _torsion()
+    y = y.copy()
+    y[:2] = y[2] + 0.15  # ~10 × the swing's largest step between samples
+    y[-2:] = y[-3] - 0.15
+    r = identify(Trace(t, y, source="edges"), Rig(kind="torsion", stiffness=K))
+    assert "outliers_removed" in r.flags and r.window["n_outliers"] >= 4
+    assert r.window["t_start"] > t[1] and r.window["t_stop"] < t[-2]
+    assert r.added_effects == ()
+    assert r.J == pytest.approx(J, rel=2e-4)
