@@ -10,7 +10,8 @@ quantises to the encoder's counts, and replies after the configured latency.
 With ``baudrate`` set it also spends the request's wire time before latching
 and the reply's after, as a real RS-485 line does. Faults
 are injected on the wire: dropped replies (no answer: the client times out)
-and CRC corruption (the last byte flipped: the client's framer rejects it).
+and CRC corruption (the last byte flipped: the client's framer rejects it), and
+glitches (a position 1/128 turn off behind a correct CRC).
 A read outside the position registers gets an ILLEGAL DATA ADDRESS
 exception reply, like a real device.
 """
@@ -22,6 +23,7 @@ import logging
 import math
 import socket
 import threading
+import time
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -43,6 +45,9 @@ log = logging.getLogger("moi.drivers.sim_encoder")
 #: Modbus function codes that read the position (holding / input registers)
 _READ_CODES = (3, 4)
 
+#: shorter waits (s) are slept on the server's thread: the event loop's own timer is only ms-precise
+_SHORTEST_ASYNC_WAIT = 0.002
+
 
 @dataclass(frozen=True)
 class SimEncoderConfig:
@@ -63,6 +68,8 @@ class SimEncoderConfig:
     parity: "N", "E" or "O" (only used for the wire time).
     drop_rate: fraction of replies never sent (0…1).
     crc_error_rate: fraction of replies sent with a corrupted CRC (0…1).
+    glitch_rate: fraction of positions latched 1/128 turn off, with a correct CRC (0…1): a
+        corrupted reading no framing check can catch (the identification must).
     seed: random seed for noise and fault injection.
     """
 
@@ -80,6 +87,7 @@ class SimEncoderConfig:
     parity: str = "N"
     drop_rate: float = 0.0
     crc_error_rate: float = 0.0
+    glitch_rate: float = 0.0
     seed: int | None = None
 
     def __post_init__(self) -> None:
@@ -89,7 +97,7 @@ class SimEncoderConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise DriverConfigError(f"simulated encoder: {name} must be >= 0, got {v!r}")
-        for name in ("drop_rate", "crc_error_rate"):
+        for name in ("drop_rate", "crc_error_rate", "glitch_rate"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0 <= v < 1):
                 raise DriverConfigError(f"simulated encoder: {name} must be a fraction in [0, 1), got {v!r}")
@@ -144,7 +152,7 @@ class SimEncoderServer:
         self._io = LoopThread(f"moi-sim-encoder-{self.port}")
         self._server: ModbusSerialServer | None = None
         self._lock = threading.Lock()
-        self.counts = {"reads": 0, "replies": 0, "dropped": 0, "corrupted": 0, "exceptions": 0}
+        self.counts = {"reads": 0, "replies": 0, "dropped": 0, "corrupted": 0, "exceptions": 0, "glitches": 0}
         self.last_latch: tuple[float, float] | None = None  # (clock time, true angle) of the last read
 
     @property
@@ -210,7 +218,6 @@ class SimEncoderServer:
         await self._server.serve_forever(background=True)
 
     def _wait_listening(self, timeout: float) -> bool:
-        import time
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:
@@ -226,13 +233,19 @@ class SimEncoderServer:
         if function_code not in _READ_CODES or set_values is not None:
             return ExcCodes.ILLEGAL_FUNCTION
         request_wire, reply_wire = c.wire_times(count)
-        if request_wire > 0:  # the request is still on the wire: the encoder latches after its last byte
+        if request_wire > _SHORTEST_ASYNC_WAIT:  # the request is still on the wire: the encoder latches after its last byte
             await asyncio.sleep(request_wire)
+        elif request_wire > 0:
+            time.sleep(request_wire)  # see the reply's wait below
         t = self._clock.now()
         true_angle = float(self._angle(t))
         self.last_latch = (t, true_angle)
         measured = true_angle + (self._rng.normal(0.0, c.noise_std) if c.noise_std else 0.0)
         value = c.counts(measured)
+        if c.glitch_rate and self._rng.random() < c.glitch_rate:
+            value = c.counts(measured + 2 * math.pi / 128)
+            with self._lock:
+                self.counts["glitches"] += 1
         offset = c.register - start_address
         if c.registers == 1:
             registers[offset] = value & 0xFFFF
@@ -241,8 +254,13 @@ class SimEncoderServer:
         with self._lock:
             self.counts["reads"] += 1
         delay = c.latency + reply_wire
-        if delay > 0:
+        if delay > _SHORTEST_ASYNC_WAIT:
             await asyncio.sleep(delay)
+        elif delay > 0:
+            # the event loop waits in whole milliseconds (epoll): 0.2 ms would become >= 1 ms, a round
+            # trip 3× the wire's and a third of the samples; this loop serves only this simulated device,
+            # which is busy during its turnaround anyway
+            time.sleep(delay)
         return None
 
     def _on_packet(self, sending: bool, data: bytes) -> bytes:
