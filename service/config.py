@@ -279,7 +279,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "inertia": _doc("true J of the simulated part, kg·m²", min=0, min_open=True),
         "effects": _doc("true damping: effect = { parameter = value }", kind="effects"),
         "theta0": _doc("release angle, rad", min=0, max=3.0, min_open=True),
-        "rate": _doc("sample rate of the direct sensor, Hz", min=0, max=10000, min_open=True),
+        "rate": _doc("sample rate of the direct sensor, and the rate the simulated encoder is read at (at most: "
+                     "the link answers some 500–1500 reads per wall-clock second), Hz of simulated time",
+                     min=0, max=10000, min_open=True),
         "noise": _doc("angle noise σ, rad", min=0),
         "bits": _doc("encoder resolution, bits per turn (0: none)", min=0, max=32),
         "time_scale": _doc(f"simulated seconds per wall-clock second (at most {MAX_ENCODER_TIME_SCALE:g} with "

@@ -156,7 +156,10 @@ def build_simulated(rig: Rig, sim: SimulationSettings, sequencer: SequencerConfi
                 log.warning("simulated encoder at time_scale %g: the timestamps jitter %g× more in simulated time "
                             "than in real time; expect correlated_residual or outlier flags a real-time capture "
                             "would not raise (the default time_scale 1 keeps up)", sim.time_scale, sim.time_scale)
-            inner: Any = ModbusEncoder(server.encoder_config(timeout=SIM_ENCODER_TIMEOUT), clock)
+            # requests paced at `rate` (simulated time), as a device's client would be: back to back the
+            # simulated link answers some 2000 reads/s and loads the host that dates them
+            inner: Any = ModbusEncoder(server.encoder_config(
+                timeout=SIM_ENCODER_TIMEOUT, min_interval=min(1.0 / (sim.rate * sim.time_scale), 1.0)), clock)
         elif sim.sensor == "camera":
             inner = _simulated_camera(sim, pendulum, clock, notes)
             opened.append(inner.close)
