@@ -29,9 +29,9 @@ from scipy.signal import savgol_filter
 from .errors import IdentificationError
 from .model import STATE_PARAMS, Model
 from .noise import NoiseModel, autocorrelation, fit_noise
-from .signal import find_swings, resample_uniform
+from .signal import Swings, find_swings, resample_uniform
 
-__all__ = ["ModelFit", "fit_model", "initial_guess", "autocorrelation"]
+__all__ = ["ModelFit", "Smoothed", "fit_model", "initial_guess", "smooth", "autocorrelation"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -124,8 +124,34 @@ class ModelFit:
 # -- starting values ---------------------------------------------------------------
 
 
-def _centre(t: np.ndarray, y: np.ndarray, sigma: float) -> float:
-    sw = find_swings(t, y, hysteresis=3 * sigma)
+@dataclass(frozen=True, eq=False)
+class Smoothed:
+    """What the starting values read from the samples (t, y), whatever the model: computed once
+    for every model fitted to the same samples (a discovery round fits several).
+
+    centre: the swing's centre line (rad); swings: about it; ys, yd, ydd:
+    θ, θ', θ'' on the even grid of spacing dt (s) from a Savitzky–Golay
+    filter of ``window`` samples (ydd only away from the ends, the only part read).
+    """
+
+    t: np.ndarray
+    y: np.ndarray
+    sigma: float
+    centre: float
+    swings: Swings
+    dt: float
+    window: int
+    ys: np.ndarray
+    yd: np.ndarray
+    ydd: np.ndarray
+
+    def holds(self, t: np.ndarray, y: np.ndarray, sigma: float) -> bool:
+        """Whether this was computed from these very samples and noise floor."""
+        return self.t is t and self.y is y and self.sigma == sigma
+
+
+def _centre(t: np.ndarray, y: np.ndarray, sigma: float, sw: Swings | None = None) -> float:
+    sw = find_swings(t, y, hysteresis=3 * sigma) if sw is None else sw
     pv = sw.peak_values
     if pv.size >= 3:
         mids = 0.5 * (pv[:-1] + pv[1:])
@@ -133,9 +159,10 @@ def _centre(t: np.ndarray, y: np.ndarray, sigma: float) -> float:
     return sw.centre
 
 
-def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """Starting parameter vector and typical scales (for steps and x_scale), by equation error."""
-    centre = _centre(t, y, sigma)
+def smooth(t: np.ndarray, y: np.ndarray, sigma: float, swings: Swings | None = None) -> Smoothed:
+    """The model-independent part of ``initial_guess``; swings: ``find_swings(t, y, hysteresis=3 * sigma)``
+    when the caller has it."""
+    centre = _centre(t, y, sigma, swings)
     sw = find_swings(t, y, centre=centre, hysteresis=3 * sigma)
     wd = sw.damped_frequency
     if not math.isfinite(wd) or wd <= 0:
@@ -147,7 +174,23 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float) -> t
     order = 4 if window > 7 else 3
     ys = savgol_filter(yu, window, order, mode="interp")
     yd = savgol_filter(yu, window, order, deriv=1, delta=dt, mode="interp")
-    ydd = savgol_filter(yu, window, order, deriv=2, delta=dt, mode="interp")
+    # θ'' is read only a window away from the ends, where every mode gives the same
+    # convolution: no polynomial fits of the ends
+    ydd = savgol_filter(yu, window, order, deriv=2, delta=dt, mode="constant")
+    return Smoothed(t, y, sigma, centre, sw, dt, window, ys, yd, ydd)
+
+
+def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
+                  smoothed: Smoothed | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Starting parameter vector and typical scales (for steps and x_scale), by equation error.
+
+    smoothed: ``smooth(t, y, sigma)`` when the caller has it.
+    """
+    if smoothed is None or not smoothed.holds(t, y, sigma):
+        smoothed = smooth(t, y, sigma)
+    centre, sw, window = smoothed.centre, smoothed.swings, smoothed.window
+    ys, yd, ydd = smoothed.ys, smoothed.yd, smoothed.ydd
+    wd = sw.damped_frequency
     amplitude = float(np.max(np.abs(ys - centre)))
     theta0 = float(ys[0] - centre)
     omega0 = float(yd[0])
@@ -236,15 +279,21 @@ def start_candidates(model: Model, x: np.ndarray, previous: "ModelFit | None") -
 def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
               x0: np.ndarray | None = None, scales: np.ndarray | None = None,
               previous: ModelFit | None = None, max_step: float | None = None,
-              max_nfev: int = 200, f_scale: float | None = None) -> ModelFit:
+              max_nfev: int = 200, f_scale: float | None = None, swings: Swings | None = None) -> ModelFit:
     """Fit ``model`` to every sample (t in s, y in rad); sigma: noise floor, rad.
 
     f_scale: with a value (rad), a robust soft-L1 loss: residuals well beyond
     f_scale count in proportion to their size rather than its square.
+    swings: ``find_swings(t, y, hysteresis=3 * sigma)`` when the caller has it.
+    The starting values' model-independent part (``smooth``) is taken from
+    ``previous`` when that was fitted to the very same samples.
     """
     starts = None
+    smoothed = previous.extra.get("smoothed") if previous is not None else None
     if x0 is None or scales is None:
-        x_reg, scales = initial_guess(model, t, y, sigma)
+        if smoothed is None or not smoothed.holds(t, y, sigma):
+            smoothed = smooth(t, y, sigma, swings)
+        x_reg, scales = initial_guess(model, t, y, sigma, smoothed)
         starts = start_candidates(model, x_reg, previous)
         x0 = starts[0]
     lo, hi = model.bounds()
@@ -256,25 +305,37 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
     steps = 1e-7 * scales[:nd]
     nfev = [0]
 
-    cache: dict[str, np.ndarray] = {}
+    # The last few evaluations by x: scipy evaluates the residual and the
+    # Jacobian at the solution before it returns, the starting-value choice
+    # evaluates the start least_squares begins with, and the fit's outputs
+    # need both at the solution again; each is simulated once. Copies go
+    # out: a robust loss scales scipy's arrays in place.
+    evaluated: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # x → (measured, θ, θ')
+    last_jac: dict[bytes, np.ndarray] = {}
 
-    def simulate(x: np.ndarray) -> np.ndarray:
+    def simulate(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         nfev[0] += 1
-        theta, omega = model.true_angle(x, t, max_step)
-        cache["omega"] = omega
-        return theta
+        return model.true_angle(x, t, max_step)
+
+    def evaluate(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        key = x.tobytes()
+        hit = evaluated.get(key)
+        if hit is None:
+            theta, omega = simulate(x)
+            hit = (model.measured(x, ts, theta), theta, omega)
+            if len(evaluated) >= 4:
+                del evaluated[next(iter(evaluated))]
+            evaluated[key] = hit
+        return hit
 
     def fun(x: np.ndarray) -> np.ndarray:
-        theta = simulate(x)
-        cache["x"], cache["theta"], cache["rate"] = x.copy(), theta, cache["omega"]
-        return model.measured(x, ts, theta) - y
+        return evaluate(x)[0] - y
 
     def jac(x: np.ndarray) -> np.ndarray:
-        if "x" in cache and np.array_equal(cache["x"], x):
-            theta = cache["theta"]
-        else:
-            theta = simulate(x)
-        base = model.measured(x, ts, theta)
+        key = x.tobytes()
+        if key in last_jac:
+            return last_jac[key].copy()
+        base, theta, _ = evaluate(x)
         J = np.empty((t.size, x.size))
         for j in range(nd):
             xp = x.copy()
@@ -283,8 +344,10 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
             if xp[j] + h > hi[j]:
                 h = -h
             xp[j] += h
-            J[:, j] = (model.measured(xp, ts, simulate(xp)) - base) / h
+            J[:, j] = (model.measured(xp, ts, simulate(xp)[0]) - base) / h
         J[:, nd:] = model.sensor_columns(ts, theta)
+        last_jac.clear()
+        last_jac[key] = J.copy()
         return J
 
     if starts is not None and len(starts) > 1:
@@ -298,6 +361,7 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
     except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
         raise IdentificationError(f"least squares failed for model {model.effect_names}: {exc}") from exc
     x = sol.x
+    _, theta, omega = evaluate(x)
     residual = fun(x)
     if not np.all(np.isfinite(residual)):
         raise IdentificationError(f"model {model.effect_names} diverged (non-finite simulation)")
@@ -313,7 +377,8 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
         max_step=max_step, noise=noise, effective=effective, jac=J, scales=scales,
         cov_method=method, cov_inflation=inflation, at_bound=at_bound, f_scale=f_scale,
         n_downweighted=int(np.sum(weight < 0.5)),
-        extra={"theta": cache["theta"], "omega": cache["rate"]},  # the true swing at x (rad, rad/s)
+        # the true swing at x (rad, rad/s); what the starting values read from (t, y), for the next model
+        extra={"theta": theta, "omega": omega, "smoothed": smoothed},
     )
 
 

@@ -39,7 +39,7 @@ from .noise import fit_noise
 from .model import Model
 from .result import DiscoveryStep, IdentificationResult, ModelSummary, Quantity
 from .rig import Rig
-from .signal import find_swings, noise_floor, robust_std, spike_candidates, swing_window
+from .signal import Swings, deviation_table, find_swings, noise_floor, robust_std, spike_candidates, swing_window
 from .trace import Trace
 
 
@@ -85,6 +85,7 @@ class Prepared:
     outliers: np.ndarray  # indices into the original trace
     n_unwrapped: int = 0  # 2π jumps removed from the angle
     gap_cut_at: float | None = None  # s: the window ends at a long gap starting here
+    swings: Swings | None = None  # of (t, y) about their median, hysteresis 3·noise
 
 
 def unwrap_angle(y: np.ndarray) -> tuple[np.ndarray, int]:
@@ -95,13 +96,13 @@ def unwrap_angle(y: np.ndarray) -> tuple[np.ndarray, int]:
     return np.unwrap(y, discont=1.5 * math.pi), jumps
 
 
-def _gap_cut(t: np.ndarray, y: np.ndarray, noise: float, periods: float) -> int | None:
+def _gap_cut(t: np.ndarray, y: np.ndarray, noise: float, periods: float, sw: Swings) -> int | None:
     """Index after which a gap of more than ``periods`` swing periods ends the window (None: no such gap).
 
     A gap is kept inside the window only when the swing clearly continues
     after it: at least two full swings well above the noise (10σ).
+    sw: ``find_swings(t, y, hysteresis=3 * noise)``.
     """
-    sw = find_swings(t, y, hysteresis=3 * noise)
     wd = sw.damped_frequency
     if not (math.isfinite(wd) and wd > 0):
         return None
@@ -126,19 +127,23 @@ def prepare(trace: Trace, options: Options = Options()) -> Prepared:
     if span == 0:
         raise TraceError(f"{trace.source}: the angle never changes; expected a free swing")
     floor = 1e-9 * span  # noise-free simulations still need a scale
-    spikes = spike_candidates(y_all, max(noise_floor(y_all, robust=True, t=t_all), floor), t=t_all)
-    noise = max(noise_floor(y_all, exclude=spikes, t=t_all), floor)
+    table = deviation_table(y_all, t_all)  # the neighbour predictions both floors and the glitch screen read
+    spikes = spike_candidates(y_all, max(noise_floor(y_all, robust=True, t=t_all, table=table), floor), t=t_all,
+                              table=table)
+    noise = max(noise_floor(y_all, exclude=spikes, t=t_all, table=table), floor)
     keep = np.ones(y_all.size, dtype=bool)
     keep[spikes] = False
     win = swing_window(t_all[keep], y_all[keep], noise)
     idx = np.flatnonzero(keep)[win.start:win.stop]
     gap_cut_at = None
-    cut = _gap_cut(t_all[idx], y_all[idx], noise, options.gap_periods)
+    t, y = t_all[idx], y_all[idx]
+    sw = find_swings(t, y, hysteresis=3 * noise)
+    cut = _gap_cut(t, y, noise, options.gap_periods, sw)
     if cut is not None and cut + 1 >= 30:
         gap_cut_at = float(t_all[idx[cut]])
         idx = idx[:cut + 1]
-    t, y = t_all[idx], y_all[idx]
-    sw = find_swings(t, y, hysteresis=3 * noise)
+        t, y = t_all[idx], y_all[idx]
+        sw = find_swings(t, y, hysteresis=3 * noise)
     if sw.count < options.min_swings:
         raise TraceError(
             f"{trace.source}: only {sw.count:g} full swing(s) found; expected at least {options.min_swings:g} "
@@ -152,7 +157,7 @@ def prepare(trace: Trace, options: Options = Options()) -> Prepared:
     return Prepared(t=t, y=y, noise=noise, start=int(idx[0]), stop=int(idx[-1]) + 1,
                     release_detected=win.release_detected, stopped=win.stop_detected or gap_cut_at is not None,
                     stuck=win.stuck, outliers=np.asarray(spikes, dtype=int), n_unwrapped=n_unwrapped,
-                    gap_cut_at=gap_cut_at)
+                    gap_cut_at=gap_cut_at, swings=sw)
 
 
 def _propagate(fn: Callable[[np.ndarray], float], x: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
@@ -230,7 +235,7 @@ class Score:
     step: np.ndarray
 
 
-def score_effect(current: ModelFit, effect: Effect) -> Score:
+def score_effect(current: ModelFit, effect: Effect, q: np.ndarray | None = None) -> Score:
     """Score ``effect`` against ``current`` without fitting it (one simulation per dynamic parameter).
 
     The effect's columns g = ∂y_model/∂p at p = 0 join the current Jacobian
@@ -239,7 +244,8 @@ def score_effect(current: ModelFit, effect: Effect) -> Score:
     the predicted residual gets its own noise model, exactly as a fit would,
     so that an AR model cannot hide a deterministic term the effect explains.
     A parameter bounded below at 0 (a dissipation) that would have to go
-    negative gains nothing.
+    negative gains nothing. q: the orthonormal basis of the current scaled
+    Jacobian (``current_basis``), the same for every candidate of a round.
     """
     model = current.model
     rig = model.rig
@@ -266,7 +272,8 @@ def score_effect(current: ModelFit, effect: Effect) -> Score:
             xp[sl.start + j] += h[j]
             G[:, j] = (cand.measured(xp, ts, cand.true_angle(xp, t, current.max_step)[0]) - base) / h[j]
     r = current.effective
-    q, _ = np.linalg.qr(current.jac * current.scales)
+    if q is None:
+        q = current_basis(current)
     Gp = G - q @ (q.T @ G)
     rp = r - q @ (q.T @ r)
     step, *_ = np.linalg.lstsq(Gp, -rp, rcond=None)
@@ -277,6 +284,12 @@ def score_effect(current: ModelFit, effect: Effect) -> Score:
     n = current.n
     bic = n * math.log(max(noise.innovation_var, 1e-300)) + (current.k + len(step) + noise.order) * math.log(n)
     return Score(bic - current.bic, float(np.sqrt(np.mean(predicted**2))), step)
+
+
+def current_basis(current: ModelFit) -> np.ndarray:
+    """Orthonormal basis (QR) of the scaled Jacobian of ``current``: what a candidate's columns are projected off."""
+    q, _ = np.linalg.qr(current.jac * current.scales)
+    return q
 
 
 def usable_cores() -> int:
@@ -303,15 +316,22 @@ def parallel_map(fn: Callable, items: Sequence) -> list:
 
 
 def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
-             f_scale: float | None = None) -> tuple[ModelFit, list[DiscoveryStep], int]:
-    """The discovery loop; returns the final fit, its steps and the simulations spent."""
+             f_scale: float | None = None,
+             diagnosis: Callable[[ModelFit], Diagnostics] | None = None) -> tuple[ModelFit, list[DiscoveryStep], int]:
+    """The discovery loop; returns the final fit, its steps and the simulations spent.
+
+    diagnosis: ``diagnose`` of a fit with the record's noise floor (the
+    caller's, to diagnose the final fit only once).
+    """
+    if diagnosis is None:
+        def diagnosis(f: ModelFit) -> Diagnostics:
+            return diagnose(f, prep.noise, prep.stuck)
     current = fit
     steps: list[DiscoveryStep] = []
     spent = 0
     allowed = set(options.candidates) if options.candidates is not None else set(EFFECTS)
     amplitude = float(np.max(np.abs(fit.fitted - fit.value("offset"))))
     for rnd in range(1, options.max_rounds + 1):
-        diag = diagnose(current, prep.noise, prep.stuck)
         tried: dict[str, ModelFit] = {}
         table: dict[str, dict[str, float]] = {}
         floor = current.n * prep.noise**2
@@ -319,8 +339,10 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
         cands = [c for c in candidate_effects(rig, current.model.effect_names)
                  if c.name in allowed and c.identifiable(amplitude)]
 
-        def trial(cand: Effect, current: ModelFit = current) -> tuple[Score, ModelFit | None]:
-            score = score_effect(current, cand)
+        q = current_basis(current) if cands else None
+
+        def trial(cand: Effect, current: ModelFit = current, q: np.ndarray | None = q) -> tuple[Score, ModelFit | None]:
+            score = score_effect(current, cand, q)
             if score.d_bic >= 0.0:
                 return score, None
             model = Model(rig, tuple(resolve_effects(current.model.effect_names + (cand.name,), rig)))
@@ -354,7 +376,7 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
         best = min(tried, key=lambda k: tried[k].bic)
         bf = tried[best]
         d_bic = bf.bic - current.bic
-        evidence = EFFECTS[best](rig).evidence(diag)
+        evidence = EFFECTS[best](rig).evidence(diagnosis(current))
         if d_bic < -options.bic_margin:
             reason = (f"BIC {d_bic:+.1f} (noise model AR({bf.noise.order})), residual RMS "
                       f"{current.residual_rms:.3g} → {bf.residual_rms:.3g} rad")
@@ -390,7 +412,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
             raise UnknownEffectError(f"unknown candidate effect(s) {unknown}; expected names from {', '.join(EFFECTS)}")
     prep = prepare(trace, options)
     declared = Model.from_names(rig, rig.declared)
-    base = fit_model(declared, prep.t, prep.y, prep.noise)
+    base = fit_model(declared, prep.t, prep.y, prep.noise, swings=prep.swings)
     nfev = base.nfev
     # Wild samples the pre-screen left (bursts, a stalled tracker) must not
     # steer the fit or pass for an effect: with any beyond outlier_sigma robust
@@ -404,13 +426,21 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         nfev += base.nfev
     steps: list[DiscoveryStep] = []
     final = base
+    diagnosed: dict[int, tuple[ModelFit, Diagnostics]] = {}  # by id, the fit kept so its id is not reused
+
+    def diagnosis(fit: ModelFit) -> Diagnostics:
+        # the loop's last round may have diagnosed the final fit already
+        if id(fit) not in diagnosed:
+            diagnosed[id(fit)] = (fit, diagnose(fit, prep.noise, prep.stuck))
+        return diagnosed[id(fit)][1]
+
     if options.discover:
-        final, steps, spent = discover(base, prep, rig, options, f_scale)
+        final, steps, spent = discover(base, prep, rig, options, f_scale, diagnosis)
         nfev += spent
     # Glitches the pre-screen missed show in the final residual; judged there
     # because a structured baseline residual is not Gaussian. While the final
     # residual is itself structured, its peaks are not glitches: keep the data.
-    diag: Diagnostics = diagnose(final, prep.noise, prep.stuck)
+    diag: Diagnostics = diagnosis(final)
     bad = np.zeros(0, dtype=int)
     if not diag.structured and f_scale is None:
         t_fit, y_fit, bad = _remove_outliers(final, prep, options)

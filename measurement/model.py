@@ -47,11 +47,11 @@ class Model:
     def effect_names(self) -> tuple[str, ...]:
         return tuple(e.name for e in self.effects)
 
-    @property
+    @cached_property
     def dynamic(self) -> tuple[Effect, ...]:
         return tuple(e for e in self.effects if e.role != "sensor")
 
-    @property
+    @cached_property
     def sensor(self) -> tuple[Effect, ...]:
         return tuple(e for e in self.effects if e.role == "sensor")
 
@@ -162,6 +162,8 @@ class Model:
 
     def measured(self, x: Sequence[float], t: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """Measured angle θ + a + sensor terms (rad) from the true angle θ at times t."""
+        if not self.sensor:  # the offset alone: the same sum without building a column of ones
+            return theta + float(x[self.n_dynamic])
         lin = np.asarray(x[self.n_dynamic:], dtype=float)
         return theta + self.sensor_columns(t, theta) @ lin
 

@@ -28,20 +28,37 @@ from scipy.special import gammaincc
 MAX_ORDER = 12
 
 
+def lagged_products(rc: np.ndarray, max_lag: int) -> np.ndarray:
+    """Σ_i rc[i]·rc[i+k] for k = 0..max_lag (the biased autocovariance times n).
+
+    The few lags the noise model and the whiteness test need are direct dot
+    products; many lags (of a long one) go by FFT, zero-padded so that the
+    circular correlation equals the linear one.
+    """
+    n = rc.size
+    max_lag = min(max_lag, n - 1)
+    if max_lag <= 32:
+        return np.array([float(rc[: n - k] @ rc[k:]) for k in range(max_lag + 1)])
+    nfft = 1 << (n + max_lag).bit_length()
+    f = np.fft.rfft(rc, nfft)
+    return np.fft.irfft(f * np.conj(f), nfft)[: max_lag + 1]
+
+
 def autocorrelation(r: np.ndarray, max_lag: int) -> np.ndarray:
-    """Sample autocorrelation ρ(0..max_lag) of a residual (FFT, biased estimator)."""
+    """Sample autocorrelation ρ(0..max_lag) of a residual (biased estimator)."""
     r = np.asarray(r, dtype=float) - np.mean(r)
-    n = r.size
-    nfft = 1 << (2 * n - 1).bit_length()
-    f = np.fft.rfft(r, nfft)
-    ac = np.fft.irfft(f * np.conj(f), nfft)[: max_lag + 1]
+    ac = np.zeros(max_lag + 1)
+    ac[: min(max_lag, r.size - 1) + 1] = lagged_products(r, max_lag)
     return ac / ac[0] if ac[0] > 0 else np.zeros(max_lag + 1)
 
 
-def ljung_box(r: np.ndarray, lags: int) -> tuple[float, float]:
-    """Ljung–Box statistic Q and its p-value (χ² with ``lags`` degrees of freedom) for whiteness."""
+def ljung_box(r: np.ndarray, lags: int, rho: np.ndarray | None = None) -> tuple[float, float]:
+    """Ljung–Box statistic Q and its p-value (χ² with ``lags`` degrees of freedom) for whiteness.
+
+    rho: r's ``autocorrelation`` to at least ``lags``, when the caller has it already.
+    """
     n = r.size
-    rho = autocorrelation(r, lags)
+    rho = autocorrelation(r, lags) if rho is None else rho[: lags + 1]
     q = n * (n + 2) * float(np.sum(rho[1:] ** 2 / (n - np.arange(1, lags + 1))))
     # the χ² survival function is the regularised upper incomplete gamma function
     return q, float(gammaincc(lags / 2.0, q / 2.0))
@@ -101,9 +118,7 @@ def fit_noise(r: np.ndarray, max_order: int = MAX_ORDER) -> NoiseModel:
     n = r.size
     max_order = int(min(max_order, max(0, n // 50)))
     rc = r - r.mean()
-    nfft = 1 << (2 * n - 1).bit_length()
-    f = np.fft.rfft(rc, nfft)
-    acov = np.fft.irfft(f * np.conj(f), nfft)[: max_order + 1] / n
+    acov = lagged_products(rc, max_order) / n
     var = float(np.mean(r * r))
     if acov[0] <= 0:
         return NoiseModel(np.array([1.0]), var, var)

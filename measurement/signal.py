@@ -66,17 +66,30 @@ def loo_deviations(t: np.ndarray | None, y: np.ndarray, d: int) -> tuple[np.ndar
     return idx, dev / np.sqrt(1.0 + np.sum(weights**2, axis=0))
 
 
-def _gap_free(t: np.ndarray | None, idx: np.ndarray, d: int) -> np.ndarray:
-    """Whether the window idx ± d spans no gap (an interval over 3× the median)."""
-    if t is None:
-        return np.ones(idx.size, dtype=bool)
-    dt = np.diff(np.asarray(t, dtype=float))
-    bad = np.concatenate([[0], np.cumsum(dt > 3.0 * float(np.median(dt)))])
-    return (bad[idx + d] - bad[idx - d]) == 0
+Deviations = dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+def deviation_table(angle: np.ndarray, t: np.ndarray | None = None, orders: tuple[int, ...] = (1, 2, 3)) -> Deviations:
+    """d → (indices, ``loo_deviations``, whether each window is gap-free) for each d in ``orders``.
+
+    Computed once for a record and handed to ``noise_floor`` and
+    ``spike_candidates`` (``table=``), which otherwise each compute the same.
+    """
+    y = np.asarray(angle, dtype=float)
+    bad = None
+    if t is not None:
+        dt = np.diff(np.asarray(t, dtype=float))
+        bad = np.concatenate([[0], np.cumsum(dt > 3.0 * float(np.median(dt)))])
+    out: Deviations = {}
+    for d in orders:
+        idx, dev = loo_deviations(t, y, d)
+        out[d] = (idx, dev, np.ones(idx.size, dtype=bool) if bad is None else (bad[idx + d] - bad[idx - d]) == 0)
+    return out
 
 
 def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bool = False,
-                t: np.ndarray | None = None, orders: tuple[int, ...] = (1, 2, 3)) -> float:
+                t: np.ndarray | None = None, orders: tuple[int, ...] = (1, 2, 3),
+                table: Deviations | None = None) -> float:
     """White-noise σ of a densely sampled smooth signal, rad.
 
     Each sample is predicted from its neighbours (``loo_deviations``, with d
@@ -89,19 +102,21 @@ def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bo
     itself quantised on encoder data: use it only to find glitches).
     exclude: indices of known glitches, left out with their neighbourhoods.
     t: sample times (s), for uneven sampling and gaps.
+    table: ``deviation_table(angle, t, orders)`` when the caller has it.
     """
     y = np.asarray(angle, dtype=float)
+    if table is None:
+        table = deviation_table(y, t, orders)
     best = math.inf
     for d in orders:
-        idx, dev = loo_deviations(t, y, d)
+        idx, dev, keep = table[d]
         if idx.size < 10:
             continue
-        keep = _gap_free(t, idx, d)
         if exclude is not None and len(exclude):
             near = np.zeros(y.size, dtype=bool)
             for i in np.asarray(exclude, dtype=int):
                 near[max(0, i - d): i + d + 1] = True
-            keep &= ~near[idx]
+            keep = keep & ~near[idx]
         dev = dev[keep]
         if dev.size < 10:
             continue
@@ -112,14 +127,14 @@ def noise_floor(angle: np.ndarray, exclude: np.ndarray | None = None, robust: bo
 
 
 def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
-                     t: np.ndarray | None = None) -> np.ndarray:
+                     t: np.ndarray | None = None, table: Deviations | None = None) -> np.ndarray:
     """Indices of isolated glitches (tracking errors), found before any fit.
 
     Each sample is compared with the cubic through its two neighbours on
     each side (``loo_deviations`` with d = 2), which follows a smooth swing;
     one glitch also disturbs its neighbours' predictions, so only the worst
     sample of a run is taken, replaced by its prediction, and the test
-    repeated.
+    repeated. table: ``deviation_table(angle, t)`` when the caller has it.
     """
     y = np.array(angle, dtype=float)
     n = y.size
@@ -127,10 +142,10 @@ def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
         return np.zeros(0, dtype=int)
     found: list[int] = []
     skip = np.zeros(n, dtype=bool)
-    idx, _ = loo_deviations(t, y, 2)
-    skip[idx[~_gap_free(t, idx, 2)]] = True  # no prediction across a gap
+    idx, dev, gap_free = table[2] if table is not None and 2 in table else deviation_table(y, t, (2,))[2]
+    skip[idx[~gap_free]] = True  # no prediction across a gap
+    dev = dev.copy()  # updated below; the table's stays that of the record
     for _ in range(max(1, n // 20)):
-        idx, dev = loo_deviations(t, y, 2)
         score = np.abs(dev) / sigma
         score[skip[idx]] = 0.0
         k = int(np.argmax(score))
@@ -141,6 +156,10 @@ def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
         skip[j] = True
         # replace by the prediction so that the next pass sees a clean neighbourhood
         y[j] -= _raw_deviation(t, y, j)
+        # only the samples with j among their two neighbours a side see the change (idx[p] = p + 2)
+        lo, hi = max(0, j - 4), min(n, j + 5)
+        near, near_dev = loo_deviations(None if t is None else t[lo:hi], y[lo:hi], 2)
+        dev[near + lo - 2] = near_dev
     return np.array(sorted(found), dtype=int)
 
 
@@ -205,9 +224,7 @@ def find_swings(t: np.ndarray, angle: np.ndarray, centre: float | None = None, h
     # sample of largest excursion.
     side = np.where(z > hysteresis, 1, np.where(z < -hysteresis, -1, 0))
     beyond = np.flatnonzero(side)
-    crossings: list[float] = []
-    peaks_t: list[float] = []
-    peaks_v: list[float] = []
+    crossings = peaks_t = peaks_v = np.zeros(0)
     if beyond.size:
         sb = side[beyond]
         starts = beyond[np.concatenate(([True], sb[1:] != sb[:-1]))]
@@ -218,35 +235,28 @@ def find_swings(t: np.ndarray, angle: np.ndarray, centre: float | None = None, h
         at_best = np.flatnonzero(excursion == np.repeat(best, lengths)) + starts[0]
         lobe = at_best[np.searchsorted(at_best, starts)]
         crossings = _crossing_times(t, z, starts[1:])
-        peaks_t = list(t[lobe])
-        peaks_v = list(z[lobe])
-    complete = np.ones(len(peaks_v), dtype=bool)
+        peaks_t = t[lobe]
+        peaks_v = z[lobe]
+    complete = np.ones(peaks_v.size, dtype=bool)
     if complete.size:
         complete[-1] = False
         # the first lobe's extremum at the very first sample may be mid-swing
         complete[0] = peaks_t[0] > t[0]
-    return Swings(c, np.asarray(crossings), np.asarray(peaks_t), np.asarray(peaks_v), complete)
+    return Swings(c, crossings, peaks_t, peaks_v, complete)
 
 
-def _crossing_times(t: np.ndarray, z: np.ndarray, at: np.ndarray) -> list[float]:
+def _crossing_times(t: np.ndarray, z: np.ndarray, at: np.ndarray) -> np.ndarray:
     """For each index i in ``at``: walk back to the sign change just before i and interpolate linearly."""
     sg = np.sign(z)
-    pos = np.arange(z.size)
-    out = np.empty(at.size)
-    for sign in (1.0, -1.0):
-        mine = sg[at] == sign
-        if not mine.any():
-            continue
-        # the last sample at or before each index whose sign differs from ``sign`` (−1: none)
-        other = np.maximum.accumulate(np.where(sg != sign, pos, -1))
-        i = at[mine]
-        j = other[i - 1] + 1  # the sign change is between j − 1 and j (j = 0: none before i)
-        jj = np.maximum(j, 1)
-        z0, z1 = z[jj - 1], z[jj]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            frac = np.where(z0 != z1, z0 / (z0 - z1), 0.5)
-        out[mine] = np.where(j == 0, t[i], t[jj - 1] + frac * (t[jj] - t[jj - 1]))
-    return [float(v) for v in out]
+    # where each run of samples of one sign begins; i's run begins at j, so the
+    # sign changes between j − 1 and j (j = 0: no change before i)
+    runs = np.concatenate(([0], np.flatnonzero(sg[1:] != sg[:-1]) + 1))
+    j = runs[np.searchsorted(runs, at, side="right") - 1]
+    jj = np.maximum(j, 1)
+    z0, z1 = z[jj - 1], z[jj]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.where(z0 != z1, z0 / (z0 - z1), 0.5)
+    return np.where(j == 0, t[at], t[jj - 1] + frac * (t[jj] - t[jj - 1]))
 
 
 @dataclass(frozen=True)
