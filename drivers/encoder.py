@@ -103,12 +103,12 @@ class EncoderConfig:
     timeout: s to wait for one reply. max_consecutive_errors: this many failed reads in
         a row is an EncoderFault.
     min_interval: s between the starts of two requests (0: as fast as the bus allows).
-    late_reply_factor: a reply whose round trip exceeds this many times the link's shortest
-        round trip (the fastest of the last 1024 requests) is dropped and counted in
-        ``late_replies``: its host timestamp, the midpoint of request and reply, is uncertain by
-        half the excess, an angle error of θ'·Δt. With the default 1.5 a kept sample's time is
-        off by at most a quarter of the shortest round trip (about a quarter of the sample
-        period when reading back to back). 0 keeps every reply.
+    late_reply_factor: a reply whose round trip exceeds the recent short round trips (the 10th
+        percentile of the last 256) by more than (late_reply_factor − 1) times the capture's
+        shortest of them is dropped and counted in ``late_replies``: its host timestamp, the
+        midpoint of request and reply, is uncertain by half the excess, an angle error of θ'·Δt.
+        With the default 1.5 a kept sample's time is off by at most a quarter of the link's round
+        trip, however busy the host. 0 keeps every reply.
     """
 
     port: str
@@ -236,6 +236,7 @@ class ModbusEncoder:
         self._counts = self._zero_counts()
         self._unwrap_last: float | None = None
         self._rtts: deque[float] = deque(maxlen=256)  # recent round trips, clock s
+        self._rtt_floor = math.inf  # the capture's shortest reference round trip, clock s (see _late)
 
     # -- AngleSensor ---------------------------------------------------------------
     def start(self) -> None:
@@ -442,21 +443,27 @@ class ModbusEncoder:
     def _late(self, rtt: float) -> bool:
         """Whether this round trip is too long for its midpoint to date the sample.
 
-        Judged against the link's short round trips (the 10th percentile of the last 256), not a
-        typical one: while a busy host delays most replies a median would follow them up. A
-        percentile, not the minimum: one exceptionally fast reply must not make all others late.
+        The reference is the recent short round trips (the 10th percentile of the last 256), not a
+        typical one: while a busy host delays most replies a median would follow them up. The
+        excess allowed over it is (late_reply_factor − 1) times the shortest such reference of the
+        capture, the link's own round trip: it does not grow while the host is busy, so a kept
+        sample's time is off by at most a quarter of that (factor 1.5). At least the tenth of the
+        replies at or under the reference is always kept: a link that slows down for good is followed.
         """
         recent = self._rtts
         late = False
         if self.config.late_reply_factor and len(recent) >= 16:
-            floor = float(np.partition(np.fromiter(recent, dtype=float), len(recent) // 10)[len(recent) // 10])
-            late = rtt > self.config.late_reply_factor * floor
+            k = len(recent) // 10
+            reference = float(np.partition(np.fromiter(recent, dtype=float), k)[k])
+            self._rtt_floor = min(self._rtt_floor, reference)
+            late = rtt > reference + (self.config.late_reply_factor - 1.0) * self._rtt_floor
         recent.append(rtt)
         return late
 
     async def _sample_loop(self) -> None:
         c = self.config
         self._rtts.clear()
+        self._rtt_floor = math.inf
         next_start = 0.0
         while self._sampling:
             if c.min_interval > 0:
