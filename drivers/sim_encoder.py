@@ -5,8 +5,9 @@ URL pyserial and pymodbus understand), so ``drivers.encoder.ModbusEncoder``
 talks to it through exactly the code path it uses on an RS-485 adapter.
 
 On every read request the server latches the position from the angle source
-at that instant on the injected clock (real or scaled time), adds noise,
-quantises to the encoder's counts, and replies after the configured latency.
+halfway through the configured latency (its turnaround) on the injected clock
+(real or scaled time), adds noise, quantises to the encoder's counts, and
+replies at the end of it.
 With ``baudrate`` set it also spends the request's wire time before latching
 and the reply's after, as a real RS-485 line does. Faults
 are injected on the wire: dropped replies (no answer: the client times out)
@@ -62,7 +63,8 @@ class SimEncoderConfig:
     direction: +1, or −1 when the encoder counts against the rig's positive angle.
     zero: counts reported at angle 0 (mounting offset).
     noise_std: white noise added to the true angle before quantisation, rad.
-    latency: encoder turnaround, from latching the position to replying, s of real time.
+    latency: encoder turnaround, from the request's last byte to the reply, s of real time;
+        the position is latched halfway through it.
     baudrate: if set, the request's wire time passes before the latch and the reply's
         after it, at this baud rate (11 bits per character with parity, 10 without).
     parity: "N", "E" or "O" (only used for the wire time).
@@ -233,10 +235,10 @@ class SimEncoderServer:
         if function_code not in _READ_CODES or set_values is not None:
             return ExcCodes.ILLEGAL_FUNCTION
         request_wire, reply_wire = c.wire_times(count)
-        if request_wire > _SHORTEST_ASYNC_WAIT:  # the request is still on the wire: the encoder latches after its last byte
-            await asyncio.sleep(request_wire)
-        elif request_wire > 0:
-            time.sleep(request_wire)  # see the reply's wait below
+        # the request's wire time, then the first half of the turnaround: the simulated device runs on the host,
+        # so a busy host stretches its turnaround, which a real encoder's does not; latching midway keeps the
+        # stretch symmetric about the latch, out of the client's midpoint timestamp
+        await self._wait(request_wire + 0.5 * c.latency)
         t = self._clock.now()
         true_angle = float(self._angle(t))
         self.last_latch = (t, true_angle)
@@ -253,15 +255,19 @@ class SimEncoderServer:
             registers[offset:offset + 2] = to_registers(value, "uint32", c.word_order)
         with self._lock:
             self.counts["reads"] += 1
-        delay = c.latency + reply_wire
-        if delay > _SHORTEST_ASYNC_WAIT:
-            await asyncio.sleep(delay)
-        elif delay > 0:
+        await self._wait(0.5 * c.latency + reply_wire)
+        return None
+
+    @staticmethod
+    async def _wait(seconds: float) -> None:
+        """Let ``seconds`` of real time pass on the device's loop."""
+        if seconds > _SHORTEST_ASYNC_WAIT:
+            await asyncio.sleep(seconds)
+        elif seconds > 0:
             # the event loop waits in whole milliseconds (epoll): 0.2 ms would become >= 1 ms, a round
             # trip 3× the wire's and a third of the samples; this loop serves only this simulated device,
             # which is busy during its turnaround anyway
-            time.sleep(delay)
-        return None
+            time.sleep(seconds)
 
     def _on_packet(self, sending: bool, data: bytes) -> bytes:
         if not sending or not data:

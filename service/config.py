@@ -103,7 +103,8 @@ class SimulationSettings:
 MAX_TIME_SCALE = 1000.0
 
 #: largest time_scale with sensor = "encoder": the simulated Modbus link serves some 500–1500 reads per
-#: wall-clock second (bench/bench_encoder.py), ≥ 25 samples per simulated second at 20×, ≥ 30 per swing
+#: wall-clock second (bench/bench_encoder.py), about 30 samples per simulated second at 20× (some 35 per
+#: swing of the demo rig) on a busy 2-core host; at 50× it was 7
 MAX_ENCODER_TIME_SCALE = 20.0
 
 
