@@ -31,6 +31,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from measurement import Options, Pendulum, Rig, Trace, identify, quantise, simulate_trace
+from measurement.effects import EFFECTS
 from measurement.fit import fit_model
 from measurement.identification import prepare
 from measurement.model import Model
@@ -49,14 +50,19 @@ STRENGTHS = {
         "quadratic": [("K", v) for v in (3e-5, 1e-4, 4e-4)],
         "cubic_stiffness": [("k3", v) for v in (3e-3, 1e-2, 4e-2)],
         "drift": [("rate", v) for v in (2e-6, 6e-6, 2e-5)],
+        "dahl": [("theta_c", v) for v in (0.003, 0.01, 0.03)],
     },
     "compound": {
         "coulomb": [("mu", v) for v in (2e-5, 6e-5, 2e-4)],
         "quadratic": [("K", v) for v in (3e-5, 1e-4, 4e-4)],
         "drift": [("rate", v) for v in (2e-6, 6e-6, 2e-5)],
         "gain": [("g", v) for v in (1.002, 1.006, 1.02)],
+        "dahl": [("theta_c", v) for v in (0.01, 0.03, 0.1)],
+        "view": [("shear", v) for v in (1e-4, 3e-4, 1e-3)],
     },
 }
+#: values held fixed while the strength above varies (Dahl friction: its sliding torque)
+FIXED = {("torsion", "dahl"): {"Tc": 3e-5}, ("compound", "dahl"): {"mu": 2e-4}, ("compound", "view"): {"stretch": 0.0}}
 
 
 def make_trace(rig_name: str, effects: dict, noise: str, seed: int) -> Trace:
@@ -80,12 +86,15 @@ def make_trace(rig_name: str, effects: dict, noise: str, seed: int) -> Trace:
 def power_case(args):
     rig_name, effect, param, value, noise, seed = args
     spec = RIGS[rig_name]
-    trace = make_trace(rig_name, {effect: {param: value}}, noise, seed)
+    trace = make_trace(rig_name, {effect: {param: value, **FIXED.get((rig_name, effect), {})}}, noise, seed)
     true_names = list(spec["base"]) + [effect]
     rig = spec["rig"]
     prep = prepare(trace)
     full = fit_model(Model.from_names(rig, true_names), prep.t, prep.y, prep.noise)
-    without = fit_model(Model.from_names(rig, list(spec["base"])), prep.t, prep.y, prep.noise)
+    # an effect that refines another is weighed against that one (Dahl friction against dry friction)
+    refined = EFFECTS[effect].refines
+    without = fit_model(Model.from_names(rig, list(spec["base"]) + ([refined] if refined else [])),
+                        prep.t, prep.y, prep.noise)
     oracle = full.bic - without.bic
     r = identify(trace, rig.with_declared(tuple(spec["base"])))
     return rig_name, effect, value, noise, seed, oracle, r.added_effects

@@ -19,6 +19,9 @@ def main() -> int:
         print(f"=== {path.name}")
         spec = importlib.util.spec_from_file_location(path.stem, path)
         module = importlib.util.module_from_spec(spec)
+        # registered under its name: a bench that hands its functions to worker
+        # processes (bench_discovery_power) pickles them by module and name
+        sys.modules[path.stem] = module
         t0 = time.perf_counter()
         try:
             spec.loader.exec_module(module)

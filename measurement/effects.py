@@ -33,7 +33,7 @@ if TYPE_CHECKING:  # effects need only the rig's attributes; the rig module impo
     from .rig import Rig
 
 #: names the effects' ``term`` expressions may use, in their numpy form
-_NUMPY_NAMES = {"cos": np.cos, "sin": np.sin, "abs": np.abs}
+_NUMPY_NAMES = {"cos": np.cos, "sin": np.sin, "abs": np.abs, "exp": np.exp}
 
 #: name → effect class, filled by ``Effect.__init_subclass__`` in definition order.
 EFFECTS: dict[str, type["Effect"]] = {}
@@ -47,6 +47,7 @@ class Parameter:
     physical/physical_unit: the torque-law quantity reported when J is known
     (e.g. c in N·m·s/rad); None when the fitted quantity is already physical.
     lower: lower bound used in fitting (dissipation cannot be negative).
+    upper: upper bound (where the law stops meaning what its name says).
     """
 
     name: str
@@ -55,6 +56,8 @@ class Parameter:
     physical_unit: str | None
     lower: float = 0.0
     description: str = ""
+    #: upper bound used in fitting
+    upper: float = math.inf
 
 
 class Effect:
@@ -111,6 +114,32 @@ class Effect:
     #: Static friction capacity at rest (rad/s², a θ'' magnitude) as an
     #: expression in x and p0...; empty when the effect cannot hold the pendulum.
     holding_term: ClassVar[str] = ""
+    #: An effect that remembers the last turning point (``term`` then also
+    #: uses xr, where it was, rad, and zr, a state it had there): ``memory`` is
+    #: the new zr at a reversal at x reached in direction s, ``memory_force``
+    #: its θ'' contribution at rest there (in x, zr, p0...). One effect at most.
+    memory: ClassVar[str] = ""
+    memory_force: ClassVar[str] = ""
+    #: condition (in p0...) under which the remembered force turns over within a
+    #: small fraction of a step after a reversal
+    memory_sharp: ClassVar[str] = "False"
+    #: sensor parameters that change the angle's scale (nominal 0): ω_n is read through them
+    scale_parameters: ClassVar[tuple[str, ...]] = ()
+    #: The effect this one generalises (it contains it as a limit and replaces
+    #: it in a model): offered as a candidate only where that one is present.
+    refines: ClassVar[str | None] = None
+
+    def refined_start(self, refined_values: Sequence[float], amplitudes: Sequence[float]) -> list[list[float]]:
+        """Start values that reproduce (nearly) the refined effect with ``refined_values``.
+
+        amplitudes: (largest, smallest) swing amplitude of the record, rad.
+        Several starts may be given; the fit keeps the best.
+        """
+        raise NotImplementedError
+
+    def parameter_scales(self, amplitude: float) -> list[float | None]:
+        """Typical size of each parameter at this amplitude (rad); None: from the regressors."""
+        return [None] * len(self.parameters)
 
     def equivalent_viscous(self, values: Sequence[float], amplitude: float, omega: float) -> float:
         """c_eq/J (1/s) dissipating the same energy per cycle at this amplitude (rad) and ω (rad/s)."""
@@ -127,9 +156,12 @@ class Effect:
         """
         return None
 
+    #: below this amplitude (rad) the effect cannot be told apart from the swing
+    min_amplitude: ClassVar[float] = 0.0
+
     def identifiable(self, amplitude: float) -> bool:
         """Whether a record of this amplitude (rad) can tell the effect apart (else never a candidate)."""
-        return True
+        return amplitude >= self.min_amplitude
 
     # -- sensor effects --------------------------------------------------------
     def sensor_basis(self, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -299,6 +331,101 @@ class Coulomb(Effect):
         return {"Tc": None if inertia is None else b * inertia}
 
 
+class Dahl(Coulomb):
+    name = "dahl"
+    role = "damping"
+    parameters = (
+        Parameter("Tc_per_J", "rad/s²", "Tc", "N·m", description="sliding friction torque over J (compound: μ·m·g/J)"),
+        Parameter("theta_c", "rad", None, None, upper=0.5,
+                  description="pre-sliding angle: the friction reaches 63 % of T_c this far from a turning point"
+                              " (beyond 0.5 rad it would be a spring, not friction)"),
+    )
+    cause = "pre-sliding (micro-slip) stiffness of a dry bearing, or a cable: a spring at small amplitude, "\
+            "dry friction at large"
+    law = "dT/dθ = (T_c/θ_c)·(1 − T/T_c·sgn θ') (Dahl; compound: T_c ∝ cos θ)"
+    refines = "coulomb"
+
+    # The Dahl law integrates in closed form over a half-swing: with z = T/T_c
+    # and z_r its value at the last turning point x_r,
+    #     z = s − s·(1 − s·z_r)·exp(−|x − x_r|/θ_c),
+    # so the friction is a function of the angle travelled since the reversal
+    # and the integrator needs no third state. θ_c = 0 is Coulomb friction.
+    _z = "(s - s * (1.0 - s * zr) * exp(-abs(x - xr) / p1) if p1 > 0.0 else s)"
+    memory = _z
+    memory_sharp = "p0 != 0.0 and p1 > 0.0"
+
+    @property
+    def term(self) -> str:  # type: ignore[override]
+        return f"p0 * {self._z} * cos(x)" if self.rig.kind == "compound" else f"p0 * {self._z}"
+
+    @property
+    def holding_term(self) -> str:  # type: ignore[override]
+        # A pre-sliding spring does not stick: it keeps oscillating, less and less. At θ_c = 0
+        # it is Coulomb friction, which must stick as Coulomb's does: without that, the
+        # friction would flip at every reversal near rest, ever faster (a Zeno chatter). Below
+        # a micro-radian the spring is stiffer than any record resolves and its oscillation
+        # near rest would take millions of reversals: it holds as dry friction does.
+        cap = "p0 * abs(cos(x))" if self.rig.kind == "compound" else "p0"
+        return f"({cap} if p1 <= {self.stiff_below!r} else 0.0)"
+
+    #: pre-sliding angle (rad) below which the friction holds the pendulum at rest as Coulomb's does
+    stiff_below: ClassVar[float] = 1e-6
+
+    @property
+    def memory_force(self) -> str:  # type: ignore[override]
+        return "p0 * zr * cos(x)" if self.rig.kind == "compound" else "p0 * zr"
+
+    def basis(self, theta, omega):
+        # Linear in T_c only: its regressor is the sliding (Coulomb) one; θ_c
+        # enters through refined_start and parameter_scales, not a regression.
+        theta = np.asarray(theta, dtype=float)
+        col = np.sign(np.asarray(omega, dtype=float)) * (np.cos(theta) if self.rig.kind == "compound" else 1.0)
+        return np.stack([np.broadcast_to(col, theta.shape), np.zeros_like(theta)], axis=1)
+
+    def refined_start(self, refined_values, amplitudes):
+        smallest = max(float(amplitudes[1]), 1e-6)
+        # the pre-sliding angle shows where the swings come down to it
+        return [[float(refined_values[0]), f * smallest] for f in (0.1, 0.3, 1.0)]
+
+    def parameter_scales(self, amplitude):
+        return [None, 0.1 * max(amplitude, 1e-6)]
+
+    def frequency_factor(self, values, omega_n, amplitude):
+        # below θ_c the friction is a spring T_c/θ_c: the swing is faster there
+        tc, thc = float(values[0]), float(values[1])
+        if thc <= 0.0:
+            return 1.0
+        return min(math.sqrt(1.0 + max(tc, 0.0) / (thc * max(omega_n, 1e-9) ** 2)), 10.0)
+
+    def equivalent_viscous(self, values, amplitude, omega):
+        # sliding over all but ≈θ_c of each half-swing
+        thc = float(values[1])
+        return super().equivalent_viscous(values, amplitude, omega) * max(0.0, 1.0 - thc / amplitude) if amplitude > 0 else 0.0
+
+    extra_units = {**Coulomb.extra_units, "presliding_stiffness": "N·m/rad", "presliding_stiffness_per_J": "1/s²"}
+
+    def evidence(self, diag):
+        if diag.freq_amp_t <= -4:
+            return (f"the swing frequency rises as the swing decays, beyond the model (t = {diag.freq_amp_t:.1f}):"
+                    f" a stiffness that acts only at small amplitude, as a bearing's pre-sliding spring")
+        return ""
+
+    def normalise(self, given, inertia):
+        if "theta_c" not in given:
+            raise InvalidInput("dahl: missing value theta_c (rad), the pre-sliding angle")
+        # the sliding friction is given as for dry friction
+        rest = {k: v for k, v in given.items() if k != "theta_c"}
+        return Coulomb(self.rig).normalise(rest, inertia) + [float(given["theta_c"])]
+
+    def physical(self, values, inertia, omega_n):
+        out = super().physical(values, inertia, omega_n)
+        tc, thc = float(values[0]), float(values[1])
+        k = tc / thc if thc > 0 else None  # θ_c = 0: dry friction, no spring to report
+        out["presliding_stiffness_per_J"] = k
+        out["presliding_stiffness"] = None if inertia is None or k is None else k * inertia
+        return out
+
+
 class Quadratic(Effect):
     name = "quadratic"
     role = "damping"
@@ -377,13 +504,11 @@ class Gain(Effect):
     #: a scale error is told apart from the amplitude only through the sin θ of a compound rig
     rigs = ("compound",)
     cause = "camera/encoder scale error (distance, focal length, marker geometry)"
+    scale_parameters = ("g_minus_1",)
     law = "θ_meas = a + g·θ"
     extra_units = {"g": "1"}
-    #: below this amplitude (rad) sin θ is too close to θ for g to be told from the amplitude
-    min_amplitude: ClassVar[float] = 0.5
-
-    def identifiable(self, amplitude):
-        return amplitude >= self.min_amplitude
+    #: below this amplitude sin θ is too close to θ for g to be told from the amplitude
+    min_amplitude = 0.5
 
     def sensor_basis(self, t, theta):
         return np.asarray(theta, dtype=float)[:, None]
@@ -411,6 +536,38 @@ class Gain(Effect):
         return {"g": 1.0 + float(values[0])}
 
 
+class View(Effect):
+    name = "view"
+    role = "sensor"
+    parameters = (
+        Parameter("stretch", "1", None, None, lower=-0.5, upper=0.5,
+                  description="image stretched along the horizontal against the vertical (e₁)"),
+        Parameter("shear", "1", None, None, lower=-0.5, upper=0.5,
+                  description="image stretched along a diagonal (e₂): makes the two half-swings unequal"),
+    )
+    #: told apart from the swing only at large angles, where sin 2θ and cos 2θ are not θ and θ²
+    rigs = ("compound",)
+    scale_parameters = ("stretch",)
+    cause = "camera not square to the swing plane (oblique view, lens): the image of the swing is an ellipse"
+    law = "θ_meas = a + θ + e₁·sin 2θ + e₂·(cos 2θ − 1) (an affine image of the marker's direction, to first order)"
+    min_amplitude = 0.5
+
+    def sensor_basis(self, t, theta):
+        # the direction (sin θ, cos θ) seen through the image map [[1+e₁, e₂], [e₂, 1−e₁]]:
+        # ∂θ_meas/∂e₁ = sin 2θ, ∂θ_meas/∂e₂ = cos 2θ (minus 1: the offset is fitted apart)
+        theta = np.asarray(theta, dtype=float)
+        return np.stack([np.sin(2 * theta), np.cos(2 * theta) - 1.0], axis=1)
+
+    def evidence(self, diag):
+        if abs(diag.asymmetry_t) >= 4:
+            return (f"the two half-swings differ in amplitude by {diag.asymmetry:+.2g} rad (t = {diag.asymmetry_t:.1f}),"
+                    f" as an oblique view of the swing makes them")
+        return ""
+
+    def physical(self, values, inertia, omega_n):
+        return {}
+
+
 def resolve_effects(names: Iterable[str], rig: "Rig") -> list[Effect]:
     """Instantiate effects by name for this rig, in library order.
 
@@ -419,6 +576,10 @@ def resolve_effects(names: Iterable[str], rig: "Rig") -> list[Effect]:
     """
     names = list(names)
     seen: set[str] = set()
+    for n in names:
+        other = getattr(EFFECTS.get(n), "refines", None)
+        if other is not None and other in names:
+            raise UnknownEffectError(f"effects {n!r} and {other!r} exclude each other: {n} contains {other} as a limit")
     for n in names:
         if n not in EFFECTS:
             hint = " (the zero offset is always fitted; it is not an effect)" if n in ("offset", "zero_offset") else ""
@@ -434,4 +595,12 @@ def resolve_effects(names: Iterable[str], rig: "Rig") -> list[Effect]:
 def candidate_effects(rig: "Rig", present: Iterable[str]) -> list[Effect]:
     """Library effects that apply to this rig and are not already in the model."""
     present = set(present)
-    return [cls(rig) for n, cls in EFFECTS.items() if n not in present and rig.kind in cls.rigs]
+    contained = {EFFECTS[n].refines for n in present if n in EFFECTS}
+    return [cls(rig) for n, cls in EFFECTS.items()
+            if n not in present and n not in contained and rig.kind in cls.rigs
+            and (cls.refines is None or cls.refines in present)]
+
+
+def with_effect(present: Iterable[str], effect: Effect) -> tuple[str, ...]:
+    """The effect names of a model after adding ``effect`` (which replaces the effect it refines)."""
+    return tuple(n for n in present if n != effect.refines) + (effect.name,)

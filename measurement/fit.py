@@ -233,12 +233,22 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
         for e in model.dynamic:
             start = e.fallback_start(sw.peak_times[good], amps[good]) if good.sum() >= 3 else None
             values[e.name] = start if start is not None else [0.0] * len(e.parameters)
+    peaks = np.abs(sw.peak_values)
+    smallest = float(np.min(peaks[-3:])) if peaks.size else amplitude
+    for e in model.dynamic:
+        if e.refines is not None:
+            # a parameter the regression cannot see starts where it shows
+            starts = e.refined_start(values[e.name][:1], (amplitude, smallest))
+            values[e.name] = starts[len(starts) // 2]
 
     x = model.vector((theta0, omega0, omega_n), values, centre)
     restoring_rms = omega_n**2 * float(np.sqrt(np.mean(restoring**2)))
     scales = np.empty(model.size)
     scales[:3] = [max(amplitude, 1e-6), max(amplitude * omega_n, 1e-6), omega_n]
     scales[3:model.n_dynamic] = restoring_rms / col_rms[1:]
+    for e in model.dynamic:
+        sl = model.layout[e.name]
+        scales[sl] = [s if size is None else size for s, size in zip(scales[sl], e.parameter_scales(amplitude))]
     scales[model.layout["offset"]] = max(amplitude, 1e-6)
     for e in model.sensor:
         # a sensor term of the swing's size over the record
@@ -270,6 +280,16 @@ def start_candidates(model: Model, x: np.ndarray, previous: "ModelFit | None") -
             if e.role == "sensor":
                 state[model.layout[e.name]] = previous.effect(e.name)
     starts += [np.clip(full, lo_b, hi_b), np.clip(state, lo_b, hi_b)]
+    refining = [e for e in model.effects if e.refines is not None and e.refines in pm.layout]
+    if refining:
+        # start from the fit it refines: the same values, the new parameters at sizes worth trying
+        theta = np.abs(previous.extra["theta"])
+        amplitudes = (float(np.max(theta)), float(np.max(theta[-max(1, theta.size // 10):])))
+        for e in refining:
+            for vals in e.refined_start(previous.effect(e.refines), amplitudes):
+                x_ref = full.copy()
+                x_ref[model.layout[e.name]] = vals
+                starts.append(np.clip(x_ref, lo_b, hi_b))
     return starts
 
 
@@ -370,7 +390,8 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
     noise = fit_noise(effective)
     cov, method, inflation = covariance(J * np.sqrt(weight)[:, None], effective, scales, noise)
     tol = 1e-9 * scales
-    at_bound = tuple(n for n, v, l, s in zip(model.names, x, lo, tol) if np.isfinite(l) and v - l <= s)
+    at_bound = tuple(n for n, v, l, u, s in zip(model.names, x, lo, hi, tol)
+                     if (np.isfinite(l) and v - l <= s) or (np.isfinite(u) and u - v <= s))
     return ModelFit(
         model=model, x=x, cov=cov, t=t, y=y, fitted=y + residual, residual=residual,
         rss=float(effective @ effective), success=bool(sol.success), message=str(sol.message), nfev=nfev[0],

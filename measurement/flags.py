@@ -17,6 +17,7 @@ CORRELATED_RESIDUAL = "correlated_residual"
 OUTLIERS_DOWNWEIGHTED = "outliers_downweighted"
 WINDOW_CUT_AT_GAP = "window_cut_at_gap"
 ANGLE_UNWRAPPED = "angle_unwrapped"
+SENSOR_SCALE_FITTED = "sensor_scale_fitted"
 # -- acquisition --------------------------------------------------------------------
 ENCODER_ERRORS = "encoder_errors"
 CAMERA_POSE = "camera_pose"
@@ -37,6 +38,9 @@ FLAGS: dict[str, str] = {
     OUTLIERS_DOWNWEIGHTED: "the robust loss gave samples far off the model a reduced weight (count in window.n_downweighted)",
     WINDOW_CUT_AT_GAP: "the fit window ends at a long gap in the samples (window.gap_cut_at gives the time)",
     ANGLE_UNWRAPPED: "jumps of 2π in the angle (a swing through ±π) were unwrapped (count in window.n_unwrapped)",
+    SENSOR_SCALE_FITTED: "the angle sensor's scale was identified from the swing itself (effect gain or view): the "
+                         "sensor is off its calibration and ω_n, J rest on that fit (the report gives ω_n at the "
+                         "nominal scale); calibrate the camera or encoder scale",
     ENCODER_ERRORS: "the encoder had time-outs, CRC errors or late replies (counts in acquisition)",
     CAMERA_POSE: "the camera's yaw was beyond the limit (yaw_limit_deg): the angles were corrected; check the mounting",
     MARKER_LOST: "the tracker lost the marker in some frames",

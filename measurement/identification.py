@@ -32,7 +32,7 @@ from threadpoolctl import ThreadpoolController
 
 from . import flags as F
 from .diagnostics import Diagnostics, diagnose
-from .effects import EFFECTS, Effect, candidate_effects, resolve_effects
+from .effects import EFFECTS, Effect, candidate_effects, resolve_effects, with_effect
 from .errors import IdentificationError, TraceError, UnknownEffectError
 from .fit import ModelFit, fit_model
 from .noise import fit_noise
@@ -198,7 +198,9 @@ def _effect_quantities(fit: ModelFit, rig: Rig, role: Sequence[str]) -> dict[str
             if val is None:
                 params[name] = Quantity(None, None, e.unit_of(name))
             else:
-                v, s = _propagate(lambda xx, _n=name: float(physical(xx)[_n]), x, cov)
+                # a quantity undefined beside x (Dahl's spring as θ_c crosses 0) has no uncertainty
+                v, s = _propagate(lambda xx, _n=name: float(physical(xx)[_n] if physical(xx)[_n] is not None
+                                                            else math.nan), x, cov)
                 params[name] = Quantity(v, s, e.unit_of(name))
         out[e.name] = params
     return out
@@ -212,6 +214,28 @@ def _summary(fit: ModelFit, rig: Rig) -> ModelSummary:
         omega_n=w, omega_n_std=ws, residual_rms=fit.residual_rms, bic=fit.bic, aic=fit.aic,
         damping=_effect_quantities(fit, rig, ("damping",)),
     )
+
+
+def _omega_n_at_nominal_scale(fit: ModelFit) -> tuple[list[str], float] | None:
+    """ω_n (rad/s) the fit implies were the sensor's scale parameters at their nominal 0, and their names.
+
+    The conditional mean under the fit's Gaussian uncertainty: ω_n − Σ_ωs·Σ_ss⁻¹·s.
+    None when the model fits no scale.
+    """
+    model = fit.model
+    names = [f"{e.name}.{p}" for e in model.sensor for p in e.scale_parameters]
+    if not names:
+        return None
+    iw = model.index("omega_n")
+    idx = [model.index(n) for n in names]
+    s = fit.x[idx]
+    cov_ss = fit.cov[np.ix_(idx, idx)]
+    cov_ws = fit.cov[iw, idx]
+    try:
+        shift = float(cov_ws @ np.linalg.solve(cov_ss, s))
+    except np.linalg.LinAlgError:
+        return None
+    return names, float(fit.x[iw]) - shift
 
 
 def _remove_outliers(fit: ModelFit, prep: Prepared, options: Options) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -249,9 +273,13 @@ def score_effect(current: ModelFit, effect: Effect, q: np.ndarray | None = None)
     """
     model = current.model
     rig = model.rig
-    cand = Model(rig, tuple(resolve_effects(model.effect_names + (effect.name,), rig)))
+    cand = Model(rig, tuple(resolve_effects(with_effect(model.effect_names, effect), rig)))
+    values = {e.name: current.effect(e.name) for e in model.effects}
+    if effect.refines is not None:
+        # at its other parameters' zero the effect is the one it refines, with the same values
+        values[effect.name] = current.effect(effect.refines) + [0.0] * (len(effect.parameters) - 1)
     x = cand.vector((current.value("theta0"), current.value("omega0"), current.value("omega_n")),
-                    {e.name: current.effect(e.name) for e in model.effects}, current.value("offset"))
+                    values, current.value("offset"))
     t = current.t
     ts = t - t[0]
     # with the effect at 0 the candidate's swing is the current fit's (kept on the fit: no simulation)
@@ -266,6 +294,9 @@ def score_effect(current: ModelFit, effect: Effect, q: np.ndarray | None = None)
         restoring = np.sin(theta) if rig.kind == "compound" else theta
         col = np.sqrt(np.mean(effect.basis(theta, omega) ** 2, axis=0))
         h = 1e-6 * w**2 * float(np.sqrt(np.mean(restoring**2))) / np.where(col > 0, col, 1.0)
+        # a parameter the effect is not linear in is screened by a secant of its typical size
+        amplitude = float(np.max(np.abs(theta)))
+        h = np.array([hj if size is None else size for hj, size in zip(h, effect.parameter_scales(amplitude))])
         G = np.empty((t.size, sl.stop - sl.start))
         for j in range(G.shape[1]):
             xp = x.copy()
@@ -345,7 +376,7 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
             score = score_effect(current, cand, q)
             if score.d_bic >= 0.0:
                 return score, None
-            model = Model(rig, tuple(resolve_effects(current.model.effect_names + (cand.name,), rig)))
+            model = Model(rig, tuple(resolve_effects(with_effect(current.model.effect_names, cand), rig)))
             try:
                 return score, fit_model(model, current.t, current.y, prep.noise, previous=current, f_scale=f_scale)
             except IdentificationError:
@@ -505,6 +536,13 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     structure = diag.describe()
     if diag.structured:
         structure.append("left unexplained: no effect of the library accounts for this structure (flag unmodeled_residual)")
+    nominal = _omega_n_at_nominal_scale(final)
+    if nominal is not None:
+        flags.append(F.SENSOR_SCALE_FITTED)
+        names, w_nom = nominal
+        structure.append(f"the angle's scale was fitted from the swing ({', '.join(names)}): with the sensor at its "
+                         f"nominal scale ω_n would read {w_nom:.6g} rad/s ({(w_nom - w) / ws:+.1f} σ, "
+                         f"{100 * (w_nom - w) / w:+.2f} %); calibrate the sensor's scale (flag sensor_scale_fitted)")
     statistics = {
         "n": final.n, "k": final.k, "dof": final.dof, "rss": final.rss,
         "chi2": final.rss / prep.noise**2, "redchi": final.rss / prep.noise**2 / max(final.dof, 1),

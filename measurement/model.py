@@ -120,7 +120,8 @@ class Model:
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo = self._per_parameter([-np.inf, -np.inf, 0.0], -np.inf, lambda p: p.lower)
-        return np.asarray(lo, dtype=float), np.full(len(lo), np.inf)
+        hi = self._per_parameter([np.inf, np.inf, np.inf], np.inf, lambda p: p.upper)
+        return np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
 
     def split(self, x: Sequence[float]) -> dict[str, list[float]]:
         """Effect name → its parameter values, from a parameter vector."""

@@ -53,17 +53,24 @@ def loo_deviations(t: np.ndarray | None, y: np.ndarray, d: int) -> tuple[np.ndar
     tt = np.arange(n, dtype=float) if t is None else np.asarray(t, dtype=float)
     idx = np.arange(d, n - d)
     offsets = [o for o in range(-d, d + 1) if o != 0]
-    # one contiguous row per neighbour: the loops below run over whole rows
-    centre = slice(d, n - d)
-    nodes = np.stack([tt[d + o:n - d + o] - tt[centre] for o in offsets])
-    values = np.stack([y[d + o:n - d + o] for o in offsets])
-    weights = np.ones_like(nodes)
-    for j in range(len(offsets)):
+    # one array per neighbour, whole-array operations written into buffers
+    m = n - 2 * d
+    nodes = [tt[d + o:n - d + o] - tt[d:n - d] for o in offsets]
+    f = np.empty(m)
+    pred = np.zeros(m)
+    sum_w2 = np.zeros(m)
+    for j, o in enumerate(offsets):
+        w = np.ones(m)
         for k in range(len(offsets)):
             if k != j:
-                weights[j] *= -nodes[k] / (nodes[j] - nodes[k])
-    dev = y[centre] - np.sum(weights * values, axis=0)
-    return idx, dev / np.sqrt(1.0 + np.sum(weights**2, axis=0))
+                np.subtract(nodes[j], nodes[k], out=f)
+                np.divide(nodes[k], f, out=f)
+                np.negative(f, out=f)
+                w *= f  # the Lagrange weight of neighbour j
+        pred += w * y[d + o:n - d + o]
+        sum_w2 += w * w
+    dev = y[d:n - d] - pred
+    return idx, dev / np.sqrt(1.0 + sum_w2)
 
 
 Deviations = dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]

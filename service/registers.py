@@ -23,9 +23,11 @@ from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, 
 from measurement import flags as F
 
 #: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 4  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
+MAP_VERSION = 5  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
 # 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
 #    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
+# 5: bits 6-7 of `effects` (dahl, view; they set bit 15, other, before); register flags_high (flags from
+#    bit 16 on: sensor_scale_fitted); seq_end moved from 62 to 63
 #    holding registers; flag calibration_due (bit 13)
 
 
@@ -64,6 +66,7 @@ FLAG_BITS: dict[str, int] = {
     F.ANGLE_UNWRAPPED: 12,
     F.CALIBRATION_DUE: 13,  # map version 4: the rig's calibration is past its validity period
     F.NEGATIVE_INERTIA: 14,  # map version 4
+    F.SENSOR_SCALE_FITTED: 16,  # map version 5: register flags_high, bit 0
 }
 FLAG_OTHER_BIT = 15
 
@@ -75,6 +78,8 @@ EFFECT_BITS: dict[str, int] = {
     "cubic_stiffness": 3,
     "drift": 4,
     "gain": 5,  # map version 3
+    "dahl": 6,  # map version 5
+    "view": 7,  # map version 5
 }
 EFFECT_OTHER_BIT = 15
 
@@ -121,6 +126,7 @@ def flag_bits(flags: Iterable[str]) -> int:
 
 
 def flags_from_bits(bits: int) -> list[str]:
+    """Flag names of a bit field (``flags`` | ``flags_high`` << 16); "other" for bit FLAG_OTHER_BIT."""
     names = [name for name, b in FLAG_BITS.items() if bits & (1 << b)]
     if bits & (1 << FLAG_OTHER_BIT):
         names.append("other")
@@ -211,7 +217,8 @@ def _table() -> tuple[Register, ...]:
     add("snapshot", 29, "noise_floor", "float32", "rad", "noise_floor", "angle noise floor estimated from the data")
     add("snapshot", 31, "J_object", "float32", "kg·m²", "J_object", "J − tare inertia (NaN without a tare)")
     add("snapshot", 33, "flags", "bits16", "bits", "flags",
-        "quality flags: " + ", ".join(f"bit {b} {n}" for n, b in FLAG_BITS.items()) + f", bit {FLAG_OTHER_BIT} other")
+        "quality flags: " + ", ".join(f"bit {b} {n}" for n, b in FLAG_BITS.items() if b < 16)
+        + f", bit {FLAG_OTHER_BIT} other")
     add("snapshot", 34, "effects", "bits16", "bits", "effects",
         "effects of the final model: " + ", ".join(f"bit {b} {n}" for n, b in EFFECT_BITS.items()) + f", bit {EFFECT_OTHER_BIT} other")
     add("snapshot", 35, "uuid", "uuid", "", "uuid", "result UUID (the MQTT `uuid`), 16 bytes big-endian, 2 bytes per register")
@@ -226,7 +233,9 @@ def _table() -> tuple[Register, ...]:
         "the part's value of the recipe quantity (mean of its usable releases; NaN until complete)")
     add("snapshot", 50, "part_U", "float32", "kg·m²", "part_U", "expanded uncertainty U of part_value (NaN until complete)")
     add("snapshot", 52, "part_id", "ascii20", "", "part_id", "the part ID the release was measured for (echo of registers 100–109)")
-    add("snapshot", 62, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
+    add("snapshot", 62, "flags_high", "bits16", "bits", "flags_high",
+        "more quality flags: " + ", ".join(f"bit {b - 16} {n}" for n, b in FLAG_BITS.items() if b >= 16))
+    add("snapshot", 63, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
     return tuple(rows)
 
 
@@ -310,7 +319,8 @@ def _snapshot_values(payload: Mapping[str, Any] | None) -> dict[str, Any]:
         "residual_rms_before": payload.get("residual_rms_before"),
         "noise_floor": payload.get("noise_floor"),
         "J_object": payload.get("J_object"),
-        "flags": flag_bits(payload.get("flags") or ()),
+        "flags": flag_bits(payload.get("flags") or ()) & 0xFFFF,
+        "flags_high": flag_bits(payload.get("flags") or ()) >> 16,
         "effects": effect_bits(payload.get("effects") or ()),
         "uuid": payload.get("uuid"),
         **_part_values(payload),

@@ -196,7 +196,7 @@ def _run(app, args: argparse.Namespace) -> int:
             a = R.BY_NAME[reg].address
             print(f"  {a:>3}–{a + 1:<3} {reg:<14} {snap[reg]:.8g}   (JSON {payload[key]!r})")
         print(f"  {R.BY_NAME['flags'].address:>3}     flags          0x{snap['flags']:04x} "
-              f"{R.flags_from_bits(snap['flags']) or '(none)'}")
+              f"{R.flags_from_bits(snap['flags'] | snap['flags_high'] << 16) or '(none)'}")
         codes = {v: k for k, v in R.VERDICT_CODES.items()}
         for reg in ("verdict", "release_index", "releases", "part_id", "part_value", "part_U"):
             a = R.BY_NAME[reg].address

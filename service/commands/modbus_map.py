@@ -55,7 +55,7 @@ def _read(args: argparse.Namespace) -> int:
             print(f"moi modbus-map: {args.read} answered {rr}", file=sys.stderr)
             return 3
         values = R.decode_image(rr.registers, args.word_order)
-        values["flags"] = R.flags_from_bits(values["flags"])
+        values["flags"] = R.flags_from_bits(values["flags"] | values.pop("flags_high") << 16)
         values["state"] = next((k for k, v in R.STATE_CODES.items() if v == values["state"]), values["state"])
         print(json.dumps(values, indent=2, default=str))
     finally:

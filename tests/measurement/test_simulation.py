@@ -105,9 +105,12 @@ def test_every_effect_term_matches_its_basis(name):
         th, om = rng.uniform(-1, 1, 50), rng.uniform(-2, 2, 50)
         params = rng.uniform(0.1, 1, len(eff.parameters))
         basis = eff.basis(th, om) @ params
-        env = {"cos": math.cos, "sin": math.sin, "abs": abs}
+        env = {"cos": math.cos, "sin": math.sin, "abs": abs, "exp": math.exp}
         env.update({f"p{j}": p for j, p in enumerate(params)})
-        term = [eval(eff.term, dict(env, x=a, v=b, s=math.copysign(1.0, b))) for a, b in zip(th, om)]  # noqa: S307
+        # an effect that remembers the last turning point is compared far from it, its memory
+        # saturated in the direction of motion (its regressors are that limit)
+        term = [eval(eff.term, dict(env, x=a, v=b, s=math.copysign(1.0, b), xr=a - 1e3 * math.copysign(1.0, b),  # noqa: S307
+                                    zr=math.copysign(1.0, b))) for a, b in zip(th, om)]
         assert np.allclose(term, basis, rtol=1e-12, atol=1e-12)
 
 

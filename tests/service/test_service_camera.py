@@ -73,11 +73,13 @@ def test_the_daemon_measures_J_with_the_simulated_camera_triggered_by_the_plc(tm
     assert abs(error) < 2e-3
     cam = msg["acquisition"]["camera"]
     assert cam["yaw_deg"] == pytest.approx(yaw_deg, abs=0.2) and cam["yaw_corrected"] is True
-    assert cam["samples"] > 400 and cam["reader"] == "poll" and cam["marker_lost"] == cam["corrupt_frames"] == 0
+    # ~800 frames on an idle machine; a loaded 2-core CI host has rendered fewer than 300 in time,
+    # which the fit handles (J is checked above): this checks that the camera delivered a swing
+    assert cam["samples"] > 200 and cam["reader"] == "poll" and cam["marker_lost"] == cam["corrupt_frames"] == 0
     assert "camera_pose" in msg["flags"]
     # the PLC reads the same result, the camera's flag on its own bit
     assert registers["uuid"] == msg["uuid"] and registers["J"] == float(np.float32(msg["J"]))
-    assert registers["flags"] == msg["flag_bits"] == R.flag_bits(msg["flags"])
+    assert registers["flags"] | registers["flags_high"] << 16 == msg["flag_bits"] == R.flag_bits(msg["flags"])
     assert registers["flags"] & (1 << R.FLAG_BITS["camera_pose"])
     # the raw trace is the camera's (yaw-corrected), the configuration used is recorded with it
     with_trace = app.app.store.get(stored.uuid, trace=True)
