@@ -1,10 +1,15 @@
 """`moi measure --sim`: one push-button cycle on the simulated rig, through the real CLI entry point."""
 
 import json
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
 from service.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_measure_sim_prints_every_state_and_the_result(capsys):
@@ -72,21 +77,24 @@ def test_measure_sim_camera_options_are_checked(capsys):
 NOISE_FLAGS = {"outliers_removed", "outliers_downweighted", "correlated_residual", "unmodeled_residual"}
 
 
-def test_routine_simulated_measurements_raise_no_quality_flag_and_a_glitch_still_does(capsys):
+def moi_measure_sim(*args: str) -> tuple[dict, str]:
+    """`moi measure --sim --json ARGS` as a user runs it: its own process (not this one, whose heap and
+    leftover threads from earlier tests would jitter the simulated link); (the JSON result, stderr)."""
+    done = subprocess.run([sys.executable, "-m", "service.cli", "measure", "--sim", "--json", *args], cwd=REPO,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout), done.stderr
+
+
+def test_routine_simulated_measurements_raise_no_quality_flag_and_a_glitch_still_does():
     for seed in (1, 2, 3):
-        rc = main(["measure", "--sim", "--json", "--duration", "8", "--seed", str(seed)])
-        captured = capsys.readouterr()
-        assert rc == 0, captured.err
-        d = json.loads(captured.out)
+        d, err = moi_measure_sim("--duration", "8", "--seed", str(seed))
         assert not NOISE_FLAGS & set(d["flags"]), (seed, d["flags"], d["acquisition"]["encoder"])
         assert abs(d["J"] / d["truth"]["J"] - 1) < 1e-3
         enc = d["acquisition"]["encoder"]
         assert enc["samples"] + enc["late_replies"] + enc["errors"] == enc["requests"]  # every request accounted for
-        assert f"{enc['late_replies']} late replies" in captured.err  # dropped samples are reported, not silent
-    rc = main(["measure", "--sim", "--json", "--duration", "8", "--seed", "4", "--glitch-rate", "0.003"])
-    captured = capsys.readouterr()
-    assert rc == 0, captured.err
-    d = json.loads(captured.out)
+        assert f"{enc['late_replies']} late replies" in err  # dropped samples are reported, not silent
+    d, _ = moi_measure_sim("--duration", "8", "--seed", "4", "--glitch-rate", "0.003")
     assert {"outliers_removed", "outliers_downweighted"} & set(d["flags"]), d["flags"]
     assert abs(d["J"] / d["truth"]["J"] - 1) < 1e-3
 
