@@ -6,11 +6,14 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: demo test bench install broker browser clean
 
+# pip shows its progress: the first install downloads numpy, scipy, OpenCV and friends
 $(STAMP): pyproject.toml
-	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
-	touch $(STAMP)
+	@echo "installing moi and its dependencies into $(VENV) (about a minute on a fresh clone)..."
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	@$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --progress-bar on -e '.[test]'
+	@touch $(STAMP)
+	@echo "moi is installed in $(VENV)"
 
 install: $(STAMP)
 

@@ -7,6 +7,11 @@ time at which the server latched each position is known from the position
 itself: the timestamp error of each sample is t_host_midpoint − t_latch.
 
     rate            samples per second (wall clock = simulated clock here, scale 1)
+
+Then the simulated appliance's own encoder (``service.hardware.build_simulated``:
+default latency, noise and late-reply rule) at each allowed time scale:
+requests and kept samples per wall-clock second, samples per simulated second
+(what a capture gets), and the share of late replies dropped.
     dt std          spread of the sample intervals (how even the sampling is)
     stamp bias/std  mean and standard deviation of t_midpoint − t_latch; the std is
                     the timestamp jitter that matters for the fit (a constant bias
@@ -75,6 +80,38 @@ def main() -> None:
     clean = rows[0]
     print(f"angle error from timestamp jitter on a 0.25 rad, 0.86 Hz swing: "
           f"≤ {0.25 * 2 * math.pi * 0.86 * clean['stamp_std_us'] * 1e-6:.2e} rad RMS")
+    main_scales()
+
+
+def per_time_scale(seconds: float = 2.0) -> list[dict]:
+    """Samples per simulated second of the simulated appliance's encoder at each allowed time scale."""
+    from firmware_host import SequencerConfig
+    from service.config import MAX_ENCODER_TIME_SCALE, SimulationSettings
+    from service.defaults import DEMO_RIG, SIM_ENCODER_NOISE
+    from service.hardware import build_simulated
+
+    logging.getLogger("moi.hardware").setLevel(logging.ERROR)  # the faster-than-real-time warning, once per scale
+    rows = []
+    for scale in (1.0, 2.0, 5.0, 10.0, MAX_ENCODER_TIME_SCALE):
+        sim = SimulationSettings(time_scale=scale, noise=SIM_ENCODER_NOISE, sensor="encoder", seed=1)
+        with build_simulated(DEMO_RIG, sim, SequencerConfig(capture_duration=seconds * scale)) as dev:
+            dev.sensor.start()
+            time.sleep(seconds)  # a bench may wait on the wall clock: that is what it measures
+            dev.sensor.stop()
+            t, _ = dev.sensor.read()
+            st = dev.sensor.stats()
+        rows.append({"scale": scale, "requests_per_s": st["requests"] / seconds, "samples_per_s": len(t) / seconds,
+                     "samples_per_sim_s": len(t) / (seconds * scale),
+                     "late_share": st["late_replies"] / max(st["requests"], 1)})
+    return rows
+
+
+def main_scales() -> None:
+    print("the simulated appliance's encoder per time scale (2 s of wall time each):")
+    for r in per_time_scale():
+        print(f"  time × {r['scale']:4g}: {r['requests_per_s']:6.0f} requests/s, {r['samples_per_s']:6.0f} samples/s "
+              f"(wall) → {r['samples_per_sim_s']:6.1f} samples per simulated s; late replies dropped "
+              f"{100 * r['late_share']:4.1f} %")
 
 
 if __name__ == "__main__":

@@ -103,10 +103,12 @@ class EncoderConfig:
     timeout: s to wait for one reply. max_consecutive_errors: this many failed reads in
         a row is an EncoderFault.
     min_interval: s between the starts of two requests (0: as fast as the bus allows).
-    late_reply_sigma: a reply whose round trip exceeds the median of the last 64 by more than
-        this many robust σ (and by 10 % of the median) is dropped and counted in
-        ``late_replies``: its host timestamp, the midpoint of request and reply, is
-        then uncertain by half the excess, an angle error of θ'·Δt. 0 keeps every reply.
+    late_reply_factor: a reply whose round trip exceeds the recent short round trips (the 10th
+        percentile of the last 256) by more than (late_reply_factor − 1) times the capture's
+        shortest of them is dropped and counted in ``late_replies``: its host timestamp, the
+        midpoint of request and reply, is uncertain by half the excess, an angle error of θ'·Δt.
+        With the default 1.5 a kept sample's time is off by at most a quarter of the link's round
+        trip, however busy the host. 0 keeps every reply.
     """
 
     port: str
@@ -125,7 +127,7 @@ class EncoderConfig:
     timeout: float = 0.05
     max_consecutive_errors: int = 10
     min_interval: float = 0.0
-    late_reply_sigma: float = 5.0
+    late_reply_factor: float = 1.5
 
     def __post_init__(self) -> None:
         if not (isinstance(self.port, str) and self.port.strip()):
@@ -151,8 +153,10 @@ class EncoderConfig:
                 f"encoder: max_consecutive_errors must be an integer >= 1, got {self.max_consecutive_errors!r}")
         if not (isinstance(self.min_interval, (int, float)) and 0 <= self.min_interval <= 1):
             raise DriverConfigError(f"encoder: min_interval must be 0..1 s, got {self.min_interval!r}")
-        if not (isinstance(self.late_reply_sigma, (int, float)) and (self.late_reply_sigma == 0 or self.late_reply_sigma >= 2)):
-            raise DriverConfigError(f"encoder: late_reply_sigma must be 0 (off) or >= 2, got {self.late_reply_sigma!r}")
+        f = self.late_reply_factor
+        if not (isinstance(f, (int, float)) and not isinstance(f, bool) and (f == 0 or 1.1 <= f <= 100)):
+            raise DriverConfigError(f"encoder: late_reply_factor must be 0 (off) or 1.1..100 times the shortest "
+                                    f"round trip, got {f!r}")
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "EncoderConfig":
@@ -231,7 +235,8 @@ class ModbusEncoder:
         self._rx = bytearray()  # bytes received for the request in flight (CRC check)
         self._counts = self._zero_counts()
         self._unwrap_last: float | None = None
-        self._rtts: deque[float] = deque(maxlen=64)  # recent round trips, clock s
+        self._rtts: deque[float] = deque(maxlen=256)  # recent round trips, clock s
+        self._rtt_floor = math.inf  # the capture's shortest reference round trip, clock s (see _late)
 
     # -- AngleSensor ---------------------------------------------------------------
     def start(self) -> None:
@@ -436,20 +441,29 @@ class ModbusEncoder:
         return 0.5 * (t_send + t_reply), value, t_reply - t_send
 
     def _late(self, rtt: float) -> bool:
-        """Whether this round trip is too long for its midpoint to date the sample."""
+        """Whether this round trip is too long for its midpoint to date the sample.
+
+        The reference is the recent short round trips (the 10th percentile of the last 256), not a
+        typical one: while a busy host delays most replies a median would follow them up. The
+        excess allowed over it is (late_reply_factor − 1) times the shortest such reference of the
+        capture, the link's own round trip: it does not grow while the host is busy, so a kept
+        sample's time is off by at most a quarter of that (factor 1.5). At least the tenth of the
+        replies at or under the reference is always kept: a link that slows down for good is followed.
+        """
         recent = self._rtts
         late = False
-        if self.config.late_reply_sigma and len(recent) >= 16:
-            arr = np.fromiter(recent, dtype=float)
-            med = float(np.median(arr))
-            spread = 1.4826 * float(np.median(np.abs(arr - med)))
-            late = rtt - med > max(self.config.late_reply_sigma * spread, 0.1 * med)
+        if self.config.late_reply_factor and len(recent) >= 16:
+            k = len(recent) // 10
+            reference = float(np.partition(np.fromiter(recent, dtype=float), k)[k])
+            self._rtt_floor = min(self._rtt_floor, reference)
+            late = rtt > reference + (self.config.late_reply_factor - 1.0) * self._rtt_floor
         recent.append(rtt)
         return late
 
     async def _sample_loop(self) -> None:
         c = self.config
         self._rtts.clear()
+        self._rtt_floor = math.inf
         next_start = 0.0
         while self._sampling:
             if c.min_interval > 0:

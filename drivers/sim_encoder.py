@@ -5,12 +5,14 @@ URL pyserial and pymodbus understand), so ``drivers.encoder.ModbusEncoder``
 talks to it through exactly the code path it uses on an RS-485 adapter.
 
 On every read request the server latches the position from the angle source
-at that instant on the injected clock (real or scaled time), adds noise,
-quantises to the encoder's counts, and replies after the configured latency.
+halfway through the configured latency (its turnaround) on the injected clock
+(real or scaled time), adds noise, quantises to the encoder's counts, and
+replies at the end of it.
 With ``baudrate`` set it also spends the request's wire time before latching
 and the reply's after, as a real RS-485 line does. Faults
 are injected on the wire: dropped replies (no answer: the client times out)
-and CRC corruption (the last byte flipped: the client's framer rejects it).
+and CRC corruption (the last byte flipped: the client's framer rejects it), and
+glitches (a position 1/128 turn off behind a correct CRC).
 A read outside the position registers gets an ILLEGAL DATA ADDRESS
 exception reply, like a real device.
 """
@@ -22,6 +24,7 @@ import logging
 import math
 import socket
 import threading
+import time
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -43,6 +46,9 @@ log = logging.getLogger("moi.drivers.sim_encoder")
 #: Modbus function codes that read the position (holding / input registers)
 _READ_CODES = (3, 4)
 
+#: shorter waits (s) are slept on the server's thread: the event loop's own timer is only ms-precise
+_SHORTEST_ASYNC_WAIT = 0.002
+
 
 @dataclass(frozen=True)
 class SimEncoderConfig:
@@ -57,12 +63,15 @@ class SimEncoderConfig:
     direction: +1, or −1 when the encoder counts against the rig's positive angle.
     zero: counts reported at angle 0 (mounting offset).
     noise_std: white noise added to the true angle before quantisation, rad.
-    latency: encoder turnaround, from latching the position to replying, s of real time.
+    latency: encoder turnaround, from the request's last byte to the reply, s of real time;
+        the position is latched halfway through it.
     baudrate: if set, the request's wire time passes before the latch and the reply's
         after it, at this baud rate (11 bits per character with parity, 10 without).
     parity: "N", "E" or "O" (only used for the wire time).
     drop_rate: fraction of replies never sent (0…1).
     crc_error_rate: fraction of replies sent with a corrupted CRC (0…1).
+    glitch_rate: fraction of positions latched 1/128 turn off, with a correct CRC (0…1): a
+        corrupted reading no framing check can catch (the identification must).
     seed: random seed for noise and fault injection.
     """
 
@@ -80,6 +89,7 @@ class SimEncoderConfig:
     parity: str = "N"
     drop_rate: float = 0.0
     crc_error_rate: float = 0.0
+    glitch_rate: float = 0.0
     seed: int | None = None
 
     def __post_init__(self) -> None:
@@ -89,7 +99,7 @@ class SimEncoderConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise DriverConfigError(f"simulated encoder: {name} must be >= 0, got {v!r}")
-        for name in ("drop_rate", "crc_error_rate"):
+        for name in ("drop_rate", "crc_error_rate", "glitch_rate"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0 <= v < 1):
                 raise DriverConfigError(f"simulated encoder: {name} must be a fraction in [0, 1), got {v!r}")
@@ -144,7 +154,7 @@ class SimEncoderServer:
         self._io = LoopThread(f"moi-sim-encoder-{self.port}")
         self._server: ModbusSerialServer | None = None
         self._lock = threading.Lock()
-        self.counts = {"reads": 0, "replies": 0, "dropped": 0, "corrupted": 0, "exceptions": 0}
+        self.counts = {"reads": 0, "replies": 0, "dropped": 0, "corrupted": 0, "exceptions": 0, "glitches": 0}
         self.last_latch: tuple[float, float] | None = None  # (clock time, true angle) of the last read
 
     @property
@@ -210,7 +220,6 @@ class SimEncoderServer:
         await self._server.serve_forever(background=True)
 
     def _wait_listening(self, timeout: float) -> bool:
-        import time
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:
@@ -226,13 +235,19 @@ class SimEncoderServer:
         if function_code not in _READ_CODES or set_values is not None:
             return ExcCodes.ILLEGAL_FUNCTION
         request_wire, reply_wire = c.wire_times(count)
-        if request_wire > 0:  # the request is still on the wire: the encoder latches after its last byte
-            await asyncio.sleep(request_wire)
+        # the request's wire time, then the first half of the turnaround: the simulated device runs on the host,
+        # so a busy host stretches its turnaround, which a real encoder's does not; latching midway keeps the
+        # stretch symmetric about the latch, out of the client's midpoint timestamp
+        await self._wait(request_wire + 0.5 * c.latency)
         t = self._clock.now()
         true_angle = float(self._angle(t))
         self.last_latch = (t, true_angle)
         measured = true_angle + (self._rng.normal(0.0, c.noise_std) if c.noise_std else 0.0)
         value = c.counts(measured)
+        if c.glitch_rate and self._rng.random() < c.glitch_rate:
+            value = c.counts(measured + 2 * math.pi / 128)
+            with self._lock:
+                self.counts["glitches"] += 1
         offset = c.register - start_address
         if c.registers == 1:
             registers[offset] = value & 0xFFFF
@@ -240,10 +255,19 @@ class SimEncoderServer:
             registers[offset:offset + 2] = to_registers(value, "uint32", c.word_order)
         with self._lock:
             self.counts["reads"] += 1
-        delay = c.latency + reply_wire
-        if delay > 0:
-            await asyncio.sleep(delay)
+        await self._wait(0.5 * c.latency + reply_wire)
         return None
+
+    @staticmethod
+    async def _wait(seconds: float) -> None:
+        """Let ``seconds`` of real time pass on the device's loop."""
+        if seconds > _SHORTEST_ASYNC_WAIT:
+            await asyncio.sleep(seconds)
+        elif seconds > 0:
+            # the event loop waits in whole milliseconds (epoll): 0.2 ms would become >= 1 ms, a round
+            # trip 3× the wire's and a third of the samples; this loop serves only this simulated device,
+            # which is busy during its turnaround anyway
+            time.sleep(seconds)
 
     def _on_packet(self, sending: bool, data: bytes) -> bytes:
         if not sending or not data:

@@ -86,6 +86,26 @@ class SimulationSettings:
     camera_config: Any = None        # the parsed camera file (CameraConfig) with sensor = "camera"
     drop_rate: float = 0.0
     crc_rate: float = 0.0
+    glitch_rate: float = 0.0
+
+    def __post_init__(self) -> None:
+        ts = self.time_scale
+        if not (isinstance(ts, (int, float)) and not isinstance(ts, bool) and 0 < ts <= MAX_TIME_SCALE):
+            raise InvalidInput(f"time_scale must be in (0, {MAX_TIME_SCALE:g}] simulated s per wall-clock s, got {ts!r}")
+        if self.sensor == "encoder" and ts > MAX_ENCODER_TIME_SCALE:
+            raise InvalidInput(
+                f"time_scale {ts:g} is above {MAX_ENCODER_TIME_SCALE:g}, the largest the simulated encoder keeps up "
+                f"with: its Modbus link answers some 500–1500 reads per wall-clock second, and a capture needs "
+                f"dozens of samples per swing (use time_scale <= {MAX_ENCODER_TIME_SCALE:g})")
+
+
+#: largest [simulation] time_scale: simulated seconds per wall-clock second
+MAX_TIME_SCALE = 1000.0
+
+#: largest time_scale with sensor = "encoder": the simulated Modbus link serves some 500–1500 reads per
+#: wall-clock second (bench/bench_encoder.py), about 30 samples per simulated second at 20× (some 35 per
+#: swing of the demo rig) on a busy 2-core host; at 50× it was 7
+MAX_ENCODER_TIME_SCALE = 20.0
 
 
 @dataclass(frozen=True)
@@ -260,10 +280,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "inertia": _doc("true J of the simulated part, kg·m²", min=0, min_open=True),
         "effects": _doc("true damping: effect = { parameter = value }", kind="effects"),
         "theta0": _doc("release angle, rad", min=0, max=3.0, min_open=True),
-        "rate": _doc("sample rate of the direct sensor, Hz", min=0, max=10000, min_open=True),
+        "rate": _doc("sample rate of the direct sensor, and the rate the simulated encoder is read at (at most: "
+                     "the link answers some 500–1500 reads per wall-clock second), Hz of simulated time",
+                     min=0, max=10000, min_open=True),
         "noise": _doc("angle noise σ, rad", min=0),
         "bits": _doc("encoder resolution, bits per turn (0: none)", min=0, max=32),
-        "time_scale": _doc("simulated seconds per wall-clock second", min=0, max=1000, min_open=True),
+        "time_scale": _doc(f"simulated seconds per wall-clock second (at most {MAX_ENCODER_TIME_SCALE:g} with "
+                           f"sensor = \"encoder\")", min=0, max=MAX_TIME_SCALE, min_open=True),
         "seed": _doc("noise seed (default: random)"),
         "sensor": _doc("\"encoder\": a simulated Modbus RTU encoder on a loopback socket read by the real encoder "
                        "client; \"direct\": an in-process sensor sampling at rate (faster); \"camera\": a mock camera "
@@ -277,6 +300,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                "sensor)", min=-20, max=20),
         "drop_rate": _doc("fraction of encoder replies (or camera frames) lost", min=0, max=1),
         "crc_rate": _doc("fraction of encoder replies with a corrupted CRC", min=0, max=1),
+        "glitch_rate": _doc("fraction of encoder replies whose position is off by 1/128 turn although the CRC is "
+                            "right (a glitch the identification must catch)", min=0, max=1),
     }),
     "mqtt": _schema(MqttSettings, {
         "host": _doc("broker host"),
@@ -562,7 +587,10 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
     sim_doc["camera"] = _resolve(base, sim_doc["camera"])
     if sim_doc["sensor"] == "camera":
         sim_doc["camera_config"] = _read_camera(c, "simulation", "camera", sim_doc["camera"])
-    simulation = SimulationSettings(**sim_doc)
+    try:
+        simulation = SimulationSettings(**sim_doc)
+    except InvalidInput as exc:
+        raise ConfigError(f"{source}: [simulation]: {exc}") from None
     simulated = sim or hardware is None
 
     rig_path = _resolve(base, dev["rig"])

@@ -23,6 +23,16 @@ DEMO_EFFECTS: dict[str, dict[str, float]] = {"viscous": {"c": 1.5e-4}, "coulomb"
 #: release angle of the simulated pendulum, rad
 DEMO_THETA0 = 0.25
 
+#: angle noise of the simulated encoder in `moi measure --sim` and `moi demo`, rad (about one count of a
+#: 17-bit encoder; with none, the count steps of a slow swing are a staircase, a structured residual)
+SIM_ENCODER_NOISE = 5e-5
+
+#: default time scale of `moi measure --sim` and `moi demo` with the simulated encoder: real time. The
+#: client and the simulated device share one interpreter; their round trip jitters by some 20 µs of wall
+#: time (more on a busy host), and a faster clock multiplies that in simulated time: at 2× and above the
+#: timestamp jitter already colours the residual of a 17-bit encoder (correlated_residual, outliers)
+SIM_ENCODER_TIME_SCALE = 1.0
+
 #: the simulated camera when no camera file is given (the camera file's tables): 640×480 px at
 #: 100 frames/s, 56° field of view, the marker on a 0.10 m radius seen from 0.25 m (240 px per rad at rest)
 DEMO_CAMERA: dict[str, Any] = {

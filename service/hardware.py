@@ -146,11 +146,20 @@ def build_simulated(rig: Rig, sim: SimulationSettings, sequencer: SequencerConfi
             bits = sim.bits or 17
             server = SimEncoderServer(pendulum.angle, clock, SimEncoderConfig(
                 counts_per_turn=1 << bits, registers=1 if bits <= 16 else 2, noise_std=sim.noise,
-                latency=sim.latency, drop_rate=sim.drop_rate, crc_error_rate=sim.crc_rate, seed=sim.seed)).start()
+                latency=sim.latency, drop_rate=sim.drop_rate, crc_error_rate=sim.crc_rate, glitch_rate=sim.glitch_rate,
+                seed=sim.seed)).start()
             opened.append(server.stop)
             closers.insert(0, server.stop)
             notes.append(f"simulated encoder: Modbus RTU on {server.url}, {bits} bits")
-            inner: Any = ModbusEncoder(server.encoder_config(timeout=SIM_ENCODER_TIMEOUT), clock)
+            if sim.time_scale > 1.0:
+                # the round trip's jitter (tens of µs of wall time) is time_scale× longer on the simulated clock
+                log.warning("simulated encoder at time_scale %g: the timestamps jitter %g× more in simulated time "
+                            "than in real time; expect correlated_residual or outlier flags a real-time capture "
+                            "would not raise (the default time_scale 1 keeps up)", sim.time_scale, sim.time_scale)
+            # requests paced at `rate` (simulated time), as a device's client would be: back to back the
+            # simulated link answers some 2000 reads/s and loads the host that dates them
+            inner: Any = ModbusEncoder(server.encoder_config(
+                timeout=SIM_ENCODER_TIMEOUT, min_interval=min(1.0 / (sim.rate * sim.time_scale), 1.0)), clock)
         elif sim.sensor == "camera":
             inner = _simulated_camera(sim, pendulum, clock, notes)
             opened.append(inner.close)

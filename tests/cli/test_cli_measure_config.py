@@ -37,8 +37,8 @@ def test_measure_config_runs_one_measurement_with_the_configured_devices(tmp_pat
     d = json.loads(captured.out)
     assert abs(d["J"] / 0.0125 - 1) < 2e-3 and d["requested_by"] == "cli"
     assert "IDLE" in captured.err and not (tmp_path / "state" / "results.db").exists()  # nothing stored
-    # the simulated clock runs 25x: each state line says the real time too, and that it is identifying
-    assert "s real time)" in captured.err and "identifying…" in captured.err
+    # the simulated clock runs 25x: state lines show the wall time, the simulated clock labelled, and that it is identifying
+    assert "(simulated clock" in captured.err and "identifying…" in captured.err
 
 
 def test_measure_config_refuses_bad_pins_and_a_running_daemon(tmp_path, capsys):

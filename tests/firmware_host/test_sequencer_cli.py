@@ -1,8 +1,15 @@
 """`moi measure --sim`: one push-button cycle on the simulated rig, through the real CLI entry point."""
 
 import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
 
 from service.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_measure_sim_prints_every_state_and_the_result(capsys):
@@ -64,3 +71,69 @@ def test_measure_sim_camera_options_are_checked(capsys):
     assert "--camera-yaw must be within ±20°" in capsys.readouterr().err
     assert main(["measure", "--sim", "--sensor", "camera", "--camera", "/nonexistent/cam.toml"]) == 2
     assert "cam.toml" in capsys.readouterr().err
+
+
+#: the flags timestamp jitter raised on routine simulated runs, though the physics fitted to 1e-6
+NOISE_FLAGS = {"outliers_removed", "outliers_downweighted", "correlated_residual", "unmodeled_residual"}
+
+
+def moi_measure_sim(*args: str) -> tuple[dict, str]:
+    """`moi measure --sim --json ARGS` as a user runs it: its own process (not this one, whose heap and
+    leftover threads from earlier tests would jitter the simulated link); (the JSON result, stderr)."""
+    done = subprocess.run([sys.executable, "-m", "service.cli", "measure", "--sim", "--json", *args], cwd=REPO,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout), done.stderr
+
+
+def test_routine_simulated_measurements_raise_no_quality_flag_and_a_glitch_still_does():
+    for seed in (1, 2, 3):
+        d, err = moi_measure_sim("--duration", "8", "--seed", str(seed))
+        assert not NOISE_FLAGS & set(d["flags"]), (seed, d["flags"], d["acquisition"]["encoder"])
+        assert abs(d["J"] / d["truth"]["J"] - 1) < 1e-3
+        enc = d["acquisition"]["encoder"]
+        assert enc["samples"] + enc["late_replies"] + enc["errors"] == enc["requests"]  # every request accounted for
+        assert f"{enc['late_replies']} late replies" in err  # dropped samples are reported, not silent
+    d, _ = moi_measure_sim("--duration", "8", "--seed", "4", "--glitch-rate", "0.003")
+    assert {"outliers_removed", "outliers_downweighted"} & set(d["flags"]), d["flags"]
+    assert abs(d["J"] / d["truth"]["J"] - 1) < 1e-3
+
+
+def test_measure_shows_the_capture_progress_on_stderr_and_keeps_json_stdout_pure(capsys):
+    rc = main(["measure", "--sim", "--json", "--duration", "5", "--seed", "5", "--progress"])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert captured.out.count("\n") == 1 and json.loads(captured.out)["J"] > 0
+    progress = [line for line in captured.err.splitlines() if line.startswith("capturing:")]
+    assert progress and all("of 5 s" in line and "s left" in line for line in progress)
+    assert "identifying…" in captured.err
+    assert "capturing:" not in captured.out
+
+
+def test_measure_without_a_terminal_or_progress_flag_prints_no_progress(capsys):
+    rc = main(["measure", "--sim", "--duration", "8", "--seed", "6", "--time-scale", "4"])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    assert "capturing:" not in out.out + out.err
+    # a faster clock is labelled: the bracket is wall time, the simulated clock says so
+    idle = [line for line in out.out.splitlines() if " IDLE " in line][0]
+    assert "(simulated clock" in idle and float(idle[1:].split()[0]) < 30
+
+
+def test_time_scale_beyond_what_the_simulated_encoder_keeps_up_with_is_refused(capsys):
+    from measurement.errors import InvalidInput
+    from service.config import MAX_ENCODER_TIME_SCALE, SimulationSettings, parse_config
+    from service.errors import ConfigError
+
+    assert main(["measure", "--sim", "--time-scale", "25"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "time_scale 25" in err and f"{MAX_ENCODER_TIME_SCALE:g}" in err
+    with pytest.raises(InvalidInput, match="above 20"):
+        SimulationSettings(time_scale=MAX_ENCODER_TIME_SCALE * 1.5)
+    with pytest.raises(ConfigError, match=r"\[simulation\].*time_scale 30"):
+        parse_config({"simulation": {"time_scale": 30.0}})
+    assert main(["demo", "--time-scale", "21", "--web-port", "0"]) == 2
+    assert "time_scale 21" in capsys.readouterr().err
+    # the in-process sensor has no bus to keep up with
+    assert SimulationSettings(time_scale=500.0, sensor="direct").time_scale == 500.0
+    assert SimulationSettings(time_scale=MAX_ENCODER_TIME_SCALE).time_scale == MAX_ENCODER_TIME_SCALE

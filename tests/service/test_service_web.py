@@ -211,7 +211,7 @@ def test_setup_camera_snapshot_and_fault_shown_and_acknowledged(appliance_factor
 
 
 def test_setup_encoder_angle_now(appliance_factory, tmp_path):
-    running = appliance_factory(appliance_doc(tmp_path / "state", web=ON, simulation={"sensor": "encoder"}))
+    running = appliance_factory(appliance_doc(tmp_path / "state", web=ON, simulation={"sensor": "encoder", "time_scale": 1.0}))
     status, body = Client(running.app.web.url).json("/api/angle")
     # the simulated pendulum is held at its release angle (0.25 rad) until a measurement fires the solenoid
     assert status == 200 and body["source"] == "encoder" and body["angle_rad"] == pytest.approx(0.25, abs=1e-3)
