@@ -100,19 +100,29 @@ def _gap_cut(t: np.ndarray, y: np.ndarray, noise: float, periods: float, sw: Swi
     """Index after which a gap of more than ``periods`` swing periods ends the window (None: no such gap).
 
     A gap is kept inside the window only when the swing clearly continues
-    after it: at least two full swings well above the noise (10σ).
+    after it: at least two full swings well above the noise (10σ). A tracker
+    that loses the pendulum often writes a burst of wild samples before it
+    stops: steps between samples far beyond the swing's own (4 × their 99th
+    percentile) within the last period before the gap end the window too.
     sw: ``find_swings(t, y, hysteresis=3 * noise)``.
     """
     wd = sw.damped_frequency
     if not (math.isfinite(wd) and wd > 0):
         return None
-    long = np.flatnonzero(np.diff(t) > periods * 2 * math.pi / wd)
+    period = 2 * math.pi / wd
+    long = np.flatnonzero(np.diff(t) > periods * period)
     for g in long:
         after_t, after_y = t[g + 1:], y[g + 1:]
         if after_t.size >= 10:
             sa = find_swings(after_t, after_y, centre=sw.centre, hysteresis=10 * noise)
             if sa.count >= 2:
                 continue
+        steps = np.abs(np.diff(y[:g + 1]))
+        lo = int(np.searchsorted(t, t[g] - period))
+        if lo > 10:
+            wild = np.flatnonzero(steps[lo:] > max(4 * float(np.quantile(steps[:lo], 0.99)), 10 * noise))
+            if wild.size:
+                return lo + int(wild[0])
         return int(g)
     return None
 

@@ -116,3 +116,18 @@ def test_wild_samples_at_the_ends_of_the_record_are_glitches_not_the_swing():
     assert r.window["t_start"] > t[1] and r.window["t_stop"] < t[-2]
     assert r.added_effects == ()
     assert r.J == pytest.approx(J, rel=2e-4)
+
+
+def test_a_burst_of_wild_samples_before_a_final_gap_ends_the_window():
+    """The tracker loses the pendulum: ten wild samples, then nothing for 2.5 s, then a few more."""
+    t, y = _torsion()
+    keep = t < 15.0
+    t2, y2 = t[keep].copy(), y[keep].copy()
+    rng = np.random.default_rng(3)
+    y2[-10:] = rng.uniform(-3.0, 3.0, 10)  # the last 0.1 s: jumps of radians between samples
+    t2 = np.concatenate([t2, [17.5, 17.6]])
+    y2 = np.concatenate([y2, [0.4, -0.3]])
+    r = identify(Trace(t2, y2, source="burst"), Rig(kind="torsion", stiffness=K))
+    assert "window_cut_at_gap" in r.flags and r.window["t_stop"] < t[keep][-10]
+    assert r.added_effects == ()
+    assert r.J == pytest.approx(J, rel=2e-4)
