@@ -316,8 +316,9 @@ def swing_window(t: np.ndarray, angle: np.ndarray, sigma: float) -> SwingWindow:
     y = np.asarray(angle, dtype=float)
     n = y.size
     tol = max(6.0 * sigma, 1e-12)
-    head = y[: max(5, min(n // 50, 50))]
-    hold = float(np.median(head))
+    # the hold's level from the first few samples only: a short hold (a link that stalled at the
+    # start delivers few of its samples) must not have its level pulled by the release after it
+    hold = float(np.median(y[:5]))
     moved = np.flatnonzero(np.abs(y - hold) > tol)
     start = 0
     release = False

@@ -92,3 +92,15 @@ def test_too_few_swings_is_an_input_error():
     trace = simulate_trace(Pendulum(rig, 0.0125), theta0=0.2, duration=1.5, rate=200, seed=1)
     with pytest.raises(TraceError, match="swing"):
         identify(trace, rig)
+
+
+def test_a_short_hold_before_the_release_is_found():
+    """20 held samples, then the release: the hold's level must come from the hold, not from the first 50 samples."""
+    rig = Rig(kind="torsion", stiffness=K_SEED001)
+    truth = Pendulum(rig, 0.0125, {"viscous": {"c": 1.5e-4}})
+    trace = simulate_trace(truth, theta0=0.25, duration=20, rate=200, noise_std=5e-5, quantisation_bits=17,
+                           pre_trigger=0.1, seed=4)
+    r = identify(trace, rig)
+    assert r.window["release_detected"] and r.window["t_start"] >= 0.09
+    assert r.added_effects == () and "unmodeled_residual" not in r.flags
+    assert r.J == pytest.approx(0.0125, rel=2e-4)
