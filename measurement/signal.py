@@ -316,13 +316,15 @@ def swing_window(t: np.ndarray, angle: np.ndarray, sigma: float) -> SwingWindow:
     y = np.asarray(angle, dtype=float)
     n = y.size
     tol = max(6.0 * sigma, 1e-12)
-    # the hold's level from the first few samples only: a short hold (a link that stalled at the
-    # start delivers few of its samples) must not have its level pulled by the release after it
-    hold = float(np.median(y[:5]))
+    # the hold's level from its first five samples only: a short hold (a link that stalled at the
+    # start delivers few of its samples) must not have its level pulled by the release after it;
+    # a hold is then at least those five samples
+    held = 5
+    hold = float(np.median(y[:held]))
     moved = np.flatnonzero(np.abs(y - hold) > tol)
     start = 0
     release = False
-    if moved.size and moved[0] > 3:
+    if moved.size and moved[0] >= held:
         start = int(moved[0]) - 1
         release = True
     # end of motion: the last sample that differs from the final resting value
