@@ -188,6 +188,11 @@ def _inertia(rig: Rig, omega_n: float) -> float | None:
     return None if c is None else c / omega_n**2
 
 
+def _defined(value: float | None) -> float:
+    """value as a float, NaN where it is undefined (None)."""
+    return math.nan if value is None else float(value)
+
+
 def _effect_quantities(fit: ModelFit, rig: Rig, role: Sequence[str]) -> dict[str, dict[str, Quantity]]:
     """Effect → its fitted (normalised) and physical values with uncertainties, for effects of ``role``."""
     model, x, cov = fit.model, fit.x, fit.cov
@@ -209,8 +214,7 @@ def _effect_quantities(fit: ModelFit, rig: Rig, role: Sequence[str]) -> dict[str
                 params[name] = Quantity(None, None, e.unit_of(name))
             else:
                 # a quantity undefined beside x (Dahl's spring as θ_c crosses 0) has no uncertainty
-                v, s = _propagate(lambda xx, _n=name: float(physical(xx)[_n] if physical(xx)[_n] is not None
-                                                            else math.nan), x, cov)
+                v, s = _propagate(lambda xx, _n=name: _defined(physical(xx)[_n]), x, cov)
                 params[name] = Quantity(v, s, e.unit_of(name))
         out[e.name] = params
     return out

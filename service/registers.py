@@ -309,6 +309,7 @@ def decode_value(kind: str, words: Sequence[int], word_order: str) -> Any:
 def _snapshot_values(payload: Mapping[str, Any] | None) -> dict[str, Any]:
     if payload is None:
         return {r.source: None for r in REGISTERS if r.area == "snapshot"} | {"seq": 0}
+    flags = flag_bits(payload.get("flags") or ())
     return {
         "seq": modbus_seq(int(payload["seq"])),
         "finished_at": int(math.floor(float(payload["timestamp"]))),
@@ -319,8 +320,8 @@ def _snapshot_values(payload: Mapping[str, Any] | None) -> dict[str, Any]:
         "residual_rms_before": payload.get("residual_rms_before"),
         "noise_floor": payload.get("noise_floor"),
         "J_object": payload.get("J_object"),
-        "flags": flag_bits(payload.get("flags") or ()) & 0xFFFF,
-        "flags_high": flag_bits(payload.get("flags") or ()) >> 16,
+        "flags": flags & 0xFFFF,
+        "flags_high": flags >> 16,
         "effects": effect_bits(payload.get("effects") or ()),
         "uuid": payload.get("uuid"),
         **_part_values(payload),
