@@ -365,8 +365,7 @@ class Dahl(Coulomb):
         # friction would flip at every reversal near rest, ever faster (a Zeno chatter). Below
         # a micro-radian the spring is stiffer than any record resolves and its oscillation
         # near rest would take millions of reversals: it holds as dry friction does.
-        cap = "p0 * abs(cos(x))" if self.rig.kind == "compound" else "p0"
-        return f"({cap} if p1 <= {self.stiff_below!r} else 0.0)"
+        return f"({super().holding_term} if p1 <= {self.stiff_below!r} else 0.0)"
 
     #: pre-sliding angle (rad) below which the friction holds the pendulum at rest as Coulomb's does
     stiff_below: ClassVar[float] = 1e-6
