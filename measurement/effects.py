@@ -592,12 +592,16 @@ def resolve_effects(names: Iterable[str], rig: "Rig") -> list[Effect]:
 
 
 def candidate_effects(rig: "Rig", present: Iterable[str]) -> list[Effect]:
-    """Library effects that apply to this rig and are not already in the model."""
+    """Library effects that apply to this rig and are not already in the model.
+
+    A rig whose sensor is calibrated is offered no effect that fits the angle's scale.
+    """
     present = set(present)
     contained = {EFFECTS[n].refines for n in present if n in EFFECTS}
     return [cls(rig) for n, cls in EFFECTS.items()
             if n not in present and n not in contained and rig.kind in cls.rigs
-            and (cls.refines is None or cls.refines in present)]
+            and (cls.refines is None or cls.refines in present)
+            and not (rig.sensor_calibrated and cls.scale_parameters)]
 
 
 def with_effect(present: Iterable[str], effect: Effect) -> tuple[str, ...]:

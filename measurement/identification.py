@@ -587,5 +587,6 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         declared_effects=declared.effect_names, effects=final.model.effect_names, added_effects=added,
         residual_rms=final.residual_rms, noise_floor=prep.noise, statistics=statistics, flags=tuple(dict.fromkeys(flags)),
         baseline=_summary(base, rig), steps=tuple(steps), diagnostics=diag.as_dict(), structure=tuple(structure),
-        window=window, acquisition={k: v for k, v in trace.meta.items() if k != "truth"}, arrays=arrays,
+        window=window, acquisition={k: v for k, v in trace.meta.items() if k != "truth"},
+        sensor_calibrated=rig.sensor_calibrated, arrays=arrays,
     )

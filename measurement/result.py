@@ -157,6 +157,8 @@ class IdentificationResult:
     window: dict[str, Any]
     #: facts from the sensor path (camera yaw, dropped frames, encoder errors...), from Trace.meta
     acquisition: dict[str, Any] = field(default_factory=dict)
+    #: the rig declared the angle sensor calibrated: no effect fitted the angle's scale
+    sensor_calibrated: bool = False
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -196,6 +198,7 @@ class IdentificationResult:
             "structure": list(self.structure),
             "window": {k: _num(v) for k, v in self.window.items()},
             "acquisition": _jsonable(self.acquisition),
+            "sensor_calibrated": self.sensor_calibrated,
         }
         if include_arrays:
             d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
@@ -236,6 +239,8 @@ class IdentificationResult:
         L.append(f"    declared : {', '.join(self.declared_effects) or '(none)'}")
         L.append(f"    final    : {', '.join(self.effects) or '(none)'}")
         L.append(f"    added    : {', '.join(self.added_effects) or '(none)'}")
+        if self.sensor_calibrated:
+            L.append("    sensor   : calibrated (its scale is known: effects that fit it, gain and view, not offered)")
         L.append("[[Before / after]]")
         b = self.baseline
         jb = f"{b.J:.7g}" if b.J is not None else "n/a"

@@ -30,6 +30,7 @@ _RIG_KEYS = {
 }
 _OBJECT_KEYS = {"mass", "axis_offset"}
 _MODEL_KEYS = {"declared"}
+_SENSOR_KEYS = {"calibrated"}
 _CALIBRATION_KEYS = {"date", "valid_days", "references", "source"}
 
 
@@ -126,6 +127,9 @@ class Rig:
     g: local gravity, m/s².
     declared: effect names the user declares (from ``[model] declared``).
     calibration: date, validity and references of the calibration (``[calibration]``), optional.
+    sensor_calibrated: the angle sensor's scale and view are known (``[sensor] calibrated``):
+        sensor effects that would fit the angle's scale from the swing (gain, view) are neither
+        declared nor offered, so ω_n rests on the calibration, not on the fit.
     """
 
     kind: str
@@ -139,6 +143,7 @@ class Rig:
     object: ObjectTransfer | None = None
     declared: tuple[str, ...] = field(default=("viscous",))
     calibration: CalibrationRecord | None = None
+    sensor_calibrated: bool = False
 
     def __post_init__(self) -> None:
         if self.kind not in RIG_KINDS:
@@ -151,7 +156,12 @@ class Rig:
             raise RigError("rig: stiffness belongs to a torsion rig; kind is 'compound'")
         # the rig carries the model declaration; the effect library checks it
         # (effects need only the rig's attributes, so the import runs one way)
-        resolve_effects(self.declared, self)
+        effects = resolve_effects(self.declared, self)
+        if self.sensor_calibrated:
+            scaling = [e.name for e in effects if e.scale_parameters]
+            if scaling:
+                raise RigError(f"rig: the sensor is calibrated ([sensor] calibrated = true) but [model] declares "
+                               f"{', '.join(scaling)}, which fit the angle's scale; drop one or the other")
 
     # -- derived constants ---------------------------------------------------
     @property
@@ -177,10 +187,10 @@ class Rig:
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> "Rig":
         """Build a rig from the parsed rig TOML document ([rig], [object], [model], [calibration])."""
-        unknown_tables = set(doc) - {"rig", "object", "model", "calibration"}
+        unknown_tables = set(doc) - {"rig", "object", "model", "calibration", "sensor"}
         if unknown_tables:
             raise RigError(f"rig file: unknown table(s) {sorted(unknown_tables)}; expected [rig], [object], [model], "
-                           "[calibration]")
+                           "[calibration], [sensor]")
         rig = doc.get("rig")
         if not isinstance(rig, Mapping):
             raise RigError("rig file: missing [rig] table")
@@ -214,6 +224,14 @@ class Rig:
             if not isinstance(d, list) or not all(isinstance(x, str) for x in d):
                 raise RigError("rig file: [model] declared must be a list of effect names")
             declared = tuple(d)
+        sensor_calibrated = False
+        if "sensor" in doc:
+            sensor = doc["sensor"]
+            if not isinstance(sensor, Mapping) or set(sensor) - _SENSOR_KEYS:
+                raise RigError("rig file: [sensor] takes only calibrated = true | false")
+            sensor_calibrated = sensor.get("calibrated", False)
+            if not isinstance(sensor_calibrated, bool):
+                raise RigError(f"rig file: [sensor] calibrated must be true or false, got {sensor_calibrated!r}")
         return cls(
             kind=kind,
             stiffness=opt("stiffness", "N·m/rad"),
@@ -226,6 +244,7 @@ class Rig:
             object=obj,
             declared=declared,
             calibration=CalibrationRecord.from_dict(doc["calibration"]) if "calibration" in doc else None,
+            sensor_calibrated=sensor_calibrated,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -243,4 +262,6 @@ class Rig:
         doc["model"] = {"declared": list(self.declared)}
         if self.calibration is not None:
             doc["calibration"] = self.calibration.to_dict()
+        if self.sensor_calibrated:
+            doc["sensor"] = {"calibrated": True}
         return doc

@@ -22,6 +22,8 @@ from service.errors import StoreError
 COMMANDS: dict[str, tuple[str, str]] = {
     "identify": ("service.commands.identify",
         "identify J, ω_n and the damping from a trace CSV or a video"),
+    "markers": ("service.commands.markers",
+        "a trace CSV from two markers tracked on the pendulum, the camera's oblique view measured and removed"),
     "simulate": ("service.commands.simulate",
         "simulate a free swing with chosen effects, noise, quantisation and sample rate"),
     "calibrate": ("service.commands.calibrate",

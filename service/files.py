@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import tomllib
 from pathlib import Path
-from typing import Any, Callable, TypeVar
+from typing import TYPE_CHECKING, Any, Callable, TypeVar
 
 import tomli_w
 
@@ -14,6 +14,9 @@ from measurement.rig import Rig
 from measurement.trace import Trace, parse_trace_csv
 
 from .errors import InputFileError
+
+if TYPE_CHECKING:  # the vision package only when a marker track is read
+    from measurement.vision.marker_pair import MarkerTrack
 
 T = TypeVar("T")
 
@@ -64,6 +67,18 @@ def read_trace(path: str | os.PathLike) -> Trace:
         raise InputFileError(f"trace {str(path)!r} has {rows:,} lines; expected at most {MAX_TRACE_ROWS:,} samples "
                              "(decimate it: the identification time grows with the samples)")
     return parse_trace_csv(text.splitlines(), source=str(path))
+
+
+def read_markers(path: str | os.PathLike) -> "MarkerTrack":
+    """A marker track CSV (columns t in s, ax, ay, bx, by in px; '#' comments)."""
+    from measurement.vision.marker_pair import parse_marker_csv
+
+    text = read_text(path, "marker track")
+    rows = text.count("\n")
+    if rows > MAX_TRACE_ROWS + 1000:
+        raise InputFileError(f"marker track {str(path)!r} has {rows:,} lines; expected at most {MAX_TRACE_ROWS:,} "
+                             "samples")
+    return parse_marker_csv(text.splitlines(), source=str(path))
 
 
 def read_toml_as(path: str | os.PathLike, what: str, parse: Callable[[dict], T], error: type[Exception]) -> T:

@@ -5,6 +5,7 @@
     geometry   normalised coordinate → angle, exact (R·sin θ lateral, R·(1 − cos θ) deeper)
     pose       the camera's yaw, fitted as a parameter of the projection over a whole swing
     pipeline   frames → Trace (gaps and flags for lost/corrupt/dropped frames, yaw corrected)
+    marker_pair  two markers on the pendulum → angle, the camera's oblique view measured from their distance
     render     ray-traced synthetic frames: the truth for tests, bench and the mock camera
 
 Pure numpy/scipy/opencv: decoding files and talking to cameras live in
@@ -24,6 +25,8 @@ _WHERE = {
     **dict.fromkeys(("Tracking", "VisionSettings", "count_dropped", "trace_from_tracking", "track_frames"), "pipeline"),
     **dict.fromkeys(("PoseEstimate", "estimate_yaw"), "pose"),
     **dict.fromkeys(("CameraPose", "Imaging", "MarkerPattern", "MarkerRenderer"), "render"),
+    **dict.fromkeys(("MarkerTrack", "PairView", "measure_view", "pair_angle", "pair_trace", "parse_marker_csv"),
+                    "marker_pair"),
 }
 
 
@@ -33,6 +36,7 @@ __getattr__, __dir__ = lazy_exports(__name__, globals(), _WHERE)
 if TYPE_CHECKING:  # pragma: no cover
     from .config import CameraConfig, CameraModel, MarkerGeometry, PoseSettings
     from .geometry import angle_from_normalised, normalised_from_angle
+    from .marker_pair import MarkerTrack, PairView, measure_view, pair_angle, pair_trace, parse_marker_csv
     from .locate import MarkerObservation, MarkerTracker, TrackerSettings
     from .pipeline import Tracking, VisionSettings, count_dropped, trace_from_tracking, track_frames
     from .pose import PoseEstimate, estimate_yaw
