@@ -24,6 +24,7 @@ CAMERA_POSE = "camera_pose"
 MARKER_LOST = "marker_lost"
 DROPPED_FRAMES = "dropped_frames"
 CORRUPT_FRAME = "corrupt_frame"
+CAMERA_PERSPECTIVE = "camera_perspective"
 # -- the rig ---------------------------------------------------------------------------
 CALIBRATION_DUE = "calibration_due"
 NEGATIVE_INERTIA = "negative_inertia"
@@ -46,6 +47,10 @@ FLAGS: dict[str, str] = {
     MARKER_LOST: "the tracker lost the marker in some frames",
     DROPPED_FRAMES: "the camera dropped frames (gaps in the frame timestamps)",
     CORRUPT_FRAME: "some frames were unreadable or corrupt",
+    CAMERA_PERSPECTIVE: "two markers on the pendulum changed their distance with the angle beyond what the camera's "
+                        "oblique view (measured and removed) explains: perspective (parts of the swing nearer the "
+                        "camera) or a position-dependent tracker bias; the angle keeps an error of that kind "
+                        "(acquisition.view.distance_pattern)",
     NEGATIVE_INERTIA: "J_object (J − tare) or J_object_axis came out negative, which no part can have: the rig file's tare "
                       "inertia or [object] mass/axis_offset does not fit this set-up",
     CALIBRATION_DUE: "the rig's calibration is past its validity period ([calibration] date + valid_days of the rig file)",

@@ -557,6 +557,12 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         structure.append(f"the angle's scale was fitted from the swing ({', '.join(names)}): with the sensor at its "
                          f"nominal scale ω_n would read {w_nom:.6g} rad/s ({(w_nom - w) / ws:+.1f} σ, "
                          f"{100 * (w_nom - w) / w:+.2f} %); calibrate the sensor's scale (flag sensor_scale_fitted)")
+    if F.CAMERA_PERSPECTIVE in flags:
+        pattern = float(trace.meta.get("view", {}).get("distance_pattern", float("nan")))
+        structure.append(f"the camera's view was more than oblique: the two markers' distance changed with the angle "
+                         f"by up to {100 * pattern:.1f} % after the oblique view was removed (perspective, or a "
+                         f"position-dependent tracker bias); the angle keeps an error of that kind and part of the "
+                         f"residual may be it (flag camera_perspective)")
     statistics = {
         "n": final.n, "k": final.k, "dof": final.dof, "rss": final.rss,
         "chi2": final.rss / prep.noise**2, "redchi": final.rss / prep.noise**2 / max(final.dof, 1),

@@ -59,26 +59,38 @@ def read_toml(path: str | os.PathLike, what: str) -> dict[str, Any]:
         raise InputFileError(f"{what} {str(path)!r} nests tables or arrays too deeply to be a {what}") from None
 
 
-def read_trace(path: str | os.PathLike) -> Trace:
-    """A trace CSV (columns t in s and angle in rad; '#' comments)."""
-    text = read_text(path, "trace")
+def _read_samples(path: str | os.PathLike, what: str) -> list[str]:
+    """The lines of a CSV of samples, refused when it holds more rows than a trace may."""
+    text = read_text(path, what)
     rows = text.count("\n")
     if rows > MAX_TRACE_ROWS + 1000:  # + the header and comment lines
-        raise InputFileError(f"trace {str(path)!r} has {rows:,} lines; expected at most {MAX_TRACE_ROWS:,} samples "
+        raise InputFileError(f"{what} {str(path)!r} has {rows:,} lines; expected at most {MAX_TRACE_ROWS:,} samples "
                              "(decimate it: the identification time grows with the samples)")
-    return parse_trace_csv(text.splitlines(), source=str(path))
+    return text.splitlines()
+
+
+def read_trace(path: str | os.PathLike) -> Trace:
+    """A trace CSV (columns t in s and angle in rad; '#' comments)."""
+    return parse_trace_csv(_read_samples(path, "trace"), source=str(path))
 
 
 def read_markers(path: str | os.PathLike) -> "MarkerTrack":
     """A marker track CSV (columns t in s, ax, ay, bx, by in px; '#' comments)."""
     from measurement.vision.marker_pair import parse_marker_csv
 
-    text = read_text(path, "marker track")
-    rows = text.count("\n")
-    if rows > MAX_TRACE_ROWS + 1000:
-        raise InputFileError(f"marker track {str(path)!r} has {rows:,} lines; expected at most {MAX_TRACE_ROWS:,} "
-                             "samples")
-    return parse_marker_csv(text.splitlines(), source=str(path))
+    return parse_marker_csv(_read_samples(path, "marker track"), source=str(path))
+
+
+def read_samples(path: str | os.PathLike) -> "Trace | MarkerTrack":
+    """A trace CSV, or a marker track CSV when its header has the markers' columns and no angle."""
+    from measurement.vision.marker_pair import MARKER_COLUMNS, parse_marker_csv
+
+    lines = _read_samples(path, "trace")
+    header = next((line for line in lines if line.strip() and not line.lstrip().startswith("#")), "")
+    cells = {c.strip() for c in header.split(",")}
+    if "angle" not in cells and set(MARKER_COLUMNS) <= cells:
+        return parse_marker_csv(lines, source=str(path))
+    return parse_trace_csv(lines, source=str(path))
 
 
 def read_toml_as(path: str | os.PathLike, what: str, parse: Callable[[dict], T], error: type[Exception]) -> T:

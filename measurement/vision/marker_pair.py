@@ -27,6 +27,7 @@ from typing import Iterable
 import numpy as np
 
 from ..errors import VisionError
+from ..flags import CAMERA_PERSPECTIVE
 from ..trace import Trace
 
 #: the marker track CSV's columns: time (s) and the two markers' image positions (px)
@@ -36,6 +37,10 @@ MARKER_COLUMNS = ("t", "ax", "ay", "bx", "by")
 OUTLIER_SIGMAS = 6.0
 #: fewest samples the view is measured from
 MIN_SAMPLES = 20
+#: the swing's angle range is cut into this many bins to see how the marker distance follows the angle
+ANGLE_BINS = 12
+#: a systematic distance change (relative) beyond which the report says the view is more than oblique
+DISTANCE_PATTERN_NOTED = 0.01
 
 
 @dataclass(frozen=True)
@@ -62,6 +67,10 @@ class PairView:
         the angle reads off by stretch·sin 2θ + shear·cos 2θ.
     separation: median distance of the markers, px. radius_scatter: RMS of the corrected
         distance about its mean, relative (tracking noise and what an affine view leaves).
+    distance_pattern: the largest systematic change of the corrected distance with the angle,
+        relative (the mean over each of ANGLE_BINS bins of the swing): what an oblique view does
+        not explain, a perspective (parts of the swing nearer the camera) or a marker tracked
+        with a bias that depends on its position. Noise averages out of it.
     samples: samples the view was measured from; rejected: samples off the ellipse by more
         than OUTLIER_SIGMAS robust σ (tracking glitches; still in the trace, not in the view).
     matrix: S = Q^½ scaled to determinant 1, row-major (2×2): the correction, v ↦ S·v.
@@ -76,6 +85,7 @@ class PairView:
     shear_std: float
     separation: float
     radius_scatter: float
+    distance_pattern: float
     samples: int
     rejected: int
     matrix: tuple[float, float, float, float]
@@ -97,7 +107,13 @@ class PairView:
                 f"{np.degrees(self.major_axis):+.1f}° from the image's vertical\n"
                 f"uncorrected the angle would read off by stretch·sin 2θ + shear·cos 2θ with stretch "
                 f"{self.stretch:+.4f} ± {self.stretch_std:.4f}, shear {self.shear:+.4f} ± {self.shear_std:.4f}; "
-                f"marker distance {self.separation:.1f} px, scatter {100 * self.radius_scatter:.2f} %")
+                f"marker distance {self.separation:.1f} px, scatter {100 * self.radius_scatter:.2f} %\n"
+                f"after that view the marker distance still changes with the angle by up to "
+                f"{100 * self.distance_pattern:.1f} %: "
+                + ("the camera sees the swing plane obliquely and nothing else shows"
+                   if self.distance_pattern < DISTANCE_PATTERN_NOTED else
+                   "more than an oblique view explains (perspective: parts of the swing nearer the camera, or a "
+                   "marker tracked with a bias); the angle keeps an error of that kind"))
 
 
 def pair_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -185,10 +201,16 @@ def measure_view(a: np.ndarray, b: np.ndarray) -> PairView:
         jac[:, j] = (terms(q + dq) - base) / h
     std = np.sqrt(np.clip(np.diag(jac @ cov @ jac.T), 0.0, None))
     corrected = np.hypot(*(v[keep] @ s.T).T)
+    relative = corrected / np.mean(corrected) - 1.0
+    angle = _direction(v[keep] @ s.T)
+    edges = np.quantile(angle, np.linspace(0.0, 1.0, ANGLE_BINS + 1))
+    which = np.clip(np.searchsorted(edges, angle, side="right") - 1, 0, ANGLE_BINS - 1)
+    pattern = max(abs(float(np.mean(relative[which == k]))) for k in range(ANGLE_BINS) if np.any(which == k))
     return PairView(
         axis_ratio=ratio, axis_ratio_std=float(std[0]), major_axis=major_axis,
         stretch=stretch, stretch_std=float(std[1]), shear=shear, shear_std=float(std[2]),
         separation=float(np.median(dist)), radius_scatter=float(np.std(corrected) / np.mean(corrected)),
+        distance_pattern=pattern,
         samples=int(keep.sum()), rejected=int((~keep).sum()),
         matrix=tuple(float(x) for x in s.ravel()),
     )
@@ -239,6 +261,9 @@ def pair_trace(track: MarkerTrack, view: PairView | None) -> Trace:
     """The swing as a Trace: the angle of a→b, corrected for ``view`` (None: as the image shows it)."""
     angle = pair_angle(track.a, track.b) if view is None else view.angle(track.a, track.b)
     meta = {"sensor": "camera, marker pair", "rows_without_both_markers": track.missing}
+    flags: tuple[str, ...] = ()
     if view is not None:
         meta["view"] = view.to_dict()
-    return Trace(track.t, angle, source=track.source, meta=meta)
+        if view.distance_pattern >= DISTANCE_PATTERN_NOTED:
+            flags = (CAMERA_PERSPECTIVE,)
+    return Trace(track.t, angle, source=track.source, flags=flags, meta=meta)

@@ -12,7 +12,9 @@ from ..files import check_output_path, read_rig, write_atomic
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("source", metavar="SOURCE", help="trace CSV (t in s, angle in rad), video file or image folder")
+    p.add_argument("source", metavar="SOURCE", help="trace CSV (t in s, angle in rad), marker track CSV (t in s, two markers' image positions "
+                        "ax, ay, bx, by in px: the camera's oblique view is measured from their distance and removed), "
+                        "video file or image folder")
     p.add_argument("--rig", required=True, metavar="RIG.toml", help="rig file (kind, stiffness or mass/com_distance, declared effects)")
     p.add_argument("--camera", metavar="CAM.toml", help="camera file, for a video SOURCE")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the report")

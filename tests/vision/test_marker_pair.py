@@ -132,3 +132,19 @@ def test_marker_csv_parsing_drops_and_counts_lost_markers():
         parse_marker_csv(["t,ax,ay,bx,by", ",1,2,3,4"])
     with pytest.raises(VisionError, match="no row with both markers"):
         parse_marker_csv(["t,ax,ay,bx,by", "0,,,3,4"])
+
+
+def test_a_view_in_perspective_is_said_to_be_more_than_oblique():
+    theta = _swing(6, theta0=2.0).angle
+    a, b = _image(theta, 0.03, 0.01, rng=np.random.default_rng(11))
+    oblique = measure_view(a, b)
+    assert oblique.distance_pattern < 0.01 and "nothing else shows" in oblique.report()
+    # the same swing with its left side 15 % nearer the camera than its right (a swing plane turned in depth)
+    u = np.column_stack([np.sin(theta), np.cos(theta)])
+    depth = lambda r: 1.0 + 0.15 * r * u[:, 0] / 0.42  # noqa: E731 - scale at each marker's position
+    pivot = np.array([640.0, 200.0])
+    a_p = pivot + 800.0 * 0.30 * u * depth(0.30)[:, None]
+    b_p = pivot + 800.0 * 0.42 * u * depth(0.42)[:, None]
+    perspective = measure_view(a_p, b_p)
+    assert perspective.distance_pattern > 0.03
+    assert "more than an oblique view explains" in perspective.report()
