@@ -40,7 +40,7 @@ MIN_SAMPLES = 20
 #: the swing's angle range is cut into this many bins to see how the marker distance follows the angle
 ANGLE_BINS = 12
 #: a systematic distance change (relative) beyond which the report says the view is more than oblique
-DISTANCE_PATTERN_NOTED = 0.01
+DISTANCE_PATTERN_NOTED = 0.005
 
 
 @dataclass(frozen=True)
