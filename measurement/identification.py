@@ -252,6 +252,20 @@ def _omega_n_at_nominal_scale(fit: ModelFit) -> tuple[list[str], float] | None:
     return names, float(fit.x[iw]) - shift
 
 
+def _omega_n_std_view(fit: ModelFit, view: dict) -> float:
+    """1σ of ω_n (rad/s) that the camera view's calibration carries into it.
+
+    The angle was corrected for a view measured with 1σ stretch_std and shear_std; an error δ in
+    them leaves δ·sin 2y and δ·cos 2y in the angle y, and the fit answers with its linear response
+    (the least-squares pseudo-inverse of its Jacobian) to each.
+    """
+    y = fit.fitted
+    errors = np.column_stack([np.sin(2 * y), np.cos(2 * y)])
+    response = np.linalg.lstsq(fit.jac * fit.scales, errors, rcond=None)[0] * fit.scales[:, None]
+    per_term = response[fit.model.index("omega_n")]
+    return float(math.hypot(per_term[0] * view["stretch_std"], per_term[1] * view["shear_std"]))
+
+
 def _remove_outliers(fit: ModelFit, prep: Prepared, options: Options) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r = fit.residual
     scale = max(robust_std(r), prep.noise)
@@ -501,11 +515,15 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         diag = diagnose(final, prep.noise, prep.stuck)
 
     w, ws = final.value("omega_n"), final.stdev("omega_n")
+    # a sensor calibrated from the record itself (a camera view measured from two markers) carries
+    # its own uncertainty into ω_n, beside the fit's
+    view = trace.meta.get("view")
+    w_cal = _omega_n_std_view(final, view) if isinstance(view, dict) and "stretch_std" in view else None
     J = _inertia(rig, w)
     J_std = None if J is None else 2 * J * ws / w
     J_cal = None
-    if J is not None and rig.restoring_constant_std:
-        J_cal = J * rig.restoring_constant_std / rig.restoring_constant
+    if J is not None and (rig.restoring_constant_std or w_cal):
+        J_cal = J * math.hypot((rig.restoring_constant_std or 0.0) / rig.restoring_constant, 2 * (w_cal or 0.0) / w)
     J_obj = J_obj_std = J_ax = J_ax_std = None
     if J is not None and rig.tare_inertia is not None:
         J_obj = J - rig.tare_inertia
@@ -585,7 +603,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         source=trace.source, rig_kind=rig.kind,
         J=J, J_std=J_std, J_std_calibration=J_cal, J_object=J_obj, J_object_std=J_obj_std,
         J_object_axis=J_ax, J_object_axis_std=J_ax_std,
-        omega_n=w, omega_n_std=ws, damping_ratio=zeta, damping_ratio_std=zeta_std, reference_amplitude=amp_ref,
+        omega_n=w, omega_n_std=ws, omega_n_std_calibration=w_cal, damping_ratio=zeta, damping_ratio_std=zeta_std, reference_amplitude=amp_ref,
         offset=Quantity(final.value("offset"), final.stdev("offset"), "rad"),
         damping=_effect_quantities(final, rig, ("damping",)),
         stiffness=_effect_quantities(final, rig, ("stiffness",)),

@@ -136,6 +136,8 @@ class IdentificationResult:
     J_object_axis_std: float | None
     omega_n: float
     omega_n_std: float
+    #: 1σ of ω_n from a sensor calibration made on the record (the camera view measured from two markers), rad/s
+    omega_n_std_calibration: float | None
     damping_ratio: float
     damping_ratio_std: float
     reference_amplitude: float
@@ -178,6 +180,7 @@ class IdentificationResult:
             "J_object": _num(self.J_object), "J_object_std": _num(self.J_object_std),
             "J_object_axis": _num(self.J_object_axis), "J_object_axis_std": _num(self.J_object_axis_std),
             "omega_n": _num(self.omega_n), "omega_n_std": _num(self.omega_n_std),
+            "omega_n_std_calibration": _num(self.omega_n_std_calibration),
             "damping_ratio": _num(self.damping_ratio), "damping_ratio_std": _num(self.damping_ratio_std),
             "reference_amplitude": _num(self.reference_amplitude),
             "offset": self.offset.to_dict(),
@@ -225,8 +228,10 @@ class IdentificationResult:
             L.append(f"    J_object     = {Quantity(self.J_object, self.J_object_std, 'kg·m²')}  (J − tare)")
         if self.J_object_axis is not None:
             L.append(f"    J_object_axis= {Quantity(self.J_object_axis, self.J_object_axis_std, 'kg·m²')}  (own axis, J_D − m·L²)")
+        cal = (f"; the camera view's calibration adds ±{self.omega_n_std_calibration:.2g}"
+               if self.omega_n_std_calibration else "")
         L.append(f"    omega_n      = {Quantity(self.omega_n, self.omega_n_std, 'rad/s')}"
-                 f"  (f_n = {self.omega_n / (2 * math.pi):.6g} Hz)")
+                 f"  (f_n = {self.omega_n / (2 * math.pi):.6g} Hz{cal})")
         L.append(f"    damping ratio= {Quantity(self.damping_ratio, self.damping_ratio_std, '')}"
                  f" (equivalent viscous, at {self.reference_amplitude:.4g} rad)")
         for group, title in ((self.damping, "damping"), (self.stiffness, "stiffness"), (self.sensor, "sensor")):

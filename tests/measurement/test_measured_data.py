@@ -62,7 +62,7 @@ def test_sessions_that_disagree_on_omega_n_say_what_is_left(runs):
 
 def _name_what_is_left(r60, r120, named):
     gap = abs(r60.omega_n - r120.omega_n)
-    combined = (r60.omega_n_std**2 + r120.omega_n_std**2) ** 0.5
+    combined = sum(r.omega_n_std**2 + (r.omega_n_std_calibration or 0.0) ** 2 for r in (r60, r120)) ** 0.5
     agree = gap < 1e-3 * r60.omega_n and gap < 3 * combined and set(r60.effects) == set(r120.effects)
     if not agree:  # the product's rule: agreement, or a flag naming what is left
         for r in (r60, r120):
@@ -78,6 +78,7 @@ def test_the_camera_view_measured_from_the_markers_takes_the_place_of_a_fitted_s
         assert r.sensor_calibrated
         assert not {"gain", "view"} & set(r.effects) and "sensor_scale_fitted" not in r.flags
         assert r.acquisition["view"]["samples"] > 1900
+        assert 0 < r.omega_n_std_calibration < 0.01  # the view's own 1σ, carried into ω_n
     # the 120° session's oblique view, measured from the markers, is the one its swing asked for
     assert 0.01 < c120.acquisition["view"]["shear"] < 0.04
     # the measured view brings the sessions' ω_n closer than the fitted scales did (0.45 % apart)

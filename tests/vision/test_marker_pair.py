@@ -148,3 +148,27 @@ def test_a_view_in_perspective_is_said_to_be_more_than_oblique():
     perspective = measure_view(a_p, b_p)
     assert perspective.distance_pattern > 0.03
     assert "more than an oblique view explains" in perspective.report()
+
+
+def test_the_views_uncertainty_is_carried_into_omega_n():
+    import dataclasses
+
+    trace = _swing(8, theta0=2.0, duration=25.0)
+    a, b = _image(trace.angle, 0.04, 0.015, rng=np.random.default_rng(8))
+    track = MarkerTrack(trace.t, a, b, source="synthetic")
+    view = measure_view(a, b)
+    r = identify(pair_trace(track, view), CALIBRATED)
+    assert r.omega_n_std_calibration is not None and r.omega_n_std_calibration > 0
+    assert "the camera view's calibration adds" in r.report()
+    assert r.to_dict()["omega_n_std_calibration"] == r.omega_n_std_calibration
+    # against refits with the view moved by its 1σ (stretch, then shear)
+    s = np.array(view.matrix).reshape(2, 2)
+    moved = []
+    for d_stretch, d_shear in ((view.stretch_std, 0.0), (0.0, view.shear_std)):
+        e = np.array([[d_stretch, d_shear], [d_shear, -d_stretch]])
+        shifted = dataclasses.replace(view, matrix=tuple(((np.eye(2) - e) @ s).ravel()))
+        moved.append(identify(pair_trace(track, shifted), CALIBRATED).omega_n - r.omega_n)
+    refit = float(np.hypot(*moved))
+    assert 0.7 < r.omega_n_std_calibration / refit < 1.4
+    # a trace read as it is carries none
+    assert identify(pair_trace(track, None), CALIBRATED).omega_n_std_calibration is None
