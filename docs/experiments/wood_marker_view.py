@@ -6,8 +6,11 @@ the effects the loop finds, from the angle as the image shows it (the
 loop may fit the scale: gain, view) and from the angle with the measured view
 removed (the rig's sensor declared calibrated). Then, for the two releases in
 data/, ω_n over the same range of amplitudes (the 120° release from 10 s on,
-the 60° release up to 10 s: both ≈ 1.3 → 0.5 rad), and ω_n with one model
-declared for both (viscous, dahl, quadratic; no discovery).
+the 60° release up to 10 s: both ≈ 1.3 → 0.5 rad), ω_n with one model
+declared for both (viscous, dahl, quadratic; no discovery), and where the
+markers sat on the pendulum: the circles their view-corrected positions
+trace about the pivot (radius of b over radius of a, free of the image's
+scale).
 
 Run from the repository root:
 `.venv/bin/python docs/experiments/wood_marker_view.py`             (the two releases in data/)
@@ -44,6 +47,14 @@ def read_track(path: Path) -> MarkerTrack:
         return parse_marker_csv(fh, source=path.name)
 
 
+def circle(p: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre (px) and radius (px) of the circle through points p (algebraic least squares)."""
+    x, y = p.T
+    c = np.linalg.lstsq(np.column_stack([x, y, np.ones_like(x)]), x * x + y * y, rcond=None)[0]
+    centre = c[:2] / 2
+    return centre, float(np.sqrt(c[2] + centre @ centre))
+
+
 def main() -> None:
     paths = [Path(p) for p in sys.argv[1:]] or [ROOT / "data" / "wood_markers_60deg.csv",
                                                  ROOT / "data" / "wood_markers_120deg.csv"]
@@ -71,6 +82,13 @@ def main() -> None:
             print(f"  {name:26s} {t0:4.0f}–{min(t1, trace.t[-1]):4.1f} s: amplitude {np.max(np.abs(swing[:60])):.2f} → "
                   f"{np.max(np.abs(swing[-60:])):.2f} rad, effects {','.join(r.added_effects) or '(none)'}, "
                   f"ω_n {r.omega_n:.4f} ± {r.omega_n_std:.4f} rad/s")
+        print("\nwhere the markers sat (circles of the view-corrected positions about the pivot):")
+        for name in calibrated:
+            track = read_track(ROOT / "data" / name)
+            s = np.asarray(measure_view(track.a, track.b).matrix).reshape(2, 2)
+            (ca, ra), (cb, rb) = circle(track.a @ s.T), circle(track.b @ s.T)
+            print(f"  {name:26s} pivot at {np.round(ca, 1)} and {np.round(cb, 1)} px; radii {ra:.1f} and {rb:.1f} px, "
+                  f"ratio {rb / ra:.3f}")
         one = Rig(kind="compound", declared=("viscous", "dahl", "quadratic"), sensor_calibrated=True)
         print("\none model for both (viscous, dahl, quadratic declared, no discovery), view measured:")
         for name, trace in calibrated.items():
