@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Callable, Sequence
 
@@ -469,6 +469,10 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         unknown = [c for c in options.candidates if c not in EFFECTS]
         if unknown:
             raise UnknownEffectError(f"unknown candidate effect(s) {unknown}; expected names from {', '.join(EFFECTS)}")
+    if isinstance(trace.meta.get("view"), dict) and not rig.sensor_calibrated:
+        # the camera's view was measured on this record: fitting the angle's scale again from the
+        # swing would overrule the measurement with whatever the model lacks
+        rig = replace(rig, sensor_calibrated=True)
     prep = prepare(trace, options)
     declared = Model.from_names(rig, rig.declared)
     base = fit_model(declared, prep.t, prep.y, prep.noise, swings=prep.swings)

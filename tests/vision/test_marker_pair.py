@@ -172,3 +172,12 @@ def test_the_views_uncertainty_is_carried_into_omega_n():
     assert 0.7 < r.omega_n_std_calibration / refit < 1.4
     # a trace read as it is carries none
     assert identify(pair_trace(track, None), CALIBRATED).omega_n_std_calibration is None
+
+
+def test_a_record_whose_view_was_measured_is_not_given_a_fitted_scale_again():
+    trace = _swing(9, theta0=2.0, duration=25.0)
+    a, b = _image(trace.angle, 0.04, 0.015, rng=np.random.default_rng(9))
+    track = MarkerTrack(trace.t, a, b, source="synthetic")
+    r = identify(pair_trace(track, measure_view(a, b)), RIG)  # the rig says nothing of its sensor
+    assert r.sensor_calibrated and not {"gain", "view"} & {name for s in r.steps for name in s.candidates}
+    assert abs(r.omega_n - OMEGA_N) < 4 * np.hypot(r.omega_n_std, r.omega_n_std_calibration)
