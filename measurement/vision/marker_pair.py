@@ -101,7 +101,7 @@ class PairView:
         return d
 
     def report(self) -> str:
-        """Two lines a measurement engineer reads."""
+        """Three lines a measurement engineer reads."""
         return (f"camera view measured from the marker pair ({self.samples} samples, {self.rejected} off the ellipse "
                 f"rejected): axis ratio {self.axis_ratio:.4f} ± {self.axis_ratio_std:.4f}, major axis at "
                 f"{np.degrees(self.major_axis):+.1f}° from the image's vertical\n"
@@ -126,7 +126,7 @@ def _direction(v: np.ndarray) -> np.ndarray:
 
 
 def _view_terms(q: np.ndarray) -> tuple[np.ndarray, float, float, float, float, np.ndarray]:
-    """From Q's entries (q11, q12, q22): S normalised, axis ratio, major axis, stretch, shear."""
+    """From Q's entries (q11, q12, q22): S normalised, axis ratio, major axis, stretch, shear, Q's eigenvalues."""
     Q = np.array([[q[0], q[1]], [q[1], q[2]]])
     w, V = np.linalg.eigh(Q)
     if w[0] <= 0:
