@@ -33,7 +33,7 @@ from threadpoolctl import ThreadpoolController
 from . import flags as F
 from .diagnostics import Diagnostics, diagnose
 from .effects import EFFECTS, Effect, candidate_effects, resolve_effects, with_effect
-from .errors import IdentificationError, TraceError, UnknownEffectError
+from .errors import IdentificationError, RigError, TraceError, UnknownEffectError
 from .fit import ModelFit, fit_model
 from .noise import fit_noise
 from .model import Model
@@ -472,6 +472,10 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     if isinstance(trace.meta.get("view"), dict) and not rig.sensor_calibrated:
         # the camera's view was measured on this record: fitting the angle's scale again from the
         # swing would overrule the measurement with whatever the model lacks
+        scaling = [n for n in rig.declared if n in EFFECTS and EFFECTS[n].scale_parameters]
+        if scaling:
+            raise RigError(f"{trace.source}: the camera's view was measured from the marker pair, but the rig declares "
+                           f"{', '.join(scaling)}, which would fit the angle's scale again; drop it from [model] declared")
         rig = replace(rig, sensor_calibrated=True)
     prep = prepare(trace, options)
     declared = Model.from_names(rig, rig.declared)

@@ -181,3 +181,11 @@ def test_a_record_whose_view_was_measured_is_not_given_a_fitted_scale_again():
     r = identify(pair_trace(track, measure_view(a, b)), RIG)  # the rig says nothing of its sensor
     assert r.sensor_calibrated and not {"gain", "view"} & {name for s in r.steps for name in s.candidates}
     assert abs(r.omega_n - OMEGA_N) < 4 * np.hypot(r.omega_n_std, r.omega_n_std_calibration)
+
+
+def test_a_rig_that_would_fit_the_measured_view_again_is_refused():
+    trace = _swing(10, theta0=2.0, duration=20.0)
+    a, b = _image(trace.angle, 0.04, 0.015, rng=np.random.default_rng(10))
+    measured = pair_trace(MarkerTrack(trace.t, a, b, source="track.csv"), measure_view(a, b))
+    with pytest.raises(RigError, match="track.csv: the camera's view was measured.*declares view"):
+        identify(measured, Rig(kind="compound", declared=("viscous", "view")))
