@@ -469,7 +469,9 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         unknown = [c for c in options.candidates if c not in EFFECTS]
         if unknown:
             raise UnknownEffectError(f"unknown candidate effect(s) {unknown}; expected names from {', '.join(EFFECTS)}")
-    if isinstance(trace.meta.get("view"), dict) and not rig.sensor_calibrated:
+    # a camera view measured on this record (two markers), with its 1σ: measurement.vision.marker_pair
+    view = trace.meta.get("view") if isinstance(trace.meta.get("view"), dict) else None
+    if view is not None and not rig.sensor_calibrated:
         # the camera's view was measured on this record: fitting the angle's scale again from the
         # swing would overrule the measurement with whatever the model lacks
         scaling = [n for n in rig.declared if n in EFFECTS and EFFECTS[n].scale_parameters]
@@ -523,10 +525,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         diag = diagnose(final, prep.noise, prep.stuck)
 
     w, ws = final.value("omega_n"), final.stdev("omega_n")
-    # a sensor calibrated from the record itself (a camera view measured from two markers) carries
-    # its own uncertainty into ω_n, beside the fit's
-    view = trace.meta.get("view")
-    w_cal = _omega_n_std_view(final, view) if isinstance(view, dict) and "stretch_std" in view else None
+    # a sensor calibrated from the record itself carries its own uncertainty into ω_n, beside the fit's
+    w_cal = _omega_n_std_view(final, view) if view is not None else None
     J = _inertia(rig, w)
     J_std = None if J is None else 2 * J * ws / w
     J_cal = None
@@ -584,7 +584,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
                          f"nominal scale ω_n would read {w_nom:.6g} rad/s ({(w_nom - w) / ws:+.1f} σ, "
                          f"{100 * (w_nom - w) / w:+.2f} %); calibrate the sensor's scale (flag sensor_scale_fitted)")
     if F.CAMERA_PERSPECTIVE in flags:
-        pattern = float(trace.meta.get("view", {}).get("distance_pattern", float("nan")))
+        pattern = float((view or {}).get("distance_pattern", float("nan")))
         structure.append(f"the camera's view was more than oblique: the two markers' distance changed with the angle "
                          f"by up to {100 * pattern:.1f} % after the oblique view was removed (perspective, or a "
                          f"position-dependent tracker bias); the angle keeps an error of that kind and part of the "
