@@ -95,17 +95,26 @@ class Trace:
         return buf.getvalue()
 
 
+def csv_content(lines: Iterable[str]) -> list[tuple[int, str]]:
+    """(line number from 1, line) of a CSV's header and rows: blank lines and '#' comments left out."""
+    return [(n, line) for n, line in enumerate(lines, start=1) if line.strip() and not line.lstrip().startswith("#")]
+
+
+def csv_header(content: list[tuple[int, str]]) -> list[str]:
+    """The column names of ``csv_content``'s first line (stripped; [] when there is none)."""
+    return [h.strip() for h in next(csv.reader([content[0][1]]))] if content else []
+
+
 def parse_trace_csv(lines: Iterable[str], source: str = "trace") -> Trace:
     """Parse a trace CSV: a header row with columns t (s) and angle (rad).
 
     Other columns are ignored, lines starting with '#' are comments.
     Raises TraceError naming the row and what was expected.
     """
-    content = [(n, line) for n, line in enumerate(lines, start=1) if line.strip() and not line.lstrip().startswith("#")]
+    content = csv_content(lines)
     if not content:
         raise TraceError(f"{source}: no header row; expected a CSV with columns t (s) and angle (rad)")
-    header_no, header_line = content[0]
-    header = [h.strip() for h in next(csv.reader([header_line]))]
+    header = csv_header(content)
     missing = [c for c in ("t", "angle") if c not in header]
     if missing:
         raise TraceError(f"{source}: missing column(s) {', '.join(missing)} in header {header}; expected columns t (s) and angle (rad)")

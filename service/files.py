@@ -11,7 +11,7 @@ import tomli_w
 
 from measurement.errors import RigError
 from measurement.rig import Rig
-from measurement.trace import Trace, parse_trace_csv
+from measurement.trace import Trace, csv_content, csv_header, parse_trace_csv
 
 from .errors import InputFileError
 
@@ -86,8 +86,7 @@ def read_samples(path: str | os.PathLike) -> "Trace | MarkerTrack":
     from measurement.vision.marker_pair import MARKER_COLUMNS, parse_marker_csv
 
     lines = _read_samples(path, "trace")
-    header = next((line for line in lines if line.strip() and not line.lstrip().startswith("#")), "")
-    cells = {c.strip() for c in header.split(",")}
+    cells = set(csv_header(csv_content(lines)))
     if "angle" not in cells and set(MARKER_COLUMNS) <= cells:
         return parse_marker_csv(lines, source=str(path))
     return parse_trace_csv(lines, source=str(path))

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import VisionError
 from ..flags import CAMERA_PERSPECTIVE
-from ..trace import Trace
+from ..trace import Trace, csv_content, csv_header
 
 #: the marker track CSV's columns: time (s) and the two markers' image positions (px)
 MARKER_COLUMNS = ("t", "ax", "ay", "bx", "by")
@@ -222,10 +222,10 @@ def parse_marker_csv(lines: Iterable[str], source: str = "markers") -> MarkerTra
     Other columns are ignored and lines starting with '#' are comments. A row where a
     marker was not found (an empty cell) is dropped and counted in ``missing``.
     """
-    content = [(n, line) for n, line in enumerate(lines, start=1) if line.strip() and not line.lstrip().startswith("#")]
+    content = csv_content(lines)
     if not content:
         raise VisionError(f"{source}: no header row; expected a CSV with columns {', '.join(MARKER_COLUMNS)}")
-    header = [h.strip() for h in next(csv.reader([content[0][1]]))]
+    header = csv_header(content)
     absent = [c for c in MARKER_COLUMNS if c not in header]
     if absent:
         raise VisionError(f"{source}: missing column(s) {', '.join(absent)} in header {header}; expected t (s) and "
