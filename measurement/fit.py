@@ -24,12 +24,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
-from scipy.signal import savgol_filter
 
 from .errors import IdentificationError
 from .model import STATE_PARAMS, Model
 from .noise import NoiseModel, autocorrelation, fit_noise
-from .signal import Swings, find_swings, resample_uniform
+from .signal import Swings, find_swings, resample_uniform, savitzky_golay
 
 __all__ = ["ModelFit", "Smoothed", "fit_model", "initial_guess", "smooth", "autocorrelation"]
 
@@ -172,11 +171,11 @@ def smooth(t: np.ndarray, y: np.ndarray, sigma: float, swings: Swings | None = N
     window = int(max(7, min(period_samples / 5.0, (tu.size // 3))))
     window += 1 - window % 2
     order = 4 if window > 7 else 3
-    ys = savgol_filter(yu, window, order, mode="interp")
-    yd = savgol_filter(yu, window, order, deriv=1, delta=dt, mode="interp")
+    ys = savitzky_golay(yu, window, order)
+    yd = savitzky_golay(yu, window, order, deriv=1, delta=dt)
     # θ'' is read only a window away from the ends, where every mode gives the same
     # convolution: no polynomial fits of the ends
-    ydd = savgol_filter(yu, window, order, deriv=2, delta=dt, mode="constant")
+    ydd = savitzky_golay(yu, window, order, deriv=2, delta=dt, ends="zero")
     return Smoothed(t, y, sigma, centre, sw, dt, window, ys, yd, ydd)
 
 
