@@ -7,8 +7,8 @@ import sys
 
 from measurement.effects import EFFECTS
 
-from ..errors import InputFileError
-from ..files import check_output_path, read_rig, write_atomic
+from service.errors import InputFileError
+from service.sources.files import check_output_path, read_rig, write_atomic
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -27,7 +27,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from measurement import Options, identify  # scipy: only when identifying
 
-    from ..sources import load_source
+    from service.sources.dispatch import load_source
 
     if args.plot:  # a bad plot path is refused before the work, not after it
         if not args.plot.lower().endswith(".png"):
@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         print(result.report())
     sys.stdout.flush()
     if args.plot:
-        from ..plot import render_png
+        from service.publish.plot import render_png
         write_atomic(args.plot, render_png(result, dpi=110), "plot file")
         if not args.json:
             print(f"plot written to {args.plot}")

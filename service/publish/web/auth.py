@@ -23,7 +23,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import StartupError
+from service.errors import StartupError
 
 log = logging.getLogger("moi.web")
 

@@ -1,9 +1,9 @@
 """SOURCE of `moi identify`: a trace CSV, a marker track CSV, a video file or an image folder, as a ``Trace``.
 
-The dispatcher above the low-level readers: a CSV is read by ``service.files``
+The dispatcher above the low-level readers: a CSV is read by ``service.sources.files``
 (a marker track becomes the angle of its two markers, the camera's oblique view
 measured from their distance and removed: ``measurement.vision.marker_pair``),
-a video or an image folder goes through the vision path (``service.video``,
+a video or an image folder goes through the vision path (``service.sources.video``,
 imported only then: it loads OpenCV).
 """
 
@@ -15,7 +15,7 @@ from pathlib import Path
 from measurement.rig import Rig
 from measurement.trace import Trace
 
-from .errors import InputFileError
+from service.errors import InputFileError
 from .files import read_samples
 
 VIDEO_SUFFIXES = {".avi", ".mp4", ".mkv", ".mov", ".m4v", ".webm", ".mjpg", ".mjpeg", ".ogv"}

@@ -38,13 +38,13 @@ from drivers.errors import DriverConfigError
 from drivers.settings import (ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSettings, IndicatorSettings,
                               SolenoidSettings)
 
-from .defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, demo_camera
-from .errors import ConfigError
-from .files import read_rig, read_toml
-from .modbus_server import ModbusSettings, allowed_networks
-from .mqtt import MqttSettings
-from .registers import WORD_ORDERS
-from .web.settings import WebSettings
+from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, demo_camera
+from service.errors import ConfigError
+from service.sources.files import read_rig, read_toml
+from service.publish.modbus.server import ModbusSettings, allowed_networks
+from service.publish.mqtt.client import MqttSettings
+from service.publish.modbus.registers import WORD_ORDERS
+from service.publish.web.settings import WebSettings
 
 REQUIRED = object()
 
@@ -381,7 +381,7 @@ class Config:
     modbus: ModbusSettings | None    # None: Modbus off
     web: WebSettings | None          # None: no web page
     document: Mapping[str, Any]      # the parsed TOML, stored with every measurement
-    recipes: Any = None              # service.recipes.RecipeBook (every recipe of [recipes] directory, checked)
+    recipes: Any = None              # service.parts.recipes.RecipeBook (every recipe of [recipes] directory, checked)
     active_recipe: str | None = None  # [recipes] active
 
     def to_dict(self) -> dict[str, Any]:
@@ -644,7 +644,7 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
             raise c.fail("modbus", "allow_from", str(exc)) from None
         modbus = ModbusSettings(**mb)
 
-    from .recipes import RecipeBook
+    from service.parts.recipes import RecipeBook
     rc = c.table("recipes", doc.get("recipes", {}), SCHEMA["recipes"])
     book = RecipeBook.load(_resolve(base, rc["directory"]))  # RecipeError: one line naming the recipe file
     if rc["active"] is not None:
@@ -697,7 +697,7 @@ def _check_encoder_keys(c: _Checker, enc: Mapping[str, Any]) -> None:
 def _read_camera(c: _Checker, table: str, key: str, path: str | None) -> Any:
     """The camera file at ``path`` (None: the demo camera) as a ``CameraConfig``;
     a missing or malformed file is a one-line error naming the config file, the key and the camera file."""
-    from .camera_config import read_camera
+    from .camera import read_camera
     if path is None:
         return demo_camera()
     try:

@@ -20,7 +20,7 @@ from aiohttp import web
 
 from drivers.aioloop import LoopThread
 
-from ..errors import StartupError
+from service.errors import StartupError
 from .auth import Guard, read_token
 from .settings import DEFAULT_TOKEN_FILE_NAME, WebSettings
 from .views import Views
@@ -28,7 +28,7 @@ from .views import Views
 if TYPE_CHECKING:  # pragma: no cover
     from firmware_host import Event, Measurement
 
-    from ..daemon import Appliance
+    from service.daemon import Appliance
 
 log = logging.getLogger("moi.web")
 
@@ -127,7 +127,7 @@ class WebServer:
         return fut
 
     def _draw(self, uuid: str, get_result) -> bytes:
-        from ..plot import render_png
+        from service.publish.plot import render_png
 
         try:
             self._wait_for_no_capture()

@@ -1,6 +1,6 @@
 """The Modbus server the PLC polls (pymodbus 3.16, TCP or RTU).
 
-The register layout lives in ``service.registers``; this module serves it.
+The register layout lives in ``service.publish.modbus.registers``; this module serves it.
 The server runs on its own asyncio loop in a thread (``drivers.aioloop.LoopThread``). The daemon hands it a new
 result with ``publish_result`` and the live status with ``set_live``; both
 build a complete register image and swap it in with one assignment, and every
@@ -45,7 +45,7 @@ from pymodbus.simulator.simcore import SimCore
 from drivers.aioloop import LoopThread
 
 from . import registers as R
-from .errors import ModbusServerError
+from service.errors import ModbusServerError
 
 log = logging.getLogger("moi.modbus")
 
@@ -258,7 +258,7 @@ class _BoundedTcpServer(ModbusTcpServer):
 
 
 class ModbusServer:
-    """Serves the register image of ``service.registers``.
+    """Serves the register image of ``service.publish.modbus.registers``.
 
     on_command(name, source, data) is called from the server thread when the PLC
     writes 1 to a command coil (name "trigger" or "abort"; called with two

@@ -15,7 +15,7 @@ from measurement.vision.config import CameraConfig
 from measurement.vision.locate import MarkerTracker, TrackerSettings
 from measurement.vision.pipeline import Tracking, VisionSettings, trace_from_tracking
 
-from .camera_config import camera_config
+from service.config.camera import camera_config
 
 
 def track_source(path: str | os.PathLike, config: CameraConfig,

@@ -28,7 +28,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .errors import StoreDamaged, StoreError
+from service.errors import StoreDamaged, StoreError
 
 DB_NAME = "results.db"
 SCHEMA_VERSION = 2  # 2: part, recipe and verdict columns (added in place to a version-1 store)
@@ -363,7 +363,7 @@ class Store:
         ("result",)); the payload is queued as it is stored. part: values of
         the PART_COLUMNS (part ID, recipe, verdicts...), missing keys are NULL.
         """
-        from .payload import dumps
+        from service.publish.payload import dumps
 
         uid = uuid or str(uuidlib.uuid4())
         now = time.time()

@@ -18,7 +18,7 @@ from urllib.parse import urlencode, urlsplit
 import jinja2
 from aiohttp import web
 
-from .. import __version__
+from service import __version__
 from .auth import COOKIE, CSRF_HEADER, SESSION_LIFETIME
 from .live import Live
 from measurement.flags import FLAGS
@@ -26,7 +26,7 @@ from measurement.flags import FLAGS
 from .words import STATE_WORDS, flag_words
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..store import StoredMeasurement as Measurement
+    from service.persistence.store import StoredMeasurement as Measurement
     from .server import WebServer
 
 log = logging.getLogger("moi.web")
@@ -259,7 +259,7 @@ class Views:
         """Select the recipe (name or number; 0 deselects) and/or set the part ID of the next measurements."""
         from measurement.errors import InvalidInput
 
-        from ..recipes import check_part_id
+        from service.parts.recipes import check_part_id
 
         form = await request.post()
         self._authorise(request, form)
@@ -333,7 +333,7 @@ class Views:
         m = self._get(request.match_info["key"], trace=True)
         if m.trace_t is None:
             raise Refused(404, f"measurement {m.seq} was stored without its trace ([device] store_trace = false)")
-        from ..commands.export import trace_text
+        from service.commands.export import trace_text
         return web.Response(text=trace_text(m), content_type="text/csv", headers={
             "Content-Disposition": f'attachment; filename="moi-{m.seq}-{m.uuid[:8]}-trace.csv"'})
 
@@ -407,7 +407,7 @@ class Views:
         rows, _ = self.app.store.search(limit=None, **self._filters(request))
         name = f"moi-{self.app.config.device_id}-history.{fmt}"
         # the same files as `moi export` (oldest first)
-        from ..commands.export import _csv, _json
+        from service.commands.export import _csv, _json
         rows.reverse()
         body, ctype = (_json(rows), "application/json") if fmt == "json" else (_csv(rows), "text/csv")
         return web.Response(text=body, content_type=ctype,
@@ -506,7 +506,7 @@ class Views:
 def _annotated_png(frame, config) -> bytes:
     import cv2
 
-    from ..commands.camera_check import check_image
+    from service.commands.camera_check import check_image
     annotated, _report, _lines = check_image(frame, config)
     ok, buf = cv2.imencode(".png", annotated)
     if not ok:

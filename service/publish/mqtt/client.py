@@ -3,7 +3,7 @@
 Topics under ``<prefix>/<device_id>/`` (prefix default "moi"):
 
 * ``result``      one JSON result per measurement, QoS 1, from the durable outbox
-  (``service.outbox``); consumers dedupe by ``uuid``.
+  (``service.persistence.outbox``); consumers dedupe by ``uuid``.
 * ``status``      ``online`` / ``offline``, retained; ``offline`` is also the last will.
 * ``state``       sequencer events as JSON, retained (the latest state), QoS 0.
 * ``cmd/measure`` a message here starts one measurement (like the push button);
@@ -40,12 +40,12 @@ from typing import Any, Callable
 import paho.mqtt.client as mqtt
 from paho.mqtt.enums import CallbackAPIVersion
 
-from .errors import ConfigError
-from .outbox import OutboxSender
+from service.errors import ConfigError
+from service.persistence.outbox import OutboxSender
 from measurement.verdict import DEFAULT_INVALID_FLAGS
 
-from .registers import FLAG_BITS
-from .store import Store
+from service.publish.modbus.registers import FLAG_BITS
+from service.persistence.store import Store
 
 log = logging.getLogger("moi.mqtt")
 

@@ -4,7 +4,7 @@
 an envelope (uuid, sequence number, device, trigger, timestamps, software
 version) plus the two residual RMS values under explicit before/after names.
 The result store keeps this exact dict; the outbox sends it as JSON; the
-Modbus image is encoded from it (``service.registers.encode_snapshot``).
+Modbus image is encoded from it (``service.publish.modbus.registers.encode_snapshot``).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import json
 from datetime import datetime, timezone
 from typing import Any, Mapping
 
-from .registers import flag_bits
+from service.publish.modbus.registers import flag_bits
 
 PAYLOAD_SCHEMA = 2  # 2: part_id, recipe, release, part, verdict, calibration
 
@@ -24,7 +24,7 @@ ENVELOPE_KEYS = (
     "residual_rms_before", "residual_rms_after", "flag_bits", "timing",
 ) + ("part_id", "recipe", "release", "part", "verdict", "calibration")
 
-#: the part keys of the envelope (``service.recipes.PartTracker.release`` and the rig's calibration state)
+#: the part keys of the envelope (``service.parts.recipes.PartTracker.release`` and the rig's calibration state)
 PART_KEYS = ENVELOPE_KEYS[-6:]
 
 

@@ -36,9 +36,9 @@ from drivers.solenoid import Solenoid
 from firmware_host import SequencerConfig
 from measurement import Pendulum, Rig
 
-from .config import Config, HardwareSettings, SimulationSettings
+from service.config.appliance import Config, HardwareSettings, SimulationSettings
 from .defaults import SIM_BUTTON_PIN, SIM_SOLENOID_PIN, demo_camera
-from .errors import ConfigError, StartupError
+from service.errors import ConfigError, StartupError
 
 log = logging.getLogger("moi.hardware")
 
@@ -225,7 +225,7 @@ def _simulated_camera(sim: SimulationSettings, rig: SimRig, clock: Clock, notes:
 
     cfg = sim.camera_config
     if cfg is None:  # SimulationSettings built by hand rather than by parse_config, which reads the file
-        from .camera_config import read_camera
+        from service.config.camera import read_camera
         cfg = read_camera(sim.camera) if sim.camera else demo_camera()
     if sim.time_scale != 1.0:
         # frames are rendered on the main loop's thread (~5 ms each at 640×480); faster than real time,

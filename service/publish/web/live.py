@@ -10,7 +10,7 @@ from .words import STATE_WORDS
 if TYPE_CHECKING:  # pragma: no cover
     from firmware_host import Event
 
-    from ..daemon import Appliance
+    from service.daemon import Appliance
 
 #: at most this many samples in one tick (a page that opens late catches up over a few ticks)
 MAX_SAMPLES_PER_TICK = 4000

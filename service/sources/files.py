@@ -13,7 +13,7 @@ from measurement.errors import RigError
 from measurement.rig import Rig
 from measurement.trace import Trace, csv_content, csv_header, parse_trace_csv
 
-from .errors import InputFileError
+from service.errors import InputFileError
 
 if TYPE_CHECKING:  # the vision package only when a marker track is read
     from measurement.vision.marker_pair import MarkerTrack

@@ -8,7 +8,7 @@ import os
 from measurement.errors import VisionError
 from measurement.vision.config import CameraConfig
 
-from .files import read_toml_as
+from service.sources.files import read_toml_as
 
 
 def read_camera(path: str | os.PathLike) -> CameraConfig:

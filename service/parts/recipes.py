@@ -54,8 +54,8 @@ from measurement.errors import InvalidInput
 from measurement.verdict import (QUANTITIES, RULES, PartResult, QualityRules, Reading,
                                  Specification, combine, judge_release)
 
-from .errors import ConfigError
-from .files import read_rig, read_text
+from service.errors import ConfigError
+from service.sources.files import read_rig, read_text
 
 log = logging.getLogger("moi.recipes")
 
@@ -123,7 +123,7 @@ class Recipe:
 def _schemas() -> dict[str, dict[str, Any]]:
     """The keys of a recipe file: [recipe] here, [decision] and [quality] from the settings they fill
     (``Specification``, ``QualityRules``: their defaults are the recipe's)."""
-    from .config import REQUIRED, Key, _doc, _schema
+    from service.config.appliance import REQUIRED, Key, _doc, _schema
 
     return {
         "recipe": {
@@ -155,8 +155,8 @@ def load_recipe(path: str | Path) -> Recipe:
     """Read and check one recipe file (``RecipeError`` naming the file, table and key)."""
     from measurement.effects import EFFECTS
 
-    from .config import _Checker
-    from .files import read_toml
+    from service.config.appliance import _Checker
+    from service.sources.files import read_toml
 
     class Checker(_Checker):
         def fail(self, table: str | None, key: str | None, message: str) -> RecipeError:
