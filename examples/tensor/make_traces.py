@@ -9,7 +9,7 @@ from pathlib import Path
 
 from measurement.simulate import BRACKET, simulate_set
 from measurement.tensor import TensorPlan
-from service.files import read_rig, write_text_atomic
+from service.sources.files import read_rig, write_text_atomic
 
 HERE = Path(__file__).resolve().parent
 

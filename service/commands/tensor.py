@@ -15,8 +15,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputFileError
-from ..files import check_output_path, read_rig, read_toml, write_atomic
+from service.errors import InputFileError
+from service.sources.files import check_output_path, read_rig, read_toml, write_atomic
 
 #: what a plan file holds beside the plan itself (``measurement.tensor.TensorPlan.from_dict``)
 PLAN_FILE_KEYS = ("rig",)
@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from measurement import identify
     from measurement.tensor import solve_results
 
-    from ..sources import load_source
+    from service.sources.dispatch import load_source
 
     results = [[identify(load_source(p, rig=rig), rig).to_dict() for p in paths] for paths in traces]
     tensor = solve_results(plan, results, rig)
@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         print(tensor.report())
     sys.stdout.flush()
     if args.plot:
-        from ..plot import render_tensor_png
+        from service.publish.plot import render_tensor_png
         write_atomic(args.plot, render_tensor_png(tensor), "plot file")
         if not args.json:
             print(f"plot written to {args.plot}")
