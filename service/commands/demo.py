@@ -36,18 +36,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--time-scale", type=float, default=SIM_ENCODER_TIME_SCALE, metavar="X",
                    help=f"simulated seconds per wall-clock second (default {SIM_ENCODER_TIME_SCALE:g}, at most 20; "
                         "faster, the simulated encoder's timestamps jitter enough to raise quality flags)")
-    p.add_argument("--duration", type=float, default=20.0, metavar="S", help="capture after the release, simulated s (default 20)")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="capture after the release, simulated s (default 20; 10 with --tensor)")
     p.add_argument("--inertia", "-J", type=float, default=DEMO_INERTIA, metavar="KG_M2",
                    help=f"true J of the simulated part (default {DEMO_INERTIA:g})")
     p.add_argument("--seed", type=int, default=1, help="noise seed (default 1)")
-    p.add_argument("--releases", type=int, default=3, metavar="N",
-                   help="releases of the demo part (its recipe asks for N; default 3)")
+    p.add_argument("--releases", type=int, default=None, metavar="N",
+                   help="releases of the demo part (its recipe asks for N; default 3; with --tensor, per orientation, "
+                        "default 1)")
     p.add_argument("--nominal", type=float, metavar="KG_M2",
                    help="nominal J of the demo recipe (default: the simulated part's J; ±1 %% tolerance)")
     p.add_argument("--state-dir", metavar="DIR", help="keep the result store here (default: a temporary directory)")
     p.add_argument("--json", action="store_true", help="print the published result payload as JSON at the end")
     p.add_argument("--web-port", type=int, default=8080, metavar="PORT",
                    help="serve the web page on 127.0.0.1:PORT (default 8080; a free port if it is taken; 0: any)")
+    p.add_argument("--tensor", action="store_true",
+                   help="run a guided six-orientation tensor set of a simulated bracket instead, and print the tensor's "
+                        "error against the truth (--releases per orientation, default 1; --duration default 10)")
     p.add_argument("--serve", action="store_true",
                    help="keep the appliance and its web page running after the measurement, until Ctrl-C")
 
@@ -87,6 +92,14 @@ def _write_recipe(args: argparse.Namespace, state_dir: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.tensor:
+        from .demo_tensor import run as run_tensor
+
+        args.releases = 1 if args.releases is None else args.releases
+        args.duration = 10.0 if args.duration is None else args.duration
+        return run_tensor(args)
+    args.releases = 3 if args.releases is None else args.releases
+    args.duration = 20.0 if args.duration is None else args.duration
     if not 1 <= args.releases <= 10:
         raise InputFileError(f"--releases must be in [1, 10], got {args.releases}")
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")

@@ -67,6 +67,7 @@ class TensorSet:
         self.status = RUNNING
         self.result: TensorResult | None = None
         self.error: str | None = None
+        self._undo: tuple[int, str, TensorResult | None, str | None] | None = None
 
     # -- what the operator sees -----------------------------------------------------------------
     @property
@@ -110,6 +111,7 @@ class TensorSet:
             raise SetError(f"the set is {self.status}; start a new one")
         index = self.current
         step = self.steps[index]
+        self._undo = (index, self.status, self.result, self.error)
         step.results.append(dict(result))
         step.measurements.append(measurement_id)
         counted = {"orientation": self.plan.orientations[index].name, "index": index + 1,
@@ -118,6 +120,16 @@ class TensorSet:
             self._advance()
         return {**counted, "progress": self.progress()}
 
+    def forget_last(self) -> None:
+        """Undo the last ``release`` (its measurement could not be stored)."""
+        if self._undo is None:
+            return
+        index, self.status, self.result, self.error = self._undo
+        self.steps[index].results.pop()
+        self.steps[index].measurements.pop()
+        self.current = index
+        self._undo = None
+
     def act(self, action: str, orientation: str | None = None) -> None:
         """The operator's ``redo`` (the named orientation, default the current one if it has releases,
         else the previous one), ``skip`` (the current one) or ``abort`` (the whole set)."""
@@ -125,6 +137,7 @@ class TensorSet:
             raise SetError(f"unknown set action {action!r}; expected one of {', '.join(ACTIONS)}")
         if self.done:
             raise SetError(f"the set is {self.status}: nothing to {action}")
+        self._undo = None
         if action == "abort":
             self.status = ABORTED
             self.error = "aborted by the operator"

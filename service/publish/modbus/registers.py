@@ -122,6 +122,9 @@ WRITABLE_END = max(a + n for a, n in WRITABLE.values())  # exclusive
 COILS: dict[str, int] = {
     "trigger": 0,  # write 1: start one measurement (reads back 0)
     "abort": 1,    # write 1: abort the running measurement (reads back 0)
+    "set_redo": 2,   # write 1: tensor set, measure the current orientation again (or the previous one)
+    "set_skip": 3,   # write 1: tensor set, skip the current orientation
+    "set_abort": 4,  # write 1: tensor set, abort the set (its releases stay stored)
 }
 
 
@@ -599,11 +602,18 @@ def markdown() -> str:
                    "`measurements_started` increments when the measurement starts",
         "abort": "abort the running measurement (solenoid off, no result), or acknowledge a FAULT (FAULT is latched "
                  "until then; a trigger in FAULT is ignored); reads back 0",
+        "set_redo": "tensor set (a recipe with a [tensor] plan): the releases of the current orientation (or, when "
+                    "it has none yet, of the previous one) no longer count; measure it again. Refused while a "
+                    "measurement runs; reads back 0",
+        "set_skip": "tensor set: skip the current orientation (the tensor is computed without it, flag "
+                    "orientation_excluded); reads back 0",
+        "set_abort": "tensor set: abort the set; the releases measured so far stay stored, the set is stored as "
+                     "aborted; reads back 0",
     }
     for name, a in COILS.items():
         L.append(f"| {a} | `{name}` | {meaning[name]} |")
     L.append("")
-    L.append("Only these two coils are writable. Writing 0 to them does nothing; any other write anywhere on the "
+    L.append("Only these coils are writable. Writing 0 to them does nothing; any other write anywhere on the "
              "device, but the part ID and recipe_select registers, gets exception 0x02 (illegal data address). "
              "A single-coil write (FC 5) carries 0xFF00 or 0x0000, any other value gets exception 0x03 (illegal "
              "data value); the reply echoes the request.")
