@@ -168,3 +168,21 @@ def test_a_tensor_recipe_is_checked(tmp_path):
     with pytest.raises(RecipeError, match="do not apply"):
         load_recipe(bad)
     assert F.ORIENTATION_EXCLUDED in R.FLAG_BITS
+
+
+def test_the_web_page_shows_the_orientation_to_mount_and_takes_the_actions(tmp_path, appliance_factory):
+    import urllib.request
+    from pathlib import Path
+
+    app = appliance_factory(tensor_doc(tmp_path, web={"enabled": True}))
+    base = app.app.web.url
+    html = urllib.request.urlopen(base + "set", timeout=10).read().decode()
+    assert "mount orientation 1 of 6 &#39;x&#39;" in html or "mount orientation 1 of 6 'x'" in html
+    assert "<svg" in html and "swing axis" in html
+    token = Path(app.app.web.token_file).read_text().strip()
+    req = urllib.request.Request(base + "api/set/skip", data=b"", method="POST",
+                                 headers={"Authorization": f"Bearer {token}", "Origin": base.rstrip("/")})
+    assert urllib.request.urlopen(req, timeout=10).status == 202
+    app.app.call_soon(lambda: None).result(10)
+    state = json.loads(urllib.request.urlopen(base + "api/set", timeout=10).read())
+    assert state["set"]["skipped"] == ["x"] and state["set"]["orientation"]["name"] == "y"
