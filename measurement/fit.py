@@ -369,16 +369,34 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
         last_jac[key] = J.copy()
         return J
 
+    order = [0]
     if starts is not None and len(starts) > 1:
         costs = [float(np.sum(fun(xs) ** 2)) for xs in starts]
-        x0 = starts[int(np.argmin(costs))]
+        order = [int(i) for i in np.argsort(costs)]
     loss = "linear" if f_scale is None else "soft_l1"
-    try:
-        sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale=scales, method="trf",
-                            ftol=1e-12, xtol=1e-12, gtol=1e-10, max_nfev=max_nfev,
-                            loss=loss, f_scale=1.0 if f_scale is None else f_scale)
-    except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
-        raise IdentificationError(f"least squares failed for model {model.effect_names}: {exc}") from exc
+    # A model that contains the previous one fits the same samples at least as well; ending
+    # worse, the solver went down another basin from the cheapest start (over a long record
+    # a start near a poor fit can slip a cycle): the other starts are tried, the best kept.
+    beaten = None
+    if previous is not None and previous.f_scale == f_scale and previous.t.size == t.size and np.array_equal(previous.t, t):
+        beaten = 0.5 * previous.rss * (1.0 + 1e-6)
+    sol = None
+    for i in order:
+        x0 = starts[i] if starts is not None else x0
+        try:
+            trial = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale=scales, method="trf",
+                                  ftol=1e-12, xtol=1e-12, gtol=1e-10, max_nfev=max_nfev,
+                                  loss=loss, f_scale=1.0 if f_scale is None else f_scale)
+        except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
+            if sol is None and i == order[-1]:
+                raise IdentificationError(f"least squares failed for model {model.effect_names}: {exc}") from exc
+            continue
+        if sol is None or trial.cost < sol.cost:
+            sol = trial
+        if beaten is None or sol.cost <= beaten:
+            break
+    if sol is None:
+        raise IdentificationError(f"least squares failed for model {model.effect_names} from every start")
     x = sol.x
     _, theta, omega = evaluate(x)
     residual = fun(x)

@@ -28,6 +28,10 @@ CAMERA_PERSPECTIVE = "camera_perspective"
 # -- the rig ---------------------------------------------------------------------------
 CALIBRATION_DUE = "calibration_due"
 NEGATIVE_INERTIA = "negative_inertia"
+# -- the inertia tensor of a multi-orientation set ----------------------------------------------
+TENSOR_INCONSISTENT = "tensor_inconsistent"
+TENSOR_UNPHYSICAL = "tensor_unphysical"
+ORIENTATION_EXCLUDED = "orientation_excluded"
 
 #: flag → what it tells the user (the Modbus map and the docs print these)
 FLAGS: dict[str, str] = {
@@ -54,6 +58,12 @@ FLAGS: dict[str, str] = {
     NEGATIVE_INERTIA: "J_object (J − tare) or J_object_axis came out negative, which no part can have: the rig file's tare "
                       "inertia or [object] mass/axis_offset does not fit this set-up",
     CALIBRATION_DUE: "the rig's calibration is past its validity period ([calibration] date + valid_days of the rig file)",
+    TENSOR_INCONSISTENT: "a tensor set: the orientations disagree beyond their uncertainties (χ² beyond its 99 % point); "
+                         "the orientation with the largest normalised residual is named: a mis-mounted or mis-typed axis",
+    TENSOR_UNPHYSICAL: "a tensor set: a principal moment is ≤ 0 or I1 + I2 < I3 beyond the uncertainty, which no "
+                       "body can have: check the axes, offsets, mass and tare",
+    ORIENTATION_EXCLUDED: "a tensor set: an orientation whose releases were all INVALID was left out (named in the "
+                          "reasons); the tensor rests on the others",
 }
 
 

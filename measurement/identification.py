@@ -273,6 +273,10 @@ def _remove_outliers(fit: ModelFit, prep: Prepared, options: Options) -> tuple[n
     return fit.t[~bad], fit.y[~bad], np.flatnonzero(bad)
 
 
+#: residual RMS over the noise floor up to which a candidate's first-order score is trusted to skip its fit
+SCREEN_TRUST = 4.0
+
+
 @dataclass(frozen=True)
 class Score:
     """First-order (linearised) value of adding an effect to a fit.
@@ -400,9 +404,14 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
 
         q = current_basis(current) if cands else None
 
+        # Far above the noise the current fit may be in another basin than the true swing (a
+        # cycle slipped over a long record, a wrong damping law at large amplitude): its
+        # linearisation says nothing about a candidate then, so every candidate is fitted.
+        screen = current.residual_rms <= SCREEN_TRUST * prep.noise
+
         def trial(cand: Effect, current: ModelFit = current, q: np.ndarray | None = q) -> tuple[Score, ModelFit | None]:
             score = score_effect(current, cand, q)
-            if score.d_bic >= 0.0:
+            if screen and score.d_bic >= 0.0:
                 return score, None
             model = Model(rig, tuple(resolve_effects(with_effect(current.model.effect_names, cand), rig)))
             try:
@@ -413,7 +422,7 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
         # the candidates are independent: fitted side by side, read back in library order
         for cand, (score, f) in zip(cands, parallel_map(trial, cands)):
             spent += len(cand.parameters)
-            if score.d_bic >= 0.0:
+            if f is None and score.d_bic >= 0.0:
                 # the first-order gain cannot pay for the parameter: not worth a fit
                 table[cand.name] = {"bic": current.bic + score.d_bic, "screened": 1.0,
                                     "residual_rms": score.residual_rms,

@@ -23,13 +23,14 @@ from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, 
 from measurement import flags as F
 
 #: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 6  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
+MAP_VERSION = 7  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
 # 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
 #    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
 # 5: bits 6-7 of `effects` (dahl, view; they set bit 15, other, before); register flags_high (flags from
 #    bit 16 on: sensor_scale_fitted); seq_end moved from 62 to 63
 #    holding registers; flag calibration_due (bit 13)
 # 6: flag camera_perspective (register flags_high, bit 1)
+# 7: the tensor flags (register flags_high, bits 2-4)
 
 
 # --- enumerations ------------------------------------------------------------
@@ -69,6 +70,9 @@ FLAG_BITS: dict[str, int] = {
     F.NEGATIVE_INERTIA: 14,  # map version 4
     F.SENSOR_SCALE_FITTED: 16,  # map version 5: register flags_high, bit 0
     F.CAMERA_PERSPECTIVE: 17,  # map version 6: register flags_high, bit 1
+    F.TENSOR_INCONSISTENT: 18,  # map version 7: a tensor set's flags (register flags_high / tensor_flags)
+    F.TENSOR_UNPHYSICAL: 19,
+    F.ORIENTATION_EXCLUDED: 20,
 }
 FLAG_OTHER_BIT = 15
 
