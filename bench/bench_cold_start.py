@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"cold start, whole process, median of {args.repeat} ({os.cpu_count()} cores, load average {load:.1f}); "
               f"before = {BEFORE}" + ("" if before else " (not available)"))
         print(f"{'':44}" + "".join(f"{name + ' wall':>13}{'CPU':>8}" for name, _ in trees) + f"{'goal':>8}")
-        for key, argv_ in commands.items():
+        for key in commands:
             for pin in pins:
                 label = ("moi identify 30 s @ 200 Hz" if key == "identify" else "moi --help") + \
                         (", one core" if pin else "")

@@ -480,7 +480,7 @@ class Appliance:
         cal = rig.calibration
         if cal is None:
             return None
-        today = _dt.datetime.fromtimestamp(now, _dt.timezone.utc).date()
+        today = _dt.datetime.fromtimestamp(now, _dt.UTC).date()
         until = cal.valid_until
         return {"date": cal.date.isoformat(), "valid_until": until.isoformat() if until else None,
                 "due": cal.due(today), "stiffness": rig.stiffness, "stiffness_std": rig.stiffness_std}
