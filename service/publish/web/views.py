@@ -420,16 +420,7 @@ class Views:
         out: dict[str, Any] = {"software_version": __version__, "device_id": cfg.device_id,
                                "simulated": cfg.simulated, "state": app.live_status().state,
                                "loop_iterations": app.loop_iterations, "last_loop_error": app.last_loop_error}
-        if app.mqtt is not None:
-            out["mqtt"] = {"broker": f"{cfg.mqtt.host}:{cfg.mqtt.port}", "connected": app.mqtt.is_connected,
-                           "outbox_backlog": app.store.outbox_count() if app.store is not None else None}
-        else:
-            out["mqtt"] = None
-        if app.modbus is not None:
-            out["modbus"] = {"mode": cfg.modbus.mode, "port": app.modbus.bound_port,
-                             "clients": app.modbus.client_count(), "requests": app.modbus.requests}
-        else:
-            out["modbus"] = None
+        out.update(app.publisher_health())
         try:
             du = shutil.disk_usage(cfg.state_dir)
             out["disk"] = {"path": str(cfg.state_dir), "free_bytes": du.free, "total_bytes": du.total}
