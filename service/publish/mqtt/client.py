@@ -33,7 +33,6 @@ import logging
 import ssl
 import threading
 from collections import deque
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -43,6 +42,9 @@ from paho.mqtt.enums import CallbackAPIVersion
 from service.errors import ConfigError
 from service.persistence.outbox import OutboxSender
 from service.publish.port import ApplianceView, Publisher
+
+# the settings are read by the configuration without paho; here for the client's users too
+from .settings import MqttSettings  # noqa: F401
 from measurement.verdict import DEFAULT_INVALID_FLAGS
 
 from service.publish.modbus.registers import FLAG_BITS
@@ -68,34 +70,6 @@ def _never_raises(callback: Callable[..., None]) -> Callable[..., None]:
             log.exception("MQTT: %s failed (ignored; the connection goes on)", callback.__name__)
 
     return guarded
-
-
-@dataclass(frozen=True)
-class MqttSettings:
-    """Broker connection and topics (``[mqtt]`` in the config file).
-
-    keepalive, reconnect_min/max, resend_after: s.
-    """
-
-    host: str = "localhost"
-    port: int = 1883
-    prefix: str = "moi"
-    client_id: str | None = None
-    username: str | None = None
-    password: str | None = None
-    password_file: str | None = None
-    keepalive: int = 30
-    tls: bool = False
-    ca_file: str | None = None
-    cert_file: str | None = None
-    key_file: str | None = None
-    tls_insecure: bool = False
-    reconnect_min: float = 0.5
-    reconnect_max: float = 30.0
-    resend_after: float = 30.0
-    window: int = 10
-    home_assistant: bool = False
-    discovery_prefix: str = "homeassistant"
 
 
 class Topics:

@@ -24,7 +24,7 @@ from service.errors import StartupError
 from service.publish.port import ApplianceView, Publisher
 
 from .auth import Guard, read_token
-from .settings import DEFAULT_TOKEN_FILE_NAME, WebSettings
+from .settings import DEFAULT_TOKEN_FILE_NAME, PLOT_NAME, WebSettings
 from .views import Views
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -32,8 +32,6 @@ if TYPE_CHECKING:  # pragma: no cover
 
 log = logging.getLogger("moi.web")
 
-#: the name of the plot kept with each measurement in the store
-PLOT_NAME = "plot.png"
 #: no plot is drawn while the sequencer is in one of these (the sensor is being read)
 CAPTURE_STATES = ("ARMED", "RELEASING", "CAPTURING")
 

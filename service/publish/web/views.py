@@ -12,7 +12,7 @@ import math
 import shutil
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping, Protocol
 from urllib.parse import urlencode, urlsplit
 
 import jinja2
@@ -21,13 +21,32 @@ from aiohttp import web
 from service import __version__
 from .auth import COOKIE, CSRF_HEADER, SESSION_LIFETIME
 from .live import Live
+from .settings import PLOT_NAME
 from measurement.flags import FLAGS
 
 from .words import STATE_WORDS, flag_words
 
 if TYPE_CHECKING:  # pragma: no cover
+    import concurrent.futures
+
     from service.persistence.store import StoredMeasurement as Measurement
-    from .server import WebServer
+    from service.publish.port import ApplianceView
+
+    from .auth import Guard
+    from .settings import WebSettings
+
+    class WebServer(Protocol):
+        """What the views use of the server that owns them (``server.WebServer``)."""
+
+        appliance: ApplianceView
+        settings: WebSettings
+        guard: Guard
+
+        def listen(self) -> asyncio.Queue: ...
+        def unlisten(self, q: asyncio.Queue) -> None: ...
+        def plot_future(self, uuid: str) -> concurrent.futures.Future | None: ...
+        def submit_plot(self, uuid: str, get_result: Any) -> concurrent.futures.Future: ...
+        def stats(self) -> dict[str, Any]: ...
 
 log = logging.getLogger("moi.web")
 
@@ -303,7 +322,6 @@ class Views:
                           has_trace=self.app.config.store_trace)
 
     async def plot(self, request: web.Request) -> web.Response:
-        from .server import PLOT_NAME
 
         m = self._get(request.match_info["key"])
         if m.status != "ok":
