@@ -20,6 +20,7 @@ ANGLE_UNWRAPPED = "angle_unwrapped"
 SENSOR_SCALE_FITTED = "sensor_scale_fitted"
 HALVES_DISAGREE = "halves_disagree"
 MODEL_AMBIGUOUS = "model_ambiguous"
+RELEASES_DISAGREE = "releases_disagree"
 # -- acquisition --------------------------------------------------------------------
 ENCODER_ERRORS = "encoder_errors"
 CAMERA_POSE = "camera_pose"
@@ -56,6 +57,9 @@ FLAGS: dict[str, str] = {
     MODEL_AMBIGUOUS: "another model explains the record about as well (within the BIC margin) and gives another ω_n: "
                      "the data do not decide between them (model_form.competitors names them); the spread is in "
                      "omega_n_u and J_u",
+    RELEASES_DISAGREE: "releases of one object identified jointly scatter about the joint ω_n beyond their "
+                       "uncertainties (consistency.p < 0.01; consistency.largest_release departs most): the joint σ "
+                       "is scaled by the Birge ratio",
     ENCODER_ERRORS: "the encoder had time-outs, CRC errors or late replies (counts in acquisition)",
     CAMERA_POSE: "the camera's yaw was beyond the limit (yaw_limit_deg): the angles were corrected; check the mounting",
     MARKER_LOST: "the tracker lost the marker in some frames",

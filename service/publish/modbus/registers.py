@@ -31,7 +31,7 @@ MAP_VERSION = 8  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3:
 #    holding registers; flag calibration_due (bit 13)
 # 6: flag camera_perspective (register flags_high, bit 1)
 # 7: the tensor flags (register flags_high, bits 2-4)
-# 8: flags halves_disagree, model_ambiguous (register flags_high, bits 5-6)
+# 8: flags halves_disagree, model_ambiguous, releases_disagree (register flags_high, bits 5-7)
 
 
 # --- enumerations ------------------------------------------------------------
@@ -74,8 +74,9 @@ FLAG_BITS: dict[str, int] = {
     F.TENSOR_INCONSISTENT: 18,  # map version 7: a tensor set's flags (register flags_high / tensor_flags)
     F.TENSOR_UNPHYSICAL: 19,
     F.ORIENTATION_EXCLUDED: 20,
-    F.HALVES_DISAGREE: 21,  # map version 8: the model's form (register flags_high, bits 5-6)
+    F.HALVES_DISAGREE: 21,  # map version 8: the model's form (register flags_high, bits 5-7)
     F.MODEL_AMBIGUOUS: 22,
+    F.RELEASES_DISAGREE: 23,
 }
 FLAG_OTHER_BIT = 15
 
