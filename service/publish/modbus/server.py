@@ -44,6 +44,8 @@ from pymodbus.simulator.simcore import SimCore
 
 from drivers.aioloop import LoopThread
 
+from service.publish.port import ApplianceView, Publisher
+
 from . import registers as R
 from service.errors import ModbusServerError
 
@@ -257,7 +259,7 @@ class _BoundedTcpServer(ModbusTcpServer):
         conn.close()
 
 
-class ModbusServer:
+class ModbusServer(Publisher):
     """Serves the register image of ``service.publish.modbus.registers``.
 
     on_command(name, source, data) is called from the server thread when the PLC
@@ -489,9 +491,54 @@ class ModbusServer:
                 log.warning("Modbus server shutdown: %s", exc)
         self._io.stop(timeout)
 
+    # --- the publisher port ---------------------------------------------------------
+    NAME = "modbus"
+    EARLY = True  # the PLC sees STARTING, and the last result, while the devices open
+
+    @classmethod
+    def build(cls, settings: ModbusSettings, appliance: ApplianceView) -> "ModbusServer":
+        parts, store = appliance.parts, appliance.store
+        server = cls(settings, on_command=appliance.command, recipe_numbers=parts.book.numbers)
+        server.set_inputs(recipe=parts.recipe.number if parts.recipe else 0)
+        if store is not None:
+            # until the main loop runs, the PLC sees STARTING and the true outbox backlog, not defaults
+            server.set_live(R.LiveStatus(state="STARTING", simulated=appliance.config.simulated,
+                                         outbox_pending=store.outbox_count()))
+            last = store.latest("ok")
+            if last is not None and last.payload is not None:
+                server.publish_result(last.payload)  # the PLC sees the last result after a restart too
+        return server
+
+    def failure(self) -> str | None:
+        return None if self.alive() else "the Modbus server thread stopped"
+
+    def where(self) -> str:
+        s = self.settings
+        return f"Modbus {s.mode.upper()} " + (f"{s.host}:{self.bound_port}" if s.mode == "tcp" else str(s.serial_port))
+
+    def health(self) -> dict[str, Any]:
+        return {"mode": self.settings.mode, "port": self.bound_port, "clients": self.client_count(),
+                "requests": self.requests}
+
+    def on_live(self, live: R.LiveStatus) -> None:
+        self.set_live(live)
+
+    def on_result(self, stored: Any, measurement: Any) -> None:
+        if stored.payload is not None:
+            self.publish_result(stored.payload)
+
+    def on_recipe(self, recipe: Any) -> None:
+        self.set_inputs(recipe=recipe.number if recipe else 0)
+
+    def on_part_id(self, part_id: str | None) -> None:
+        self.set_inputs(part_id=part_id or "")
+
     def __enter__(self) -> "ModbusServer":
         self.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+PUBLISHER = ModbusServer

@@ -56,7 +56,7 @@ def _fmt(v: Any, spec: str = ".6g") -> str:
 def _when(ts: float | None) -> str:
     if ts is None:
         return "–"
-    return dt.datetime.fromtimestamp(ts, dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    return dt.datetime.fromtimestamp(ts, dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
 def _name(v: Any) -> Any:
@@ -177,7 +177,7 @@ class Views:
                 timeout = max(0.0, next_tick - loop.time())
                 try:
                     msg = await asyncio.wait_for(q.get(), timeout) if timeout > 0 else q.get_nowait()
-                except (asyncio.TimeoutError, asyncio.QueueEmpty):
+                except (TimeoutError, asyncio.QueueEmpty):
                     msg = "tick"
                 if msg is None:
                     break
@@ -356,7 +356,7 @@ class Views:
                 d = dt.date.fromisoformat(text)
             except ValueError:
                 raise Refused(400, f"{name}={text[:20]!r}: expected a date YYYY-MM-DD") from None
-            return dt.datetime(d.year, d.month, d.day, tzinfo=dt.timezone.utc).timestamp()
+            return dt.datetime(d.year, d.month, d.day, tzinfo=dt.UTC).timestamp()
 
         out["since"] = day("since")
         until = day("until")
@@ -420,16 +420,7 @@ class Views:
         out: dict[str, Any] = {"software_version": __version__, "device_id": cfg.device_id,
                                "simulated": cfg.simulated, "state": app.live_status().state,
                                "loop_iterations": app.loop_iterations, "last_loop_error": app.last_loop_error}
-        if app.mqtt is not None:
-            out["mqtt"] = {"broker": f"{cfg.mqtt.host}:{cfg.mqtt.port}", "connected": app.mqtt.is_connected,
-                           "outbox_backlog": app.store.outbox_count() if app.store is not None else None}
-        else:
-            out["mqtt"] = None
-        if app.modbus is not None:
-            out["modbus"] = {"mode": cfg.modbus.mode, "port": app.modbus.bound_port,
-                             "clients": app.modbus.client_count(), "requests": app.modbus.requests}
-        else:
-            out["modbus"] = None
+        out.update(app.publisher_health())
         try:
             du = shutil.disk_usage(cfg.state_dir)
             out["disk"] = {"path": str(cfg.state_dir), "free_bytes": du.free, "total_bytes": du.total}
