@@ -23,7 +23,7 @@ from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, 
 from measurement import flags as F
 
 #: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 7  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
+MAP_VERSION = 8  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
 # 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
 #    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
 # 5: bits 6-7 of `effects` (dahl, view; they set bit 15, other, before); register flags_high (flags from
@@ -31,6 +31,7 @@ MAP_VERSION = 7  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3:
 #    holding registers; flag calibration_due (bit 13)
 # 6: flag camera_perspective (register flags_high, bit 1)
 # 7: the tensor flags (register flags_high, bits 2-4)
+# 8: flags halves_disagree, model_ambiguous, releases_disagree (register flags_high, bits 5-7)
 
 
 # --- enumerations ------------------------------------------------------------
@@ -73,6 +74,9 @@ FLAG_BITS: dict[str, int] = {
     F.TENSOR_INCONSISTENT: 18,  # map version 7: a tensor set's flags (register flags_high / tensor_flags)
     F.TENSOR_UNPHYSICAL: 19,
     F.ORIENTATION_EXCLUDED: 20,
+    F.HALVES_DISAGREE: 21,  # map version 8: the model's form (register flags_high, bits 5-7)
+    F.MODEL_AMBIGUOUS: 22,
+    F.RELEASES_DISAGREE: 23,
 }
 FLAG_OTHER_BIT = 15
 
