@@ -159,7 +159,7 @@ def _joint(results: list[IdentificationResult], rig: Rig) -> JointResult:
         # each release alone with the shared model: the start of the joint fit
         fits.append(fit_model(model, t, y, r.noise_floor))
         models.append(model)
-    dyn = [n for n in models[0].names[len(STATE_PARAMS):models[0].n_dynamic]]
+    dyn = list(models[0].names[len(STATE_PARAMS):models[0].n_dynamic])
     n_shared = 1 + len(dyn)
     weights = np.array([1.0 / max(f.residual_rms, 1e-12) for f in fits])
     # start: ω_n and the laws averaged over the releases, each by its information
