@@ -95,10 +95,6 @@ class Effect:
     def __repr__(self) -> str:
         return f"<effect {self.name}>"
 
-    @property
-    def parameter_names(self) -> tuple[str, ...]:
-        return tuple(p.name for p in self.parameters)
-
     # -- dynamic effects -------------------------------------------------------
     #: This effect's θ'' term Σ p_j φ_j (the law) as one Python expression in x
     #: (θ, rad), v (θ', rad/s), s (±1, direction of the half-swing) and p0, p1,

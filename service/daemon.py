@@ -355,6 +355,8 @@ class Appliance:
                     fut.set_exception(exc)
 
     def _check_components(self) -> None:
+        if self._compiling is not None and self._compiling.poll() is not None:
+            self._compiling = None  # the kernel is compiled (poll reaped the child)
         for p in self.publishers:
             why = p.failure()
             if why is not None:
@@ -570,6 +572,14 @@ class Appliance:
             self.devices = None
         self._stop_publishers(early)
         self.publishers = []
+        if self._compiling is not None:  # a first run stopped before the kernel was compiled: the next start compiles it
+            self._compiling.terminate()
+            try:
+                self._compiling.wait(5)
+            except subprocess.TimeoutExpired:
+                self._compiling.kill()
+                self._compiling.wait()
+            self._compiling = None
         if self.store is not None:
             self.store.close()
             self.store = None

@@ -300,7 +300,6 @@ class Config:
     mqtt: MqttSettings | None        # None: MQTT off
     modbus: ModbusSettings | None    # None: Modbus off
     web: WebSettings | None          # None: no web page
-    document: Mapping[str, Any]      # the parsed TOML, stored with every measurement
     recipes: Any = None              # service.parts.recipes.RecipeBook (every recipe of [recipes] directory, checked)
     active_recipe: str | None = None  # [recipes] active
 
@@ -498,7 +497,7 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         state_dir=Path(sd) if sd else default_state_dir(environ),
         log_level=dev["log_level"], store_trace=dev["store_trace"],
         rig=rig, rig_path=rig_path, simulated=simulated, simulation=simulation, hardware=hardware,
-        sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, web=web, document=dict(doc),
+        sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, web=web,
         recipes=book, active_recipe=rc["active"],
     )
 
