@@ -28,7 +28,7 @@ SETS = {
 }
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def joint(name: str):
     files, rig = SETS[name]
     return identify_releases([load_source(ROOT / f) for f in files], read_rig(ROOT / rig))
