@@ -139,8 +139,9 @@ def _shared_effects(results: Sequence[IdentificationResult], rig: Rig) -> tuple[
     return tuple(e.name for e in resolve_effects(names, rig))
 
 
-def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options = Options()) -> JointResult:
-    """Identify several releases of one object on ``rig`` jointly (see the module doc)."""
+def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options | None = None) -> JointResult:
+    """Identify several releases of one object on ``rig`` jointly (see the module doc); options: ``Options()``."""
+    options = Options() if options is None else options
     if len(traces) < 2:
         raise InvalidInput(f"a joint identification needs at least 2 releases, got {len(traces)}")
     results = [identify(tr, rig, options) for tr in traces]
