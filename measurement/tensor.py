@@ -550,7 +550,6 @@ def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigS
             excluded[i] = "not measured" if r is None else (r.invalid or "no value")
         else:
             used.append(i)
-    names_out = [plan.orientations[i].name for i in excluded]
     rank, cond = plan_geometry([plan.orientations[i].axis for i in used])
     if rank < 6 or cond > MAX_CONDITION:
         raise TensorError(f"the orientations left ({len(used)}: {', '.join(plan.orientations[i].name for i in used)}) "

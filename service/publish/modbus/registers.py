@@ -24,15 +24,17 @@ from measurement import flags as F
 from measurement.tensor import COMPONENTS
 
 #: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 7  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
+MAP_VERSION = 9  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
 # 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
 #    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
 # 5: bits 6-7 of `effects` (dahl, view; they set bit 15, other, before); register flags_high (flags from
 #    bit 16 on: sensor_scale_fitted); seq_end moved from 62 to 63
 #    holding registers; flag calibration_due (bit 13)
 # 6: flag camera_perspective (register flags_high, bit 1)
-# 7: the tensor flags (register flags_high, bits 2-4); the guided tensor set's progress (set_step, set_steps,
-#    set_orientation: live registers 7-9) and the tensor of the latest set (block 200-238, its own snapshot)
+# 7: the tensor flags (register flags_high, bits 2-4)
+# 8: flags halves_disagree, model_ambiguous, releases_disagree (register flags_high, bits 5-7)
+# 9: the guided tensor set's progress (set_step, set_steps, set_orientation: live registers 7-9), its coils
+#    set_redo, set_skip, set_abort (2-4) and the tensor of the latest set (block 200-238, its own snapshot)
 
 
 # --- enumerations ------------------------------------------------------------
@@ -75,6 +77,9 @@ FLAG_BITS: dict[str, int] = {
     F.TENSOR_INCONSISTENT: 18,  # map version 7: a tensor set's flags (register flags_high / tensor_flags)
     F.TENSOR_UNPHYSICAL: 19,
     F.ORIENTATION_EXCLUDED: 20,
+    F.HALVES_DISAGREE: 21,  # map version 8: the model's form (register flags_high, bits 5-7)
+    F.MODEL_AMBIGUOUS: 22,
+    F.RELEASES_DISAGREE: 23,
 }
 FLAG_OTHER_BIT = 15
 
@@ -554,7 +559,7 @@ def markdown() -> str:
              "with a [tensor] plan, docs/tensor.md), read as one block (one request) or with the snapshot "
              "protocol below on `tensor_seq` / `tensor_seq_end`. Addresses between the blocks get exception 0x02.")
     L.append("")
-    L.append(f"## Writable holding registers (FC 6 / FC 16 write, FC 3 read back)")
+    L.append("## Writable holding registers (FC 6 / FC 16 write, FC 3 read back)")
     L.append("")
     L.append("| address | registers | name | meaning |")
     L.append("|---:|---:|---|---|")
@@ -648,7 +653,7 @@ def markdown() -> str:
     L.append("")
     L.append(f"1. read `seq` (register {SNAPSHOT_START}) → S1; if S1 = 0 there is no result yet;")
     L.append(f"2. read the body (registers {SNAPSHOT_START + 1}–{SNAPSHOT_END - 1}) in as many requests as needed;")
-    L.append(f"3. read `seq` again → S2;")
+    L.append("3. read `seq` again → S2;")
     L.append("4. accept the values only if S1 = S2 = `seq_end`; otherwise a new result arrived meanwhile: start again.")
     L.append("")
     L.append("A result takes far longer than a PLC scan to produce (a swing lasts seconds), so the retry "
