@@ -518,6 +518,7 @@ class Appliance:
         if tensor_set is not None and (tensor_set.done or tensor_set.recipe is not recipe):
             tensor_set = None  # the set ended (aborted) while this release ran: it counts for nothing
         if tensor_set is not None:
+            assert recipe is not None
             part = {"part_id": part_id, "recipe": recipe.to_dict(), "release": None, "part": None, "verdict": None,
                     "calibration": calibration, "tensor_set": tensor_set.release(result, m.id)}
         else:
@@ -608,11 +609,12 @@ class Appliance:
         fields: dict[str, Any] = {}
         for p in self.publishers:
             fields |= p.live_fields()
+        fields |= self._set_registers()
         return LiveStatus(
             state="STOPPING" if self._stopping else state, busy=bool(seq and seq.busy), fault=state == "FAULT",
             simulated=self.config.simulated, started=self._started_runs,
             recipe=self.parts.recipe.number if self.parts.recipe else 0,
-            releases_done=(self.parts.open_part or {}).get("done", 0), **fields, **self._set_registers(),
+            releases_done=(self.parts.open_part or {}).get("done", 0), **fields,
         )
 
     def _set_registers(self) -> dict[str, int]:

@@ -227,7 +227,7 @@ def load_recipe(path: str | Path) -> Recipe:
         raise c.fail("recipe", "tolerance", "give exactly one of tolerance (± kg·m²) or tolerance_percent "
                      "(± % of nominal)")
     nominal = rec["nominal"]
-    tol = None
+    tol = 0.0
     if tensor is None:
         tol = rec["tolerance"] if rec["tolerance"] is not None else nominal * rec["tolerance_percent"] / 100.0
         if tol >= nominal:
@@ -364,23 +364,27 @@ class PartTracker:
         if recipe is None:
             self._abandon("no recipe is active")
             return out
+        spec = recipe.spec
+        if spec is None:  # a tensor recipe's release outside its set (the set ended while it ran): not judged
+            self._abandon("a tensor recipe is active")
+            return out
         abandoned = None
         if o is not None and (o.part_id != part_id or o.recipe.version != recipe.version):
             abandoned = self._abandon("a different part ID or recipe")
             o = None
         if o is None:
             o = self._open = _OpenPart(str(uuidlib.uuid4()), part_id, recipe)
-        reading = Reading.from_result(result, recipe.spec.quantity)
+        reading = Reading.from_result(result, spec.quantity)
         o.readings.append(reading)
         o.measurements.append(measurement_id)
-        decision = judge_release(reading, recipe.spec, recipe.quality)
+        decision = judge_release(reading, spec, recipe.quality)
         out["release"] = {"index": len(o.readings), "of": recipe.releases, "part_uuid": o.uuid,
-                          "quantity": recipe.spec.quantity, **decision.to_dict(), "abandoned": abandoned}
+                          "quantity": spec.quantity, **decision.to_dict(), "abandoned": abandoned}
         if len(o.readings) >= recipe.releases:
-            part = combine(o.readings, recipe.spec, recipe.quality)
+            part = combine(o.readings, spec, recipe.quality)
             self.last_part = part
             out["part"] = {"uuid": o.uuid, "part_id": part_id, "measurements": list(o.measurements),
-                           "quantity": recipe.spec.quantity, **part.to_dict()}
+                           "quantity": spec.quantity, **part.to_dict()}
             out["verdict"] = part.verdict
             for e in part.excluded:
                 log.warning("part %s: release %d excluded: %s", part_id or o.uuid, e["index"] + 1, e["reason"])
