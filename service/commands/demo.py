@@ -14,6 +14,7 @@ release and the part's verdict are printed, with the verdict registers.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import logging
@@ -22,6 +23,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Iterator
 
 from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
 from service.errors import InputFileError
@@ -91,39 +93,38 @@ def _write_recipe(args: argparse.Namespace, state_dir: str) -> None:
         f"tolerance_percent = 1.0\nreleases = {args.releases}\n", encoding="utf-8")
 
 
-def run(args: argparse.Namespace) -> int:
-    if args.tensor:
-        from .demo_tensor import run as run_tensor
+@contextlib.contextmanager
+def state_directory(args: argparse.Namespace, prefix: str) -> Iterator[str]:
+    """--state-dir, or a temporary directory removed at the end."""
+    if args.state_dir:
+        yield args.state_dir
+        return
+    with tempfile.TemporaryDirectory(prefix=prefix) as d:
+        yield d
 
-        args.releases = 1 if args.releases is None else args.releases
-        args.duration = 10.0 if args.duration is None else args.duration
-        return run_tensor(args)
-    args.releases = 3 if args.releases is None else args.releases
-    args.duration = 20.0 if args.duration is None else args.duration
+
+def run(args: argparse.Namespace) -> int:
+    args.releases = (1 if args.tensor else 3) if args.releases is None else args.releases
+    args.duration = (10.0 if args.tensor else 20.0) if args.duration is None else args.duration
     if not 1 <= args.releases <= 10:
         raise InputFileError(f"--releases must be in [1, 10], got {args.releases}")
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+    if args.tensor:
+        from .demo_tensor import run_in
+
+        with state_directory(args, "moi-demo-tensor-") as state_dir:
+            return run_in(args, state_dir)
+    from service.config.appliance import parse_config
     from service.daemon import Appliance
 
-    tmp = None
-    if args.state_dir:
-        state_dir = args.state_dir
-    else:
-        tmp = tempfile.TemporaryDirectory(prefix="moi-demo-")
-        state_dir = tmp.name
-    try:
-        from service.config.appliance import parse_config
-
+    with state_directory(args, "moi-demo-") as state_dir:
         _write_recipe(args, state_dir)
         config = parse_config(_doc(args, state_dir), source="moi demo")
         if args.web_port and not _port_free(args.web_port):
             print(f"port {args.web_port} is taken: the web page goes on a free port")
             config = dataclasses.replace(config, web=dataclasses.replace(config.web, port=0))
         return _run(Appliance(config, stop_grace=5.0), args)
-    finally:
-        if tmp is not None:
-            tmp.cleanup()
 
 
 def _run(app, args: argparse.Namespace) -> int:

@@ -13,16 +13,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
-
-from service.errors import InputFileError
 
 EXIT_FAULT = 3
 TENSOR_RECIPE = "bracket-tensor"
@@ -49,39 +45,26 @@ def recipe_text(releases: int) -> str:
     return "\n".join(lines)
 
 
-def run(args: argparse.Namespace) -> int:
-    if not 1 <= args.releases <= 10:
-        raise InputFileError(f"--releases must be in [1, 10], got {args.releases}")
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+def run_in(args: argparse.Namespace, state_dir: str) -> int:
+    """The demo with its store and recipe in ``state_dir`` (`moi demo` checked the arguments)."""
     from service.config.appliance import parse_config
     from service.daemon import Appliance
 
-    tmp = None
-    if args.state_dir:
-        state_dir = args.state_dir
-    else:
-        tmp = tempfile.TemporaryDirectory(prefix="moi-demo-tensor-")
-        state_dir = tmp.name
-    try:
-        recipes = Path(state_dir) / "recipes"
-        recipes.mkdir(parents=True, exist_ok=True)
-        (recipes / f"{TENSOR_RECIPE}.toml").write_text(recipe_text(args.releases), encoding="utf-8")
-        doc = {
-            "device": {"id": "demo", "state_dir": state_dir, "log_level": "warning"},
-            "sequencer": {"pre_trigger": 0.2, "capture_duration": args.duration, "sample_timeout": 2.0},
-            # the in-process sensor: six orientations in seconds, not minutes
-            "simulation": {"time_scale": 10.0, "rate": 100.0, "seed": args.seed, "sensor": "direct",
-                           "noise": 3e-4, "effects": {"viscous": {"c": 1.5e-4}}},
-            "modbus": {"host": "127.0.0.1", "port": 0},
-            "web": {"host": "127.0.0.1", "port": 0, "enabled": False},
-            "recipes": {"directory": str(recipes), "active": TENSOR_RECIPE},
-        }
-        config = parse_config(doc, source="moi demo --tensor")
-        return _run(Appliance(config, stop_grace=5.0), args)
-    finally:
-        if tmp is not None:
-            tmp.cleanup()
+    recipes = Path(state_dir) / "recipes"
+    recipes.mkdir(parents=True, exist_ok=True)
+    (recipes / f"{TENSOR_RECIPE}.toml").write_text(recipe_text(args.releases), encoding="utf-8")
+    doc = {
+        "device": {"id": "demo", "state_dir": state_dir, "log_level": "warning"},
+        "sequencer": {"pre_trigger": 0.2, "capture_duration": args.duration, "sample_timeout": 2.0},
+        # the in-process sensor: six orientations in seconds, not minutes
+        "simulation": {"time_scale": 10.0, "rate": 100.0, "seed": args.seed, "sensor": "direct",
+                       "noise": 3e-4, "effects": {"viscous": {"c": 1.5e-4}}},
+        "modbus": {"host": "127.0.0.1", "port": 0},
+        "web": {"host": "127.0.0.1", "port": 0, "enabled": False},
+        "recipes": {"directory": str(recipes), "active": TENSOR_RECIPE},
+    }
+    config = parse_config(doc, source="moi demo --tensor")
+    return _run(Appliance(config, stop_grace=5.0), args)
 
 
 def _run(app, args: argparse.Namespace) -> int:

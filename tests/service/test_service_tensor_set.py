@@ -186,3 +186,17 @@ def test_the_web_page_shows_the_orientation_to_mount_and_takes_the_actions(tmp_p
     app.app.call_soon(lambda: None).result(10)
     state = json.loads(urllib.request.urlopen(base + "api/set", timeout=10).read())
     assert state["set"]["skipped"] == ["x"] and state["set"]["orientation"]["name"] == "y"
+
+
+def test_moi_demo_tensor_runs_a_whole_set_and_prints_the_error_against_the_truth():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    r = subprocess.run([sys.executable, "-m", "service.cli", "demo", "--tensor"], capture_output=True, text=True,
+                       timeout=300, cwd=Path(__file__).resolve().parents[2])
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.count("mount orientation") == 6 and "complete, stored with its 6 releases" in r.stdout
+    rows = [line.split() for line in r.stdout.splitlines() if line.split()[:1] and line.split()[0] in TS.COMPONENTS]
+    assert len(rows) == 6 and all(abs(float(row[-1])) < 4 for row in rows), rows  # error/σ per component
+    assert "Modbus tensor block 200–238" in r.stdout
