@@ -1,7 +1,8 @@
 """One table of the states the appliance reports: every sequencer state is in it, codes are distinct,
 and the registers and the web page read it."""
 
-from firmware_host.states import STATES, State
+from firmware_host.states import State
+from service.states import STATES
 from service.publish.modbus import registers as R
 from service.publish.web.words import STATE_WORDS
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, to_registers  # noqa: F401
-from firmware_host.states import STATES
+from service.states import STATES
 from measurement import flags as F
 
 #: bumped whenever an address or an encoding in this file changes

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from drivers.aioloop import LoopThread
-from firmware_host.states import STATES
+from service.states import STATES
 
 from service.errors import StartupError
 from service.publish.port import ApplianceView, Publisher

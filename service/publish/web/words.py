@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from firmware_host.states import STATES
+from service.states import STATES
 from measurement.flags import describe
 
 #: sequencer state → what is happening
