@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, to_registers  # noqa: F401
+from service.states import STATES
 from measurement import flags as F
 from measurement.tensor import COMPONENTS
 
@@ -40,18 +41,7 @@ MAP_VERSION = 9  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3:
 # --- enumerations ------------------------------------------------------------
 
 #: sequencer/daemon state → code in register `state`
-STATE_CODES: dict[str, int] = {
-    "STARTING": 0,
-    "IDLE": 1,
-    "ARMED": 2,
-    "RELEASING": 3,
-    "CAPTURING": 4,
-    "IDENTIFYING": 5,
-    "PUBLISHING": 6,
-    "FAULT": 7,
-    "ABORTED": 8,
-    "STOPPING": 9,
-}
+STATE_CODES: dict[str, int] = {name: s.code for name, s in STATES.items()}
 STATE_OTHER = 255
 
 #: quality flag (``measurement.flags.FLAGS``, which says what each means) → bit in register `flags`.
