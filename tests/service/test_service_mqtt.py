@@ -133,3 +133,23 @@ def test_home_assistant_discovery_is_retained_and_names_the_result_topic(tmp_pat
     finally:
         svc.stop()
         store.close()
+
+
+def test_a_retained_document_published_while_the_broker_is_down_is_there_when_it_is_back(
+        tmp_path, persistent_broker, consumer_factory):
+    store = Store(tmp_path)
+    svc = MqttService(settings(persistent_broker.port), "d1", store)
+    svc.start()
+    try:
+        assert svc.connected_event.wait(10)
+        persistent_broker.stop()
+        svc.publish_retained(svc.topics.tensor, {"uuid": "set-1", "tensor": [[1.0, 0.0, 0.0]] * 3})
+        persistent_broker.start()
+        # a consumer that subscribes after the outage finds the latest tensor retained
+        c = consumer_factory(persistent_broker.port, ["moi/d1/tensor"])
+        c.wait_subscribed()
+        c.wait(lambda c: any(json.loads(p).get("uuid") == "set-1" for p in c.on("/tensor")), 20,
+               "the tensor retained after the broker came back")
+    finally:
+        svc.stop()
+        store.close()

@@ -386,8 +386,9 @@ class MqttService(Publisher):
         self.publish_retained(self.topics.spc(recipe.name), doc)
 
     def publish_retained(self, topic: str, doc: dict[str, Any]) -> None:
-        """A retained JSON document (QoS 1), e.g. the SPC summary of a recipe; dropped while disconnected
-        (the next part republishes it)."""
+        """A retained JSON document (QoS 1), e.g. the SPC summary of a recipe or the latest tensor. While
+        the broker is away paho keeps it queued and sends it on reconnection (a test holds this); a
+        restart of the daemon in between loses it until the next one is published."""
         self.client.publish(topic, json.dumps(doc, allow_nan=False, default=str), qos=1, retain=True)
 
 
