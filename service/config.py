@@ -352,6 +352,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "token_file": _doc("file holding the password/token every action (Measure, Abort) needs (default: "
                            "web-token in the state directory, made with a random token on first start)", kind="path"),
         "page_size": _doc("measurements per history page", min=1, max=500),
+        "max_connections": _doc("browser connections at once; one more is closed at once", min=1, max=512),
+        "request_timeout": _doc("close a connection that sent no complete request for this long, s", min=0,
+                                min_open=True, max=3600),
     }, extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
 }
 

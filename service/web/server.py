@@ -36,6 +36,15 @@ log = logging.getLogger("moi.web")
 PLOT_NAME = "plot.png"
 #: no plot is drawn while the sequencer is in one of these (the sensor is being read)
 CAPTURE_STATES = ("ARMED", "RELEASING", "CAPTURING")
+#: at most one "connections refused" line per this many seconds, s
+REFUSED_LOG_INTERVAL = 60.0
+
+
+class _Refuse(asyncio.Protocol):
+    """A connection beyond the limit: closed as soon as it is accepted."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        transport.abort()
 
 
 class WebServer:
@@ -50,6 +59,9 @@ class WebServer:
         self.bound_port: int | None = None
         self._io = LoopThread("moi-web")
         self._runner: web.AppRunner | None = None
+        self._listener: asyncio.AbstractServer | None = None
+        self.connections_refused = 0
+        self._refused_logged_at = -float("inf")
         self._listeners: set[asyncio.Queue] = set()
         self._plotter = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="moi-plot")
         self._plots: dict[str, concurrent.futures.Future] = {}
@@ -77,23 +89,43 @@ class WebServer:
         log.info("web page on %s (actions need the token in %s)", self.url, self.token_file)
 
     async def _serve(self) -> None:
-        runner = web.AppRunner(self.views.application(), access_log=None, handle_signals=False, shutdown_timeout=1.0)
+        # aiohttp's keep-alive timer starts when a connection opens and is renewed only by an answer: as
+        # request_timeout it closes a client that trickles its headers (slowloris) as well as an idle one
+        runner = web.AppRunner(self.views.application(), access_log=None, handle_signals=False, shutdown_timeout=1.0,
+                               keepalive_timeout=self.settings.request_timeout)
         await runner.setup()
-        site = web.TCPSite(runner, self.settings.host, self.settings.port)
         try:
-            await site.start()
+            self._listener = await asyncio.get_running_loop().create_server(
+                self._protocol, self.settings.host, self.settings.port, reuse_address=True)
         except BaseException:
             await runner.cleanup()
             raise
         self._runner = runner
-        self.bound_port = runner.addresses[0][1] if runner.addresses else self.settings.port
+        self.bound_port = self._listener.sockets[0].getsockname()[1]
+
+    def _protocol(self) -> asyncio.BaseProtocol:
+        """aiohttp's protocol for a new connection, or one that closes it at once beyond ``max_connections``:
+        every descriptor a client can hold here is one the process may lack for the sensor or the store."""
+        assert self._runner is not None and self._runner.server is not None
+        if len(self._runner.server.connections) < self.settings.max_connections:
+            return self._runner.server()
+        self.connections_refused += 1
+        now = time.monotonic()
+        if now - self._refused_logged_at > REFUSED_LOG_INTERVAL:
+            self._refused_logged_at = now
+            log.warning("web: %d connections open (the limit); closing new ones (%d so far)",
+                        self.settings.max_connections, self.connections_refused)
+        return _Refuse()
 
     async def _close(self) -> None:
         for q in list(self._listeners):
             q.put_nowait(None)  # ends every live stream
+        if self._listener is not None:
+            self._listener.close()  # no new connections; the open ones are shut down by the runner
         if self._runner is not None:
             await self._runner.cleanup()
             self._runner = None
+        self._listener = None
 
     def alive(self) -> bool:
         return self._io.running
@@ -172,4 +204,7 @@ class WebServer:
             return self._plots.get(uuid)
 
     def stats(self) -> dict[str, Any]:
-        return {"url": self.url, "listeners": len(self._listeners), "token_file": self.token_file}
+        server = self._runner.server if self._runner is not None else None
+        return {"url": self.url, "listeners": len(self._listeners), "token_file": self.token_file,
+                "connections": len(server.connections) if server is not None else 0,
+                "connections_refused": self.connections_refused}

@@ -1,0 +1,78 @@
+"""One client must never take down the appliance or spoil a measurement: attacks by web, Modbus and
+MQTT clients on the running daemon (simulated rig, everything on loopback, bounded in count and time)."""
+
+from __future__ import annotations
+
+import resource
+import socket
+import struct
+
+import pytest
+
+from service import registers as R
+
+from .conftest import appliance_doc, free_port, moi_subprocess, port_open, wait_until, write_toml
+from .test_service_attacks import _closed_by_peer, _tcp_exchange
+
+#: the descriptor limit the daemon runs with in these tests (the unit's is 1024): small, so an attack reaches it
+SMALL_FILE_LIMIT = 256
+
+
+def _limited(n: int = SMALL_FILE_LIMIT):
+    return lambda: resource.setrlimit(resource.RLIMIT_NOFILE, (n, n))
+
+
+def _plc_image(port: int) -> dict:
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as plc:
+        reply = _tcp_exchange(plc, 1, 1, struct.pack(">BHH", 4, 0, R.IMAGE_SIZE))
+    assert len(reply) == 2 + 2 * R.IMAGE_SIZE
+    return R.decode_image(list(struct.unpack(f">{R.IMAGE_SIZE}H", reply[2:])))
+
+
+def _plc_trigger(port: int) -> None:
+    trigger = struct.pack(">BHH", 5, R.COILS["trigger"], 0xFF00)
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as plc:
+        assert _tcp_exchange(plc, 2, 1, trigger) == trigger
+
+
+# --- slowloris on the web port -------------------------------------------------------------------------------------
+
+def test_slowloris_on_the_web_port_neither_starves_the_plc_nor_the_measurement(tmp_path):
+    """Connections that trickle a request's headers, more than the daemon has descriptors: the web server
+    serves at most max_connections, closes each trickler after request_timeout, and the PLC reads, triggers
+    and gets its result meanwhile; the log stays short."""
+    mb_port, web_port = free_port(), free_port()
+    doc = appliance_doc(tmp_path / "state", modbus_port=mb_port,
+                        web={"enabled": True, "port": web_port, "max_connections": 32, "request_timeout": 2.0})
+    cfg = write_toml(tmp_path / "appliance.toml", doc)
+    daemon = moi_subprocess(["run", "--config", str(cfg)], preexec_fn=_limited())
+    attackers: list[socket.socket] = []
+    try:
+        wait_until(lambda: (port_open(mb_port) and port_open(web_port)) or daemon.poll() is not None, 30,
+                   what="the daemon's ports")
+        assert daemon.poll() is None
+        for _ in range(SMALL_FILE_LIMIT + 44):
+            try:
+                s = socket.create_connection(("127.0.0.1", web_port), timeout=5)
+                s.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nX-a: ")  # and never the end of the headers
+            except OSError:
+                break
+            attackers.append(s)
+        assert len(attackers) > SMALL_FILE_LIMIT, f"only {len(attackers)} attack connections"
+        assert _plc_image(mb_port)["state"] == R.STATE_CODES["IDLE"]
+        _plc_trigger(mb_port)
+        image = wait_until(lambda: (lambda i: i if i["seq"] == 1 else None)(_plc_image(mb_port)), 60,
+                           what="the result in the registers")
+        assert image["state"] != R.STATE_CODES["FAULT"] and image["J"] > 0
+        # every trickler is closed by the server: the ones beyond the limit at once, the others after 2 s
+        assert all(_closed_by_peer(s, 30) for s in attackers)
+        with socket.create_connection(("127.0.0.1", web_port), timeout=10) as browser:
+            browser.sendall(b"GET /api/state HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
+            browser.settimeout(10)
+            assert browser.recv(12).startswith(b"HTTP/1.1 200")
+    finally:
+        for s in attackers:
+            s.close()
+        daemon.terminate()
+        _, err = daemon.communicate(timeout=30)
+    assert b"Too many open files" not in err and len(err) < 20_000, err[-2000:]
