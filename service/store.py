@@ -471,6 +471,13 @@ class Store:
             return None
         return self._row(rows[0], full=True, trace=trace)
 
+    @_store_errors("reading a measurement")
+    def has_trace(self, uuid: str) -> bool:
+        """Whether the measurement ``uuid`` was stored with its trace (without reading the trace)."""
+        with self._lock:
+            row = self._db.execute("SELECT trace_t IS NOT NULL FROM measurements WHERE uuid = ?", (uuid,)).fetchone()
+        return bool(row and row[0])
+
     @_store_errors("reading the latest measurement")
     def latest(self, status: str | None = "ok") -> StoredMeasurement | None:
         where = "WHERE status = ?" if status else ""

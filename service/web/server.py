@@ -3,8 +3,10 @@
 Threads: the daemon's main loop delivers sequencer events (``on_event``) and
 stored measurements (``measurement_stored``); both only hand over to this
 server's loop or to the plot worker and never block. Handlers read the store
-(one short SQLite query each) and the appliance's live status; actions go
-through the daemon's command queue like the button, Modbus and MQTT.
+(one short SQLite query each) and the appliance's live status; what takes
+longer (exports, a trace as CSV, a plot drawn again) is made in a child process
+(``child.ChildWork``), never on a thread of the process that reads the sensor;
+actions go through the daemon's command queue like the button, Modbus and MQTT.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from drivers.aioloop import LoopThread
 
 from ..errors import StartupError
 from .auth import Guard, read_token
+from .child import ChildWork
 from .settings import DEFAULT_TOKEN_FILE_NAME, WebSettings
 from .views import Views
 
@@ -66,6 +69,7 @@ class WebServer:
         self._plotter = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="moi-plot")
         self._plots: dict[str, concurrent.futures.Future] = {}
         self._plots_lock = threading.Lock()
+        self.child = ChildWork()
         self.views = Views(self)
 
     # --- life cycle ---------------------------------------------------------------
@@ -139,6 +143,7 @@ class WebServer:
                 log.exception("web server shutdown failed")
         self._io.stop()
         self._plotter.shutdown(wait=True, cancel_futures=True)
+        self.child.close()
 
     # --- from the daemon's main loop (never block) -----------------------------------
     def on_event(self, event: "Event") -> None:
@@ -148,22 +153,25 @@ class WebServer:
 
     def measurement_stored(self, m: "Measurement") -> None:
         """A measurement was stored: draw its plot once, in the plot worker, and keep it with it."""
-        self.submit_plot(m.id, lambda: m.result)
+        def draw() -> bytes:
+            from ..plot import render_png
+            return render_png(m.result)
 
-    def submit_plot(self, uuid: str, get_result) -> concurrent.futures.Future:
+        self.submit_plot(m.id, draw)
+
+    def submit_plot(self, uuid: str, make_png) -> concurrent.futures.Future:
+        """Keep the PNG ``make_png()`` draws with the measurement ``uuid`` (once, however often asked)."""
         with self._plots_lock:
             fut = self._plots.get(uuid)
             if fut is None:
-                fut = self._plotter.submit(self._draw, uuid, get_result)
+                fut = self._plotter.submit(self._draw, uuid, make_png)
                 self._plots[uuid] = fut
         return fut
 
-    def _draw(self, uuid: str, get_result) -> bytes:
-        from ..plot import render_png
-
+    def _draw(self, uuid: str, make_png) -> bytes:
         try:
             self._wait_for_no_capture()
-            png = render_png(get_result())
+            png = make_png()
             store = self.appliance.store
             if store is not None:
                 store.put_attachment(uuid, PLOT_NAME, png, "image/png")

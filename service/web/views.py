@@ -20,6 +20,7 @@ from aiohttp import web
 
 from .. import __version__
 from .auth import COOKIE, CSRF_HEADER, SESSION_LIFETIME
+from .child import ChildBusy, export_file, replot, trace_file
 from .live import Live
 from measurement.flags import FLAGS
 
@@ -314,27 +315,28 @@ class Views:
         got = self.app.store.get_attachment(m.uuid, PLOT_NAME)
         if got is None:
             # stored without a plot (the page was off): identify the kept trace again, once, and keep the picture
-            if self.app.store.get(m.uuid, trace=True).trace_t is None:
+            if not self.app.store.has_trace(m.uuid):
                 raise Refused(404, f"measurement {m.seq} has no plot and no stored trace to draw one from")
-            await asyncio.wrap_future(self.server.submit_plot(m.uuid, lambda: self._reidentify(m.uuid)))
+            cfg = self.app.config
+            job = (replot, str(cfg.state_dir), m.uuid, cfg.rig.to_dict(), cfg.identification)
+            await asyncio.wrap_future(self.server.submit_plot(m.uuid, lambda: self.server.child.call(*job)))
             got = self.app.store.get_attachment(m.uuid, PLOT_NAME)
         data, media = got
         return web.Response(body=data, content_type=media, headers={"Cache-Control": "max-age=86400, immutable"})
 
-    def _reidentify(self, uuid: str):
-        from measurement import Rig, Trace, identify
-
-        m = self.app.store.get(uuid, trace=True)
-        rig = Rig.from_dict(m.rig) if m.rig else self.app.config.rig
-        return identify(Trace(m.trace_t, m.trace_angle, source=f"measurement {m.seq}"), rig,
-                        self.app.config.identification)
+    async def _in_child(self, fn, *args) -> bytes:
+        """``fn(*args)`` in the web page's child process (away from the capture's threads)."""
+        try:
+            return await self.server.child.run(fn, *args)
+        except ChildBusy as exc:
+            raise Refused(503, str(exc)) from None
 
     async def trace_csv(self, request: web.Request) -> web.Response:
-        m = self._get(request.match_info["key"], trace=True)
-        if m.trace_t is None:
+        m = self._get(request.match_info["key"])
+        if not self.app.store.has_trace(m.uuid):
             raise Refused(404, f"measurement {m.seq} was stored without its trace ([device] store_trace = false)")
-        from ..commands.export import trace_text
-        return web.Response(text=trace_text(m), content_type="text/csv", headers={
+        body = await self._in_child(trace_file, str(self.app.config.state_dir), m.uuid)
+        return web.Response(body=body, content_type="text/csv", headers={
             "Content-Disposition": f'attachment; filename="moi-{m.seq}-{m.uuid[:8]}-trace.csv"'})
 
     async def result_json(self, request: web.Request) -> web.Response:
@@ -404,14 +406,11 @@ class Views:
         fmt = request.match_info["fmt"]
         if fmt not in ("csv", "json"):
             raise Refused(404, f"export format {fmt[:10]!r}: expected export.csv or export.json")
-        rows, _ = self.app.store.search(limit=None, **self._filters(request))
         name = f"moi-{self.app.config.device_id}-history.{fmt}"
         # the same files as `moi export` (oldest first)
-        from ..commands.export import _csv, _json
-        rows.reverse()
-        body, ctype = (_json(rows), "application/json") if fmt == "json" else (_csv(rows), "text/csv")
-        return web.Response(text=body, content_type=ctype,
-                            headers={"Content-Disposition": f'attachment; filename="{name}"'})
+        body = await self._in_child(export_file, str(self.app.config.state_dir), fmt, self._filters(request))
+        return web.Response(body=body, content_type="application/json" if fmt == "json" else "text/csv",
+                            charset="utf-8", headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
     # --- set-up -----------------------------------------------------------------------------------------
     def health(self) -> dict[str, Any]:

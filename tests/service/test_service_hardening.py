@@ -76,3 +76,62 @@ def test_slowloris_on_the_web_port_neither_starves_the_plc_nor_the_measurement(t
         daemon.terminate()
         _, err = daemon.communicate(timeout=30)
     assert b"Too many open files" not in err and len(err) < 20_000, err[-2000:]
+
+
+# --- anonymous readers and the capture ------------------------------------------------------------------------------
+
+def _fill_history(store, like, n: int) -> None:
+    """``n`` more stored results with the payload of ``like`` (what months of use leave in the store)."""
+    for i in range(n):
+        store.record(status="ok", trigger="button", device_id=like.device_id, software_version="test",
+                     started_at=like.started_at + i, finished_at=like.finished_at + i, result=like.payload,
+                     build_payload=lambda uuid, seq: {**like.payload, "uuid": uuid, "seq": seq}, rig=like.rig,
+                     config=like.config)
+
+
+def _encoder_rate(payload: dict) -> float:
+    """Samples per second of the encoder during the capture of a result."""
+    return payload["acquisition"]["encoder"]["rate_hz"]
+
+
+def test_an_export_flood_neither_slows_the_encoder_capture_nor_moves_j(tmp_path, appliance_factory):
+    """Four anonymous clients loop on /history/export.json during an encoder capture: the capture keeps its
+    sample rate (against a capture without them, same run) and J its value; no read of the encoder times out."""
+    import threading
+    import urllib.request
+
+    app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=1.0, web={"enabled": True},
+                                          sequencer={"pre_trigger": 0.2, "capture_duration": 8.0},
+                                          simulation={"sensor": "encoder"}, device={"store_trace": False}))
+    app.press()
+    app.wait_done(1, timeout=60)
+    quiet = app.app.store.latest("ok")
+    _fill_history(app.app.store, quiet, 300)
+    url = app.app.web.url + "history/export.json"
+    stop, exported = threading.Event(), []
+
+    def reader() -> None:
+        while not stop.is_set():
+            with urllib.request.urlopen(url, timeout=60) as r:
+                exported.append(len(r.read()))
+
+    readers = [threading.Thread(target=reader, daemon=True) for _ in range(4)]
+    for t in readers:
+        t.start()
+    try:
+        wait_until(lambda: len(exported) >= 4, 120, what="the flood to run")
+        app.press()
+        app.wait_done(2, timeout=120)
+        during = app.app.store.latest("ok")
+        assert len(exported) >= 8, "the capture ran without the flood: the test proved nothing"
+    finally:
+        stop.set()
+        for t in readers:
+            t.join(120)
+    q, d = quiet.payload, during.payload
+    print(f"encoder {_encoder_rate(q):.0f} samples/s alone, {_encoder_rate(d):.0f} during the flood; "
+          f"J {q['J']:.6g} → {d['J']:.6g} kg·m²; {len(exported)} exports")
+    assert d["acquisition"]["encoder"]["timeouts"] == 0
+    assert _encoder_rate(d) >= 0.5 * _encoder_rate(q)
+    truth = app.app.devices.sim.inertia
+    assert abs(d["J"] / truth - 1) < 2e-3 and d["J_std"] < 5 * q["J_std"]
