@@ -116,6 +116,7 @@ class Appliance:
         self._lock_fd: int | None = None
         self._ignored_triggers = 0
         self._ignored_logged_at = -float("inf")
+        self._refused_logged_at = -float("inf")
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
@@ -298,6 +299,13 @@ class Appliance:
                 if name != "trigger":
                     continue
             if name == "trigger":
+                unwritable = self._store_unwritable()
+                if unwritable is not None:
+                    now = time.monotonic()
+                    if now - self._refused_logged_at >= IGNORED_LOG_INTERVAL:
+                        log.error("trigger from %s refused: %s", source, unwritable)
+                        self._refused_logged_at = now
+                    continue
                 if seq.request_measurement(source):
                     self._accepted_source = source
                     self._accepted_part = (self.parts.part_id, self.parts.recipe)
@@ -315,6 +323,15 @@ class Appliance:
                     log.info("abort from %s: nothing to abort", source)
             else:
                 log.warning("unknown command %r from %s", name, source)
+
+    def _store_unwritable(self) -> str | None:
+        """Why no measurement may start (its result could not be kept), or None. After a failed write
+        a write is tried again here, so measuring resumes as soon as space is freed."""
+        store = self.store
+        if store is None or store.write_failure is None or store.writable():
+            return None
+        return (f"the result store cannot be written ({store.write_failure}); free space in "
+                f"{str(self.config.state_dir)!r}: the results kept so far are safe and still delivered")
 
     def _apply_part_data(self, data: Mapping[str, Any]) -> None:
         """Select a recipe and/or set the part ID (InvalidInput when unknown or malformed)."""
@@ -536,6 +553,8 @@ class Appliance:
     def _status_text(self) -> str:
         seq = self.sequencer
         parts = [seq.state.value.lower() if seq else "starting"]
+        if self.store is not None and self.store.write_failure is not None:
+            parts.append(f"result store cannot be written ({self.store.write_failure}): measurements refused")
         if self.mqtt is not None:
             parts.append("mqtt connected" if self.mqtt.is_connected else
                          "mqtt disconnected" + (f" ({self.mqtt.last_error})" if self.mqtt.last_error else ""))

@@ -302,18 +302,59 @@ class Store:
 
     # --- plumbing -----------------------------------------------------------------
     class _Tx:
-        def __init__(self, db: sqlite3.Connection) -> None:
-            self.db = db
+        """One write transaction. Every write passes here, so here the store learns whether it can still
+        write (``Store.write_failure``); a failed COMMIT (a full disk) is rolled back, or the connection
+        would stay in the transaction and refuse every later write even once space is freed."""
+
+        def __init__(self, store: "Store") -> None:
+            self.store = store
+            self.db = store._db
 
         def __enter__(self) -> sqlite3.Connection:
-            self.db.execute("BEGIN IMMEDIATE")
+            try:
+                self.db.execute("BEGIN IMMEDIATE")
+            except sqlite3.Error as exc:
+                self.store._write_failed(exc)
+                raise
             return self.db
 
         def __exit__(self, exc_type, exc, tb) -> None:
-            self.db.execute("COMMIT" if exc_type is None else "ROLLBACK")
+            if exc_type is None:
+                try:
+                    self.db.execute("COMMIT")
+                    self.store.write_failure = None
+                    return
+                except sqlite3.Error as failed:
+                    exc = failed
+                    self._rollback()
+                    self.store._write_failed(exc)
+                    raise
+            if isinstance(exc, sqlite3.Error):
+                self.store._write_failed(exc)
+            self._rollback()
+
+        def _rollback(self) -> None:
+            if self.db.in_transaction:
+                self.db.execute("ROLLBACK")
 
     def _tx(self) -> "_Tx":
-        return Store._Tx(self._db)
+        return Store._Tx(self)
+
+    #: why the last write failed (a full disk, a read-only file), None after a write that succeeded
+    write_failure: str | None = None
+
+    def _write_failed(self, exc: sqlite3.Error) -> None:
+        self.write_failure = str(exc)
+
+    def writable(self) -> bool:
+        """Whether a write succeeds now (a write transaction that changes nothing): after a failed
+        write, the way to learn that space was freed."""
+        try:
+            with self._lock, self._tx() as db:
+                db.execute("UPDATE meta SET value = value WHERE key = 'schema'")
+        except sqlite3.Error:
+            return False
+        return True
 
     read_only = False
 

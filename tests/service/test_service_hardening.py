@@ -51,13 +51,16 @@ def test_slowloris_on_the_web_port_neither_starves_the_plc_nor_the_measurement(t
         wait_until(lambda: (port_open(mb_port) and port_open(web_port)) or daemon.poll() is not None, 30,
                    what="the daemon's ports")
         assert daemon.poll() is None
-        for _ in range(SMALL_FILE_LIMIT + 44):
+        for _ in range(SMALL_FILE_LIMIT + 64):
             try:
                 s = socket.create_connection(("127.0.0.1", web_port), timeout=5)
+            except OSError:
+                continue  # the listen backlog was full for a moment
+            attackers.append(s)
+            try:
                 s.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nX-a: ")  # and never the end of the headers
             except OSError:
-                break
-            attackers.append(s)
+                pass  # already closed: beyond the limit
         assert len(attackers) > SMALL_FILE_LIMIT, f"only {len(attackers)} attack connections"
         assert _plc_image(mb_port)["state"] == R.STATE_CODES["IDLE"]
         _plc_trigger(mb_port)
@@ -135,3 +138,52 @@ def test_an_export_flood_neither_slows_the_encoder_capture_nor_moves_j(tmp_path,
     assert _encoder_rate(d) >= 0.5 * _encoder_rate(q)
     truth = app.app.devices.sim.inertia
     assert abs(d["J"] / truth - 1) < 2e-3 and d["J_std"] < 5 * q["J_std"]
+
+
+# --- a full disk ----------------------------------------------------------------------------------------------------
+
+def _refuse_writes(store, refuse: bool) -> None:
+    """Make SQLite refuse every write of ``store`` (as a full disk does), or accept them again."""
+    import sqlite3
+
+    writes = (sqlite3.SQLITE_INSERT, sqlite3.SQLITE_UPDATE, sqlite3.SQLITE_DELETE)
+    with store._lock:
+        store._db.set_authorizer((lambda action, *_: sqlite3.SQLITE_DENY if action in writes else sqlite3.SQLITE_OK)
+                                 if refuse else None)
+
+
+@pytest.mark.broker
+def test_a_full_disk_with_an_unsent_result_degrades_instead_of_looping(tmp_path, persistent_broker, appliance_factory,
+                                                                       consumer_factory, caplog):
+    """The result waits in the outbox (broker down) when the disk fills: the result is still delivered, once,
+    the daemon keeps running, triggers are refused with a line saying why; once space is freed, the outbox
+    empties and measuring resumes."""
+    broker = persistent_broker  # the consumer's session outlives the broker's restart: it misses nothing
+    c = consumer_factory(broker.port, ["moi/test-rig/result"], persistent=True)
+    c.wait_subscribed()
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
+    assert app.app.mqtt.subscribed_event.wait(10)
+    broker.stop()
+    wait_until(lambda: not app.app.mqtt.is_connected, 20, what="the broker to be gone")
+    app.press()
+    app.wait_done(1)
+    store = app.app.store
+    assert store.outbox_count() == 1
+    _refuse_writes(store, True)
+    broker.start()
+    c.wait(lambda c: len(c.unique_results()) == 1, 30, "the unsent result")
+    wait_until(lambda: app.app.mqtt.sender.pending == 0, 20, what="the result to count as delivered")
+    assert app.thread.is_alive() and app.app.mqtt.sender.error is None
+    assert store.outbox_count() == 1  # its delete waits for space
+    app.press()
+    wait_until(lambda: any("trigger from button refused: the result store cannot be written" in r.getMessage()
+                           for r in caplog.records), 10, what="the refusal")
+    assert app.states().count("ARMED") == 1 and "measurements refused" in app.app._status_text()
+    _refuse_writes(store, False)
+    wait_until(lambda: store.outbox_count() == 0, 20, what="the delivered row to leave the outbox")
+    app.press()
+    app.wait_done(2)
+    c.wait(lambda c: len(c.unique_results()) == 2, 30, "the next result")
+    first = next(iter(c.unique_results()))
+    assert sum(r["uuid"] == first for r in c.results()) == 1
+    assert app.stop() == 0
