@@ -8,7 +8,7 @@ itself: the timestamp error of each sample is t_host_midpoint − t_latch.
 
     rate            samples per second (wall clock = simulated clock here, scale 1)
 
-Then the simulated appliance's own encoder (``service.hardware.build_simulated``:
+Then the simulated appliance's own encoder (``service.devices.hardware.build_simulated``:
 default latency, noise and late-reply rule) at each allowed time scale:
 requests and kept samples per wall-clock second, samples per simulated second
 (what a capture gets), and the share of late replies dropped.
@@ -86,9 +86,9 @@ def main() -> None:
 def per_time_scale(seconds: float = 2.0) -> list[dict]:
     """Samples per simulated second of the simulated appliance's encoder at each allowed time scale."""
     from firmware_host import SequencerConfig
-    from service.config import MAX_ENCODER_TIME_SCALE, SimulationSettings
-    from service.defaults import DEMO_RIG, SIM_ENCODER_NOISE
-    from service.hardware import build_simulated
+    from service.config.appliance import MAX_ENCODER_TIME_SCALE, SimulationSettings
+    from service.devices.defaults import DEMO_RIG, SIM_ENCODER_NOISE
+    from service.devices.hardware import build_simulated
 
     logging.getLogger("moi.hardware").setLevel(logging.ERROR)  # the faster-than-real-time warning, once per scale
     rows = []

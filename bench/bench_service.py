@@ -76,8 +76,8 @@ def main() -> None:
 
     from _appliance import Finished, simulated_doc
     from measurement import identify
-    from service import registers as R
-    from service.config import parse_config
+    from service.publish.modbus import registers as R
+    from service.config.appliance import parse_config
     from service.daemon import Appliance
 
     work = Path(tempfile.mkdtemp(prefix="moi-bench-service-"))

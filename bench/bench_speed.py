@@ -86,7 +86,7 @@ def _daemon_worker(args: argparse.Namespace) -> None:
     logging.basicConfig(level=logging.ERROR)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     from _appliance import Finished, simulated_doc
-    from service.config import parse_config
+    from service.config.appliance import parse_config
     from service.daemon import Appliance
 
     work = Path(tempfile.mkdtemp(prefix="moi-bench-rss-"))

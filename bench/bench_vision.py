@@ -62,7 +62,7 @@ def angle_accuracy() -> tuple[float, float, float]:
 
 
 def video_run(tmp: pathlib.Path, yaw_deg: float) -> dict:
-    from service.video import video_trace
+    from service.sources.video import video_trace
 
     sw = swing()
     r = MarkerRenderer(CAMERA, MARKER, pose=CameraPose(yaw=math.radians(yaw_deg)), imaging=IMAGING, seed=11)

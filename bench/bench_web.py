@@ -38,9 +38,9 @@ def _get(url: str) -> bytes:
 
 
 def main() -> None:
-    from service.config import parse_config
+    from service.config.appliance import parse_config
     from service.daemon import Appliance
-    from service.web.server import PLOT_NAME
+    from service.publish.web.server import PLOT_NAME
 
     with tempfile.TemporaryDirectory(prefix="moi-bench-web-") as state:
         doc = {"device": {"id": "bench", "state_dir": state, "log_level": "warning"},

@@ -1,7 +1,7 @@
 """The file-backed camera: frames of a video file or an image folder, with their times.
 
 What ``moi identify VIDEO --camera CAM.toml`` and ``moi camera-check --source``
-read (``service.video`` tracks the marker in them). Sources: any container
+read (``service.sources.video`` tracks the marker in them). Sources: any container
 OpenCV's FFmpeg backend reads (AVI, MP4, MKV, MOV…) or a folder of images (PNG, JPEG, BMP, TIFF, PGM) taken in name order
 (numbers in names compare as numbers).
 

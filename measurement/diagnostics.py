@@ -22,6 +22,8 @@ from .signal import find_swings, resample_uniform
 AT_NOISE = 1.10
 #: BIC gain (under the noise model) above which the residual holds structure
 STRUCTURE_MARGIN = 10.0
+#: residual RMS over the noise floor from which a named shape in it is worth a flag
+NAMED_ABOVE_NOISE = 1.5
 
 
 @dataclass(frozen=True)
@@ -63,6 +65,28 @@ class Diagnostics:
     def structured(self) -> bool:
         """The residual holds deterministic structure beyond its noise model: something is unmodelled."""
         return self.structure_bic < -STRUCTURE_MARGIN
+
+    def named_structure(self) -> list[str]:
+        """The shapes in the residual that can be named, each large enough to matter, in words.
+
+        A spectral line away from the swing frequency (another mode, a
+        vibration), a trend slower than the swing, unequal half-swings: each
+        must hold a fair share of a residual that stands clear of the noise
+        (a line at the swing frequency is the model's own phase or envelope
+        error, judged by what it does to ω_n instead).
+        """
+        out: list[str] = []
+        if self.rms_ratio < NAMED_ABOVE_NOISE:
+            return out
+        off_swing = (self.line_hz is not None and math.isfinite(self.swing_hz) and self.swing_hz > 0
+                     and abs(self.line_hz / self.swing_hz - 1.0) > 0.15)
+        if off_swing and self.line_fraction >= 0.3:
+            out.append(f"a spectral line at {self.line_hz:.4g} Hz holds {100 * self.line_fraction:.0f} % of the residual power")
+        if self.low_frequency_fraction >= 0.5:
+            out.append(f"a trend slower than the swing holds {100 * self.low_frequency_fraction:.0f} % of the residual power")
+        if abs(self.asymmetry_t) >= 6 and abs(self.asymmetry) >= 3 * self.noise_floor:
+            out.append(f"the half-swings differ by {self.asymmetry:+.3g} rad (t = {self.asymmetry_t:.1f})")
+        return out
 
     def as_dict(self) -> dict:
         d = asdict(self)

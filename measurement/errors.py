@@ -36,3 +36,7 @@ class VisionError(InvalidInput):
 
 class IdentificationError(MeasurementError):
     """The fit could not produce a result from otherwise valid data."""
+
+
+class TensorError(InvalidInput):
+    """A tensor plan or a multi-orientation set that cannot determine the inertia tensor."""

@@ -24,12 +24,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
-from scipy.signal import savgol_filter
 
 from .errors import IdentificationError
 from .model import STATE_PARAMS, Model
 from .noise import NoiseModel, autocorrelation, fit_noise
-from .signal import Swings, find_swings, resample_uniform
+from .signal import Swings, find_swings, resample_uniform, savitzky_golay
 
 __all__ = ["ModelFit", "Smoothed", "fit_model", "initial_guess", "smooth", "autocorrelation"]
 
@@ -172,11 +171,11 @@ def smooth(t: np.ndarray, y: np.ndarray, sigma: float, swings: Swings | None = N
     window = int(max(7, min(period_samples / 5.0, (tu.size // 3))))
     window += 1 - window % 2
     order = 4 if window > 7 else 3
-    ys = savgol_filter(yu, window, order, mode="interp")
-    yd = savgol_filter(yu, window, order, deriv=1, delta=dt, mode="interp")
+    ys = savitzky_golay(yu, window, order)
+    yd = savitzky_golay(yu, window, order, deriv=1, delta=dt)
     # θ'' is read only a window away from the ends, where every mode gives the same
     # convolution: no polynomial fits of the ends
-    ydd = savgol_filter(yu, window, order, deriv=2, delta=dt, mode="constant")
+    ydd = savitzky_golay(yu, window, order, deriv=2, delta=dt, ends="zero")
     return Smoothed(t, y, sigma, centre, sw, dt, window, ys, yd, ydd)
 
 
@@ -370,16 +369,34 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
         last_jac[key] = J.copy()
         return J
 
+    order = [0]
     if starts is not None and len(starts) > 1:
         costs = [float(np.sum(fun(xs) ** 2)) for xs in starts]
-        x0 = starts[int(np.argmin(costs))]
+        order = [int(i) for i in np.argsort(costs)]
     loss = "linear" if f_scale is None else "soft_l1"
-    try:
-        sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale=scales, method="trf",
-                            ftol=1e-12, xtol=1e-12, gtol=1e-10, max_nfev=max_nfev,
-                            loss=loss, f_scale=1.0 if f_scale is None else f_scale)
-    except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
-        raise IdentificationError(f"least squares failed for model {model.effect_names}: {exc}") from exc
+    # A model that contains the previous one fits the same samples at least as well; ending
+    # worse, the solver went down another basin from the cheapest start (over a long record
+    # a start near a poor fit can slip a cycle): the other starts are tried, the best kept.
+    beaten = None
+    if previous is not None and previous.f_scale == f_scale and previous.t.size == t.size and np.array_equal(previous.t, t):
+        beaten = 0.5 * previous.rss * (1.0 + 1e-6)
+    sol = None
+    for i in order:
+        x0 = starts[i] if starts is not None else x0
+        try:
+            trial = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale=scales, method="trf",
+                                  ftol=1e-12, xtol=1e-12, gtol=1e-10, max_nfev=max_nfev,
+                                  loss=loss, f_scale=1.0 if f_scale is None else f_scale)
+        except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
+            if sol is None and i == order[-1]:
+                raise IdentificationError(f"least squares failed for model {model.effect_names}: {exc}") from exc
+            continue
+        if sol is None or trial.cost < sol.cost:
+            sol = trial
+        if beaten is None or sol.cost <= beaten:
+            break
+    if sol is None:
+        raise IdentificationError(f"least squares failed for model {model.effect_names} from every start")
     x = sol.x
     _, theta, omega = evaluate(x)
     residual = fun(x)

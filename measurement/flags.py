@@ -18,6 +18,9 @@ OUTLIERS_DOWNWEIGHTED = "outliers_downweighted"
 WINDOW_CUT_AT_GAP = "window_cut_at_gap"
 ANGLE_UNWRAPPED = "angle_unwrapped"
 SENSOR_SCALE_FITTED = "sensor_scale_fitted"
+HALVES_DISAGREE = "halves_disagree"
+MODEL_AMBIGUOUS = "model_ambiguous"
+RELEASES_DISAGREE = "releases_disagree"
 # -- acquisition --------------------------------------------------------------------
 ENCODER_ERRORS = "encoder_errors"
 CAMERA_POSE = "camera_pose"
@@ -28,10 +31,16 @@ CAMERA_PERSPECTIVE = "camera_perspective"
 # -- the rig ---------------------------------------------------------------------------
 CALIBRATION_DUE = "calibration_due"
 NEGATIVE_INERTIA = "negative_inertia"
+# -- the inertia tensor of a multi-orientation set ----------------------------------------------
+TENSOR_INCONSISTENT = "tensor_inconsistent"
+TENSOR_UNPHYSICAL = "tensor_unphysical"
+ORIENTATION_EXCLUDED = "orientation_excluded"
 
 #: flag → what it tells the user (the Modbus map and the docs print these)
 FLAGS: dict[str, str] = {
-    UNMODELED_RESIDUAL: "the residual is above the noise and structured: something no library effect explains is left",
+    UNMODELED_RESIDUAL: "the residual holds structure no library effect explains, and it matters: it changes ω_n "
+                        "by more than the fit's σ (the record's halves disagree), or it has a shape the report names "
+                        "(a spectral line, a trend, unequal half-swings); coloured noise alone does not raise it",
     OUTLIERS_REMOVED: "isolated glitch samples were left out of the fit (count in window.n_outliers)",
     PARAMETER_AT_BOUND: "an effect's parameter sits at its physical bound (e.g. a damping of zero)",
     FIT_NOT_CONVERGED: "the least-squares fit stopped before converging: do not use this J",
@@ -42,6 +51,15 @@ FLAGS: dict[str, str] = {
     SENSOR_SCALE_FITTED: "the angle sensor's scale was identified from the swing itself (effect gain or view): the "
                          "sensor is off its calibration and ω_n, J rest on that fit (the report gives ω_n at the "
                          "nominal scale); calibrate the camera or encoder scale",
+    HALVES_DISAGREE: "the final model fitted to each half of the record gives ω_n values that differ beyond their σ: "
+                     "the model lacks something that changes with the amplitude or over time (model_form.segments); "
+                     "their scatter is in omega_n_u and J_u",
+    MODEL_AMBIGUOUS: "another model explains the record about as well (within the BIC margin) and gives another ω_n: "
+                     "the data do not decide between them (model_form.competitors names them); the spread is in "
+                     "omega_n_u and J_u",
+    RELEASES_DISAGREE: "releases of one object identified jointly scatter about the joint ω_n beyond their "
+                       "uncertainties (consistency.p < 0.01; consistency.largest_release departs most): the joint σ "
+                       "is scaled by the Birge ratio",
     ENCODER_ERRORS: "the encoder had time-outs, CRC errors or late replies (counts in acquisition)",
     CAMERA_POSE: "the camera's yaw was beyond the limit (yaw_limit_deg): the angles were corrected; check the mounting",
     MARKER_LOST: "the tracker lost the marker in some frames",
@@ -54,6 +72,12 @@ FLAGS: dict[str, str] = {
     NEGATIVE_INERTIA: "J_object (J − tare) or J_object_axis came out negative, which no part can have: the rig file's tare "
                       "inertia or [object] mass/axis_offset does not fit this set-up",
     CALIBRATION_DUE: "the rig's calibration is past its validity period ([calibration] date + valid_days of the rig file)",
+    TENSOR_INCONSISTENT: "a tensor set: the orientations disagree beyond their uncertainties (χ² beyond its 99 % point); "
+                         "the orientation with the largest normalised residual is named: a mis-mounted or mis-typed axis",
+    TENSOR_UNPHYSICAL: "a tensor set: a principal moment is ≤ 0 or I1 + I2 < I3 beyond the uncertainty, which no "
+                       "body can have: check the axes, offsets, mass and tare",
+    ORIENTATION_EXCLUDED: "a tensor set: an orientation whose releases were all INVALID was left out (named in the "
+                          "reasons); the tensor rests on the others",
 }
 
 

@@ -31,6 +31,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from . import flags as F
+from .consistency import ModelForm, check_segments, competitors, effect_holds
 from .diagnostics import Diagnostics, diagnose
 from .effects import EFFECTS, Effect, candidate_effects, resolve_effects, with_effect
 from .errors import IdentificationError, RigError, TraceError, UnknownEffectError
@@ -273,6 +274,10 @@ def _remove_outliers(fit: ModelFit, prep: Prepared, options: Options) -> tuple[n
     return fit.t[~bad], fit.y[~bad], np.flatnonzero(bad)
 
 
+#: residual RMS over the noise floor up to which a candidate's first-order score is trusted to skip its fit
+SCREEN_TRUST = 4.0
+
+
 @dataclass(frozen=True)
 class Score:
     """First-order (linearised) value of adding an effect to a fit.
@@ -400,9 +405,14 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
 
         q = current_basis(current) if cands else None
 
+        # Far above the noise the current fit may be in another basin than the true swing (a
+        # cycle slipped over a long record, a wrong damping law at large amplitude): its
+        # linearisation says nothing about a candidate then, so every candidate is fitted.
+        screen = current.residual_rms <= SCREEN_TRUST * prep.noise
+
         def trial(cand: Effect, current: ModelFit = current, q: np.ndarray | None = q) -> tuple[Score, ModelFit | None]:
             score = score_effect(current, cand, q)
-            if score.d_bic >= 0.0:
+            if screen and score.d_bic >= 0.0:
                 return score, None
             model = Model(rig, tuple(resolve_effects(with_effect(current.model.effect_names, cand), rig)))
             try:
@@ -413,7 +423,7 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
         # the candidates are independent: fitted side by side, read back in library order
         for cand, (score, f) in zip(cands, parallel_map(trial, cands)):
             spent += len(cand.parameters)
-            if score.d_bic >= 0.0:
+            if f is None and score.d_bic >= 0.0:
                 # the first-order gain cannot pay for the parameter: not worth a fit
                 table[cand.name] = {"bic": current.bic + score.d_bic, "screened": 1.0,
                                     "residual_rms": score.residual_rms,
@@ -424,28 +434,53 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
             spent += f.nfev
             tried[cand.name] = f
             table[cand.name] = {"bic": f.bic, "residual_rms": f.residual_rms,
-                                "excess_explained": (current.rss - f.rss) / excess}
+                                "excess_explained": (current.rss - f.rss) / excess, "omega_n": f.value("omega_n")}
+        w_before = current.value("omega_n")
         if not tried:
             best_screen = min(table, key=lambda k: table[k]["bic"]) if table else None
             reason = "no candidate effect left to try" if not table else (
                 f"no candidate could lower BIC (best first-order change: {best_screen} "
                 f"{table[best_screen]['bic'] - current.bic:+.1f})")
-            steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, table, None, None, None, "", reason))
+            steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, table, None, None, None, "", reason,
+                                       w_before))
             break
-        best = min(tried, key=lambda k: tried[k].bic)
+        # The best by BIC that also holds across the record: a sensor scale that moves ω_n by
+        # more than its σ must be the same in both halves of the record, or it stands in for a
+        # restoring law the model lacks, and would buy a wrong J.
+        best = None
+        not_held: list[str] = []
+        for name in sorted(tried, key=lambda k: tried[k].bic):
+            f = tried[name]
+            if f.bic - current.bic >= -options.bic_margin:
+                break
+            if EFFECTS[name].scale_parameters and abs(f.value("omega_n") - w_before) > f.stdev("omega_n"):
+                holds, words, nfev = effect_holds(f, name, prep.noise)
+                spent += nfev
+                if not holds:
+                    table[name]["rejected"] = 1.0
+                    not_held.append(f"{name} does not hold across the record ({words})")
+                    continue
+            best = name
+            break
+        if best is None:
+            best = min(tried, key=lambda k: tried[k].bic)
+            d_bic = tried[best].bic - current.bic
+            evidence = EFFECTS[best](rig).evidence(diagnosis(current))
+            reason = "; ".join(not_held) if not_held else (
+                f"best candidate {best} changes BIC by only {d_bic:+.1f} (needs < {-options.bic_margin:g})")
+            steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, table, None, None, None, evidence,
+                                       reason, w_before))
+            break
         bf = tried[best]
         d_bic = bf.bic - current.bic
         evidence = EFFECTS[best](rig).evidence(diagnosis(current))
-        if d_bic < -options.bic_margin:
-            reason = (f"BIC {d_bic:+.1f} (noise model AR({bf.noise.order})), residual RMS "
-                      f"{current.residual_rms:.3g} → {bf.residual_rms:.3g} rad")
-            steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, table, best, bf.residual_rms, bf.bic,
-                                       evidence, reason))
-            current = bf
-            continue
-        reason = f"best candidate {best} changes BIC by only {d_bic:+.1f} (needs < {-options.bic_margin:g})"
-        steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, table, None, None, None, evidence, reason))
-        break
+        reason = (f"BIC {d_bic:+.1f} (noise model AR({bf.noise.order})), residual RMS "
+                  f"{current.residual_rms:.3g} → {bf.residual_rms:.3g} rad")
+        if not_held:
+            reason += "; " + "; ".join(not_held)
+        steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, table, best, bf.residual_rms, bf.bic,
+                                   evidence, reason, w_before))
+        current = bf
     return current, steps, spent
 
 
@@ -527,11 +562,19 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     w, ws = final.value("omega_n"), final.stdev("omega_n")
     # a sensor calibrated from the record itself carries its own uncertainty into ω_n, beside the fit's
     w_cal = _omega_n_std_view(final, view) if view is not None else None
+    # the model's form: does it hold across the record, and do rival models the data cannot
+    # tell apart give another ω_n (consistency.py)
+    segments = check_segments(final, prep.noise)
+    rivals, u_rivals = competitors(steps, options.bic_margin)
+    form = ModelForm(segments, rivals, segments.u if segments is not None else 0.0, u_rivals)
+    w_u = math.sqrt(ws**2 + (w_cal or 0.0) ** 2 + form.u**2)
     J = _inertia(rig, w)
     J_std = None if J is None else 2 * J * ws / w
     J_cal = None
     if J is not None and (rig.restoring_constant_std or w_cal):
         J_cal = J * math.hypot((rig.restoring_constant_std or 0.0) / rig.restoring_constant, 2 * (w_cal or 0.0) / w)
+    J_model = None if J is None else 2 * J * form.u / w
+    J_u = None if J is None else math.sqrt((J_std or 0.0) ** 2 + (J_cal or 0.0) ** 2 + J_model**2)
     J_obj = J_obj_std = J_ax = J_ax_std = None
     if J is not None and rig.tare_inertia is not None:
         J_obj = J - rig.tare_inertia
@@ -552,8 +595,17 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     zeta, zeta_std = _propagate(ratio, final.x, final.cov)
 
     flags: list[str] = list(trace.flags)
-    if diag.structured:
+    # structure beyond the noise model is flagged when it matters: it changes the answer by more
+    # than the fit's σ (the halves disagree), or it has a shape the report can name
+    changes_answer = segments is not None and segments.disagree and segments.u > ws
+    named = diag.named_structure()
+    unmodeled = diag.structured and (changes_answer or bool(named))
+    if unmodeled:
         flags.append(F.UNMODELED_RESIDUAL)
+    if segments is not None and segments.disagree:
+        flags.append(F.HALVES_DISAGREE)
+    if form.ambiguous(ws):
+        flags.append(F.MODEL_AMBIGUOUS)
     if n_outliers:
         flags.append(F.OUTLIERS_REMOVED)
     if final.n_downweighted:
@@ -574,8 +626,27 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
 
     added = tuple(n for n in final.model.effect_names if n not in declared.effect_names)
     structure = diag.describe()
-    if diag.structured:
-        structure.append("left unexplained: no effect of the library accounts for this structure (flag unmodeled_residual)")
+    if segments is not None:
+        (w1, w2), (s1, s2) = segments.omega_n, segments.omega_n_std
+        verdict = ("they disagree: the model lacks something that changes with the amplitude or the time "
+                   f"(flag halves_disagree); ±{segments.u:.2g} rad/s of model form enters omega_n_u"
+                   if segments.disagree else "they agree")
+        structure.append(f"the final model fitted to each half of the record (split at {segments.t_split:.3g} s) gives "
+                         f"ω_n {w1:.6g} ± {s1:.2g} and {w2:.6g} ± {s2:.2g} rad/s ({segments.z:.1f} σ apart): {verdict}")
+    else:
+        structure.append("the record is too short to fit each half alone: whether the model holds across it is not checked")
+    for c in rivals if form.ambiguous(ws) else ():
+        if c.weight >= 0.05:
+            structure.append(f"a rival explanation the data do not decisively reject: {c.change} (ΔBIC {c.d_bic:+.1f}, "
+                             f"weight {c.weight:.2f}) gives ω_n {c.omega_n:.6g} rad/s ({c.delta:+.2g}); "
+                             f"the spread enters omega_n_u (flag model_ambiguous)")
+    if unmodeled:
+        what = "; ".join(named) if named else "it changes ω_n by more than the fit's σ"
+        structure.append(f"left unexplained: no effect of the library accounts for this structure ({what}; "
+                         "flag unmodeled_residual)")
+    elif diag.structured:
+        structure.append("the rest is coloured noise: structure beyond the noise model that neither changes ω_n beyond "
+                         "its σ nor has a shape to name")
     nominal = _omega_n_at_nominal_scale(final)
     if nominal is not None:
         flags.append(F.SENSOR_SCALE_FITTED)
@@ -611,7 +682,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         source=trace.source, rig_kind=rig.kind,
         J=J, J_std=J_std, J_std_calibration=J_cal, J_object=J_obj, J_object_std=J_obj_std,
         J_object_axis=J_ax, J_object_axis_std=J_ax_std,
-        omega_n=w, omega_n_std=ws, omega_n_std_calibration=w_cal, damping_ratio=zeta, damping_ratio_std=zeta_std, reference_amplitude=amp_ref,
+        omega_n=w, omega_n_std=ws, omega_n_std_calibration=w_cal, omega_n_std_model=form.u, omega_n_u=w_u,
+        J_std_model=J_model, J_u=J_u, model_form=form.to_dict(), damping_ratio=zeta, damping_ratio_std=zeta_std, reference_amplitude=amp_ref,
         offset=Quantity(final.value("offset"), final.stdev("offset"), "rad"),
         damping=_effect_quantities(final, rig, ("damping",)),
         stiffness=_effect_quantities(final, rig, ("stiffness",)),

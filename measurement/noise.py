@@ -21,8 +21,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import lfilter
 from scipy.special import gammaincc
+
+from .signal import all_pole_filter, fir_filter
 
 #: highest AR order tried (a coloured camera or encoder noise needs a few)
 MAX_ORDER = 12
@@ -80,13 +81,13 @@ class NoiseModel:
         """A(q)·x along axis 0 (the first p rows are left out: they have no full past)."""
         if self.order == 0:
             return x
-        return lfilter(self.a, [1.0], x, axis=0)[self.order:]
+        return fir_filter(self.a, x)
 
     def colour_t(self, x: np.ndarray) -> np.ndarray:
         """A(q)⁻ᵀ·x (anticausal inverse filter) along axis 0: Σ = σ_e²·A⁻¹A⁻ᵀ, so xᵀΣx = σ_e²·‖A⁻ᵀx‖²."""
         if self.order == 0:
             return x
-        return lfilter([1.0], self.a, x[::-1], axis=0)[::-1]
+        return all_pole_filter(self.a, x[::-1])[::-1]
 
     @property
     def variance_ratio(self) -> float:

@@ -101,11 +101,14 @@ class DiscoveryStep:
     bic_after: float | None
     evidence: str
     reason: str
+    #: ω_n of the model the round started from, rad/s
+    omega_n_before: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "round": self.round,
             "residual_rms_before": _num(self.residual_rms_before), "bic_before": _num(self.bic_before),
+            "omega_n_before": _num(self.omega_n_before),
             "candidates": {k: {kk: _num(vv) for kk, vv in v.items()} for k, v in self.candidates.items()},
             "chosen": self.chosen,
             "residual_rms_after": _num(self.residual_rms_after), "bic_after": _num(self.bic_after),
@@ -161,6 +164,14 @@ class IdentificationResult:
     acquisition: dict[str, Any] = field(default_factory=dict)
     #: the rig declared the angle sensor calibrated: no effect fitted the angle's scale
     sensor_calibrated: bool = False
+    #: 1σ of ω_n (rad/s) and J (kg·m²) from the model's form: the record's halves scattering beyond
+    #: their σ, and rival models the data do not decisively separate (``model_form`` says which)
+    omega_n_std_model: float = 0.0
+    J_std_model: float | None = None
+    #: combined standard uncertainty of ω_n (rad/s) and J (kg·m²): fit ⊕ calibration ⊕ model form
+    omega_n_u: float | None = None
+    J_u: float | None = None
+    model_form: dict[str, Any] = field(default_factory=dict)
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -181,6 +192,9 @@ class IdentificationResult:
             "J_object_axis": _num(self.J_object_axis), "J_object_axis_std": _num(self.J_object_axis_std),
             "omega_n": _num(self.omega_n), "omega_n_std": _num(self.omega_n_std),
             "omega_n_std_calibration": _num(self.omega_n_std_calibration),
+            "omega_n_std_model": _num(self.omega_n_std_model), "omega_n_u": _num(self.omega_n_u),
+            "J_std_model": _num(self.J_std_model), "J_u": _num(self.J_u),
+            "model_form": _jsonable(self.model_form),
             "damping_ratio": _num(self.damping_ratio), "damping_ratio_std": _num(self.damping_ratio_std),
             "reference_amplitude": _num(self.reference_amplitude),
             "offset": self.offset.to_dict(),
@@ -232,6 +246,10 @@ class IdentificationResult:
                if self.omega_n_std_calibration else "")
         L.append(f"    omega_n      = {Quantity(self.omega_n, self.omega_n_std, 'rad/s')}"
                  f"  (f_n = {self.omega_n / (2 * math.pi):.6g} Hz{cal})")
+        if self.omega_n_std_model:
+            ju = f"; J ± {self.J_u:.2g} kg·m²" if self.J_u is not None else ""
+            L.append(f"    model form   = ±{self.omega_n_std_model:.2g} rad/s (halves of the record, rival models)"
+                     f" → combined u: ω_n ± {self.omega_n_u:.2g} rad/s{ju}")
         L.append(f"    damping ratio= {Quantity(self.damping_ratio, self.damping_ratio_std, '')}"
                  f" (equivalent viscous, at {self.reference_amplitude:.4g} rad)")
         for group, title in ((self.damping, "damping"), (self.stiffness, "stiffness"), (self.sensor, "sensor")):

@@ -349,3 +349,49 @@ def swing_window(t: np.ndarray, angle: np.ndarray, sigma: float) -> SwingWindow:
                 stop, stopped = cut, True
     return SwingWindow(start=start, stop=max(stop, start + 1), release_detected=release, stop_detected=stopped,
                        stuck=stuck)
+
+
+def savitzky_golay(y: np.ndarray, window: int, order: int, deriv: int = 0, delta: float = 1.0,
+                   ends: str = "fit") -> np.ndarray:
+    """The ``deriv``-th derivative of y (per delta, s) by a least-squares polynomial of ``order`` over a
+    centred odd ``window`` of samples (Savitzky and Golay, "Smoothing and differentiation of data by
+    simplified least squares procedures", 1964).
+
+    ends: ``"fit"`` evaluates the polynomial fitted to the first and last window at the samples less than
+    half a window from the ends; ``"zero"`` treats the samples beyond the ends as zeros. A few lines of
+    numpy instead of ``scipy.signal``, whose import alone costs a cold-started command most of a second.
+    """
+    y = np.asarray(y, dtype=float)
+    half = window // 2
+    # offsets in half windows keep the Vandermonde matrix well conditioned; row `deriv` of its
+    # pseudo-inverse maps a window of samples to that coefficient of the fitted polynomial
+    offsets = np.arange(-half, half + 1, dtype=float) / max(half, 1)
+    weights = np.linalg.pinv(np.vander(offsets, order + 1, increasing=True))[deriv]
+    weights *= math.factorial(deriv) / (delta * max(half, 1)) ** deriv
+    out = np.correlate(np.concatenate((np.zeros(half), y, np.zeros(half))), weights, mode="valid")
+    if ends == "fit" and y.size >= window:
+        at = np.arange(window, dtype=float)
+        for sl, where in ((slice(0, window), slice(0, half)), (slice(y.size - window, y.size), slice(window - half, window))):
+            poly = np.polynomial.polynomial.Polynomial.fit(at, y[sl], order, domain=[0.0, 1.0], window=[0.0, 1.0])
+            out[sl][where] = poly.deriv(deriv)(at[where]) / delta ** deriv
+    return out
+
+
+def fir_filter(a: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Σ_k a[k]·x[i−k] along axis 0, for i ≥ len(a) − 1 (the rows with a full past)."""
+    p = a.size - 1
+    n = x.shape[0]
+    out = a[0] * x[p:]
+    for k in range(1, p + 1):
+        out = out + a[k] * x[p - k:n - k]
+    return out
+
+
+def all_pole_filter(a: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """y with Σ_k a[k]·y[i−k] = x[i] along axis 0 (y before the start taken as zero; a[0] = 1): the
+    inverse of ``fir_filter``, solved as a banded lower-triangular system."""
+    from scipy.linalg import solve_banded  # already loaded by the diagnostics' Cholesky solve
+
+    p = a.size - 1
+    bands = np.repeat(np.asarray(a, dtype=float)[:, None], x.shape[0], axis=1)
+    return solve_banded((p, 0), bands, x, check_finite=False)

@@ -3,7 +3,10 @@
 ``Pendulum`` is the truth (rig, J, effects with values); ``simulate_trace``
 samples it like a sensor would (rate, jitter, noise, encoder quantisation,
 zero offset); ``Swing`` gives θ at any time for live mocks (the simulated
-encoder and camera ask for the angle "now").
+encoder and camera ask for the angle "now"). ``RigidBody`` is a part with a
+full inertia tensor: ``RigidBody.mounted`` is the pendulum it makes on a rig
+when it swings about any axis of its own frame, its centre of mass off that
+axis or not.
 """
 
 from __future__ import annotations
@@ -65,6 +68,57 @@ class Pendulum:
     def measured(self, t: np.ndarray, theta: np.ndarray, offset: float = 0.0) -> np.ndarray:
         """What the sensor reads (rad) at times t (s, from the first sample) for the true angle θ (rad)."""
         return self.model.measured(self.parameter_vector(0.0, 0.0, offset), np.asarray(t, dtype=float), theta)
+
+
+@dataclass(frozen=True)
+class RigidBody:
+    """A rigid part with known truth: its inertia tensor about the centre of mass, in its own frame.
+
+    tensor: the 3×3 inertia matrix T, kg·m² (nᵀ·T·n is the inertia about the unit axis n; its
+    off-diagonal entries are −∫xy dm). mass: kg.
+    """
+
+    tensor: tuple[tuple[float, float, float], ...]
+    mass: float
+
+    def __post_init__(self) -> None:
+        T = np.asarray(self.tensor, dtype=float)
+        if T.shape != (3, 3) or not np.all(np.isfinite(T)) or not np.allclose(T, T.T):
+            raise InvalidInput("a rigid body's tensor must be a finite symmetric 3×3 matrix in kg·m²")
+        lam = np.linalg.eigvalsh(T)
+        if lam[0] <= 0 or lam[0] + lam[1] < lam[2] * (1 - 1e-12):
+            raise InvalidInput(f"no rigid body has the principal moments {lam.tolist()} kg·m² "
+                               "(each must be > 0 and the two smaller must sum to at least the largest)")
+        if not (isinstance(self.mass, (int, float)) and self.mass > 0 and math.isfinite(self.mass)):
+            raise InvalidInput(f"mass must be a finite number > 0 kg, got {self.mass!r}")
+
+    @classmethod
+    def from_point_masses(cls, masses: np.ndarray, positions: np.ndarray) -> "RigidBody":
+        """The body made of point masses (kg) at positions (N×3, m, any origin)."""
+        m = np.asarray(masses, dtype=float)
+        r = np.asarray(positions, dtype=float)
+        c = r - (m @ r) / m.sum()
+        T = np.einsum("i,ij->ij", m, c).T @ c
+        T = np.eye(3) * np.trace(T) - T
+        return cls(tuple(tuple(row) for row in T.tolist()), float(m.sum()))  # type: ignore[arg-type]
+
+    def inertia_about(self, axis: np.ndarray, through: np.ndarray | None = None) -> float:
+        """Inertia about the line along ``axis`` (normalised here) through the point ``through`` (m, from
+        the centre of mass; None: through it), kg·m²: the tensor moved to that point (Steiner, in tensor
+        form T + m·(|p|²·1 − p·pᵀ)) and read along the axis."""
+        n = np.asarray(axis, dtype=float)
+        n = n / np.linalg.norm(n)
+        p = np.zeros(3) if through is None else np.asarray(through, dtype=float)
+        T_p = np.asarray(self.tensor, dtype=float) + self.mass * (np.eye(3) * (p @ p) - np.outer(p, p))
+        return float(n @ T_p @ n)
+
+    def mounted(self, rig: Rig, axis: np.ndarray, offset: np.ndarray | None = None,
+                effects: Mapping[str, Mapping[str, float]] | None = None) -> Pendulum:
+        """The pendulum this body makes on ``rig`` swinging about ``axis`` (its own frame), its centre of
+        mass at ``offset`` (m) from the swing axis: J = the rig's tare + the body about that axis."""
+        through = None if offset is None else -np.asarray(offset, dtype=float)
+        J = (rig.tare_inertia or 0.0) + self.inertia_about(axis, through)
+        return Pendulum(rig, J, dict(effects or {}))
 
 
 def quantise(angle: np.ndarray, bits: int) -> np.ndarray:

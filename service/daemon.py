@@ -41,16 +41,16 @@ from measurement.errors import InvalidInput
 from measurement.integrator import is_compiled
 
 from . import __version__
-from .config import Config
+from service.config.appliance import Config
 from .errors import ServiceError, StartupError, StoreDamaged
-from .hardware import Devices, build_devices
-from .modbus_server import ModbusServer
-from .mqtt import MqttService
+from service.devices.hardware import Devices, build_devices
+from service.publish.modbus.server import ModbusServer
+from service.publish.mqtt.client import MqttService
 from .notify import Notifier
-from .payload import iso_utc, result_payload
-from .recipes import SPC_WINDOW, PartTracker, Recipe, RecipeBook, recipe_spc
-from .registers import LiveStatus
-from .store import Store, quarantine_store
+from service.publish.payload import iso_utc, result_payload
+from service.parts.recipes import SPC_WINDOW, PartTracker, Recipe, RecipeBook, recipe_spc
+from service.publish.modbus.registers import LiveStatus
+from service.persistence.store import Store, quarantine_store
 
 log = logging.getLogger("moi.daemon")
 
@@ -90,7 +90,7 @@ class Appliance:
         self.store: Store | None = None
         self.modbus: ModbusServer | None = None
         self.mqtt: MqttService | None = None
-        self.web: Any = None  # service.web.server.WebServer when [web] is enabled
+        self.web: Any = None  # service.publish.web.server.WebServer when [web] is enabled
         self.sequencer: Sequencer | None = None
         self._commands: queue.SimpleQueue[tuple[str, str, Mapping[str, Any] | None]] = queue.SimpleQueue()
         self._calls: queue.SimpleQueue[tuple[Callable[[], Any], concurrent.futures.Future]] = queue.SimpleQueue()
@@ -174,7 +174,7 @@ class Appliance:
                                                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                                    stderr=subprocess.DEVNULL)
             if cfg.web is not None:
-                from .web.server import WebServer  # aiohttp is loaded only when the page is served
+                from service.publish.web.server import WebServer  # aiohttp is loaded only when the page is served
                 self.web = WebServer(self, cfg.web)
                 self.web.start()
                 self.sequencer.subscribe(self.web.on_event)

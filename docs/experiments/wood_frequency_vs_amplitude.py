@@ -18,7 +18,7 @@ from scipy.special import ellipk
 from measurement import Trace, identify
 from measurement.identification import prepare
 from measurement.signal import find_swings
-from service.files import read_rig, read_trace
+from service.sources.files import read_rig, read_trace
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -15,7 +15,7 @@ from measurement import Rig
 from measurement.fit import fit_model
 from measurement.identification import prepare
 from measurement.model import Model
-from service.files import read_trace
+from service.sources.files import read_trace
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -13,7 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from measurement import Options, identify
-from service.files import read_rig, read_trace
+from service.sources.files import read_rig, read_trace
 
 ROOT = Path(__file__).resolve().parents[2]
 PHYSICS = ("viscous", "dahl", "quadratic")

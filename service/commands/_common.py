@@ -7,8 +7,8 @@ import os
 from datetime import datetime, timezone
 from pathlib import Path
 
-from ..errors import InputFileError, StoreError
-from ..store import DB_NAME, Store
+from service.errors import InputFileError, StoreError
+from service.persistence.store import DB_NAME, Store
 
 #: where systemd's StateDirectory=moi puts the store
 SYSTEM_STATE_DIR = Path("/var/lib/moi")
@@ -35,7 +35,7 @@ def find_store_dir(args: argparse.Namespace) -> Path:
     if args.state_dir:
         candidates = [Path(args.state_dir)]
     elif args.config:
-        from ..config import load_config  # only with --config: it loads the drivers' settings
+        from service.config.appliance import load_config  # only with --config: it loads the drivers' settings
 
         candidates = [load_config(args.config).state_dir]
     else:

@@ -39,7 +39,7 @@ from measurement.calibration import Cylinder, Reference, calibrate_torsion
 from measurement.errors import CalibrationError
 from measurement.rig import CalibrationRecord
 
-from ..files import read_rig, read_toml, read_trace, write_rig
+from service.sources.files import read_rig, read_toml, read_trace, write_rig
 
 
 _REF_KEYS = {"name", "trace", "added_inertia", "added_inertia_std", "cylinders", "omega", "zeta", "omega_n"}

@@ -24,9 +24,9 @@ from typing import TYPE_CHECKING
 
 from measurement.errors import VisionError
 
-from ..camera_config import read_camera
-from ..defaults import demo_camera
-from ..errors import InputFileError
+from service.config.camera import read_camera
+from service.devices.defaults import demo_camera
+from service.errors import InputFileError
 
 if TYPE_CHECKING:  # the vision modules load OpenCV: imported where used, not for `moi --help`
     import numpy as np

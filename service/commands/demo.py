@@ -23,8 +23,8 @@ import threading
 import time
 from pathlib import Path
 
-from ..defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
-from ..errors import InputFileError
+from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
+from service.errors import InputFileError
 
 
 EXIT_FAULT = 3
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputFileError(f"--releases must be in [1, 10], got {args.releases}")
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-    from ..daemon import Appliance
+    from service.daemon import Appliance
 
     tmp = None
     if args.state_dir:
@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         tmp = tempfile.TemporaryDirectory(prefix="moi-demo-")
         state_dir = tmp.name
     try:
-        from ..config import parse_config
+        from service.config.appliance import parse_config
 
         _write_recipe(args, state_dir)
         config = parse_config(_doc(args, state_dir), source="moi demo")
@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
 def _run(app, args: argparse.Namespace) -> int:
     from pymodbus.client import ModbusTcpClient
 
-    from .. import registers as R
+    from service.publish.modbus import registers as R
 
     cfg = app.config
     out = sys.stdout

@@ -10,9 +10,9 @@ import sys
 
 from measurement import Trace
 
-from ..errors import InputFileError
-from ..files import write_text_atomic
-from ..payload import iso_utc
+from service.errors import InputFileError
+from service.sources.files import write_text_atomic
+from service.publish.payload import iso_utc
 from ._common import add_store_arguments, fmt_time, open_store, parse_time
 
 

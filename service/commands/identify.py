@@ -7,12 +7,14 @@ import sys
 
 from measurement.effects import EFFECTS
 
-from ..errors import InputFileError
-from ..files import check_output_path, read_rig, write_atomic
+from service.errors import InputFileError
+from service.sources.files import check_output_path, read_rig, write_atomic
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("source", metavar="SOURCE", help="trace CSV (t in s, angle in rad), marker track CSV (t in s, two markers' image positions "
+    p.add_argument("source", metavar="SOURCE", nargs="+", help="one or more releases of one object (several are "
+                   "identified jointly: shared physics, per-release offset and sensor terms, and a test that they "
+                   "agree); each a trace CSV (t in s, angle in rad), marker track CSV (t in s, two markers' image positions "
                         "ax, ay, bx, by in px: the camera's oblique view is measured from their distance and removed), "
                         "video file or image folder")
     p.add_argument("--rig", required=True, metavar="RIG.toml", help="rig file (kind, stiffness or mass/com_distance, declared effects)")
@@ -27,18 +29,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from measurement import Options, identify  # scipy: only when identifying
 
-    from ..sources import load_source
+    from service.sources.dispatch import load_source
 
     if args.plot:  # a bad plot path is refused before the work, not after it
         if not args.plot.lower().endswith(".png"):
             raise InputFileError(f"--plot {args.plot!r}: the plot is a PNG; give a file name ending in .png")
         check_output_path(args.plot, "plot file")
+        if len(args.source) > 1:
+            raise InputFileError("--plot draws one release; give one SOURCE with --plot")
     rig = read_rig(args.rig)
-    trace = load_source(args.source, camera=args.camera, rig=rig)
+    traces = [load_source(s, camera=args.camera, rig=rig) for s in args.source]
     candidates = None
     if args.candidates is not None:
         candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
-    result = identify(trace, rig, Options(discover=not args.no_discover, candidates=candidates))
+    options = Options(discover=not args.no_discover, candidates=candidates)
+    if len(traces) > 1:
+        from measurement.joint import identify_releases
+
+        joint = identify_releases(traces, rig, options)
+        print(joint.to_json() if args.json else joint.report())
+        sys.stdout.flush()
+        return 0
+    result = identify(traces[0], rig, options)
     # the result first: a plot that cannot be written must not lose it
     if args.json:
         sys.stdout.write(result.to_json() + "\n")
@@ -46,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
         print(result.report())
     sys.stdout.flush()
     if args.plot:
-        from ..plot import render_png
+        from service.publish.plot import render_png
         write_atomic(args.plot, render_png(result, dpi=110), "plot file")
         if not args.json:
             print(f"plot written to {args.plot}")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..files import read_markers, write_atomic
+from service.sources.files import read_markers, write_atomic
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

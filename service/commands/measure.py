@@ -30,8 +30,8 @@ import sys
 
 from measurement.errors import InvalidInput
 
-from ..defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE, demo_camera
-from ..files import read_rig
+from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE, demo_camera
+from service.sources.files import read_rig
 from .simulate import EFFECT_SYNTAX, parse_effects
 
 
@@ -110,8 +110,8 @@ def run(args: argparse.Namespace) -> int:
     from firmware_host import Sequencer, SequencerConfig
     from measurement import Options, Pendulum
 
-    from ..config import SimulationSettings
-    from ..hardware import build_simulated
+    from service.config.appliance import SimulationSettings
+    from service.devices.hardware import build_simulated
 
     rig = read_rig(args.rig) if args.rig else DEFAULT_RIG
     tokens = args.effects if args.effects is not None else ([] if args.rig else DEFAULT_EFFECTS)
@@ -169,11 +169,11 @@ def _measure_configured(args: argparse.Namespace) -> int:
     """One measurement on the devices of the configuration, built by the daemon's own builder."""
     from firmware_host import Sequencer
 
-    from ..check import pin_problems
-    from ..config import load_config
-    from ..daemon import lock_state_dir
-    from ..errors import ConfigError, StartupError
-    from ..hardware import build_devices
+    from service.config.check import pin_problems
+    from service.config.appliance import load_config
+    from service.daemon import lock_state_dir
+    from service.errors import ConfigError, StartupError
+    from service.devices.hardware import build_devices
 
     config = load_config(args.config)
     if pin_problems(config):
@@ -327,7 +327,7 @@ def _print_result(results: list, seq, last, as_json: bool, truth: dict | None = 
 
 def _camera_config(args: argparse.Namespace):
     """The simulated camera's file (--camera, else the demo camera), checked before anything is opened."""
-    from ..camera_config import read_camera
+    from service.config.camera import read_camera
     if not (abs(args.camera_yaw) < 20 and args.camera_yaw == args.camera_yaw):
         raise InvalidInput(f"--camera-yaw must be within ±20°, got {args.camera_yaw:g}")
     return read_camera(args.camera) if args.camera else demo_camera()

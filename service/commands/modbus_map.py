@@ -10,8 +10,8 @@ import argparse
 import json
 import sys
 
-from .. import registers as R
-from ..files import read_text, write_text_atomic
+from service.publish.modbus import registers as R
+from service.sources.files import read_text, write_text_atomic
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..errors import InputFileError
+from service.errors import InputFileError
 from ._common import add_store_arguments, fmt_time, open_store, parse_time
 
 

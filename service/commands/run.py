@@ -7,7 +7,7 @@ import logging
 import signal
 import sys
 
-from ..errors import StartupError, StoreError
+from service.errors import StartupError, StoreError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -36,14 +36,14 @@ def setup_logging(level: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.config_reference:
-        from ..config import reference_markdown
+        from service.config.appliance import reference_markdown
         sys.stdout.write(reference_markdown())
         return 0
-    from ..config import load_config  # the drivers' and servers' settings: not for `moi --help`
+    from service.config.appliance import load_config  # the drivers' and servers' settings: not for `moi --help`
 
     config = load_config(args.config, sim=args.sim, state_dir=args.state_dir)
-    from ..check import check_config, pin_problems
-    from ..errors import ConfigError
+    from service.config.check import check_config, pin_problems
+    from service.errors import ConfigError
 
     if args.check:
         import json
@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     if pin_problems(config):  # gpiozero would fail with a traceback when building the devices
         raise ConfigError("; ".join(pin_problems(config)))
     setup_logging(args.log_level or config.log_level)
-    from ..daemon import Appliance
+    from service.daemon import Appliance
 
     app = Appliance(config)
 

@@ -8,7 +8,7 @@ import math
 from measurement.effects import EFFECTS
 from measurement.errors import InvalidInput, UnknownEffectError
 
-from ..files import read_rig, write_text_atomic
+from service.sources.files import read_rig, write_text_atomic
 
 
 EFFECT_SYNTAX = (

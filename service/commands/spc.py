@@ -14,8 +14,8 @@ import argparse
 import json
 from pathlib import Path
 
-from ..errors import InputFileError
-from ..recipes import recipe_spc
+from service.errors import InputFileError
+from service.parts.recipes import recipe_spc
 from ._common import add_store_arguments, fmt_time, open_store, parse_time
 
 
@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
             continue
         png = None
         if not args.no_plot:
-            from ..plot import plot_control_chart
+            from service.publish.plot import plot_control_chart
             out_dir.mkdir(parents=True, exist_ok=True)
             png = out_dir / f"spc-{name}.png"
             plot_control_chart(spc.summary, png, title=f"recipe {name} ({spc.quantity})")

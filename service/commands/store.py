@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..errors import InputFileError
+from service.errors import InputFileError
 from ._common import add_store_arguments, find_store_dir
 
 
@@ -21,7 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..store import DB_NAME, check_store, salvage_store
+    from service.persistence.store import DB_NAME, check_store, salvage_store
 
     if args.db:
         path = Path(args.db)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from service.cli import main
-from service.store import Store
+from service.persistence.store import Store
 
 REPO = Path(__file__).resolve().parents[2]
 RIG = str(REPO / "examples" / "torsion_rig.toml")
@@ -163,7 +163,7 @@ def test_calibrate_help_shows_the_file_format_and_the_shipped_example_calibrates
     assert main(["calibrate", str(REPO / "examples" / "calibration.toml"), "--rig", str(rig), "--out", str(rig)]) == 0
     text = rig.read_text()
     assert "# k, N·m/rad" in text and "[calibration]" in text  # the user's comments survive the rewrite
-    from service.files import read_rig
+    from service.sources.files import read_rig
     assert read_rig(rig).stiffness == pytest.approx(0.3651, rel=1e-4)
 
 

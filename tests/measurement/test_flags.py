@@ -1,8 +1,8 @@
-"""Every quality flag has one meaning (measurement.flags) and one Modbus bit (service.registers)."""
+"""Every quality flag has one meaning (measurement.flags) and one Modbus bit (service.publish.modbus.registers)."""
 
 from measurement import flags as F
 from measurement.effects import EFFECTS
-from service import registers as R
+from service.publish.modbus import registers as R
 
 
 def test_every_flag_has_a_description_and_a_bit():

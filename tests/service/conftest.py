@@ -246,7 +246,7 @@ class RunningAppliance:
     """An Appliance running its main loop in a thread (in-process: the mock button is reachable)."""
 
     def __init__(self, doc: dict, **kwargs: Any) -> None:
-        from service.config import parse_config
+        from service.config.appliance import parse_config
         from service.daemon import Appliance
 
         self.config = parse_config(doc, source="test.toml")

@@ -10,9 +10,9 @@ import struct
 
 import pytest
 
-from service import registers as R
-from service.mqtt import MqttService, MqttSettings
-from service.store import Store
+from service.publish.modbus import registers as R
+from service.publish.mqtt.client import MqttService, MqttSettings
+from service.persistence.store import Store
 
 from .conftest import appliance_doc, free_port, wait_until
 
@@ -134,7 +134,7 @@ def _crc(frame: bytes) -> bytes:
 
 
 def test_rtu_single_coil_writes_are_echoed_and_illegal_values_refused():
-    from service.modbus_server import ModbusServer, ModbusSettings
+    from service.publish.modbus.server import ModbusServer, ModbusSettings
 
     port = free_port()
     commands: list[str] = []
@@ -174,7 +174,7 @@ def _read_request(tid: int) -> bytes:
 
 
 def test_the_connection_cap_closes_the_longest_idle_connection_first():
-    from service.modbus_server import ModbusServer, ModbusSettings
+    from service.publish.modbus.server import ModbusServer, ModbusSettings
 
     srv = ModbusServer(ModbusSettings(host="127.0.0.1", port=0, max_connections=3, idle_timeout=0))
     srv.start()
@@ -196,7 +196,7 @@ def test_the_connection_cap_closes_the_longest_idle_connection_first():
 
 
 def test_an_idle_connection_is_closed_and_an_active_one_is_not():
-    from service.modbus_server import ModbusServer, ModbusSettings
+    from service.publish.modbus.server import ModbusServer, ModbusSettings
 
     srv = ModbusServer(ModbusSettings(host="127.0.0.1", port=0, idle_timeout=0.5))
     srv.start()
@@ -268,7 +268,7 @@ def _connect_from(source: str, port: int) -> socket.socket:
 
 def test_only_this_machine_and_the_allow_list_get_in():
     """Clients bound to other loopback addresses stand for other hosts: 127.0.0.3 is allowed, 127.0.0.2 is not."""
-    from service.modbus_server import ModbusServer, ModbusSettings
+    from service.publish.modbus.server import ModbusServer, ModbusSettings
 
     srv = ModbusServer(ModbusSettings(host="127.0.0.1", port=0, allow_from=("127.0.0.3",)))
     srv.start()
@@ -284,9 +284,9 @@ def test_only_this_machine_and_the_allow_list_get_in():
 
 
 def test_listening_beyond_this_machine_is_a_stated_choice():
-    from service.config import parse_config
+    from service.config.appliance import parse_config
     from service.errors import ConfigError
-    from service.modbus_server import ModbusSettings, network_exposure
+    from service.publish.modbus.server import ModbusSettings, network_exposure
 
     assert parse_config({}, source="empty.toml").modbus.host == "127.0.0.1"
     assert network_exposure(ModbusSettings()) is None

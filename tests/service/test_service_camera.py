@@ -25,11 +25,11 @@ from pymodbus.client import ModbusTcpClient
 
 from drivers.camera_sensor import CameraAngleSensor
 from drivers.errors import SensorFault
-from service import registers as R
+from service.publish.modbus import registers as R
 from service.cli import main
-from service.config import load_config, parse_config
+from service.config.appliance import load_config, parse_config
 from service.errors import StartupError
-from service.hardware import build_devices
+from service.devices.hardware import build_devices
 
 from .conftest import appliance_doc, write_toml
 
@@ -277,6 +277,6 @@ def test_the_camera_example_loads_for_the_device_and_for_the_simulation():
     assert sim.simulated and sim.simulation.sensor == "camera" and sim.simulation.camera_config == cam.config
     # without a camera file the simulation films with the demo camera of `moi measure --sensor camera`
     demo = parse_config({"simulation": {"sensor": "camera"}})
-    from service.defaults import DEMO_CAMERA as DEFAULT_CAMERA
+    from service.devices.defaults import DEMO_CAMERA as DEFAULT_CAMERA
     assert demo.simulation.camera is None and demo.simulation.camera_config.to_dict()["camera"]["fx"] == \
         DEFAULT_CAMERA["camera"]["fx"]

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from service.cli import main
-from service.config import DEFAULT_SIM_RIG, load_config, parse_config
+from service.config.appliance import DEFAULT_SIM_RIG, load_config, parse_config
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -123,7 +123,7 @@ def test_check_prints_the_configuration_without_secrets(tmp_path, capsys):
 
 
 def test_the_configuration_reference_in_docs_matches_the_schema():
-    from service.config import reference_markdown
+    from service.config.appliance import reference_markdown
 
     text = (REPO / "docs" / "service.md").read_text(encoding="utf-8")
     start = text.index("-->\n", text.index("<!-- config-reference:start")) + 4

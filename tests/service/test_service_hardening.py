@@ -9,7 +9,7 @@ import struct
 
 import pytest
 
-from service import registers as R
+from service.publish.modbus import registers as R
 
 from .conftest import appliance_doc, free_port, moi_subprocess, port_open, wait_until, write_toml
 from .test_service_attacks import _closed_by_peer, _tcp_exchange

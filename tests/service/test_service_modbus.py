@@ -10,8 +10,8 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 from pymodbus.framer import FramerType
 
-from service import registers as R
-from service.modbus_server import ModbusServer, ModbusSettings
+from service.publish.modbus import registers as R
+from service.publish.modbus.server import ModbusServer, ModbusSettings
 
 from .conftest import free_port
 

@@ -7,8 +7,8 @@ import threading
 
 import pytest
 
-from service.mqtt import MqttService, MqttSettings, discovery_messages, Topics
-from service.store import Store
+from service.publish.mqtt.client import MqttService, MqttSettings, discovery_messages, Topics
+from service.persistence.store import Store
 
 pytestmark = pytest.mark.broker
 

@@ -7,9 +7,9 @@ import subprocess
 
 import pytest
 
-from service.config import parse_config
-from service.mqtt import MqttService
-from service.store import Store
+from service.config.appliance import parse_config
+from service.publish.mqtt.client import MqttService
+from service.persistence.store import Store
 
 from .conftest import MOSQUITTO, Broker, wait_until
 

@@ -11,9 +11,9 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 
 from measurement.verdict import Specification, decide
-from service import registers as R
+from service.publish.modbus import registers as R
 from service.errors import ConfigError
-from service.recipes import RecipeBook, RecipeError, load_recipe
+from service.parts.recipes import RecipeBook, RecipeError, load_recipe
 
 from .conftest import appliance_doc, wait_until
 
@@ -259,7 +259,7 @@ def test_moi_run_check_validates_every_recipe(tmp_path, capsys):
 
 
 def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_an_unstored_release(tmp_path):
-    from service.recipes import PartTracker
+    from service.parts.recipes import PartTracker
 
     d = tmp_path / "recipes"
     write(d / "r.toml", recipe("r", 1, J_TRUE, tolerance_percent=1.0, releases=2))

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from service import registers as R
+from service.publish.modbus import registers as R
 from service.commands import modbus_map
 
 REPO = Path(__file__).resolve().parents[2]

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from service.cli import main
-from service.store import Store
+from service.persistence.store import Store
 
 RECIPE = {"name": "disc", "number": 3, "version": "abc123", "quantity": "J", "nominal": 12.0, "lower": 8.0,
           "upper": 16.0, "coverage_factor": 2.0}

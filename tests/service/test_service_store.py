@@ -12,8 +12,8 @@ import pytest
 
 from measurement import Pendulum, Rig, identify, simulate_trace
 from service.cli import main
-from service.payload import dumps, result_payload
-from service.store import Store
+from service.publish.payload import dumps, result_payload
+from service.persistence.store import Store
 
 
 @pytest.fixture(scope="module")
@@ -121,7 +121,7 @@ def test_export_csv_json_and_trace(tmp_path, result, capsys):
     assert docs[0]["payload"]["uuid"] == m.uuid and docs[0]["payload"]["J"] == result[0].J
     trace_csv = tmp_path / "trace.csv"
     assert main(["export", "--state-dir", str(tmp_path), "--trace", m.uuid, "--out", str(trace_csv)]) == 0
-    from service.files import read_trace
+    from service.sources.files import read_trace
     t = read_trace(trace_csv)
     np.testing.assert_allclose(t.t, result[1].t, atol=1e-9)
     np.testing.assert_allclose(t.angle, result[1].angle, rtol=1e-11, atol=1e-15)
@@ -130,7 +130,7 @@ def test_export_csv_json_and_trace(tmp_path, result, capsys):
 def test_a_uuid_that_starts_with_digits_is_found_by_its_prefix(tmp_path, result, monkeypatch):
     import uuid as uuidlib
 
-    import service.store as store_module
+    import service.persistence.store as store_module
 
     fixed = uuidlib.UUID("12345678-9abc-4def-8123-456789abcdef")
     monkeypatch.setattr(store_module.uuidlib, "uuid4", lambda: fixed)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from service.cli import main
-from service.store import DB_NAME, Store
+from service.persistence.store import DB_NAME, Store
 
 from .conftest import appliance_doc
 

@@ -139,7 +139,7 @@ def test_setup_page_masks_secrets_and_reports_health(appliance_factory, tmp_path
 
 
 def test_a_missing_token_file_stops_the_start(tmp_path):
-    from service.config import parse_config
+    from service.config.appliance import parse_config
     from service.daemon import Appliance
 
     doc = appliance_doc(tmp_path / "state", web={**ON, "token_file": str(tmp_path / "absent")})
@@ -150,7 +150,7 @@ def test_a_missing_token_file_stops_the_start(tmp_path):
 
 
 def test_store_search_pages_and_filters(tmp_path):
-    from service.store import Store
+    from service.persistence.store import Store
 
     with Store(tmp_path) as store:
         for i in range(7):
@@ -173,7 +173,7 @@ def test_store_search_pages_and_filters(tmp_path):
 def test_a_taken_port_stops_the_start_with_a_clear_reason(tmp_path):
     import socket
 
-    from service.config import parse_config
+    from service.config.appliance import parse_config
     from service.daemon import Appliance
 
     with socket.socket() as taken:

@@ -8,7 +8,7 @@ import pytest
 
 from measurement.errors import InvalidInput, VisionError
 from measurement.vision import CameraConfig
-from service.camera_config import read_camera
+from service.config.camera import read_camera
 from service.cli import main
 
 from .conftest import RIG, camera_toml, write_toml

@@ -10,8 +10,8 @@ import pytest
 from measurement import identify
 from measurement.vision import MarkerRenderer
 from service.cli import main
-from service.files import read_rig
-from service.video import video_trace
+from service.sources.files import read_rig
+from service.sources.video import video_trace
 
 from .conftest import CAMERA, CONFIG, IMAGING, J_TRUE, MARKER, RIG, camera_toml, truth_swing, write_toml, write_video
 

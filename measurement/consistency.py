@@ -1,0 +1,261 @@
+"""Does the identified model hold across the record, and could another model explain it as well?
+
+A low residual on one record is not how a model is shown true: the same
+physics must give the same answer wherever it is looked at. Two checks turn
+that into an uncertainty of the model's form, beside the fit's statistical σ:
+
+* **Segments.** The final model is fitted again to each half of the record
+  (started from the whole fit, each half with its own initial state and
+  sensor zero). A model that holds gives the same ω_n in both halves within
+  their σ; a model that lacks an amplitude- or time-dependent effect does
+  not, and the whole-record value then lies wherever the compromise of its
+  errors put it. The scatter of the halves about the whole, beyond what
+  their σ explain, is a variance component of the model's form (a
+  method-of-moments estimate, as DerSimonian and Laird estimate the
+  between-study variance in "Meta-analysis in clinical trials", 1986).
+* **Competing explanations.** Where the discovery loop found models within
+  its BIC margin of the one it kept (another effect that explains the same
+  residual, or an effect not quite worth adding), the data do not
+  decisively separate them: their spread of ω_n, weighted by their BIC
+  weights (Burnham and Anderson, "Model Selection and Multimodel Inference",
+  ch. 4), is carried into the uncertainty and the models are named.
+
+A sensor-scale effect that moves ω_n by more than its own σ must also hold
+across the record: its parameters fitted in each half must agree
+(``effect_holds``), so that a sensor scale that is really an approximate
+restoring law is not bought with a wrong J.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+from scipy.special import erfc, gammaincc
+
+from .errors import IdentificationError
+from .fit import ModelFit, fit_model
+
+#: fewest full swings a segment must hold to be fitted on its own
+MIN_SEGMENT_SWINGS = 3.0
+#: two-sided p-value below which the halves' ω_n disagree (the model does not hold across the record)
+DISAGREE_P = 0.01
+#: p-value below which an effect's parameters fitted in the two halves disagree
+EFFECT_P = 1e-3
+
+
+def _num(v: float | None) -> float | None:
+    return None if v is None or not math.isfinite(v) else float(v)
+
+
+@dataclass(frozen=True)
+class SegmentCheck:
+    """The final model fitted to each half of the record.
+
+    omega_n / omega_n_std: per half, rad/s. z: |ω₁ − ω₂| over their combined
+    σ; p: its two-sided p-value. u: the model-form standard uncertainty of
+    ω_n (rad/s) from the halves' scatter about the whole record's value
+    beyond their own σ (0 when they scatter no more than that).
+    """
+
+    t_split: float
+    omega_n: tuple[float, ...]
+    omega_n_std: tuple[float, ...]
+    z: float
+    p: float
+    u: float
+
+    @property
+    def disagree(self) -> bool:
+        return self.p < DISAGREE_P
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"t_split": _num(self.t_split), "omega_n": [_num(w) for w in self.omega_n],
+                "omega_n_std": [_num(s) for s in self.omega_n_std], "z": _num(self.z), "p": _num(self.p),
+                "u": _num(self.u), "disagree": self.disagree}
+
+
+@dataclass(frozen=True)
+class Competitor:
+    """A model the data do not decisively separate from the one kept.
+
+    change: what differs from the kept model, in words; d_bic: its BIC
+    minus the kept model's (under the noise model); weight: its BIC weight
+    in its round; omega_n: its ω_n, rad/s; delta: minus the kept model's ω_n
+    in the same round, rad/s.
+    """
+
+    change: str
+    d_bic: float
+    weight: float
+    omega_n: float
+    delta: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"change": self.change, "d_bic": _num(self.d_bic),
+                "weight": _num(self.weight), "omega_n": _num(self.omega_n), "delta": _num(self.delta)}
+
+
+@dataclass(frozen=True)
+class ModelForm:
+    """The model-form part of ω_n's uncertainty: segments and competing explanations (rad/s)."""
+
+    segments: SegmentCheck | None
+    competitors: tuple[Competitor, ...]
+    u_segments: float
+    u_competitors: float
+
+    @property
+    def u(self) -> float:
+        return math.hypot(self.u_segments, self.u_competitors)
+
+    def ambiguous(self, omega_n_std: float) -> bool:
+        """Rival models within the margin spread ω_n by more than the fit's σ (rad/s) says."""
+        return self.u_competitors > omega_n_std
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"u": _num(self.u), "u_segments": _num(self.u_segments), "u_competitors": _num(self.u_competitors),
+                "segments": None if self.segments is None else self.segments.to_dict(),
+                "competitors": [c.to_dict() for c in self.competitors]}
+
+
+def _swings_in(theta: np.ndarray) -> float:
+    """Full swings in a stretch of the true angle (zero crossings / 2)."""
+    s = np.signbit(theta)
+    return float(np.count_nonzero(s[1:] != s[:-1])) / 2.0
+
+
+def halves(fit: ModelFit) -> tuple[slice, slice] | None:
+    """The two halves of the fitted samples, or None when either holds too few swings to be fitted alone."""
+    n = fit.n
+    cut = n // 2
+    theta = fit.extra["theta"]
+    first, second = slice(0, cut), slice(cut, n)
+    if min(_swings_in(theta[first]), _swings_in(theta[second])) < MIN_SEGMENT_SWINGS or min(cut, n - cut) < 30:
+        return None
+    return first, second
+
+
+def refit_segment(fit: ModelFit, part: slice, sigma: float) -> ModelFit:
+    """``fit``'s model refitted to the samples in ``part`` alone, started from ``fit``.
+
+    The initial state is the whole fit's swing at the segment's first sample;
+    the linear sensor terms (offset, drift...) start from their least-squares
+    values on the segment given that swing.
+    """
+    model = fit.model
+    t, y = fit.t[part], fit.y[part]
+    theta = fit.extra["theta"][part]
+    x0 = fit.x.copy()
+    x0[model.index("theta0")] = float(theta[0])
+    x0[model.index("omega0")] = float(fit.extra["omega"][part][0])
+    x0[model.n_dynamic:], *_ = np.linalg.lstsq(model.sensor_columns(t - t[0], theta), y - theta, rcond=None)
+    lo, hi = model.bounds()
+    return fit_model(model, t, y, sigma, x0=np.clip(x0, lo, hi), scales=fit.scales, max_step=fit.max_step,
+                     f_scale=fit.f_scale)
+
+
+def segment_fits(fit: ModelFit, sigma: float) -> tuple[float, list[ModelFit]] | None:
+    """(time of the split, the fits of both halves); None when the record is too short to split."""
+    parts = halves(fit)
+    if parts is None:
+        return None
+    try:
+        return float(fit.t[parts[1].start]), [refit_segment(fit, p, sigma) for p in parts]
+    except IdentificationError:
+        return None
+
+
+def check_segments(fit: ModelFit, sigma: float,
+                   fitted: tuple[float, list[ModelFit]] | None = None) -> SegmentCheck | None:
+    """ω_n of each half against the whole record's (None when the record cannot be split).
+
+    fitted: ``segment_fits(fit, sigma)`` when the caller has it.
+    """
+    fitted = segment_fits(fit, sigma) if fitted is None else fitted
+    if fitted is None:
+        return None
+    t_split, segs = fitted
+    w, s = fit.value("omega_n"), fit.stdev("omega_n")
+    ws = [f.value("omega_n") for f in segs]
+    ss = [f.stdev("omega_n") for f in segs]
+    sd = math.hypot(ss[0], ss[1])
+    z = abs(ws[0] - ws[1]) / sd if sd > 0 else math.inf
+    p = float(erfc(z / math.sqrt(2.0)))
+    # a half's estimate differs from the whole's by its own information's share: variance σ_h² − σ²
+    excess = [(wi - w) ** 2 - max(si**2 - s**2, 0.0) for wi, si in zip(ws, ss)]
+    u = math.sqrt(max(float(np.mean(excess)), 0.0))
+    return SegmentCheck(t_split, tuple(ws), tuple(ss), z, p, u)
+
+
+def effect_holds(fit: ModelFit, effect: str, sigma: float) -> tuple[bool, str, int]:
+    """Whether a sensor-scale ``effect`` in ``fit`` holds across the record; returns (holds, why, simulations).
+
+    A sensor's scale (gain, view) is a constant of the sensor: fitted in each
+    half of the record its parameters must agree (χ² of their difference). A
+    scale that changes with the swing's amplitude stands in for a restoring
+    law the model lacks (a bifilar suspension's is not m·g·S·sin θ), and
+    would buy a wrong ω_n. A record too short to split holds (nothing
+    contradicts it).
+    """
+    parts = halves(fit)
+    if parts is None:
+        return True, "the record is too short to fit its halves alone", 0
+    model = fit.model
+    eff = next(e for e in model.effects if e.name == effect)
+    try:
+        a, b = (refit_segment(fit, p, sigma) for p in parts)
+    except IdentificationError:
+        return True, "its halves could not be fitted alone", 0
+    sl = model.layout[effect]
+    d = a.x[sl] - b.x[sl]
+    cov = a.cov[sl, sl] + b.cov[sl, sl]
+    try:
+        chi2 = float(d @ np.linalg.solve(cov, d))
+    except np.linalg.LinAlgError:
+        chi2 = float(d @ np.linalg.pinv(cov) @ d)
+    p = float(gammaincc(d.size / 2.0, chi2 / 2.0))
+    words = ", ".join(f"{effect}.{q.name} {va:.4g} / {vb:.4g}" for q, va, vb in zip(eff.parameters, a.x[sl], b.x[sl]))
+    return p >= EFFECT_P, (f"a sensor's scale is constant, but the first / second half give {words} "
+                           f"(χ² {chi2:.1f} on {d.size}, p = {p:.2g})"), a.nfev + b.nfev
+
+
+def competitors(steps: Sequence[Any], margin: float) -> tuple[tuple[Competitor, ...], float]:
+    """Models within ``margin`` of BIC of the one each discovery round kept, and ω_n's spread over them (rad/s).
+
+    steps: the loop's ``DiscoveryStep``s, whose candidate tables carry each
+    fitted candidate's ω_n and the model's before the round. In a round that
+    added an effect, the others fitted within the margin are rival
+    explanations of the same residual; in the round that stopped, a
+    candidate that lowered BIC, but not by the margin, is an explanation the
+    data neither demand nor exclude. The spread is Σ w·(ω − ω_kept)² over
+    each round's BIC weights, rounds added up.
+    """
+    out: list[Competitor] = []
+    var = 0.0
+    for st in steps:
+        table = st.candidates
+        fitted = {k: v for k, v in table.items() if "omega_n" in v and not v.get("screened") and not v.get("rejected")}
+        if st.chosen is not None:
+            if st.chosen not in fitted:
+                continue
+            ref_bic, ref_w = fitted[st.chosen]["bic"], fitted[st.chosen]["omega_n"]
+            rivals = {k: v for k, v in fitted.items() if k != st.chosen and v["bic"] - ref_bic < margin}
+        else:
+            if st.omega_n_before is None:
+                continue
+            ref_bic, ref_w = st.bic_before, st.omega_n_before
+            rivals = {k: v for k, v in fitted.items() if v["bic"] - ref_bic < margin}
+        if not rivals:
+            continue
+        bics = np.array([ref_bic] + [v["bic"] for v in rivals.values()])
+        w = np.exp(-(bics - bics.min()) / 2.0)
+        w /= w.sum()
+        for (name, v), wi in zip(rivals.items(), w[1:]):
+            delta = v["omega_n"] - ref_w
+            var += float(wi) * delta**2
+            change = f"{name} instead of {st.chosen}" if st.chosen is not None else f"{name} added"
+            out.append(Competitor(change, v["bic"] - ref_bic, float(wi), v["omega_n"], delta))
+    return tuple(out), math.sqrt(var)

@@ -1,0 +1,323 @@
+"""Several releases of one object, one identification.
+
+Each release is identified on its own first (its window, noise, glitches,
+discovery and model form). The releases are then fitted jointly: the
+physics is shared (ω_n and the damping and stiffness laws: the union of the
+dynamic effects any release needed), the nuisance is per release (initial
+state, sensor zero, drift and other sensor terms). Releases at different
+amplitudes are how amplitude-dependent physics is told from a constant ω_n.
+
+The releases are then tested against the joint value: χ² of each release's
+own ω_n (with its combined uncertainty) about the joint one, the largest
+normalised deviation and the release it points to, and the largest
+normalised difference between two releases. When they scatter more than
+their uncertainties allow, the joint σ is scaled by the Birge ratio
+√(χ²/dof) (R. T. Birge, "The calculation of errors by the method of least
+squares", Phys. Rev. 40, 1932) and the result is flagged.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.special import gammaincc
+
+from . import flags as F
+from .effects import EFFECTS, resolve_effects
+from .errors import IdentificationError, InvalidInput
+from .fit import ModelFit, fit_model
+from .identification import Options, _blas, _effect_quantities, _inertia, identify
+from .model import STATE_PARAMS, Model
+from .noise import fit_noise
+from .result import IdentificationResult, Quantity, _jsonable, _num
+from .rig import Rig
+from .trace import Trace
+
+#: p-value of the releases' χ² below which they are inconsistent (flag releases_disagree)
+CONSISTENT_P = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class JointResult:
+    """The joint identification of several releases of one object. SI units; *_std are 1σ.
+
+    omega_n: the releases' ω_n (each fitted alone with the shared effects)
+    weighted by their combined uncertainties; omega_n_std: its σ;
+    omega_n_u: σ scaled by the Birge ratio when the releases scatter beyond
+    their uncertainties, and never below the releases' common model-form and
+    calibration terms. The damping laws are the joint fit's (all samples,
+    shared physics; its own ω_n is consistency.joint_fit). releases: each
+    release identified alone.
+    consistency: chi2, dof, p, the largest normalised deviation from the
+    joint value and its release, the largest normalised pairwise difference.
+    """
+
+    rig_kind: str
+    effects: tuple[str, ...]
+    omega_n: float
+    omega_n_std: float
+    omega_n_u: float
+    J: float | None
+    J_std: float | None
+    J_u: float | None
+    damping: dict[str, dict[str, Quantity]]
+    stiffness: dict[str, dict[str, Quantity]]
+    residual_rms: float
+    consistency: dict[str, Any]
+    flags: tuple[str, ...]
+    releases: tuple[IdentificationResult, ...]
+    baseline: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        declared = self.releases[0].declared_effects
+        return {
+            "joint": True, "rig_kind": self.rig_kind,
+            "J": _num(self.J), "J_std": _num(self.J_std), "J_u": _num(self.J_u),
+            "omega_n": _num(self.omega_n), "omega_n_std": _num(self.omega_n_std), "omega_n_u": _num(self.omega_n_u),
+            "declared_effects": list(declared), "effects": list(self.effects),
+            "added_effects": [e for e in self.effects if e not in declared],
+            "damping": {e: {k: q.to_dict() for k, q in ps.items()} for e, ps in self.damping.items()},
+            "stiffness": {e: {k: q.to_dict() for k, q in ps.items()} for e, ps in self.stiffness.items()},
+            "residual_rms": _num(self.residual_rms),
+            "baseline": _jsonable(self.baseline),
+            "consistency": _jsonable(self.consistency),
+            "flags": list(self.flags),
+            "releases": [r.to_dict() for r in self.releases],
+        }
+
+    def to_json(self) -> str:
+        import json
+        return json.dumps(self.to_dict(), ensure_ascii=False, allow_nan=False)
+
+    def report(self) -> str:
+        c = self.consistency
+        L = [f"[[Joint identification]] {len(self.releases)} releases of one object ({self.rig_kind} rig)",
+             f"    shared effects: {', '.join(self.effects) or '(none)'}; per release: initial state, zero offset, sensor terms",
+             "[[Releases]]  each alone: its own model (ω_n ± combined u), and the shared model (ω_n ± u, z against the joint)",
+             f"    {'source':<34}{'amplitude':>10}{'own ω_n':>12}{'u':>9}{'shared ω_n':>12}{'u':>9}{'z':>7}  own effects / flags"]
+        for r, w, u, z in zip(self.releases, c["omega_n"], c["u"], c["z"]):
+            uo = r.omega_n_u if r.omega_n_u is not None else r.omega_n_std
+            name = r.source if len(r.source) <= 33 else "…" + r.source[-32:]
+            L.append(f"    {name:<34}{r.reference_amplitude:>10.3g}{r.omega_n:>12.7g}{uo:>9.2g}{w:>12.7g}{u:>9.2g}{z:>+7.1f}  "
+                     f"{', '.join(r.effects)}" + (f" / {', '.join(r.flags)}" if r.flags else ""))
+        L.append("[[Result]]")
+        if self.J is not None:
+            L.append(f"    J            = {self.J:.7g} kg·m², σ {self.J_std:.2g}, combined u {self.J_u:.2g} kg·m²")
+        else:
+            L.append("    J            = n/a: the rig gives no stiffness (torsion) or mass·com_distance (compound)")
+        L.append(f"    omega_n      = {self.omega_n:.7g} rad/s, σ {self.omega_n_std:.2g}, combined u {self.omega_n_u:.2g} rad/s"
+                 " (the releases weighted by their whole uncertainty)")
+        jf = c["joint_fit"]
+        L.append(f"    joint fit    : ω_n {jf['omega_n']:.7g} ± {jf['omega_n_std']:.2g} rad/s (all samples, the laws below shared)")
+        for group in (self.damping, self.stiffness):
+            for eff, params in group.items():
+                for name, q in params.items():
+                    if q.value is not None:
+                        L.append(f"    {eff}.{name:<10} = {q}")
+        L.append("[[Consistency]]")
+        L.append(f"    χ² {c['chi2']:.2f} on {c['dof']} (p = {c['p']:.2g}); largest deviation {c['largest_z']:+.1f} σ "
+                 f"({c['largest_release']}); largest pairwise difference {c['pairwise_max']:.1f} σ")
+        L.append("    " + ("the releases agree with one ω_n within their uncertainties" if c["p"] >= CONSISTENT_P else
+                          f"the releases disagree beyond their uncertainties (flag releases_disagree): the joint σ is "
+                          f"scaled by the Birge ratio {c['birge_ratio']:.2f}; {c['largest_release']} departs most"))
+        L.append(f"[[Flags]] {', '.join(self.flags) if self.flags else 'none'}")
+        return "\n".join(L)
+
+
+def _shared_effects(results: Sequence[IdentificationResult], rig: Rig) -> tuple[str, ...]:
+    """The dynamic effects any release needed (a refinement replacing what it refines), in library order."""
+    names: set[str] = set()
+    for r in results:
+        names.update(n for n in r.effects if EFFECTS[n].role != "sensor")
+    for n in list(names):
+        if EFFECTS[n].refines in names:
+            names.discard(EFFECTS[n].refines)
+    return tuple(e.name for e in resolve_effects(names, rig))
+
+
+def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options = Options()) -> JointResult:
+    """Identify several releases of one object on ``rig`` jointly (see the module doc)."""
+    if len(traces) < 2:
+        raise InvalidInput(f"a joint identification needs at least 2 releases, got {len(traces)}")
+    results = [identify(tr, rig, options) for tr in traces]
+    with _blas().limit(limits=1, user_api="blas"):
+        return _joint(results, rig)
+
+
+def _joint(results: list[IdentificationResult], rig: Rig) -> JointResult:
+    shared = _shared_effects(results, rig)
+    models: list[Model] = []
+    fits: list[ModelFit] = []
+    for r in results:
+        sensor = tuple(n for n in r.effects if EFFECTS[n].role == "sensor")
+        model = Model.from_names(rig, shared + sensor)
+        t, y = r.arrays["t"], r.arrays["angle"]
+        # each release alone with the shared model: the start of the joint fit
+        fits.append(fit_model(model, t, y, r.noise_floor))
+        models.append(model)
+    dyn = [n for n in models[0].names[len(STATE_PARAMS):models[0].n_dynamic]]
+    n_shared = 1 + len(dyn)
+    weights = np.array([1.0 / max(f.residual_rms, 1e-12) for f in fits])
+    # start: ω_n and the laws averaged over the releases, each by its information
+    var_w = np.array([max(f.stdev("omega_n"), 1e-12) ** 2 for f in fits])
+    z0 = [float(np.sum([f.value("omega_n") for f in fits] / var_w) / np.sum(1 / var_w))]
+    for name in dyn:
+        vals = np.array([f.value(name) for f in fits])
+        z0.append(float(np.median(vals)))
+    blocks: list[tuple[int, int]] = []  # each release's own parameters in z
+    for m, f in zip(models, fits):
+        start = len(z0)
+        z0 += [f.value("theta0"), f.value("omega0")] + list(f.x[m.n_dynamic:])
+        blocks.append((start, len(z0)))
+    z0 = np.asarray(z0)
+    lo_all, hi_all = [0.0], [np.inf]
+    lo_m, hi_m = models[0].bounds()
+    lo_all += list(lo_m[len(STATE_PARAMS):models[0].n_dynamic])
+    hi_all += list(hi_m[len(STATE_PARAMS):models[0].n_dynamic])
+    for m in models:
+        lo, hi = m.bounds()
+        lo_all += [-np.inf, -np.inf] + list(lo[m.n_dynamic:])
+        hi_all += [np.inf, np.inf] + list(hi[m.n_dynamic:])
+    lo_all, hi_all = np.asarray(lo_all), np.asarray(hi_all)
+    z0 = np.clip(z0, lo_all, hi_all)
+    scales = [fits[0].scales[2]] + list(np.median([f.scales[3:m.n_dynamic] for f, m in zip(fits, models)], axis=0)) \
+        if dyn else [fits[0].scales[2]]
+    for m, f in zip(models, fits):
+        scales += [f.scales[0], f.scales[1]] + list(f.scales[m.n_dynamic:])
+    scales = np.asarray(scales)
+
+    def release_x(z: np.ndarray, i: int) -> np.ndarray:
+        m = models[i]
+        a, b = blocks[i]
+        x = np.empty(m.size)
+        x[0], x[1] = z[a], z[a + 1]
+        x[2] = z[0]
+        x[3:m.n_dynamic] = z[1:n_shared]
+        x[m.n_dynamic:] = z[a + 2:b]
+        return x
+
+    def release_residual(z: np.ndarray, i: int) -> np.ndarray:
+        x = release_x(z, i)
+        t = fits[i].t
+        th, _ = models[i].true_angle(x, t, fits[i].max_step)
+        return (models[i].measured(x, t - t[0], th) - fits[i].y) * weights[i]
+
+    def fun(z: np.ndarray) -> np.ndarray:
+        return np.concatenate([release_residual(z, i) for i in range(len(models))])
+
+    sizes = [f.n for f in fits]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+
+    def jac(z: np.ndarray) -> np.ndarray:
+        base = [release_residual(z, i) for i in range(len(models))]
+        J = np.zeros((offsets[-1], z.size))
+        for j in range(z.size):
+            h = 1e-7 * scales[j]
+            zp = z.copy()
+            zp[j] += h if zp[j] + h <= hi_all[j] else -h
+            step = zp[j] - z[j]
+            owners = range(len(models)) if j < n_shared else [k for k, (a, b) in enumerate(blocks) if a <= j < b]
+            for i in owners:
+                J[offsets[i]:offsets[i + 1], j] = (release_residual(zp, i) - base[i]) / step
+        return J
+
+    try:
+        sol = least_squares(fun, z0, jac=jac, bounds=(lo_all, hi_all), x_scale=scales, method="trf",
+                            ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=60)
+    except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
+        raise IdentificationError(f"the joint fit failed: {exc}") from exc
+    z = sol.x
+    Jm = sol.jac
+    r = sol.fun
+    # covariance: the sandwich with each release's own AR noise model (its residual's colour)
+    Js = Jm * scales
+    try:
+        inv = np.linalg.inv(Js.T @ Js)
+    except np.linalg.LinAlgError:
+        inv = np.linalg.pinv(Js.T @ Js)
+    middle = np.zeros_like(inv)
+    for i in range(len(models)):
+        sl = slice(offsets[i], offsets[i + 1])
+        noise = fit_noise(r[sl])
+        G = noise.colour_t(Js[sl])
+        middle += noise.innovation_var * (G.T @ G) * (sizes[i] / max(sizes[i] - z.size / len(models), 1))
+    cov = (inv @ middle @ inv) * np.outer(scales, scales)
+    w_fit = float(z[0])
+    s_fit = float(math.sqrt(max(cov[0, 0], 0.0)))
+
+    # the releases against the joint value, each fitted alone with the shared effects (the same
+    # model, so that a difference is the releases', not the models'), with its own fit σ and the
+    # model-form and calibration terms of its own identification
+    w_i = np.array([f.value("omega_n") for f in fits])
+    u_i = np.array([math.sqrt(f.stdev("omega_n") ** 2 + res.omega_n_std_model**2 + (res.omega_n_std_calibration or 0.0) ** 2)
+                    for f, res in zip(fits, results)])
+    # The joint ω_n weighs each release by its whole uncertainty, which the least squares over the
+    # samples cannot know: a release whose model does not hold across it (its model-form term)
+    # counts for less. The joint fit's own ω_n is reported beside it (joint_fit).
+    wts = 1.0 / u_i**2
+    w_joint = float(np.sum(wts * w_i) / np.sum(wts))
+    s_joint = float(1.0 / math.sqrt(np.sum(wts)))
+    zs = (w_i - w_joint) / u_i
+    dof = len(results) - 1
+    chi2 = float(np.sum(zs**2))
+    p = float(gammaincc(dof / 2.0, chi2 / 2.0))
+    k = int(np.argmax(np.abs(zs)))
+    pair = max(((abs(w_i[a] - w_i[b]) / math.hypot(u_i[a], u_i[b]), a, b)
+                for a in range(len(results)) for b in range(a + 1, len(results))), key=lambda v: v[0])
+    birge = math.sqrt(max(chi2 / dof, 1.0))
+    # what the releases share is not averaged away: their model-form and calibration terms
+    common = float(np.sum(wts * np.array([math.hypot(res.omega_n_std_model, res.omega_n_std_calibration or 0.0)
+                                          for res in results])) / np.sum(wts))
+    u_joint = max(s_joint * birge, common)
+    flags: list[str] = []
+    if p < CONSISTENT_P:
+        flags.append(F.RELEASES_DISAGREE)
+    for res in results:
+        for fl in res.flags:
+            if fl not in flags and fl != F.RELEASES_DISAGREE:
+                flags.append(fl)
+    consistency = {
+        "chi2": chi2, "dof": dof, "p": p, "birge_ratio": birge, "z": [float(v) for v in zs],
+        "omega_n": [float(v) for v in w_i], "u": [float(v) for v in u_i],
+        "largest_z": float(zs[k]), "largest_release": results[k].source,
+        "pairwise_max": float(pair[0]), "pairwise_releases": [results[pair[1]].source, results[pair[2]].source],
+        "joint_fit": {"omega_n": w_fit, "omega_n_std": s_fit},
+    }
+    # the shared laws, read through the first release's model (the same effects for all)
+    x0 = release_x(z, 0)
+    m0 = models[0]
+    idx = [0] + list(range(1, n_shared))
+    cov0 = np.zeros((m0.size, m0.size))
+    pos = [2] + list(range(3, m0.n_dynamic))
+    cov0[np.ix_(pos, pos)] = cov[np.ix_(idx, idx)]
+    shim = _SharedFit(m0, x0, cov0)
+    J = _inertia(rig, w_joint)
+    J_std = None if J is None else 2 * J * s_joint / w_joint
+    J_u = None if J is None else 2 * J * u_joint / w_joint
+    rms = float(math.sqrt(np.mean(np.concatenate([(r[offsets[i]:offsets[i + 1]] / weights[i]) ** 2
+                                                  for i in range(len(models))]))))
+    baseline = {"effects": list(results[0].declared_effects),
+                "omega_n": [res.baseline.omega_n for res in results]}
+    return JointResult(
+        rig_kind=rig.kind, effects=shared, omega_n=w_joint, omega_n_std=s_joint, omega_n_u=u_joint,
+        J=J, J_std=J_std, J_u=J_u,
+        damping=_effect_quantities(shim, rig, ("damping",)), stiffness=_effect_quantities(shim, rig, ("stiffness",)),
+        residual_rms=rms, consistency=consistency, flags=tuple(flags), releases=tuple(results), baseline=baseline,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class _SharedFit:
+    """The shared laws as a fit of the first release's model (what ``_effect_quantities`` reads)."""
+
+    model: Model
+    x: np.ndarray
+    cov: np.ndarray
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.sqrt(np.clip(np.diag(self.cov), 0.0, None))

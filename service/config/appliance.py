@@ -1,0 +1,736 @@
+"""The appliance configuration: one TOML file, validated with one-line errors.
+
+Every table and key is declared below (``SCHEMA``); an unknown key, a wrong
+type, a value out of range or a missing hardware setting raises
+``ConfigError`` naming the file, the table, the key and what was expected.
+docs/service.md shows the whole file; examples/appliance.toml is a
+commented example.
+
+Without a ``[hardware]`` table (or with ``--sim``) the appliance runs on the
+simulated rig described by ``[simulation]``.
+
+The angle sensor is the Modbus encoder (``[hardware.encoder]``) or a camera
+(``sensor = "camera"``, ``[hardware.camera]`` naming the V4L2 device and the
+camera file of docs/vision.md). Camera files are read and checked here, so a
+missing or malformed one is a configuration error naming both files.
+"""
+
+from __future__ import annotations
+
+import collections.abc
+import copy
+import dataclasses
+import difflib
+import math
+import os
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import UnionType
+from typing import Any, Mapping, Union
+
+from firmware_host import SequencerConfig
+from measurement import Options, Rig
+from measurement.effects import EFFECTS
+from measurement.errors import InvalidInput
+
+from drivers.errors import DriverConfigError
+from drivers.settings import (ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSettings, IndicatorSettings,
+                              SolenoidSettings)
+
+from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, demo_camera
+from service.errors import ConfigError
+from service.sources.files import read_rig, read_toml
+from service.publish.modbus.server import ModbusSettings, allowed_networks
+from service.publish.mqtt.client import MqttSettings
+from service.publish.modbus.registers import WORD_ORDERS
+from service.publish.web.settings import WebSettings
+
+REQUIRED = object()
+
+#: the angle sensors of ``[hardware] sensor``
+SENSORS = ("encoder", "camera")
+
+#: the rig simulated when ``[device] rig`` is not given (the demo rig of `moi demo`)
+DEFAULT_SIM_RIG = DEMO_RIG
+
+
+# --- the settings: each table of the file is one dataclass; its fields are the table's keys and defaults ----
+@dataclass(frozen=True)
+class DeviceSettings:
+    """``[device]``: the device id (an MQTT topic level), the store, the rig file, logging."""
+
+    id: str = "moi"
+    state_dir: str | None = None
+    rig: str | None = None
+    log_level: str = "info"
+    store_trace: bool = True
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """``[simulation]``: the simulated rig (SI units; see ``SCHEMA["simulation"]`` for each key)."""
+
+    inertia: float = DEMO_INERTIA
+    effects: Mapping[str, Mapping[str, float]] = field(default_factory=lambda: copy.deepcopy(DEMO_EFFECTS))
+    theta0: float = DEMO_THETA0
+    rate: float = 200.0
+    noise: float = 1e-4
+    bits: int = 17
+    time_scale: float = 1.0
+    seed: int | None = None
+    sensor: str = "encoder"
+    latency: float = 0.0002
+    camera: str | None = None        # camera file (resolved), None: the demo camera
+    camera_yaw_deg: float = 0.0
+    camera_config: Any = None        # the parsed camera file (CameraConfig) with sensor = "camera"
+    drop_rate: float = 0.0
+    crc_rate: float = 0.0
+    glitch_rate: float = 0.0
+
+    def __post_init__(self) -> None:
+        ts = self.time_scale
+        if not (isinstance(ts, (int, float)) and not isinstance(ts, bool) and 0 < ts <= MAX_TIME_SCALE):
+            raise InvalidInput(f"time_scale must be in (0, {MAX_TIME_SCALE:g}] simulated s per wall-clock s, got {ts!r}")
+        if self.sensor == "encoder" and ts > MAX_ENCODER_TIME_SCALE:
+            raise InvalidInput(
+                f"time_scale {ts:g} is above {MAX_ENCODER_TIME_SCALE:g}, the largest the simulated encoder keeps up "
+                f"with: its Modbus link answers some 500–1500 reads per wall-clock second, and a capture needs "
+                f"dozens of samples per swing (use time_scale <= {MAX_ENCODER_TIME_SCALE:g})")
+
+
+#: largest [simulation] time_scale: simulated seconds per wall-clock second
+MAX_TIME_SCALE = 1000.0
+
+#: largest time_scale with sensor = "encoder": the simulated Modbus link serves some 500–1500 reads per
+#: wall-clock second (bench/bench_encoder.py), about 30 samples per simulated second at 20× (some 35 per
+#: swing of the demo rig) on a busy 2-core host; at 50× it was 7
+MAX_ENCODER_TIME_SCALE = 20.0
+
+
+@dataclass(frozen=True)
+class RecipeSettings:
+    """``[recipes]``: the recipe directory (one TOML file per part type) and the recipe active at start."""
+
+    directory: str | None = None
+    active: str | None = None
+
+
+@dataclass(frozen=True)
+class CameraSettings:
+    """``[hardware.camera]``: the V4L2 device, the camera file (path and parsed content), the lost-marker limit."""
+
+    device: str | int
+    file: str
+    max_lost_time: float = 0.5
+    config: Any = None  # measurement.vision.CameraConfig (imported lazily: it loads OpenCV)
+
+
+@dataclass(frozen=True, kw_only=True)
+class HardwareSettings:
+    """``[hardware]``: the GPIO backend, the angle sensor and the device tables (checked by the drivers' settings)."""
+
+    gpio_backend: str | None = None
+    sensor: str = "encoder"
+    solenoid: Mapping[str, Any]
+    button: Mapping[str, Any] | None = None
+    indicator: Mapping[str, Any] | None = None
+    encoder: Mapping[str, Any] | None = None
+    camera: CameraSettings | None = None
+
+
+# --- the schema, derived from the settings dataclasses ------------------------------------------
+@dataclass(frozen=True)
+class Key:
+    kind: str  # str | int | float | bool | path | strlist | table | effects | pinlike | videodevice
+    default: Any = None
+    doc: str = ""
+    choices: tuple[Any, ...] | None = None
+    min: float | None = None
+    max: float | None = None
+    min_open: bool = False  # min is exclusive
+
+    def expected(self) -> str:
+        if self.choices:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        names = {"str": "a string", "path": "a path (string)", "int": "an integer", "float": "a number",
+                 "bool": "true or false", "strlist": "a list of strings", "table": "a table",
+                 "effects": "a table of effect = { parameter = value }",
+                 "pinlike": "a BCM pin number or a name like 'GPIO17'",
+                 "videodevice": "a video device path like '/dev/video0' or a device index >= 0"}
+        text = names[self.kind]
+        if self.min is not None and self.max is not None:
+            text += f" in {'(' if self.min_open else '['}{self.min:g}, {self.max:g}]"
+        elif self.min is not None:
+            text += f" {'>' if self.min_open else '>='} {self.min:g}"
+        return text
+
+
+def _kind(hint: Any) -> str:
+    """The schema kind of a settings field's type (``int | None`` → "int", ``int | str`` → "pinlike")."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)] if typing.get_origin(hint) in (Union, UnionType) \
+        else [hint]
+    if set(args) == {int, str}:
+        return "pinlike"
+    (t,) = args
+    origin = typing.get_origin(t) or t
+    if origin in (tuple, list):
+        return "strlist"
+    if origin in (dict, Mapping, collections.abc.Mapping) or dataclasses.is_dataclass(origin):
+        return "table"
+    return {bool: "bool", int: "int", float: "float", str: "str"}[origin]
+
+
+def _schema(cls: type, keys: Mapping[str, Mapping[str, Any]], *, extra: Mapping[str, Key] | None = None,
+            defaults: Mapping[str, Any] | None = None) -> dict[str, Key]:
+    """The table of ``cls``: one key per field named in ``keys`` (the field's doc and limits), in the field order.
+
+    The key's type and default come from the field (a field without default is required);
+    ``keys[name]`` adds the doc, choices, min/max and, where the type alone does not say it, the
+    kind ("path", "effects", "videodevice"). Every key of ``keys`` must be a field of ``cls``.
+    """
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    missing = set(keys) - set(fields)
+    assert not missing, f"{cls.__name__} has no field(s) {sorted(missing)}"
+    out: dict[str, Key] = dict(extra or {})
+    for name, f in fields.items():
+        if name not in keys:
+            continue
+        if defaults and name in defaults:
+            default = defaults[name]
+        elif f.default is not dataclasses.MISSING:
+            default = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            default = f.default_factory()
+        else:
+            default = REQUIRED
+        spec = dict(keys[name])
+        out[name] = Key(spec.pop("kind", None) or _kind(hints[name]), default, **spec)
+    return out
+
+
+def _doc(doc: str = "", **limits: Any) -> dict[str, Any]:
+    return {"doc": doc, **limits}
+
+
+def _sequencer_keys() -> dict[str, dict[str, Any]]:
+    docs = {
+        "pre_trigger": "capture before the release, s", "release_pulse": "solenoid pulse asked for, s",
+        "capture_duration": "capture after the release (at most), s",
+        "decay_threshold": "end the capture once the half peak-to-peak angle is below this, rad (0: off)",
+        "decay_window": "window of the decay test, s", "min_capture": "no decay test before this, s",
+        "sample_timeout": "no sample for this long → FAULT, s", "identify_timeout": "identification limit, s",
+        "min_samples": "fewer samples → FAULT",
+    }
+    # identify_in_worker is not a key: the daemon always identifies in a worker (poll must stay responsive)
+    return {f.name: _doc(docs[f.name], min=0) for f in dataclasses.fields(SequencerConfig)
+            if f.name != "identify_in_worker"}
+
+
+_PIN = _doc("BCM pin number or gpiozero pin name")
+
+SCHEMA: dict[str, dict[str, Key]] = {
+    "device": _schema(DeviceSettings, {
+        "id": _doc("device id: names the MQTT topics and Home Assistant entities"),
+        "state_dir": _doc("result store directory (default $STATE_DIRECTORY, else ./moi-state)", kind="path"),
+        "rig": _doc("rig TOML file (required with [hardware]; relative paths are relative to this file)", kind="path"),
+        "log_level": _doc("logging level", choices=("debug", "info", "warning", "error")),
+        "store_trace": _doc("keep the raw trace of every measurement in the store"),
+    }),
+    "sequencer": _schema(SequencerConfig, _sequencer_keys()),
+    "identification": _schema(Options, {
+        "discover": _doc("run the discovery loop"),
+        "candidates": _doc("effects the loop may add (default: all)"),
+        "min_swings": _doc("fewer full swings is an input error", min=0),
+        "bic_margin": _doc("an added effect must lower BIC by more than this", min=0),
+    }),
+    "hardware": _schema(HardwareSettings, {
+        "gpio_backend": _doc("gpiozero pin factory (lgpio on a Pi, mock for tests; default: gpiozero's)"),
+        "sensor": _doc("angle sensor: the Modbus encoder ([hardware.encoder]) or a camera ([hardware.camera])",
+                       choices=SENSORS),
+        "solenoid": _doc("[hardware.solenoid] pin, active_high, max_on_time"),
+        "button": _doc("[hardware.button] pin, pull_up, bounce_time"),
+        "indicator": _doc("[hardware.indicator] pin, kind, active_high"),
+        "encoder": _doc("[hardware.encoder]: drivers.encoder.EncoderConfig (port, device_id, baudrate, parity, "
+                        "register, registers, counts_per_turn, direction, zero, timeout, ...)"),
+        "camera": _doc("[hardware.camera] device, file, max_lost_time (required with sensor = \"camera\")"),
+    }),
+    # the GPIO tables: keys and defaults of the drivers' settings, which also check the values
+    "hardware.solenoid": _schema(SolenoidSettings, {
+        "pin": _PIN, "active_high": _doc("a high level energises the coil"),
+        "max_on_time": _doc(f"hard limit of one pulse, s (at most {ABSOLUTE_MAX_ON_TIME:g})"),
+    }),
+    "hardware.button": _schema(ButtonSettings, {
+        "pin": _PIN, "pull_up": _doc("pressed pulls the line low"),
+        "bounce_time": _doc("contact bounce suppression, s (at most 1)"),
+    }),
+    "hardware.indicator": _schema(IndicatorSettings, {
+        "pin": _PIN, "kind": _doc("", choices=INDICATOR_KINDS), "active_high": _doc(""),
+    }),
+    "hardware.camera": _schema(CameraSettings, {
+        "device": _doc("V4L2 capture device: a path like \"/dev/video0\" (better: a stable /dev/v4l/by-id/... link) "
+                       "or an index", kind="videodevice"),
+        "file": _doc("camera file: intrinsics, resolution and fps, marker radius and distance, optional [pose] "
+                     "(docs/vision.md); relative to this file", kind="path"),
+        "max_lost_time": _doc("no marker in the frames (lost or corrupt) for this long in a row → FAULT, s "
+                              "(at least 5 frames)", min=0, min_open=True),
+    }),
+    "simulation": _schema(SimulationSettings, {
+        "inertia": _doc("true J of the simulated part, kg·m²", min=0, min_open=True),
+        "effects": _doc("true damping: effect = { parameter = value }", kind="effects"),
+        "theta0": _doc("release angle, rad", min=0, max=3.0, min_open=True),
+        "rate": _doc("sample rate of the direct sensor, and the rate the simulated encoder is read at (at most: "
+                     "the link answers some 500–1500 reads per wall-clock second), Hz of simulated time",
+                     min=0, max=10000, min_open=True),
+        "noise": _doc("angle noise σ, rad", min=0),
+        "bits": _doc("encoder resolution, bits per turn (0: none)", min=0, max=32),
+        "time_scale": _doc(f"simulated seconds per wall-clock second (at most {MAX_ENCODER_TIME_SCALE:g} with "
+                           f"sensor = \"encoder\")", min=0, max=MAX_TIME_SCALE, min_open=True),
+        "seed": _doc("noise seed (default: random)"),
+        "sensor": _doc("\"encoder\": a simulated Modbus RTU encoder on a loopback socket read by the real encoder "
+                       "client; \"direct\": an in-process sensor sampling at rate (faster); \"camera\": a mock camera "
+                       "rendering the marker, read by the real camera sensor (keep time_scale = 1: frames are "
+                       "rendered in real time)", choices=("encoder", "direct", "camera")),
+        "latency": _doc("simulated encoder reply latency, s of real time", min=0, max=1),
+        "camera": _doc("camera file of the simulated camera (sensor = \"camera\"; default: the demo camera, 640×480 px "
+                       "at 100 frames/s, fx = 600 px, marker radius 0.10 m at 0.25 m); relative to this file",
+                       kind="path"),
+        "camera_yaw_deg": _doc("yaw of the simulated camera, degrees, within ±20 (estimated and corrected by the "
+                               "sensor)", min=-20, max=20),
+        "drop_rate": _doc("fraction of encoder replies (or camera frames) lost", min=0, max=1),
+        "crc_rate": _doc("fraction of encoder replies with a corrupted CRC", min=0, max=1),
+        "glitch_rate": _doc("fraction of encoder replies whose position is off by 1/128 turn although the CRC is "
+                            "right (a glitch the identification must catch)", min=0, max=1),
+    }),
+    "mqtt": _schema(MqttSettings, {
+        "host": _doc("broker host"),
+        "port": _doc("broker port", min=1, max=65535),
+        "prefix": _doc("topic prefix: topics are <prefix>/<device id>/..."),
+        "client_id": _doc("MQTT client id (default moi-<device id>)"),
+        "username": _doc(""),
+        "password": _doc("prefer password_file"),
+        "password_file": _doc("file holding the password (e.g. a systemd credential)", kind="path"),
+        "keepalive": _doc("s", min=5, max=3600),
+        "tls": _doc("connect with TLS"),
+        "ca_file": _doc("CA certificate(s) for the broker (default: the system's)", kind="path"),
+        "cert_file": _doc("client certificate (mutual TLS)", kind="path"),
+        "key_file": _doc("client key (mutual TLS)", kind="path"),
+        "tls_insecure": _doc("skip the broker host name check (testing only)"),
+        "reconnect_min": _doc("first reconnect delay, s", min=0, min_open=True),
+        "reconnect_max": _doc("longest reconnect delay, s", min=0, min_open=True),
+        "resend_after": _doc("re-send a result not acknowledged after this, s", min=0, min_open=True),
+        "window": _doc("results in flight (published, not yet acknowledged) at most", min=1, max=1000),
+        "home_assistant": _doc("publish Home Assistant discovery messages"),
+        "discovery_prefix": _doc("Home Assistant discovery prefix"),
+    }, extra={"enabled": Key("bool", True, "publish over MQTT (the table's presence enables it)")}),
+    "recipes": _schema(RecipeSettings, {
+        "directory": _doc("directory of the recipe files, one TOML file per part type (docs/service.md, Recipes); "
+                          "relative to this file", kind="path"),
+        "active": _doc("recipe active at start (name or number); the PLC (register recipe_select) or MQTT "
+                       "(cmd/recipe) may change it"),
+    }),
+    "modbus": _schema(ModbusSettings, {
+        "mode": _doc("Modbus TCP server or Modbus RTU slave on a serial line", choices=("tcp", "rtu")),
+        "host": _doc("TCP listen address"),
+        "port": _doc("TCP port (502 needs CAP_NET_BIND_SERVICE; 0: any free port)", min=0, max=65535),
+        "unit_id": _doc("Modbus unit (device) id answered", min=1, max=247),
+        "word_order": _doc("order of the two registers of a float32/uint32", choices=WORD_ORDERS),
+        "max_connections": _doc("TCP clients at once; one more closes the connection idle the longest", min=1, max=256),
+        "idle_timeout": _doc("close a TCP connection without a request for this long, s (0: never)", min=0),
+        "allow_from": _doc("TCP client addresses or networks allowed besides this machine, e.g. [\"192.168.10.20\", "
+                           "\"10.0.0.0/24\"] (empty: every client that reaches host)"),
+        "serial_port": _doc("RTU: serial device, e.g. /dev/ttyAMA0"),
+        "baudrate": _doc("RTU baud rate", min=300, max=4_000_000),
+        "parity": _doc("RTU parity", choices=("N", "E", "O")),
+        "stopbits": _doc("RTU stop bits", choices=(1, 2)),
+        "bytesize": _doc("RTU data bits", choices=(7, 8)),
+    }, extra={"enabled": Key("bool", True, "serve the registers")}),
+    "web": _schema(WebSettings, {
+        "host": _doc("listen address: 127.0.0.1 this machine only, 0.0.0.0 every interface (the LAN)"),
+        "port": _doc("TCP port (0: any free port)", min=0, max=65535),
+        "token_file": _doc("file holding the password/token every action (Measure, Abort) needs (default: "
+                           "web-token in the state directory, made with a random token on first start)", kind="path"),
+        "page_size": _doc("measurements per history page", min=1, max=500),
+        "max_connections": _doc("browser connections at once; one more is closed at once", min=1, max=512),
+        "request_timeout": _doc("close a connection that sent no complete request for this long, s", min=0,
+                                min_open=True, max=3600),
+    }, extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
+}
+
+#: tables that are plain key/value tables of SCHEMA (the others are sub-tables)
+TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus", "web",
+              "recipes")
+
+
+# --- the validated configuration ----------------------------------------------------------------
+@dataclass(frozen=True)
+class Config:
+    """The whole validated configuration (SI units)."""
+
+    source: str                      # the file it came from ("<defaults>" when none)
+    device_id: str
+    state_dir: Path
+    log_level: str
+    store_trace: bool
+    rig: Rig
+    rig_path: str | None
+    simulated: bool
+    simulation: SimulationSettings
+    hardware: HardwareSettings | None
+    sequencer: SequencerConfig
+    identification: Options
+    mqtt: MqttSettings | None        # None: MQTT off
+    modbus: ModbusSettings | None    # None: Modbus off
+    web: WebSettings | None          # None: no web page
+    document: Mapping[str, Any]      # the parsed TOML, stored with every measurement
+    recipes: Any = None              # service.parts.recipes.RecipeBook (every recipe of [recipes] directory, checked)
+    active_recipe: str | None = None  # [recipes] active
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary of what the daemon runs with (passwords left out)."""
+        def clean(obj: Any) -> Any:
+            if obj is None:
+                return None
+            d = dataclasses.asdict(obj)
+            for secret in ("password",):
+                if d.get(secret):
+                    d[secret] = "***"
+            return d
+        return {
+            "source": self.source, "device_id": self.device_id, "state_dir": str(self.state_dir),
+            "rig_path": self.rig_path, "rig": self.rig.to_dict(), "simulated": self.simulated,
+            "simulation": clean(self.simulation) if self.simulated else None,
+            "hardware": clean(self.hardware), "sequencer": clean(self.sequencer),
+            "identification": clean(self.identification), "mqtt": clean(self.mqtt), "modbus": clean(self.modbus),
+            "recipes": None if self.recipes is None else {
+                "directory": self.recipes.directory, "active": self.active_recipe,
+                "recipes": [{"name": r.name, "number": r.number, "version": r.version, "path": r.path}
+                            for r in self.recipes.recipes]},
+            "web": clean(self.web),
+        }
+
+
+# --- validation ------------------------------------------------------------------------------------
+class _Checker:
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, table: str, key: str | None, message: str) -> ConfigError:
+        where = f"[{table}]" + (f" {key}" if key else "")
+        return ConfigError(f"{self.source}: {where}: {message}")
+
+    def table(self, name: str, doc: Any, schema: Mapping[str, Key]) -> dict[str, Any]:
+        if not isinstance(doc, Mapping):
+            raise self.fail(name, None, f"expected a table, got {type(doc).__name__} {doc!r}")
+        unknown = [k for k in doc if k not in schema]
+        if unknown:
+            k = unknown[0]
+            close = difflib.get_close_matches(k, list(schema), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else f"; expected one of: {', '.join(schema)}"
+            raise self.fail(name, None, f"unknown key {k!r}{hint}")
+        out: dict[str, Any] = {}
+        for key, spec in schema.items():
+            if key not in doc:
+                if spec.default is REQUIRED:
+                    raise self.fail(name, key, f"missing; expected {spec.expected()}"
+                                    + (f" ({spec.doc})" if spec.doc else ""))
+                out[key] = spec.default
+                continue
+            out[key] = self.value(name, key, doc[key], spec)
+        return out
+
+    def value(self, table: str, key: str, v: Any, spec: Key) -> Any:
+        bad = self.fail(table, key, f"expected {spec.expected()}, got {v!r}")
+        k = spec.kind
+        if k in ("str", "path"):
+            if not isinstance(v, str) or (k == "path" and not v):
+                raise bad
+        elif k == "pinlike":
+            pass  # checked with the rest of its table by the driver's settings (drivers.settings.check_pin)
+        elif k == "videodevice":
+            if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0) or v == "":
+                raise bad
+            if isinstance(v, str) and v.isdigit():
+                v = int(v)  # "0": the index, not a file named 0
+        elif k == "bool":
+            if not isinstance(v, bool):
+                raise bad
+        elif k == "int":
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise bad
+        elif k == "float":
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise bad
+            v = float(v)
+        elif k == "strlist":
+            if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+                raise bad
+            v = tuple(v)
+        elif k == "table":
+            if not isinstance(v, Mapping):
+                raise bad
+            v = dict(v)
+        elif k == "effects":
+            v = self.effects(table, key, v)
+        if spec.choices is not None and v not in spec.choices:
+            raise bad
+        if k in ("int", "float"):
+            if spec.min is not None and (v < spec.min or (spec.min_open and v == spec.min)):
+                raise bad
+            if spec.max is not None and v > spec.max:
+                raise bad
+        return v
+
+    def effects(self, table: str, key: str, v: Any) -> dict[str, dict[str, float]]:
+        if not isinstance(v, Mapping):
+            raise self.fail(table, key, f"expected a table of effect = {{ parameter = value }}, got {v!r}")
+        out: dict[str, dict[str, float]] = {}
+        for name, params in v.items():
+            if name not in EFFECTS:
+                raise self.fail(table, key, f"unknown effect {name!r}; expected one of {', '.join(EFFECTS)}")
+            if not isinstance(params, Mapping) or not params:
+                raise self.fail(table, key, f"{name}: expected {{ parameter = value }}, e.g. viscous = {{ c = 1.5e-4 }}")
+            vals: dict[str, float] = {}
+            for p, x in params.items():
+                if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                    raise self.fail(table, key, f"{name}.{p}: expected a number, got {x!r}")
+                vals[str(p)] = float(x)
+            out[str(name)] = vals
+        return out
+
+
+def _resolve(base: Path, p: str | None) -> str | None:
+    if p is None:
+        return None
+    q = Path(os.path.expanduser(p))
+    return str(q if q.is_absolute() else (base / q))
+
+
+def default_state_dir(environ: Mapping[str, str] | None = None) -> Path:
+    """$STATE_DIRECTORY (set by systemd's StateDirectory=), else ./moi-state."""
+    env = os.environ if environ is None else environ
+    sd = env.get("STATE_DIRECTORY")
+    if sd:
+        return Path(sd.split(":")[0])
+    return Path("moi-state")
+
+
+def load_config(path: str | os.PathLike | None, *, sim: bool = False, state_dir: str | None = None,
+                environ: Mapping[str, str] | None = None) -> Config:
+    """Read and validate the configuration. ``path`` None: all defaults (simulated rig).
+
+    sim: force the simulated rig even when [hardware] is configured (the
+    hardware table is still validated). state_dir: overrides [device] state_dir.
+    """
+    if path is None:
+        doc: dict[str, Any] = {}
+        source = "<defaults>"
+        base = Path.cwd()
+    else:
+        doc = read_toml(path, "config file")
+        source = str(path)
+        base = Path(path).resolve().parent
+    return parse_config(doc, source=source, base=base, sim=sim, state_dir=state_dir, environ=environ)
+
+
+def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path | None = None, sim: bool = False,
+                 state_dir: str | None = None, environ: Mapping[str, str] | None = None) -> Config:
+    c = _Checker(source)
+    base = base or Path.cwd()
+    unknown = [t for t in doc if t not in TOP_TABLES]
+    if unknown:
+        t = unknown[0]
+        close = difflib.get_close_matches(t, TOP_TABLES, n=1)
+        hint = f" (did you mean [{close[0]}]?)" if close else f"; expected tables: {', '.join(f'[{x}]' for x in TOP_TABLES)}"
+        kind = "table" if isinstance(doc[t], Mapping) else "top-level key"
+        raise ConfigError(f"{source}: unknown {kind} {t!r}{hint}")
+
+    dev = c.table("device", doc.get("device", {}), SCHEMA["device"])
+    if not dev["id"] or any(ch in dev["id"] for ch in "/#+ ") or len(dev["id"]) > 64:
+        raise c.fail("device", "id", f"expected 1–64 characters without '/', '#', '+' or spaces (it is an MQTT topic level), got {dev['id']!r}")
+    seq_doc = c.table("sequencer", doc.get("sequencer", {}), SCHEMA["sequencer"])
+    try:
+        seq_cfg = SequencerConfig(**seq_doc, identify_in_worker=True)
+    except InvalidInput as exc:
+        raise ConfigError(f"{source}: [sequencer]: {exc}") from None
+    ident = c.table("identification", doc.get("identification", {}), SCHEMA["identification"])
+    if ident["candidates"] is not None:
+        for name in ident["candidates"]:
+            if name not in EFFECTS:
+                raise c.fail("identification", "candidates", f"unknown effect {name!r}; expected names from {', '.join(EFFECTS)}")
+    options = Options(**ident)
+
+    hardware = None
+    if "hardware" in doc:
+        hw = c.table("hardware", doc["hardware"], SCHEMA["hardware"])
+        sol = _device_table(c, "hardware.solenoid", hw["solenoid"], SolenoidSettings)
+        btn = _device_table(c, "hardware.button", hw["button"], ButtonSettings)
+        ind = _device_table(c, "hardware.indicator", hw["indicator"], IndicatorSettings)
+        enc = hw["encoder"]
+        if hw["sensor"] == "encoder":
+            if enc is None:
+                raise c.fail("hardware", "encoder", "missing: sensor = \"encoder\" needs a [hardware.encoder] table "
+                              "(port, device id, register, counts per turn)")
+            _check_encoder_keys(c, enc)
+        camera = None
+        if hw["camera"] is not None:
+            cam = c.table("hardware.camera", hw["camera"], SCHEMA["hardware.camera"])
+            if hw["sensor"] == "camera":
+                file = _resolve(base, cam["file"])
+                camera = CameraSettings(device=cam["device"], file=file, max_lost_time=cam["max_lost_time"],
+                                        config=_read_camera(c, "hardware.camera", "file", file))
+        elif hw["sensor"] == "camera":
+            raise c.fail("hardware", "camera", "missing: sensor = \"camera\" needs a [hardware.camera] table "
+                          "(device = \"/dev/video0\", file = the camera file)")
+        hardware = HardwareSettings(gpio_backend=hw["gpio_backend"], sensor=hw["sensor"], solenoid=sol, button=btn,
+                                    indicator=ind, encoder=enc, camera=camera)
+
+    sim_doc = c.table("simulation", doc.get("simulation", {}), SCHEMA["simulation"])
+    sim_doc["camera"] = _resolve(base, sim_doc["camera"])
+    if sim_doc["sensor"] == "camera":
+        sim_doc["camera_config"] = _read_camera(c, "simulation", "camera", sim_doc["camera"])
+    try:
+        simulation = SimulationSettings(**sim_doc)
+    except InvalidInput as exc:
+        raise ConfigError(f"{source}: [simulation]: {exc}") from None
+    simulated = sim or hardware is None
+
+    rig_path = _resolve(base, dev["rig"])
+    if rig_path is not None:
+        try:
+            rig = read_rig(rig_path)
+        except InvalidInput as exc:
+            raise ConfigError(f"{source}: [device] rig: {exc}") from None
+    elif not simulated:
+        raise c.fail("device", "rig", "missing: a rig file (kind, stiffness or mass/com_distance, declared effects) "
+                      "is required with [hardware]")
+    else:
+        rig = DEMO_RIG
+    if simulated:
+        try:
+            from measurement import Pendulum
+            # resolves the effects on this rig and checks their parameter names
+            Pendulum(rig, simulation.inertia, simulation.effects).parameter_vector(simulation.theta0)
+        except InvalidInput as exc:
+            raise ConfigError(f"{source}: [simulation]: {exc}") from None
+
+    mqtt = None
+    if "mqtt" in doc:
+        m = c.table("mqtt", doc["mqtt"], SCHEMA["mqtt"])
+        if m.pop("enabled"):
+            for k in ("password_file", "ca_file", "cert_file", "key_file"):
+                m[k] = _resolve(base, m[k])
+            if m["password"] is not None and m["password_file"] is not None:
+                raise c.fail("mqtt", "password", "give password or password_file, not both")
+            if (m["password"] is not None or m["password_file"] is not None) and m["username"] is None:
+                raise c.fail("mqtt", "username", "missing: a password needs a username")
+            if (m["cert_file"] is None) != (m["key_file"] is None):
+                raise c.fail("mqtt", "cert_file", "give both cert_file and key_file for mutual TLS, or neither")
+            if not m["tls"] and any(m[k] for k in ("ca_file", "cert_file", "key_file")):
+                raise c.fail("mqtt", "tls", "ca_file/cert_file/key_file are set but tls = false")
+            if m["reconnect_max"] < m["reconnect_min"]:
+                raise c.fail("mqtt", "reconnect_max", "must be >= reconnect_min")
+            if not m["prefix"].strip("/") or any(ch in m["prefix"] for ch in "#+"):
+                raise c.fail("mqtt", "prefix", f"expected topic levels without '#' or '+', got {m['prefix']!r}")
+            mqtt = MqttSettings(**m)
+
+    modbus = None
+    mb = c.table("modbus", doc.get("modbus", {}), SCHEMA["modbus"])
+    if mb.pop("enabled"):
+        if mb["mode"] == "rtu" and not mb["serial_port"]:
+            raise c.fail("modbus", "serial_port", "missing: mode = \"rtu\" needs the serial device, e.g. /dev/ttyAMA0")
+        mb["allow_from"] = tuple(mb["allow_from"] or ())
+        try:
+            allowed_networks(mb["allow_from"])
+        except ValueError as exc:
+            raise c.fail("modbus", "allow_from", str(exc)) from None
+        modbus = ModbusSettings(**mb)
+
+    from service.parts.recipes import RecipeBook
+    rc = c.table("recipes", doc.get("recipes", {}), SCHEMA["recipes"])
+    book = RecipeBook.load(_resolve(base, rc["directory"]))  # RecipeError: one line naming the recipe file
+    if rc["active"] is not None:
+        try:
+            book.find(rc["active"])
+        except ConfigError as exc:
+            raise c.fail("recipes", "active", str(exc)) from None
+    for r in book.recipes:
+        r.check_rig(rig)  # the quantity must be one the rig it measures with can give
+
+    web = None
+    w = c.table("web", doc.get("web", {}), SCHEMA["web"])
+    if w.pop("enabled"):
+        w["token_file"] = _resolve(base, w["token_file"])
+        web = WebSettings(**w)
+
+    sd = state_dir or _resolve(base, dev["state_dir"])
+    return Config(
+        source=source, device_id=dev["id"],
+        state_dir=Path(sd) if sd else default_state_dir(environ),
+        log_level=dev["log_level"], store_trace=dev["store_trace"],
+        rig=rig, rig_path=rig_path, simulated=simulated, simulation=simulation, hardware=hardware,
+        sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, web=web, document=dict(doc),
+        recipes=book, active_recipe=rc["active"],
+    )
+
+
+def _device_table(c: _Checker, table: str, doc: Any, settings: type) -> dict[str, Any] | None:
+    """A GPIO device table (None when absent), its values checked by the driver's settings dataclass."""
+    if doc is None:
+        return None
+    values = c.table(table, doc, SCHEMA[table])
+    try:
+        settings(**values)
+    except DriverConfigError as exc:
+        raise c.fail(table, None, str(exc)) from None
+    return values
+
+
+def _check_encoder_keys(c: _Checker, enc: Mapping[str, Any]) -> None:
+    """[hardware.encoder] is the encoder driver's own settings table: let the driver check it."""
+    from drivers.encoder import EncoderConfig
+
+    try:
+        EncoderConfig.from_dict(dict(enc))
+    except DriverConfigError as exc:
+        raise c.fail("hardware.encoder", None, str(exc)) from None
+
+
+def _read_camera(c: _Checker, table: str, key: str, path: str | None) -> Any:
+    """The camera file at ``path`` (None: the demo camera) as a ``CameraConfig``;
+    a missing or malformed file is a one-line error naming the config file, the key and the camera file."""
+    from .camera import read_camera
+    if path is None:
+        return demo_camera()
+    try:
+        return read_camera(path)
+    except InvalidInput as exc:  # InputFileError (not found, not TOML) or VisionError (naming the file)
+        raise c.fail(table, key, str(exc)) from None
+
+
+def reference_markdown() -> str:
+    """The configuration reference (the generated part of docs/service.md): every table and key."""
+    L = ["| key | type | default | meaning |", "|---|---|---|---|"]
+    out: list[str] = []
+    for table, keys in SCHEMA.items():
+        out.append(f"**[{table}]**")
+        out.append("")
+        out += L
+        for k, spec in keys.items():
+            if spec.default is REQUIRED:
+                default = "**required**"
+            elif spec.default is None:
+                default = "–"
+            elif isinstance(spec.default, bool):
+                default = f"`{str(spec.default).lower()}`"
+            elif isinstance(spec.default, dict):
+                default = ", ".join(f"{e} {p}" for e, p in spec.default.items())
+            else:
+                default = f"`{spec.default!r}`".replace("'", '"') if isinstance(spec.default, str) else f"`{spec.default}`"
+            kind = {"pinlike": "int or str", "videodevice": "str or int", "strlist": "list of str", "effects": "table",
+                    "path": "path"}.get(spec.kind, spec.kind)
+            doc = spec.doc + (f" ({', '.join(repr(c) for c in spec.choices)})" if spec.choices else "")
+            out.append(f"| `{k}` | {kind} | {default} | {doc.replace('|', '/')} |")
+        out.append("")
+    return "\n".join(out)

@@ -1,0 +1,132 @@
+"""`moi run --check`: what the configuration file cannot say by itself, checked before the daemon
+starts: GPIO pins that exist and are used once, files that can be read, the GPIO backend, the
+serial port or camera, and ports that can be bound. Every problem is one sentence."""
+
+from __future__ import annotations
+
+import importlib
+import os
+import socket
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .appliance import Config
+
+#: gpiozero pin factory name → the module it needs
+_BACKEND_MODULES = {"lgpio": "lgpio", "rpigpio": "RPi.GPIO", "pigpio": "pigpio", "native": None, "mock": None}
+
+
+@dataclass(frozen=True)
+class Check:
+    what: str
+    ok: bool
+    detail: str
+
+    def line(self) -> str:
+        return f"{'ok     ' if self.ok else 'PROBLEM'}  {self.what}: {self.detail}"
+
+
+def pin_problems(config: Config) -> list[str]:
+    """The GPIO pins of [hardware]: each must be a GPIO of a Raspberry Pi header and be used once
+    (gpiozero would otherwise fail at start with a traceback)."""
+    hw = config.hardware
+    if hw is None:
+        return []
+    from gpiozero.pins.mock import MockFactory  # only the board's pin table: no hardware is touched
+
+    board = MockFactory().board_info
+    problems: list[str] = []
+    seen: dict[str, str] = {}
+    for device in ("solenoid", "button", "indicator"):
+        table = getattr(hw, device)
+        if not table or "pin" not in table:
+            continue
+        spec = table["pin"]
+        found = [info for _, info in board.find_pin(spec)]
+        if not found or not str(found[0].name).startswith("GPIO"):
+            problems.append(f"[hardware.{device}] pin {spec!r} is not a GPIO pin of the Raspberry Pi header "
+                            "(expected a BCM number 0–27 or a name like 'GPIO17' or 'BOARD11')")
+            continue
+        name = str(found[0].name)
+        if name in seen:
+            problems.append(f"[hardware.{device}] pin {spec!r} is {name}, already the {seen[name]}'s pin")
+        seen[name] = device
+    return problems
+
+
+def _readable(path: str | None, what: str) -> Check | None:
+    if not path:
+        return None
+    p = Path(path)
+    if not p.is_file():
+        return Check(what, False, f"{path} does not exist or is not a file")
+    if not os.access(p, os.R_OK):
+        return Check(what, False, f"{path} is not readable by this user")
+    return Check(what, True, str(path))
+
+
+def _bindable(host: str, port: int, what: str) -> Check:
+    if port == 0:
+        return Check(what, True, f"{host}: any free port")
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+        with socket.socket(infos[0][0], socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            s.bind(infos[0][4])
+    except OSError as exc:
+        return Check(what, False, f"cannot listen on {host}:{port}: {exc.strerror or exc} (a running daemon?)")
+    return Check(what, True, f"{host}:{port} free")
+
+
+def check_config(config: Config) -> list[Check]:
+    """Every check of the configuration and of the environment it names."""
+    checks: list[Check] = [Check("configuration", True, f"{config.source} parsed")]
+    checks += [Check("GPIO pins", False, p) for p in pin_problems(config)]
+    hw = config.hardware
+    if hw is not None and not config.simulated:
+        if not pin_problems(config):
+            checks.append(Check("GPIO pins", True, "each a GPIO of the header, each used once"))
+        backend = hw.gpio_backend or os.environ.get("GPIOZERO_PIN_FACTORY")
+        module = _BACKEND_MODULES.get(backend or "lgpio", backend)
+        if module:
+            try:
+                importlib.import_module(module)
+                checks.append(Check("GPIO backend", True, f"{backend or 'lgpio'} ({module} importable)"))
+            except Exception as exc:  # an import of a hardware library may fail in many ways
+                checks.append(Check("GPIO backend", False, f"{backend or 'lgpio'}: cannot import {module} "
+                                    f"({type(exc).__name__}: {exc}); on a Pi: pip install 'moi[pi]'"))
+        if hw.sensor == "encoder" and hw.encoder:
+            port = str(hw.encoder.get("port", ""))
+            if port and "://" not in port:
+                checks.append(Check("encoder serial port", Path(port).exists(),
+                                    port + (" present" if Path(port).exists() else " does not exist")))
+        if hw.sensor == "camera" and hw.camera is not None:
+            dev = hw.camera.device
+            path = Path(f"/dev/video{dev}") if isinstance(dev, int) else Path(str(dev))
+            checks.append(Check("camera", path.exists(), f"{path}" + (" present" if path.exists() else " does not exist")))
+    m = config.mqtt
+    if m is not None:
+        for path, what in ((m.password_file, "MQTT password_file"), (m.ca_file, "MQTT ca_file"),
+                           (m.cert_file, "MQTT cert_file"), (m.key_file, "MQTT key_file")):
+            c = _readable(path, what)
+            if c is not None:
+                checks.append(c)
+    mb = config.modbus
+    if mb is not None:
+        if mb.mode == "tcp":
+            checks.append(_bindable(mb.host, mb.port, "Modbus TCP port"))
+        elif mb.serial_port and "://" not in mb.serial_port:
+            ok = Path(mb.serial_port).exists()
+            checks.append(Check("Modbus RTU port", ok, mb.serial_port + (" present" if ok else " does not exist")))
+    web: Any = getattr(config, "web", None)
+    if web is not None:
+        checks.append(_bindable(web.host, web.port, "web page port"))
+        c = _readable(web.token_file, "web token_file")
+        if c is not None:
+            checks.append(c)
+    state = Path(config.state_dir)
+    parent = state if state.exists() else next((p for p in state.parents if p.exists()), Path("/"))
+    writable = os.access(parent, os.W_OK)
+    checks.append(Check("state directory", writable, f"{state}" + ("" if writable else f": {parent} is not writable")))
+    return checks

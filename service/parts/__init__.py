@@ -1,0 +1,1 @@
+"""Parts: recipes (part types), their verdicts and statistical process control."""

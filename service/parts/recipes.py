@@ -1,0 +1,415 @@
+"""Recipes (part types) and the parts measured with them.
+
+A recipe is one TOML file per part type in the configuration's recipe
+directory (``[recipes] directory``)::
+
+    [recipe]
+    name = "rotor-A12"            # unique; names its SPC topic and chart
+    number = 12                   # 1…65535: what the PLC writes to register recipe_select
+    description = "rotor A, steel"   # optional
+    quantity = "J"                # J | J_object (J − tare) | J_object_axis (own axis), as the rig defines it
+    nominal = 0.0125              # kg·m²
+    tolerance = 1.0e-4            # ± kg·m²   (or tolerance_percent = 0.8, of the nominal)
+    releases = 3                  # releases per part (the part's result combines them)
+    rig = "rig-A.toml"            # optional: the rig file for this part type (relative to this file)
+    declared = ["viscous"]        # optional: the declared model (default: the rig's)
+
+    [decision]                    # optional
+    rule = "guard_band"           # guard_band (ISO 14253-1) | simple
+    uncertain = "NOK"             # guard band: verdict when conformance is not proven (NOK | INVALID)
+    coverage_factor = 2.0         # U = k·u_c
+
+    [quality]                     # optional: when a result is INVALID
+    invalid_flags = ["unmodeled_residual", "fit_not_converged", "calibration_due", "negative_inertia"]
+    max_J_std = 5.0e-6            # largest 1σ of the quantity, kg·m²   (or max_J_std_percent)
+    min_swings = 3.0              # fewest full swings in the fitted window
+    consistency_limit = 3.0       # |z| above which releases disagree
+    min_valid_releases = 2        # fewest usable releases for a part verdict (default: releases − 1, at least 1)
+
+The decision rule and the combination of releases are
+``measurement.verdict``'s (documented there). The recipe version is the
+SHA-256 of the file's bytes as read (first 16 hex digits): every stored
+measurement carries it, so a verdict can be traced to the exact recipe.
+
+A part is identified by its serial number (``part_id``, up to
+``PART_ID_LENGTH`` ASCII characters), written by the PLC or carried by the
+MQTT measure command. ``PartTracker`` counts the releases of the open part:
+the same part ID and recipe continue the part until it has ``releases``
+releases; a different part ID or recipe starts a new part (an unfinished part
+is reported as abandoned in the log and in the next payload's
+``release.abandoned``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import uuid as uuidlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from measurement import Rig
+from measurement.errors import InvalidInput
+from measurement.verdict import (QUANTITIES, RULES, PartResult, QualityRules, Reading,
+                                 Specification, combine, judge_release)
+
+from service.errors import ConfigError
+from service.sources.files import read_rig, read_text
+
+log = logging.getLogger("moi.recipes")
+
+#: characters of a part ID (the Modbus block holds 2 per register)
+PART_ID_LENGTH = 20
+
+
+class RecipeError(ConfigError):
+    """A recipe file is unusable, or a recipe that does not exist was asked for."""
+
+
+def check_part_id(text: str) -> str:
+    """A part ID as stored: printable ASCII, at most PART_ID_LENGTH characters, no surrounding blanks."""
+    if not isinstance(text, str):
+        raise InvalidInput(f"part_id must be a string, got {text!r}")
+    s = text.strip()
+    if len(s) > PART_ID_LENGTH or not all(32 <= ord(ch) < 127 for ch in s):
+        raise InvalidInput(f"part_id must be at most {PART_ID_LENGTH} printable ASCII characters, got {text!r}")
+    return s
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """One part type. ``spec``/``quality``: the decision (``measurement.verdict``)."""
+
+    name: str
+    number: int
+    description: str
+    path: str
+    version: str
+    releases: int
+    spec: Specification
+    quality: QualityRules
+    rig: Rig | None = None
+    rig_path: str | None = None
+    declared: tuple[str, ...] | None = None
+
+    def rig_for(self, device_rig: Rig) -> Rig:
+        """The rig a measurement of this part type is identified with."""
+        rig = self.rig or device_rig
+        return rig.with_declared(self.declared) if self.declared is not None else rig
+
+    def check_rig(self, device_rig: Rig) -> None:
+        """RecipeError when the rig it measures with cannot give the recipe's quantity."""
+        rig = self.rig_for(device_rig)
+        q = self.spec.quantity
+        if rig.restoring_constant is None:
+            raise RecipeError(f"{self.path}: [recipe] quantity: the rig gives no J (no stiffness, or no mass and "
+                              "com_distance); calibrate it or name a calibrated rig")
+        if q == "J_object" and rig.tare_inertia is None:
+            raise RecipeError(f"{self.path}: [recipe] quantity: J_object needs the rig's tare_inertia")
+        if q == "J_object_axis" and rig.object is None:
+            raise RecipeError(f"{self.path}: [recipe] quantity: J_object_axis needs the rig's [object] mass and "
+                              "axis_offset")
+
+    def to_dict(self) -> dict[str, Any]:
+        """What every payload of this recipe carries (JSON-ready)."""
+        return {"name": self.name, "number": self.number, "version": self.version, "path": self.path,
+                "releases": self.releases, "rig_path": self.rig_path,
+                "declared": list(self.declared) if self.declared is not None else None,
+                **self.spec.to_dict(), "quality": self.quality.to_dict()}
+
+
+# --- reading and checking recipe files -------------------------------------------------------------------------
+def _schemas() -> dict[str, dict[str, Any]]:
+    """The keys of a recipe file: [recipe] here, [decision] and [quality] from the settings they fill
+    (``Specification``, ``QualityRules``: their defaults are the recipe's)."""
+    from service.config.appliance import REQUIRED, Key, _doc, _schema
+
+    return {
+        "recipe": {
+            "name": Key("str", REQUIRED, "unique; names the SPC topic and chart"),
+            "number": Key("int", REQUIRED, "what the PLC writes to recipe_select", min=1, max=0xFFFF),
+            "description": Key("str", "", ""),
+            "quantity": Key("str", "J", "", choices=QUANTITIES),
+            "nominal": Key("float", REQUIRED, "kg·m²", min=0, min_open=True),
+            "tolerance": Key("float", None, "± kg·m²", min=0, min_open=True),
+            "tolerance_percent": Key("float", None, "± % of the nominal", min=0, min_open=True),
+            "releases": Key("int", 1, "releases per part", min=1, max=20),
+            "rig": Key("path", None, "rig file of this part type, relative to the recipe file"),
+            "declared": Key("strlist", None, "declared model"),
+        },
+        "decision": _schema(Specification, {
+            "rule": _doc("", choices=RULES), "uncertain": _doc("", choices=("NOK", "INVALID")),
+            "coverage_factor": _doc("k of U = k·u_c", min=1.0)}),
+        "quality": _schema(QualityRules, {
+            "invalid_flags": _doc(""), "min_swings": _doc("", min=0.0),
+            "consistency_limit": _doc("", min=0, min_open=True),
+            "min_valid_releases": _doc("default: releases − 1, at least 1", min=1)},
+            defaults={"min_valid_releases": None},
+            extra={"max_J_std": Key("float", None, "kg·m²", min=0, min_open=True),
+                   "max_J_std_percent": Key("float", None, "% of J", min=0, min_open=True)}),
+    }
+
+
+def load_recipe(path: str | Path) -> Recipe:
+    """Read and check one recipe file (``RecipeError`` naming the file, table and key)."""
+    from measurement.effects import EFFECTS
+
+    from service.config.appliance import _Checker
+    from service.sources.files import read_toml
+
+    class Checker(_Checker):
+        def fail(self, table: str | None, key: str | None, message: str) -> RecipeError:
+            where = (f"[{table}]" if table else "") + (f" {key}" if key else "")
+            return RecipeError(f"{self.source}: {where + ': ' if where else ''}{message}")
+
+    p = Path(path)
+    raw = read_text(p, "recipe file").encode("utf-8")
+    try:
+        doc = read_toml(p, "recipe file")
+    except InvalidInput as exc:
+        raise RecipeError(str(exc)) from None
+    c = Checker(str(p))
+    schemas = _schemas()
+    for t in doc:
+        if t not in schemas:
+            raise c.fail(None, None, f"unknown table [{t}]; expected [recipe], [decision], [quality]")
+    if "recipe" not in doc:
+        raise c.fail(None, None, "missing [recipe] table (name, number, quantity, nominal, tolerance, releases)")
+    rec = c.table("recipe", doc["recipe"], schemas["recipe"])
+    dec = c.table("decision", doc.get("decision", {}), schemas["decision"])
+    qual = c.table("quality", doc.get("quality", {}), schemas["quality"])
+    name = rec["name"]
+    if not name or any(ch in name for ch in "/#+") or len(name) > 64 or name != name.strip():
+        raise c.fail("recipe", "name", f"expected 1–64 characters without '/', '#', '+' (it names an MQTT topic "
+                     f"level), got {name!r}")
+    if (rec["tolerance"] is None) == (rec["tolerance_percent"] is None):
+        raise c.fail("recipe", "tolerance", "give exactly one of tolerance (± kg·m²) or tolerance_percent "
+                     "(± % of nominal)")
+    nominal = rec["nominal"]
+    tol = rec["tolerance"] if rec["tolerance"] is not None else nominal * rec["tolerance_percent"] / 100.0
+    if tol >= nominal:
+        raise c.fail("recipe", "tolerance", f"expected less than the nominal {nominal:g} kg·m², got {tol:g}")
+    releases = rec["releases"]
+    rig = rig_path = None
+    if rec["rig"] is not None:
+        rig_path = str((p.parent / rec["rig"]).resolve())
+        try:
+            rig = read_rig(rig_path)
+        except InvalidInput as exc:
+            raise c.fail("recipe", "rig", str(exc)) from None
+    declared = rec["declared"]
+    for e in declared or ():
+        if e not in EFFECTS:
+            raise c.fail("recipe", "declared", f"unknown effect {e!r}; expected names from {', '.join(EFFECTS)}")
+    if declared is not None:
+        try:  # the declared model must resolve on the rig it is used with
+            (rig or Rig(kind="torsion")).with_declared(declared)
+        except InvalidInput as exc:
+            raise c.fail("recipe", "declared", str(exc)) from None
+    if qual["max_J_std"] is not None and qual["max_J_std_percent"] is not None:
+        raise c.fail("quality", "max_J_std", "give max_J_std (kg·m²) or max_J_std_percent, not both")
+    min_valid = qual["min_valid_releases"] if qual["min_valid_releases"] is not None else max(1, releases - 1)
+    if min_valid > releases:
+        raise c.fail("quality", "min_valid_releases", f"expected at most releases = {releases}, got {min_valid}")
+    pct = qual["max_J_std_percent"]
+    quality = QualityRules(invalid_flags=tuple(qual["invalid_flags"]), max_std=qual["max_J_std"],
+                           max_std_relative=None if pct is None else pct / 100.0, min_swings=qual["min_swings"],
+                           consistency_limit=qual["consistency_limit"], min_valid_releases=min_valid)
+    try:
+        spec = Specification.symmetric(rec["quantity"], nominal, tol, **dec)
+    except InvalidInput as exc:
+        raise c.fail("recipe", None, str(exc)) from None
+    return Recipe(name=name, number=rec["number"], description=rec["description"], path=str(p),
+                  version=hashlib.sha256(raw).hexdigest()[:16], releases=releases, spec=spec, quality=quality,
+                  rig=rig, rig_path=rig_path, declared=None if declared is None else tuple(declared))
+
+
+@dataclass(frozen=True)
+class RecipeBook:
+    """Every recipe of the recipe directory, by name and by number."""
+
+    directory: str | None
+    recipes: tuple[Recipe, ...] = ()
+
+    @classmethod
+    def load(cls, directory: str | Path | None) -> "RecipeBook":
+        """All ``*.toml`` files of ``directory`` (None: no recipes). Duplicate names or numbers are errors."""
+        if directory is None:
+            return cls(None)
+        d = Path(directory)
+        if not d.is_dir():
+            raise RecipeError(f"recipe directory {str(d)!r} not found")
+        recipes = [load_recipe(p) for p in sorted(d.glob("*.toml"))]
+        seen: dict[Any, str] = {}
+        for r in recipes:
+            for key in (("name", r.name), ("number", r.number)):
+                if key in seen:
+                    raise RecipeError(f"{r.path}: [recipe] {key[0]}: {key[1]!r} is already used by {seen[key]}")
+                seen[key] = r.path
+        return cls(str(d), tuple(recipes))
+
+    def find(self, key: str | int) -> Recipe:
+        """A recipe by name or number (a string of digits is a number)."""
+        for r in self.recipes:
+            if r.name == key or (isinstance(key, int) and r.number == key) or (isinstance(key, str) and key.isdigit()
+                                                                              and r.number == int(key)):
+                return r
+        known = ", ".join(f"{r.number} {r.name}" for r in self.recipes) or "none"
+        raise RecipeError(f"no recipe {key!r} in {self.directory or 'the configuration'} (known: {known})")
+
+    @property
+    def numbers(self) -> frozenset[int]:
+        return frozenset(r.number for r in self.recipes)
+
+
+# --- the parts being measured -------------------------------------------------------------------------------------
+@dataclass
+class _OpenPart:
+    uuid: str
+    part_id: str | None
+    recipe: Recipe
+    readings: list[Reading] = field(default_factory=list)
+    measurements: list[str] = field(default_factory=list)
+
+
+class PartTracker:
+    """Counts the releases of the part being measured and makes its verdict (daemon's main loop thread only).
+
+    The part ID and the active recipe are set by the PLC, MQTT or the config;
+    ``release(result, measurement_id, part_id, recipe)`` is called once per
+    successful measurement with what was current when it was triggered and
+    returns the keys the payload adds (``part_id``, ``recipe``, ``release``,
+    ``part``, ``verdict``).
+    """
+
+    def __init__(self, book: RecipeBook, active: str | None = None) -> None:
+        self.book = book
+        self.recipe: Recipe | None = book.find(active) if active is not None else None
+        self.part_id: str | None = None
+        self._open: _OpenPart | None = None
+        self._undo: tuple[_OpenPart | None, int] | None = None
+        self.last_part: PartResult | None = None
+
+    def select(self, key: str | int) -> Recipe:
+        """Make a recipe active (RecipeError if it does not exist); 0 or "" deselects."""
+        if key in (0, "", "0"):
+            self.recipe = None
+            return None  # type: ignore[return-value]
+        self.recipe = self.book.find(key)
+        return self.recipe
+
+    def set_part_id(self, part_id: str | None) -> None:
+        self.part_id = check_part_id(part_id) or None if part_id is not None else None
+
+    @property
+    def open_part(self) -> dict[str, Any] | None:
+        o = self._open
+        if o is None:
+            return None
+        return {"uuid": o.uuid, "part_id": o.part_id, "recipe": o.recipe.name, "done": len(o.readings),
+                "of": o.recipe.releases}
+
+    def release(self, result: Mapping[str, Any], measurement_id: str, part_id: str | None,
+                recipe: Recipe | None) -> dict[str, Any]:
+        """Count one release; returns the payload keys (the part's verdict once it is complete)."""
+        out: dict[str, Any] = {"part_id": part_id, "recipe": recipe.to_dict() if recipe else None,
+                               "release": None, "part": None, "verdict": None}
+        o = self._open
+        self._undo = (o, len(o.readings) if o is not None else 0)
+        if recipe is None:
+            self._abandon("no recipe is active")
+            return out
+        abandoned = None
+        if o is not None and (o.part_id != part_id or o.recipe.version != recipe.version):
+            abandoned = self._abandon("a different part ID or recipe")
+            o = None
+        if o is None:
+            o = self._open = _OpenPart(str(uuidlib.uuid4()), part_id, recipe)
+        reading = Reading.from_result(result, recipe.spec.quantity)
+        o.readings.append(reading)
+        o.measurements.append(measurement_id)
+        decision = judge_release(reading, recipe.spec, recipe.quality)
+        out["release"] = {"index": len(o.readings), "of": recipe.releases, "part_uuid": o.uuid,
+                          "quantity": recipe.spec.quantity, **decision.to_dict(), "abandoned": abandoned}
+        if len(o.readings) >= recipe.releases:
+            part = combine(o.readings, recipe.spec, recipe.quality)
+            self.last_part = part
+            out["part"] = {"uuid": o.uuid, "part_id": part_id, "measurements": list(o.measurements),
+                           "quantity": recipe.spec.quantity, **part.to_dict()}
+            out["verdict"] = part.verdict
+            for e in part.excluded:
+                log.warning("part %s: release %d excluded: %s", part_id or o.uuid, e["index"] + 1, e["reason"])
+            self._open = None
+        return out
+
+    def undo_last(self) -> None:
+        """Forget the last ``release`` (its measurement could not be stored)."""
+        if self._undo is None:
+            return
+        o, n = self._undo
+        if o is not None:
+            del o.readings[n:]
+            del o.measurements[n:]
+        self._open = o
+        self._undo = None
+
+    def _abandon(self, why: str) -> dict[str, Any] | None:
+        o = self._open
+        if o is None:
+            return None
+        log.warning("part %s (%s) abandoned after %d of %d releases: %s", o.part_id or "(no ID)", o.recipe.name,
+                    len(o.readings), o.recipe.releases, why)
+        self._open = None
+        return {"part_uuid": o.uuid, "part_id": o.part_id, "recipe": o.recipe.name, "done": len(o.readings),
+                "of": o.recipe.releases, "reason": why}
+
+
+# --- SPC of a recipe's parts ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RecipeSpc:
+    """The SPC of one recipe's completed parts (oldest first). INVALID parts are left out and counted."""
+
+    recipe: str
+    summary: Any  # measurement.spc.SpcSummary
+    parts: tuple[str, ...]            # part IDs (or part UUIDs) of the plotted points
+    versions: tuple[str, ...]         # recipe versions seen (more than one: the recipe changed in the series)
+    invalid_left_out: int
+    first: float                      # finished_at of the first and last part, Unix s
+    last: float
+    quantity: str
+
+    def to_dict(self, include_points: bool = False) -> dict[str, Any]:
+        return {"recipe": self.recipe, "quantity": self.quantity, "versions": list(self.versions),
+                "parts": len(self.parts), "invalid_left_out": self.invalid_left_out,
+                "first": self.first, "last": self.last, **self.summary.to_dict(include_points)}
+
+
+#: parts in the SPC summary the daemon publishes after each part (the latest ones)
+SPC_WINDOW = 100
+
+
+def recipe_spc(store: Any, recipe: str, *, since: float | None = None, until: float | None = None,
+               chart: str = "auto", limit: int | None = None) -> RecipeSpc | None:
+    """SPC of ``recipe``'s completed parts in the store (None with fewer than 2 usable parts).
+
+    chart "auto": X̄–R when every part combined the same number (2…10) of releases, else I-MR
+    of the part values; "I-MR" or "Xbar-R" to choose. Limits: the newest part's recipe.
+    limit: only the latest ``limit`` completed parts.
+    """
+    from measurement.spc import D2, individuals, xbar_r
+
+    rows = list(reversed(store.list(limit=limit, recipe=recipe, parts_only=True, since=since, until=until, full=True)))
+    usable = [m for m in rows if m.part_verdict != "INVALID" and m.payload and (m.payload.get("part") or {}).get("mean")
+              is not None]
+    if len(usable) < 2:
+        return None
+    spec = usable[-1].payload["recipe"]
+    lsl, usl = spec["lower"], spec["upper"]
+    groups = [[p["values"][i] for i in p["used"]] for p in (m.payload["part"] for m in usable)]
+    sizes = {len(g) for g in groups}
+    use_xbar = chart == "Xbar-R" or (chart == "auto" and len(sizes) == 1 and next(iter(sizes)) in D2)
+    summary = xbar_r(groups, lsl, usl) if use_xbar else individuals([m.part_value for m in usable], lsl, usl)
+    versions = tuple(dict.fromkeys(m.recipe_version for m in usable if m.recipe_version))
+    return RecipeSpc(recipe, summary, tuple(m.part_id or m.part_uuid or "" for m in usable), versions,
+                     len(rows) - len(usable), usable[0].finished_at, usable[-1].finished_at, spec["quantity"])

@@ -1,0 +1,779 @@
+"""The result store: every measurement in SQLite (WAL) in the state directory.
+
+One row per measurement (ok, failed or aborted) with the raw trace, the
+published payload (which contains ``IdentificationResult.to_dict()``), the rig
+and configuration used, timestamps and the software version. The MQTT outbox
+lives in the same database so that a result and its pending publication are
+written in one transaction, before anything is published: a crash either
+loses the measurement entirely (it never reached the store, nothing was
+published) or keeps both.
+
+Durability: WAL with ``synchronous=FULL`` (a power cut after commit keeps the
+row). One connection guarded by a lock is shared by the daemon's threads.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import sqlite3
+import threading
+import time
+import uuid as uuidlib
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterator, Mapping, Sequence
+
+import numpy as np
+
+from service.errors import StoreDamaged, StoreError
+
+DB_NAME = "results.db"
+SCHEMA_VERSION = 2  # 2: part, recipe and verdict columns (added in place to a version-1 store)
+
+#: the part/recipe/verdict columns (schema 2), added to an older store by ``ALTER TABLE`` at open
+PART_COLUMNS = (
+    ("part_id", "TEXT"),          # the part's serial number (PLC / MQTT), None when none was given
+    ("part_uuid", "TEXT"),        # the part: every release of one part shares it
+    ("recipe", "TEXT"),           # recipe name
+    ("recipe_version", "TEXT"),   # hash of the recipe file as used
+    ("release_index", "INTEGER"), # 1 … releases
+    ("releases", "INTEGER"),      # releases per part of the recipe
+    ("verdict", "TEXT"),          # this release's verdict: OK / NOK / INVALID
+    ("part_verdict", "TEXT"),     # the part's verdict, on the release that completed the part
+    ("part_value", "REAL"),       # the part's combined value of the recipe quantity, kg·m²
+    ("part_U", "REAL"),           # its expanded uncertainty, kg·m²
+)
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (
+    key   TEXT PRIMARY KEY,
+    value TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS measurements (
+    id               INTEGER PRIMARY KEY,
+    uuid             TEXT NOT NULL UNIQUE,
+    seq              INTEGER NOT NULL UNIQUE,
+    status           TEXT NOT NULL CHECK (status IN ('ok', 'failed', 'aborted')),
+    trigger          TEXT NOT NULL,
+    device_id        TEXT NOT NULL,
+    software_version TEXT NOT NULL,
+    started_at       REAL NOT NULL,
+    finished_at      REAL NOT NULL,
+    stored_at        REAL NOT NULL,
+    published_at     REAL,
+    J                REAL,
+    J_std            REAL,
+    omega_n          REAL,
+    damping_ratio    REAL,
+    residual_rms     REAL,
+    flags            TEXT NOT NULL DEFAULT '[]',
+    error            TEXT,
+    payload          TEXT,
+    rig              TEXT,
+    config           TEXT,
+    trace_t          BLOB,
+    trace_angle      BLOB,
+    trace_meta       TEXT
+);
+CREATE INDEX IF NOT EXISTS measurements_finished ON measurements (finished_at);
+CREATE TABLE IF NOT EXISTS outbox (
+    id             INTEGER PRIMARY KEY,
+    measurement_id INTEGER NOT NULL REFERENCES measurements (id),
+    uuid           TEXT NOT NULL,
+    kind           TEXT NOT NULL,
+    payload        TEXT NOT NULL,
+    created_at     REAL NOT NULL,
+    attempts       INTEGER NOT NULL DEFAULT 0,
+    last_attempt   REAL
+);
+CREATE TABLE IF NOT EXISTS attachments (
+    uuid       TEXT NOT NULL REFERENCES measurements (uuid),
+    name       TEXT NOT NULL,
+    media_type TEXT NOT NULL,
+    data       BLOB NOT NULL,
+    created_at REAL NOT NULL,
+    PRIMARY KEY (uuid, name)
+);
+"""
+
+
+def _read_only_connection(path: Path) -> sqlite3.Connection:
+    """A connection that never writes. WAL mode needs the -shm file, which a read-only directory
+    cannot get; with no -wal file nothing waits to be checkpointed, so the file is read as it is."""
+    def connect(mode: str) -> sqlite3.Connection:
+        db = sqlite3.connect(f"file:{path}?{mode}", uri=True, isolation_level=None, check_same_thread=False,
+                             timeout=10.0)
+        try:
+            db.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchall()
+        except BaseException:
+            db.close()
+            raise
+        return db
+
+    try:
+        return connect("mode=ro")
+    except sqlite3.OperationalError:
+        if Path(f"{path}-wal").exists():
+            raise
+        return connect("mode=ro&immutable=1")
+
+
+#: SQLite's primary result codes that mean a damaged file (SQLITE_CORRUPT, SQLITE_NOTADB)
+_DAMAGED_CODES = {11, 26}
+
+
+def _is_damage(exc: BaseException) -> bool:
+    if isinstance(exc, sqlite3.Error):
+        code = getattr(exc, "sqlite_errorcode", None)
+        return code is not None and code & 0xFF in _DAMAGED_CODES
+    return isinstance(exc, (zlib.error, json.JSONDecodeError))  # a blob or a JSON text that no longer decodes
+
+
+def _store_errors(what: str) -> Callable:
+    """Method decorator: an SQLite error (or a stored value that no longer decodes) becomes one
+    StoreError line naming the file and what was being done; StoreDamaged when the file is damaged."""
+
+    def wrap(method: Callable) -> Callable:
+        @functools.wraps(method)
+        def guarded(self: "Store", *args: Any, **kwargs: Any) -> Any:
+            try:
+                return method(self, *args, **kwargs)
+            except StoreError:
+                raise
+            except (sqlite3.Error, zlib.error, json.JSONDecodeError) as exc:
+                if _is_damage(exc):
+                    raise StoreDamaged(f"the result store {str(self.path)!r} is damaged ({exc}) while {what}; "
+                                       "`moi store check` tells what can be read, `moi store salvage` keeps it") from None
+                raise StoreError(f"cannot use the result store {str(self.path)!r} while {what}: {exc}") from None
+
+        return guarded
+
+    return wrap
+
+
+def _pack(a: np.ndarray | None) -> bytes | None:
+    if a is None:
+        return None
+    return zlib.compress(np.ascontiguousarray(a, dtype="<f8").tobytes(), 6)
+
+
+def _unpack(b: bytes | None) -> np.ndarray | None:
+    if b is None:
+        return None
+    return np.frombuffer(zlib.decompress(b), dtype="<f8").copy()
+
+
+@dataclass(frozen=True)
+class StoredMeasurement:
+    """One stored measurement as read back from the store (times: Unix s; trace arrays: s and rad).
+
+    Not ``firmware_host.Measurement``, which is what the sequencer hands to the store.
+    """
+
+    id: int
+    uuid: str
+    seq: int
+    status: str
+    trigger: str
+    device_id: str
+    software_version: str
+    started_at: float
+    finished_at: float
+    stored_at: float
+    published_at: float | None
+    J: float | None
+    J_std: float | None
+    omega_n: float | None
+    damping_ratio: float | None
+    residual_rms: float | None
+    flags: tuple[str, ...]
+    error: str | None
+    payload: dict[str, Any] | None = None
+    rig: dict[str, Any] | None = None
+    config: dict[str, Any] | None = None
+    trace_t: np.ndarray | None = None
+    trace_angle: np.ndarray | None = None
+    trace_meta: dict[str, Any] | None = None
+    part_id: str | None = None
+    part_uuid: str | None = None
+    recipe: str | None = None
+    recipe_version: str | None = None
+    release_index: int | None = None
+    releases: int | None = None
+    verdict: str | None = None
+    part_verdict: str | None = None
+    part_value: float | None = None
+    part_U: float | None = None
+
+    def summary(self) -> dict[str, Any]:
+        """The listing fields (no payload, no trace)."""
+        return {
+            "uuid": self.uuid, "seq": self.seq, "status": self.status, "trigger": self.trigger,
+            "device_id": self.device_id, "software_version": self.software_version,
+            "started_at": self.started_at, "finished_at": self.finished_at, "published_at": self.published_at,
+            "J": self.J, "J_std": self.J_std, "omega_n": self.omega_n, "damping_ratio": self.damping_ratio,
+            "residual_rms": self.residual_rms, "flags": list(self.flags), "error": self.error,
+            **{name: getattr(self, name) for name, _ in PART_COLUMNS},
+        }
+
+
+@dataclass(frozen=True)
+class OutboxItem:
+    id: int
+    uuid: str
+    kind: str
+    payload: str
+    attempts: int
+
+
+_BASE_COLUMNS = ("id, uuid, seq, status, trigger, device_id, software_version, started_at, finished_at, stored_at, "
+                 "published_at, J, J_std, omega_n, damping_ratio, residual_rms, flags, error")
+_PART_SELECT = ", ".join(name for name, _ in PART_COLUMNS)
+_LIST_COLUMNS = f"{_BASE_COLUMNS}, {_PART_SELECT}"
+_FULL_COLUMNS = _LIST_COLUMNS + ", payload, rig, config"
+_TRACE_COLUMNS = ", trace_t, trace_angle, trace_meta"
+
+
+def _names(columns: str) -> list[str]:
+    """The column names of a SELECT list above (they are the StoredMeasurement fields)."""
+    return [c.strip() for c in columns.split(",") if c.strip()]
+
+
+class Store:
+    """The SQLite result store and outbox in ``state_dir``/results.db."""
+
+    def __init__(self, state_dir: str | Path, *, create: bool = True, read_only: bool = False) -> None:
+        self.state_dir = Path(state_dir)
+        self.path = self.state_dir / DB_NAME
+        if (not create or read_only) and not self.path.exists():
+            raise StoreError(f"no result store at {str(self.path)!r}")
+        self._lock = threading.RLock()
+        if read_only:
+            self._open_read_only()
+            return
+        try:
+            self.state_dir.mkdir(parents=True, exist_ok=True)
+            # isolation_level=None: explicit BEGIN/COMMIT, no implicit transactions
+            self._db = sqlite3.connect(str(self.path), isolation_level=None, check_same_thread=False, timeout=10.0)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=FULL")
+            self._db.execute("PRAGMA foreign_keys=ON")
+            self._db.executescript(_SCHEMA)  # idempotent (IF NOT EXISTS)
+            have = {row[1] for row in self._db.execute("PRAGMA table_info(measurements)")}
+            for name, kind in PART_COLUMNS:
+                if name not in have:
+                    self._db.execute(f"ALTER TABLE measurements ADD COLUMN {name} {kind}")
+            self._db.execute("CREATE INDEX IF NOT EXISTS measurements_part ON measurements (part_id)")
+            with self._tx():
+                row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
+                if row is None:
+                    self._db.execute("INSERT INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),))
+                elif int(row[0]) > SCHEMA_VERSION:
+                    raise StoreError(f"{self.path}: result store schema {row[0]} is newer than this software ({SCHEMA_VERSION})")
+                elif int(row[0]) < SCHEMA_VERSION:
+                    self._db.execute("UPDATE meta SET value = ? WHERE key='schema'", (str(SCHEMA_VERSION),))
+        except sqlite3.Error as exc:
+            if _is_damage(exc):
+                raise StoreDamaged(f"the result store {str(self.path)!r} is damaged ({exc})") from None
+            raise StoreError(f"cannot open the result store {str(self.path)!r}: {exc}") from None
+        except OSError as exc:
+            raise StoreError(f"cannot create the state directory {str(self.state_dir)!r}: {exc.strerror}") from None
+
+    def _open_read_only(self) -> None:
+        """For the reading commands: nothing is written (no schema, no journal mode, no write lock),
+        so a store the user may only read (another user's, a copy on read-only media) opens too."""
+        try:
+            self._db = _read_only_connection(self.path)
+            try:
+                row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
+            except BaseException:
+                self._db.close()
+                raise
+        except sqlite3.Error as exc:
+            if _is_damage(exc):
+                raise StoreDamaged(f"the result store {str(self.path)!r} is damaged ({exc})") from None
+            raise StoreError(f"cannot read the result store {str(self.path)!r}: {exc}") from None
+        if row is not None and int(row[0]) > SCHEMA_VERSION:
+            raise StoreError(f"{self.path}: result store schema {row[0]} is newer than this software ({SCHEMA_VERSION})")
+        self.read_only = True
+
+    # --- plumbing -----------------------------------------------------------------
+    class _Tx:
+        """One write transaction. Every write passes here, so here the store learns whether it can still
+        write (``Store.write_failure``); a failed COMMIT (a full disk) is rolled back, or the connection
+        would stay in the transaction and refuse every later write even once space is freed."""
+
+        def __init__(self, store: "Store") -> None:
+            self.store = store
+            self.db = store._db
+
+        def __enter__(self) -> sqlite3.Connection:
+            try:
+                self.db.execute("BEGIN IMMEDIATE")
+            except sqlite3.Error as exc:
+                self.store._write_failed(exc)
+                raise
+            return self.db
+
+        def __exit__(self, exc_type, exc, tb) -> None:
+            if exc_type is None:
+                try:
+                    self.db.execute("COMMIT")
+                    self.store.write_failure = None
+                    return
+                except sqlite3.Error as failed:
+                    exc = failed
+                    self._rollback()
+                    self.store._write_failed(exc)
+                    raise
+            if isinstance(exc, sqlite3.Error):
+                self.store._write_failed(exc)
+            self._rollback()
+
+        def _rollback(self) -> None:
+            if self.db.in_transaction:
+                self.db.execute("ROLLBACK")
+
+    def _tx(self) -> "_Tx":
+        return Store._Tx(self)
+
+    #: why the last write failed (a full disk, a read-only file), None after a write that succeeded
+    write_failure: str | None = None
+
+    def _write_failed(self, exc: sqlite3.Error) -> None:
+        self.write_failure = str(exc)
+
+    def writable(self) -> bool:
+        """Whether a write succeeds now (a write transaction that changes nothing): after a failed
+        write, the way to learn that space was freed."""
+        try:
+            with self._lock, self._tx() as db:
+                db.execute("UPDATE meta SET value = value WHERE key = 'schema'")
+        except sqlite3.Error:
+            return False
+        return True
+
+    read_only = False
+
+    def close(self) -> None:
+        with self._lock:
+            if self.read_only:
+                self._db.close()
+                return
+            try:
+                self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            except sqlite3.Error:
+                pass  # another reader holds the WAL: the checkpoint happens later
+            self._db.close()
+
+    def __enter__(self) -> "Store":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- writing ------------------------------------------------------------------
+    def record(
+        self,
+        *,
+        status: str,
+        trigger: str,
+        device_id: str,
+        software_version: str,
+        started_at: float,
+        finished_at: float,
+        result: Mapping[str, Any] | None = None,
+        build_payload: Callable[[str, int], dict[str, Any]] | None = None,
+        error: str | None = None,
+        rig: Mapping[str, Any] | None = None,
+        config: Mapping[str, Any] | None = None,
+        trace_t: np.ndarray | None = None,
+        trace_angle: np.ndarray | None = None,
+        trace_meta: Mapping[str, Any] | None = None,
+        enqueue: Sequence[str] = (),
+        uuid: str | None = None,
+        part: Mapping[str, Any] | None = None,
+    ) -> StoredMeasurement:
+        """Store one measurement and queue its publications, atomically.
+
+        build_payload(uuid, seq) makes the published payload once the sequence
+        number is known (ok results). enqueue: outbox kinds to queue (e.g.
+        ("result",)); the payload is queued as it is stored. part: values of
+        the PART_COLUMNS (part ID, recipe, verdicts...), missing keys are NULL.
+        """
+        from service.publish.payload import dumps
+
+        uid = uuid or str(uuidlib.uuid4())
+        now = time.time()
+        try:
+            with self._lock, self._tx() as db:
+                seq = int(db.execute("SELECT COALESCE(MAX(seq), 0) + 1 FROM measurements").fetchone()[0])
+                counter = db.execute("SELECT value FROM meta WHERE key='last_seq'").fetchone()
+                if counter is not None:  # never reuse a number, even after rows were pruned
+                    seq = max(seq, int(counter[0]) + 1)
+                db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('last_seq', ?)", (str(seq),))
+                payload = build_payload(uid, seq) if build_payload is not None else None
+                payload_text = dumps(payload) if payload is not None else None
+                r = result or {}
+                cur = db.execute(
+                    "INSERT INTO measurements (uuid, seq, status, trigger, device_id, software_version, started_at, "
+                    "finished_at, stored_at, J, J_std, omega_n, damping_ratio, residual_rms, flags, error, payload, rig, "
+                    "config, trace_t, trace_angle, trace_meta) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                    (uid, seq, status, trigger, device_id, software_version, started_at, finished_at, now,
+                     r.get("J"), r.get("J_std"), r.get("omega_n"), r.get("damping_ratio"), r.get("residual_rms"),
+                     json.dumps(list(r.get("flags") or [])), error, payload_text,
+                     json.dumps(rig) if rig is not None else None,
+                     json.dumps(config) if config is not None else None,
+                     _pack(trace_t), _pack(trace_angle),
+                     json.dumps(trace_meta, default=str) if trace_meta is not None else None),
+                )
+                mid = cur.lastrowid
+                if part:
+                    cols = [name for name, _ in PART_COLUMNS if part.get(name) is not None]
+                    if cols:
+                        db.execute(f"UPDATE measurements SET {', '.join(c + ' = ?' for c in cols)} WHERE id = ?",
+                                   (*[part[c] for c in cols], mid))
+                if payload_text is not None:
+                    for kind in enqueue:
+                        db.execute("INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at) VALUES (?,?,?,?,?)",
+                                   (mid, uid, kind, payload_text, now))
+        except sqlite3.Error as exc:
+            raise StoreError(f"cannot write to the result store {str(self.path)!r}: {exc}") from None
+        m = self.get(uid)
+        assert m is not None
+        return m
+
+    # --- outbox -------------------------------------------------------------------
+    @_store_errors("reading the MQTT outbox")
+    def outbox_pending(self, limit: int = 100, exclude: Sequence[int] = ()) -> list[OutboxItem]:
+        """Oldest unacknowledged publications first."""
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT id, uuid, kind, payload, attempts FROM outbox ORDER BY id LIMIT ?", (limit + len(exclude),)
+            ).fetchall()
+        skip = set(exclude)
+        return [OutboxItem(*row) for row in rows if row[0] not in skip][:limit]
+
+    @_store_errors("updating the MQTT outbox")
+    def outbox_attempt(self, item_id: int) -> None:
+        with self._lock, self._tx() as db:
+            db.execute("UPDATE outbox SET attempts = attempts + 1, last_attempt = ? WHERE id = ?", (time.time(), item_id))
+
+    @_store_errors("updating the MQTT outbox")
+    def outbox_ack(self, item_id: int) -> bool:
+        """The broker acknowledged the publication: drop it from the outbox. False if it was not there."""
+        now = time.time()
+        with self._lock, self._tx() as db:
+            row = db.execute("SELECT measurement_id FROM outbox WHERE id = ?", (item_id,)).fetchone()
+            if row is None:
+                return False
+            db.execute("DELETE FROM outbox WHERE id = ?", (item_id,))
+            db.execute("UPDATE measurements SET published_at = COALESCE(published_at, ?) WHERE id = ?", (now, row[0]))
+        return True
+
+    @_store_errors("counting the MQTT outbox")
+    def outbox_count(self) -> int:
+        with self._lock:
+            return int(self._db.execute("SELECT COUNT(*) FROM outbox").fetchone()[0])
+
+    # --- reading ------------------------------------------------------------------
+    def _row(self, row: Sequence[Any], full: bool, trace: bool) -> StoredMeasurement:
+        """A row selected with ``_FULL_COLUMNS`` (full) or ``_LIST_COLUMNS``, plus ``_TRACE_COLUMNS`` (trace)."""
+        names = _names(_FULL_COLUMNS if full else _LIST_COLUMNS) + (_names(_TRACE_COLUMNS) if trace else [])
+        d = dict(zip(names, row, strict=True))
+        d["flags"] = tuple(json.loads(d["flags"] or "[]"))
+        for k in ("payload", "rig", "config", "trace_meta"):
+            if d.get(k) is not None:
+                d[k] = json.loads(d[k])
+        for k in ("trace_t", "trace_angle"):
+            if k in d:
+                d[k] = _unpack(d[k])
+        return StoredMeasurement(**d)
+
+    @_store_errors("reading a measurement")
+    def get(self, key: str | int, *, trace: bool = False) -> StoredMeasurement | None:
+        """A measurement by UUID (or a unique UUID prefix) or by sequence number.
+
+        A key of digits only is a sequence number first and a UUID prefix when no measurement has that
+        number (a UUID may start with eight digits)."""
+        cols = _FULL_COLUMNS + (_TRACE_COLUMNS if trace else "")
+        with self._lock:
+            rows = []
+            if isinstance(key, int) or (isinstance(key, str) and key.isdigit()):
+                rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE seq = ?", (int(key),)).fetchall()
+            if not rows and isinstance(key, str):
+                # a prefix, compared literally: '%' and '_' in the key are not wildcards
+                rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE substr(uuid, 1, length(?)) = ?",
+                                        (str(key), str(key))).fetchall()
+        if len(rows) != 1:
+            return None
+        return self._row(rows[0], full=True, trace=trace)
+
+    @_store_errors("reading a measurement")
+    def has_trace(self, uuid: str) -> bool:
+        """Whether the measurement ``uuid`` was stored with its trace (without reading the trace)."""
+        with self._lock:
+            row = self._db.execute("SELECT trace_t IS NOT NULL FROM measurements WHERE uuid = ?", (uuid,)).fetchone()
+        return bool(row and row[0])
+
+    @_store_errors("reading the latest measurement")
+    def latest(self, status: str | None = "ok") -> StoredMeasurement | None:
+        where = "WHERE status = ?" if status else ""
+        args: tuple = (status,) if status else ()
+        with self._lock:
+            row = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC LIMIT 1", args).fetchone()
+        return self._row(row, full=True, trace=False) if row else None
+
+    @_store_errors("listing measurements")
+    def list(self, limit: int | None = 20, *, since: float | None = None, until: float | None = None,
+             status: str | None = None, full: bool = False, part_id: str | None = None,
+             recipe: str | None = None, parts_only: bool = False) -> list[StoredMeasurement]:
+        """Measurements, newest first (limit None: all). part_id / recipe: only those;
+        parts_only: only the releases that completed a part (they carry the part verdict)."""
+        where, args = _where(since=since, until=until, status=status, part_id=part_id, recipe=recipe,
+                             parts_only=parts_only)
+        lim = "LIMIT ?" if limit is not None else ""
+        if limit is not None:
+            args.append(int(limit))
+        cols = _FULL_COLUMNS if full else _LIST_COLUMNS
+        with self._lock:
+            rows = self._db.execute(f"SELECT {cols} FROM measurements {where} ORDER BY seq DESC {lim}", args).fetchall()
+        return [self._row(r, full=full, trace=False) for r in rows]
+
+    def recipes(self) -> list[str]:
+        """Names of the recipes of the completed parts in the store, in order of first use."""
+        with self._lock:
+            rows = self._db.execute("SELECT recipe FROM measurements WHERE part_verdict IS NOT NULL "
+                                    "GROUP BY recipe ORDER BY MIN(seq)").fetchall()
+        return [r[0] for r in rows if r[0] is not None]
+
+    def iter_all(self, **kwargs: Any) -> Iterator[StoredMeasurement]:
+        yield from self.list(limit=None, **kwargs)
+
+    @_store_errors("counting measurements")
+    def count(self) -> int:
+        with self._lock:
+            return int(self._db.execute("SELECT COUNT(*) FROM measurements").fetchone()[0])
+
+    # --- attachments (files kept with a measurement, e.g. its plot) ---------------
+    def put_attachment(self, uuid: str, name: str, data: bytes, media_type: str) -> None:
+        """Keep ``data`` with the measurement ``uuid`` under ``name`` (replaces one of the same name)."""
+        try:
+            with self._lock, self._tx() as db:
+                db.execute("INSERT OR REPLACE INTO attachments (uuid, name, media_type, data, created_at) "
+                           "VALUES (?,?,?,?,?)", (uuid, name, media_type, sqlite3.Binary(data), time.time()))
+        except sqlite3.Error as exc:
+            raise StoreError(f"cannot store {name!r} of measurement {uuid}: {exc}") from None
+
+    @_store_errors("reading an attachment")
+    def get_attachment(self, uuid: str, name: str) -> tuple[bytes, str] | None:
+        """(data, media type) of an attachment, or None."""
+        with self._lock:
+            row = self._db.execute("SELECT data, media_type FROM attachments WHERE uuid = ? AND name = ?",
+                                   (uuid, name)).fetchone()
+        return (bytes(row[0]), row[1]) if row else None
+
+    @_store_errors("searching measurements")
+    def search(self, *, offset: int = 0, limit: int | None = 25, since: float | None = None,
+               until: float | None = None, status: str | None = None, flag: str | None = None,
+               part_id: str | None = None, recipe: str | None = None) -> tuple[list[StoredMeasurement], int]:
+        """One page of measurements (with payloads), newest first, and how many match in all.
+        The filters of ``list``, and flag: only those carrying this quality flag."""
+        where, args = _where(since=since, until=until, status=status, part_id=part_id, recipe=recipe, flag=flag)
+        with self._lock:
+            total = int(self._db.execute(f"SELECT COUNT(*) FROM measurements {where}", args).fetchone()[0])
+            page = f"LIMIT {int(limit)} OFFSET {int(offset)}" if limit is not None else ""
+            rows = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC {page}",
+                                    args).fetchall()
+        return [self._row(r, full=True, trace=False) for r in rows], total
+
+
+def _where(*, since: float | None = None, until: float | None = None, status: str | None = None,
+           part_id: str | None = None, recipe: str | None = None, parts_only: bool = False,
+           flag: str | None = None) -> tuple[str, list[Any]]:
+    """The WHERE clause (and its arguments) of the measurement filters of ``Store.list`` and ``Store.search``."""
+    clauses: list[str] = []
+    args: list[Any] = []
+    for sql, value in (("part_id = ?", part_id), ("recipe = ?", recipe), ("finished_at >= ?", since),
+                       ("finished_at < ?", until), ("status = ?", status),
+                       ("EXISTS (SELECT 1 FROM json_each(flags) WHERE value = ?)", flag)):
+        if value is not None:
+            clauses.append(sql)
+            args.append(value)
+    if parts_only:
+        clauses.append("part_verdict IS NOT NULL")
+    return ("WHERE " + " AND ".join(clauses)) if clauses else "", args
+
+
+# --- a damaged store: check, salvage, quarantine ------------------------------------------------------------------
+#: tables read back by check and salvage, in the order rows are copied (foreign keys point backwards)
+_TABLES = ("measurements", "outbox", "attachments")
+
+
+@dataclass
+class StoreHealth:
+    """What ``check_store``/``salvage_store`` could read: rows per table, rows lost, SQLite's own findings."""
+
+    path: str
+    readable: dict[str, int]
+    lost: dict[str, int]
+    problems: list[str]
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems and not any(self.lost.values())
+
+    def summary(self) -> str:
+        read = ", ".join(f"{n} {t}" for t, n in self.readable.items())
+        lost = ", ".join(f"{n} {t}" for t, n in self.lost.items() if n)
+        return f"{self.path}: " + ("intact" if self.ok else "damaged") + f"; readable: {read}" + \
+            (f"; lost: {lost}" if lost else "")
+
+
+def _open_read_only(path: Path) -> sqlite3.Connection:
+    if not path.exists():
+        raise StoreError(f"no result store at {str(path)!r}")
+    try:
+        return _read_only_connection(path)
+    except sqlite3.Error as exc:
+        raise StoreError(f"cannot read {str(path)!r}: {exc}") from None
+
+
+def _rowids(db: sqlite3.Connection, table: str, max_probes: int = 100_000) -> Iterator[int]:
+    """The rowids of ``table`` that can be reached. A scan stops at a damaged page; the rowids
+    after it are found by seeking past it (bounded number of seeks)."""
+    last = 0
+    probes = 0
+    while probes < max_probes:
+        try:
+            for (rowid,) in db.execute(f"SELECT rowid FROM {table} WHERE rowid > ? ORDER BY rowid", (last,)):
+                last = rowid
+                yield rowid
+            return
+        except sqlite3.DatabaseError:
+            probes += 1
+            last += 1  # step over the rowid the damaged page hides
+
+
+def _read_rows(db: sqlite3.Connection, table: str, health: StoreHealth) -> Iterator[tuple[list[str], tuple]]:
+    """Every readable row of ``table`` (column names, values); unreadable ones are counted as lost."""
+    try:
+        columns = [r[1] for r in db.execute(f"PRAGMA table_info({table})")]
+        ids = list(_rowids(db, table))
+    except sqlite3.DatabaseError as exc:
+        health.problems.append(f"{table}: not readable ({exc})")
+        return
+    for rowid in ids:
+        row = _read_row(db, table, columns, rowid)
+        if row is None and table == "measurements":
+            # the trace's pages are the bulk of the file: keep the result without it rather than nothing
+            row = _read_row(db, table, columns, rowid, without=("trace_t", "trace_angle"))
+            if row is not None:
+                health.problems.append(f"measurement row {rowid}: trace not readable (kept without it)")
+        if row is None:
+            health.lost[table] += 1
+            continue
+        health.readable[table] += 1
+        yield columns, row
+
+
+def _read_row(db: sqlite3.Connection, table: str, columns: list[str], rowid: int,
+              without: tuple[str, ...] = ()) -> tuple | None:
+    """One row whose blobs and JSON texts decode, or None; the columns in ``without`` read as NULL."""
+    wanted = [c if c not in without else "NULL" for c in columns]
+    try:
+        row = db.execute(f"SELECT {', '.join(wanted)} FROM {table} WHERE rowid = ?", (rowid,)).fetchone()
+        if row is not None and table == "measurements":
+            d = dict(zip(columns, row))
+            for k in ("flags", "payload", "rig", "config", "trace_meta"):
+                if d.get(k) is not None:
+                    json.loads(d[k])
+            for k in ("trace_t", "trace_angle"):
+                _unpack(d.get(k))
+        return row
+    except (sqlite3.DatabaseError, zlib.error, json.JSONDecodeError, UnicodeDecodeError):
+        return None
+
+
+def check_store(path: str | Path) -> StoreHealth:
+    """Read every row of the store at ``path`` (results.db) without changing it; say what is damaged."""
+    path = Path(path)
+    health = StoreHealth(str(path), {t: 0 for t in _TABLES}, {t: 0 for t in _TABLES}, [])
+    db = _open_read_only(path)
+    try:
+        try:
+            found = [r[0] for r in db.execute("PRAGMA integrity_check(20)")]
+            if found != ["ok"]:
+                health.problems += found
+        except sqlite3.DatabaseError as exc:
+            health.problems.append(str(exc))
+        for table in _TABLES:
+            for _ in _read_rows(db, table, health):
+                pass
+    finally:
+        db.close()
+    return health
+
+
+def salvage_store(path: str | Path, dest_dir: str | Path) -> StoreHealth:
+    """Copy every readable row of the store at ``path`` into a new store in ``dest_dir`` (which
+    must not hold one yet). Sequence numbers are kept and never reused."""
+    path, dest = Path(path), Path(dest_dir)
+    if (dest / DB_NAME).exists():
+        raise StoreError(f"{str(dest / DB_NAME)!r} exists already: salvage into an empty directory")
+    health = StoreHealth(str(path), {t: 0 for t in _TABLES}, {t: 0 for t in _TABLES}, [])
+    src = _open_read_only(path)
+    try:
+        with Store(dest) as new:
+            db = new._db
+            with new._lock, new._tx():
+                max_seq = 0
+                for table in _TABLES:
+                    for columns, row in _read_rows(src, table, health):
+                        try:
+                            db.execute(f"INSERT OR IGNORE INTO {table} ({', '.join(columns)}) "
+                                       f"VALUES ({', '.join('?' * len(columns))})", row)
+                        except sqlite3.IntegrityError:  # e.g. an outbox row whose measurement was lost
+                            health.readable[table] -= 1
+                            health.lost[table] += 1
+                            continue
+                        if table == "measurements":
+                            max_seq = max(max_seq, int(row[columns.index("seq")]))
+                outbox_used = health.readable["outbox"] + health.lost["outbox"] > 0 or \
+                    any(p.startswith("outbox:") for p in health.problems)
+                if outbox_used:
+                    # an unsent result whose outbox row was on a lost page is queued again from its stored
+                    # payload (consumers dedupe by uuid); without MQTT in use nothing was ever queued
+                    requeued = db.execute(
+                        "INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at) "
+                        "SELECT id, uuid, 'result', payload, stored_at FROM measurements m WHERE status = 'ok' "
+                        "AND payload IS NOT NULL AND published_at IS NULL "
+                        "AND NOT EXISTS (SELECT 1 FROM outbox o WHERE o.measurement_id = m.id)").rowcount
+                    if requeued:
+                        health.problems.append(f"outbox: {requeued} unsent result(s) queued again from their "
+                                               "stored payload")
+                try:
+                    counter = src.execute("SELECT value FROM meta WHERE key='last_seq'").fetchone()
+                    max_seq = max(max_seq, int(counter[0])) if counter else max_seq
+                except (sqlite3.DatabaseError, ValueError):
+                    pass  # the counter is lost: the largest salvaged seq is the floor
+                db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('last_seq', ?)", (str(max_seq),))
+    finally:
+        src.close()
+    return health
+
+
+def quarantine_store(state_dir: str | Path, clock: Callable[[], float] = time.time) -> tuple[Path, StoreHealth]:
+    """Move a damaged results.db (with its -wal and -shm files) aside and salvage what can be read
+    into a new results.db. Returns (where the damaged file now is, what was salvaged)."""
+    state = Path(state_dir)
+    db = state / DB_NAME
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(clock()))
+    aside = state / f"{DB_NAME}.damaged-{stamp}"
+    for suffix in ("", "-wal", "-shm"):  # SQLite pairs "<name>-wal" with "<name>": they move together
+        if Path(f"{db}{suffix}").exists():
+            os.replace(f"{db}{suffix}", f"{aside}{suffix}")
+    return aside, salvage_store(aside, state)

@@ -1,0 +1,1 @@
+"""The Modbus server and its register map."""

@@ -1,0 +1,497 @@
+"""The Modbus server the PLC polls (pymodbus 3.16, TCP or RTU).
+
+The register layout lives in ``service.publish.modbus.registers``; this module serves it.
+The server runs on its own asyncio loop in a thread (``drivers.aioloop.LoopThread``). The daemon hands it a new
+result with ``publish_result`` and the live status with ``set_live``; both
+build a complete register image and swap it in with one assignment, and every
+request copies that image into pymodbus' datastore before pymodbus reads it,
+so one request never mixes two images (see the snapshot protocol in
+docs/modbus.md).
+
+Writes: only the two command coils and the part ID / recipe_select holding
+registers (``registers.WRITABLE``) are writable. The result image is declared
+read-only (pymodbus answers 0x02), so is everything between it and the
+writable block; coils other than the command coils are refused in the access
+hook with 0x02. A single-coil write (function 5) must carry 0xFF00 (on) or
+0x0000 (off), anything else is answered with exception 03 and fires nothing,
+and its reply echoes the request (the coil itself reads back 0: the command
+coils are pulses). A write to the part registers while a measurement runs (or
+a trigger is about to start one) gets 0x06 (server device busy): the part
+being measured cannot change; an unknown recipe number or a non-ASCII part ID
+gets 0x03 (illegal data value).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import logging
+import struct
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping
+
+from pymodbus.constants import ExcCodes
+from pymodbus.exceptions import NoSuchIdException
+from pymodbus.framer import FramerType
+from pymodbus.pdu import ExceptionResponse
+from pymodbus.pdu.bit_message import WriteSingleCoilRequest, WriteSingleCoilResponse
+from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.server.requesthandler import ServerRequestHandler
+from pymodbus.simulator import DataType, SimData, SimDevice
+from pymodbus.simulator.simcore import SimCore
+
+from drivers.aioloop import LoopThread
+
+from . import registers as R
+from service.errors import ModbusServerError
+
+log = logging.getLogger("moi.modbus")
+
+_READ_REGISTERS = {3, 4}
+_READ_DISCRETE = {2}
+_WRITE_COILS = {5, 15}
+_WRITE_REGISTERS = {6, 16}
+
+#: after a trigger coil write, part writes are refused this long (s) until the daemon reports busy
+TRIGGER_HOLD = 0.5
+
+
+@dataclass(frozen=True)
+class ModbusSettings:
+    """Where and how to serve (see ``[modbus]`` in docs/service.md).
+
+    mode: "tcp" | "rtu". host/port: TCP listen address (port 0: any free port).
+    max_connections: TCP clients served at once; one more closes the connection idle the
+    longest. idle_timeout: a TCP connection without a request for this long is closed, s
+    (0: never). Both keep the descriptors a client can hold bounded.
+    allow_from: TCP client addresses or networks ("192.168.10.20", "10.0.0.0/24") allowed
+    to connect besides this machine (127.0.0.1, ::1); empty: every client that reaches
+    ``host``. Modbus has no authentication: the default host 127.0.0.1 keeps the trigger
+    and abort coils on this machine, and opening them to a network is a choice made by
+    setting ``host``, best with ``allow_from``.
+    serial_port, baudrate, parity ("N"|"E"|"O"), stopbits, bytesize: RTU line
+    (serial_port may be "socket://HOST:PORT" for a serial-over-TCP bridge).
+    unit_id: the Modbus device id answered. word_order: "big" | "little".
+    """
+
+    mode: str = "tcp"
+    host: str = "127.0.0.1"
+    port: int = 5020
+    unit_id: int = 1
+    word_order: str = "big"
+    max_connections: int = 16
+    idle_timeout: float = 60.0
+    allow_from: tuple[str, ...] = ()
+    serial_port: str | None = None
+    baudrate: int = 19200
+    parity: str = "E"
+    stopbits: int = 1
+    bytesize: int = 8
+
+
+class _OneUnitCore(SimCore):
+    """SimCore that treats an unknown unit id as missing instead of raising KeyError.
+
+    pymodbus 3.16's SimCore falls back to device id 0 and raises KeyError when it
+    is absent, which the request handler turns into a logged "device failure"
+    reply; a request for another unit must instead be ignored (RTU, shared line)
+    or answered with "gateway target failed to respond" (TCP).
+    """
+
+    async def async_getValues(self, device_id: int, func_code: int, address: int, count: int = 1):
+        if device_id not in self.devices:
+            raise NoSuchIdException(f"unit id {device_id} is not served")
+        return await super().async_getValues(device_id, func_code, address, count)
+
+    async def async_setValues(self, device_id: int, func_code: int, address: int, values):
+        self.require_device(device_id)
+        return await super().async_setValues(device_id, func_code, address, values)
+
+    def require_device(self, device_id: int) -> None:
+        if device_id not in self.devices:
+            raise NoSuchIdException(f"unit id {device_id} is not served")
+
+
+class _WriteSingleCoil(WriteSingleCoilRequest):
+    """Function 5 as the Modbus Application Protocol specification has it (section 6.5): the value
+    is 0xFF00 or 0x0000, anything else is exception 03 (ILLEGAL DATA VALUE); the normal
+    response is an echo of the request. pymodbus 3.16 reads any non-zero value as "on" and
+    answers with the coil's read-back value."""
+
+    value = 0x0000  # the value field as received
+
+    def decode(self, data: bytes) -> None:
+        self.address, self.value = struct.unpack(">HH", data[:4])
+        self.bits = [self.value == 0xFF00]
+
+    async def datastore_update(self, context, device_id: int):
+        if isinstance(context, _OneUnitCore):
+            context.require_device(device_id)  # another unit's request is not ours to refuse
+        if self.value not in (0x0000, 0xFF00):
+            return ExceptionResponse(self.function_code, ExcCodes.ILLEGAL_VALUE)
+        echo = list(self.bits)  # the access hook clears the written values (pulse coils)
+        response = await super().datastore_update(context, device_id)
+        if isinstance(response, WriteSingleCoilResponse):
+            response.bits = echo
+        return response
+
+
+#: clients on this machine are always allowed (local tools: ``moi modbus-map --read``, the web page)
+_THIS_MACHINE = (ipaddress.ip_network("127.0.0.1/32"), ipaddress.ip_network("::1/128"))
+
+
+def allowed_networks(allow_from: tuple[str, ...]) -> tuple[ipaddress.IPv4Network | ipaddress.IPv6Network, ...]:
+    """The networks of ``allow_from`` (ValueError naming a malformed entry)."""
+    nets = []
+    for entry in allow_from:
+        try:
+            nets.append(ipaddress.ip_network(entry.strip(), strict=False))
+        except ValueError:
+            raise ValueError(f"{entry!r} is not an IP address or network (e.g. \"192.168.10.20\", "
+                             "\"10.0.0.0/24\")") from None
+    return tuple(nets)
+
+
+def network_exposure(settings: "ModbusSettings") -> str | None:
+    """A warning when the TCP server is reachable beyond this machine, else None."""
+    if settings.mode != "tcp":
+        return None
+    try:
+        if ipaddress.ip_address(settings.host).is_loopback:
+            return None
+    except ValueError:
+        if settings.host == "localhost":
+            return None
+    who = ("clients in allow_from " + ", ".join(settings.allow_from)) if settings.allow_from else "every client that reaches it"
+    return (f"Modbus TCP listens on {settings.host}, not only on this machine: {who} can trigger and abort "
+            "measurements (Modbus has no authentication)")
+
+
+def _is_allowed(peer: str, networks: tuple) -> bool:
+    try:
+        addr = ipaddress.ip_address(peer.split("%", 1)[0])
+    except ValueError:
+        return False
+    if isinstance(addr, ipaddress.IPv6Address) and addr.ipv4_mapped is not None:
+        addr = addr.ipv4_mapped
+    return any(addr in net for net in _THIS_MACHINE + networks)
+
+
+class _TrackedHandler(ServerRequestHandler):
+    """A client connection that remembers when it last sent something (monotonic s)."""
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.last_activity = time.monotonic()
+
+    def connection_made(self, transport: Any) -> None:
+        super().connection_made(transport)
+        server = self.server
+        if not isinstance(server, _BoundedTcpServer):
+            return
+        if server.allowed is not None:
+            peer = (transport.get_extra_info("peername") or ("",))[0]
+            if not _is_allowed(str(peer), server.allowed):
+                server.refuse(self, str(peer))  # before the cap: a refused client never displaces an allowed one
+                return
+        server.make_room(self)
+
+    def callback_data(self, data: bytes, addr: tuple | None = None) -> int:
+        self.last_activity = time.monotonic()
+        return super().callback_data(data, addr)
+
+
+class _BoundedTcpServer(ModbusTcpServer):
+    """ModbusTcpServer with a connection cap and an idle time-out: without them a client that
+    opens connections and never closes them runs the process out of file descriptors (no new
+    PLC connection, no MQTT reconnect). Beyond ``max_connections`` the connection idle the
+    longest is closed to make room, so a PLC reconnecting always gets in."""
+
+    def __init__(self, *args: Any, max_connections: int, idle_timeout: float, allow_from: tuple[str, ...] = (),
+                 **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.max_connections = max(1, max_connections)
+        self.idle_timeout = idle_timeout
+        self.dropped = 0  # connections closed for the cap or the idle time-out
+        self.refused = 0  # connections from addresses outside allow_from
+        self._last_warning = -float("inf")
+        self._last_refusal_log = -float("inf")
+        self.allowed = allowed_networks(allow_from) if allow_from else None
+
+    def refuse(self, conn: Any, peer: str) -> None:
+        self.refused += 1
+        now = time.monotonic()
+        if now - self._last_refusal_log >= 10.0:
+            self._last_refusal_log = now
+            log.warning("Modbus: refused a connection from %s (not in allow_from; %d refused so far)", peer,
+                        self.refused)
+        conn.close()
+
+    def callback_new_connection(self) -> _TrackedHandler:
+        return _TrackedHandler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+
+    def make_room(self, new: Any) -> None:
+        """Close the connections idle the longest until ``new`` fits under the cap."""
+        others = [c for c in self.active_connections.values() if c is not new]
+        while len(others) >= self.max_connections:
+            oldest = min(others, key=lambda c: getattr(c, "last_activity", 0.0))
+            others.remove(oldest)
+            self._drop(oldest, f"more than {self.max_connections} connections")
+
+    def close_idle(self) -> None:
+        if self.idle_timeout <= 0:
+            return
+        now = time.monotonic()
+        for conn in list(self.active_connections.values()):
+            if now - getattr(conn, "last_activity", now) > self.idle_timeout:
+                self._drop(conn, f"idle for more than {self.idle_timeout:g} s")
+
+    def _drop(self, conn: Any, why: str) -> None:
+        self.dropped += 1
+        now = time.monotonic()
+        if now - self._last_warning >= 10.0:  # one line per 10 s, however hard a client tries
+            self._last_warning = now
+            log.warning("Modbus: closed a client connection (%s; %d closed so far)", why, self.dropped)
+        conn.close()
+
+
+class ModbusServer:
+    """Serves the register image of ``service.publish.modbus.registers``.
+
+    on_command(name, source, data) is called from the server thread when the PLC
+    writes 1 to a command coil (name "trigger" or "abort"; called with two
+    arguments), a part ID (name "part_id", data {"part_id": text}) or a recipe
+    number ("recipe", {"recipe": number}); it must not block.
+    ``recipe_numbers``: the recipe numbers the PLC may select (0 deselects).
+    """
+
+    def __init__(self, settings: ModbusSettings, on_command: Callable[..., None] | None = None,
+                 recipe_numbers: frozenset[int] = frozenset()) -> None:
+        if settings.word_order not in R.WORD_ORDERS:
+            raise ValueError(f"word_order must be one of {R.WORD_ORDERS}")
+        self.settings = settings
+        self._on_command = on_command or (lambda name, source, data=None: None)
+        self.recipe_numbers = recipe_numbers
+        self._lock = threading.Lock()
+        self._live = R.LiveStatus()
+        self._snapshot = R.encode_snapshot(None, settings.word_order)
+        self._verdict: str | None = None
+        self._inputs = [0] * (R.WRITABLE_END - R.WRITABLE_START)  # the writable holding registers
+        self._hold_until = 0.0  # monotonic time until which part writes are refused after a trigger
+        self._result_valid = False
+        self._image: tuple[int, ...] = ()
+        self._status_bits = 0
+        self._rebuild()
+        self._io = LoopThread("moi-modbus")
+        self._server: ModbusTcpServer | ModbusSerialServer | None = None
+        self._idle_task: asyncio.Task | None = None
+        self.bound_port: int | None = None
+        self.requests = 0  # requests served (all function codes), for diagnostics
+
+    # --- data the daemon updates --------------------------------------------
+    def publish_result(self, payload: Mapping[str, Any]) -> None:
+        """Make a stored result the current snapshot (one atomic swap)."""
+        words = R.encode_snapshot(payload, self.settings.word_order)
+        with self._lock:
+            self._snapshot = words
+            self._verdict = payload.get("verdict")
+            self._result_valid = True
+            self._rebuild()
+
+    def set_inputs(self, *, part_id: str | None = None, recipe: int | None = None) -> None:
+        """Show a part ID / recipe set by another source (MQTT, config) in the writable registers."""
+        with self._lock:
+            if part_id is not None:
+                a, n = R.WRITABLE["part_id"]
+                self._inputs[a - R.WRITABLE_START: a - R.WRITABLE_START + n] = R.encode_ascii(part_id, 2 * n)
+            if recipe is not None:
+                self._inputs[R.WRITABLE["recipe_select"][0] - R.WRITABLE_START] = int(recipe) & 0xFFFF
+
+    def inputs(self) -> dict[str, object]:
+        """The writable registers as now: part_id (text) and recipe_select (number)."""
+        a, n = R.WRITABLE["part_id"]
+        words = self._inputs
+        return {"part_id": R.decode_ascii(words[a - R.WRITABLE_START: a - R.WRITABLE_START + n]),
+                "recipe_select": words[R.WRITABLE["recipe_select"][0] - R.WRITABLE_START]}
+
+    def set_live(self, live: R.LiveStatus) -> None:
+        if live.busy:
+            self._hold_until = 0.0  # the daemon took the trigger: busy protects the part from here on
+        with self._lock:
+            if live != self._live:
+                self._live = live
+                self._rebuild()
+
+    @property
+    def live(self) -> R.LiveStatus:
+        return self._live
+
+    def image(self) -> tuple[int, ...]:
+        """The registers 0 … IMAGE_SIZE-1 as served now."""
+        return self._image
+
+    def _rebuild(self) -> None:
+        live = R.encode_live(self._live, self._result_valid, self.settings.word_order, self._verdict)
+        # one assignment: a request handler sees the old or the new tuple, never a mix
+        self._image = tuple(live + self._snapshot)
+        self._status_bits = self._live.status_bits(self._result_valid, self._verdict)
+
+    # --- pymodbus access hook (runs in the server's event loop) -------------------
+    async def _action(self, func_code: int, start_address: int, address: int, count: int,
+                      current: list, values: list | None) -> ExcCodes | None:
+        self.requests += 1
+        if func_code in _READ_REGISTERS:
+            image = self._image
+            current[0: len(image)] = image  # the block starts at address 0
+            if func_code == 3:
+                current[R.WRITABLE_START: R.WRITABLE_END] = self._inputs
+            return None
+        if func_code in _WRITE_REGISTERS and values is not None:
+            return self._write_inputs(address, values)
+        if func_code in _READ_DISCRETE:
+            current[0] = self._status_bits
+            return None
+        if func_code in _WRITE_COILS and values is not None:
+            if address < 0 or address + len(values) > len(R.COILS):
+                return ExcCodes.ILLEGAL_ADDRESS
+            names = {a: n for n, a in R.COILS.items()}
+            for i, v in enumerate(values):
+                if v:
+                    name = names[address + i]
+                    if name == "trigger":  # the part ID written before it is queued before it: it applies
+                        self._hold_until = time.monotonic() + TRIGGER_HOLD
+                    self._on_command(name, "modbus")
+                values[i] = False  # command coils are pulses: they read back 0
+            return None
+        return None
+
+    def _write_inputs(self, address: int, values: list) -> ExcCodes | None:
+        """FC 6 / FC 16 to the part ID / recipe_select registers (pymodbus refused every other address)."""
+        if address < R.WRITABLE_START or address + len(values) > R.WRITABLE_END:
+            return ExcCodes.ILLEGAL_ADDRESS
+        if self._live.busy or time.monotonic() < self._hold_until:
+            return ExcCodes.DEVICE_BUSY  # the part being measured cannot change
+        new = list(self._inputs)
+        new[address - R.WRITABLE_START: address - R.WRITABLE_START + len(values)] = [int(v) & 0xFFFF for v in values]
+        a, n = R.WRITABLE["part_id"]
+        part_words = new[a - R.WRITABLE_START: a - R.WRITABLE_START + n]
+        raw = b"".join(w.to_bytes(2, "big") for w in part_words).replace(b"\0", b"")
+        if any(not 32 <= ch < 127 for ch in raw):
+            return ExcCodes.ILLEGAL_VALUE
+        recipe = new[R.WRITABLE["recipe_select"][0] - R.WRITABLE_START]
+        touched = range(address, address + len(values))
+        recipe_written = R.WRITABLE["recipe_select"][0] in touched
+        if recipe_written and recipe != 0 and recipe not in self.recipe_numbers:
+            return ExcCodes.ILLEGAL_VALUE
+        self._inputs = new
+        if any(a <= t < a + n for t in touched):
+            self._on_command("part_id", "modbus", {"part_id": R.decode_ascii(part_words)})
+        if recipe_written:
+            self._on_command("recipe", "modbus", {"recipe": recipe})
+        return None
+
+    def _device(self) -> SimDevice:
+        n_coil_regs = len(R.COILS)
+        return SimDevice(
+            id=self.settings.unit_id,
+            simdata=(
+                [SimData(0, count=n_coil_regs, values=False, datatype=DataType.BITS)],
+                [SimData(0, count=len(R.STATUS_BITS), values=False, datatype=DataType.BITS)],
+                [SimData(0, count=R.IMAGE_SIZE, values=0, datatype=DataType.REGISTERS, readonly=True),
+                 SimData(R.WRITABLE_START, count=R.WRITABLE_END - R.WRITABLE_START, values=0,
+                         datatype=DataType.REGISTERS)],
+                [SimData(0, count=R.IMAGE_SIZE, values=0, datatype=DataType.REGISTERS, readonly=True)],
+            ),
+            action=self._action,
+        )
+
+    # --- lifecycle -------------------------------------------------------------------
+    def start(self, timeout: float = 10.0) -> None:
+        """Start serving; returns once the port is bound. Raises ModbusServerError if it cannot."""
+        if self._io.running:
+            raise RuntimeError("Modbus server already started")
+        try:
+            self._io.start_serving(self._main(), timeout)
+        except TimeoutError:
+            raise ModbusServerError(f"Modbus server did not start within {timeout} s") from None
+        except Exception as exc:
+            raise ModbusServerError(str(exc)) from None
+
+    async def _main(self) -> None:
+        s = self.settings
+        device = self._device()
+        if s.mode == "tcp":
+            server = _BoundedTcpServer(device, address=(s.host, s.port), ignore_missing_devices=False,
+                                       custom_pdu=[_WriteSingleCoil], max_connections=s.max_connections,
+                                       idle_timeout=s.idle_timeout, allow_from=tuple(s.allow_from))
+            where = f"TCP {s.host}:{s.port}"
+        elif s.mode == "rtu":
+            server = ModbusSerialServer(device, framer=FramerType.RTU, port=s.serial_port or "", baudrate=s.baudrate,
+                                        parity=s.parity, stopbits=s.stopbits, bytesize=s.bytesize,
+                                        ignore_missing_devices=True, custom_pdu=[_WriteSingleCoil])
+            where = f"RTU {s.serial_port} {s.baudrate} {s.bytesize}{s.parity}{s.stopbits}"
+        else:
+            raise ModbusServerError(f"unknown Modbus mode {s.mode!r}; expected tcp or rtu")
+        server.context = _OneUnitCore(device)
+        self._server = server
+        try:
+            await server.serve_forever(background=True)
+        except RuntimeError:
+            raise ModbusServerError(f"cannot listen on Modbus {where} (address in use, or no permission)") from None
+        sockets = getattr(server.transport, "sockets", None)
+        if sockets:
+            self.bound_port = sockets[0].getsockname()[1]
+        log.info("Modbus server on %s (unit id %d)", where if self.bound_port is None else
+                 f"TCP {s.host}:{self.bound_port}", s.unit_id)
+        if (exposure := network_exposure(s)) is not None:
+            log.warning("%s", exposure)
+        if isinstance(server, _BoundedTcpServer) and s.idle_timeout > 0:
+            # a reference is kept: the loop holds tasks only weakly
+            self._idle_task = asyncio.get_running_loop().create_task(self._close_idle(server, s.idle_timeout))
+
+    @staticmethod
+    async def _close_idle(server: "_BoundedTcpServer", idle_timeout: float) -> None:
+        while not server.serving.done():
+            await asyncio.wait([server.serving], timeout=min(1.0, idle_timeout / 4))
+            server.close_idle()
+
+    def client_count(self) -> int | None:
+        """Modbus TCP clients connected now (None for RTU or before the start)."""
+        server = self._server if self.settings.mode == "tcp" else None
+        conns = getattr(server, "active_connections", None)
+        return len(conns) if conns is not None else None
+
+    @property
+    def connections_refused(self) -> int:
+        """TCP connections refused since start (client address not in ``allow_from``)."""
+        server = self._server
+        return server.refused if isinstance(server, _BoundedTcpServer) else 0
+
+    @property
+    def connections_dropped(self) -> int:
+        """TCP client connections closed for the cap or the idle time-out since start."""
+        server = self._server
+        return server.dropped if isinstance(server, _BoundedTcpServer) else 0
+
+    def alive(self) -> bool:
+        """True while the server serves (after a successful ``start``)."""
+        return self._io.running and self._server is not None and not self._server.serving.done()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        if not self._io.running:
+            return
+        if self._server is not None:
+            try:
+                self._io.call(self._server.shutdown(), timeout)
+            except Exception as exc:  # shutting down: nothing else to do but say so
+                log.warning("Modbus server shutdown: %s", exc)
+        self._io.stop(timeout)
+
+    def __enter__(self) -> "ModbusServer":
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

@@ -1,0 +1,388 @@
+"""MQTT telemetry (paho-mqtt 2.x, callback API version 2).
+
+Topics under ``<prefix>/<device_id>/`` (prefix default "moi"):
+
+* ``result``      one JSON result per measurement, QoS 1, from the durable outbox
+  (``service.persistence.outbox``); consumers dedupe by ``uuid``.
+* ``status``      ``online`` / ``offline``, retained; ``offline`` is also the last will.
+* ``state``       sequencer events as JSON, retained (the latest state), QoS 0.
+* ``cmd/measure`` a message here starts one measurement (like the push button);
+  ``cmd/abort`` aborts the running one. Retained messages are ignored (a stale
+  retained command must not fire at every reconnect); a JSON payload with an
+  ``"id"`` is acted on once per id (QoS 1 may deliver twice). A JSON measure
+  command may carry ``"part_id"`` (the part's serial number) and ``"recipe"``.
+* ``cmd/recipe``  makes a recipe active: its name or number as the payload, or
+  JSON ``{"recipe": name or number}`` (0 or "" deselects).
+* ``spc/<recipe>`` the SPC summary of a recipe's parts, retained, republished
+  after each completed part.
+
+* ``result/last`` a retained copy of the latest delivered result (what Home
+  Assistant's sensors read, so they are known again after its restart).
+
+Optional Home Assistant MQTT discovery (retained config messages) for J, its
+uncertainty, J_object, ω_n, the damping ratio, the state, the part, each
+quality flag (device class "problem" only for the flags that invalidate a
+result), a "measure" and an "abort / acknowledge" button.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import logging
+import ssl
+import threading
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import paho.mqtt.client as mqtt
+from paho.mqtt.enums import CallbackAPIVersion
+
+from service.errors import ConfigError
+from service.persistence.outbox import OutboxSender
+from measurement.verdict import DEFAULT_INVALID_FLAGS
+
+from service.publish.modbus.registers import FLAG_BITS
+from service.persistence.store import Store
+
+log = logging.getLogger("moi.mqtt")
+
+#: a command payload longer than this is a command without an id (its JSON is not parsed), bytes
+MAX_COMMAND_PAYLOAD = 1024
+
+
+def _never_raises(callback: Callable[..., None]) -> Callable[..., None]:
+    """Wrap a paho callback: an exception that escaped it would end paho's network thread
+    (no more commands, acknowledgements or reconnects), so it is logged and counted instead."""
+
+    @functools.wraps(callback)
+    def guarded(self: "MqttService", *args: Any) -> None:
+        try:
+            callback(self, *args)
+        except Exception as exc:  # a callback must never end the network thread
+            self.callback_errors += 1
+            self.last_error = f"{callback.__name__}: {type(exc).__name__}: {exc}"
+            log.exception("MQTT: %s failed (ignored; the connection goes on)", callback.__name__)
+
+    return guarded
+
+
+@dataclass(frozen=True)
+class MqttSettings:
+    """Broker connection and topics (``[mqtt]`` in the config file).
+
+    keepalive, reconnect_min/max, resend_after: s.
+    """
+
+    host: str = "localhost"
+    port: int = 1883
+    prefix: str = "moi"
+    client_id: str | None = None
+    username: str | None = None
+    password: str | None = None
+    password_file: str | None = None
+    keepalive: int = 30
+    tls: bool = False
+    ca_file: str | None = None
+    cert_file: str | None = None
+    key_file: str | None = None
+    tls_insecure: bool = False
+    reconnect_min: float = 0.5
+    reconnect_max: float = 30.0
+    resend_after: float = 30.0
+    window: int = 10
+    home_assistant: bool = False
+    discovery_prefix: str = "homeassistant"
+
+
+class Topics:
+    def __init__(self, prefix: str, device_id: str) -> None:
+        base = f"{prefix.strip('/')}/{device_id}" if prefix.strip("/") else device_id
+        self.base = base
+        self.result = f"{base}/result"
+        self.last_result = f"{base}/result/last"  # retained copy of the latest delivered result
+        self.status = f"{base}/status"
+        self.state = f"{base}/state"
+        self.cmd_measure = f"{base}/cmd/measure"
+        self.cmd_abort = f"{base}/cmd/abort"
+        self.cmd_recipe = f"{base}/cmd/recipe"
+
+    def spc(self, recipe: str) -> str:
+        """The retained SPC summary topic of a recipe."""
+        return f"{self.base}/spc/{recipe}"
+
+    def for_kind(self, kind: str) -> str:
+        if kind == "result":
+            return self.result
+        raise ValueError(f"unknown outbox kind {kind!r}")
+
+
+class _Client(mqtt.Client):
+    """paho's client, telling why a connection attempt failed: paho swallows the error of every
+    attempt before the first success (an unresolvable host, a refused port, a TLS failure) and
+    reports later ones without the cause."""
+
+    on_connect_error: Callable[[OSError], None] | None = None
+
+    def reconnect(self):  # type: ignore[override]
+        try:
+            return super().reconnect()
+        except OSError as exc:  # socket.gaierror, ConnectionRefusedError, ssl.SSLError, TimeoutError ...
+            if self.on_connect_error is not None:
+                self.on_connect_error(exc)
+            raise
+
+
+class MqttService:
+    """The MQTT client of the daemon: durable result delivery, status, state, commands.
+
+    on_command(name, source[, data]) is called from paho's thread for a command
+    message ("trigger" or "abort", source "mqtt"; "trigger" with data when the
+    message carries a part ID or recipe, "recipe" with data {"recipe": ...});
+    it must not block.
+    """
+
+    def __init__(self, settings: MqttSettings, device_id: str, store: Store, *, software_version: str = "",
+                 on_command: Callable[[str, str], None] | None = None,
+                 on_delivered: Callable[[str], None] | None = None) -> None:
+        self.settings = settings
+        self.device_id = device_id
+        self.topics = Topics(settings.prefix, device_id)
+        self.software_version = software_version
+        self._on_command = on_command or (lambda name, source: None)
+        self._seen_ids: deque[str] = deque(maxlen=256)
+        self._seen_lock = threading.Lock()
+        self.connected_event = threading.Event()
+        self.subscribed_event = threading.Event()  # the broker confirmed the command subscriptions
+        self.last_error: str | None = None
+        self.callback_errors = 0  # exceptions caught in paho callbacks (each one logged)
+        client_id = settings.client_id or f"moi-{device_id}"
+        # clean session: the outbox, not the broker session, is what makes delivery durable
+        self.client = _Client(CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=True)
+        self.client.on_connect_error = self._on_connect_error
+        self._last_logged_error: str | None = None
+        self._configure_auth()
+        self.client.will_set(self.topics.status, "offline", qos=1, retain=True)
+        # the type hints say int, but paho only sleeps for these: sub-second backoff works
+        self.client.reconnect_delay_set(settings.reconnect_min, settings.reconnect_max)  # type: ignore[arg-type]
+        self.client.on_connect = self._on_connect
+        self.client.on_disconnect = self._on_disconnect
+        self.client.on_publish = self._on_publish
+        self.client.on_message = self._on_message
+        self.client.on_subscribe = self._on_subscribe
+        self.sender = OutboxSender(store, self._publish_kind, window=settings.window,
+                                   resend_after=settings.resend_after, on_delivered=on_delivered)
+
+    def _configure_auth(self) -> None:
+        s = self.settings
+        password = s.password
+        if s.password_file:
+            try:
+                path = Path(s.password_file)
+                password = path.read_text(encoding="utf-8").strip()
+                if path.stat().st_mode & 0o004:
+                    log.warning("MQTT: password_file %s is readable by every user (mode %o); "
+                                "chmod 600 it", s.password_file, path.stat().st_mode & 0o777)
+            except OSError as exc:
+                raise ConfigError(f"[mqtt] password_file {s.password_file!r} cannot be read: {exc.strerror}") from None
+        if s.username is not None:
+            self.client.username_pw_set(s.username, password)
+        if s.tls:
+            try:
+                self.client.tls_set(ca_certs=s.ca_file, certfile=s.cert_file, keyfile=s.key_file,
+                                    cert_reqs=ssl.CERT_REQUIRED)
+            except (OSError, ssl.SSLError, ValueError) as exc:
+                raise ConfigError(f"[mqtt] TLS settings unusable: {exc}") from None
+            if s.tls_insecure:
+                self.client.tls_insecure_set(True)
+
+    # --- lifecycle -------------------------------------------------------------------
+    def start(self) -> None:
+        """Start connecting (in the background; the broker may be down) and delivering."""
+        self.sender.start()
+        self.client.connect_async(self.settings.host, self.settings.port, keepalive=self.settings.keepalive)
+        self.client.loop_start()
+
+    def stop(self, flush_timeout: float = 2.0) -> None:
+        """Wait a little for in-flight results to be acknowledged, say offline, disconnect.
+
+        Unacknowledged results stay in the outbox for the next start.
+        """
+        if self.connected_event.is_set():
+            self.sender.wait_idle(flush_timeout)
+            info = self.client.publish(self.topics.status, "offline", qos=1, retain=True)
+            try:
+                info.wait_for_publish(timeout=min(flush_timeout, 1.0))
+            except (RuntimeError, ValueError):
+                pass  # connection gone meanwhile: the last will says offline instead
+        self.sender.stop()
+        self.client.disconnect()
+        self.client.loop_stop()
+
+    @property
+    def is_connected(self) -> bool:
+        return self.connected_event.is_set() and self.network_thread_alive()
+
+    def network_thread_alive(self) -> bool:
+        """True while paho's network thread runs (after ``start``). paho keeps the thread in
+        ``_thread`` and sets it to None when loop_forever ends, normally or by an exception."""
+        thread = getattr(self.client, "_thread", None)
+        return thread is not None and thread.is_alive()
+
+    # --- publishing --------------------------------------------------------------------
+    def _publish_kind(self, kind: str, payload: str) -> int:
+        info = self.client.publish(self.topics.for_kind(kind), payload, qos=1, retain=False)
+        if kind == "result":  # the outbox sends oldest first: the retained copy ends at the newest
+            self.client.publish(self.topics.last_result, payload, qos=1, retain=True)
+        return info.mid
+
+    def publish_state(self, event: dict[str, Any]) -> None:
+        """A sequencer event (retained: a new subscriber sees the current state)."""
+        self.client.publish(self.topics.state, json.dumps(event, default=str), qos=0, retain=True)
+
+    def wake(self) -> None:
+        """New outbox rows were stored."""
+        self.sender.wake()
+
+    # --- paho callbacks (network thread) -----------------------------------------------------
+    @_never_raises
+    def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
+        if reason_code.is_failure:
+            self.last_error = f"broker refused the connection: {reason_code}"
+            log.warning("MQTT: %s", self.last_error)
+            return
+        self.last_error = None
+        self._last_logged_error = None
+        log.info("MQTT connected to %s:%d", self.settings.host, self.settings.port)
+        client.publish(self.topics.status, "online", qos=1, retain=True)
+        client.subscribe([(self.topics.cmd_measure, 1), (self.topics.cmd_abort, 1), (self.topics.cmd_recipe, 1)])
+        if self.settings.home_assistant:
+            for topic, config in discovery_messages(self.settings, self.topics, self.device_id, self.software_version):
+                client.publish(topic, json.dumps(config), qos=1, retain=True)
+        self.connected_event.set()
+        self.sender.connected()
+
+    @_never_raises
+    def _on_connect_error(self, exc: OSError) -> None:
+        s = self.settings
+        self.last_error = f"cannot connect to {s.host}:{s.port}: {type(exc).__name__}: {exc}"
+        if self.last_error != self._last_logged_error:  # once per distinct cause, not at every retry
+            self._last_logged_error = self.last_error
+            log.warning("MQTT: %s (retrying every %g–%g s)", self.last_error, s.reconnect_min, s.reconnect_max)
+
+    @_never_raises
+    def _on_disconnect(self, client, userdata, flags, reason_code, properties) -> None:
+        if self.connected_event.is_set():
+            (log.warning if reason_code.is_failure else log.info)("MQTT disconnected: %s", reason_code)
+        self.connected_event.clear()
+        self.subscribed_event.clear()
+        self.sender.disconnected()
+
+    @_never_raises
+    def _on_subscribe(self, client, userdata, mid, reason_codes, properties) -> None:
+        if any(rc.is_failure for rc in reason_codes):
+            self.last_error = f"broker refused the command subscriptions: {', '.join(map(str, reason_codes))}"
+            log.warning("MQTT: %s", self.last_error)
+            return
+        self.subscribed_event.set()
+
+    @_never_raises
+    def _on_publish(self, client, userdata, mid, reason_code, properties) -> None:
+        self.sender.acked(mid)
+
+    @_never_raises
+    def _on_message(self, client, userdata, message) -> None:
+        if message.retain:
+            log.warning("MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
+            return
+        name = {self.topics.cmd_measure: "trigger", self.topics.cmd_abort: "abort",
+                self.topics.cmd_recipe: "recipe"}.get(message.topic)
+        if name is None:
+            return
+        cmd_id = None
+        data: dict[str, Any] = {}
+        doc: Any = None
+        if message.payload and len(message.payload) <= MAX_COMMAND_PAYLOAD:
+            try:
+                doc = json.loads(message.payload)
+                if isinstance(doc, dict) and doc.get("id") is not None:
+                    cmd_id = str(doc["id"])[:128]
+            except (ValueError, UnicodeDecodeError, RecursionError):
+                pass  # any payload is a valid command; only a JSON "id" is used for dedupe
+        if isinstance(doc, dict):
+            data = {k: doc[k] for k in ("part_id", "recipe") if k in doc}
+        if name == "recipe":
+            if not isinstance(doc, dict):  # a bare name or number
+                data = {"recipe": message.payload.decode("utf-8", errors="replace").strip()}
+            if "recipe" not in data:
+                log.warning("MQTT: %s without a recipe name or number ignored", message.topic)
+                return
+        if cmd_id is not None:
+            with self._seen_lock:
+                if (name, cmd_id) in self._seen_ids:
+                    log.info("MQTT: duplicate %s command id %s ignored", name, cmd_id)
+                    return
+                self._seen_ids.append((name, cmd_id))
+        if data:
+            self._on_command(name, "mqtt", data)
+        else:
+            self._on_command(name, "mqtt")
+
+    def publish_retained(self, topic: str, doc: dict[str, Any]) -> None:
+        """A retained JSON document (QoS 1), e.g. the SPC summary of a recipe; dropped while disconnected
+        (the next part republishes it)."""
+        self.client.publish(topic, json.dumps(doc, allow_nan=False, default=str), qos=1, retain=True)
+
+
+def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
+                       software_version: str) -> list[tuple[str, dict[str, Any]]]:
+    """Home Assistant MQTT discovery config messages (topic, config)."""
+    dp = settings.discovery_prefix.strip("/")
+    node = "".join(c if c.isalnum() or c in "_-" else "_" for c in device_id)
+    device = {"identifiers": [f"moi_{node}"], "name": f"moi {device_id}", "manufacturer": "moi",
+              "model": "pendulum inertia appliance", "sw_version": software_version}
+    common = {"availability_topic": topics.status, "payload_available": "online",
+              "payload_not_available": "offline", "device": device}
+    origin = {"name": "moi", "sw_version": software_version}
+    out: list[tuple[str, dict[str, Any]]] = []
+
+    def entity(domain: str, key: str, topic_key: str | None = None, **cfg: Any) -> None:
+        oid = f"moi_{node}_{key}"
+        # object_id is deprecated in favour of default_entity_id; both until Home Assistant drops object_id
+        doc = {"unique_id": oid, "object_id": oid, "default_entity_id": f"{domain}.{oid}", **cfg,
+               "origin": origin, **common}
+        out.append((f"{dp}/{domain}/{node}/{topic_key or key}/config", {k: v for k, v in doc.items() if v is not None}))
+
+    # the result sensors read the retained copy of the latest result: known again right after a
+    # Home Assistant restart, not "unknown" until the next measurement
+    sensors = [
+        ("J", "Moment of inertia", "kg·m²", "{{ value_json.J }}"),
+        ("J_std", "Moment of inertia uncertainty", "kg·m²", "{{ value_json.J_std }}"),
+        ("J_object", "Moment of inertia of the part (J − tare)", "kg·m²", "{{ value_json.J_object }}"),
+        ("omega_n", "Natural angular frequency", "rad/s", "{{ value_json.omega_n }}"),
+        ("damping_ratio", "Damping ratio", None, "{{ value_json.damping_ratio }}"),
+        ("residual_rms", "Fit residual RMS", "rad", "{{ value_json.residual_rms_after }}"),
+    ]
+    for key, name, unit, template in sensors:
+        entity("sensor", key, name=name, state_topic=topics.last_result, value_template=template,
+               state_class="measurement", unit_of_measurement=unit,
+               json_attributes_topic=topics.last_result if key == "J" else None,
+               json_attributes_template=("{{ {'uuid': value_json.uuid, 'seq': value_json.seq, "
+                                         "'finished_at': value_json.finished_at, 'flags': value_json.flags} | tojson }}")
+               if key == "J" else None)
+    entity("sensor", "state", name="Sequencer state", state_topic=topics.state, value_template="{{ value_json.state }}")
+    # the part: its ID and its verdict (OK / NOK / INVALID once complete, "pending" before, "none" without a recipe)
+    for key, name, template in (
+            ("part_id", "Part ID", "{{ value_json.part_id or '' }}"),
+            ("verdict", "Part verdict", "{{ value_json.verdict or ('pending' if value_json.recipe else 'none') }}")):
+        entity("sensor", key, name=name, state_topic=topics.last_result, value_template=template)
+    for flag in FLAG_BITS:
+        # "problem" only for the flags that make a result invalid; the others are information
+        entity("binary_sensor", f"flag_{flag}", flag, name=f"Flag {flag.replace('_', ' ')}",
+               device_class="problem" if flag in DEFAULT_INVALID_FLAGS else None, state_topic=topics.last_result,
+               value_template="{{ 'ON' if '" + flag + "' in value_json.flags else 'OFF' }}")
+    entity("button", "measure", name="Measure", command_topic=topics.cmd_measure, payload_press="{}")
+    entity("button", "abort", name="Abort / acknowledge fault", command_topic=topics.cmd_abort, payload_press="{}")
+    return out

@@ -1,0 +1,75 @@
+"""The published result: one dict, from which the MQTT JSON and the Modbus registers are both made.
+
+``result_payload`` takes ``IdentificationResult.to_dict()`` unchanged and adds
+an envelope (uuid, sequence number, device, trigger, timestamps, software
+version) plus the two residual RMS values under explicit before/after names.
+The result store keeps this exact dict; the outbox sends it as JSON; the
+Modbus image is encoded from it (``service.publish.modbus.registers.encode_snapshot``).
+"""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime, timezone
+from typing import Any, Mapping
+
+from service.publish.modbus.registers import flag_bits
+
+PAYLOAD_SCHEMA = 2  # 2: part_id, recipe, release, part, verdict, calibration
+
+#: keys the envelope adds on top of the result's own keys
+ENVELOPE_KEYS = (
+    "payload_schema", "uuid", "seq", "device_id", "software_version", "trigger", "status",
+    "started_at", "finished_at", "timestamp", "duration",
+    "residual_rms_before", "residual_rms_after", "flag_bits", "timing",
+) + ("part_id", "recipe", "release", "part", "verdict", "calibration")
+
+#: the part keys of the envelope (``service.parts.recipes.PartTracker.release`` and the rig's calibration state)
+PART_KEYS = ENVELOPE_KEYS[-6:]
+
+
+def iso_utc(t: float) -> str:
+    """Unix time (s) → ISO 8601 UTC with milliseconds, e.g. 2025-01-31T12:00:00.123+00:00."""
+    return datetime.fromtimestamp(t, timezone.utc).isoformat(timespec="milliseconds")
+
+
+def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id: str, trigger: str,
+                   started_at: float, finished_at: float, software_version: str,
+                   timing: Mapping[str, Any] | None = None, part: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The result payload (JSON-ready dict). started_at/finished_at: Unix time, s.
+
+    part: the part keys (PART_KEYS: part_id, recipe, release, part, verdict,
+    calibration); missing ones are null, so every payload has them.
+    """
+    clash = set(ENVELOPE_KEYS) & set(result)
+    if clash:  # the result object grew a key the envelope uses: fail loudly rather than overwrite
+        raise ValueError(f"result keys {sorted(clash)} collide with the payload envelope")
+    baseline = result.get("baseline") or {}
+    envelope = {
+        "payload_schema": PAYLOAD_SCHEMA,
+        "uuid": str(uuid),
+        "seq": int(seq),
+        "device_id": device_id,
+        "software_version": software_version,
+        "trigger": trigger,
+        "status": "ok",
+        "started_at": iso_utc(started_at),
+        "finished_at": iso_utc(finished_at),
+        "timestamp": float(finished_at),
+        "duration": float(finished_at - started_at),
+        "residual_rms_before": baseline.get("residual_rms"),
+        "residual_rms_after": result.get("residual_rms"),
+        "flag_bits": flag_bits(result.get("flags") or ()),
+        "timing": dict(timing or {}),
+    }
+    part = part or {}
+    unknown = set(part) - set(PART_KEYS)
+    if unknown:
+        raise ValueError(f"unknown part keys {sorted(unknown)}; expected {PART_KEYS}")
+    envelope.update({k: part.get(k) for k in PART_KEYS})
+    return {**envelope, **result}
+
+
+def dumps(payload: Mapping[str, Any]) -> str:
+    """Canonical JSON text of a payload (what MQTT carries and the store keeps)."""
+    return json.dumps(payload, ensure_ascii=False, allow_nan=False, separators=(",", ":"))

@@ -1,0 +1,124 @@
+"""Who may act: the token file, login sessions and the cross-site request forgery guard.
+
+Read-only pages are open. Every action that moves hardware or changes state
+needs either
+
+* a session cookie from ``POST /login`` with the token (HttpOnly, SameSite=Strict)
+  **and** the session's CSRF token in the ``X-CSRF-Token`` header or the ``csrf``
+  form field (synchronizer token: another site can make the browser send the
+  cookie, but cannot read the page that holds the CSRF token), or
+* ``Authorization: Bearer <token>`` (scripts; a browser never adds it by itself).
+
+A request whose ``Origin`` names another site is refused whatever it carries.
+"""
+
+from __future__ import annotations
+
+import hmac
+import logging
+import os
+import secrets
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from service.errors import StartupError
+
+log = logging.getLogger("moi.web")
+
+COOKIE = "moi_session"
+CSRF_HEADER = "X-CSRF-Token"
+#: a login lasts this long, s
+SESSION_LIFETIME = 12 * 3600.0
+#: at most this many live sessions (the oldest is dropped)
+MAX_SESSIONS = 64
+
+
+def read_token(path: str | os.PathLike, *, create: bool) -> str:
+    """The token in ``path`` (first line, stripped). create: make the file with a random token (mode 0600)
+    when it does not exist. A missing (create False), empty or unreadable file is a ``StartupError``."""
+    p = Path(path)
+    if create and not p.exists():
+        try:
+            p.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(secrets.token_urlsafe(18) + "\n")
+            log.info("web: made a new action token in %s", p)
+        except FileExistsError:
+            pass
+        except OSError as exc:
+            raise StartupError(f"[web] cannot create the token file {str(p)!r}: {exc.strerror}") from None
+    try:
+        token = p.read_text(encoding="utf-8").strip().splitlines()[0].strip() if p.stat().st_size else ""
+    except FileNotFoundError:
+        raise StartupError(f"[web] token_file {str(p)!r} does not exist; put the action password in it") from None
+    except (OSError, UnicodeDecodeError, IndexError) as exc:
+        raise StartupError(f"[web] cannot read the token file {str(p)!r}: {exc}") from None
+    if len(token) < 8:
+        raise StartupError(f"[web] the token in {str(p)!r} is empty or shorter than 8 characters")
+    return token
+
+
+@dataclass
+class Session:
+    csrf: str
+    expires: float
+
+
+class Guard:
+    """Sessions and checks for one token."""
+
+    def __init__(self, token: str, clock=time.monotonic) -> None:
+        self._token = token
+        self._clock = clock
+        self._sessions: dict[str, Session] = {}
+        self._lock = threading.Lock()
+
+    def token_ok(self, candidate: str | None) -> bool:
+        return bool(candidate) and hmac.compare_digest(candidate.encode(), self._token.encode())
+
+    def login(self, candidate: str | None) -> tuple[str, Session] | None:
+        """A new session (id, session) when ``candidate`` is the token, else None."""
+        if not self.token_ok(candidate):
+            return None
+        sid = secrets.token_urlsafe(24)
+        s = Session(csrf=secrets.token_urlsafe(24), expires=self._clock() + SESSION_LIFETIME)
+        with self._lock:
+            self._prune()
+            if len(self._sessions) >= MAX_SESSIONS:
+                del self._sessions[min(self._sessions, key=lambda k: self._sessions[k].expires)]
+            self._sessions[sid] = s
+        return sid, s
+
+    def logout(self, sid: str | None) -> None:
+        with self._lock:
+            self._sessions.pop(sid or "", None)
+
+    def session(self, sid: str | None) -> Session | None:
+        if not sid:
+            return None
+        with self._lock:
+            s = self._sessions.get(sid)
+            if s is not None and s.expires < self._clock():
+                del self._sessions[sid]
+                return None
+            return s
+
+    def _prune(self) -> None:
+        now = self._clock()
+        for k in [k for k, s in self._sessions.items() if s.expires < now]:
+            del self._sessions[k]
+
+    def authorise(self, *, cookie: str | None, csrf: str | None, bearer: str | None) -> tuple[int, str] | None:
+        """None when the request may act, else (HTTP status, why not): 401 without a valid login or token,
+        403 with a login but without its CSRF token."""
+        if bearer is not None:
+            return None if self.token_ok(bearer) else (401, "wrong token in the Authorization header")
+        s = self.session(cookie)
+        if s is None:
+            return 401, "log in first: this action needs the appliance's token"
+        if not csrf or not hmac.compare_digest(csrf.encode(), s.csrf.encode()):
+            return 403, "missing or wrong CSRF token: reload the page and try again"
+        return None

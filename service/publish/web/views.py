@@ -1,0 +1,513 @@
+"""Pages and endpoints. Every bad request gets a 4xx with a sentence saying what was wrong; an
+unexpected error is logged and answered 500 with its type, never with a traceback."""
+
+from __future__ import annotations
+
+import asyncio
+import datetime as dt
+import hashlib
+import json
+import logging
+import math
+import shutil
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Mapping
+from urllib.parse import urlencode, urlsplit
+
+import jinja2
+from aiohttp import web
+
+from service import __version__
+from .auth import COOKIE, CSRF_HEADER, SESSION_LIFETIME
+from .child import ChildBusy, export_file, replot, trace_file
+from .live import Live
+from measurement.flags import FLAGS
+
+from .words import STATE_WORDS, flag_words
+
+if TYPE_CHECKING:  # pragma: no cover
+    from service.persistence.store import StoredMeasurement as Measurement
+    from .server import WebServer
+
+log = logging.getLogger("moi.web")
+
+HERE = Path(__file__).parent
+#: a tick of the live stream every this many s (elapsed time, new samples)
+TICK = 0.25
+#: keys whose values the set-up page never shows
+SECRET_WORDS = ("password", "token", "secret")
+
+
+class Refused(web.HTTPException):
+    """A 4xx with a message (rendered as a page or as JSON by the error middleware)."""
+
+    def __init__(self, status: int, message: str) -> None:
+        self.status_code = status
+        super().__init__(text=message)
+        self.message = message
+
+
+def _fmt(v: Any, spec: str = ".6g") -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
+
+
+def _when(ts: float | None) -> str:
+    if ts is None:
+        return "–"
+    return dt.datetime.fromtimestamp(ts, dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+def _name(v: Any) -> Any:
+    return v.get("name") if isinstance(v, Mapping) else v
+
+
+def mask(obj: Any) -> Any:
+    """``obj`` with the value of every key that names a secret replaced by ***."""
+    if isinstance(obj, Mapping):
+        return {k: ("***" if any(w in str(k).lower() for w in SECRET_WORDS) and v and not str(k).endswith("_file")
+                    else mask(v)) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [mask(x) for x in obj]
+    return obj
+
+
+def _wants_json(request: web.Request) -> bool:
+    return request.path.startswith("/api/") or "application/json" in request.headers.get("Accept", "")
+
+
+class Views:
+    def __init__(self, server: "WebServer") -> None:
+        self.server = server
+        self.app = server.appliance
+        self.live = Live(server.appliance)
+        self.env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")),
+                                      autoescape=jinja2.select_autoescape(["html"]), trim_blocks=True,
+                                      lstrip_blocks=True)
+        self.env.filters.update(fmt=_fmt, when=_when, name=_name)
+        # file names carry a hash of the content: a browser never keeps a stale script after an update
+        stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
+        self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS,
+                                static_url=lambda name: f"/static/{name}?v={stamps.get(name, '')}")
+
+    # --- application ------------------------------------------------------------------------
+    def application(self) -> web.Application:
+        app = web.Application(middlewares=[self._errors], client_max_size=64 * 1024)
+        r = app.router
+        r.add_get("/", self.home)
+        r.add_get("/events", self.events)
+        r.add_get("/api/state", self.api_state)
+        r.add_post("/login", self.login)
+        r.add_post("/logout", self.logout)
+        r.add_post("/api/measure", self.measure)
+        r.add_post("/api/abort", self.abort)
+        r.add_post("/api/part", self.part)
+        r.add_get("/history", self.history)
+        r.add_get("/history/export.{fmt}", self.export)
+        r.add_get("/results/{key}", self.result)
+        r.add_get("/results/{key}/plot.png", self.plot)
+        r.add_get("/results/{key}/trace.csv", self.trace_csv)
+        r.add_get("/results/{key}/result.json", self.result_json)
+        r.add_get("/setup", self.setup)
+        r.add_get("/api/health", self.api_health)
+        r.add_get("/api/angle", self.api_angle)
+        r.add_get("/setup/snapshot.png", self.snapshot)
+        r.add_static("/static/", HERE / "static")
+        return app
+
+    @web.middleware
+    async def _errors(self, request: web.Request, handler):
+        try:
+            resp = await handler(request)
+        except web.HTTPException as exc:
+            if exc.status_code < 400:
+                raise
+            message = getattr(exc, "message", None) or exc.reason
+            if exc.status_code == 404 and not isinstance(exc, Refused):
+                message = f"no page {request.path!r} on this appliance"
+            elif exc.status_code == 405:
+                message = f"{request.method} is not allowed on {request.path}"
+            elif exc.status_code == 413:
+                message = "request body too large"
+            return self._error(request, exc.status_code, message)
+        except (asyncio.CancelledError, ConnectionResetError):
+            raise
+        except Exception as exc:
+            log.exception("web request %s %s failed", request.method, request.path)
+            return self._error(request, 500, f"internal error ({type(exc).__name__}); the appliance log has details")
+        return resp
+
+    def _error(self, request: web.Request, status: int, message: str) -> web.Response:
+        if _wants_json(request):
+            return web.json_response({"error": message, "status": status}, status=status)
+        return self._page(request, "error.html", status=status, message=message, code=status)
+
+    def _page(self, request: web.Request, template: str, status: int = 200, **ctx: Any) -> web.Response:
+        session = self.server.guard.session(request.cookies.get(COOKIE))
+        ctx.setdefault("title", "")
+        html = self.env.get_template(template).render(
+            device_id=self.app.config.device_id, logged_in=session is not None,
+            csrf=session.csrf if session else "", path=request.path_qs, simulated=self.app.config.simulated, **ctx)
+        return web.Response(text=html, status=status, content_type="text/html",
+                            headers={"Cache-Control": "no-store", "X-Content-Type-Options": "nosniff",
+                                     "X-Frame-Options": "DENY", "Referrer-Policy": "same-origin"})
+
+    # --- home and live state ---------------------------------------------------------------------
+    async def home(self, request: web.Request) -> web.Response:
+        last = self.app.store.latest("ok") if self.app.store is not None else None
+        return self._page(request, "home.html", title="Home", state=self.live.snapshot(), last=last,
+                          recipes=self.app.parts.book.recipes)
+
+    async def api_state(self, request: web.Request) -> web.Response:
+        return web.json_response(self.live.snapshot())
+
+    async def events(self, request: web.Request) -> web.StreamResponse:
+        """Server-sent events: ``state`` on every transition, ``tick`` every 0.25 s (progress, new samples)."""
+        resp = web.StreamResponse(headers={"Content-Type": "text/event-stream", "Cache-Control": "no-cache",
+                                           "X-Accel-Buffering": "no"})
+        await resp.prepare(request)
+        q = self.server.listen()
+        cursor: dict[str, Any] = {}
+        loop = asyncio.get_running_loop()
+        try:
+            await resp.write(b"retry: 1000\n\n")
+            next_tick = 0.0
+            while True:
+                timeout = max(0.0, next_tick - loop.time())
+                try:
+                    msg = await asyncio.wait_for(q.get(), timeout) if timeout > 0 else q.get_nowait()
+                except (asyncio.TimeoutError, asyncio.QueueEmpty):
+                    msg = "tick"
+                if msg is None:
+                    break
+                if msg == "tick":
+                    next_tick = loop.time() + TICK
+                    msg = self.live.snapshot(cursor)
+                await resp.write(f"event: {msg['type']}\ndata: {json.dumps(msg, allow_nan=False, default=str)}\n\n"
+                                 .encode())
+        except (ConnectionResetError, asyncio.CancelledError):
+            pass
+        finally:
+            self.server.unlisten(q)
+        return resp
+
+    # --- login and actions ---------------------------------------------------------------------
+    def _same_origin(self, request: web.Request) -> None:
+        origin = request.headers.get("Origin")
+        if origin and origin != "null" and urlsplit(origin).netloc != request.host:
+            raise Refused(403, f"cross-site request from {origin!r} refused")
+
+    def _next(self, request: web.Request, value: str | None) -> str:
+        # only a path on this appliance: never an open redirect
+        ok = value and value.startswith("/") and not value.startswith(("//", "/\\")) and "\\" not in value
+        return value if ok else "/"
+
+    async def login(self, request: web.Request) -> web.StreamResponse:
+        self._same_origin(request)
+        form = await request.post()
+        made = self.server.guard.login(str(form.get("token") or ""))
+        if made is None:
+            await asyncio.sleep(0.5)  # a guess costs time
+            raise Refused(401, "wrong token: it is the first line of the appliance's web token file")
+        sid, _ = made
+        resp = web.HTTPSeeOther(self._next(request, str(form.get("next") or "")))
+        resp.set_cookie(COOKIE, sid, max_age=int(SESSION_LIFETIME), httponly=True, samesite="Strict", path="/")
+        raise resp
+
+    async def logout(self, request: web.Request) -> web.StreamResponse:
+        self._same_origin(request)
+        form = await request.post()
+        self._authorise(request, form)
+        self.server.guard.logout(request.cookies.get(COOKIE))
+        resp = web.HTTPSeeOther("/")
+        resp.del_cookie(COOKIE, path="/")
+        raise resp
+
+    def _authorise(self, request: web.Request, form: Mapping[str, Any]) -> None:
+        self._same_origin(request)
+        bearer = None
+        auth = request.headers.get("Authorization")
+        if auth is not None:
+            kind, _, value = auth.partition(" ")
+            if kind.lower() != "bearer" or not value.strip():
+                raise Refused(401, "Authorization must be 'Bearer <token>'")
+            bearer = value.strip()
+        why = self.server.guard.authorise(cookie=request.cookies.get(COOKIE), bearer=bearer,
+                                          csrf=request.headers.get(CSRF_HEADER) or str(form.get("csrf") or ""))
+        if why is not None:
+            raise Refused(*why)
+
+    async def _action(self, request: web.Request, name: str) -> web.Response:
+        form = await request.post() if request.content_type in ("application/x-www-form-urlencoded",
+                                                                 "multipart/form-data") else {}
+        self._authorise(request, form)
+        state = self.app.live_status().state
+        self.app.command(name, "web")
+        log.info("web: %s requested (state %s)", name, state)
+        if "text/html" in request.headers.get("Accept", "") and form:
+            raise web.HTTPSeeOther("/")
+        return web.json_response({"accepted": True, "command": name, "state": state}, status=202)
+
+    async def measure(self, request: web.Request) -> web.Response:
+        return await self._action(request, "trigger")
+
+    async def abort(self, request: web.Request) -> web.Response:
+        return await self._action(request, "abort")
+
+    async def part(self, request: web.Request) -> web.Response:
+        """Select the recipe (name or number; 0 deselects) and/or set the part ID of the next measurements."""
+        from measurement.errors import InvalidInput
+
+        from service.parts.recipes import check_part_id
+
+        form = await request.post()
+        self._authorise(request, form)
+        data: dict[str, Any] = {}
+        recipe = str(form.get("recipe") or "").strip()
+        if recipe:
+            if recipe not in ("0",):
+                try:
+                    self.app.parts.book.find(recipe)
+                except InvalidInput as exc:
+                    raise Refused(400, str(exc)) from None
+            data["recipe"] = recipe
+        if "part_id" in form:
+            try:
+                data["part_id"] = check_part_id(str(form["part_id"])) or None
+            except InvalidInput as exc:
+                raise Refused(400, str(exc)) from None
+        if not data:
+            raise Refused(400, "nothing to change: give recipe and/or part_id")
+        if self.app.sequencer is not None and self.app.sequencer.busy:
+            raise Refused(409, "a measurement runs: the recipe and the part ID cannot change during it")
+        self.app.command("recipe", "web", data)
+        return web.json_response({"accepted": True, "command": "part", **data}, status=202)
+
+    # --- results ----------------------------------------------------------------------------------
+    def _get(self, key: str, trace: bool = False) -> "Measurement":
+        if not key or len(key) > 64 or not all(c.isalnum() or c == "-" for c in key):
+            raise Refused(400, f"bad measurement id {key[:64]!r}: expected a UUID, a UUID prefix or a sequence number")
+        store = self.app.store
+        m = store.get(key, trace=trace) if store is not None else None
+        if m is None:
+            raise Refused(404, f"no measurement {key!r} (or the prefix is not unique)")
+        return m
+
+    async def result(self, request: web.Request) -> web.Response:
+        m = self._get(request.match_info["key"])
+        p = m.payload or {}
+        steps = [s for s in p.get("steps") or () if s.get("chosen")]
+        return self._page(request, "result.html", title=f"Result {m.seq}", m=m, p=p, steps=steps,
+                          flags=flag_words(m.flags), baseline=p.get("baseline") or {},
+                          has_trace=self.app.config.store_trace)
+
+    async def plot(self, request: web.Request) -> web.Response:
+        from .server import PLOT_NAME
+
+        m = self._get(request.match_info["key"])
+        if m.status != "ok":
+            raise Refused(404, f"measurement {m.seq} {m.status}: it has no result to plot")
+        fut = self.server.plot_future(m.uuid)
+        if fut is not None:
+            await asyncio.wrap_future(fut)
+        got = self.app.store.get_attachment(m.uuid, PLOT_NAME)
+        if got is None:
+            # stored without a plot (the page was off): identify the kept trace again, once, and keep the picture
+            if not self.app.store.has_trace(m.uuid):
+                raise Refused(404, f"measurement {m.seq} has no plot and no stored trace to draw one from")
+            cfg = self.app.config
+            job = (replot, str(cfg.state_dir), m.uuid, cfg.rig.to_dict(), cfg.identification)
+            await asyncio.wrap_future(self.server.submit_plot(m.uuid, lambda: self.server.child.call(*job)))
+            got = self.app.store.get_attachment(m.uuid, PLOT_NAME)
+        data, media = got
+        return web.Response(body=data, content_type=media, headers={"Cache-Control": "max-age=86400, immutable"})
+
+    async def _in_child(self, fn, *args) -> bytes:
+        """``fn(*args)`` in the web page's child process (away from the capture's threads)."""
+        try:
+            return await self.server.child.run(fn, *args)
+        except ChildBusy as exc:
+            raise Refused(503, str(exc)) from None
+
+    async def trace_csv(self, request: web.Request) -> web.Response:
+        m = self._get(request.match_info["key"])
+        if not self.app.store.has_trace(m.uuid):
+            raise Refused(404, f"measurement {m.seq} was stored without its trace ([device] store_trace = false)")
+        body = await self._in_child(trace_file, str(self.app.config.state_dir), m.uuid)
+        return web.Response(body=body, content_type="text/csv", headers={
+            "Content-Disposition": f'attachment; filename="moi-{m.seq}-{m.uuid[:8]}-trace.csv"'})
+
+    async def result_json(self, request: web.Request) -> web.Response:
+        m = self._get(request.match_info["key"])
+        body = m.payload if m.payload is not None else {**m.summary(), "status": m.status}
+        return web.Response(text=json.dumps(body, indent=2, ensure_ascii=False), content_type="application/json",
+                            headers={"Content-Disposition": f'attachment; filename="moi-{m.seq}-{m.uuid[:8]}.json"'})
+
+    # --- history -------------------------------------------------------------------------------------
+    def _filters(self, request: web.Request) -> dict[str, Any]:
+        q = request.query
+        out: dict[str, Any] = {}
+
+        def day(name: str) -> float | None:
+            text = q.get(name, "").strip()
+            if not text:
+                return None
+            try:
+                d = dt.date.fromisoformat(text)
+            except ValueError:
+                raise Refused(400, f"{name}={text[:20]!r}: expected a date YYYY-MM-DD") from None
+            return dt.datetime(d.year, d.month, d.day, tzinfo=dt.timezone.utc).timestamp()
+
+        out["since"] = day("since")
+        until = day("until")
+        out["until"] = until + 86400.0 if until is not None else None  # the whole last day
+        status = q.get("status", "").strip()
+        if status and status not in ("ok", "failed", "aborted"):
+            raise Refused(400, f"status={status[:20]!r}: expected ok, failed or aborted")
+        out["status"] = status or None
+        flag = q.get("flag", "").strip()
+        if len(flag) > 64:
+            raise Refused(400, "flag: at most 64 characters")
+        out["flag"] = flag or None
+        for param, key in (("recipe", "recipe"), ("part", "part_id")):
+            v = q.get(param, "").strip()
+            if len(v) > 128:
+                raise Refused(400, f"{param}: at most 128 characters")
+            out[key] = v or None
+        return out
+
+    def _query_args(self, request: web.Request) -> dict[str, str]:
+        return {k: request.query.get(k, "") for k in ("since", "until", "recipe", "part", "flag", "status")}
+
+    async def history(self, request: web.Request) -> web.Response:
+        filters = self._filters(request)
+        size = self.server.settings.page_size
+        try:
+            page = int(request.query.get("page", "1"))
+        except ValueError:
+            raise Refused(400, f"page={request.query.get('page')[:20]!r}: expected a page number 1, 2, ...") from None
+        if page < 1:
+            raise Refused(400, "page: expected a page number 1, 2, ...")
+        rows, total = self.app.store.search(offset=(page - 1) * size, limit=size, **filters)
+        pages = max(1, math.ceil(total / size))
+        args = {k: v for k, v in self._query_args(request).items() if v}
+
+        def link(n: int) -> str:
+            return "/history?" + urlencode({**args, "page": n})
+
+        export = urlencode(args)
+        return self._page(request, "history.html", title="History", rows=rows, total=total, page=page, pages=pages,
+                          q=self._query_args(request), link=link, export=export, flag_names=sorted(FLAGS),
+                          recipes=self.app.store.recipes())
+
+    async def export(self, request: web.Request) -> web.Response:
+        fmt = request.match_info["fmt"]
+        if fmt not in ("csv", "json"):
+            raise Refused(404, f"export format {fmt[:10]!r}: expected export.csv or export.json")
+        name = f"moi-{self.app.config.device_id}-history.{fmt}"
+        # the same files as `moi export` (oldest first)
+        body = await self._in_child(export_file, str(self.app.config.state_dir), fmt, self._filters(request))
+        return web.Response(body=body, content_type="application/json" if fmt == "json" else "text/csv",
+                            charset="utf-8", headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+    # --- set-up -----------------------------------------------------------------------------------------
+    def health(self) -> dict[str, Any]:
+        app = self.app
+        cfg = app.config
+        out: dict[str, Any] = {"software_version": __version__, "device_id": cfg.device_id,
+                               "simulated": cfg.simulated, "state": app.live_status().state,
+                               "loop_iterations": app.loop_iterations, "last_loop_error": app.last_loop_error}
+        if app.mqtt is not None:
+            out["mqtt"] = {"broker": f"{cfg.mqtt.host}:{cfg.mqtt.port}", "connected": app.mqtt.is_connected,
+                           "outbox_backlog": app.store.outbox_count() if app.store is not None else None}
+        else:
+            out["mqtt"] = None
+        if app.modbus is not None:
+            out["modbus"] = {"mode": cfg.modbus.mode, "port": app.modbus.bound_port,
+                             "clients": app.modbus.client_count(), "requests": app.modbus.requests}
+        else:
+            out["modbus"] = None
+        try:
+            du = shutil.disk_usage(cfg.state_dir)
+            out["disk"] = {"path": str(cfg.state_dir), "free_bytes": du.free, "total_bytes": du.total}
+        except OSError:
+            out["disk"] = None
+        n = app.notifier
+        ping = n.last_watchdog_ping
+        out["watchdog"] = {"period_s": n.watchdog_period,
+                           "last_ping_s_ago": (time.monotonic() - ping) if ping is not None else None}
+        out["measurements_stored"] = app.store.count() if app.store is not None else None
+        return out
+
+    async def api_health(self, request: web.Request) -> web.Response:
+        return web.json_response(self.health())
+
+    async def setup(self, request: web.Request) -> web.Response:
+        cfg = self.app.config
+        sensor = "camera" if self._camera() is not None else "encoder"
+        return self._page(request, "setup.html", title="Set-up", health=self.health(),
+                          config_json=json.dumps(mask(cfg.to_dict()), indent=2, default=str), sensor=sensor,
+                          web=self.server.stats())
+
+    def _camera(self):
+        cfg = self.app.config
+        if cfg.simulated:
+            return cfg.simulation.camera_config if cfg.simulation.sensor == "camera" else None
+        return cfg.hardware.camera.config if cfg.hardware is not None and cfg.hardware.camera is not None else None
+
+    async def api_angle(self, request: web.Request) -> web.Response:
+        """The angle now: the last sample while a measurement captures, else one read of the encoder."""
+        seq = self.app.sequencer
+        if seq is None or self.app.devices is None:
+            raise Refused(503, "the appliance is not running its devices yet")
+        if seq.busy:
+            p = seq.progress(max(0, seq.progress(0)["next"] - 1))
+            if p["angle"]:
+                return web.json_response({"angle_rad": p["angle"][-1], "source": "capture"})
+            raise Refused(409, "a measurement is starting; no sample yet")
+        read = getattr(self.app.devices.sensor, "read_position", None)
+        if read is None:
+            raise Refused(404, "this angle sensor has no one-off read (a camera: use the snapshot)")
+        loop = asyncio.get_running_loop()
+        try:
+            _, angle = await loop.run_in_executor(None, read)
+        except Exception as exc:  # a sensor fault is the answer, not a server error
+            raise Refused(503, f"angle read failed: {exc}") from None
+        return web.json_response({"angle_rad": angle, "angle_deg": math.degrees(angle), "source": "encoder"})
+
+    async def snapshot(self, request: web.Request) -> web.Response:
+        """One camera frame with the search window and the fitted edge (what `moi camera-check` draws)."""
+        config = self._camera()
+        if config is None:
+            raise Refused(404, "this appliance has no camera")
+        camera = getattr(self.app.devices.sensor, "camera", None) if self.app.devices is not None else None
+        if camera is None:
+            raise Refused(404, "this camera sensor gives no single frames")
+
+        def grab():  # on the main loop: never while a measurement reads the camera
+            if self.app.sequencer.busy:
+                raise Refused(409, "a measurement is running: the camera is busy; try again when it is idle")
+            return camera.grab().image
+
+        try:
+            image = await asyncio.wrap_future(self.app.call_soon(grab))
+            loop = asyncio.get_running_loop()
+            png = await loop.run_in_executor(None, lambda: _annotated_png(image, config))
+        except Refused:
+            raise
+        except Exception as exc:
+            raise Refused(503, f"camera snapshot failed: {exc}") from None
+        return web.Response(body=png, content_type="image/png", headers={"Cache-Control": "no-store"})
+
+
+def _annotated_png(frame, config) -> bytes:
+    import cv2
+
+    from service.commands.camera_check import check_image
+    annotated, _report, _lines = check_image(frame, config)
+    ok, buf = cv2.imencode(".png", annotated)
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    return buf.tobytes()

@@ -1,0 +1,1 @@
+"""Input sources of `moi identify`: trace and marker CSV files, videos and image folders."""
