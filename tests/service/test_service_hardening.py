@@ -187,3 +187,30 @@ def test_a_full_disk_with_an_unsent_result_degrades_instead_of_looping(tmp_path,
     first = next(iter(c.unique_results()))
     assert sum(r["uuid"] == first for r in c.results()) == 1
     assert app.stop() == 0
+
+
+# --- Modbus writes that are not applied -----------------------------------------------------------------------------
+
+def test_mask_write_and_read_write_multiple_are_refused_not_acknowledged_and_dropped(tmp_path, appliance_factory):
+    """FC 22 and FC 23 to the part ID and recipe registers: exception 01, and the part ID stays what FC 16 wrote
+    (they were answered as done, while nothing was applied)."""
+    from .test_service_attacks import _tcp_exchange
+
+    app = appliance_factory(appliance_doc(tmp_path / "state"))
+    part, _ = R.WRITABLE["part_id"]
+    words = R.encode_ascii("PART-A", 20)
+    with socket.create_connection(("127.0.0.1", app.app.modbus.bound_port), timeout=5) as s:
+        fc16 = struct.pack(f">BHHB{len(words)}H", 16, part, len(words), 2 * len(words), *words)
+        assert _tcp_exchange(s, 1, 1, fc16)[0] == 16
+        wait_until(lambda: app.app.parts.part_id == "PART-A", 10, what="PART-A")
+        b = R.encode_ascii("PART-B", 20)
+        fc23 = struct.pack(f">BHHHHB{len(b)}H", 23, part, 2, part, len(b), 2 * len(b), *b)
+        assert _tcp_exchange(s, 2, 1, fc23) == bytes([0x80 | 23, 0x01])
+        fc22 = struct.pack(">BHHH", 22, part, 0x0000, 0x4242)
+        assert _tcp_exchange(s, 3, 1, fc22) == bytes([0x80 | 22, 0x01])
+        # FC 3 reads back what is in force, and the next measurement is stored for it
+        reply = _tcp_exchange(s, 4, 1, struct.pack(">BHH", 3, part, len(words)))
+        assert R.decode_ascii(list(struct.unpack(f">{len(words)}H", reply[2:]))) == "PART-A"
+    app.press()
+    app.wait_done(1)
+    assert app.app.store.latest("ok").part_id == "PART-A"

@@ -18,7 +18,9 @@ and its reply echoes the request (the coil itself reads back 0: the command
 coils are pulses). A write to the part registers while a measurement runs (or
 a trigger is about to start one) gets 0x06 (server device busy): the part
 being measured cannot change; an unknown recipe number or a non-ASCII part ID
-gets 0x03 (illegal data value).
+gets 0x03 (illegal data value). Function 22 (mask write) and 23 (read/write
+multiple registers) get 0x01 (illegal function): a write is applied as the
+functions above do, or refused, never acknowledged and dropped.
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ log = logging.getLogger("moi.modbus")
 
 _READ_REGISTERS = {3, 4}
 _READ_DISCRETE = {2}
+_READ_COILS = {1}
 _WRITE_COILS = {5, 15}
 _WRITE_REGISTERS = {6, 16}
 
@@ -365,7 +368,11 @@ class ModbusServer:
                     self._on_command(name, "modbus")
                 values[i] = False  # command coils are pulses: they read back 0
             return None
-        return None
+        if func_code in _READ_COILS or func_code in _WRITE_COILS or func_code in _WRITE_REGISTERS:
+            return None  # the command coils read 0; the read-back of a write function
+        # any other function that reaches the data (22 mask write, 23 read/write multiple registers) would
+        # be answered as done and not applied: the PLC is told instead that it is not served
+        return ExcCodes.ILLEGAL_FUNCTION
 
     def _write_inputs(self, address: int, values: list) -> ExcCodes | None:
         """FC 6 / FC 16 to the part ID / recipe_select registers (pymodbus refused every other address)."""
