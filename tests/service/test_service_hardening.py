@@ -214,3 +214,39 @@ def test_mask_write_and_read_write_multiple_are_refused_not_acknowledged_and_dro
     app.press()
     app.wait_done(1)
     assert app.app.store.latest("ok").part_id == "PART-A"
+
+
+# --- CSV formula injection ------------------------------------------------------------------------------------------
+
+FORMULAS = ("=1+cmd|'/c calc'!A1", "+SUM(A1)", "-2+3", "@SUM(1)")
+
+
+def test_text_cells_that_a_spreadsheet_would_evaluate_are_neutralised_in_every_csv(tmp_path, appliance_factory,
+                                                                                    capsys):
+    """Part IDs written by a PLC (no authentication) and an error text in `moi export --format csv` and in the
+    web page's /history/export.csv: shown as text, never a formula; numbers stay numbers."""
+    import csv
+    import urllib.request
+
+    from service.cli import main
+
+    app = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True}))
+    for formula in FORMULAS:
+        app.app.command("part_id", "modbus", {"part_id": formula})
+        app.press()
+        app.wait_done(FORMULAS.index(formula) + 1)
+    app.app.store.record(status="failed", trigger="plc", device_id="test-rig", software_version="t", started_at=1.0,
+                         finished_at=2.0, error="=HYPERLINK(\"http://x\")")
+    with urllib.request.urlopen(app.app.web.url + "history/export.csv", timeout=60) as r:
+        web_csv = r.read().decode()
+    app.stop()
+    assert main(["export", "--state-dir", str(tmp_path / "state"), "--format", "csv"]) == 0
+    cli_csv = capsys.readouterr().out
+    assert cli_csv == web_csv
+    rows = list(csv.DictReader(cli_csv.splitlines()))
+    assert [r["part_id"] for r in rows[:4]] == ["'" + f for f in FORMULAS]
+    assert rows[4]["error"] == "'=HYPERLINK(\"http://x\")"
+    cells = [c for r in rows for c in r.values() if c]
+    assert not any(c.startswith(("=", "+", "@")) for c in cells)
+    assert all(float(c) < 0 for r in rows for c in (r["J"],) if c.startswith("-"))  # numbers untouched
+    assert float(rows[0]["J"]) > 0
