@@ -56,8 +56,8 @@ def test_an_exception_in_a_command_handler_is_logged_and_the_next_command_still_
         assert svc.subscribed_event.wait(10)
         c = consumer_factory(broker.port, ["moi/rig/status"])
         c.wait_subscribed()
-        c.publish("moi/rig/cmd/measure", "")
-        c.publish("moi/rig/cmd/abort", "")
+        c.publish("moi/rig/cmd/measure", "1")
+        c.publish("moi/rig/cmd/abort", "1")
         wait_until(lambda: len(got) == 2, 10, what="the second command")
         assert got == ["trigger", "abort"]
         assert svc.callback_errors == 1 and "handler bug" in svc.last_error

@@ -3,6 +3,7 @@ MQTT clients on the running daemon (simulated rig, everything on loopback, bound
 
 from __future__ import annotations
 
+import json
 import resource
 import socket
 import struct
@@ -250,3 +251,28 @@ def test_text_cells_that_a_spreadsheet_would_evaluate_are_neutralised_in_every_c
     assert not any(c.startswith(("=", "+", "@")) for c in cells)
     assert all(float(c) < 0 for r in rows for c in (r["J"],) if c.startswith("-"))  # numbers untouched
     assert float(rows[0]["J"]) > 0
+
+
+# --- MQTT ---------------------------------------------------------------------------------------------------------
+
+@pytest.mark.broker
+def test_clearing_a_retained_command_starts_and_aborts_nothing(tmp_path, broker, appliance_factory, consumer_factory):
+    """The documented way to clear a retained command, an empty retained message, reaches the daemon as a plain
+    empty message: neither while idle nor during a measurement is it a trigger or an abort."""
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port, time_scale=1.0))
+    assert app.app.mqtt.subscribed_event.wait(10)
+    c = consumer_factory(broker.port, ["moi/test-rig/status"])
+    c.wait_subscribed()
+    commands: list[str] = []
+    forward = app.app.command
+    app.app.mqtt._on_command = lambda name, source, data=None: (commands.append(name), forward(name, source, data))
+    c.publish("moi/test-rig/cmd/measure", "", retain=True)
+    c.publish("moi/test-rig/cmd/abort", "", retain=True)
+    app.press()  # a measurement of 5 s at time scale 1: the clearing below arrives while it runs
+    app.wait_event(lambda e: e.state.value == "CAPTURING", 10, what="CAPTURING")
+    c.publish("moi/test-rig/cmd/abort", "", retain=True)
+    c.publish("moi/test-rig/cmd/measure", "", retain=True)
+    c.publish("moi/test-rig/cmd/recipe", json.dumps({"id": "marker", "recipe": "0"}))  # after the others
+    wait_until(lambda: commands == ["recipe"], 10, what="the marker command")
+    app.wait_done(1, timeout=60)
+    assert app.states().count("ARMED") == 1 and "ABORTED" not in app.states()

@@ -301,6 +301,11 @@ class MqttService:
                 self.topics.cmd_recipe: "recipe"}.get(message.topic)
         if name is None:
             return
+        if not message.payload:
+            # how a retained command is cleared (the broker hands the empty message on to the subscribers
+            # as a plain one): never a command itself
+            log.info("MQTT: empty message on %s ignored (the clearing of a retained command)", message.topic)
+            return
         cmd_id = None
         data: dict[str, Any] = {}
         doc: Any = None
