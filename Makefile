@@ -4,14 +4,14 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench install broker browser clean
+.PHONY: demo test lint bench install broker browser clean
 
 # pip shows its progress: the first install downloads numpy, scipy, OpenCV and friends
 $(STAMP): pyproject.toml
 	@echo "installing moi and its dependencies into $(VENV) (about a minute on a fresh clone)..."
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --progress-bar on -e '.[test]'
+	$(PY) -m pip install --progress-bar on -e '.[test,lint]'
 	@touch $(STAMP)
 	@echo "moi is installed in $(VENV)"
 
@@ -41,6 +41,11 @@ demo: $(STAMP)
 
 test: $(STAMP) broker browser
 	$(PY) -m pytest -q
+
+# ruff (pyflakes, bugbear, pyupgrade...) and mypy, configured in pyproject.toml, over the whole tree
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
 
 bench: $(STAMP)
 	$(PY) bench/run.py

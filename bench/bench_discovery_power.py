@@ -135,7 +135,7 @@ def main() -> None:
     print("Discovery power (30 s torsion 17-bit, 40 s compound 14-bit, 200 Hz, noise 2e-4 rad; white / AR(1) 0.7)")
     print(f"{'rig':<9}{'effect':<16}{'strength':>10}{'noise':>10}{'oracle ΔBIC':>13}  found")
     table = defaultdict(lambda: [0, 0])
-    for rig, eff, value, noise, seed, oracle, added in power:
+    for rig, eff, value, noise, _seed, oracle, added in power:
         found = eff in added
         wrong = [a for a in added if a != eff]
         print(f"{rig:<9}{eff:<16}{value:>10.4g}{noise:>10}{oracle:>13.1f}  {'yes' if found else 'no'}"

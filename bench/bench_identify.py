@@ -5,7 +5,6 @@ under 1 s (so a Raspberry Pi 4 stays under 5 s); the whole discovery loop
 under 3 s. Run: `.venv/bin/python bench/bench_identify.py` (or `make bench`).
 """
 
-import math
 import statistics
 import time
 

@@ -395,7 +395,7 @@ class ModbusEncoder:
         self._client = self._new_client()
         try:
             ok = await asyncio.wait_for(self._client.connect(), timeout=max(self.config.timeout, 0.5))
-        except (asyncio.TimeoutError, OSError) as exc:
+        except (TimeoutError, OSError) as exc:
             return f"cannot open the port: {type(exc).__name__}: {exc}"
         if not ok:
             return "cannot open the port (connection refused or device missing)"

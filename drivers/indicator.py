@@ -15,7 +15,7 @@ from gpiozero import DigitalOutputDevice
 from gpiozero.pins import Factory
 
 from .backend import pin_factory as default_factory
-from .settings import INDICATOR_KINDS as KINDS, IndicatorSettings
+from .settings import IndicatorSettings
 
 _BUSY = {"ARMED", "RELEASING", "CAPTURING", "IDENTIFYING"}
 

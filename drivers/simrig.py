@@ -18,9 +18,9 @@ import math
 import threading
 
 import numpy as np
-from typing import Any, Callable, Mapping
+from typing import Any, Callable
 
-from measurement import Pendulum, Rig, Swing
+from measurement import Pendulum, Swing
 
 from .clock import Clock
 from .errors import DriverConfigError
@@ -49,12 +49,6 @@ class SimRig:
         self._released_at: float | None = None
         self._detach: list[Callable[[], None]] = []
         self.releases = 0
-
-    @classmethod
-    def from_rig(cls, rig: Rig, inertia: float, effects: Mapping[str, Mapping[str, float]] | None = None, *,
-                 theta0: float, clock: Clock, duration: float = 60.0) -> "SimRig":
-        """Build the truth from a rig, J (kg·m²) and effect values (see ``measurement.Pendulum``)."""
-        return cls(Pendulum(rig, inertia, dict(effects or {})), theta0=theta0, clock=clock, duration=duration)
 
     # -- truth ------------------------------------------------------------------------
     @property

@@ -68,10 +68,6 @@ class Solenoid:
         with self._lock:
             return not self._closed and bool(self._device.value)
 
-    @property
-    def closed(self) -> bool:
-        return self._closed
-
     def add_listener(self, callback: Callable[[bool], None]) -> Callable[[], None]:
         """Call ``callback(active)`` after each switch on (True) and off (False); returns a remover.
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .sequencer import Measurement
+    from measurement import IdentificationResult, Trace
 
 
 class State(str, enum.Enum):
@@ -40,6 +40,41 @@ TRANSITIONS: dict[State, frozenset[State]] = {
     State.FAULT: frozenset({State.IDLE, State.ABORTED}),
     State.ABORTED: frozenset({State.IDLE}),
 }
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """One finished measurement, handed to the result sink.
+
+    id: UUID4 string; requested_by: who asked ("button", "mqtt", "modbus", "cli", ...).
+    requested_at / released_at / capture_ended_at / finished_at: s on the sequencer's clock.
+    trace: the captured trace (t from the first pre-trigger sample, s; angle, rad).
+    result: the identification result (J, damping, flags, acquisition counts...).
+    capture_end: why the capture ended, in words.
+    """
+
+    id: str
+    requested_by: str
+    requested_at: float
+    released_at: float
+    capture_ended_at: float
+    finished_at: float
+    trace: Trace
+    result: IdentificationResult
+    capture_end: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """The result's JSON (``IdentificationResult.to_dict()``) plus ``id``, ``requested_by`` and ``timing``."""
+        d: dict[str, Any] = {"id": self.id, "requested_by": self.requested_by}
+        d.update(self.result.to_dict())
+        d["timing"] = {
+            "released_after_request_s": self.released_at - self.requested_at,
+            "capture_s": self.capture_ended_at - self.released_at,
+            "capture_to_result_s": self.finished_at - self.capture_ended_at,
+            "capture_end": self.capture_end,
+            "samples": len(self.trace),
+        }
+        return d
 
 
 @dataclass(frozen=True, eq=False)

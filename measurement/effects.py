@@ -23,14 +23,25 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar, Iterable, Mapping, Sequence
+from typing import ClassVar, Iterable, Mapping, Protocol, Sequence
 
 import numpy as np
 
 from .errors import InvalidInput, RigError, UnknownEffectError
 
-if TYPE_CHECKING:  # effects need only the rig's attributes; the rig module imports this one
-    from .rig import Rig
+
+
+class Rig(Protocol):
+    """What an effect reads of its rig (``measurement.rig.Rig``, whose module imports this one)."""
+
+    @property
+    def kind(self) -> str: ...
+    @property
+    def mass(self) -> float | None: ...
+    @property
+    def g(self) -> float: ...
+    @property
+    def sensor_calibrated(self) -> bool: ...
 
 #: names the effects' ``term`` expressions may use, in their numpy form
 _NUMPY_NAMES = {"cos": np.cos, "sin": np.sin, "abs": np.abs, "exp": np.exp}
@@ -83,10 +94,6 @@ class Effect:
 
     def __repr__(self) -> str:
         return f"<effect {self.name}>"
-
-    @property
-    def parameter_names(self) -> tuple[str, ...]:
-        return tuple(p.name for p in self.parameters)
 
     # -- dynamic effects -------------------------------------------------------
     #: This effect's θ'' term Σ p_j φ_j (the law) as one Python expression in x

@@ -603,7 +603,10 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     # than the fit's σ (the halves disagree), or it has a shape the report can name
     changes_answer = segments is not None and segments.disagree and segments.u > ws
     named = diag.named_structure()
-    unmodeled = diag.structured and (changes_answer or bool(named))
+    # far above the noise (where the loop's screen is not trusted either) a structured residual
+    # is a model that misses the swing itself, whatever ω_n does
+    far = prep.noise > 0 and final.residual_rms > SCREEN_TRUST * prep.noise
+    unmodeled = diag.structured and (changes_answer or bool(named) or far)
     if unmodeled:
         flags.append(F.UNMODELED_RESIDUAL)
     if segments is not None and segments.disagree:
@@ -645,7 +648,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
                              f"weight {c.weight:.2f}) gives ω_n {c.omega_n:.6g} rad/s ({c.delta:+.2g}); "
                              f"the spread enters omega_n_u (flag model_ambiguous)")
     if unmodeled:
-        what = "; ".join(named) if named else "it changes ω_n by more than the fit's σ"
+        what = "; ".join(named) if named else ("it changes ω_n by more than the fit's σ" if changes_answer else
+                                              f"the residual is over {SCREEN_TRUST:g} × the noise floor")
         structure.append(f"left unexplained: no effect of the library accounts for this structure ({what}; "
                          "flag unmodeled_residual)")
     elif diag.structured:

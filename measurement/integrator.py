@@ -39,7 +39,7 @@ import re
 import sys
 import tempfile
 import threading
-from functools import lru_cache
+from functools import lru_cache, cache
 from pathlib import Path
 from types import ModuleType, SimpleNamespace
 from typing import Sequence
@@ -216,7 +216,7 @@ def library(kind: str) -> tuple:
     return _library(kind, tuple(EFFECTS.values()))
 
 
-@lru_cache(maxsize=None)
+@cache
 def _library(kind: str, classes: tuple) -> tuple:
     rig = SimpleNamespace(kind=kind)  # an effect's law needs only the rig's kind
     return tuple(cls(rig) for cls in classes if kind in cls.rigs and cls.role != "sensor")

@@ -139,8 +139,9 @@ def _shared_effects(results: Sequence[IdentificationResult], rig: Rig) -> tuple[
     return tuple(e.name for e in resolve_effects(names, rig))
 
 
-def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options = Options()) -> JointResult:
-    """Identify several releases of one object on ``rig`` jointly (see the module doc)."""
+def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options | None = None) -> JointResult:
+    """Identify several releases of one object on ``rig`` jointly (see the module doc); options: ``Options()``."""
+    options = Options() if options is None else options
     if len(traces) < 2:
         raise InvalidInput(f"a joint identification needs at least 2 releases, got {len(traces)}")
     results = [identify(tr, rig, options) for tr in traces]
@@ -159,7 +160,7 @@ def _joint(results: list[IdentificationResult], rig: Rig) -> JointResult:
         # each release alone with the shared model: the start of the joint fit
         fits.append(fit_model(model, t, y, r.noise_floor))
         models.append(model)
-    dyn = [n for n in models[0].names[len(STATE_PARAMS):models[0].n_dynamic]]
+    dyn = list(models[0].names[len(STATE_PARAMS):models[0].n_dynamic])
     n_shared = 1 + len(dyn)
     weights = np.array([1.0 / max(f.residual_rms, 1e-12) for f in fits])
     # start: ω_n and the laws averaged over the releases, each by its information

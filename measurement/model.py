@@ -24,7 +24,6 @@ from .integrator import Dynamics
 from .rig import Rig
 
 STATE_PARAMS = ("theta0", "omega0", "omega_n")
-STATE_UNITS = {"theta0": "rad", "omega0": "rad/s", "omega_n": "rad/s", "offset": "rad"}
 
 
 @dataclass(frozen=True)
@@ -115,9 +114,6 @@ class Model:
             out += [of_effect(p) for p in e.parameters]
         return out
 
-    def units(self) -> tuple[str, ...]:
-        return tuple(self._per_parameter([STATE_UNITS[n] for n in STATE_PARAMS], "rad", lambda p: p.unit))
-
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo = self._per_parameter([-np.inf, -np.inf, 0.0], -np.inf, lambda p: p.lower)
         hi = self._per_parameter([np.inf, np.inf, np.inf], np.inf, lambda p: p.upper)
@@ -167,11 +163,6 @@ class Model:
             return theta + float(x[self.n_dynamic])
         lin = np.asarray(x[self.n_dynamic:], dtype=float)
         return theta + self.sensor_columns(t, theta) @ lin
-
-    def predict(self, x: Sequence[float], t: np.ndarray, max_step: float) -> np.ndarray:
-        """Measured angle θ + a + sensor terms at times t, rad."""
-        theta, _ = self.true_angle(x, t, max_step)
-        return self.measured(x, t, theta)
 
 
 def omega_n_of(rig: Rig, inertia: float) -> float:

@@ -89,11 +89,6 @@ class NoiseModel:
             return x
         return all_pole_filter(self.a, x[::-1])[::-1]
 
-    @property
-    def variance_ratio(self) -> float:
-        """Long-run variance of the mean over the white-noise one: how much less a coloured sample tells."""
-        return float(self.innovation_var / max(self.variance, 1e-300) / np.sum(self.a) ** 2)
-
 
 def levinson(acov: np.ndarray, order: int) -> tuple[list[np.ndarray], np.ndarray]:
     """Yule–Walker AR fits of orders 0..order (Levinson–Durbin): coefficient vectors and innovation variances."""

@@ -252,7 +252,7 @@ class IdentificationResult:
                      f" → combined u: ω_n ± {self.omega_n_u:.2g} rad/s{ju}")
         L.append(f"    damping ratio= {Quantity(self.damping_ratio, self.damping_ratio_std, '')}"
                  f" (equivalent viscous, at {self.reference_amplitude:.4g} rad)")
-        for group, title in ((self.damping, "damping"), (self.stiffness, "stiffness"), (self.sensor, "sensor")):
+        for group in (self.damping, self.stiffness, self.sensor):
             for eff, params in group.items():
                 for name, q in params.items():
                     if q.value is not None:

@@ -504,8 +504,12 @@ class TensorResult:
             z = o.get("normalised_residual")
             L.append(f"    {o['name']:8}{ax:>26}{o['J_axis']:>14.6g}{-o['parallel_axis'] or 0.0:>12.3g}{o['J']:>14.6g}"
                      f"{o['u']:>10.2g}{o['fitted']:>14.6g}{'' if z is None else f'{z:+.2f}':>7}")
-        lim = "" if self.chi2_limit is None else f" (99 % point {self.chi2_limit:.3g})"
-        L.append(f"    χ² = {self.chi2:.3g} for {self.dof} dof{lim}; plan condition number {self.condition_number:.3g}")
+        if self.dof:
+            L.append(f"    χ² = {self.chi2:.3g} for {self.dof} dof (99 % point {self.chi2_limit:.3g}); plan condition "
+                     f"number {self.condition_number:.3g}")
+        else:
+            L.append(f"    6 orientations determine the 6 components exactly: nothing checks them (a plan of more axes "
+                     f"does); plan condition number {self.condition_number:.3g}")
         L.append(f"[[Flags]] {', '.join(self.flags) if self.flags else 'none'}")
         for f, why in self.reasons.items():
             L.append(f"    {f}: {why}")
@@ -546,7 +550,6 @@ def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigS
             excluded[i] = "not measured" if r is None else (r.invalid or "no value")
         else:
             used.append(i)
-    names_out = [plan.orientations[i].name for i in excluded]
     rank, cond = plan_geometry([plan.orientations[i].axis for i in used])
     if rank < 6 or cond > MAX_CONDITION:
         raise TensorError(f"the orientations left ({len(used)}: {', '.join(plan.orientations[i].name for i in used)}) "
@@ -580,8 +583,8 @@ def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigS
     C = np.linalg.inv(At.T @ At)
     C = (C + C.T) / 2
     r = b - A @ x
-    chi2 = float(np.sum((bt - At @ x) ** 2))
     dof = len(used) - 6
+    chi2 = float(np.sum((bt - At @ x) ** 2)) if dof else 0.0  # rounding's, not the data's, when exactly determined
     var_r = np.diag(V - A @ C @ A.T)
     z = [float(ri / math.sqrt(vr)) if vr > 1e-9 * vii else None for ri, vr, vii in zip(r, var_r, np.diag(V))]
 

@@ -57,7 +57,6 @@ from . import flags as F
 from .errors import InvalidInput
 
 OK, NOK, INVALID = "OK", "NOK", "INVALID"
-VERDICTS = (OK, NOK, INVALID)
 
 #: decision rules (see the module docstring)
 RULES = ("guard_band", "simple")

@@ -22,6 +22,8 @@ from service.errors import StoreError
 COMMANDS: dict[str, tuple[str, str]] = {
     "identify": ("service.commands.identify",
         "identify J, ω_n and the damping from a trace CSV or a video"),
+    "tensor": ("service.commands.tensor",
+        "the inertia tensor, principal moments and axes of a part from a plan of swing axes and their traces"),
     "markers": ("service.commands.markers",
         "a trace CSV from two markers tracked on the pendulum, the camera's oblique view measured and removed"),
     "simulate": ("service.commands.simulate",

@@ -1,4 +1,4 @@
-"""The appliance daemon: sequencer, result store, MQTT, Modbus and systemd, in one main loop.
+"""The appliance daemon: sequencer, result store, the publishers and systemd, in one main loop.
 
 Threads and who owns what:
 
@@ -7,13 +7,14 @@ Threads and who owns what:
   Modbus coils and MQTT, refreshes the live Modbus registers and pings the
   systemd watchdog, only after an iteration that completed (a hung loop
   therefore gets the daemon restarted by systemd);
-* the sequencer calls back on the main loop's thread: state events (published
-  on MQTT and in the registers) and the result sink, which stores the
-  measurement and its outbox row in one SQLite transaction, then swaps the
-  Modbus snapshot and wakes the outbox sender; nothing is published before
-  the store has it;
-* pymodbus, paho and the outbox sender run in their own threads and only
-  enqueue commands / acknowledgements.
+* the sequencer calls back on the main loop's thread: state events (handed to
+  every publisher) and the result sink, which stores the measurement and its
+  outbox rows in one SQLite transaction, then hands the stored result to every
+  publisher (the Modbus snapshot swaps, the outbox sender wakes, the web page
+  draws its plot); nothing is published before the store has it;
+* the publishers (``service.publish.port``: Modbus, MQTT, the web page) run in
+  their own threads and only enqueue commands / acknowledgements; the daemon
+  holds them in a list and never names one.
 
 Only ``run``'s loop catches broadly: an unexpected error becomes a FAULT of
 the sequencer (solenoid off), published like any state; a component thread
@@ -44,13 +45,13 @@ from . import __version__
 from service.config.appliance import Config
 from .errors import ServiceError, StartupError, StoreDamaged
 from service.devices.hardware import Devices, build_devices
-from service.publish.modbus.server import ModbusServer
-from service.publish.mqtt.client import MqttService
 from .notify import Notifier
 from service.publish.payload import iso_utc, result_payload
-from service.parts.recipes import SPC_WINDOW, PartTracker, Recipe, RecipeBook, recipe_spc
+from service.parts.recipes import PartTracker, Recipe, RecipeBook
 from service.publish.modbus.registers import LiveStatus
 from service.persistence.store import Store, quarantine_store
+from service.publish import port
+from service.publish.port import ApplianceView, Publisher
 
 log = logging.getLogger("moi.daemon")
 
@@ -88,9 +89,7 @@ class Appliance:
         self._devices = devices
         self.devices: Devices | None = None
         self.store: Store | None = None
-        self.modbus: ModbusServer | None = None
-        self.mqtt: MqttService | None = None
-        self.web: Any = None  # service.publish.web.server.WebServer when [web] is enabled
+        self.publishers: list[Publisher] = []  # started, in start order
         self.sequencer: Sequencer | None = None
         self._commands: queue.SimpleQueue[tuple[str, str, Mapping[str, Any] | None]] = queue.SimpleQueue()
         self._calls: queue.SimpleQueue[tuple[Callable[[], Any], concurrent.futures.Future]] = queue.SimpleQueue()
@@ -145,16 +144,10 @@ class Appliance:
         try:
             self._lock_state_dir()
             self.store = self._open_store()
-            if cfg.modbus is not None:
-                self.modbus = ModbusServer(cfg.modbus, on_command=self.command, recipe_numbers=self.parts.book.numbers)
-                self.modbus.set_inputs(recipe=self.parts.recipe.number if self.parts.recipe else 0)
-                # until the main loop runs, the PLC sees STARTING and the true outbox backlog, not defaults
-                self.modbus.set_live(LiveStatus(state="STARTING", simulated=cfg.simulated,
-                                                outbox_pending=self.store.outbox_count()))
-                last = self.store.latest("ok")
-                if last is not None and last.payload is not None:
-                    self.modbus.publish_result(last.payload)  # the PLC sees the last result after a restart too
-                self.modbus.start()
+            view = ApplianceView(self)
+            enabled = [(entry.load(), settings) for entry in port.PUBLISHERS
+                       if (settings := getattr(cfg, entry.name, None)) is not None]
+            self._start_publishers([(kind, s) for kind, s in enabled if kind.EARLY], view)
             self.devices = self._devices or build_devices(cfg)
             d = self.devices
             # the button is wired through the command queue like the other sources, so every
@@ -173,33 +166,56 @@ class Appliance:
                 self._compiling = subprocess.Popen([sys.executable, "-m", "measurement.integrator", cfg.rig.kind],
                                                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                                    stderr=subprocess.DEVNULL)
-            if cfg.web is not None:
-                from service.publish.web.server import WebServer  # aiohttp is loaded only when the page is served
-                self.web = WebServer(self, cfg.web)
-                self.web.start()
-                self.sequencer.subscribe(self.web.on_event)
-            # MQTT last: its outbox sender starts delivering at once, and the live registers
-            # follow its progress only once the main loop runs (right after this)
-            if cfg.mqtt is not None:
-                self.mqtt = MqttService(cfg.mqtt, cfg.device_id, self.store, software_version=__version__,
-                                        on_command=self.command)
-                self.mqtt.start()
+            # the others once the sequencer exists, in PUBLISHERS' order (an outbox sender delivers at
+            # once; the live status follows its progress once the main loop runs, right after this)
+            self._start_publishers([(kind, s) for kind, s in enabled if not kind.EARLY], view)
         except BaseException:
             self._shutdown_components()
             raise
         self._refresh_live()
-        if self.mqtt is not None:
-            self.mqtt.publish_state(self._state_message("IDLE", "IDLE", "daemon started", None))
-        where = []
-        if self.modbus is not None:
-            m = cfg.modbus
-            where.append(f"Modbus {m.mode.upper()} " + (f"{m.host}:{self.modbus.bound_port}" if m.mode == "tcp" else str(m.serial_port)))
-        where.append(f"MQTT {cfg.mqtt.host}:{cfg.mqtt.port}" if cfg.mqtt else "MQTT off")
-        if self.web is not None:
-            where.append(f"web page {self.web.url}")
+        self._to_publishers("on_state", self._state_message("IDLE", "IDLE", "daemon started", None), None)
+        where = [w for p in self.publishers if (w := p.where())] or ["no publisher"]
         log.info("moi %s ready (%s rig; %s; store %s)", __version__, "simulated" if cfg.simulated else "hardware",
                  ", ".join(where), self.store.path)
         self.notifier.ready(f"idle; {', '.join(where)}")
+
+    def _start_publishers(self, kinds: list[tuple[type[Publisher], Any]], view: ApplianceView) -> None:
+        for kind, settings in kinds:
+            publisher = kind.build(settings, view)
+            publisher.start()
+            self.publishers.append(publisher)
+
+    def _stop_publishers(self, publishers: list[Publisher]) -> None:
+        for p in reversed(publishers):
+            try:
+                p.stop()
+            except Exception:
+                log.exception("%s stop failed", p.NAME)
+            self.publishers.remove(p)
+
+    def _to_publishers(self, hook: str, *args: Any) -> None:
+        """Call ``hook`` of every publisher (main loop thread; hooks never block)."""
+        for p in self.publishers:
+            getattr(p, hook)(*args)
+
+    def publisher(self, name: str) -> Publisher | None:
+        """The running publisher of configuration table ``name``, or None."""
+        return next((p for p in self.publishers if p.NAME == name), None)
+
+    def __getattr__(self, name: str) -> Any:
+        # app.modbus, app.mqtt, app.web...: a publisher by its table's name (None when off), for tests and tools
+        if any(entry.name == name for entry in port.PUBLISHERS):
+            return next((p for p in self.__dict__.get("publishers", ()) if p.NAME == name), None)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def publisher_health(self) -> dict[str, dict[str, Any] | None]:
+        """Each publisher's health under its name (None when it is off), for the health page."""
+        out: dict[str, dict[str, Any] | None] = {}
+        for entry in port.PUBLISHERS:
+            if entry.in_health:
+                p = self.publisher(entry.name)
+                out[entry.name] = p.health() if p is not None else None
+        return out
 
     def _lock_state_dir(self) -> None:
         self._lock_fd = lock_state_dir(self.config.state_dir)
@@ -338,12 +354,10 @@ class Appliance:
         if data.get("recipe") is not None:
             r = self.parts.select(data["recipe"])
             log.info("recipe %s", f"{r.number} {r.name!r} (version {r.version}) active" if r else "deselected")
-            if self.modbus is not None:
-                self.modbus.set_inputs(recipe=r.number if r else 0)
+            self._to_publishers("on_recipe", r)
         if "part_id" in data:
             self.parts.set_part_id(data["part_id"])
-            if self.modbus is not None:
-                self.modbus.set_inputs(part_id=self.parts.part_id or "")
+            self._to_publishers("on_part_id", self.parts.part_id)
 
     def _run_calls(self) -> None:
         while True:
@@ -358,16 +372,12 @@ class Appliance:
                     fut.set_exception(exc)
 
     def _check_components(self) -> None:
-        if self.modbus is not None and not self.modbus.alive():
-            raise _Fatal("the Modbus server thread stopped")
-        if self.web is not None and not self.web.alive():
-            raise _Fatal("the web server thread stopped")
-        if self.mqtt is not None and self.mqtt.sender.error is not None:
-            raise _Fatal(f"the MQTT outbox sender failed: {self.mqtt.sender.error}")
-        if self.mqtt is not None and not self.mqtt.network_thread_alive():
-            # commands and acknowledgements are no longer read: stop feeding the watchdog and let
-            # systemd restart the daemon (the outbox keeps every unacknowledged result)
-            raise _Fatal("the MQTT network thread stopped")
+        if self._compiling is not None and self._compiling.poll() is not None:
+            self._compiling = None  # the kernel is compiled (poll reaped the child)
+        for p in self.publishers:
+            why = p.failure()
+            if why is not None:
+                raise _Fatal(why)
 
     def _fault(self, reason: str) -> None:
         seq = self.sequencer
@@ -400,9 +410,8 @@ class Appliance:
         if event.state in (State.FAULT, State.ABORTED) and event.measurement_id \
                 and event.measurement_id in self._run_started:
             self._store_failure(event)
-        if self.mqtt is not None:
-            self.mqtt.publish_state(self._state_message(event.state.value, event.previous.value, event.reason,
-                                                        event.measurement_id, event))
+        self._to_publishers("on_state", self._state_message(event.state.value, event.previous.value, event.reason,
+                                                            event.measurement_id, event), event)
         self._refresh_live()
 
     def _state_message(self, state: str, previous: str, reason: str, measurement_id: str | None,
@@ -458,38 +467,20 @@ class Appliance:
                 software_version=__version__, started_at=started, finished_at=finished, result=result,
                 build_payload=build, rig=rig.to_dict(), config=cfg.to_dict(),
                 trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
-                trace_meta=dict(trace.meta), enqueue=("result",) if self.mqtt is not None else (),
+                trace_meta=dict(trace.meta), enqueue=tuple(kind for p in self.publishers for kind in p.OUTBOX),
                 part=_part_columns(part),
             )
         except BaseException:
             self.parts.undo_last()  # not stored: the release does not count for the part
             raise
         self._durable_results.append(m.id)
-        if self.modbus is not None and stored.payload is not None:
-            self.modbus.publish_result(stored.payload)
-        if self.mqtt is not None:
-            self.mqtt.wake()
-        if self.web is not None:
-            self.web.measurement_stored(m)  # its plot is drawn once, off this thread, and kept with it
+        self._to_publishers("on_result", stored, m)
         self._note_stored(m.id)
         log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, result.get("J"),
                  ", ".join(result.get("flags") or []) or "none")
         if part["verdict"] is not None and recipe is not None:
             log.info("part %s (%s): %s", part_id or "(no ID)", recipe.name, part["verdict"])
-            if self.mqtt is not None:
-                self._publish_spc(recipe)
-
-    def _publish_spc(self, recipe: Recipe) -> None:
-        """The retained SPC summary of a recipe's latest parts (after each completed part)."""
-        assert self.store is not None and self.mqtt is not None
-        spc = recipe_spc(self.store, recipe.name, limit=SPC_WINDOW)
-        doc: dict[str, Any] = {"recipe": recipe.name, "version": recipe.version, "window": SPC_WINDOW,
-                               "device_id": self.config.device_id, "timestamp": self.wall_clock()}
-        if spc is None:
-            doc["status"] = "fewer than 2 usable parts"
-        else:
-            doc |= spc.to_dict() | {"recipe": recipe.name, "status": "ok"}
-        self.mqtt.publish_retained(self.mqtt.topics.spc(recipe.name), doc)
+            self._to_publishers("on_part_done", recipe)
 
     @staticmethod
     def _calibration_state(rig: Rig, now: float) -> dict[str, Any] | None:
@@ -497,7 +488,7 @@ class Appliance:
         cal = rig.calibration
         if cal is None:
             return None
-        today = _dt.datetime.fromtimestamp(now, _dt.timezone.utc).date()
+        today = _dt.datetime.fromtimestamp(now, _dt.UTC).date()
         until = cal.valid_until
         return {"date": cal.date.isoformat(), "valid_until": until.isoformat() if until else None,
                 "due": cal.due(today), "stiffness": rig.stiffness, "stiffness_std": rig.stiffness_std}
@@ -538,28 +529,27 @@ class Appliance:
     def live_status(self) -> LiveStatus:
         seq = self.sequencer
         state = seq.state.value if seq is not None else "STARTING"
+        fields: dict[str, Any] = {}
+        for p in self.publishers:
+            fields |= p.live_fields()
         return LiveStatus(
             state="STOPPING" if self._stopping else state, busy=bool(seq and seq.busy), fault=state == "FAULT",
-            mqtt_connected=bool(self.mqtt and self.mqtt.is_connected), simulated=self.config.simulated,
-            outbox_pending=self.mqtt.sender.pending if self.mqtt is not None else 0, started=self._started_runs,
+            simulated=self.config.simulated, started=self._started_runs,
             recipe=self.parts.recipe.number if self.parts.recipe else 0,
-            releases_done=(self.parts.open_part or {}).get("done", 0),
+            releases_done=(self.parts.open_part or {}).get("done", 0), **fields,
         )
 
     def _refresh_live(self) -> None:
-        if self.modbus is not None:
-            self.modbus.set_live(self.live_status())
+        if self.publishers:
+            self._to_publishers("on_live", self.live_status())
 
     def _status_text(self) -> str:
         seq = self.sequencer
         parts = [seq.state.value.lower() if seq else "starting"]
         if self.store is not None and self.store.write_failure is not None:
             parts.append(f"result store cannot be written ({self.store.write_failure}): measurements refused")
-        if self.mqtt is not None:
-            parts.append("mqtt connected" if self.mqtt.is_connected else
-                         "mqtt disconnected" + (f" ({self.mqtt.last_error})" if self.mqtt.last_error else ""))
-            if self.mqtt.sender.pending:
-                parts.append(f"{self.mqtt.sender.pending} result(s) waiting for the broker")
+        for p in self.publishers:
+            parts += p.status()
         return "; ".join(parts)
 
     # --- stop -------------------------------------------------------------------------------------------------------
@@ -590,24 +580,25 @@ class Appliance:
         self._shutdown_components()
 
     def _shutdown_components(self) -> None:
-        if self.web is not None:  # first: its handlers read the store and the devices
-            try:
-                self.web.stop()
-            except Exception:
-                log.exception("web server stop failed")
-            self.web = None
+        # in reverse start order: those started after the devices first (the web page's handlers read the
+        # store and the devices; MQTT's in-flight publications get a moment), then the devices, then
+        # the early ones (the PLC sees STOPPING to the end)
+        late = [p for p in self.publishers if not p.EARLY]
+        early = [p for p in self.publishers if p.EARLY]
+        self._stop_publishers(late)
         if self.devices is not None:
             self.devices.close()  # solenoid first
             self.devices = None
-        if self.mqtt is not None:
+        self._stop_publishers(early)
+        self.publishers = []
+        if self._compiling is not None:  # a first run stopped before the kernel was compiled: the next start compiles it
+            self._compiling.terminate()
             try:
-                self.mqtt.stop(flush_timeout=2.0)
-            except Exception:
-                log.exception("MQTT stop failed")
-            self.mqtt = None
-        if self.modbus is not None:
-            self.modbus.stop()
-            self.modbus = None
+                self._compiling.wait(5)
+            except subprocess.TimeoutExpired:
+                self._compiling.kill()
+                self._compiling.wait()
+            self._compiling = None
         if self.store is not None:
             self.store.close()
             self.store = None

@@ -46,5 +46,6 @@ __all__ = [
     "CameraConfig", "CameraModel", "MarkerGeometry", "PoseSettings", "angle_from_normalised",
     "normalised_from_angle", "MarkerObservation", "MarkerTracker", "TrackerSettings", "Tracking", "VisionSettings",
     "count_dropped", "trace_from_tracking", "track_frames", "PoseEstimate", "estimate_yaw", "CameraPose", "Imaging",
-    "MarkerPattern", "MarkerRenderer",
+    "MarkerPattern", "MarkerRenderer", "MarkerTrack", "PairView", "measure_view", "pair_angle", "pair_trace",
+    "parse_marker_csv",
 ]

@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     if args.valid_days <= 0:
         raise CalibrationError(f"--valid-days must be > 0, got {args.valid_days}")
     try:
-        date = dt.date.fromisoformat(args.date) if args.date else dt.datetime.now(dt.timezone.utc).date()
+        date = dt.date.fromisoformat(args.date) if args.date else dt.datetime.now(dt.UTC).date()
     except ValueError:
         raise CalibrationError(f"--date must be a date like 2026-01-31, got {args.date!r}") from None
     stds: dict[str, float] = {}

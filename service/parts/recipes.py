@@ -123,7 +123,7 @@ class Recipe:
 def _schemas() -> dict[str, dict[str, Any]]:
     """The keys of a recipe file: [recipe] here, [decision] and [quality] from the settings they fill
     (``Specification``, ``QualityRules``: their defaults are the recipe's)."""
-    from service.config.appliance import REQUIRED, Key, _doc, _schema
+    from service.config.schema import REQUIRED, Key, doc as _doc, schema as _schema
 
     return {
         "recipe": {
@@ -155,7 +155,7 @@ def load_recipe(path: str | Path) -> Recipe:
     """Read and check one recipe file (``RecipeError`` naming the file, table and key)."""
     from measurement.effects import EFFECTS
 
-    from service.config.appliance import _Checker
+    from service.config.schema import Checker as _Checker
     from service.sources.files import read_toml
 
     class Checker(_Checker):

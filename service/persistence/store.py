@@ -701,7 +701,7 @@ def _read_row(db: sqlite3.Connection, table: str, columns: list[str], rowid: int
 def check_store(path: str | Path) -> StoreHealth:
     """Read every row of the store at ``path`` (results.db) without changing it; say what is damaged."""
     path = Path(path)
-    health = StoreHealth(str(path), {t: 0 for t in _TABLES}, {t: 0 for t in _TABLES}, [])
+    health = StoreHealth(str(path), dict.fromkeys(_TABLES, 0), dict.fromkeys(_TABLES, 0), [])
     db = _open_read_only(path)
     try:
         try:
@@ -724,7 +724,7 @@ def salvage_store(path: str | Path, dest_dir: str | Path) -> StoreHealth:
     path, dest = Path(path), Path(dest_dir)
     if (dest / DB_NAME).exists():
         raise StoreError(f"{str(dest / DB_NAME)!r} exists already: salvage into an empty directory")
-    health = StoreHealth(str(path), {t: 0 for t in _TABLES}, {t: 0 for t in _TABLES}, [])
+    health = StoreHealth(str(path), dict.fromkeys(_TABLES, 0), dict.fromkeys(_TABLES, 0), [])
     src = _open_read_only(path)
     try:
         with Store(dest) as new:

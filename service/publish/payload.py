@@ -10,7 +10,7 @@ Modbus image is encoded from it (``service.publish.modbus.registers.encode_snaps
 from __future__ import annotations
 
 import json
-from datetime import datetime, timezone
+from datetime import datetime, UTC
 from typing import Any, Mapping
 
 from service.publish.modbus.registers import flag_bits
@@ -30,7 +30,7 @@ PART_KEYS = ENVELOPE_KEYS[-6:]
 
 def iso_utc(t: float) -> str:
     """Unix time (s) → ISO 8601 UTC with milliseconds, e.g. 2025-01-31T12:00:00.123+00:00."""
-    return datetime.fromtimestamp(t, timezone.utc).isoformat(timespec="milliseconds")
+    return datetime.fromtimestamp(t, UTC).isoformat(timespec="milliseconds")
 
 
 def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id: str, trigger: str,

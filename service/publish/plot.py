@@ -90,3 +90,41 @@ def plot_control_chart(summary, path: str | os.PathLike, title: str = "", unit: 
     axr.set_ylabel("moving range" if s.subgroup == 1 else "range")
     axr.set_xlabel("part")
     fig.savefig(path, dpi=100, format="png")
+
+
+def render_tensor_png(result, *, dpi: int = 100) -> bytes:
+    """The picture of a ``measurement.tensor.TensorResult`` as PNG bytes: each orientation's inertia about
+    the centre of mass (with its U) against the tensor's nᵀ·T·n, and the normalised residuals below."""
+    from matplotlib.figure import Figure
+
+    rows = result.orientations
+    x = np.arange(len(rows))
+    names = [r["name"] for r in rows]
+    used = [i for i, r in enumerate(rows) if "excluded" not in r]
+    k = result.coverage_factor
+    fig = Figure(figsize=(max(6.0, 0.8 * len(rows) + 2), 6.5), layout="constrained")
+    ax, axr = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    ax.errorbar(x[used], [rows[i]["J"] for i in used], yerr=[k * rows[i]["u"] for i in used], fmt="o", color="k",
+                ms=4, capsize=3, label=f"measured, moved to the centre of mass (± U, k = {k:g})")
+    ax.plot(x, [r["fitted"] for r in rows], "_", color="tab:red", ms=18, mew=2, label="tensor: nᵀ·T·n")
+    out = [i for i in range(len(rows)) if i not in used]
+    if out:
+        ax.plot(x[out], [rows[i]["fitted"] for i in out], "x", color="tab:gray", ms=8, label="excluded")
+    lam = ", ".join(f"{v:.5g}" for v in result.principal_moments)
+    check = f"χ² {result.chi2:.3g} for {result.dof} dof" if result.dof else "6 axes: no check"
+    ax.set_title(f"{result.part}: principal moments {lam} kg·m²; {check}", fontsize=9)
+    ax.set_ylabel("inertia about the axis [kg·m²]")
+    ax.legend(loc="best", fontsize=8)
+    z = [rows[i]["normalised_residual"] for i in used]
+    axr.bar(x[used], [0.0 if v is None else v for v in z], color="tab:blue")
+    axr.axhline(0, color="k", lw=0.8)
+    for s in (-3, 3):
+        axr.axhline(s, color="tab:red", ls="--", lw=0.8)
+    axr.set_ylabel("normalised residual")
+    axr.set_xticks(x, names)
+    axr.set_xlabel("orientation")
+    if result.flags:
+        axr.text(0.01, 0.03, "flags: " + ", ".join(result.flags), transform=axr.transAxes, fontsize=8, color="tab:red")
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=dpi, format="png")
+    return buf.getvalue()

@@ -41,7 +41,11 @@ def test_small_swings_of_the_60deg_session_hold_presliding_friction(runs):
     # a pre-sliding angle well inside the amplitudes the record covers (1 → 0.05 rad)
     assert 0.03 < theta_c.value < 0.15 and theta_c.std < 0.3 * theta_c.value
     assert r.residual_rms < 0.5 * r.baseline.residual_rms
-    assert "unmodeled_residual" not in r.flags
+    # the tracked angle keeps the camera's oblique view, which no constant sensor scale explains
+    # (a fitted view differs between the halves of the record): the halves disagree on ω_n, and
+    # the result says so and carries their scatter in its uncertainty
+    assert "view" not in r.effects and any("view does not hold across the record" in s.reason for s in r.steps)
+    assert "halves_disagree" in r.flags and r.omega_n_std_model > 5 * r.omega_n_std
 
 
 def test_both_sessions_find_dry_friction(runs):
@@ -81,12 +85,10 @@ def test_the_camera_view_measured_from_the_markers_takes_the_place_of_a_fitted_s
         assert 0 < r.omega_n_std_calibration < 0.01  # the view's own 1σ, carried into ω_n
     # the 120° session's oblique view, measured from the markers, is the one its swing asked for
     assert 0.01 < c120.acquisition["view"]["shear"] < 0.04
-    # the measured view brings the sessions' ω_n closer than the fitted scales did (0.45 % apart)
-    r60, r120 = runs.values()
-    fitted_gap = abs(r60.omega_n - r120.omega_n) / r60.omega_n
-    measured_gap = _name_what_is_left(c60, c120, {"camera_perspective": "more than oblique",
-                                                  "unmodeled_residual": "left unexplained"})
-    assert measured_gap < 0.5 * fitted_gap
+    # as tracked and with the view measured, the two sessions agree within their stated uncertainty
+    for a, b in (runs.values(), (c60, c120)):
+        assert abs(a.omega_n - b.omega_n) < 2 * (a.omega_n_u**2 + b.omega_n_u**2) ** 0.5
+    _name_what_is_left(c60, c120, {"camera_perspective": "more than oblique", "halves_disagree": "halves"})
 
 
 def test_with_the_camera_calibrated_each_session_keeps_its_friction(calibrated):

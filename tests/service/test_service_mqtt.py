@@ -116,7 +116,7 @@ def test_home_assistant_discovery_is_retained_and_names_the_result_topic(tmp_pat
         late = consumer_factory(broker.port, ["homeassistant/#"])  # subscribes after: sees retained configs
         late.wait(lambda c: len(c.messages) >= len(expected), 10, "discovery configs")
         assert all(retained for _, _, retained in late.messages)
-        j = json.loads(dict((t, p) for t, p, _ in late.messages)["homeassistant/sensor/d1/J/config"])
+        j = json.loads({t: p for t, p, _ in late.messages}["homeassistant/sensor/d1/J/config"])
         assert j["state_topic"] == "moi/d1/result/last" and j["availability_topic"] == "moi/d1/status"
         assert j["unit_of_measurement"] == "kg·m²"
         assert j["default_entity_id"] == "sensor.moi_d1_J" and j["object_id"] == "moi_d1_J"
@@ -128,7 +128,7 @@ def test_home_assistant_discovery_is_retained_and_names_the_result_topic(tmp_pat
         assert "device_class" not in configs["homeassistant/binary_sensor/d1/outliers_removed/config"]
         flags = [t for t, _, _ in late.messages if t.startswith("homeassistant/binary_sensor/")]
         assert "homeassistant/binary_sensor/d1/unmodeled_residual/config" in flags
-        verdict = json.loads(dict((t, p) for t, p, _ in late.messages)["homeassistant/sensor/d1/verdict/config"])
+        verdict = json.loads({t: p for t, p, _ in late.messages}["homeassistant/sensor/d1/verdict/config"])
         assert verdict["state_topic"] == "moi/d1/result/last" and "value_json.verdict" in verdict["value_template"]
     finally:
         svc.stop()

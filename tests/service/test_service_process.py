@@ -28,7 +28,7 @@ def stop_daemon(proc: subprocess.Popen, sig=signal.SIGTERM, timeout: float = 30)
     except subprocess.TimeoutExpired:
         proc.kill()
         _, err = proc.communicate(timeout=10)
-        raise AssertionError(f"daemon did not stop on {sig!r}: {err.decode(errors='replace')[-3000:]}")
+        raise AssertionError(f"daemon did not stop on {sig!r}: {err.decode(errors='replace')[-3000:]}") from None
     return proc.returncode, err.decode(errors="replace")
 
 

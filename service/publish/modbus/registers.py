@@ -492,7 +492,7 @@ def markdown() -> str:
     L.append(f"Registers {LIVE_START}–{SNAPSHOT_START - 1} are live status; registers {SNAPSHOT_START}–"
              f"{SNAPSHOT_END - 1} are the result snapshot of the latest successful measurement.")
     L.append("")
-    L.append(f"## Writable holding registers (FC 6 / FC 16 write, FC 3 read back)")
+    L.append("## Writable holding registers (FC 6 / FC 16 write, FC 3 read back)")
     L.append("")
     L.append("| address | registers | name | meaning |")
     L.append("|---:|---:|---|---|")
@@ -581,7 +581,7 @@ def markdown() -> str:
     L.append("")
     L.append(f"1. read `seq` (register {SNAPSHOT_START}) → S1; if S1 = 0 there is no result yet;")
     L.append(f"2. read the body (registers {SNAPSHOT_START + 1}–{SNAPSHOT_END - 1}) in as many requests as needed;")
-    L.append(f"3. read `seq` again → S2;")
+    L.append("3. read `seq` again → S2;")
     L.append("4. accept the values only if S1 = S2 = `seq_end`; otherwise a new result arrived meanwhile: start again.")
     L.append("")
     L.append("A result takes far longer than a PLC scan to produce (a swing lasts seconds), so the retry "

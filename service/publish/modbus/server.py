@@ -31,7 +31,6 @@ import logging
 import struct
 import threading
 import time
-from dataclasses import dataclass
 from typing import Any, Callable, Mapping
 
 from pymodbus.constants import ExcCodes
@@ -46,6 +45,11 @@ from pymodbus.simulator.simcore import SimCore
 
 from drivers.aioloop import LoopThread
 
+from service.publish.port import ApplianceView, Publisher
+
+# the settings are read by the configuration without pymodbus; here for the server's users too
+from .settings import _THIS_MACHINE, ModbusSettings, allowed_networks, network_exposure  # noqa: F401
+
 from . import registers as R
 from service.errors import ModbusServerError
 
@@ -59,39 +63,6 @@ _WRITE_REGISTERS = {6, 16}
 
 #: after a trigger coil write, part writes are refused this long (s) until the daemon reports busy
 TRIGGER_HOLD = 0.5
-
-
-@dataclass(frozen=True)
-class ModbusSettings:
-    """Where and how to serve (see ``[modbus]`` in docs/service.md).
-
-    mode: "tcp" | "rtu". host/port: TCP listen address (port 0: any free port).
-    max_connections: TCP clients served at once; one more closes the connection idle the
-    longest. idle_timeout: a TCP connection without a request for this long is closed, s
-    (0: never). Both keep the descriptors a client can hold bounded.
-    allow_from: TCP client addresses or networks ("192.168.10.20", "10.0.0.0/24") allowed
-    to connect besides this machine (127.0.0.1, ::1); empty: every client that reaches
-    ``host``. Modbus has no authentication: the default host 127.0.0.1 keeps the trigger
-    and abort coils on this machine, and opening them to a network is a choice made by
-    setting ``host``, best with ``allow_from``.
-    serial_port, baudrate, parity ("N"|"E"|"O"), stopbits, bytesize: RTU line
-    (serial_port may be "socket://HOST:PORT" for a serial-over-TCP bridge).
-    unit_id: the Modbus device id answered. word_order: "big" | "little".
-    """
-
-    mode: str = "tcp"
-    host: str = "127.0.0.1"
-    port: int = 5020
-    unit_id: int = 1
-    word_order: str = "big"
-    max_connections: int = 16
-    idle_timeout: float = 60.0
-    allow_from: tuple[str, ...] = ()
-    serial_port: str | None = None
-    baudrate: int = 19200
-    parity: str = "E"
-    stopbits: int = 1
-    bytesize: int = 8
 
 
 class _OneUnitCore(SimCore):
@@ -139,37 +110,6 @@ class _WriteSingleCoil(WriteSingleCoilRequest):
         if isinstance(response, WriteSingleCoilResponse):
             response.bits = echo
         return response
-
-
-#: clients on this machine are always allowed (local tools: ``moi modbus-map --read``, the web page)
-_THIS_MACHINE = (ipaddress.ip_network("127.0.0.1/32"), ipaddress.ip_network("::1/128"))
-
-
-def allowed_networks(allow_from: tuple[str, ...]) -> tuple[ipaddress.IPv4Network | ipaddress.IPv6Network, ...]:
-    """The networks of ``allow_from`` (ValueError naming a malformed entry)."""
-    nets = []
-    for entry in allow_from:
-        try:
-            nets.append(ipaddress.ip_network(entry.strip(), strict=False))
-        except ValueError:
-            raise ValueError(f"{entry!r} is not an IP address or network (e.g. \"192.168.10.20\", "
-                             "\"10.0.0.0/24\")") from None
-    return tuple(nets)
-
-
-def network_exposure(settings: "ModbusSettings") -> str | None:
-    """A warning when the TCP server is reachable beyond this machine, else None."""
-    if settings.mode != "tcp":
-        return None
-    try:
-        if ipaddress.ip_address(settings.host).is_loopback:
-            return None
-    except ValueError:
-        if settings.host == "localhost":
-            return None
-    who = ("clients in allow_from " + ", ".join(settings.allow_from)) if settings.allow_from else "every client that reaches it"
-    return (f"Modbus TCP listens on {settings.host}, not only on this machine: {who} can trigger and abort "
-            "measurements (Modbus has no authentication)")
 
 
 def _is_allowed(peer: str, networks: tuple) -> bool:
@@ -260,7 +200,7 @@ class _BoundedTcpServer(ModbusTcpServer):
         conn.close()
 
 
-class ModbusServer:
+class ModbusServer(Publisher):
     """Serves the register image of ``service.publish.modbus.registers``.
 
     on_command(name, source, data) is called from the server thread when the PLC
@@ -496,9 +436,54 @@ class ModbusServer:
                 log.warning("Modbus server shutdown: %s", exc)
         self._io.stop(timeout)
 
+    # --- the publisher port ---------------------------------------------------------
+    NAME = "modbus"
+    EARLY = True  # the PLC sees STARTING, and the last result, while the devices open
+
+    @classmethod
+    def build(cls, settings: ModbusSettings, appliance: ApplianceView) -> "ModbusServer":
+        parts, store = appliance.parts, appliance.store
+        server = cls(settings, on_command=appliance.command, recipe_numbers=parts.book.numbers)
+        server.set_inputs(recipe=parts.recipe.number if parts.recipe else 0)
+        if store is not None:
+            # until the main loop runs, the PLC sees STARTING and the true outbox backlog, not defaults
+            server.set_live(R.LiveStatus(state="STARTING", simulated=appliance.config.simulated,
+                                         outbox_pending=store.outbox_count()))
+            last = store.latest("ok")
+            if last is not None and last.payload is not None:
+                server.publish_result(last.payload)  # the PLC sees the last result after a restart too
+        return server
+
+    def failure(self) -> str | None:
+        return None if self.alive() else "the Modbus server thread stopped"
+
+    def where(self) -> str:
+        s = self.settings
+        return f"Modbus {s.mode.upper()} " + (f"{s.host}:{self.bound_port}" if s.mode == "tcp" else str(s.serial_port))
+
+    def health(self) -> dict[str, Any]:
+        return {"mode": self.settings.mode, "port": self.bound_port, "clients": self.client_count(),
+                "requests": self.requests}
+
+    def on_live(self, live: R.LiveStatus) -> None:
+        self.set_live(live)
+
+    def on_result(self, stored: Any, measurement: Any) -> None:
+        if stored.payload is not None:
+            self.publish_result(stored.payload)
+
+    def on_recipe(self, recipe: Any) -> None:
+        self.set_inputs(recipe=recipe.number if recipe else 0)
+
+    def on_part_id(self, part_id: str | None) -> None:
+        self.set_inputs(part_id=part_id or "")
+
     def __enter__(self) -> "ModbusServer":
         self.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+PUBLISHER = ModbusServer

@@ -33,15 +33,18 @@ import logging
 import ssl
 import threading
 from collections import deque
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import paho.mqtt.client as mqtt
 from paho.mqtt.enums import CallbackAPIVersion
 
 from service.errors import ConfigError
 from service.persistence.outbox import OutboxSender
+from service.publish.port import ApplianceView, Publisher
+
+# the settings are read by the configuration without paho; here for the client's users too
+from .settings import MqttSettings  # noqa: F401
 from measurement.verdict import DEFAULT_INVALID_FLAGS
 
 from service.publish.modbus.registers import FLAG_BITS
@@ -67,34 +70,6 @@ def _never_raises(callback: Callable[..., None]) -> Callable[..., None]:
             log.exception("MQTT: %s failed (ignored; the connection goes on)", callback.__name__)
 
     return guarded
-
-
-@dataclass(frozen=True)
-class MqttSettings:
-    """Broker connection and topics (``[mqtt]`` in the config file).
-
-    keepalive, reconnect_min/max, resend_after: s.
-    """
-
-    host: str = "localhost"
-    port: int = 1883
-    prefix: str = "moi"
-    client_id: str | None = None
-    username: str | None = None
-    password: str | None = None
-    password_file: str | None = None
-    keepalive: int = 30
-    tls: bool = False
-    ca_file: str | None = None
-    cert_file: str | None = None
-    key_file: str | None = None
-    tls_insecure: bool = False
-    reconnect_min: float = 0.5
-    reconnect_max: float = 30.0
-    resend_after: float = 30.0
-    window: int = 10
-    home_assistant: bool = False
-    discovery_prefix: str = "homeassistant"
 
 
 class Topics:
@@ -135,7 +110,7 @@ class _Client(mqtt.Client):
             raise
 
 
-class MqttService:
+class MqttService(Publisher):
     """The MQTT client of the daemon: durable result delivery, status, state, commands.
 
     on_command(name, source[, data]) is called from paho's thread for a command
@@ -157,6 +132,7 @@ class MqttService:
         self.connected_event = threading.Event()
         self.subscribed_event = threading.Event()  # the broker confirmed the command subscriptions
         self.last_error: str | None = None
+        self._appliance: ApplianceView | None = None  # set by build(): the daemon's clock for SPC summaries
         self.callback_errors = 0  # exceptions caught in paho callbacks (each one logged)
         client_id = settings.client_id or f"moi-{device_id}"
         # clean session: the outbox, not the broker session, is what makes delivery durable
@@ -335,6 +311,69 @@ class MqttService:
         else:
             self._on_command(name, "mqtt")
 
+    # --- the publisher port ---------------------------------------------------------
+    NAME = "mqtt"
+    OUTBOX = ("result",)  # every result is queued in the store's outbox with it, delivered from there
+
+    @classmethod
+    def build(cls, settings: MqttSettings, appliance: ApplianceView) -> "MqttService":
+        store = appliance.store
+        assert store is not None, "the store opens before the publishers"
+        service = cls(settings, appliance.config.device_id, store, software_version=appliance.software_version,
+                      on_command=appliance.command)
+        service._appliance = appliance
+        return service
+
+    def failure(self) -> str | None:
+        if self.sender.error is not None:
+            return f"the MQTT outbox sender failed: {self.sender.error}"
+        if not self.network_thread_alive():
+            # commands and acknowledgements are no longer read: stop feeding the watchdog and let
+            # systemd restart the daemon (the outbox keeps every unacknowledged result)
+            return "the MQTT network thread stopped"
+        return None
+
+    def where(self) -> str:
+        return f"MQTT {self.settings.host}:{self.settings.port}"
+
+    def health(self) -> dict[str, Any]:
+        store = self.sender.store
+        return {"broker": f"{self.settings.host}:{self.settings.port}", "connected": self.is_connected,
+                "outbox_backlog": store.outbox_count() if store is not None else None}
+
+    def live_fields(self) -> dict[str, Any]:
+        return {"mqtt_connected": self.is_connected, "outbox_pending": self.sender.pending}
+
+    def status(self) -> list[str]:
+        out = ["mqtt connected" if self.is_connected else
+               "mqtt disconnected" + (f" ({self.last_error})" if self.last_error else "")]
+        if self.sender.pending:
+            out.append(f"{self.sender.pending} result(s) waiting for the broker")
+        return out
+
+    def on_state(self, message: Mapping[str, Any], event: Any) -> None:
+        self.publish_state(dict(message))
+
+    def on_result(self, stored: Any, measurement: Any) -> None:
+        self.wake()
+
+    def on_part_done(self, recipe: Any) -> None:
+        """The retained SPC summary of the recipe's latest parts."""
+        from service.parts.recipes import SPC_WINDOW, recipe_spc
+
+        app = self._appliance
+        store = self.sender.store
+        if app is None or store is None:
+            return
+        spc = recipe_spc(store, recipe.name, limit=SPC_WINDOW)
+        doc: dict[str, Any] = {"recipe": recipe.name, "version": recipe.version, "window": SPC_WINDOW,
+                               "device_id": self.device_id, "timestamp": app.now()}
+        if spc is None:
+            doc["status"] = "fewer than 2 usable parts"
+        else:
+            doc |= spc.to_dict() | {"recipe": recipe.name, "status": "ok"}
+        self.publish_retained(self.topics.spc(recipe.name), doc)
+
     def publish_retained(self, topic: str, doc: dict[str, Any]) -> None:
         """A retained JSON document (QoS 1), e.g. the SPC summary of a recipe; dropped while disconnected
         (the next part republishes it)."""
@@ -391,3 +430,6 @@ def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
     entity("button", "measure", name="Measure", command_topic=topics.cmd_measure, payload_press="{}")
     entity("button", "abort", name="Abort / acknowledge fault", command_topic=topics.cmd_abort, payload_press="{}")
     return out
+
+
+PUBLISHER = MqttService

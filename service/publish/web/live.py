@@ -10,13 +10,13 @@ from .words import STATE_WORDS
 if TYPE_CHECKING:  # pragma: no cover
     from firmware_host import Event
 
-    from service.daemon import Appliance
+    from service.publish.port import ApplianceView
 
 #: at most this many samples in one tick (a page that opens late catches up over a few ticks)
 MAX_SAMPLES_PER_TICK = 4000
 
 
-def extras(app: "Appliance") -> dict[str, Any]:
+def extras(app: "ApplianceView") -> dict[str, Any]:
     """The active recipe (name, number) and part ID, where the appliance has them."""
     parts = getattr(app, "parts", None)
     if parts is None:
@@ -26,7 +26,7 @@ def extras(app: "Appliance") -> dict[str, Any]:
 
 
 class Live:
-    def __init__(self, app: "Appliance") -> None:
+    def __init__(self, app: "ApplianceView") -> None:
         self.app = app
 
     def event_message(self, event: "Event") -> dict[str, Any]:

@@ -1,7 +1,7 @@
 """The web server inside the daemon: aiohttp in its own thread and event loop.
 
-Threads: the daemon's main loop delivers sequencer events (``on_event``) and
-stored measurements (``measurement_stored``); both only hand over to this
+Threads: the daemon's main loop delivers sequencer events (``on_state``) and
+stored measurements (``on_result``); both only hand over to this
 server's loop or to the plot worker and never block. Handlers read the store
 (one short SQLite query each) and the appliance's live status; what takes
 longer (exports, a trace as CSV, a plot drawn again) is made in a child process
@@ -23,20 +23,18 @@ from aiohttp import web
 from drivers.aioloop import LoopThread
 
 from service.errors import StartupError
+from service.publish.port import ApplianceView, Publisher
+
 from .auth import Guard, read_token
 from .child import ChildWork
-from .settings import DEFAULT_TOKEN_FILE_NAME, WebSettings
+from .settings import DEFAULT_TOKEN_FILE_NAME, PLOT_NAME, WebSettings
 from .views import Views
 
 if TYPE_CHECKING:  # pragma: no cover
     from firmware_host import Event, Measurement
 
-    from service.daemon import Appliance
-
 log = logging.getLogger("moi.web")
 
-#: the name of the plot kept with each measurement in the store
-PLOT_NAME = "plot.png"
 #: no plot is drawn while the sequencer is in one of these (the sensor is being read)
 CAPTURE_STATES = ("ARMED", "RELEASING", "CAPTURING")
 #: at most one "connections refused" line per this many seconds, s
@@ -50,10 +48,16 @@ class _Refuse(asyncio.Protocol):
         transport.abort()
 
 
-class WebServer:
+class WebServer(Publisher):
     """Serves the pages of ``appliance`` on ``settings.host``:``settings.port`` (``start`` / ``stop``)."""
 
-    def __init__(self, appliance: "Appliance", settings: WebSettings) -> None:
+    NAME = "web"
+
+    @classmethod
+    def build(cls, settings: WebSettings, appliance: ApplianceView) -> "WebServer":
+        return cls(appliance, settings)
+
+    def __init__(self, appliance: ApplianceView, settings: WebSettings) -> None:
         self.appliance = appliance
         self.settings = settings
         token_file = settings.token_file or str(appliance.config.state_dir / DEFAULT_TOKEN_FILE_NAME)
@@ -134,6 +138,12 @@ class WebServer:
     def alive(self) -> bool:
         return self._io.running
 
+    def failure(self) -> str | None:
+        return None if self.alive() else "the web server thread stopped"
+
+    def where(self) -> str:
+        return f"web page {self.url}"
+
     def stop(self, timeout: float = 5.0) -> None:
         """Close the live streams and the server, end the loop thread, let a plot in progress finish; safe twice."""
         if self._io.running:
@@ -146,13 +156,20 @@ class WebServer:
         self.child.close()
 
     # --- from the daemon's main loop (never block) -----------------------------------
-    def on_event(self, event: "Event") -> None:
+    def on_state(self, message: Any, event: "Event | None") -> None:
         """A sequencer transition: pushed to every open page at once."""
+        if event is not None:
+            self.on_event(event)
+
+    def on_event(self, event: "Event") -> None:
         msg = self.views.live.event_message(event)
         self._call(lambda: [q.put_nowait(msg) for q in self._listeners])
 
-    def measurement_stored(self, m: "Measurement") -> None:
+    def on_result(self, stored: Any, measurement: "Measurement") -> None:
         """A measurement was stored: draw its plot once, in the plot worker, and keep it with it."""
+        self.measurement_stored(measurement)
+
+    def measurement_stored(self, m: "Measurement") -> None:
         def draw() -> bytes:
             from service.publish.plot import render_png
             return render_png(m.result)
@@ -216,3 +233,6 @@ class WebServer:
         return {"url": self.url, "listeners": len(self._listeners), "token_file": self.token_file,
                 "connections": len(server.connections) if server is not None else 0,
                 "connections_refused": self.connections_refused}
+
+
+PUBLISHER = WebServer

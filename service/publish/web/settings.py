@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+#: the name of the plot kept with each measurement in the store
+PLOT_NAME = "plot.png"
+
 #: the token file used when ``[web] token_file`` is not given: in the state directory, created on first start
 DEFAULT_TOKEN_FILE_NAME = "web-token"
 

@@ -12,7 +12,7 @@ import math
 import shutil
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping, Protocol
 from urllib.parse import urlencode, urlsplit
 
 import jinja2
@@ -22,13 +22,32 @@ from service import __version__
 from .auth import COOKIE, CSRF_HEADER, SESSION_LIFETIME
 from .child import ChildBusy, export_file, replot, trace_file
 from .live import Live
+from .settings import PLOT_NAME
 from measurement.flags import FLAGS
 
 from .words import STATE_WORDS, flag_words
 
 if TYPE_CHECKING:  # pragma: no cover
+    import concurrent.futures
+
     from service.persistence.store import StoredMeasurement as Measurement
-    from .server import WebServer
+    from service.publish.port import ApplianceView
+
+    from .auth import Guard
+    from .settings import WebSettings
+
+    class WebServer(Protocol):
+        """What the views use of the server that owns them (``server.WebServer``)."""
+
+        appliance: ApplianceView
+        settings: WebSettings
+        guard: Guard
+
+        def listen(self) -> asyncio.Queue: ...
+        def unlisten(self, q: asyncio.Queue) -> None: ...
+        def plot_future(self, uuid: str) -> concurrent.futures.Future | None: ...
+        def submit_plot(self, uuid: str, get_result: Any) -> concurrent.futures.Future: ...
+        def stats(self) -> dict[str, Any]: ...
 
 log = logging.getLogger("moi.web")
 
@@ -57,7 +76,7 @@ def _fmt(v: Any, spec: str = ".6g") -> str:
 def _when(ts: float | None) -> str:
     if ts is None:
         return "–"
-    return dt.datetime.fromtimestamp(ts, dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    return dt.datetime.fromtimestamp(ts, dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
 def _name(v: Any) -> Any:
@@ -178,7 +197,7 @@ class Views:
                 timeout = max(0.0, next_tick - loop.time())
                 try:
                     msg = await asyncio.wait_for(q.get(), timeout) if timeout > 0 else q.get_nowait()
-                except (asyncio.TimeoutError, asyncio.QueueEmpty):
+                except (TimeoutError, asyncio.QueueEmpty):
                     msg = "tick"
                 if msg is None:
                     break
@@ -304,7 +323,6 @@ class Views:
                           has_trace=self.app.config.store_trace)
 
     async def plot(self, request: web.Request) -> web.Response:
-        from .server import PLOT_NAME
 
         m = self._get(request.match_info["key"])
         if m.status != "ok":
@@ -358,7 +376,7 @@ class Views:
                 d = dt.date.fromisoformat(text)
             except ValueError:
                 raise Refused(400, f"{name}={text[:20]!r}: expected a date YYYY-MM-DD") from None
-            return dt.datetime(d.year, d.month, d.day, tzinfo=dt.timezone.utc).timestamp()
+            return dt.datetime(d.year, d.month, d.day, tzinfo=dt.UTC).timestamp()
 
         out["since"] = day("since")
         until = day("until")
@@ -419,16 +437,7 @@ class Views:
         out: dict[str, Any] = {"software_version": __version__, "device_id": cfg.device_id,
                                "simulated": cfg.simulated, "state": app.live_status().state,
                                "loop_iterations": app.loop_iterations, "last_loop_error": app.last_loop_error}
-        if app.mqtt is not None:
-            out["mqtt"] = {"broker": f"{cfg.mqtt.host}:{cfg.mqtt.port}", "connected": app.mqtt.is_connected,
-                           "outbox_backlog": app.store.outbox_count() if app.store is not None else None}
-        else:
-            out["mqtt"] = None
-        if app.modbus is not None:
-            out["modbus"] = {"mode": cfg.modbus.mode, "port": app.modbus.bound_port,
-                             "clients": app.modbus.client_count(), "requests": app.modbus.requests}
-        else:
-            out["modbus"] = None
+        out.update(app.publisher_health())
         try:
             du = shutil.disk_usage(cfg.state_dir)
             out["disk"] = {"path": str(cfg.state_dir), "free_bytes": du.free, "total_bytes": du.total}

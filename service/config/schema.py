@@ -1,0 +1,189 @@
+"""The configuration schema: a key's type, default, doc and limits, derived from a settings dataclass, and the
+checker that validates a TOML table against it with one-line errors.
+
+Shared by the appliance configuration (``service.config.appliance``) and the recipe files
+(``service.parts.recipes``).
+"""
+
+from __future__ import annotations
+
+import collections.abc
+import dataclasses
+import difflib
+import math
+import typing
+from dataclasses import dataclass
+from types import UnionType
+from typing import Any, Mapping, Union
+
+from measurement.effects import EFFECTS
+
+from service.errors import ConfigError
+
+#: the default of a key that must be given
+REQUIRED = object()
+
+
+@dataclass(frozen=True)
+class Key:
+    kind: str  # str | int | float | bool | path | strlist | table | effects | pinlike | videodevice
+    default: Any = None
+    doc: str = ""
+    choices: tuple[Any, ...] | None = None
+    min: float | None = None
+    max: float | None = None
+    min_open: bool = False  # min is exclusive
+
+    def expected(self) -> str:
+        if self.choices:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        names = {"str": "a string", "path": "a path (string)", "int": "an integer", "float": "a number",
+                 "bool": "true or false", "strlist": "a list of strings", "table": "a table",
+                 "effects": "a table of effect = { parameter = value }",
+                 "pinlike": "a BCM pin number or a name like 'GPIO17'",
+                 "videodevice": "a video device path like '/dev/video0' or a device index >= 0"}
+        text = names[self.kind]
+        if self.min is not None and self.max is not None:
+            text += f" in {'(' if self.min_open else '['}{self.min:g}, {self.max:g}]"
+        elif self.min is not None:
+            text += f" {'>' if self.min_open else '>='} {self.min:g}"
+        return text
+
+
+def kind_of(hint: Any) -> str:
+    """The schema kind of a settings field's type (``int | None`` → "int", ``int | str`` → "pinlike")."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)] if typing.get_origin(hint) in (Union, UnionType) \
+        else [hint]
+    if set(args) == {int, str}:
+        return "pinlike"
+    (t,) = args
+    origin = typing.get_origin(t) or t
+    if origin in (tuple, list):
+        return "strlist"
+    if origin in (dict, Mapping, collections.abc.Mapping) or dataclasses.is_dataclass(origin):
+        return "table"
+    return {bool: "bool", int: "int", float: "float", str: "str"}[origin]
+
+
+def schema(cls: type, keys: Mapping[str, Mapping[str, Any]], *, extra: Mapping[str, Key] | None = None,
+            defaults: Mapping[str, Any] | None = None) -> dict[str, Key]:
+    """The table of ``cls``: one key per field named in ``keys`` (the field's doc and limits), in the field order.
+
+    The key's type and default come from the field (a field without default is required);
+    ``keys[name]`` adds the doc, choices, min/max and, where the type alone does not say it, the
+    kind ("path", "effects", "videodevice"). Every key of ``keys`` must be a field of ``cls``.
+    """
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    missing = set(keys) - set(fields)
+    assert not missing, f"{cls.__name__} has no field(s) {sorted(missing)}"
+    out: dict[str, Key] = dict(extra or {})
+    for name, f in fields.items():
+        if name not in keys:
+            continue
+        if defaults and name in defaults:
+            default = defaults[name]
+        elif f.default is not dataclasses.MISSING:
+            default = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            default = f.default_factory()
+        else:
+            default = REQUIRED
+        spec = dict(keys[name])
+        out[name] = Key(spec.pop("kind", None) or kind_of(hints[name]), default, **spec)
+    return out
+
+
+def doc(text: str = "", **limits: Any) -> dict[str, Any]:
+    """A key's doc and limits, for ``schema``."""
+    return {"doc": text, **limits}
+
+
+class Checker:
+    """Checks a document's tables against their schema; every error is a ConfigError naming the file, the table and the key."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, table: str, key: str | None, message: str) -> ConfigError:
+        where = f"[{table}]" + (f" {key}" if key else "")
+        return ConfigError(f"{self.source}: {where}: {message}")
+
+    def table(self, name: str, doc: Any, schema: Mapping[str, Key]) -> dict[str, Any]:
+        if not isinstance(doc, Mapping):
+            raise self.fail(name, None, f"expected a table, got {type(doc).__name__} {doc!r}")
+        unknown = [k for k in doc if k not in schema]
+        if unknown:
+            k = unknown[0]
+            close = difflib.get_close_matches(k, list(schema), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else f"; expected one of: {', '.join(schema)}"
+            raise self.fail(name, None, f"unknown key {k!r}{hint}")
+        out: dict[str, Any] = {}
+        for key, spec in schema.items():
+            if key not in doc:
+                if spec.default is REQUIRED:
+                    raise self.fail(name, key, f"missing; expected {spec.expected()}"
+                                    + (f" ({spec.doc})" if spec.doc else ""))
+                out[key] = spec.default
+                continue
+            out[key] = self.value(name, key, doc[key], spec)
+        return out
+
+    def value(self, table: str, key: str, v: Any, spec: Key) -> Any:
+        bad = self.fail(table, key, f"expected {spec.expected()}, got {v!r}")
+        k = spec.kind
+        if k in ("str", "path"):
+            if not isinstance(v, str) or (k == "path" and not v):
+                raise bad
+        elif k == "pinlike":
+            pass  # checked with the rest of its table by the driver's settings (drivers.settings.check_pin)
+        elif k == "videodevice":
+            if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0) or v == "":
+                raise bad
+            if isinstance(v, str) and v.isdigit():
+                v = int(v)  # "0": the index, not a file named 0
+        elif k == "bool":
+            if not isinstance(v, bool):
+                raise bad
+        elif k == "int":
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise bad
+        elif k == "float":
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise bad
+            v = float(v)
+        elif k == "strlist":
+            if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+                raise bad
+            v = tuple(v)
+        elif k == "table":
+            if not isinstance(v, Mapping):
+                raise bad
+            v = dict(v)
+        elif k == "effects":
+            v = self.effects(table, key, v)
+        if spec.choices is not None and v not in spec.choices:
+            raise bad
+        if k in ("int", "float"):
+            if spec.min is not None and (v < spec.min or (spec.min_open and v == spec.min)):
+                raise bad
+            if spec.max is not None and v > spec.max:
+                raise bad
+        return v
+
+    def effects(self, table: str, key: str, v: Any) -> dict[str, dict[str, float]]:
+        if not isinstance(v, Mapping):
+            raise self.fail(table, key, f"expected a table of effect = {{ parameter = value }}, got {v!r}")
+        out: dict[str, dict[str, float]] = {}
+        for name, params in v.items():
+            if name not in EFFECTS:
+                raise self.fail(table, key, f"unknown effect {name!r}; expected one of {', '.join(EFFECTS)}")
+            if not isinstance(params, Mapping) or not params:
+                raise self.fail(table, key, f"{name}: expected {{ parameter = value }}, e.g. viscous = {{ c = 1.5e-4 }}")
+            vals: dict[str, float] = {}
+            for p, x in params.items():
+                if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                    raise self.fail(table, key, f"{name}.{p}: expected a number, got {x!r}")
+                vals[str(p)] = float(x)
+            out[str(name)] = vals
+        return out

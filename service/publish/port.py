@@ -1,0 +1,178 @@
+"""The publisher port: what the daemon knows of a way the appliance tells the plant.
+
+A publisher (the Modbus server, the MQTT client, the web page; next an OPC UA
+server) is one class with ``NAME`` (its configuration table, and its name in
+the logs and on the health page), a ``build(settings, appliance)`` class
+method, and the hooks below; every hook has a default that does nothing, so a
+publisher implements only what it publishes. ``PUBLISHERS`` lists them: adding
+one is one subpackage with its settings dataclass and one line there. The
+daemon holds the publishers that the configuration enables in a list and never
+names one.
+
+Hooks run on the daemon's main loop thread (``on_*``, ``live``, ``status``,
+``failure``); they must hand work over and never block.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import importlib
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Mapping
+
+if TYPE_CHECKING:  # pragma: no cover
+    from firmware_host import Event, Measurement, Sequencer
+    from service.config.appliance import Config
+    from service.devices.hardware import Devices
+    from service.notify import Notifier
+    from service.parts.recipes import PartTracker, Recipe
+    from service.persistence.store import Store, StoredMeasurement
+    from service.publish.modbus.registers import LiveStatus
+
+
+@dataclass(frozen=True)
+class PublisherEntry:
+    """One publisher: its configuration table (``Config.<name>``, None when off) and the module whose
+    ``PUBLISHER`` class serves it (imported only when the table is given: pymodbus, paho and aiohttp are
+    loaded by the appliances that use them)."""
+
+    name: str
+    module: str
+    #: reported on the health page (``/api/health``) under its name, null when off
+    in_health: bool = True
+
+    def load(self) -> type[Publisher]:
+        return importlib.import_module(self.module).PUBLISHER
+
+
+#: in start order: Modbus first (the PLC sees STARTING while the devices open), the web page once the
+#: sequencer exists, MQTT last (its outbox sender delivers at once)
+PUBLISHERS: tuple[PublisherEntry, ...] = (
+    PublisherEntry("modbus", "service.publish.modbus.server"),
+    PublisherEntry("web", "service.publish.web.server", in_health=False),
+    PublisherEntry("mqtt", "service.publish.mqtt.client"),
+)
+
+
+class Publisher:
+    """The interface; a publisher subclasses it (or provides the same members)."""
+
+    #: the configuration table it is built from, and its name
+    NAME: ClassVar[str] = ""
+    #: started before the devices are built (a camera or an encoder may take seconds to open)
+    EARLY: ClassVar[bool] = False
+    #: the store's outbox rows queued with each result, for a publisher that delivers from the durable outbox
+    OUTBOX: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def build(cls, settings: Any, appliance: ApplianceView) -> Publisher:
+        """The publisher for its settings (the configuration table), not yet started."""
+        raise NotImplementedError
+
+    def start(self) -> None:
+        """Serve (StartupError when it cannot: an address in use, a refused credential)."""
+
+    def stop(self) -> None:
+        """Stop serving; safe twice."""
+
+    def failure(self) -> str | None:
+        """None while it works; else the sentence why the daemon must stop (a thread that died)."""
+        return None
+
+    def where(self) -> str | None:
+        """Where it serves, for the log line and the systemd status at start."""
+        return None
+
+    def health(self) -> dict[str, Any] | None:
+        """What the health page shows of it."""
+        return None
+
+    def live_fields(self) -> dict[str, Any]:
+        """Its part of the live status (``LiveStatus`` fields)."""
+        return {}
+
+    def status(self) -> list[str]:
+        """Phrases for the systemd status line."""
+        return []
+
+    def on_state(self, message: Mapping[str, Any], event: Event | None) -> None:
+        """A sequencer transition (``event``; None for the daemon's own "started"), with the public message."""
+
+    def on_live(self, live: LiveStatus) -> None:
+        """The live status, refreshed every main loop iteration."""
+
+    def on_result(self, stored: StoredMeasurement, measurement: Measurement) -> None:
+        """A measurement is in the store (its outbox rows with it)."""
+
+    def on_recipe(self, recipe: Recipe | None) -> None:
+        """The active recipe changed."""
+
+    def on_part_id(self, part_id: str | None) -> None:
+        """The part ID of the next measurement changed."""
+
+    def on_part_done(self, recipe: Recipe) -> None:
+        """A part of ``recipe`` is complete (its verdict given)."""
+
+
+class ApplianceView:
+    """What a publisher may see of the appliance and ask of it: read-only views and the command queue."""
+
+    def __init__(self, appliance: Any) -> None:
+        self._app = appliance
+
+    @property
+    def config(self) -> Config:
+        return self._app.config
+
+    @property
+    def store(self) -> Store | None:
+        return self._app.store
+
+    @property
+    def sequencer(self) -> Sequencer | None:
+        return self._app.sequencer
+
+    @property
+    def devices(self) -> Devices | None:
+        return self._app.devices
+
+    @property
+    def parts(self) -> PartTracker:
+        return self._app.parts
+
+    @property
+    def notifier(self) -> Notifier:
+        return self._app.notifier
+
+    @property
+    def loop_iterations(self) -> int:
+        return self._app.loop_iterations
+
+    @property
+    def last_loop_error(self) -> str | None:
+        return self._app.last_loop_error
+
+    @property
+    def software_version(self) -> str:
+        from service import __version__
+        return __version__
+
+    def now(self) -> float:
+        """Unix time, s (the appliance's wall clock)."""
+        return self._app.wall_clock()
+
+    def live_status(self) -> LiveStatus:
+        return self._app.live_status()
+
+    def public_event(self, event: Event) -> dict[str, Any]:
+        return self._app.public_event(event)
+
+    def publisher_health(self) -> dict[str, dict[str, Any] | None]:
+        """Each publisher's health under its name (None when it is off), for the health page."""
+        return self._app.publisher_health()
+
+    def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
+        self._app.command(name, source, data)
+
+    def call_soon(self, fn: Callable[[], Any]) -> concurrent.futures.Future:
+        return self._app.call_soon(fn)

@@ -1,0 +1,68 @@
+"""The model's form in the uncertainty: the record's halves, rival models, and a sensor scale that must be constant."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from measurement import Rig, Trace, identify
+from measurement.consistency import competitors
+from measurement.result import DiscoveryStep
+
+
+def _bifilar_trace(beta: float, seed: int = 1) -> Trace:
+    # a bifilar suspension's restoring torque grows faster than sin θ as the body rises:
+    # θ'' = −ω0²·sin θ / √(1 − β·sin²(θ/2)) − c·θ'
+    w0, c = 2.4, 0.02
+
+    def f(_t, s):
+        th, v = s
+        return [v, -w0**2 * math.sin(th) / math.sqrt(1 - beta * math.sin(th / 2) ** 2) - c * v]
+
+    t = np.arange(0.0, 60.0, 0.01)
+    sol = solve_ivp(f, (0.0, 60.0), [1.2, 0.0], t_eval=t, rtol=1e-10, atol=1e-12)
+    y = sol.y[0] + np.random.default_rng(seed).normal(0.0, 1e-3, t.size)
+    return Trace(t, y, source="bifilar")
+
+
+def test_a_sensor_scale_is_not_bought_for_a_restoring_law_that_is_not_sin_theta():
+    r = identify(_bifilar_trace(0.3), Rig(kind="compound", declared=("viscous",)))
+    assert not {"gain", "view"} & set(r.effects)
+    assert any("gain does not hold across the record" in s.reason for s in r.steps)
+    # the law the model lacks shows: the halves disagree, and the scatter is in the uncertainty
+    assert "halves_disagree" in r.flags and r.omega_n_u > 3 * r.omega_n_std
+
+
+def test_the_law_of_a_clean_swing_holds_across_the_record():
+    r = identify(_bifilar_trace(0.0), Rig(kind="compound", declared=("viscous",)))
+    assert r.added_effects == () and "halves_disagree" not in r.flags
+    assert abs(r.omega_n - 2.4) < 3 * r.omega_n_u
+    assert r.model_form["segments"]["z"] < 3
+
+
+def _step(chosen, table, bic_before=0.0, w_before=None):
+    return DiscoveryStep(1, 1e-3, bic_before, table, chosen, None, None, "", "", w_before)
+
+
+def test_rivals_within_the_margin_spread_omega_n_by_their_bic_weights():
+    # two effects explain the residual equally well (equal BIC) and give ω_n 1e-3 apart
+    table = {"coulomb": {"bic": -100.0, "omega_n": 5.000}, "dahl": {"bic": -100.0, "omega_n": 5.001}}
+    rivals, u = competitors([_step("coulomb", table)], margin=10.0)
+    assert [c.change for c in rivals] == ["dahl instead of coulomb"]
+    assert rivals[0].weight == pytest.approx(0.5)
+    assert u == pytest.approx(math.sqrt(0.5) * 1e-3)
+    # a rival far beyond the margin is no rival
+    far = {"coulomb": {"bic": -100.0, "omega_n": 5.000}, "dahl": {"bic": -80.0, "omega_n": 5.1}}
+    assert competitors([_step("coulomb", far)], margin=10.0) == ((), 0.0)
+
+
+def test_an_effect_the_data_neither_demand_nor_exclude_is_a_rival_of_the_model_kept():
+    table = {"drift": {"bic": -8.0, "omega_n": 5.002}, "quadratic": {"bic": 30.0, "omega_n": 5.5},
+             "coulomb": {"bic": -20.0, "screened": 1.0}}
+    rivals, u = competitors([_step(None, table, bic_before=0.0, w_before=5.0)], margin=10.0)
+    assert [c.change for c in rivals] == ["drift added"]
+    w = 1.0 / (1.0 + math.exp(-4.0))
+    assert rivals[0].weight == pytest.approx(w) and u == pytest.approx(math.sqrt(w) * 2e-3)
