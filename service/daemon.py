@@ -97,7 +97,9 @@ class Appliance:
         self._stop = threading.Event()
         self._compiling: subprocess.Popen | None = None  # the integrator compiled on a first run
         self._started_runs = 0
-        self._run_started: dict[str, tuple[float, str]] = {}  # measurement id → (wall time of ARMED, trigger source)
+        # measurement id → (monotonic time of ARMED, trigger source): a run's start is the wall clock at its end
+        # less the monotonic time it took, so a step of the wall clock never gives a negative duration
+        self._run_started: dict[str, tuple[float, str]] = {}
         self._accepted_source = "unknown"  # source of the last accepted trigger (paired with the next ARMED)
         # the part ID and recipe of the last accepted trigger, and of each run (measurement id → them)
         self.parts = PartTracker(config.recipes or RecipeBook(None), config.active_recipe)
@@ -404,7 +406,7 @@ class Appliance:
         if event.state is State.ARMED:
             self._started_runs += 1
             if event.measurement_id:
-                self._run_started[event.measurement_id] = (self.wall_clock(), self._accepted_source)
+                self._run_started[event.measurement_id] = (time.monotonic(), self._accepted_source)
                 self._run_part[event.measurement_id] = self._accepted_part
                 self._current_recipe = self._accepted_part[1]
         if event.state in (State.FAULT, State.ABORTED) and event.measurement_id \
@@ -442,9 +444,9 @@ class Appliance:
         """The sequencer's result sink: store (with the outbox row), then Modbus, then wake MQTT."""
         assert self.store is not None
         finished = self.wall_clock()
-        started = self._run_started.pop(m.id, (None, ""))[0]
-        if started is None:
-            started = finished - (m.finished_at - m.requested_at) / self._clock_scale()
+        armed = self._run_started.pop(m.id, (None, ""))[0]
+        took = time.monotonic() - armed if armed is not None else (m.finished_at - m.requested_at) / self._clock_scale()
+        started = finished - took
         cfg = self.config
         result = m.result.to_dict()
         timing = m.to_dict().get("timing", {})
@@ -495,13 +497,14 @@ class Appliance:
 
     def _store_failure(self, event: Event) -> None:
         assert self.store is not None and event.measurement_id is not None
-        started, trigger = self._run_started.pop(event.measurement_id)
+        armed, trigger = self._run_started.pop(event.measurement_id)
+        finished = self.wall_clock()
         part_id, recipe = self._run_part.pop(event.measurement_id, (None, None))
         status = "failed" if event.state is State.FAULT else "aborted"
         try:
             self.store.record(uuid=event.measurement_id, status=status, trigger=trigger,
-                              device_id=self.config.device_id, software_version=__version__, started_at=started,
-                              finished_at=self.wall_clock(), error=event.reason, rig=self.config.rig.to_dict(),
+                              device_id=self.config.device_id, software_version=__version__,
+                              started_at=finished - (time.monotonic() - armed), finished_at=finished, error=event.reason, rig=self.config.rig.to_dict(),
                               config=self.config.to_dict(),
                               part={"part_id": part_id, "recipe": recipe.name if recipe else None,
                                     "recipe_version": recipe.version if recipe else None})

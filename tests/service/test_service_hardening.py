@@ -276,3 +276,26 @@ def test_clearing_a_retained_command_starts_and_aborts_nothing(tmp_path, broker,
     wait_until(lambda: commands == ["recipe"], 10, what="the marker command")
     app.wait_done(1, timeout=60)
     assert app.states().count("ARMED") == 1 and "ABORTED" not in app.states()
+
+
+# --- durations ------------------------------------------------------------------------------------------------------
+
+def test_a_wall_clock_step_back_during_a_capture_gives_no_negative_duration(tmp_path, appliance_factory):
+    """NTP (or a user) sets the wall clock back a day while a measurement captures: the stored and published
+    duration is the time the measurement took (monotonic), and it starts before it finishes."""
+    import time
+
+    step = {"back": 0.0}
+    app = appliance_factory(appliance_doc(tmp_path / "state"), wall_clock=lambda: time.time() - step["back"])
+    app.app.sequencer.subscribe(lambda e: step.update(back=86400.0) if e.state.value == "CAPTURING" else None)
+    app.press()
+    app.wait_done(1)
+    m = app.app.store.latest("ok")
+    assert 0 < m.payload["duration"] < 60 and m.started_at < m.finished_at
+    step["back"] = 0.0  # and an aborted run: stepped back again during its capture
+    app.press()
+    app.wait_event(lambda e: e.state.value == "CAPTURING", 10, count=2, what="the second capture")
+    app.app.command("abort", "test")
+    app.wait_done(2)
+    aborted = app.app.store.latest("aborted")
+    assert 0 < aborted.finished_at - aborted.started_at < 60
