@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import resource
+from pathlib import Path
 import socket
 import struct
 
@@ -299,3 +300,37 @@ def test_a_wall_clock_step_back_during_a_capture_gives_no_negative_duration(tmp_
     app.wait_done(2)
     aborted = app.app.store.latest("aborted")
     assert 0 < aborted.finished_at - aborted.started_at < 60
+
+
+# --- moi run --check ------------------------------------------------------------------------------------------------
+
+def test_check_warns_of_an_open_modbus_port_and_refuses_what_the_start_refuses(tmp_path, capsys):
+    """Modbus on every interface without allow_from is a warning (the start goes on, as the daemon's log says
+    too); a capture of 1e12 s is refused by --check as by the start, with the same line."""
+    from service.cli import main
+
+    def config(extra: str) -> str:
+        path = tmp_path / "appliance.toml"
+        path.write_text(f'[device]\nstate_dir = "{tmp_path / "state"}"\n[web]\nenabled = false\n{extra}')
+        return str(path)
+
+    open_port = config('[modbus]\nhost = "0.0.0.0"\nport = 0\n')
+    assert main(["run", "--check", "--config", open_port]) == 0
+    out = capsys.readouterr().out
+    assert "WARNING  Modbus exposure: Modbus TCP listens on 0.0.0.0" in out and "allow_from" in out
+    assert main(["run", "--check", "--config", config('[modbus]\nhost = "0.0.0.0"\nport = 0\n'
+                                                      'allow_from = ["192.168.10.20"]\n')]) == 0
+    assert "WARNING" not in capsys.readouterr().out
+    huge = config("[modbus]\nport = 0\n[sequencer]\ncapture_duration = 1e12\n")
+    assert main(["run", "--check", "--config", huge]) == 2
+    checked = capsys.readouterr().err
+    assert main(["run", "--config", huge]) == 2
+    assert capsys.readouterr().err == checked and "capture_duration" in checked and "at most 3600 s" in checked
+
+
+def test_the_shipped_examples_open_modbus_only_to_named_clients():
+    from service.config.appliance import load_config
+
+    for name in ("appliance.toml", "appliance-camera.toml"):
+        m = load_config(Path(__file__).resolve().parents[2] / "examples" / name).modbus
+        assert m.host in ("127.0.0.1", "localhost") or m.allow_from, name
