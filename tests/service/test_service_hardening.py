@@ -334,3 +334,25 @@ def test_the_shipped_examples_open_modbus_only_to_named_clients():
     for name in ("appliance.toml", "appliance-camera.toml"):
         m = load_config(Path(__file__).resolve().parents[2] / "examples" / name).modbus
         assert m.host in ("127.0.0.1", "localhost") or m.allow_from, name
+
+
+def test_pipelined_modbus_tcp_requests_each_get_their_answer():
+    """Three requests in one segment, then one split over two: four answers, each with its transaction id
+    (pymodbus read the first of a segment and kept the rest until the client sent more)."""
+    from service.publish.modbus.server import ModbusServer, ModbusSettings
+
+    from .test_service_attacks import _mbap, _recv_exact
+
+    srv = ModbusServer(ModbusSettings(host="127.0.0.1", port=0))
+    srv.start()
+    try:
+        with socket.create_connection(("127.0.0.1", srv.bound_port), timeout=5) as s:
+            reads = [_mbap(tid, 1, struct.pack(">BHH", 4, 0, 2)) for tid in (1, 2, 3, 4)]
+            s.sendall(reads[0] + reads[1] + reads[2] + reads[3][:5])
+            answers = [_recv_exact(s, 13) for _ in range(3)]
+            s.sendall(reads[3][5:])
+            answers.append(_recv_exact(s, 13))
+        assert [struct.unpack(">H", a[:2])[0] for a in answers] == [1, 2, 3, 4]
+        assert all(a[7:9] == b"\x04\x04" for a in answers)
+    finally:
+        srv.stop()

@@ -26,6 +26,7 @@ functions above do, or refused, never acknowledged and dropped.
 from __future__ import annotations
 
 import asyncio
+import collections
 import ipaddress
 import logging
 import struct
@@ -128,6 +129,7 @@ class _TrackedHandler(ServerRequestHandler):
     def __init__(self, *args: Any) -> None:
         super().__init__(*args)
         self.last_activity = time.monotonic()
+        self._requests: collections.deque = collections.deque()
 
     def connection_made(self, transport: Any) -> None:
         super().connection_made(transport)
@@ -142,8 +144,31 @@ class _TrackedHandler(ServerRequestHandler):
         server.make_room(self)
 
     def callback_data(self, data: bytes, addr: tuple | None = None) -> int:
+        """Every complete request in ``data``: a client may send several in one segment (pipelining, as
+        Modbus/TCP allows), and pymodbus reads one and leaves the others until more bytes come."""
         self.last_activity = time.monotonic()
-        return super().callback_data(data, addr)
+        used = 0
+        while used < len(data):
+            n = super().callback_data(data[used:], addr)  # one request; its answer is scheduled
+            if n <= 0:
+                break  # an incomplete request: the transport keeps it for the next bytes
+            used += n
+            if self.last_pdu is not None:  # None: answered already (malformed) or not for this unit
+                self._requests.append((self.last_pdu, self.last_addr))
+        return used
+
+    def send(self, data: bytes, addr: tuple | None = None) -> None:
+        # pymodbus empties its receive buffer when it answers: a request already received in part would be lost
+        kept = self.recv_buffer
+        super().send(data, addr)
+        self.recv_buffer = kept
+
+    async def handle_request(self) -> None:
+        # one scheduled answer per request read above, in order
+        if not self._requests:
+            return
+        self.last_pdu, self.last_addr = self._requests.popleft()
+        await super().handle_request()
 
 
 class _BoundedTcpServer(ModbusTcpServer):
