@@ -133,6 +133,12 @@ class _TrackedHandler(ServerRequestHandler):
 
     def connection_made(self, transport: Any) -> None:
         super().connection_made(transport)
+        if self.is_closing:
+            # closed for the cap between its accept and now (asyncio makes connections one loop turn after
+            # accepting them): pymodbus had no transport to close then, so the socket would stay open
+            transport.close()
+            self.transport = None
+            return
         server = self.server
         if not isinstance(server, _BoundedTcpServer):
             return
