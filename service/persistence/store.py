@@ -31,6 +31,8 @@ import numpy as np
 from service.errors import StoreDamaged, StoreError
 
 DB_NAME = "results.db"
+#: the largest integer SQLite stores (a longer sequence number is no measurement's)
+SQLITE_MAX_INTEGER = 2**63 - 1
 SCHEMA_VERSION = 2  # 2: part, recipe and verdict columns (added in place to a version-1 store)
 
 #: the part/recipe/verdict columns (schema 2), added to an older store by ``ALTER TABLE`` at open
@@ -502,7 +504,7 @@ class Store:
         cols = _FULL_COLUMNS + (_TRACE_COLUMNS if trace else "")
         with self._lock:
             rows = []
-            if isinstance(key, int) or (isinstance(key, str) and key.isdigit()):
+            if (isinstance(key, int) or (isinstance(key, str) and key.isdigit())) and int(key) <= SQLITE_MAX_INTEGER:
                 rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE seq = ?", (int(key),)).fetchall()
             if not rows and isinstance(key, str):
                 # a prefix, compared literally: '%' and '_' in the key are not wildcards

@@ -385,3 +385,76 @@ def test_a_burst_of_modbus_connections_leaves_none_open_beyond_the_cap(caplog):
             s.close()
         srv.stop()
     assert not [r for r in caplog.records if r.exc_info], [r.getMessage() for r in caplog.records if r.exc_info]
+
+
+# --- tracebacks and 500s ----------------------------------------------------------------------------------------------
+
+def _http(port: int, raw: bytes, half_close: bool = False) -> bytes:
+    """One raw HTTP/1.1 exchange (the connection closed after it): the status line and what follows."""
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(raw)
+        if half_close:
+            s.shutdown(socket.SHUT_WR)  # a truncated body stays truncated
+        s.settimeout(30)
+        out = b""
+        while chunk := s.recv(65536):
+            out += chunk
+    return out
+
+
+def test_hostile_web_requests_get_a_4xx_not_a_500(tmp_path, appliance_factory, caplog):
+    """A sequence number beyond SQLite's integers, a history page beyond any, a multipart body cut short:
+    a 4xx with a sentence, never a 500 or a logged traceback."""
+    app = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True}))
+    port = app.app.web.bound_port
+    huge = "9" * 23
+    for path, status in ((f"/results/{huge}", b"404"), (f"/results/{huge}/result.json", b"404"),
+                         (f"/history?page={huge}", b"400")):
+        reply = _http(port, f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nConnection: close\r\n\r\n".encode())
+        assert reply.split(b" ", 2)[1] == status, (path, reply[:300])
+    token = Path(app.app.web.token_file).read_text().strip()
+    body = b'--XyZ\r\nContent-Disposition: form-data; name="part_id"\r\n\r\nSN-1'  # no closing boundary
+    head = (f"POST /api/part HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nAuthorization: Bearer {token}\r\n"
+            f"Content-Type: multipart/form-data; boundary=XyZ\r\nContent-Length: {len(body)}\r\n"
+            "Connection: close\r\n\r\n").encode()
+    reply = _http(port, head + body)
+    assert reply.split(b" ", 2)[1] == b"400", reply[:300]
+    assert not [r for r in caplog.records if r.exc_info], [r.getMessage() for r in caplog.records if r.exc_info]
+
+
+def test_cli_tracebacks_are_one_line(tmp_path):
+    """A sequence number beyond SQLite's integers, output to a full device, a CSV cell beyond the csv
+    module's limit: one line on stderr and exit 2."""
+    import subprocess
+    import sys
+
+    from service.persistence.store import Store
+
+    with Store(tmp_path / "state") as s:
+        s.record(status="ok", trigger="button", device_id="rig", software_version="t", started_at=1.0,
+                 finished_at=2.0, result={"J": 0.0125, "flags": []},
+                 build_payload=lambda u, q: {"uuid": u, "seq": q, "J": 0.0125})
+    (tmp_path / "wide.csv").write_text("t,angle\n" + "9" * 140_000 + ",1\n")
+    repo = Path(__file__).resolve().parents[2]
+    state = ["--state-dir", str(tmp_path / "state")]
+    cases = [(["results", "9" * 23, *state], None), (["export", "--trace", "9" * 23, *state], None),
+             (["results", "--json", *state], "/dev/full"), (["export", *state], "/dev/full"),
+             (["identify", str(tmp_path / "wide.csv"), "--rig", str(repo / "examples" / "torsion_rig.toml")], None)]
+    # a demo on a state directory another daemon holds (its lock taken here)
+    from service.daemon import lock_state_dir
+
+    cases.append((["demo", "--state-dir", str(tmp_path / "held"), "--web-port", "0"], None))
+    held = lock_state_dir(tmp_path / "held")
+    try:
+        for args, out in cases:
+            if out is not None and not Path(out).exists():
+                continue
+            with open(out or "/dev/null", "w") as stdout:
+                p = subprocess.run([sys.executable, "-m", "service.cli", *args], cwd=str(repo), stdout=stdout,
+                                   stderr=subprocess.PIPE, text=True, timeout=120)
+            lines = p.stderr.strip().splitlines()
+            assert p.returncode == 2 and len(lines) == 1 and "Traceback" not in p.stderr, (args, p.stderr[-1500:])
+            assert len(lines[0]) < 400, lines[0][:400]
+    finally:
+        import os
+        os.close(held)

@@ -54,6 +54,8 @@ log = logging.getLogger("moi.web")
 HERE = Path(__file__).parent
 #: a tick of the live stream every this many s (elapsed time, new samples)
 TICK = 0.25
+#: the largest history page asked for (its offset must stay an SQLite integer; no store has so many)
+MAX_PAGE = 10**9
 #: keys whose values the set-up page never shows
 SECRET_WORDS = ("password", "token", "secret")
 
@@ -91,6 +93,14 @@ def mask(obj: Any) -> Any:
     if isinstance(obj, (list, tuple)):
         return [mask(x) for x in obj]
     return obj
+
+
+async def _form(request: web.Request) -> Mapping[str, Any]:
+    """The request's form fields; a body that does not parse (a multipart body cut short) is a 400."""
+    try:
+        return await request.post()
+    except ValueError as exc:  # aiohttp's form and multipart readers say what was wrong with a ValueError
+        raise Refused(400, f"malformed form body: {exc}") from None
 
 
 def _wants_json(request: web.Request) -> bool:
@@ -225,7 +235,7 @@ class Views:
 
     async def login(self, request: web.Request) -> web.StreamResponse:
         self._same_origin(request)
-        form = await request.post()
+        form = await _form(request)
         made = self.server.guard.login(str(form.get("token") or ""))
         if made is None:
             await asyncio.sleep(0.5)  # a guess costs time
@@ -237,7 +247,7 @@ class Views:
 
     async def logout(self, request: web.Request) -> web.StreamResponse:
         self._same_origin(request)
-        form = await request.post()
+        form = await _form(request)
         self._authorise(request, form)
         self.server.guard.logout(request.cookies.get(COOKIE))
         resp = web.HTTPSeeOther("/")
@@ -259,7 +269,7 @@ class Views:
             raise Refused(*why)
 
     async def _action(self, request: web.Request, name: str) -> web.Response:
-        form = await request.post() if request.content_type in ("application/x-www-form-urlencoded",
+        form = await _form(request) if request.content_type in ("application/x-www-form-urlencoded",
                                                                  "multipart/form-data") else {}
         self._authorise(request, form)
         state = self.app.live_status().state
@@ -281,7 +291,7 @@ class Views:
 
         from service.parts.recipes import check_part_id
 
-        form = await request.post()
+        form = await _form(request)
         self._authorise(request, form)
         data: dict[str, Any] = {}
         recipe = str(form.get("recipe") or "").strip()
@@ -405,9 +415,9 @@ class Views:
         try:
             page = int(request.query.get("page", "1"))
         except ValueError:
-            raise Refused(400, f"page={request.query.get('page')[:20]!r}: expected a page number 1, 2, ...") from None
-        if page < 1:
-            raise Refused(400, "page: expected a page number 1, 2, ...")
+            raise Refused(400, f"page={request.query.get('page', '')[:20]!r}: expected a page number 1, 2, ...") from None
+        if not 1 <= page <= MAX_PAGE:
+            raise Refused(400, f"page: expected a page number 1, 2, ... (at most {MAX_PAGE})")
         rows, total = self.app.store.search(offset=(page - 1) * size, limit=size, **filters)
         pages = max(1, math.ceil(total / size))
         args = {k: v for k, v in self._query_args(request).items() if v}
