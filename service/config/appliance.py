@@ -275,6 +275,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "max_connections": _doc("browser connections at once; one more is closed at once", min=1, max=512),
         "request_timeout": _doc("close a connection that sent no complete request for this long, s", min=0,
                                 min_open=True, max=3600),
+        "server_names": _doc("host names the page is reached by besides IP addresses, localhost and this "
+                             "machine's names, e.g. [\"moi-rig-3.factory.lan\"] (any other Host is refused)"),
     }, extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
 }
 

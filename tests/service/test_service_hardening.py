@@ -458,3 +458,59 @@ def test_cli_tracebacks_are_one_line(tmp_path):
     finally:
         import os
         os.close(held)
+
+
+# --- the web page's token -----------------------------------------------------------------------------------------
+
+def test_token_guessing_is_slow_logged_and_the_page_answers_only_for_its_own_names(tmp_path, appliance_factory,
+                                                                                   caplog):
+    """Wrong tokens, many connections at once: they wait in one line, GUESS_DELAY each (no faster than
+    1/GUESS_DELAY per second in all), and the log says so in one line; a login form without its CSRF value is
+    403; a request for another host name (DNS rebinding) is 421; a short token and a token file others can
+    read are refused or warned about at start."""
+    import concurrent.futures
+    import os
+    import time
+
+    from service.errors import StartupError
+    from service.publish.web.auth import GUESS_DELAY, read_token
+
+    app = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True}))
+    port = app.app.web.bound_port
+
+    def guess(i: int) -> bytes:
+        return _http(port, (f"POST /api/measure HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nAuthorization: Bearer "
+                            f"guess-{i:04d}-xxxxxxxxxx\r\nContent-Length: 0\r\nConnection: close\r\n\r\n").encode())
+
+    guesses = 8
+    t0 = time.monotonic()
+    with concurrent.futures.ThreadPoolExecutor(guesses) as pool:
+        replies = list(pool.map(guess, range(guesses)))
+    took = time.monotonic() - t0
+    assert all(r.split(b" ", 2)[1] == b"401" for r in replies)
+    # a lower bound only (the delays are served one after the other): never a speed assert on this machine
+    assert took >= (guesses - 1) * GUESS_DELAY
+    assert app.app.web.guard.wrong_tokens == guesses
+    assert sum("wrong token(s)" in r.getMessage() for r in caplog.records) == 1
+    # a login form posted without its CSRF value: refused before the token is even looked at
+    token = Path(app.app.web.token_file).read_text().strip()
+    body = f"token={token}".encode()
+    reply = _http(port, (f"POST /login HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nContent-Type: application/"
+                         f"x-www-form-urlencoded\r\nContent-Length: {len(body)}\r\nConnection: close\r\n\r\n")
+                  .encode() + body)
+    assert reply.split(b" ", 2)[1] == b"403"
+    # the Host header: an address or this machine's names, not a rebinding attacker's name
+    for host, status in (("evil.example", b"421"), (f"127.0.0.1:{port}", b"200"), ("localhost", b"200")):
+        reply = _http(port, f"GET /api/state HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n".encode())
+        assert reply.split(b" ", 2)[1] == status, (host, reply[:200])
+    # the token itself
+    short = tmp_path / "short"
+    short.write_text("eight-ch\n")
+    with pytest.raises(StartupError, match="shorter than 16"):
+        read_token(short, create=False)
+    shared = tmp_path / "shared"
+    shared.write_text("a-token-long-enough-to-use\n")
+    os.chmod(shared, 0o644)
+    caplog.clear()
+    assert read_token(shared, create=False) == "a-token-long-enough-to-use"
+    assert any("can be read by other users" in r.getMessage() for r in caplog.records)

@@ -6,9 +6,11 @@ from __future__ import annotations
 import asyncio
 import datetime as dt
 import hashlib
+import hmac
 import json
 import logging
 import math
+import secrets
 import shutil
 import time
 from pathlib import Path
@@ -19,7 +21,7 @@ import jinja2
 from aiohttp import web
 
 from service import __version__
-from .auth import COOKIE, CSRF_HEADER, SESSION_LIFETIME
+from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME
 from .child import ChildBusy, export_file, replot, trace_file
 from .live import Live
 from .settings import PLOT_NAME
@@ -95,6 +97,25 @@ def mask(obj: Any) -> Any:
     return obj
 
 
+def _own_names(extra: tuple[str, ...]) -> frozenset[str]:
+    """The host names this appliance answers for: localhost, its own names, and ``extra``."""
+    import socket
+
+    names = {"localhost", socket.gethostname(), socket.getfqdn()}
+    names |= {n.split(".")[0] + ".local" for n in list(names) if n}
+    return frozenset(n.lower().rstrip(".") for n in names | set(extra) if n)
+
+
+def _is_ip(name: str) -> bool:
+    import ipaddress
+
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        return False
+    return True
+
+
 async def _form(request: web.Request) -> Mapping[str, Any]:
     """The request's form fields; a body that does not parse (a multipart body cut short) is a 400."""
     try:
@@ -116,6 +137,7 @@ class Views:
                                       autoescape=jinja2.select_autoescape(["html"]), trim_blocks=True,
                                       lstrip_blocks=True)
         self.env.filters.update(fmt=_fmt, when=_when, name=_name)
+        self._names = _own_names(server.settings.server_names)
         # file names carry a hash of the content: a browser never keeps a stale script after an update
         stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
         self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS,
@@ -123,7 +145,7 @@ class Views:
 
     # --- application ------------------------------------------------------------------------
     def application(self) -> web.Application:
-        app = web.Application(middlewares=[self._errors], client_max_size=64 * 1024)
+        app = web.Application(middlewares=[self._errors, self._host_check], client_max_size=64 * 1024)
         r = app.router
         r.add_get("/", self.home)
         r.add_get("/events", self.events)
@@ -168,6 +190,17 @@ class Views:
             return self._error(request, 500, f"internal error ({type(exc).__name__}); the appliance log has details")
         return resp
 
+    @web.middleware
+    async def _host_check(self, request: web.Request, handler):
+        """Only requests that name this appliance: a page on another site whose name was made to point here
+        (DNS rebinding) names its own host, and would otherwise read the results from a LAN browser."""
+        host = (request.host or "").rsplit(":", 1)[0] if not (request.host or "").endswith("]") else request.host
+        name = host.strip("[]").lower().rstrip(".")
+        if name not in self._names and not _is_ip(name):
+            raise Refused(421, f"this appliance does not answer for the host {host[:64]!r}; add it to [web] "
+                               "server_names")
+        return await handler(request)
+
     def _error(self, request: web.Request, status: int, message: str) -> web.Response:
         if _wants_json(request):
             return web.json_response({"error": message, "status": status}, status=status)
@@ -175,13 +208,20 @@ class Views:
 
     def _page(self, request: web.Request, template: str, status: int = 200, **ctx: Any) -> web.Response:
         session = self.server.guard.session(request.cookies.get(COOKIE))
+        # before a login, the login form's CSRF value, also in a SameSite=Strict cookie: another site's form
+        # can carry neither (double submit)
+        login_csrf = request.cookies.get(LOGIN_COOKIE) or secrets.token_urlsafe(18)
         ctx.setdefault("title", "")
         html = self.env.get_template(template).render(
             device_id=self.app.config.device_id, logged_in=session is not None,
-            csrf=session.csrf if session else "", path=request.path_qs, simulated=self.app.config.simulated, **ctx)
-        return web.Response(text=html, status=status, content_type="text/html",
+            csrf=session.csrf if session else login_csrf, path=request.path_qs,
+            simulated=self.app.config.simulated, **ctx)
+        resp = web.Response(text=html, status=status, content_type="text/html",
                             headers={"Cache-Control": "no-store", "X-Content-Type-Options": "nosniff",
                                      "X-Frame-Options": "DENY", "Referrer-Policy": "same-origin"})
+        if session is None:
+            resp.set_cookie(LOGIN_COOKIE, login_csrf, httponly=True, samesite="Strict", path="/")
+        return resp
 
     # --- home and live state ---------------------------------------------------------------------
     async def home(self, request: web.Request) -> web.Response:
@@ -236,9 +276,12 @@ class Views:
     async def login(self, request: web.Request) -> web.StreamResponse:
         self._same_origin(request)
         form = await _form(request)
+        csrf, expected = str(form.get("csrf") or ""), request.cookies.get(LOGIN_COOKIE) or ""
+        if not csrf or not expected or not hmac.compare_digest(csrf.encode(), expected.encode()):
+            raise Refused(403, "missing or wrong CSRF token: reload the page and log in again")
         made = self.server.guard.login(str(form.get("token") or ""))
         if made is None:
-            await asyncio.sleep(0.5)  # a guess costs time
+            await self.server.guard.wrong_token(request.remote)  # a guess costs time
             raise Refused(401, "wrong token: it is the first line of the appliance's web token file")
         sid, _ = made
         resp = web.HTTPSeeOther(self._next(request, str(form.get("next") or "")))
@@ -248,13 +291,13 @@ class Views:
     async def logout(self, request: web.Request) -> web.StreamResponse:
         self._same_origin(request)
         form = await _form(request)
-        self._authorise(request, form)
+        await self._authorise(request, form)
         self.server.guard.logout(request.cookies.get(COOKIE))
         resp = web.HTTPSeeOther("/")
         resp.del_cookie(COOKIE, path="/")
         raise resp
 
-    def _authorise(self, request: web.Request, form: Mapping[str, Any]) -> None:
+    async def _authorise(self, request: web.Request, form: Mapping[str, Any]) -> None:
         self._same_origin(request)
         bearer = None
         auth = request.headers.get("Authorization")
@@ -266,12 +309,14 @@ class Views:
         why = self.server.guard.authorise(cookie=request.cookies.get(COOKIE), bearer=bearer,
                                           csrf=request.headers.get(CSRF_HEADER) or str(form.get("csrf") or ""))
         if why is not None:
+            if bearer is not None:
+                await self.server.guard.wrong_token(request.remote)  # a guess costs time
             raise Refused(*why)
 
     async def _action(self, request: web.Request, name: str) -> web.Response:
         form = await _form(request) if request.content_type in ("application/x-www-form-urlencoded",
                                                                  "multipart/form-data") else {}
-        self._authorise(request, form)
+        await self._authorise(request, form)
         state = self.app.live_status().state
         self.app.command(name, "web")
         log.info("web: %s requested (state %s)", name, state)
@@ -292,7 +337,7 @@ class Views:
         from service.parts.recipes import check_part_id
 
         form = await _form(request)
-        self._authorise(request, form)
+        await self._authorise(request, form)
         data: dict[str, Any] = {}
         recipe = str(form.get("recipe") or "").strip()
         if recipe:
