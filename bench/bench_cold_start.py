@@ -29,23 +29,15 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # the benches' shared helpers
+
+from bench_speed import _before_tree  # noqa: E402
+
 REPO = HERE.parent
 BEFORE = "b622b1d"
 
 GOALS = {"identify": 0.7, "help": 0.1}
 RIG_TOML = '[rig]\nkind = "torsion"\nstiffness = 0.3651\n[model]\ndeclared = ["viscous"]\n'
-
-
-def _before_tree(work: Path) -> Path | None:
-    tree = work / "before"
-    tree.mkdir()
-    try:
-        archive = subprocess.run(["git", "-C", str(REPO), "archive", BEFORE, "measurement", "service", "drivers",
-                                  "firmware_host"], capture_output=True, check=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
-    except (OSError, subprocess.CalledProcessError):
-        return None
-    return tree
 
 
 def _command(tree: Path, argv: list[str], pin: bool) -> tuple[float, float]:
@@ -85,7 +77,7 @@ def main(argv: list[str] | None = None) -> None:
                    fmt="%.17g")
         (work / "rig.toml").write_text(RIG_TOML)
         commands = {"identify": ["identify", str(trace), "--rig", str(work / "rig.toml")], "help": ["--help"]}
-        before = None if args.no_before else _before_tree(work)
+        before = None if args.no_before else _before_tree(work, BEFORE)
         trees = [("after", REPO)] + ([("before", before)] if before else [])
         pins = [False] + ([True] if shutil.which("taskset") else [])
         for _, tree in trees:  # fills the kernel cache: every timed run only loads it

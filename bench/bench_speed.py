@@ -125,11 +125,12 @@ def _status_kb(field: str) -> int:
 # -- the parent: makes the traces, unpacks "before", alternates the trees ------------
 
 
-def _before_tree(work: Path) -> Path | None:
+def _before_tree(work: Path, rev: str = BEFORE) -> Path | None:
+    """The source tree at ``rev`` unpacked in ``work``/before (None without git or the commit)."""
     tree = work / "before"
     tree.mkdir()
     try:
-        archive = subprocess.run(["git", "-C", str(REPO), "archive", BEFORE, "measurement", "service", "drivers",
+        archive = subprocess.run(["git", "-C", str(REPO), "archive", rev, "measurement", "service", "drivers",
                                   "firmware_host"], capture_output=True, check=True).stdout
         subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
     except (OSError, subprocess.CalledProcessError):

@@ -15,12 +15,13 @@ from gpiozero import Button
 from gpiozero.pins import Factory
 
 from .backend import pin_factory as default_factory
+from .gpio import GpioDevice
 from .settings import ButtonSettings
 
 log = logging.getLogger("moi.drivers.button")
 
 
-class PushButton:
+class PushButton(GpioDevice):
     """A momentary push button on a GPIO input.
 
     pin: BCM number or gpiozero pin name.
@@ -38,12 +39,6 @@ class PushButton:
         self._device = Button(pin, pull_up=pull_up, bounce_time=bounce_time,
                               pin_factory=pin_factory or default_factory())
         self._device.when_pressed = self._pressed
-        self._closed = False
-
-    @property
-    def pin(self):
-        """The gpiozero pin (a ``MockPin``: ``drive_low()``/``drive_high()`` press and release with pull_up)."""
-        return self._device.pin
 
     @property
     def is_pressed(self) -> bool:
@@ -58,20 +53,8 @@ class PushButton:
         with self._lock:
             self._when_pressed = callback
 
-    def close(self) -> None:
-        """Detach and release the pin; safe twice."""
-        with self._lock:
-            if self._closed:
-                return
-            self._closed = True
-            self._when_pressed = None
-        self._device.close()
-
-    def __enter__(self) -> "PushButton":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def _make_safe(self) -> None:
+        self._when_pressed = None  # detached: a press while closing asks for nothing
 
     def _pressed(self) -> None:
         with self._lock:

@@ -15,12 +15,13 @@ from gpiozero import DigitalOutputDevice
 from gpiozero.pins import Factory
 
 from .backend import pin_factory as default_factory
+from .gpio import GpioDevice
 from .settings import IndicatorSettings
 
 _BUSY = {"ARMED", "RELEASING", "CAPTURING", "IDENTIFYING"}
 
 
-class Indicator:
+class Indicator(GpioDevice):
     """A status LED or buzzer.
 
     pin: BCM number or gpiozero pin name; kind: "led" | "buzzer";
@@ -33,13 +34,8 @@ class Indicator:
         self.kind = kind
         self.shown: str | None = None
         self._lock = threading.Lock()
-        self._closed = False
         self._device = DigitalOutputDevice(pin, active_high=active_high, initial_value=False,
                                            pin_factory=pin_factory or default_factory())
-
-    @property
-    def pin(self):
-        return self._device.pin
 
     @property
     def is_active(self) -> bool:
@@ -75,17 +71,5 @@ class Indicator:
             if not self._closed:
                 self._device.off()
 
-    def close(self) -> None:
-        """Off and release the pin; safe twice."""
-        with self._lock:
-            if self._closed:
-                return
-            self._closed = True
-            self._device.off()
-            self._device.close()
-
-    def __enter__(self) -> "Indicator":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def _make_safe(self) -> None:
+        self._device.off()

@@ -99,6 +99,16 @@ class SimRig:
                 self._released_at = self.clock.now()
                 self.releases += 1
 
+    def mount(self, pendulum: Pendulum) -> None:
+        """Put another part (or the same part in another orientation) on the rig: what the operator does
+        between two steps of a tensor set. Only while latched: a swinging pendulum keeps its part."""
+        swing = Swing(pendulum, theta0=self.theta0, duration=self.swing.duration)
+        with self._lock:
+            if self._released_at is not None:
+                self._released_at = None  # the operator stops the swing to remount the part
+            self.pendulum = pendulum
+            self.swing = swing
+
     def relatch(self) -> None:
         """Swing the pendulum back to θ0 and latch it (the operator between measurements)."""
         with self._lock:

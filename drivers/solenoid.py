@@ -26,11 +26,12 @@ from gpiozero.pins import Factory
 
 from .backend import pin_factory as default_factory
 from .errors import DeviceFault
+from .gpio import GpioDevice
 from .settings import ABSOLUTE_MAX_ON_TIME, SolenoidSettings  # noqa: F401  (re-exported)
 
 log = logging.getLogger("moi.drivers.solenoid")
 
-class Solenoid:
+class Solenoid(GpioDevice):
     """Release solenoid on a GPIO line.
 
     pin: BCM number or gpiozero pin name.
@@ -50,18 +51,12 @@ class Solenoid:
         self._off_event = threading.Event()
         self._off_event.set()
         self._on_since: float | None = None
-        self._closed = False
         self.pulses = 0
         self._device = DigitalOutputDevice(pin, active_high=active_high, initial_value=False,
                                            pin_factory=pin_factory or default_factory())
         self._device.off()
 
     # -- state -------------------------------------------------------------------
-    @property
-    def pin(self):
-        """The gpiozero pin (a ``MockPin`` with ``.states`` on the mock backend)."""
-        return self._device.pin
-
     @property
     def is_active(self) -> bool:
         """True while the coil is energised."""
@@ -127,22 +122,10 @@ class Solenoid:
         """Block until the coil is off (True) or ``timeout`` s of real time pass (False)."""
         return self._off_event.wait(timeout)
 
-    def close(self) -> None:
-        """Switch off and release the pin; safe twice."""
-        with self._lock:
-            if self._closed:
-                return
-            was_on = self._switch_off()
-            self._closed = True
-            self._device.close()
-        if was_on:
-            self._notify(False)
-
-    def __enter__(self) -> "Solenoid":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def _make_safe(self) -> Callable[[], None] | None:
+        if self._switch_off():
+            return lambda: self._notify(False)
+        return None
 
     def __repr__(self) -> str:
         state = "closed" if self._closed else ("on" if self.is_active else "off")

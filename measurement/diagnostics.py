@@ -56,6 +56,8 @@ class Diagnostics:
     #: BIC change when the residual is regressed on the shapes an unmodelled
     #: effect leaves (``structure_test``), under the noise model; < −margin: structure
     structure_bic: float = 0.0
+    #: BIC change when the residual is regressed on the envelope shapes θ·τ, θ·τ² alone
+    envelope_bic: float = 0.0
 
     @property
     def at_noise_floor(self) -> bool:
@@ -69,13 +71,19 @@ class Diagnostics:
     def named_structure(self) -> list[str]:
         """The shapes in the residual that can be named, each large enough to matter, in words.
 
-        A spectral line away from the swing frequency (another mode, a
-        vibration), a trend slower than the swing, unequal half-swings: each
-        must hold a fair share of a residual that stands clear of the noise
-        (a line at the swing frequency is the model's own phase or envelope
-        error, judged by what it does to ω_n instead).
+        An envelope that decays otherwise than the model's (a damping law
+        it lacks); a spectral line away from the swing frequency (another
+        mode, a vibration), a trend slower than the swing, unequal
+        half-swings: each of these must hold a fair share of a residual
+        that stands clear of the noise (a line at the swing frequency is the
+        model's own phase error, judged by what it does to ω_n instead).
         """
         out: list[str] = []
+        # the envelope test carries its own margin (it is a BIC under the noise model, two shapes):
+        # a damping law the model lacks shows there even close to the noise
+        if self.envelope_bic < -STRUCTURE_MARGIN:
+            out.append(f"the swing decays otherwise than the model: its envelope departs from the model's "
+                       f"(ΔBIC {self.envelope_bic:+.0f})")
         if self.rms_ratio < NAMED_ABOVE_NOISE:
             return out
         off_swing = (self.line_hz is not None and math.isfinite(self.swing_hz) and self.swing_hz > 0
@@ -192,8 +200,9 @@ def _decrement(peaks: np.ndarray) -> tuple[tuple[float, float, float], tuple[flo
     return tuple(float(c) for c in coef), tuple(float(v) for v in tv)
 
 
-def structure_test(fit: ModelFit, line_hz: float | None) -> float:
-    """ΔBIC of explaining the residual by the shapes an unmodelled effect leaves, under an AR noise model.
+def structure_test(fit: ModelFit, line_hz: float | None) -> tuple[float, float]:
+    """ΔBIC of explaining the residual by the shapes an unmodelled effect leaves, under an AR noise model,
+    and ΔBIC of the envelope shapes alone (θ·τ, θ·τ²).
 
     The shapes: the fitted swing θ and its rate θ' modulated by 1, τ, τ²
     (an envelope or a frequency the model gets wrong), θ² and θ³
@@ -232,9 +241,15 @@ def structure_test(fit: ModelFit, line_hz: float | None) -> float:
     Xw, rw = noise.whiten(X), noise.whiten(rc)
     ew = _fit_residual(Xw, rw)
     m = rw.size
+    # the swing's envelope alone (θ·τ, θ·τ²: an amplitude the model loses too fast or too slowly),
+    # under the same noise model: a damping law the model lacks
+    env = _fit_residual(Xw[:, 1:3], rw)
     with np.errstate(divide="ignore"):
-        gain = m * math.log(max(float(ew @ ew), 1e-300) / max(float(rw @ rw), 1e-300))
-    return float(gain + (X.shape[1] + (1 if line_hz is not None else 0)) * math.log(n))
+        base = max(float(rw @ rw), 1e-300)
+        gain = m * math.log(max(float(ew @ ew), 1e-300) / base)
+        gain_env = m * math.log(max(float(env @ env), 1e-300) / base)
+    return (float(gain + (X.shape[1] + (1 if line_hz is not None else 0)) * math.log(n)),
+            float(gain_env + 2 * math.log(n)))
 
 
 def _fit_residual(X: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -322,11 +337,12 @@ def diagnose(fit: ModelFit, noise: float, stopped: bool = False) -> Diagnostics:
             asym = float(pos.mean() - neg.mean())
             se = math.sqrt(pos.var(ddof=1) / pos.size + neg.var(ddof=1) / neg.size)
             asym_t = asym / se if se > 0 else 0.0
+    structure_bic, envelope_bic = structure_test(fit, line_hz)
     return Diagnostics(
         residual_rms=rms, noise_floor=noise, rms_ratio=ratio, lag1=float(rho[1]), whiteness_p=p, white=white,
         swing_hz=swing_hz, line_hz=line_hz, line_fraction=line_fraction, low_frequency_fraction=low_fraction,
         envelope_law=law, envelope_errors=errors, stopped=stopped,
         freq_amp_slope=fa_slope, freq_amp_t=fa_t, centre_slope=c_slope, centre_t=c_t,
         asymmetry=asym, asymmetry_t=asym_t, decrement=dec, decrement_t=dec_t,
-        structure_bic=structure_test(fit, line_hz),
+        structure_bic=structure_bic, envelope_bic=envelope_bic,
     )

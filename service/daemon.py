@@ -48,6 +48,7 @@ from service.devices.hardware import Devices, build_devices
 from .notify import Notifier
 from service.publish.payload import iso_utc, result_payload
 from service.parts.recipes import PartTracker, Recipe, RecipeBook
+from service.parts.tensor_set import COMPLETE, TensorSet
 from service.publish.modbus.registers import LiveStatus
 from service.persistence.store import Store, quarantine_store
 from service.publish import port
@@ -106,6 +107,7 @@ class Appliance:
         self._accepted_part: tuple[str | None, Recipe | None] = (None, None)
         self._run_part: dict[str, tuple[str | None, Recipe | None]] = {}
         self._current_recipe: Recipe | None = None
+        self.tensor_set: TensorSet | None = None  # the guided set of a tensor recipe (open or just finished)
         self._last_status = ""
         self.loop_iterations = 0
         self.last_loop_error: str | None = None
@@ -121,9 +123,10 @@ class Appliance:
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
-        """Queue a command from ``source`` ("button", "modbus", "mqtt", "cli"): "trigger" (data may carry
-        ``part_id``, and ``recipe`` as a name or number), "abort", "recipe" (data ``recipe``) or "part_id"
-        (data ``part_id``)."""
+        """Queue a command from ``source`` ("button", "modbus", "mqtt", "cli", "web"): "trigger" (data may carry
+        ``part_id``, and ``recipe`` as a name or number), "abort", "recipe" (data ``recipe``), "part_id"
+        (data ``part_id``), "set" (data ``action`` redo | skip | abort, optional ``orientation``: the tensor
+        set's operator actions) or "set_redo" / "set_skip" / "set_abort" (the Modbus coils)."""
         self._commands.put((name, source, data))
         self._wakeup.set()
 
@@ -174,6 +177,7 @@ class Appliance:
         except BaseException:
             self._shutdown_components()
             raise
+        self._open_set()  # a tensor recipe active from the configuration: its set waits for the first release
         self._refresh_live()
         self._to_publishers("on_state", self._state_message("IDLE", "IDLE", "daemon started", None), None)
         where = [w for p in self.publishers if (w := p.where())] or ["no publisher"]
@@ -316,6 +320,10 @@ class Appliance:
                     continue
                 if name != "trigger":
                     continue
+            if name in ("set", "set_redo", "set_skip", "set_abort"):
+                action = name[4:] if name != "set" else str((data or {}).get("action"))
+                self._set_action(action, (data or {}).get("orientation"), source)
+                continue
             if name == "trigger":
                 unwritable = self._store_unwritable()
                 if unwritable is not None:
@@ -327,6 +335,7 @@ class Appliance:
                 if seq.request_measurement(source):
                     self._accepted_source = source
                     self._accepted_part = (self.parts.part_id, self.parts.recipe)
+                    self._open_set()
                 else:
                     self._ignored_triggers += 1
                     now = time.monotonic()
@@ -360,6 +369,75 @@ class Appliance:
         if "part_id" in data:
             self.parts.set_part_id(data["part_id"])
             self._to_publishers("on_part_id", self.parts.part_id)
+        self._open_set()
+
+    # --- the guided tensor set (main loop thread) ------------------------------------------------------
+    def _open_set(self) -> None:
+        """Open a tensor set when the active recipe declares a tensor plan and none runs for it and this part
+        (a finished set is shown until the next trigger or selection, which starts the next one); a running
+        set of another recipe or part is aborted (its releases stay stored)."""
+        recipe, part_id = self.parts.recipe, self.parts.part_id
+        current = self.tensor_set
+        if current is not None and not current.done:
+            if recipe is current.recipe and part_id == current.part_id:
+                return
+            current.act("abort")
+            current.error = "a different recipe or part ID was selected"
+            self._finish_set(current)
+        if recipe is None or recipe.tensor is None:
+            return
+        self.tensor_set = TensorSet(recipe, recipe.rig_for(self.config.rig), part_id, self.wall_clock())
+        log.info("tensor set %s started (%s, part %s): %s", self.tensor_set.uuid, recipe.name, part_id or "-",
+                 self.tensor_set.instruction())
+        self._publish_set()
+
+    def _set_action(self, action: str, orientation: Any, source: str) -> None:
+        s = self.tensor_set
+        if s is None or s.done:
+            log.warning("set %s from %s: no tensor set is running", action, source)
+            return
+        assert self.sequencer is not None
+        if self.sequencer.busy and action != "abort":
+            log.warning("set %s from %s refused: a measurement runs", action, source)
+            return
+        try:
+            s.act(action, None if orientation is None else str(orientation))
+        except InvalidInput as exc:
+            log.warning("set %s from %s refused: %s", action, source, exc)
+            return
+        log.info("tensor set %s: %s by %s; %s", s.uuid, action, source, s.instruction())
+        if s.done:
+            self._finish_set(s)
+        self._publish_set()
+
+    def _finish_set(self, s: TensorSet) -> None:
+        """Store a finished set (complete, failed or aborted) and hand it to the publishers."""
+        assert self.store is not None
+        record = s.to_dict()
+        try:
+            self.store.record_tensor_set(record, started_at=s.started_at, finished_at=self.wall_clock())
+        except ServiceError:
+            log.exception("could not store the tensor set %s", s.uuid)
+            return
+        if s.status == COMPLETE and s.result is not None:
+            r = s.result
+            log.info("tensor set %s complete: principal moments %s kg·m², flags %s", s.uuid,
+                     ", ".join(f"{v:.6g}" for v in r.principal_moments), ", ".join(r.flags) or "none")
+        self._to_publishers("on_tensor_set", record | {"device_id": self.config.device_id,
+                                                      "timestamp": self.wall_clock()})
+
+    def _publish_set(self) -> None:
+        progress = self.set_progress()
+        if progress is not None:
+            self._to_publishers("on_set", progress)
+        self._refresh_live()
+
+    def set_progress(self) -> dict[str, Any] | None:
+        """The tensor set's progress with the operator's instruction (None: no set)."""
+        s = self.tensor_set
+        if s is None:
+            return None
+        return s.progress() | {"instruction": s.instruction(), "device_id": self.config.device_id}
 
     def _run_calls(self) -> None:
         while True:
@@ -455,7 +533,15 @@ class Appliance:
         calibration = self._calibration_state(rig, finished)
         if calibration is not None and calibration["due"] and F.CALIBRATION_DUE not in result["flags"]:
             result["flags"] = [*result["flags"], F.CALIBRATION_DUE]
-        part = self.parts.release(result, m.id, part_id, recipe) | {"calibration": calibration}
+        tensor_set = self.tensor_set if recipe is not None and recipe.tensor is not None else None
+        if tensor_set is not None and (tensor_set.done or tensor_set.recipe is not recipe):
+            tensor_set = None  # the set ended (aborted) while this release ran: it counts for nothing
+        if tensor_set is not None:
+            assert recipe is not None
+            part = {"part_id": part_id, "recipe": recipe.to_dict(), "release": None, "part": None, "verdict": None,
+                    "calibration": calibration, "tensor_set": tensor_set.release(result, m.id)}
+        else:
+            part = self.parts.release(result, m.id, part_id, recipe) | {"calibration": calibration}
 
         def build(uuid: str, seq: int) -> dict[str, Any]:
             return result_payload(result, uuid=uuid, seq=seq, device_id=cfg.device_id, trigger=m.requested_by,
@@ -473,7 +559,10 @@ class Appliance:
                 part=_part_columns(part),
             )
         except BaseException:
-            self.parts.undo_last()  # not stored: the release does not count for the part
+            if tensor_set is not None:
+                tensor_set.forget_last()
+            else:
+                self.parts.undo_last()  # not stored: the release does not count for the part
             raise
         self._durable_results.append(m.id)
         self._to_publishers("on_result", stored, m)
@@ -483,6 +572,11 @@ class Appliance:
         if part["verdict"] is not None and recipe is not None:
             log.info("part %s (%s): %s", part_id or "(no ID)", recipe.name, part["verdict"])
             self._to_publishers("on_part_done", recipe)
+        if tensor_set is not None:
+            log.info("tensor set %s: %s", tensor_set.uuid, tensor_set.instruction())
+            if tensor_set.done:
+                self._finish_set(tensor_set)
+            self._publish_set()
 
     @staticmethod
     def _calibration_state(rig: Rig, now: float) -> dict[str, Any] | None:
@@ -535,12 +629,20 @@ class Appliance:
         fields: dict[str, Any] = {}
         for p in self.publishers:
             fields |= p.live_fields()
+        fields |= self._set_registers()
         return LiveStatus(
             state="STOPPING" if self._stopping else state, busy=bool(seq and seq.busy), fault=state == "FAULT",
             simulated=self.config.simulated, started=self._started_runs,
             recipe=self.parts.recipe.number if self.parts.recipe else 0,
             releases_done=(self.parts.open_part or {}).get("done", 0), **fields,
         )
+
+    def _set_registers(self) -> dict[str, int]:
+        p = self.tensor_set.progress() if self.tensor_set is not None else None
+        if p is None:
+            return {}
+        o = p["orientation"]
+        return {"set_step": p["step"], "set_steps": p["steps"], "set_orientation": o["index"] if o else 0}
 
     def _refresh_live(self) -> None:
         if self.publishers:

@@ -14,6 +14,7 @@ release and the part's verdict are printed, with the verdict registers.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import logging
@@ -22,6 +23,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Iterator
 
 from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
 from service.errors import InputFileError
@@ -36,18 +38,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--time-scale", type=float, default=SIM_ENCODER_TIME_SCALE, metavar="X",
                    help=f"simulated seconds per wall-clock second (default {SIM_ENCODER_TIME_SCALE:g}, at most 20; "
                         "faster, the simulated encoder's timestamps jitter enough to raise quality flags)")
-    p.add_argument("--duration", type=float, default=20.0, metavar="S", help="capture after the release, simulated s (default 20)")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="capture after the release, simulated s (default 20; 10 with --tensor)")
     p.add_argument("--inertia", "-J", type=float, default=DEMO_INERTIA, metavar="KG_M2",
                    help=f"true J of the simulated part (default {DEMO_INERTIA:g})")
     p.add_argument("--seed", type=int, default=1, help="noise seed (default 1)")
-    p.add_argument("--releases", type=int, default=3, metavar="N",
-                   help="releases of the demo part (its recipe asks for N; default 3)")
+    p.add_argument("--releases", type=int, default=None, metavar="N",
+                   help="releases of the demo part (its recipe asks for N; default 3; with --tensor, per orientation, "
+                        "default 1)")
     p.add_argument("--nominal", type=float, metavar="KG_M2",
                    help="nominal J of the demo recipe (default: the simulated part's J; ±1 %% tolerance)")
     p.add_argument("--state-dir", metavar="DIR", help="keep the result store here (default: a temporary directory)")
     p.add_argument("--json", action="store_true", help="print the published result payload as JSON at the end")
     p.add_argument("--web-port", type=int, default=8080, metavar="PORT",
                    help="serve the web page on 127.0.0.1:PORT (default 8080; a free port if it is taken; 0: any)")
+    p.add_argument("--tensor", action="store_true",
+                   help="run a guided six-orientation tensor set of a simulated bracket instead, and print the tensor's "
+                        "error against the truth (--releases per orientation, default 1; --duration default 10)")
     p.add_argument("--serve", action="store_true",
                    help="keep the appliance and its web page running after the measurement, until Ctrl-C")
 
@@ -86,31 +93,38 @@ def _write_recipe(args: argparse.Namespace, state_dir: str) -> None:
         f"tolerance_percent = 1.0\nreleases = {args.releases}\n", encoding="utf-8")
 
 
+@contextlib.contextmanager
+def state_directory(args: argparse.Namespace, prefix: str) -> Iterator[str]:
+    """--state-dir, or a temporary directory removed at the end."""
+    if args.state_dir:
+        yield args.state_dir
+        return
+    with tempfile.TemporaryDirectory(prefix=prefix) as d:
+        yield d
+
+
 def run(args: argparse.Namespace) -> int:
+    args.releases = (1 if args.tensor else 3) if args.releases is None else args.releases
+    args.duration = (10.0 if args.tensor else 20.0) if args.duration is None else args.duration
     if not 1 <= args.releases <= 10:
         raise InputFileError(f"--releases must be in [1, 10], got {args.releases}")
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+    if args.tensor:
+        from .demo_tensor import run_in
+
+        with state_directory(args, "moi-demo-tensor-") as state_dir:
+            return run_in(args, state_dir)
+    from service.config.appliance import parse_config
     from service.daemon import Appliance
 
-    tmp = None
-    if args.state_dir:
-        state_dir = args.state_dir
-    else:
-        tmp = tempfile.TemporaryDirectory(prefix="moi-demo-")
-        state_dir = tmp.name
-    try:
-        from service.config.appliance import parse_config
-
+    with state_directory(args, "moi-demo-") as state_dir:
         _write_recipe(args, state_dir)
         config = parse_config(_doc(args, state_dir), source="moi demo")
         if args.web_port and not _port_free(args.web_port):
             print(f"port {args.web_port} is taken: the web page goes on a free port")
             config = dataclasses.replace(config, web=dataclasses.replace(config.web, port=0))
         return _run(Appliance(config, stop_grace=5.0), args)
-    finally:
-        if tmp is not None:
-            tmp.cleanup()
 
 
 def _run(app, args: argparse.Namespace) -> int:

@@ -19,12 +19,31 @@ directory (``[recipes] directory``)::
     uncertain = "NOK"             # guard band: verdict when conformance is not proven (NOK | INVALID)
     coverage_factor = 2.0         # U = k·u_c
 
-    [quality]                     # optional: when a result is INVALID
+    [quality]                     # optional: when a result is INVALID (for a tensor set: which releases count)
     invalid_flags = ["unmodeled_residual", "fit_not_converged", "calibration_due", "negative_inertia"]
     max_J_std = 5.0e-6            # largest 1σ of the quantity, kg·m²   (or max_J_std_percent)
     min_swings = 3.0              # fewest full swings in the fitted window
     consistency_limit = 3.0       # |z| above which releases disagree
     min_valid_releases = 2        # fewest usable releases for a part verdict (default: releases − 1, at least 1)
+
+A recipe may instead declare a tensor plan: the part's inertia tensor is then
+measured as a guided set of orientations (``service.parts.tensor_set``), each
+with ``releases`` releases; nominal and tolerance do not apply::
+
+    [recipe]
+    name = "bracket-tensor"
+    number = 40
+    releases = 1                  # releases per orientation
+
+    [tensor.part]                 # as in a `moi tensor` plan file (docs/tensor.md), without rig and traces
+    mass = 1.25
+    poi_convention = "negative"
+
+    [[tensor.orientation]]
+    name = "x"
+    axis = [1, 0, 0]
+    offset = [0.0, 0.03, -0.02]   # optional, m
+    # … at least six
 
 The decision rule and the combination of releases are
 ``measurement.verdict``'s (documented there). The recipe version is the
@@ -51,6 +70,7 @@ from typing import Any, Mapping
 
 from measurement import Rig
 from measurement.errors import InvalidInput
+from measurement.tensor import RigShared, TensorPlan
 from measurement.verdict import (QUANTITIES, RULES, PartResult, QualityRules, Reading,
                                  Specification, combine, judge_release)
 
@@ -87,11 +107,12 @@ class Recipe:
     path: str
     version: str
     releases: int
-    spec: Specification
+    spec: Specification | None  # None for a tensor recipe: no single quantity is judged
     quality: QualityRules
     rig: Rig | None = None
     rig_path: str | None = None
     declared: tuple[str, ...] | None = None
+    tensor: TensorPlan | None = None  # the orientations of a guided tensor set
 
     def rig_for(self, device_rig: Rig) -> Rig:
         """The rig a measurement of this part type is identified with."""
@@ -101,7 +122,12 @@ class Recipe:
     def check_rig(self, device_rig: Rig) -> None:
         """RecipeError when the rig it measures with cannot give the recipe's quantity."""
         rig = self.rig_for(device_rig)
-        q = self.spec.quantity
+        if self.tensor is not None:
+            try:
+                RigShared.of(rig)
+            except InvalidInput as exc:
+                raise RecipeError(f"{self.path}: [tensor]: {exc}") from None
+        q = self.spec.quantity if self.spec is not None else "J"
         if rig.restoring_constant is None:
             raise RecipeError(f"{self.path}: [recipe] quantity: the rig gives no J (no stiffness, or no mass and "
                               "com_distance); calibrate it or name a calibrated rig")
@@ -116,7 +142,8 @@ class Recipe:
         return {"name": self.name, "number": self.number, "version": self.version, "path": self.path,
                 "releases": self.releases, "rig_path": self.rig_path,
                 "declared": list(self.declared) if self.declared is not None else None,
-                **self.spec.to_dict(), "quality": self.quality.to_dict()}
+                **(self.spec.to_dict() if self.spec is not None else {}), "quality": self.quality.to_dict(),
+                **({"tensor": self.tensor.to_dict()} if self.tensor is not None else {})}
 
 
 # --- reading and checking recipe files -------------------------------------------------------------------------
@@ -131,7 +158,7 @@ def _schemas() -> dict[str, dict[str, Any]]:
             "number": Key("int", REQUIRED, "what the PLC writes to recipe_select", min=1, max=0xFFFF),
             "description": Key("str", "", ""),
             "quantity": Key("str", "J", "", choices=QUANTITIES),
-            "nominal": Key("float", REQUIRED, "kg·m²", min=0, min_open=True),
+            "nominal": Key("float", None, "kg·m² (required unless the recipe declares [tensor])", min=0, min_open=True),
             "tolerance": Key("float", None, "± kg·m²", min=0, min_open=True),
             "tolerance_percent": Key("float", None, "± % of the nominal", min=0, min_open=True),
             "releases": Key("int", 1, "releases per part", min=1, max=20),
@@ -172,8 +199,8 @@ def load_recipe(path: str | Path) -> Recipe:
     c = Checker(str(p))
     schemas = _schemas()
     for t in doc:
-        if t not in schemas:
-            raise c.fail(None, None, f"unknown table [{t}]; expected [recipe], [decision], [quality]")
+        if t not in schemas and t != "tensor":
+            raise c.fail(None, None, f"unknown table [{t}]; expected [recipe], [decision], [quality], [tensor]")
     if "recipe" not in doc:
         raise c.fail(None, None, "missing [recipe] table (name, number, quantity, nominal, tolerance, releases)")
     rec = c.table("recipe", doc["recipe"], schemas["recipe"])
@@ -183,13 +210,28 @@ def load_recipe(path: str | Path) -> Recipe:
     if not name or any(ch in name for ch in "/#+") or len(name) > 64 or name != name.strip():
         raise c.fail("recipe", "name", f"expected 1–64 characters without '/', '#', '+' (it names an MQTT topic "
                      f"level), got {name!r}")
-    if (rec["tolerance"] is None) == (rec["tolerance_percent"] is None):
+    tensor = None
+    if "tensor" in doc:
+        if not isinstance(doc["tensor"], dict):
+            raise c.fail("tensor", None, "expected a table: [tensor.part] and [[tensor.orientation]]")
+        try:
+            tensor = TensorPlan.from_dict(doc["tensor"])
+        except InvalidInput as exc:
+            raise c.fail("tensor", None, str(exc)) from None
+        if any(rec[k] is not None for k in ("nominal", "tolerance", "tolerance_percent")) or "decision" in doc:
+            raise c.fail("recipe", "nominal", "a tensor recipe's result is the tensor: nominal, tolerance and "
+                         "[decision] do not apply")
+    elif rec["nominal"] is None:
+        raise c.fail("recipe", "nominal", "missing (kg·m²)")
+    if tensor is None and (rec["tolerance"] is None) == (rec["tolerance_percent"] is None):
         raise c.fail("recipe", "tolerance", "give exactly one of tolerance (± kg·m²) or tolerance_percent "
                      "(± % of nominal)")
     nominal = rec["nominal"]
-    tol = rec["tolerance"] if rec["tolerance"] is not None else nominal * rec["tolerance_percent"] / 100.0
-    if tol >= nominal:
-        raise c.fail("recipe", "tolerance", f"expected less than the nominal {nominal:g} kg·m², got {tol:g}")
+    tol = 0.0
+    if tensor is None:
+        tol = rec["tolerance"] if rec["tolerance"] is not None else nominal * rec["tolerance_percent"] / 100.0
+        if tol >= nominal:
+            raise c.fail("recipe", "tolerance", f"expected less than the nominal {nominal:g} kg·m², got {tol:g}")
     releases = rec["releases"]
     rig = rig_path = None
     if rec["rig"] is not None:
@@ -216,13 +258,15 @@ def load_recipe(path: str | Path) -> Recipe:
     quality = QualityRules(invalid_flags=tuple(qual["invalid_flags"]), max_std=qual["max_J_std"],
                            max_std_relative=None if pct is None else pct / 100.0, min_swings=qual["min_swings"],
                            consistency_limit=qual["consistency_limit"], min_valid_releases=min_valid)
-    try:
-        spec = Specification.symmetric(rec["quantity"], nominal, tol, **dec)
-    except InvalidInput as exc:
-        raise c.fail("recipe", None, str(exc)) from None
+    spec = None
+    if tensor is None:
+        try:
+            spec = Specification.symmetric(rec["quantity"], nominal, tol, **dec)
+        except InvalidInput as exc:
+            raise c.fail("recipe", None, str(exc)) from None
     return Recipe(name=name, number=rec["number"], description=rec["description"], path=str(p),
                   version=hashlib.sha256(raw).hexdigest()[:16], releases=releases, spec=spec, quality=quality,
-                  rig=rig, rig_path=rig_path, declared=None if declared is None else tuple(declared))
+                  rig=rig, rig_path=rig_path, declared=None if declared is None else tuple(declared), tensor=tensor)
 
 
 @dataclass(frozen=True)
@@ -320,23 +364,27 @@ class PartTracker:
         if recipe is None:
             self._abandon("no recipe is active")
             return out
+        spec = recipe.spec
+        if spec is None:  # a tensor recipe's release outside its set (the set ended while it ran): not judged
+            self._abandon("a tensor recipe is active")
+            return out
         abandoned = None
         if o is not None and (o.part_id != part_id or o.recipe.version != recipe.version):
             abandoned = self._abandon("a different part ID or recipe")
             o = None
         if o is None:
             o = self._open = _OpenPart(str(uuidlib.uuid4()), part_id, recipe)
-        reading = Reading.from_result(result, recipe.spec.quantity)
+        reading = Reading.from_result(result, spec.quantity)
         o.readings.append(reading)
         o.measurements.append(measurement_id)
-        decision = judge_release(reading, recipe.spec, recipe.quality)
+        decision = judge_release(reading, spec, recipe.quality)
         out["release"] = {"index": len(o.readings), "of": recipe.releases, "part_uuid": o.uuid,
-                          "quantity": recipe.spec.quantity, **decision.to_dict(), "abandoned": abandoned}
+                          "quantity": spec.quantity, **decision.to_dict(), "abandoned": abandoned}
         if len(o.readings) >= recipe.releases:
-            part = combine(o.readings, recipe.spec, recipe.quality)
+            part = combine(o.readings, spec, recipe.quality)
             self.last_part = part
             out["part"] = {"uuid": o.uuid, "part_id": part_id, "measurements": list(o.measurements),
-                           "quantity": recipe.spec.quantity, **part.to_dict()}
+                           "quantity": spec.quantity, **part.to_dict()}
             out["verdict"] = part.verdict
             for e in part.excluded:
                 log.warning("part %s: release %d excluded: %s", part_id or o.uuid, e["index"] + 1, e["reason"])

@@ -101,6 +101,24 @@ CREATE TABLE IF NOT EXISTS attachments (
 );
 """
 
+#: the tensor sets (a guided multi-orientation set of a tensor recipe): one row per set, linked to the
+#: releases that count for each orientation (their UUIDs in ``releases``); a table of its own, so a store
+#: of an older version opens and gains it unchanged
+_TENSOR_SCHEMA = """
+CREATE TABLE IF NOT EXISTS tensor_sets (
+    id          INTEGER PRIMARY KEY,
+    uuid        TEXT NOT NULL UNIQUE,
+    status      TEXT NOT NULL CHECK (status IN ('complete', 'aborted', 'failed')),
+    recipe      TEXT,
+    part_id     TEXT,
+    started_at  REAL,
+    finished_at REAL NOT NULL,
+    flags       TEXT NOT NULL DEFAULT '[]',
+    releases    TEXT NOT NULL,
+    record      TEXT NOT NULL
+);
+"""
+
 
 def _read_only_connection(path: Path) -> sqlite3.Connection:
     """A connection that never writes. WAL mode needs the -shm file, which a read-only directory
@@ -264,6 +282,7 @@ class Store:
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.execute("PRAGMA foreign_keys=ON")
             self._db.executescript(_SCHEMA)  # idempotent (IF NOT EXISTS)
+            self._db.executescript(_TENSOR_SCHEMA)
             have = {row[1] for row in self._db.execute("PRAGMA table_info(measurements)")}
             for name, kind in PART_COLUMNS:
                 if name not in have:
@@ -569,6 +588,29 @@ class Store:
                            "VALUES (?,?,?,?,?)", (uuid, name, media_type, sqlite3.Binary(data), time.time()))
         except sqlite3.Error as exc:
             raise StoreError(f"cannot store {name!r} of measurement {uuid}: {exc}") from None
+
+    # --- tensor sets --------------------------------------------------------------
+    @_store_errors("storing a tensor set")
+    def record_tensor_set(self, record: Mapping[str, Any], *, started_at: float | None, finished_at: float) -> None:
+        """Store a finished tensor set (``TensorSet.to_dict()``): complete, aborted or failed."""
+        tensor = record.get("tensor") or {}
+        with self._lock, self._tx() as db:
+            db.execute("INSERT INTO tensor_sets (uuid, status, recipe, part_id, started_at, finished_at, flags, "
+                       "releases, record) VALUES (?,?,?,?,?,?,?,?,?)",
+                       (record["uuid"], record["status"], record.get("recipe"), record.get("part_id"), started_at,
+                        finished_at, json.dumps(tensor.get("flags") or []), json.dumps(record.get("releases") or {}),
+                        json.dumps(record, allow_nan=False)))
+
+    @_store_errors("reading tensor sets")
+    def tensor_sets(self, limit: int | None = 20) -> list[dict[str, Any]]:
+        """Stored tensor sets, newest first: their records with ``finished_at`` and ``started_at``."""
+        with self._lock:
+            if not self._db.execute("SELECT 1 FROM sqlite_master WHERE name = 'tensor_sets'").fetchone():
+                return []  # a read-only store written before tensor sets existed
+            rows = self._db.execute("SELECT record, started_at, finished_at FROM tensor_sets ORDER BY id DESC"
+                                    + (" LIMIT ?" if limit is not None else ""),
+                                    (int(limit),) if limit is not None else ()).fetchall()
+        return [json.loads(r[0]) | {"started_at": r[1], "finished_at": r[2]} for r in rows]
 
     @_store_errors("reading an attachment")
     def get_attachment(self, uuid: str, name: str) -> tuple[bytes, str] | None:

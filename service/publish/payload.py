@@ -15,17 +15,18 @@ from typing import Any, Mapping
 
 from service.publish.modbus.registers import flag_bits
 
-PAYLOAD_SCHEMA = 2  # 2: part_id, recipe, release, part, verdict, calibration
+PAYLOAD_SCHEMA = 3  # 2: part_id, recipe, release, part, verdict, calibration; 3: tensor_set
 
 #: keys the envelope adds on top of the result's own keys
 ENVELOPE_KEYS = (
     "payload_schema", "uuid", "seq", "device_id", "software_version", "trigger", "status",
     "started_at", "finished_at", "timestamp", "duration",
     "residual_rms_before", "residual_rms_after", "flag_bits", "timing",
-) + ("part_id", "recipe", "release", "part", "verdict", "calibration")
+) + ("part_id", "recipe", "release", "part", "verdict", "calibration", "tensor_set")
 
-#: the part keys of the envelope (``service.parts.recipes.PartTracker.release`` and the rig's calibration state)
-PART_KEYS = ENVELOPE_KEYS[-6:]
+#: the part keys of the envelope (``service.parts.recipes.PartTracker.release``, the rig's calibration state and,
+#: for a tensor recipe, the orientation the release counted for: ``service.parts.tensor_set.TensorSet.release``)
+PART_KEYS = ENVELOPE_KEYS[-7:]
 
 
 def iso_utc(t: float) -> str:

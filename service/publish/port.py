@@ -113,6 +113,14 @@ class Publisher:
     def on_part_done(self, recipe: Recipe) -> None:
         """A part of ``recipe`` is complete (its verdict given)."""
 
+    def on_set(self, progress: Mapping[str, Any]) -> None:
+        """A tensor set's progress changed: the orientation to mount next (``TensorSet.progress`` and the
+        operator's instruction)."""
+
+    def on_tensor_set(self, record: Mapping[str, Any]) -> None:
+        """A tensor set finished and is in the store (``TensorSet.to_dict``: complete with its tensor,
+        failed or aborted)."""
+
 
 class ApplianceView:
     """What a publisher may see of the appliance and ask of it: read-only views and the command queue."""
@@ -176,3 +184,7 @@ class ApplianceView:
 
     def call_soon(self, fn: Callable[[], Any]) -> concurrent.futures.Future:
         return self._app.call_soon(fn)
+
+    def set_progress(self) -> dict[str, Any] | None:
+        """The tensor set's progress (main loop thread: ask through ``call_soon``)."""
+        return self._app.set_progress()

@@ -86,12 +86,12 @@ def test_writes_to_read_only_registers_and_other_coils_are_refused(server, clien
                client.write_registers(0, [1, 2, 3], device_id=1),
                client.write_register(R.IMAGE_SIZE + 10, 1, device_id=1),
                client.write_coil(len(R.COILS), True, device_id=1),
-               client.write_coils(0, [False, False, True], device_id=1),
+               client.write_coils(len(R.COILS) - 2, [False, False, True], device_id=1),  # one past the last
                client.write_coil(1000, True, device_id=1)):
         assert rr.isError(), rr
         assert rr.exception_code == ILLEGAL_ADDRESS
     assert client.read_holding_registers(0, count=R.IMAGE_SIZE, device_id=1).registers == before
-    assert server.commands == []  # the refused multi-coil write did not fire the abort either
+    assert server.commands == []  # the refused multi-coil write did not fire a command either
 
 
 def test_reading_past_the_map_is_an_exception(client):

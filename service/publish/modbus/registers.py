@@ -20,10 +20,12 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, to_registers  # noqa: F401
+from service.states import STATES
 from measurement import flags as F
+from measurement.tensor import COMPONENTS
 
 #: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 8  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
+MAP_VERSION = 9  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
 # 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
 #    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
 # 5: bits 6-7 of `effects` (dahl, view; they set bit 15, other, before); register flags_high (flags from
@@ -32,23 +34,14 @@ MAP_VERSION = 8  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3:
 # 6: flag camera_perspective (register flags_high, bit 1)
 # 7: the tensor flags (register flags_high, bits 2-4)
 # 8: flags halves_disagree, model_ambiguous, releases_disagree (register flags_high, bits 5-7)
+# 9: the guided tensor set's progress (set_step, set_steps, set_orientation: live registers 7-9), its coils
+#    set_redo, set_skip, set_abort (2-4) and the tensor of the latest set (block 200-238, its own snapshot)
 
 
 # --- enumerations ------------------------------------------------------------
 
 #: sequencer/daemon state → code in register `state`
-STATE_CODES: dict[str, int] = {
-    "STARTING": 0,
-    "IDLE": 1,
-    "ARMED": 2,
-    "RELEASING": 3,
-    "CAPTURING": 4,
-    "IDENTIFYING": 5,
-    "PUBLISHING": 6,
-    "FAULT": 7,
-    "ABORTED": 8,
-    "STOPPING": 9,
-}
+STATE_CODES: dict[str, int] = {name: s.code for name, s in STATES.items()}
 STATE_OTHER = 255
 
 #: quality flag (``measurement.flags.FLAGS``, which says what each means) → bit in register `flags`.
@@ -124,6 +117,9 @@ WRITABLE_END = max(a + n for a, n in WRITABLE.values())  # exclusive
 COILS: dict[str, int] = {
     "trigger": 0,  # write 1: start one measurement (reads back 0)
     "abort": 1,    # write 1: abort the running measurement (reads back 0)
+    "set_redo": 2,   # write 1: tensor set, measure the current orientation again (or the previous one)
+    "set_skip": 3,   # write 1: tensor set, skip the current orientation
+    "set_abort": 4,  # write 1: tensor set, abort the set (its releases stay stored)
 }
 
 
@@ -207,6 +203,12 @@ def _table() -> tuple[Register, ...]:
     add("live", 5, "recipe", "uint16", "", "recipe", "number of the active recipe (0: none)")
     add("live", 6, "part_releases_done", "uint16", "count", "releases_done",
         "releases of the part in progress so far (0 when no part is open)")
+    add("live", 7, "set_step", "uint16", "count", "set_step",
+        "tensor set: the step now to measure, 1…set_steps (0: no set running)")
+    add("live", 8, "set_steps", "uint16", "count", "set_steps", "tensor set: its number of orientations (0: no set)")
+    add("live", 9, "set_orientation", "uint16", "", "set_orientation",
+        "tensor set: the orientation to mount now, its number in the recipe's plan (1-based; 0: none). The "
+        "recipe's [[tensor.orientation]] tables, in order, say which axis each number is")
 
     # Result snapshot: written as one unit (see the snapshot protocol).
     add("snapshot", 10, "seq", "uint16", "count", "seq",
@@ -246,8 +248,34 @@ def _table() -> tuple[Register, ...]:
     add("snapshot", 62, "flags_high", "bits16", "bits", "flags_high",
         "more quality flags: " + ", ".join(f"bit {b - 16} {n}" for n, b in FLAG_BITS.items() if b >= 16))
     add("snapshot", 63, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
+
+    # The tensor of the latest tensor set: a block of its own, with its own snapshot protocol.
+    a = TENSOR_START
+    add("tensor", a, "tensor_seq", "uint16", "count", "tensor_seq",
+        "tensor sets completed since the daemon started (1…65535, wrapping past 0); 0 = no tensor yet")
+    for i, c in enumerate(TENSOR_COMPONENTS):
+        add("tensor", a + 1 + 2 * i, c, "float32", "kg·m²", c,
+            f"inertia tensor component {c} about the centre of mass, part frame (products in the recipe's "
+            "poi_convention, see docs/tensor.md)")
+    for i, c in enumerate(TENSOR_COMPONENTS):
+        add("tensor", a + 13 + 2 * i, f"{c}_U", "float32", "kg·m²", f"{c}_U", f"expanded uncertainty U of {c} (k = 2)")
+    for i in range(3):
+        add("tensor", a + 25 + 2 * i, f"I{i + 1}", "float32", "kg·m²", f"I{i + 1}",
+            f"principal moment {i + 1} (ascending)")
+    for i in range(3):
+        add("tensor", a + 31 + 2 * i, f"I{i + 1}_U", "float32", "kg·m²", f"I{i + 1}_U",
+            f"expanded uncertainty U of principal moment {i + 1} (k = 2)")
+    add("tensor", a + 37, "tensor_flags", "bits16", "bits", "tensor_flags",
+        "the tensor's flags, the bits of `flags_high`: " + ", ".join(
+            f"bit {b - 16} {n}" for n, b in FLAG_BITS.items() if n in TENSOR_FLAGS))
+    add("tensor", a + 38, "tensor_seq_end", "uint16", "count", "tensor_seq", "copy of `tensor_seq`, the block's last register")
     return tuple(rows)
 
+
+#: the tensor block: the first address, the components in their order (``measurement.tensor.COMPONENTS``)
+TENSOR_START = 200
+TENSOR_COMPONENTS = COMPONENTS
+TENSOR_FLAGS = (F.TENSOR_INCONSISTENT, F.TENSOR_UNPHYSICAL, F.ORIENTATION_EXCLUDED)
 
 REGISTERS: tuple[Register, ...] = _table()
 BY_NAME: dict[str, Register] = {r.name: r for r in REGISTERS}
@@ -255,6 +283,7 @@ LIVE_START = 0
 SNAPSHOT_START = BY_NAME["seq"].address
 SNAPSHOT_END = BY_NAME["seq_end"].address + 1  # exclusive
 IMAGE_SIZE = SNAPSHOT_END  # registers 0 … IMAGE_SIZE-1
+TENSOR_END = BY_NAME["tensor_seq_end"].address + 1  # exclusive
 
 
 def _check_table() -> None:
@@ -265,6 +294,7 @@ def _check_table() -> None:
                 raise AssertionError(f"register {a} used by {used[a]} and {r.name}")
             used[a] = r.name
     assert IMAGE_SIZE <= 125, "the whole image must be readable with one FC3/FC4 request"
+    assert TENSOR_END - TENSOR_START <= 125 and TENSOR_START >= WRITABLE_END, "the tensor block: one request, apart"
 
 
 _check_table()
@@ -366,6 +396,9 @@ class LiveStatus:
     started: int = 0
     recipe: int = 0          # active recipe number (0: none)
     releases_done: int = 0   # releases of the part in progress
+    set_step: int = 0        # tensor set: the step to measure now (1-based; 0: no set)
+    set_steps: int = 0       # tensor set: orientations in the plan
+    set_orientation: int = 0  # tensor set: number of the orientation to mount now (1-based; 0: none)
 
     def status_bits(self, result_valid: bool, verdict: str | None = None) -> int:
         """The status bits; ``verdict``: the snapshot's part verdict (sets part_ok / part_nok / part_invalid)."""
@@ -398,11 +431,32 @@ def encode_live(live: LiveStatus, result_valid: bool, word_order: str = "big", v
         "constant": MAP_VERSION, "state": state_code(live.state), "status": live.status_bits(result_valid, verdict),
         "started": live.started & 0xFFFF, "outbox_pending": min(int(live.outbox_pending), 0xFFFF),
         "recipe": live.recipe & 0xFFFF, "releases_done": min(int(live.releases_done), 0xFFFF),
+        "set_step": live.set_step & 0xFFFF, "set_steps": live.set_steps & 0xFFFF,
+        "set_orientation": live.set_orientation & 0xFFFF,
     }
     out = [0] * (SNAPSHOT_START - LIVE_START)
     for r in REGISTERS:
         if r.area == "live":
             out[r.address - LIVE_START: r.address - LIVE_START + r.count] = encode_value(r.kind, values[r.source], word_order)
+    return out
+
+
+def encode_tensor(tensor: Mapping[str, Any] | None, seq: int, word_order: str = "big") -> list[int]:
+    """Registers TENSOR_START … TENSOR_END-1 for a tensor result (``TensorResult.to_dict()``; None: none yet)."""
+    _check_order(word_order)
+    values: dict[str, Any] = {"tensor_seq": modbus_seq(seq) if tensor is not None else 0}
+    if tensor is not None:
+        values |= {c: tensor["components"][c] for c in TENSOR_COMPONENTS}
+        values |= {f"{c}_U": tensor["tensor_U"][c] for c in TENSOR_COMPONENTS}
+        for i in range(3):
+            values[f"I{i + 1}"] = tensor["principal_moments"][i]
+            values[f"I{i + 1}_U"] = tensor["principal_moments_U"][i]
+        values["tensor_flags"] = flag_bits(tensor.get("flags") or ()) >> 16
+    out = [0] * (TENSOR_END - TENSOR_START)
+    for r in REGISTERS:
+        if r.area == "tensor":
+            out[r.address - TENSOR_START: r.address - TENSOR_START + r.count] = encode_value(
+                r.kind, values.get(r.source), word_order)
     return out
 
 
@@ -490,7 +544,10 @@ def markdown() -> str:
         L.append(f"| {span} | {r.count} | `{r.name}` | {r.kind} | {r.unit} | {r.description} |")
     L.append("")
     L.append(f"Registers {LIVE_START}–{SNAPSHOT_START - 1} are live status; registers {SNAPSHOT_START}–"
-             f"{SNAPSHOT_END - 1} are the result snapshot of the latest successful measurement.")
+             f"{SNAPSHOT_END - 1} are the result snapshot of the latest successful measurement; registers "
+             f"{TENSOR_START}–{TENSOR_END - 1} are the inertia tensor of the latest completed tensor set (a recipe "
+             "with a [tensor] plan, docs/tensor.md), read as one block (one request) or with the snapshot "
+             "protocol below on `tensor_seq` / `tensor_seq_end`. Addresses between the blocks get exception 0x02.")
     L.append("")
     L.append("## Writable holding registers (FC 6 / FC 16 write, FC 3 read back)")
     L.append("")
@@ -542,11 +599,18 @@ def markdown() -> str:
                    "`measurements_started` increments when the measurement starts",
         "abort": "abort the running measurement (solenoid off, no result), or acknowledge a FAULT (FAULT is latched "
                  "until then; a trigger in FAULT is ignored); reads back 0",
+        "set_redo": "tensor set (a recipe with a [tensor] plan): the releases of the current orientation (or, when "
+                    "it has none yet, of the previous one) no longer count; measure it again. Refused while a "
+                    "measurement runs; reads back 0",
+        "set_skip": "tensor set: skip the current orientation (the tensor is computed without it, flag "
+                    "orientation_excluded); reads back 0",
+        "set_abort": "tensor set: abort the set; the releases measured so far stay stored, the set is stored as "
+                     "aborted; reads back 0",
     }
     for name, a in COILS.items():
         L.append(f"| {a} | `{name}` | {meaning[name]} |")
     L.append("")
-    L.append("Only these two coils are writable. Writing 0 to them does nothing; any other write anywhere on the "
+    L.append("Only these coils are writable. Writing 0 to them does nothing; any other write anywhere on the "
              "device, but the part ID and recipe_select registers, gets exception 0x02 (illegal data address). "
              "A single-coil write (FC 5) carries 0xFF00 or 0x0000, any other value gets exception 0x03 (illegal "
              "data value); the reply echoes the request.")

@@ -256,6 +256,8 @@ class ModbusServer(Publisher):
         self._hold_until = 0.0  # monotonic time until which part writes are refused after a trigger
         self._result_valid = False
         self._image: tuple[int, ...] = ()
+        self._tensor: tuple[int, ...] = tuple(R.encode_tensor(None, 0, settings.word_order))
+        self._tensor_seq = 0
         self._status_bits = 0
         self._rebuild()
         self._io = LoopThread("moi-modbus")
@@ -273,6 +275,12 @@ class ModbusServer(Publisher):
             self._verdict = payload.get("verdict")
             self._result_valid = True
             self._rebuild()
+
+    def publish_tensor(self, tensor: Mapping[str, Any]) -> None:
+        """Make a tensor set's result (``TensorResult.to_dict()``) the current tensor block (one atomic swap)."""
+        with self._lock:
+            self._tensor_seq += 1
+            self._tensor = tuple(R.encode_tensor(tensor, self._tensor_seq, self.settings.word_order))
 
     def set_inputs(self, *, part_id: str | None = None, recipe: int | None = None) -> None:
         """Show a part ID / recipe set by another source (MQTT, config) in the writable registers."""
@@ -319,6 +327,7 @@ class ModbusServer(Publisher):
         if func_code in _READ_REGISTERS:
             image = self._image
             current[0: len(image)] = image  # the block starts at address 0
+            current[R.TENSOR_START: R.TENSOR_END] = self._tensor
             if func_code == 3:
                 current[R.WRITABLE_START: R.WRITABLE_END] = self._inputs
             return None
@@ -379,8 +388,12 @@ class ModbusServer(Publisher):
                 [SimData(0, count=len(R.STATUS_BITS), values=False, datatype=DataType.BITS)],
                 [SimData(0, count=R.IMAGE_SIZE, values=0, datatype=DataType.REGISTERS, readonly=True),
                  SimData(R.WRITABLE_START, count=R.WRITABLE_END - R.WRITABLE_START, values=0,
-                         datatype=DataType.REGISTERS)],
-                [SimData(0, count=R.IMAGE_SIZE, values=0, datatype=DataType.REGISTERS, readonly=True)],
+                         datatype=DataType.REGISTERS),
+                 SimData(R.TENSOR_START, count=R.TENSOR_END - R.TENSOR_START, values=0,
+                         datatype=DataType.REGISTERS, readonly=True)],
+                [SimData(0, count=R.IMAGE_SIZE, values=0, datatype=DataType.REGISTERS, readonly=True),
+                 SimData(R.TENSOR_START, count=R.TENSOR_END - R.TENSOR_START, values=0,
+                         datatype=DataType.REGISTERS, readonly=True)],
             ),
             action=self._action,
         )
@@ -508,6 +521,10 @@ class ModbusServer(Publisher):
 
     def on_part_id(self, part_id: str | None) -> None:
         self.set_inputs(part_id=part_id or "")
+
+    def on_tensor_set(self, record: Mapping[str, Any]) -> None:
+        if record.get("status") == "complete" and record.get("tensor") is not None:
+            self.publish_tensor(record["tensor"])
 
     def __enter__(self) -> "ModbusServer":
         self.start()

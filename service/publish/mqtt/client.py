@@ -83,6 +83,9 @@ class Topics:
         self.cmd_measure = f"{base}/cmd/measure"
         self.cmd_abort = f"{base}/cmd/abort"
         self.cmd_recipe = f"{base}/cmd/recipe"
+        self.cmd_set = f"{base}/cmd/set"  # a tensor set: {"action": "redo" | "skip" | "abort", "orientation": name}
+        self.set_state = f"{base}/set"    # retained: the tensor set's progress (the orientation to mount next)
+        self.tensor = f"{base}/tensor"    # retained: the latest tensor set's record with its tensor
 
     def spc(self, recipe: str) -> str:
         """The retained SPC summary topic of a recipe."""
@@ -233,7 +236,8 @@ class MqttService(Publisher):
         self._last_logged_error = None
         log.info("MQTT connected to %s:%d", self.settings.host, self.settings.port)
         client.publish(self.topics.status, "online", qos=1, retain=True)
-        client.subscribe([(self.topics.cmd_measure, 1), (self.topics.cmd_abort, 1), (self.topics.cmd_recipe, 1)])
+        client.subscribe([(self.topics.cmd_measure, 1), (self.topics.cmd_abort, 1), (self.topics.cmd_recipe, 1),
+                          (self.topics.cmd_set, 1)])
         if self.settings.home_assistant:
             for topic, config in discovery_messages(self.settings, self.topics, self.device_id, self.software_version):
                 client.publish(topic, json.dumps(config), qos=1, retain=True)
@@ -274,7 +278,7 @@ class MqttService(Publisher):
             log.warning("MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
             return
         name = {self.topics.cmd_measure: "trigger", self.topics.cmd_abort: "abort",
-                self.topics.cmd_recipe: "recipe"}.get(message.topic)
+                self.topics.cmd_recipe: "recipe", self.topics.cmd_set: "set"}.get(message.topic)
         if name is None:
             return
         if not message.payload:
@@ -293,7 +297,11 @@ class MqttService(Publisher):
             except (ValueError, UnicodeDecodeError, RecursionError):
                 pass  # any payload is a valid command; only a JSON "id" is used for dedupe
         if isinstance(doc, dict):
-            data = {k: doc[k] for k in ("part_id", "recipe") if k in doc}
+            data = {k: doc[k] for k in (("action", "orientation") if name == "set" else ("part_id", "recipe"))
+                    if k in doc}
+        if name == "set" and not isinstance(data.get("action"), str):
+            log.warning("MQTT: %s without {\"action\": \"redo\" | \"skip\" | \"abort\"} ignored", message.topic)
+            return
         if name == "recipe":
             if not isinstance(doc, dict):  # a bare name or number
                 data = {"recipe": message.payload.decode("utf-8", errors="replace").strip()}
@@ -356,6 +364,14 @@ class MqttService(Publisher):
 
     def on_result(self, stored: Any, measurement: Any) -> None:
         self.wake()
+
+    def on_set(self, progress: Mapping[str, Any]) -> None:
+        self.publish_retained(self.topics.set_state, dict(progress))
+
+    def on_tensor_set(self, record: Mapping[str, Any]) -> None:
+        # retained: the latest complete tensor (an aborted or failed set shows on the `set` topic)
+        if record.get("status") == "complete":
+            self.publish_retained(self.topics.tensor, dict(record))
 
     def on_part_done(self, recipe: Any) -> None:
         """The retained SPC summary of the recipe's latest parts."""

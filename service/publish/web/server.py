@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from drivers.aioloop import LoopThread
+from service.states import STATES
 
 from service.errors import StartupError
 from service.publish.port import ApplianceView, Publisher
@@ -36,7 +37,7 @@ if TYPE_CHECKING:  # pragma: no cover
 log = logging.getLogger("moi.web")
 
 #: no plot is drawn while the sequencer is in one of these (the sensor is being read)
-CAPTURE_STATES = ("ARMED", "RELEASING", "CAPTURING")
+CAPTURE_STATES = tuple(name for name, s in STATES.items() if s.capturing)
 #: at most one "connections refused" line per this many seconds, s
 REFUSED_LOG_INTERVAL = 60.0
 

@@ -161,6 +161,9 @@ class Views:
         r.add_get("/results/{key}/plot.png", self.plot)
         r.add_get("/results/{key}/trace.csv", self.trace_csv)
         r.add_get("/results/{key}/result.json", self.result_json)
+        r.add_get("/set", self.tensor_set)
+        r.add_get("/api/set", self.api_set)
+        r.add_post("/api/set/{action}", self.set_action)
         r.add_get("/setup", self.setup)
         r.add_get("/api/health", self.api_health)
         r.add_get("/api/angle", self.api_angle)
@@ -358,6 +361,41 @@ class Views:
             raise Refused(409, "a measurement runs: the recipe and the part ID cannot change during it")
         self.app.command("recipe", "web", data)
         return web.json_response({"accepted": True, "command": "part", **data}, status=202)
+
+    # --- the guided tensor set ---------------------------------------------------------------------
+    async def _set_state(self) -> tuple[dict[str, Any] | None, dict[str, Any] | None]:
+        """The set's progress (read on the main loop, which owns it) and the latest stored tensor set."""
+        progress = await asyncio.wrap_future(self.app.call_soon(self.app.set_progress))
+        store = self.app.store
+        latest = store.tensor_sets(1) if store is not None else []
+        return progress, (latest[0] if latest else None)
+
+    async def tensor_set(self, request: web.Request) -> web.Response:
+        progress, latest = await self._set_state()
+        o = (progress or {}).get("orientation")
+        drawing = axes_drawing(o["axis"], o.get("offset")) if o else None
+        return self._page(request, "tensor_set.html", title="Tensor set", progress=progress, latest=latest,
+                          drawing=drawing)
+
+    async def api_set(self, request: web.Request) -> web.Response:
+        progress, latest = await self._set_state()
+        return web.json_response({"set": progress, "latest": latest}, dumps=lambda d: json.dumps(d, default=str))
+
+    async def set_action(self, request: web.Request) -> web.Response:
+        """redo | skip | abort of the running tensor set (the same actions as the Modbus coils and MQTT)."""
+        from service.parts.tensor_set import ACTIONS
+
+        action = request.match_info["action"]
+        if action not in ACTIONS:
+            raise Refused(404, f"no set action {action!r}; expected one of {', '.join(ACTIONS)}")
+        form = await request.post() if request.content_type in ("application/x-www-form-urlencoded",
+                                                                 "multipart/form-data") else {}
+        self._authorise(request, form)
+        self.app.command("set", "web", {"action": action})
+        log.info("web: set %s requested", action)
+        if "text/html" in request.headers.get("Accept", "") and form:
+            raise web.HTTPSeeOther("/set")
+        return web.json_response({"accepted": True, "command": "set", "action": action}, status=202)
 
     # --- results ----------------------------------------------------------------------------------
     def _get(self, key: str, trace: bool = False) -> "Measurement":
@@ -564,6 +602,28 @@ class Views:
         except Exception as exc:
             raise Refused(503, f"camera snapshot failed: {exc}") from None
         return web.Response(body=png, content_type="image/png", headers={"Cache-Control": "no-store"})
+
+
+def axes_drawing(axis: Any, offset: Any = None, size: int = 220) -> dict[str, Any]:
+    """A small isometric drawing of the part's frame and the swing axis (SVG coordinates, px): the part's
+    x, y, z as arrows from its centre of mass, the swing axis as a line through the point the offset gives."""
+    c30, s30 = math.cos(math.radians(30)), math.sin(math.radians(30))
+    half = size / 2
+    scale = size * 0.32
+
+    def at(v: Any) -> tuple[float, float]:
+        x, y, z = (float(t) for t in v)
+        return round(half + scale * (x - y) * c30, 1), round(half - scale * (z - (x + y) * s30), 1)
+
+    n = [float(t) for t in axis]
+    d = [float(t) for t in (offset or (0.0, 0.0, 0.0))]
+    norm = math.sqrt(sum(t * t for t in d)) or 1.0
+    # the swing axis passes the centre of mass at the offset (drawn at most half the frame's length away)
+    p = [-t / norm * min(0.5, norm / 0.05) for t in d] if offset else [0.0, 0.0, 0.0]
+    a, b = at([p[i] - 1.3 * n[i] for i in range(3)]), at([p[i] + 1.3 * n[i] for i in range(3)])
+    return {"size": size, "origin": at((0, 0, 0)),
+            "frame": [("x", at((1, 0, 0))), ("y", at((0, 1, 0))), ("z", at((0, 0, 1)))],
+            "axis": (a, b), "axis_label": b}
 
 
 def _annotated_png(frame, config) -> bytes:

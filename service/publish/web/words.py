@@ -2,21 +2,11 @@
 
 from __future__ import annotations
 
+from service.states import STATES
 from measurement.flags import describe
 
 #: sequencer state → what is happening
-STATE_WORDS: dict[str, str] = {
-    "STARTING": "the appliance is starting",
-    "IDLE": "ready: press Measure (or the push button)",
-    "ARMED": "recording the pendulum at rest before the release",
-    "RELEASING": "solenoid pulse: releasing the pendulum",
-    "CAPTURING": "the pendulum swings freely; recording",
-    "IDENTIFYING": "identifying the equation of motion",
-    "PUBLISHING": "storing and publishing the result",
-    "FAULT": "fault: acknowledge it once the cause is fixed",
-    "ABORTED": "the measurement was abandoned",
-    "STOPPING": "the appliance is stopping",
-}
+STATE_WORDS: dict[str, str] = {name: s.words for name, s in STATES.items()}
 
 
 def flag_words(flags) -> list[tuple[str, str]]:

@@ -1,0 +1,33 @@
+"""The states the appliance reports, in one table: each one's Modbus code, the words a technician reads, and
+whether the angle sensor is being read in it. (Here, not with the sequencer: reading it must not load the
+sequencer and the science it drives; a test holds it to ``firmware_host.State``.)"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class StateInfo:
+    """What the appliance says of a state: its code in Modbus register ``state``, the words a technician
+    reads on the web page, and whether the angle sensor is being read in it."""
+
+    code: int
+    words: str
+    capturing: bool = False
+
+
+#: every state the appliance reports, the sequencer's (``firmware_host.State``) and the daemon's own
+#: (STARTING, STOPPING): the one table the Modbus registers and the web page read
+STATES: dict[str, StateInfo] = {
+    "STARTING": StateInfo(0, "the appliance is starting"),
+    "IDLE": StateInfo(1, "ready: press Measure (or the push button)"),
+    "ARMED": StateInfo(2, "recording the pendulum at rest before the release", capturing=True),
+    "RELEASING": StateInfo(3, "solenoid pulse: releasing the pendulum", capturing=True),
+    "CAPTURING": StateInfo(4, "the pendulum swings freely; recording", capturing=True),
+    "IDENTIFYING": StateInfo(5, "identifying the equation of motion"),
+    "PUBLISHING": StateInfo(6, "storing and publishing the result"),
+    "FAULT": StateInfo(7, "fault: acknowledge it once the cause is fixed"),
+    "ABORTED": StateInfo(8, "the measurement was abandoned"),
+    "STOPPING": StateInfo(9, "the appliance is stopping"),
+}
