@@ -310,8 +310,8 @@ class Appliance:
                 return
             if name in ("recipe", "part_id") or (name == "trigger" and data):
                 if seq.busy:
-                    log.warning("%s from %s refused: a measurement runs (the part cannot change during it)",
-                                name, source)
+                    self._log_ignored(f"{name} from {source} refused: a measurement runs (the part cannot change "
+                                      "during it)")
                     continue
                 try:
                     self._apply_part_data(data or {})
@@ -337,12 +337,7 @@ class Appliance:
                     self._accepted_part = (self.parts.part_id, self.parts.recipe)
                     self._open_set()
                 else:
-                    self._ignored_triggers += 1
-                    now = time.monotonic()
-                    if now - self._ignored_logged_at >= IGNORED_LOG_INTERVAL:  # a stuck button or a looping PLC
-                        log.info("trigger from %s ignored (state %s; %d ignored since the last such line)", source,
-                                 seq.state.value, self._ignored_triggers)
-                        self._ignored_logged_at, self._ignored_triggers = now, 0
+                    self._log_ignored(f"trigger from {source} ignored (state {seq.state.value})")
             elif name == "abort":
                 if seq.state is State.FAULT:
                     seq.abort(f"fault acknowledged by {source}")
@@ -350,6 +345,14 @@ class Appliance:
                     log.info("abort from %s: nothing to abort", source)
             else:
                 log.warning("unknown command %r from %s", name, source)
+
+    def _log_ignored(self, what: str) -> None:
+        """One line per IGNORED_LOG_INTERVAL for the commands a stuck button or a looping client repeats."""
+        self._ignored_triggers += 1
+        now = time.monotonic()
+        if now - self._ignored_logged_at >= IGNORED_LOG_INTERVAL:
+            log.info("%s; %d command(s) ignored or refused since the last such line", what, self._ignored_triggers)
+            self._ignored_logged_at, self._ignored_triggers = now, 0
 
     def _store_unwritable(self) -> str | None:
         """Why no measurement may start (its result could not be kept), or None. After a failed write

@@ -514,3 +514,46 @@ def test_token_guessing_is_slow_logged_and_the_page_answers_only_for_its_own_nam
     caplog.clear()
     assert read_token(shared, create=False) == "a-token-long-enough-to-use"
     assert any("can be read by other users" in r.getMessage() for r in caplog.records)
+
+
+# --- log amplification ------------------------------------------------------------------------------------------------
+
+@pytest.mark.broker
+def test_what_a_client_repeats_or_inflates_is_logged_in_a_few_short_lines(tmp_path, broker, appliance_factory,
+                                                                         consumer_factory, caplog):
+    """A 10 MB recipe command, 2,000 triggers during a measurement, 1,000 failed accepts: a few lines, none
+    longer than a kilobyte (the recipe was one 10 MB line, the triggers 999 lines, the accepts a traceback
+    each)."""
+    import logging
+
+    from drivers.aioloop import LoopThread
+
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port, time_scale=1.0))
+    assert app.app.mqtt.subscribed_event.wait(10)
+    c = consumer_factory(broker.port, ["moi/test-rig/status"])
+    c.wait_subscribed()
+    caplog.clear()
+    c.publish("moi/test-rig/cmd/recipe", "R" * 10_000_000)
+    app.press()
+    app.wait_event(lambda e: e.state.value == "CAPTURING", 10, what="CAPTURING")
+    for i in range(1000):
+        app.app.command("trigger", "mqtt", {"part_id": f"P{i}"})
+        app.app.command("trigger", "button")
+    wait_until(lambda: app.app._commands.empty(), 20, what="the commands to be handled")
+    app.wait_done(1, timeout=60)
+    io = LoopThread("test-accepts").start()
+    try:
+        for _ in range(1000):
+            io.loop.call_soon_threadsafe(io.loop.call_exception_handler, {
+                "message": "socket.accept() out of system resource", "exception": OSError(24, "Too many open files")})
+        io.call(asyncio_noop(), 10)  # after the 1,000 reports
+    finally:
+        io.stop()
+    lines = [r.getMessage() for r in caplog.records if r.levelno >= logging.INFO]
+    assert max(map(len, lines)) < 1024, max(lines, key=len)[:300]
+    assert sum("refused" in line or "ignored" in line for line in lines if "recipe" not in line) <= 2, lines
+    assert sum("out of system resource" in line for line in lines) == 1, lines
+
+
+async def asyncio_noop() -> None:
+    return None

@@ -303,6 +303,10 @@ class MqttService(Publisher):
             log.warning("MQTT: %s without {\"action\": \"redo\" | \"skip\" | \"abort\"} ignored", message.topic)
             return
         if name == "recipe":
+            if len(message.payload) > MAX_COMMAND_PAYLOAD:  # no recipe has such a name: not worth a log line of it
+                log.warning("MQTT: %s of %d bytes ignored (a recipe name or number, at most %d bytes)",
+                            message.topic, len(message.payload), MAX_COMMAND_PAYLOAD)
+                return
             if not isinstance(doc, dict):  # a bare name or number
                 data = {"recipe": message.payload.decode("utf-8", errors="replace").strip()}
             if "recipe" not in data:
