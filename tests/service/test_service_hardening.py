@@ -534,6 +534,7 @@ def test_what_a_client_repeats_or_inflates_is_logged_in_a_few_short_lines(tmp_pa
     c.wait_subscribed()
     caplog.clear()
     c.publish("moi/test-rig/cmd/recipe", "R" * 10_000_000)
+    wait_until(lambda: any("recipe" in r.getMessage()[:200] for r in caplog.records), 30, what="the recipe command")
     app.press()
     app.wait_event(lambda e: e.state.value == "CAPTURING", 10, what="CAPTURING")
     for i in range(1000):
