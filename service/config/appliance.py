@@ -227,7 +227,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "host": _doc("broker host"),
         "port": _doc("broker port", min=1, max=65535),
         "prefix": _doc("topic prefix: topics are <prefix>/<device id>/..."),
-        "client_id": _doc("MQTT client id (default moi-<device id>)"),
+        "client_id": _doc("MQTT client id (default moi-<device id>-<8 hex digits from this machine and the state "
+                          "directory>: unique per appliance)"),
         "username": _doc(""),
         "password": _doc("prefer password_file"),
         "password_file": _doc("file holding the password (e.g. a systemd credential)", kind="path"),

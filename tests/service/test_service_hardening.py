@@ -558,3 +558,41 @@ def test_what_a_client_repeats_or_inflates_is_logged_in_a_few_short_lines(tmp_pa
 
 async def asyncio_noop() -> None:
     return None
+
+
+# --- two appliances with one device id -------------------------------------------------------------------------------
+
+@pytest.mark.broker
+def test_two_appliances_with_one_device_id_do_not_take_each_others_connection(tmp_path, broker, caplog):
+    """The default client id carries a tag of the machine and the state directory: two appliances given the
+    same [device] id stay connected (each took the other's session over once a second); with one explicit
+    client_id they do, and the log says why instead of "Unspecified error"."""
+    from service.persistence.store import Store
+    from service.publish.mqtt.client import TAKEOVER_DROPS, MqttService, MqttSettings
+
+    settings = MqttSettings(host="127.0.0.1", port=broker.port, reconnect_min=0.1, reconnect_max=0.2)
+    stores = [Store(tmp_path / f"state-{i}") for i in range(2)]
+    services = [MqttService(settings, "rig", store) for store in stores]
+    try:
+        assert services[0].client_id != services[1].client_id and services[0].client_id.startswith("moi-rig-")
+        for svc in services:
+            svc.start()
+            assert svc.subscribed_event.wait(10)
+        # both connected at once, each once: nobody was pushed off (a takeover would have closed the first)
+        assert all(svc.is_connected and svc.connections == 1 for svc in services)
+    finally:
+        for svc in services:
+            svc.stop()
+    same = MqttSettings(host="127.0.0.1", port=broker.port, reconnect_min=0.1, reconnect_max=0.2, client_id="moi-rig")
+    services = [MqttService(same, "rig", store) for store in stores]
+    try:
+        for svc in services:
+            svc.start()
+        wait_until(lambda: any("another client uses the client id 'moi-rig'" in r.getMessage()
+                               for r in caplog.records), 60, what="the takeover to be named")
+        assert sum(svc.connections for svc in services) >= TAKEOVER_DROPS
+    finally:
+        for svc in services:
+            svc.stop()
+        for store in stores:
+            store.close()
