@@ -21,6 +21,7 @@ import jinja2
 from aiohttp import web
 
 from service import __version__
+from service.errors import StoreDamaged
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME
 from .child import ChildBusy, export_file, replot, trace_file
 from .live import Live
@@ -188,6 +189,9 @@ class Views:
             return self._error(request, exc.status_code, message)
         except (asyncio.CancelledError, ConnectionResetError):
             raise
+        except StoreDamaged as exc:  # the file's damage, not this server's bug: said, and seen in /api/health
+            log.error("web request %s %s: %s", request.method, request.path[:200], exc)
+            return self._error(request, 503, str(exc))
         except Exception as exc:
             log.exception("web request %s %s failed", request.method, request.path)
             return self._error(request, 500, f"internal error ({type(exc).__name__}); the appliance log has details")
@@ -541,6 +545,8 @@ class Views:
         out["watchdog"] = {"period_s": n.watchdog_period,
                            "last_ping_s_ago": (time.monotonic() - ping) if ping is not None else None}
         out["measurements_stored"] = app.store.count() if app.store is not None else None
+        store = app.store
+        out["store"] = {"damage": store.damage, "write_failure": store.write_failure} if store is not None else None
         return out
 
     async def api_health(self, request: web.Request) -> web.Response:
