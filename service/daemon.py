@@ -120,6 +120,7 @@ class Appliance:
         self._ignored_triggers = 0
         self._ignored_logged_at = -float("inf")
         self._refused_logged_at = -float("inf")
+        self._armed_at: float | None = None  # sequencer clock time of the last ARMED, s (None: not armed)
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
@@ -277,11 +278,21 @@ class Appliance:
                         log.error("main loop failed %d times in a row; stopping", failures)
                         self.exit_status = EXIT_RUNTIME_FAILURE
                         break
-                self._wakeup.wait(self.poll_interval)
+                self._wakeup.wait(self._next_wait())
                 self._wakeup.clear()
         finally:
             self.stop()
         return self.exit_status
+
+    def _next_wait(self) -> float:
+        """Real seconds until the next poll: ``poll_interval``, or less when the release is due sooner. On
+        the simulated rig at a large time scale a whole poll interval is many simulated seconds, which the
+        pre-trigger would otherwise grow by (20 s at ×1000)."""
+        seq, armed = self.sequencer, self._armed_at
+        if seq is None or armed is None or seq.state is not State.ARMED or self.devices is None:
+            return self.poll_interval
+        due = armed + self.config.sequencer.pre_trigger - self.devices.clock.now()
+        return min(self.poll_interval, max(0.0, due / self._clock_scale()))
 
     def _iteration(self) -> None:
         assert self.sequencer is not None
@@ -484,6 +495,7 @@ class Appliance:
             self._wakeup.set()
 
     def _on_event(self, event: Event) -> None:
+        self._armed_at = event.time if event.state is State.ARMED else None
         if event.state is State.ARMED:
             self._started_runs += 1
             if event.measurement_id:

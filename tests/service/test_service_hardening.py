@@ -687,3 +687,50 @@ def test_the_sequence_number_goes_on_after_the_header_is_destroyed(tmp_path, app
     app.press()
     app.wait_done(1)
     assert app.app.store.latest("ok").seq == last + 1
+
+
+# --- the largest simulated time scale -------------------------------------------------------------------------------
+
+def test_the_main_loop_wakes_for_the_release_at_any_time_scale(tmp_path):
+    """While ARMED the loop waits only until the release is due (in real seconds: the simulated rest of the
+    pre-trigger over the time scale), not a whole poll interval: at ×1000 a 20 ms poll added 20 simulated s to
+    every pre-trigger (captures of 41 s for 20). The wait is computed, so no scheduler is timed here."""
+    from types import SimpleNamespace
+
+    from firmware_host import State
+    from service.config.appliance import parse_config
+    from service.daemon import Appliance
+
+    cfg = parse_config(appliance_doc(tmp_path / "state", time_scale=1000.0, sequencer={"pre_trigger": 0.5}),
+                       source="test.toml")
+    app = Appliance(cfg, poll_interval=0.02)
+    now = {"t": 100.0}
+    app.devices = SimpleNamespace(clock=SimpleNamespace(now=lambda: now["t"]))
+    app.sequencer = SimpleNamespace(state=State.ARMED)
+    app._armed_at = 99.9
+    assert app._next_wait() == pytest.approx(0.4 / 1000.0)
+    now["t"] = 101.0  # already due: poll at once
+    assert app._next_wait() == 0.0
+    app.sequencer = SimpleNamespace(state=State.CAPTURING)
+    assert app._next_wait() == 0.02
+
+
+def test_plots_waiting_to_be_drawn_are_bounded(tmp_path, appliance_factory, monkeypatch):
+    """Measurements stored faster than their plots are drawn: at most MAX_PENDING_PLOTS wait (each holds its
+    result's arrays: +140 MB over 520 measurements at ×1000); the others are drawn when asked for."""
+    import threading
+    from types import SimpleNamespace
+
+    import service.publish.plot as plot
+    from service.publish.web.server import MAX_PENDING_PLOTS
+
+    app = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True}))
+    go = threading.Event()
+    monkeypatch.setattr(plot, "render_png", lambda result: (go.wait(30), b"png")[1])
+    web = app.app.web
+    try:
+        for i in range(50):
+            web.measurement_stored(SimpleNamespace(id=f"m-{i}", result=None))
+        assert len(web._plots) == MAX_PENDING_PLOTS
+    finally:
+        go.set()

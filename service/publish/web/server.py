@@ -38,6 +38,8 @@ log = logging.getLogger("moi.web")
 
 #: no plot is drawn while the sequencer is in one of these (the sensor is being read)
 CAPTURE_STATES = tuple(name for name, s in STATES.items() if s.capturing)
+#: plots waiting to be drawn at most; a measurement stored beyond them gets its plot when it is asked for
+MAX_PENDING_PLOTS = 8
 #: at most one "connections refused" line per this many seconds, s
 REFUSED_LOG_INTERVAL = 60.0
 
@@ -171,6 +173,14 @@ class WebServer(Publisher):
         self.measurement_stored(measurement)
 
     def measurement_stored(self, m: "Measurement") -> None:
+        with self._plots_lock:
+            behind = len(self._plots)
+        if behind >= MAX_PENDING_PLOTS:
+            # measurements come faster than plots are drawn (a large simulated time scale): each waiting plot
+            # holds its result's arrays; this one is drawn from the stored trace when a page asks for it
+            log.debug("plot of %s not drawn now: %d plots waiting", m.id, behind)
+            return
+
         def draw() -> bytes:
             from service.publish.plot import render_png
             return render_png(m.result)
