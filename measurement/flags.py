@@ -40,7 +40,8 @@ ORIENTATION_EXCLUDED = "orientation_excluded"
 FLAGS: dict[str, str] = {
     UNMODELED_RESIDUAL: "the residual holds structure no library effect explains, and it matters: it changes ω_n "
                         "by more than the fit's σ (the record's halves disagree), or it has a shape the report names "
-                        "(a spectral line, a trend, unequal half-swings); coloured noise alone does not raise it",
+                        "(an envelope that decays otherwise than the model's, a spectral line, a trend, unequal "
+                        "half-swings), or it stands over 4 × the noise floor; coloured noise alone does not raise it",
     OUTLIERS_REMOVED: "isolated glitch samples were left out of the fit (count in window.n_outliers)",
     PARAMETER_AT_BOUND: "an effect's parameter sits at its physical bound (e.g. a damping of zero)",
     FIT_NOT_CONVERGED: "the least-squares fit stopped before converging: do not use this J",

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: model form (omega_n_std_model, J_std_model, omega_n_u, J_u, model_form)
 
 
 def _num(v: Any) -> Any:

@@ -29,11 +29,14 @@ swings than the recipe asks for.
 
 Repeat measurements (``combine``)
 ---------------------------------
-The part value is the arithmetic mean of the usable releases. Its random
-standard uncertainty is the larger of the Type A standard deviation of the
-mean s/√n (GUM 4.2.3) and the releases' own fit uncertainties propagated
-through the mean √(Σu_i²)/n: with n = 3 the Type A estimate has 2 degrees of
-freedom and may come out far too small by chance. The systematic part (the
+The part value is the mean of the usable releases, each weighed by its own
+random uncertainty u_i (the fit's σ and the model-form term of its record:
+a release whose model does not hold across its record counts for less; with
+equal u_i it is the arithmetic mean). Its random standard uncertainty is the
+larger of the Type A standard deviation of the mean s/√n (GUM 4.2.3) and the
+releases' own uncertainties propagated through the weighted mean
+1/√(Σ1/u_i²): with n = 3 the Type A estimate has 2 degrees of freedom and
+may come out far too small by chance. The systematic part (the
 calibration) is common to all releases and does not average down; it is added
 in quadrature once.
 
@@ -174,7 +177,11 @@ class Reading:
         swings = None
         if omega and window.get("t_start") is not None and window.get("t_stop") is not None:
             swings = float(omega) * (float(window["t_stop"]) - float(window["t_start"])) / (2 * math.pi)
-        return cls(None if value is None else float(value), None if J_std is None else float(J_std),
+        # the release's own model form (its record's halves, rival models) is random from release to
+        # release: it belongs with the fit's σ, not with the calibration
+        model = result.get("J_std_model") or 0.0
+        u_random = None if J_std is None else math.hypot(float(J_std), float(model))
+        return cls(None if value is None else float(value), u_random,
                    math.hypot(cal, tare), tuple(result.get("flags") or ()), swings)
 
     @property
@@ -360,11 +367,19 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
         return PartResult(n, values, (), tuple(excluded), None, None, None, None, None, tuple(z), dec)
 
     vals = [float(readings[i].value) for i in usable]  # type: ignore[arg-type]
+    us = [float(readings[i].u_random) for i in usable]  # type: ignore[arg-type]
     m = len(vals)
-    mean = sum(vals) / m
+    if all(u > 0 for u in us):
+        # each release weighed by its own uncertainty: a release whose model does not hold across
+        # its record (a larger model-form term) counts for less
+        w = [1.0 / u**2 for u in us]
+        mean = sum(wi * v for wi, v in zip(w, vals)) / sum(w)
+        u_fit = 1.0 / math.sqrt(sum(w))
+    else:
+        mean = sum(vals) / m
+        u_fit = math.sqrt(sum(u**2 for u in us)) / m
     std = math.sqrt(sum((v - mean) ** 2 for v in vals) / (m - 1)) if m > 1 else None
     u_a = std / math.sqrt(m) if std is not None else None
-    u_fit = math.sqrt(sum(float(readings[i].u_random) ** 2 for i in usable)) / m  # type: ignore[arg-type]
     u_sys = max(readings[i].u_systematic for i in usable)
     u_c = math.hypot(max(u_a or 0.0, u_fit), u_sys)
     if part_reasons:

@@ -66,3 +66,23 @@ def test_an_effect_the_data_neither_demand_nor_exclude_is_a_rival_of_the_model_k
     assert [c.change for c in rivals] == ["drift added"]
     w = 1.0 / (1.0 + math.exp(-4.0))
     assert rivals[0].weight == pytest.approx(w) and u == pytest.approx(math.sqrt(w) * 2e-3)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_dropouts_and_a_drifting_zero_do_not_pass_for_presliding_friction(seed):
+    # an IMU-like record: dry friction, a zero that drifts, four dropouts of 0.76 s
+    from measurement import Pendulum, simulate_trace
+
+    rig = Rig(kind="compound", mass=1.0, com_distance=1.0, g=9.81)
+    truth = {"viscous": {"c_per_J": 0.02}, "coulomb": {"Tc_per_J": 0.02}}
+    tr = simulate_trace(Pendulum(rig, 9.81 / 2.4**2, truth), theta0=1.1, duration=90, rate=100, noise_std=1e-3,
+                        seed=seed)
+    rng = np.random.default_rng(seed)
+    keep = np.ones(tr.t.size, dtype=bool)
+    for start in rng.uniform(5.0, 85.0, 4):
+        keep &= ~((tr.t > start) & (tr.t < start + 0.76))
+    y = tr.angle + 4e-4 * tr.t
+    r = identify(Trace(tr.t[keep], y[keep], source="imu"), Rig(kind="compound", declared=("viscous",)))
+    assert "dahl" not in r.effects and {"coulomb", "drift"} <= set(r.effects)
+    assert abs(r.omega_n - 2.4) < 3 * r.omega_n_u
+    assert "halves_disagree" not in r.flags

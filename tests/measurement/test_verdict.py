@@ -95,3 +95,15 @@ def test_invalid_releases_are_excluded_and_too_few_usable_make_the_part_invalid(
     assert part.verdict == INVALID and "2 usable of 3 releases" in part.decision.reasons[0]
     every = [Reading(0.0125, 1e-6, flags=("unmodeled_residual",))] * 3
     assert combine(every, SPEC, QualityRules()).verdict == INVALID
+
+
+def test_a_release_whose_model_does_not_hold_counts_for_less():
+    # the release's model-form term joins its fit σ as random; the part weighs each release by it
+    held = {"J": 0.012500, "J_std": 1e-6, "J_std_model": 0.0, "flags": []}
+    loose = {"J": 0.012508, "J_std": 1e-6, "J_std_model": 8e-6, "flags": ["halves_disagree"]}
+    r = Reading.from_result(loose, "J")
+    assert r.u_random == pytest.approx(math.hypot(1e-6, 8e-6))
+    part = combine([Reading.from_result(held, "J"), r], SPEC, QualityRules())
+    w = 1 / 1e-12, 1 / (65e-12)
+    assert part.mean == pytest.approx((w[0] * 0.0125 + w[1] * 0.012508) / sum(w))
+    assert part.u_fit == pytest.approx(1 / math.sqrt(sum(w)))
