@@ -734,3 +734,25 @@ def test_plots_waiting_to_be_drawn_are_bounded(tmp_path, appliance_factory, monk
         assert len(web._plots) == MAX_PENDING_PLOTS
     finally:
         go.set()
+
+
+def test_every_action_of_the_web_page_needs_the_token(tmp_path, appliance_factory):
+    """Each POST route but the login, asked without a token: 401, and nothing is queued (an action added later
+    that forgot to await its check would act for anyone)."""
+    import re
+
+    app = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True}))
+    port = app.app.web.bound_port
+    queued: list[str] = []
+    forward = app.app.command
+    app.app.command = lambda name, source, data=None: (queued.append(name), forward(name, source, data))
+    posts = [r.resource.canonical for r in app.app.web._runner.app.router.routes() if r.method == "POST"]
+    assert "/api/measure" in posts
+    for path in posts:
+        if path == "/login":
+            continue
+        path = re.sub(r"\{[^}]+\}", "skip", path)
+        reply = _http(port, (f"POST {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nContent-Length: 0\r\n"
+                             "Connection: close\r\n\r\n").encode())
+        assert reply.split(b" ", 2)[1] == b"401", (path, reply[:200])
+    assert queued == []

@@ -392,9 +392,9 @@ class Views:
         action = request.match_info["action"]
         if action not in ACTIONS:
             raise Refused(404, f"no set action {action!r}; expected one of {', '.join(ACTIONS)}")
-        form = await request.post() if request.content_type in ("application/x-www-form-urlencoded",
+        form = await _form(request) if request.content_type in ("application/x-www-form-urlencoded",
                                                                  "multipart/form-data") else {}
-        self._authorise(request, form)
+        await self._authorise(request, form)
         self.app.command("set", "web", {"action": action})
         log.info("web: set %s requested", action)
         if "text/html" in request.headers.get("Accept", "") and form:
