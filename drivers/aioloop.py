@@ -54,6 +54,7 @@ class LoopThread:
                 finally:
                     loop.close()
 
+        loop.set_exception_handler(_OnceAMinute(self.name))
         self._loop = loop
         self._thread = threading.Thread(target=run, name=self.name, daemon=True)
         self._thread.start()
@@ -96,3 +97,33 @@ class LoopThread:
             thread.join(timeout)
             if thread.is_alive():
                 log.warning("%s: the event loop thread did not end within %g s", self.name, timeout)
+
+
+#: the same asyncio error is logged at most once per this many seconds, s
+ERROR_LOG_INTERVAL = 60.0
+
+
+class _OnceAMinute:
+    """The loop's exception handler: asyncio's own report, once per ``ERROR_LOG_INTERVAL`` for each message,
+    then a count. Out of descriptors, asyncio reports every failed accept with its traceback: one client
+    could fill the disk with them."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self._last: dict[str, tuple[float, int]] = {}  # message → (monotonic time logged, repeats since)
+
+    def __call__(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
+        import time
+
+        key = str(context.get("message", ""))
+        now = time.monotonic()
+        logged_at, repeats = self._last.get(key, (-float("inf"), 0))
+        if now - logged_at < ERROR_LOG_INTERVAL:
+            self._last[key] = (logged_at, repeats + 1)
+            return
+        if len(self._last) > 100:  # messages that name a connection differ each time: keep the table small
+            self._last.clear()
+        self._last[key] = (now, 0)
+        if repeats:
+            context = {**context, "message": f"{key} ({repeats} more since the last report)"}
+        loop.default_exception_handler(context)

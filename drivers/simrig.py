@@ -26,6 +26,11 @@ from .clock import Clock
 from .errors import DriverConfigError
 
 
+
+#: longest simulated swing, s (θ holds its last value afterwards)
+MAX_DURATION = 3600.0
+
+
 class SimRig:
     """A pendulum on a rig, released by a solenoid, readable as θ(t) on the shared clock.
 
@@ -39,8 +44,8 @@ class SimRig:
     def __init__(self, pendulum: Pendulum, *, theta0: float, clock: Clock, duration: float = 60.0):
         if not (isinstance(theta0, (int, float)) and math.isfinite(theta0) and 0 < abs(theta0) < math.pi):
             raise DriverConfigError(f"simulated rig: theta0 must be a release angle 0 < |θ0| < π rad, got {theta0!r}")
-        if not (isinstance(duration, (int, float)) and 0 < duration <= 3600):
-            raise DriverConfigError(f"simulated rig: duration must be in (0, 3600] s, got {duration!r}")
+        if not (isinstance(duration, (int, float)) and 0 < duration <= MAX_DURATION):
+            raise DriverConfigError(f"simulated rig: duration must be in (0, {MAX_DURATION:g}] s, got {duration!r}")
         self.pendulum = pendulum
         self.theta0 = float(theta0)
         self.clock = clock

@@ -82,6 +82,11 @@ ResultSink = Callable[["Measurement"], None]
 Identifier = Callable[[Trace, Rig], IdentificationResult]
 
 
+#: longest pre-trigger and capture, s: a record of an hour is far beyond any swing, and a longer one
+#: (a typo of 1e12) would only fill the memory sample by sample
+MAX_CAPTURE = 3600.0
+
+
 @dataclass(frozen=True)
 class SequencerConfig:
     """Timing of one measurement (angles in rad).
@@ -126,9 +131,11 @@ class SequencerConfig:
         def finite(v: Any) -> bool:
             return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
-        check("pre_trigger", finite(self.pre_trigger) and self.pre_trigger >= 0, "a time >= 0 s")
+        check("pre_trigger", finite(self.pre_trigger) and 0 <= self.pre_trigger <= MAX_CAPTURE,
+              f"a time >= 0 s and at most {MAX_CAPTURE:g} s")
         check("release_pulse", finite(self.release_pulse) and self.release_pulse > 0, "a time > 0 s")
-        check("capture_duration", finite(self.capture_duration) and self.capture_duration > 0, "a time > 0 s")
+        check("capture_duration", finite(self.capture_duration) and 0 < self.capture_duration <= MAX_CAPTURE,
+              f"a time > 0 s and at most {MAX_CAPTURE:g} s")
         check("decay_threshold", finite(self.decay_threshold) and self.decay_threshold >= 0, "an angle >= 0 rad (0 disables)")
         check("decay_window", finite(self.decay_window) and self.decay_window > 0, "a time > 0 s")
         check("min_capture", finite(self.min_capture) and self.min_capture >= 0, "a time >= 0 s")

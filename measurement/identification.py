@@ -40,7 +40,8 @@ from .noise import fit_noise
 from .model import Model
 from .result import DiscoveryStep, IdentificationResult, ModelSummary, Quantity
 from .rig import Rig
-from .signal import Swings, deviation_table, find_swings, noise_floor, robust_std, spike_candidates, swing_window
+from .signal import (MAX_GRID_PER_SAMPLE, Swings, deviation_table, find_swings, noise_floor, robust_std,
+                     spike_candidates, swing_window)
 from .trace import Trace
 
 
@@ -112,9 +113,12 @@ def _gap_cut(t: np.ndarray, y: np.ndarray, noise: float, periods: float, sw: Swi
         return None
     period = 2 * math.pi / wd
     long = np.flatnonzero(np.diff(t) > periods * period)
+    # a gap is bridged only while the span stays within the samples' own grid: the simulation steps
+    # through a gap, so a long one would cost time by the span, not by the samples
+    bridgeable = float(t[-1] - t[0]) <= MAX_GRID_PER_SAMPLE * t.size * float(np.median(np.diff(t)))
     for g in long:
         after_t, after_y = t[g + 1:], y[g + 1:]
-        if after_t.size >= 10:
+        if bridgeable and after_t.size >= 10:
             sa = find_swings(after_t, after_y, centre=sw.centre, hysteresis=10 * noise)
             if sa.count >= 2:
                 continue

@@ -23,15 +23,22 @@ def robust_std(x: np.ndarray) -> float:
     return float(_MAD_TO_SIGMA * np.median(np.abs(x - np.median(x))))
 
 
+#: an even grid has at most this many points per sample: a gap in the record costs no more than its samples
+MAX_GRID_PER_SAMPLE = 4
+
+
 def resample_uniform(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """(t, y, dt) on an even grid at the median interval dt (s); as given when already even to 1 %.
 
     For the tools that need even spacing (Savitzky–Golay, FFT); the fit itself
-    always uses the true timestamps.
+    always uses the true timestamps. A record whose span would need more than
+    ``MAX_GRID_PER_SAMPLE`` grid points per sample (a long gap) gets the coarser
+    interval that fits in them: the cost is bounded by the samples, not the span.
     """
     dt = float(np.median(np.diff(t)))
     if np.max(np.abs(np.diff(t) - dt)) <= 0.01 * dt:
         return t, y, dt
+    dt = max(dt, float(t[-1] - t[0]) / (MAX_GRID_PER_SAMPLE * len(t)))
     tu = np.arange(t[0], t[-1], dt)
     return tu, np.interp(tu, t, y), dt
 

@@ -102,7 +102,10 @@ def csv_content(lines: Iterable[str]) -> list[tuple[int, str]]:
 
 def csv_header(content: list[tuple[int, str]]) -> list[str]:
     """The column names of ``csv_content``'s first line (stripped; [] when there is none)."""
-    return [h.strip() for h in next(csv.reader([content[0][1]]))] if content else []
+    try:
+        return [h.strip() for h in next(csv.reader([content[0][1]]))] if content else []
+    except csv.Error:  # a cell beyond the csv module's field limit: no header this parser knows
+        return []
 
 
 def parse_trace_csv(lines: Iterable[str], source: str = "trace") -> Trace:
@@ -121,14 +124,17 @@ def parse_trace_csv(lines: Iterable[str], source: str = "trace") -> Trace:
     it, ia = header.index("t"), header.index("angle")
     t, a = [], []
     for n, line in content[1:]:
-        row = next(csv.reader([line]))
+        try:
+            row = next(csv.reader([line]))
+        except csv.Error as exc:  # e.g. a cell longer than the csv module's field limit (131,072 characters)
+            raise TraceError(f"{source}: line {n}: {exc}; expected numbers for t (s) and angle (rad)") from None
         if len(row) <= max(it, ia):
             raise TraceError(f"{source}: line {n} has {len(row)} cells; expected at least {max(it, ia) + 1} (t and angle)")
         try:
             t.append(float(row[it]))
             a.append(float(row[ia]))
         except ValueError:
-            raise TraceError(f"{source}: line {n}: non-numeric cell in {row!r}; expected numbers for t (s) and angle (rad)") from None
+            raise TraceError(f"{source}: line {n}: non-numeric cell in {row!r:.200}; expected numbers for t (s) and angle (rad)") from None
     if not t:
         raise TraceError(f"{source}: the trace is empty (a header but no data rows)")
     for n_value, (tv, av) in enumerate(zip(t, a)):

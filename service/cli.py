@@ -10,12 +10,13 @@ with its traceback).
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 from typing import Sequence
 
 from measurement.errors import InvalidInput
-from service.errors import StoreError
+from service.errors import StartupError, StoreError
 
 #: subcommand → (module, one-line help), in the order `moi --help` lists them. A module is imported
 #: only when its command runs (or its own --help is asked): `moi --help` loads no command.
@@ -89,12 +90,19 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+#: errors of writing the output that are the place it goes to, not a bug: no space, quota, too large, I/O
+_OUTPUT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO})
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser(argv)
     args = parser.parse_args(argv)
     try:
-        return int(args._run(args) or 0)
-    except (InvalidInput, StoreError) as exc:  # a damaged or unusable store is the user's file: one line
+        status = int(args._run(args) or 0)
+        sys.stdout.flush()  # a full disk under stdout is met here, not at the interpreter's exit
+        return status
+    except (InvalidInput, StoreError, StartupError) as exc:
+        # a damaged or unusable store is the user's file, a taken port or state directory the machine's: one line
         print(f"moi {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
@@ -105,6 +113,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes
         return 128 + 13
+    except OSError as exc:
+        if exc.errno not in _OUTPUT_ERRNOS:
+            raise
+        # the output could not be written (`moi export > /dev/full`, a full disk): one line, as for bad input
+        import os
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes
+        print(f"moi {args.command}: error: cannot write the output: {exc.strerror}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -98,7 +98,9 @@ class Appliance:
         self._stop = threading.Event()
         self._compiling: subprocess.Popen | None = None  # the integrator compiled on a first run
         self._started_runs = 0
-        self._run_started: dict[str, tuple[float, str]] = {}  # measurement id → (wall time of ARMED, trigger source)
+        # measurement id → (monotonic time of ARMED, trigger source): a run's start is the wall clock at its end
+        # less the monotonic time it took, so a step of the wall clock never gives a negative duration
+        self._run_started: dict[str, tuple[float, str]] = {}
         self._accepted_source = "unknown"  # source of the last accepted trigger (paired with the next ARMED)
         # the part ID and recipe of the last accepted trigger, and of each run (measurement id → them)
         self.parts = PartTracker(config.recipes or RecipeBook(None), config.active_recipe)
@@ -117,6 +119,8 @@ class Appliance:
         self._lock_fd: int | None = None
         self._ignored_triggers = 0
         self._ignored_logged_at = -float("inf")
+        self._refused_logged_at = -float("inf")
+        self._armed_at: float | None = None  # sequencer clock time of the last ARMED, s (None: not armed)
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
@@ -274,11 +278,21 @@ class Appliance:
                         log.error("main loop failed %d times in a row; stopping", failures)
                         self.exit_status = EXIT_RUNTIME_FAILURE
                         break
-                self._wakeup.wait(self.poll_interval)
+                self._wakeup.wait(self._next_wait())
                 self._wakeup.clear()
         finally:
             self.stop()
         return self.exit_status
+
+    def _next_wait(self) -> float:
+        """Real seconds until the next poll: ``poll_interval``, or less when the release is due sooner. On
+        the simulated rig at a large time scale a whole poll interval is many simulated seconds, which the
+        pre-trigger would otherwise grow by (20 s at ×1000)."""
+        seq, armed = self.sequencer, self._armed_at
+        if seq is None or armed is None or seq.state is not State.ARMED or self.devices is None:
+            return self.poll_interval
+        due = armed + self.config.sequencer.pre_trigger - self.devices.clock.now()
+        return min(self.poll_interval, max(0.0, due / self._clock_scale()))
 
     def _iteration(self) -> None:
         assert self.sequencer is not None
@@ -307,8 +321,8 @@ class Appliance:
                 return
             if name in ("recipe", "part_id") or (name == "trigger" and data):
                 if seq.busy:
-                    log.warning("%s from %s refused: a measurement runs (the part cannot change during it)",
-                                name, source)
+                    self._log_ignored(f"{name} from {source} refused: a measurement runs (the part cannot change "
+                                      "during it)")
                     continue
                 try:
                     self._apply_part_data(data or {})
@@ -322,17 +336,19 @@ class Appliance:
                 self._set_action(action, (data or {}).get("orientation"), source)
                 continue
             if name == "trigger":
+                unwritable = self._store_unwritable()
+                if unwritable is not None:
+                    now = time.monotonic()
+                    if now - self._refused_logged_at >= IGNORED_LOG_INTERVAL:
+                        log.error("trigger from %s refused: %s", source, unwritable)
+                        self._refused_logged_at = now
+                    continue
                 if seq.request_measurement(source):
                     self._accepted_source = source
                     self._accepted_part = (self.parts.part_id, self.parts.recipe)
                     self._open_set()
                 else:
-                    self._ignored_triggers += 1
-                    now = time.monotonic()
-                    if now - self._ignored_logged_at >= IGNORED_LOG_INTERVAL:  # a stuck button or a looping PLC
-                        log.info("trigger from %s ignored (state %s; %d ignored since the last such line)", source,
-                                 seq.state.value, self._ignored_triggers)
-                        self._ignored_logged_at, self._ignored_triggers = now, 0
+                    self._log_ignored(f"trigger from {source} ignored (state {seq.state.value})")
             elif name == "abort":
                 if seq.state is State.FAULT:
                     seq.abort(f"fault acknowledged by {source}")
@@ -340,6 +356,23 @@ class Appliance:
                     log.info("abort from %s: nothing to abort", source)
             else:
                 log.warning("unknown command %r from %s", name, source)
+
+    def _log_ignored(self, what: str) -> None:
+        """One line per IGNORED_LOG_INTERVAL for the commands a stuck button or a looping client repeats."""
+        self._ignored_triggers += 1
+        now = time.monotonic()
+        if now - self._ignored_logged_at >= IGNORED_LOG_INTERVAL:
+            log.info("%s; %d command(s) ignored or refused since the last such line", what, self._ignored_triggers)
+            self._ignored_logged_at, self._ignored_triggers = now, 0
+
+    def _store_unwritable(self) -> str | None:
+        """Why no measurement may start (its result could not be kept), or None. After a failed write
+        a write is tried again here, so measuring resumes as soon as space is freed."""
+        store = self.store
+        if store is None or store.write_failure is None or store.writable():
+            return None
+        return (f"the result store cannot be written ({store.write_failure}); free space in "
+                f"{str(self.config.state_dir)!r}: the results kept so far are safe and still delivered")
 
     def _apply_part_data(self, data: Mapping[str, Any]) -> None:
         """Select a recipe and/or set the part ID (InvalidInput when unknown or malformed)."""
@@ -462,10 +495,11 @@ class Appliance:
             self._wakeup.set()
 
     def _on_event(self, event: Event) -> None:
+        self._armed_at = event.time if event.state is State.ARMED else None
         if event.state is State.ARMED:
             self._started_runs += 1
             if event.measurement_id:
-                self._run_started[event.measurement_id] = (self.wall_clock(), self._accepted_source)
+                self._run_started[event.measurement_id] = (time.monotonic(), self._accepted_source)
                 self._run_part[event.measurement_id] = self._accepted_part
                 self._current_recipe = self._accepted_part[1]
         if event.state in (State.FAULT, State.ABORTED) and event.measurement_id \
@@ -503,9 +537,9 @@ class Appliance:
         """The sequencer's result sink: store (with the outbox row), then Modbus, then wake MQTT."""
         assert self.store is not None
         finished = self.wall_clock()
-        started = self._run_started.pop(m.id, (None, ""))[0]
-        if started is None:
-            started = finished - (m.finished_at - m.requested_at) / self._clock_scale()
+        armed = self._run_started.pop(m.id, (None, ""))[0]
+        took = time.monotonic() - armed if armed is not None else (m.finished_at - m.requested_at) / self._clock_scale()
+        started = finished - took
         cfg = self.config
         result = m.result.to_dict()
         timing = m.to_dict().get("timing", {})
@@ -572,13 +606,14 @@ class Appliance:
 
     def _store_failure(self, event: Event) -> None:
         assert self.store is not None and event.measurement_id is not None
-        started, trigger = self._run_started.pop(event.measurement_id)
+        armed, trigger = self._run_started.pop(event.measurement_id)
+        finished = self.wall_clock()
         part_id, recipe = self._run_part.pop(event.measurement_id, (None, None))
         status = "failed" if event.state is State.FAULT else "aborted"
         try:
             self.store.record(uuid=event.measurement_id, status=status, trigger=trigger,
-                              device_id=self.config.device_id, software_version=__version__, started_at=started,
-                              finished_at=self.wall_clock(), error=event.reason, rig=self.config.rig.to_dict(),
+                              device_id=self.config.device_id, software_version=__version__,
+                              started_at=finished - (time.monotonic() - armed), finished_at=finished, error=event.reason, rig=self.config.rig.to_dict(),
                               config=self.config.to_dict(),
                               part={"part_id": part_id, "recipe": recipe.name if recipe else None,
                                     "recipe_version": recipe.version if recipe else None})
@@ -631,6 +666,8 @@ class Appliance:
     def _status_text(self) -> str:
         seq = self.sequencer
         parts = [seq.state.value.lower() if seq else "starting"]
+        if self.store is not None and self.store.write_failure is not None:
+            parts.append(f"result store cannot be written ({self.store.write_failure}): measurements refused")
         for p in self.publishers:
             parts += p.status()
         return "; ".join(parts)

@@ -88,6 +88,19 @@ def _csv(rows) -> str:
         rec["calibration_date"] = (p.get("calibration") or {}).get("date")
         for k in ("started_at", "finished_at", "published_at"):
             rec[k] = iso_utc(s[k]) if s[k] is not None else ""
-        w.writerow(["" if rec.get(k) is None else (repr(rec[k]) if isinstance(rec[k], float) else rec[k])
+        w.writerow(["" if rec.get(k) is None else (repr(rec[k]) if isinstance(rec[k], float) else csv_text(rec[k]))
                     for k in CSV_COLUMNS])
     return buf.getvalue()
+
+
+#: first characters that make a spreadsheet read a cell as a formula (OWASP, "CSV Injection")
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_text(value: object) -> object:
+    """A text cell a spreadsheet will show as text: one starting like a formula gets a leading apostrophe
+    (a part ID ``=1+cmd|'/c calc'!A1`` written by a PLC must not run when the export is opened).
+    Numbers are written as numbers."""
+    if isinstance(value, str) and value.startswith(FORMULA_STARTS):
+        return "'" + value
+    return value

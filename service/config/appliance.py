@@ -227,7 +227,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "host": _doc("broker host"),
         "port": _doc("broker port", min=1, max=65535),
         "prefix": _doc("topic prefix: topics are <prefix>/<device id>/..."),
-        "client_id": _doc("MQTT client id (default moi-<device id>)"),
+        "client_id": _doc("MQTT client id (default moi-<device id>-<8 hex digits from this machine and the state "
+                          "directory>: unique per appliance)"),
         "username": _doc(""),
         "password": _doc("prefer password_file"),
         "password_file": _doc("file holding the password (e.g. a systemd credential)", kind="path"),
@@ -272,6 +273,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "token_file": _doc("file holding the password/token every action (Measure, Abort) needs (default: "
                            "web-token in the state directory, made with a random token on first start)", kind="path"),
         "page_size": _doc("measurements per history page", min=1, max=500),
+        "max_connections": _doc("browser connections at once; one more is closed at once", min=1, max=512),
+        "request_timeout": _doc("close a connection that sent no complete request for this long, s", min=0,
+                                min_open=True, max=3600),
+        "server_names": _doc("host names the page is reached by besides IP addresses, localhost and this "
+                             "machine's names, e.g. [\"moi-rig-3.factory.lan\"] (any other Host is refused)"),
     }, extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
 }
 

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from service.publish.modbus.settings import network_exposure
+
 from .appliance import Config
 
 #: gpiozero pin factory name → the module it needs
@@ -19,12 +21,17 @@ _BACKEND_MODULES = {"lgpio": "lgpio", "rpigpio": "RPi.GPIO", "pigpio": "pigpio",
 
 @dataclass(frozen=True)
 class Check:
+    """One finding. ok: the daemon can start with it. warning: it can, but the user should know (an
+    exposure chosen perhaps by accident)."""
+
     what: str
     ok: bool
     detail: str
+    warning: bool = False
 
     def line(self) -> str:
-        return f"{'ok     ' if self.ok else 'PROBLEM'}  {self.what}: {self.detail}"
+        mark = "PROBLEM" if not self.ok else "WARNING" if self.warning else "ok     "
+        return f"{mark}  {self.what}: {self.detail}"
 
 
 def pin_problems(config: Config) -> list[str]:
@@ -116,6 +123,10 @@ def check_config(config: Config) -> list[Check]:
     if mb is not None:
         if mb.mode == "tcp":
             checks.append(_bindable(mb.host, mb.port, "Modbus TCP port"))
+            exposure = network_exposure(mb)
+            if exposure is not None:
+                checks.append(Check("Modbus exposure", True, exposure + ("" if mb.allow_from else
+                                    "; name the PLCs in [modbus] allow_from"), warning=not mb.allow_from))
         elif mb.serial_port and "://" not in mb.serial_port:
             ok = Path(mb.serial_port).exists()
             checks.append(Check("Modbus RTU port", ok, mb.serial_port + (" present" if ok else " does not exist")))

@@ -31,7 +31,7 @@ from drivers.errors import DriverConfigError
 from drivers.indicator import Indicator
 from drivers.sensor import AngleSensor, SimulatedAngleSensor
 from drivers.settings import SolenoidSettings
-from drivers.simrig import SimRig
+from drivers.simrig import MAX_DURATION as SIM_MAX_DURATION, SimRig
 from drivers.solenoid import Solenoid
 from firmware_host import SequencerConfig
 from measurement import Pendulum, Rig
@@ -134,7 +134,7 @@ def build_simulated(rig: Rig, sim: SimulationSettings, sequencer: SequencerConfi
     try:
         button = PushButton(btn_pin, pull_up=True, bounce_time=None, pin_factory=factory)
         opened.append(button.close)
-        duration = sequencer.pre_trigger + sequencer.capture_duration + 5.0
+        duration = min(sequencer.pre_trigger + sequencer.capture_duration + 5.0, SIM_MAX_DURATION)
         pendulum = SimRig(Pendulum(rig, sim.inertia, sim.effects), theta0=sim.theta0, clock=clock,
                           duration=duration).attach(solenoid)
         closers: list[Callable[[], None]] = [pendulum.close]

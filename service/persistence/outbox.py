@@ -16,6 +16,11 @@ daemon killed between PUBACK and the delete); consumers dedupe by the
 payload's ``uuid``. A row is never lost: it leaves the database only after a
 PUBACK for one of its publications.
 
+A store that cannot be written (a full disk) does not stop the sender: the
+attempt counter is bookkeeping and is skipped, and a row whose PUBACK came but
+whose delete failed is remembered as delivered (not sent again) and deleted
+once the store takes writes again. Only a damaged store stops it.
+
 Thread rules: paho calls ``acked``/``connected``/``disconnected`` from its
 network thread while holding its own locks, so those only enqueue and set an
 event; every store access and every publish happens in the sender's thread.
@@ -30,6 +35,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
+from service.errors import StoreDamaged, StoreError
 from .store import Store
 
 log = logging.getLogger("moi.outbox")
@@ -64,6 +70,8 @@ class OutboxSender:
         self._connected = threading.Event()
         self._inflight: dict[int, _InFlight] = {}  # item id → in flight
         self._by_mid: dict[int, int] = {}           # mid → item id
+        self._delivered: dict[int, str] = {}        # item id → uuid: acknowledged, its delete not yet written
+        self._write_logged = False
         self._idle = threading.Condition()
         self._thread: threading.Thread | None = None
         self.pending = store.outbox_count()  # rows not yet acknowledged (updated by the sender thread)
@@ -150,7 +158,7 @@ class OutboxSender:
             try:
                 mid = self._acks.get_nowait()
             except queue.Empty:
-                return
+                break
             item_id = self._by_mid.pop(mid, None)
             if item_id is None:
                 continue  # status/state/discovery messages, or a superseded resend
@@ -158,10 +166,25 @@ class OutboxSender:
             # drop the other mids of this row (an earlier send that paho may still retry)
             for m in [m for m, i in self._by_mid.items() if i == item_id]:
                 del self._by_mid[m]
-            if self.store.outbox_ack(item_id):
+            self._delivered[item_id] = fl.uuid if fl is not None else ""
+        for item_id, uuid in list(self._delivered.items()):
+            try:
+                removed = self.store.outbox_ack(item_id)
+            except StoreDamaged:
+                raise
+            except StoreError as exc:
+                self._write_failed(exc)
+                return  # the rows stay acknowledged in memory; the next step tries again
+            del self._delivered[item_id]
+            if removed:
                 self.delivered += 1
-                if fl is not None:
-                    self._on_delivered(fl.uuid)
+                if uuid:
+                    self._on_delivered(uuid)
+
+    def _write_failed(self, exc: StoreError) -> None:
+        if not self._write_logged:  # once per episode: a full disk fails every step
+            log.error("outbox: %s; results go on being published, their bookkeeping waits for space", exc)
+            self._write_logged = True
 
     def _step(self) -> None:
         self._drain_acks()
@@ -178,11 +201,13 @@ class OutboxSender:
                     self._send(item.id, item.uuid, item.kind, item.payload)
             free = self.window - len(self._inflight)
             if free > 0:
-                for item in self.store.outbox_pending(limit=free, exclude=list(self._inflight)):
+                for item in self.store.outbox_pending(limit=free, exclude=[*self._inflight, *self._delivered]):
                     if not self._connected.is_set():
                         break
                     self._send(item.id, item.uuid, item.kind, item.payload)
-        self.pending = self.store.outbox_count()
+        self.pending = self.store.outbox_count() - len(self._delivered)
+        if self.store.write_failure is None:
+            self._write_logged = False
         with self._idle:
             self._idle.notify_all()
 
@@ -190,4 +215,9 @@ class OutboxSender:
         mid = self._publish(kind, payload)
         self._by_mid[mid] = item_id
         self._inflight[item_id] = _InFlight(item_id, uuid, mid, self._clock())
-        self.store.outbox_attempt(item_id)
+        try:
+            self.store.outbox_attempt(item_id)
+        except StoreDamaged:
+            raise
+        except StoreError as exc:
+            self._write_failed(exc)

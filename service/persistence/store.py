@@ -31,6 +31,8 @@ import numpy as np
 from service.errors import StoreDamaged, StoreError
 
 DB_NAME = "results.db"
+#: the largest integer SQLite stores (a longer sequence number is no measurement's)
+SQLITE_MAX_INTEGER = 2**63 - 1
 SCHEMA_VERSION = 2  # 2: part, recipe and verdict columns (added in place to a version-1 store)
 
 #: the part/recipe/verdict columns (schema 2), added to an older store by ``ALTER TABLE`` at open
@@ -163,6 +165,7 @@ def _store_errors(what: str) -> Callable:
                 raise
             except (sqlite3.Error, zlib.error, json.JSONDecodeError) as exc:
                 if _is_damage(exc):
+                    self.damage = f"{exc} while {what}"
                     raise StoreDamaged(f"the result store {str(self.path)!r} is damaged ({exc}) while {what}; "
                                        "`moi store check` tells what can be read, `moi store salvage` keeps it") from None
                 raise StoreError(f"cannot use the result store {str(self.path)!r} while {what}: {exc}") from None
@@ -321,18 +324,61 @@ class Store:
 
     # --- plumbing -----------------------------------------------------------------
     class _Tx:
-        def __init__(self, db: sqlite3.Connection) -> None:
-            self.db = db
+        """One write transaction. Every write passes here, so here the store learns whether it can still
+        write (``Store.write_failure``); a failed COMMIT (a full disk) is rolled back, or the connection
+        would stay in the transaction and refuse every later write even once space is freed."""
+
+        def __init__(self, store: "Store") -> None:
+            self.store = store
+            self.db = store._db
 
         def __enter__(self) -> sqlite3.Connection:
-            self.db.execute("BEGIN IMMEDIATE")
+            try:
+                self.db.execute("BEGIN IMMEDIATE")
+            except sqlite3.Error as exc:
+                self.store._write_failed(exc)
+                raise
             return self.db
 
         def __exit__(self, exc_type, exc, tb) -> None:
-            self.db.execute("COMMIT" if exc_type is None else "ROLLBACK")
+            if exc_type is None:
+                try:
+                    self.db.execute("COMMIT")
+                    self.store.write_failure = None
+                    return
+                except sqlite3.Error as failed:
+                    exc = failed
+                    self._rollback()
+                    self.store._write_failed(exc)
+                    raise
+            if isinstance(exc, sqlite3.Error):
+                self.store._write_failed(exc)
+            self._rollback()
+
+        def _rollback(self) -> None:
+            if self.db.in_transaction:
+                self.db.execute("ROLLBACK")
 
     def _tx(self) -> "_Tx":
-        return Store._Tx(self._db)
+        return Store._Tx(self)
+
+    #: why the last write failed (a full disk, a read-only file), None after a write that succeeded
+    write_failure: str | None = None
+    #: the damage the store met last (a page of a trace or a plot that no longer reads), None while none
+    damage: str | None = None
+
+    def _write_failed(self, exc: sqlite3.Error) -> None:
+        self.write_failure = str(exc)
+
+    def writable(self) -> bool:
+        """Whether a write succeeds now (a write transaction that changes nothing): after a failed
+        write, the way to learn that space was freed."""
+        try:
+            with self._lock, self._tx() as db:
+                db.execute("UPDATE meta SET value = value WHERE key = 'schema'")
+        except sqlite3.Error:
+            return False
+        return True
 
     read_only = False
 
@@ -392,6 +438,7 @@ class Store:
                 counter = db.execute("SELECT value FROM meta WHERE key='last_seq'").fetchone()
                 if counter is not None:  # never reuse a number, even after rows were pruned
                     seq = max(seq, int(counter[0]) + 1)
+                seq = max(seq, read_seq_floor(self.state_dir) + 1)
                 db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('last_seq', ?)", (str(seq),))
                 payload = build_payload(uid, seq) if build_payload is not None else None
                 payload_text = dumps(payload) if payload is not None else None
@@ -420,6 +467,7 @@ class Store:
                                    (mid, uid, kind, payload_text, now))
         except sqlite3.Error as exc:
             raise StoreError(f"cannot write to the result store {str(self.path)!r}: {exc}") from None
+        write_seq_floor(self.state_dir, seq)
         m = self.get(uid)
         assert m is not None
         return m
@@ -480,7 +528,7 @@ class Store:
         cols = _FULL_COLUMNS + (_TRACE_COLUMNS if trace else "")
         with self._lock:
             rows = []
-            if isinstance(key, int) or (isinstance(key, str) and key.isdigit()):
+            if (isinstance(key, int) or (isinstance(key, str) and key.isdigit())) and int(key) <= SQLITE_MAX_INTEGER:
                 rows = self._db.execute(f"SELECT {cols} FROM measurements WHERE seq = ?", (int(key),)).fetchall()
             if not rows and isinstance(key, str):
                 # a prefix, compared literally: '%' and '_' in the key are not wildcards
@@ -489,6 +537,13 @@ class Store:
         if len(rows) != 1:
             return None
         return self._row(rows[0], full=True, trace=trace)
+
+    @_store_errors("reading a measurement")
+    def has_trace(self, uuid: str) -> bool:
+        """Whether the measurement ``uuid`` was stored with its trace (without reading the trace)."""
+        with self._lock:
+            row = self._db.execute("SELECT trace_t IS NOT NULL FROM measurements WHERE uuid = ?", (uuid,)).fetchone()
+        return bool(row and row[0])
 
     @_store_errors("reading the latest measurement")
     def latest(self, status: str | None = "ok") -> StoredMeasurement | None:
@@ -537,6 +592,10 @@ class Store:
                 db.execute("INSERT OR REPLACE INTO attachments (uuid, name, media_type, data, created_at) "
                            "VALUES (?,?,?,?,?)", (uuid, name, media_type, sqlite3.Binary(data), time.time()))
         except sqlite3.Error as exc:
+            if _is_damage(exc):
+                self.damage = f"{exc} while storing {name!r} of measurement {uuid}"
+                raise StoreDamaged(f"the result store {str(self.path)!r} is damaged ({exc}): cannot store {name!r} "
+                                   f"of measurement {uuid}") from None
             raise StoreError(f"cannot store {name!r} of measurement {uuid}: {exc}") from None
 
     # --- tensor sets --------------------------------------------------------------
@@ -660,6 +719,12 @@ def _read_rows(db: sqlite3.Connection, table: str, health: StoreHealth) -> Itera
     except sqlite3.DatabaseError as exc:
         health.problems.append(f"{table}: not readable ({exc})")
         return
+    indexed = _indexed_count(db, table)
+    if indexed is not None and indexed > len(ids):
+        # rows the table's own tree no longer reaches (a damaged root or inner page) are still listed in
+        # its unique index: they are lost, and said so, not silently left out
+        health.lost[table] += indexed - len(ids)
+        health.problems.append(f"{table}: {indexed - len(ids)} row(s) listed in its index cannot be reached")
     for rowid in ids:
         row = _read_row(db, table, columns, rowid)
         if row is None and table == "measurements":
@@ -672,6 +737,21 @@ def _read_rows(db: sqlite3.Connection, table: str, health: StoreHealth) -> Itera
             continue
         health.readable[table] += 1
         yield columns, row
+
+
+#: a unique index of each table that lists every row (its count needs no page of the table itself)
+_ROW_INDEXES = {"measurements": "sqlite_autoindex_measurements_1"}
+
+
+def _indexed_count(db: sqlite3.Connection, table: str) -> int | None:
+    """The rows of ``table`` by its unique index, or None (no such index, or it is damaged too)."""
+    index = _ROW_INDEXES.get(table)
+    if index is None:
+        return None
+    try:
+        return int(db.execute(f"SELECT count(uuid) FROM {table} INDEXED BY {index}").fetchone()[0])
+    except sqlite3.DatabaseError:
+        return None
 
 
 def _read_row(db: sqlite3.Connection, table: str, columns: list[str], rowid: int,
@@ -719,7 +799,17 @@ def salvage_store(path: str | Path, dest_dir: str | Path) -> StoreHealth:
     if (dest / DB_NAME).exists():
         raise StoreError(f"{str(dest / DB_NAME)!r} exists already: salvage into an empty directory")
     health = StoreHealth(str(path), dict.fromkeys(_TABLES, 0), dict.fromkeys(_TABLES, 0), [])
-    src = _open_read_only(path)
+    try:
+        src = _open_read_only(path)
+    except StoreError as exc:
+        if not path.exists():
+            raise
+        # nothing is readable (the header is gone): an empty store that goes on counting where the old one was
+        health.problems.append(str(exc))
+        with Store(dest) as new, new._lock, new._tx() as db:
+            db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('last_seq', ?)",
+                       (str(read_seq_floor(path.parent)),))
+        return health
     try:
         with Store(dest) as new:
             db = new._db
@@ -754,10 +844,36 @@ def salvage_store(path: str | Path, dest_dir: str | Path) -> StoreHealth:
                     max_seq = max(max_seq, int(counter[0])) if counter else max_seq
                 except (sqlite3.DatabaseError, ValueError):
                     pass  # the counter is lost: the largest salvaged seq is the floor
+                # the copy of the counter beside the file: a PLC keyed on seq never sees an old number again,
+                # even when the header (and with it every row) is gone
+                max_seq = max(max_seq, read_seq_floor(path.parent))
                 db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('last_seq', ?)", (str(max_seq),))
     finally:
         src.close()
     return health
+
+
+#: the last sequence number given, beside the database: it survives a damage that loses the database's own
+SEQ_FLOOR_NAME = "last-seq"
+
+
+def read_seq_floor(state_dir: str | Path) -> int:
+    """The last sequence number given in ``state_dir`` by its copy beside the database (0: none)."""
+    try:
+        return int((Path(state_dir) / SEQ_FLOOR_NAME).read_text(encoding="ascii").strip() or 0)
+    except (OSError, ValueError):
+        return 0
+
+
+def write_seq_floor(state_dir: str | Path, seq: int) -> None:
+    """Keep ``seq`` as the last sequence number given (atomic replace; a failure only loses the copy)."""
+    path = Path(state_dir) / SEQ_FLOOR_NAME
+    tmp = path.with_name(SEQ_FLOOR_NAME + ".tmp")
+    try:
+        tmp.write_text(f"{seq}\n", encoding="ascii")
+        os.replace(tmp, path)
+    except OSError:
+        pass  # the database keeps its own counter; this copy is for when the database is lost
 
 
 def quarantine_store(state_dir: str | Path, clock: Callable[[], float] = time.time) -> tuple[Path, StoreHealth]:

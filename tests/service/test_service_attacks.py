@@ -8,6 +8,7 @@ from pathlib import Path
 import socket
 import struct
 
+import numpy as np
 import pytest
 
 from service.publish.modbus import registers as R
@@ -56,8 +57,8 @@ def test_an_exception_in_a_command_handler_is_logged_and_the_next_command_still_
         assert svc.subscribed_event.wait(10)
         c = consumer_factory(broker.port, ["moi/rig/status"])
         c.wait_subscribed()
-        c.publish("moi/rig/cmd/measure", "")
-        c.publish("moi/rig/cmd/abort", "")
+        c.publish("moi/rig/cmd/measure", "1")
+        c.publish("moi/rig/cmd/abort", "1")
         wait_until(lambda: len(got) == 2, 10, what="the second command")
         assert got == ["trigger", "abort"]
         assert svc.callback_errors == 1 and "handler bug" in svc.last_error
@@ -321,11 +322,12 @@ def test_a_result_that_cannot_be_stored_never_leaves_the_device(tmp_path, broker
 
 def test_the_capture_is_bounded_by_sample_time_at_the_largest_time_scale(tmp_path, appliance_factory):
     """At 1000× a 20 ms poll is 20 simulated seconds: the record must still end 20 s after the release
-    (it ran to 2,300 s and 230,000 rows when the capture was bounded by poll time only)."""
+    (it ran to 2,300 s and 230,000 rows when the capture was bounded by poll time only). The main loop
+    polls every 50 ms here, as a busy machine may run it: nothing asserted depends on when it runs."""
     pre, duration, rate = 0.2, 20.0, 100.0
     app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=1000.0,
                                           sequencer={"pre_trigger": pre, "capture_duration": duration},
-                                          simulation={"rate": rate}))
+                                          simulation={"rate": rate}), poll_interval=0.05)
     app.press()
     app.wait_done(1, timeout=60)
     m = app.app.store.latest("ok")
@@ -333,9 +335,12 @@ def test_the_capture_is_bounded_by_sample_time_at_the_largest_time_scale(tmp_pat
     release = stored.trace_meta["sequencer"]["release_t"]
     # after the release: exactly the window, however late the poll came
     assert stored.trace_t[-1] - release == pytest.approx(duration, abs=2 / rate)
-    # before it: the pre-trigger, longer only by the poll the release waited for (20 ms = 20 s here)
-    assert release <= pre + 0.02 * 1000.0 + 1.0
-    assert len(stored.trace_t) <= stored.trace_t[-1] * rate + 2  # one row per sample, nothing piled up
+    # before it: at least the pre-trigger; how much longer depends on when the scheduler ran the poll that
+    # released (a 20 ms wait is 20 s here), so it is not bounded in time but in rows: one per sample
+    t = np.asarray(stored.trace_t)
+    assert release >= pre
+    assert np.count_nonzero(t < release) <= (release - t[0]) * rate + 2
+    assert len(t) <= (t[-1] - t[0]) * rate + 2  # one row per sample, nothing piled up
 
 
 # --- two daemons on one state directory -------------------------------------------------------------------------

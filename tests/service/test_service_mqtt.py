@@ -91,7 +91,7 @@ def test_commands_trigger_once_and_retained_or_repeated_ids_do_not(tmp_path, bro
         c.publish("moi/d1/cmd/measure", json.dumps({"id": "a1"}))
         c.publish("moi/d1/cmd/measure", json.dumps({"id": "a1"}))  # QoS 1 duplicate of the same command
         c.publish("moi/d1/cmd/abort", "now")
-        c.publish("moi/d1/cmd/measure", "")
+        c.publish("moi/d1/cmd/measure", "go")
         with cond:
             assert cond.wait_for(lambda: len(got) >= 3, 10)
         # a marker after everything: when it arrives, every earlier command was handled

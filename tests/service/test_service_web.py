@@ -24,7 +24,13 @@ ON = {"enabled": True}
 class Client:
     def __init__(self, url: str) -> None:
         self.base = url.rstrip("/")
-        self.opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(CookieJar()))
+        self.jar = CookieJar()
+        self.opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(self.jar))
+
+    def csrf(self) -> str:
+        """The page's CSRF value (before a login: the login form's)."""
+        html = self.request("/")[2].decode()
+        return html.split('name="csrf-token" content="')[1].split('"')[0]
 
     def request(self, path: str, data: dict | bytes | None = None, headers: dict | None = None,
                 method: str | None = None) -> tuple[int, dict, bytes]:
@@ -54,17 +60,20 @@ def test_actions_need_the_token_and_the_csrf_token(running):
     assert c.json("/api/measure", method="POST") == (401, {"error": "log in first: this action needs the "
                                                           "appliance's token", "status": 401})
     assert c.json("/api/measure", method="POST", headers={"Authorization": "Bearer wrong-token"})[0] == 401
-    status, _, body = c.request("/login", {"token": "wrong-token"})
+    # a login form without the form's CSRF value (what a forged cross-site form would be): refused
+    assert c.request("/login", {"token": token})[0] == 403
+    login_csrf = c.csrf()
+    status, _, body = c.request("/login", {"token": "wrong-token", "csrf": login_csrf})
     assert status == 401 and b"wrong token" in body and b"Traceback" not in body
-    # logged in, but without the page's CSRF token: refused (what a forged cross-site form would be)
-    status, _, _ = c.request("/login", {"token": token, "next": "/setup"})
+    # logged in, but without the page's CSRF token: the actions below are refused
+    status, _, _ = c.request("/login", {"token": token, "next": "/setup", "csrf": login_csrf})
     assert status == 200
     # after a login only a page of this appliance: never a redirect to another site
-    no_follow = urllib.request.build_opener(type("NoRedirect", (urllib.request.HTTPRedirectHandler,),
-                                                 {"redirect_request": lambda *a, **k: None}))
+    no_follow = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(c.jar), type(
+        "NoRedirect", (urllib.request.HTTPRedirectHandler,), {"redirect_request": lambda *a, **k: None}))
     for target in ("//evil.example/", "/\\evil.example/", "http://evil.example/"):
         req = urllib.request.Request(app.web.url + "login", data=urllib.parse.urlencode(
-            {"token": token, "next": target}).encode())
+            {"token": token, "next": target, "csrf": login_csrf}).encode())
         with pytest.raises(urllib.error.HTTPError) as got:
             no_follow.open(req, timeout=10)
         assert (got.value.code, got.value.headers["Location"]) == (303, "/")

@@ -567,7 +567,9 @@ def markdown() -> str:
     L.append("These are the only writable registers. A write to them while a measurement runs (from the trigger "
              "until the result is published) gets exception 0x06 (server device busy): the part being measured "
              "cannot change. A part ID with bytes outside printable ASCII gets 0x03. Reading them with FC 3 gives "
-             "the part ID and recipe now in force (also when set over MQTT).")
+             "the part ID and recipe now in force (also when set over MQTT). Other functions that would write "
+             "them, FC 22 (mask write) and FC 23 (read/write multiple registers), get exception 0x01 (illegal "
+             "function): a write is applied or refused, never acknowledged and dropped.")
     L.append("")
     L.append("## Verdicts (registers `verdict`, `release_verdict`; status bits 6–8)")
     L.append("")

@@ -18,12 +18,15 @@ and its reply echoes the request (the coil itself reads back 0: the command
 coils are pulses). A write to the part registers while a measurement runs (or
 a trigger is about to start one) gets 0x06 (server device busy): the part
 being measured cannot change; an unknown recipe number or a non-ASCII part ID
-gets 0x03 (illegal data value).
+gets 0x03 (illegal data value). Function 22 (mask write) and 23 (read/write
+multiple registers) get 0x01 (illegal function): a write is applied as the
+functions above do, or refused, never acknowledged and dropped.
 """
 
 from __future__ import annotations
 
 import asyncio
+import collections
 import ipaddress
 import logging
 import struct
@@ -55,6 +58,7 @@ log = logging.getLogger("moi.modbus")
 
 _READ_REGISTERS = {3, 4}
 _READ_DISCRETE = {2}
+_READ_COILS = {1}
 _WRITE_COILS = {5, 15}
 _WRITE_REGISTERS = {6, 16}
 
@@ -125,9 +129,16 @@ class _TrackedHandler(ServerRequestHandler):
     def __init__(self, *args: Any) -> None:
         super().__init__(*args)
         self.last_activity = time.monotonic()
+        self._requests: collections.deque = collections.deque()
 
     def connection_made(self, transport: Any) -> None:
         super().connection_made(transport)
+        if self.is_closing:
+            # closed for the cap between its accept and now (asyncio makes connections one loop turn after
+            # accepting them): pymodbus had no transport to close then, so the socket would stay open
+            transport.close()
+            self.transport = None
+            return
         server = self.server
         if not isinstance(server, _BoundedTcpServer):
             return
@@ -139,8 +150,31 @@ class _TrackedHandler(ServerRequestHandler):
         server.make_room(self)
 
     def callback_data(self, data: bytes, addr: tuple | None = None) -> int:
+        """Every complete request in ``data``: a client may send several in one segment (pipelining, as
+        Modbus/TCP allows), and pymodbus reads one and leaves the others until more bytes come."""
         self.last_activity = time.monotonic()
-        return super().callback_data(data, addr)
+        used = 0
+        while used < len(data):
+            n = super().callback_data(data[used:], addr)  # one request; its answer is scheduled
+            if n <= 0:
+                break  # an incomplete request: the transport keeps it for the next bytes
+            used += n
+            if self.last_pdu is not None:  # None: answered already (malformed) or not for this unit
+                self._requests.append((self.last_pdu, self.last_addr))
+        return used
+
+    def send(self, data: bytes, addr: tuple | None = None) -> None:
+        # pymodbus empties its receive buffer when it answers: a request already received in part would be lost
+        kept = self.recv_buffer
+        super().send(data, addr)
+        self.recv_buffer = kept
+
+    async def handle_request(self) -> None:
+        # one scheduled answer per request read above, in order
+        if not self._requests:
+            return
+        self.last_pdu, self.last_addr = self._requests.popleft()
+        await super().handle_request()
 
 
 class _BoundedTcpServer(ModbusTcpServer):
@@ -314,7 +348,11 @@ class ModbusServer(Publisher):
                     self._on_command(name, "modbus")
                 values[i] = False  # command coils are pulses: they read back 0
             return None
-        return None
+        if func_code in _READ_COILS or func_code in _WRITE_COILS or func_code in _WRITE_REGISTERS:
+            return None  # the command coils read 0; the read-back of a write function
+        # any other function that reaches the data (22 mask write, 23 read/write multiple registers) would
+        # be answered as done and not applied: the PLC is told instead that it is not served
+        return ExcCodes.ILLEGAL_FUNCTION
 
     def _write_inputs(self, address: int, values: list) -> ExcCodes | None:
         """FC 6 / FC 16 to the part ID / recipe_select registers (pymodbus refused every other address)."""

@@ -30,8 +30,10 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import os
 import ssl
 import threading
+import time
 from collections import deque
 from pathlib import Path
 from typing import Any, Callable, Mapping
@@ -51,6 +53,27 @@ from service.publish.modbus.registers import FLAG_BITS
 from service.persistence.store import Store
 
 log = logging.getLogger("moi.mqtt")
+
+#: a connection the broker closes within this many seconds of connecting counts towards a takeover, s
+TAKEOVER_WINDOW = 10.0
+#: after so many such closes in a row the log names the likely cause: another client with this client id
+TAKEOVER_DROPS = 3
+
+
+def default_client_id(device_id: str, store_path: str | os.PathLike) -> str:
+    """``moi-<device id>-<tag>``: the tag (8 hex digits) is made from this machine's id and the result store's
+    path, stable across restarts; two appliances given the same device id by mistake then do not take each
+    other's connection over at the broker (which closes the older one: both reconnect, in turn, for ever)."""
+    import hashlib
+    import socket
+
+    try:
+        machine = Path("/etc/machine-id").read_text(encoding="ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        machine = ""
+    seed = f"{machine or socket.gethostname()}:{Path(store_path).resolve()}"
+    return f"moi-{device_id}-{hashlib.sha256(seed.encode()).hexdigest()[:8]}"
+
 
 #: a command payload longer than this is a command without an id (its JSON is not parsed), bytes
 MAX_COMMAND_PAYLOAD = 1024
@@ -137,7 +160,11 @@ class MqttService(Publisher):
         self.last_error: str | None = None
         self._appliance: ApplianceView | None = None  # set by build(): the daemon's clock for SPC summaries
         self.callback_errors = 0  # exceptions caught in paho callbacks (each one logged)
-        client_id = settings.client_id or f"moi-{device_id}"
+        client_id = settings.client_id or default_client_id(device_id, store.path)
+        self.client_id = client_id
+        self.connections = 0  # successful connections since start
+        self._connected_at = 0.0  # monotonic time of the last one
+        self._quick_drops = 0  # connections in a row the broker closed soon after they were made
         # clean session: the outbox, not the broker session, is what makes delivery durable
         self.client = _Client(CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=True)
         self.client.on_connect_error = self._on_connect_error
@@ -234,6 +261,8 @@ class MqttService(Publisher):
             return
         self.last_error = None
         self._last_logged_error = None
+        self.connections += 1
+        self._connected_at = time.monotonic()
         log.info("MQTT connected to %s:%d", self.settings.host, self.settings.port)
         client.publish(self.topics.status, "online", qos=1, retain=True)
         client.subscribe([(self.topics.cmd_measure, 1), (self.topics.cmd_abort, 1), (self.topics.cmd_recipe, 1),
@@ -256,6 +285,16 @@ class MqttService(Publisher):
     def _on_disconnect(self, client, userdata, flags, reason_code, properties) -> None:
         if self.connected_event.is_set():
             (log.warning if reason_code.is_failure else log.info)("MQTT disconnected: %s", reason_code)
+            if reason_code.is_failure and time.monotonic() - self._connected_at < TAKEOVER_WINDOW:
+                self._quick_drops += 1
+                if self._quick_drops == TAKEOVER_DROPS:
+                    self.last_error = (f"the broker closed the connection {TAKEOVER_DROPS} times in a row within "
+                                       f"{TAKEOVER_WINDOW:g} s of connecting: another client uses the client id "
+                                       f"{self.client_id!r} (two appliances with the same [device] id and "
+                                       "[mqtt] client_id?)")
+                    log.error("MQTT: %s", self.last_error)
+            else:
+                self._quick_drops = 0
         self.connected_event.clear()
         self.subscribed_event.clear()
         self.sender.disconnected()
@@ -281,6 +320,11 @@ class MqttService(Publisher):
                 self.topics.cmd_recipe: "recipe", self.topics.cmd_set: "set"}.get(message.topic)
         if name is None:
             return
+        if not message.payload:
+            # how a retained command is cleared (the broker hands the empty message on to the subscribers
+            # as a plain one): never a command itself
+            log.info("MQTT: empty message on %s ignored (the clearing of a retained command)", message.topic)
+            return
         cmd_id = None
         data: dict[str, Any] = {}
         doc: Any = None
@@ -298,6 +342,10 @@ class MqttService(Publisher):
             log.warning("MQTT: %s without {\"action\": \"redo\" | \"skip\" | \"abort\"} ignored", message.topic)
             return
         if name == "recipe":
+            if len(message.payload) > MAX_COMMAND_PAYLOAD:  # no recipe has such a name: not worth a log line of it
+                log.warning("MQTT: %s of %d bytes ignored (a recipe name or number, at most %d bytes)",
+                            message.topic, len(message.payload), MAX_COMMAND_PAYLOAD)
+                return
             if not isinstance(doc, dict):  # a bare name or number
                 data = {"recipe": message.payload.decode("utf-8", errors="replace").strip()}
             if "recipe" not in data:

@@ -14,10 +14,12 @@ A request whose ``Origin`` names another site is refused whatever it carries.
 
 from __future__ import annotations
 
+import asyncio
 import hmac
 import logging
 import os
 import secrets
+import stat
 import threading
 import time
 from dataclasses import dataclass
@@ -33,6 +35,15 @@ CSRF_HEADER = "X-CSRF-Token"
 SESSION_LIFETIME = 12 * 3600.0
 #: at most this many live sessions (the oldest is dropped)
 MAX_SESSIONS = 64
+#: the cookie that carries the login form's CSRF value until a session exists (double submit)
+LOGIN_COOKIE = "moi_login"
+#: shortest token accepted, characters (the one made on first start has 24)
+MIN_TOKEN_LENGTH = 16
+#: each wrong token costs this long, one at a time for the whole server, s: at most 1/GUESS_DELAY guesses
+#: per second, however many connections ask
+GUESS_DELAY = 0.5
+#: at most one "wrong tokens" line per this many seconds, s
+GUESS_LOG_INTERVAL = 60.0
 
 
 def read_token(path: str | os.PathLike, *, create: bool) -> str:
@@ -56,8 +67,16 @@ def read_token(path: str | os.PathLike, *, create: bool) -> str:
         raise StartupError(f"[web] token_file {str(p)!r} does not exist; put the action password in it") from None
     except (OSError, UnicodeDecodeError, IndexError) as exc:
         raise StartupError(f"[web] cannot read the token file {str(p)!r}: {exc}") from None
-    if len(token) < 8:
-        raise StartupError(f"[web] the token in {str(p)!r} is empty or shorter than 8 characters")
+    if len(token) < MIN_TOKEN_LENGTH:
+        raise StartupError(f"[web] the token in {str(p)!r} is empty or shorter than {MIN_TOKEN_LENGTH} characters "
+                           "(delete the file to get a random one)")
+    try:
+        mode = p.stat().st_mode
+    except OSError:
+        mode = 0
+    if mode & (stat.S_IRWXG | stat.S_IRWXO):
+        log.warning("web: the token file %s can be read by other users (mode %o); chmod 600 it", p,
+                    stat.S_IMODE(mode))
     return token
 
 
@@ -75,6 +94,25 @@ class Guard:
         self._clock = clock
         self._sessions: dict[str, Session] = {}
         self._lock = threading.Lock()
+        self._guessing: asyncio.Lock | None = None  # made on the web loop, at the first wrong token
+        self.wrong_tokens = 0
+        self._wrong_since_log = 0
+        self._guess_logged_at = -float("inf")
+
+    async def wrong_token(self, peer: str | None) -> None:
+        """A wrong token was given: wait ``GUESS_DELAY``, one wrong token at a time for the whole server (a
+        guesser opening many connections waits in line), and say so in the log once a minute at most."""
+        self.wrong_tokens += 1
+        self._wrong_since_log += 1
+        now = self._clock()
+        if now - self._guess_logged_at >= GUESS_LOG_INTERVAL:
+            log.warning("web: %d wrong token(s) since the last such line (the latest from %s)",
+                        self._wrong_since_log, peer or "?")
+            self._guess_logged_at, self._wrong_since_log = now, 0
+        if self._guessing is None:
+            self._guessing = asyncio.Lock()
+        async with self._guessing:
+            await asyncio.sleep(GUESS_DELAY)
 
     def token_ok(self, candidate: str | None) -> bool:
         return bool(candidate) and hmac.compare_digest(candidate.encode(), self._token.encode())

@@ -3,8 +3,10 @@
 Threads: the daemon's main loop delivers sequencer events (``on_state``) and
 stored measurements (``on_result``); both only hand over to this
 server's loop or to the plot worker and never block. Handlers read the store
-(one short SQLite query each) and the appliance's live status; actions go
-through the daemon's command queue like the button, Modbus and MQTT.
+(one short SQLite query each) and the appliance's live status; what takes
+longer (exports, a trace as CSV, a plot drawn again) is made in a child process
+(``child.ChildWork``), never on a thread of the process that reads the sensor;
+actions go through the daemon's command queue like the button, Modbus and MQTT.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from service.errors import StartupError
 from service.publish.port import ApplianceView, Publisher
 
 from .auth import Guard, read_token
+from .child import ChildWork
 from .settings import DEFAULT_TOKEN_FILE_NAME, PLOT_NAME, WebSettings
 from .views import Views
 
@@ -35,6 +38,17 @@ log = logging.getLogger("moi.web")
 
 #: no plot is drawn while the sequencer is in one of these (the sensor is being read)
 CAPTURE_STATES = tuple(name for name, s in STATES.items() if s.capturing)
+#: plots waiting to be drawn at most; a measurement stored beyond them gets its plot when it is asked for
+MAX_PENDING_PLOTS = 8
+#: at most one "connections refused" line per this many seconds, s
+REFUSED_LOG_INTERVAL = 60.0
+
+
+class _Refuse(asyncio.Protocol):
+    """A connection beyond the limit: closed as soon as it is accepted."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        transport.abort()
 
 
 class WebServer(Publisher):
@@ -55,10 +69,14 @@ class WebServer(Publisher):
         self.bound_port: int | None = None
         self._io = LoopThread("moi-web")
         self._runner: web.AppRunner | None = None
+        self._listener: asyncio.AbstractServer | None = None
+        self.connections_refused = 0
+        self._refused_logged_at = -float("inf")
         self._listeners: set[asyncio.Queue] = set()
         self._plotter = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="moi-plot")
         self._plots: dict[str, concurrent.futures.Future] = {}
         self._plots_lock = threading.Lock()
+        self.child = ChildWork()
         self.views = Views(self)
 
     # --- life cycle ---------------------------------------------------------------
@@ -82,23 +100,43 @@ class WebServer(Publisher):
         log.info("web page on %s (actions need the token in %s)", self.url, self.token_file)
 
     async def _serve(self) -> None:
-        runner = web.AppRunner(self.views.application(), access_log=None, handle_signals=False, shutdown_timeout=1.0)
+        # aiohttp's keep-alive timer starts when a connection opens and is renewed only by an answer: as
+        # request_timeout it closes a client that trickles its headers (slowloris) as well as an idle one
+        runner = web.AppRunner(self.views.application(), access_log=None, handle_signals=False, shutdown_timeout=1.0,
+                               keepalive_timeout=self.settings.request_timeout)
         await runner.setup()
-        site = web.TCPSite(runner, self.settings.host, self.settings.port)
         try:
-            await site.start()
+            self._listener = await asyncio.get_running_loop().create_server(
+                self._protocol, self.settings.host, self.settings.port, reuse_address=True)
         except BaseException:
             await runner.cleanup()
             raise
         self._runner = runner
-        self.bound_port = runner.addresses[0][1] if runner.addresses else self.settings.port
+        self.bound_port = self._listener.sockets[0].getsockname()[1]
+
+    def _protocol(self) -> asyncio.BaseProtocol:
+        """aiohttp's protocol for a new connection, or one that closes it at once beyond ``max_connections``:
+        every descriptor a client can hold here is one the process may lack for the sensor or the store."""
+        assert self._runner is not None and self._runner.server is not None
+        if len(self._runner.server.connections) < self.settings.max_connections:
+            return self._runner.server()
+        self.connections_refused += 1
+        now = time.monotonic()
+        if now - self._refused_logged_at > REFUSED_LOG_INTERVAL:
+            self._refused_logged_at = now
+            log.warning("web: %d connections open (the limit); closing new ones (%d so far)",
+                        self.settings.max_connections, self.connections_refused)
+        return _Refuse()
 
     async def _close(self) -> None:
         for q in list(self._listeners):
             q.put_nowait(None)  # ends every live stream
+        if self._listener is not None:
+            self._listener.close()  # no new connections; the open ones are shut down by the runner
         if self._runner is not None:
             await self._runner.cleanup()
             self._runner = None
+        self._listener = None
 
     def alive(self) -> bool:
         return self._io.running
@@ -118,6 +156,7 @@ class WebServer(Publisher):
                 log.exception("web server shutdown failed")
         self._io.stop()
         self._plotter.shutdown(wait=True, cancel_futures=True)
+        self.child.close()
 
     # --- from the daemon's main loop (never block) -----------------------------------
     def on_state(self, message: Any, event: "Event | None") -> None:
@@ -134,22 +173,33 @@ class WebServer(Publisher):
         self.measurement_stored(measurement)
 
     def measurement_stored(self, m: "Measurement") -> None:
-        self.submit_plot(m.id, lambda: m.result)
+        with self._plots_lock:
+            behind = len(self._plots)
+        if behind >= MAX_PENDING_PLOTS:
+            # measurements come faster than plots are drawn (a large simulated time scale): each waiting plot
+            # holds its result's arrays; this one is drawn from the stored trace when a page asks for it
+            log.debug("plot of %s not drawn now: %d plots waiting", m.id, behind)
+            return
 
-    def submit_plot(self, uuid: str, get_result) -> concurrent.futures.Future:
+        def draw() -> bytes:
+            from service.publish.plot import render_png
+            return render_png(m.result)
+
+        self.submit_plot(m.id, draw)
+
+    def submit_plot(self, uuid: str, make_png) -> concurrent.futures.Future:
+        """Keep the PNG ``make_png()`` draws with the measurement ``uuid`` (once, however often asked)."""
         with self._plots_lock:
             fut = self._plots.get(uuid)
             if fut is None:
-                fut = self._plotter.submit(self._draw, uuid, get_result)
+                fut = self._plotter.submit(self._draw, uuid, make_png)
                 self._plots[uuid] = fut
         return fut
 
-    def _draw(self, uuid: str, get_result) -> bytes:
-        from service.publish.plot import render_png
-
+    def _draw(self, uuid: str, make_png) -> bytes:
         try:
             self._wait_for_no_capture()
-            png = render_png(get_result())
+            png = make_png()
             store = self.appliance.store
             if store is not None:
                 store.put_attachment(uuid, PLOT_NAME, png, "image/png")
@@ -190,7 +240,10 @@ class WebServer(Publisher):
             return self._plots.get(uuid)
 
     def stats(self) -> dict[str, Any]:
-        return {"url": self.url, "listeners": len(self._listeners), "token_file": self.token_file}
+        server = self._runner.server if self._runner is not None else None
+        return {"url": self.url, "listeners": len(self._listeners), "token_file": self.token_file,
+                "connections": len(server.connections) if server is not None else 0,
+                "connections_refused": self.connections_refused}
 
 
 PUBLISHER = WebServer

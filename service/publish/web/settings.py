@@ -16,9 +16,17 @@ class WebSettings:
     """host: the address the page is served on (127.0.0.1: this machine only; 0.0.0.0: every interface).
     port: TCP port (0: any free port, for tests). token_file: the file holding the password/token that every
     action (Measure, Abort, acknowledge) needs; None: ``<state_dir>/web-token``, made with a random token
-    on first start. page_size: measurements per history page."""
+    on first start. page_size: measurements per history page. max_connections: connections served at once
+    (a newcomer beyond them is closed at once: the descriptors of the process stay with the measurement, the
+    PLC and MQTT). request_timeout: a connection that has not sent a complete request this many seconds after
+    it opened (or after its last answer) is closed, s. server_names: host names the page may be asked for
+    besides an IP address, localhost and this machine's own names (a request naming another host in its Host
+    header is refused: a DNS-rebinding page on a LAN browser could otherwise read every result)."""
 
     host: str = "127.0.0.1"
     port: int = 8080
     token_file: str | None = None
     page_size: int = 25
+    max_connections: int = 64
+    request_timeout: float = 15.0
+    server_names: tuple[str, ...] = ()

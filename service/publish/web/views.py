@@ -6,9 +6,11 @@ from __future__ import annotations
 import asyncio
 import datetime as dt
 import hashlib
+import hmac
 import json
 import logging
 import math
+import secrets
 import shutil
 import time
 from pathlib import Path
@@ -19,7 +21,9 @@ import jinja2
 from aiohttp import web
 
 from service import __version__
-from .auth import COOKIE, CSRF_HEADER, SESSION_LIFETIME
+from service.errors import StoreDamaged
+from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME
+from .child import ChildBusy, export_file, replot, trace_file
 from .live import Live
 from .settings import PLOT_NAME
 from measurement.flags import FLAGS
@@ -53,6 +57,8 @@ log = logging.getLogger("moi.web")
 HERE = Path(__file__).parent
 #: a tick of the live stream every this many s (elapsed time, new samples)
 TICK = 0.25
+#: the largest history page asked for (its offset must stay an SQLite integer; no store has so many)
+MAX_PAGE = 10**9
 #: keys whose values the set-up page never shows
 SECRET_WORDS = ("password", "token", "secret")
 
@@ -92,6 +98,33 @@ def mask(obj: Any) -> Any:
     return obj
 
 
+def _own_names(extra: tuple[str, ...]) -> frozenset[str]:
+    """The host names this appliance answers for: localhost, its own names, and ``extra``."""
+    import socket
+
+    names = {"localhost", socket.gethostname(), socket.getfqdn()}
+    names |= {n.split(".")[0] + ".local" for n in list(names) if n}
+    return frozenset(n.lower().rstrip(".") for n in names | set(extra) if n)
+
+
+def _is_ip(name: str) -> bool:
+    import ipaddress
+
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        return False
+    return True
+
+
+async def _form(request: web.Request) -> Mapping[str, Any]:
+    """The request's form fields; a body that does not parse (a multipart body cut short) is a 400."""
+    try:
+        return await request.post()
+    except ValueError as exc:  # aiohttp's form and multipart readers say what was wrong with a ValueError
+        raise Refused(400, f"malformed form body: {exc}") from None
+
+
 def _wants_json(request: web.Request) -> bool:
     return request.path.startswith("/api/") or "application/json" in request.headers.get("Accept", "")
 
@@ -105,6 +138,7 @@ class Views:
                                       autoescape=jinja2.select_autoescape(["html"]), trim_blocks=True,
                                       lstrip_blocks=True)
         self.env.filters.update(fmt=_fmt, when=_when, name=_name)
+        self._names = _own_names(server.settings.server_names)
         # file names carry a hash of the content: a browser never keeps a stale script after an update
         stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
         self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS,
@@ -112,7 +146,7 @@ class Views:
 
     # --- application ------------------------------------------------------------------------
     def application(self) -> web.Application:
-        app = web.Application(middlewares=[self._errors], client_max_size=64 * 1024)
+        app = web.Application(middlewares=[self._errors, self._host_check], client_max_size=64 * 1024)
         r = app.router
         r.add_get("/", self.home)
         r.add_get("/events", self.events)
@@ -155,10 +189,24 @@ class Views:
             return self._error(request, exc.status_code, message)
         except (asyncio.CancelledError, ConnectionResetError):
             raise
+        except StoreDamaged as exc:  # the file's damage, not this server's bug: said, and seen in /api/health
+            log.error("web request %s %s: %s", request.method, request.path[:200], exc)
+            return self._error(request, 503, str(exc))
         except Exception as exc:
             log.exception("web request %s %s failed", request.method, request.path)
             return self._error(request, 500, f"internal error ({type(exc).__name__}); the appliance log has details")
         return resp
+
+    @web.middleware
+    async def _host_check(self, request: web.Request, handler):
+        """Only requests that name this appliance: a page on another site whose name was made to point here
+        (DNS rebinding) names its own host, and would otherwise read the results from a LAN browser."""
+        host = (request.host or "").rsplit(":", 1)[0] if not (request.host or "").endswith("]") else request.host
+        name = host.strip("[]").lower().rstrip(".")
+        if name not in self._names and not _is_ip(name):
+            raise Refused(421, f"this appliance does not answer for the host {host[:64]!r}; add it to [web] "
+                               "server_names")
+        return await handler(request)
 
     def _error(self, request: web.Request, status: int, message: str) -> web.Response:
         if _wants_json(request):
@@ -167,13 +215,20 @@ class Views:
 
     def _page(self, request: web.Request, template: str, status: int = 200, **ctx: Any) -> web.Response:
         session = self.server.guard.session(request.cookies.get(COOKIE))
+        # before a login, the login form's CSRF value, also in a SameSite=Strict cookie: another site's form
+        # can carry neither (double submit)
+        login_csrf = request.cookies.get(LOGIN_COOKIE) or secrets.token_urlsafe(18)
         ctx.setdefault("title", "")
         html = self.env.get_template(template).render(
             device_id=self.app.config.device_id, logged_in=session is not None,
-            csrf=session.csrf if session else "", path=request.path_qs, simulated=self.app.config.simulated, **ctx)
-        return web.Response(text=html, status=status, content_type="text/html",
+            csrf=session.csrf if session else login_csrf, path=request.path_qs,
+            simulated=self.app.config.simulated, **ctx)
+        resp = web.Response(text=html, status=status, content_type="text/html",
                             headers={"Cache-Control": "no-store", "X-Content-Type-Options": "nosniff",
                                      "X-Frame-Options": "DENY", "Referrer-Policy": "same-origin"})
+        if session is None:
+            resp.set_cookie(LOGIN_COOKIE, login_csrf, httponly=True, samesite="Strict", path="/")
+        return resp
 
     # --- home and live state ---------------------------------------------------------------------
     async def home(self, request: web.Request) -> web.Response:
@@ -227,10 +282,13 @@ class Views:
 
     async def login(self, request: web.Request) -> web.StreamResponse:
         self._same_origin(request)
-        form = await request.post()
+        form = await _form(request)
+        csrf, expected = str(form.get("csrf") or ""), request.cookies.get(LOGIN_COOKIE) or ""
+        if not csrf or not expected or not hmac.compare_digest(csrf.encode(), expected.encode()):
+            raise Refused(403, "missing or wrong CSRF token: reload the page and log in again")
         made = self.server.guard.login(str(form.get("token") or ""))
         if made is None:
-            await asyncio.sleep(0.5)  # a guess costs time
+            await self.server.guard.wrong_token(request.remote)  # a guess costs time
             raise Refused(401, "wrong token: it is the first line of the appliance's web token file")
         sid, _ = made
         resp = web.HTTPSeeOther(self._next(request, str(form.get("next") or "")))
@@ -239,14 +297,14 @@ class Views:
 
     async def logout(self, request: web.Request) -> web.StreamResponse:
         self._same_origin(request)
-        form = await request.post()
-        self._authorise(request, form)
+        form = await _form(request)
+        await self._authorise(request, form)
         self.server.guard.logout(request.cookies.get(COOKIE))
         resp = web.HTTPSeeOther("/")
         resp.del_cookie(COOKIE, path="/")
         raise resp
 
-    def _authorise(self, request: web.Request, form: Mapping[str, Any]) -> None:
+    async def _authorise(self, request: web.Request, form: Mapping[str, Any]) -> None:
         self._same_origin(request)
         bearer = None
         auth = request.headers.get("Authorization")
@@ -258,12 +316,14 @@ class Views:
         why = self.server.guard.authorise(cookie=request.cookies.get(COOKIE), bearer=bearer,
                                           csrf=request.headers.get(CSRF_HEADER) or str(form.get("csrf") or ""))
         if why is not None:
+            if bearer is not None:
+                await self.server.guard.wrong_token(request.remote)  # a guess costs time
             raise Refused(*why)
 
     async def _action(self, request: web.Request, name: str) -> web.Response:
-        form = await request.post() if request.content_type in ("application/x-www-form-urlencoded",
+        form = await _form(request) if request.content_type in ("application/x-www-form-urlencoded",
                                                                  "multipart/form-data") else {}
-        self._authorise(request, form)
+        await self._authorise(request, form)
         state = self.app.live_status().state
         self.app.command(name, "web")
         log.info("web: %s requested (state %s)", name, state)
@@ -283,8 +343,8 @@ class Views:
 
         from service.parts.recipes import check_part_id
 
-        form = await request.post()
-        self._authorise(request, form)
+        form = await _form(request)
+        await self._authorise(request, form)
         data: dict[str, Any] = {}
         recipe = str(form.get("recipe") or "").strip()
         if recipe:
@@ -332,9 +392,9 @@ class Views:
         action = request.match_info["action"]
         if action not in ACTIONS:
             raise Refused(404, f"no set action {action!r}; expected one of {', '.join(ACTIONS)}")
-        form = await request.post() if request.content_type in ("application/x-www-form-urlencoded",
+        form = await _form(request) if request.content_type in ("application/x-www-form-urlencoded",
                                                                  "multipart/form-data") else {}
-        self._authorise(request, form)
+        await self._authorise(request, form)
         self.app.command("set", "web", {"action": action})
         log.info("web: set %s requested", action)
         if "text/html" in request.headers.get("Accept", "") and form:
@@ -370,27 +430,28 @@ class Views:
         got = self.app.store.get_attachment(m.uuid, PLOT_NAME)
         if got is None:
             # stored without a plot (the page was off): identify the kept trace again, once, and keep the picture
-            if self.app.store.get(m.uuid, trace=True).trace_t is None:
+            if not self.app.store.has_trace(m.uuid):
                 raise Refused(404, f"measurement {m.seq} has no plot and no stored trace to draw one from")
-            await asyncio.wrap_future(self.server.submit_plot(m.uuid, lambda: self._reidentify(m.uuid)))
+            cfg = self.app.config
+            job = (replot, str(cfg.state_dir), m.uuid, cfg.rig.to_dict(), cfg.identification)
+            await asyncio.wrap_future(self.server.submit_plot(m.uuid, lambda: self.server.child.call(*job)))
             got = self.app.store.get_attachment(m.uuid, PLOT_NAME)
         data, media = got
         return web.Response(body=data, content_type=media, headers={"Cache-Control": "max-age=86400, immutable"})
 
-    def _reidentify(self, uuid: str):
-        from measurement import Rig, Trace, identify
-
-        m = self.app.store.get(uuid, trace=True)
-        rig = Rig.from_dict(m.rig) if m.rig else self.app.config.rig
-        return identify(Trace(m.trace_t, m.trace_angle, source=f"measurement {m.seq}"), rig,
-                        self.app.config.identification)
+    async def _in_child(self, fn, *args) -> bytes:
+        """``fn(*args)`` in the web page's child process (away from the capture's threads)."""
+        try:
+            return await self.server.child.run(fn, *args)
+        except ChildBusy as exc:
+            raise Refused(503, str(exc)) from None
 
     async def trace_csv(self, request: web.Request) -> web.Response:
-        m = self._get(request.match_info["key"], trace=True)
-        if m.trace_t is None:
+        m = self._get(request.match_info["key"])
+        if not self.app.store.has_trace(m.uuid):
             raise Refused(404, f"measurement {m.seq} was stored without its trace ([device] store_trace = false)")
-        from service.commands.export import trace_text
-        return web.Response(text=trace_text(m), content_type="text/csv", headers={
+        body = await self._in_child(trace_file, str(self.app.config.state_dir), m.uuid)
+        return web.Response(body=body, content_type="text/csv", headers={
             "Content-Disposition": f'attachment; filename="moi-{m.seq}-{m.uuid[:8]}-trace.csv"'})
 
     async def result_json(self, request: web.Request) -> web.Response:
@@ -441,9 +502,9 @@ class Views:
         try:
             page = int(request.query.get("page", "1"))
         except ValueError:
-            raise Refused(400, f"page={request.query.get('page')[:20]!r}: expected a page number 1, 2, ...") from None
-        if page < 1:
-            raise Refused(400, "page: expected a page number 1, 2, ...")
+            raise Refused(400, f"page={request.query.get('page', '')[:20]!r}: expected a page number 1, 2, ...") from None
+        if not 1 <= page <= MAX_PAGE:
+            raise Refused(400, f"page: expected a page number 1, 2, ... (at most {MAX_PAGE})")
         rows, total = self.app.store.search(offset=(page - 1) * size, limit=size, **filters)
         pages = max(1, math.ceil(total / size))
         args = {k: v for k, v in self._query_args(request).items() if v}
@@ -460,14 +521,11 @@ class Views:
         fmt = request.match_info["fmt"]
         if fmt not in ("csv", "json"):
             raise Refused(404, f"export format {fmt[:10]!r}: expected export.csv or export.json")
-        rows, _ = self.app.store.search(limit=None, **self._filters(request))
         name = f"moi-{self.app.config.device_id}-history.{fmt}"
         # the same files as `moi export` (oldest first)
-        from service.commands.export import _csv, _json
-        rows.reverse()
-        body, ctype = (_json(rows), "application/json") if fmt == "json" else (_csv(rows), "text/csv")
-        return web.Response(text=body, content_type=ctype,
-                            headers={"Content-Disposition": f'attachment; filename="{name}"'})
+        body = await self._in_child(export_file, str(self.app.config.state_dir), fmt, self._filters(request))
+        return web.Response(body=body, content_type="application/json" if fmt == "json" else "text/csv",
+                            charset="utf-8", headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
     # --- set-up -----------------------------------------------------------------------------------------
     def health(self) -> dict[str, Any]:
@@ -487,6 +545,8 @@ class Views:
         out["watchdog"] = {"period_s": n.watchdog_period,
                            "last_ping_s_ago": (time.monotonic() - ping) if ping is not None else None}
         out["measurements_stored"] = app.store.count() if app.store is not None else None
+        store = app.store
+        out["store"] = {"damage": store.damage, "write_failure": store.write_failure} if store is not None else None
         return out
 
     async def api_health(self, request: web.Request) -> web.Response:

@@ -1,0 +1,129 @@
+"""What a browser may ask for that takes more than a moment: done in a child process, one job at a time.
+
+The sensor of a capture is read by threads of the daemon's process (the
+encoder's Modbus client, the camera's frame reader). Work done by any other
+thread of that process holds the interpreter lock against them: four clients
+looping on the history export dropped an encoder capture from some 140 to 10
+samples/s and spoiled its J, while two busy processes on both cores did not.
+So the exports, a trace as CSV and a plot drawn again from a stored trace run
+in one child process (started on first use, at a lower priority); the web
+loop only awaits them, and a request beyond ``max_waiting`` queued jobs is
+told to come back later.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import logging
+import multiprocessing
+import os
+import threading
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any, Callable, Mapping
+
+log = logging.getLogger("moi.web")
+
+#: jobs queued or running at once; one more is refused (the web answers 503)
+MAX_WAITING = 4
+#: how much lower the child runs than the daemon (nice increment): the capture comes first on a busy core
+CHILD_NICENESS = 10
+
+
+class ChildBusy(Exception):
+    """``max_waiting`` jobs are already queued."""
+
+
+class ChildWork:
+    """One child process for the heavy answers of the web page (``run`` from the web loop, ``call`` from a thread)."""
+
+    def __init__(self, max_waiting: int = MAX_WAITING) -> None:
+        self.max_waiting = max_waiting
+        self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+        self._lock = threading.Lock()
+        self._waiting = 0
+        self.jobs = 0
+
+    def _submit(self, fn: Callable[..., Any], *args: Any) -> concurrent.futures.Future:
+        with self._lock:
+            if self._waiting >= self.max_waiting:
+                raise ChildBusy(f"{self._waiting} exports or plots are being made; try again in a moment")
+            if self._pool is None:
+                # spawn, not fork: the daemon's threads hold locks a forked child would inherit held
+                self._pool = concurrent.futures.ProcessPoolExecutor(
+                    max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_lower_priority)
+            pool = self._pool
+            self._waiting += 1
+            self.jobs += 1
+        try:
+            fut = pool.submit(fn, *args)
+        except BaseException:
+            self._done(None)
+            raise
+        fut.add_done_callback(self._done)
+        return fut
+
+    def _done(self, fut: concurrent.futures.Future | None) -> None:
+        with self._lock:
+            self._waiting -= 1
+            if fut is not None and not fut.cancelled() and isinstance(fut.exception(), BrokenProcessPool):
+                log.error("the web page's child process died; a new one is started for the next job")
+                self._pool = None
+
+    async def run(self, fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)`` in the child (``fn`` and the arguments picklable); ChildBusy when too many wait."""
+        return await asyncio.wrap_future(self._submit(fn, *args))
+
+    def call(self, fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)`` in the child, waiting for it on the calling thread."""
+        return self._submit(fn, *args).result()
+
+    def close(self) -> None:
+        """End the child (a job in progress finishes first); safe twice."""
+        with self._lock:
+            pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _lower_priority() -> None:
+    try:
+        os.nice(CHILD_NICENESS)
+    except OSError:  # not allowed here: the job still runs, at the daemon's priority
+        pass
+
+
+# --- the jobs (run in the child: module-level functions of plain arguments) -------------------------------------
+
+def export_file(state_dir: str, fmt: str, filters: Mapping[str, Any]) -> bytes:
+    """The history as ``moi export`` writes it (CSV or JSON, oldest first), of the measurements ``filters`` select."""
+    from service.commands.export import _csv, _json
+    from service.persistence.store import Store
+
+    with Store(state_dir, read_only=True) as store:
+        rows, _ = store.search(limit=None, **filters)
+    rows.reverse()
+    return (_json(rows) if fmt == "json" else _csv(rows)).encode()
+
+
+def trace_file(state_dir: str, uuid: str) -> bytes:
+    """The stored trace of the measurement ``uuid`` as trace CSV (``moi export --trace``)."""
+    from service.commands.export import trace_text
+    from service.persistence.store import Store
+
+    with Store(state_dir, read_only=True) as store:
+        m = store.get(uuid, trace=True)
+    return trace_text(m).encode()
+
+
+def replot(state_dir: str, uuid: str, default_rig: Mapping[str, Any], options: Any) -> bytes:
+    """The plot of the measurement ``uuid`` (PNG) from its stored trace, identified again with its rig."""
+    from measurement import Rig, Trace, identify
+
+    from service.publish.plot import render_png
+    from service.persistence.store import Store
+
+    with Store(state_dir, read_only=True) as store:
+        m = store.get(uuid, trace=True)
+    rig = Rig.from_dict(m.rig or default_rig)
+    return render_png(identify(Trace(m.trace_t, m.trace_angle, source=f"measurement {m.seq}"), rig, options))
