@@ -322,3 +322,24 @@ class _SharedFit:
     @property
     def std(self) -> np.ndarray:
         return np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
+
+
+def joint_value(results: Sequence[IdentificationResult], rig: Rig,
+                quantity: str = "J") -> tuple[float, float, dict[str, Any]] | None:
+    """The releases' joint value of ``quantity`` (J, J_object or J_object_axis, kg·m²) with its random 1σ
+    and the facts of the joint identification; None when the rig gives no J.
+
+    The joint J comes from the joint ω_n; J_object and J_object_axis differ from J by the rig's
+    constants, the same for every release (the first release's difference is taken).
+    """
+    if len(results) < 2 or any(r.J is None or getattr(r, quantity, None) is None for r in results):
+        return None
+    with _blas().limit(limits=1, user_api="blas"):
+        j = _joint(list(results), rig)
+    if j.J is None or j.J_u is None:
+        return None
+    first = results[0]
+    value = j.J - (first.J - getattr(first, quantity))
+    facts = {"omega_n": j.omega_n, "omega_n_u": j.omega_n_u, "effects": list(j.effects), "flags": list(j.flags),
+             "consistency": _jsonable({k: v for k, v in j.consistency.items() if k != "pairwise_releases"})}
+    return float(value), float(j.J_u), facts

@@ -40,6 +40,12 @@ may come out far too small by chance. The systematic part (the
 calibration) is common to all releases and does not average down; it is added
 in quadrature once.
 
+With the releases' identifications at hand (the appliance), the part's value
+is their joint identification instead (``measurement.joint``: the physics
+shared, each release's offset and sensor terms its own, the releases weighed
+by their whole uncertainty and the joint σ scaled by the Birge ratio when they
+scatter beyond it); the Type A floor and the systematic part apply as above.
+
 Agreement of the releases: release i is compared with the mean of the others,
 z_i = (x_i − x̄_−i) / √(u_i² + u(x̄_−i)²), with u(x̄_−i) = √(Σ_{j≠i} u_j²)/(n−1).
 With at least 3 usable releases, the one with the largest |z| above the
@@ -54,7 +60,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from . import flags as F
 from .errors import InvalidInput
@@ -297,6 +303,8 @@ class PartResult:
     u_systematic: float | None
     z: tuple[float | None, ...]
     decision: Decision
+    #: the joint identification the value came from (its ω_n, consistency test); None: the weighted mean
+    joint: dict[str, Any] | None = None
 
     @property
     def verdict(self) -> str:
@@ -305,7 +313,7 @@ class PartResult:
     def to_dict(self) -> dict[str, Any]:
         return {"releases": self.releases, "values": list(self.values), "used": list(self.used), "excluded": [dict(e) for e in self.excluded],
                 "mean": self.mean, "std": self.std, "u_typeA": self.u_typeA, "u_fit": self.u_fit,
-                "u_systematic": self.u_systematic, "z": list(self.z), **self.decision.to_dict()}
+                "u_systematic": self.u_systematic, "z": list(self.z), "joint": self.joint, **self.decision.to_dict()}
 
 
 def agreement(values: Sequence[float], u: Sequence[float]) -> list[float]:
@@ -321,8 +329,19 @@ def agreement(values: Sequence[float], u: Sequence[float]) -> list[float]:
     return out
 
 
-def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRules) -> PartResult:
-    """The part verdict from its releases (the rule is in the module docstring)."""
+#: the joint value of the usable releases (their indices) as (value, random 1σ, consistency facts), kg·m²;
+#: None when it cannot be had (the verdict then rests on the weighted mean)
+JointOf = Callable[[Sequence[int]], "tuple[float, float, dict[str, Any]] | None"]
+
+
+def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRules,
+            joint_of: JointOf | None = None) -> PartResult:
+    """The part verdict from its releases (the rule is in the module docstring).
+
+    joint_of: the releases identified jointly (shared physics, per-release
+    nuisance: ``measurement.joint``); given, the part's value and its random
+    uncertainty are the joint ones, the Type A floor still applies.
+    """
     n = len(readings)
     if n == 0:
         raise VerdictError("a part needs at least one release")
@@ -378,6 +397,9 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
     else:
         mean = sum(vals) / m
         u_fit = math.sqrt(sum(u**2 for u in us)) / m
+    joint = joint_of(tuple(usable)) if joint_of is not None and m >= 2 else None
+    if joint is not None:
+        mean, u_fit, joint_facts = joint
     std = math.sqrt(sum((v - mean) ** 2 for v in vals) / (m - 1)) if m > 1 else None
     u_a = std / math.sqrt(m) if std is not None else None
     u_sys = max(readings[i].u_systematic for i in usable)
@@ -387,4 +409,5 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
                        tuple(part_reasons))
     else:
         dec = decide(mean, u_c, spec)
-    return PartResult(n, values, tuple(usable), tuple(excluded), mean, std, u_a, u_fit, u_sys, tuple(z), dec)
+    return PartResult(n, values, tuple(usable), tuple(excluded), mean, std, u_a, u_fit, u_sys, tuple(z), dec,
+                      joint_facts if joint is not None else None)

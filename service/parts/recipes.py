@@ -69,7 +69,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from measurement import Rig
-from measurement.errors import InvalidInput
+from measurement.errors import InvalidInput, MeasurementError
 from measurement.tensor import RigShared, TensorPlan
 from measurement.verdict import (QUANTITIES, RULES, PartResult, QualityRules, Reading,
                                  Specification, combine, judge_release)
@@ -315,6 +315,8 @@ class _OpenPart:
     recipe: Recipe
     readings: list[Reading] = field(default_factory=list)
     measurements: list[str] = field(default_factory=list)
+    #: each release's identification (with its samples), for the part's joint identification
+    identified: list[Any] = field(default_factory=list)
 
 
 class PartTracker:
@@ -355,8 +357,12 @@ class PartTracker:
                 "of": o.recipe.releases}
 
     def release(self, result: Mapping[str, Any], measurement_id: str, part_id: str | None,
-                recipe: Recipe | None) -> dict[str, Any]:
-        """Count one release; returns the payload keys (the part's verdict once it is complete)."""
+                recipe: Recipe | None, identified: Any = None, rig: Rig | None = None) -> dict[str, Any]:
+        """Count one release; returns the payload keys (the part's verdict once it is complete).
+
+        identified, rig: the release's ``IdentificationResult`` and the rig it was identified on: with
+        them for every release, the part's value is the releases' joint identification.
+        """
         out: dict[str, Any] = {"part_id": part_id, "recipe": recipe.to_dict() if recipe else None,
                                "release": None, "part": None, "verdict": None}
         o = self._open
@@ -377,11 +383,24 @@ class PartTracker:
         reading = Reading.from_result(result, spec.quantity)
         o.readings.append(reading)
         o.measurements.append(measurement_id)
+        o.identified.append(identified)
         decision = judge_release(reading, spec, recipe.quality)
         out["release"] = {"index": len(o.readings), "of": recipe.releases, "part_uuid": o.uuid,
                           "quantity": spec.quantity, **decision.to_dict(), "abandoned": abandoned}
         if len(o.readings) >= recipe.releases:
-            part = combine(o.readings, spec, recipe.quality)
+            joint_of = None
+            if rig is not None and all(r is not None for r in o.identified):
+                found = o.identified
+
+                def joint_of(used, quantity=spec.quantity, found=found, rig=rig):
+                    from measurement.joint import joint_value  # scipy: only when a part completes
+                    try:
+                        return joint_value([found[i] for i in used], rig, quantity)
+                    except MeasurementError as exc:
+                        log.warning("part %s: the joint identification failed (%s); the weighted mean is used",
+                                    part_id or o.uuid, exc)
+                        return None
+            part = combine(o.readings, spec, recipe.quality, joint_of)
             self.last_part = part
             out["part"] = {"uuid": o.uuid, "part_id": part_id, "measurements": list(o.measurements),
                            "quantity": spec.quantity, **part.to_dict()}
@@ -399,6 +418,7 @@ class PartTracker:
         if o is not None:
             del o.readings[n:]
             del o.measurements[n:]
+            del o.identified[n:]
         self._open = o
         self._undo = None
 

@@ -107,3 +107,19 @@ def test_a_release_whose_model_does_not_hold_counts_for_less():
     w = 1 / 1e-12, 1 / (65e-12)
     assert part.mean == pytest.approx((w[0] * 0.0125 + w[1] * 0.012508) / sum(w))
     assert part.u_fit == pytest.approx(1 / math.sqrt(sum(w)))
+
+
+def test_the_part_value_is_the_joint_identification_of_its_usable_releases():
+    readings = [Reading(0.012500, 1e-6), Reading(0.012502, 1e-6, flags=("unmodeled_residual",)), Reading(0.012501, 1e-6)]
+    asked = []
+
+    def joint_of(used):
+        asked.append(tuple(used))
+        return 0.0125004, 4e-7, {"consistency": {"p": 0.6}}
+
+    part = combine(readings, SPEC, QualityRules(min_valid_releases=2), joint_of)
+    assert asked == [(0, 2)]  # the invalid release is left out of the joint identification
+    assert part.mean == 0.0125004 and part.u_fit == 4e-7 and part.joint == {"consistency": {"p": 0.6}}
+    assert part.to_dict()["joint"]["consistency"]["p"] == 0.6
+    # without it (no identifications at hand) the weighted mean, as before
+    assert combine(readings, SPEC, QualityRules(min_valid_releases=2)).joint is None

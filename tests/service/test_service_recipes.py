@@ -119,6 +119,10 @@ def test_a_plc_selects_a_recipe_writes_a_part_id_and_reads_the_verdict_of_three_
     assert last["part"]["measurements"] == [m.uuid for m in reversed(rows)]
     assert last["part"]["used"] == [0, 1, 2] and last["part"]["excluded"] == []
     assert last["part"]["u_typeA"] == pytest.approx(last["part"]["std"] / math.sqrt(3))
+    # the part's value is the three releases identified jointly, and they agree with it
+    joint = last["part"]["joint"]
+    assert joint["consistency"]["dof"] == 2 and joint["consistency"]["p"] >= 0.01
+    assert "viscous" in joint["effects"] and last["part"]["mean"] == pytest.approx(J_TRUE, rel=2e-3)
     assert last["recipe"]["version"] == rows[0].recipe_version == load_recipe(recipe_dir / "ok.toml").version
     assert all(m.payload["part_id"] == "SN-0001" for m in rows)
 

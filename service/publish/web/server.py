@@ -48,6 +48,7 @@ class _Refuse(asyncio.Protocol):
     """A connection beyond the limit: closed as soon as it is accepted."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)  # a TCP connection: it can be aborted
         transport.abort()
 
 

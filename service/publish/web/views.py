@@ -37,6 +37,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from service.publish.port import ApplianceView
 
     from .auth import Guard
+    from .child import ChildWork
     from .settings import WebSettings
 
     class WebServer(Protocol):
@@ -45,6 +46,7 @@ if TYPE_CHECKING:  # pragma: no cover
         appliance: ApplianceView
         settings: WebSettings
         guard: Guard
+        child: ChildWork
 
         def listen(self) -> asyncio.Queue: ...
         def unlisten(self, q: asyncio.Queue) -> None: ...
