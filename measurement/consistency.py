@@ -37,6 +37,7 @@ from scipy.special import erfc, gammaincc
 
 from .errors import IdentificationError
 from .fit import ModelFit, fit_model
+from .result import _num
 
 #: fewest full swings a segment must hold to be fitted on its own
 MIN_SEGMENT_SWINGS = 3.0
@@ -44,10 +45,6 @@ MIN_SEGMENT_SWINGS = 3.0
 DISAGREE_P = 0.01
 #: p-value below which an effect's parameters fitted in the two halves disagree
 EFFECT_P = 1e-3
-
-
-def _num(v: float | None) -> float | None:
-    return None if v is None or not math.isfinite(v) else float(v)
 
 
 @dataclass(frozen=True)
