@@ -219,9 +219,16 @@ def _run(app, args: argparse.Namespace) -> int:
         part = payload.get("part")
         if part is not None:
             print()
-            print(f"part {payload['part_id']}: {part['quantity']} = {_g(part['mean'], '.7g')} kg·m² (mean of releases "
-                  f"{[i + 1 for i in part['used']]}), s = {_g(part['std'])}, Type A u = {_g(part['u_typeA'])}, "
-                  f"fit u = {_g(part['u_fit'])}, calibration u = {_g(part['u_systematic'])}, U = {_g(part['U'])} kg·m²")
+            joint = part.get("joint")
+            how = "identified jointly" if joint else "weighted mean"
+            fit_u = "joint u" if joint else "fit u"
+            print(f"part {payload['part_id']}: {part['quantity']} = {_g(part['mean'], '.7g')} kg·m² (releases "
+                  f"{[i + 1 for i in part['used']]} {how}), s = {_g(part['std'])}, Type A u = {_g(part['u_typeA'])}, "
+                  f"{fit_u} = {_g(part['u_fit'])}, calibration u = {_g(part['u_systematic'])}, U = {_g(part['U'])} kg·m²")
+            if joint:
+                c = joint["consistency"]
+                print(f"  the releases against the joint ω_n {joint['omega_n']:.7g} rad/s: χ² {c['chi2']:.2f} on "
+                      f"{c['dof']} (p = {c['p']:.2g}), largest deviation {c['largest_z']:+.1f} σ")
             for e in part["excluded"]:
                 print(f"  excluded release {e['index'] + 1}: {e['reason']}")
             spec = payload["recipe"]
