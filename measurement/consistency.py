@@ -101,8 +101,11 @@ class ModelForm:
 
     segments: SegmentCheck | None
     competitors: tuple[Competitor, ...]
-    u_segments: float
     u_competitors: float
+
+    @property
+    def u_segments(self) -> float:
+        return 0.0 if self.segments is None else self.segments.u
 
     @property
     def u(self) -> float:
@@ -155,7 +158,8 @@ def refit_segment(fit: ModelFit, part: slice, sigma: float) -> ModelFit:
 
 
 def segment_fits(fit: ModelFit, sigma: float) -> tuple[float, list[ModelFit]] | None:
-    """(time of the split, the fits of both halves); None when the record is too short to split."""
+    """(time of the split, the fits of both halves); None when the record is too short to split or a
+    half cannot be fitted alone."""
     parts = halves(fit)
     if parts is None:
         return None
@@ -165,13 +169,9 @@ def segment_fits(fit: ModelFit, sigma: float) -> tuple[float, list[ModelFit]] | 
         return None
 
 
-def check_segments(fit: ModelFit, sigma: float,
-                   fitted: tuple[float, list[ModelFit]] | None = None) -> SegmentCheck | None:
-    """ω_n of each half against the whole record's (None when the record cannot be split).
-
-    fitted: ``segment_fits(fit, sigma)`` when the caller has it.
-    """
-    fitted = segment_fits(fit, sigma) if fitted is None else fitted
+def check_segments(fit: ModelFit, sigma: float) -> SegmentCheck | None:
+    """ω_n of each half against the whole record's (None when the record cannot be split)."""
+    fitted = segment_fits(fit, sigma)
     if fitted is None:
         return None
     t_split, segs = fitted
@@ -197,15 +197,12 @@ def effect_holds(fit: ModelFit, effect: str, sigma: float) -> tuple[bool, str, i
     would buy a wrong ω_n. A record too short to split holds (nothing
     contradicts it).
     """
-    parts = halves(fit)
-    if parts is None:
-        return True, "the record is too short to fit its halves alone", 0
+    fitted = segment_fits(fit, sigma)
+    if fitted is None:
+        return True, "the record is too short (or too poor) to fit its halves alone", 0
+    _, (a, b) = fitted
     model = fit.model
     eff = next(e for e in model.effects if e.name == effect)
-    try:
-        a, b = (refit_segment(fit, p, sigma) for p in parts)
-    except IdentificationError:
-        return True, "its halves could not be fitted alone", 0
     sl = model.layout[effect]
     d = a.x[sl] - b.x[sl]
     cov = a.cov[sl, sl] + b.cov[sl, sl]

@@ -381,6 +381,7 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
     if previous is not None and previous.f_scale == f_scale and previous.t.size == t.size and np.array_equal(previous.t, t):
         beaten = 0.5 * previous.rss * (1.0 + 1e-6)
     sol = None
+    failed: Exception | None = None
     for i in order:
         x0 = starts[i] if starts is not None else x0
         try:
@@ -388,15 +389,14 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
                                   ftol=1e-12, xtol=1e-12, gtol=1e-10, max_nfev=max_nfev,
                                   loss=loss, f_scale=1.0 if f_scale is None else f_scale)
         except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
-            if sol is None and i == order[-1]:
-                raise IdentificationError(f"least squares failed for model {model.effect_names}: {exc}") from exc
+            failed = exc
             continue
         if sol is None or trial.cost < sol.cost:
             sol = trial
         if beaten is None or sol.cost <= beaten:
             break
     if sol is None:
-        raise IdentificationError(f"least squares failed for model {model.effect_names} from every start")
+        raise IdentificationError(f"least squares failed for model {model.effect_names}: {failed}") from failed
     x = sol.x
     _, theta, omega = evaluate(x)
     residual = fun(x)

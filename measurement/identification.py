@@ -570,7 +570,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     # tell apart give another ω_n (consistency.py)
     segments = check_segments(final, prep.noise)
     rivals, u_rivals = competitors(steps, options.bic_margin)
-    form = ModelForm(segments, rivals, segments.u if segments is not None else 0.0, u_rivals)
+    form = ModelForm(segments, rivals, u_rivals)
+    ambiguous = form.ambiguous(ws)
     w_u = math.sqrt(ws**2 + (w_cal or 0.0) ** 2 + form.u**2)
     J = _inertia(rig, w)
     J_std = None if J is None else 2 * J * ws / w
@@ -611,7 +612,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         flags.append(F.UNMODELED_RESIDUAL)
     if segments is not None and segments.disagree:
         flags.append(F.HALVES_DISAGREE)
-    if form.ambiguous(ws):
+    if ambiguous:
         flags.append(F.MODEL_AMBIGUOUS)
     if n_outliers:
         flags.append(F.OUTLIERS_REMOVED)
@@ -642,7 +643,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
                          f"ω_n {w1:.6g} ± {s1:.2g} and {w2:.6g} ± {s2:.2g} rad/s ({segments.z:.1f} σ apart): {verdict}")
     else:
         structure.append("the record is too short to fit each half alone: whether the model holds across it is not checked")
-    for c in rivals if form.ambiguous(ws) else ():
+    for c in rivals if ambiguous else ():
         if c.weight >= 0.05:
             structure.append(f"a rival explanation the data do not decisively reject: {c.change} (ΔBIC {c.d_bic:+.1f}, "
                              f"weight {c.weight:.2f}) gives ω_n {c.omega_n:.6g} rad/s ({c.delta:+.2g}); "

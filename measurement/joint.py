@@ -19,7 +19,7 @@ squares", Phys. Rev. 40, 1932) and the result is flagged.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
@@ -70,7 +70,6 @@ class JointResult:
     consistency: dict[str, Any]
     flags: tuple[str, ...]
     releases: tuple[IdentificationResult, ...]
-    baseline: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         declared = self.releases[0].declared_effects
@@ -83,7 +82,7 @@ class JointResult:
             "damping": {e: {k: q.to_dict() for k, q in ps.items()} for e, ps in self.damping.items()},
             "stiffness": {e: {k: q.to_dict() for k, q in ps.items()} for e, ps in self.stiffness.items()},
             "residual_rms": _num(self.residual_rms),
-            "baseline": _jsonable(self.baseline),
+            "baseline": {"effects": list(declared), "omega_n": [_num(r.baseline.omega_n) for r in self.releases]},
             "consistency": _jsonable(self.consistency),
             "flags": list(self.flags),
             "releases": [r.to_dict() for r in self.releases],
@@ -144,12 +143,16 @@ def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options | None
     options = Options() if options is None else options
     if len(traces) < 2:
         raise InvalidInput(f"a joint identification needs at least 2 releases, got {len(traces)}")
-    results = [identify(tr, rig, options) for tr in traces]
-    with _blas().limit(limits=1, user_api="blas"):
-        return _joint(results, rig)
+    return _joint([identify(tr, rig, options) for tr in traces], rig)
 
 
 def _joint(results: list[IdentificationResult], rig: Rig) -> JointResult:
+    # tall, thin matrices, as in ``identify``: BLAS threads would only contend
+    with _blas().limit(limits=1, user_api="blas"):
+        return _fit_jointly(results, rig)
+
+
+def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
     shared = _shared_effects(results, rig)
     models: list[Model] = []
     fits: list[ModelFit] = []
@@ -212,6 +215,8 @@ def _joint(results: list[IdentificationResult], rig: Rig) -> JointResult:
 
     sizes = [f.n for f in fits]
     offsets = np.concatenate([[0], np.cumsum(sizes)])
+    # the releases a parameter moves: all for the shared ones, its own for the others
+    owners = [list(range(len(models)))] * n_shared + [[i] for i, (a, b) in enumerate(blocks) for _ in range(a, b)]
 
     def jac(z: np.ndarray) -> np.ndarray:
         base = [release_residual(z, i) for i in range(len(models))]
@@ -221,8 +226,7 @@ def _joint(results: list[IdentificationResult], rig: Rig) -> JointResult:
             zp = z.copy()
             zp[j] += h if zp[j] + h <= hi_all[j] else -h
             step = zp[j] - z[j]
-            owners = range(len(models)) if j < n_shared else [k for k, (a, b) in enumerate(blocks) if a <= j < b]
-            for i in owners:
+            for i in owners[j]:
                 J[offsets[i]:offsets[i + 1], j] = (release_residual(zp, i) - base[i]) / step
         return J
 
@@ -274,13 +278,8 @@ def _joint(results: list[IdentificationResult], rig: Rig) -> JointResult:
     common = float(np.sum(wts * np.array([math.hypot(res.omega_n_std_model, res.omega_n_std_calibration or 0.0)
                                           for res in results])) / np.sum(wts))
     u_joint = max(s_joint * birge, common)
-    flags: list[str] = []
-    if p < CONSISTENT_P:
-        flags.append(F.RELEASES_DISAGREE)
-    for res in results:
-        for fl in res.flags:
-            if fl not in flags and fl != F.RELEASES_DISAGREE:
-                flags.append(fl)
+    flags = [F.RELEASES_DISAGREE] if p < CONSISTENT_P else []
+    flags = list(dict.fromkeys(flags + [fl for res in results for fl in res.flags]))
     consistency = {
         "chi2": chi2, "dof": dof, "p": p, "birge_ratio": birge, "z": [float(v) for v in zs],
         "omega_n": [float(v) for v in w_i], "u": [float(v) for v in u_i],
@@ -301,13 +300,11 @@ def _joint(results: list[IdentificationResult], rig: Rig) -> JointResult:
     J_u = None if J is None else 2 * J * u_joint / w_joint
     rms = float(math.sqrt(np.mean(np.concatenate([(r[offsets[i]:offsets[i + 1]] / weights[i]) ** 2
                                                   for i in range(len(models))]))))
-    baseline = {"effects": list(results[0].declared_effects),
-                "omega_n": [res.baseline.omega_n for res in results]}
     return JointResult(
         rig_kind=rig.kind, effects=shared, omega_n=w_joint, omega_n_std=s_joint, omega_n_u=u_joint,
         J=J, J_std=J_std, J_u=J_u,
         damping=_effect_quantities(shim, rig, ("damping",)), stiffness=_effect_quantities(shim, rig, ("stiffness",)),
-        residual_rms=rms, consistency=consistency, flags=tuple(flags), releases=tuple(results), baseline=baseline,
+        residual_rms=rms, consistency=consistency, flags=tuple(flags), releases=tuple(results),
     )
 
 
@@ -334,8 +331,7 @@ def joint_value(results: Sequence[IdentificationResult], rig: Rig,
     """
     if len(results) < 2 or any(r.J is None or getattr(r, quantity, None) is None for r in results):
         return None
-    with _blas().limit(limits=1, user_api="blas"):
-        j = _joint(list(results), rig)
+    j = _joint(list(results), rig)
     if j.J is None or j.J_u is None:
         return None
     first = results[0]

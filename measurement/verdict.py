@@ -388,7 +388,11 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
     vals = [float(readings[i].value) for i in usable]  # type: ignore[arg-type]
     us = [float(readings[i].u_random) for i in usable]  # type: ignore[arg-type]
     m = len(vals)
-    if all(u > 0 for u in us):
+    joint = joint_of(tuple(usable)) if joint_of is not None and m >= 2 else None
+    joint_facts = None
+    if joint is not None:
+        mean, u_fit, joint_facts = joint
+    elif all(u > 0 for u in us):
         # each release weighed by its own uncertainty: a release whose model does not hold across
         # its record (a larger model-form term) counts for less
         w = [1.0 / u**2 for u in us]
@@ -397,9 +401,6 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
     else:
         mean = sum(vals) / m
         u_fit = math.sqrt(sum(u**2 for u in us)) / m
-    joint = joint_of(tuple(usable)) if joint_of is not None and m >= 2 else None
-    if joint is not None:
-        mean, u_fit, joint_facts = joint
     std = math.sqrt(sum((v - mean) ** 2 for v in vals) / (m - 1)) if m > 1 else None
     u_a = std / math.sqrt(m) if std is not None else None
     u_sys = max(readings[i].u_systematic for i in usable)
@@ -410,4 +411,4 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
     else:
         dec = decide(mean, u_c, spec)
     return PartResult(n, values, tuple(usable), tuple(excluded), mean, std, u_a, u_fit, u_sys, tuple(z), dec,
-                      joint_facts if joint is not None else None)
+                      joint_facts)

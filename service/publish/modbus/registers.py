@@ -242,7 +242,7 @@ def _table() -> tuple[Register, ...]:
     add("snapshot", 46, "releases", "uint16", "count", "releases", "releases per part of the recipe")
     add("snapshot", 47, "recipe_number", "uint16", "", "recipe_number", "number of the recipe the release was judged with (0: none)")
     add("snapshot", 48, "part_value", "float32", "kg·m²", "part_value",
-        "the part's value of the recipe quantity (mean of its usable releases; NaN until complete)")
+        "the part's value of the recipe quantity (its usable releases identified jointly; NaN until complete)")
     add("snapshot", 50, "part_U", "float32", "kg·m²", "part_U", "expanded uncertainty U of part_value (NaN until complete)")
     add("snapshot", 52, "part_id", "ascii20", "", "part_id", "the part ID the release was measured for (echo of registers 100–109)")
     add("snapshot", 62, "flags_high", "bits16", "bits", "flags_high",
