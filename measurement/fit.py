@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
@@ -434,6 +435,35 @@ def robust_residual(residual: np.ndarray, f_scale: float | None) -> tuple[np.nda
     return np.sign(residual) * f_scale * np.sqrt(rho), 1.0 / np.sqrt(1.0 + z)
 
 
+def _inverse_gram(Js: np.ndarray) -> np.ndarray:
+    """(JᵀJ)⁻¹ of a scaled Jacobian (the pseudo-inverse when it is singular)."""
+    JtJ = Js.T @ Js
+    try:
+        return np.linalg.inv(JtJ)
+    except np.linalg.LinAlgError:
+        return np.linalg.pinv(JtJ)
+
+
+def _coloured_gram(Js: np.ndarray, blocks: Sequence[tuple[slice, NoiseModel, float]]) -> np.ndarray:
+    """JᵀΣJ for rows in independent blocks, each with its own AR noise model and the parameters
+    charged to it (its degrees of freedom): Σ_b σ_e²·‖A_b⁻ᵀJ_b‖²·n_b/(n_b − k_b)."""
+    middle = np.zeros((Js.shape[1], Js.shape[1]))
+    for rows, noise, k in blocks:
+        G = noise.colour_t(Js[rows])
+        n = G.shape[0]
+        middle += noise.innovation_var * (G.T @ G) * (n / max(n - k, 1))
+    return middle
+
+
+def block_covariance(J: np.ndarray, scales: np.ndarray,
+                     blocks: Sequence[tuple[slice, NoiseModel, float]]) -> np.ndarray:
+    """Parameter covariance of a least-squares estimate over several independent stretches of samples
+    (rows of J), each with its own AR noise model: the sandwich of ``covariance`` block by block."""
+    Js = J * scales
+    inv = _inverse_gram(Js)
+    return (inv @ _coloured_gram(Js, blocks) @ inv) * np.outer(scales, scales)
+
+
 def covariance(J: np.ndarray, residual: np.ndarray, scales: np.ndarray,
                noise: NoiseModel | None = None) -> tuple[np.ndarray, str, float]:
     """Parameter covariance of the least-squares estimate under the AR noise model.
@@ -444,20 +474,14 @@ def covariance(J: np.ndarray, residual: np.ndarray, scales: np.ndarray,
     """
     n, k = J.shape
     Js = J * scales  # scaled for conditioning
-    JtJ = Js.T @ Js
-    try:
-        inv = np.linalg.inv(JtJ)
-    except np.linalg.LinAlgError:
-        inv = np.linalg.pinv(JtJ)
+    inv = _inverse_gram(Js)
     if noise is None:
         noise = fit_noise(residual)
     s2 = float(residual @ residual) / max(n - k, 1)
     white = inv * s2
     if noise.order == 0:
         return white * np.outer(scales, scales), "white", 1.0
-    G = noise.colour_t(Js)
-    middle = noise.innovation_var * (G.T @ G) * (n / max(n - k, 1))
-    sandwich = inv @ middle @ inv
+    sandwich = inv @ _coloured_gram(Js, [(slice(None), noise, k)]) @ inv
     d_white, d_ar = np.diag(white), np.diag(sandwich)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratios = np.sqrt(np.where(d_white > 0, d_ar / d_white, 1.0))

@@ -29,7 +29,7 @@ from scipy.special import gammaincc
 from . import flags as F
 from .effects import EFFECTS, resolve_effects
 from .errors import IdentificationError, InvalidInput
-from .fit import ModelFit, fit_model
+from .fit import ModelFit, block_covariance, fit_model
 from .identification import Options, _blas, _effect_quantities, _inertia, identify
 from .model import STATE_PARAMS, Model
 from .noise import fit_noise
@@ -239,18 +239,8 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
     Jm = sol.jac
     r = sol.fun
     # covariance: the sandwich with each release's own AR noise model (its residual's colour)
-    Js = Jm * scales
-    try:
-        inv = np.linalg.inv(Js.T @ Js)
-    except np.linalg.LinAlgError:
-        inv = np.linalg.pinv(Js.T @ Js)
-    middle = np.zeros_like(inv)
-    for i in range(len(models)):
-        sl = slice(offsets[i], offsets[i + 1])
-        noise = fit_noise(r[sl])
-        G = noise.colour_t(Js[sl])
-        middle += noise.innovation_var * (G.T @ G) * (sizes[i] / max(sizes[i] - z.size / len(models), 1))
-    cov = (inv @ middle @ inv) * np.outer(scales, scales)
+    parts = [slice(offsets[i], offsets[i + 1]) for i in range(len(models))]
+    cov = block_covariance(Jm, scales, [(sl, fit_noise(r[sl]), z.size / len(models)) for sl in parts])
     w_fit = float(z[0])
     s_fit = float(math.sqrt(max(cov[0, 0], 0.0)))
 
