@@ -47,6 +47,8 @@ def main() -> None:
         doc["web"] = {"enabled": True, "port": 0}
         app = Appliance(parse_config(doc, source="bench"), poll_interval=0.02)
         app.start()
+        assert app.sequencer is not None and app.store is not None
+        sequencer, store = app.sequencer, app.store
         loop = threading.Thread(target=app.run, daemon=True)
         loop.start()
         finished = Finished(app)
@@ -56,14 +58,14 @@ def main() -> None:
             if not finished.wait(i, 120):
                 print(f"measurement {i} did not end in 120 s")
                 break
-            if finished.faults and app.sequencer.state.value == "FAULT":
+            if finished.faults and sequencer.state.value == "FAULT":
                 app.command("abort", "bench")
         rss1 = _rss_mb()
         spans, releases = [], []
-        for m in app.store.list(limit=None):
+        for m in store.list(limit=None):
             if m.status != "ok":
                 continue
-            s = app.store.get(m.uuid, trace=True)
+            s = store.get(m.uuid, trace=True)
             spans.append(s.trace_t[-1] - s.trace_t[0])
             releases.append(s.trace_meta["sequencer"]["release_t"])
         app.request_stop()
