@@ -33,9 +33,8 @@ class Finished:
         app.sequencer.subscribe(self._on_event)
 
     def _on_event(self, event) -> None:
-        published = event.state.value == "IDLE" and event.previous.value == "PUBLISHING"
         fault = event.state.value == "FAULT"
-        if published or fault:
+        if event.ends_measurement:
             with self._cond:
                 self.count += 1
                 if fault:

@@ -149,9 +149,9 @@ def _run(app, args: argparse.Namespace) -> int:
         sim = f"  (simulated clock {e.time - t0:.2f} s)" if scale != 1.0 else ""
         out.write(f"[{time.monotonic() - wall0:7.2f} s] {e.state.value:<12} {e.reason}{sim}\n")
         out.flush()
-        if e.state.value == "PUBLISHING" and e.measurement is not None:
+        if e.publishes:
             published.append(e.measurement)
-        if e.state.value in ("IDLE", "FAULT") and e.previous.value != "IDLE":
+        if e.ends_measurement:
             done.set()
 
     app.sequencer.subscribe(on_event)

@@ -258,19 +258,21 @@ class _StatePrinter:
     def __call__(self, e) -> None:
         import time
 
+        from firmware_host import State
+
         wall = time.monotonic() - self._wall0
         sim = f"  (simulated clock {e.time - self._t0:.2f} s)" if self._scale != 1.0 else ""
-        hint = "; identifying…" if e.state.value == "IDENTIFYING" else ""
+        hint = "; identifying…" if e.state is State.IDENTIFYING else ""
         with self._lock:
             self._end_line()
             print(f"[{wall:7.2f} s] {e.state.value:<12} {e.reason}{hint}{sim}", file=self._out, flush=True)
-        if e.state.value == "CAPTURING" and self._progress and self._thread is None:
+        if e.state is State.CAPTURING and self._progress and self._thread is None:
             import threading
 
             self._thread = threading.Thread(target=self._report, args=(e.time,), name="moi-measure-progress",
                                             daemon=True)
             self._thread.start()
-        elif e.state.value != "CAPTURING":
+        elif e.state is not State.CAPTURING:
             self._stop_thread()
 
     def close(self) -> None:
