@@ -189,6 +189,11 @@ class _Run:
     identify_started_at: float | None = None
     measurement: "Measurement | None" = None
 
+    def release_time(self) -> float:
+        """``released_at`` (clock time, s), for the states from RELEASING on, where it is always set."""
+        assert self.released_at is not None, "the release time is read before the release"
+        return self.released_at
+
 
 class Sequencer:
     """The measurement state machine. See ``firmware_host`` for the contract.
@@ -547,8 +552,10 @@ class Sequencer:
     def _step(self, now: float) -> None:
         run = self._run
         state = self._state
+        if state not in BUSY:  # IDLE, FAULT, ABORTED: nothing advances by itself
+            return
+        assert run is not None, f"{state.value} without a measurement in progress"
         if state in (State.ARMED, State.RELEASING, State.CAPTURING):
-            assert run is not None
             self._collect(run, now)
             self._check_sample_timeout(run, now)
         if state is State.ARMED:
@@ -560,7 +567,7 @@ class Sequencer:
                 self._trim_pre_trigger(run)
                 self._transition(now, State.RELEASING, f"solenoid pulse {run.granted_pulse:g} s")
         elif state is State.RELEASING:
-            if now - run.released_at >= run.granted_pulse:
+            if now - run.release_time() >= run.granted_pulse:
                 self.solenoid.off()
                 self._transition(now, State.CAPTURING, "released; solenoid off, swinging freely")
         elif state is State.CAPTURING:
@@ -605,7 +612,7 @@ class Sequencer:
         # released: on a fast simulated clock (or a stalled loop) the wait can be many pre-triggers long,
         # and that rest would lengthen the record and the work; the samples left out are counted
         # (the latest sample before it always stays: the rest the swing starts from, and the order guard's anchor)
-        first = min(bisect.bisect_left(run.t, run.released_at - self.config.pre_trigger), len(run.t) - 1)
+        first = min(bisect.bisect_left(run.t, run.release_time() - self.config.pre_trigger), len(run.t) - 1)
         if first > 0:
             del run.t[:first], run.angle[:first]
             run.outside_window += first
@@ -621,14 +628,15 @@ class Sequencer:
 
     def _capture_end(self, run: _Run, now: float) -> str | None:
         cfg = self.config
-        elapsed = now - run.released_at
-        if elapsed >= cfg.capture_duration or (run.t and run.t[-1] >= run.released_at + cfg.capture_duration) \
+        released_at = run.release_time()
+        elapsed = now - released_at
+        if elapsed >= cfg.capture_duration or (run.t and run.t[-1] >= released_at + cfg.capture_duration) \
                 or run.beyond_window:
             return f"capture complete: {cfg.capture_duration:g} s after the release"
         if cfg.decay_threshold > 0 and elapsed >= cfg.min_capture and run.t:
             t_end = run.t[-1]
             i = bisect.bisect_left(run.t, t_end - cfg.decay_window)
-            if run.t[i] <= run.released_at and i > 0:
+            if run.t[i] <= released_at and i > 0:
                 return None
             window = run.angle[i:]
             if t_end - run.t[i] >= 0.9 * cfg.decay_window and len(window) >= 4:
@@ -661,7 +669,7 @@ class Sequencer:
                 "measurement_id": run.id,
                 "requested_by": run.requested_by,
                 "t0": float(t0),  # clock time of the first sample, s: the trace's time origin
-                "release_t": float(run.released_at - t0),
+                "release_t": float(run.release_time() - t0),
                 "release_pulse_s": run.granted_pulse,
                 "capture_end": why,
             },
@@ -692,10 +700,10 @@ class Sequencer:
         return trace, self._identifier(trace, rig)
 
     def _check_identification(self, run: _Run, now: float) -> None:
-        job = run.job
-        assert job is not None
+        job, started_at = run.job, run.identify_started_at
+        assert job is not None and started_at is not None, "IDENTIFYING without an identification started"
         if not job.done.is_set():
-            busy = (now - run.identify_started_at) / self._scale
+            busy = (now - started_at) / self._scale
             if busy > self.config.identify_timeout:
                 raise IdentificationTimeout(
                     f"identification time-out: no result after {busy:.3g} s (limit {self.config.identify_timeout:g} s)")
@@ -709,9 +717,10 @@ class Sequencer:
             if not isinstance(exc, MeasurementError):
                 log.error("identification raised", exc_info=exc)
             raise IdentificationFailed(f"identification failed: {type(exc).__name__}: {exc}") from exc
+        assert job.result is not None and run.capture_ended_at is not None, "done without an error: run() stored it"
         run.trace, result = job.result
         measurement = Measurement(
-            id=run.id, requested_by=run.requested_by, requested_at=run.requested_at, released_at=run.released_at,
+            id=run.id, requested_by=run.requested_by, requested_at=run.requested_at, released_at=run.release_time(),
             capture_ended_at=run.capture_ended_at, finished_at=now, trace=run.trace, result=result,
             capture_end=run.capture_end)
         j = f"J = {result.J:.7g} kg·m²" if result.J is not None else f"omega_n = {result.omega_n:.7g} rad/s (J n/a)"
@@ -728,5 +737,6 @@ class Sequencer:
 
     def _finish_publishing(self, run: _Run, now: float) -> None:
         measurement = run.measurement
+        assert measurement is not None, "PUBLISHING without the measurement that entered it"
         self._transition(now, State.IDLE, f"published measurement {measurement.id}", measurement)
         self._run = None
