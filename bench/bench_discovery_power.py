@@ -27,6 +27,7 @@ import sys
 import time
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,10 +37,23 @@ from measurement.fit import fit_model
 from measurement.identification import prepare
 from measurement.model import Model
 
-TORSION = dict(rig=Rig(kind="torsion", stiffness=0.3651), J=0.0125, theta0=0.25, duration=30.0, bits=17,
-               base={"viscous": {"c": 1.5e-4}})
-COMPOUND = dict(rig=Rig(kind="compound", mass=1.5, com_distance=0.25), J=0.12, theta0=0.8, duration=40.0, bits=14,
-                base={"viscous": {"c": 1.0e-3}})
+@dataclass(frozen=True)
+class RigCase:
+    """A simulated rig: its part's J (kg·m²), the release angle (rad), the record length (s), the
+    encoder's resolution (bits) and the effects always present (effect → parameter → value, SI)."""
+
+    rig: Rig
+    J: float
+    theta0: float
+    duration: float
+    bits: int
+    base: dict[str, dict[str, float]]
+
+
+TORSION = RigCase(rig=Rig(kind="torsion", stiffness=0.3651), J=0.0125, theta0=0.25, duration=30.0, bits=17,
+                  base={"viscous": {"c": 1.5e-4}})
+COMPOUND = RigCase(rig=Rig(kind="compound", mass=1.5, com_distance=0.25), J=0.12, theta0=0.8, duration=40.0,
+                   bits=14, base={"viscous": {"c": 1.0e-3}})
 RIGS = {"torsion": TORSION, "compound": COMPOUND}
 NOISE = 2e-4
 RATE = 200.0
@@ -67,9 +81,9 @@ FIXED = {("torsion", "dahl"): {"Tc": 3e-5}, ("compound", "dahl"): {"mu": 2e-4}, 
 
 def make_trace(rig_name: str, effects: dict, noise: str, seed: int) -> Trace:
     spec = RIGS[rig_name]
-    rig = spec["rig"]
-    p = Pendulum(rig, spec["J"], {**spec["base"], **effects})
-    trace = simulate_trace(p, theta0=spec["theta0"], duration=spec["duration"], rate=RATE, seed=seed)
+    rig = spec.rig
+    p = Pendulum(rig, spec.J, {**spec.base, **effects})
+    trace = simulate_trace(p, theta0=spec.theta0, duration=spec.duration, rate=RATE, seed=seed)
     rng = np.random.default_rng(10_000 + seed)
     if noise == "white":
         e = rng.normal(0.0, NOISE, trace.t.size)
@@ -80,23 +94,23 @@ def make_trace(rig_name: str, effects: dict, noise: str, seed: int) -> Trace:
         e[0] = rng.normal(0.0, NOISE)
         for i in range(1, e.size):
             e[i] = phi * e[i - 1] + w[i]
-    return Trace(trace.t, quantise(trace.angle + e, spec["bits"]), source=f"{rig_name}-{noise}-{seed}")
+    return Trace(trace.t, quantise(trace.angle + e, spec.bits), source=f"{rig_name}-{noise}-{seed}")
 
 
 def power_case(args):
     rig_name, effect, param, value, noise, seed = args
     spec = RIGS[rig_name]
     trace = make_trace(rig_name, {effect: {param: value, **FIXED.get((rig_name, effect), {})}}, noise, seed)
-    true_names = list(spec["base"]) + [effect]
-    rig = spec["rig"]
+    true_names = list(spec.base) + [effect]
+    rig = spec.rig
     prep = prepare(trace)
     full = fit_model(Model.from_names(rig, true_names), prep.t, prep.y, prep.noise)
     # an effect that refines another is weighed against that one (Dahl friction against dry friction)
     refined = EFFECTS[effect].refines
-    without = fit_model(Model.from_names(rig, list(spec["base"]) + ([refined] if refined else [])),
+    without = fit_model(Model.from_names(rig, list(spec.base) + ([refined] if refined else [])),
                         prep.t, prep.y, prep.noise)
     oracle = full.bic - without.bic
-    r = identify(trace, rig.with_declared(tuple(spec["base"])))
+    r = identify(trace, rig.with_declared(tuple(spec.base)))
     return rig_name, effect, value, noise, seed, oracle, r.added_effects
 
 
@@ -104,7 +118,7 @@ def clean_case(args):
     rig_name, noise, seed = args
     spec = RIGS[rig_name]
     trace = make_trace(rig_name, {}, noise, seed)
-    r = identify(trace, spec["rig"].with_declared(tuple(spec["base"])))
+    r = identify(trace, spec.rig.with_declared(tuple(spec.base)))
     return rig_name, noise, seed, r.added_effects, "unmodeled_residual" in r.flags
 
 
@@ -112,8 +126,8 @@ def coverage_case(args):
     noise, seed = args
     spec = TORSION
     trace = make_trace("torsion", {}, noise, seed)
-    r = identify(trace, spec["rig"].with_declared(tuple(spec["base"])), Options(discover=False))
-    return noise, seed, (r.J - spec["J"]) / r.J_std
+    r = identify(trace, spec.rig.with_declared(tuple(spec.base)), Options(discover=False))
+    return noise, seed, (r.J - spec.J) / r.J_std
 
 
 def main() -> None:
@@ -134,7 +148,7 @@ def main() -> None:
 
     print("Discovery power (30 s torsion 17-bit, 40 s compound 14-bit, 200 Hz, noise 2e-4 rad; white / AR(1) 0.7)")
     print(f"{'rig':<9}{'effect':<16}{'strength':>10}{'noise':>10}{'oracle ΔBIC':>13}  found")
-    table = defaultdict(lambda: [0, 0])
+    table: defaultdict[tuple[str, str], list[int]] = defaultdict(lambda: [0, 0])  # (rig, effect) → [found, cases]
     for rig, eff, value, noise, _seed, oracle, added in power:
         found = eff in added
         wrong = [a for a in added if a != eff]

@@ -23,10 +23,10 @@ def one(kind: str, seed: int) -> dict:
     from gpiozero.pins.mock import MockFactory
 
     from drivers.clock import ScaledClock
-    from drivers.sensor import SimulatedAngleSensor
+    from drivers.sensor import AngleSensor, SimulatedAngleSensor
     from drivers.simrig import SimRig
     from drivers.solenoid import Solenoid
-    from firmware_host import Sequencer, SequencerConfig, State
+    from firmware_host import Event, Measurement, Sequencer, SequencerConfig, State
     from measurement import Pendulum, Rig
 
     rig = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
@@ -37,6 +37,7 @@ def one(kind: str, seed: int) -> dict:
     solenoid = Solenoid(17, max_on_time=0.5, pin_factory=factory)
     closers.append(solenoid.close)
     sim = SimRig(truth, theta0=0.25, clock=clock, duration=40.0).attach(solenoid)
+    sensor: AngleSensor
     if kind == "modbus":
         from drivers.encoder import ModbusEncoder
         from drivers.sim_encoder import SimEncoderConfig, SimEncoderServer
@@ -47,10 +48,14 @@ def one(kind: str, seed: int) -> dict:
         sensor = SimulatedAngleSensor(sim.angle, clock, rate=200.0, quantisation_bits=17, seed=seed)
     closers.append(sensor.close)
     marks: dict[str, float] = {}
-    results = []
+    results: list[Measurement] = []
     seq = Sequencer(clock=clock, solenoid=solenoid, sensor=sensor, rig=rig, sink=results.append,
                     config=SequencerConfig(capture_duration=30.0, sample_timeout=5.0))
-    seq.subscribe(lambda e: marks.setdefault(e.state.value, time.perf_counter()))
+
+    def mark(event: Event) -> None:  # wall time of each state's first entry
+        marks.setdefault(event.state.value, time.perf_counter())
+
+    seq.subscribe(mark)
     max_poll = 0.0
     try:
         seq.request_measurement("bench")
@@ -70,6 +75,7 @@ def one(kind: str, seed: int) -> dict:
     if not results:
         raise RuntimeError(f"{kind}: no result: {seq.last_fault}")
     m = results[0]
+    assert m.result.J is not None, "the torsion rig gives the stiffness: J is known"
     return {"kind": kind, "samples": len(m.trace), "capture_to_result": marks["PUBLISHING"] - marks["IDENTIFYING"],
             "max_poll_ms": 1e3 * max_poll, "J_error_pct": 100 * (m.result.J / truth.inertia - 1),
             "added": ",".join(m.result.added_effects) or "-"}

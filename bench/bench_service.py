@@ -100,17 +100,18 @@ def main() -> None:
         t_ident[count[0]] = time.perf_counter()
         return r
 
-    config = parse_config(doc, source="bench")
-    app = Appliance(config, identifier=stamped_identify, poll_interval=0.02)
-    app.start()
     t_stored: dict[int, float] = {}
-    orig_note = app._note_stored
 
-    def note(uuid: str) -> None:
-        t_stored[len(t_stored) + 1] = time.perf_counter()
-        orig_note(uuid)
+    class StampedAppliance(Appliance):
+        """Stamps the moment the store committed (bench instrumentation only)."""
 
-    app._note_stored = note  # stamp the moment the store committed (bench instrumentation only)
+        def _note_stored(self, uuid: str) -> None:
+            t_stored[len(t_stored) + 1] = time.perf_counter()
+            super()._note_stored(uuid)
+
+    config = parse_config(doc, source="bench")
+    app = StampedAppliance(config, identifier=stamped_identify, poll_interval=0.02)
+    app.start()
     main_loop = threading.Thread(target=app.run, daemon=True)
     main_loop.start()
 

@@ -67,12 +67,15 @@ def _worker(args: argparse.Namespace) -> None:
     t0 = time.perf_counter()
     first = identify(trace, rig, options) if args.warmup else None
     first_call = time.perf_counter() - t0
-    walls, cpus, r = [], [], first
+    walls: list[float] = []
+    cpus: list[float] = []
+    r = first
     for _ in range(args.repeat):
         t0, c0 = time.perf_counter(), time.process_time()
         r = identify(trace, rig, options)
         walls.append(time.perf_counter() - t0)
         cpus.append(time.process_time() - c0)
+    assert r is not None, "main() makes a worker time at least one call"
     print(json.dumps({"wall": walls, "cpu": cpus, "first_call": first_call if args.warmup else None,
                       "nfev": r.statistics["nfev"], "J": r.J, "added": list(r.added_effects)}))
 

@@ -67,7 +67,7 @@ def video_run(tmp: pathlib.Path, yaw_deg: float) -> dict:
     sw = swing()
     r = MarkerRenderer(CAMERA, MARKER, pose=CameraPose(yaw=math.radians(yaw_deg)), imaging=IMAGING, seed=11)
     path = tmp / f"swing{yaw_deg:g}.avi"
-    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 60.0, (640, 480), isColor=False)
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), 60.0, (640, 480), isColor=False)
     w.set(cv2.VIDEOWRITER_PROP_QUALITY, 95)
     for k in range(1200):
         w.write(r.render(sw.angle(k / 60.0)))
@@ -76,6 +76,7 @@ def video_run(tmp: pathlib.Path, yaw_deg: float) -> dict:
     trace = video_trace(path, CONFIG)
     t_video = time.perf_counter() - t0
     result = identify(trace, RIG)
+    assert result.J is not None and result.J_std is not None, "RIG gives the stiffness: J is known"
     err = trace.angle - sw.angle(trace.t)
     return {"J_err_pct": 100 * (result.J / J_TRUE - 1), "J_std_pct": 100 * result.J_std / J_TRUE,
             "yaw_deg": trace.meta["camera"]["yaw_deg"], "yaw_std_deg": trace.meta["camera"]["yaw_std_deg"],

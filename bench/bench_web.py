@@ -49,6 +49,8 @@ def main() -> None:
                "modbus": {"enabled": False}, "web": {"host": "127.0.0.1", "port": 0}}
         app = Appliance(parse_config(doc, source="bench"))
         app.start()
+        store = app.store
+        assert store is not None, "start() opens the store"
         import threading
         main_loop = threading.Thread(target=app.run, daemon=True)
         main_loop.start()
@@ -56,25 +58,25 @@ def main() -> None:
             app.command("trigger", "bench")
             if not app.wait_stored(1, 120):
                 raise RuntimeError("the simulated measurement did not finish")
-            first = app.store.latest()
+            first = store.latest()
             base = app.web.url.rstrip("/")
             _get(f"{base}/results/{first.uuid}/plot.png")  # waits for the plot worker
-            png, media = app.store.get_attachment(first.uuid, PLOT_NAME)
-            full = app.store.get(first.uuid, trace=True)
+            png, media = store.get_attachment(first.uuid, PLOT_NAME)
+            full = store.get(first.uuid, trace=True)
             t0 = time.perf_counter()
             uuids = [first.uuid]
             for i in range(STORED - 1):
-                m = app.store.record(
+                m = store.record(
                     status="ok", trigger="bench", device_id="bench", software_version=full.software_version,
                     started_at=full.started_at - 60.0 * (i + 1), finished_at=full.finished_at - 60.0 * (i + 1),
                     result=full.payload, build_payload=lambda uuid, seq: {**full.payload, "uuid": uuid, "seq": seq},
                     rig=full.rig, config=full.config, trace_t=full.trace_t, trace_angle=full.trace_angle,
                     trace_meta=full.trace_meta)
-                app.store.put_attachment(m.uuid, PLOT_NAME, png, media)
+                store.put_attachment(m.uuid, PLOT_NAME, png, media)
                 uuids.append(m.uuid)
             fill = time.perf_counter() - t0
             db = Path(state) / "results.db"
-            print(f"store: {app.store.count()} measurements with trace ({len(full.trace_t)} samples) and plot "
+            print(f"store: {store.count()} measurements with trace ({len(full.trace_t)} samples) and plot "
                   f"({len(png) / 1e3:.0f} kB) each, {db.stat().st_size / 1e6:.0f} MB; filled in {fill:.1f} s")
             rng = random.Random(1)
             page, html, plot = [], [], []

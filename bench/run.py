@@ -18,6 +18,8 @@ def main() -> int:
     for path in sorted(HERE.glob("bench_*.py")):
         print(f"=== {path.name}")
         spec = importlib.util.spec_from_file_location(path.stem, path)
+        # a .py path always gets a spec with the source loader; None is for suffixes no loader knows
+        assert spec is not None and spec.loader is not None, path
         module = importlib.util.module_from_spec(spec)
         # registered under its name: a bench that hands its functions to worker
         # processes (bench_discovery_power) pickles them by module and name

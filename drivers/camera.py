@@ -125,7 +125,7 @@ class V4L2Camera(Camera):
         if not self._cap.isOpened():
             self.close()
             raise DriverConfigError(f"camera: {device} cannot be opened as a V4L2 capture device (busy, or not a camera)")
-        self._cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*"MJPG"))
+        self._cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter.fourcc(*"MJPG"))
         self._cap.set(cv2.CAP_PROP_FRAME_WIDTH, model.width)
         self._cap.set(cv2.CAP_PROP_FRAME_HEIGHT, model.height)
         self._cap.set(cv2.CAP_PROP_FPS, model.fps)

@@ -322,6 +322,8 @@ def kernel(kind: str) -> ModuleType:
             tmp.write_text(src)
             os.replace(tmp, path)
         spec = importlib.util.spec_from_file_location(name, path)
+        # a .py path always gets a spec with the source loader; None is for suffixes no loader knows
+        assert spec is not None and spec.loader is not None, path
         mod = importlib.util.module_from_spec(spec)
         sys.modules[name] = mod  # numba's cache locates a function's module by name
         spec.loader.exec_module(mod)

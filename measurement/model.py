@@ -25,6 +25,9 @@ from .rig import Rig
 
 STATE_PARAMS = ("theta0", "omega0", "omega_n")
 
+#: a parameter vector: the float array the fitter iterates on, or a sequence of floats
+Vector = Sequence[float] | np.ndarray
+
 
 @dataclass(frozen=True)
 class Model:
@@ -82,10 +85,10 @@ class Model:
             return self.layout[name].start
         return self.names.index(name)
 
-    def value(self, x: Sequence[float], name: str) -> float:
+    def value(self, x: Vector, name: str) -> float:
         return float(x[self.index(name)])
 
-    def values(self, x: Sequence[float], effect: str) -> list[float]:
+    def values(self, x: Vector, effect: str) -> list[float]:
         """An effect's parameter values, in its ``parameters`` order."""
         return [float(v) for v in np.asarray(x)[self.layout[effect]]]
 
@@ -119,7 +122,7 @@ class Model:
         hi = self._per_parameter([np.inf, np.inf, np.inf], np.inf, lambda p: p.upper)
         return np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
 
-    def split(self, x: Sequence[float]) -> dict[str, list[float]]:
+    def split(self, x: Vector) -> dict[str, list[float]]:
         """Effect name → its parameter values, from a parameter vector."""
         return {e.name: self.values(x, e.name) for e in self.effects}
 
@@ -132,7 +135,7 @@ class Model:
             x[self.layout[e.name]] = effect_values.get(e.name, [0.0] * len(e.parameters))
         return x
 
-    def frequency_factor(self, x: Sequence[float], amplitude: float) -> float:
+    def frequency_factor(self, x: Vector, amplitude: float) -> float:
         """Highest swing frequency over ω_n at this amplitude (rad), from every effect's own knowledge."""
         w = self.value(x, "omega_n")
         f = 1.0
@@ -140,11 +143,11 @@ class Model:
             f *= e.frequency_factor(self.values(x, e.name), w, amplitude)
         return f
 
-    def max_step(self, x: Sequence[float], amplitude: float) -> float:
+    def max_step(self, x: Vector, amplitude: float) -> float:
         """Integration step (s) that keeps ω·h ≤ 0.05 at this amplitude (rad)."""
         return 0.05 / (max(self.value(x, "omega_n"), 1e-9) * self.frequency_factor(x, amplitude))
 
-    def dynamics(self, x: Sequence[float]) -> Dynamics:
+    def dynamics(self, x: Vector) -> Dynamics:
         return Dynamics(self.rig.kind, self.dynamic, [self.values(x, e.name) for e in self.dynamic])
 
     def sensor_columns(self, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -152,12 +155,12 @@ class Model:
         cols = [np.ones_like(t)[:, None]] + [e.sensor_basis(t, theta) for e in self.sensor]
         return np.hstack(cols)
 
-    def true_angle(self, x: Sequence[float], t: np.ndarray, max_step: float) -> tuple[np.ndarray, np.ndarray]:
+    def true_angle(self, x: Vector, t: np.ndarray, max_step: float) -> tuple[np.ndarray, np.ndarray]:
         """θ, θ' of the pendulum itself (no sensor terms) at times t."""
         return self.dynamics(x).integrate(t, self.value(x, "theta0"), self.value(x, "omega0"),
                                           self.value(x, "omega_n"), max_step)
 
-    def measured(self, x: Sequence[float], t: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    def measured(self, x: Vector, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """Measured angle θ + a + sensor terms (rad) from the true angle θ at times t."""
         if not self.sensor:  # the offset alone: the same sum without building a column of ones
             return theta + float(x[self.n_dynamic])

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Mapping, overload
 
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
@@ -103,7 +103,7 @@ class RigidBody:
         c = r - (m @ r) / m.sum()
         T = np.einsum("i,ij->ij", m, c).T @ c
         T = np.eye(3) * np.trace(T) - T
-        return cls(tuple(tuple(row) for row in T.tolist()), float(m.sum()))  # type: ignore[arg-type]
+        return cls(tuple(tuple(row) for row in T.tolist()), float(m.sum()))
 
     def inertia_about(self, axis: np.ndarray, through: np.ndarray | None = None) -> float:
         """Inertia about the line along ``axis`` (normalised here) through the point ``through`` (m, from
@@ -225,8 +225,15 @@ class Swing:
         self._spline = CubicHermiteSpline(t, theta, omega)
         self._final = float(theta[-1])
 
+    @overload
+    def angle(self, t_since_release: float) -> float: ...
+    @overload
+    def angle(self, t_since_release: np.ndarray) -> np.ndarray: ...
     def angle(self, t_since_release: float | np.ndarray) -> float | np.ndarray:
-        """True angle (rad) at time(s) after the release (s); θ0 before it."""
+        """True angle (rad) at time(s) after the release (s); θ0 before it.
+
+        A float time gives a float; an array of times, an array of its shape (a 0-d array counts as a float).
+        """
         ts = np.asarray(t_since_release, dtype=float)
         out = np.where(ts <= 0, self.theta0, self._spline(np.clip(ts, 0.0, self.duration)))
         out = np.where(ts > self.duration, self._final, out)

@@ -31,6 +31,7 @@ zero offset anyway.
 from __future__ import annotations
 
 import math
+from typing import overload
 
 import numpy as np
 
@@ -63,9 +64,17 @@ def angle_from_bearing(alpha: np.ndarray | float, radius: float, axis_dist: floa
     return float(out) if out.ndim == 0 else out
 
 
+@overload
+def angle_from_normalised(x: float, marker: MarkerGeometry, yaw: float = 0.0, rest_angle: float = 0.0) -> float: ...
+@overload
+def angle_from_normalised(x: np.ndarray, marker: MarkerGeometry, yaw: float = 0.0,
+                          rest_angle: float = 0.0) -> np.ndarray: ...
 def angle_from_normalised(x: np.ndarray | float, marker: MarkerGeometry, yaw: float = 0.0,
                           rest_angle: float = 0.0) -> np.ndarray | float:
     """Swing angle θ = φ − φ0 (rad) of the marker seen at ideal normalised image coordinate x.
+
+    A float x gives a float θ; an array of positions, an array of angles of its shape (a 0-d array counts
+    as a float).
 
     yaw: ψ, rad, of the optical axis from the camera–axis line.
     rest_angle: φ0, rad, the marker's surface angle at rest (sets L and the zero).
