@@ -31,7 +31,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, fields
 from enum import Enum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -42,6 +42,9 @@ from .clock import Clock, MonotonicClock
 from .errors import DriverConfigError, EncoderFault
 from .sensor import SampleBuffer
 from .modbus_words import WORD_ORDERS, from_registers
+
+if TYPE_CHECKING:  # as a type only: pymodbus is imported where a client is made
+    from pymodbus.client import AsyncModbusSerialClient
 
 log = logging.getLogger("moi.drivers.encoder")
 
@@ -202,6 +205,10 @@ def _send_immediately(client: Any) -> None:
     pymodbus keeps the pyserial port at ``client.ctx.transport.sync_serial``.
     """
     port = getattr(getattr(getattr(client, "ctx", None), "transport", None), "sync_serial", None)
+    if port is None:
+        log.warning("cannot disable Nagle (pymodbus keeps no port at client.ctx.transport.sync_serial): "
+                    "replies after a lost one may time out too")
+        return
     try:
         fd = port.fileno()
         with socket.fromfd(fd, socket.AF_INET, socket.SOCK_STREAM) as sock:  # a dup: closing it keeps the port
@@ -228,7 +235,7 @@ class ModbusEncoder:
         self._buffer = SampleBuffer()
         self._lock = self._buffer.lock  # also guards the counters
         self._io = LoopThread("moi-encoder-io")
-        self._client = None
+        self._client: AsyncModbusSerialClient | None = None
         self._task: asyncio.Task | None = None
         self._sampling = False
         self._closed = False
@@ -371,7 +378,7 @@ class ModbusEncoder:
             self._rx = bytearray(data)  # pymodbus hands over the whole receive buffer so far
         return data
 
-    def _new_client(self):
+    def _new_client(self) -> AsyncModbusSerialClient:
         from pymodbus.client import AsyncModbusSerialClient
         from pymodbus.framer import FramerType
         c = self.config
@@ -409,10 +416,11 @@ class ModbusEncoder:
         why = await self._connect()
         if why is not None:
             return ReadFailure(Failure.CONNECTION, why)
+        client = self._client
+        assert client is not None, "_connect() succeeded: the client is connected"
         c = self.config
         self._rx = bytearray()
-        read = (self._client.read_holding_registers if c.register_type == "holding"
-                else self._client.read_input_registers)
+        read = client.read_holding_registers if c.register_type == "holding" else client.read_input_registers
         t_send = self.clock.now()
         try:
             reply = await read(c.register, count=c.registers, device_id=c.device_id)
@@ -424,7 +432,7 @@ class ModbusEncoder:
             return ReadFailure(Failure.CONNECTION, f"link lost ({exc})")
         t_reply = self.clock.now()
         if reply.isError():
-            code = getattr(reply, "exception_code", None)
+            code = reply.exception_code
             meaning = {1: "illegal function", 2: "illegal data address", 3: "illegal data value",
                        4: "device failure", 6: "device busy"}.get(code, "exception")
             return ReadFailure(Failure.EXCEPTION, f"exception reply {code} ({meaning}) reading {c.registers} "
@@ -435,7 +443,7 @@ class ModbusEncoder:
         if c.registers == 1:
             value = regs[0]
         else:
-            value = from_registers(regs, "uint32", c.word_order)
+            value = int(from_registers(regs, "uint32", c.word_order))  # already an int: uint32 decodes to one
         with self._lock:
             self._counts["rtt_max_s"] = max(self._counts["rtt_max_s"], t_reply - t_send)
         return 0.5 * (t_send + t_reply), value, t_reply - t_send

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from typing import Callable
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
@@ -141,12 +142,12 @@ def _envelope_law(times: np.ndarray, amps: np.ndarray) -> tuple[str | None, dict
     """Which decay law fits the peak amplitudes best: exponential, linear, hyperbolic."""
     if amps.size < 5:
         return None, {}
-    laws = {
+    laws: dict[str, tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]] = {  # law: (linearised A, back to A)
         "exponential (viscous)": (np.log(amps), np.exp),
         "linear (coulomb)": (amps, lambda v: v),
         "hyperbolic (quadratic drag)": (1.0 / amps, lambda v: 1.0 / v),
     }
-    errors = {}
+    errors: dict[str, float] = {}  # law's first word: relative RMS misfit of the amplitudes
     for law, (z, back) in laws.items():
         coef = np.polyfit(times, z, 1)
         lin = np.polyval(coef, times)
@@ -155,7 +156,7 @@ def _envelope_law(times: np.ndarray, amps: np.ndarray) -> tuple[str | None, dict
             continue
         pred = back(lin)
         errors[law.split(" ")[0]] = float(np.sqrt(np.mean((pred - amps) ** 2)) / np.mean(amps))
-    best = min(errors, key=errors.get)
+    best = min(errors, key=errors.__getitem__)
     runner_up = min(v for k, v in errors.items() if k != best)
     # Over a small decay the three laws look alike; name one only when the
     # amplitude fell by a third and the best law fits clearly better.
@@ -194,10 +195,14 @@ def _decrement(peaks: np.ndarray) -> tuple[tuple[float, float, float], tuple[flo
     try:
         cov = float(resid @ resid) / dof * np.linalg.pinv(X.T @ X)
     except np.linalg.LinAlgError:
-        return tuple(float(c) for c in coef), (0.0, 0.0, 0.0)
+        return _three(coef), (0.0, 0.0, 0.0)
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
     tv = np.where(se > 0, coef / np.where(se > 0, se, 1.0), 0.0)
-    return tuple(float(c) for c in coef), tuple(float(v) for v in tv)
+    return _three(coef), _three(tv)
+
+
+def _three(v: np.ndarray) -> tuple[float, float, float]:
+    return float(v[0]), float(v[1]), float(v[2])
 
 
 def structure_test(fit: ModelFit, line_hz: float | None) -> tuple[float, float]:
@@ -221,17 +226,17 @@ def structure_test(fit: ModelFit, line_hz: float | None) -> tuple[float, float]:
     rate = np.gradient(theta, t)
     amp = max(float(np.max(np.abs(theta))), 1e-12)
     rate_scale = max(float(np.max(np.abs(rate))), 1e-12)
-    line = line_hz is not None and line_hz > 0
+    peak_hz = line_hz if line_hz is not None and line_hz > 0 else None
     # the columns written in place: a list of 11 to 15 arrays stacked would be copied once more
-    X = np.empty((n, 11 + 4 * line))
+    X = np.empty((n, 11 if peak_hz is None else 15))
     a, w = theta / amp, rate / rate_scale
     tau2 = tau * tau
     X[:, 0], X[:, 1], X[:, 2] = a, a * tau, a * tau2
     X[:, 3], X[:, 4], X[:, 5] = w, w * tau, w * tau2
     X[:, 6], X[:, 7] = a * a, a * a * a
     X[:, 8], X[:, 9], X[:, 10] = tau, tau2, tau2 * tau
-    if line:
-        arg = 2 * math.pi * line_hz * (t - t[0])
+    if peak_hz is not None:
+        arg = 2 * math.pi * peak_hz * (t - t[0])
         c, s = np.cos(arg), np.sin(arg)
         X[:, 11], X[:, 12], X[:, 13], X[:, 14] = c, s, tau * c, tau * s
     X -= X.mean(axis=0)

@@ -277,7 +277,7 @@ class Viscous(Effect):
 class Coulomb(Effect):
     name = "coulomb"
     role = "damping"
-    parameters = (
+    parameters: ClassVar[tuple[Parameter, ...]] = (  # any length: Dahl friction adds its pre-sliding angle
         Parameter("Tc_per_J", "rad/s²", "Tc", "N·m", description="friction torque over J (compound: μ·m·g/J)"),
     )
     cause = "dry (bearing) friction"

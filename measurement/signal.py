@@ -174,11 +174,11 @@ def spike_candidates(angle: np.ndarray, sigma: float, threshold: float = 8.0,
     # parabola through the three samples inward of it, the inner one first, before the interior
     # (a tracker that starts on the wrong blob gives a record whose first samples jump by a
     # large angle, and the interior test would then blame their good neighbours).
-    typical = None if t is None else float(np.median(np.diff(t)))
+    typical = math.inf if t is None else float(np.median(np.diff(t)))  # sampling interval, s (no times: no gaps)
     for j in (1, 0, n - 2, n - 1):
         step = 1 if j < n // 2 else -1
         nodes = [j + step, j + 2 * step, j + 3 * step]
-        if typical is not None and np.max(np.abs(np.diff(t[[j] + nodes]))) > 3 * typical:
+        if t is not None and np.max(np.abs(np.diff(t[[j] + nodes]))) > 3 * typical:
             continue  # no extrapolation across a gap (the window's gap rule judges what lies beyond)
         d = _lagrange_deviation(t, y, j, nodes)
         if abs(d) / (_EDGE_GAIN * sigma) >= threshold:

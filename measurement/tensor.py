@@ -100,13 +100,13 @@ _PART_KEYS = {"name", "mass", "mass_std", "poi_convention"}
 _ORIENTATION_KEYS = {"name", "axis", "offset", "offset_std"}
 
 
-def design_row(axis: Sequence[float]) -> np.ndarray:
+def design_row(axis: Sequence[float] | np.ndarray) -> np.ndarray:
     """a(n) = [nx², ny², nz², 2nxny, 2nxnz, 2nynz] of a unit axis: I_n = a(n)·x."""
     nx, ny, nz = (float(v) for v in axis)
     return np.array([nx * nx, ny * ny, nz * nz, 2 * nx * ny, 2 * nx * nz, 2 * ny * nz])
 
 
-def matrix_of(x: Sequence[float]) -> np.ndarray:
+def matrix_of(x: Sequence[float] | np.ndarray) -> np.ndarray:
     """The 3×3 inertia matrix from (Txx, Tyy, Tzz, Txy, Txz, Tyz)."""
     xx, yy, zz, xy, xz, yz = (float(v) for v in x)
     return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
@@ -413,8 +413,8 @@ def axis_reading(results: Sequence[Mapping[str, Any]], shared: RigShared,
         return AxisReading(None, None, None, len(results), pooled.used, pooled.excluded, reasons)
     u_random = max(pooled.u_typeA or 0.0, pooled.u_fit or 0.0)
     own = max(readings[i].u_systematic for i in pooled.used)
-    rig_J = [results[i].get("J") for i in pooled.used]
-    rig_inertia = float(np.mean([float(j) for j in rig_J])) if all(j is not None for j in rig_J) else None
+    rig_J = [float(j) for i in pooled.used if (j := results[i].get("J")) is not None]
+    rig_inertia = float(np.mean(rig_J)) if len(rig_J) == len(pooled.used) else None  # only when every release has it
     return AxisReading(pooled.mean, math.hypot(u_random, own), rig_inertia, len(results), pooled.used, pooled.excluded)
 
 
@@ -497,12 +497,12 @@ class TensorResult:
         L.append("[[Orientations]]")
         L.append(f"    {'name':8}{'axis':>26}{'J axis':>14}{'−m·d⊥²':>12}{'J cm':>14}{'± u':>10}{'nᵀTn':>14}{'z':>7}")
         for o in self.orientations:
-            ax = "[" + ", ".join(f"{v:+.3f}" for v in o["axis"]) + "]"
+            axis = "[" + ", ".join(f"{v:+.3f}" for v in o["axis"]) + "]"
             if o.get("excluded"):
-                L.append(f"    {o['name']:8}{ax:>26}   excluded: {o['excluded']}")
+                L.append(f"    {o['name']:8}{axis:>26}   excluded: {o['excluded']}")
                 continue
             z = o.get("normalised_residual")
-            L.append(f"    {o['name']:8}{ax:>26}{o['J_axis']:>14.6g}{-o['parallel_axis'] or 0.0:>12.3g}{o['J']:>14.6g}"
+            L.append(f"    {o['name']:8}{axis:>26}{o['J_axis']:>14.6g}{-o['parallel_axis'] or 0.0:>12.3g}{o['J']:>14.6g}"
                      f"{o['u']:>10.2g}{o['fitted']:>14.6g}{'' if z is None else f'{z:+.2f}':>7}")
         if self.dof:
             L.append(f"    χ² = {self.chi2:.3g} for {self.dof} dof (99 % point {self.chi2_limit:.3g}); plan condition "
@@ -545,22 +545,23 @@ def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigS
         raise TensorError(f"the plan has {len(plan.orientations)} orientations but {len(readings)} readings were given")
     used: list[int] = []
     excluded: dict[int, str] = {}
+    own: list[tuple[float, float, float]] = []  # of each used orientation: J about its axis, its σ, the rig's J
     for i, r in enumerate(readings):
         if r is None or r.invalid is not None or r.value is None or r.u is None:
             excluded[i] = "not measured" if r is None else (r.invalid or "no value")
         else:
             used.append(i)
+            own.append((float(r.value), float(r.u), float(r.rig_inertia if r.rig_inertia is not None else r.value)))
     rank, cond = plan_geometry([plan.orientations[i].axis for i in used])
     if rank < 6 or cond > MAX_CONDITION:
         raise TensorError(f"the orientations left ({len(used)}: {', '.join(plan.orientations[i].name for i in used)}) "
                           f"cannot determine the tensor (rank {rank} of 6); excluded: "
                           + "; ".join(f"{plan.orientations[i].name} ({why})" for i, why in excluded.items()))
     ors = [plan.orientations[i] for i in used]
-    rd = [readings[i] for i in used]
     A = np.array([design_row(o.axis) for o in ors])
     m = plan.mass or 0.0
-    J_axis = np.array([float(r.value) for r in rd])  # type: ignore[union-attr,arg-type]
-    u_own = np.array([float(r.u) for r in rd])  # type: ignore[union-attr,arg-type]
+    J_axis = np.array([j for j, _, _ in own])
+    u_own = np.array([u for _, u, _ in own])
     # the parallel-axis step and its sensitivities to the mass (common) and the offset (own)
     dperp2 = np.array([axis_offset_inertia(1.0, o.axis, plan.offset_vector(o)) for o in ors])
     correction = m * dperp2
@@ -568,8 +569,7 @@ def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigS
                                 * np.asarray(o.axis)) for o in ors])
     u_offset2 = np.array([o.offset_std**2 for o in ors]) * np.sum(grad_d**2, axis=1)
     b = J_axis - correction
-    rig_J = np.array([float(r.rig_inertia) if r.rig_inertia is not None else float(r.value)  # type: ignore[union-attr]
-                      for r in rd])
+    rig_J = np.array([j for _, _, j in own])
     s = shared.scale_rel * rig_J
     V = np.diag(u_own**2 + u_offset2) + np.outer(s, s) + shared.tare_std**2 + plan.mass_std**2 * np.outer(dperp2, dperp2)
     if not np.all(np.diag(V) > 0):
@@ -582,11 +582,11 @@ def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigS
     x, *_ = np.linalg.lstsq(At, bt, rcond=None)
     C = np.linalg.inv(At.T @ At)
     C = (C + C.T) / 2
-    r = b - A @ x
+    resid = b - A @ x
     dof = len(used) - 6
     chi2 = float(np.sum((bt - At @ x) ** 2)) if dof else 0.0  # rounding's, not the data's, when exactly determined
     var_r = np.diag(V - A @ C @ A.T)
-    z = [float(ri / math.sqrt(vr)) if vr > 1e-9 * vii else None for ri, vr, vii in zip(r, var_r, np.diag(V))]
+    z = [float(ri / math.sqrt(vr)) if vr > 1e-9 * vii else None for ri, vr, vii in zip(resid, var_r, np.diag(V))]
 
     signs = convention_signs(plan.poi_convention)
     comp = x * signs
@@ -654,9 +654,9 @@ def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigS
         part=plan.part, poi_convention=plan.poi_convention, tensor=T,
         components=dict(zip(COMPONENTS, comp.tolist())), cov=cov, U=dict(zip(COMPONENTS, U.tolist())),
         coverage_factor=coverage_factor,
-        principal_moments=tuple(lam.tolist()), principal_moments_U=tuple(lam_U.tolist()),  # type: ignore[arg-type]
+        principal_moments=tuple(lam.tolist()), principal_moments_U=tuple(lam_U.tolist()),
         principal_axes=tuple(tuple(Vec[:, k].tolist()) for k in range(3)),
-        principal_axes_U_deg=tuple(ang_U.tolist()),  # type: ignore[arg-type]
+        principal_axes_U_deg=tuple(ang_U.tolist()),
         condition_number=cond, chi2=chi2, dof=dof, chi2_limit=chi2_limit, orientations=tuple(rows),
         flags=tuple(flags), reasons=reasons, mass=plan.mass,
         monte_carlo={"draws": draws, "seed": seed, "coverage": coverage},

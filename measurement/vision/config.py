@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Literal, Mapping, overload
 
 import numpy as np
 
@@ -57,7 +57,14 @@ def _integer(table: str, key: str, value: Any, unit: str) -> int:
     return int(value)
 
 
+@overload
+def _table(doc: Mapping[str, Any], name: str, keys: tuple[str, ...], required: Literal[True]) -> Mapping[str, Any]: ...
+@overload
+def _table(doc: Mapping[str, Any], name: str, keys: tuple[str, ...],
+           required: Literal[False]) -> Mapping[str, Any] | None: ...
 def _table(doc: Mapping[str, Any], name: str, keys: tuple[str, ...], required: bool) -> Mapping[str, Any] | None:
+    """The table ``name`` of ``doc``, checked for unknown (and, if required, missing) keys; None when an
+    optional table is absent (a required one raises VisionError)."""
     t = doc.get(name)
     if t is None:
         if required:
@@ -199,11 +206,11 @@ class CameraConfig:
         dist = c["distortion"]
         if not isinstance(dist, list) or len(dist) != 5:
             raise VisionError(f"camera file: [camera] distortion must be a list of 5 numbers [k1, k2, p1, p2, k3], got {dist!r}")
-        distortion = tuple(_number("camera", f"distortion[{i}]", d, "", positive=False) for i, d in enumerate(dist))
+        k1, k2, p1, p2, k3 = (_number("camera", f"distortion[{i}]", d, "", positive=False) for i, d in enumerate(dist))
         camera = CameraModel(
             width=width, height=height, fps=_number("camera", "fps", c["fps"], "frames/s"),
             fx=_number("camera", "fx", c["fx"], "px"), fy=_number("camera", "fy", c["fy"], "px"),
-            cx=cx, cy=cy, distortion=distortion,  # type: ignore[arg-type]
+            cx=cx, cy=cy, distortion=(k1, k2, p1, p2, k3),
         )
         marker = MarkerGeometry(radius=_number("marker", "radius", m["radius"], "m"),
                                 distance=_number("marker", "distance", m["distance"], "m"))

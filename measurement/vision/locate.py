@@ -173,7 +173,7 @@ class MarkerTracker:
         g[:, 1:-1] = f[:, 2:] - f[:, :-2]
         k = min(s.search_rows, img.shape[0] - (1 - img.shape[0] % 2))
         tall = cv2.blur(g, (1, k), borderType=cv2.BORDER_CONSTANT) if k > 1 else g
-        i, j = np.unravel_index(int(np.argmax(np.abs(tall))), tall.shape)
+        i, j = (int(n) for n in np.unravel_index(int(np.argmax(np.abs(tall))), tall.shape))
         peak = float(tall[i, j])
         polarity = 1 if peak > 0 else -1
         # the vertical run of rows along which this edge continues (it may lean or bend slightly)
@@ -195,7 +195,7 @@ class MarkerTracker:
             return "no vertical edge in the frame"
         r0, r1 = min(rows), max(rows) + 1
         contrast = float(np.median((polarity * g[r0:r1, max(j - half, 1):min(j + half + 1, img.shape[1] - 1)]).max(axis=1)))
-        return (r0, r1), int(j), polarity, contrast
+        return (r0, r1), j, polarity, contrast
 
     # -- measure ----------------------------------------------------------
     def _measure(self, img: np.ndarray, rows: tuple[int, int], c0: int, c1: int, polarity: int,
@@ -209,7 +209,7 @@ class MarkerTracker:
             return MarkerObservation(False, LOST, "the marker window left the image", roi=roi_box)
         raw = img[r0:r1, c0:c1]
         stale = self._stale_rows(raw, r0, c0)
-        roi = raw.astype(np.float32)
+        roi: np.ndarray = raw.astype(np.float32)
         if s.smooth_rows > 1:
             roi = cv2.blur(roi, (1, s.smooth_rows), borderType=cv2.BORDER_REPLICATE)
         g = polarity * (roi[:, 2:] - roi[:, :-2])  # gradient at columns c0+1 … c1−2
@@ -284,6 +284,7 @@ class MarkerTracker:
         if why:
             self._locked = False
             return MarkerObservation(False, CORRUPT, why)
+        assert frame is not None, "check_frame passed it: a grey image of the camera's size"
         try:
             return self._locate(frame, keep_points)
         finally:
@@ -295,6 +296,7 @@ class MarkerTracker:
     def _locate(self, img: np.ndarray, keep_points: bool) -> MarkerObservation:
         s = self.settings
         if self._locked and s.track:
+            assert self._last_u is not None and self._rows is not None, "a lock (_update) has the marker's column and rows"
             pred = self._last_u + self._velocity
             half = s.roi_half_width + int(math.ceil(2 * abs(self._velocity)))
             c = int(round(pred))

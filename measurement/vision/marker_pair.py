@@ -212,7 +212,7 @@ def measure_view(a: np.ndarray, b: np.ndarray) -> PairView:
         separation=float(np.median(dist)), radius_scatter=float(np.std(corrected) / np.mean(corrected)),
         distance_pattern=pattern,
         samples=int(keep.sum()), rejected=int((~keep).sum()),
-        matrix=tuple(float(x) for x in s.ravel()),
+        matrix=(float(s[0, 0]), float(s[0, 1]), float(s[1, 0]), float(s[1, 1])),  # row-major
     )
 
 

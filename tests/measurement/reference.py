@@ -14,6 +14,18 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 
+class _Turn:
+    """solve_ivp event: the velocity crossing zero in ``direction``; it ends the integration (a turning point)."""
+
+    terminal = True
+
+    def __init__(self, direction: float):
+        self.direction = direction
+
+    def __call__(self, _t: float, z: np.ndarray) -> float:
+        return z[1]
+
+
 def reference_motion(kind: str, omega_n: float, t: np.ndarray, theta0: float, *, viscous: float = 0.0,
                      coulomb: float = 0.0, quadratic: float = 0.0, cubic: float = 0.0,
                      extra=None) -> np.ndarray:
@@ -42,12 +54,8 @@ def reference_motion(kind: str, omega_n: float, t: np.ndarray, theta0: float, *,
             x, v = z
             return [v, -restoring(x) - viscous * v - s * friction(x) - quadratic * s * v * v]
 
-        def turn(_, z):
-            return z[1]
-        turn.terminal = True
-        turn.direction = -s  # velocity crossing zero away from s
         sol = solve_ivp(rhs, (t0, t_end), [x0, v0], method="DOP853", rtol=1e-12, atol=1e-14,
-                        events=turn, dense_output=True, first_step=1e-6)
+                        events=_Turn(direction=-s), dense_output=True, first_step=1e-6)
         seg = (t >= t0) & (t <= sol.t[-1])
         out[seg] = sol.sol(t[seg])[0]
         if sol.status != 1:

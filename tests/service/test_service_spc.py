@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from typing import Any, Callable
 
 import pytest
 
@@ -12,6 +13,11 @@ from service.persistence.store import Store
 
 RECIPE = {"name": "disc", "number": 3, "version": "abc123", "quantity": "J", "nominal": 12.0, "lower": 8.0,
           "upper": 16.0, "coverage_factor": 2.0}
+
+
+def _returning(payload: dict[str, Any]) -> Callable[[str, int], dict[str, Any]]:
+    """A ``build_payload`` for a payload made beforehand (whatever the uuid and sequence number)."""
+    return lambda uuid, seq: payload
 
 
 def add_part(store: Store, t: float, serial: str, values: list[float], verdict: str = "OK",
@@ -25,10 +31,10 @@ def add_part(store: Store, t: float, serial: str, values: list[float], verdict: 
                 "quantity": "J", "reasons": [], "verdict": verdict} if complete else None
         release = {"index": i, "of": n, "verdict": "OK", "value": v, "u_c": 0.05, "quantity": "J", "reasons": [],
                    "part_uuid": f"pu-{serial}"}
-        payload = {"part_id": serial, "recipe": recipe, "release": release, "part": part,
+        payload: dict[str, Any] = {"part_id": serial, "recipe": recipe, "release": release, "part": part,
                    "verdict": verdict if complete else None, "calibration": {"date": "2026-01-01", "due": False}}
         store.record(status="ok", trigger="modbus", device_id="d", software_version="test", started_at=t,
-                     finished_at=t + i, result={"J": v, "flags": []}, build_payload=lambda u, s, p=payload: p,
+                     finished_at=t + i, result={"J": v, "flags": []}, build_payload=_returning(payload),
                      part={"part_id": serial, "part_uuid": f"pu-{serial}", "recipe": recipe["name"],
                            "recipe_version": recipe["version"], "release_index": i, "releases": n,
                            "verdict": "OK", "part_verdict": verdict if complete else None,
