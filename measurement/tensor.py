@@ -613,7 +613,8 @@ def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigS
     reasons: dict[str, str] = {}
     chi2_limit = float(chi2_dist.ppf(CHI2_PROBABILITY, dof)) if dof > 0 else None
     if chi2_limit is not None and chi2 > chi2_limit:
-        worst = max((k for k in range(len(z)) if z[k] is not None), key=lambda k: abs(z[k]), default=None)  # type: ignore[arg-type]
+        size = {k: abs(zk) for k, zk in enumerate(z) if zk is not None}  # orientation: |normalised residual|
+        worst = max(size, key=size.__getitem__, default=None)
         who = ""
         if worst is not None:
             o = ors[worst]
