@@ -38,7 +38,7 @@ from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_
 from service.config.schema import REQUIRED, Checker as _Checker, Key, doc as _doc, schema as _schema
 from service.errors import ConfigError
 from service.sources.files import read_rig, read_toml
-from service.publish.modbus.settings import ModbusSettings, allowed_networks
+from service.publish.modbus.settings import RESULT_HANDSHAKES, ModbusSettings, allowed_networks
 from service.publish.mqtt.settings import MqttSettings
 from service.publish.modbus.registers import WORD_ORDERS
 from service.publish.web.settings import WebSettings
@@ -266,6 +266,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "parity": _doc("RTU parity", choices=("N", "E", "O")),
         "stopbits": _doc("RTU stop bits", choices=(1, 2)),
         "bytesize": _doc("RTU data bits", choices=(7, 8)),
+        "result_handshake": _doc("\"latest\": the result block shows the latest result (read seq before and after); "
+                                 "\"ack\": results queue until the PLC acknowledges each in register result_ack "
+                                 "(docs/modbus.md)", choices=RESULT_HANDSHAKES),
+        "queue_depth": _doc("result_handshake = \"ack\": results queued for the PLC at most; one more is counted "
+                            "in overrun_count", min=1, max=1000),
+        "plc_heartbeat_timeout": _doc("the PLC's heartbeat register (114) unchanged this long raises "
+                                      "plc_heartbeat_lost, s (0: no watchdog)", min=0, max=3600),
     }, extra={"enabled": Key("bool", True, "serve the registers")}),
     "web": _schema(WebSettings, {
         "host": _doc("listen address: 127.0.0.1 this machine only, 0.0.0.0 every interface (the LAN)"),

@@ -28,6 +28,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from service.parts.recipes import PartTracker, Recipe
     from service.persistence.store import Store, StoredMeasurement
     from service.publish.modbus.registers import LiveStatus
+    from service.publish.replies import ReplyTo
 
 
 @dataclass(frozen=True)
@@ -179,8 +180,10 @@ class ApplianceView:
         """Each publisher's health under its name (None when it is off), for the health page."""
         return self._app.publisher_health()
 
-    def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
-        self._app.command(name, source, data)
+    def command(self, name: str, source: str, data: Mapping[str, Any] | None = None,
+                reply: ReplyTo | None = None) -> None:
+        """Queue a command (``Appliance.command``); ``reply`` hears its outcome on the main loop thread."""
+        self._app.command(name, source, data, reply)
 
     def call_soon(self, fn: Callable[[], Any]) -> concurrent.futures.Future:
         return self._app.call_soon(fn)
