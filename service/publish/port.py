@@ -1,6 +1,6 @@
 """The publisher port: what the daemon knows of a way the appliance tells the plant.
 
-A publisher (the Modbus server, the MQTT client, the web page; next an OPC UA
+A publisher (the Modbus server, the MQTT client, the web page, the OPC UA
 server) is one class with ``NAME`` (its configuration table, and its name in
 the logs and on the health page), a ``build(settings, appliance)`` class
 method, and the hooks below; every hook has a default that does nothing, so a
@@ -47,11 +47,12 @@ class PublisherEntry:
 
 
 #: in start order: Modbus first (the PLC sees STARTING while the devices open), the web page once the
-#: sequencer exists, MQTT last (its outbox sender delivers at once)
+#: sequencer exists, MQTT (its outbox sender delivers at once), OPC UA
 PUBLISHERS: tuple[PublisherEntry, ...] = (
     PublisherEntry("modbus", "service.publish.modbus.server"),
     PublisherEntry("web", "service.publish.web.server", in_health=False),
     PublisherEntry("mqtt", "service.publish.mqtt.client"),
+    PublisherEntry("opcua", "service.publish.opcua.server"),
 )
 
 

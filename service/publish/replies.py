@@ -35,6 +35,7 @@ REASONS: dict[str, Reason] = {
     "no_tensor_set": Reason(8, "no tensor set runs"),
     "unknown_command": Reason(9, "the command is not one the appliance knows"),
     "measurement_failed": Reason(10, "the measurement ended in FAULT or was aborted: no result"),
+    "duplicate": Reason(11, "a command with this id was received already (QoS 1 may deliver twice): done once"),
 }
 
 #: the statuses of a reply, in the order a trigger goes through them
