@@ -10,6 +10,7 @@ import argparse
 import json
 import math
 import sys
+from typing import Sequence
 
 from service.publish.modbus import registers as R
 from service.sources.files import read_text, write_text_atomic
@@ -61,7 +62,7 @@ def _read(args: argparse.Namespace) -> int:
     return 0
 
 
-def read_document(words: list[int], word_order: str) -> dict:
+def read_document(words: Sequence[int], word_order: str) -> dict:
     """What ``--read`` prints: the registers as read (``raw``: address → word) and their values (``decoded``:
     names and units; NaN as null, so the output is strict JSON; bit fields as lists of names)."""
     values = R.decode_image(words, word_order)

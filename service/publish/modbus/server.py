@@ -257,7 +257,7 @@ class ModbusServer(Publisher):
         if settings.word_order not in R.WORD_ORDERS:
             raise ValueError(f"word_order must be one of {R.WORD_ORDERS}")
         self.settings = settings
-        self._on_command = on_command or (lambda name, source, data=None: None)
+        self._on_command: Callable[..., None] = on_command or (lambda name, source, data=None, reply=None: None)
         self.recipe_numbers = recipe_numbers
         self._lock = threading.Lock()
         self._clock = clock

@@ -32,7 +32,7 @@ import math
 import socket
 import time
 from collections import OrderedDict
-from datetime import datetime, timezone
+from datetime import datetime, UTC
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -67,7 +67,7 @@ RESULT_EVALUATION: dict[str, int] = {"Undefined": 0, "OK": 1, "NotOK": 2, "NotDe
 
 #: the value of a variable before the first result (OPC UA has no null scalar of these types)
 _EMPTY: dict[ua.VariantType, Any] = {ua.VariantType.String: "", ua.VariantType.Int32: 0,
-                                     ua.VariantType.DateTime: datetime(1970, 1, 1, tzinfo=timezone.utc)}
+                                     ua.VariantType.DateTime: datetime(1970, 1, 1, tzinfo=UTC)}
 
 #: the method's wait for a result is limited to this, ms
 MAX_TIMEOUT_MS = 60_000
@@ -233,9 +233,10 @@ class OpcUaServer(Publisher):
         di = await server.register_namespace(NS_DI)
 
         def nid(name: str) -> ua.NodeId:
-            return ua.NodeId(f"{self.device_id}.{name}", idx)
+            return ua.NodeId(ua.String(f"{self.device_id}.{name}"), ua.Int16(idx))
 
-        machines = await server.nodes.objects.add_folder(ua.NodeId("Machines", idx), ua.QualifiedName("Machines", mach))
+        machines = await server.nodes.objects.add_folder(ua.NodeId(ua.String("Machines"), ua.Int16(idx)),
+                                                         ua.QualifiedName("Machines", mach))
         machine = await machines.add_object(nid("Machine"), ua.QualifiedName(self.device_id, idx))
         ident = await machine.add_object(nid("Identification"), ua.QualifiedName("Identification", di))
         for name, value in (("Manufacturer", ua.LocalizedText(s.manufacturer)), ("Model", ua.LocalizedText(s.model)),
@@ -281,7 +282,7 @@ class OpcUaServer(Publisher):
         def arg(name: str, vtype: ua.VariantType, description: str, array: bool = False) -> ua.Argument:
             a = ua.Argument()
             a.Name = name
-            a.DataType = ua.NodeId(vtype.value)
+            a.DataType = ua.NodeId(ua.Int32(vtype.value))
             a.ValueRank = 1 if array else -1
             a.ArrayDimensions = [0] if array else []
             a.Description = ua.LocalizedText(description)
@@ -306,7 +307,7 @@ class OpcUaServer(Publisher):
             [("ResultId", ua.VariantType.String), ("ResultEvaluation", ua.VariantType.Int32),
              ("PartId", ua.VariantType.String), ("ExternalRecipeId", ua.VariantType.String),
              ("Result", ua.VariantType.String)])
-        self._event = await server.get_event_generator(etype, rm)
+        self._event = await server.get_event_generator(etype, rm.nodeid)
 
     def stop(self, timeout: float = 5.0) -> None:
         if not self._io.running:
@@ -337,39 +338,39 @@ class OpcUaServer(Publisher):
 
     async def _get_latest(self, parent: ua.NodeId, *args: Any) -> Any:
         if len(args) != 1 or (timeout := self._int32(args[0])) is None:
-            return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+            return _bad(ua.StatusCodes.BadInvalidArgument)
         if not self._results and timeout > 0 and self._new_result is not None:
             try:
                 await asyncio.wait_for(self._new_result.wait(), min(timeout, MAX_TIMEOUT_MS) / 1000)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 pass
         if not self._results:
             if self.store is not None:
                 last = await asyncio.to_thread(self.store.latest, "ok")
                 if last is not None and last.payload is not None:
                     return self._outputs(result_document(last.payload), handle=True)
-            return ua.StatusCode(ua.StatusCodes.BadNoData)
+            return _bad(ua.StatusCodes.BadNoData)
         return self._outputs(next(reversed(self._results.values())), handle=True)
 
     async def _get_by_id(self, parent: ua.NodeId, *args: Any) -> Any:
         result_id = getattr(args[0], "Value", None) if args else None
         if len(args) not in (1, 2) or not isinstance(result_id, str) or not result_id:
-            return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+            return _bad(ua.StatusCodes.BadInvalidArgument)
         doc = self._results.get(result_id)
         if doc is None and self.store is not None and len(result_id) == 36:
             stored = await asyncio.to_thread(self.store.get, result_id)
             if stored is not None and stored.uuid == result_id and stored.payload is not None:
                 doc = result_document(stored.payload)
         if doc is None:
-            return ua.StatusCode(ua.StatusCodes.BadNotFound)
+            return _bad(ua.StatusCodes.BadNotFound)
         return self._outputs(doc, handle=False)
 
     async def _acknowledge(self, parent: ua.NodeId, *args: Any) -> Any:
         ids = getattr(args[0], "Value", None) if len(args) == 1 else None
         if not isinstance(ids, list) or not ids or not all(isinstance(i, str) for i in ids):
-            return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+            return _bad(ua.StatusCodes.BadInvalidArgument)
         if any(i not in self._unacknowledged for i in ids):
-            return ua.StatusCode(ua.StatusCodes.BadNotFound)  # none is acknowledged
+            return _bad(ua.StatusCodes.BadNotFound)  # none is acknowledged
         for i in ids:
             del self._unacknowledged[i]
         await self._nodes["unacknowledged"].write_value(ua.Variant(len(self._unacknowledged), ua.VariantType.UInt32))
@@ -454,6 +455,11 @@ class OpcUaServer(Publisher):
         server = cls(settings, cfg.device_id, cfg.state_dir, software_version=appliance.software_version,
                      store=appliance.store)
         return server
+
+
+def _bad(code: int) -> ua.StatusCode:
+    """A method's Bad status code (the client's call raises it)."""
+    return ua.StatusCode(ua.UInt32(code))
 
 
 def _log_failure(fut: Any) -> None:
