@@ -190,3 +190,47 @@ def test_modbus_map_read_prints_strict_json_with_raw_and_decoded_apart(plc, caps
         name for name, _ in R.ERROR_CODES.values())
     assert not srv.acknowledge(0)  # (the queue holds 41: only its seq acknowledges it)
     assert srv.acknowledge(41)
+
+
+def test_the_daemon_answers_the_command_register_and_a_restart_queues_what_the_plc_did_not_acknowledge(
+        tmp_path, appliance_factory):
+    from .conftest import appliance_doc, wait_until
+
+    doc = appliance_doc(tmp_path / "state", modbus={"result_handshake": "ack", "queue_depth": DEPTH})
+    app = appliance_factory(doc)
+    c = ModbusTcpClient("127.0.0.1", port=app.app.modbus.bound_port, timeout=3, retries=0)
+    assert c.connect()
+    try:
+        for n in (1, 2):
+            count = image(c)["command_count"]
+            assert not write(c, "command", R.COMMAND_CODES["trigger"], 0).isError()
+            v = wait_until(lambda: (v := image(c))["command_count"] >= count + 2 and v, 30, what="trigger done")
+            assert v["command_echo"] == 1 and v["command_status"] == R.COMMAND_STATUS["done"]
+            assert not write(c, "command", 0).isError()
+            app.wait_done(n)
+        v = image(c)
+        assert v["results_queued"] == 2 and bit(v, "result_valid")
+        first = v["seq"]
+        assert not write(c, "result_ack", first).isError()
+        second = image(c)["seq"]
+        assert second > first
+        # the abort command with nothing to abort: refused, with its reason
+        count = image(c)["command_count"]
+        assert not write(c, "command", R.COMMAND_CODES["abort"], 0).isError()
+        v = wait_until(lambda: (v := image(c))["command_count"] > count and v, 10, what="abort answered")
+        assert v["command_status"] == R.COMMAND_STATUS["refused"]
+        assert v["command_reason"] == CommandReply("abort", "refused", "nothing_to_abort").reason_code
+    finally:
+        c.close()
+    assert app.stop() == 0
+
+    again = appliance_factory(doc)  # the same state directory: the unacknowledged result is queued again
+    c = ModbusTcpClient("127.0.0.1", port=again.app.modbus.bound_port, timeout=3, retries=0)
+    assert c.connect()
+    try:
+        v = image(c)
+        assert v["seq"] == second and v["results_queued"] == 1 and bit(v, "result_valid")
+        assert not write(c, "result_ack", second).isError()
+        assert not bit(image(c), "result_valid")
+    finally:
+        c.close()

@@ -712,9 +712,10 @@ def _handshake_markdown() -> list[str]:
              f"writing its `seq` to `result_ack` (register {a['result_ack']}): the next one is swapped in, or, "
              "when none waits, `result_valid` clears and the block keeps the acknowledged values. A result that "
              "finds the queue full is not queued: `overrun_count` counts it and `result_buffer_overrun` is set, so "
-             "a loss is always visible (the result itself is stored and sent over MQTT). The queue is held in "
-             "memory: after a restart it holds the latest stored result only (the PLC recognises it by its `seq` "
-             "and `uuid`).")
+             "a loss is always visible (the result itself is stored and sent over MQTT). The appliance keeps "
+             "the sequence number of the last acknowledged result in its state directory: after a restart the "
+             "results stored since are queued again (the newest `queue_depth` of them; the PLC recognises a "
+             "result it has seen by its `seq` and `uuid`).")
     L.append("")
     L.append("### PLC program, mode ack (IEC 61131-3 structured text, pseudo-code)")
     L.append("")

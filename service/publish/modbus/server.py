@@ -40,6 +40,7 @@ import logging
 import struct
 import threading
 import time
+from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from pymodbus.constants import ExcCodes
@@ -56,6 +57,7 @@ from drivers.aioloop import LoopThread
 
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
+from service.sources.files import write_text_atomic
 
 # the settings are read by the configuration without pymodbus; here for the server's users too
 from .settings import _THIS_MACHINE, ModbusSettings, allowed_networks, network_exposure  # noqa: F401
@@ -70,6 +72,9 @@ _READ_DISCRETE = {2}
 _READ_COILS = {1}
 _WRITE_COILS = {5, 15}
 _WRITE_REGISTERS = {6, 16}
+
+#: mode "ack": the file in the state directory that keeps the sequence number of the last acknowledged result
+ACKED_FILE = "modbus-acked-seq"
 
 #: after a trigger coil write, part writes are refused this long (s) until the daemon reports busy
 TRIGGER_HOLD = 0.5
@@ -249,11 +254,14 @@ class ModbusServer(Publisher):
     number ("recipe", {"recipe": number}); it must not block.
     ``recipe_numbers``: the recipe numbers the PLC may select (0 deselects). A command written to register
     `command` is handed on with a fourth argument, the reply that fills the command status registers.
-    clock: monotonic s (the heartbeats and the hold after a trigger).
+    clock: monotonic s (the heartbeats and the hold after a trigger). acked_file: where mode "ack" keeps the
+    sequence number of the last result the PLC acknowledged, so that a restart queues again the results
+    stored since (``ModbusServer.build``).
     """
 
     def __init__(self, settings: ModbusSettings, on_command: Callable[..., None] | None = None,
-                 recipe_numbers: frozenset[int] = frozenset(), clock: Callable[[], float] = time.monotonic) -> None:
+                 recipe_numbers: frozenset[int] = frozenset(), clock: Callable[[], float] = time.monotonic,
+                 acked_file: Path | None = None) -> None:
         if settings.word_order not in R.WORD_ORDERS:
             raise ValueError(f"word_order must be one of {R.WORD_ORDERS}")
         self.settings = settings
@@ -261,6 +269,7 @@ class ModbusServer(Publisher):
         self.recipe_numbers = recipe_numbers
         self._lock = threading.Lock()
         self._clock = clock
+        self.acked_file = acked_file
         self._live = R.LiveStatus()
         self._snapshot = R.encode_snapshot(None, settings.word_order)
         self._verdict: str | None = None
@@ -325,10 +334,37 @@ class ModbusServer(Publisher):
         with self._lock:
             if not self._queue or self._queue[0][0] != seq:
                 return False
-            self._queue.popleft()
+            _, _, payload = self._queue.popleft()
             self._show()
             self._rebuild()
-            return True
+        if self.acked_file is not None:
+            try:
+                write_text_atomic(self.acked_file, f"{int(payload['seq'])}\n")
+            except OSError as exc:  # the acknowledgement holds; only a restart would queue the result again
+                log.warning("Modbus: cannot keep the acknowledged position in %s: %s", self.acked_file, exc)
+        return True
+
+    def restore_queue(self, store: Any) -> None:
+        """Mode "ack" after a restart: queue the results stored after the one the PLC acknowledged last (the
+        newest ``queue_depth`` of them; older ones count as overrun). Without a kept position (the first
+        start in this mode), the latest result is shown, as in mode "latest"."""
+        last: int | None = None
+        if self.acked_file is not None:
+            try:
+                last = int(self.acked_file.read_text(encoding="ascii").strip())
+            except (OSError, ValueError):
+                last = None
+        if last is None:
+            latest = store.latest("ok")
+            if latest is not None and latest.payload is not None:
+                self.publish_result(latest.payload)
+            return
+        depth = self.settings.queue_depth
+        rows = [r for r in store.list(limit=depth + 64, status="ok", full=True)
+                if r.seq > last and r.payload is not None]
+        rows.sort(key=lambda r: r.seq)
+        for r in rows:
+            self.publish_result(r.payload)
 
     def results_queued(self) -> int:
         return len(self._queue)
@@ -632,15 +668,19 @@ class ModbusServer(Publisher):
     @classmethod
     def build(cls, settings: ModbusSettings, appliance: ApplianceView) -> "ModbusServer":
         parts, store = appliance.parts, appliance.store
-        server = cls(settings, on_command=appliance.command, recipe_numbers=parts.book.numbers)
+        server = cls(settings, on_command=appliance.command, recipe_numbers=parts.book.numbers,
+                     acked_file=Path(appliance.config.state_dir) / ACKED_FILE)
         server.set_inputs(recipe=parts.recipe.number if parts.recipe else 0)
         if store is not None:
             # until the main loop runs, the PLC sees STARTING and the true outbox backlog, not defaults
             server.set_live(R.LiveStatus(state="STARTING", simulated=appliance.config.simulated,
                                          outbox_pending=store.outbox_count()))
-            last = store.latest("ok")
-            if last is not None and last.payload is not None:
-                server.publish_result(last.payload)  # the PLC sees the last result after a restart too
+            if settings.result_handshake == "ack":
+                server.restore_queue(store)  # the results the PLC has not acknowledged, again
+            else:
+                last = store.latest("ok")
+                if last is not None and last.payload is not None:
+                    server.publish_result(last.payload)  # the PLC sees the last result after a restart too
         return server
 
     def failure(self) -> str | None:
