@@ -168,3 +168,17 @@ def test_no_unencrypted_endpoint_is_offered_and_the_certificate_was_made(opc):
     asyncio.run(run())
     state = Path(app.config.state_dir) / "opcua"
     assert (state / "server-cert.der").stat().st_size > 0 and (state / "server-key.pem").stat().st_mode & 0o077 == 0
+
+
+def test_every_appliance_state_has_a_machinery_item_state_and_every_verdict_an_evaluation():
+    from service.publish.opcua.server import ITEM_STATES, result_evaluation
+    from service.states import STATES
+
+    assert set(ITEM_STATES) == set(STATES)
+    assert set(ITEM_STATES.values()) == {"NotAvailable", "OutOfService", "NotExecuting", "Executing"}
+    assert result_evaluation({"verdict": "OK", "part": {"verdict": "OK", "zone": "conformance"}}) == "OK"
+    assert result_evaluation({"verdict": "NOK", "part": {"verdict": "NOK", "zone": "nonconformance"}}) == "NotOK"
+    assert result_evaluation({"verdict": "NOK", "part": {"verdict": "NOK", "zone": "uncertainty"}}) == "NotDecidable"
+    assert result_evaluation({"verdict": "INVALID", "part": {"verdict": "INVALID"}}) == "NotDecidable"
+    assert result_evaluation({"verdict": None, "release": {"verdict": "OK", "zone": "conformance"}}) == "OK"
+    assert result_evaluation({}) == "Undefined"
