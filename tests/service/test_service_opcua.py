@@ -182,3 +182,17 @@ def test_every_appliance_state_has_a_machinery_item_state_and_every_verdict_an_e
     assert result_evaluation({"verdict": "INVALID", "part": {"verdict": "INVALID"}}) == "NotDecidable"
     assert result_evaluation({"verdict": None, "release": {"verdict": "OK", "zone": "conformance"}}) == "OK"
     assert result_evaluation({}) == "Undefined"
+
+
+def test_opcua_is_off_by_default_and_a_table_without_a_way_in_is_refused_with_one_line(tmp_path):
+    from service.config.appliance import parse_config
+    from service.errors import ConfigError
+
+    doc = appliance_doc(tmp_path / "state")
+    assert parse_config(doc, source="t.toml").opcua is None
+    for table, words in (({}, "no client could log in"), ({"username": "u"}, "needs a password"),
+                         ({"username": "u", "password": "p", "password_file": "f"}, "not both")):
+        with pytest.raises(ConfigError, match=words):
+            parse_config(appliance_doc(tmp_path / "state", opcua=table), source="t.toml")
+    s = parse_config(appliance_doc(tmp_path / "state", opcua={"anonymous": True}), source="t.toml").opcua
+    assert s is not None and s.host == "127.0.0.1" and s.anonymous and not s.allow_unencrypted
