@@ -37,7 +37,7 @@ MAP_VERSION = 10  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3
 # 8: flags halves_disagree, model_ambiguous, releases_disagree (register flags_high, bits 5-7)
 # 9: the guided tensor set's progress (set_step, set_steps, set_orientation: live registers 7-9), its coils
 #    set_redo, set_skip, set_abort (2-4) and the tensor of the latest set (block 200-238, its own snapshot)
-# 10: the PLC handshake: block 64-72 (plc_status, error_code, heartbeat, the result queue, the command
+# 10: the PLC handshake: block 80-88 (plc_status, error_code, heartbeat, the result queue, the command
 #    status) and the writable registers command, command_parameter, result_ack, plc_heartbeat (111-114)
 
 
@@ -293,24 +293,25 @@ def _table() -> tuple[Register, ...]:
         "more quality flags: " + ", ".join(f"bit {b - 16} {n}" for n, b in FLAG_BITS.items() if b >= 16))
     add("snapshot", 63, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
 
-    # The PLC handshake: live, after the snapshot so that registers 0…72 are one request.
-    add("handshake", 64, "plc_status", "bits16", "bits", "plc_status",
+    # The PLC handshake: live, at a fixed address past the snapshot (which may grow up to it), so that
+    # registers 0…88 are one request.
+    add("handshake", HANDSHAKE_START + 0, "plc_status", "bits16", "bits", "plc_status",
         "handshake status word: " + ", ".join(f"bit {b} {n}" for n, b in PLC_STATUS_BITS.items()))
-    add("handshake", 65, "error_code", "uint16", "enum", "error_code", "error code, see the table below (0: none)")
-    add("handshake", 66, "heartbeat", "uint16", "count", "heartbeat",
+    add("handshake", HANDSHAKE_START + 1, "error_code", "uint16", "enum", "error_code", "error code, see the table below (0: none)")
+    add("handshake", HANDSHAKE_START + 2, "heartbeat", "uint16", "count", "heartbeat",
         f"incremented every {HEARTBEAT_PERIOD:g} s while the appliance's main loop runs (wraps at 65536); a value "
         "that stops changing means the appliance hangs")
-    add("handshake", 67, "results_queued", "uint16", "count", "results_queued",
+    add("handshake", HANDSHAKE_START + 3, "results_queued", "uint16", "count", "results_queued",
         "results waiting for the PLC's acknowledgement, the one shown included (mode ack; latest: 0 or 1)")
-    add("handshake", 68, "overrun_count", "uint16", "count", "overrun_count",
+    add("handshake", HANDSHAKE_START + 4, "overrun_count", "uint16", "count", "overrun_count",
         "results that found the queue full since the daemon started (saturates at 65535)")
-    add("handshake", 69, "command_echo", "uint16", "enum", "command_echo",
+    add("handshake", HANDSHAKE_START + 5, "command_echo", "uint16", "enum", "command_echo",
         "the command code the status below belongs to (" + ", ".join(f"{c} {n}" for c, n in COMMANDS.items()) + ")")
-    add("handshake", 70, "command_status", "uint16", "enum", "command_status",
+    add("handshake", HANDSHAKE_START + 6, "command_status", "uint16", "enum", "command_status",
         "its status: " + ", ".join(f"{c} {n}" for n, c in COMMAND_STATUS.items()))
-    add("handshake", 71, "command_reason", "uint16", "enum", "command_reason",
+    add("handshake", HANDSHAKE_START + 7, "command_reason", "uint16", "enum", "command_reason",
         "why it was refused or failed (0: it was not): " + ", ".join(f"{r.code} {n}" for n, r in REASONS.items()))
-    add("handshake", 72, "command_count", "uint16", "count", "command_count",
+    add("handshake", HANDSHAKE_START + 8, "command_count", "uint16", "count", "command_count",
         "incremented with every change of the command status (wraps at 65536): the PLC waits for it to change")
 
     # The tensor of the latest tensor set: a block of its own, with its own snapshot protocol.
@@ -336,6 +337,9 @@ def _table() -> tuple[Register, ...]:
     return tuple(rows)
 
 
+#: the handshake block's first address (the snapshot ends before it)
+HANDSHAKE_START = 80
+
 #: the tensor block: the first address, the components in their order (``measurement.tensor.COMPONENTS``)
 TENSOR_START = 200
 TENSOR_COMPONENTS = COMPONENTS
@@ -346,7 +350,6 @@ BY_NAME: dict[str, Register] = {r.name: r for r in REGISTERS}
 LIVE_START = 0
 SNAPSHOT_START = BY_NAME["seq"].address
 SNAPSHOT_END = BY_NAME["seq_end"].address + 1  # exclusive
-HANDSHAKE_START = BY_NAME["plc_status"].address
 HANDSHAKE_END = BY_NAME["command_count"].address + 1  # exclusive
 IMAGE_SIZE = HANDSHAKE_END  # registers 0 … IMAGE_SIZE-1
 TENSOR_END = BY_NAME["tensor_seq_end"].address + 1  # exclusive
@@ -360,7 +363,7 @@ def _check_table() -> None:
                 raise AssertionError(f"register {a} used by {used[a]} and {r.name}")
             used[a] = r.name
     assert IMAGE_SIZE <= 125, "the whole image must be readable with one FC3/FC4 request"
-    assert HANDSHAKE_START == SNAPSHOT_END, "the handshake block follows the snapshot"
+    assert HANDSHAKE_START >= SNAPSHOT_END, "the handshake block lies past the snapshot"
     assert TENSOR_END - TENSOR_START <= 125 and TENSOR_START >= WRITABLE_END, "the tensor block: one request, apart"
 
 
@@ -544,6 +547,12 @@ class Handshake:
     command_count: int = 0
 
 
+def assemble_image(live: Sequence[int], snapshot: Sequence[int], handshake: Sequence[int]) -> tuple[int, ...]:
+    """Registers 0 … IMAGE_SIZE-1 from the three blocks (the addresses between them read as 0)."""
+    gap = [0] * (HANDSHAKE_START - SNAPSHOT_END)
+    return tuple([*live, *snapshot, *gap, *handshake])
+
+
 def plc_status_bits(**bits: bool) -> int:
     """Register `plc_status` from its bits by name (PLC_STATUS_BITS)."""
     return sum(1 << PLC_STATUS_BITS[k] for k, v in bits.items() if v)
@@ -632,9 +641,10 @@ def _handshake_markdown() -> list[str]:
     """The PLC handshake: status word, error codes, commands, the result queue, ST pseudo-code for both modes."""
     a = {name: addr for name, (addr, _) in WRITABLE.items()}
     b = BY_NAME
-    L: list[str] = ["## PLC handshake (registers 64–72, holding registers 111–114)", ""]
-    L.append(f"Registers {HANDSHAKE_START}–{HANDSHAKE_END - 1} are live, like 0–9, and follow the snapshot so that "
-             f"one request for registers 0–{IMAGE_SIZE - 1} reads everything.")
+    L: list[str] = [f"## PLC handshake (registers {HANDSHAKE_START}–{HANDSHAKE_END - 1}, holding registers "
+                    f"{a['command']}–{a['plc_heartbeat']})", ""]
+    L.append(f"Registers {HANDSHAKE_START}–{HANDSHAKE_END - 1} are live, like 0–9, at a fixed address past the "
+             f"snapshot, so that one request for registers 0–{IMAGE_SIZE - 1} reads everything.")
     L.append("")
     L.append("### Status word (register `plc_status`)")
     L.append("")

@@ -442,7 +442,7 @@ class ModbusServer(Publisher):
             overrun_count=self.overrun_count, command_echo=echo, command_status=status, command_reason=reason,
             command_count=count)
         # one assignment: a request handler sees the old or the new tuple, never a mix
-        self._image = tuple(live + self._snapshot + R.encode_handshake(handshake))
+        self._image = R.assemble_image(live, self._snapshot, R.encode_handshake(handshake))
         self._status_bits = self._live.status_bits(self._result_valid, self._verdict)
 
     def _reply_to(self, code: int) -> Callable[[CommandReply], None]:

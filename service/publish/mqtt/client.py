@@ -285,6 +285,8 @@ class MqttService(Publisher):
     def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
         if reason_code.is_failure:
             self.last_error = f"broker refused the connection: {reason_code}"
+            if self.v5 and "protocol" in str(reason_code).lower():
+                self.last_error += ' (a broker without MQTT 5: set [mqtt] protocol = "3.1.1")'
             log.warning("MQTT: %s", self.last_error)
             return
         self.last_error = None
