@@ -550,7 +550,7 @@ class Handshake:
 def assemble_image(live: Sequence[int], snapshot: Sequence[int], handshake: Sequence[int]) -> tuple[int, ...]:
     """Registers 0 … IMAGE_SIZE-1 from the three blocks (the addresses between them read as 0)."""
     gap = [0] * (HANDSHAKE_START - SNAPSHOT_END)
-    return tuple([*live, *snapshot, *gap, *handshake])
+    return (*live, *snapshot, *gap, *handshake)
 
 
 def plc_status_bits(**bits: bool) -> int:
