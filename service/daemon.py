@@ -67,6 +67,9 @@ IGNORED_LOG_INTERVAL = 10.0
 #: the lock file in the state directory that makes a second daemon on it stop at start
 LOCK_NAME = "moi.lock"
 
+#: how often the live status looks again whether the rig's calibration is due, s
+CALIBRATION_CHECK_INTERVAL = 60.0
+
 #: consecutive failing loop iterations after which the daemon gives up (systemd restarts it)
 MAX_LOOP_FAILURES = 20
 
@@ -124,6 +127,8 @@ class Appliance:
         self._ignored_logged_at = -float("inf")
         self._refused_logged_at = -float("inf")
         self._armed_at: float | None = None  # sequencer clock time of the last ARMED, s (None: not armed)
+        # (monotonic s, recipe, due) of the last look at the rig's calibration (the live status' calibration_due)
+        self._calibration_checked: tuple[float, Recipe | None, bool] = (-float("inf"), None, False)
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str, data: Mapping[str, Any] | None = None,
@@ -607,9 +612,9 @@ class Appliance:
             raise
         self._durable_results.append(m.id)
         self._to_publishers("on_result", stored, m)
+        self._note_stored(m.id)
         if (reply := self._run_reply.pop(m.id, None)) is not None:
             reply(CommandReply("trigger", "done", data={"uuid": m.id, "seq": stored.seq}))
-        self._note_stored(m.id)
         log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, result.get("J"),
                  ", ".join(result.get("flags") or []) or "none")
         if part["verdict"] is not None and recipe is not None:
@@ -687,11 +692,18 @@ class Appliance:
         )
 
     def _calibration_due(self) -> bool:
-        """The active rig's calibration is past its validity period (today, by the wall clock)."""
+        """The active rig's calibration is past its validity period (today, by the wall clock; looked at once
+        per CALIBRATION_CHECK_INTERVAL and at a change of recipe, not at every iteration of the main loop)."""
         recipe = self.parts.recipe
+        now = time.monotonic()
+        checked_at, checked_for, due = self._calibration_checked
+        if checked_for is recipe and now - checked_at < CALIBRATION_CHECK_INTERVAL:
+            return due
         rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
         state = self._calibration_state(rig, self.wall_clock())
-        return bool(state and state["due"])
+        due = bool(state and state["due"])
+        self._calibration_checked = (now, recipe, due)
+        return due
 
     def _set_registers(self) -> dict[str, int]:
         p = self.tensor_set.progress() if self.tensor_set is not None else None

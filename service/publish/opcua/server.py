@@ -197,7 +197,7 @@ class OpcUaServer(Publisher):
         cert = self._path(s.certificate, "server-cert.der")
         key = self._path(s.private_key, "server-key.pem")
         for p in (cache, cert, key):
-            p.parent.mkdir(parents=True, exist_ok=True)
+            p.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # the key is never readable by others
         server = Server(user_manager=_Users(s.username, self.password, s.anonymous))  # type: ignore[arg-type]
         await server.init(cache)
         server.set_endpoint(f"opc.tcp://{s.host}:{s.port}/moi/")
