@@ -84,11 +84,18 @@ def test_browse_machine_identification_and_item_state(opc):
 class _Events:
     def __init__(self) -> None:
         self.got: list = []
+        self.states: list[str] = []  # MachineryItemState as it changed
+        self.executing = asyncio.Event()
         self.arrived = asyncio.Event()
 
     def event_notification(self, event) -> None:
         self.got.append(event)
         self.arrived.set()
+
+    def datachange_notification(self, node, value, data) -> None:
+        self.states.append(value.Text)
+        if value.Text == "Executing":
+            self.executing.set()
 
 
 def test_a_measurement_raises_result_ready_and_the_methods_give_and_acknowledge_it(opc):
@@ -104,10 +111,14 @@ def test_a_measurement_raises_result_ready_and_the_methods_give_and_acknowledge_
             events = _Events()
             sub = await c.create_subscription(50, events)
             await sub.subscribe_events(rm, etype)
+            item_state = await m.get_child([f"{ns[NS_DI]}:MachineryBuildingBlocks",
+                                            f"{ns[NS_MACHINERY]}:MachineryItemState", "0:CurrentState"])
+            await sub.subscribe_data_change(item_state)
             app.press()
             await asyncio.wait_for(events.arrived.wait(), 60)
             ev = events.got[0]
             uuid = app.app.stored[0]
+            await asyncio.wait_for(events.executing.wait(), 10)  # the machine was measuring before the result
             assert ev.ResultId == uuid and ev.ResultEvaluation == RESULT_EVALUATION["Undefined"]  # no recipe
             doc = json.loads(ev.Result)
             assert doc["ResultContent"]["J"] == pytest.approx(app.app.store.get(uuid).payload["J"])
