@@ -305,6 +305,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                             kind="path"),
         "cache_file": _doc("asyncua's cache of the standard address space (default: opcua/address-space in the state "
                            "directory; made on first start, read on every later one)", kind="path"),
+        "trusted_clients": _doc("directory of the client application certificates (DER or PEM) admitted (default: "
+                                "any client certificate; the user and password decide)", kind="path"),
         "manufacturer": _doc("MachineIdentification Manufacturer"),
         "model": _doc("MachineIdentification Model"),
         "serial_number": _doc("MachineIdentification SerialNumber (default: the device id)"),
@@ -534,7 +536,7 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
     if "opcua" in doc:
         o = c.table("opcua", doc["opcua"], SCHEMA["opcua"])
         if o.pop("enabled"):
-            for k in ("password_file", "certificate", "private_key", "cache_file"):
+            for k in ("password_file", "certificate", "private_key", "cache_file", "trusted_clients"):
                 o[k] = _resolve(base, o[k])
             if o["password"] is not None and o["password_file"] is not None:
                 raise c.fail("opcua", "password", "give password or password_file, not both")

@@ -27,12 +27,15 @@ def opc(tmp_path_factory):
     base = tmp_path_factory.mktemp("opcua")
     pw = base / "opcua-password"
     pw.write_text(PASSWORD + "\n", encoding="utf-8")
-    doc = appliance_doc(base / "state", opcua={"host": "127.0.0.1", "port": 0, "username": USER,
-                                               "password_file": str(pw), "serial_number": "SN-0007"})
-    app = RunningAppliance(doc)
-    key, cert = base / "client-key.pem", base / "client-cert.der"
+    trusted = base / "trusted"
+    trusted.mkdir()
+    key, cert = base / "client-key.pem", trusted / "client-cert.der"
     asyncio.run(setup_self_signed_certificate(key, cert, "urn:moi-test:client", "localhost",
                                               [ExtendedKeyUsageOID.CLIENT_AUTH], {"commonName": "moi test client"}))
+    doc = appliance_doc(base / "state", opcua={"host": "127.0.0.1", "port": 0, "username": USER,
+                                               "password_file": str(pw), "serial_number": "SN-0007",
+                                               "trusted_clients": str(trusted)})
+    app = RunningAppliance(doc)
     try:
         yield app, key, cert
     finally:
@@ -207,3 +210,24 @@ def test_opcua_is_off_by_default_and_a_table_without_a_way_in_is_refused_with_on
             parse_config(appliance_doc(tmp_path / "state", opcua=table), source="t.toml")
     s = parse_config(appliance_doc(tmp_path / "state", opcua={"anonymous": True}), source="t.toml").opcua
     assert s is not None and s.host == "127.0.0.1" and s.anonymous and not s.allow_unencrypted
+
+
+def test_a_client_certificate_outside_trusted_clients_is_refused(opc, tmp_path):
+    app, _, _ = opc
+    key, cert = tmp_path / "stranger-key.pem", tmp_path / "stranger-cert.der"
+
+    async def run():
+        await setup_self_signed_certificate(key, cert, "urn:moi-test:stranger", "localhost",
+                                            [ExtendedKeyUsageOID.CLIENT_AUTH], {"commonName": "stranger"})
+        c = Client(app.app.opcua.endpoint, timeout=10)
+        c.application_uri = "urn:moi-test:stranger"
+        await c.set_security(SecurityPolicyBasic256Sha256, str(cert), str(key),
+                             mode=ua.MessageSecurityMode.SignAndEncrypt)
+        c.set_user(USER)
+        c.set_password(PASSWORD)  # the right password does not admit an untrusted application
+        with pytest.raises(ua.UaStatusCodeError) as e:
+            await c.connect()
+            await c.disconnect()
+        assert e.value.code == ua.StatusCodes.BadCertificateUntrusted
+
+    asyncio.run(run())

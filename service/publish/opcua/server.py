@@ -39,6 +39,8 @@ from typing import Any, Mapping
 from asyncua import Server, ua
 from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.crypto.truststore import TrustStore
+from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from drivers.aioloop import LoopThread
@@ -214,6 +216,14 @@ class OpcUaServer(Publisher):
         if s.allow_unencrypted:
             policies.append(ua.SecurityPolicyType.NoSecurity)
         server.set_security_policy(policies)
+        if s.trusted_clients is not None:
+            trusted = Path(s.trusted_clients)
+            if not trusted.is_dir():
+                raise OpcUaServerError(f"[opcua] trusted_clients {s.trusted_clients!r} is not a directory")
+            store = TrustStore([trusted], [])
+            await store.load()
+            server.set_certificate_validator(CertificateValidator(
+                CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT, store))
         tokens: list[type] = [ua.UserNameIdentityToken]
         if s.anonymous:
             tokens.append(ua.AnonymousIdentityToken)

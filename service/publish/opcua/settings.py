@@ -16,7 +16,9 @@ class OpcUaSettings:
     certificate (DER) and key (PEM), created self-signed on first start when missing (default:
     ``opcua/`` in the state directory). cache_file: asyncua's shelf of the standard address space,
     made on first start, read on every later one (default: ``opcua/address-space`` in the state
-    directory). manufacturer, model, serial_number: MachineIdentification (serial number default:
+    directory). trusted_clients: a directory of the client application certificates (DER or PEM) admitted;
+    a client with another certificate is refused before it may log in (None: any client certificate, the
+    user and password decide). manufacturer, model, serial_number: MachineIdentification (serial number default:
     the device id). results_kept: results GetResultById finds without reading the store (the newest).
     """
 
@@ -30,6 +32,7 @@ class OpcUaSettings:
     certificate: str | None = None
     private_key: str | None = None
     cache_file: str | None = None
+    trusted_clients: str | None = None
     manufacturer: str = "moi"
     model: str = "pendulum inertia appliance"
     serial_number: str | None = None
