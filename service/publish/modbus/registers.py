@@ -92,7 +92,7 @@ EFFECT_OTHER_BIT = 15
 #: bits of register `status` (also served as discrete inputs at the same bit numbers)
 STATUS_BITS: dict[str, int] = {
     "busy": 0,            # a measurement is running (ARMED … PUBLISHING)
-    "result_valid": 1,    # the snapshot holds a result (seq != 0)
+    "result_valid": 1,    # the snapshot holds a result the PLC has not acknowledged (plc_status bit 2 too)
     "fault": 2,           # the sequencer is in FAULT
     "mqtt_connected": 3,  # the MQTT client is connected to its broker
     "simulated": 4,       # the appliance runs on the simulated rig
