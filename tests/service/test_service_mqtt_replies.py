@@ -98,3 +98,28 @@ def test_commands_are_answered_accepted_done_or_refused_with_the_reason(tmp_path
         assert r["status"] == "done" and app.app.parts.part_id == "SN-42"
     finally:
         c.close()
+
+
+def test_a_broker_spoken_to_in_mqtt_3_1_1_gets_the_answers_on_the_reply_topic(tmp_path, broker, consumer_factory):
+    from service.persistence.store import Store
+    from service.publish.mqtt.client import MqttService, MqttSettings
+    from service.publish.replies import CommandReply
+
+    def on_command(name, source, data=None, reply=None):
+        reply(CommandReply(name, "refused", "busy"))  # as the daemon answers while a measurement runs
+
+    store = Store(tmp_path / "state")
+    svc = MqttService(MqttSettings(host="127.0.0.1", port=broker.port, protocol="3.1.1", reconnect_min=0.1,
+                                   reconnect_max=0.5), "rig", store, on_command=on_command)
+    svc.start()
+    try:
+        assert svc.subscribed_event.wait(10) and not svc.v5
+        c = consumer_factory(broker.port, ["moi/rig/reply"])
+        c.wait_subscribed()
+        c.publish("moi/rig/cmd/recipe", json.dumps({"id": "r-9", "recipe": "rotor"}))
+        c.wait(lambda c: c.on("/reply"), 10, "the reply")
+        r = json.loads(c.on("/reply")[0])
+        assert (r["id"], r["command"], r["status"], r["reason"]) == ("r-9", "recipe", "refused", "busy")
+    finally:
+        svc.stop()
+        store.close()
