@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-SCHEMA_VERSION = 2  # 2: model form (omega_n_std_model, J_std_model, omega_n_u, J_u, model_form)
+SCHEMA_VERSION = 3  # 2: model form (omega_n_std_model, J_std_model, omega_n_u, J_u, model_form); 3: uncertainty_budget, J_U…
 
 
 def _num(v: Any) -> Any:
@@ -37,6 +37,24 @@ def _jsonable(v: Any) -> Any:
     if isinstance(v, np.ndarray):
         return [_jsonable(x) for x in v.tolist()]
     return _num(v)
+
+
+def _budget_table(b: dict[str, Any]) -> list[str]:
+    """A budget dict (``measurement.uncertainty.Budget.to_dict``) as the report's table."""
+    out = [f"    {'source':<32}{'value':>12}{'u':>10}  {'unit':<8}{'c':>10}{'c·u':>10}{'share':>8}"]
+    for ln in b["lines"]:
+        note = f"  ({ln['note']})" if ln.get("note") else ""
+        value = ln["value"] if ln["value"] is not None else float("nan")
+        c = ln["sensitivity"] if ln["sensitivity"] is not None else float("nan")
+        out.append(f"    {ln['source'][:32]:<32}{value:>12.6g}{ln['std']:>10.2g}  {ln['unit']:<8}{c:>10.3g}"
+                   f"{ln['contribution']:>10.2g}{100 * ln['share']:>7.1f}%{note}")
+    for c in b.get("correlations", ()):
+        out.append(f"    correlation r({c['a']}, {c['b']}) = {c['r']:+.4f}: {100 * b['correlation_share']:+.1f} % of u²")
+    dof = "∞" if b.get("dof") is None else f"{b['dof']:.0f}"
+    rel = f" ({100 * b['U'] / abs(b['value']):.3g} %)" if b.get("value") else ""
+    out.append(f"    u = {b['u']:.3g} {b['unit']}, ν_eff = {dof}, k = {b['coverage_factor']:.2f}, "
+               f"U = {b['U']:.3g} {b['unit']}{rel}")
+    return out
 
 
 @dataclass(frozen=True)
@@ -172,6 +190,9 @@ class IdentificationResult:
     omega_n_u: float | None = None
     J_u: float | None = None
     model_form: dict[str, Any] = field(default_factory=dict)
+    #: measurand ("J", "J_object", "J_object_axis") → its GUM budget (``measurement.uncertainty.Budget.to_dict``):
+    #: lines (source, value, u, sensitivity, contribution, share), u, coverage factor, U
+    uncertainty_budget: dict[str, Any] = field(default_factory=dict)
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -180,6 +201,20 @@ class IdentificationResult:
         if self.baseline.residual_rms > 0:
             return 1.0 - self.residual_rms / self.baseline.residual_rms
         return None
+
+    def _budget(self, measurand: str, key: str) -> float | None:
+        b = self.uncertainty_budget.get(measurand)
+        return None if b is None else _num(b.get(key))
+
+    @property
+    def J_U(self) -> float | None:
+        """Expanded uncertainty of J, kg·m² (coverage factor in the budget)."""
+        return self._budget("J", "U")
+
+    @property
+    def coverage_factor(self) -> float | None:
+        """k of J_U = k·J_u (2 unless the effective degrees of freedom call for more)."""
+        return self._budget("J", "coverage_factor")
 
     def to_dict(self, include_arrays: bool = False) -> dict[str, Any]:
         d: dict[str, Any] = {
@@ -194,6 +229,11 @@ class IdentificationResult:
             "omega_n_std_calibration": _num(self.omega_n_std_calibration),
             "omega_n_std_model": _num(self.omega_n_std_model), "omega_n_u": _num(self.omega_n_u),
             "J_std_model": _num(self.J_std_model), "J_u": _num(self.J_u),
+            "J_U": self.J_U, "coverage_factor": self.coverage_factor,
+            "J_object_u": self._budget("J_object", "u"), "J_object_U": self._budget("J_object", "U"),
+            "J_object_axis_u": self._budget("J_object_axis", "u"),
+            "J_object_axis_U": self._budget("J_object_axis", "U"),
+            "uncertainty_budget": _jsonable(self.uncertainty_budget),
             "model_form": _jsonable(self.model_form),
             "damping_ratio": _num(self.damping_ratio), "damping_ratio_std": _num(self.damping_ratio_std),
             "reference_amplitude": _num(self.reference_amplitude),
@@ -250,6 +290,9 @@ class IdentificationResult:
             ju = f"; J ± {self.J_u:.2g} kg·m²" if self.J_u is not None else ""
             L.append(f"    model form   = ±{self.omega_n_std_model:.2g} rad/s (halves of the record, rival models)"
                      f" → combined u: ω_n ± {self.omega_n_u:.2g} rad/s{ju}")
+        for measurand, b in self.uncertainty_budget.items():
+            L.append(f"[[Uncertainty budget]] {measurand} (GUM; J_std above is the fit's 1σ alone)")
+            L.extend(_budget_table(b))
         L.append(f"    damping ratio= {Quantity(self.damping_ratio, self.damping_ratio_std, '')}"
                  f" (equivalent viscous, at {self.reference_amplitude:.4g} rad)")
         for group in (self.damping, self.stiffness, self.sensor):
