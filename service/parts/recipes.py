@@ -25,6 +25,7 @@ directory (``[recipes] directory``)::
     min_swings = 3.0              # fewest full swings in the fitted window
     consistency_limit = 3.0       # |z| above which releases disagree
     min_valid_releases = 2        # fewest usable releases for a part verdict (default: releases − 1, at least 1)
+    max_uncertainty_ratio = 0.25  # optional: U at most this fraction of the half-tolerance, else INVALID
 
 A recipe may instead declare a tensor plan: the part's inertia tensor is then
 measured as a guided set of orientations (``service.parts.tensor_set``), each
@@ -171,7 +172,10 @@ def _schemas() -> dict[str, dict[str, Any]]:
         "quality": _schema(QualityRules, {
             "invalid_flags": _doc(""), "min_swings": _doc("", min=0.0),
             "consistency_limit": _doc("", min=0, min_open=True),
-            "min_valid_releases": _doc("default: releases − 1, at least 1", min=1)},
+            "min_valid_releases": _doc("default: releases − 1, at least 1", min=1),
+            "max_uncertainty_ratio": _doc("largest expanded uncertainty U as a fraction of the half-tolerance "
+                                          "(0.25: a test uncertainty ratio of 4); beyond it a result is INVALID",
+                                          min=0, min_open=True)},
             defaults={"min_valid_releases": None},
             extra={"max_J_std": Key("float", None, "kg·m²", min=0, min_open=True),
                    "max_J_std_percent": Key("float", None, "% of J", min=0, min_open=True)}),
@@ -257,7 +261,8 @@ def load_recipe(path: str | Path) -> Recipe:
     pct = qual["max_J_std_percent"]
     quality = QualityRules(invalid_flags=tuple(qual["invalid_flags"]), max_std=qual["max_J_std"],
                            max_std_relative=None if pct is None else pct / 100.0, min_swings=qual["min_swings"],
-                           consistency_limit=qual["consistency_limit"], min_valid_releases=min_valid)
+                           consistency_limit=qual["consistency_limit"], min_valid_releases=min_valid,
+                           max_uncertainty_ratio=qual["max_uncertainty_ratio"])
     spec = None
     if tensor is None:
         try:
