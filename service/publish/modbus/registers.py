@@ -25,7 +25,7 @@ from measurement import flags as F
 from measurement.tensor import COMPONENTS
 
 #: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 9  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
+MAP_VERSION = 10  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
 # 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
 #    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
 # 5: bits 6-7 of `effects` (dahl, view; they set bit 15, other, before); register flags_high (flags from
@@ -36,6 +36,7 @@ MAP_VERSION = 9  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3:
 # 8: flags halves_disagree, model_ambiguous, releases_disagree (register flags_high, bits 5-7)
 # 9: the guided tensor set's progress (set_step, set_steps, set_orientation: live registers 7-9), its coils
 #    set_redo, set_skip, set_abort (2-4) and the tensor of the latest set (block 200-238, its own snapshot)
+# 10: J_U, J_object_U (expanded uncertainty from the result's budget, 63-66); seq_end moved from 63 to 67
 
 
 # --- enumerations ------------------------------------------------------------
@@ -247,7 +248,12 @@ def _table() -> tuple[Register, ...]:
     add("snapshot", 52, "part_id", "ascii20", "", "part_id", "the part ID the release was measured for (echo of registers 100–109)")
     add("snapshot", 62, "flags_high", "bits16", "bits", "flags_high",
         "more quality flags: " + ", ".join(f"bit {b - 16} {n}" for n, b in FLAG_BITS.items() if b >= 16))
-    add("snapshot", 63, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
+    add("snapshot", 63, "J_U", "float32", "kg·m²", "J_U",
+        "expanded uncertainty U of J from its uncertainty budget (coverage factor in the result, k = 2 unless "
+        "few degrees of freedom call for more; NaN when J is unknown)")
+    add("snapshot", 65, "J_object_U", "float32", "kg·m²", "J_object_U",
+        "expanded uncertainty U of J_object, the k–I0 correlation of the calibration kept (NaN without a tare)")
+    add("snapshot", 67, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
 
     # The tensor of the latest tensor set: a block of its own, with its own snapshot protocol.
     a = TENSOR_START
@@ -360,6 +366,7 @@ def _snapshot_values(payload: Mapping[str, Any] | None) -> dict[str, Any]:
         "residual_rms_before": payload.get("residual_rms_before"),
         "noise_floor": payload.get("noise_floor"),
         "J_object": payload.get("J_object"),
+        "J_U": payload.get("J_U"), "J_object_U": payload.get("J_object_U"),
         "flags": flags & 0xFFFF,
         "flags_high": flags >> 16,
         "effects": effect_bits(payload.get("effects") or ()),
