@@ -335,3 +335,44 @@ class PendulumInputs:
         if "m_o" in x:
             out["J_object_axis"] = evaluate("J_object_axis", "kg·m²", self.J_object_axis, inputs, corr)
         return out
+
+
+# -- check standard ------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class CheckStandard:
+    """A reference artifact of certified J_ref ± U_ref measured as a part: does the budget hold?
+
+    E_n = |J − J_ref| / √(U² + U_ref²) (ISO/IEC 17043:2010, "Conformity assessment — General
+    requirements for proficiency testing", B.4.1.1): E_n ≤ 1 passes. A value far inside says the
+    budget may be pessimistic; one beyond 1 says it is too small, or the rig has drifted. kg·m².
+    """
+
+    name: str
+    quantity: str
+    value: float
+    U: float
+    reference: float
+    reference_U: float
+    E_n: float
+    passed: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "quantity": self.quantity, "value": self.value, "U": self.U,
+                "reference": self.reference, "reference_U": self.reference_U, "deviation": self.value - self.reference,
+                "E_n": self.E_n, "passed": self.passed}
+
+
+def check_standard(name: str, quantity: str, value: float, U: float, reference: float,
+                   reference_U: float) -> CheckStandard:
+    """The normalised error of a measured check standard against its certificate (kg·m²)."""
+    for what, v in (("reference", reference), ("value", value)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise UncertaintyError(f"check standard: {what} must be a number in kg·m², got {v!r}")
+    U = check_std("check standard: U", U, "kg·m²")
+    reference_U = check_std("check standard: the reference's U", reference_U, "kg·m²")
+    den = math.hypot(U, reference_U)
+    if den == 0:
+        raise UncertaintyError("check standard: U and the reference's U are both 0; expected an expanded uncertainty")
+    e_n = abs(value - reference) / den
+    return CheckStandard(name, quantity, float(value), U, float(reference), reference_U, e_n, e_n <= 1.0)

@@ -224,7 +224,7 @@ def _run(app, args: argparse.Namespace) -> int:
             fit_u = "joint u" if joint else "fit u"
             print(f"part {payload['part_id']}: {part['quantity']} = {_g(part['mean'], '.7g')} kg·m² (releases "
                   f"{[i + 1 for i in part['used']]} {how}), s = {_g(part['std'])}, Type A u = {_g(part['u_typeA'])}, "
-                  f"{fit_u} = {_g(part['u_fit'])}, systematic u = {_g(part["u_systematic"])}, U = {_g(part['U'])} kg·m²")
+                  f"{fit_u} = {_g(part['u_fit'])}, systematic u = {_g(part['u_systematic'])}, U = {_g(part['U'])} kg·m²")
             if joint:
                 c = joint["consistency"]
                 print(f"  the releases against the joint ω_n {joint['omega_n']:.7g} rad/s: χ² {c['chi2']:.2f} on "
