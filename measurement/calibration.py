@@ -20,8 +20,8 @@ line it is the maximum-likelihood solution of York et al., "Unified equations
 for the slope, intercept, and standard errors of the best straight line",
 Am. J. Phys. 72 (2004)). The covariance of (a, b) is (AᵀWA)⁻¹ with W = diag(1/σ_i²):
 what the stated uncertainties allow. It is scaled up by the Birge ratio²
-χ²/ν when the references scatter beyond their σ (they are then understated),
-never down: with 3 references and 2 unknowns the misfit has one degree of
+χ²/ν when the references scatter beyond their σ (χ² above its 95 % quantile
+for ν = n − 2: they are then understated), never down: with 3 references and 2 unknowns the misfit has one degree of
 freedom, and a lucky small misfit must not promise more than the certificates.
 Only when no reference states any uncertainty does the misfit alone set the
 σ (and the calibration says so). k = 1/b and I0 = a/b and their covariance
@@ -157,6 +157,10 @@ class Calibration:
         return "\n".join(lines)
 
 
+#: the references are taken to scatter beyond their stated σ when χ² exceeds this quantile of its distribution
+CONSISTENCY_LEVEL = 0.95
+
+
 def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
     """Fit k and I0 from references (at least two distinct added inertias); see the module doc."""
     refs = tuple(references)
@@ -213,7 +217,9 @@ def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
         if dof > 0:
             chi2 = float(np.sum((residual_x / s_eff) ** 2))
             birge = math.sqrt(chi2 / dof)
-            if birge > 1:
+            from scipy.stats import chi2 as chi2_dist  # only here: the calibration module loads without scipy
+
+            if chi2 > chi2_dist.ppf(CONSISTENCY_LEVEL, dof):
                 # the references scatter beyond their stated σ: those are understated, by this much
                 cov = cov * birge**2
                 notes.append(f"the references scatter {birge:.2g} × beyond their stated uncertainties: "
