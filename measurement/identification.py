@@ -294,7 +294,7 @@ def budgets(rig: Rig, omega_n: float, omega_n_std: float, *, dof: float = math.i
     return PendulumInputs(
         omega_n=omega_n, omega_n_std=omega_n_std, omega_n_dof=dof, omega_n_model=model, omega_n_view=view,
         clock_ppm=rig.clock_accuracy_ppm,
-        angle_scale=None if scale_response is None else (scale_response, rig.angle_scale_std),  # type: ignore[arg-type]
+        angle_scale=None if scale_response is None else (scale_response, rig.angle_scale_std),
         rig_kind=rig.kind, stiffness=rig.stiffness, stiffness_std=rig.stiffness_std,
         mass=rig.mass, mass_std=rig.mass_std, com_distance=rig.com_distance, com_distance_std=rig.com_distance_std,
         g=rig.g, g_std=rig.g_std, tare=rig.tare_inertia, tare_std=rig.tare_inertia_std,

@@ -243,7 +243,7 @@ class PendulumInputs:
     omega_n_model: float = 0.0
     omega_n_view: float | None = None
     clock_ppm: float | None = None
-    angle_scale: tuple[float, float] | None = None
+    angle_scale: tuple[float, float | None] | None = None
     rig_kind: str = "torsion"
     stiffness: float | None = None
     stiffness_std: float | None = None

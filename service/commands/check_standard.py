@@ -96,7 +96,7 @@ def _history(args: argparse.Namespace) -> int:
     from service.commands._common import open_store
 
     with open_store(args) as store:
-        rows = [r for r in reversed(store.check_standards(limit=None))]
+        rows = list(reversed(store.check_standards(limit=None)))
     if args.name != "check standard":
         rows = [r for r in rows if r["name"] == args.name]
     chart = None

@@ -25,7 +25,7 @@ ARTIFACT = 0.0125  # kg·m², the artifact's own inertia (J_object)
 @pytest.fixture(scope="module")
 def swing(tmp_path_factory) -> Path:
     rig = DEMO_RIG
-    tr = simulate_trace(Pendulum(rig, ARTIFACT + rig.tare_inertia, {"viscous": {"c": 2e-4}}), theta0=0.3,
+    tr = simulate_trace(Pendulum(rig, ARTIFACT + (rig.tare_inertia or 0.0), {"viscous": {"c": 2e-4}}), theta0=0.3,
                         duration=12.0, rate=100.0, noise_std=1e-4, seed=5)
     path = tmp_path_factory.mktemp("check") / "artifact.csv"
     path.write_text("t,angle\n" + "\n".join(f"{float(t)!r},{float(a)!r}" for t, a in zip(tr.t, tr.angle)) + "\n")
