@@ -175,7 +175,7 @@ class Budget:
         return {"measurand": self.measurand, "value": self.value, "unit": self.unit,
                 "lines": [ln.to_dict() for ln in self.lines], "correlations": [dict(c) for c in self.correlations],
                 "correlation_share": self.correlation_share, "u": self.u, "u_random": self.u_random,
-                "u_systematic": self.u_systematic, "dof": _finite(self.dof),
+                "u_systematic": self.u_systematic, "dof": self.dof if self.dof < 1e6 else None,
                 "coverage_factor": self.coverage_factor, "U": self.U}
 
 

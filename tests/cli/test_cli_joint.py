@@ -24,6 +24,10 @@ def test_two_releases_give_one_joint_answer_with_a_consistency_test(capsys):
     lo, hi = sorted(c["omega_n"])
     assert lo <= d["omega_n"] <= hi
     assert d["omega_n_u"] >= d["omega_n_std"] > 0
+    # the joint value has its own budget: the joint ω_n and the rig's constants
+    b = d["uncertainty_budget"]["J"]
+    assert d["J_U"] == b["U"] and b["U"] >= 2 * d["J_u"] * (1 - 1e-9)
+    assert {ln["symbol"] for ln in b["lines"]} >= {"omega_n_fit", "m", "S", "g"}
 
 
 def test_the_report_lists_each_release_and_the_verdict_on_their_agreement(capsys):
