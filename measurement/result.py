@@ -273,15 +273,21 @@ class IdentificationResult:
         L.append(f"    samples {s.get('n')}, window {self.window.get('t_start', 0):.3f}–{self.window.get('t_stop', 0):.3f} s,"
                  f" {s.get('nfev')} simulations, converged: {s.get('success')}")
         L.append("[[Result]]")
+        def expanded(measurand: str) -> str:
+            b = self.uncertainty_budget.get(measurand)
+            return "" if not b else f"; U = {b['U']:.2g} kg·m² (k = {b['coverage_factor']:.3g}, budget below)"
+
         if self.J is not None:
             extra = f" (calibration adds ±{self.J_std_calibration:.2g})" if self.J_std_calibration else ""
-            L.append(f"    J            = {Quantity(self.J, self.J_std, 'kg·m²')}{extra}")
+            L.append(f"    J            = {Quantity(self.J, self.J_std, 'kg·m²')}{extra}{expanded('J')}")
         else:
             L.append("    J            = n/a: the rig gives no stiffness (torsion) or mass·com_distance (compound)")
         if self.J_object is not None:
-            L.append(f"    J_object     = {Quantity(self.J_object, self.J_object_std, 'kg·m²')}  (J − tare)")
+            L.append(f"    J_object     = {Quantity(self.J_object, self.J_object_std, 'kg·m²')}  (J − tare)"
+                     f"{expanded('J_object')}")
         if self.J_object_axis is not None:
-            L.append(f"    J_object_axis= {Quantity(self.J_object_axis, self.J_object_axis_std, 'kg·m²')}  (own axis, J_D − m·L²)")
+            L.append(f"    J_object_axis= {Quantity(self.J_object_axis, self.J_object_axis_std, 'kg·m²')}  (own axis, J_D − m·L²)"
+                     f"{expanded('J_object_axis')}")
         cal = (f"; the camera view's calibration adds ±{self.omega_n_std_calibration:.2g}"
                if self.omega_n_std_calibration else "")
         L.append(f"    omega_n      = {Quantity(self.omega_n, self.omega_n_std, 'rad/s')}"
