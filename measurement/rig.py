@@ -169,6 +169,11 @@ class Rig:
             raise RigError("rig: mass/com_distance belong to a compound rig; kind is 'torsion'")
         if self.kind == "compound" and self.stiffness is not None:
             raise RigError("rig: stiffness belongs to a torsion rig; kind is 'compound'")
+        if self.angle_scale_std is not None and not self.sensor_calibrated:
+            # an uncalibrated sensor's scale is fitted from the swing (gain, view) or does not enter ω_n:
+            # a σ for it would be counted for nothing
+            raise RigError("rig: [sensor] angle_scale_std is the σ of a calibrated sensor's scale; "
+                           "add calibrated = true or drop it")
         if self.stiffness_tare_covariance is not None:
             check_covariance("rig: stiffness_tare_covariance", self.stiffness_tare_covariance,
                              self.stiffness_std, self.tare_inertia_std)

@@ -189,6 +189,8 @@ def test_bad_uncertainties_in_a_rig_file_say_what_was_expected(doc, expected):
 def test_clock_accuracy_must_be_a_number_of_ppm():
     with pytest.raises(RigError, match="clock_accuracy_ppm must be a number in ppm"):
         Rig.from_dict({"rig": {"kind": "torsion"}, "sensor": {"clock_accuracy_ppm": "50 ppm"}})
+    with pytest.raises(RigError, match="angle_scale_std is the σ of a calibrated sensor"):
+        Rig.from_dict({"rig": {"kind": "torsion"}, "sensor": {"angle_scale_std": 1e-3}})
     rig = Rig.from_dict({"rig": {"kind": "compound", "mass": 1.0, "com_distance": 0.2, "mass_std": 1e-3,
                                  "g_std": 0.01}, "sensor": {"clock_accuracy_ppm": 20},
                          "object": {"mass": 0.3, "axis_offset": 0.1, "axis_offset_std": 1e-3}})
