@@ -104,7 +104,8 @@ def test_a_plc_selects_a_recipe_writes_a_part_id_and_reads_the_verdict_of_three_
                 assert s["verdict"] == 0 and math.isnan(s["part_value"])  # the part is not complete yet
                 assert R.decode_image(c.read_input_registers(0, count=10, device_id=1).registers)["part_releases_done"] == i
         assert s["verdict"] == R.VERDICT_CODES["OK"]
-        assert abs(s["part_value"] / J_TRUE - 1) < 2e-3 and 0 < s["part_U"] < 1e-5
+        # U of the part: the demo rig's calibration (k known to 0.09 %) dominates, the releases average down
+        assert abs(s["part_value"] / J_TRUE - 1) < 2e-3 and 1e-5 < s["part_U"] < 5e-5
         live = R.decode_image(c.read_input_registers(0, count=10, device_id=1).registers)
         assert live["status"] & (1 << R.STATUS_BITS["part_ok"]) and not live["status"] & (1 << R.STATUS_BITS["part_nok"])
         assert live["recipe"] == 7 and live["part_releases_done"] == 0
