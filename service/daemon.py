@@ -587,6 +587,19 @@ class Appliance:
         if part["verdict"] is not None and recipe is not None:
             log.info("part %s (%s): %s", part_id or "(no ID)", recipe.name, part["verdict"])
             self._to_publishers("on_part_done", recipe)
+        whole = part.get("part")
+        check = whole.get("check_standard") if isinstance(whole, dict) else None
+        if check is not None:
+            # a check standard measured at the station: kept with the history `moi check-standard` reads;
+            # a failed one makes the next results calibration_due (``_calibration_state``)
+            log.log(logging.INFO if check["passed"] else logging.WARNING, "check standard %s: E_n = %.2f (%s)",
+                    check["name"], check["E_n"], "pass" if check["passed"] else "FAIL")
+            try:
+                self.store.record_check_standard(check | {"part_id": part_id, "measurement": m.id,
+                                                          "flags": list(result.get("flags") or [])},
+                                                 finished_at=finished)
+            except StoreError:
+                log.exception("could not store the check standard of measurement %s", m.id)
         if tensor_set is not None:
             log.info("tensor set %s: %s", tensor_set.uuid, tensor_set.instruction())
             if tensor_set.done:

@@ -59,6 +59,10 @@ def recipe_dir(tmp_path) -> Path:
                                     rig="../rigs/cal-rig.toml"))
     write(d / "strict.toml", recipe("rotor-strict", 11, J_TRUE, tolerance_percent=1.0, releases=1)
           + "[quality]\nmax_J_std = 1e-12\n")
+    # a check standard whose certificate is 1 % off the artifact: E_n > 1, the station's calibration is due
+    write(d / "check.toml", recipe("check-disc", 12, J_TRUE, tolerance_percent=5.0, releases=1)
+          + f"[check_standard]\nreference = {J_TRUE * 1.01!r}\nreference_U = 2e-5\nname = \"disc CS-1\"\n")
+    write(d / "after.toml", recipe("rotor-after", 13, J_TRUE, tolerance_percent=5.0, releases=1))
     return d
 
 
@@ -139,7 +143,7 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
             assert rr.isError() and rr.exception_code == 0x02, address
         rr = c.write_register(R.WRITABLE["recipe_select"][0], 99, device_id=1)  # no such recipe
         assert rr.isError() and rr.exception_code == 0x03
-        for n, number in enumerate((8, 9, 10, 11), start=1):
+        for n, number in enumerate((8, 9, 10, 11, 12, 13), start=1):
             select(c, number)
             assert not write_part_id(c, f"P-{number}").isError()
             assert not c.write_coil(R.COILS["trigger"], True, device_id=1).isError()
@@ -170,6 +174,14 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
     assert verdict == code["INVALID"] and p["part"]["reasons"][-1] == "release 1: invalid: flag calibration_due", (p["flags"], p["part"])
     verdict, p = verdicts[11]
     assert verdict == code["INVALID"] and "above the limit" in p["part"]["excluded"][0]["reason"], (p["flags"], p["part"])
+    # the check standard measured at the station: E_n stored with the history; the next part is INVALID
+    verdict, p = verdicts[12]
+    check = p["part"]["check_standard"]
+    assert check["name"] == "disc CS-1" and check["E_n"] > 1 and not check["passed"]
+    assert app.app.store.check_standards(limit=1)[0]["E_n"] == check["E_n"]
+    verdict, p = verdicts[13]
+    assert p["calibration"]["due"] and p["calibration"]["check_standard"]["passed"] is False
+    assert verdict == code["INVALID"] and "calibration_due" in p["flags"]
 
 
 @pytest.mark.broker
