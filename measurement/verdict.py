@@ -336,6 +336,9 @@ class PartResult:
     decision: Decision
     #: the joint identification the value came from (its ω_n, consistency test); None: the weighted mean
     joint: dict[str, Any] | None = None
+    #: the part's budget: its random line (Type A repeatability or the releases' own, with its degrees of
+    #: freedom), its systematic line, u_c, ν_eff (Welch–Satterthwaite), k and U
+    uncertainty: dict[str, Any] | None = None
 
     @property
     def verdict(self) -> str:
@@ -344,7 +347,8 @@ class PartResult:
     def to_dict(self) -> dict[str, Any]:
         return {"releases": self.releases, "values": list(self.values), "used": list(self.used), "excluded": [dict(e) for e in self.excluded],
                 "mean": self.mean, "std": self.std, "u_typeA": self.u_typeA, "u_fit": self.u_fit,
-                "u_systematic": self.u_systematic, "z": list(self.z), "joint": self.joint, **self.decision.to_dict()}
+                "u_systematic": self.u_systematic, "z": list(self.z), "joint": self.joint,
+                "uncertainty": self.uncertainty, **self.decision.to_dict()}
 
 
 def agreement(values: Sequence[float], u: Sequence[float]) -> list[float]:
@@ -437,13 +441,21 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
     u_sys = max(readings[i].u_systematic for i in usable)
     u_c = math.hypot(max(u_a or 0.0, u_fit), u_sys)
     k = max([spec.coverage_factor] + [readings[i].coverage_factor or 0.0 for i in usable])
-    if u_a is not None and u_a > u_fit:
+    type_a = u_a is not None and u_a > u_fit
+    dof = welch_satterthwaite(u_c, [(u_a, m - 1)]) if type_a and u_a is not None else math.inf
+    if type_a:
         # the repeatability (Type A, m − 1 degrees of freedom) sets the random part: few releases, a larger k
-        k = max(k, _coverage_factor(welch_satterthwaite(u_c, [(u_a, m - 1)]), spec.coverage_factor))
+        k = max(k, _coverage_factor(dof, spec.coverage_factor))
+    random_line = ({"source": f"repeatability of {m} releases (Type A, s/√n)", "u": u_a, "dof": m - 1}
+                   if type_a else {"source": "the releases' own uncertainty (fit, model form; joint or weighted "
+                                             "mean)", "u": u_fit, "dof": None})
+    budget = {"lines": [random_line, {"source": "systematic, common to the releases (calibration, rig constants, "
+                                                "clock, sensor scale)", "u": u_sys, "dof": None}],
+              "u_c": u_c, "dof": dof if math.isfinite(dof) else None, "coverage_factor": k, "U": k * u_c}
     if part_reasons:
         dec = Decision(INVALID, mean, u_c, k * u_c, mean - spec.nominal, None, spec.rule,
                        tuple(part_reasons))
     else:
         dec = decide(mean, u_c, spec, k, rules)
     return PartResult(n, values, tuple(usable), tuple(excluded), mean, std, u_a, u_fit, u_sys, tuple(z), dec,
-                      joint_facts)
+                      joint_facts, budget)

@@ -166,6 +166,8 @@ def test_part_of_three_scattered_releases_gets_students_t_for_two_degrees_of_fre
     assert part.u_typeA > part.u_fit and len(part.used) == 3
     assert part.decision.U == pytest.approx(coverage_factor(2) * part.decision.u_c, rel=1e-9)
     assert part.decision.U / part.decision.u_c > 4
+    lines = part.uncertainty["lines"]
+    assert lines[0]["dof"] == 2 and lines[0]["u"] == part.u_typeA and part.uncertainty["dof"] == pytest.approx(2.0)
 
 
 def test_reading_takes_the_budget_of_its_quantity():
