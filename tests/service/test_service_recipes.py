@@ -234,6 +234,12 @@ def test_recipe_files_are_checked_with_one_line_errors(tmp_path):
         "quantity": (recipe("a", 1, 0.01, tolerance=1e-4, quantity="mass"), "[recipe] quantity: expected one of"),
         "min-valid": (recipe("a", 1, 0.01, tolerance=1e-4, releases=2) + "[quality]\nmin_valid_releases = 3\n",
                       "at most releases = 2"),
+        "tur": (recipe("a", 1, 0.01, tolerance=1e-4) + "[quality]\nmax_uncertainty_ratio = -0.25\n",
+                "[quality] max_uncertainty_ratio: expected a number > 0"),
+        "check-u": (recipe("a", 1, 0.01, tolerance=1e-4) + "[check_standard]\nreference = 0.01\n",
+                    "[check_standard] reference_U"),
+        "check-neg": (recipe("a", 1, 0.01, tolerance=1e-4) + '[check_standard]\nreference_U = "2e-5"\n',
+                      "[check_standard] reference_U: expected a number > 0"),
     }
     for name, (text, message) in cases.items():
         path = write(tmp_path / f"{name}.toml", text)
