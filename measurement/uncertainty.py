@@ -184,8 +184,8 @@ def evaluate(measurand: str, unit: str, f: Callable[[Mapping[str, float]], float
              base_coverage: float = DEFAULT_COVERAGE_FACTOR) -> Budget:
     """The GUM budget of y = f(inputs) (law of propagation of uncertainty, first order).
 
-    Sensitivities are central differences with a step of 1e-4·u (or of the value's scale when u = 0),
-    exact for the linear and near-linear models here. correlations: (symbol_a, symbol_b) → r.
+    Sensitivities are central differences with a step of 1e-4·u (1e-6 of the value's scale when u = 0),
+    exact to a few ppm for the smooth models here. correlations: (symbol_a, symbol_b) → r.
     Inputs with no influence (c = 0) are left out.
     """
     x = {i.symbol: float(i.value) for i in inputs}
@@ -193,7 +193,9 @@ def evaluate(measurand: str, unit: str, f: Callable[[Mapping[str, float]], float
     cs: dict[str, float] = {}
     for i in inputs:
         u = i.std or 0.0
-        h = 1e-4 * u if u > 0 else 1e-6 * max(abs(i.value), 1e-9)
+        # a step small against u (the model is smooth over ±u), never so small against the value that
+        # round-off swamps it; an input with no u gets one of 1e-6 of its scale (1 for an error term at 0)
+        h = max(1e-4 * u, 1e-9 * abs(i.value)) if u > 0 else 1e-6 * max(abs(i.value), 1.0)
         xp, xm = dict(x), dict(x)
         xp[i.symbol] += h
         xm[i.symbol] -= h
