@@ -46,6 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="what the certificate states (default J_object: the artifact without the fixture)")
     p.add_argument("--name", default="check standard", help="the artifact's name (its history is kept by name)")
     p.add_argument("--history", action="store_true", help="list the stored checks and their control chart")
+    p.add_argument("--plot", metavar="FILE.png", help="with --history: write the control chart of the deviations")
     p.add_argument("--json", action="store_true", help="print JSON")
     add_store_arguments(p)
 
@@ -94,7 +95,12 @@ def _history(args: argparse.Namespace) -> int:
     from measurement.spc import SpcError, individuals
 
     from service.commands._common import open_store
+    from service.sources.files import check_output_path
 
+    if args.plot:  # a bad path is refused before the work
+        if not args.plot.lower().endswith(".png"):
+            raise InputFileError(f"--plot {args.plot!r}: the chart is a PNG; give a file name ending in .png")
+        check_output_path(args.plot, "chart file")
     with open_store(args) as store:
         rows = list(reversed(store.check_standards(limit=None)))
     if args.name != "check standard":
@@ -104,6 +110,10 @@ def _history(args: argparse.Namespace) -> int:
         chart = individuals([r["deviation"] for r in rows])
     except SpcError:
         pass  # fewer than 2 checks: no chart yet
+    if args.plot and chart is not None:
+        from service.publish.plot import plot_control_chart
+
+        plot_control_chart(chart, args.plot, title=f"check standard {args.name}: J − J_ref")
     if args.json:
         print(json.dumps({"checks": rows, "chart": None if chart is None else chart.to_dict()}, ensure_ascii=False))
         return 0
@@ -118,5 +128,7 @@ def _history(args: argparse.Namespace) -> int:
     if chart is not None:
         print("the deviation J − J_ref, check by check:")
         print(chart.report())
+        if args.plot:
+            print(f"chart written to {args.plot}")
     return 0
 

@@ -50,9 +50,10 @@ def test_check_standard_passes_fails_is_stored_and_charted(swing, rig_file, tmp_
     assert main(args + ["--reference", str(ARTIFACT * 1.01), "--reference-U", "2e-5"]) == 3
     bad = json.loads(capsys.readouterr().out)
     assert not bad["passed"] and bad["E_n"] > 1
-    assert main(["check-standard", "--history", "--state-dir", str(state)]) == 0
+    assert main(["check-standard", "--history", "--state-dir", str(state), "--plot", str(tmp_path / "cs.png")]) == 0
     out = capsys.readouterr().out
-    assert out.count("pass") == 1 and out.count("FAIL") == 1 and "I-MR chart" in out
+    assert out.count("  pass\n") == 1 and out.count("  FAIL\n") == 1 and "I-MR chart" in out
+    assert (tmp_path / "cs.png").read_bytes()[:4] == b"\x89PNG"
     # the appliance: its results are calibration_due while the newest check since the calibration failed
     with Store(state) as store:
         app = SimpleNamespace(store=store)
