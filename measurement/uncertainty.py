@@ -83,9 +83,9 @@ def coverage_factor(dof: float, base: float = DEFAULT_COVERAGE_FACTOR) -> float:
     """k_p for ``dof`` effective degrees of freedom: Student's t at 95.45 %, never below ``base``."""
     if not math.isfinite(dof) or dof > 1e6:
         return base
-    from scipy.stats import t as student  # scipy is loaded by the identification anyway
+    from scipy.special import stdtrit  # scipy.special: loaded by the fit anyway (scipy.stats is far heavier)
 
-    return max(base, float(student.ppf(0.5 + COVERAGE_PROBABILITY / 2, max(dof, 1.0))))
+    return max(base, float(stdtrit(max(dof, 1.0), 0.5 + COVERAGE_PROBABILITY / 2)))
 
 
 def welch_satterthwaite(u_c: float, terms: Sequence[tuple[float, float]]) -> float:
