@@ -139,7 +139,8 @@ class IdentificationResult:
     """Everything a measurement says. SI units; *_std are 1σ standard uncertainties.
 
     J: total inertia about the pivot, kg·m² (None when the rig lacks k or m·S).
-    J_object: J − tare_inertia (None without a tare).
+    J_object: J − tare_inertia (None without a tare); J_object_std: the fit's σ ⊕ the tare's, as before
+    (kept for old readers); J_object_u / J_object_U (``to_dict``): the budget's, the k–I0 correlation kept.
     J_object_axis: the parallel-axis transfer J_object − m·L² about the object's own axis.
     omega_n: small-amplitude natural angular frequency, rad/s.
     damping_ratio: equivalent viscous damping ratio at ``reference_amplitude``.
