@@ -18,6 +18,7 @@ from service.cli import main
 from service.daemon import Appliance
 from service.devices.defaults import DEMO_RIG
 from service.persistence.store import Store
+from service.sources.files import read_rig
 
 ARTIFACT = 0.0125  # kg·m², the artifact's own inertia (J_object)
 
@@ -83,6 +84,17 @@ def test_identify_json_carries_the_expanded_uncertainty_and_its_budget(swing, ri
     lines = {ln["symbol"]: ln for ln in d["uncertainty_budget"]["J_object"]["lines"]}
     assert {"omega_n_fit", "clock", "k", "I0"} <= set(lines)
     assert d["J_std"] < d["J_u"]  # J_std keeps its meaning: the fit's 1σ alone
+    # the published budget against a Monte Carlo propagation of the same inputs (JCGM 101)
+    rig = read_rig(str(rig_file))
+    assert rig.stiffness_std and rig.tare_inertia_std and rig.stiffness_tare_covariance and rig.clock_accuracy_ppm
+    rng = np.random.default_rng(5)
+    n = 20_000
+    cov = [[rig.stiffness_std**2, rig.stiffness_tare_covariance], [rig.stiffness_tare_covariance,
+                                                                   rig.tare_inertia_std**2]]
+    k, i0 = rng.multivariate_normal([rig.stiffness, rig.tare_inertia], cov, n).T
+    w = sum(rng.normal(0.0, ln["std"], n) for ln in lines.values() if ln["unit"] == "rad/s") + d["omega_n"]
+    w = w * (1 + rng.normal(0.0, rig.clock_accuracy_ppm * 1e-6, n))
+    assert np.std(k / w**2 - i0) == pytest.approx(d["J_object_u"], rel=0.1)
 
 
 @pytest.mark.parametrize("line, words", [
