@@ -58,6 +58,9 @@ does), and while the newest one has failed the appliance's results carry
     reference_U = 2.0e-5          # its expanded uncertainty (certificate, k = 2), kg·m²
     name = "disc CS-1"            # the artifact (default: the recipe name)
 
+Unless the recipe lists its own ``invalid_flags``, a check standard is not made
+INVALID by ``calibration_due``: a passing check is what clears it.
+
 The decision rule and the combination of releases are
 ``measurement.verdict``'s (documented there). The recipe version is the
 SHA-256 of the file's bytes as read (first 16 hex digits): every stored
@@ -283,7 +286,11 @@ def load_recipe(path: str | Path) -> Recipe:
     if min_valid > releases:
         raise c.fail("quality", "min_valid_releases", f"expected at most releases = {releases}, got {min_valid}")
     pct = qual["max_J_std_percent"]
-    quality = QualityRules(invalid_flags=tuple(qual["invalid_flags"]), max_std=qual["max_J_std"],
+    invalid_flags = tuple(qual["invalid_flags"])
+    if "check_standard" in doc and "invalid_flags" not in doc.get("quality", {}):
+        # the check standard is what clears a calibration_due its failure raised: it must not be refused for it
+        invalid_flags = tuple(f for f in invalid_flags if f != "calibration_due")
+    quality = QualityRules(invalid_flags=invalid_flags, max_std=qual["max_J_std"],
                            max_std_relative=None if pct is None else pct / 100.0, min_swings=qual["min_swings"],
                            consistency_limit=qual["consistency_limit"], min_valid_releases=min_valid,
                            max_uncertainty_ratio=qual["max_uncertainty_ratio"])

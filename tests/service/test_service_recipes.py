@@ -182,6 +182,8 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
     verdict, p = verdicts[13]
     assert p["calibration"]["due"] and p["calibration"]["check_standard"]["passed"] is False
     assert verdict == code["INVALID"] and "calibration_due" in p["flags"]
+    # the check standard is not refused for the calibration_due its own failure raised: a passing one clears it
+    assert "calibration_due" not in load_recipe(recipe_dir / "check.toml").quality.invalid_flags
 
 
 @pytest.mark.broker
