@@ -197,3 +197,19 @@ def test_clock_accuracy_must_be_a_number_of_ppm():
                                  "g_std": 0.01}, "sensor": {"clock_accuracy_ppm": 20},
                          "object": {"mass": 0.3, "axis_offset": 0.1, "axis_offset_std": 1e-3}})
     assert Rig.from_dict(rig.to_dict()) == rig
+
+
+def test_a_tensor_set_shares_k_and_the_tare_with_their_correlation():
+    from measurement.tensor import RigShared
+
+    rig = Rig(kind="torsion", stiffness=0.3651, stiffness_std=3.373e-4, tare_inertia=4.5043e-3,
+              tare_inertia_std=4.177e-6, stiffness_tare_covariance=1.4076e-9)
+    shared = RigShared.of(rig)
+    assert shared.scale_tare_corr == pytest.approx(0.999, abs=1e-3)
+    J = np.array([0.017, 0.012])
+    # the same covariance the budget gives each J_object: k/ω² − I0 with k and I0 correlated
+    for i, Ji in enumerate(J):
+        b = PendulumInputs(omega_n=math.sqrt(rig.stiffness / Ji), omega_n_std=0.0, stiffness=rig.stiffness,
+                           stiffness_std=rig.stiffness_std, tare=rig.tare_inertia, tare_std=rig.tare_inertia_std,
+                           cov_k_tare=rig.stiffness_tare_covariance).budgets()["J_object"]
+        assert math.sqrt(shared.common_covariance(J)[i, i]) == pytest.approx(b.u, rel=1e-4)
