@@ -133,7 +133,7 @@ class Appliance:
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str, data: Mapping[str, Any] | None = None,
                 reply: ReplyTo | None = None) -> None:
-        """Queue a command from ``source`` ("button", "modbus", "mqtt", "opcua", "cli", "web"): "trigger" (data
+        """Queue a command from ``source`` ("button", "modbus", "mqtt", "cli", "web"): "trigger" (data
         may carry ``part_id``, and ``recipe`` as a name or number), "abort", "acknowledge_fault", "recipe" (data
         ``recipe``), "part_id" (data ``part_id``), "set" (data ``action`` redo | skip | abort, optional
         ``orientation``: the tensor set's operator actions) or "set_redo" / "set_skip" / "set_abort" (the

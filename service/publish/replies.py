@@ -1,11 +1,11 @@
 """What the appliance answers to a command, on every surface: one table of outcomes and reasons.
 
-A command (a trigger, an abort, a recipe selection ...) from Modbus, MQTT or OPC UA is queued with a
+A command (a trigger, an abort, a recipe selection ...) from the Modbus command register or MQTT is queued with a
 ``reply`` callable; the daemon's main loop calls it with a ``CommandReply`` once it has acted: accepted
 (a trigger: a measurement starts), refused (with the reason; nothing changed), done (a trigger: its result
 is stored; any other command: applied) or failed (a trigger's measurement ended in FAULT or was aborted).
-Modbus shows the reason's code in register ``command_reason``, MQTT its name in the reply message, OPC UA
-its words with a Bad status code.
+Modbus shows the reason's code in register ``command_reason``, MQTT its name in the reply message. (The
+OPC UA server takes no commands: its methods read and acknowledge results.)
 """
 
 from __future__ import annotations
