@@ -41,6 +41,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "list the stored measurements, or show one in full"),
     "export": ("service.commands.export",
         "export stored measurements to CSV or JSON, or one measurement's raw trace"),
+    "report": ("service.commands.report",
+        "the quality record of one measurement as a PDF (verdict, J ± U, releases, evidence, calibration)"),
     "spc": ("service.commands.spc",
         "SPC per recipe: control chart numbers, capability, run rules and a control-chart PNG"),
     "store": ("service.commands.store",

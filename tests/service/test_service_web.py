@@ -4,6 +4,7 @@ with the measurement, secrets masked, the token file."""
 from __future__ import annotations
 
 import json
+import re
 import os
 import stat
 import urllib.error
@@ -263,3 +264,79 @@ def test_a_result_stored_without_its_plot_gets_it_drawn_once_from_its_trace(appl
     status, _, png = Client(running.app.web.url).request(f"/results/{uid}/plot.png")
     assert status == 200 and png[:4] == b"\x89PNG"
     assert running.app.store.get_attachment(uid, "plot.png")[0] == png  # kept: the next view shows the same
+
+
+#: what must never reach a page: a Python None, a NaN or infinity, a raw dict or list, a traceback
+RAW = re.compile(r"\bNone\b|\bnan\b|\bNaN\b|\binf\b|Traceback|\{'|\['|\bTrue\b|\bFalse\b")
+
+
+def _recipes(d: Path) -> Path:
+    """Three part types on the simulated rig (J 0.0125 kg·m²): one that passes on 2 releases (shown in g·cm²),
+    one whose nominal is 20 % off (NOK), one whose 1σ limit no release meets (INVALID)."""
+    d.mkdir()
+    (d / "ok.toml").write_text('[recipe]\nname = "rotor-ok"\nnumber = 1\nnominal = 0.0125\ntolerance_percent = 2.0\n'
+                               'releases = 2\ndisplay_unit = "g*cm^2"\n')
+    (d / "nok.toml").write_text('[recipe]\nname = "rotor-nok"\nnumber = 2\nnominal = 0.015\ntolerance_percent = 2.0\n')
+    (d / "bad.toml").write_text('[recipe]\nname = "rotor-bad"\nnumber = 3\nnominal = 0.0125\ntolerance_percent = 2.0\n'
+                                '[quality]\nmax_J_std = 1.0e-15\n')
+    return d
+
+
+def _measure(running, c: Client, bearer: dict, recipe: str, part_id: str, count: int) -> None:
+    assert c.json("/api/part", data={"recipe": recipe, "part_id": part_id}, headers=bearer)[0] == 202
+    for _ in range(count):
+        done = running.app.store.count()
+        assert c.json("/api/measure", method="POST", headers=bearer)[0] == 202
+        running.wait_done(done + 1, 60)
+
+
+def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(appliance_factory, tmp_path):
+    running = appliance_factory(appliance_doc(tmp_path / "state", web=ON,
+                                              recipes={"directory": str(_recipes(tmp_path / "recipes"))}))
+    app = running.app
+    bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
+    c = Client(app.web.url)
+    _measure(running, c, bearer, "rotor-ok", "SN-1", 1)
+    first = app.store.latest()
+    # a part in progress: the release's own check, never a part verdict
+    page = c.request(f"/results/{first.uuid}")[2].decode()
+    assert "release 1 of 2" in page and "part OK" not in page and 'id="verdict"' in page
+    assert "next: release 2 of 2" in c.request("/")[2].decode()
+    _measure(running, c, bearer, "rotor-ok", "SN-1", 1)
+    ok = app.store.latest()
+    _measure(running, c, bearer, "rotor-nok", "SN-2", 1)
+    nok = app.store.latest()
+    _measure(running, c, bearer, "rotor-bad", "SN-3", 1)
+    bad = app.store.latest()
+    assert (ok.part_verdict, nok.part_verdict, bad.part_verdict) == ("OK", "NOK", "INVALID")
+
+    page = c.request(f"/results/{ok.uuid}")[2].decode()
+    part = ok.payload["part"]
+    # the part's value ± U in the recipe's unit (g·cm² = 1e7 kg·m²), the limits, the band
+    assert f"{part['value'] * 1e7:.7g} g·cm²" in page and f"{part['U'] * 1e7:.2g} g·cm²" in page
+    assert "part value from 2 of 2 releases, none excluded" in page and 'id="band"' in page
+    assert f"{0.0125 * 0.98 * 1e7:.7g} g·cm² … {0.0125 * 1.02 * 1e7:.7g} g·cm²" in page
+    assert 'class="verdict-tile verdict-OK" id="verdict"><span class="tile-word">OK' in page
+    page = c.request(f"/results/{bad.uuid}")[2].decode()
+    assert '<span class="tile-word">INVALID' in page and "part OK" not in page
+    assert "release 1 excluded" in page and "1σ" in page
+    assert '<span class="tile-word">NOK' in c.request(f"/results/{nok.uuid}")[2].decode()
+    # Home: the last part's verdict as the tile, the shift's counters, the last parts, the calibration
+    home = c.request("/")[2].decode()
+    assert 'id="tile-verdict">INVALID' in home and "SN-3" in home
+    assert [home.split(f'id="count-{v}">')[1].split("<")[0] for v in ("OK", "NOK", "INVALID")] == ["1", "1", "1"]
+    assert home.count('class="chip verdict-') == 3 and 'id="calibration"' in home
+    assert c.request("/home/summary")[2].decode().startswith('<div class="summary" id="summary">')
+    # the history keeps the part's verdict and each release's check apart
+    hist = c.request("/history")[2].decode()
+    assert "1 of 2: check OK" in hist and "part in progress" in hist
+
+    pages = ["/", "/history", "/spc", "/spc?recipe=rotor-ok", "/setup", "/set", "/history?recipe=rotor-bad"]
+    for m in (first, ok, nok, bad):
+        pages += [f"/results/{m.uuid}", f"/results/{m.uuid}/report"]
+    for path in pages:
+        status, _, body = c.request(path)
+        text = body.decode()
+        assert status == 200, (path, status, text[:300])
+        found = RAW.search(re.sub(r"<script.*?</script>", "", text, flags=re.S))
+        assert found is None, (path, found and text[max(0, found.start() - 120):found.end() + 60])

@@ -127,3 +127,17 @@ def replot(state_dir: str, uuid: str, default_rig: Mapping[str, Any], options: A
         m = store.get(uuid, trace=True)
     rig = Rig.from_dict(m.rig or default_rig)
     return render_png(identify(Trace(m.trace_t, m.trace_angle, source=f"measurement {m.seq}"), rig, options))
+
+
+def report_file(state_dir: str, uuid: str, default_unit: str) -> bytes:
+    """The report of the measurement ``uuid`` as PDF (``moi report ID --pdf``)."""
+    from service.persistence.store import Store
+    from service.publish.report import report_pdf
+
+    from .quality import display_unit
+    from .settings import PLOT_NAME
+
+    with Store(state_dir, read_only=True) as store:
+        m = store.get(uuid)
+        got = store.get_attachment(uuid, PLOT_NAME)
+    return report_pdf(m, got[0] if got else None, display_unit(m.payload, default_unit))

@@ -23,12 +23,13 @@ from aiohttp import web
 from service import __version__
 from service.errors import StoreDamaged
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME
-from .child import ChildBusy, export_file, replot, trace_file
+from .child import ChildBusy, export_file, replot, report_file, trace_file
 from .live import Live
 from .settings import PLOT_NAME
 from measurement.flags import FLAGS
 
 from .words import STATE_WORDS, flag_words
+from . import quality as Q
 
 if TYPE_CHECKING:  # pragma: no cover
     import concurrent.futures
@@ -61,6 +62,8 @@ HERE = Path(__file__).parent
 TICK = 0.25
 #: the largest history page asked for (its offset must stay an SQLite integer; no store has so many)
 MAX_PAGE = 10**9
+#: the latest parts an SPC page charts at most
+SPC_POINTS = 500
 #: keys whose values the set-up page never shows
 SECRET_WORDS = ("password", "token", "secret")
 
@@ -139,11 +142,11 @@ class Views:
         self.env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")),
                                       autoescape=jinja2.select_autoescape(["html"]), trim_blocks=True,
                                       lstrip_blocks=True)
-        self.env.filters.update(fmt=_fmt, when=_when, name=_name)
+        self.env.filters.update(fmt=_fmt, when=_when, name=_name, inertia=Q.inertia, iso=Q.iso)
         self._names = _own_names(server.settings.server_names)
         # file names carry a hash of the content: a browser never keeps a stale script after an update
         stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
-        self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS,
+        self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS, VERDICT_WORDS=Q.VERDICT_WORDS,
                                 static_url=lambda name: f"/static/{name}?v={stamps.get(name, '')}")
 
     # --- application ------------------------------------------------------------------------
@@ -151,6 +154,8 @@ class Views:
         app = web.Application(middlewares=[self._errors, self._host_check], client_max_size=64 * 1024)
         r = app.router
         r.add_get("/", self.home)
+        r.add_get("/home/summary", self.home_summary)
+        r.add_get("/spc", self.spc)
         r.add_get("/events", self.events)
         r.add_get("/api/state", self.api_state)
         r.add_post("/login", self.login)
@@ -164,6 +169,8 @@ class Views:
         r.add_get("/results/{key}/plot.png", self.plot)
         r.add_get("/results/{key}/trace.csv", self.trace_csv)
         r.add_get("/results/{key}/result.json", self.result_json)
+        r.add_get("/results/{key}/report", self.report)
+        r.add_get("/results/{key}/report.pdf", self.report_pdf)
         r.add_get("/set", self.tensor_set)
         r.add_get("/api/set", self.api_set)
         r.add_post("/api/set/{action}", self.set_action)
@@ -233,10 +240,47 @@ class Views:
         return resp
 
     # --- home and live state ---------------------------------------------------------------------
+    def unit(self, payload: Mapping[str, Any] | None = None) -> str:
+        """The unit a result is shown in: its recipe's, else the set-up's."""
+        return Q.display_unit(payload, self.server.settings.display_unit)
+
+    def summary(self) -> dict[str, Any]:
+        """Home's verdict tile (the last completed part: it stays until the next one), the shift's counters, the
+        last parts, the part in progress and the calibration."""
+        store = self.app.store
+        now = dt.datetime.now().astimezone()
+        shift = Q.shift_start(self.server.settings.shift_starts, now)
+        parts = store.list(limit=12, parts_only=True, full=True) if store is not None else []
+        last = store.latest("ok") if store is not None else None
+        counts = store.verdict_counts(since=shift.timestamp()) if store is not None else {}
+        tracker = getattr(self.app, "parts", None)
+        open_part = tracker.open_part if tracker is not None else None
+        recipe = tracker.recipe if tracker is not None else None
+        rig = recipe.rig_for(self.app.config.rig) if recipe is not None else self.app.config.rig
+        cal = rig.calibration
+        calibration = None
+        if cal is not None:
+            until = cal.valid_until
+            calibration = {"date": cal.date.isoformat(), "valid_until": until.isoformat() if until else None,
+                           "due": cal.due(now.date()),
+                           "days_left": (until - now.date()).days if until is not None else None}
+        tile = parts[0] if parts else None
+        return {"tile": tile, "tile_view": Q.part_view(tile.payload) if tile else None,
+                "tile_unit": self.unit(tile.payload if tile else None), "counts": counts,
+                "shift": shift.strftime("%H:%M"), "strip": parts, "open_part": open_part,
+                "next_release": {"k": (open_part["done"] + 1) if open_part else 1, "of": recipe.releases}
+                if recipe is not None and recipe.spec is not None else None,
+                "calibration": calibration, "last": last, "last_view": Q.part_view(last.payload) if last else None,
+                "last_unit": self.unit(last.payload if last else None)}
+
     async def home(self, request: web.Request) -> web.Response:
-        last = self.app.store.latest("ok") if self.app.store is not None else None
-        return self._page(request, "home.html", title="Home", state=self.live.snapshot(), last=last,
+        return self._page(request, "home.html", title="Home", state=self.live.snapshot(), s=self.summary(),
                           recipes=self.app.parts.book.recipes)
+
+    async def home_summary(self, request: web.Request) -> web.Response:
+        """Home's verdict tile, counters and last parts alone (the page fetches it after each result)."""
+        html = self.env.get_template("summary.html").render(s=self.summary())
+        return web.Response(text=html, content_type="text/html", headers={"Cache-Control": "no-store"})
 
     async def api_state(self, request: web.Request) -> web.Response:
         return web.json_response(self.live.snapshot())
@@ -327,6 +371,10 @@ class Views:
                                                                  "multipart/form-data") else {}
         await self._authorise(request, form)
         state = self.app.live_status().state
+        seq = self.app.sequencer
+        if name == "trigger" and seq is not None and seq.busy:
+            # said, not queued and silently dropped: the sequencer takes no trigger while it measures
+            raise Refused(409, f"a measurement is already running ({state}): Measure again when it is IDLE")
         self.app.command(name, "web")
         log.info("web: %s requested (state %s)", name, state)
         if "text/html" in request.headers.get("Accept", "") and form:
@@ -417,9 +465,29 @@ class Views:
         m = self._get(request.match_info["key"])
         p = m.payload or {}
         steps = [s for s in p.get("steps") or () if s.get("chosen")]
-        return self._page(request, "result.html", title=f"Result {m.seq}", m=m, p=p, steps=steps,
+        return self._page(request, "result.html", title=f"Result {m.seq}", steps=steps,
                           flags=flag_words(m.flags), baseline=p.get("baseline") or {},
-                          has_trace=self.app.config.store_trace)
+                          has_trace=self.app.config.store_trace, **self._result_context(m))
+
+    def _result_context(self, m: "Measurement") -> dict[str, Any]:
+        p = m.payload or {}
+        unit = self.unit(p)
+        view = Q.part_view(p)
+        return {"m": m, "p": p, "unit": unit, "v": view, "band": Q.band(view["recipe"], view.get("value"),
+                                                                           view.get("U"), unit)}
+
+    async def report(self, request: web.Request) -> web.Response:
+        """The quality record of one result: a page that prints on A4 (the PDF has the same content)."""
+        m = self._get(request.match_info["key"])
+        return self._page(request, "report.html", title=f"Report {m.seq}", flags=flag_words(m.flags),
+                          **self._result_context(m))
+
+    async def report_pdf(self, request: web.Request) -> web.Response:
+        m = self._get(request.match_info["key"])
+        body = await self._in_child(report_file, str(self.app.config.state_dir), m.uuid,
+                                    self.server.settings.display_unit)
+        return web.Response(body=body, content_type="application/pdf", headers={
+            "Content-Disposition": f'attachment; filename="moi-{m.seq}-{m.uuid[:8]}-report.pdf"'})
 
     async def plot(self, request: web.Request) -> web.Response:
 
@@ -516,6 +584,7 @@ class Views:
 
         export = urlencode(args)
         return self._page(request, "history.html", title="History", rows=rows, total=total, page=page, pages=pages,
+                          unit=self.server.settings.display_unit, unit_of=self.unit,
                           q=self._query_args(request), link=link, export=export, flag_names=sorted(FLAGS),
                           recipes=self.app.store.recipes())
 
@@ -528,6 +597,37 @@ class Views:
         body = await self._in_child(export_file, str(self.app.config.state_dir), fmt, self._filters(request))
         return web.Response(body=body, content_type="application/json" if fmt == "json" else "text/csv",
                             charset="utf-8", headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+    # --- SPC ---------------------------------------------------------------------------------------------------
+    async def spc(self, request: web.Request) -> web.Response:
+        """Control chart (I-MR or X̄–R) of one recipe's part values, Cp/Cpk, rule violations marked."""
+        from service.parts.recipes import recipe_spc
+
+        filters = self._filters(request)
+        chart = request.query.get("chart", "auto")
+        if chart not in ("auto", "I-MR", "Xbar-R"):
+            raise Refused(400, f"chart={chart[:20]!r}: expected auto, I-MR or Xbar-R")
+        store = self.app.store
+        recipes = store.recipes() if store is not None else []
+        recipe = request.query.get("recipe", "").strip() or (recipes[-1] if recipes else "")
+        if recipe and recipe not in recipes:
+            raise Refused(404, f"no completed parts of recipe {recipe[:64]!r} in the store")
+        result = None
+        if recipe:
+            loop = asyncio.get_running_loop()
+            result = await loop.run_in_executor(None, lambda: recipe_spc(
+                store, recipe, since=filters["since"], until=filters["until"], chart=chart, limit=SPC_POINTS))
+        unit = self.server.settings.display_unit
+        book = getattr(self.app, "parts", None)
+        if book is not None and recipe:
+            try:
+                unit = book.book.find(recipe).display_unit or unit
+            except Exception:  # a recipe in the store that is no longer in the directory: the set-up's unit
+                pass
+        chart_svg = Q.control_chart(result.summary, unit) if result is not None else None
+        q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
+        return self._page(request, "spc.html", title="SPC", recipes=recipes, recipe=recipe, spc=result,
+                          chart=chart_svg, unit=unit, q=q)
 
     # --- set-up -----------------------------------------------------------------------------------------
     def health(self) -> dict[str, Any]:

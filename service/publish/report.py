@@ -1,0 +1,100 @@
+"""The quality record of one stored result as a PDF (A4): what the report page shows, drawn with
+matplotlib's PDF backend (text stays text: a PDF reader finds the verdict)."""
+
+from __future__ import annotations
+
+import io
+from typing import Any
+
+from .web import quality as Q
+from .web.words import flag_words
+
+#: A4 portrait, inches
+A4 = (8.27, 11.69)
+VERDICT_COLOURS = {"OK": "#1a7f37", "NOK": "#b00020", "INVALID": "#9a6700"}
+
+
+def report_lines(m: Any, unit: str) -> tuple[dict[str, Any], list[tuple[str, str]], list[str]]:
+    """(the part view, the (label, text) facts, the release lines) of a ``StoredMeasurement``."""
+    p = m.payload or {}
+    v = Q.part_view(p)
+    r = v["recipe"] or {}
+    cal = p.get("calibration") or None
+    facts = [("measurement", f"#{m.seq} {m.uuid}"), ("part ID", p.get("part_id") or Q.MISSING),
+             ("finished", Q.iso(m.finished_at)), ("operator / started by", m.trigger or Q.MISSING),
+             ("device", m.device_id), ("software", f"moi {m.software_version}")]
+    if r:
+        facts.append(("recipe", f"{r.get('name')} (no. {r.get('number')}, version {r.get('version')})"))
+        if r.get("lower") is not None:
+            facts += [("nominal", Q.inertia(r.get("nominal"), unit)),
+                      ("limits", f"{Q.inertia(r.get('lower'), unit)} … {Q.inertia(r.get('upper'), unit)}"),
+                      ("decision rule", "guard band (ISO 14253-1), unproven: " + str(r.get("uncertain"))
+                       if r.get("rule") == "guard_band" else "simple acceptance (U reported, not used)")]
+    if v.get("U") is not None:
+        facts.append((f"{v.get('quantity') or 'J'} ± U", f"{Q.inertia(v.get('value'), unit)} ± "
+                      f"{Q.inertia(v.get('U'), unit, '.2g')} (k = {Q.number(v.get('k'), '.2g')})"))
+    else:
+        facts.append(("J ± u", f"{Q.inertia(v.get('value'), unit)} ± {Q.inertia(v.get('std'), unit, '.2g')} (1σ)"))
+    for row in v["budget"]:
+        facts.append(("  budget: " + row["name"], Q.inertia(row["u"], unit, ".2g")
+                      + (f" ({Q.number(row['share'], '.3g')} of u_c²)" if row["share"] is not None else "")))
+    facts.append(("calibration", (f"{cal.get('date')}" + (f", due {cal.get('valid_until')}" if cal.get("valid_until")
+                                                            else "") + (" (DUE)" if cal.get("due") else ""))
+                  if cal else "no calibration record"))
+    releases: list[str] = []
+    part = v.get("part")
+    if part:
+        excluded = {e["release"]: e["reason"] for e in v["excluded"]}
+        for i, value in enumerate(part.get("values") or (), start=1):
+            releases.append(f"release {i} of {part.get('releases')}: {Q.inertia(value, unit)} — "
+                            + (f"excluded: {excluded[i]}" if i in excluded else "used"))
+    elif p.get("release"):
+        rel = p["release"]
+        releases.append(f"release {rel.get('index')} of {rel.get('of')}: {Q.inertia(rel.get('value'), unit)} — "
+                        f"check {rel.get('verdict')}; the part is not complete")
+    flags = [f"{f}: {words}" if words else f for f, words in flag_words(m.flags)]
+    releases.append("flags of this release: " + ("; ".join(flags) if flags else "none"))
+    return v, facts, releases
+
+
+def report_pdf(m: Any, plot_png: bytes | None, unit: str = "kg·m²") -> bytes:
+    """The report of the stored measurement ``m`` (``StoredMeasurement``) as PDF bytes; ``plot_png``: the
+    evidence plot kept with it (None: said on the page)."""
+    import textwrap
+
+    from matplotlib.figure import Figure
+
+    v, facts, releases = report_lines(m, unit)
+    fig = Figure(figsize=A4)
+    fig.text(0.06, 0.965, f"Inertia measurement report #{m.seq}", fontsize=15, weight="bold", va="top")
+    verdict = v.get("verdict")
+    if v["kind"] == "part":
+        head, colour = v["verdict_words"], VERDICT_COLOURS.get(verdict or "", "k")
+    elif v["kind"] == "release":
+        head, colour = f"part in progress: release {v.get('index')} of {v.get('of')} (no part verdict yet)", "0.3"
+    else:
+        head, colour = "no recipe: a value without a verdict", "0.3"
+    fig.text(0.06, 0.93, head, fontsize=20, weight="bold", color=colour, va="top")
+    y = 0.885
+    lines = [(k, t) for k, t in facts] + [("", "")] + [("", r) for r in releases]
+    lines += [("", "release " + str(e["release"]) + " excluded from the part: " + e["reason"]) for e in v["excluded"]]
+    lines += [("", "why: " + r) for r in v["reasons"]]
+    for label, text in lines:
+        wrapped = textwrap.wrap(text, 78) or [""]
+        fig.text(0.06, y, label, fontsize=8.5, color="0.35", va="top")
+        for w in wrapped:
+            fig.text(0.32 if label else 0.06, y, w, fontsize=8.5, va="top")
+            y -= 0.017
+        if y < 0.42:
+            break
+    if plot_png is not None:
+        import matplotlib.image as mpimg
+
+        ax = fig.add_axes((0.04, 0.02, 0.92, max(0.1, y - 0.04)))
+        ax.imshow(mpimg.imread(io.BytesIO(plot_png), format="png"))
+        ax.set_axis_off()
+    else:
+        fig.text(0.06, y - 0.02, "no evidence plot is kept with this measurement", fontsize=9, va="top")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="pdf", metadata={"Title": f"moi report {m.uuid}", "Subject": head})
+    return buf.getvalue()

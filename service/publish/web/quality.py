@@ -1,0 +1,210 @@
+"""What the pages and the report say about a part: its verdict first, the value in the display unit, the
+tolerance band with the guard band and the result's interval, the shift's counters, control charts as SVG.
+
+Pure functions of stored payloads (dicts) and numbers: the views, the report page and the PDF share them.
+Every number is written with its unit; a missing value is written as "–", never as None or nan.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from typing import Any, Mapping, Sequence
+
+from measurement.units import SI, from_si, inertia_unit
+
+#: what the page says for a value it does not have
+MISSING = "–"
+
+#: verdict words (colour is never the only sign: the word is always written)
+VERDICT_WORDS = {"OK": "part OK", "NOK": "part NOK (not conforming)", "INVALID": "part INVALID (measure again)"}
+
+
+def number(v: Any, spec: str = ".6g") -> str:
+    """A number as text; None, NaN, ±inf and non-numbers that are not text become "–"."""
+    if v is None or isinstance(v, bool):
+        return MISSING
+    if isinstance(v, (int, float)):
+        return format(v, spec) if math.isfinite(v) else MISSING
+    return str(v)
+
+
+def inertia(v: Any, unit: str = SI, spec: str = ".7g") -> str:
+    """``v`` kg·m² written in ``unit`` with the unit ("–" without a value)."""
+    shown = from_si(v, unit) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+    return MISSING if shown is None else f"{format(shown, spec)} {unit}"
+
+
+def iso(ts: float | None) -> str:
+    """Unix time (s) as ISO 8601 with its UTC offset, to the second ("–" without one)."""
+    if ts is None or not math.isfinite(ts):
+        return MISSING
+    return dt.datetime.fromtimestamp(ts, dt.UTC).isoformat(timespec="seconds")
+
+
+def display_unit(payload: Mapping[str, Any] | None, default: str = SI) -> str:
+    """The unit a result is shown in: its recipe's, else ``default`` (the set-up's)."""
+    recipe = (payload or {}).get("recipe") or {}
+    try:
+        return inertia_unit(recipe.get("display_unit") or default)
+    except Exception:  # a unit this version does not know (a newer recipe): SI
+        return SI
+
+
+def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
+    """What the result page leads with, from a stored payload.
+
+    kind: "part" (the part is complete: its verdict), "release" (a release of a part in progress: no part
+    verdict yet), "plain" (no recipe: a value without a verdict). value, U (kg·m²), k: the number the
+    decision rests on and its expanded uncertainty; std: a 1σ when no U exists.
+    """
+    p = payload or {}
+    recipe = p.get("recipe") or None
+    part = p.get("part") or None
+    release = p.get("release") or None
+    out: dict[str, Any] = {"recipe": recipe, "part": part, "release": release, "excluded": [], "reasons": [],
+                           "budget": budget_rows(p.get("uncertainty_budget"))}
+    k = (recipe or {}).get("coverage_factor") or p.get("coverage_factor")
+    if part is not None:
+        out.update(kind="part", verdict=part.get("verdict"), value=part.get("value"), U=part.get("U"), k=k,
+                   quantity=part.get("quantity") or (recipe or {}).get("quantity"),
+                   used=len(part.get("used") or ()), releases=part.get("releases"),
+                   excluded=[{"release": int(e.get("index", 0)) + 1, "reason": e.get("reason") or ""}
+                             for e in part.get("excluded") or ()],
+                   reasons=list(part.get("reasons") or ()), zone=part.get("zone"))
+    elif release is not None:
+        out.update(kind="release", verdict=None, value=release.get("value"), U=release.get("U"), k=k,
+                   quantity=release.get("quantity"), index=release.get("index"), of=release.get("of"))
+    else:
+        U = p.get("J_U")
+        out.update(kind="plain", verdict=None, value=p.get("J"), U=U, k=p.get("coverage_factor") if U else None,
+                   quantity="J", std=p.get("J_std"))
+    out["verdict_words"] = VERDICT_WORDS.get(out.get("verdict") or "", "")
+    return out
+
+
+def budget_rows(budget: Any) -> list[dict[str, Any]]:
+    """The rows of a result's uncertainty budget (source, standard uncertainty kg·m², share of u_c²), from a
+    list of rows or a mapping that holds one (``contributions`` / ``rows`` / ``components``) or maps each source
+    to its u; [] when the result carries none."""
+    if not budget:
+        return []
+    rows: Any = budget
+    if isinstance(budget, Mapping):
+        rows = next((budget[k] for k in ("contributions", "rows", "components", "sources") if k in budget), None)
+        if rows is None:
+            rows = [{"name": k, "u": v} for k, v in budget.items() if isinstance(v, (int, float))]
+        elif isinstance(rows, Mapping):
+            rows = [{"name": k, **(v if isinstance(v, Mapping) else {"u": v})} for k, v in rows.items()]
+    out = []
+    for r in rows if isinstance(rows, (list, tuple)) else ():
+        if not isinstance(r, Mapping):
+            continue
+        u = next((r[k] for k in ("u", "std", "standard_uncertainty", "u_i") if k in r), None)
+        share = next((r[k] for k in ("share", "fraction", "percent_of_variance") if k in r), None)
+        out.append({"name": str(next((r[k] for k in ("name", "source", "quantity") if k in r), "")),
+                    "u": u, "share": share})
+    return out
+
+
+def band(recipe: Mapping[str, Any] | None, value: float | None, U: float | None, unit: str = SI,
+         width: float = 600.0) -> dict[str, Any] | None:
+    """The tolerance band drawing (SVG x coordinates in a ``width`` wide box): LSL, nominal, USL, the guard
+    band (ISO 14253-1: the zone shrunk by U at each end) and the result's interval value ± U."""
+    if not recipe or recipe.get("lower") is None or recipe.get("upper") is None:
+        return None
+    lsl, usl, nominal = float(recipe["lower"]), float(recipe["upper"]), recipe.get("nominal")
+    span = usl - lsl
+    lo, hi = lsl - 0.35 * span, usl + 0.35 * span
+    u = float(U) if U is not None and math.isfinite(U) else 0.0
+    if value is not None and math.isfinite(value):
+        lo, hi = min(lo, value - u - 0.05 * span), max(hi, value + u + 0.05 * span)
+    pad = 12.0
+
+    def x(v: float) -> float:
+        return round(pad + (v - lo) / (hi - lo) * (width - 2 * pad), 1)
+
+    guard = recipe.get("rule", "guard_band") == "guard_band" and 0 < 2 * u < span
+    out: dict[str, Any] = {
+        "width": width, "lsl": x(lsl), "usl": x(usl), "nominal": x(nominal) if nominal is not None else None,
+        "labels": [(x(lsl), "LSL " + inertia(lsl, unit, ".6g")), (x(usl), "USL " + inertia(usl, unit, ".6g"))],
+        "guard": (x(lsl + u), x(usl - u)) if guard else None, "value": None, "interval": None}
+    if value is not None and math.isfinite(value):
+        out["value"] = x(value)
+        out["interval"] = (x(value - u), x(value + u))
+    return out
+
+
+def shift_start(starts: Sequence[str], now: dt.datetime) -> dt.datetime:
+    """The start of the shift ``now`` (local, aware) is in; ``starts``: "HH:MM" local times."""
+    best = None
+    for days in (0, 1):
+        day = (now - dt.timedelta(days=days)).date()
+        for hm in starts:
+            h, m = (int(t) for t in hm.split(":"))
+            t = dt.datetime(day.year, day.month, day.day, h, m, tzinfo=now.tzinfo)
+            if t <= now and (best is None or t > best):
+                best = t
+    return best if best is not None else now.replace(hour=0, minute=0, second=0, microsecond=0)
+
+
+# --- control charts as SVG -----------------------------------------------------------------------------------------
+def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: float = 300.0) -> dict[str, Any]:
+    """An SPC summary (``measurement.spc.SpcSummary``) as SVG geometry: the points (violations marked), the
+    centre line, the control limits and the specification limits, each labelled on the right; the ranges
+    below. Values are drawn in ``unit``."""
+    s = summary
+    f = from_si(1.0, unit) or 1.0
+    pts = [float(v) * f for v in s.points]
+    lines = [("centre", s.mean * f, "centre"), ("UCL", s.ucl * f, "limit"), ("LCL", s.lcl * f, "limit")]
+    if s.usl is not None:
+        lines.append(("USL", s.usl * f, "spec"))
+    if s.lsl is not None:
+        lines.append(("LSL", s.lsl * f, "spec"))
+    bad = {v.index for v in s.violations} | set(s.outside)
+    rules = sorted({(v.index, v.rule) for v in s.violations})
+    top = _panel(pts, lines, bad, width, height, unit)
+    f_r = [float(r) * f for r in s.ranges]
+    r_lines = [("R̄", s.range_mean * f, "centre"), ("UCL", s.range_ucl * f, "limit")]
+    if s.range_lcl > 0:
+        r_lines.append(("LCL", s.range_lcl * f, "limit"))
+    first = 1 if s.subgroup == 1 else 0  # a moving range starts at the second part
+    bottom = _panel(f_r, r_lines, set(), width, height * 0.55, unit, x_offset=first, n_total=len(pts))
+    return {"top": top, "bottom": bottom, "rules": [(i + 1, r) for i, r in rules],
+            "range_name": "moving range" if s.subgroup == 1 else f"range (n = {s.subgroup})"}
+
+
+def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad: set[int], width: float,
+           height: float, unit: str, x_offset: int = 0, n_total: int | None = None) -> dict[str, Any]:
+    left, right, top, bottom = 78.0, 150.0, 12.0, 26.0
+    n = n_total or len(values)
+    ys = list(values) + [v for _, v, _ in lines]
+    lo, hi = (min(ys), max(ys)) if ys else (0.0, 1.0)
+    if hi - lo <= 0:
+        lo, hi = lo - 1.0, hi + 1.0
+    margin = 0.08 * (hi - lo)
+    lo, hi = lo - margin, hi + margin
+
+    def X(i: int) -> float:
+        return round(left + (i + 0.5) / max(n, 1) * (width - left - right), 1)
+
+    def Y(v: float) -> float:
+        return round(top + (hi - v) / (hi - lo) * (height - top - bottom), 1)
+
+    points = [(X(i + x_offset), Y(v), (i + x_offset) in bad, i + x_offset + 1, format(v, ".6g"))
+              for i, v in enumerate(values)]
+    drawn = [(name, Y(v), kind, f"{name} {v:.5g}") for name, v, kind in lines]
+    # labels that would overlap are moved apart (at least 12 px), in the order of their height
+    placed: list[float] = []
+    labels = []
+    for name, y, kind, text in sorted(drawn, key=lambda d: d[1]):
+        ly = max(y, placed[-1] + 12.0) if placed else y
+        placed.append(ly)
+        labels.append((ly + 4, kind, text))
+    ticks = [(Y(lo + (hi - lo) * i / 4), format(lo + (hi - lo) * i / 4, ".4g")) for i in range(5)]
+    step = max(1, n // 10)
+    xticks = [(X(i), str(i + 1)) for i in range(0, n, step)]
+    return {"width": width, "height": height, "left": left, "right": width - right, "top": top,
+            "bottom": height - bottom, "points": points, "lines": drawn, "labels": labels, "yticks": ticks,
+            "xticks": xticks, "unit": unit,
+            "path": " ".join(f"{'M' if k == 0 else 'L'}{x},{y}" for k, (x, y, *_rest) in enumerate(points))}
