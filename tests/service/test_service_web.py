@@ -248,7 +248,8 @@ def test_recipe_and_part_id_set_from_the_page_reach_the_result_and_the_history(a
     m = app.store.latest()
     assert (m.recipe, m.part_id, m.part_verdict) == ("rotor-a", "SN-0042", "OK")
     page = c.request(f"/results/{m.uuid}")[2].decode()
-    assert 'id="verdict">part OK' in page and "SN-0042" in page and "release 1 of 1" in page
+    assert 'verdict-OK" id="verdict"><span class="tile-word">OK' in page and "part OK" in page
+    assert "SN-0042" in page and "release 1 of 1" in page
     assert m.uuid in c.request("/history?recipe=rotor-a&part=SN-0042")[2].decode()
     assert m.uuid not in c.request("/history?part=SN-0043")[2].decode()
 
@@ -340,3 +341,20 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
         assert status == 200, (path, status, text[:300])
         found = RAW.search(re.sub(r"<script.*?</script>", "", text, flags=re.S))
         assert found is None, (path, found and text[max(0, found.start() - 120):found.end() + 60])
+
+
+def test_a_second_measure_during_a_capture_is_refused_in_words(appliance_factory, tmp_path):
+    # a capture long enough (300 s of simulated time, 12 s here) to be asked twice during it; aborted afterwards
+    doc = appliance_doc(tmp_path / "state", web=ON)
+    doc["sequencer"]["capture_duration"] = 300.0
+    running = appliance_factory(doc)
+    app = running.app
+    bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
+    c = Client(app.web.url)
+    assert c.json("/api/measure", method="POST", headers=bearer)[0] == 202
+    running.wait_event(lambda e: e.state.value == "CAPTURING", 30, what="the capture")
+    status, body = c.json("/api/measure", method="POST", headers=bearer)
+    assert status == 409 and "already running" in body["error"] and "IDLE" in body["error"]
+    assert c.json("/api/abort", method="POST", headers=bearer)[0] == 202
+    running.wait_done(1, 30)
+    assert app.store.latest(None).status == "aborted"

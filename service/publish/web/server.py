@@ -40,6 +40,10 @@ log = logging.getLogger("moi.web")
 CAPTURE_STATES = tuple(name for name, s in STATES.items() if s.capturing)
 #: plots waiting to be drawn at most; a measurement stored beyond them gets its plot when it is asked for
 MAX_PENDING_PLOTS = 8
+#: the latest results whose fit the live page can draw over the swing
+MAX_FITS = 4
+#: points of such a fit at most
+FIT_POINTS = 1500
 #: at most one "connections refused" line per this many seconds, s
 REFUSED_LOG_INTERVAL = 60.0
 
@@ -76,6 +80,7 @@ class WebServer(Publisher):
         self._listeners: set[asyncio.Queue] = set()
         self._plotter = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="moi-plot")
         self._plots: dict[str, concurrent.futures.Future] = {}
+        self._fits: dict[str, dict[str, Any]] = {}
         self._plots_lock = threading.Lock()
         self.child = ChildWork()
         self.views = Views(self)
@@ -174,6 +179,7 @@ class WebServer(Publisher):
         self.measurement_stored(measurement)
 
     def measurement_stored(self, m: "Measurement") -> None:
+        self._keep_fit(m)
         with self._plots_lock:
             behind = len(self._plots)
         if behind >= MAX_PENDING_PLOTS:
@@ -187,6 +193,26 @@ class WebServer(Publisher):
             return render_png(m.result)
 
         self.submit_plot(m.id, draw)
+
+    def _keep_fit(self, m: "Measurement") -> None:
+        """The fit and its residual of the latest results, thinned to at most FIT_POINTS points, for the live page
+        to draw over the swing it just showed (times from the trace's first sample, s; angles, rad)."""
+        try:
+            a = m.result.arrays
+            t, fitted, residual, t0 = a["t"], a["fitted"], a["residual"], float(a["trace_t"][0])
+        except (AttributeError, KeyError, IndexError, TypeError):  # a result without arrays: nothing to draw
+            return
+        step = max(1, len(t) // FIT_POINTS)
+        fit = {"t": [round(float(x) - t0, 4) for x in t[::step]], "fitted": [round(float(x), 6) for x in fitted[::step]],
+               "residual": [round(float(x), 7) for x in residual[::step]], "unit": "rad", "time_unit": "s"}
+        with self._plots_lock:
+            self._fits[m.id] = fit
+            while len(self._fits) > MAX_FITS:
+                self._fits.pop(next(iter(self._fits)))
+
+    def fit(self, uuid: str) -> dict[str, Any] | None:
+        with self._plots_lock:
+            return self._fits.get(uuid)
 
     def submit_plot(self, uuid: str, make_png) -> concurrent.futures.Future:
         """Keep the PNG ``make_png()`` draws with the measurement ``uuid`` (once, however often asked)."""

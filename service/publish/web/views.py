@@ -54,6 +54,7 @@ if TYPE_CHECKING:  # pragma: no cover
         def plot_future(self, uuid: str) -> concurrent.futures.Future | None: ...
         def submit_plot(self, uuid: str, get_result: Any) -> concurrent.futures.Future: ...
         def stats(self) -> dict[str, Any]: ...
+        def fit(self, uuid: str) -> dict[str, Any] | None: ...
 
 log = logging.getLogger("moi.web")
 
@@ -169,6 +170,7 @@ class Views:
         r.add_get("/results/{key}/plot.png", self.plot)
         r.add_get("/results/{key}/trace.csv", self.trace_csv)
         r.add_get("/results/{key}/result.json", self.result_json)
+        r.add_get("/results/{key}/fit.json", self.fit_json)
         r.add_get("/results/{key}/report", self.report)
         r.add_get("/results/{key}/report.pdf", self.report_pdf)
         r.add_get("/set", self.tensor_set)
@@ -475,6 +477,17 @@ class Views:
         view = Q.part_view(p)
         return {"m": m, "p": p, "unit": unit, "v": view, "band": Q.band(view["recipe"], view.get("value"),
                                                                            view.get("U"), unit)}
+
+    async def fit_json(self, request: web.Request) -> web.Response:
+        """The fit and its residual of one of the latest results (the live page draws them over the swing)."""
+        key = request.match_info["key"]
+        fit = self.server.fit(key)
+        if fit is None:
+            m = self._get(key)
+            fit = self.server.fit(m.uuid)
+        if fit is None:
+            raise Refused(404, "only the latest results keep their fit for the live page; see the result's plot")
+        return web.json_response(fit)
 
     async def report(self, request: web.Request) -> web.Response:
         """The quality record of one result: a page that prints on A4 (the PDF has the same content)."""
