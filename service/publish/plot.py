@@ -11,8 +11,13 @@ import numpy as np
 from measurement.result import IdentificationResult
 
 
-def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO, *, dpi: int = 110) -> None:
-    """Draw the result into ``path`` (a file name or a binary file object), PNG."""
+#: the picture formats a plot may be written in (by the file name's extension)
+PLOT_FORMATS = ("png", "svg", "pdf")
+
+
+def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO, *, dpi: int = 110,
+                fmt: str = "png") -> None:
+    """Draw the result into ``path`` (a file name or a binary file object) as ``fmt`` (png, svg or pdf)."""
     # a Figure without pyplot: no global state, so the daemon's plot worker thread may draw too
     from matplotlib.figure import Figure
 
@@ -45,13 +50,18 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO
     axes[2].set_xlabel("t [s]")
     if result.flags:
         axes[2].text(0.01, 0.03, "flags: " + ", ".join(result.flags), transform=axes[2].transAxes, fontsize=8, color="tab:red")
-    fig.savefig(path, dpi=dpi, format="png")
+    fig.savefig(path, dpi=dpi, format=fmt)
 
 
 def render_png(result: IdentificationResult, *, dpi: int = 80) -> bytes:
     """The picture of ``result`` as PNG bytes (what the result store keeps with the measurement)."""
+    return render(result, "png", dpi=dpi)
+
+
+def render(result: IdentificationResult, fmt: str, *, dpi: int = 110) -> bytes:
+    """The picture of ``result`` as ``fmt`` (png, svg, pdf) bytes."""
     buf = io.BytesIO()
-    plot_result(result, buf, dpi=dpi)
+    plot_result(result, buf, dpi=dpi, fmt=fmt)
     return buf.getvalue()
 
 

@@ -3,6 +3,7 @@ with the measurement, secrets masked, the token file."""
 
 from __future__ import annotations
 
+import io
 import json
 import re
 import os
@@ -358,3 +359,36 @@ def test_a_second_measure_during_a_capture_is_refused_in_words(appliance_factory
     assert c.json("/api/abort", method="POST", headers=bearer)[0] == 202
     running.wait_done(1, 30)
     assert app.store.latest(None).status == "aborted"
+
+    # the quality record: the report's PDF from the page and from `moi report`, its text read back
+    from pypdf import PdfReader
+
+    from service.cli import main
+
+    status, headers, pdf = c.request(f"/results/{bad.uuid}/report.pdf")
+    assert status == 200 and headers["Content-Type"] == "application/pdf" and pdf[:5] == b"%PDF-"
+    text = PdfReader(io.BytesIO(pdf)).pages[0].extract_text()
+    assert "part INVALID" in text and "release 1 excluded" in text and "SN-3" in text
+    state = str(tmp_path / "state")
+    assert main(["report", ok.uuid[:8], "--state-dir", state, "--pdf", str(tmp_path / "ok.pdf")]) == 0
+    text = PdfReader(str(tmp_path / "ok.pdf")).pages[0].extract_text()
+    assert "part OK" in text and "g·cm²" in text and "guard band" in text and "release 2 of 2" in text
+    assert main(["report", ok.uuid[:8], "--state-dir", state, "--pdf", str(tmp_path / "ok.png")]) == 2
+
+    # AQDEF: the recipe's characteristic (nominal, limits, unit) and one value line per part, read back
+    out = tmp_path / "rotor-ok.dfq"
+    assert main(["export", "--state-dir", state, "--format", "dfq", "--recipe", "rotor-ok", "--out", str(out)]) == 0
+    fields, values = {}, []
+    for line in out.read_bytes().decode("cp1252").split("\r\n"):
+        if line.startswith("K") and " " in line and "\x14" not in line:
+            key, _, value = line.partition(" ")
+            fields[key] = value
+        elif line:
+            values.append(line.split("\x14"))
+    assert fields["K0100"] == "1" and fields["K1001"] == "rotor-ok" and fields["K2142/1"] == "g·cm²"
+    places = int(fields["K2022/1"])
+    assert float(fields["K2101/1"]) == pytest.approx(0.0125e7) and places >= 3
+    assert float(fields["K2110/1"]) == pytest.approx(0.0125e7 * 0.98) and float(fields["K2111/1"]) == pytest.approx(0.0125e7 * 1.02)
+    assert len(values) == 1 and float(values[0][0]) == pytest.approx(ok.part_value * 1e7, abs=10 ** -places)
+    assert values[0][1] == "0" and values[0][2].count(".") == 2 and fields["K0014/1"] == "SN-1"
+    assert main(["export", "--state-dir", state, "--format", "dfq"]) == 2  # three recipes: which one?
