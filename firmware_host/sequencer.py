@@ -97,7 +97,8 @@ class SequencerConfig:
     seconds: on a ``ScaledClock`` the sequencer divides clock time by its
     ``scale``, so a simulation running 5× faster does not starve the bus or the fit.
 
-    pre_trigger: capture recorded before the release (at rest at the release angle).
+    pre_trigger: capture recorded before the release (at rest at the release angle): the last
+        pre_trigger seconds before it, however late the release came.
     release_pulse: how long the solenoid is asked to stay on (the solenoid clamps
         it to its own hard maximum).
     capture_duration: the capture ends this long after the release at the latest.
@@ -182,7 +183,7 @@ class _Run:
     last_sample_at: float | None = None  # clock time a new sample last arrived
     dropped_out_of_order: int = 0
     beyond_window: int = 0  # samples later than release + capture_duration (not kept)
-    outside_window: int = 0  # samples not kept: after release + capture_duration
+    outside_window: int = 0  # samples not kept: before release − pre_trigger or after release + capture_duration
     trace: Trace | None = None
     job: _Job | None = None
     identify_started_at: float | None = None
@@ -556,6 +557,7 @@ class Sequencer:
                     raise DeviceFault("solenoid already energised before the release")
                 run.granted_pulse = self.solenoid.pulse(self.config.release_pulse)
                 run.released_at = now
+                self._trim_pre_trigger(run)
                 self._transition(now, State.RELEASING, f"solenoid pulse {run.granted_pulse:g} s")
         elif state is State.RELEASING:
             if now - run.released_at >= run.granted_pulse:
@@ -597,6 +599,16 @@ class Sequencer:
             run.t.extend(t[keep].tolist())
             run.angle.extend(angle[keep].tolist())
             run.last_sample_at = now
+
+    def _trim_pre_trigger(self, run: _Run) -> None:
+        # the record before the release is the last pre_trigger seconds, however late the poll came that
+        # released: on a fast simulated clock (or a stalled loop) the wait can be many pre-triggers long,
+        # and that rest would lengthen the record and the work; the samples left out are counted
+        # (the latest sample before it always stays: the rest the swing starts from, and the order guard's anchor)
+        first = min(bisect.bisect_left(run.t, run.released_at - self.config.pre_trigger), len(run.t) - 1)
+        if first > 0:
+            del run.t[:first], run.angle[:first]
+            run.outside_window += first
 
     def _check_sample_timeout(self, run: _Run, now: float) -> None:
         since = run.last_sample_at if run.last_sample_at is not None else run.armed_at

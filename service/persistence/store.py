@@ -29,6 +29,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import numpy as np
 
 from service.errors import StoreDamaged, StoreError
+from service.persistence.pages import leaf_records
 
 DB_NAME = "results.db"
 #: the largest integer SQLite stores (a longer sequence number is no measurement's)
@@ -731,9 +732,15 @@ def _read_rows(db: sqlite3.Connection, table: str, health: StoreHealth) -> Itera
     indexed = _indexed_count(db, table)
     if indexed is not None and indexed > len(ids):
         # rows the table's own tree no longer reaches (a damaged root or inner page) are still listed in
-        # its unique index: they are lost, and said so, not silently left out
-        health.lost[table] += indexed - len(ids)
-        health.problems.append(f"{table}: {indexed - len(ids)} row(s) listed in its index cannot be reached")
+        # its unique index, and their leaf pages are usually intact: read them there; what cannot be read
+        # is lost, and said so, not silently left out
+        unreached = indexed - len(ids)
+        found = _rows_from_leaf_pages(db, table, columns, set(ids))
+        health.lost[table] += unreached - len(found)
+        health.readable[table] += len(found)
+        health.problems.append(f"{table}: {unreached} row(s) listed in its index cannot be reached through the "
+                               f"table; {len(found)} read from its leaf pages")
+        yield from ((columns, row) for row in found)
     for rowid in ids:
         row = _read_row(db, table, columns, rowid)
         if row is None and table == "measurements":
@@ -763,22 +770,64 @@ def _indexed_count(db: sqlite3.Connection, table: str) -> int | None:
         return None
 
 
+def _rows_from_leaf_pages(db: sqlite3.Connection, table: str, columns: list[str], reached: set[int]) -> list[tuple]:
+    """Rows of ``table`` its tree does not reach, read from the file's leaf pages (``pages.leaf_records``).
+
+    A leaf page does not say which table it belongs to, and a page may hold a stale copy of a row: a
+    record is taken only when its uuid is listed in the table's intact unique index, it has the table's
+    shape (ALTER TABLE columns missing at the end read as NULL), its JSON and arrays decode, and no
+    other record claims that uuid."""
+    index = _ROW_INDEXES.get(table)
+    if index is None or "uuid" not in columns:
+        return []
+    try:
+        listed = {u for (u,) in db.execute(f"SELECT uuid FROM {table} INDEXED BY {index}")}
+        file = next(r[2] for r in db.execute("PRAGMA database_list") if r[1] == "main")
+        pk = [r[1] for r in db.execute(f"PRAGMA table_info({table})") if r[5] == 1 and r[2].upper() == "INTEGER"]
+        records = list(leaf_records(file))
+    except (sqlite3.DatabaseError, OSError, ValueError, StopIteration):
+        return []
+    at_uuid = columns.index("uuid")
+    found: dict[str, tuple] = {}
+    claimed: dict[str, int] = {}
+    for rec in records:
+        if rec.rowid in reached or not at_uuid < len(rec.values) <= len(columns):
+            continue
+        values = list(rec.values) + [None] * (len(columns) - len(rec.values))
+        for name in pk:  # an INTEGER PRIMARY KEY is the rowid itself: the record stores NULL there
+            values[columns.index(name)] = rec.rowid
+        uuid = values[at_uuid]
+        if uuid not in listed or not _decodes(table, dict(zip(columns, values))):
+            continue
+        claimed[uuid] = claimed.get(uuid, 0) + 1
+        found[uuid] = tuple(values)
+    return [row for uuid, row in found.items() if claimed[uuid] == 1]
+
+
+def _decodes(table: str, d: Mapping[str, Any]) -> bool:
+    """Whether a row's JSON texts and packed arrays decode."""
+    if table != "measurements":
+        return True
+    try:
+        for k in ("flags", "payload", "rig", "config", "trace_meta"):
+            if d.get(k) is not None:
+                json.loads(d[k])
+        for k in ("trace_t", "trace_angle"):
+            _unpack(d.get(k))
+    except (zlib.error, json.JSONDecodeError, UnicodeDecodeError, TypeError, ValueError):
+        return False
+    return True
+
+
 def _read_row(db: sqlite3.Connection, table: str, columns: list[str], rowid: int,
               without: tuple[str, ...] = ()) -> tuple | None:
     """One row whose blobs and JSON texts decode, or None; the columns in ``without`` read as NULL."""
     wanted = [c if c not in without else "NULL" for c in columns]
     try:
         row = db.execute(f"SELECT {', '.join(wanted)} FROM {table} WHERE rowid = ?", (rowid,)).fetchone()
-        if row is not None and table == "measurements":
-            d = dict(zip(columns, row))
-            for k in ("flags", "payload", "rig", "config", "trace_meta"):
-                if d.get(k) is not None:
-                    json.loads(d[k])
-            for k in ("trace_t", "trace_angle"):
-                _unpack(d.get(k))
-        return row
-    except (sqlite3.DatabaseError, zlib.error, json.JSONDecodeError, UnicodeDecodeError):
+    except sqlite3.DatabaseError:
         return None
+    return row if row is None or _decodes(table, dict(zip(columns, row))) else None
 
 
 def check_store(path: str | Path) -> StoreHealth:

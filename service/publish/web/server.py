@@ -21,13 +21,12 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from drivers.aioloop import LoopThread
-from service.states import STATES
-
 from service.errors import StartupError
 from service.publish.port import ApplianceView, Publisher
 
 from .auth import Guard, read_token
 from .child import ChildWork
+from .priority import CAPTURE_STATES
 from .settings import DEFAULT_TOKEN_FILE_NAME, PLOT_NAME, WebSettings
 from .views import Views
 
@@ -36,8 +35,6 @@ if TYPE_CHECKING:  # pragma: no cover
 
 log = logging.getLogger("moi.web")
 
-#: no plot is drawn while the sequencer is in one of these (the sensor is being read)
-CAPTURE_STATES = tuple(name for name, s in STATES.items() if s.capturing)
 #: plots waiting to be drawn at most; a measurement stored beyond them gets its plot when it is asked for
 MAX_PENDING_PLOTS = 8
 #: the latest results whose fit the live page can draw over the swing
@@ -189,8 +186,10 @@ class WebServer(Publisher):
             return
 
         def draw() -> bytes:
+            # matplotlib holds the interpreter lock for a good part of a second: in the child process, where
+            # it cannot delay the sensor's reader of the next capture
             from service.publish.plot import render_png
-            return render_png(m.result)
+            return self.child.call(render_png, m.result)
 
         self.submit_plot(m.id, draw)
 

@@ -24,6 +24,7 @@ from service import __version__
 from service.errors import StoreDamaged
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME
 from .child import ChildBusy, export_file, replot, report_file, trace_file
+from .priority import CAPTURE_STATES, CaptureFirst
 from .live import Live
 from .settings import PLOT_NAME
 from measurement.flags import FLAGS
@@ -145,14 +146,19 @@ class Views:
                                       lstrip_blocks=True)
         self.env.filters.update(fmt=_fmt, when=_when, name=_name, inertia=Q.inertia, iso=Q.iso)
         self._names = _own_names(server.settings.server_names)
+        self.capture_first = CaptureFirst(self._capturing)
         # file names carry a hash of the content: a browser never keeps a stale script after an update
         stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
         self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS, VERDICT_WORDS=Q.VERDICT_WORDS,
                                 static_url=lambda name: f"/static/{name}?v={stamps.get(name, '')}")
 
+    def _capturing(self) -> bool:
+        seq = self.app.sequencer
+        return seq is not None and seq.state.value in CAPTURE_STATES
+
     # --- application ------------------------------------------------------------------------
     def application(self) -> web.Application:
-        app = web.Application(middlewares=[self._errors, self._host_check], client_max_size=64 * 1024)
+        app = web.Application(middlewares=[self._errors, self._host_check, self.capture_first.middleware], client_max_size=64 * 1024)
         r = app.router
         r.add_get("/", self.home)
         r.add_get("/home/summary", self.home_summary)
