@@ -343,23 +343,6 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
         found = RAW.search(re.sub(r"<script.*?</script>", "", text, flags=re.S))
         assert found is None, (path, found and text[max(0, found.start() - 120):found.end() + 60])
 
-
-def test_a_second_measure_during_a_capture_is_refused_in_words(appliance_factory, tmp_path):
-    # a capture long enough (300 s of simulated time, 12 s here) to be asked twice during it; aborted afterwards
-    doc = appliance_doc(tmp_path / "state", web=ON)
-    doc["sequencer"]["capture_duration"] = 300.0
-    running = appliance_factory(doc)
-    app = running.app
-    bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
-    c = Client(app.web.url)
-    assert c.json("/api/measure", method="POST", headers=bearer)[0] == 202
-    running.wait_event(lambda e: e.state.value == "CAPTURING", 30, what="the capture")
-    status, body = c.json("/api/measure", method="POST", headers=bearer)
-    assert status == 409 and "already running" in body["error"] and "IDLE" in body["error"]
-    assert c.json("/api/abort", method="POST", headers=bearer)[0] == 202
-    running.wait_done(1, 30)
-    assert app.store.latest(None).status == "aborted"
-
     # the quality record: the report's PDF from the page and from `moi report`, its text read back
     from pypdf import PdfReader
 
@@ -392,3 +375,20 @@ def test_a_second_measure_during_a_capture_is_refused_in_words(appliance_factory
     assert len(values) == 1 and float(values[0][0]) == pytest.approx(ok.part_value * 1e7, abs=10 ** -places)
     assert values[0][1] == "0" and values[0][2].count(".") == 2 and fields["K0014/1"] == "SN-1"
     assert main(["export", "--state-dir", state, "--format", "dfq"]) == 2  # three recipes: which one?
+
+
+def test_a_second_measure_during_a_capture_is_refused_in_words(appliance_factory, tmp_path):
+    # a capture long enough (300 s of simulated time, 12 s here) to be asked twice during it; aborted afterwards
+    doc = appliance_doc(tmp_path / "state", web=ON)
+    doc["sequencer"]["capture_duration"] = 300.0
+    running = appliance_factory(doc)
+    app = running.app
+    bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
+    c = Client(app.web.url)
+    assert c.json("/api/measure", method="POST", headers=bearer)[0] == 202
+    running.wait_event(lambda e: e.state.value == "CAPTURING", 30, what="the capture")
+    status, body = c.json("/api/measure", method="POST", headers=bearer)
+    assert status == 409 and "already running" in body["error"] and "IDLE" in body["error"]
+    assert c.json("/api/abort", method="POST", headers=bearer)[0] == 202
+    running.wait_done(1, 30)
+    assert app.store.latest(None).status == "aborted"
