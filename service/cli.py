@@ -43,6 +43,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "export stored measurements to CSV or JSON, or one measurement's raw trace"),
     "report": ("service.commands.report",
         "the quality record of one measurement as a PDF (verdict, J ± U, releases, evidence, calibration)"),
+    "user": ("service.commands.user",
+        "named users of the web page (operator, quality, admin): add, remove, list"),
     "spc": ("service.commands.spc",
         "SPC per recipe: control chart numbers, capability, run rules and a control-chart PNG"),
     "store": ("service.commands.store",

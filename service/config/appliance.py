@@ -283,6 +283,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "display_unit": _doc("unit of inertia shown when a recipe names none (values stay kg·m²)",
                              choices=tuple(INERTIA_UNITS) + tuple(ASCII_NAMES)),
         "shift_starts": _doc("shift start times HH:MM, local time (Home counts the parts of the current shift)"),
+        "users_file": _doc("named users with roles (operator, quality, admin) and password hashes, made by "
+                           "`moi user add` (default: none; the token is the one login)", kind="path"),
     }, extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
 }
 
@@ -503,6 +505,7 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
     w = c.table("web", doc.get("web", {}), SCHEMA["web"])
     if w.pop("enabled"):
         w["token_file"] = _resolve(base, w["token_file"])
+        w["users_file"] = _resolve(base, w["users_file"])
         w["display_unit"] = inertia_unit(w["display_unit"])
         for hm in w["shift_starts"]:
             if not _HHMM.fullmatch(str(hm)):

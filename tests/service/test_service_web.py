@@ -392,3 +392,47 @@ def test_a_second_measure_during_a_capture_is_refused_in_words(appliance_factory
     assert c.json("/api/abort", method="POST", headers=bearer)[0] == 202
     running.wait_done(1, 30)
     assert app.store.latest(None).status == "aborted"
+
+
+def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp_path, monkeypatch, capsys):
+    from service.cli import main
+    from service.publish.web.auth import allowed, check_password
+
+    users = tmp_path / "users.toml"
+    for name, role, pw in (("olga", "operator", "olga-password-1"), ("quinn", "quality", "quinn-password-2")):
+        monkeypatch.setattr("sys.stdin", io.StringIO(pw + "\n"))
+        assert main(["user", "add", name, "--role", role, "--users-file", str(users), "--password-stdin"]) == 0
+    monkeypatch.setattr("sys.stdin", io.StringIO("short\n"))
+    assert main(["user", "add", "x", "--users-file", str(users), "--password-stdin"]) == 2
+    text = users.read_text()
+    assert "olga-password-1" not in text and stat.S_IMODE(os.stat(users).st_mode) == 0o600  # only hashes
+    assert check_password("olga-password-1", text.split('password = "')[1].split('"')[0])
+    assert not allowed("operator", "acknowledge") and allowed("quality", "acknowledge") and allowed("admin", "recipe")
+
+    d = tmp_path / "recipes"
+    d.mkdir()
+    (d / "a.toml").write_text('[recipe]\nname = "rotor-a"\nnumber = 3\nnominal = 0.0125\ntolerance_percent = 2.0\n')
+    running = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True, "users_file": str(users)},
+                                              recipes={"directory": str(d)}))
+    app = running.app
+
+    def login(name: str, pw: str) -> tuple[Client, str]:
+        c = Client(app.web.url)
+        status, _, page = c.request("/login", {"user": name, "token": pw, "csrf": c.csrf()})
+        assert status == 200 and f"{name} (" in page.decode()
+        return c, page.decode().split('name="csrf-token" content="')[1].split('"')[0]
+
+    c = Client(app.web.url)
+    status, _, body = c.request("/login", {"user": "olga", "token": "wrong-password", "csrf": c.csrf()})
+    assert status == 401 and b"wrong user name or password" in body
+    olga, csrf = login("olga", "olga-password-1")
+    status, body = olga.json("/api/part", data={"recipe": "rotor-a"}, headers={"X-CSRF-Token": csrf})
+    assert status == 403 and "olga (operator) may not change the recipe" in body["error"]
+    assert olga.json("/api/part", data={"part_id": "SN-7"}, headers={"X-CSRF-Token": csrf})[0] == 202
+    quinn, qcsrf = login("quinn", "quinn-password-2")
+    assert quinn.json("/api/part", data={"recipe": "rotor-a"}, headers={"X-CSRF-Token": qcsrf})[0] == 202
+    assert olga.json("/api/measure", method="POST", headers={"X-CSRF-Token": csrf})[0] == 202
+    running.wait_done(1, 60)
+    m = app.store.latest()
+    assert m.trigger == "web:olga" and m.part_verdict == "OK"
+    assert "web:olga" in olga.request(f"/results/{m.uuid}/report")[2].decode()

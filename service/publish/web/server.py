@@ -24,7 +24,7 @@ from drivers.aioloop import LoopThread
 from service.errors import StartupError
 from service.publish.port import ApplianceView, Publisher
 
-from .auth import Guard, read_token
+from .auth import Guard, read_token, read_users
 from .child import ChildWork
 from .priority import CAPTURE_STATES
 from .settings import DEFAULT_TOKEN_FILE_NAME, PLOT_NAME, WebSettings
@@ -67,7 +67,8 @@ class WebServer(Publisher):
         self.settings = settings
         token_file = settings.token_file or str(appliance.config.state_dir / DEFAULT_TOKEN_FILE_NAME)
         self.token_file = token_file
-        self.guard = Guard(read_token(token_file, create=settings.token_file is None))
+        users = read_users(settings.users_file) if settings.users_file else None
+        self.guard = Guard(read_token(token_file, create=settings.token_file is None), users=users)
         self.bound_port: int | None = None
         self._io = LoopThread("moi-web")
         self._runner: web.AppRunner | None = None

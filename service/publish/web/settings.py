@@ -24,7 +24,9 @@ class WebSettings:
     header is refused: a DNS-rebinding page on a LAN browser could otherwise read every result). display_unit:
     the unit of inertia the pages, reports and exports show when the recipe names none (values stay kg·m²).
     shift_starts: when the shifts begin, "HH:MM" in the appliance's local time: Home counts the parts of the
-    shift in progress."""
+    shift in progress. users_file: a TOML file of named users with roles and scrypt password hashes (``moi
+    user add``): people log in by name and each result records who started it; None: the token is the one
+    login."""
 
     host: str = "127.0.0.1"
     port: int = 8080
@@ -35,3 +37,4 @@ class WebSettings:
     server_names: tuple[str, ...] = ()
     display_unit: str = "kg·m²"
     shift_starts: tuple[str, ...] = ("06:00", "14:00", "22:00")
+    users_file: str | None = None

@@ -22,7 +22,7 @@ from aiohttp import web
 
 from service import __version__
 from service.errors import StoreDamaged
-from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME
+from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME, allowed
 from .child import ChildBusy, export_file, replot, report_file, trace_file
 from .priority import CAPTURE_STATES, CaptureFirst
 from .live import Live
@@ -238,6 +238,8 @@ class Views:
         ctx.setdefault("title", "")
         html = self.env.get_template(template).render(
             device_id=self.app.config.device_id, logged_in=session is not None,
+            user=session.user if session else None, role=session.role if session else None,
+            named_users=bool(self.server.guard.users),
             csrf=session.csrf if session else login_csrf, path=request.path_qs,
             simulated=self.app.config.simulated, **ctx)
         resp = web.Response(text=html, status=status, content_type="text/html",
@@ -340,9 +342,12 @@ class Views:
         csrf, expected = str(form.get("csrf") or ""), request.cookies.get(LOGIN_COOKIE) or ""
         if not csrf or not expected or not hmac.compare_digest(csrf.encode(), expected.encode()):
             raise Refused(403, "missing or wrong CSRF token: reload the page and log in again")
-        made = self.server.guard.login(str(form.get("token") or ""))
+        user = str(form.get("user") or "").strip()
+        made = self.server.guard.login(str(form.get("token") or ""), user or None)
         if made is None:
             await self.server.guard.wrong_token(request.remote)  # a guess costs time
+            if user:
+                raise Refused(401, "wrong user name or password")
             raise Refused(401, "wrong token: it is the first line of the appliance's web token file")
         sid, _ = made
         resp = web.HTTPSeeOther(self._next(request, str(form.get("next") or "")))
@@ -358,7 +363,9 @@ class Views:
         resp.del_cookie(COOKIE, path="/")
         raise resp
 
-    async def _authorise(self, request: web.Request, form: Mapping[str, Any]) -> None:
+    async def _authorise(self, request: web.Request, form: Mapping[str, Any], action: str | None = None) -> str:
+        """Refused unless the request may act (and its role may do ``action``); the source its commands are
+        recorded with: "web", or "web:<name>" for a named user."""
         self._same_origin(request)
         bearer = None
         auth = request.headers.get("Authorization")
@@ -373,18 +380,24 @@ class Views:
             if bearer is not None:
                 await self.server.guard.wrong_token(request.remote)  # a guess costs time
             raise Refused(*why)
+        name, role = self.server.guard.who(cookie=request.cookies.get(COOKIE), bearer=bearer)
+        if action is not None and not allowed(role, action):
+            need = {"recipe": "change the recipe", "acknowledge": "acknowledge a fault"}.get(action, action)
+            raise Refused(403, f"{name or 'this login'} ({role}) may not {need}: log in as a quality engineer "
+                               "or an admin")
+        return f"web:{name}" if name else "web"
 
     async def _action(self, request: web.Request, name: str) -> web.Response:
         form = await _form(request) if request.content_type in ("application/x-www-form-urlencoded",
                                                                  "multipart/form-data") else {}
-        await self._authorise(request, form)
         state = self.app.live_status().state
+        source = await self._authorise(request, form, "acknowledge" if name == "abort" and state == "FAULT" else name)
         seq = self.app.sequencer
         if name == "trigger" and seq is not None and seq.busy:
             # said, not queued and silently dropped: the sequencer takes no trigger while it measures
             raise Refused(409, f"a measurement is already running ({state}): Measure again when it is IDLE")
-        self.app.command(name, "web")
-        log.info("web: %s requested (state %s)", name, state)
+        self.app.command(name, source)
+        log.info("%s: %s requested (state %s)", source, name, state)
         if "text/html" in request.headers.get("Accept", "") and form:
             raise web.HTTPSeeOther("/")
         return web.json_response({"accepted": True, "command": name, "state": state}, status=202)
@@ -402,9 +415,9 @@ class Views:
         from service.parts.recipes import check_part_id
 
         form = await _form(request)
-        await self._authorise(request, form)
-        data: dict[str, Any] = {}
         recipe = str(form.get("recipe") or "").strip()
+        source = await self._authorise(request, form, "recipe" if recipe else "part_id")
+        data: dict[str, Any] = {}
         if recipe:
             if recipe not in ("0",):
                 try:
@@ -421,7 +434,7 @@ class Views:
             raise Refused(400, "nothing to change: give recipe and/or part_id")
         if self.app.sequencer is not None and self.app.sequencer.busy:
             raise Refused(409, "a measurement runs: the recipe and the part ID cannot change during it")
-        self.app.command("recipe", "web", data)
+        self.app.command("recipe", source, data)
         return web.json_response({"accepted": True, "command": "part", **data}, status=202)
 
     # --- the guided tensor set ---------------------------------------------------------------------
@@ -452,8 +465,8 @@ class Views:
             raise Refused(404, f"no set action {action!r}; expected one of {', '.join(ACTIONS)}")
         form = await _form(request) if request.content_type in ("application/x-www-form-urlencoded",
                                                                  "multipart/form-data") else {}
-        await self._authorise(request, form)
-        self.app.command("set", "web", {"action": action})
+        source = await self._authorise(request, form, "set")
+        self.app.command("set", source, {"action": action})
         log.info("web: set %s requested", action)
         if "text/html" in request.headers.get("Accept", "") and form:
             raise web.HTTPSeeOther("/set")
