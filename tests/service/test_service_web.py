@@ -306,7 +306,8 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert "next: release 2 of 2" in c.request("/")[2].decode()
     _measure(running, c, bearer, "rotor-ok", "SN-1", 1)
     ok = app.store.latest()
-    _measure(running, c, bearer, "rotor-nok", "SN-2", 1)
+    for serial in ("SN-2a", "SN-2b", "SN-2"):  # three parts: a control chart
+        _measure(running, c, bearer, "rotor-nok", serial, 1)
     nok = app.store.latest()
     _measure(running, c, bearer, "rotor-bad", "SN-3", 1)
     bad = app.store.latest()
@@ -326,8 +327,14 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     # Home: the last part's verdict as the tile, the shift's counters, the last parts, the calibration
     home = c.request("/")[2].decode()
     assert 'id="tile-verdict">INVALID' in home and "SN-3" in home
-    assert [home.split(f'id="count-{v}">')[1].split("<")[0] for v in ("OK", "NOK", "INVALID")] == ["1", "1", "1"]
-    assert home.count('class="chip verdict-') == 3 and 'id="calibration"' in home
+    assert [home.split(f'id="count-{v}">')[1].split("<")[0] for v in ("OK", "NOK", "INVALID")] == ["1", "3", "1"]
+    assert home.count('class="chip verdict-') == 5 and 'id="calibration"' in home
+    # SPC of a recipe: the chart of its 3 parts, its capability, the limits labelled with their values
+    spc = c.request("/spc?recipe=rotor-nok")[2].decode()
+    assert 'id="chart-points"' in spc and 'id="chart-ranges"' in spc and "I-MR" in spc and "Cpk" in spc
+    assert spc.count('class="point"') + spc.count('class="violation"') == 3 + 2  # 3 parts, 2 moving ranges
+    assert "USL 0.0153" in spc and "LSL 0.0147" in spc and "part value [kg·m²]" in spc
+    assert c.request("/spc?recipe=no-such")[0] == 404 and c.request("/spc?chart=pie")[0] == 400
     assert c.request("/home/summary")[2].decode().startswith('<div class="summary" id="summary">')
     # the history keeps the part's verdict and each release's check apart
     hist = c.request("/history")[2].decode()

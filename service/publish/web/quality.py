@@ -71,7 +71,9 @@ def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
                    used=len(part.get("used") or ()), releases=part.get("releases"),
                    excluded=[{"release": int(e.get("index", 0)) + 1, "reason": e.get("reason") or ""}
                              for e in part.get("excluded") or ()],
-                   reasons=list(part.get("reasons") or ()), zone=part.get("zone"))
+                   # the exclusions are listed once (the part's reasons repeat them after "release N:")
+                   reasons=[r for r in part.get("reasons") or () if not str(r).startswith("release ")],
+                   zone=part.get("zone"))
     elif release is not None:
         out.update(kind="release", verdict=None, value=release.get("value"), U=release.get("U"), k=k,
                    quantity=release.get("quantity"), index=release.get("index"), of=release.get("of"))
@@ -151,32 +153,45 @@ def shift_start(starts: Sequence[str], now: dt.datetime) -> dt.datetime:
 # --- control charts as SVG -----------------------------------------------------------------------------------------
 def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: float = 300.0) -> dict[str, Any]:
     """An SPC summary (``measurement.spc.SpcSummary``) as SVG geometry: the points (violations marked), the
-    centre line, the control limits and the specification limits, each labelled on the right; the ranges
-    below. Values are drawn in ``unit``."""
+    centre line and the control limits, the specification limits when they are near enough not to flatten
+    the chart (else named as off the chart), each labelled on the right; the ranges below. Values in ``unit``."""
     s = summary
     f = from_si(1.0, unit) or 1.0
     pts = [float(v) * f for v in s.points]
     lines = [("centre", s.mean * f, "centre"), ("UCL", s.ucl * f, "limit"), ("LCL", s.lcl * f, "limit")]
-    if s.usl is not None:
-        lines.append(("USL", s.usl * f, "spec"))
-    if s.lsl is not None:
-        lines.append(("LSL", s.lsl * f, "spec"))
+    width_cl = max((s.ucl - s.lcl) * f, 1e-300)
+    off_chart = []
+    for name, v in (("USL", s.usl), ("LSL", s.lsl)):
+        if v is None:
+            continue
+        v = v * f
+        if s.lcl * f - 2 * width_cl <= v <= s.ucl * f + 2 * width_cl:
+            lines.append((name, v, "spec"))
+        else:
+            off_chart.append(f"{name} {_plain(v, width_cl)} {unit} ({'above' if v > s.ucl * f else 'below'} the chart)")
     bad = {v.index for v in s.violations} | set(s.outside)
-    rules = sorted({(v.index, v.rule) for v in s.violations})
-    top = _panel(pts, lines, bad, width, height, unit)
+    rules = sorted({(v.index, v.rule) for v in s.violations} | {(i, "outside the control limits") for i in s.outside})
+    top = _panel(pts, lines, bad, width, height, width_cl)
     f_r = [float(r) * f for r in s.ranges]
     r_lines = [("R̄", s.range_mean * f, "centre"), ("UCL", s.range_ucl * f, "limit")]
     if s.range_lcl > 0:
         r_lines.append(("LCL", s.range_lcl * f, "limit"))
     first = 1 if s.subgroup == 1 else 0  # a moving range starts at the second part
-    bottom = _panel(f_r, r_lines, set(), width, height * 0.55, unit, x_offset=first, n_total=len(pts))
-    return {"top": top, "bottom": bottom, "rules": [(i + 1, r) for i, r in rules],
+    bottom = _panel(f_r, r_lines, set(), width, height * 0.6, max(s.range_ucl * f, 1e-300), x_offset=first,
+                    n_total=len(pts))
+    return {"top": top, "bottom": bottom, "rules": [(i + 1, r) for i, r in rules], "off_chart": off_chart,
             "range_name": "moving range" if s.subgroup == 1 else f"range (n = {s.subgroup})"}
 
 
+def _plain(v: float, spread: float) -> str:
+    """``v`` with the decimals that tell values ``spread``/50 apart from each other."""
+    decimals = max(0, min(12, 1 - int(math.floor(math.log10(spread / 50.0))))) if spread > 0 else 6
+    return f"{v:.{decimals}f}" if abs(v) < 1e7 else f"{v:.6g}"
+
+
 def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad: set[int], width: float,
-           height: float, unit: str, x_offset: int = 0, n_total: int | None = None) -> dict[str, Any]:
-    left, right, top, bottom = 78.0, 150.0, 12.0, 26.0
+           height: float, spread: float, x_offset: int = 0, n_total: int | None = None) -> dict[str, Any]:
+    left, right, top, bottom = 90.0, 170.0, 12.0, 26.0
     n = n_total or len(values)
     ys = list(values) + [v for _, v, _ in lines]
     lo, hi = (min(ys), max(ys)) if ys else (0.0, 1.0)
@@ -191,20 +206,24 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
     def Y(v: float) -> float:
         return round(top + (hi - v) / (hi - lo) * (height - top - bottom), 1)
 
-    points = [(X(i + x_offset), Y(v), (i + x_offset) in bad, i + x_offset + 1, format(v, ".6g"))
+    points = [(X(i + x_offset), Y(v), (i + x_offset) in bad, i + x_offset + 1, _plain(v, spread))
               for i, v in enumerate(values)]
-    drawn = [(name, Y(v), kind, f"{name} {v:.5g}") for name, v, kind in lines]
-    # labels that would overlap are moved apart (at least 12 px), in the order of their height
-    placed: list[float] = []
-    labels = []
-    for name, y, kind, text in sorted(drawn, key=lambda d: d[1]):
-        ly = max(y, placed[-1] + 12.0) if placed else y
-        placed.append(ly)
-        labels.append((ly + 4, kind, text))
-    ticks = [(Y(lo + (hi - lo) * i / 4), format(lo + (hi - lo) * i / 4, ".4g")) for i in range(5)]
+    drawn = [(name, Y(v), kind, f"{name} {_plain(v, spread)}") for name, v, kind in lines]
+    # labels at least 13 px apart, in the order of their lines, kept inside the panel
+    order = sorted(drawn, key=lambda d: d[1])
+    ys_l: list[float] = []
+    for _name, y, _kind, _text in order:
+        ys_l.append(max(y, ys_l[-1] + 13.0) if ys_l else y)
+    overflow = ys_l[-1] - (height - bottom) if ys_l else 0.0
+    if overflow > 0:
+        ys_l = [max(top, y - overflow) for y in ys_l]
+        for i in range(1, len(ys_l)):
+            ys_l[i] = max(ys_l[i], ys_l[i - 1] + 13.0)
+    labels = [(y + 4, kind, text) for y, (_n, _y, kind, text) in zip(ys_l, order)]
+    ticks = [(Y(lo + (hi - lo) * i / 4), _plain(lo + (hi - lo) * i / 4, (hi - lo) * 5)) for i in range(5)]
     step = max(1, n // 10)
     xticks = [(X(i), str(i + 1)) for i in range(0, n, step)]
     return {"width": width, "height": height, "left": left, "right": width - right, "top": top,
             "bottom": height - bottom, "points": points, "lines": drawn, "labels": labels, "yticks": ticks,
-            "xticks": xticks, "unit": unit,
+            "xticks": xticks,
             "path": " ".join(f"{'M' if k == 0 else 'L'}{x},{y}" for k, (x, y, *_rest) in enumerate(points))}

@@ -67,7 +67,7 @@ var moi = (function () {
     g.setTransform(r, 0, 0, r, 0, 0); g.clearRect(0, 0, cw, ch);
     var L = 58, R = 10, B = 34, T = 8, W = cw - L - R, Htot = ch - T - B;
     var H = fit ? Htot * 0.68 : Htot, box = {x: L, y: T, w: W, h: H};
-    var tmax = Math.max(this.tmax, n ? this.t[n - 1] : 0), amax = 1e-6, i;
+    var tmax = Math.max(this.tmax, n ? this.t[n - 1] : 0), amax = n ? 1e-6 : 0.2, i;
     for (i = 0; i < n; i++) { amax = Math.max(amax, Math.abs(this.a[i])); }
     amax *= 1.05;
     this.panel(g, box, this.t, this.a, "angle [rad]", tmax, amax, "#555", true);

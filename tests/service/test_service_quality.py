@@ -1,0 +1,89 @@
+"""What the pages and the report say, as pure functions: display units, the tolerance band, the part view of
+a payload (never None or nan in words), the uncertainty budget in any of its shapes, the shift, the
+control chart's geometry (violations marked, labels apart)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+
+import pytest
+
+from measurement.spc import individuals
+from measurement.units import INERTIA_UNITS, UnitError, from_si, inertia_unit
+from service.publish.web import quality as Q
+
+
+def test_units_convert_from_si_exactly_and_unknown_ones_are_refused():
+    assert from_si(1.0, "g·cm²") == pytest.approx(1e7) and from_si(1.0, "kg*mm^2") == pytest.approx(1e6)
+    # 1 lb·in² = 0.45359237 kg · 0.0254² m²; 1 slug·ft² = 14.5939029 kg · 0.3048² m²
+    assert from_si(0.45359237 * 0.0254**2, "lb·in²") == pytest.approx(1.0, rel=1e-12)
+    assert from_si(14.593902937 * 0.3048**2, "slug*ft^2") == pytest.approx(1.0, rel=1e-9)
+    assert set(INERTIA_UNITS) == {"kg·m²", "g·cm²", "kg·mm²", "lb·in²", "slug·ft²"}
+    assert from_si(None, "g·cm²") is None and from_si(math.nan, "g·cm²") is None
+    with pytest.raises(UnitError, match="expected one of kg·m²"):
+        inertia_unit("furlong")
+    assert Q.inertia(0.0125, "g·cm²") == "125000 g·cm²" and Q.inertia(None) == "–" and Q.inertia(math.inf) == "–"
+    assert Q.number(None) == Q.number(math.nan) == Q.number(True) == "–"
+
+
+def test_part_view_never_shows_a_release_verdict_as_the_parts():
+    recipe = {"name": "r", "number": 1, "nominal": 1.0, "lower": 0.9, "upper": 1.1, "rule": "guard_band",
+              "coverage_factor": 2.0, "display_unit": "g·cm²"}
+    in_progress = {"recipe": recipe, "release": {"index": 1, "of": 2, "verdict": "OK", "value": 1.0, "U": 0.01,
+                                                 "quantity": "J"}, "part": None, "verdict": None}
+    v = Q.part_view(in_progress)
+    assert (v["kind"], v["verdict"], v["index"], v["of"]) == ("release", None, 1, 2)
+    done = {"recipe": recipe, "verdict": "INVALID", "part": {
+        "verdict": "INVALID", "value": None, "U": None, "releases": 2, "used": [], "quantity": "J",
+        "excluded": [{"index": 0, "reason": "invalid: x"}, {"index": 1, "reason": "invalid: y"}],
+        "reasons": ["0 usable of 2 releases, fewer than 2", "release 1: invalid: x"]}}
+    v = Q.part_view(done)
+    assert v["verdict_words"] == "part INVALID (measure again)" and [e["release"] for e in v["excluded"]] == [1, 2]
+    assert v["reasons"] == ["0 usable of 2 releases, fewer than 2"]  # the exclusions are said once
+    assert Q.display_unit(done) == "g·cm²" and Q.display_unit({}, "lb*in^2") == "lb·in²"
+    assert Q.part_view(None)["kind"] == "plain"
+
+
+def test_tolerance_band_puts_the_guard_band_inside_the_limits_and_the_interval_around_the_value():
+    b = Q.band({"nominal": 1.0, "lower": 0.9, "upper": 1.1, "rule": "guard_band"}, 1.05, 0.02)
+    assert b["lsl"] < b["guard"][0] < b["nominal"] < b["guard"][1] < b["usl"]
+    assert b["interval"][0] < b["value"] < b["interval"][1]
+    assert Q.band({"nominal": 1.0, "lower": 0.9, "upper": 1.1, "rule": "simple"}, 1.0, 0.02)["guard"] is None
+    assert Q.band(None, 1.0, 0.1) is None
+    far = Q.band({"nominal": 1.0, "lower": 0.9, "upper": 1.1}, 2.0, 0.01)
+    assert 0 <= far["lsl"] < far["usl"] < far["value"] <= far["width"]  # a value far out is still on the drawing
+
+
+@pytest.mark.parametrize("budget", [
+    [{"name": "fit", "u": 1e-6, "share": 0.5}],
+    {"contributions": [{"source": "fit", "std": 1e-6, "share": 0.5}]},
+    {"components": {"fit": {"u": 1e-6, "share": 0.5}}},
+    {"fit": 1e-6},
+])
+def test_an_uncertainty_budget_is_read_in_any_of_its_shapes(budget):
+    rows = Q.budget_rows(budget)
+    assert rows[0]["name"] == "fit" and rows[0]["u"] == 1e-6
+    assert Q.budget_rows(None) == [] and Q.budget_rows("text") == []
+
+
+def test_shift_start_is_the_latest_start_at_or_before_now():
+    tz = dt.timezone(dt.timedelta(hours=2))
+    starts = ("06:00", "14:00", "22:00")
+    assert Q.shift_start(starts, dt.datetime(2026, 3, 2, 15, 30, tzinfo=tz)).hour == 14
+    early = Q.shift_start(starts, dt.datetime(2026, 3, 2, 3, 0, tzinfo=tz))
+    assert (early.day, early.hour) == (1, 22)  # the night shift began yesterday
+
+
+def test_control_chart_marks_violations_and_keeps_labels_apart():
+    values = [1.0, 1.001, 0.999, 1.0005, 0.9995, 1.0, 1.0015, 0.999, 1.05]  # the last point far out
+    s = individuals(values, 0.99, 1.01)
+    chart = Q.control_chart(s, "kg·m²")
+    bad = [p for p in chart["top"]["points"] if p[2]]
+    assert 9 in [p[3] for p in bad] and (9, "outside the control limits") in chart["rules"]
+    assert {p[3] for p in bad} == {n for n, _rule in chart["rules"]}  # every marked point has its rule said
+    ys = sorted(y for y, _kind, _text in chart["top"]["labels"])
+    assert all(b - a >= 13.0 for a, b in zip(ys, ys[1:]))
+    assert all(chart["top"]["top"] <= y - 4 <= chart["top"]["bottom"] for y in ys)
+    texts = [t for _y, _k, t in chart["top"]["labels"]]
+    assert len({t.split()[1] for t in texts}) == len(texts)  # each limit's value written distinguishably
