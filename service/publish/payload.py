@@ -15,7 +15,7 @@ from typing import Any, Mapping
 
 from service.publish.modbus.registers import flag_bits
 
-PAYLOAD_SCHEMA = 3  # 2: part_id, recipe, release, part, verdict, calibration; 3: tensor_set
+PAYLOAD_SCHEMA = 4  # 2: part_id, recipe, release, part, verdict, calibration; 3: tensor_set; 4: recipe.display_unit, trigger "web:<user>"
 
 #: keys the envelope adds on top of the result's own keys
 ENVELOPE_KEYS = (

@@ -87,6 +87,9 @@ def report_pdf(m: Any, plot_png: bytes | None, unit: str = "kg·m²") -> bytes:
             y -= 0.017
         if y < 0.42:
             break
+    r = v["recipe"] or {}
+    if r.get("lower") is not None and r.get("upper") is not None:
+        y = _band(fig, y, r, v.get("value"), v.get("U"), unit)
     if plot_png is not None:
         import matplotlib.image as mpimg
 
@@ -98,3 +101,31 @@ def report_pdf(m: Any, plot_png: bytes | None, unit: str = "kg·m²") -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="pdf", metadata={"Title": f"moi report {m.uuid}", "Subject": head})
     return buf.getvalue()
+
+
+def _band(fig: Any, y: float, recipe: dict[str, Any], value: float | None, U: float | None, unit: str) -> float:
+    """The tolerance band under the facts (as on the result page); returns the height left above it."""
+    from measurement.units import from_si
+
+    f = from_si(1.0, unit) or 1.0
+    lsl, usl = recipe["lower"] * f, recipe["upper"] * f
+    u = (U or 0.0) * f
+    ax = fig.add_axes((0.08, y - 0.07, 0.84, 0.04))
+    ax.axvspan(lsl, usl, color="#d8f5dc", label="tolerance zone")
+    if recipe.get("rule", "guard_band") == "guard_band" and 0 < 2 * u < usl - lsl:
+        ax.axvspan(lsl + u, usl - u, color="#8fd19e", label="proven in (guard band)")
+    for x in (lsl, usl):
+        ax.axvline(x, color="0.25", lw=1.5)
+    span = usl - lsl
+    lo, hi = lsl - 0.35 * span, usl + 0.35 * span
+    if value is not None:
+        x = value * f
+        lo, hi = min(lo, x - u - 0.05 * span), max(hi, x + u + 0.05 * span)
+        ax.errorbar([x], [0.5], xerr=[u], fmt="o", color="#123", capsize=4, label="result ± U")
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(0, 1)
+    ax.set_yticks([])
+    ax.tick_params(labelsize=7)
+    ax.set_xlabel(unit, fontsize=7)
+    ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(0, 1.9), ncol=3, frameon=False)
+    return y - 0.11

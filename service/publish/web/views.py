@@ -516,6 +516,9 @@ class Views:
 
     async def report_pdf(self, request: web.Request) -> web.Response:
         m = self._get(request.match_info["key"])
+        fut = self.server.plot_future(m.uuid)
+        if fut is not None:  # the evidence plot is being drawn: the report has it
+            await asyncio.wrap_future(fut)
         body = await self._in_child(report_file, str(self.app.config.state_dir), m.uuid,
                                     self.server.settings.display_unit)
         return web.Response(body=body, content_type="application/pdf", headers={
