@@ -86,7 +86,10 @@ def _daemon_worker(args: argparse.Namespace) -> None:
     logging.basicConfig(level=logging.ERROR)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     from _appliance import Finished, simulated_doc
-    from service.config.appliance import parse_config
+    try:
+        from service.config.appliance import parse_config
+    except ImportError:  # "before" is a tree from when the configuration was one module
+        from service.config import parse_config  # type: ignore[attr-defined,no-redef]
     from service.daemon import Appliance
 
     work = Path(tempfile.mkdtemp(prefix="moi-bench-rss-"))

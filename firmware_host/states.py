@@ -97,6 +97,16 @@ class Event:
     measurement_id: str | None = None
     measurement: "Measurement | None" = None
 
+    @property
+    def ends_measurement(self) -> bool:
+        """The measurement in progress is over: back in IDLE from its last step, or in FAULT."""
+        return self.state in (State.IDLE, State.FAULT) and self.previous is not State.IDLE
+
+    @property
+    def publishes(self) -> bool:
+        """The finished measurement is handed over to be stored and published (``measurement`` is set)."""
+        return self.state is State.PUBLISHING and self.measurement is not None
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (the full result is in ``measurement.to_dict()``)."""
         d: dict[str, Any] = {

@@ -33,6 +33,9 @@ EXIT_FAULT = 3
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from service.config.schema import default_of
+    from service.publish.web.settings import WebSettings
+
     p.add_argument("--mqtt", metavar="HOST[:PORT]", help="also publish to this MQTT broker and show the result it delivers "
                                                        "(default: MQTT skipped)")
     p.add_argument("--time-scale", type=float, default=SIM_ENCODER_TIME_SCALE, metavar="X",
@@ -50,8 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="nominal J of the demo recipe (default: the simulated part's J; ±1 %% tolerance)")
     p.add_argument("--state-dir", metavar="DIR", help="keep the result store here (default: a temporary directory)")
     p.add_argument("--json", action="store_true", help="print the published result payload as JSON at the end")
-    p.add_argument("--web-port", type=int, default=8080, metavar="PORT",
-                   help="serve the web page on 127.0.0.1:PORT (default 8080; a free port if it is taken; 0: any)")
+    p.add_argument("--web-port", type=int, default=default_of(WebSettings, "port"), metavar="PORT",
+                   help="serve the web page on 127.0.0.1:PORT (default %(default)s; a free port if it is taken; 0: any)")
     p.add_argument("--tensor", action="store_true",
                    help="run a guided six-orientation tensor set of a simulated bracket instead, and print the tensor's "
                         "error against the truth (--releases per orientation, default 1; --duration default 10)")
@@ -146,9 +149,9 @@ def _run(app, args: argparse.Namespace) -> int:
         sim = f"  (simulated clock {e.time - t0:.2f} s)" if scale != 1.0 else ""
         out.write(f"[{time.monotonic() - wall0:7.2f} s] {e.state.value:<12} {e.reason}{sim}\n")
         out.flush()
-        if e.state.value == "PUBLISHING" and e.measurement is not None:
+        if e.publishes:
             published.append(e.measurement)
-        if e.state.value in ("IDLE", "FAULT") and e.previous.value != "IDLE":
+        if e.ends_measurement:
             done.set()
 
     app.sequencer.subscribe(on_event)

@@ -80,9 +80,9 @@ def _run(app, args: argparse.Namespace) -> int:
     published: list = []
 
     def on_event(e) -> None:
-        if e.state.value == "PUBLISHING" and e.measurement is not None:
+        if e.publishes:
             published.append(e.measurement)
-        if e.state.value in ("IDLE", "FAULT") and e.previous.value != "IDLE":
+        if e.ends_measurement:
             done.set()
 
     app.sequencer.subscribe(on_event)

@@ -30,14 +30,13 @@ import sys
 
 from measurement.errors import InvalidInput
 
-from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE, demo_camera
+from service.devices.defaults import DEMO_EFFECTS, DEMO_RIG, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE, demo_camera
 from service.sources.files import read_rig
 from .simulate import EFFECT_SYNTAX, parse_effects
 
 
 #: the demo rig, part and damping when no --rig is given
 DEFAULT_RIG = DEMO_RIG
-DEFAULT_INERTIA = DEMO_INERTIA
 DEFAULT_EFFECTS = [f"{name}:{p}={v:g}" for name, params in DEMO_EFFECTS.items() for p, v in params.items()]
 
 #: exit status when the measurement ended in FAULT (not a bug: exit 1; not bad input: exit 2)
@@ -51,6 +50,19 @@ PROGRESS_EVERY = 1.0
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    # the defaults are the settings classes' own (imported here, when this command is chosen: `moi --help`
+    # loads no command)
+    from firmware_host import SequencerConfig
+
+    from service.config.appliance import SimulationSettings
+    from service.config.schema import default_of
+
+    def seq(name: str) -> object:
+        return default_of(SequencerConfig, name)
+
+    def sim(name: str) -> object:
+        return default_of(SimulationSettings, name)
+
     p.add_argument("--sim", action="store_true",
                    help="use the simulated rig (or give --config for the configured hardware)")
     p.add_argument("--config", "-c", metavar="appliance.toml",
@@ -58,17 +70,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "store, no MQTT or Modbus); stop the daemon first")
     p.add_argument("--rig", metavar="RIG.toml",
                    help="rig file (default: the torsion demo rig, k = 0.3651 N·m/rad, declared viscous)")
-    p.add_argument("--inertia", "-J", type=float, default=DEFAULT_INERTIA, metavar="KG_M2",
-                   help=f"true J of the simulated pendulum, kg·m² (default {DEFAULT_INERTIA})")
+    p.add_argument("--inertia", "-J", type=float, default=sim("inertia"), metavar="KG_M2",
+                   help="true J of the simulated pendulum, kg·m² (default %(default)g)")
     p.add_argument("--effects", nargs="*", default=None, metavar="EFFECT",
                    help=f"{EFFECT_SYNTAX} (default without --rig: {' '.join(DEFAULT_EFFECTS)}; with --rig: none)")
-    p.add_argument("--theta0", type=float, default=0.25, metavar="RAD", help="release angle, rad (default 0.25)")
-    p.add_argument("--duration", type=float, default=30.0, metavar="S",
-                   help="capture after the release, s of simulated time (default 30)")
-    p.add_argument("--pre-trigger", type=float, default=0.5, metavar="S", help="capture before the release, s (default 0.5)")
-    p.add_argument("--decay-threshold", type=float, default=0.0, metavar="RAD",
-                   help="end the capture early once the swing amplitude is below this, rad (default 0: off)")
-    p.add_argument("--sensor", choices=("encoder", "camera"), default="encoder",
+    p.add_argument("--theta0", type=float, default=sim("theta0"), metavar="RAD",
+                   help="release angle, rad (default %(default)g)")
+    p.add_argument("--duration", type=float, default=seq("capture_duration"), metavar="S",
+                   help="capture after the release, s of simulated time (default %(default)g)")
+    p.add_argument("--pre-trigger", type=float, default=seq("pre_trigger"), metavar="S",
+                   help="capture before the release, s (default %(default)g)")
+    p.add_argument("--decay-threshold", type=float, default=seq("decay_threshold"), metavar="RAD",
+                   help="end the capture early once the swing amplitude is below this, rad (default %(default)g: off)")
+    p.add_argument("--sensor", choices=("encoder", "camera"), default=sim("sensor"),
                    help="what records the swing: the Modbus encoder (default) or the camera")
     p.add_argument("--time-scale", type=float, default=None, metavar="X",
                    help="simulated seconds per wall-clock second (default 1; at most 20 with the encoder, whose "
@@ -76,19 +90,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--camera", metavar="CAM.toml",
                    help="camera file of the simulated camera (--sensor camera; default 640×480 px at 100 frames/s, "
                         "fx = 600 px, marker radius 0.10 m at 0.25 m)")
-    p.add_argument("--camera-yaw", type=float, default=0.0, metavar="DEG",
-                   help="yaw of the simulated camera, degrees (--sensor camera; estimated and corrected; default 0)")
-    p.add_argument("--bits", type=int, default=17, help="encoder resolution, bits per turn (default 17)")
+    p.add_argument("--camera-yaw", type=float, default=sim("camera_yaw_deg"), metavar="DEG",
+                   help="yaw of the simulated camera, degrees (--sensor camera; estimated and corrected; "
+                        "default %(default)g)")
+    p.add_argument("--bits", type=int, default=sim("bits"), help="encoder resolution, bits per turn (default %(default)s)")
     p.add_argument("--noise", type=float, default=SIM_ENCODER_NOISE, metavar="RAD",
                    help=f"encoder angle noise σ, rad (default {SIM_ENCODER_NOISE:g}, about one count at 17 bits)")
-    p.add_argument("--latency", type=float, default=0.0002, metavar="S",
-                   help="encoder reply latency, s of real time (default 0.0002)")
-    p.add_argument("--drop-rate", type=float, default=0.0, metavar="P",
-                   help="fraction of encoder replies (or camera frames) lost (default 0)")
-    p.add_argument("--crc-rate", type=float, default=0.0, metavar="P",
-                   help="fraction of encoder replies with a corrupted CRC (default 0)")
-    p.add_argument("--glitch-rate", type=float, default=0.0, metavar="P",
-                   help="fraction of encoder readings 1/128 turn off behind a correct CRC (default 0)")
+    p.add_argument("--latency", type=float, default=sim("latency"), metavar="S",
+                   help="encoder reply latency, s of real time (default %(default)g)")
+    p.add_argument("--drop-rate", type=float, default=sim("drop_rate"), metavar="P",
+                   help="fraction of encoder replies (or camera frames) lost (default %(default)g)")
+    p.add_argument("--crc-rate", type=float, default=sim("crc_rate"), metavar="P",
+                   help="fraction of encoder replies with a corrupted CRC (default %(default)g)")
+    p.add_argument("--glitch-rate", type=float, default=sim("glitch_rate"), metavar="P",
+                   help="fraction of encoder readings 1/128 turn off behind a correct CRC (default %(default)g)")
     p.add_argument("--seed", type=int, default=None, help="random seed of the encoder or camera noise and faults")
     p.add_argument("--no-discover", action="store_true", help="fit the declared model only (no discovery loop)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object instead of the report")
@@ -243,19 +258,21 @@ class _StatePrinter:
     def __call__(self, e) -> None:
         import time
 
+        from firmware_host import State
+
         wall = time.monotonic() - self._wall0
         sim = f"  (simulated clock {e.time - self._t0:.2f} s)" if self._scale != 1.0 else ""
-        hint = "; identifying…" if e.state.value == "IDENTIFYING" else ""
+        hint = "; identifying…" if e.state is State.IDENTIFYING else ""
         with self._lock:
             self._end_line()
             print(f"[{wall:7.2f} s] {e.state.value:<12} {e.reason}{hint}{sim}", file=self._out, flush=True)
-        if e.state.value == "CAPTURING" and self._progress and self._thread is None:
+        if e.state is State.CAPTURING and self._progress and self._thread is None:
             import threading
 
             self._thread = threading.Thread(target=self._report, args=(e.time,), name="moi-measure-progress",
                                             daemon=True)
             self._thread.start()
-        elif e.state.value != "CAPTURING":
+        elif e.state is not State.CAPTURING:
             self._stop_thread()
 
     def close(self) -> None:

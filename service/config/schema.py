@@ -65,6 +65,17 @@ def kind_of(hint: Any) -> str:
     return {bool: "bool", int: "int", float: "float", str: "str"}[origin]
 
 
+def default_of(cls: type, name: str) -> Any:
+    """The default of the field ``name`` of the settings dataclass ``cls`` (REQUIRED when it has none): what a
+    command-line option that stands for that setting defaults to, so the two never disagree."""
+    f = {f.name: f for f in dataclasses.fields(cls)}[name]
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
+    return REQUIRED
+
+
 def schema(cls: type, keys: Mapping[str, Mapping[str, Any]], *, extra: Mapping[str, Key] | None = None,
             defaults: Mapping[str, Any] | None = None) -> dict[str, Key]:
     """The table of ``cls``: one key per field named in ``keys`` (the field's doc and limits), in the field order.
@@ -74,21 +85,14 @@ def schema(cls: type, keys: Mapping[str, Mapping[str, Any]], *, extra: Mapping[s
     kind ("path", "effects", "videodevice"). Every key of ``keys`` must be a field of ``cls``.
     """
     hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls)}
+    fields = [f.name for f in dataclasses.fields(cls)]
     missing = set(keys) - set(fields)
     assert not missing, f"{cls.__name__} has no field(s) {sorted(missing)}"
     out: dict[str, Key] = dict(extra or {})
-    for name, f in fields.items():
+    for name in fields:
         if name not in keys:
             continue
-        if defaults and name in defaults:
-            default = defaults[name]
-        elif f.default is not dataclasses.MISSING:
-            default = f.default
-        elif f.default_factory is not dataclasses.MISSING:
-            default = f.default_factory()
-        else:
-            default = REQUIRED
+        default = defaults[name] if defaults and name in defaults else default_of(cls, name)
         spec = dict(keys[name])
         out[name] = Key(spec.pop("kind", None) or kind_of(hints[name]), default, **spec)
     return out

@@ -107,6 +107,7 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
     status, headers, png = c.request(f"/results/{m.uuid}/plot.png")
     assert status == 200 and headers["Content-Type"] == "image/png" and png[:4] == b"\x89PNG"
     assert app.store.get_attachment(m.uuid, "plot.png")[0] == png  # drawn once, kept with the measurement
+    assert app.web.child.jobs >= 1  # in the child process, away from the sensor's reader
     status, _, page = c.request(f"/results/{m.seq}")
     assert status == 200 and f"{m.J:.7g}".encode() in page
     status, _, csv_text = c.request(f"/results/{m.uuid}/trace.csv")
