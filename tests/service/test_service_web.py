@@ -17,7 +17,7 @@ import pytest
 
 from service.errors import StartupError
 
-from .conftest import appliance_doc
+from .conftest import appliance_doc, wait_until
 
 
 ON = {"enabled": True}
@@ -282,6 +282,10 @@ def _recipes(d: Path) -> Path:
     (d / "nok.toml").write_text('[recipe]\nname = "rotor-nok"\nnumber = 2\nnominal = 0.015\ntolerance_percent = 2.0\n')
     (d / "bad.toml").write_text('[recipe]\nname = "rotor-bad"\nnumber = 3\nnominal = 0.0125\ntolerance_percent = 2.0\n'
                                 '[quality]\nmax_J_std = 1.0e-15\n')
+    (d.parent / "cal-rig.toml").write_text('[rig]\nkind = "torsion"\nstiffness = 0.3651\n[calibration]\n'
+                                           'date = 2020-01-15\nvalid_days = 365\n')
+    (d / "cal.toml").write_text('[recipe]\nname = "rotor-cal"\nnumber = 4\nnominal = 0.0125\ntolerance_percent = 2.0\n'
+                                'rig = "../cal-rig.toml"\n')
     return d
 
 
@@ -336,6 +340,12 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert spc.count('class="point"') + spc.count('class="violation"') == 3 + 2  # 3 parts, 2 moving ranges
     assert "USL 0.0153" in spc and "LSL 0.0147" in spc and "part value [kg·m²]" in spc
     assert c.request("/spc?recipe=no-such")[0] == 404 and c.request("/spc?chart=pie")[0] == 400
+    assert "no calibration record" in home
+    # the calibration of the rig the active recipe measures with, and its due date, on Home
+    assert c.json("/api/part", data={"recipe": "rotor-cal"}, headers=bearer)[0] == 202
+    # (the main loop applies the selection: the page shows it once it did)
+    wait_until(lambda: c.json("/api/state")[1]["recipe"] == {"name": "rotor-cal", "number": 4}, 10, what="rotor-cal")
+    assert "DUE</b> (valid until 2021-01-14)" in c.request("/")[2].decode()
     assert c.request("/home/summary")[2].decode().startswith('<div class="summary" id="summary">')
     # the history keeps the part's verdict and each release's check apart
     hist = c.request("/history")[2].decode()
@@ -444,3 +454,10 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     m = app.store.latest()
     assert m.trigger == "web:olga" and m.part_verdict == "OK"
     assert "web:olga" in olga.request(f"/results/{m.uuid}/report")[2].decode()
+    # a fault is acknowledged by a quality engineer, not by an operator
+    app.sequencer.fault("encoder fault: test cable pulled")
+    running.wait_event(lambda e: e.state.value == "FAULT", 10, what="FAULT")
+    status, body = olga.json("/api/abort", method="POST", headers={"X-CSRF-Token": csrf})
+    assert status == 403 and "may not acknowledge a fault" in body["error"]
+    assert quinn.json("/api/abort", method="POST", headers={"X-CSRF-Token": qcsrf})[0] == 202
+    running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")
