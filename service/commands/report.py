@@ -35,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
         if m is None:
             raise InputFileError(f"no single measurement matches {args.id!r} in {store.path}")
         got = store.get_attachment(m.uuid, PLOT_NAME)
-    write_atomic(args.pdf, report_pdf(m, got[0] if got else None, display_unit(m.payload, default)), "report file")
+        pdf = report_pdf(m, got[0] if got else None, display_unit(m.payload, default), store.get)
+    write_atomic(args.pdf, pdf, "report file")
     print(f"report of measurement #{m.seq} ({m.uuid}) written to {args.pdf}")
     return 0

@@ -14,8 +14,9 @@ A4 = (8.27, 11.69)
 VERDICT_COLOURS = {"OK": "#1a7f37", "NOK": "#b00020", "INVALID": "#9a6700"}
 
 
-def report_lines(m: Any, unit: str) -> tuple[dict[str, Any], list[tuple[str, str]], list[str]]:
-    """(the part view, the (label, text) facts, the release lines) of a ``StoredMeasurement``."""
+def report_lines(m: Any, unit: str, lookup: Any = None) -> tuple[dict[str, Any], list[tuple[str, str]], list[str]]:
+    """(the part view, the (label, text) facts, the release lines) of a ``StoredMeasurement``; ``lookup(uuid)``:
+    a release's stored measurement (its flags)."""
     p = m.payload or {}
     v = Q.part_view(p)
     r = v["recipe"] or {}
@@ -41,30 +42,25 @@ def report_lines(m: Any, unit: str) -> tuple[dict[str, Any], list[tuple[str, str
     facts.append(("calibration", (f"{cal.get('date')}" + (f", due {cal.get('valid_until')}" if cal.get("valid_until")
                                                             else "") + (" (DUE)" if cal.get("due") else ""))
                   if cal else "no calibration record"))
-    releases: list[str] = []
-    part = v.get("part")
-    if part:
-        excluded = {e["release"]: e["reason"] for e in v["excluded"]}
-        for i, value in enumerate(part.get("values") or (), start=1):
-            releases.append(f"release {i} of {part.get('releases')}: {Q.inertia(value, unit)} — "
-                            + (f"excluded: {excluded[i]}" if i in excluded else "used"))
-    elif p.get("release"):
-        rel = p["release"]
-        releases.append(f"release {rel.get('index')} of {rel.get('of')}: {Q.inertia(rel.get('value'), unit)} — "
-                        f"check {rel.get('verdict')}; the part is not complete")
-    flags = [f"{f}: {words}" if words else f for f, words in flag_words(m.flags)]
-    releases.append("flags of this release: " + ("; ".join(flags) if flags else "none"))
+    releases = []
+    for r in Q.release_rows(v, p, lookup):
+        flags = "flags: " + (", ".join(r["flags"]) or "none") if r["flags"] is not None else ""
+        releases.append(f"release {r['index']} of {r['of']}: {Q.inertia(r['value'], unit)} — {r['status']}"
+                        + (f"; {flags}" if flags else ""))
+    described = [f"{f}: {words}" for f, words in flag_words(m.flags) if words]
+    if described:
+        releases.append("this release's flags: " + "; ".join(described))
     return v, facts, releases
 
 
-def report_pdf(m: Any, plot_png: bytes | None, unit: str = "kg·m²") -> bytes:
+def report_pdf(m: Any, plot_png: bytes | None, unit: str = "kg·m²", lookup: Any = None) -> bytes:
     """The report of the stored measurement ``m`` (``StoredMeasurement``) as PDF bytes; ``plot_png``: the
     evidence plot kept with it (None: said on the page)."""
     import textwrap
 
     from matplotlib.figure import Figure
 
-    v, facts, releases = report_lines(m, unit)
+    v, facts, releases = report_lines(m, unit, lookup)
     fig = Figure(figsize=A4)
     fig.text(0.06, 0.965, f"Inertia measurement report #{m.seq}", fontsize=15, weight="bold", va="top")
     verdict = v.get("verdict")

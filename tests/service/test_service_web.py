@@ -374,6 +374,9 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert main(["report", ok.uuid[:8], "--state-dir", state, "--pdf", str(tmp_path / "ok.pdf")]) == 0
     text = PdfReader(str(tmp_path / "ok.pdf")).pages[0].extract_text()
     assert "part OK" in text and "g·cm²" in text and "guard band" in text and "release 2 of 2" in text
+    assert text.count("used; flags: ") == 2  # each release with its flags
+    report = c.request(f"/results/{ok.uuid}/report")[2].decode()
+    assert f'<a href="/results/{first.uuid}">1 of 2</a>' in report and "web" in report
     assert main(["report", ok.uuid[:8], "--state-dir", state, "--pdf", str(tmp_path / "ok.png")]) == 2
 
     # AQDEF: the recipe's characteristic (nominal, limits, unit) and one value line per part, read back

@@ -140,4 +140,4 @@ def report_file(state_dir: str, uuid: str, default_unit: str) -> bytes:
     with Store(state_dir, read_only=True) as store:
         m = store.get(uuid)
         got = store.get_attachment(uuid, PLOT_NAME)
-    return report_pdf(m, got[0] if got else None, display_unit(m.payload, default_unit))
+        return report_pdf(m, got[0] if got else None, display_unit(m.payload, default_unit), store.get)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import datetime as dt
 import math
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from measurement.units import SI, from_si, inertia_unit
 
@@ -83,6 +83,29 @@ def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
                    quantity="J", std=p.get("J_std"))
     out["verdict_words"] = VERDICT_WORDS.get(out.get("verdict") or "", "")
     return out
+
+
+def release_rows(view: Mapping[str, Any], payload: Mapping[str, Any] | None,
+                 lookup: Callable[[str], Any] | None = None) -> list[dict[str, Any]]:
+    """Each release of the part (index, of, value kg·m², status, flags, seq, uuid): every release of a complete
+    part (``lookup(uuid)``: its stored measurement, for its flags), else the one release of the payload."""
+    p = payload or {}
+    part = view.get("part")
+    if part:
+        excluded = {e["release"]: e["reason"] for e in view.get("excluded") or ()}
+        ids = list(part.get("measurements") or ())
+        out = []
+        for i, value in enumerate(part.get("values") or (), start=1):
+            m = lookup(ids[i - 1]) if lookup is not None and i <= len(ids) else None
+            out.append({"index": i, "of": part.get("releases"), "value": value,
+                        "status": f"excluded: {excluded[i]}" if i in excluded else "used",
+                        "flags": list(m.flags) if m is not None else None,
+                        "seq": m.seq if m is not None else None, "uuid": ids[i - 1] if i <= len(ids) else None})
+        return out
+    rel = p.get("release") or {}
+    return [{"index": rel.get("index", 1), "of": rel.get("of", 1), "value": p.get("J") if not rel else rel.get("value"),
+             "status": f"check {rel['verdict']}; the part is not complete" if rel.get("verdict") else "no recipe",
+             "flags": list(p.get("flags") or ()), "seq": p.get("seq"), "uuid": p.get("uuid")}]
 
 
 def budget_rows(budget: Any) -> list[dict[str, Any]]:

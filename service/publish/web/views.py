@@ -511,8 +511,11 @@ class Views:
     async def report(self, request: web.Request) -> web.Response:
         """The quality record of one result: a page that prints on A4 (the PDF has the same content)."""
         m = self._get(request.match_info["key"])
-        return self._page(request, "report.html", title=f"Report {m.seq}", flags=flag_words(m.flags),
-                          **self._result_context(m))
+        ctx = self._result_context(m)
+        releases = Q.release_rows(ctx["v"], m.payload, self.app.store.get)
+        seen = sorted({f for r in releases for f in r["flags"] or ()} | set(m.flags))
+        return self._page(request, "report.html", title=f"Report {m.seq}", releases=releases,
+                          flags=flag_words(seen), **ctx)
 
     async def report_pdf(self, request: web.Request) -> web.Response:
         m = self._get(request.match_info["key"])
