@@ -172,6 +172,22 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
             assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
             browser.set_window_size(width, 900)
 
+    # the live swing on a phone: labelled axes at a readable height, then the fit over it and the residual
+    browser.set_window_size(390, 900)
+    browser.get(url)
+    wait.until(lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-live") == "1")
+    done = app.store.count()
+    browser.find_element(By.ID, "measure").click()
+    wait.until(lambda d: d.find_element(By.ID, "swing").get_attribute("data-fit") == "1")
+    assert app.store.count() == done + 1
+    swing = browser.find_element(By.ID, "swing")
+    assert swing.size["height"] >= 200 and int(swing.get_attribute("data-drawn")) > 100
+    assert browser.execute_script("return document.documentElement.scrollWidth") <= 390
+    # the same part ID again starts a new part: its first release is in, the second is next
+    wait.until(lambda d: d.find_element(By.ID, "release-k").text == "next: release 2 of 2")
+    browser.execute_script("document.getElementById('swing').scrollIntoView()")
+    browser.save_screenshot(str(artifacts / "live-390.png"))
+
 
 def _post(url: str, data: dict, headers: dict) -> None:
     import json

@@ -47,10 +47,11 @@ var moi = (function () {
     var L = box.x, T = box.y, W = box.w, H = box.h;
     g.strokeStyle = "#999"; g.lineWidth = 1; g.strokeRect(L, T, W, H);
     g.fillStyle = "#333"; g.font = "12px sans-serif"; g.textAlign = "right"; g.textBaseline = "middle";
-    ticks(-amax, amax, H > 120 ? 4 : 2).forEach(function (v) {
+    var marks = H > 120 ? ticks(-amax, amax, 4) : [-0.8 * amax, 0, 0.8 * amax];  // a short panel: its range
+    marks.forEach(function (v) {
       var y = T + H / 2 - v / amax * (H / 2 - 4);
       g.strokeStyle = "#eee"; g.beginPath(); g.moveTo(L, y); g.lineTo(L + W, y); g.stroke();
-      g.fillText(Math.abs(amax) < 0.01 ? v.toExponential(1) : v.toPrecision(2).replace(/\.?0+$/, ""), L - 4, y);
+      g.fillText(v === 0 ? "0" : (Math.abs(amax) < 0.01 ? v.toExponential(1) : String(Number(v.toPrecision(2)))), L - 4, y);
     });
     g.save(); g.translate(12, T + H / 2); g.rotate(-Math.PI / 2); g.textAlign = "center"; g.fillText(ylabel, 0, 0); g.restore();
     g.strokeStyle = colour; g.lineWidth = dots ? 1 : 1.5; g.beginPath();
