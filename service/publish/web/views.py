@@ -85,12 +85,6 @@ def _fmt(v: Any, spec: str = ".6g") -> str:
     return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
 
 
-def _when(ts: float | None) -> str:
-    if ts is None:
-        return "–"
-    return dt.datetime.fromtimestamp(ts, dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
-
-
 def _name(v: Any) -> Any:
     return v.get("name") if isinstance(v, Mapping) else v
 
@@ -144,7 +138,7 @@ class Views:
         self.env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")),
                                       autoescape=jinja2.select_autoescape(["html"]), trim_blocks=True,
                                       lstrip_blocks=True)
-        self.env.filters.update(fmt=_fmt, when=_when, name=_name, inertia=Q.inertia, iso=Q.iso)
+        self.env.filters.update(fmt=_fmt, name=_name, inertia=Q.inertia, iso=Q.iso)
         self._names = _own_names(server.settings.server_names)
         self.capture_first = CaptureFirst(self._capturing)
         # file names carry a hash of the content: a browser never keeps a stale script after an update

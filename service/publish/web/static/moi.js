@@ -132,6 +132,7 @@ var moi = (function () {
       li.textContent = s.state + " — " + (s.reason || "");
       li.setAttribute("data-state", s.state);
       $("log").appendChild(li);
+      if (s.state === "IDLE" || s.state === "FAULT") { say(""); }  // "measurement requested" is answered now
       if (s.state === "IDLE" && s.previous === "PUBLISHING" && s.measurement_id) {
         var id = s.measurement_id;
         // the verdict tile, the counters and the last parts as the server now has them
