@@ -13,6 +13,7 @@ import json
 import sys
 
 from measurement import Trace
+from measurement.units import SI
 
 from service.errors import InputFileError
 from service.sources.files import write_atomic, write_text_atomic
@@ -30,7 +31,7 @@ CSV_COLUMNS = (
 )
 
 #: the unit of every inertia value in the CSV and JSON exports (stored values are SI)
-EXPORT_UNIT = "kg·m²"
+EXPORT_UNIT = SI
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -81,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _dfq(store, args: argparse.Namespace) -> bytes:
     """The DFQ file of one recipe's completed parts (oldest first)."""
-    from measurement.units import SI, inertia_unit
+    from measurement.units import inertia_unit
 
     from service.publish.dfq import ENCODING, dfq_text
 

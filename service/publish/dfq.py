@@ -21,7 +21,7 @@ import datetime as dt
 import math
 from typing import Any, Iterable, Mapping
 
-from measurement.units import from_si
+from measurement.units import SI, from_si
 
 #: the field separator of a value line (AQDEF: DC4)
 FIELD = "\x14"
@@ -40,7 +40,7 @@ def _decimals(tolerance: float) -> int:
     return max(3, min(12, int(math.ceil(-math.log10(tolerance / 10.0))) if tolerance > 0 else 6))
 
 
-def dfq_text(recipe: Mapping[str, Any], parts: Iterable[Any], unit: str = "kg·m²") -> str:
+def dfq_text(recipe: Mapping[str, Any], parts: Iterable[Any], unit: str = SI) -> str:
     """The DFQ file of ``parts`` (``StoredMeasurement`` rows that completed a part, oldest first) of ``recipe``
     (the payload's recipe dict: name, number, quantity, nominal, lower, upper)."""
     f = from_si(1.0, unit) or 1.0

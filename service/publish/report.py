@@ -6,6 +6,8 @@ from __future__ import annotations
 import io
 from typing import Any
 
+from measurement.units import SI
+
 from .web import quality as Q
 from .web.words import flag_words
 
@@ -53,7 +55,7 @@ def report_lines(m: Any, unit: str, lookup: Any = None) -> tuple[dict[str, Any],
     return v, facts, releases
 
 
-def report_pdf(m: Any, plot_png: bytes | None, unit: str = "kg·m²", lookup: Any = None) -> bytes:
+def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = None) -> bytes:
     """The report of the stored measurement ``m`` (``StoredMeasurement``) as PDF bytes; ``plot_png``: the
     evidence plot kept with it (None: said on the page)."""
     import textwrap
