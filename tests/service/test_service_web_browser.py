@@ -161,6 +161,15 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
             if name == "spc":  # the chart, in the recipe's unit, scrolls inside its box on a phone
                 chart = browser.find_element(By.ID, "chart-points")
                 assert chart.is_displayed() and "kg·mm²" in chart.text and "UCL" in chart.text
+            if name == "report" and width == 1280:  # it prints cleanly: the record, not the page's navigation
+                import base64
+                import io
+
+                from pypdf import PdfReader
+                printed = PdfReader(io.BytesIO(base64.b64decode(browser.print_page())))
+                text = " ".join(pg.extract_text() for pg in printed.pages)
+                assert "part INVALID" in text and "SN-0044" in text and "Tensor set" not in text
+                assert len(printed.pages) <= 3
             if name == "history":
                 table = browser.find_element(By.ID, "history")
                 assert "part verdict" in table.text and "NOK" in table.text
