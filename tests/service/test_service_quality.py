@@ -87,3 +87,15 @@ def test_control_chart_marks_violations_and_keeps_labels_apart():
     assert all(chart["top"]["top"] <= y - 4 <= chart["top"]["bottom"] for y in ys)
     texts = [t for _y, _k, t in chart["top"]["labels"]]
     assert len({t.split()[1] for t in texts}) == len(texts)  # each limit's value written distinguishably
+
+
+def test_an_xbar_r_chart_draws_each_subgroup_and_its_range_in_the_display_unit():
+    from measurement.spc import xbar_r
+
+    groups = [[0.0125, 0.01251, 0.01249], [0.0125, 0.012505, 0.012495], [0.01251, 0.0125, 0.0125],
+              [0.012495, 0.0125, 0.012505]]
+    chart = Q.control_chart(xbar_r(groups, 0.0124, 0.0126), "g·cm²")
+    assert chart["range_name"] == "range (n = 3)"
+    assert len(chart["top"]["points"]) == len(chart["bottom"]["points"]) == 4
+    # 0.0126 kg·m² in g·cm², far above the control limits: named, not drawn (it would flatten the chart)
+    assert [t.split(" g·cm²")[0] for t in chart["off_chart"]] == ["USL 126000.0", "LSL 124000.0"]

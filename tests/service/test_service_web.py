@@ -340,6 +340,8 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert spc.count('class="point"') + spc.count('class="violation"') == 3 + 2  # 3 parts, 2 moving ranges
     assert "USL 0.0153" in spc and "LSL 0.0147" in spc and "part value [kg·m²]" in spc
     assert c.request("/spc?recipe=no-such")[0] == 404 and c.request("/spc?chart=pie")[0] == 400
+    status, _, body = c.request("/spc?recipe=rotor-nok&chart=Xbar-R")  # one release a part: no subgroups
+    assert status == 400 and b"subgroups of 2 to 10" in body
     assert "no calibration record" in home
     # the calibration of the rig the active recipe measures with, and its due date, on Home
     assert c.json("/api/part", data={"recipe": "rotor-cal"}, headers=bearer)[0] == 202

@@ -633,6 +633,8 @@ class Views:
     # --- SPC ---------------------------------------------------------------------------------------------------
     async def spc(self, request: web.Request) -> web.Response:
         """Control chart (I-MR or X̄–R) of one recipe's part values, Cp/Cpk, rule violations marked."""
+        from measurement.errors import InvalidInput
+
         from service.parts.recipes import recipe_spc
 
         filters = self._filters(request)
@@ -647,8 +649,11 @@ class Views:
         result = None
         if recipe:
             loop = asyncio.get_running_loop()
-            result = await loop.run_in_executor(None, lambda: recipe_spc(
-                store, recipe, since=filters["since"], until=filters["until"], chart=chart, limit=SPC_POINTS))
+            try:
+                result = await loop.run_in_executor(None, lambda: recipe_spc(
+                    store, recipe, since=filters["since"], until=filters["until"], chart=chart, limit=SPC_POINTS))
+            except InvalidInput as exc:  # e.g. X̄–R asked of parts with one release each
+                raise Refused(400, f"chart={chart}: {exc}") from None
         unit = self.server.settings.display_unit
         book = getattr(self.app, "parts", None)
         if book is not None and recipe:
