@@ -181,6 +181,13 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
             assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
             browser.set_window_size(width, 900)
 
+    # the narrowest phone the layout is made for: still nothing wider than the window
+    browser.set_window_size(360, 900)
+    for path in ("/", f"/results/{bad.uuid}"):
+        browser.get(url.rstrip("/") + path)
+        wait.until(lambda d: d.execute_script("return document.readyState") == "complete")
+        assert browser.execute_script("return document.documentElement.scrollWidth <= window.innerWidth"), path
+
     # the live swing on a phone: labelled axes at a readable height, then the fit over it and the residual
     browser.set_window_size(390, 900)
     browser.get(url)
