@@ -81,6 +81,12 @@ class CalibrationRecord:
         until = self.valid_until
         return until is not None and today > until
 
+    def state(self, today: _dt.date) -> dict[str, Any]:
+        """As of ``today``: the date, the last valid day (None: no expiry), whether it is due, the days left."""
+        until = self.valid_until
+        return {"date": self.date.isoformat(), "valid_until": until.isoformat() if until else None,
+                "due": self.due(today), "days_left": (until - today).days if until is not None else None}
+
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"date": self.date.isoformat()}
         if self.valid_days is not None:

@@ -599,10 +599,9 @@ class Appliance:
         cal = rig.calibration
         if cal is None:
             return None
-        today = _dt.datetime.fromtimestamp(now, _dt.UTC).date()
-        until = cal.valid_until
-        return {"date": cal.date.isoformat(), "valid_until": until.isoformat() if until else None,
-                "due": cal.due(today), "stiffness": rig.stiffness, "stiffness_std": rig.stiffness_std}
+        state = cal.state(_dt.datetime.fromtimestamp(now, _dt.UTC).date())
+        return {k: state[k] for k in ("date", "valid_until", "due")} | {"stiffness": rig.stiffness,
+                                                                          "stiffness_std": rig.stiffness_std}
 
     def _store_failure(self, event: Event) -> None:
         assert self.store is not None and event.measurement_id is not None

@@ -25,7 +25,7 @@ from service.errors import StoreDamaged
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME, allowed
 from .child import ChildBusy, export_file, replot, report_file, trace_file
 from .priority import CAPTURE_STATES, CaptureFirst
-from .live import Live
+from .live import Live, extras
 from .settings import PLOT_NAME
 from measurement.flags import FLAGS
 
@@ -261,19 +261,13 @@ class Views:
         open_part = tracker.open_part if tracker is not None else None
         recipe = tracker.recipe if tracker is not None else None
         rig = recipe.rig_for(self.app.config.rig) if recipe is not None else self.app.config.rig
-        cal = rig.calibration
-        calibration = None
-        if cal is not None:
-            until = cal.valid_until
-            calibration = {"date": cal.date.isoformat(), "valid_until": until.isoformat() if until else None,
-                           "due": cal.due(now.date()),
-                           "days_left": (until - now.date()).days if until is not None else None}
+        # as the daemon judges it for the results: the UTC day
+        calibration = rig.calibration.state(dt.datetime.now(dt.UTC).date()) if rig.calibration is not None else None
         tile = parts[0] if parts else None
         return {"tile": tile, "tile_view": Q.part_view(tile.payload) if tile else None,
                 "tile_unit": self.unit(tile.payload if tile else None), "counts": counts,
                 "shift": shift.strftime("%H:%M"), "strip": parts, "open_part": open_part,
-                "next_release": {"k": (open_part["done"] + 1) if open_part else 1, "of": recipe.releases}
-                if recipe is not None and recipe.spec is not None else None,
+                "next_release": extras(self.app).get("release_next"),
                 "calibration": calibration, "last": last, "last_view": Q.part_view(last.payload) if last else None,
                 "last_unit": self.unit(last.payload if last else None)}
 
