@@ -56,15 +56,14 @@ def report_lines(m: Any, unit: str, lookup: Any = None) -> tuple[dict[str, Any],
 
 
 def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = None) -> bytes:
-    """The report of the stored measurement ``m`` (``StoredMeasurement``) as PDF bytes; ``plot_png``: the
-    evidence plot kept with it (None: said on the page)."""
+    """The report of the stored measurement ``m`` (``StoredMeasurement``) as PDF bytes, on as many A4 pages as
+    it takes; ``plot_png``: the evidence plot kept with it (None: said on the page)."""
     import textwrap
 
+    from matplotlib.backends.backend_pdf import PdfPages
     from matplotlib.figure import Figure
 
     v, facts, releases = report_lines(m, unit, lookup)
-    fig = Figure(figsize=A4)
-    fig.text(0.06, 0.965, f"Inertia measurement report #{m.seq}", fontsize=15, weight="bold", va="top")
     verdict = v.get("verdict")
     if v["kind"] == "part":
         head, colour = v["verdict_words"], VERDICT_COLOURS.get(verdict or "", "k")
@@ -72,32 +71,45 @@ def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = Non
         head, colour = f"part in progress: release {v.get('index')} of {v.get('of')} (no part verdict yet)", "0.3"
     else:
         head, colour = "no recipe: a value without a verdict", "0.3"
-    fig.text(0.06, 0.93, head, fontsize=20, weight="bold", color=colour, va="top")
-    y = 0.885
     lines = [(k, t) for k, t in facts] + [("", "")] + [("", r) for r in releases]
-    lines += [("", "release " + str(e["release"]) + " excluded from the part: " + e["reason"]) for e in v["excluded"]]
     lines += [("", "why: " + r) for r in v["reasons"]]
-    for label, text in lines:
-        wrapped = textwrap.wrap(text, 78) or [""]
-        fig.text(0.06, y, label, fontsize=8.5, color="0.35", va="top")
-        for w in wrapped:
-            fig.text(0.32 if label else 0.06, y, w, fontsize=8.5, va="top")
-            y -= 0.017
-        if y < 0.42:
-            break
-    r = v["recipe"] or {}
-    if r.get("lower") is not None and r.get("upper") is not None:
-        y = _band(fig, y, r, v.get("value"), v.get("U"), unit)
-    if plot_png is not None:
-        import matplotlib.image as mpimg
-
-        ax = fig.add_axes((0.04, 0.02, 0.92, max(0.1, y - 0.04)))
-        ax.imshow(mpimg.imread(io.BytesIO(plot_png), format="png"))
-        ax.set_axis_off()
-    else:
-        fig.text(0.06, y - 0.02, "no evidence plot is kept with this measurement", fontsize=9, va="top")
     buf = io.BytesIO()
-    fig.savefig(buf, format="pdf", metadata={"Title": f"moi report {m.uuid}", "Subject": head})
+    with PdfPages(buf, metadata={"Title": f"moi report {m.uuid}", "Subject": head}) as pdf:
+        pages = 1
+        fig = Figure(figsize=A4)
+        fig.text(0.06, 0.965, f"Inertia measurement report #{m.seq}", fontsize=15, weight="bold", va="top")
+        fig.text(0.06, 0.93, head, fontsize=20, weight="bold", color=colour, va="top")
+        y = 0.885
+        for label, text in lines:
+            wrapped = textwrap.wrap(text, 78) or [""]
+            if y - 0.017 * len(wrapped) < 0.05:  # the page is full: the rest on the next one
+                pdf.savefig(fig)
+                pages += 1
+                fig = Figure(figsize=A4)
+                fig.text(0.06, 0.965, f"report #{m.seq} ({head}), page {pages}", fontsize=9, va="top")
+                y = 0.93
+            fig.text(0.06, y, label, fontsize=8.5, color="0.35", va="top")
+            for w in wrapped:
+                fig.text(0.32 if label else 0.06, y, w, fontsize=8.5, va="top")
+                y -= 0.017
+        r = v["recipe"] or {}
+        if y < 0.45:  # the band and the evidence need room: a page of their own
+            pdf.savefig(fig)
+            pages += 1
+            fig = Figure(figsize=A4)
+            fig.text(0.06, 0.965, f"report #{m.seq} ({head}), page {pages}", fontsize=9, va="top")
+            y = 0.93
+        if r.get("lower") is not None and r.get("upper") is not None:
+            y = _band(fig, y, r, v.get("value"), v.get("U"), unit)
+        if plot_png is not None:
+            import matplotlib.image as mpimg
+
+            ax = fig.add_axes((0.04, 0.02, 0.92, max(0.1, y - 0.04)))
+            ax.imshow(mpimg.imread(io.BytesIO(plot_png), format="png"))
+            ax.set_axis_off()
+        else:
+            fig.text(0.06, y - 0.02, "no evidence plot is kept with this measurement", fontsize=9, va="top")
+        pdf.savefig(fig)
     return buf.getvalue()
 
 

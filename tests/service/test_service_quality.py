@@ -99,3 +99,25 @@ def test_an_xbar_r_chart_draws_each_subgroup_and_its_range_in_the_display_unit()
     assert len(chart["top"]["points"]) == len(chart["bottom"]["points"]) == 4
     # 0.0126 kg·m² in g·cm², far above the control limits: named, not drawn (it would flatten the chart)
     assert [t.split(" g·cm²")[0] for t in chart["off_chart"]] == ["USL 126000.0", "LSL 124000.0"]
+
+
+def test_a_long_report_goes_on_to_more_pages_and_leaves_nothing_out():
+    import io
+    from types import SimpleNamespace
+
+    from pypdf import PdfReader
+
+    from service.publish.report import report_pdf
+
+    n = 20
+    recipe = {"name": "r", "number": 1, "version": "abc", "nominal": 0.0125, "lower": 0.012, "upper": 0.013,
+              "rule": "guard_band", "uncertain": "NOK", "coverage_factor": 2.0}
+    part = {"verdict": "OK", "value": 0.0125, "U": 1e-6, "releases": n, "used": list(range(n)), "quantity": "J",
+            "values": [0.0125 + i * 1e-8 for i in range(n)], "excluded": [], "reasons": []}
+    payload = {"recipe": recipe, "part": part, "verdict": "OK", "part_id": "SN-9",
+               "uncertainty_budget": [{"name": f"source {i}", "u": 1e-7, "share": 0.05} for i in range(n)]}
+    m = SimpleNamespace(seq=7, uuid="u-7", payload=payload, finished_at=1.7e9, trigger="web:olga",
+                        device_id="rig", software_version="9", flags=())
+    text = " ".join(p.extract_text() for p in PdfReader(io.BytesIO(report_pdf(m, None))).pages)
+    assert "part OK" in text and "web:olga" in text
+    assert f"release {n} of {n}" in text and f"source {n - 1}" in text  # the last lines too, on a later page
