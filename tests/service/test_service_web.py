@@ -371,7 +371,7 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     status, headers, pdf = c.request(f"/results/{bad.uuid}/report.pdf")
     assert status == 200 and headers["Content-Type"] == "application/pdf" and pdf[:5] == b"%PDF-"
     text = PdfReader(io.BytesIO(pdf)).pages[0].extract_text()
-    assert "part INVALID" in text and "release 1 excluded" in text and "SN-3" in text
+    assert "part INVALID" in text and "excluded: invalid" in text and "SN-3" in text
     state = str(tmp_path / "state")
     assert main(["report", ok.uuid[:8], "--state-dir", state, "--pdf", str(tmp_path / "ok.pdf")]) == 0
     text = PdfReader(str(tmp_path / "ok.pdf")).pages[0].extract_text()
