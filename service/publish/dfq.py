@@ -36,8 +36,9 @@ def _clean(text: Any) -> str:
 
 
 def _decimals(tolerance: float) -> int:
-    """Decimal places that resolve a tenth of the tolerance (and at least 3)."""
-    return max(3, min(12, int(math.ceil(-math.log10(tolerance / 10.0))) if tolerance > 0 else 6))
+    """Decimal places that resolve a ten-thousandth of the tolerance (SPC charts the spread of the parts, far
+    inside the tolerance), at least 3."""
+    return max(3, min(15, int(math.ceil(-math.log10(tolerance / 1e4))) if tolerance > 0 else 8))
 
 
 def dfq_text(recipe: Mapping[str, Any], parts: Iterable[Any], unit: str = SI) -> str:
