@@ -81,25 +81,31 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _dfq(store, args: argparse.Namespace) -> bytes:
-    """The DFQ file of one recipe's completed parts (oldest first)."""
+    return dfq_bytes(store, args.recipe, unit=args.unit, part_id=args.part,
+                     since=parse_time(args.since) if args.since else None,
+                     until=parse_time(args.until) if args.until else None)
+
+
+def dfq_bytes(store, recipe_name: str | None, *, unit: str | None = None, part_id: str | None = None,
+              since: float | None = None, until: float | None = None) -> bytes:
+    """The DFQ file of one recipe's completed parts (oldest first); ``recipe_name`` None: the store's only one."""
     from measurement.units import inertia_unit
 
     from service.publish.dfq import ENCODING, dfq_text
 
     recipes = store.recipes()
-    name = args.recipe
+    name = recipe_name
     if name is None:
         if len(recipes) != 1:
-            raise InputFileError("a DFQ file holds one part type: give --recipe NAME (recipes in the store: "
+            raise InputFileError("a DFQ file holds one part type: give the recipe (recipes in the store: "
                                  f"{', '.join(recipes) or 'none'})")
         name = recipes[0]
-    rows = list(reversed(store.list(limit=None, full=True, recipe=name, parts_only=True, part_id=args.part,
-                                    since=parse_time(args.since) if args.since else None,
-                                    until=parse_time(args.until) if args.until else None)))
+    rows = list(reversed(store.list(limit=None, full=True, recipe=name, parts_only=True, part_id=part_id,
+                                    since=since, until=until)))
     if not rows:
         raise InputFileError(f"no completed parts of recipe {name!r} in {store.path}")
     recipe = rows[-1].payload["recipe"]  # the limits of the newest part's recipe version
-    unit = inertia_unit(args.unit or recipe.get("display_unit") or SI)
+    unit = inertia_unit(unit or recipe.get("display_unit") or SI)
     return dfq_text(recipe, rows, unit).encode(ENCODING, errors="replace")
 
 

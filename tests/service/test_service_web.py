@@ -128,7 +128,7 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
                               ("/history?status=maybe", 400, b"expected ok, failed or aborted"),
                               ("/results/no-such-id", 404, b"no measurement"),
                               ("/results/a%27b", 400, b"bad measurement id"),
-                              ("/history/export.xml", 404, b"expected export.csv or export.json"),
+                              ("/history/export.xml", 404, b"expected export.csv, export.json or export.dfq"),
                               ("/nothing-here", 404, b"no page")):
         status, _, body = c.request(path)
         assert (status, words in body, b"Traceback" in body) == (code, True, False), (path, status, body[:300])
@@ -398,6 +398,9 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert len(values) == 1 and float(values[0][0]) == pytest.approx(ok.part_value * 1e7, abs=10 ** -places)
     assert values[0][1] == "0" and values[0][2].count(".") == 2 and fields["K0014/1"] == "SN-1"
     assert main(["export", "--state-dir", state, "--format", "dfq"]) == 2  # three recipes: which one?
+    status, _, web_dfq = c.request("/history/export.dfq?recipe=rotor-ok")  # the same file from the SPC page
+    assert status == 200 and web_dfq == out.read_bytes() and "/history/export.dfq?recipe=rotor-nok" in spc
+    assert c.request("/history/export.dfq")[0] == 400 and c.request("/history/export.dfq?recipe=none")[0] == 404
 
 
 def test_a_second_measure_during_a_capture_is_refused_in_words(appliance_factory, tmp_path):

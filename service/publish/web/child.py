@@ -96,11 +96,17 @@ def _lower_priority() -> None:
 # --- the jobs (run in the child: module-level functions of plain arguments) -------------------------------------
 
 def export_file(state_dir: str, fmt: str, filters: Mapping[str, Any]) -> bytes:
-    """The history as ``moi export`` writes it (CSV or JSON, oldest first), of the measurements ``filters`` select."""
+    """The history as ``moi export`` writes it (CSV or JSON, oldest first), of the measurements ``filters`` select;
+    "dfq": the AQDEF file of the recipe's completed parts."""
     from service.commands.export import _csv, _json
     from service.persistence.store import Store
 
     with Store(state_dir, read_only=True) as store:
+        if fmt == "dfq":
+            from service.commands.export import dfq_bytes
+
+            return dfq_bytes(store, filters.get("recipe"), part_id=filters.get("part_id"), since=filters.get("since"),
+                             until=filters.get("until"))
         rows, _ = store.search(limit=None, **filters)
     rows.reverse()
     return (_json(rows) if fmt == "json" else _csv(rows)).encode()

@@ -21,7 +21,8 @@ import jinja2
 from aiohttp import web
 
 from service import __version__
-from service.errors import StoreDamaged
+from service.errors import InputFileError, StoreDamaged
+from service.publish.dfq import ENCODING
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME, allowed
 from .child import ChildBusy, export_file, replot, report_file, trace_file
 from .priority import CAPTURE_STATES, CaptureFirst
@@ -616,13 +617,20 @@ class Views:
 
     async def export(self, request: web.Request) -> web.Response:
         fmt = request.match_info["fmt"]
-        if fmt not in ("csv", "json"):
-            raise Refused(404, f"export format {fmt[:10]!r}: expected export.csv or export.json")
-        name = f"moi-{self.app.config.device_id}-history.{fmt}"
+        if fmt not in ("csv", "json", "dfq"):
+            raise Refused(404, f"export format {fmt[:10]!r}: expected export.csv, export.json or export.dfq")
+        filters = self._filters(request)
+        if fmt == "dfq" and not filters["recipe"]:
+            raise Refused(400, "a DFQ file holds one part type: give recipe=NAME")
+        name = f"moi-{self.app.config.device_id}-{filters['recipe'] if fmt == 'dfq' else 'history'}.{fmt}"
         # the same files as `moi export` (oldest first)
-        body = await self._in_child(export_file, str(self.app.config.state_dir), fmt, self._filters(request))
-        return web.Response(body=body, content_type="application/json" if fmt == "json" else "text/csv",
-                            charset="utf-8", headers={"Content-Disposition": f'attachment; filename="{name}"'})
+        try:
+            body = await self._in_child(export_file, str(self.app.config.state_dir), fmt, filters)
+        except InputFileError as exc:  # no parts of that recipe
+            raise Refused(404, str(exc)) from None
+        media = {"json": "application/json", "csv": "text/csv", "dfq": "text/plain"}[fmt]
+        return web.Response(body=body, content_type=media, charset="utf-8" if fmt != "dfq" else ENCODING,
+                            headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
     # --- SPC ---------------------------------------------------------------------------------------------------
     async def spc(self, request: web.Request) -> web.Response:
