@@ -35,11 +35,11 @@ class Client:
         return html.split('name="csrf-token" content="')[1].split('"')[0]
 
     def request(self, path: str, data: dict | bytes | None = None, headers: dict | None = None,
-                method: str | None = None) -> tuple[int, dict, bytes]:
+                method: str | None = None, timeout: float = 30) -> tuple[int, dict, bytes]:
         body = data if isinstance(data, bytes) or data is None else urllib.parse.urlencode(data).encode()
         req = urllib.request.Request(self.base + path, data=body, headers=headers or {}, method=method)
         try:
-            with self.opener.open(req, timeout=30) as r:
+            with self.opener.open(req, timeout=timeout) as r:
                 return r.status, dict(r.headers), r.read()
         except urllib.error.HTTPError as e:
             return e.code, dict(e.headers), e.read()
@@ -368,7 +368,8 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
 
     from service.cli import main
 
-    status, headers, pdf = c.request(f"/results/{bad.uuid}/report.pdf")
+    # (made in the page's child process at a lower priority, after the plots it queued: slow on a busy machine)
+    status, headers, pdf = c.request(f"/results/{bad.uuid}/report.pdf", timeout=180)
     assert status == 200 and headers["Content-Type"] == "application/pdf" and pdf[:5] == b"%PDF-"
     text = PdfReader(io.BytesIO(pdf)).pages[0].extract_text()
     assert "part INVALID" in text and "excluded: invalid" in text and "SN-3" in text
@@ -398,9 +399,10 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert len(values) == 1 and float(values[0][0]) == pytest.approx(ok.part_value * 1e7, abs=10 ** -places)
     assert values[0][1] == "0" and values[0][2].count(".") == 2 and fields["K0014/1"] == "SN-1"
     assert main(["export", "--state-dir", state, "--format", "dfq"]) == 2  # three recipes: which one?
-    status, _, web_dfq = c.request("/history/export.dfq?recipe=rotor-ok")  # the same file from the SPC page
+    status, _, web_dfq = c.request("/history/export.dfq?recipe=rotor-ok", timeout=180)  # the file of the SPC page
     assert status == 200 and web_dfq == out.read_bytes() and "/history/export.dfq?recipe=rotor-nok" in spc
-    assert c.request("/history/export.dfq")[0] == 400 and c.request("/history/export.dfq?recipe=none")[0] == 404
+    assert c.request("/history/export.dfq")[0] == 400
+    assert c.request("/history/export.dfq?recipe=none", timeout=180)[0] == 404
 
 
 def test_a_second_measure_during_a_capture_is_refused_in_words(appliance_factory, tmp_path):

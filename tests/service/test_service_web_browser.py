@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import appliance_doc
+from .conftest import appliance_doc, wait_until
 
 pytestmark = pytest.mark.browser
 
@@ -135,6 +135,11 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
             running.wait_done(done + 1, 60)
     nok, bad = app.store.list(parts_only=True, limit=2, full=True)[::-1][-2:]
     assert (nok.part_verdict, bad.part_verdict) == ("NOK", "INVALID")
+
+    # every result's plot is drawn (in the page's child process, at a lower priority: slow on a busy machine)
+    # before the pages that show it are opened within the browser's page-load time
+    for m in app.store.list(limit=None):
+        wait_until(lambda m=m: app.store.get_attachment(m.uuid, "plot.png") is not None, 300, 0.2, f"plot {m.seq}")
 
     artifacts = Path(os.environ.get("MOI_ARTIFACTS") or tmp_path / "screens")
     artifacts.mkdir(parents=True, exist_ok=True)

@@ -80,12 +80,6 @@ class Refused(web.HTTPException):
         self.message = message
 
 
-def _fmt(v: Any, spec: str = ".6g") -> str:
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return "–"
-    return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
-
-
 def _name(v: Any) -> Any:
     return v.get("name") if isinstance(v, Mapping) else v
 
@@ -139,7 +133,7 @@ class Views:
         self.env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")),
                                       autoescape=jinja2.select_autoescape(["html"]), trim_blocks=True,
                                       lstrip_blocks=True)
-        self.env.filters.update(fmt=_fmt, name=_name, inertia=Q.inertia, iso=Q.iso)
+        self.env.filters.update(fmt=Q.number, name=_name, inertia=Q.inertia, iso=Q.iso)
         self._names = _own_names(server.settings.server_names)
         self.capture_first = CaptureFirst(self._capturing)
         # file names carry a hash of the content: a browser never keeps a stale script after an update
