@@ -47,12 +47,13 @@ from .errors import ServiceError, StartupError, StoreDamaged
 from service.devices.hardware import Devices, build_devices
 from .notify import Notifier
 from service.publish.payload import iso_utc, result_payload
-from service.parts.recipes import PartTracker, Recipe, RecipeBook
+from service.parts.recipes import PartTracker, Recipe, RecipeBook, RecipeError
 from service.parts.tensor_set import COMPLETE, TensorSet
 from service.publish.modbus.registers import LiveStatus
 from service.persistence.store import Store, quarantine_store
 from service.publish import port
 from service.publish.port import ApplianceView, Publisher
+from service.publish.replies import CommandReply, ReplyTo
 
 log = logging.getLogger("moi.daemon")
 
@@ -65,6 +66,9 @@ IGNORED_LOG_INTERVAL = 10.0
 
 #: the lock file in the state directory that makes a second daemon on it stop at start
 LOCK_NAME = "moi.lock"
+
+#: how often the live status looks again whether the rig's calibration is due, s
+CALIBRATION_CHECK_INTERVAL = 60.0
 
 #: consecutive failing loop iterations after which the daemon gives up (systemd restarts it)
 MAX_LOOP_FAILURES = 20
@@ -92,7 +96,7 @@ class Appliance:
         self.store: Store | None = None
         self.publishers: list[Publisher] = []  # started, in start order
         self.sequencer: Sequencer | None = None
-        self._commands: queue.SimpleQueue[tuple[str, str, Mapping[str, Any] | None]] = queue.SimpleQueue()
+        self._commands: queue.SimpleQueue[tuple[str, str, Mapping[str, Any] | None, ReplyTo | None]] = queue.SimpleQueue()
         self._calls: queue.SimpleQueue[tuple[Callable[[], Any], concurrent.futures.Future]] = queue.SimpleQueue()
         self._wakeup = threading.Event()
         self._stop = threading.Event()
@@ -102,6 +106,8 @@ class Appliance:
         # less the monotonic time it took, so a step of the wall clock never gives a negative duration
         self._run_started: dict[str, tuple[float, str]] = {}
         self._accepted_source = "unknown"  # source of the last accepted trigger (paired with the next ARMED)
+        self._accepted_reply: ReplyTo | None = None  # who hears the outcome of the last accepted trigger
+        self._run_reply: dict[str, ReplyTo] = {}  # measurement id → who hears its outcome
         # the part ID and recipe of the last accepted trigger, and of each run (measurement id → them)
         self.parts = PartTracker(config.recipes or RecipeBook(None), config.active_recipe)
         self._accepted_part: tuple[str | None, Recipe | None] = (None, None)
@@ -121,14 +127,18 @@ class Appliance:
         self._ignored_logged_at = -float("inf")
         self._refused_logged_at = -float("inf")
         self._armed_at: float | None = None  # sequencer clock time of the last ARMED, s (None: not armed)
+        # (monotonic s, recipe, due) of the last look at the rig's calibration (the live status' calibration_due)
+        self._calibration_checked: tuple[float, Recipe | None, bool] = (-float("inf"), None, False)
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
-    def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
-        """Queue a command from ``source`` ("button", "modbus", "mqtt", "cli", "web"): "trigger" (data may carry
-        ``part_id``, and ``recipe`` as a name or number), "abort", "recipe" (data ``recipe``), "part_id"
-        (data ``part_id``), "set" (data ``action`` redo | skip | abort, optional ``orientation``: the tensor
-        set's operator actions) or "set_redo" / "set_skip" / "set_abort" (the Modbus coils)."""
-        self._commands.put((name, source, data))
+    def command(self, name: str, source: str, data: Mapping[str, Any] | None = None,
+                reply: ReplyTo | None = None) -> None:
+        """Queue a command from ``source`` ("button", "modbus", "mqtt", "opcua", "cli", "web"): "trigger" (data
+        may carry ``part_id``, and ``recipe`` as a name or number), "abort", "acknowledge_fault", "recipe" (data
+        ``recipe``), "part_id" (data ``part_id``), "set" (data ``action`` redo | skip | abort, optional
+        ``orientation``: the tensor set's operator actions) or "set_redo" / "set_skip" / "set_abort" (the
+        Modbus coils). ``reply`` hears the outcome (``service.publish.replies``) on the main loop thread."""
+        self._commands.put((name, source, data, reply))
         self._wakeup.set()
 
     def call_soon(self, fn: Callable[[], Any]) -> concurrent.futures.Future:
@@ -312,50 +322,67 @@ class Appliance:
             self.notifier.status(status)
 
     def _drain_commands(self) -> None:
-        seq = self.sequencer
-        assert seq is not None
         while True:
             try:
-                name, source, data = self._commands.get_nowait()
+                name, source, data, reply = self._commands.get_nowait()
             except queue.Empty:
                 return
-            if name in ("recipe", "part_id") or (name == "trigger" and data):
-                if seq.busy:
-                    self._log_ignored(f"{name} from {source} refused: a measurement runs (the part cannot change "
-                                      "during it)")
-                    continue
-                try:
-                    self._apply_part_data(data or {})
-                except InvalidInput as exc:
-                    log.warning("%s from %s refused: %s", name, source, exc)
-                    continue
-                if name != "trigger":
-                    continue
-            if name in ("set", "set_redo", "set_skip", "set_abort"):
-                action = name[4:] if name != "set" else str((data or {}).get("action"))
-                self._set_action(action, (data or {}).get("orientation"), source)
-                continue
-            if name == "trigger":
-                unwritable = self._store_unwritable()
-                if unwritable is not None:
-                    now = time.monotonic()
-                    if now - self._refused_logged_at >= IGNORED_LOG_INTERVAL:
-                        log.error("trigger from %s refused: %s", source, unwritable)
-                        self._refused_logged_at = now
-                    continue
-                if seq.request_measurement(source):
-                    self._accepted_source = source
-                    self._accepted_part = (self.parts.part_id, self.parts.recipe)
-                    self._open_set()
-                else:
-                    self._log_ignored(f"trigger from {source} ignored (state {seq.state.value})")
-            elif name == "abort":
-                if seq.state is State.FAULT:
-                    seq.abort(f"fault acknowledged by {source}")
-                elif not seq.abort(f"aborted by {source}"):
-                    log.info("abort from %s: nothing to abort", source)
-            else:
-                log.warning("unknown command %r from %s", name, source)
+            outcome = self._execute(name, source, data, reply)
+            if reply is not None:
+                reply(outcome)
+
+    def _execute(self, name: str, source: str, data: Mapping[str, Any] | None,
+                 reply: ReplyTo | None) -> CommandReply:
+        """Act on one command; the outcome its source hears."""
+        seq = self.sequencer
+        assert seq is not None
+
+        def refused(reason: str, detail: str = "") -> CommandReply:
+            return CommandReply(name, "refused", reason, detail)
+
+        if name in ("recipe", "part_id") or (name == "trigger" and data):
+            if seq.busy:
+                self._log_ignored(f"{name} from {source} refused: a measurement runs (the part cannot change "
+                                  "during it)")
+                return refused("busy")
+            try:
+                self._apply_part_data(data or {})
+            except InvalidInput as exc:
+                log.warning("%s from %s refused: %s", name, source, exc)
+                return refused("unknown_recipe" if isinstance(exc, RecipeError) else "malformed", str(exc))
+            if name != "trigger":
+                return CommandReply(name, "done")
+        if name in ("set", "set_redo", "set_skip", "set_abort"):
+            action = name[4:] if name != "set" else str((data or {}).get("action"))
+            return self._set_action(action, (data or {}).get("orientation"), source, name)
+        if name == "trigger":
+            unwritable = self._store_unwritable()
+            if unwritable is not None:
+                now = time.monotonic()
+                if now - self._refused_logged_at >= IGNORED_LOG_INTERVAL:
+                    log.error("trigger from %s refused: %s", source, unwritable)
+                    self._refused_logged_at = now
+                return refused("store_unwritable", unwritable)
+            if seq.request_measurement(source):
+                self._accepted_source = source
+                self._accepted_reply = reply
+                self._accepted_part = (self.parts.part_id, self.parts.recipe)
+                self._open_set()
+                return CommandReply(name, "accepted")
+            self._log_ignored(f"trigger from {source} ignored (state {seq.state.value})")
+            state = seq.state
+            return refused("fault" if state is State.FAULT else "busy" if seq.busy else "not_ready",
+                           f"state {state.value}")
+        if name in ("abort", "acknowledge_fault"):
+            if seq.state is State.FAULT:
+                seq.abort(f"fault acknowledged by {source}")
+                return CommandReply(name, "done")
+            if name == "abort" and seq.abort(f"aborted by {source}"):
+                return CommandReply(name, "done")
+            log.info("%s from %s: nothing to %s", name, source, "abort" if name == "abort" else "acknowledge")
+            return refused("nothing_to_abort")
+        log.warning("unknown command %r from %s", name, source)
+        return refused("unknown_command", f"{name!r}")
 
     def _log_ignored(self, what: str) -> None:
         """One line per IGNORED_LOG_INTERVAL for the commands a stuck button or a looping client repeats."""
@@ -405,24 +432,25 @@ class Appliance:
                  self.tensor_set.instruction())
         self._publish_set()
 
-    def _set_action(self, action: str, orientation: Any, source: str) -> None:
+    def _set_action(self, action: str, orientation: Any, source: str, name: str = "set") -> CommandReply:
         s = self.tensor_set
         if s is None or s.done:
             log.warning("set %s from %s: no tensor set is running", action, source)
-            return
+            return CommandReply(name, "refused", "no_tensor_set")
         assert self.sequencer is not None
         if self.sequencer.busy and action != "abort":
             log.warning("set %s from %s refused: a measurement runs", action, source)
-            return
+            return CommandReply(name, "refused", "busy")
         try:
             s.act(action, None if orientation is None else str(orientation))
         except InvalidInput as exc:
             log.warning("set %s from %s refused: %s", action, source, exc)
-            return
+            return CommandReply(name, "refused", "malformed", str(exc))
         log.info("tensor set %s: %s by %s; %s", s.uuid, action, source, s.instruction())
         if s.done:
             self._finish_set(s)
         self._publish_set()
+        return CommandReply(name, "done")
 
     def _finish_set(self, s: TensorSet) -> None:
         """Store a finished set (complete, failed or aborted) and hand it to the publishers."""
@@ -500,6 +528,9 @@ class Appliance:
             self._started_runs += 1
             if event.measurement_id:
                 self._run_started[event.measurement_id] = (time.monotonic(), self._accepted_source)
+                if self._accepted_reply is not None:
+                    self._run_reply[event.measurement_id] = self._accepted_reply
+                    self._accepted_reply = None
                 self._run_part[event.measurement_id] = self._accepted_part
                 self._current_recipe = self._accepted_part[1]
         if event.state in (State.FAULT, State.ABORTED) and event.measurement_id \
@@ -582,6 +613,8 @@ class Appliance:
         self._durable_results.append(m.id)
         self._to_publishers("on_result", stored, m)
         self._note_stored(m.id)
+        if (reply := self._run_reply.pop(m.id, None)) is not None:
+            reply(CommandReply("trigger", "done", data={"uuid": m.id, "seq": stored.seq}))
         log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, result.get("J"),
                  ", ".join(result.get("flags") or []) or "none")
         if part["verdict"] is not None and recipe is not None:
@@ -609,6 +642,9 @@ class Appliance:
         finished = self.wall_clock()
         part_id, recipe = self._run_part.pop(event.measurement_id, (None, None))
         status = "failed" if event.state is State.FAULT else "aborted"
+        if (reply := self._run_reply.pop(event.measurement_id, None)) is not None:
+            reply(CommandReply("trigger", "failed", "measurement_failed", event.reason or status,
+                               {"uuid": event.measurement_id}))
         try:
             self.store.record(uuid=event.measurement_id, status=status, trigger=trigger,
                               device_id=self.config.device_id, software_version=__version__,
@@ -648,8 +684,25 @@ class Appliance:
             state="STOPPING" if self._stopping else state, busy=bool(seq and seq.busy), fault=state == "FAULT",
             simulated=self.config.simulated, started=self._started_runs,
             recipe=self.parts.recipe.number if self.parts.recipe else 0,
-            releases_done=(self.parts.open_part or {}).get("done", 0), **fields,
+            releases_done=(self.parts.open_part or {}).get("done", 0),
+            calibration_due=self._calibration_due(),
+            store_unwritable=self.store is not None and self.store.write_failure is not None,
+            **fields,
         )
+
+    def _calibration_due(self) -> bool:
+        """The active rig's calibration is past its validity period (today, by the wall clock; looked at once
+        per CALIBRATION_CHECK_INTERVAL and at a change of recipe, not at every iteration of the main loop)."""
+        recipe = self.parts.recipe
+        now = time.monotonic()
+        checked_at, checked_for, due = self._calibration_checked
+        if checked_for is recipe and now - checked_at < CALIBRATION_CHECK_INTERVAL:
+            return due
+        rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
+        state = self._calibration_state(rig, self.wall_clock())
+        due = bool(state and state["due"])
+        self._calibration_checked = (now, recipe, due)
+        return due
 
     def _set_registers(self) -> dict[str, int]:
         p = self.tensor_set.progress() if self.tensor_set is not None else None

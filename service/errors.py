@@ -28,6 +28,10 @@ class ModbusServerError(StartupError):
     """The Modbus server cannot listen on its port or serial line."""
 
 
+class OpcUaServerError(StartupError):
+    """The OPC UA server cannot start: its port, its certificate or its address space cache."""
+
+
 class StoreError(ServiceError):
     """The result store (SQLite) cannot be opened, read or written."""
 

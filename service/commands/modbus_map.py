@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
+from typing import Sequence
 
 from service.publish.modbus import registers as R
 from service.sources.files import read_text, write_text_atomic
@@ -54,10 +56,22 @@ def _read(args: argparse.Namespace) -> int:
         if rr.isError():
             print(f"moi modbus-map: {args.read} answered {rr}", file=sys.stderr)
             return 3
-        values = R.decode_image(rr.registers, args.word_order)
-        values["flags"] = R.flags_from_bits(values["flags"] | values.pop("flags_high") << 16)
-        values["state"] = next((k for k, v in R.STATE_CODES.items() if v == values["state"]), values["state"])
-        print(json.dumps(values, indent=2, default=str))
+        print(json.dumps(read_document(rr.registers, args.word_order), indent=2, allow_nan=False))
     finally:
         client.close()
     return 0
+
+
+def read_document(words: Sequence[int], word_order: str) -> dict:
+    """What ``--read`` prints: the registers as read (``raw``: address → word) and their values (``decoded``:
+    names and units; NaN as null, so the output is strict JSON; bit fields as lists of names)."""
+    values = R.decode_image(words, word_order)
+    values = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in values.items()}
+    values["flags"] = R.flags_from_bits(values["flags"] | values.pop("flags_high") << 16)
+    values["state"] = next((k for k, v in R.STATE_CODES.items() if v == values["state"]), values["state"])
+    values["status"] = [n for n, b in R.STATUS_BITS.items() if values["status"] >> b & 1]
+    values["plc_status"] = [n for n, b in R.PLC_STATUS_BITS.items() if values["plc_status"] >> b & 1]
+    values["error_code"] = R.ERROR_CODES.get(values["error_code"], (values["error_code"],))[0]
+    values["effects"] = [n for n, b in R.EFFECT_BITS.items() if values["effects"] >> b & 1]
+    return {"map_version": R.MAP_VERSION, "word_order": word_order,
+            "raw": {str(a): w for a, w in enumerate(words)}, "decoded": values}

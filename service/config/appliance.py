@@ -39,8 +39,9 @@ from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_
 from service.config.schema import REQUIRED, Checker as _Checker, Key, doc as _doc, schema as _schema
 from service.errors import ConfigError
 from service.sources.files import read_rig, read_toml
-from service.publish.modbus.settings import ModbusSettings, allowed_networks
-from service.publish.mqtt.settings import MqttSettings
+from service.publish.modbus.settings import RESULT_HANDSHAKES, ModbusSettings, allowed_networks
+from service.publish.mqtt.settings import PROTOCOLS, MqttSettings
+from service.publish.opcua.settings import OpcUaSettings
 from service.publish.modbus.registers import WORD_ORDERS
 from service.publish.web.settings import WebSettings
 from measurement.units import ASCII_NAMES, INERTIA_UNITS, inertia_unit
@@ -246,6 +247,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "window": _doc("results in flight (published, not yet acknowledged) at most", min=1, max=1000),
         "home_assistant": _doc("publish Home Assistant discovery messages"),
         "discovery_prefix": _doc("Home Assistant discovery prefix"),
+        "protocol": _doc("MQTT protocol version: \"5\" (command replies on the command's response topic with its "
+                         "correlation data) or \"3.1.1\" for a broker that speaks only that (replies on "
+                         "<prefix>/<device id>/reply)", choices=PROTOCOLS),
     }, extra={"enabled": Key("bool", True, "publish over MQTT (the table's presence enables it)")}),
     "recipes": _schema(RecipeSettings, {
         "directory": _doc("directory of the recipe files, one TOML file per part type (docs/service.md, Recipes); "
@@ -268,6 +272,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "parity": _doc("RTU parity", choices=("N", "E", "O")),
         "stopbits": _doc("RTU stop bits", choices=(1, 2)),
         "bytesize": _doc("RTU data bits", choices=(7, 8)),
+        "result_handshake": _doc("\"latest\": the result block shows the latest result (read seq before and after); "
+                                 "\"ack\": results queue until the PLC acknowledges each in register result_ack "
+                                 "(docs/modbus.md)", choices=RESULT_HANDSHAKES),
+        "queue_depth": _doc("result_handshake = \"ack\": results queued for the PLC at most; one more is counted "
+                            "in overrun_count", min=1, max=1000),
+        "plc_heartbeat_timeout": _doc("the PLC's heartbeat register (114) unchanged this long raises "
+                                      "plc_heartbeat_lost, s (0: no watchdog)", min=0, max=3600),
     }, extra={"enabled": Key("bool", True, "serve the registers")}),
     "web": _schema(WebSettings, {
         "host": _doc("listen address: 127.0.0.1 this machine only, 0.0.0.0 every interface (the LAN)"),
@@ -286,6 +297,29 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "users_file": _doc("named users with roles (operator, quality, admin) and password hashes, made by "
                            "`moi user add` (default: none; the token is the one login)", kind="path"),
     }, extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
+    "opcua": _schema(OpcUaSettings, {
+        "host": _doc("listen address (127.0.0.1: this machine only; 0.0.0.0: every interface)"),
+        "port": _doc("TCP port (0: any free port)", min=0, max=65535),
+        "username": _doc("the user an OPC UA client logs in as"),
+        "password": _doc("prefer password_file"),
+        "password_file": _doc("file holding the password (e.g. a systemd credential)", kind="path"),
+        "anonymous": _doc("let clients in without a user (read and call the methods)"),
+        "allow_unencrypted": _doc("also offer the endpoint without security (default: Basic256Sha256 Sign & Encrypt "
+                                  "only)"),
+        "certificate": _doc("the server's certificate, DER (default: opcua/server-cert.der in the state directory; "
+                            "made self-signed on first start)", kind="path"),
+        "private_key": _doc("the server's private key, PEM (default: opcua/server-key.pem in the state directory)",
+                            kind="path"),
+        "cache_file": _doc("asyncua's cache of the standard address space (default: opcua/address-space in the state "
+                           "directory; made on first start, read on every later one)", kind="path"),
+        "trusted_clients": _doc("directory of the client application certificates (DER or PEM) admitted (default: "
+                                "any client certificate; the user and password decide)", kind="path"),
+        "manufacturer": _doc("MachineIdentification Manufacturer"),
+        "model": _doc("MachineIdentification Model"),
+        "serial_number": _doc("MachineIdentification SerialNumber (default: the device id)"),
+        "results_kept": _doc("results GetResultById finds in memory (older ones: from the store)", min=1,
+                             max=100000),
+    }, extra={"enabled": Key("bool", True, "serve OPC UA (the table's presence enables it)")}),
 }
 
 #: tables that are plain key/value tables of SCHEMA (the others are sub-tables)
@@ -293,7 +327,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
 _HHMM = re.compile(r"([01][0-9]|2[0-3]):[0-5][0-9]")
 
 TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus", "web",
-              "recipes")
+              "recipes", "opcua")
 
 
 # --- the validated configuration ----------------------------------------------------------------
@@ -316,6 +350,7 @@ class Config:
     mqtt: MqttSettings | None        # None: MQTT off
     modbus: ModbusSettings | None    # None: Modbus off
     web: WebSettings | None          # None: no web page
+    opcua: OpcUaSettings | None = None  # None: OPC UA off (the default)
     recipes: Any = None              # service.parts.recipes.RecipeBook (every recipe of [recipes] directory, checked)
     active_recipe: str | None = None  # [recipes] active
 
@@ -339,7 +374,7 @@ class Config:
                 "directory": self.recipes.directory, "active": self.active_recipe,
                 "recipes": [{"name": r.name, "number": r.number, "version": r.version, "path": r.path}
                             for r in self.recipes.recipes]},
-            "web": clean(self.web),
+            "web": clean(self.web), "opcua": clean(self.opcua),
         }
 
 
@@ -512,13 +547,28 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
                 raise c.fail("web", "shift_starts", f"expected times HH:MM (00:00 … 23:59), got {hm!r}")
         web = WebSettings(**w)
 
+    opcua = None
+    if "opcua" in doc:
+        o = c.table("opcua", doc["opcua"], SCHEMA["opcua"])
+        if o.pop("enabled"):
+            for k in ("password_file", "certificate", "private_key", "cache_file", "trusted_clients"):
+                o[k] = _resolve(base, o[k])
+            if o["password"] is not None and o["password_file"] is not None:
+                raise c.fail("opcua", "password", "give password or password_file, not both")
+            if o["username"] is None and not o["anonymous"]:
+                raise c.fail("opcua", "username", "missing: no client could log in (give username and password_file, "
+                                                  "or set anonymous = true)")
+            if o["username"] is not None and o["password"] is None and o["password_file"] is None:
+                raise c.fail("opcua", "password_file", "missing: the user needs a password")
+            opcua = OpcUaSettings(**o)
+
     sd = state_dir or _resolve(base, dev["state_dir"])
     return Config(
         source=source, device_id=dev["id"],
         state_dir=Path(sd) if sd else default_state_dir(environ),
         log_level=dev["log_level"], store_trace=dev["store_trace"],
         rig=rig, rig_path=rig_path, simulated=simulated, simulation=simulation, hardware=hardware,
-        sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, web=web,
+        sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, web=web, opcua=opcua,
         recipes=book, active_recipe=rc["active"],
     )
 

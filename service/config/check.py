@@ -136,6 +136,16 @@ def check_config(config: Config) -> list[Check]:
         c = _readable(web.token_file, "web token_file")
         if c is not None:
             checks.append(c)
+    ua = config.opcua
+    if ua is not None:
+        checks.append(_bindable(ua.host, ua.port, "OPC UA port"))
+        # a certificate or key not there yet is made at the first start: checked only when it exists
+        made = [(p, w) for p, w in ((ua.certificate, "OPC UA certificate"), (ua.private_key, "OPC UA private_key"))
+                if p and Path(p).exists()]
+        for path, what in [(ua.password_file, "OPC UA password_file"), *made]:
+            c = _readable(path, what)
+            if c is not None:
+                checks.append(c)
     state = Path(config.state_dir)
     parent = state if state.exists() else next((p for p in state.parents if p.exists()), Path("/"))
     writable = os.access(parent, os.W_OK)

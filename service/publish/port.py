@@ -1,6 +1,6 @@
 """The publisher port: what the daemon knows of a way the appliance tells the plant.
 
-A publisher (the Modbus server, the MQTT client, the web page; next an OPC UA
+A publisher (the Modbus server, the MQTT client, the web page, the OPC UA
 server) is one class with ``NAME`` (its configuration table, and its name in
 the logs and on the health page), a ``build(settings, appliance)`` class
 method, and the hooks below; every hook has a default that does nothing, so a
@@ -28,6 +28,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from service.parts.recipes import PartTracker, Recipe
     from service.persistence.store import Store, StoredMeasurement
     from service.publish.modbus.registers import LiveStatus
+    from service.publish.replies import ReplyTo
 
 
 @dataclass(frozen=True)
@@ -46,11 +47,12 @@ class PublisherEntry:
 
 
 #: in start order: Modbus first (the PLC sees STARTING while the devices open), the web page once the
-#: sequencer exists, MQTT last (its outbox sender delivers at once)
+#: sequencer exists, MQTT (its outbox sender delivers at once), OPC UA
 PUBLISHERS: tuple[PublisherEntry, ...] = (
     PublisherEntry("modbus", "service.publish.modbus.server"),
     PublisherEntry("web", "service.publish.web.server", in_health=False),
     PublisherEntry("mqtt", "service.publish.mqtt.client"),
+    PublisherEntry("opcua", "service.publish.opcua.server"),
 )
 
 
@@ -179,8 +181,10 @@ class ApplianceView:
         """Each publisher's health under its name (None when it is off), for the health page."""
         return self._app.publisher_health()
 
-    def command(self, name: str, source: str, data: Mapping[str, Any] | None = None) -> None:
-        self._app.command(name, source, data)
+    def command(self, name: str, source: str, data: Mapping[str, Any] | None = None,
+                reply: ReplyTo | None = None) -> None:
+        """Queue a command (``Appliance.command``); ``reply`` hears its outcome on the main loop thread."""
+        self._app.command(name, source, data, reply)
 
     def call_soon(self, fn: Callable[[], Any]) -> concurrent.futures.Future:
         return self._app.call_soon(fn)

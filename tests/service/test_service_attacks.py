@@ -44,7 +44,7 @@ def test_an_exception_in_a_command_handler_is_logged_and_the_next_command_still_
                                                                                          consumer_factory):
     got: list[str] = []
 
-    def on_command(name: str, source: str) -> None:
+    def on_command(name: str, source: str, data=None, reply=None) -> None:
         got.append(name)
         if len(got) == 1:
             raise RuntimeError("handler bug")
@@ -113,7 +113,7 @@ def test_illegal_coil_values_are_exception_03_and_fire_nothing_and_legal_writes_
     app = appliance_factory(appliance_doc(tmp_path / "state"))
     fired: list[str] = []
     forward = app.app.modbus._on_command
-    app.app.modbus._on_command = lambda name, source: (fired.append(name), forward(name, source))
+    app.app.modbus._on_command = lambda name, source, *more: (fired.append(name), forward(name, source, *more))
     with socket.create_connection(("127.0.0.1", app.app.modbus.bound_port), timeout=5) as s:
         for tid, value in enumerate(ILLEGAL_COIL_VALUES, 1):
             reply = _tcp_exchange(s, tid, 1, struct.pack(">BHH", 5, R.COILS["trigger"], value))

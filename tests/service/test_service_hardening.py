@@ -269,7 +269,8 @@ def test_clearing_a_retained_command_starts_and_aborts_nothing(tmp_path, broker,
     c.wait_subscribed()
     commands: list[str] = []
     forward = app.app.command
-    app.app.mqtt._on_command = lambda name, source, data=None: (commands.append(name), forward(name, source, data))
+    app.app.mqtt._on_command = lambda name, source, data=None, reply=None: (commands.append(name),
+                                                                           forward(name, source, data, reply))
     c.publish("moi/test-rig/cmd/measure", "", retain=True)
     c.publish("moi/test-rig/cmd/abort", "", retain=True)
     app.press()  # a measurement of 5 s at time scale 1: the clearing below arrives while it runs

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import threading
 
 import pytest
@@ -73,7 +74,7 @@ def test_commands_trigger_once_and_retained_or_repeated_ids_do_not(tmp_path, bro
     got: list[tuple[str, str]] = []
     cond = threading.Condition()
 
-    def on_command(name, source):
+    def on_command(name, source, data=None, reply=None):
         with cond:
             got.append((name, source))
             cond.notify_all()
@@ -107,10 +108,11 @@ def test_commands_trigger_once_and_retained_or_repeated_ids_do_not(tmp_path, bro
 def test_home_assistant_discovery_is_retained_and_names_the_result_topic(tmp_path, broker, consumer_factory):
     store = Store(tmp_path)
     svc = MqttService(settings(broker.port, home_assistant=True), "d1", store, software_version="1.2")
+    svc.recipes = ("shaft-A", "rotor")
     svc.start()
     try:
         assert svc.connected_event.wait(10)
-        expected = discovery_messages(svc.settings, Topics("moi", "d1"), "d1", "1.2")
+        expected = discovery_messages(svc.settings, Topics("moi", "d1"), "d1", "1.2", svc.recipes)
         early = consumer_factory(broker.port, ["homeassistant/#"], client_id="early")
         early.wait(lambda c: len(c.messages) >= len(expected), 10, "discovery configs (all at the broker)")
         late = consumer_factory(broker.port, ["homeassistant/#"])  # subscribes after: sees retained configs
@@ -119,7 +121,7 @@ def test_home_assistant_discovery_is_retained_and_names_the_result_topic(tmp_pat
         j = json.loads({t: p for t, p, _ in late.messages}["homeassistant/sensor/d1/J/config"])
         assert j["state_topic"] == "moi/d1/result/last" and j["availability_topic"] == "moi/d1/status"
         assert j["unit_of_measurement"] == "kg·m²"
-        assert j["default_entity_id"] == "sensor.moi_d1_J" and j["object_id"] == "moi_d1_J"
+        assert j["default_entity_id"] == "sensor.moi_d1_j" and j["object_id"] == "moi_d1_j"
         assert j["origin"]["name"] == "moi" and j["origin"]["sw_version"] == "1.2"
         configs = {t: json.loads(p) for t, p, _ in late.messages}
         assert "homeassistant/sensor/d1/J_object/config" in configs
@@ -130,6 +132,19 @@ def test_home_assistant_discovery_is_retained_and_names_the_result_topic(tmp_pat
         assert "homeassistant/binary_sensor/d1/unmodeled_residual/config" in flags
         verdict = json.loads({t: p for t, p, _ in late.messages}["homeassistant/sensor/d1/verdict/config"])
         assert verdict["state_topic"] == "moi/d1/result/last" and "value_json.verdict" in verdict["value_template"]
+        select = configs["homeassistant/select/d1/recipe/config"]
+        assert select["options"] == ["none", "shaft-A", "rotor"] and select["command_topic"] == "moi/d1/cmd/recipe"
+        assert select["state_topic"] == "moi/d1/recipe"
+        text = configs["homeassistant/text/d1/next_part_id/config"]
+        assert text["command_topic"] == "moi/d1/cmd/part_id" and text["max"] == 20
+        for c in configs.values():  # Home Assistant's entity ids: lower case, digits, underscores
+            assert re.fullmatch(r"[a-z_]+\.[a-z0-9_]+", c["default_entity_id"]), c["default_entity_id"]
+            if c.get("state_class") == "measurement":
+                assert c.get("unit_of_measurement"), c["name"]
+        # the state the select and the text show, retained
+        state = consumer_factory(broker.port, ["moi/d1/recipe", "moi/d1/part_id"], client_id="state")
+        state.wait(lambda c: len(c.messages) >= 2, 10, "the retained recipe and part ID")
+        assert json.loads(state.on("/recipe")[0]) == {"name": "none", "number": 0}
     finally:
         svc.stop()
         store.close()
@@ -153,3 +168,11 @@ def test_a_retained_document_published_while_the_broker_is_down_is_there_when_it
     finally:
         svc.stop()
         store.close()
+
+
+def test_entity_ids_are_valid_for_any_device_id():
+    msgs = discovery_messages(MqttSettings(home_assistant=True), Topics("moi", "HA-Test.2"), "HA-Test.2", "1")
+    ids = {c["default_entity_id"] for _, c in msgs}
+    assert "sensor.moi_ha_test_2_j" in ids and "sensor.moi_ha_test_2_omega_n" in ids
+    assert all(re.fullmatch(r"[a-z_]+\.[a-z0-9_]+", i) for i in ids)
+    assert len(ids) == len(msgs)  # no two entities collapse into one id

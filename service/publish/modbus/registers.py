@@ -20,12 +20,13 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, to_registers  # noqa: F401
+from service.publish.replies import REASONS
 from service.states import STATES
 from measurement import flags as F
 from measurement.tensor import COMPONENTS
 
 #: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 9  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
+MAP_VERSION = 10  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
 # 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
 #    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
 # 5: bits 6-7 of `effects` (dahl, view; they set bit 15, other, before); register flags_high (flags from
@@ -36,6 +37,8 @@ MAP_VERSION = 9  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3:
 # 8: flags halves_disagree, model_ambiguous, releases_disagree (register flags_high, bits 5-7)
 # 9: the guided tensor set's progress (set_step, set_steps, set_orientation: live registers 7-9), its coils
 #    set_redo, set_skip, set_abort (2-4) and the tensor of the latest set (block 200-238, its own snapshot)
+# 10: the PLC handshake: block 80-88 (plc_status, error_code, heartbeat, the result queue, the command
+#    status) and the writable registers command, command_parameter, result_ack, plc_heartbeat (111-114)
 
 
 # --- enumerations ------------------------------------------------------------
@@ -89,7 +92,7 @@ EFFECT_OTHER_BIT = 15
 #: bits of register `status` (also served as discrete inputs at the same bit numbers)
 STATUS_BITS: dict[str, int] = {
     "busy": 0,            # a measurement is running (ARMED … PUBLISHING)
-    "result_valid": 1,    # the snapshot holds a result (seq != 0)
+    "result_valid": 1,    # the snapshot holds a result the PLC has not acknowledged (plc_status bit 2 too)
     "fault": 2,           # the sequencer is in FAULT
     "mqtt_connected": 3,  # the MQTT client is connected to its broker
     "simulated": 4,       # the appliance runs on the simulated rig
@@ -98,6 +101,41 @@ STATUS_BITS: dict[str, int] = {
     "part_nok": 7,        # ... NOK
     "part_invalid": 8,    # ... INVALID (not trustworthy: measure again)
 }
+
+#: bits of register `plc_status`, the handshake's status word (the bits integrators know from vision sensors)
+PLC_STATUS_BITS: dict[str, int] = {
+    "ready": 0,                  # IDLE: a trigger is accepted now
+    "busy": 1,                   # a measurement runs (ARMED … PUBLISHING)
+    "result_valid": 2,           # the block 10–63 shows a result not yet acknowledged (latest mode: a result)
+    "result_buffer_overrun": 3,  # a result found the queue full (see overrun_count); cleared by acknowledge_fault
+    "error": 4,                  # error_code is not 0
+    "calibration_due": 5,        # the rig's calibration is past its validity period
+    "not_decidable": 6,          # the shown result's verdict is INVALID or lies in the guard band's uncertainty range
+    "trigger_ack": 7,            # the trigger in `command` was accepted; cleared when the PLC writes `command` again
+    "plc_heartbeat_lost": 8,     # the PLC's heartbeat (register 114) did not change for [modbus] plc_heartbeat_timeout
+}
+
+#: register `error_code`: code → (name, meaning); the highest-priority cause present is shown
+ERROR_CODES: dict[int, tuple[str, str]] = {
+    0: ("none", "no error"),
+    1: ("fault", "the sequencer is in FAULT (a sensor, the solenoid or the identification failed; the reason is "
+                 "on the web page and in the MQTT state): acknowledge it with command 3 or coil 1"),
+    2: ("store_unwritable", "the result store cannot be written (disk full?): measurements are refused"),
+    3: ("plc_heartbeat_lost", "the PLC's heartbeat register did not change for plc_heartbeat_timeout"),
+    4: ("result_buffer_overrun", "a result found the queue full and is not shown (still stored and sent over "
+                                 "MQTT); acknowledge with command 3"),
+}
+ERROR_CODE_BY_NAME: dict[str, int] = {name: code for code, (name, _) in ERROR_CODES.items()}
+
+#: register `command`: code → name (the daemon's command it queues)
+COMMANDS: dict[int, str] = {1: "trigger", 2: "abort", 3: "acknowledge_fault", 4: "select_recipe"}
+COMMAND_CODES: dict[str, int] = {name: code for code, name in COMMANDS.items()}
+
+#: register `command_status`
+COMMAND_STATUS: dict[str, int] = {"none": 0, "accepted": 1, "refused": 2, "done": 3, "failed": 4}
+
+#: the appliance increments `heartbeat` this often while its main loop runs, s
+HEARTBEAT_PERIOD = 0.5
 
 #: verdict → code in registers `verdict` and `release_verdict` (0: none yet / part not complete / no recipe)
 VERDICT_CODES: dict[str, int] = {"OK": 1, "NOK": 2, "INVALID": 3}
@@ -109,7 +147,13 @@ PART_ID_CHARS = 20
 WRITABLE: dict[str, tuple[int, int]] = {
     "part_id": (100, PART_ID_CHARS // 2),  # the next part's serial number, ASCII, NUL-padded
     "recipe_select": (110, 1),             # the recipe number to make active (0: none)
+    "command": (111, 1),                   # a command code (COMMANDS), 0: none
+    "command_parameter": (112, 1),         # the command's parameter (select_recipe: the recipe number)
+    "result_ack": (113, 1),                # acknowledge the shown result: write its `seq`
+    "plc_heartbeat": (114, 1),             # a counter the PLC changes; its silence raises plc_heartbeat_lost
 }
+#: the writable registers that say which part is measured: refused while a measurement runs
+PART_INPUTS = ("part_id", "recipe_select")
 WRITABLE_START = min(a for a, _ in WRITABLE.values())
 WRITABLE_END = max(a + n for a, n in WRITABLE.values())  # exclusive
 
@@ -249,6 +293,27 @@ def _table() -> tuple[Register, ...]:
         "more quality flags: " + ", ".join(f"bit {b - 16} {n}" for n, b in FLAG_BITS.items() if b >= 16))
     add("snapshot", 63, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
 
+    # The PLC handshake: live, at a fixed address past the snapshot (which may grow up to it), so that
+    # registers 0…88 are one request.
+    add("handshake", HANDSHAKE_START + 0, "plc_status", "bits16", "bits", "plc_status",
+        "handshake status word: " + ", ".join(f"bit {b} {n}" for n, b in PLC_STATUS_BITS.items()))
+    add("handshake", HANDSHAKE_START + 1, "error_code", "uint16", "enum", "error_code", "error code, see the table below (0: none)")
+    add("handshake", HANDSHAKE_START + 2, "heartbeat", "uint16", "count", "heartbeat",
+        f"incremented every {HEARTBEAT_PERIOD:g} s while the appliance's main loop runs (wraps at 65536); a value "
+        "that stops changing means the appliance hangs")
+    add("handshake", HANDSHAKE_START + 3, "results_queued", "uint16", "count", "results_queued",
+        "results waiting for the PLC's acknowledgement, the one shown included (mode ack; latest: 0 or 1)")
+    add("handshake", HANDSHAKE_START + 4, "overrun_count", "uint16", "count", "overrun_count",
+        "results that found the queue full since the daemon started (saturates at 65535)")
+    add("handshake", HANDSHAKE_START + 5, "command_echo", "uint16", "enum", "command_echo",
+        "the command code the status below belongs to (" + ", ".join(f"{c} {n}" for c, n in COMMANDS.items()) + ")")
+    add("handshake", HANDSHAKE_START + 6, "command_status", "uint16", "enum", "command_status",
+        "its status: " + ", ".join(f"{c} {n}" for n, c in COMMAND_STATUS.items()))
+    add("handshake", HANDSHAKE_START + 7, "command_reason", "uint16", "enum", "command_reason",
+        "why it was refused or failed (0: it was not): " + ", ".join(f"{r.code} {n}" for n, r in REASONS.items()))
+    add("handshake", HANDSHAKE_START + 8, "command_count", "uint16", "count", "command_count",
+        "incremented with every change of the command status (wraps at 65536): the PLC waits for it to change")
+
     # The tensor of the latest tensor set: a block of its own, with its own snapshot protocol.
     a = TENSOR_START
     add("tensor", a, "tensor_seq", "uint16", "count", "tensor_seq",
@@ -272,6 +337,9 @@ def _table() -> tuple[Register, ...]:
     return tuple(rows)
 
 
+#: the handshake block's first address (the snapshot ends before it)
+HANDSHAKE_START = 80
+
 #: the tensor block: the first address, the components in their order (``measurement.tensor.COMPONENTS``)
 TENSOR_START = 200
 TENSOR_COMPONENTS = COMPONENTS
@@ -282,7 +350,8 @@ BY_NAME: dict[str, Register] = {r.name: r for r in REGISTERS}
 LIVE_START = 0
 SNAPSHOT_START = BY_NAME["seq"].address
 SNAPSHOT_END = BY_NAME["seq_end"].address + 1  # exclusive
-IMAGE_SIZE = SNAPSHOT_END  # registers 0 … IMAGE_SIZE-1
+HANDSHAKE_END = BY_NAME["command_count"].address + 1  # exclusive
+IMAGE_SIZE = HANDSHAKE_END  # registers 0 … IMAGE_SIZE-1
 TENSOR_END = BY_NAME["tensor_seq_end"].address + 1  # exclusive
 
 
@@ -294,6 +363,7 @@ def _check_table() -> None:
                 raise AssertionError(f"register {a} used by {used[a]} and {r.name}")
             used[a] = r.name
     assert IMAGE_SIZE <= 125, "the whole image must be readable with one FC3/FC4 request"
+    assert HANDSHAKE_START >= SNAPSHOT_END, "the handshake block lies past the snapshot"
     assert TENSOR_END - TENSOR_START <= 125 and TENSOR_START >= WRITABLE_END, "the tensor block: one request, apart"
 
 
@@ -399,6 +469,8 @@ class LiveStatus:
     set_step: int = 0        # tensor set: the step to measure now (1-based; 0: no set)
     set_steps: int = 0       # tensor set: orientations in the plan
     set_orientation: int = 0  # tensor set: number of the orientation to mount now (1-based; 0: none)
+    calibration_due: bool = False   # the rig's calibration is past its validity period
+    store_unwritable: bool = False  # the result store cannot be written: measurements are refused
 
     def status_bits(self, result_valid: bool, verdict: str | None = None) -> int:
         """The status bits; ``verdict``: the snapshot's part verdict (sets part_ok / part_nok / part_invalid)."""
@@ -460,6 +532,59 @@ def encode_tensor(tensor: Mapping[str, Any] | None, seq: int, word_order: str = 
     return out
 
 
+@dataclass(frozen=True)
+class Handshake:
+    """The values of the handshake block (registers HANDSHAKE_START … HANDSHAKE_END-1)."""
+
+    plc_status: int = 0
+    error_code: int = 0
+    heartbeat: int = 0
+    results_queued: int = 0
+    overrun_count: int = 0
+    command_echo: int = 0
+    command_status: int = 0
+    command_reason: int = 0
+    command_count: int = 0
+
+
+def assemble_image(live: Sequence[int], snapshot: Sequence[int], handshake: Sequence[int]) -> tuple[int, ...]:
+    """Registers 0 … IMAGE_SIZE-1 from the three blocks (the addresses between them read as 0)."""
+    gap = [0] * (HANDSHAKE_START - SNAPSHOT_END)
+    return (*live, *snapshot, *gap, *handshake)
+
+
+def plc_status_bits(**bits: bool) -> int:
+    """Register `plc_status` from its bits by name (PLC_STATUS_BITS)."""
+    return sum(1 << PLC_STATUS_BITS[k] for k, v in bits.items() if v)
+
+
+def error_code(live: LiveStatus, *, plc_heartbeat_lost: bool, overrun: bool) -> int:
+    """Register `error_code`: the highest-priority cause present (ERROR_CODES, lowest code first)."""
+    causes = {"fault": live.fault, "store_unwritable": live.store_unwritable,
+              "plc_heartbeat_lost": plc_heartbeat_lost, "result_buffer_overrun": overrun}
+    return next((ERROR_CODE_BY_NAME[name] for name, present in causes.items() if present), 0)
+
+
+def not_decidable(payload: Mapping[str, Any] | None) -> bool:
+    """True when a result's verdict cannot decide: INVALID, or in the guard band's uncertainty range (the part's
+    decision once complete, else the release's)."""
+    if payload is None:
+        return False
+    decision = payload.get("part") or payload.get("release") or {}
+    verdict = payload.get("verdict") or decision.get("verdict")
+    return verdict == "INVALID" or decision.get("zone") == "uncertainty"
+
+
+def encode_handshake(h: Handshake) -> list[int]:
+    """Registers HANDSHAKE_START … HANDSHAKE_END-1 (all uint16/bits16: no word order)."""
+    out = [0] * (HANDSHAKE_END - HANDSHAKE_START)
+    for r in REGISTERS:
+        if r.area == "handshake":
+            out[r.address - HANDSHAKE_START] = min(int(getattr(h, r.source)), 0xFFFF) if r.source in (
+                "overrun_count",) else int(getattr(h, r.source)) & 0xFFFF
+    return out
+
+
 def decode_image(words: Sequence[int], word_order: str = "big", start: int = 0) -> dict[str, Any]:
     """Named values from registers read at ``start`` (any span; registers outside it are left out)."""
     _check_order(word_order)
@@ -512,6 +637,147 @@ def read_snapshot(read: Callable[[int, int], Sequence[int]], word_order: str = "
 # --- documentation -------------------------------------------------------------
 
 
+def _handshake_markdown() -> list[str]:
+    """The PLC handshake: status word, error codes, commands, the result queue, ST pseudo-code for both modes."""
+    a = {name: addr for name, (addr, _) in WRITABLE.items()}
+    b = BY_NAME
+    L: list[str] = [f"## PLC handshake (registers {HANDSHAKE_START}–{HANDSHAKE_END - 1}, holding registers "
+                    f"{a['command']}–{a['plc_heartbeat']})", ""]
+    L.append(f"Registers {HANDSHAKE_START}–{HANDSHAKE_END - 1} are live, like 0–9, at a fixed address past the "
+             f"snapshot, so that one request for registers 0–{IMAGE_SIZE - 1} reads everything.")
+    L.append("")
+    L.append("### Status word (register `plc_status`)")
+    L.append("")
+    L.append("| bit | name | set while |")
+    L.append("|---:|---|---|")
+    meaning = {
+        "ready": "the appliance is IDLE: a trigger is accepted now",
+        "busy": "a measurement runs (from ARMED until the result is published)",
+        "result_valid": "the result block shows a result the PLC has not acknowledged (mode `latest`: any result "
+                        "until acknowledged)",
+        "result_buffer_overrun": "a result found the queue full (mode `ack`); `overrun_count` says how many; "
+                                 "cleared by command 3 (acknowledge fault)",
+        "error": "`error_code` is not 0",
+        "calibration_due": "the rig's calibration is past its validity period (the result flag calibration_due "
+                           "is set on every result meanwhile)",
+        "not_decidable": "the shown result's verdict cannot decide: INVALID, or inside the guard band's uncertainty "
+                         "range (ISO 14253-1)",
+        "trigger_ack": "a trigger written to `command` was accepted; cleared when the PLC writes `command` again "
+                       "(0 to take its hand off)",
+        "plc_heartbeat_lost": "the PLC's heartbeat register did not change for `[modbus] plc_heartbeat_timeout`",
+    }
+    for name, bit in PLC_STATUS_BITS.items():
+        L.append(f"| {bit} | `{name}` | {meaning[name]} |")
+    L.append("")
+    L.append("### Error codes (register `error_code`)")
+    L.append("")
+    L.append("| code | name | meaning |")
+    L.append("|---:|---|---|")
+    for code, (name, words) in ERROR_CODES.items():
+        L.append(f"| {code} | `{name}` | {words} |")
+    L.append("")
+    L.append("When several causes are present the lowest code above 0 is shown.")
+    L.append("")
+    L.append("### Heartbeats")
+    L.append("")
+    L.append(f"`heartbeat` (register {b['heartbeat'].address}) is incremented every {HEARTBEAT_PERIOD:g} s by the "
+             "appliance's main loop, the loop that runs the measurements: when it stops changing for a few "
+             "seconds the appliance hangs, whatever the Modbus connection says. The PLC's own heartbeat goes the "
+             f"other way: with `[modbus] plc_heartbeat_timeout` > 0 the PLC changes register {a['plc_heartbeat']} "
+             "(any new value, e.g. a counter) more often than that; its silence raises `plc_heartbeat_lost` (status "
+             "bit 8, error code 3), the log line, the systemd status and the health page say so, and it clears "
+             "itself when the value changes again.")
+    L.append("")
+    L.append("### Commands (holding registers `command`, `command_parameter`)")
+    L.append("")
+    L.append("| code | command | does |")
+    L.append("|---:|---|---|")
+    does = {"trigger": "start one measurement (as coil 0 or the push button)",
+            "abort": "abort the running measurement, or acknowledge a FAULT (as coil 1)",
+            "acknowledge_fault": "acknowledge a FAULT and the result_buffer_overrun bit",
+            "select_recipe": "make recipe number `command_parameter` active (0: none; as register recipe_select)"}
+    for code, name in COMMANDS.items():
+        L.append(f"| {code} | `{name}` | {does[name]} |")
+    L.append("")
+    L.append("The outcome: `command_echo` = the code, `command_status` = "
+             + ", ".join(f"{c} {n}" for n, c in COMMAND_STATUS.items())
+             + ", `command_reason` = why (table below), and `command_count` increments with each such change. "
+             "A trigger goes accepted → done (its result is stored and queued) or failed (FAULT or aborted); the "
+             "other commands go straight to done or refused.")
+    L.append("")
+    L.append("| reason | name | meaning |")
+    L.append("|---:|---|---|")
+    L.append("| 0 | – | not refused |")
+    for name, r in REASONS.items():
+        L.append(f"| {r.code} | `{name}` | {r.words} |")
+    L.append("")
+    L.append("The same reasons, by name, are in the MQTT command replies (docs/service.md).")
+    L.append("")
+    L.append("### The result queue (`[modbus] result_handshake`)")
+    L.append("")
+    L.append("`\"latest\"` (default, the map of versions before 10): the block 10–63 shows the latest result; a "
+             "result the PLC has not read yet is replaced by the next. `\"ack\"`: every stored result is queued "
+             "(at most `[modbus] queue_depth`, default 8); the block shows the oldest one not yet acknowledged, "
+             f"`results_queued` (register {b['results_queued'].address}) counts them. The PLC acknowledges it by "
+             f"writing its `seq` to `result_ack` (register {a['result_ack']}): the next one is swapped in, or, "
+             "when none waits, `result_valid` clears and the block keeps the acknowledged values. A result that "
+             "finds the queue full is not queued: `overrun_count` counts it and `result_buffer_overrun` is set, so "
+             "a loss is always visible (the result itself is stored and sent over MQTT). The appliance keeps "
+             "the sequence number of the last acknowledged result in its state directory: after a restart the "
+             "results stored since are queued again (the newest `queue_depth` of them; the PLC recognises a "
+             "result it has seen by its `seq` and `uuid`).")
+    L.append("")
+    L.append("### PLC program, mode ack (IEC 61131-3 structured text, pseudo-code)")
+    L.append("")
+    L.append("```iecst")
+    L.append(f"(* every scan: read registers 0..{IMAGE_SIZE - 1} in one FC 4 request into Img *)")
+    L.append("CASE Step OF")
+    L.append("  0: (* once per part type *)")
+    L.append(f"     WriteRegs(addr := {a['command']}, values := [4, RecipeNo]);   (* select_recipe *)")
+    L.append("     Step := 10;")
+    L.append(f"  10: IF Img.plc_status.{PLC_STATUS_BITS['ready']} THEN  (* ready *)")
+    L.append(f"        WriteRegs(addr := {a['part_id']}, values := PartIdWords);       (* 10 registers, ASCII *)")
+    L.append("        LastCount := Img.command_count;")
+    L.append(f"        WriteRegs(addr := {a['command']}, values := [1, 0]);          (* trigger *)")
+    L.append("        Step := 20;")
+    L.append("      END_IF;")
+    L.append("  20: IF Img.command_count <> LastCount AND Img.command_echo = 1 THEN")
+    L.append("        IF Img.command_status = 1 (* accepted *) THEN Step := 30;")
+    L.append("        ELSE Reason := Img.command_reason; Step := 900; END_IF;")
+    L.append(f"        WriteReg(addr := {a['command']}, value := 0);                 (* hand off: trigger_ack clears *)")
+    L.append("      END_IF;")
+    L.append(f"  30: IF Img.plc_status.{PLC_STATUS_BITS['result_valid']} THEN      (* result_valid *)")
+    L.append("        Result := Img.snapshot;                              (* registers 10..63 of the same read *)")
+    L.append(f"        WriteReg(addr := {a['result_ack']}, value := Img.seq);         (* acknowledge it *)")
+    L.append("        IF Result.release_index < Result.releases THEN Step := 10; ELSE Step := 40; END_IF;")
+    L.append("      END_IF;")
+    L.append("  40: (* latch Result.verdict: 1 OK, 2 NOK, 3 INVALID; not_decidable = measure again *)")
+    L.append("      Step := 10;")
+    L.append("  900: (* show Reason; busy: wait and retry; fault: acknowledge with command 3 *)")
+    L.append("END_CASE;")
+    L.append(f"IF Img.plc_status.{PLC_STATUS_BITS['result_buffer_overrun']} THEN Alarm(Img.overrun_count); END_IF;")
+    L.append("IF Img.heartbeat = LastHeartbeat FOR 3 s THEN Alarm('appliance hangs'); END_IF;")
+    L.append(f"WriteReg(addr := {a['plc_heartbeat']}, value := MyCounter);         (* every second, if the watchdog is on *)")
+    L.append("```")
+    L.append("")
+    L.append("### PLC program, mode latest (no acknowledgement)")
+    L.append("")
+    L.append("```iecst")
+    L.append("(* trigger with coil 0 or command 1 as above; then: *)")
+    L.append(f"S1 := ReadReg({b['seq'].address});")
+    L.append("IF S1 <> 0 AND S1 <> LastSeq THEN")
+    L.append(f"  Body := ReadRegs({SNAPSHOT_START + 1}, {SNAPSHOT_END - SNAPSHOT_START - 1});   (* in parts if the PLC must *)")
+    L.append(f"  S2 := ReadReg({b['seq'].address});")
+    L.append("  IF S1 = S2 AND S2 = Body.seq_end THEN LastSeq := S1; (* use Body *) END_IF;  (* else: read again *)")
+    L.append("END_IF;")
+    L.append("```")
+    L.append("")
+    L.append("A result stored while the PLC did not look is replaced by the next in this mode; use mode ack when "
+             "every result must reach the PLC.")
+    L.append("")
+    return L
+
+
 def markdown() -> str:
     """docs/modbus.md, generated from the tables above (`moi modbus-map`)."""
     L: list[str] = []
@@ -559,14 +825,24 @@ def markdown() -> str:
                    "with the measurement and echoed in `part_id` of the snapshot and in every MQTT payload",
         "recipe_select": "the number of the recipe (part type) to make active; 0: none. An unknown number gets "
                          "exception 0x03 (illegal data value). The active recipe reads back here and in `recipe`",
+        "command": "a command code (table below); its outcome shows in `command_echo`, `command_status`, "
+                   "`command_reason` and `command_count`. Write 0 to take the hand off (clears `trigger_ack`). "
+                   "An unknown code gets 0x03 and does nothing. Not refused while a measurement runs: the "
+                   "appliance answers busy in `command_reason` instead",
+        "command_parameter": "the command's parameter, written with `command` in one FC 16 (select_recipe: the "
+                             "recipe number, 0: none; an unknown number gets 0x03)",
+        "result_ack": "acknowledge the result shown: write its `seq`. Any other value, or an acknowledgement "
+                      "when none is waiting, gets 0x03 and changes nothing",
+        "plc_heartbeat": "a counter the PLC changes at least every `[modbus] plc_heartbeat_timeout` seconds; "
+                         "when it stops, `plc_heartbeat_lost` is raised (status bit, error code, health page)",
     }
     for name, (a, n) in WRITABLE.items():
         span = f"{a}" if n == 1 else f"{a}–{a + n - 1}"
         L.append(f"| {span} | {n} | `{name}` | {wmeaning[name]} |")
     L.append("")
-    L.append("These are the only writable registers. A write to them while a measurement runs (from the trigger "
-             "until the result is published) gets exception 0x06 (server device busy): the part being measured "
-             "cannot change. A part ID with bytes outside printable ASCII gets 0x03. Reading them with FC 3 gives "
+    L.append("These are the only writable registers. A write to the part ID or recipe_select while a measurement "
+             "runs (from the trigger until the result is published) gets exception 0x06 (server device busy): the "
+             "part being measured cannot change. A part ID with bytes outside printable ASCII gets 0x03. Reading them with FC 3 gives "
              "the part ID and recipe now in force (also when set over MQTT). Other functions that would write "
              "them, FC 22 (mask write) and FC 23 (read/write multiple registers), get exception 0x01 (illegal "
              "function): a write is applied or refused, never acknowledged and dropped.")
@@ -632,6 +908,7 @@ def markdown() -> str:
         L.append(f"| {b} | `{name}` | {F.describe(name)} |")
     L.append(f"| {FLAG_OTHER_BIT} | any other flag | see the MQTT result's `flags` list for its name |")
     L.append("")
+    L += _handshake_markdown()
     L.append("## Consistent-snapshot protocol")
     L.append("")
     L.append(f"The result snapshot (registers {SNAPSHOT_START}–{SNAPSHOT_END - 1}) is replaced as one unit: the "

@@ -8,8 +8,14 @@ request copies that image into pymodbus' datastore before pymodbus reads it,
 so one request never mixes two images (see the snapshot protocol in
 docs/modbus.md).
 
-Writes: only the two command coils and the part ID / recipe_select holding
-registers (``registers.WRITABLE``) are writable. The result image is declared
+The PLC handshake (docs/modbus.md): a status word, an error code, a heartbeat
+the main loop advances (``set_live``), a watchdog on the PLC's heartbeat, the
+command register whose outcome the daemon reports through a reply
+(``service.publish.replies``), and with ``result_handshake = "ack"`` a queue of
+results the PLC acknowledges one by one (``result_ack``).
+
+Writes: only the command coils and the holding registers of ``registers.WRITABLE``
+are writable. The result image is declared
 read-only (pymodbus answers 0x02), so is everything between it and the
 writable block; coils other than the command coils are refused in the access
 hook with 0x02. A single-coil write (function 5) must carry 0xFF00 (on) or
@@ -18,7 +24,9 @@ and its reply echoes the request (the coil itself reads back 0: the command
 coils are pulses). A write to the part registers while a measurement runs (or
 a trigger is about to start one) gets 0x06 (server device busy): the part
 being measured cannot change; an unknown recipe number or a non-ASCII part ID
-gets 0x03 (illegal data value). Function 22 (mask write) and 23 (read/write
+gets 0x03 (illegal data value), so do an unknown command code and an
+acknowledgement of a `seq` that is not the one shown. A refused write changes
+nothing. Function 22 (mask write) and 23 (read/write
 multiple registers) get 0x01 (illegal function): a write is applied as the
 functions above do, or refused, never acknowledged and dropped.
 """
@@ -32,6 +40,7 @@ import logging
 import struct
 import threading
 import time
+from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from pymodbus.constants import ExcCodes
@@ -47,6 +56,8 @@ from pymodbus.simulator.simcore import SimCore
 from drivers.aioloop import LoopThread
 
 from service.publish.port import ApplianceView, Publisher
+from service.publish.replies import CommandReply
+from service.sources.files import write_text_atomic
 
 # the settings are read by the configuration without pymodbus; here for the server's users too
 from .settings import _THIS_MACHINE, ModbusSettings, allowed_networks, network_exposure  # noqa: F401
@@ -61,6 +72,9 @@ _READ_DISCRETE = {2}
 _READ_COILS = {1}
 _WRITE_COILS = {5, 15}
 _WRITE_REGISTERS = {6, 16}
+
+#: mode "ack": the file in the state directory that keeps the sequence number of the last acknowledged result
+ACKED_FILE = "modbus-acked-seq"
 
 #: after a trigger coil write, part writes are refused this long (s) until the daemon reports busy
 TRIGGER_HOLD = 0.5
@@ -238,23 +252,40 @@ class ModbusServer(Publisher):
     writes 1 to a command coil (name "trigger" or "abort"; called with two
     arguments), a part ID (name "part_id", data {"part_id": text}) or a recipe
     number ("recipe", {"recipe": number}); it must not block.
-    ``recipe_numbers``: the recipe numbers the PLC may select (0 deselects).
+    ``recipe_numbers``: the recipe numbers the PLC may select (0 deselects). A command written to register
+    `command` is handed on with a fourth argument, the reply that fills the command status registers.
+    clock: monotonic s (the heartbeats and the hold after a trigger). acked_file: where mode "ack" keeps the
+    sequence number of the last result the PLC acknowledged, so that a restart queues again the results
+    stored since (``ModbusServer.build``).
     """
 
     def __init__(self, settings: ModbusSettings, on_command: Callable[..., None] | None = None,
-                 recipe_numbers: frozenset[int] = frozenset()) -> None:
+                 recipe_numbers: frozenset[int] = frozenset(), clock: Callable[[], float] = time.monotonic,
+                 acked_file: Path | None = None) -> None:
         if settings.word_order not in R.WORD_ORDERS:
             raise ValueError(f"word_order must be one of {R.WORD_ORDERS}")
         self.settings = settings
-        self._on_command = on_command or (lambda name, source, data=None: None)
+        self._on_command: Callable[..., None] = on_command or (lambda name, source, data=None, reply=None: None)
         self.recipe_numbers = recipe_numbers
         self._lock = threading.Lock()
+        self._clock = clock
+        self.acked_file = acked_file
         self._live = R.LiveStatus()
         self._snapshot = R.encode_snapshot(None, settings.word_order)
         self._verdict: str | None = None
         self._inputs = [0] * (R.WRITABLE_END - R.WRITABLE_START)  # the writable holding registers
         self._hold_until = 0.0  # monotonic time until which part writes are refused after a trigger
         self._result_valid = False
+        self._shown: Mapping[str, Any] | None = None  # the payload the result block shows
+        self._queue: collections.deque[tuple[int, list[int], Mapping[str, Any]]] = collections.deque()
+        self.overrun_count = 0
+        self._overrun = False  # a result found the queue full; cleared by acknowledge_fault
+        self._heartbeat = 0
+        self._heartbeat_tick = -1
+        self._plc_heartbeat_at = clock()  # the last change of the PLC's heartbeat register
+        self._plc_heartbeat_lost = False
+        self._command = (0, 0, 0, 0)  # command_echo, command_status, command_reason, command_count
+        self._trigger_ack = False
         self._image: tuple[int, ...] = ()
         self._tensor: tuple[int, ...] = tuple(R.encode_tensor(None, 0, settings.word_order))
         self._tensor_seq = 0
@@ -268,13 +299,75 @@ class ModbusServer(Publisher):
 
     # --- data the daemon updates --------------------------------------------
     def publish_result(self, payload: Mapping[str, Any]) -> None:
-        """Make a stored result the current snapshot (one atomic swap)."""
+        """A stored result: in mode "latest" it becomes the shown snapshot at once (one atomic swap); in mode
+        "ack" it joins the queue and is shown when those before it are acknowledged (a full queue counts it in
+        `overrun_count` and sets result_buffer_overrun instead)."""
         words = R.encode_snapshot(payload, self.settings.word_order)
+        seq = R.modbus_seq(int(payload["seq"]))
         with self._lock:
-            self._snapshot = words
-            self._verdict = payload.get("verdict")
-            self._result_valid = True
+            if self.settings.result_handshake == "ack":
+                if len(self._queue) >= self.settings.queue_depth:
+                    self.overrun_count += 1
+                    self._overrun = True
+                    log.warning("Modbus: result seq %d found %d results unacknowledged by the PLC: not queued "
+                                "(%d so far; it is stored and sent over MQTT)", seq, len(self._queue),
+                                self.overrun_count)
+                    self._rebuild()
+                    return
+            else:
+                self._queue.clear()
+            self._queue.append((seq, words, payload))
+            self._show()
             self._rebuild()
+
+    def _show(self) -> None:
+        """The oldest queued result becomes the snapshot (with the lock held); none queued: the last one stays,
+        without ResultValid."""
+        if self._queue:
+            _, self._snapshot, self._shown = self._queue[0]
+            self._verdict = self._shown.get("verdict")
+        self._result_valid = bool(self._queue)
+
+    def acknowledge(self, seq: int) -> bool:
+        """The PLC acknowledged the shown result (its `seq`); False (nothing changes) when that is not the one
+        shown or none is."""
+        with self._lock:
+            if not self._queue or self._queue[0][0] != seq:
+                return False
+            _, _, payload = self._queue.popleft()
+            self._show()
+            self._rebuild()
+        if self.acked_file is not None:
+            try:
+                write_text_atomic(self.acked_file, f"{int(payload['seq'])}\n")
+            except OSError as exc:  # the acknowledgement holds; only a restart would queue the result again
+                log.warning("Modbus: cannot keep the acknowledged position in %s: %s", self.acked_file, exc)
+        return True
+
+    def restore_queue(self, store: Any) -> None:
+        """Mode "ack" after a restart: queue the results stored after the one the PLC acknowledged last (the
+        newest ``queue_depth`` of them; older ones count as overrun). Without a kept position (the first
+        start in this mode), the latest result is shown, as in mode "latest"."""
+        last: int | None = None
+        if self.acked_file is not None:
+            try:
+                last = int(self.acked_file.read_text(encoding="ascii").strip())
+            except (OSError, ValueError):
+                last = None
+        if last is None:
+            latest = store.latest("ok")
+            if latest is not None and latest.payload is not None:
+                self.publish_result(latest.payload)
+            return
+        depth = self.settings.queue_depth
+        rows = [r for r in store.list(limit=depth + 64, status="ok", full=True)
+                if r.seq > last and r.payload is not None]
+        rows.sort(key=lambda r: r.seq)
+        for r in rows:
+            self.publish_result(r.payload)
+
+    def results_queued(self) -> int:
+        return len(self._queue)
 
     def publish_tensor(self, tensor: Mapping[str, Any]) -> None:
         """Make a tensor set's result (``TensorResult.to_dict()``) the current tensor block (one atomic swap)."""
@@ -299,12 +392,33 @@ class ModbusServer(Publisher):
                 "recipe_select": words[R.WRITABLE["recipe_select"][0] - R.WRITABLE_START]}
 
     def set_live(self, live: R.LiveStatus) -> None:
+        """The live status (the daemon's main loop, every iteration): also advances the heartbeat and
+        watches the PLC's."""
         if live.busy:
             self._hold_until = 0.0  # the daemon took the trigger: busy protects the part from here on
+        now = self._clock()
+        tick = int(now / R.HEARTBEAT_PERIOD)
+        timeout = self.settings.plc_heartbeat_timeout
         with self._lock:
-            if live != self._live:
+            changed = live != self._live
+            if tick != self._heartbeat_tick:
+                self._heartbeat_tick = tick
+                self._heartbeat = (self._heartbeat + 1) & 0xFFFF
+                changed = True
+            lost = timeout > 0 and now - self._plc_heartbeat_at > timeout
+            if lost != self._plc_heartbeat_lost:
+                self._plc_heartbeat_lost = lost
+                (log.warning if lost else log.info)(
+                    "Modbus: the PLC's heartbeat (register %d) %s", R.WRITABLE["plc_heartbeat"][0],
+                    f"did not change for {timeout:g} s" if lost else "changes again")
+                changed = True
+            if changed:
                 self._live = live
                 self._rebuild()
+
+    @property
+    def plc_heartbeat_lost(self) -> bool:
+        return self._plc_heartbeat_lost
 
     @property
     def live(self) -> R.LiveStatus:
@@ -316,9 +430,35 @@ class ModbusServer(Publisher):
 
     def _rebuild(self) -> None:
         live = R.encode_live(self._live, self._result_valid, self.settings.word_order, self._verdict)
+        error = R.error_code(self._live, plc_heartbeat_lost=self._plc_heartbeat_lost, overrun=self._overrun)
+        echo, status, reason, count = self._command
+        handshake = R.Handshake(
+            plc_status=R.plc_status_bits(
+                ready=self._live.state == "IDLE" and not self._live.busy, busy=self._live.busy,
+                result_valid=self._result_valid, result_buffer_overrun=self._overrun, error=error != 0,
+                calibration_due=self._live.calibration_due, not_decidable=R.not_decidable(self._shown),
+                trigger_ack=self._trigger_ack, plc_heartbeat_lost=self._plc_heartbeat_lost),
+            error_code=error, heartbeat=self._heartbeat, results_queued=len(self._queue),
+            overrun_count=self.overrun_count, command_echo=echo, command_status=status, command_reason=reason,
+            command_count=count)
         # one assignment: a request handler sees the old or the new tuple, never a mix
-        self._image = tuple(live + self._snapshot)
+        self._image = R.assemble_image(live, self._snapshot, R.encode_handshake(handshake))
         self._status_bits = self._live.status_bits(self._result_valid, self._verdict)
+
+    def _reply_to(self, code: int) -> Callable[[CommandReply], None]:
+        """The reply of a command written to register `command` (the daemon's main loop calls it)."""
+
+        def reply(r: CommandReply) -> None:
+            with self._lock:
+                count = (self._command[3] + 1) & 0xFFFF
+                self._command = (code, R.COMMAND_STATUS[r.status], r.reason_code, count)
+                if R.COMMANDS[code] == "trigger" and r.status == "accepted":
+                    self._trigger_ack = True
+                if R.COMMANDS[code] == "acknowledge_fault" and r.status in ("done", "refused"):
+                    self._overrun = False  # the overrun is acknowledged with the fault (its count stays)
+                self._rebuild()
+
+        return reply
 
     # --- pymodbus access hook (runs in the server's event loop) -------------------
     async def _action(self, func_code: int, start_address: int, address: int, count: int,
@@ -344,7 +484,7 @@ class ModbusServer(Publisher):
                 if v:
                     name = names[address + i]
                     if name == "trigger":  # the part ID written before it is queued before it: it applies
-                        self._hold_until = time.monotonic() + TRIGGER_HOLD
+                        self._hold_until = self._clock() + TRIGGER_HOLD
                     self._on_command(name, "modbus")
                 values[i] = False  # command coils are pulses: they read back 0
             return None
@@ -355,10 +495,20 @@ class ModbusServer(Publisher):
         return ExcCodes.ILLEGAL_FUNCTION
 
     def _write_inputs(self, address: int, values: list) -> ExcCodes | None:
-        """FC 6 / FC 16 to the part ID / recipe_select registers (pymodbus refused every other address)."""
+        """FC 6 / FC 16 to the writable holding registers (pymodbus refused every other address). Everything
+        written is checked first: a refused write changes nothing."""
         if address < R.WRITABLE_START or address + len(values) > R.WRITABLE_END:
             return ExcCodes.ILLEGAL_ADDRESS
-        if self._live.busy or time.monotonic() < self._hold_until:
+        touched = set(range(address, address + len(values)))
+
+        def written(name: str) -> bool:
+            a, n = R.WRITABLE[name]
+            return bool(touched & set(range(a, a + n)))
+
+        def word(words: list[int], name: str) -> int:
+            return words[R.WRITABLE[name][0] - R.WRITABLE_START]
+
+        if any(written(n) for n in R.PART_INPUTS) and (self._live.busy or self._clock() < self._hold_until):
             return ExcCodes.DEVICE_BUSY  # the part being measured cannot change
         new = list(self._inputs)
         new[address - R.WRITABLE_START: address - R.WRITABLE_START + len(values)] = [int(v) & 0xFFFF for v in values]
@@ -367,17 +517,48 @@ class ModbusServer(Publisher):
         raw = b"".join(w.to_bytes(2, "big") for w in part_words).replace(b"\0", b"")
         if any(not 32 <= ch < 127 for ch in raw):
             return ExcCodes.ILLEGAL_VALUE
-        recipe = new[R.WRITABLE["recipe_select"][0] - R.WRITABLE_START]
-        touched = range(address, address + len(values))
-        recipe_written = R.WRITABLE["recipe_select"][0] in touched
-        if recipe_written and recipe != 0 and recipe not in self.recipe_numbers:
+        recipe = word(new, "recipe_select")
+        if written("recipe_select") and recipe != 0 and recipe not in self.recipe_numbers:
             return ExcCodes.ILLEGAL_VALUE
+        command, parameter = word(new, "command"), word(new, "command_parameter")
+        if written("command") and command != 0:
+            if command not in R.COMMANDS:
+                return ExcCodes.ILLEGAL_VALUE
+            if R.COMMANDS[command] == "select_recipe" and parameter != 0 and parameter not in self.recipe_numbers:
+                return ExcCodes.ILLEGAL_VALUE
+        if written("result_ack"):
+            ack = word(new, "result_ack")
+            with self._lock:
+                if not self._queue or self._queue[0][0] != ack:
+                    return ExcCodes.ILLEGAL_VALUE  # not the result shown: nothing is acknowledged
+        # every check passed: apply
+        if written("plc_heartbeat") and word(new, "plc_heartbeat") != word(self._inputs, "plc_heartbeat"):
+            self._plc_heartbeat_at = self._clock()
         self._inputs = new
+        if written("result_ack"):
+            self.acknowledge(word(new, "result_ack"))
         if any(a <= t < a + n for t in touched):
             self._on_command("part_id", "modbus", {"part_id": R.decode_ascii(part_words)})
-        if recipe_written:
+        if written("recipe_select"):
             self._on_command("recipe", "modbus", {"recipe": recipe})
+        if written("command"):
+            with self._lock:
+                self._trigger_ack = False  # the PLC took its hand off the trigger (or gives a new command)
+                self._rebuild()
+            if command != 0:
+                self._dispatch(command, parameter)
         return None
+
+    def _dispatch(self, code: int, parameter: int) -> None:
+        name = R.COMMANDS[code]
+        reply = self._reply_to(code)
+        if name == "trigger":
+            self._hold_until = self._clock() + TRIGGER_HOLD
+            self._on_command("trigger", "modbus", None, reply)
+        elif name == "select_recipe":
+            self._on_command("recipe", "modbus", {"recipe": parameter}, reply)
+        else:
+            self._on_command(name, "modbus", None, reply)
 
     def _device(self) -> SimDevice:
         n_coil_regs = len(R.COILS)
@@ -487,15 +668,19 @@ class ModbusServer(Publisher):
     @classmethod
     def build(cls, settings: ModbusSettings, appliance: ApplianceView) -> "ModbusServer":
         parts, store = appliance.parts, appliance.store
-        server = cls(settings, on_command=appliance.command, recipe_numbers=parts.book.numbers)
+        server = cls(settings, on_command=appliance.command, recipe_numbers=parts.book.numbers,
+                     acked_file=Path(appliance.config.state_dir) / ACKED_FILE)
         server.set_inputs(recipe=parts.recipe.number if parts.recipe else 0)
         if store is not None:
             # until the main loop runs, the PLC sees STARTING and the true outbox backlog, not defaults
             server.set_live(R.LiveStatus(state="STARTING", simulated=appliance.config.simulated,
                                          outbox_pending=store.outbox_count()))
-            last = store.latest("ok")
-            if last is not None and last.payload is not None:
-                server.publish_result(last.payload)  # the PLC sees the last result after a restart too
+            if settings.result_handshake == "ack":
+                server.restore_queue(store)  # the results the PLC has not acknowledged, again
+            else:
+                last = store.latest("ok")
+                if last is not None and last.payload is not None:
+                    server.publish_result(last.payload)  # the PLC sees the last result after a restart too
         return server
 
     def failure(self) -> str | None:
@@ -507,7 +692,17 @@ class ModbusServer(Publisher):
 
     def health(self) -> dict[str, Any]:
         return {"mode": self.settings.mode, "port": self.bound_port, "clients": self.client_count(),
-                "requests": self.requests}
+                "requests": self.requests, "result_handshake": self.settings.result_handshake,
+                "results_queued": self.results_queued(), "overrun_count": self.overrun_count,
+                "plc_heartbeat_lost": self._plc_heartbeat_lost}
+
+    def status(self) -> list[str]:
+        out = []
+        if self._plc_heartbeat_lost:
+            out.append(f"PLC heartbeat lost (no change for {self.settings.plc_heartbeat_timeout:g} s)")
+        if self._overrun:
+            out.append(f"{self.overrun_count} result(s) found the PLC's queue full")
+        return out
 
     def on_live(self, live: R.LiveStatus) -> None:
         self.set_live(live)

@@ -25,6 +25,11 @@ class ModbusSettings:
     serial_port, baudrate, parity ("N"|"E"|"O"), stopbits, bytesize: RTU line
     (serial_port may be "socket://HOST:PORT" for a serial-over-TCP bridge).
     unit_id: the Modbus device id answered. word_order: "big" | "little".
+    result_handshake: "latest" (the block shows the latest result; the PLC reads `seq` before and after)
+    | "ack" (results queue until the PLC acknowledges each by writing its `seq` to `result_ack`; a
+    result that finds ``queue_depth`` results waiting is counted in `overrun_count`, not shown).
+    plc_heartbeat_timeout: the PLC's heartbeat register unchanged this long raises plc_heartbeat_lost, s
+    (0: no watchdog).
     """
 
     mode: str = "tcp"
@@ -40,6 +45,13 @@ class ModbusSettings:
     parity: str = "E"
     stopbits: int = 1
     bytesize: int = 8
+    result_handshake: str = "latest"
+    queue_depth: int = 8
+    plc_heartbeat_timeout: float = 0.0
+
+
+#: the values of ``result_handshake``
+RESULT_HANDSHAKES = ("latest", "ack")
 
 
 def allowed_networks(allow_from: tuple[str, ...]) -> tuple[ipaddress.IPv4Network | ipaddress.IPv6Network, ...]:

@@ -13,6 +13,13 @@ Topics under ``<prefix>/<device_id>/`` (prefix default "moi"):
   command may carry ``"part_id"`` (the part's serial number) and ``"recipe"``.
 * ``cmd/recipe``  makes a recipe active: its name or number as the payload, or
   JSON ``{"recipe": name or number}`` (0 or "" deselects).
+* ``cmd/part_id`` sets the next part's ID: the ID as the payload, or JSON
+  ``{"part_id": text}`` ("" clears it).
+* ``reply``       every command's outcome (JSON: command, id, status accepted |
+  refused | done | failed, reason, detail; a trigger's result uuid and seq once
+  done), unless the command came with an MQTT 5 response topic: then there,
+  with its correlation data. Retained and empty messages get no reply.
+* ``recipe``, ``part_id`` retained: the active recipe and the next part's ID.
 * ``spc/<recipe>`` the SPC summary of a recipe's parts, retained, republished
   after each completed part.
 
@@ -22,7 +29,9 @@ Topics under ``<prefix>/<device_id>/`` (prefix default "moi"):
 Optional Home Assistant MQTT discovery (retained config messages) for J, its
 uncertainty, J_object, ω_n, the damping ratio, the state, the part, each
 quality flag (device class "problem" only for the flags that invalidate a
-result), a "measure" and an "abort / acknowledge" button.
+result), a "measure" and an "abort / acknowledge" button, a ``select`` of the
+recipe and a ``text`` of the part ID. Entity ids are lower case with
+underscores (Home Assistant's rule), every numeric sensor has its unit.
 """
 
 from __future__ import annotations
@@ -40,10 +49,13 @@ from typing import Any, Callable, Mapping
 
 import paho.mqtt.client as mqtt
 from paho.mqtt.enums import CallbackAPIVersion
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
 
 from service.errors import ConfigError
 from service.persistence.outbox import OutboxSender
 from service.publish.port import ApplianceView, Publisher
+from service.publish.replies import CommandReply
 
 # the settings are read by the configuration without paho; here for the client's users too
 from .settings import MqttSettings  # noqa: F401
@@ -107,6 +119,10 @@ class Topics:
         self.cmd_abort = f"{base}/cmd/abort"
         self.cmd_recipe = f"{base}/cmd/recipe"
         self.cmd_set = f"{base}/cmd/set"  # a tensor set: {"action": "redo" | "skip" | "abort", "orientation": name}
+        self.cmd_part_id = f"{base}/cmd/part_id"
+        self.reply = f"{base}/reply"      # commands' outcomes (unless an MQTT 5 response topic was given)
+        self.recipe = f"{base}/recipe"    # retained: the active recipe {"name", "number"} (name "none": none)
+        self.part_id = f"{base}/part_id"  # retained: the next part's ID {"part_id"}
         self.set_state = f"{base}/set"    # retained: the tensor set's progress (the orientation to mount next)
         self.tensor = f"{base}/tensor"    # retained: the latest tensor set's record with its tensor
 
@@ -139,20 +155,21 @@ class _Client(mqtt.Client):
 class MqttService(Publisher):
     """The MQTT client of the daemon: durable result delivery, status, state, commands.
 
-    on_command(name, source[, data]) is called from paho's thread for a command
-    message ("trigger" or "abort", source "mqtt"; "trigger" with data when the
-    message carries a part ID or recipe, "recipe" with data {"recipe": ...});
-    it must not block.
+    on_command(name, source, data, reply) is called from paho's thread for a
+    command message ("trigger" or "abort", source "mqtt"; "trigger" with data
+    when the message carries a part ID or recipe, "recipe" with data
+    {"recipe": ...}, "part_id" with {"part_id": ...}; data None otherwise);
+    ``reply`` publishes the outcome. It must not block.
     """
 
     def __init__(self, settings: MqttSettings, device_id: str, store: Store, *, software_version: str = "",
-                 on_command: Callable[[str, str], None] | None = None,
+                 on_command: Callable[..., None] | None = None,
                  on_delivered: Callable[[str], None] | None = None) -> None:
         self.settings = settings
         self.device_id = device_id
         self.topics = Topics(settings.prefix, device_id)
         self.software_version = software_version
-        self._on_command = on_command or (lambda name, source: None)
+        self._on_command = on_command or (lambda name, source, data=None, reply=None: None)
         self._seen_ids: deque[str] = deque(maxlen=256)
         self._seen_lock = threading.Lock()
         self.connected_event = threading.Event()
@@ -166,7 +183,14 @@ class MqttService(Publisher):
         self._connected_at = 0.0  # monotonic time of the last one
         self._quick_drops = 0  # connections in a row the broker closed soon after they were made
         # clean session: the outbox, not the broker session, is what makes delivery durable
-        self.client = _Client(CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=True)
+        self.v5 = settings.protocol == "5"
+        if self.v5:
+            self.client = _Client(CallbackAPIVersion.VERSION2, client_id=client_id, protocol=mqtt.MQTTv5)
+        else:
+            self.client = _Client(CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=True)
+        self.recipes: tuple[str, ...] = ()  # recipe names for Home Assistant's select (set by build)
+        self._recipe_doc: dict[str, Any] = {"name": "none", "number": 0}
+        self._part_doc: dict[str, Any] = {"part_id": ""}
         self.client.on_connect_error = self._on_connect_error
         self._last_logged_error: str | None = None
         self._configure_auth()
@@ -208,7 +232,11 @@ class MqttService(Publisher):
     def start(self) -> None:
         """Start connecting (in the background; the broker may be down) and delivering."""
         self.sender.start()
-        self.client.connect_async(self.settings.host, self.settings.port, keepalive=self.settings.keepalive)
+        if self.v5:
+            self.client.connect_async(self.settings.host, self.settings.port, keepalive=self.settings.keepalive,
+                                      clean_start=True)
+        else:
+            self.client.connect_async(self.settings.host, self.settings.port, keepalive=self.settings.keepalive)
         self.client.loop_start()
 
     def stop(self, flush_timeout: float = 2.0) -> None:
@@ -257,6 +285,8 @@ class MqttService(Publisher):
     def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
         if reason_code.is_failure:
             self.last_error = f"broker refused the connection: {reason_code}"
+            if self.v5 and "protocol" in str(reason_code).lower():
+                self.last_error += ' (a broker without MQTT 5: set [mqtt] protocol = "3.1.1")'
             log.warning("MQTT: %s", self.last_error)
             return
         self.last_error = None
@@ -266,9 +296,12 @@ class MqttService(Publisher):
         log.info("MQTT connected to %s:%d", self.settings.host, self.settings.port)
         client.publish(self.topics.status, "online", qos=1, retain=True)
         client.subscribe([(self.topics.cmd_measure, 1), (self.topics.cmd_abort, 1), (self.topics.cmd_recipe, 1),
-                          (self.topics.cmd_set, 1)])
+                          (self.topics.cmd_set, 1), (self.topics.cmd_part_id, 1)])
+        client.publish(self.topics.recipe, json.dumps(self._recipe_doc), qos=1, retain=True)
+        client.publish(self.topics.part_id, json.dumps(self._part_doc), qos=1, retain=True)
         if self.settings.home_assistant:
-            for topic, config in discovery_messages(self.settings, self.topics, self.device_id, self.software_version):
+            for topic, config in discovery_messages(self.settings, self.topics, self.device_id, self.software_version,
+                                                    self.recipes):
                 client.publish(topic, json.dumps(config), qos=1, retain=True)
         self.connected_event.set()
         self.sender.connected()
@@ -317,7 +350,8 @@ class MqttService(Publisher):
             log.warning("MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
             return
         name = {self.topics.cmd_measure: "trigger", self.topics.cmd_abort: "abort",
-                self.topics.cmd_recipe: "recipe", self.topics.cmd_set: "set"}.get(message.topic)
+                self.topics.cmd_recipe: "recipe", self.topics.cmd_set: "set",
+                self.topics.cmd_part_id: "part_id"}.get(message.topic)
         if name is None:
             return
         if not message.payload:
@@ -335,32 +369,53 @@ class MqttService(Publisher):
                     cmd_id = str(doc["id"])[:128]
             except (ValueError, UnicodeDecodeError, RecursionError):
                 pass  # any payload is a valid command; only a JSON "id" is used for dedupe
+        reply = self._replier(message, cmd_id)
+
+        def refuse(reason: str, detail: str) -> None:
+            log.warning("MQTT: %s refused: %s", message.topic, detail)
+            reply(CommandReply(name, "refused", reason, detail))
+
+        keys = {"set": ("action", "orientation"), "part_id": ("part_id",)}.get(name, ("part_id", "recipe"))
         if isinstance(doc, dict):
-            data = {k: doc[k] for k in (("action", "orientation") if name == "set" else ("part_id", "recipe"))
-                    if k in doc}
+            data = {k: doc[k] for k in keys if k in doc}
         if name == "set" and not isinstance(data.get("action"), str):
-            log.warning("MQTT: %s without {\"action\": \"redo\" | \"skip\" | \"abort\"} ignored", message.topic)
-            return
-        if name == "recipe":
-            if len(message.payload) > MAX_COMMAND_PAYLOAD:  # no recipe has such a name: not worth a log line of it
-                log.warning("MQTT: %s of %d bytes ignored (a recipe name or number, at most %d bytes)",
-                            message.topic, len(message.payload), MAX_COMMAND_PAYLOAD)
-                return
-            if not isinstance(doc, dict):  # a bare name or number
-                data = {"recipe": message.payload.decode("utf-8", errors="replace").strip()}
-            if "recipe" not in data:
-                log.warning("MQTT: %s without a recipe name or number ignored", message.topic)
-                return
+            return refuse("malformed", 'expected JSON {"action": "redo" | "skip" | "abort"}')
+        if name in ("recipe", "part_id"):
+            if len(message.payload) > MAX_COMMAND_PAYLOAD:  # no recipe or part has such a name
+                return refuse("malformed", f"{len(message.payload)} bytes (at most {MAX_COMMAND_PAYLOAD})")
+            if not isinstance(doc, dict):  # a bare name, number or ID
+                data = {name: message.payload.decode("utf-8", errors="replace").strip()}
+            if name not in data:
+                return refuse("malformed", f'expected the {name.replace("_", " ")} or JSON {{"{name}": ...}}')
         if cmd_id is not None:
             with self._seen_lock:
                 if (name, cmd_id) in self._seen_ids:
                     log.info("MQTT: duplicate %s command id %s ignored", name, cmd_id)
+                    reply(CommandReply(name, "refused", "duplicate"))
                     return
                 self._seen_ids.append((name, cmd_id))
-        if data:
-            self._on_command(name, "mqtt", data)
-        else:
-            self._on_command(name, "mqtt")
+        self._on_command(name, "mqtt", data or None, reply)
+
+    def _replier(self, message: Any, cmd_id: str | None) -> Callable[[CommandReply], None]:
+        """The reply of a command message: to its MQTT 5 response topic with its correlation data, else to
+        the ``reply`` topic with its id (any thread; publishing never blocks)."""
+        props = getattr(message, "properties", None)
+        topic = getattr(props, "ResponseTopic", None) if props is not None else None
+        correlation = getattr(props, "CorrelationData", None) if props is not None else None
+        if not isinstance(topic, str) or not topic or any(ch in topic for ch in "#+\0"):
+            topic = self.topics.reply  # none, or one no PUBLISH may name
+        command = message.topic.rsplit("/", 1)[-1]
+
+        def reply(r: CommandReply) -> None:
+            doc = r.to_dict() | {"command": command, "id": cmd_id, "device_id": self.device_id,
+                                 "timestamp": self._appliance.now() if self._appliance is not None else time.time()}
+            properties = None
+            if self.v5 and correlation is not None:
+                properties = Properties(PacketTypes.PUBLISH)
+                properties.CorrelationData = correlation
+            self.client.publish(topic, json.dumps(doc, allow_nan=False, default=str), qos=1, properties=properties)
+
+        return reply
 
     # --- the publisher port ---------------------------------------------------------
     NAME = "mqtt"
@@ -373,7 +428,21 @@ class MqttService(Publisher):
         service = cls(settings, appliance.config.device_id, store, software_version=appliance.software_version,
                       on_command=appliance.command)
         service._appliance = appliance
+        service.recipes = tuple(r.name for r in appliance.parts.book.recipes)
+        service._set_recipe_doc(appliance.parts.recipe)
+        service._part_doc = {"part_id": appliance.parts.part_id or ""}
         return service
+
+    def _set_recipe_doc(self, recipe: Any) -> None:
+        self._recipe_doc = {"name": recipe.name, "number": recipe.number} if recipe else {"name": "none", "number": 0}
+
+    def on_recipe(self, recipe: Any) -> None:
+        self._set_recipe_doc(recipe)
+        self.publish_retained(self.topics.recipe, self._recipe_doc)
+
+    def on_part_id(self, part_id: str | None) -> None:
+        self._part_doc = {"part_id": part_id or ""}
+        self.publish_retained(self.topics.part_id, self._part_doc)
 
     def failure(self) -> str | None:
         if self.sender.error is not None:
@@ -440,11 +509,21 @@ class MqttService(Publisher):
         self.client.publish(topic, json.dumps(doc, allow_nan=False, default=str), qos=1, retain=True)
 
 
+def entity_slug(text: str) -> str:
+    """``text`` as Home Assistant allows in an entity id: lower case letters, digits and single underscores."""
+    out = "".join(c if c.isascii() and c.isalnum() else "_" for c in text.lower())
+    return "_".join(part for part in out.split("_") if part) or "x"
+
+
 def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
-                       software_version: str) -> list[tuple[str, dict[str, Any]]]:
-    """Home Assistant MQTT discovery config messages (topic, config)."""
+                       software_version: str, recipes: tuple[str, ...] = ()) -> list[tuple[str, dict[str, Any]]]:
+    """Home Assistant MQTT discovery config messages (topic, config). ``recipes``: the recipe names (a select
+    entity offers them, with "none")."""
+    from service.parts.recipes import PART_ID_LENGTH
+
     dp = settings.discovery_prefix.strip("/")
     node = "".join(c if c.isalnum() or c in "_-" else "_" for c in device_id)
+    slug = entity_slug(device_id)
     device = {"identifiers": [f"moi_{node}"], "name": f"moi {device_id}", "manufacturer": "moi",
               "model": "pendulum inertia appliance", "sw_version": software_version}
     common = {"availability_topic": topics.status, "payload_available": "online",
@@ -453,20 +532,21 @@ def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
     out: list[tuple[str, dict[str, Any]]] = []
 
     def entity(domain: str, key: str, topic_key: str | None = None, **cfg: Any) -> None:
-        oid = f"moi_{node}_{key}"
+        oid = f"moi_{slug}_{entity_slug(key)}"
         # object_id is deprecated in favour of default_entity_id; both until Home Assistant drops object_id
-        doc = {"unique_id": oid, "object_id": oid, "default_entity_id": f"{domain}.{oid}", **cfg,
+        doc = {"unique_id": f"moi_{node}_{key}", "object_id": oid, "default_entity_id": f"{domain}.{oid}", **cfg,
                "origin": origin, **common}
         out.append((f"{dp}/{domain}/{node}/{topic_key or key}/config", {k: v for k, v in doc.items() if v is not None}))
 
     # the result sensors read the retained copy of the latest result: known again right after a
-    # Home Assistant restart, not "unknown" until the next measurement
+    # Home Assistant restart, not "unknown" until the next measurement. Every one has its unit (SI; "1":
+    # a ratio), so Home Assistant keeps long-term statistics of it.
     sensors = [
         ("J", "Moment of inertia", "kg·m²", "{{ value_json.J }}"),
         ("J_std", "Moment of inertia uncertainty", "kg·m²", "{{ value_json.J_std }}"),
         ("J_object", "Moment of inertia of the part (J − tare)", "kg·m²", "{{ value_json.J_object }}"),
         ("omega_n", "Natural angular frequency", "rad/s", "{{ value_json.omega_n }}"),
-        ("damping_ratio", "Damping ratio", None, "{{ value_json.damping_ratio }}"),
+        ("damping_ratio", "Damping ratio", "1", "{{ value_json.damping_ratio }}"),
         ("residual_rms", "Fit residual RMS", "rad", "{{ value_json.residual_rms_after }}"),
     ]
     for key, name, unit, template in sensors:
@@ -476,6 +556,7 @@ def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
                json_attributes_template=("{{ {'uuid': value_json.uuid, 'seq': value_json.seq, "
                                          "'finished_at': value_json.finished_at, 'flags': value_json.flags} | tojson }}")
                if key == "J" else None)
+    # text sensors (no unit: they are words)
     entity("sensor", "state", name="Sequencer state", state_topic=topics.state, value_template="{{ value_json.state }}")
     # the part: its ID and its verdict (OK / NOK / INVALID once complete, "pending" before, "none" without a recipe)
     for key, name, template in (
@@ -489,6 +570,13 @@ def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
                value_template="{{ 'ON' if '" + flag + "' in value_json.flags else 'OFF' }}")
     entity("button", "measure", name="Measure", command_topic=topics.cmd_measure, payload_press="{}")
     entity("button", "abort", name="Abort / acknowledge fault", command_topic=topics.cmd_abort, payload_press="{}")
+    if recipes:
+        entity("select", "recipe", name="Recipe", options=["none", *recipes], command_topic=topics.cmd_recipe,
+               command_template="{{ {'recipe': (0 if value == 'none' else value)} | tojson }}",
+               state_topic=topics.recipe, value_template="{{ value_json.name }}")
+    entity("text", "next_part_id", name="Next part ID", command_topic=topics.cmd_part_id,
+           command_template="{{ {'part_id': value} | tojson }}", state_topic=topics.part_id,
+           value_template="{{ value_json.part_id }}", min=0, max=PART_ID_LENGTH, pattern="[ -~]*")
     return out
 
 

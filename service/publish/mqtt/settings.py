@@ -9,7 +9,9 @@ from dataclasses import dataclass
 class MqttSettings:
     """Broker connection and topics (``[mqtt]`` in the config file).
 
-    keepalive, reconnect_min/max, resend_after: s.
+    keepalive, reconnect_min/max, resend_after: s. protocol: "5" (MQTT 5: a command's reply goes to its
+    response topic with its correlation data) or "3.1.1" (a broker that speaks only that: replies go to
+    ``<prefix>/<device id>/reply``).
     """
 
     host: str = "localhost"
@@ -31,3 +33,8 @@ class MqttSettings:
     window: int = 10
     home_assistant: bool = False
     discovery_prefix: str = "homeassistant"
+    protocol: str = "5"
+
+
+#: the values of ``protocol``
+PROTOCOLS = ("5", "3.1.1")

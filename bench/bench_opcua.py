@@ -1,0 +1,147 @@
+"""Bench: the OPC UA server's start time, and the time from the end of identification to the ResultReadyEvent
+at a client.
+
+1. Start time of the server alone (certificate made, address space built, listening), three ways: the first
+   start (it makes the certificate and asyncua's cache of the standard address space), a later start that
+   reads that cache, and a start without a cache (the standard address space built from code). asyncua
+   keeps the cache with Python's ``shelve``: with the gdbm module (Debian/Raspberry Pi OS: python3-gdbm) it
+   is a fast hash file, without it ``dbm.dumb``, which may be slower than building: the numbers say which.
+2. The daemon on the simulated rig with the OPC UA server; an asyncua client (Basic256Sha256 Sign & Encrypt,
+   user and password) subscribed to the ResultReadyEvent. For each of N measurements:
+
+       t0  the identification returns (stamped by the identifier seam)
+       t1  the client's subscription handler receives the event
+
+Run: `.venv/bin/python bench/bench_opcua.py` (or `make bench`). Numbers are printed, never asserted.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dbm
+import os
+import statistics
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+os.environ.setdefault("GPIOZERO_PIN_FACTORY", "mock")
+
+N = 8
+USER, PASSWORD = "bench", "bench-password"
+
+
+def _start_times(work: Path) -> None:
+    from service.publish.opcua.server import OpcUaServer
+    from service.publish.opcua.settings import OpcUaSettings
+
+    cached = OpcUaSettings(port=0, username=USER, password=PASSWORD)
+    uncached = OpcUaSettings(port=0, username=USER, password=PASSWORD, cache_file=str(work / "none" / "x"))
+    for label, settings, state in (("first start (makes certificate and cache)", cached, work / "a"),
+                                   ("later start (reads the cache)", cached, work / "a"),
+                                   ("later start (reads the cache), again", cached, work / "a"),
+                                   ("start without a cache (builds from code)", uncached, work / "b"),
+                                   ("start without a cache, again", uncached, work / "b")):
+        if "without" in label:
+            for p in (work / "none").glob("*"):
+                p.unlink()  # a cache made by the previous start would be read
+        server = OpcUaServer(settings, "bench", state, software_version="bench")
+        server.start()
+        print(f"OPC UA server {label}: {server.start_seconds:.2f} s")
+        server.stop()
+    print(f"  (shelve backend here: {dbm.whichdb(str(work / 'a' / 'opcua' / 'address-space')) or 'dbm.dumb'})")
+
+
+def main() -> None:
+    import logging
+
+    from asyncua import Client, ua
+    from asyncua.crypto.cert_gen import setup_self_signed_certificate
+    from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    from _appliance import Finished, simulated_doc
+    from measurement import identify
+    from service.config.appliance import parse_config
+    from service.daemon import Appliance
+    from service.publish.opcua.server import NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT
+
+    logging.basicConfig(level=logging.WARNING)
+    for name in ("asyncua", "pymodbus"):
+        logging.getLogger(name).setLevel(logging.ERROR)
+    work = Path(tempfile.mkdtemp(prefix="moi-bench-opcua-"))
+    _start_times(work / "start")
+
+    pw = work / "password"
+    pw.write_text(PASSWORD, encoding="utf-8")
+    doc = simulated_doc(work / "state")
+    doc["opcua"] = {"host": "127.0.0.1", "port": 0, "username": USER, "password_file": str(pw)}
+    t_ident: dict[int, float] = {}
+    count = [0]
+
+    def stamped_identify(trace, rig):
+        r = identify(trace, rig, config.identification)
+        count[0] += 1
+        t_ident[count[0]] = time.perf_counter()
+        return r
+
+    config = parse_config(doc, source="bench")
+    app = Appliance(config, identifier=stamped_identify, poll_interval=0.02)
+    app.start()
+    print(f"OPC UA server in the daemon: started in {app.opcua.start_seconds:.2f} s (first start of this state "
+          "directory)")
+    finished = Finished(app)
+    main_loop = threading.Thread(target=app.run, daemon=True)
+    main_loop.start()
+    t_event: list[float] = []
+    key, cert = work / "client-key.pem", work / "client-cert.der"
+
+    class Handler:
+        def __init__(self, loop_event: asyncio.Event) -> None:
+            self.arrived = loop_event
+
+        def event_notification(self, event) -> None:
+            t_event.append(time.perf_counter())
+            self.arrived.set()
+
+    async def client() -> None:
+        await setup_self_signed_certificate(key, cert, "urn:moi-bench:client", "localhost",
+                                            [ExtendedKeyUsageOID.CLIENT_AUTH], {"commonName": "bench"})
+        c = Client(app.opcua.endpoint, timeout=10)
+        c.application_uri = "urn:moi-bench:client"
+        await c.set_security(SecurityPolicyBasic256Sha256, str(cert), str(key),
+                             mode=ua.MessageSecurityMode.SignAndEncrypt)
+        c.set_user(USER)
+        c.set_password(PASSWORD)
+        async with c:
+            ns = {u: await c.get_namespace_index(u) for u in (NS_MACHINERY, NS_MOI, NS_DI, NS_RESULT)}
+            rm = await c.nodes.objects.get_child([f"{ns[NS_MACHINERY]}:Machines", f"{ns[NS_MOI]}:bench",
+                                                  f"{ns[NS_DI]}:MachineryBuildingBlocks",
+                                                  f"{ns[NS_RESULT]}:ResultManagement"])
+            etype = await c.nodes.base_event_type.get_child(f"{ns[NS_RESULT]}:ResultReadyEventType")
+            arrived = asyncio.Event()
+            sub = await c.create_subscription(10, Handler(arrived))
+            await sub.subscribe_events(rm, etype)
+            for i in range(1, N + 1):
+                arrived.clear()
+                app.command("trigger", "bench")
+                await asyncio.wait_for(arrived.wait(), 60)
+                await asyncio.to_thread(finished.wait, i, 60)
+
+    try:
+        asyncio.run(client())
+    finally:
+        app.request_stop()
+        main_loop.join(30)
+    lat = [1000 * (t_event[i] - t_ident[i + 1]) for i in range(min(len(t_event), len(t_ident)))]
+    if lat:
+        print(f"end of identification → ResultReadyEvent at the client (subscription publishing interval 10 ms), "
+              f"{len(lat)} results: median {statistics.median(lat):.1f} ms, max {max(lat):.1f} ms")
+
+
+if __name__ == "__main__":
+    main()
