@@ -351,7 +351,7 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert c.request("/home/summary")[2].decode().startswith('<div class="summary" id="summary">')
     # the history keeps the part's verdict and each release's check apart
     hist = c.request("/history")[2].decode()
-    assert "1 of 2: check OK" in hist and "part in progress" in hist
+    assert "1 of 2: check OK" in hist and "comes with release 2 of 2" in hist
 
     pages = ["/", "/history", "/spc", "/spc?recipe=rotor-ok", "/setup", "/set", "/history?recipe=rotor-bad"]
     for m in (first, ok, nok, bad):
