@@ -352,6 +352,10 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     # the history keeps the part's verdict and each release's check apart
     hist = c.request("/history")[2].decode()
     assert "1 of 2: check OK" in hist and "comes with release 2 of 2" in hist
+    # the first release, once its part is judged, points to the verdict (and is not called in progress)
+    page = c.request(f"/results/{first.uuid}")[2].decode()
+    assert f'<a id="part-verdict-link" href="/results/{ok.uuid}">part OK (#{ok.seq})</a>' in page
+    assert "part in progress" not in page
 
     pages = ["/", "/history", "/spc", "/spc?recipe=rotor-ok", "/setup", "/set", "/history?recipe=rotor-bad"]
     for m in (first, ok, nok, bad):

@@ -477,6 +477,11 @@ class Views:
         p = m.payload or {}
         unit = self.unit(p)
         view = Q.part_view(p)
+        if view["kind"] == "release" and m.part_uuid and self.app.store is not None:
+            # an earlier release of a part that has been judged since: where its verdict is
+            later = self.app.store.list(limit=50, part_id=m.part_id, recipe=m.recipe, parts_only=True)
+            done = next((r for r in later if r.part_uuid == m.part_uuid), None)
+            view["part_done"] = {"uuid": done.uuid, "seq": done.seq, "verdict": done.part_verdict} if done else None
         return {"m": m, "p": p, "unit": unit, "v": view, "band": Q.band(view["recipe"], view.get("value"),
                                                                            view.get("U"), unit)}
 
