@@ -104,7 +104,8 @@ def release_rows(view: Mapping[str, Any], payload: Mapping[str, Any] | None,
         return out
     rel = p.get("release") or {}
     return [{"index": rel.get("index", 1), "of": rel.get("of", 1), "value": p.get("J") if not rel else rel.get("value"),
-             "status": f"check {rel['verdict']}; the part is not complete" if rel.get("verdict") else "no recipe",
+             "status": f"check {rel['verdict']}; the part's verdict is on its last release" if rel.get("verdict")
+             else "no recipe",
              "flags": list(p.get("flags") or ()), "seq": p.get("seq"), "uuid": p.get("uuid")}]
 
 
