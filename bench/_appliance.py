@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 from pathlib import Path
 
 
@@ -47,3 +48,19 @@ class Finished:
     def wait(self, n: int, timeout: float) -> bool:
         with self._cond:
             return self._cond.wait_for(lambda: self.count >= n, timeout)
+
+
+class StampedIdentifier:
+    """The daemon's identifier seam, timed: ``stamps[n]`` is ``time.perf_counter()`` when the n-th
+    identification returned (the start of what a publisher's latency is measured from)."""
+
+    def __init__(self, options) -> None:
+        self.options = options
+        self.stamps: dict[int, float] = {}
+
+    def __call__(self, trace, rig):
+        from measurement import identify
+
+        result = identify(trace, rig, self.options)
+        self.stamps[len(self.stamps) + 1] = time.perf_counter()
+        return result

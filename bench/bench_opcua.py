@@ -64,8 +64,7 @@ def main() -> None:
     from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
     from cryptography.x509.oid import ExtendedKeyUsageOID
 
-    from _appliance import Finished, simulated_doc
-    from measurement import identify
+    from _appliance import Finished, StampedIdentifier, simulated_doc
     from service.config.appliance import parse_config
     from service.daemon import Appliance
     from service.publish.opcua.server import NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT
@@ -80,17 +79,10 @@ def main() -> None:
     pw.write_text(PASSWORD, encoding="utf-8")
     doc = simulated_doc(work / "state")
     doc["opcua"] = {"host": "127.0.0.1", "port": 0, "username": USER, "password_file": str(pw)}
-    t_ident: dict[int, float] = {}
-    count = [0]
-
-    def stamped_identify(trace, rig):
-        r = identify(trace, rig, config.identification)
-        count[0] += 1
-        t_ident[count[0]] = time.perf_counter()
-        return r
-
     config = parse_config(doc, source="bench")
-    app = Appliance(config, identifier=stamped_identify, poll_interval=0.02)
+    stamped = StampedIdentifier(config.identification)
+    t_ident = stamped.stamps
+    app = Appliance(config, identifier=stamped, poll_interval=0.02)
     app.start()
     print(f"OPC UA server in the daemon: started in {app.opcua.start_seconds:.2f} s (first start of this state "
           "directory)")

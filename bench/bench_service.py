@@ -74,8 +74,7 @@ def main() -> None:
     from paho.mqtt.enums import CallbackAPIVersion
     from pymodbus.client import ModbusTcpClient
 
-    from _appliance import Finished, simulated_doc
-    from measurement import identify
+    from _appliance import Finished, StampedIdentifier, simulated_doc
     from service.publish.modbus import registers as R
     from service.config.appliance import parse_config
     from service.daemon import Appliance
@@ -91,17 +90,10 @@ def main() -> None:
     logging.basicConfig(level=logging.WARNING)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
-    t_ident: dict[int, float] = {}
-    count = [0]
-
-    def stamped_identify(trace, rig):
-        r = identify(trace, rig, config.identification)
-        count[0] += 1
-        t_ident[count[0]] = time.perf_counter()
-        return r
-
     config = parse_config(doc, source="bench")
-    app = Appliance(config, identifier=stamped_identify, poll_interval=0.02)
+    stamped = StampedIdentifier(config.identification)
+    t_ident = stamped.stamps
+    app = Appliance(config, identifier=stamped, poll_interval=0.02)
     app.start()
     t_stored: dict[int, float] = {}
     orig_note = app._note_stored

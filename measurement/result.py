@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-SCHEMA_VERSION = 2  # 2: model form (omega_n_std_model, J_std_model, omega_n_u, J_u, model_form)
+#: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
+SCHEMA_VERSION = 2
 
 
 def _num(v: Any) -> Any:

@@ -15,9 +15,8 @@ from typing import Any, Mapping
 
 from service.publish.modbus.registers import flag_bits
 
-PAYLOAD_SCHEMA = 5  # 2: part_id, recipe, release, part, verdict, calibration; 3: tensor_set;
-# 4: the topics reply, cmd/part_id, recipe, part_id (command replies; the envelope is unchanged);
-# 5: recipe.display_unit, trigger "web:<user>"
+#: the version of the published envelope and topics; what each version changed is in CHANGELOG.md
+PAYLOAD_SCHEMA = 5
 
 #: keys the envelope adds on top of the result's own keys
 ENVELOPE_KEYS = (

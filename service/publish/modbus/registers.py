@@ -20,25 +20,14 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from drivers.modbus_words import WORD_ORDERS, check_word_order, from_registers, to_registers  # noqa: F401
+from service.parts.recipes import PART_ID_LENGTH
 from service.publish.replies import REASONS
 from service.states import STATES
 from measurement import flags as F
 from measurement.tensor import COMPONENTS
 
-#: bumped whenever an address or an encoding in this file changes
-MAP_VERSION = 10  # 2: corrupt_frame got bit 9 of `flags` (was bit 15, other); 3: bits 10-12 of `flags`, bit 5 of `effects`
-# 4: part verdict, release, recipe and part ID in the snapshot (seq_end moved from 43 to the new end);
-#    live recipe and part progress; status bits 6-8 (part verdict); writable part ID and recipe_select
-# 5: bits 6-7 of `effects` (dahl, view; they set bit 15, other, before); register flags_high (flags from
-#    bit 16 on: sensor_scale_fitted); seq_end moved from 62 to 63
-#    holding registers; flag calibration_due (bit 13)
-# 6: flag camera_perspective (register flags_high, bit 1)
-# 7: the tensor flags (register flags_high, bits 2-4)
-# 8: flags halves_disagree, model_ambiguous, releases_disagree (register flags_high, bits 5-7)
-# 9: the guided tensor set's progress (set_step, set_steps, set_orientation: live registers 7-9), its coils
-#    set_redo, set_skip, set_abort (2-4) and the tensor of the latest set (block 200-238, its own snapshot)
-# 10: the PLC handshake: block 80-88 (plc_status, error_code, heartbeat, the result queue, the command
-#    status) and the writable registers command, command_parameter, result_ack, plc_heartbeat (111-114)
+#: bumped whenever an address or an encoding in this file changes; what each version changed is in CHANGELOG.md
+MAP_VERSION = 10
 
 
 # --- enumerations ------------------------------------------------------------
@@ -141,7 +130,7 @@ HEARTBEAT_PERIOD = 0.5
 VERDICT_CODES: dict[str, int] = {"OK": 1, "NOK": 2, "INVALID": 3}
 
 #: characters of the part ID block (2 ASCII characters per register, first character in the high byte)
-PART_ID_CHARS = 20
+PART_ID_CHARS = PART_ID_LENGTH  # the recipes' rule; two characters per register
 
 #: the only writable holding registers (FC 6 / FC 16): name → (address, count). Read back with FC 3.
 WRITABLE: dict[str, tuple[int, int]] = {
