@@ -39,7 +39,8 @@ def report_lines(m: Any, unit: str, lookup: Any = None) -> tuple[dict[str, Any],
     else:
         facts.append(("J ± u", f"{Q.inertia(v.get('value'), unit)} ± {Q.inertia(v.get('std'), unit, '.2g')} (1σ)"))
     for row in v["budget"]:
-        facts.append(("  budget: " + row["name"], Q.inertia(row["u"], unit, ".2g")
+        facts.append(("  budget: " + row["name"], (f"{Q.number(row['u'], '.2g')} {row['unit']}" if row["unit"]
+                                                   else Q.inertia(row["u"], unit, ".2g"))
                       + (f" ({Q.number(row['share'], '.3g')} of u_c²)" if row["share"] is not None else "")))
     facts.append(("calibration", (f"{cal.get('date')}" + (f", due {cal.get('valid_until')}" if cal.get("valid_until")
                                                             else "") + (" (DUE)" if cal.get("due") else ""))

@@ -63,8 +63,13 @@ def test_tolerance_band_puts_the_guard_band_inside_the_limits_and_the_interval_a
 ])
 def test_an_uncertainty_budget_is_read_in_any_of_its_shapes(budget):
     rows = Q.budget_rows(budget)
-    assert rows[0]["name"] == "fit" and rows[0]["u"] == 1e-6
+    assert rows[0]["name"] == "fit" and rows[0]["u"] == 1e-6 and rows[0]["unit"] is None
     assert Q.budget_rows(None) == [] and Q.budget_rows("text") == []
+    # an input's own uncertainty in its own unit is not written as kg·m²; its contribution to J is
+    k = Q.budget_rows([{"source": "stiffness k", "u": 0.0018, "unit": "N·m/rad"}])[0]
+    assert (k["u"], k["unit"]) == (0.0018, "N·m/rad")
+    k = Q.budget_rows([{"source": "stiffness k", "u": 0.0018, "unit": "N·m/rad", "u_J": 6e-5}])[0]
+    assert (k["u"], k["unit"]) == (6e-5, None)
 
 
 def test_shift_start_is_the_latest_start_at_or_before_now():

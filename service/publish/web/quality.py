@@ -126,10 +126,15 @@ def budget_rows(budget: Any) -> list[dict[str, Any]]:
     for r in rows if isinstance(rows, (list, tuple)) else ():
         if not isinstance(r, Mapping):
             continue
-        u = next((r[k] for k in ("u", "std", "standard_uncertainty", "u_i") if k in r), None)
+        # the row's contribution to the measurand's uncertainty first (kg·m²); an input's own u only without one,
+        # written in the row's unit when it names one
+        contribution = next((r[k] for k in ("u_J", "u_y", "contribution", "u_i", "u_contribution") if k in r), None)
+        u = contribution if contribution is not None else next(
+            (r[k] for k in ("u", "std", "standard_uncertainty") if k in r), None)
+        unit = r.get("unit") if contribution is None and r.get("unit") not in (None, SI) else None
         share = next((r[k] for k in ("share", "fraction", "percent_of_variance") if k in r), None)
         out.append({"name": str(next((r[k] for k in ("name", "source", "quantity") if k in r), "")),
-                    "u": u, "share": share})
+                    "u": u, "unit": unit, "share": share})
     return out
 
 
