@@ -40,7 +40,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "results": ("service.commands.results",
         "list the stored measurements, or show one in full"),
     "export": ("service.commands.export",
-        "export stored measurements to CSV or JSON, or one measurement's raw trace"),
+        "export stored measurements to CSV or JSON, a recipe's parts to AQDEF (Q-DAS DFQ), or one measurement's raw trace"),
     "report": ("service.commands.report",
         "the quality record of one measurement as a PDF (verdict, J ± U, releases, evidence, calibration)"),
     "user": ("service.commands.user",
