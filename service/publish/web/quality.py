@@ -11,7 +11,7 @@ import datetime as dt
 import math
 from typing import Any, Callable, Mapping, Sequence
 
-from measurement.units import SI, from_si, inertia_unit
+from measurement.units import SI, UnitError, from_si, inertia_unit
 
 #: what the page says for a value it does not have
 MISSING = "–"
@@ -47,7 +47,7 @@ def display_unit(payload: Mapping[str, Any] | None, default: str = SI) -> str:
     recipe = (payload or {}).get("recipe") or {}
     try:
         return inertia_unit(recipe.get("display_unit") or default)
-    except Exception:  # a unit this version does not know (a newer recipe): SI
+    except UnitError:  # a unit this version does not know (a newer recipe): SI
         return SI
 
 

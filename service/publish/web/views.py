@@ -660,7 +660,7 @@ class Views:
         if book is not None and recipe:
             try:
                 unit = book.book.find(recipe).display_unit or unit
-            except Exception:  # a recipe in the store that is no longer in the directory: the set-up's unit
+            except InvalidInput:  # a recipe in the store that is no longer in the directory: the set-up's unit
                 pass
         chart_svg = Q.control_chart(result.summary, unit) if result is not None else None
         q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
