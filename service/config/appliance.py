@@ -39,10 +39,12 @@ from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_
 from service.config.schema import REQUIRED, Checker as _Checker, Key, doc as _doc, schema as _schema
 from service.errors import ConfigError
 from service.sources.files import read_rig, read_toml
-from service.publish.modbus.settings import RESULT_HANDSHAKES, ModbusSettings, allowed_networks
-from service.publish.mqtt.settings import PROTOCOLS, MqttSettings
+from service.publish.modbus import settings as modbus_settings
+from service.publish.modbus.settings import ModbusSettings, allowed_networks
+from service.publish.mqtt import settings as mqtt_settings
+from service.publish.mqtt.settings import MqttSettings
+from service.publish.opcua import settings as opcua_settings
 from service.publish.opcua.settings import OpcUaSettings
-from service.publish.modbus.registers import WORD_ORDERS
 from service.publish.web.settings import WebSettings
 from measurement.units import ASCII_NAMES, INERTIA_UNITS, inertia_unit
 
@@ -226,60 +228,15 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "glitch_rate": _doc("fraction of encoder replies whose position is off by 1/128 turn although the CRC is "
                             "right (a glitch the identification must catch)", min=0, max=1),
     }),
-    "mqtt": _schema(MqttSettings, {
-        "host": _doc("broker host"),
-        "port": _doc("broker port", min=1, max=65535),
-        "prefix": _doc("topic prefix: topics are <prefix>/<device id>/..."),
-        "client_id": _doc("MQTT client id (default moi-<device id>-<8 hex digits from this machine and the state "
-                          "directory>: unique per appliance)"),
-        "username": _doc(""),
-        "password": _doc("prefer password_file"),
-        "password_file": _doc("file holding the password (e.g. a systemd credential)", kind="path"),
-        "keepalive": _doc("s", min=5, max=3600),
-        "tls": _doc("connect with TLS"),
-        "ca_file": _doc("CA certificate(s) for the broker (default: the system's)", kind="path"),
-        "cert_file": _doc("client certificate (mutual TLS)", kind="path"),
-        "key_file": _doc("client key (mutual TLS)", kind="path"),
-        "tls_insecure": _doc("skip the broker host name check (testing only)"),
-        "reconnect_min": _doc("first reconnect delay, s", min=0, min_open=True),
-        "reconnect_max": _doc("longest reconnect delay, s", min=0, min_open=True),
-        "resend_after": _doc("re-send a result not acknowledged after this, s", min=0, min_open=True),
-        "window": _doc("results in flight (published, not yet acknowledged) at most", min=1, max=1000),
-        "home_assistant": _doc("publish Home Assistant discovery messages"),
-        "discovery_prefix": _doc("Home Assistant discovery prefix"),
-        "protocol": _doc("MQTT protocol version: \"5\" (command replies on the command's response topic with its "
-                         "correlation data) or \"3.1.1\" for a broker that speaks only that (replies on "
-                         "<prefix>/<device id>/reply)", choices=PROTOCOLS),
-    }, extra={"enabled": Key("bool", True, "publish over MQTT (the table's presence enables it)")}),
+    "mqtt": _schema(MqttSettings, mqtt_settings.KEYS,
+                    extra={"enabled": Key("bool", True, "publish over MQTT (the table's presence enables it)")}),
     "recipes": _schema(RecipeSettings, {
         "directory": _doc("directory of the recipe files, one TOML file per part type (docs/service.md, Recipes); "
                           "relative to this file", kind="path"),
         "active": _doc("recipe active at start (name or number); the PLC (register recipe_select) or MQTT "
                        "(cmd/recipe) may change it"),
     }),
-    "modbus": _schema(ModbusSettings, {
-        "mode": _doc("Modbus TCP server or Modbus RTU slave on a serial line", choices=("tcp", "rtu")),
-        "host": _doc("TCP listen address"),
-        "port": _doc("TCP port (502 needs CAP_NET_BIND_SERVICE; 0: any free port)", min=0, max=65535),
-        "unit_id": _doc("Modbus unit (device) id answered", min=1, max=247),
-        "word_order": _doc("order of the two registers of a float32/uint32", choices=WORD_ORDERS),
-        "max_connections": _doc("TCP clients at once; one more closes the connection idle the longest", min=1, max=256),
-        "idle_timeout": _doc("close a TCP connection without a request for this long, s (0: never)", min=0),
-        "allow_from": _doc("TCP client addresses or networks allowed besides this machine, e.g. [\"192.168.10.20\", "
-                           "\"10.0.0.0/24\"] (empty: every client that reaches host)"),
-        "serial_port": _doc("RTU: serial device, e.g. /dev/ttyAMA0"),
-        "baudrate": _doc("RTU baud rate", min=300, max=4_000_000),
-        "parity": _doc("RTU parity", choices=("N", "E", "O")),
-        "stopbits": _doc("RTU stop bits", choices=(1, 2)),
-        "bytesize": _doc("RTU data bits", choices=(7, 8)),
-        "result_handshake": _doc("\"latest\": the result block shows the latest result (read seq before and after); "
-                                 "\"ack\": results queue until the PLC acknowledges each in register result_ack "
-                                 "(docs/modbus.md)", choices=RESULT_HANDSHAKES),
-        "queue_depth": _doc("result_handshake = \"ack\": results queued for the PLC at most; one more is counted "
-                            "in overrun_count", min=1, max=1000),
-        "plc_heartbeat_timeout": _doc("the PLC's heartbeat register (114) unchanged this long raises "
-                                      "plc_heartbeat_lost, s (0: no watchdog)", min=0, max=3600),
-    }, extra={"enabled": Key("bool", True, "serve the registers")}),
+    "modbus": _schema(ModbusSettings, modbus_settings.KEYS, extra={"enabled": Key("bool", True, "serve the registers")}),
     "web": _schema(WebSettings, {
         "host": _doc("listen address: 127.0.0.1 this machine only, 0.0.0.0 every interface (the LAN)"),
         "port": _doc("TCP port (0: any free port)", min=0, max=65535),
@@ -297,29 +254,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "users_file": _doc("named users with roles (operator, quality, admin) and password hashes, made by "
                            "`moi user add` (default: none; the token is the one login)", kind="path"),
     }, extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
-    "opcua": _schema(OpcUaSettings, {
-        "host": _doc("listen address (127.0.0.1: this machine only; 0.0.0.0: every interface)"),
-        "port": _doc("TCP port (0: any free port)", min=0, max=65535),
-        "username": _doc("the user an OPC UA client logs in as"),
-        "password": _doc("prefer password_file"),
-        "password_file": _doc("file holding the password (e.g. a systemd credential)", kind="path"),
-        "anonymous": _doc("let clients in without a user (read and call the methods)"),
-        "allow_unencrypted": _doc("also offer the endpoint without security (default: Basic256Sha256 Sign & Encrypt "
-                                  "only)"),
-        "certificate": _doc("the server's certificate, DER (default: opcua/server-cert.der in the state directory; "
-                            "made self-signed on first start)", kind="path"),
-        "private_key": _doc("the server's private key, PEM (default: opcua/server-key.pem in the state directory)",
-                            kind="path"),
-        "cache_file": _doc("asyncua's cache of the standard address space (default: opcua/address-space in the state "
-                           "directory; made on first start, read on every later one)", kind="path"),
-        "trusted_clients": _doc("directory of the client application certificates (DER or PEM) admitted (default: "
-                                "any client certificate; the user and password decide)", kind="path"),
-        "manufacturer": _doc("MachineIdentification Manufacturer"),
-        "model": _doc("MachineIdentification Model"),
-        "serial_number": _doc("MachineIdentification SerialNumber (default: the device id)"),
-        "results_kept": _doc("results GetResultById finds in memory (older ones: from the store)", min=1,
-                             max=100000),
-    }, extra={"enabled": Key("bool", True, "serve OPC UA (the table's presence enables it)")}),
+    "opcua": _schema(OpcUaSettings, opcua_settings.KEYS,
+                     extra={"enabled": Key("bool", True, "serve OPC UA (the table's presence enables it)")}),
 }
 
 #: tables that are plain key/value tables of SCHEMA (the others are sub-tables)

@@ -5,31 +5,20 @@ from __future__ import annotations
 import ipaddress
 from dataclasses import dataclass
 
+from drivers.modbus_words import WORD_ORDERS
+
 #: clients on this machine are always allowed (local tools: ``moi modbus-map --read``, the web page)
 _THIS_MACHINE = (ipaddress.ip_network("127.0.0.1/32"), ipaddress.ip_network("::1/128"))
 
 
 @dataclass(frozen=True)
 class ModbusSettings:
-    """Where and how to serve (see ``[modbus]`` in docs/service.md).
+    """Where and how the register map is served (SI units). Each key's meaning and limits: ``KEYS`` below, from
+    which the configuration's ``[modbus]`` table is built.
 
-    mode: "tcp" | "rtu". host/port: TCP listen address (port 0: any free port).
-    max_connections: TCP clients served at once; one more closes the connection idle the
-    longest. idle_timeout: a TCP connection without a request for this long is closed, s
-    (0: never). Both keep the descriptors a client can hold bounded.
-    allow_from: TCP client addresses or networks ("192.168.10.20", "10.0.0.0/24") allowed
-    to connect besides this machine (127.0.0.1, ::1); empty: every client that reaches
-    ``host``. Modbus has no authentication: the default host 127.0.0.1 keeps the trigger
-    and abort coils on this machine, and opening them to a network is a choice made by
-    setting ``host``, best with ``allow_from``.
-    serial_port, baudrate, parity ("N"|"E"|"O"), stopbits, bytesize: RTU line
-    (serial_port may be "socket://HOST:PORT" for a serial-over-TCP bridge).
-    unit_id: the Modbus device id answered. word_order: "big" | "little".
-    result_handshake: "latest" (the block shows the latest result; the PLC reads `seq` before and after)
-    | "ack" (results queue until the PLC acknowledges each by writing its `seq` to `result_ack`; a
-    result that finds ``queue_depth`` results waiting is counted in `overrun_count`, not shown).
-    plc_heartbeat_timeout: the PLC's heartbeat register unchanged this long raises plc_heartbeat_lost, s
-    (0: no watchdog).
+    Modbus has no authentication: the default host 127.0.0.1 keeps the trigger and abort coils on this
+    machine, and opening them to a network is a choice made by setting ``host``, best with ``allow_from``;
+    ``max_connections`` and ``idle_timeout`` keep the descriptors a client can hold bounded.
     """
 
     mode: str = "tcp"
@@ -79,3 +68,30 @@ def network_exposure(settings: "ModbusSettings") -> str | None:
     who = ("clients in allow_from " + ", ".join(settings.allow_from)) if settings.allow_from else "every client that reaches it"
     return (f"Modbus TCP listens on {settings.host}, not only on this machine: {who} can trigger and abort "
             "measurements (Modbus has no authentication)")
+
+
+#: each key of the configuration's ``[modbus]`` table: what it means, its unit and its limits (the table is
+#: built from this and the dataclass's fields: ``service.config.appliance.SCHEMA``)
+KEYS: dict[str, dict] = {
+    "mode": dict(doc="Modbus TCP server or Modbus RTU slave on a serial line", choices=("tcp", "rtu")),
+    "host": dict(doc="TCP listen address"),
+    "port": dict(doc="TCP port (502 needs CAP_NET_BIND_SERVICE; 0: any free port)", min=0, max=65535),
+    "unit_id": dict(doc="Modbus unit (device) id answered", min=1, max=247),
+    "word_order": dict(doc="order of the two registers of a float32/uint32", choices=WORD_ORDERS),
+    "max_connections": dict(doc="TCP clients at once; one more closes the connection idle the longest", min=1, max=256),
+    "idle_timeout": dict(doc="close a TCP connection without a request for this long, s (0: never)", min=0),
+    "allow_from": dict(doc="TCP client addresses or networks allowed besides this machine, e.g. [\"192.168.10.20\", "
+                       "\"10.0.0.0/24\"] (empty: every client that reaches host)"),
+    "serial_port": dict(doc="RTU: serial device, e.g. /dev/ttyAMA0"),
+    "baudrate": dict(doc="RTU baud rate", min=300, max=4_000_000),
+    "parity": dict(doc="RTU parity", choices=("N", "E", "O")),
+    "stopbits": dict(doc="RTU stop bits", choices=(1, 2)),
+    "bytesize": dict(doc="RTU data bits", choices=(7, 8)),
+    "result_handshake": dict(doc="\"latest\": the result block shows the latest result (read seq before and after); "
+                             "\"ack\": results queue until the PLC acknowledges each in register result_ack "
+                             "(docs/modbus.md)", choices=RESULT_HANDSHAKES),
+    "queue_depth": dict(doc="result_handshake = \"ack\": results queued for the PLC at most; one more is counted "
+                        "in overrun_count", min=1, max=1000),
+    "plc_heartbeat_timeout": dict(doc="the PLC's heartbeat register (114) unchanged this long raises "
+                                  "plc_heartbeat_lost, s (0: no watchdog)", min=0, max=3600),
+}

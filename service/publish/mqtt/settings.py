@@ -7,12 +7,8 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class MqttSettings:
-    """Broker connection and topics (``[mqtt]`` in the config file).
-
-    keepalive, reconnect_min/max, resend_after: s. protocol: "5" (MQTT 5: a command's reply goes to its
-    response topic with its correlation data) or "3.1.1" (a broker that speaks only that: replies go to
-    ``<prefix>/<device id>/reply``).
-    """
+    """Broker connection and topics (SI units). Each key's meaning and limits: ``KEYS`` below, from which the
+    configuration's ``[mqtt]`` table is built."""
 
     host: str = "localhost"
     port: int = 1883
@@ -38,3 +34,32 @@ class MqttSettings:
 
 #: the values of ``protocol``
 PROTOCOLS = ("5", "3.1.1")
+
+
+#: each key of the configuration's ``[mqtt]`` table: what it means, its unit and its limits (the table is
+#: built from this and the dataclass's fields: ``service.config.appliance.SCHEMA``)
+KEYS: dict[str, dict] = {
+    "host": dict(doc="broker host"),
+    "port": dict(doc="broker port", min=1, max=65535),
+    "prefix": dict(doc="topic prefix: topics are <prefix>/<device id>/..."),
+    "client_id": dict(doc="MQTT client id (default moi-<device id>-<8 hex digits from this machine and the state "
+                      "directory>: unique per appliance)"),
+    "username": dict(doc=""),
+    "password": dict(doc="prefer password_file"),
+    "password_file": dict(doc="file holding the password (e.g. a systemd credential)", kind="path"),
+    "keepalive": dict(doc="s", min=5, max=3600),
+    "tls": dict(doc="connect with TLS"),
+    "ca_file": dict(doc="CA certificate(s) for the broker (default: the system's)", kind="path"),
+    "cert_file": dict(doc="client certificate (mutual TLS)", kind="path"),
+    "key_file": dict(doc="client key (mutual TLS)", kind="path"),
+    "tls_insecure": dict(doc="skip the broker host name check (testing only)"),
+    "reconnect_min": dict(doc="first reconnect delay, s", min=0, min_open=True),
+    "reconnect_max": dict(doc="longest reconnect delay, s", min=0, min_open=True),
+    "resend_after": dict(doc="re-send a result not acknowledged after this, s", min=0, min_open=True),
+    "window": dict(doc="results in flight (published, not yet acknowledged) at most", min=1, max=1000),
+    "home_assistant": dict(doc="publish Home Assistant discovery messages"),
+    "discovery_prefix": dict(doc="Home Assistant discovery prefix"),
+    "protocol": dict(doc="MQTT protocol version: \"5\" (command replies on the command's response topic with its "
+                     "correlation data) or \"3.1.1\" for a broker that speaks only that (replies on "
+                     "<prefix>/<device id>/reply)", choices=PROTOCOLS),
+}

@@ -7,20 +7,8 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class OpcUaSettings:
-    """Where and how to serve (``[opcua]`` in the config file; off unless the table is given).
-
-    host/port: the TCP listen address (port 0: any free port). username, password / password_file:
-    the one user a client logs in as. anonymous: let a client in without a user (off: OPC UA has
-    authentication, use it). allow_unencrypted: also offer the endpoint without security (None);
-    by default only Basic256Sha256 Sign & Encrypt is offered. certificate, private_key: the server's
-    certificate (DER) and key (PEM), created self-signed on first start when missing (default:
-    ``opcua/`` in the state directory). cache_file: asyncua's shelf of the standard address space,
-    made on first start, read on every later one (default: ``opcua/address-space`` in the state
-    directory). trusted_clients: a directory of the client application certificates (DER or PEM) admitted;
-    a client with another certificate is refused before it may log in (None: any client certificate, the
-    user and password decide). manufacturer, model, serial_number: MachineIdentification (serial number default:
-    the device id). results_kept: results GetResultById finds without reading the store (the newest).
-    """
+    """Where and how the OPC UA server serves (off unless the ``[opcua]`` table is given). Each key's meaning and
+    limits: ``KEYS`` below, from which the configuration's table is built."""
 
     host: str = "127.0.0.1"
     port: int = 4840
@@ -37,3 +25,30 @@ class OpcUaSettings:
     model: str = "pendulum inertia appliance"
     serial_number: str | None = None
     results_kept: int = 100
+
+
+#: each key of the configuration's ``[opcua]`` table: what it means, its unit and its limits (the table is
+#: built from this and the dataclass's fields: ``service.config.appliance.SCHEMA``)
+KEYS: dict[str, dict] = {
+    "host": dict(doc="listen address (127.0.0.1: this machine only; 0.0.0.0: every interface)"),
+    "port": dict(doc="TCP port (0: any free port)", min=0, max=65535),
+    "username": dict(doc="the user an OPC UA client logs in as"),
+    "password": dict(doc="prefer password_file"),
+    "password_file": dict(doc="file holding the password (e.g. a systemd credential)", kind="path"),
+    "anonymous": dict(doc="let clients in without a user (read and call the methods)"),
+    "allow_unencrypted": dict(doc="also offer the endpoint without security (default: Basic256Sha256 Sign & Encrypt "
+                              "only)"),
+    "certificate": dict(doc="the server's certificate, DER (default: opcua/server-cert.der in the state directory; "
+                        "made self-signed on first start)", kind="path"),
+    "private_key": dict(doc="the server's private key, PEM (default: opcua/server-key.pem in the state directory)",
+                        kind="path"),
+    "cache_file": dict(doc="asyncua's cache of the standard address space (default: opcua/address-space in the state "
+                       "directory; made on first start, read on every later one)", kind="path"),
+    "trusted_clients": dict(doc="directory of the client application certificates (DER or PEM) admitted (default: "
+                            "any client certificate; the user and password decide)", kind="path"),
+    "manufacturer": dict(doc="MachineIdentification Manufacturer"),
+    "model": dict(doc="MachineIdentification Model"),
+    "serial_number": dict(doc="MachineIdentification SerialNumber (default: the device id)"),
+    "results_kept": dict(doc="results GetResultById finds in memory (older ones: from the store)", min=1,
+                         max=100000),
+}
