@@ -110,8 +110,11 @@ class WebServer(Publisher):
                                keepalive_timeout=self.settings.request_timeout)
         await runner.setup()
         try:
+            # the backlog is also how many connections asyncio accepts in one go before it closes any: at
+            # max_connections a burst holds at most twice that many descriptors, never the process's last
             self._listener = await asyncio.get_running_loop().create_server(
-                self._protocol, self.settings.host, self.settings.port, reuse_address=True)
+                self._protocol, self.settings.host, self.settings.port, reuse_address=True,
+                backlog=self.settings.max_connections)
         except BaseException:
             await runner.cleanup()
             raise
