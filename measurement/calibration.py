@@ -7,10 +7,25 @@ monocular-vision torsion pendulum paper ("Research on the Measurement Technology
 
     1/ω_n,i² = (I0 + I_i)/k
 
-a straight line in I_i. It is fitted by (weighted) least squares over all
-references — not solved from one pair as that paper's eq. 16 does, which also
-mistakes the total for the added load — so that k and I0 come with
-uncertainties and a residual that shows a bad reference.
+a straight line in I_i, x_i = a + b·I_i with x = 1/ω_n², a = I0/k, b = 1/k.
+It is fitted over all references — not solved from one pair as that paper's
+eq. 16 does, which also mistakes the total for the added load — so that k and
+I0 come with uncertainties and a residual that shows a bad reference.
+
+Both coordinates carry errors: the known inertia its certificate's σ(I_i),
+the measured x its σ(x_i) = 2·σ(ω_n,i)/ω_n,i³. The fit is a weighted least
+squares with the effective variance σ_i² = σ(x_i)² + b²·σ(I_i)² (Deming's
+errors-in-variables regression, iterated to a fixed point in b; for a straight
+line it is the maximum-likelihood solution of York et al., "Unified equations
+for the slope, intercept, and standard errors of the best straight line",
+Am. J. Phys. 72 (2004)). The covariance of (a, b) is (AᵀWA)⁻¹ with W = diag(1/σ_i²):
+what the stated uncertainties allow. It is scaled up by the Birge ratio²
+χ²/ν when the references scatter beyond their σ (χ² above its 95 % quantile
+for ν = n − 2: they are then understated), never down: with 3 references and 2 unknowns the misfit has one degree of
+freedom, and a lucky small misfit must not promise more than the certificates.
+Only when no reference states any uncertainty does the misfit alone set the
+σ (and the calibration says so). k = 1/b and I0 = a/b and their covariance
+follow by first-order propagation.
 """
 
 from __future__ import annotations
@@ -56,7 +71,8 @@ class Cylinder:
 class Reference:
     """One calibration point.
 
-    added_inertia: known inertia on the fixture, kg·m² (0 for the empty fixture).
+    added_inertia: known inertia on the fixture, kg·m² (0 for the empty fixture), and its 1σ
+    ``added_inertia_std`` (the certificate; None: not stated).
     omega_n: small-amplitude natural angular frequency, rad/s, and its 1σ (optional).
     """
 
@@ -64,16 +80,35 @@ class Reference:
     added_inertia: float
     omega_n: float
     omega_n_std: float | None = None
+    added_inertia_std: float | None = None
 
     @classmethod
-    def from_damped(cls, name: str, added_inertia: float, omega_m: float, zeta: float) -> "Reference":
+    def from_damped(cls, name: str, added_inertia: float, omega_m: float, zeta: float,
+                    added_inertia_std: float | None = None) -> "Reference":
         """From the main frequency ω_m (rad/s) and amplitude modulation ζ (1/s, either sign)."""
-        return cls(name, added_inertia, math.sqrt(omega_m**2 + zeta**2))
+        return cls(name, added_inertia, math.sqrt(omega_m**2 + zeta**2), added_inertia_std=added_inertia_std)
+
+
+def cylinder_inertia_std(c: Cylinder, mass_std: float = 0.0, diameter_std: float = 0.0,
+                         distance_std: float = 0.0) -> float:
+    """1σ of a cylinder's inertia about the pendulum axis (kg·m²) from the 1σ of its mass, diameter, distance.
+
+    I = m·d²/8 + m·L²: ∂I/∂m = d²/8 + L², ∂I/∂d = m·d/4, ∂I/∂L = 2·m·L (a stated own_inertia: its mass term is L² only).
+    """
+    dm = (c.diameter**2 / 8.0 if c.own_inertia is None else 0.0) + c.distance**2
+    dd = c.mass * c.diameter / 4.0 if c.own_inertia is None else 0.0
+    dl = 2.0 * c.mass * c.distance
+    return math.sqrt((dm * mass_std) ** 2 + (dd * diameter_std) ** 2 + (dl * distance_std) ** 2)
 
 
 @dataclass(frozen=True)
 class Calibration:
-    """k (N·m/rad) and I0 (kg·m²) with 1σ, and the fit's residual per reference."""
+    """k (N·m/rad) and I0 (kg·m²) with 1σ, their covariance, and the fit's residual per reference.
+
+    basis: what the uncertainties rest on ("stated": the references' σ, scaled by the Birge ratio when
+    they scatter beyond it; "misfit": no σ was stated, the misfit alone). birge_ratio: √(χ²/ν) of the
+    weighted fit (None without degrees of freedom or without stated σ).
+    """
 
     stiffness: float
     stiffness_std: float | None
@@ -82,33 +117,52 @@ class Calibration:
     correlation: float | None
     references: tuple[Reference, ...]
     residuals: tuple[float, ...] = field(default=())  # inertia misfit per reference, kg·m²
+    covariance: float | None = None  # cov(k, I0), N·m/rad·kg·m²
+    basis: str = "stated"
+    birge_ratio: float | None = None
+    notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
         return {
             "stiffness": self.stiffness, "stiffness_std": self.stiffness_std,
             "tare_inertia": self.tare_inertia, "tare_inertia_std": self.tare_inertia_std,
-            "correlation": self.correlation,
+            "correlation": self.correlation, "stiffness_tare_covariance": self.covariance,
+            "basis": self.basis, "birge_ratio": self.birge_ratio, "notes": list(self.notes),
             "references": [
-                {"name": r.name, "added_inertia": r.added_inertia, "omega_n": r.omega_n,
-                 "omega_n_std": r.omega_n_std, "inertia_residual": res}
+                {"name": r.name, "added_inertia": r.added_inertia, "added_inertia_std": r.added_inertia_std,
+                 "omega_n": r.omega_n, "omega_n_std": r.omega_n_std, "inertia_residual": res}
                 for r, res in zip(self.references, self.residuals)
             ],
         }
 
     def report(self) -> str:
         def pm(v: float, s: float | None, unit: str) -> str:
-            return f"{v:.6g} ± {s:.2g} {unit}" if s is not None else f"{v:.6g} {unit} (no uncertainty: 2 references)"
+            if s is None:
+                return f"{v:.6g} {unit} (no uncertainty: 2 references and none states its σ)"
+            return f"{v:.6g} ± {s:.2g} {unit} ({100 * s / abs(v):.2g} %)" if v else f"{v:.6g} ± {s:.2g} {unit}"
         lines = ["[[Calibration]] torsion rig",
                  f"    stiffness k     = {pm(self.stiffness, self.stiffness_std, 'N·m/rad')}",
-                 f"    tare inertia I0 = {pm(self.tare_inertia, self.tare_inertia_std, 'kg·m²')}",
-                 "    reference            added I [kg·m²]   ω_n [rad/s]   misfit [kg·m²]"]
+                 f"    tare inertia I0 = {pm(self.tare_inertia, self.tare_inertia_std, 'kg·m²')}"]
+        if self.correlation is not None:
+            lines.append(f"    correlation r(k, I0) = {self.correlation:+.4f} (one regression: kept in every J_object)")
+        birge = f", Birge ratio {self.birge_ratio:.2f}" if self.birge_ratio is not None else ""
+        basis = ("the references' stated uncertainties (weighted, errors in the known inertia and in ω_n)"
+                 if self.basis == "stated" else "the misfit alone: no reference states an uncertainty")
+        lines.append(f"    uncertainty from {basis}{birge}")
+        lines += [f"    note: {n}" for n in self.notes]
+        lines.append("    reference            added I [kg·m²]      u(I)    ω_n [rad/s]   misfit [kg·m²]")
         for r, res in zip(self.references, self.residuals):
-            lines.append(f"    {r.name:<20} {r.added_inertia:>14.6g} {r.omega_n:>13.6g} {res:>+15.3g}")
+            u = f"{r.added_inertia_std:.2g}" if r.added_inertia_std is not None else "—"
+            lines.append(f"    {r.name:<20} {r.added_inertia:>14.6g} {u:>9} {r.omega_n:>13.6g} {res:>+15.3g}")
         return "\n".join(lines)
 
 
+#: the references are taken to scatter beyond their stated σ when χ² exceeds this quantile of its distribution
+CONSISTENCY_LEVEL = 0.95
+
+
 def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
-    """Fit k and I0 from references (at least two distinct added inertias)."""
+    """Fit k and I0 from references (at least two distinct added inertias); see the module doc."""
     refs = tuple(references)
     if len(refs) < 2:
         raise CalibrationError(f"calibration needs at least 2 references (empty fixture and a known load); got {len(refs)}")
@@ -120,16 +174,34 @@ def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
         raise CalibrationError("calibration: added inertias must be >= 0 kg·m²")
     if np.ptp(I) == 0:
         raise CalibrationError("calibration: all references have the same added inertia; expected different known loads")
+    for r in refs:
+        for name, v in (("omega_n_std", r.omega_n_std), ("added_inertia_std", r.added_inertia_std)):
+            if v is not None and not (math.isfinite(v) and v >= 0):
+                raise CalibrationError(f"reference {r.name!r}: {name} must be a standard uncertainty >= 0, got {v!r}")
     x = 1.0 / w**2
-    stds = [r.omega_n_std for r in refs]
-    if all(s is not None and s > 0 for s in stds):
-        sx = 2.0 * np.array(stds) / w**3
-        weights = 1.0 / sx
-    else:
-        weights = np.ones_like(x)
+    sx = np.array([2.0 * (r.omega_n_std or 0.0) / r.omega_n**3 for r in refs])
+    sI = np.array([r.added_inertia_std or 0.0 for r in refs])
     A = np.vstack([np.ones_like(I), I]).T
-    Aw = A * weights[:, None]
-    coef, *_ = np.linalg.lstsq(Aw, x * weights, rcond=None)
+    stated = bool(np.any(sx > 0) or np.any(sI > 0))
+    notes: list[str] = []
+    coef = np.linalg.lstsq(A, x, rcond=None)[0]
+    s_eff = np.ones_like(x)
+    if stated:
+        for _ in range(50):  # effective variance: the slope enters the weights; a fixed point in a few steps
+            s_eff = np.sqrt(sx**2 + (coef[1] * sI) ** 2)
+            zero = s_eff <= 0
+            if np.any(zero):
+                # a reference with no stated σ would be an exact constraint; it gets a tiny one, and it is said
+                s_eff[zero] = 1e-3 * float(np.min(s_eff[~zero]))
+            new = np.linalg.lstsq(A / s_eff[:, None], x / s_eff, rcond=None)[0]
+            done = abs(new[1] - coef[1]) <= 1e-12 * abs(coef[1])
+            coef = new
+            if done:
+                break
+        unstated = [r.name for r, a, b in zip(refs, sx, sI) if a == 0 and b == 0]
+        if unstated:
+            notes.append(f"no uncertainty stated for {', '.join(unstated)}: treated as 1/1000 of the smallest "
+                         "stated one (state added_inertia_std and omega_n_std)")
     a, b = coef
     if b <= 0:
         raise CalibrationError("calibration: the period does not grow with the added inertia; check the references")
@@ -137,15 +209,35 @@ def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
     I0 = a / b
     residual_x = x - A @ coef
     dof = len(refs) - 2
-    k_std = I0_std = corr = None
-    if dof > 0:
-        s2 = float(np.sum((residual_x * weights) ** 2)) / dof
-        cov = s2 * np.linalg.inv(Aw.T @ Aw)
+    Aw = A / s_eff[:, None]
+    birge = None
+    cov = None
+    if stated:
+        cov = np.linalg.inv(Aw.T @ Aw)
+        if dof > 0:
+            chi2 = float(np.sum((residual_x / s_eff) ** 2))
+            birge = math.sqrt(chi2 / dof)
+            from scipy.special import chdtri  # only here: the calibration module loads without scipy
+
+            if chi2 > chdtri(dof, 1.0 - CONSISTENCY_LEVEL):
+                # the references scatter beyond their stated σ: those are understated, by this much
+                cov = cov * birge**2
+                notes.append(f"the references scatter {birge:.2g} × beyond their stated uncertainties: "
+                             "k and I0's σ scaled up by that (Birge ratio)")
+    elif dof > 0:
+        s2 = float(np.sum(residual_x**2)) / dof
+        cov = s2 * np.linalg.inv(A.T @ A)
+        notes.append(f"no reference states an uncertainty: σ from the misfit alone ({dof} degree(s) of freedom), "
+                     "which may be far too small by chance; state added_inertia_std (the certificate)")
+    k_std = I0_std = corr = kI_cov = None
+    if cov is not None:
         # k = 1/b, I0 = a/b: gradients with respect to (a, b)
         gk = np.array([0.0, -1.0 / b**2])
         gI = np.array([1.0 / b, -a / b**2])
         k_std = float(math.sqrt(gk @ cov @ gk))
         I0_std = float(math.sqrt(gI @ cov @ gI))
-        corr = float((gk @ cov @ gI) / (k_std * I0_std)) if k_std > 0 and I0_std > 0 else None
+        kI_cov = float(gk @ cov @ gI)
+        corr = kI_cov / (k_std * I0_std) if k_std > 0 and I0_std > 0 else None
     residual_I = tuple(float(v) for v in residual_x * k)
-    return Calibration(k, k_std, I0, I0_std, corr, refs, residual_I)
+    return Calibration(k, k_std, I0, I0_std, corr, refs, residual_I, kI_cov, "stated" if stated else "misfit",
+                       birge, tuple(notes))

@@ -43,6 +43,7 @@ from .rig import Rig
 from .signal import (MAX_GRID_PER_SAMPLE, Swings, deviation_table, find_swings, noise_floor, robust_std,
                      spike_candidates, swing_window)
 from .trace import Trace
+from .uncertainty import Budget, PendulumInputs
 
 
 @dataclass(frozen=True)
@@ -269,6 +270,38 @@ def _omega_n_std_view(fit: ModelFit, view: dict) -> float:
     response = np.linalg.lstsq(fit.jac * fit.scales, errors, rcond=None)[0] * fit.scales[:, None]
     per_term = response[fit.model.index("omega_n")]
     return float(math.hypot(per_term[0] * view["stretch_std"], per_term[1] * view["shear_std"]))
+
+
+def _omega_n_per_scale(fit: ModelFit) -> float:
+    """∂ω_n/∂s (rad/s per unit relative scale): how ω_n follows an angle read (1 + s) times too large.
+
+    The fit's linear response (the least-squares pseudo-inverse of its Jacobian) to the error s·y it
+    would see; zero for a linear restoring law, where the amplitude does not enter ω_n.
+    """
+    error = (fit.fitted - fit.value("offset"))[:, None]
+    response = np.linalg.lstsq(fit.jac * fit.scales, error, rcond=None)[0] * fit.scales[:, None]
+    return float(response[fit.model.index("omega_n"), 0])
+
+
+def budgets(rig: Rig, omega_n: float, omega_n_std: float, *, dof: float = math.inf, model: float = 0.0,
+            view: float | None = None, scale_response: float | None = None) -> dict[str, Budget]:
+    """The uncertainty budgets (measurand → ``Budget``) of a swing identified at ω_n ± σ on ``rig``.
+
+    model, view: the model-form and camera-view 1σ of ω_n (rad/s); scale_response: ∂ω_n/∂s of the
+    fit, for a sensor declared calibrated (its ``angle_scale_std`` then enters).
+    """
+    obj = rig.object
+    return PendulumInputs(
+        omega_n=omega_n, omega_n_std=omega_n_std, omega_n_dof=dof, omega_n_model=model, omega_n_view=view,
+        clock_ppm=rig.clock_accuracy_ppm,
+        angle_scale=None if scale_response is None else (scale_response, rig.angle_scale_std),
+        rig_kind=rig.kind, stiffness=rig.stiffness, stiffness_std=rig.stiffness_std,
+        mass=rig.mass, mass_std=rig.mass_std, com_distance=rig.com_distance, com_distance_std=rig.com_distance_std,
+        g=rig.g, g_std=rig.g_std, tare=rig.tare_inertia, tare_std=rig.tare_inertia_std,
+        cov_k_tare=rig.stiffness_tare_covariance,
+        object_mass=None if obj is None else obj.mass, object_mass_std=None if obj is None else obj.mass_std,
+        axis_offset=None if obj is None else obj.axis_offset, axis_offset_std=None if obj is None else obj.axis_offset_std,
+    ).budgets()
 
 
 def _remove_outliers(fit: ModelFit, prep: Prepared, options: Options) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -579,7 +612,9 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     if J is not None and (rig.restoring_constant_std or w_cal):
         J_cal = J * math.hypot((rig.restoring_constant_std or 0.0) / rig.restoring_constant, 2 * (w_cal or 0.0) / w)
     J_model = None if J is None else 2 * J * form.u / w
-    J_u = None if J is None else math.sqrt((J_std or 0.0) ** 2 + (J_cal or 0.0) ** 2 + J_model**2)
+    budget = budgets(rig, w, ws, dof=float(final.dof), model=form.u, view=w_cal,
+                     scale_response=_omega_n_per_scale(final) if rig.sensor_calibrated else None)
+    J_u = budget["J"].u if "J" in budget else None
     J_obj = J_obj_std = J_ax = J_ax_std = None
     if J is not None and rig.tare_inertia is not None:
         J_obj = J - rig.tare_inertia
@@ -692,7 +727,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         J=J, J_std=J_std, J_std_calibration=J_cal, J_object=J_obj, J_object_std=J_obj_std,
         J_object_axis=J_ax, J_object_axis_std=J_ax_std,
         omega_n=w, omega_n_std=ws, omega_n_std_calibration=w_cal, omega_n_std_model=form.u, omega_n_u=w_u,
-        J_std_model=J_model, J_u=J_u, model_form=form.to_dict(), damping_ratio=zeta, damping_ratio_std=zeta_std, reference_amplitude=amp_ref,
+        J_std_model=J_model, J_u=J_u, model_form=form.to_dict(),
+        uncertainty_budget={k: b.to_dict() for k, b in budget.items()}, damping_ratio=zeta, damping_ratio_std=zeta_std, reference_amplitude=amp_ref,
         offset=Quantity(final.value("offset"), final.stdev("offset"), "rad"),
         damping=_effect_quantities(final, rig, ("damping",)),
         stiffness=_effect_quantities(final, rig, ("stiffness",)),

@@ -19,7 +19,7 @@ squares", Phys. Rev. 40, 1932) and the result is flagged.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
@@ -30,10 +30,10 @@ from . import flags as F
 from .effects import EFFECTS, resolve_effects
 from .errors import IdentificationError, InvalidInput
 from .fit import ModelFit, block_covariance, fit_model
-from .identification import Options, _blas, _effect_quantities, _inertia, identify
+from .identification import Options, _blas, _effect_quantities, _inertia, budgets, identify
 from .model import STATE_PARAMS, Model
 from .noise import fit_noise
-from .result import IdentificationResult, Quantity, _jsonable, _num
+from .result import IdentificationResult, Quantity, _budget_table, _jsonable, _num
 from .rig import Rig
 from .trace import Trace
 
@@ -70,12 +70,17 @@ class JointResult:
     consistency: dict[str, Any]
     flags: tuple[str, ...]
     releases: tuple[IdentificationResult, ...]
+    #: measurand → its GUM budget (``measurement.uncertainty``) on the joint ω_n ± omega_n_u; the releases'
+    #: scatter (when it sets omega_n_u) counts with its n − 1 degrees of freedom
+    uncertainty_budget: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         declared = self.releases[0].declared_effects
         return {
             "joint": True, "rig_kind": self.rig_kind,
             "J": _num(self.J), "J_std": _num(self.J_std), "J_u": _num(self.J_u),
+            "J_U": _num((self.uncertainty_budget.get("J") or {}).get("U")),
+            "uncertainty_budget": _jsonable(self.uncertainty_budget),
             "omega_n": _num(self.omega_n), "omega_n_std": _num(self.omega_n_std), "omega_n_u": _num(self.omega_n_u),
             "declared_effects": list(declared), "effects": list(self.effects),
             "added_effects": [e for e in self.effects if e not in declared],
@@ -105,7 +110,11 @@ class JointResult:
                      f"{', '.join(r.effects)}" + (f" / {', '.join(r.flags)}" if r.flags else ""))
         L.append("[[Result]]")
         if self.J is not None:
-            L.append(f"    J            = {self.J:.7g} kg·m², σ {self.J_std:.2g}, combined u {self.J_u:.2g} kg·m²")
+            L.append(f"    J            = {self.J:.7g} kg·m², σ {self.J_std:.2g}, combined u {self.J_u:.2g} kg·m²"
+                     " (the releases' ω_n alone)")
+            for measurand, b in self.uncertainty_budget.items():
+                L.append(f"[[Uncertainty budget]] {measurand} (GUM: the joint ω_n and the rig's constants)")
+                L.extend(_budget_table(b))
         else:
             L.append("    J            = n/a: the rig gives no stiffness (torsion) or mass·com_distance (compound)")
         L.append(f"    omega_n      = {self.omega_n:.7g} rad/s, σ {self.omega_n_std:.2g}, combined u {self.omega_n_u:.2g} rad/s"
@@ -288,6 +297,10 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
     J = _inertia(rig, w_joint)
     J_std = None if J is None else 2 * J * s_joint / w_joint
     J_u = None if J is None else 2 * J * u_joint / w_joint
+    # the joint ω_n's u already holds the releases' model form and camera view (``common``); the rig's
+    # constants come in here. Its degrees of freedom: the releases' when their scatter sets it
+    budget = budgets(rig, w_joint, u_joint, dof=float(dof) if s_joint * birge > common and birge > 1 else math.inf,
+                     scale_response=None)
     rms = float(math.sqrt(np.mean(np.concatenate([(r[offsets[i]:offsets[i + 1]] / weights[i]) ** 2
                                                   for i in range(len(models))]))))
     return JointResult(
@@ -295,6 +308,7 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
         J=J, J_std=J_std, J_u=J_u,
         damping=_effect_quantities(shim, rig, ("damping",)), stiffness=_effect_quantities(shim, rig, ("stiffness",)),
         residual_rms=rms, consistency=consistency, flags=tuple(flags), releases=tuple(results),
+        uncertainty_budget={k: b.to_dict() for k, b in budget.items()},
     )
 
 

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 
 def _num(v: Any) -> Any:
@@ -38,6 +38,24 @@ def _jsonable(v: Any) -> Any:
     if isinstance(v, np.ndarray):
         return [_jsonable(x) for x in v.tolist()]
     return _num(v)
+
+
+def _budget_table(b: dict[str, Any]) -> list[str]:
+    """A budget dict (``measurement.uncertainty.Budget.to_dict``) as the report's table."""
+    out = [f"    {'source':<32}{'value':>12}{'u':>10}  {'unit':<8}{'c':>10}{'c·u':>10}{'share':>8}"]
+    for ln in b["lines"]:
+        note = f"  ({ln['note']})" if ln.get("note") else ""
+        value = ln["value"] if ln["value"] is not None else float("nan")
+        c = ln["sensitivity"] if ln["sensitivity"] is not None else float("nan")
+        out.append(f"    {ln['source'][:32]:<32}{value:>12.6g}{ln['std']:>10.2g}  {ln['unit']:<8}{c:>10.3g}"
+                   f"{ln['contribution']:>10.2g}{100 * ln['share']:>7.1f}%{note}")
+    for c in b.get("correlations", ()):
+        out.append(f"    correlation r({c['a']}, {c['b']}) = {c['r']:+.4f}: {100 * b['correlation_share']:+.1f} % of u²")
+    dof = "∞" if b.get("dof") is None else f"{b['dof']:.0f}"
+    rel = f" ({100 * b['U'] / abs(b['value']):.3g} %)" if b.get("value") else ""
+    out.append(f"    u = {b['u']:.3g} {b['unit']}, ν_eff = {dof}, k = {b['coverage_factor']:.2f}, "
+               f"U = {b['U']:.3g} {b['unit']}{rel}")
+    return out
 
 
 @dataclass(frozen=True)
@@ -122,7 +140,8 @@ class IdentificationResult:
     """Everything a measurement says. SI units; *_std are 1σ standard uncertainties.
 
     J: total inertia about the pivot, kg·m² (None when the rig lacks k or m·S).
-    J_object: J − tare_inertia (None without a tare).
+    J_object: J − tare_inertia (None without a tare); J_object_std: the fit's σ ⊕ the tare's, as before
+    (kept for old readers); J_object_u / J_object_U (``to_dict``): the budget's, the k–I0 correlation kept.
     J_object_axis: the parallel-axis transfer J_object − m·L² about the object's own axis.
     omega_n: small-amplitude natural angular frequency, rad/s.
     damping_ratio: equivalent viscous damping ratio at ``reference_amplitude``.
@@ -173,6 +192,9 @@ class IdentificationResult:
     omega_n_u: float | None = None
     J_u: float | None = None
     model_form: dict[str, Any] = field(default_factory=dict)
+    #: measurand ("J", "J_object", "J_object_axis") → its GUM budget (``measurement.uncertainty.Budget.to_dict``):
+    #: lines (source, value, u, sensitivity, contribution, share), u, coverage factor, U
+    uncertainty_budget: dict[str, Any] = field(default_factory=dict)
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -181,6 +203,20 @@ class IdentificationResult:
         if self.baseline.residual_rms > 0:
             return 1.0 - self.residual_rms / self.baseline.residual_rms
         return None
+
+    def _budget(self, measurand: str, key: str) -> float | None:
+        b = self.uncertainty_budget.get(measurand)
+        return None if b is None else _num(b.get(key))
+
+    @property
+    def J_U(self) -> float | None:
+        """Expanded uncertainty of J, kg·m² (coverage factor in the budget)."""
+        return self._budget("J", "U")
+
+    @property
+    def coverage_factor(self) -> float | None:
+        """k of J_U = k·J_u (2 unless the effective degrees of freedom call for more)."""
+        return self._budget("J", "coverage_factor")
 
     def to_dict(self, include_arrays: bool = False) -> dict[str, Any]:
         d: dict[str, Any] = {
@@ -195,6 +231,11 @@ class IdentificationResult:
             "omega_n_std_calibration": _num(self.omega_n_std_calibration),
             "omega_n_std_model": _num(self.omega_n_std_model), "omega_n_u": _num(self.omega_n_u),
             "J_std_model": _num(self.J_std_model), "J_u": _num(self.J_u),
+            "J_U": self.J_U, "coverage_factor": self.coverage_factor,
+            "J_object_u": self._budget("J_object", "u"), "J_object_U": self._budget("J_object", "U"),
+            "J_object_axis_u": self._budget("J_object_axis", "u"),
+            "J_object_axis_U": self._budget("J_object_axis", "U"),
+            "uncertainty_budget": _jsonable(self.uncertainty_budget),
             "model_form": _jsonable(self.model_form),
             "damping_ratio": _num(self.damping_ratio), "damping_ratio_std": _num(self.damping_ratio_std),
             "reference_amplitude": _num(self.reference_amplitude),
@@ -234,15 +275,21 @@ class IdentificationResult:
         L.append(f"    samples {s.get('n')}, window {self.window.get('t_start', 0):.3f}–{self.window.get('t_stop', 0):.3f} s,"
                  f" {s.get('nfev')} simulations, converged: {s.get('success')}")
         L.append("[[Result]]")
+        def expanded(measurand: str) -> str:
+            b = self.uncertainty_budget.get(measurand)
+            return "" if not b else f"; U = {b['U']:.2g} kg·m² (k = {b['coverage_factor']:.3g}, budget below)"
+
         if self.J is not None:
             extra = f" (calibration adds ±{self.J_std_calibration:.2g})" if self.J_std_calibration else ""
-            L.append(f"    J            = {Quantity(self.J, self.J_std, 'kg·m²')}{extra}")
+            L.append(f"    J            = {Quantity(self.J, self.J_std, 'kg·m²')}{extra}{expanded('J')}")
         else:
             L.append("    J            = n/a: the rig gives no stiffness (torsion) or mass·com_distance (compound)")
         if self.J_object is not None:
-            L.append(f"    J_object     = {Quantity(self.J_object, self.J_object_std, 'kg·m²')}  (J − tare)")
+            L.append(f"    J_object     = {Quantity(self.J_object, self.J_object_std, 'kg·m²')}  (J − tare)"
+                     f"{expanded('J_object')}")
         if self.J_object_axis is not None:
-            L.append(f"    J_object_axis= {Quantity(self.J_object_axis, self.J_object_axis_std, 'kg·m²')}  (own axis, J_D − m·L²)")
+            L.append(f"    J_object_axis= {Quantity(self.J_object_axis, self.J_object_axis_std, 'kg·m²')}  (own axis, J_D − m·L²)"
+                     f"{expanded('J_object_axis')}")
         cal = (f"; the camera view's calibration adds ±{self.omega_n_std_calibration:.2g}"
                if self.omega_n_std_calibration else "")
         L.append(f"    omega_n      = {Quantity(self.omega_n, self.omega_n_std, 'rad/s')}"
@@ -251,6 +298,9 @@ class IdentificationResult:
             ju = f"; J ± {self.J_u:.2g} kg·m²" if self.J_u is not None else ""
             L.append(f"    model form   = ±{self.omega_n_std_model:.2g} rad/s (halves of the record, rival models)"
                      f" → combined u: ω_n ± {self.omega_n_u:.2g} rad/s{ju}")
+        for measurand, b in self.uncertainty_budget.items():
+            L.append(f"[[Uncertainty budget]] {measurand} (GUM; J_std above is the fit's 1σ alone)")
+            L.extend(_budget_table(b))
         L.append(f"    damping ratio= {Quantity(self.damping_ratio, self.damping_ratio_std, '')}"
                  f" (equivalent viscous, at {self.reference_amplitude:.4g} rad)")
         for group in (self.damping, self.stiffness, self.sensor):

@@ -19,6 +19,7 @@ from typing import Any, Mapping
 
 from .effects import resolve_effects
 from .errors import RigError
+from .uncertainty import check_covariance
 
 STANDARD_GRAVITY = 9.80665  # m/s²
 
@@ -26,11 +27,12 @@ RIG_KINDS = ("torsion", "compound")
 
 _RIG_KEYS = {
     "kind", "stiffness", "stiffness_std", "tare_inertia", "tare_inertia_std",
-    "mass", "com_distance", "g",
+    "mass", "com_distance", "g", "stiffness_tare_covariance", "mass_std", "com_distance_std", "g_std",
 }
 _OBJECT_KEYS = {"mass", "axis_offset"}
+_OBJECT_STD_KEYS = {"mass_std", "axis_offset_std"}
 _MODEL_KEYS = {"declared"}
-_SENSOR_KEYS = {"calibrated"}
+_SENSOR_KEYS = {"calibrated", "clock_accuracy_ppm", "angle_scale_std"}
 _CALIBRATION_KEYS = {"date", "valid_days", "references", "source"}
 
 
@@ -50,10 +52,13 @@ class ObjectTransfer:
     """Parallel-axis transfer J_S = J_D − m_D·L²: the object's inertia about its own axis.
 
     mass: m_D, kg. axis_offset: L, m, from the pivot to the object's own axis.
+    mass_std, axis_offset_std: their 1σ (kg, m); None: not stated.
     """
 
     mass: float
     axis_offset: float
+    mass_std: float | None = None
+    axis_offset_std: float | None = None
 
 
 @dataclass(frozen=True)
@@ -80,12 +85,6 @@ class CalibrationRecord:
         """True when ``today`` is past the validity period: results carry the flag ``calibration_due``."""
         until = self.valid_until
         return until is not None and today > until
-
-    def state(self, today: _dt.date) -> dict[str, Any]:
-        """As of ``today``: the date, the last valid day (None: no expiry), whether it is due, the days left."""
-        until = self.valid_until
-        return {"date": self.date.isoformat(), "valid_until": until.isoformat() if until else None,
-                "due": self.due(today), "days_left": (until - today).days if until is not None else None}
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"date": self.date.isoformat()}
@@ -129,8 +128,12 @@ class Rig:
     stiffness: k, N·m/rad (torsion); None when not calibrated.
     stiffness_std: 1σ of k from calibration, N·m/rad (optional).
     tare_inertia: J of the empty fixture, kg·m² (optional): J_object = J − tare.
-    mass, com_distance: m (kg) and S (m) of the swinging body (compound).
-    g: local gravity, m/s².
+    tare_inertia_std: its 1σ, kg·m²; stiffness_tare_covariance: cov(k, I0), N·m/rad·kg·m²
+        (``moi calibrate`` writes all three: k and I0 come out of one regression).
+    mass, com_distance: m (kg) and S (m) of the swinging body (compound); mass_std, com_distance_std their 1σ.
+    g: local gravity, m/s²; g_std its 1σ (None: not stated; standard gravity may be 0.3 % off the local g).
+    clock_accuracy_ppm: 1σ of the sample clock's frequency, ppm (``[sensor]``; None: not stated).
+    angle_scale_std: 1σ of a calibrated angle sensor's scale, relative (``[sensor]``; None: not stated).
     declared: effect names the user declares (from ``[model] declared``).
     calibration: date, validity and references of the calibration (``[calibration]``), optional.
     sensor_calibrated: the angle sensor's scale and view are known (``[sensor] calibrated``):
@@ -150,6 +153,12 @@ class Rig:
     declared: tuple[str, ...] = field(default=("viscous",))
     calibration: CalibrationRecord | None = None
     sensor_calibrated: bool = False
+    stiffness_tare_covariance: float | None = None
+    mass_std: float | None = None
+    com_distance_std: float | None = None
+    g_std: float | None = None
+    clock_accuracy_ppm: float | None = None
+    angle_scale_std: float | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in RIG_KINDS:
@@ -160,6 +169,14 @@ class Rig:
             raise RigError("rig: mass/com_distance belong to a compound rig; kind is 'torsion'")
         if self.kind == "compound" and self.stiffness is not None:
             raise RigError("rig: stiffness belongs to a torsion rig; kind is 'compound'")
+        if self.angle_scale_std is not None and not self.sensor_calibrated:
+            # an uncalibrated sensor's scale is fitted from the swing (gain, view) or does not enter ω_n:
+            # a σ for it would be counted for nothing
+            raise RigError("rig: [sensor] angle_scale_std is the σ of a calibrated sensor's scale; "
+                           "add calibrated = true or drop it")
+        if self.stiffness_tare_covariance is not None:
+            check_covariance("rig: stiffness_tare_covariance", self.stiffness_tare_covariance,
+                             self.stiffness_std, self.tare_inertia_std)
         # the rig carries the model declaration; the effect library checks it
         # (effects need only the rig's attributes, so the import runs one way)
         effects = resolve_effects(self.declared, self)
@@ -181,10 +198,15 @@ class Rig:
 
     @property
     def restoring_constant_std(self) -> float | None:
-        """1σ of the restoring constant from calibration, when known."""
+        """1σ of the restoring constant from calibration (k) or from m, g, S, when any is stated."""
         if self.kind == "torsion":
             return self.stiffness_std
-        return None
+        c = self.restoring_constant
+        if c is None or (self.mass_std is None and self.com_distance_std is None and self.g_std is None):
+            return None
+        assert self.mass is not None and self.com_distance is not None
+        return c * math.sqrt(((self.mass_std or 0.0) / self.mass) ** 2 + ((self.g_std or 0.0) / self.g) ** 2
+                             + ((self.com_distance_std or 0.0) / self.com_distance) ** 2)
 
     def with_declared(self, declared: tuple[str, ...] | list[str]) -> "Rig":
         return replace(self, declared=tuple(declared))
@@ -215,11 +237,16 @@ class Rig:
         obj = None
         if "object" in doc:
             o = doc["object"]
-            if not isinstance(o, Mapping) or set(o) != _OBJECT_KEYS:
-                raise RigError("rig file: [object] needs exactly mass (kg) and axis_offset (m)")
+            if not isinstance(o, Mapping) or not _OBJECT_KEYS <= set(o) or set(o) - _OBJECT_KEYS - _OBJECT_STD_KEYS:
+                raise RigError("rig file: [object] needs mass (kg) and axis_offset (m), optionally mass_std (kg) "
+                               "and axis_offset_std (m)")
             obj = ObjectTransfer(
                 mass=_positive("object.mass", o["mass"], "kg"),
                 axis_offset=_positive("object.axis_offset", o["axis_offset"], "m", allow_zero=True),
+                mass_std=None if "mass_std" not in o else _positive("object.mass_std", o["mass_std"], "kg",
+                                                                    allow_zero=True),
+                axis_offset_std=None if "axis_offset_std" not in o else _positive(
+                    "object.axis_offset_std", o["axis_offset_std"], "m", allow_zero=True),
             )
         declared: tuple[str, ...] = ("viscous",)
         if "model" in doc:
@@ -231,13 +258,22 @@ class Rig:
                 raise RigError("rig file: [model] declared must be a list of effect names")
             declared = tuple(d)
         sensor_calibrated = False
+        sensor: Mapping[str, Any] = {}
         if "sensor" in doc:
             sensor = doc["sensor"]
             if not isinstance(sensor, Mapping) or set(sensor) - _SENSOR_KEYS:
-                raise RigError("rig file: [sensor] takes only calibrated = true | false")
+                raise RigError("rig file: [sensor] takes only calibrated = true | false, clock_accuracy_ppm "
+                               "(1σ, ppm) and angle_scale_std (1σ, relative)")
             sensor_calibrated = sensor.get("calibrated", False)
             if not isinstance(sensor_calibrated, bool):
                 raise RigError(f"rig file: [sensor] calibrated must be true or false, got {sensor_calibrated!r}")
+
+        def sensor_std(name: str, unit: str) -> float | None:
+            return None if name not in sensor else _positive(f"sensor.{name}", sensor[name], unit, allow_zero=True)
+
+        covariance = rig.get("stiffness_tare_covariance")
+        if covariance is not None and (isinstance(covariance, bool) or not isinstance(covariance, (int, float))):
+            raise RigError(f"rig: stiffness_tare_covariance must be a number in N·m/rad·kg·m², got {covariance!r}")
         return cls(
             kind=kind,
             stiffness=opt("stiffness", "N·m/rad"),
@@ -251,23 +287,39 @@ class Rig:
             declared=declared,
             calibration=CalibrationRecord.from_dict(doc["calibration"]) if "calibration" in doc else None,
             sensor_calibrated=sensor_calibrated,
+            stiffness_tare_covariance=None if covariance is None else float(covariance),
+            mass_std=opt("mass_std", "kg", allow_zero=True),
+            com_distance_std=opt("com_distance_std", "m", allow_zero=True),
+            g_std=opt("g_std", "m/s²", allow_zero=True),
+            clock_accuracy_ppm=sensor_std("clock_accuracy_ppm", "ppm"),
+            angle_scale_std=sensor_std("angle_scale_std", "1 (relative)"),
         )
 
     def to_dict(self) -> dict[str, Any]:
         """The rig TOML document (None values left out)."""
         rig: dict[str, Any] = {"kind": self.kind}
-        for key in ("stiffness", "stiffness_std", "tare_inertia", "tare_inertia_std", "mass", "com_distance"):
+        for key in ("stiffness", "stiffness_std", "tare_inertia", "tare_inertia_std", "stiffness_tare_covariance",
+                    "mass", "mass_std", "com_distance", "com_distance_std"):
             value = getattr(self, key)
             if value is not None:
                 rig[key] = value
         if self.g != STANDARD_GRAVITY:
             rig["g"] = self.g
+        if self.g_std is not None:
+            rig["g_std"] = self.g_std
         doc: dict[str, Any] = {"rig": rig}
         if self.object is not None:
             doc["object"] = {"mass": self.object.mass, "axis_offset": self.object.axis_offset}
+            for key in ("mass_std", "axis_offset_std"):
+                if getattr(self.object, key) is not None:
+                    doc["object"][key] = getattr(self.object, key)
         doc["model"] = {"declared": list(self.declared)}
         if self.calibration is not None:
             doc["calibration"] = self.calibration.to_dict()
-        if self.sensor_calibrated:
-            doc["sensor"] = {"calibrated": True}
+        sensor: dict[str, Any] = {"calibrated": True} if self.sensor_calibrated else {}
+        for key in ("clock_accuracy_ppm", "angle_scale_std"):
+            if getattr(self, key) is not None:
+                sensor[key] = getattr(self, key)
+        if sensor:
+            doc["sensor"] = sensor
         return doc

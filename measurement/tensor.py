@@ -352,11 +352,22 @@ class RigShared:
 
     scale_rel: relative 1σ of the restoring constant (J ∝ k: scales every J alike).
     tare, tare_std: the fixture's inertia and its 1σ, kg·m² (None: no tare, J is the part's).
+    scale_tare_corr: the correlation of k and the tare (one calibration regression gives both).
     """
 
     scale_rel: float = 0.0
     tare: float | None = None
     tare_std: float = 0.0
+    scale_tare_corr: float = 0.0
+
+    def common_covariance(self, rig_J: np.ndarray) -> np.ndarray:
+        """Covariance (kg·m²)² the orientations' J − tare share through k and the tare, each J_i = k/ω_i².
+
+        cov_ij = s_i·s_j + σ_I0² − r·σ_I0·(s_i + s_j), s_i = scale_rel·J_i (J − I0: ∂/∂k = J/k, ∂/∂I0 = −1).
+        """
+        s = self.scale_rel * np.asarray(rig_J, dtype=float)
+        t = self.tare_std
+        return np.outer(s, s) + t**2 - self.scale_tare_corr * t * (s[:, None] + s[None, :])
 
     @property
     def quantity(self) -> str:
@@ -374,7 +385,10 @@ class RigShared:
                               "centre of mass itself (offset = [x, y, z]); drop [object] from the rig")
         k, k_std = rig.restoring_constant, rig.restoring_constant_std
         scale = (k_std or 0.0) / k if k else 0.0
-        return cls(scale, rig.tare_inertia, rig.tare_inertia_std or 0.0)
+        corr = 0.0
+        if rig.stiffness_tare_covariance and k_std and rig.tare_inertia_std:
+            corr = rig.stiffness_tare_covariance / (k_std * rig.tare_inertia_std)
+        return cls(scale, rig.tare_inertia, rig.tare_inertia_std or 0.0, corr)
 
 
 def _release_reading(result: Mapping[str, Any], shared: RigShared) -> Reading:
@@ -389,7 +403,7 @@ def _release_reading(result: Mapping[str, Any], shared: RigShared) -> Reading:
     u_total = math.hypot(reading.u_random, reading.u_systematic)
     if U is not None and k:
         u_total = max(float(U) / float(k), reading.u_random)  # an expanded U, where the result carries one
-    common = math.hypot(shared.scale_rel * float(J or 0.0), shared.tare_std)
+    common = math.sqrt(max(float(shared.common_covariance(np.array([float(J or 0.0)]))[0, 0]), 0.0))
     own_systematic = math.sqrt(max(u_total**2 - reading.u_random**2 - common**2, 0.0))
     return Reading(reading.value, reading.u_random, own_systematic, reading.flags, reading.swings)
 
@@ -570,8 +584,7 @@ def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigS
     b = J_axis - correction
     rig_J = np.array([float(r.rig_inertia) if r.rig_inertia is not None else float(r.value)  # type: ignore[union-attr]
                       for r in rd])
-    s = shared.scale_rel * rig_J
-    V = np.diag(u_own**2 + u_offset2) + np.outer(s, s) + shared.tare_std**2 + plan.mass_std**2 * np.outer(dperp2, dperp2)
+    V = np.diag(u_own**2 + u_offset2) + shared.common_covariance(rig_J) + plan.mass_std**2 * np.outer(dperp2, dperp2)
     if not np.all(np.diag(V) > 0):
         bad = [o.name for o, v in zip(ors, np.diag(V)) if not v > 0]
         raise TensorError(f"orientation(s) {', '.join(bad)} have no uncertainty: a tensor's covariance needs each "

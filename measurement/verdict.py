@@ -8,10 +8,13 @@ Inspection by measurement of workpieces and measuring equipment — Part 1:
 Decision rules for verifying conformity or nonconformity with specifications")
 ------------------------------------------------------------------------------
 Specification zone: LSL ≤ x ≤ USL (a recipe gives nominal ± tolerance).
-U = k·u_c is the expanded uncertainty (coverage factor k, default 2 ≈ 95 %),
-u_c the combined standard uncertainty of the part's value: the random part
-(identification fit, repeatability of the releases) and the systematic part
-common to every release (calibration of the rig's stiffness k, tare inertia).
+U = k·u_c is the expanded uncertainty (coverage factor k, default 2 ≈ 95 %,
+more when the effective degrees of freedom are few: Welch–Satterthwaite),
+u_c the combined standard uncertainty of the part's value from the result's
+GUM budget (``measurement.uncertainty``): the random part (identification
+fit, model form, repeatability of the releases) and the systematic part
+common to every release (calibration of k with I0 and their correlation, the
+rig's m, g, S, the clock, the sensor's scale...).
 
 * ``guard_band`` (default): conformance is proven only when the whole
   uncertainty interval lies in the zone, LSL + U ≤ x ≤ USL − U → OK;
@@ -24,8 +27,10 @@ common to every release (calibration of the rig's stiffness k, tare inertia).
 
 A result is INVALID before any comparison when it cannot be trusted: a flag
 the recipe names (e.g. ``unmodeled_residual``, ``calibration_due``), no value
-(a rig without k), its standard uncertainty above the recipe's limit, or fewer
-swings than the recipe asks for.
+(a rig without k), its standard uncertainty above the recipe's limit, fewer
+swings than the recipe asks for, or an expanded uncertainty U above the
+recipe's ``max_uncertainty_ratio`` of the half-tolerance (the test uncertainty
+ratio: with 0.25, U may take at most a quarter of the tolerance's half-width).
 
 Repeat measurements (``combine``)
 ---------------------------------
@@ -36,9 +41,10 @@ equal u_i it is the arithmetic mean). Its random standard uncertainty is the
 larger of the Type A standard deviation of the mean s/√n (GUM 4.2.3) and the
 releases' own uncertainties propagated through the weighted mean
 1/√(Σ1/u_i²): with n = 3 the Type A estimate has 2 degrees of freedom and
-may come out far too small by chance. The systematic part (the
-calibration) is common to all releases and does not average down; it is added
-in quadrature once.
+may come out far too small by chance; when the Type A term is the larger, its
+n − 1 degrees of freedom enter the coverage factor (Welch–Satterthwaite,
+Student's t at 95.45 %). The systematic part (the calibration) is common to
+all releases and does not average down; it is added in quadrature once.
 
 With the releases' identifications at hand (the appliance), the part's value
 is their joint identification instead (``measurement.joint``: the physics
@@ -64,6 +70,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 from . import flags as F
 from .errors import InvalidInput
+from .uncertainty import coverage_factor as _coverage_factor, welch_satterthwaite
 
 OK, NOK, INVALID = "OK", "NOK", "INVALID"
 
@@ -135,6 +142,8 @@ class QualityRules:
     the value (None: no limit). min_swings: fewest full swings in the fitted
     window. consistency_limit: |z| above which releases disagree.
     min_valid_releases: fewest usable releases for a part verdict.
+    max_uncertainty_ratio: largest U / half-tolerance (the inverse test uncertainty ratio, e.g. 0.25);
+    None: no limit.
     """
 
     invalid_flags: tuple[str, ...] = DEFAULT_INVALID_FLAGS
@@ -143,11 +152,13 @@ class QualityRules:
     min_swings: float = 3.0
     consistency_limit: float = 3.0
     min_valid_releases: int = 1
+    max_uncertainty_ratio: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"invalid_flags": list(self.invalid_flags), "max_std": self.max_std,
                 "max_std_relative": self.max_std_relative, "min_swings": self.min_swings,
-                "consistency_limit": self.consistency_limit, "min_valid_releases": self.min_valid_releases}
+                "consistency_limit": self.consistency_limit, "min_valid_releases": self.min_valid_releases,
+                "max_uncertainty_ratio": self.max_uncertainty_ratio}
 
 
 @dataclass(frozen=True)
@@ -157,6 +168,7 @@ class Reading:
     value: None when the rig gives no J. u_random: 1σ of the identification.
     u_systematic: 1σ common to every release (calibration of k, tare).
     swings: full swings in the fitted window (ω_n·T/2π).
+    coverage_factor: the k the result's budget calls for (None: the specification's).
     """
 
     value: float | None
@@ -164,6 +176,7 @@ class Reading:
     u_systematic: float = 0.0
     flags: tuple[str, ...] = ()
     swings: float | None = None
+    coverage_factor: float | None = None
 
     @classmethod
     def from_result(cls, result: Mapping[str, Any], quantity: str) -> "Reading":
@@ -183,12 +196,18 @@ class Reading:
         swings = None
         if omega and window.get("t_start") is not None and window.get("t_stop") is not None:
             swings = float(omega) * (float(window["t_stop"]) - float(window["t_start"])) / (2 * math.pi)
+        flags = tuple(result.get("flags") or ())
+        budget = (result.get("uncertainty_budget") or {}).get(quantity)
+        if budget and value is not None:
+            # the GUM budget: its random lines (fit, model form) and the rest with their correlations
+            return cls(float(value), float(budget["u_random"]), float(budget["u_systematic"]), flags, swings,
+                       float(budget["coverage_factor"]))
         # the release's own model form (its record's halves, rival models) is random from release to
         # release: it belongs with the fit's σ, not with the calibration
         model = result.get("J_std_model") or 0.0
         u_random = None if J_std is None else math.hypot(float(J_std), float(model))
         return cls(None if value is None else float(value), u_random,
-                   math.hypot(cal, tare), tuple(result.get("flags") or ()), swings)
+                   math.hypot(cal, tare), flags, swings)
 
     @property
     def u_combined(self) -> float | None:
@@ -221,9 +240,21 @@ class Decision:
                 "deviation": self.deviation, "zone": self.zone, "rule": self.rule, "reasons": list(self.reasons)}
 
 
-def decide(value: float, u_c: float, spec: Specification) -> Decision:
-    """The conformity decision for a trustworthy value with its combined standard uncertainty."""
-    U = spec.coverage_factor * u_c
+def decide(value: float, u_c: float, spec: Specification, k: float | None = None,
+           rules: QualityRules | None = None) -> Decision:
+    """The conformity decision for a trustworthy value with its combined standard uncertainty.
+
+    k: the coverage factor (None: the specification's; never below it). rules: their
+    ``max_uncertainty_ratio`` makes a result with too large a U INVALID.
+    """
+    U = max(spec.coverage_factor, k or 0.0) * u_c
+    cap = None if rules is None else rules.max_uncertainty_ratio
+    half = (spec.upper - spec.lower) / 2
+    if cap is not None and U > cap * half:
+        return Decision(INVALID, value, u_c, U, value - spec.nominal, None, spec.rule,
+                        (f"expanded uncertainty U = {U:.2g} kg·m² exceeds {cap:g} of the half-tolerance "
+                         f"{half:.2g} kg·m² (test uncertainty ratio {half / U:.1f}, the recipe asks for at least "
+                         f"{1 / cap:.1f})",))
     if spec.lower + U <= value <= spec.upper - U:
         zone = "conformance"
     elif value < spec.lower - U or value > spec.upper + U:
@@ -279,7 +310,7 @@ def judge_release(reading: Reading, spec: Specification, rules: QualityRules) ->
         return Decision(INVALID, reading.value, reading.u_combined, None,
                         None if reading.value is None else reading.value - spec.nominal, None, spec.rule, tuple(bad))
     assert reading.value is not None and reading.u_combined is not None
-    return decide(reading.value, reading.u_combined, spec)
+    return decide(reading.value, reading.u_combined, spec, reading.coverage_factor, rules)
 
 
 @dataclass(frozen=True)
@@ -305,6 +336,9 @@ class PartResult:
     decision: Decision
     #: the joint identification the value came from (its ω_n, consistency test); None: the weighted mean
     joint: dict[str, Any] | None = None
+    #: the part's budget: its random line (Type A repeatability or the releases' own, with its degrees of
+    #: freedom), its systematic line, u_c, ν_eff (Welch–Satterthwaite), k and U
+    uncertainty: dict[str, Any] | None = None
 
     @property
     def verdict(self) -> str:
@@ -313,7 +347,8 @@ class PartResult:
     def to_dict(self) -> dict[str, Any]:
         return {"releases": self.releases, "values": list(self.values), "used": list(self.used), "excluded": [dict(e) for e in self.excluded],
                 "mean": self.mean, "std": self.std, "u_typeA": self.u_typeA, "u_fit": self.u_fit,
-                "u_systematic": self.u_systematic, "z": list(self.z), "joint": self.joint, **self.decision.to_dict()}
+                "u_systematic": self.u_systematic, "z": list(self.z), "joint": self.joint,
+                "uncertainty": self.uncertainty, **self.decision.to_dict()}
 
 
 def agreement(values: Sequence[float], u: Sequence[float]) -> list[float]:
@@ -405,10 +440,22 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
     u_a = std / math.sqrt(m) if std is not None else None
     u_sys = max(readings[i].u_systematic for i in usable)
     u_c = math.hypot(max(u_a or 0.0, u_fit), u_sys)
+    k = max([spec.coverage_factor] + [readings[i].coverage_factor or 0.0 for i in usable])
+    type_a = u_a is not None and u_a > u_fit
+    dof = welch_satterthwaite(u_c, [(u_a, m - 1)]) if type_a and u_a is not None else math.inf
+    if type_a:
+        # the repeatability (Type A, m − 1 degrees of freedom) sets the random part: few releases, a larger k
+        k = max(k, _coverage_factor(dof, spec.coverage_factor))
+    random_line = ({"source": f"repeatability of {m} releases (Type A, s/√n)", "u": u_a, "dof": m - 1}
+                   if type_a else {"source": "the releases' own uncertainty (fit, model form; joint or weighted "
+                                             "mean)", "u": u_fit, "dof": None})
+    budget = {"lines": [random_line, {"source": "systematic, common to the releases (calibration, rig constants, "
+                                                "clock, sensor scale)", "u": u_sys, "dof": None}],
+              "u_c": u_c, "dof": dof if math.isfinite(dof) else None, "coverage_factor": k, "U": k * u_c}
     if part_reasons:
-        dec = Decision(INVALID, mean, u_c, spec.coverage_factor * u_c, mean - spec.nominal, None, spec.rule,
+        dec = Decision(INVALID, mean, u_c, k * u_c, mean - spec.nominal, None, spec.rule,
                        tuple(part_reasons))
     else:
-        dec = decide(mean, u_c, spec)
+        dec = decide(mean, u_c, spec, k, rules)
     return PartResult(n, values, tuple(usable), tuple(excluded), mean, std, u_a, u_fit, u_sys, tuple(z), dec,
-                      joint_facts)
+                      joint_facts, budget)

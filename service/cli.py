@@ -31,6 +31,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "simulate a free swing with chosen effects, noise, quantisation and sample rate"),
     "calibrate": ("service.commands.calibrate",
         "calibrate a torsion rig's stiffness and tare inertia from reference loads"),
+    "check-standard": ("service.commands.check_standard",
+        "measure a reference artifact of certified J ± U: the normalised error E_n, its history and control chart"),
     "camera-check": ("service.commands.camera_check",
         "find the marker in one camera frame: position, angle, annotated PNG for alignment"),
     "measure": ("service.commands.measure",

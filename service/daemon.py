@@ -43,7 +43,7 @@ from measurement.integrator import is_compiled
 
 from . import __version__
 from service.config.appliance import Config
-from .errors import ServiceError, StartupError, StoreDamaged
+from .errors import ServiceError, StartupError, StoreDamaged, StoreError
 from service.devices.hardware import Devices, build_devices
 from .notify import Notifier
 from service.publish.payload import iso_utc, result_payload
@@ -576,7 +576,7 @@ class Appliance:
         timing = m.to_dict().get("timing", {})
         part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
         rig = recipe.rig_for(cfg.rig) if recipe is not None else cfg.rig
-        calibration = self._calibration_state(rig, finished)
+        calibration = self.calibration_state(rig, finished)
         if calibration is not None and calibration["due"] and F.CALIBRATION_DUE not in result["flags"]:
             result["flags"] = [*result["flags"], F.CALIBRATION_DUE]
         tensor_set = self.tensor_set if recipe is not None and recipe.tensor is not None else None
@@ -620,21 +620,55 @@ class Appliance:
         if part["verdict"] is not None and recipe is not None:
             log.info("part %s (%s): %s", part_id or "(no ID)", recipe.name, part["verdict"])
             self._to_publishers("on_part_done", recipe)
+        whole = part.get("part")
+        check = whole.get("check_standard") if isinstance(whole, dict) else None
+        if check is not None:
+            # a check standard measured at the station: kept with the history `moi check-standard` reads;
+            # a failed one makes the next results calibration_due (``calibration_state``)
+            log.log(logging.INFO if check["passed"] else logging.WARNING, "check standard %s: E_n = %.2f (%s)",
+                    check["name"], check["E_n"], "pass" if check["passed"] else "FAIL")
+            try:
+                self.store.record_check_standard(check | {"part_id": part_id, "measurement": m.id,
+                                                          "flags": list(result.get("flags") or [])},
+                                                 finished_at=finished)
+            except StoreError:
+                log.exception("could not store the check standard of measurement %s", m.id)
         if tensor_set is not None:
             log.info("tensor set %s: %s", tensor_set.uuid, tensor_set.instruction())
             if tensor_set.done:
                 self._finish_set(tensor_set)
             self._publish_set()
 
-    @staticmethod
-    def _calibration_state(rig: Rig, now: float) -> dict[str, Any] | None:
-        """The rig's calibration as of ``now`` (Unix s): date, validity, whether it is due."""
+    def calibration_state(self, rig: Rig, now: float) -> dict[str, Any] | None:
+        """The rig's calibration as of ``now`` (Unix s): date, validity, whether it is due.
+
+        Due also while the newest check standard (`moi check-standard`) measured since the calibration
+        failed (E_n > 1): the budget no longer covers what the rig does.
+        """
         cal = rig.calibration
-        if cal is None:
+        try:
+            checks = self.store.check_standards(limit=1) if self.store is not None else []
+        except StoreError:
+            log.exception("could not read the check standards; the calibration state leaves them out")
+            checks = []
+        check = checks[0] if checks else None
+        if check is not None and cal is not None:
+            calibrated = _dt.datetime.combine(cal.date, _dt.time(), _dt.UTC).timestamp()
+            if check["finished_at"] < calibrated:
+                check = None  # a check before the calibration says nothing about it
+        failed = check is not None and not check["passed"]
+        if cal is None and not failed:
             return None
-        state = cal.state(_dt.datetime.fromtimestamp(now, _dt.UTC).date())
-        return {k: state[k] for k in ("date", "valid_until", "due")} | {"stiffness": rig.stiffness,
-                                                                          "stiffness_std": rig.stiffness_std}
+        today = _dt.datetime.fromtimestamp(now, _dt.UTC).date()
+        until = cal.valid_until if cal is not None else None
+        state: dict[str, Any] = {
+            "date": cal.date.isoformat() if cal is not None else None,
+            "valid_until": until.isoformat() if until else None,
+            "due": (cal is not None and cal.due(today)) or failed, "stiffness": rig.stiffness,
+            "stiffness_std": rig.stiffness_std}
+        if check is not None:
+            state["check_standard"] = {k: check.get(k) for k in ("name", "E_n", "passed", "finished_at")}
+        return state
 
     def _store_failure(self, event: Event) -> None:
         assert self.store is not None and event.measurement_id is not None
@@ -699,7 +733,7 @@ class Appliance:
         if checked_for is recipe and now - checked_at < CALIBRATION_CHECK_INTERVAL:
             return due
         rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
-        state = self._calibration_state(rig, self.wall_clock())
+        state = self.calibration_state(rig, self.wall_clock())
         due = bool(state and state["due"])
         self._calibration_checked = (now, recipe, due)
         return due

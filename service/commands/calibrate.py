@@ -8,22 +8,30 @@ modulation ζ as a monocular-vision torsion pendulum reports them:
     name = "empty"
     trace = "empty.csv"            # path relative to CAL.toml
     added_inertia = 0.0            # kg·m²
-    added_inertia_std = 0.0        # optional: 1σ of the known inertia, kg·m² (recorded)
+    added_inertia_std = 0.0        # 1σ of the known inertia, kg·m² (its certificate)
 
     [[reference]]
     name = "two cylinders, L = 50 mm"
     omega = 6.9930                 # ω_m, rad/s (damped main frequency)
     zeta = -0.06017                # amplitude modulation ζ, 1/s (either sign)
-    cylinders = [{ mass = 0.5021, diameter = 0.06007, distance = 0.05 },
+    omega_n_std = 2e-4             # 1σ of the frequency, rad/s (a trace's comes from its fit)
+    cylinders = [{ mass = 0.5021, diameter = 0.06007, distance = 0.05,
+                   mass_std = 1e-4, diameter_std = 1e-5, distance_std = 2e-5 },
                  { mass = 0.5006, diameter = 0.06004, distance = 0.05 }]
+
+The regression uses every stated uncertainty (weighted, errors in the known
+inertia as well as in ω_n: measurement/calibration.py); a reference whose σ
+is not stated is said to be so. With few references a small misfit does not
+shrink k's σ below what the certificates allow.
 
 With ``--out`` the rig file gets the calibrated k and I0 with their 1σ and a
 ``[calibration]`` table: the date (``--date``, default today, UTC), the
 validity period (``--valid-days``, default 365), the calibration file and
 every reference used with its known inertia, its uncertainty, the measured
-ω_n ± 1σ and the fit's misfit. Results measured after date + valid_days
-carry the flag ``calibration_due``; the 1σ of k enters every J's expanded
-uncertainty (``J_std_calibration``).
+ω_n ± 1σ and the fit's misfit, and the covariance of k and I0
+(``stiffness_tare_covariance``). Results measured after date + valid_days
+carry the flag ``calibration_due``; k, I0 and their covariance enter every
+J's uncertainty budget (docs/uncertainty.md).
 """
 
 from __future__ import annotations
@@ -35,15 +43,18 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
-from measurement.calibration import Cylinder, Reference, calibrate_torsion
+from measurement.calibration import Cylinder, Reference, calibrate_torsion, cylinder_inertia_std
 from measurement.errors import CalibrationError
 from measurement.rig import CalibrationRecord
 
 from service.sources.files import read_rig, read_toml, read_trace, write_rig
 
 
-_REF_KEYS = {"name", "trace", "added_inertia", "added_inertia_std", "cylinders", "omega", "zeta", "omega_n"}
-_CYL_KEYS = {"mass", "diameter", "distance", "own_inertia"}
+_REF_KEYS = {"name", "trace", "added_inertia", "added_inertia_std", "cylinders", "omega", "zeta", "omega_n",
+             "omega_n_std"}
+_CYL_VALUE_KEYS = {"mass", "diameter", "distance", "own_inertia"}
+_CYL_STD_KEYS = {"mass_std", "diameter_std", "distance_std"}
+_CYL_KEYS = _CYL_VALUE_KEYS | _CYL_STD_KEYS
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -65,8 +76,14 @@ def _number(ref_name: str, key: str, value, allow_zero: bool = True) -> float:
     return float(value)
 
 
-def load_references(path: str, rig, stds: dict[str, float] | None = None) -> list[Reference]:
-    """The references of CAL.toml; ``stds`` (if given) receives name → added_inertia_std (kg·m²)."""
+def _std(ref_name: str, key: str, value, unit: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+        raise CalibrationError(f"reference {ref_name!r}: {key} must be a standard uncertainty >= 0 {unit}, got {value!r}")
+    return float(value)
+
+
+def load_references(path: str, rig) -> list[Reference]:
+    """The references of CAL.toml, each with its stated uncertainties (None where not stated)."""
     from measurement import Options, identify  # scipy: only when a reference is a trace
 
     doc = read_toml(path, "calibration file")
@@ -88,23 +105,35 @@ def load_references(path: str, rig, stds: dict[str, float] | None = None) -> lis
             cyls = r["cylinders"]
             if not isinstance(cyls, list) or not all(isinstance(c, dict) and set(c) <= _CYL_KEYS and {"mass", "diameter", "distance"} <= set(c) for c in cyls):
                 raise CalibrationError(f"reference {name!r}: cylinders must be tables with mass (kg), diameter (m), distance (m)")
-            added = sum(Cylinder(**c).inertia for c in cyls)
+            added, var = 0.0, 0.0
+            for c in cyls:
+                cyl = Cylinder(**{k: v for k, v in c.items() if k in _CYL_VALUE_KEYS})
+                added += cyl.inertia
+                stds = {k: _std(name, f"cylinder {k}", v, "(kg or m)") for k, v in c.items() if k in _CYL_STD_KEYS}
+                var += cylinder_inertia_std(cyl, **stds) ** 2
+            # a cylinder's tolerances given: its part of the reference's σ (the rest from added_inertia_std)
+            tol = math.sqrt(var) if any(set(c) & _CYL_STD_KEYS for c in cyls) else None
         else:
             added = _number(name, "added_inertia", r["added_inertia"])
+            tol = None
+        u_added = None
         if "added_inertia_std" in r:
-            u = _number(name, "added_inertia_std", r["added_inertia_std"])
-            if u < 0:
-                raise CalibrationError(f"reference {name!r}: added_inertia_std must be >= 0 kg·m², got {u!r}")
-            if stds is not None:
-                stds[name] = u
+            u_added = _std(name, "added_inertia_std", r["added_inertia_std"], "kg·m²")
+        if tol is not None:
+            u_added = math.hypot(u_added or 0.0, tol)
+        u_omega = _std(name, "omega_n_std", r["omega_n_std"], "rad/s") if "omega_n_std" in r else None
         if "trace" in r:
             trace = read_trace(base / str(r["trace"]))
             result = identify(trace, replace(rig, stiffness=None, stiffness_std=None), Options())
-            out.append(Reference(name, added, result.omega_n, result.omega_n_std))
+            # the record's own uncertainty of ω_n: the fit and its model form, unless the file states one
+            out.append(Reference(name, added, result.omega_n,
+                                 u_omega if u_omega is not None else (result.omega_n_u or result.omega_n_std), u_added))
         elif "omega" in r and "zeta" in r:
-            out.append(Reference.from_damped(name, added, _number(name, "omega", r["omega"]), _number(name, "zeta", r["zeta"])))
+            ref = Reference.from_damped(name, added, _number(name, "omega", r["omega"]), _number(name, "zeta", r["zeta"]),
+                                        u_added)
+            out.append(replace(ref, omega_n_std=u_omega))
         elif "omega_n" in r:
-            out.append(Reference(name, added, _number(name, "omega_n", r["omega_n"])))
+            out.append(Reference(name, added, _number(name, "omega_n", r["omega_n"]), u_omega, u_added))
         else:
             raise CalibrationError(f"reference {name!r}: needs a trace, or omega and zeta, or omega_n")
     return out
@@ -120,18 +149,13 @@ def run(args: argparse.Namespace) -> int:
         date = dt.date.fromisoformat(args.date) if args.date else dt.datetime.now(dt.UTC).date()
     except ValueError:
         raise CalibrationError(f"--date must be a date like 2026-01-31, got {args.date!r}") from None
-    stds: dict[str, float] = {}
-    cal = calibrate_torsion(load_references(args.calibration, rig, stds))
-    references = []
-    for ref in cal.to_dict()["references"]:
-        entry = {k: v for k, v in ref.items() if v is not None}
-        if ref["name"] in stds:
-            entry["added_inertia_std"] = stds[ref["name"]]
-        references.append(entry)
+    cal = calibrate_torsion(load_references(args.calibration, rig))
+    references = [{k: v for k, v in ref.items() if v is not None} for ref in cal.to_dict()["references"]]
     record = CalibrationRecord(date, args.valid_days, tuple(references), str(args.calibration))
     if args.out:
         new = replace(rig, stiffness=cal.stiffness, stiffness_std=cal.stiffness_std,
-                      tare_inertia=cal.tare_inertia, tare_inertia_std=cal.tare_inertia_std, calibration=record)
+                      tare_inertia=cal.tare_inertia, tare_inertia_std=cal.tare_inertia_std,
+                      stiffness_tare_covariance=cal.covariance, calibration=record)
         write_rig(new, args.out, comment=f"calibrated by moi calibrate from {args.calibration}", keep_from=args.rig)
     if args.json:
         print(json.dumps(cal.to_dict() | {"date": date.isoformat(), "valid_days": args.valid_days,

@@ -227,7 +227,7 @@ def _run(app, args: argparse.Namespace) -> int:
             fit_u = "joint u" if joint else "fit u"
             print(f"part {payload['part_id']}: {part['quantity']} = {_g(part['mean'], '.7g')} kg·m² (releases "
                   f"{[i + 1 for i in part['used']]} {how}), s = {_g(part['std'])}, Type A u = {_g(part['u_typeA'])}, "
-                  f"{fit_u} = {_g(part['u_fit'])}, calibration u = {_g(part['u_systematic'])}, U = {_g(part['U'])} kg·m²")
+                  f"{fit_u} = {_g(part['u_fit'])}, systematic u = {_g(part['u_systematic'])}, U = {_g(part['U'])} kg·m²")
             if joint:
                 c = joint["consistency"]
                 print(f"  the releases against the joint ω_n {joint['omega_n']:.7g} rad/s: χ² {c['chi2']:.2f} on "
@@ -245,6 +245,13 @@ def _run(app, args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps(payload, ensure_ascii=False))
         print(f"the result page: {app.web.url}results/{payload['uuid']}")
+        quantity = recipe.spec.quantity if recipe.spec is not None else "J"
+        budget = (payload.get("uncertainty_budget") or {}).get(quantity)
+        if budget:
+            top = sorted(budget["lines"], key=lambda ln: -ln["share"])[:3]
+            print(f"uncertainty budget of {quantity} (one release): U = {_g(budget['U'])} kg·m² "
+                  f"(k = {budget['coverage_factor']:.3g}); largest terms: "
+                  + ", ".join(f"{ln['source']} {100 * ln['share']:.2g} %" for ln in top))
         if args.serve:
             print("serving until Ctrl-C")
             try:

@@ -11,8 +11,10 @@ from typing import Any
 
 from measurement.rig import Rig
 
-#: the simulated rig when no rig file is given: torsion, k = 0.3651 N·m/rad, empty fixture 4.5043e-3 kg·m²
-DEMO_RIG = Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5043e-3, declared=("viscous",))
+#: the simulated rig when no rig file is given: torsion, k = 0.3651 N·m/rad, empty fixture 4.5043e-3 kg·m², with
+#: the uncertainties `moi calibrate examples/calibration.toml` gives them (k and I0 correlated) and a 20 ppm clock
+DEMO_RIG = Rig(kind="torsion", stiffness=0.3651, stiffness_std=3.373e-4, tare_inertia=4.5043e-3, tare_inertia_std=4.177e-6,
+               stiffness_tare_covariance=1.4076e-9, clock_accuracy_ppm=20.0, declared=("viscous",))
 
 #: true J of the simulated part, kg·m²
 DEMO_INERTIA = 0.0125

@@ -27,6 +27,7 @@ directory (``[recipes] directory``)::
     min_swings = 3.0              # fewest full swings in the fitted window
     consistency_limit = 3.0       # |z| above which releases disagree
     min_valid_releases = 2        # fewest usable releases for a part verdict (default: all of them)
+    max_uncertainty_ratio = 0.25  # optional: U at most this fraction of the half-tolerance, else INVALID
 
 A recipe may instead declare a tensor plan: the part's inertia tensor is then
 measured as a guided set of orientations (``service.parts.tensor_set``), each
@@ -46,6 +47,21 @@ with ``releases`` releases; nominal and tolerance do not apply::
     axis = [1, 0, 0]
     offset = [0.0, 0.03, -0.02]   # optional, m
     # … at least six
+
+A recipe may make its part a check standard, a reference artifact of
+certified J ± U measured at the station like a part (the PLC selects its
+number): each complete part is also compared with the certificate, its
+normalised error E_n stored as a check standard (as `moi check-standard`
+does), and while the newest one has failed the appliance's results carry
+``calibration_due``::
+
+    [check_standard]
+    reference = 0.012500          # certified value of the recipe quantity, kg·m² (default: the nominal)
+    reference_U = 2.0e-5          # its expanded uncertainty (certificate, k = 2), kg·m²
+    name = "disc CS-1"            # the artifact (default: the recipe name)
+
+Unless the recipe lists its own ``invalid_flags``, a check standard is not made
+INVALID by ``calibration_due``: a passing check is what clears it.
 
 The decision rule and the combination of releases are
 ``measurement.verdict``'s (documented there). The recipe version is the
@@ -73,6 +89,7 @@ from typing import Any, Mapping
 from measurement import Rig
 from measurement.errors import InvalidInput, MeasurementError
 from measurement.tensor import RigShared, TensorPlan
+from measurement.uncertainty import check_standard
 from measurement.units import inertia_unit
 from measurement.verdict import (QUANTITIES, RULES, PartResult, QualityRules, Reading,
                                  Specification, combine, judge_release)
@@ -117,6 +134,8 @@ class Recipe:
     declared: tuple[str, ...] | None = None
     tensor: TensorPlan | None = None  # the orientations of a guided tensor set
     display_unit: str | None = None   # the unit pages and reports show (None: the set-up's); values stay kg·m²
+    #: a check standard: {name, reference, reference_U} (kg·m²); None for a part type
+    check_standard: dict[str, Any] | None = None
 
     def rig_for(self, device_rig: Rig) -> Rig:
         """The rig a measurement of this part type is identified with."""
@@ -148,7 +167,8 @@ class Recipe:
                 "declared": list(self.declared) if self.declared is not None else None,
                 "display_unit": self.display_unit,
                 **(self.spec.to_dict() if self.spec is not None else {}), "quality": self.quality.to_dict(),
-                **({"tensor": self.tensor.to_dict()} if self.tensor is not None else {})}
+                **({"tensor": self.tensor.to_dict()} if self.tensor is not None else {}),
+                **({"check_standard": dict(self.check_standard)} if self.check_standard is not None else {})}
 
 
 # --- reading and checking recipe files -------------------------------------------------------------------------
@@ -177,10 +197,20 @@ def _schemas() -> dict[str, dict[str, Any]]:
         "quality": _schema(QualityRules, {
             "invalid_flags": _doc(""), "min_swings": _doc("", min=0.0),
             "consistency_limit": _doc("", min=0, min_open=True),
-            "min_valid_releases": _doc("default: all releases", min=1)},
+            "min_valid_releases": _doc("default: all releases", min=1),
+            "max_uncertainty_ratio": _doc("largest expanded uncertainty U as a fraction of the half-tolerance "
+                                          "(0.25: a test uncertainty ratio of 4); beyond it a result is INVALID",
+                                          min=0, min_open=True)},
             defaults={"min_valid_releases": None},
             extra={"max_J_std": Key("float", None, "kg·m²", min=0, min_open=True),
                    "max_J_std_percent": Key("float", None, "% of J", min=0, min_open=True)}),
+        "check_standard": {
+            "reference": Key("float", None, "certified value of the recipe quantity, kg·m² (default: the nominal)",
+                             min=0, min_open=True),
+            "reference_U": Key("float", REQUIRED, "its expanded uncertainty (certificate), kg·m²", min=0,
+                               min_open=True),
+            "name": Key("str", None, "the artifact (default: the recipe name)"),
+        },
     }
 
 
@@ -206,7 +236,8 @@ def load_recipe(path: str | Path) -> Recipe:
     schemas = _schemas()
     for t in doc:
         if t not in schemas and t != "tensor":
-            raise c.fail(None, None, f"unknown table [{t}]; expected [recipe], [decision], [quality], [tensor]")
+            raise c.fail(None, None, f"unknown table [{t}]; expected [recipe], [decision], [quality], [tensor], "
+                         "[check_standard]")
     if "recipe" not in doc:
         raise c.fail(None, None, "missing [recipe] table (name, number, quantity, nominal, tolerance, releases)")
     rec = c.table("recipe", doc["recipe"], schemas["recipe"])
@@ -268,19 +299,31 @@ def load_recipe(path: str | Path) -> Recipe:
     if min_valid > releases:
         raise c.fail("quality", "min_valid_releases", f"expected at most releases = {releases}, got {min_valid}")
     pct = qual["max_J_std_percent"]
-    quality = QualityRules(invalid_flags=tuple(qual["invalid_flags"]), max_std=qual["max_J_std"],
+    invalid_flags = tuple(qual["invalid_flags"])
+    if "check_standard" in doc and "invalid_flags" not in doc.get("quality", {}):
+        # the check standard is what clears a calibration_due its failure raised: it must not be refused for it
+        invalid_flags = tuple(f for f in invalid_flags if f != "calibration_due")
+    quality = QualityRules(invalid_flags=invalid_flags, max_std=qual["max_J_std"],
                            max_std_relative=None if pct is None else pct / 100.0, min_swings=qual["min_swings"],
-                           consistency_limit=qual["consistency_limit"], min_valid_releases=min_valid)
+                           consistency_limit=qual["consistency_limit"], min_valid_releases=min_valid,
+                           max_uncertainty_ratio=qual["max_uncertainty_ratio"])
     spec = None
     if tensor is None:
         try:
             spec = Specification.symmetric(rec["quantity"], nominal, tol, **dec)
         except InvalidInput as exc:
             raise c.fail("recipe", None, str(exc)) from None
+    check = None
+    if "check_standard" in doc:
+        if tensor is not None:
+            raise c.fail("check_standard", None, "a tensor recipe cannot be a check standard")
+        cs = c.table("check_standard", doc["check_standard"], schemas["check_standard"])
+        check = {"name": cs["name"] or name, "reference": cs["reference"] if cs["reference"] is not None else nominal,
+                 "reference_U": cs["reference_U"]}
     return Recipe(name=name, number=rec["number"], description=rec["description"], path=str(p),
                   version=hashlib.sha256(raw).hexdigest()[:16], releases=releases, spec=spec, quality=quality,
                   rig=rig, rig_path=rig_path, declared=None if declared is None else tuple(declared), tensor=tensor,
-                  display_unit=unit)
+                  display_unit=unit, check_standard=check)
 
 
 @dataclass(frozen=True)
@@ -418,6 +461,11 @@ class PartTracker:
             self.last_part = part
             out["part"] = {"uuid": o.uuid, "part_id": part_id, "measurements": list(o.measurements),
                            "quantity": spec.quantity, **part.to_dict()}
+            cs = recipe.check_standard
+            if cs is not None and part.decision.value is not None and part.decision.U is not None:
+                check = check_standard(cs["name"], spec.quantity, part.decision.value, part.decision.U,
+                                       cs["reference"], cs["reference_U"])
+                out["part"]["check_standard"] = check.to_dict()
             out["verdict"] = part.verdict
             for e in part.excluded:
                 log.warning("part %s: release %d excluded: %s", part_id or o.uuid, e["index"] + 1, e["reason"])

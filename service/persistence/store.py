@@ -121,6 +121,19 @@ CREATE TABLE IF NOT EXISTS tensor_sets (
 """
 
 
+#: check standards: a reference artifact of certified J ± U measured, its normalised error E_n
+#: (``measurement.uncertainty.CheckStandard``); a table of its own, so an older store gains it unchanged
+_CHECK_SCHEMA = """
+CREATE TABLE IF NOT EXISTS check_standards (
+    id          INTEGER PRIMARY KEY,
+    name        TEXT NOT NULL,
+    finished_at REAL NOT NULL,
+    passed      INTEGER NOT NULL,
+    record      TEXT NOT NULL
+);
+"""
+
+
 def _read_only_connection(path: Path) -> sqlite3.Connection:
     """A connection that never writes. WAL mode needs the -shm file, which a read-only directory
     cannot get; with no -wal file nothing waits to be checkpointed, so the file is read as it is."""
@@ -285,6 +298,7 @@ class Store:
             self._db.execute("PRAGMA foreign_keys=ON")
             self._db.executescript(_SCHEMA)  # idempotent (IF NOT EXISTS)
             self._db.executescript(_TENSOR_SCHEMA)
+            self._db.executescript(_CHECK_SCHEMA)
             have = {row[1] for row in self._db.execute("PRAGMA table_info(measurements)")}
             for name, kind in PART_COLUMNS:
                 if name not in have:
@@ -630,6 +644,26 @@ class Store:
                                     + (" LIMIT ?" if limit is not None else ""),
                                     (int(limit),) if limit is not None else ()).fetchall()
         return [json.loads(r[0]) | {"started_at": r[1], "finished_at": r[2]} for r in rows]
+
+    # --- check standards ----------------------------------------------------------
+    @_store_errors("storing a check standard")
+    def record_check_standard(self, record: Mapping[str, Any], *, finished_at: float) -> None:
+        """Store one check-standard measurement (``CheckStandard.to_dict()`` and what it was measured with)."""
+        with self._lock, self._tx() as db:
+            db.execute("INSERT INTO check_standards (name, finished_at, passed, record) VALUES (?,?,?,?)",
+                       (str(record["name"]), finished_at, 1 if record["passed"] else 0,
+                        json.dumps(record, allow_nan=False)))
+
+    @_store_errors("reading check standards")
+    def check_standards(self, limit: int | None = 20) -> list[dict[str, Any]]:
+        """Stored check-standard measurements, newest first, each with ``finished_at``."""
+        with self._lock:
+            if not self._db.execute("SELECT 1 FROM sqlite_master WHERE name = 'check_standards'").fetchone():
+                return []  # a read-only store written before check standards existed
+            rows = self._db.execute("SELECT record, finished_at FROM check_standards ORDER BY id DESC"
+                                    + (" LIMIT ?" if limit is not None else ""),
+                                    (int(limit),) if limit is not None else ()).fetchall()
+        return [json.loads(r[0]) | {"finished_at": r[1]} for r in rows]
 
     @_store_errors("reading an attachment")
     def get_attachment(self, uuid: str, name: str) -> tuple[bytes, str] | None:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from service.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -24,6 +26,11 @@ def test_two_releases_give_one_joint_answer_with_a_consistency_test(capsys):
     lo, hi = sorted(c["omega_n"])
     assert lo <= d["omega_n"] <= hi
     assert d["omega_n_u"] >= d["omega_n_std"] > 0
+    # the joint value has its own budget: the joint ω_n and the rig's constants
+    b = d["uncertainty_budget"]["J"]
+    # no m, S, g stated (the rig file says none): U is 2 × the ω_n term's u alone, the lines say so
+    assert d["J_U"] == b["U"] == pytest.approx(2 * d["J_u"], rel=1e-6)
+    assert {ln["symbol"] for ln in b["lines"]} >= {"omega_n_fit", "m", "S", "g"}
 
 
 def test_the_report_lists_each_release_and_the_verdict_on_their_agreement(capsys):

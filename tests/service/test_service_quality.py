@@ -60,6 +60,10 @@ def test_tolerance_band_puts_the_guard_band_inside_the_limits_and_the_interval_a
     {"contributions": [{"source": "fit", "std": 1e-6, "share": 0.5}]},
     {"components": {"fit": {"u": 1e-6, "share": 0.5}}},
     {"fit": 1e-6},
+    # a result's own: measurand → budget with its lines (measurement.uncertainty)
+    {"J": {"measurand": "J", "unit": "kg·m²", "U": 2e-6, "lines": [
+        {"symbol": "fit", "source": "fit", "std": 3e-6, "unit": "rad/s", "sensitivity": -0.33,
+         "contribution": -1e-6, "share": 0.5}]}, "J_object": {"lines": []}},
 ])
 def test_an_uncertainty_budget_is_read_in_any_of_its_shapes(budget):
     rows = Q.budget_rows(budget)

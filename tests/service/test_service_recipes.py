@@ -59,6 +59,10 @@ def recipe_dir(tmp_path) -> Path:
                                     rig="../rigs/cal-rig.toml"))
     write(d / "strict.toml", recipe("rotor-strict", 11, J_TRUE, tolerance_percent=1.0, releases=1)
           + "[quality]\nmax_J_std = 1e-12\n")
+    # a check standard whose certificate is 1 % off the artifact: E_n > 1, the station's calibration is due
+    write(d / "check.toml", recipe("check-disc", 12, J_TRUE, tolerance_percent=5.0, releases=1)
+          + f"[check_standard]\nreference = {J_TRUE * 1.01!r}\nreference_U = 2e-5\nname = \"disc CS-1\"\n")
+    write(d / "after.toml", recipe("rotor-after", 13, J_TRUE, tolerance_percent=5.0, releases=1))
     return d
 
 
@@ -104,7 +108,8 @@ def test_a_plc_selects_a_recipe_writes_a_part_id_and_reads_the_verdict_of_three_
                 assert s["verdict"] == 0 and math.isnan(s["part_value"])  # the part is not complete yet
                 assert R.decode_image(c.read_input_registers(0, count=10, device_id=1).registers)["part_releases_done"] == i
         assert s["verdict"] == R.VERDICT_CODES["OK"]
-        assert abs(s["part_value"] / J_TRUE - 1) < 2e-3 and 0 < s["part_U"] < 1e-5
+        # U of the part: the demo rig's calibration (k known to 0.09 %) dominates, the releases average down
+        assert abs(s["part_value"] / J_TRUE - 1) < 2e-3 and 1e-5 < s["part_U"] < 5e-5
         live = R.decode_image(c.read_input_registers(0, count=10, device_id=1).registers)
         assert live["status"] & (1 << R.STATUS_BITS["part_ok"]) and not live["status"] & (1 << R.STATUS_BITS["part_nok"])
         assert live["recipe"] == 7 and live["part_releases_done"] == 0
@@ -138,7 +143,7 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
             assert rr.isError() and rr.exception_code == 0x02, address
         rr = c.write_register(R.WRITABLE["recipe_select"][0], 99, device_id=1)  # no such recipe
         assert rr.isError() and rr.exception_code == 0x03
-        for n, number in enumerate((8, 9, 10, 11), start=1):
+        for n, number in enumerate((8, 9, 10, 11, 12, 13), start=1):
             select(c, number)
             assert not write_part_id(c, f"P-{number}").isError()
             assert not c.write_coil(R.COILS["trigger"], True, device_id=1).isError()
@@ -169,6 +174,16 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
     assert verdict == code["INVALID"] and p["part"]["reasons"][-1] == "release 1: invalid: flag calibration_due", (p["flags"], p["part"])
     verdict, p = verdicts[11]
     assert verdict == code["INVALID"] and "above the limit" in p["part"]["excluded"][0]["reason"], (p["flags"], p["part"])
+    # the check standard measured at the station: E_n stored with the history; the next part is INVALID
+    verdict, p = verdicts[12]
+    check = p["part"]["check_standard"]
+    assert check["name"] == "disc CS-1" and check["E_n"] > 1 and not check["passed"]
+    assert app.app.store.check_standards(limit=1)[0]["E_n"] == check["E_n"]
+    verdict, p = verdicts[13]
+    assert p["calibration"]["due"] and p["calibration"]["check_standard"]["passed"] is False
+    assert verdict == code["INVALID"] and "calibration_due" in p["flags"]
+    # the check standard is not refused for the calibration_due its own failure raised: a passing one clears it
+    assert "calibration_due" not in load_recipe(recipe_dir / "check.toml").quality.invalid_flags
 
 
 @pytest.mark.broker
@@ -221,6 +236,12 @@ def test_recipe_files_are_checked_with_one_line_errors(tmp_path):
         "quantity": (recipe("a", 1, 0.01, tolerance=1e-4, quantity="mass"), "[recipe] quantity: expected one of"),
         "min-valid": (recipe("a", 1, 0.01, tolerance=1e-4, releases=2) + "[quality]\nmin_valid_releases = 3\n",
                       "at most releases = 2"),
+        "tur": (recipe("a", 1, 0.01, tolerance=1e-4) + "[quality]\nmax_uncertainty_ratio = -0.25\n",
+                "[quality] max_uncertainty_ratio: expected a number > 0"),
+        "check-u": (recipe("a", 1, 0.01, tolerance=1e-4) + "[check_standard]\nreference = 0.01\n",
+                    "[check_standard] reference_U"),
+        "check-neg": (recipe("a", 1, 0.01, tolerance=1e-4) + '[check_standard]\nreference_U = "2e-5"\n',
+                      "[check_standard] reference_U: expected a number > 0"),
     }
     for name, (text, message) in cases.items():
         path = write(tmp_path / f"{name}.toml", text)

@@ -21,7 +21,7 @@ def payload(seq: int = 5, **over) -> dict:
         "uuid": str(uuid.UUID(int=0x0123456789ABCDEF0011223344556677)), "seq": seq, "timestamp": 1_700_000_000.75,
         "J": 0.012500019744038582, "J_std": 6.2e-08, "omega_n": 5.404438495635986, "omega_n_std": 1.3e-05,
         "damping_ratio": 0.0019768, "damping_ratio_std": 2.58e-06, "residual_rms_after": 1.065e-4,
-        "residual_rms_before": 2.5e-4, "noise_floor": 1.08e-4, "J_object": None,
+        "residual_rms_before": 2.5e-4, "noise_floor": 1.08e-4, "J_object": None, "J_U": 3.1e-5, "J_object_U": None,
         "flags": ["outliers_removed", "some_future_flag"], "effects": ["viscous", "coulomb"],
     }
     p.update(over)
@@ -35,9 +35,10 @@ def test_snapshot_round_trip_is_exact_to_float32(order):
     assert len(words) == R.SNAPSHOT_END - R.SNAPSHOT_START
     d = R.decode_image(words, order, start=R.SNAPSHOT_START)
     for reg, key in (("J", "J"), ("J_std", "J_std"), ("omega_n", "omega_n"), ("damping_ratio", "damping_ratio"),
-                     ("residual_rms", "residual_rms_after"), ("residual_rms_before", "residual_rms_before")):
+                     ("residual_rms", "residual_rms_after"), ("residual_rms_before", "residual_rms_before"),
+                     ("J_U", "J_U")):
         assert d[reg] == float(np.float32(p[key])), reg
-    assert math.isnan(d["J_object"])  # None → NaN
+    assert math.isnan(d["J_object"]) and math.isnan(d["J_object_U"])  # None → NaN
     assert d["seq"] == d["seq_end"] == 5
     assert d["timestamp"] == 1_700_000_000
     assert d["uuid"] == p["uuid"]

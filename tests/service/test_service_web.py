@@ -110,6 +110,9 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
     assert app.web.child.jobs >= 1  # in the child process, away from the sensor's reader
     status, _, page = c.request(f"/results/{m.seq}")
     assert status == 200 and f"{m.J:.7g}".encode() in page
+    # the uncertainty budget: a table per measurand, each line's share as a bar
+    budget = page.decode().split('id="uncertainty-budget"')[1]
+    assert "stiffness k (calibration)" in budget and "<meter" in budget and "U = " in budget
     status, _, csv_text = c.request(f"/results/{m.uuid}/trace.csv")
     assert status == 200 and b"t,angle" in csv_text
     status, body = c.json(f"/results/{m.uuid[:8]}/result.json")

@@ -27,7 +27,7 @@ from measurement import flags as F
 from measurement.tensor import COMPONENTS
 
 #: bumped whenever an address or an encoding in this file changes; what each version changed is in CHANGELOG.md
-MAP_VERSION = 10
+MAP_VERSION = 11
 
 
 # --- enumerations ------------------------------------------------------------
@@ -95,7 +95,7 @@ STATUS_BITS: dict[str, int] = {
 PLC_STATUS_BITS: dict[str, int] = {
     "ready": 0,                  # IDLE: a trigger is accepted now
     "busy": 1,                   # a measurement runs (ARMED … PUBLISHING)
-    "result_valid": 2,           # the block 10–63 shows a result not yet acknowledged (latest mode: a result)
+    "result_valid": 2,           # the snapshot block shows a result not yet acknowledged (latest mode: a result)
     "result_buffer_overrun": 3,  # a result found the queue full (see overrun_count); cleared by acknowledge_fault
     "error": 4,                  # error_code is not 0
     "calibration_due": 5,        # the rig's calibration is past its validity period
@@ -280,7 +280,12 @@ def _table() -> tuple[Register, ...]:
     add("snapshot", 52, "part_id", "ascii20", "", "part_id", "the part ID the release was measured for (echo of registers 100–109)")
     add("snapshot", 62, "flags_high", "bits16", "bits", "flags_high",
         "more quality flags: " + ", ".join(f"bit {b - 16} {n}" for n, b in FLAG_BITS.items() if b >= 16))
-    add("snapshot", 63, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
+    add("snapshot", 63, "J_U", "float32", "kg·m²", "J_U",
+        "expanded uncertainty U of J from its uncertainty budget (coverage factor in the result, k = 2 unless "
+        "few degrees of freedom call for more; NaN when J is unknown)")
+    add("snapshot", 65, "J_object_U", "float32", "kg·m²", "J_object_U",
+        "expanded uncertainty U of J_object, the k–I0 correlation of the calibration kept (NaN without a tare)")
+    add("snapshot", 67, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
 
     # The PLC handshake: live, at a fixed address past the snapshot (which may grow up to it), so that
     # registers 0…88 are one request.
@@ -419,6 +424,7 @@ def _snapshot_values(payload: Mapping[str, Any] | None) -> dict[str, Any]:
         "residual_rms_before": payload.get("residual_rms_before"),
         "noise_floor": payload.get("noise_floor"),
         "J_object": payload.get("J_object"),
+        "J_U": payload.get("J_U"), "J_object_U": payload.get("J_object_U"),
         "flags": flags & 0xFFFF,
         "flags_high": flags >> 16,
         "effects": effect_bits(payload.get("effects") or ()),
@@ -704,7 +710,8 @@ def _handshake_markdown() -> list[str]:
     L.append("")
     L.append("### The result queue (`[modbus] result_handshake`)")
     L.append("")
-    L.append("`\"latest\"` (default, the map of versions before 10): the block 10–63 shows the latest result; a "
+    L.append(f"`\"latest\"` (default, the map of versions before 10): the block {SNAPSHOT_START}–{SNAPSHOT_END - 1} "
+             "shows the latest result; a "
              "result the PLC has not read yet is replaced by the next. `\"ack\"`: every stored result is queued "
              "(at most `[modbus] queue_depth`, default 8); the block shows the oldest one not yet acknowledged, "
              f"`results_queued` (register {b['results_queued'].address}) counts them. The PLC acknowledges it by "
@@ -736,7 +743,8 @@ def _handshake_markdown() -> list[str]:
     L.append(f"        WriteReg(addr := {a['command']}, value := 0);                 (* hand off: trigger_ack clears *)")
     L.append("      END_IF;")
     L.append(f"  30: IF Img.plc_status.{PLC_STATUS_BITS['result_valid']} THEN      (* result_valid *)")
-    L.append("        Result := Img.snapshot;                              (* registers 10..63 of the same read *)")
+    L.append(f"        Result := Img.snapshot;                              (* registers {SNAPSHOT_START}..{SNAPSHOT_END - 1} "
+             "of the same read *)")
     L.append(f"        WriteReg(addr := {a['result_ack']}, value := Img.seq);         (* acknowledge it *)")
     L.append("        IF Result.release_index < Result.releases THEN Step := 10; ELSE Step := 40; END_IF;")
     L.append("      END_IF;")

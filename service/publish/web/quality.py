@@ -63,7 +63,9 @@ def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
     part = p.get("part") or None
     release = p.get("release") or None
     out: dict[str, Any] = {"recipe": recipe, "part": part, "release": release, "excluded": [], "reasons": [],
-                           "budget": budget_rows(p.get("uncertainty_budget"))}
+                           "budget": budget_rows(p.get("uncertainty_budget"),
+                                                 ((part or release or {}).get("quantity") or (recipe or {}).get("quantity")
+                                                  or "J"))}
     k = (recipe or {}).get("coverage_factor") or p.get("coverage_factor")
     if part is not None:
         out.update(kind="part", verdict=part.get("verdict"), value=part.get("value"), U=part.get("U"), k=k,
@@ -109,14 +111,19 @@ def release_rows(view: Mapping[str, Any], payload: Mapping[str, Any] | None,
              "flags": list(p.get("flags") or ()), "seq": p.get("seq"), "uuid": p.get("uuid")}]
 
 
-def budget_rows(budget: Any) -> list[dict[str, Any]]:
-    """The rows of a result's uncertainty budget (source, standard uncertainty kg·m², share of u_c²), from a
-    list of rows or a mapping that holds one (``contributions`` / ``rows`` / ``components``) or maps each source
-    to its u; [] when the result carries none."""
+def budget_rows(budget: Any, quantity: str = "J") -> list[dict[str, Any]]:
+    """The rows of a result's uncertainty budget (source, contribution to the measurand's standard
+    uncertainty kg·m², share of u_c²): from the result's measurand → budget mapping (each with its ``lines``,
+    ``measurement.uncertainty``), the budget of ``quantity``; also from a list of rows or a mapping that holds
+    one or maps each source to its u; [] when the result carries none."""
     if not budget:
         return []
+    if isinstance(budget, Mapping) and isinstance(budget.get(quantity), Mapping):
+        budget = budget[quantity]
     rows: Any = budget
-    if isinstance(budget, Mapping):
+    if isinstance(budget, Mapping) and isinstance(budget.get("lines"), (list, tuple)):
+        rows = budget["lines"]
+    elif isinstance(budget, Mapping):
         rows = next((budget[k] for k in ("contributions", "rows", "components", "sources") if k in budget), None)
         if rows is None:
             rows = [{"name": k, "u": v} for k, v in budget.items() if isinstance(v, (int, float))]
@@ -133,6 +140,8 @@ def budget_rows(budget: Any) -> list[dict[str, Any]]:
             (r[k] for k in ("u", "std", "standard_uncertainty") if k in r), None)
         unit = r.get("unit") if contribution is None and r.get("unit") not in (None, SI) else None
         share = next((r[k] for k in ("share", "fraction", "percent_of_variance") if k in r), None)
+        if isinstance(u, (int, float)) and not isinstance(u, bool):
+            u = abs(u)  # a contribution c·u carries the sign of its sensitivity; its size is what the row says
         out.append({"name": str(next((r[k] for k in ("name", "source", "quantity") if k in r), "")),
                     "u": u, "unit": unit, "share": share})
     return out

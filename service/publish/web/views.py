@@ -254,10 +254,10 @@ class Views:
         counts = store.verdict_counts(since=shift.timestamp()) if store is not None else {}
         tracker = getattr(self.app, "parts", None)
         open_part = tracker.open_part if tracker is not None else None
-        recipe = tracker.recipe if tracker is not None else None
-        rig = recipe.rig_for(self.app.config.rig) if recipe is not None else self.app.config.rig
-        # as the daemon judges it for the results: the UTC day
-        calibration = rig.calibration.state(dt.datetime.now(dt.UTC).date()) if rig.calibration is not None else None
+        calibration = self.app.calibration_state()  # as the next result will be judged
+        if calibration is not None and calibration.get("valid_until"):
+            until = dt.date.fromisoformat(calibration["valid_until"])
+            calibration = {**calibration, "days_left": (until - dt.datetime.now(dt.UTC).date()).days}
         tile = parts[0] if parts else None
         return {"tile": tile, "tile_view": Q.part_view(tile.payload) if tile else None,
                 "tile_unit": self.unit(tile.payload if tile else None), "counts": counts,

@@ -1,0 +1,90 @@
+"""Is the uncertainty budget honest? Coverage of J_object ± J_object_U over calibrate-then-measure repeats.
+
+Each repeat calibrates the example torsion rig (k = 0.3651 N·m/rad, I0 = 4.5043e-3 kg·m²) from three
+simulated reference swings (the empty fixture and two discs) whose certified inertias are off their true
+values by an error drawn from the certificate's σ (0.4 % and 0.5 %), fits k, I0 and their covariance
+(`measurement.calibration`), then measures a part (true J_object = 0.010 kg·m²) on the same rig. A true
+budget covers the truth in about 95 % of the repeats (goal 93–97 %) and is not inflated. For a normal
+error and U = k·u the median U over the RMS error is k when u is right (2 for k = 2); the bench prints it
+and its ratio to k (1 when honest; goal ≤ 1.5: at most 50 % wider than it needs to be).
+
+Run: `.venv/bin/python bench/bench_uncertainty.py [REPEATS]` (default 200; at least 40), or `make bench`.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+import sys
+import time
+
+import numpy as np
+
+from measurement import Options, Pendulum, Rig, identify, simulate_trace
+from measurement.calibration import Reference, calibrate_torsion
+from measurement.identification import budgets
+
+K, I0 = 0.3651, 4.5043e-3
+LOADS = (0.0, 0.005, 0.0125)          # true added inertias, kg·m²
+CERT_REL = (0.0, 0.004, 0.005)        # certificates' relative 1σ (the empty fixture adds exactly nothing)
+PART = 0.010                          # true J_object of the part, kg·m²
+DAMPING = {"viscous": {"c": 2e-4}}
+
+
+def swing(rig: Rig, J: float, seed: int):
+    return simulate_trace(Pendulum(rig, J, DAMPING), theta0=0.3, duration=10.0, rate=100.0, noise_std=2e-4,
+                          seed=seed)
+
+
+def repeat(i: int) -> tuple[float, float, float, float]:
+    """(error of J_object, its U, its coverage factor, the U a calibration from the misfit alone would
+    give) of one calibrate-then-measure repeat, kg·m²."""
+    rng = np.random.default_rng(1000 + i)
+    true_rig = Rig(kind="torsion", stiffness=K, declared=("viscous",))
+    refs = []
+    for j, (load, rel) in enumerate(zip(LOADS, CERT_REL)):
+        r = identify(swing(true_rig, I0 + load, 10 * i + j), Rig(kind="torsion", declared=("viscous",)), Options())
+        u = rel * load
+        certified = load + (rng.normal(0.0, u) if u else 0.0)
+        refs.append(Reference(f"ref {j}", certified, r.omega_n, r.omega_n_u or r.omega_n_std, u))
+    cal = calibrate_torsion(refs)
+    rig = Rig(kind="torsion", stiffness=cal.stiffness, stiffness_std=cal.stiffness_std, tare_inertia=cal.tare_inertia,
+              tare_inertia_std=cal.tare_inertia_std, stiffness_tare_covariance=cal.covariance, declared=("viscous",))
+    res = identify(swing(true_rig, I0 + PART, 10 * i + 9), rig, Options())
+    b = res.uncertainty_budget["J_object"]
+    # the same references without their σ: k and I0's σ from the misfit alone (1 degree of freedom)
+    old = calibrate_torsion([Reference(r.name, r.added_inertia, r.omega_n) for r in refs])
+    old_rig = Rig(kind="torsion", stiffness=old.stiffness, stiffness_std=old.stiffness_std,
+                  tare_inertia=old.tare_inertia, tare_inertia_std=old.tare_inertia_std,
+                  stiffness_tare_covariance=old.covariance, declared=("viscous",))
+    old_b = budgets(old_rig, res.omega_n, res.omega_n_std, model=res.omega_n_std_model)["J_object"]
+    return b["value"] - PART, b["U"], b["coverage_factor"], old_b.U
+
+
+def main(repeats: int = 200) -> None:
+    t0 = time.perf_counter()
+    rows = [repeat(i) for i in range(repeats)]
+    err = np.array([r[0] for r in rows])
+    U = np.array([r[1] for r in rows])
+    covered = int(np.sum(np.abs(err) <= U))
+    rms = math.sqrt(float(np.mean(err**2)))
+    ratio = statistics.median(U) / rms
+    # the binomial 95 % range of the coverage count for a true 95 % interval
+    lo, hi = np.quantile(np.random.default_rng(0).binomial(repeats, 0.9545, 100_000), [0.025, 0.975])
+    print(f"{repeats} calibrate-then-measure repeats (3 references, certificates 0.4–0.5 %, part J_object = {PART} "
+          f"kg·m²), {time.perf_counter() - t0:.0f} s")
+    print(f"  coverage of J_object ± J_object_U: {covered}/{repeats} = {100 * covered / repeats:.1f} % "
+          f"(goal 93–97 %; a true 95.45 % interval gives {int(lo)}–{int(hi)} of {repeats} in 95 % of such runs)")
+    k = statistics.median(r[2] for r in rows)
+    print(f"  median U {statistics.median(U):.3g} kg·m² ({100 * statistics.median(U) / PART:.2f} %), RMS error "
+          f"{rms:.3g} kg·m²: median U / RMS error = {ratio:.2f}, over k = {k:.2f}: {ratio / k:.2f} "
+          f"(1 when honest, goal ≤ 1.5)")
+    print(f"  U spread over the repeats: {U.min():.3g} … {U.max():.3g} kg·m² (max/min {U.max() / U.min():.2f})")
+    old = np.array([r[3] for r in rows])
+    print(f"  for contrast, k and I0's σ from the misfit alone (the references' σ ignored): coverage "
+          f"{100 * np.mean(np.abs(err) <= old):.1f} %, U {old.min():.2g} … {old.max():.2g} kg·m² "
+          f"(max/min {old.max() / old.min():.0f})")
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 200)
