@@ -346,6 +346,14 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     status, _, body = c.request("/spc?recipe=rotor-nok&chart=Xbar-R")  # one release a part: no subgroups
     assert status == 400 and b"subgroups of 2 to 10" in body
     assert "no calibration record" in home
+    # the check standard's history on the SPC page: its control chart and each check with its E_n
+    assert "no check standard measured yet" in spc
+    for i, (value, passed) in enumerate(((0.01250, True), (0.01251, True), (0.01262, False))):
+        app.store.record_check_standard({"name": "disc CS-1", "quantity": "J", "value": value, "U": 2e-5,
+                                         "reference": 0.0125, "reference_U": 2e-5, "E_n": (value - 0.0125) / 2.8e-5,
+                                         "passed": passed}, finished_at=1.7e9 + i)
+    spc = c.request("/spc?recipe=rotor-nok")[2].decode()
+    assert 'id="check-points"' in spc and spc.count("disc CS-1") == 3 and "FAILED" in spc and "4.3" in spc
     # the calibration of the rig the active recipe measures with, and its due date, on Home
     assert c.json("/api/part", data={"recipe": "rotor-cal"}, headers=bearer)[0] == 202
     # (the main loop applies the selection: the page shows it once it did)

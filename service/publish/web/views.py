@@ -664,8 +664,18 @@ class Views:
                 pass
         chart_svg = Q.control_chart(result.summary, unit) if result is not None else None
         q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
+        # the check standard's history (`moi check-standard`): its values as individuals, oldest first
+        checks = [c for c in reversed(store.check_standards(limit=SPC_POINTS) if store is not None else [])
+                  if isinstance(c.get("value"), (int, float))
+                  and (filters["since"] is None or c["finished_at"] >= filters["since"])
+                  and (filters["until"] is None or c["finished_at"] < filters["until"])]
+        check_chart = None
+        if len(checks) >= 2:
+            from measurement.spc import individuals
+
+            check_chart = Q.control_chart(individuals([float(c["value"]) for c in checks]), unit)
         return self._page(request, "spc.html", title="SPC", recipes=recipes, recipe=recipe, spc=result,
-                          chart=chart_svg, unit=unit, q=q)
+                          chart=chart_svg, unit=unit, q=q, checks=checks[-10:][::-1], check_chart=check_chart)
 
     # --- set-up -----------------------------------------------------------------------------------------
     def health(self) -> dict[str, Any]:
