@@ -132,7 +132,7 @@ def test_a_long_report_goes_on_to_more_pages_and_leaves_nothing_out():
     assert f"release {n} of {n}" in text and f"source {n - 1}" in text  # the last lines too, on a later page
 
 
-def test_the_verdict_block_shows_a_budget_when_the_result_has_one_and_the_plain_u_when_not():
+def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_result_has_one():
     import jinja2
 
     from service.publish.web.views import HERE
@@ -140,12 +140,15 @@ def test_the_verdict_block_shows_a_budget_when_the_result_has_one_and_the_plain_
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")), autoescape=True)
     env.filters.update(fmt=Q.number, inertia=Q.inertia, iso=Q.iso, name=lambda v: v)
     env.globals.update(VERDICT_WORDS=Q.VERDICT_WORDS)
-    block = env.get_template("_verdict.html")
-    budget = [{"source": "fit", "u_J": 4e-8, "share": 0.2}, {"source": "stiffness k", "u": 0.0018, "unit": "N·m/rad"}]
+    budget = {"J": {"value": 0.0125, "U": 1.2e-7, "u": 6e-8, "coverage_factor": 2.0, "correlations": [],
+                    "lines": [{"source": "fit", "value": 5.4, "std": 2e-5, "unit": "rad/s", "sensitivity": -0.0046,
+                               "contribution": -9e-8, "share": 0.6, "note": ""}]}}
     plain = {"J": 0.0125, "J_std": 5e-8, "J_U": 1.2e-7, "coverage_factor": 2.0, "uncertainty_budget": budget}
-    html = block.render(v=Q.part_view(plain), p=plain, unit="g·cm²", band=None)
-    assert "± 1.2 g·cm² (U, k = 2)" in html and 'id="budget"' in html
-    assert "0.4 g·cm²" in html and "0.0018 N·m/rad" in html and "None" not in html
+    html = env.get_template("_verdict.html").render(v=Q.part_view(plain), p=plain, unit="g·cm²", band=None)
+    assert "± 1.2 g·cm² (U, k = 2)" in html and "None" not in html
+    html = env.get_template("_budget.html").render(p=plain)
+    assert 'class="scroll"><table class="budget-table">' in html and "fit" in html  # scrolls in its card
     before = {"J": 0.0125, "J_std": 5e-8}  # a result without U or budget: its 1σ, said to be one
-    html = block.render(v=Q.part_view(before), p=before, unit="kg·m²", band=None)
-    assert "± 5e-08 kg·m² (standard uncertainty, 1σ)" in html and 'id="budget"' not in html
+    html = env.get_template("_verdict.html").render(v=Q.part_view(before), p=before, unit="kg·m²", band=None)
+    assert "± 5e-08 kg·m² (standard uncertainty, 1σ)" in html
+    assert env.get_template("_budget.html").render(p=before).strip() == ""

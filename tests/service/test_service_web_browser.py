@@ -154,7 +154,11 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
             wait.until(lambda d: d.execute_script("return document.readyState") == "complete")
             inner = browser.execute_script("return window.innerWidth")
             wide = browser.execute_script("return document.documentElement.scrollWidth")
-            assert wide <= inner, (name, width, wide, inner)  # nothing wider than the window: tables scroll inside
+            offenders = browser.execute_script(
+                "return Array.from(document.querySelectorAll('body *')).filter(e => e.getBoundingClientRect().right"
+                " > window.innerWidth + 1).slice(0, 5).map(e => e.tagName + '.' + e.className + '#' + e.id)")
+            # nothing wider than the window: tables scroll inside their card
+            assert wide <= inner, (name, width, wide, inner, offenders)
             if verdict is not None:
                 head = browser.find_element(By.ID, "verdict")
                 assert head.text.split()[0] == verdict and head.is_displayed()
