@@ -274,15 +274,15 @@ def decide(value: float, u_c: float, spec: Specification, k: float | None = None
         reasons.append(_outside(value, spec))
     else:
         verdict = spec.uncertain
-        reasons.append(f"conformance not proven: {value:.7g} with U = {U:.2g} reaches beyond "
-                       f"[{spec.lower:.7g}, {spec.upper:.7g}] (guard band, ISO 14253-1)")
+        reasons.append(f"conformance not proven: {value:.7g} kg·m² with U = {U:.2g} kg·m² reaches beyond "
+                       f"[{spec.lower:.7g}, {spec.upper:.7g}] kg·m² (guard band, ISO 14253-1)")
     return Decision(verdict, value, u_c, U, value - spec.nominal, zone, spec.rule, tuple(reasons))
 
 
 def _outside(value: float, spec: Specification) -> str:
     side = "below the lower limit" if value < spec.lower else "above the upper limit"
     limit = spec.lower if value < spec.lower else spec.upper
-    return f"{value:.7g} {side} {limit:.7g}"
+    return f"{value:.7g} kg·m² {side} {limit:.7g} kg·m²"
 
 
 def invalid_reasons(reading: Reading, rules: QualityRules) -> list[str]:
@@ -293,7 +293,7 @@ def invalid_reasons(reading: Reading, rules: QualityRules) -> list[str]:
                        "[object] for J_object / J_object_axis")
         return reasons
     if rules.max_std is not None and reading.u_random > rules.max_std:
-        reasons.append(f"standard uncertainty {reading.u_random:.2g} above the limit {rules.max_std:.2g} kg·m²")
+        reasons.append(f"standard uncertainty {reading.u_random:.2g} kg·m² above the limit {rules.max_std:.2g} kg·m²")
     if rules.max_std_relative is not None and reading.value != 0 \
             and reading.u_random / abs(reading.value) > rules.max_std_relative:
         reasons.append(f"relative standard uncertainty {reading.u_random / abs(reading.value):.2g} above the limit "

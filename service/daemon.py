@@ -576,7 +576,7 @@ class Appliance:
         timing = m.to_dict().get("timing", {})
         part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
         rig = recipe.rig_for(cfg.rig) if recipe is not None else cfg.rig
-        calibration = self._calibration_state(rig, finished)
+        calibration = self.calibration_state(rig, finished)
         if calibration is not None and calibration["due"] and F.CALIBRATION_DUE not in result["flags"]:
             result["flags"] = [*result["flags"], F.CALIBRATION_DUE]
         tensor_set = self.tensor_set if recipe is not None and recipe.tensor is not None else None
@@ -624,7 +624,7 @@ class Appliance:
         check = whole.get("check_standard") if isinstance(whole, dict) else None
         if check is not None:
             # a check standard measured at the station: kept with the history `moi check-standard` reads;
-            # a failed one makes the next results calibration_due (``_calibration_state``)
+            # a failed one makes the next results calibration_due (``calibration_state``)
             log.log(logging.INFO if check["passed"] else logging.WARNING, "check standard %s: E_n = %.2f (%s)",
                     check["name"], check["E_n"], "pass" if check["passed"] else "FAIL")
             try:
@@ -639,7 +639,7 @@ class Appliance:
                 self._finish_set(tensor_set)
             self._publish_set()
 
-    def _calibration_state(self, rig: Rig, now: float) -> dict[str, Any] | None:
+    def calibration_state(self, rig: Rig, now: float) -> dict[str, Any] | None:
         """The rig's calibration as of ``now`` (Unix s): date, validity, whether it is due.
 
         Due also while the newest check standard (`moi check-standard`) measured since the calibration
@@ -733,7 +733,7 @@ class Appliance:
         if checked_for is recipe and now - checked_at < CALIBRATION_CHECK_INTERVAL:
             return due
         rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
-        state = self._calibration_state(rig, self.wall_clock())
+        state = self.calibration_state(rig, self.wall_clock())
         due = bool(state and state["due"])
         self._calibration_checked = (now, recipe, due)
         return due

@@ -1,4 +1,4 @@
-"""`moi identify SOURCE --rig RIG.toml [--camera CAM.toml] [--json] [--plot FILE.png]`."""
+"""`moi identify SOURCE --rig RIG.toml [--camera CAM.toml] [--json] [--plot FILE.png|.svg|.pdf]`."""
 
 from __future__ import annotations
 
@@ -20,7 +20,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rig", required=True, metavar="RIG.toml", help="rig file (kind, stiffness or mass/com_distance, declared effects)")
     p.add_argument("--camera", metavar="CAM.toml", help="camera file, for a video SOURCE")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the report")
-    p.add_argument("--plot", metavar="FILE.png", help="write the trace, the fits and both residuals to a PNG")
+    p.add_argument("--plot", metavar="FILE.png", help="write the trace, the fits and both residuals to a picture: "
+                   "PNG, SVG or PDF by the file name's extension")
     p.add_argument("--no-discover", action="store_true", help="fit the declared model only (no discovery loop)")
     p.add_argument("--candidates", metavar="NAMES",
                    help=f"comma-separated effects the loop may add (default: all of {', '.join(EFFECTS)})")
@@ -31,9 +32,13 @@ def run(args: argparse.Namespace) -> int:
 
     from service.sources.dispatch import load_source
 
+    from service.publish.plot import PLOT_FORMATS
+
+    fmt = args.plot.rsplit(".", 1)[-1].lower() if args.plot and "." in args.plot else ""
     if args.plot:  # a bad plot path is refused before the work, not after it
-        if not args.plot.lower().endswith(".png"):
-            raise InputFileError(f"--plot {args.plot!r}: the plot is a PNG; give a file name ending in .png")
+        if fmt not in PLOT_FORMATS:
+            raise InputFileError(f"--plot {args.plot!r}: give a file name ending in "
+                                 + ", ".join("." + f for f in PLOT_FORMATS))
         check_output_path(args.plot, "plot file")
         if len(args.source) > 1:
             raise InputFileError("--plot draws one release; give one SOURCE with --plot")
@@ -58,8 +63,8 @@ def run(args: argparse.Namespace) -> int:
         print(result.report())
     sys.stdout.flush()
     if args.plot:
-        from service.publish.plot import render_png
-        write_atomic(args.plot, render_png(result, dpi=110), "plot file")
+        from service.publish.plot import render
+        write_atomic(args.plot, render(result, fmt, dpi=110), "plot file")
         if not args.json:
             print(f"plot written to {args.plot}")
     return 0

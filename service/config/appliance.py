@@ -21,6 +21,7 @@ import copy
 import dataclasses
 import difflib
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -45,6 +46,7 @@ from service.publish.mqtt.settings import MqttSettings
 from service.publish.opcua import settings as opcua_settings
 from service.publish.opcua.settings import OpcUaSettings
 from service.publish.web.settings import WebSettings
+from measurement.units import ASCII_NAMES, INERTIA_UNITS, inertia_unit
 
 #: the angle sensors of ``[hardware] sensor``
 SENSORS = ("encoder", "camera")
@@ -246,12 +248,20 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                 min_open=True, max=3600),
         "server_names": _doc("host names the page is reached by besides IP addresses, localhost and this "
                              "machine's names, e.g. [\"moi-rig-3.factory.lan\"] (any other Host is refused)"),
+        "display_unit": _doc("unit of inertia shown when a recipe names none (values stay kg·m²)",
+                             choices=tuple(INERTIA_UNITS) + tuple(ASCII_NAMES)),
+        "shift_starts": _doc("shift start times HH:MM, local time (Home counts the parts of the current shift)"),
+        "users_file": _doc("named users with roles (operator, quality, admin) and password hashes, made by "
+                           "`moi user add` (default: none; the token is the one login)", kind="path"),
     }, extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
     "opcua": _schema(OpcUaSettings, opcua_settings.KEYS,
                      extra={"enabled": Key("bool", True, "serve OPC UA (the table's presence enables it)")}),
 }
 
 #: tables that are plain key/value tables of SCHEMA (the others are sub-tables)
+#: a shift start, HH:MM
+_HHMM = re.compile(r"([01][0-9]|2[0-3]):[0-5][0-9]")
+
 TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus", "web",
               "recipes", "opcua")
 
@@ -466,6 +476,11 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
     w = c.table("web", doc.get("web", {}), SCHEMA["web"])
     if w.pop("enabled"):
         w["token_file"] = _resolve(base, w["token_file"])
+        w["users_file"] = _resolve(base, w["users_file"])
+        w["display_unit"] = inertia_unit(w["display_unit"])
+        for hm in w["shift_starts"]:
+            if not _HHMM.fullmatch(str(hm)):
+                raise c.fail("web", "shift_starts", f"expected times HH:MM (00:00 … 23:59), got {hm!r}")
         web = WebSettings(**w)
 
     opcua = None

@@ -13,6 +13,8 @@ directory (``[recipes] directory``)::
     releases = 3                  # releases per part (the part's result combines them)
     rig = "rig-A.toml"            # optional: the rig file for this part type (relative to this file)
     declared = ["viscous"]        # optional: the declared model (default: the rig's)
+    display_unit = "g·cm²"        # optional: the unit pages and reports show (kg·m², g·cm², kg·mm², lb·in², slug·ft²;
+                                  # default: [web] display_unit); stored values stay kg·m²
 
     [decision]                    # optional
     rule = "guard_band"           # guard_band (ISO 14253-1) | simple
@@ -24,7 +26,7 @@ directory (``[recipes] directory``)::
     max_J_std = 5.0e-6            # largest 1σ of the quantity, kg·m²   (or max_J_std_percent)
     min_swings = 3.0              # fewest full swings in the fitted window
     consistency_limit = 3.0       # |z| above which releases disagree
-    min_valid_releases = 2        # fewest usable releases for a part verdict (default: releases − 1, at least 1)
+    min_valid_releases = 2        # fewest usable releases for a part verdict (default: all of them)
     max_uncertainty_ratio = 0.25  # optional: U at most this fraction of the half-tolerance, else INVALID
 
 A recipe may instead declare a tensor plan: the part's inertia tensor is then
@@ -88,6 +90,7 @@ from measurement import Rig
 from measurement.errors import InvalidInput, MeasurementError
 from measurement.tensor import RigShared, TensorPlan
 from measurement.uncertainty import check_standard
+from measurement.units import inertia_unit
 from measurement.verdict import (QUANTITIES, RULES, PartResult, QualityRules, Reading,
                                  Specification, combine, judge_release)
 
@@ -130,6 +133,7 @@ class Recipe:
     rig_path: str | None = None
     declared: tuple[str, ...] | None = None
     tensor: TensorPlan | None = None  # the orientations of a guided tensor set
+    display_unit: str | None = None   # the unit pages and reports show (None: the set-up's); values stay kg·m²
     #: a check standard: {name, reference, reference_U} (kg·m²); None for a part type
     check_standard: dict[str, Any] | None = None
 
@@ -161,6 +165,7 @@ class Recipe:
         return {"name": self.name, "number": self.number, "version": self.version, "path": self.path,
                 "releases": self.releases, "rig_path": self.rig_path,
                 "declared": list(self.declared) if self.declared is not None else None,
+                "display_unit": self.display_unit,
                 **(self.spec.to_dict() if self.spec is not None else {}), "quality": self.quality.to_dict(),
                 **({"tensor": self.tensor.to_dict()} if self.tensor is not None else {}),
                 **({"check_standard": dict(self.check_standard)} if self.check_standard is not None else {})}
@@ -184,6 +189,7 @@ def _schemas() -> dict[str, dict[str, Any]]:
             "releases": Key("int", 1, "releases per part", min=1, max=20),
             "rig": Key("path", None, "rig file of this part type, relative to the recipe file"),
             "declared": Key("strlist", None, "declared model"),
+            "display_unit": Key("str", None, "unit the pages and reports show (values stay kg·m²)"),
         },
         "decision": _schema(Specification, {
             "rule": _doc("", choices=RULES), "uncertain": _doc("", choices=("NOK", "INVALID")),
@@ -191,7 +197,7 @@ def _schemas() -> dict[str, dict[str, Any]]:
         "quality": _schema(QualityRules, {
             "invalid_flags": _doc(""), "min_swings": _doc("", min=0.0),
             "consistency_limit": _doc("", min=0, min_open=True),
-            "min_valid_releases": _doc("default: releases − 1, at least 1", min=1),
+            "min_valid_releases": _doc("default: all releases", min=1),
             "max_uncertainty_ratio": _doc("largest expanded uncertainty U as a fraction of the half-tolerance "
                                           "(0.25: a test uncertainty ratio of 4); beyond it a result is INVALID",
                                           min=0, min_open=True)},
@@ -272,6 +278,12 @@ def load_recipe(path: str | Path) -> Recipe:
         except InvalidInput as exc:
             raise c.fail("recipe", "rig", str(exc)) from None
     declared = rec["declared"]
+    unit = None
+    if rec["display_unit"] is not None:
+        try:
+            unit = inertia_unit(rec["display_unit"])
+        except InvalidInput as exc:
+            raise c.fail("recipe", "display_unit", str(exc)) from None
     for e in declared or ():
         if e not in EFFECTS:
             raise c.fail("recipe", "declared", f"unknown effect {e!r}; expected names from {', '.join(EFFECTS)}")
@@ -282,7 +294,8 @@ def load_recipe(path: str | Path) -> Recipe:
             raise c.fail("recipe", "declared", str(exc)) from None
     if qual["max_J_std"] is not None and qual["max_J_std_percent"] is not None:
         raise c.fail("quality", "max_J_std", "give max_J_std (kg·m²) or max_J_std_percent, not both")
-    min_valid = qual["min_valid_releases"] if qual["min_valid_releases"] is not None else max(1, releases - 1)
+    # a part passes only on all its releases unless the recipe says how many may be excluded
+    min_valid = qual["min_valid_releases"] if qual["min_valid_releases"] is not None else releases
     if min_valid > releases:
         raise c.fail("quality", "min_valid_releases", f"expected at most releases = {releases}, got {min_valid}")
     pct = qual["max_J_std_percent"]
@@ -310,7 +323,7 @@ def load_recipe(path: str | Path) -> Recipe:
     return Recipe(name=name, number=rec["number"], description=rec["description"], path=str(p),
                   version=hashlib.sha256(raw).hexdigest()[:16], releases=releases, spec=spec, quality=quality,
                   rig=rig, rig_path=rig_path, declared=None if declared is None else tuple(declared), tensor=tensor,
-                  check_standard=check)
+                  display_unit=unit, check_standard=check)
 
 
 @dataclass(frozen=True)

@@ -594,6 +594,15 @@ class Store:
     def iter_all(self, **kwargs: Any) -> Iterator[StoredMeasurement]:
         yield from self.list(limit=None, **kwargs)
 
+    @_store_errors("counting verdicts")
+    def verdict_counts(self, since: float | None = None) -> dict[str, int]:
+        """Completed parts by verdict (OK, NOK, INVALID) finished at or after ``since`` (Unix s)."""
+        where, args = _where(since=since, parts_only=True)
+        with self._lock:
+            rows = self._db.execute(f"SELECT part_verdict, COUNT(*) FROM measurements {where} GROUP BY part_verdict",
+                                    args).fetchall()
+        return {"OK": 0, "NOK": 0, "INVALID": 0} | {str(v): int(n) for v, n in rows}
+
     @_store_errors("counting measurements")
     def count(self) -> int:
         with self._lock:

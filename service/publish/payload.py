@@ -16,7 +16,7 @@ from typing import Any, Mapping
 from service.publish.modbus.registers import flag_bits
 
 #: the version of the published envelope and topics; what each version changed is in CHANGELOG.md
-PAYLOAD_SCHEMA = 5
+PAYLOAD_SCHEMA = 6
 
 #: keys the envelope adds on top of the result's own keys
 ENVELOPE_KEYS = (

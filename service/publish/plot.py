@@ -11,8 +11,13 @@ import numpy as np
 from measurement.result import IdentificationResult
 
 
-def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO, *, dpi: int = 110) -> None:
-    """Draw the result into ``path`` (a file name or a binary file object), PNG."""
+#: the picture formats a plot may be written in (by the file name's extension)
+PLOT_FORMATS = ("png", "svg", "pdf")
+
+
+def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO, *, dpi: int = 110,
+                fmt: str = "png") -> None:
+    """Draw the result into ``path`` (a file name or a binary file object) as ``fmt`` (png, svg or pdf)."""
     # a Figure without pyplot: no global state, so the daemon's plot worker thread may draw too
     from matplotlib.figure import Figure
 
@@ -45,13 +50,18 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO
     axes[2].set_xlabel("t [s]")
     if result.flags:
         axes[2].text(0.01, 0.03, "flags: " + ", ".join(result.flags), transform=axes[2].transAxes, fontsize=8, color="tab:red")
-    fig.savefig(path, dpi=dpi, format="png")
+    fig.savefig(path, dpi=dpi, format=fmt)
 
 
 def render_png(result: IdentificationResult, *, dpi: int = 80) -> bytes:
     """The picture of ``result`` as PNG bytes (what the result store keeps with the measurement)."""
+    return render(result, "png", dpi=dpi)
+
+
+def render(result: IdentificationResult, fmt: str, *, dpi: int = 110) -> bytes:
+    """The picture of ``result`` as ``fmt`` (png, svg, pdf) bytes."""
     buf = io.BytesIO()
-    plot_result(result, buf, dpi=dpi)
+    plot_result(result, buf, dpi=dpi, fmt=fmt)
     return buf.getvalue()
 
 
@@ -70,13 +80,24 @@ def plot_control_chart(summary, path: str | os.PathLike, title: str = "", unit: 
     if flagged:
         ax.plot(x[flagged], np.asarray(s.points)[flagged], "o", color="tab:red", ms=7, label="outside / run rule")
     ax.axhline(s.mean, color="k", lw=1, label=f"centre {s.mean:.6g}")
-    for v, name in ((s.ucl, "UCL"), (s.lcl, "LCL")):
+    labels = [(s.ucl, "UCL", "tab:red"), (s.lcl, "LCL", "tab:red")]
+    for v in (s.ucl, s.lcl):
         ax.axhline(v, color="tab:red", ls="--", lw=1)
-        ax.text(x[-1] + 0.1, v, f" {name} {v:.6g}", va="center", fontsize=8, color="tab:red")
     for v, name in ((s.usl, "USL"), (s.lsl, "LSL")):
         if v is not None:
             ax.axhline(v, color="tab:orange", ls=":", lw=1.2)
-            ax.text(x[0] - 0.1, v, f"{name} {v:.6g} ", va="center", ha="right", fontsize=8, color="tab:orange")
+            labels.append((v, name, "tab:orange"))
+    # the limits' labels right of the plot, moved apart where their lines lie close (they overlapped)
+    ax.set_xlim(x[0] - 0.5, x[-1] + 0.5)
+    lo, hi = ax.get_ylim()
+    placed: list[float] = []
+    for v, name, colour in sorted(labels, key=lambda t: t[0]):
+        frac = (v - lo) / (hi - lo) if hi > lo else 0.5
+        frac = max(frac, placed[-1] + 0.06) if placed else frac
+        placed.append(frac)
+        ax.annotate(f"{name} {v:.6g}", xy=(1.0, (v - lo) / (hi - lo) if hi > lo else 0.5), xycoords="axes fraction",
+                    xytext=(1.01, frac), textcoords="axes fraction", va="center", fontsize=8, color=colour,
+                    arrowprops={"arrowstyle": "-", "color": colour, "lw": 0.5})
     cap = f"Cp {s.cp:.3g}, Cpk {s.cpk:.3g}" if s.cp is not None and s.cpk is not None else "Cp n/a"
     ax.set_title(f"{title}  {s.chart}: {s.n_points} points, σ within {s.sigma_within:.3g} {unit}, {cap}".strip())
     ax.set_ylabel(unit)

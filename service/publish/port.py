@@ -192,3 +192,10 @@ class ApplianceView:
     def set_progress(self) -> dict[str, Any] | None:
         """The tensor set's progress (main loop thread: ask through ``call_soon``)."""
         return self._app.set_progress()
+
+    def calibration_state(self) -> dict[str, Any] | None:
+        """The calibration of the rig the active recipe measures with, as the next result will be judged:
+        date, valid_until, due (also after a failed check standard), check_standard; None without one."""
+        recipe = self._app.parts.recipe
+        rig = recipe.rig_for(self._app.config.rig) if recipe is not None else self._app.config.rig
+        return self._app.calibration_state(rig, self._app.wall_clock())

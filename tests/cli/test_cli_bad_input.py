@@ -64,7 +64,7 @@ def test_export_refuses_targets_that_are_not_regular_files_and_leaves_nothing_be
 def test_identify_plot_paths_are_checked_first_and_the_result_survives_a_failed_plot(tmp_path, capsys, monkeypatch):
     trace = write_swing(tmp_path / "swing.csv")
     assert main(["identify", str(trace), "--rig", RIG, "--plot", str(tmp_path / "plot.jpg")]) == 2
-    assert "ending in .png" in one_error_line(capsys)
+    assert "ending in .png, .svg, .pdf" in one_error_line(capsys)
     assert main(["identify", str(trace), "--rig", RIG, "--plot", str(tmp_path / "no" / "plot.png")]) == 2
     assert "does not exist" in one_error_line(capsys)
 
@@ -78,6 +78,11 @@ def test_identify_plot_paths_are_checked_first_and_the_result_survives_a_failed_
     assert main(["identify", str(trace), "--rig", RIG, "--json", "--plot", str(tmp_path / "plot.png")]) == 2
     captured = capsys.readouterr()
     assert '"J"' in captured.out and "No space left" in captured.err  # the result was printed first
+    monkeypatch.undo()
+    # the picture's format follows the file name: SVG here (PNG and PDF the same way)
+    assert main(["identify", str(trace), "--rig", RIG, "--plot", str(tmp_path / "plot.svg")]) == 0
+    svg = (tmp_path / "plot.svg").read_text()
+    assert svg.lstrip().startswith("<?xml") and "<svg" in svg and "residual [rad]" in svg
 
 
 @pytest.mark.parametrize("case", ["timestamps 1e-300 apart", "angles in counts", "deep TOML rig", "/dev/zero"])
@@ -175,7 +180,8 @@ def test_json_and_csv_exports_carry_the_same_iso_times(store_dir, tmp_path):
     assert main(["export", "--state-dir", str(store_dir), "--out", str(tmp_path / "a.csv")]) == 0
     doc = json.loads((tmp_path / "a.json").read_text())[0]
     row = next(csv.DictReader((tmp_path / "a.csv").open()))
-    assert doc["finished_at_utc"] == row["finished_at"] and doc["finished_at"] == 1e9 + 60
+    assert doc["finished_at"] == row["finished_at"] == "2001-09-09T01:47:40.000+00:00"
+    assert doc["unit"] == row["unit"] == "kg·m²"
 
 
 def test_a_gpio_library_that_is_installed_but_fails_says_why_not_install_it(monkeypatch):

@@ -59,11 +59,11 @@ def test_check_standard_passes_fails_is_stored_and_charted(swing, rig_file, tmp_
     with Store(state) as store:
         app = SimpleNamespace(store=store)
         now = time.time()
-        state_now = Appliance._calibration_state(app, DEMO_RIG, now)
+        state_now = Appliance.calibration_state(app, DEMO_RIG, now)
         assert state_now["due"] and state_now["check_standard"]["passed"] is False
         recalibrated = DEMO_RIG.__class__(**{**DEMO_RIG.__dict__, "calibration": CalibrationRecord(
             dt.datetime.now(dt.UTC).date() + dt.timedelta(days=1), 365)})
-        assert not Appliance._calibration_state(app, recalibrated, now)["due"]
+        assert not Appliance.calibration_state(app, recalibrated, now)["due"]
 
 
 @pytest.mark.parametrize("extra, words", [

@@ -320,3 +320,21 @@ def test_a_part_whose_swing_carries_an_unmodelled_effect_is_invalid(tmp_path, re
     p = row.payload
     assert "unmodeled_residual" in p["flags"] and row.part_id == "RUB-1"
     assert p["verdict"] == row.part_verdict == "INVALID" and p["release"]["reasons"] == ["flag unmodeled_residual"]
+
+
+def test_a_part_needs_all_its_releases_unless_the_recipe_says_otherwise(tmp_path):
+    from measurement.verdict import Reading, combine
+
+    two = load_recipe(write(tmp_path / "two.toml", recipe("two", 1, J_TRUE, tolerance_percent=1.0, releases=2)))
+    assert two.quality.min_valid_releases == 2
+    good = Reading(J_TRUE, 1e-7)
+    bad = Reading(J_TRUE, 1e-7, flags=("unmodeled_residual",))
+    part = combine([good, bad], two.spec, two.quality)
+    assert part.verdict == "INVALID" and part.excluded[0]["index"] == 1  # one INVALID release: no pass, said
+    lenient = load_recipe(write(tmp_path / "one.toml", recipe("one", 2, J_TRUE, tolerance_percent=1.0, releases=2)
+                                + "[quality]\nmin_valid_releases = 1\n"))
+    assert combine([good, bad], lenient.spec, lenient.quality).verdict == "OK"
+    with pytest.raises(RecipeError, match="display_unit: unknown unit of inertia 'cubits'"):
+        load_recipe(write(tmp_path / "u.toml", recipe("u", 3, J_TRUE, tolerance_percent=1.0, display_unit="cubits")))
+    assert load_recipe(write(tmp_path / "g.toml", recipe("g", 4, J_TRUE, tolerance_percent=1.0,
+                                                         display_unit="g*cm^2"))).to_dict()["display_unit"] == "g·cm²"

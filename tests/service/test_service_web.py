@@ -3,7 +3,9 @@ with the measurement, secrets masked, the token file."""
 
 from __future__ import annotations
 
+import io
 import json
+import re
 import os
 import stat
 import urllib.error
@@ -15,7 +17,7 @@ import pytest
 
 from service.errors import StartupError
 
-from .conftest import appliance_doc
+from .conftest import appliance_doc, wait_until
 
 
 ON = {"enabled": True}
@@ -33,11 +35,11 @@ class Client:
         return html.split('name="csrf-token" content="')[1].split('"')[0]
 
     def request(self, path: str, data: dict | bytes | None = None, headers: dict | None = None,
-                method: str | None = None) -> tuple[int, dict, bytes]:
+                method: str | None = None, timeout: float = 30) -> tuple[int, dict, bytes]:
         body = data if isinstance(data, bytes) or data is None else urllib.parse.urlencode(data).encode()
         req = urllib.request.Request(self.base + path, data=body, headers=headers or {}, method=method)
         try:
-            with self.opener.open(req, timeout=30) as r:
+            with self.opener.open(req, timeout=timeout) as r:
                 return r.status, dict(r.headers), r.read()
         except urllib.error.HTTPError as e:
             return e.code, dict(e.headers), e.read()
@@ -129,7 +131,7 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
                               ("/history?status=maybe", 400, b"expected ok, failed or aborted"),
                               ("/results/no-such-id", 404, b"no measurement"),
                               ("/results/a%27b", 400, b"bad measurement id"),
-                              ("/history/export.xml", 404, b"expected export.csv or export.json"),
+                              ("/history/export.xml", 404, b"expected export.csv, export.json or export.dfq"),
                               ("/nothing-here", 404, b"no page")):
         status, _, body = c.request(path)
         assert (status, words in body, b"Traceback" in body) == (code, True, False), (path, status, body[:300])
@@ -251,7 +253,8 @@ def test_recipe_and_part_id_set_from_the_page_reach_the_result_and_the_history(a
     m = app.store.latest()
     assert (m.recipe, m.part_id, m.part_verdict) == ("rotor-a", "SN-0042", "OK")
     page = c.request(f"/results/{m.uuid}")[2].decode()
-    assert 'id="verdict">part OK' in page and "SN-0042" in page and "release 1 of 1" in page
+    assert 'verdict-OK" id="verdict"><span class="tile-word">OK' in page and "part OK" in page
+    assert "SN-0042" in page and "release 1 of 1" in page
     assert m.uuid in c.request("/history?recipe=rotor-a&part=SN-0042")[2].decode()
     assert m.uuid not in c.request("/history?part=SN-0043")[2].decode()
 
@@ -267,3 +270,219 @@ def test_a_result_stored_without_its_plot_gets_it_drawn_once_from_its_trace(appl
     status, _, png = Client(running.app.web.url).request(f"/results/{uid}/plot.png")
     assert status == 200 and png[:4] == b"\x89PNG"
     assert running.app.store.get_attachment(uid, "plot.png")[0] == png  # kept: the next view shows the same
+
+
+#: what must never reach a page: a Python None, a NaN or infinity, a raw dict or list, a traceback
+RAW = re.compile(r"\bNone\b|\bnan\b|\bNaN\b|\binf\b|Traceback|\{'|\['|\bTrue\b|\bFalse\b")
+
+
+def _recipes(d: Path) -> Path:
+    """Three part types on the simulated rig (J 0.0125 kg·m²): one that passes on 2 releases (shown in g·cm²),
+    one whose nominal is 20 % off (NOK), one whose 1σ limit no release meets (INVALID)."""
+    d.mkdir()
+    (d / "ok.toml").write_text('[recipe]\nname = "rotor-ok"\nnumber = 1\nnominal = 0.0125\ntolerance_percent = 2.0\n'
+                               'releases = 2\ndisplay_unit = "g*cm^2"\n')
+    (d / "nok.toml").write_text('[recipe]\nname = "rotor-nok"\nnumber = 2\nnominal = 0.015\ntolerance_percent = 2.0\n')
+    (d / "bad.toml").write_text('[recipe]\nname = "rotor-bad"\nnumber = 3\nnominal = 0.0125\ntolerance_percent = 2.0\n'
+                                '[quality]\nmax_J_std = 1.0e-15\n')
+    (d.parent / "cal-rig.toml").write_text('[rig]\nkind = "torsion"\nstiffness = 0.3651\n[calibration]\n'
+                                           'date = 2020-01-15\nvalid_days = 365\n')
+    (d / "cal.toml").write_text('[recipe]\nname = "rotor-cal"\nnumber = 4\nnominal = 0.0125\ntolerance_percent = 2.0\n'
+                                'rig = "../cal-rig.toml"\n')
+    return d
+
+
+def _measure(running, c: Client, bearer: dict, recipe: str, part_id: str, count: int) -> None:
+    assert c.json("/api/part", data={"recipe": recipe, "part_id": part_id}, headers=bearer)[0] == 202
+    for _ in range(count):
+        done = running.app.store.count()
+        assert c.json("/api/measure", method="POST", headers=bearer)[0] == 202
+        running.wait_done(done + 1, 60)
+
+
+def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(appliance_factory, tmp_path):
+    running = appliance_factory(appliance_doc(tmp_path / "state", web=ON,
+                                              recipes={"directory": str(_recipes(tmp_path / "recipes"))}))
+    app = running.app
+    bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
+    c = Client(app.web.url)
+    _measure(running, c, bearer, "rotor-ok", "SN-1", 1)
+    first = app.store.latest()
+    # a part in progress: the release's own check, never a part verdict
+    page = c.request(f"/results/{first.uuid}")[2].decode()
+    assert "release 1 of 2" in page and "part OK" not in page and 'id="verdict"' in page
+    assert "next: release 2 of 2" in c.request("/")[2].decode()
+    _measure(running, c, bearer, "rotor-ok", "SN-1", 1)
+    ok = app.store.latest()
+    for serial in ("SN-2a", "SN-2b", "SN-2"):  # three parts: a control chart
+        _measure(running, c, bearer, "rotor-nok", serial, 1)
+    nok = app.store.latest()
+    _measure(running, c, bearer, "rotor-bad", "SN-3", 1)
+    bad = app.store.latest()
+    assert (ok.part_verdict, nok.part_verdict, bad.part_verdict) == ("OK", "NOK", "INVALID")
+
+    page = c.request(f"/results/{ok.uuid}")[2].decode()
+    part = ok.payload["part"]
+    # the part's value ± U in the recipe's unit (g·cm² = 1e7 kg·m²), the limits, the band
+    assert f"{part['value'] * 1e7:.7g} g·cm²" in page and f"{part['U'] * 1e7:.2g} g·cm²" in page
+    assert "part value from 2 of 2 releases, none excluded" in page and 'id="band"' in page
+    assert f"{0.0125 * 0.98 * 1e7:.7g} g·cm² … {0.0125 * 1.02 * 1e7:.7g} g·cm²" in page
+    assert 'class="verdict-tile verdict-OK" id="verdict"><span class="tile-word">OK' in page
+    page = c.request(f"/results/{bad.uuid}")[2].decode()
+    assert '<span class="tile-word">INVALID' in page and "part OK" not in page
+    assert "release 1 excluded" in page and "1σ" in page
+    assert '<span class="tile-word">NOK' in c.request(f"/results/{nok.uuid}")[2].decode()
+    # Home: the last part's verdict as the tile, the shift's counters, the last parts, the calibration
+    home = c.request("/")[2].decode()
+    assert 'id="tile-verdict">INVALID' in home and "SN-3" in home
+    assert [home.split(f'id="count-{v}">')[1].split("<")[0] for v in ("OK", "NOK", "INVALID")] == ["1", "3", "1"]
+    assert home.count('class="chip verdict-') == 5 and 'id="calibration"' in home
+    # SPC of a recipe: the chart of its 3 parts, its capability, the limits labelled with their values
+    spc = c.request("/spc?recipe=rotor-nok")[2].decode()
+    assert 'id="chart-points"' in spc and 'id="chart-ranges"' in spc and "I-MR" in spc and "Cpk" in spc
+    assert spc.count('class="point"') + spc.count('class="violation"') == 3 + 2  # 3 parts, 2 moving ranges
+    assert "USL 0.0153" in spc and "LSL 0.0147" in spc and "part value [kg·m²]" in spc
+    assert c.request("/spc?recipe=no-such")[0] == 404 and c.request("/spc?chart=pie")[0] == 400
+    status, _, body = c.request("/spc?recipe=rotor-nok&chart=Xbar-R")  # one release a part: no subgroups
+    assert status == 400 and b"subgroups of 2 to 10" in body
+    assert "no calibration record" in home
+    # the check standard's history on the SPC page: its control chart and each check with its E_n
+    assert "no check standard measured yet" in spc
+    for i, (value, passed) in enumerate(((0.01250, True), (0.01251, True), (0.01262, False))):
+        app.store.record_check_standard({"name": "disc CS-1", "quantity": "J", "value": value, "U": 2e-5,
+                                         "reference": 0.0125, "reference_U": 2e-5, "E_n": (value - 0.0125) / 2.8e-5,
+                                         "passed": passed}, finished_at=1.7e9 + i)
+    spc = c.request("/spc?recipe=rotor-nok")[2].decode()
+    assert 'id="check-points"' in spc and spc.count("disc CS-1") == 3 and "FAILED" in spc and "4.3" in spc
+    # the calibration of the rig the active recipe measures with, and its due date, on Home
+    assert c.json("/api/part", data={"recipe": "rotor-cal"}, headers=bearer)[0] == 202
+    # (the main loop applies the selection: the page shows it once it did)
+    wait_until(lambda: c.json("/api/state")[1]["recipe"] == {"name": "rotor-cal", "number": 4}, 10, what="rotor-cal")
+    assert "DUE</b> (valid until 2021-01-14)" in c.request("/")[2].decode()
+    assert c.request("/home/summary")[2].decode().startswith('<div class="summary" id="summary">')
+    # the history keeps the part's verdict and each release's check apart
+    hist = c.request("/history")[2].decode()
+    assert "1 of 2: check OK" in hist and "comes with release 2 of 2" in hist
+    # the first release, once its part is judged, points to the verdict (and is not called in progress)
+    page = c.request(f"/results/{first.uuid}")[2].decode()
+    assert f'<a id="part-verdict-link" href="/results/{ok.uuid}">part OK (#{ok.seq})</a>' in page
+    assert "part in progress" not in page
+
+    pages = ["/", "/history", "/spc", "/spc?recipe=rotor-ok", "/setup", "/set", "/history?recipe=rotor-bad"]
+    for m in (first, ok, nok, bad):
+        pages += [f"/results/{m.uuid}", f"/results/{m.uuid}/report"]
+    for path in pages:
+        status, _, body = c.request(path)
+        text = body.decode()
+        assert status == 200, (path, status, text[:300])
+        found = RAW.search(re.sub(r"<script.*?</script>", "", text, flags=re.S))
+        assert found is None, (path, found and text[max(0, found.start() - 120):found.end() + 60])
+
+    # the quality record: the report's PDF from the page and from `moi report`, its text read back
+    from pypdf import PdfReader
+
+    from service.cli import main
+
+    # (made in the page's child process at a lower priority, after the plots it queued: slow on a busy machine)
+    status, headers, pdf = c.request(f"/results/{bad.uuid}/report.pdf", timeout=180)
+    assert status == 200 and headers["Content-Type"] == "application/pdf" and pdf[:5] == b"%PDF-"
+    text = PdfReader(io.BytesIO(pdf)).pages[0].extract_text()
+    assert "part INVALID" in text and "excluded: invalid" in text and "SN-3" in text
+    state = str(tmp_path / "state")
+    assert main(["report", ok.uuid[:8], "--state-dir", state, "--pdf", str(tmp_path / "ok.pdf")]) == 0
+    text = PdfReader(str(tmp_path / "ok.pdf")).pages[0].extract_text()
+    assert "part OK" in text and "g·cm²" in text and "guard band" in text and "release 2 of 2" in text
+    assert text.count("used; flags: ") == 2  # each release with its flags
+    report = c.request(f"/results/{ok.uuid}/report")[2].decode()
+    assert f'<a href="/results/{first.uuid}">1 of 2</a>' in report and "web" in report
+    assert main(["report", ok.uuid[:8], "--state-dir", state, "--pdf", str(tmp_path / "ok.png")]) == 2
+
+    # AQDEF: the recipe's characteristic (nominal, limits, unit) and one value line per part, read back
+    out = tmp_path / "rotor-ok.dfq"
+    assert main(["export", "--state-dir", state, "--format", "dfq", "--recipe", "rotor-ok", "--out", str(out)]) == 0
+    fields, values = {}, []
+    for line in out.read_bytes().decode("cp1252").split("\r\n"):
+        if line.startswith("K") and " " in line and "\x14" not in line:
+            key, _, value = line.partition(" ")
+            fields[key] = value
+        elif line:
+            values.append(line.split("\x14"))
+    assert fields["K0100"] == "1" and fields["K1001"] == "rotor-ok" and fields["K2142/1"] == "g·cm²"
+    places = int(fields["K2022/1"])
+    assert float(fields["K2101/1"]) == pytest.approx(0.0125e7) and places >= 3
+    assert float(fields["K2110/1"]) == pytest.approx(0.0125e7 * 0.98) and float(fields["K2111/1"]) == pytest.approx(0.0125e7 * 1.02)
+    assert len(values) == 1 and float(values[0][0]) == pytest.approx(ok.part_value * 1e7, abs=10 ** -places)
+    assert values[0][1] == "0" and values[0][2].count(".") == 2 and fields["K0014/1"] == "SN-1"
+    assert main(["export", "--state-dir", state, "--format", "dfq"]) == 2  # three recipes: which one?
+    status, _, web_dfq = c.request("/history/export.dfq?recipe=rotor-ok", timeout=180)  # the file of the SPC page
+    assert status == 200 and web_dfq == out.read_bytes() and "/history/export.dfq?recipe=rotor-nok" in spc
+    assert c.request("/history/export.dfq")[0] == 400
+    assert c.request("/history/export.dfq?recipe=none", timeout=180)[0] == 404
+
+
+def test_a_second_measure_during_a_capture_is_refused_in_words(appliance_factory, tmp_path):
+    # a capture long enough (300 s of simulated time, 12 s here) to be asked twice during it; aborted afterwards
+    doc = appliance_doc(tmp_path / "state", web=ON)
+    doc["sequencer"]["capture_duration"] = 300.0
+    running = appliance_factory(doc)
+    app = running.app
+    bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
+    c = Client(app.web.url)
+    assert c.json("/api/measure", method="POST", headers=bearer)[0] == 202
+    running.wait_event(lambda e: e.state.value == "CAPTURING", 30, what="the capture")
+    status, body = c.json("/api/measure", method="POST", headers=bearer)
+    assert status == 409 and "already running" in body["error"] and "IDLE" in body["error"]
+    assert c.json("/api/abort", method="POST", headers=bearer)[0] == 202
+    running.wait_done(1, 30)
+    assert app.store.latest(None).status == "aborted"
+
+
+def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp_path, monkeypatch, capsys):
+    from service.cli import main
+    from service.publish.web.auth import allowed, check_password
+
+    users = tmp_path / "users.toml"
+    for name, role, pw in (("olga", "operator", "olga-password-1"), ("quinn", "quality", "quinn-password-2")):
+        monkeypatch.setattr("sys.stdin", io.StringIO(pw + "\n"))
+        assert main(["user", "add", name, "--role", role, "--users-file", str(users), "--password-stdin"]) == 0
+    monkeypatch.setattr("sys.stdin", io.StringIO("short\n"))
+    assert main(["user", "add", "x", "--users-file", str(users), "--password-stdin"]) == 2
+    text = users.read_text()
+    assert "olga-password-1" not in text and stat.S_IMODE(os.stat(users).st_mode) == 0o600  # only hashes
+    assert check_password("olga-password-1", text.split('password = "')[1].split('"')[0])
+    assert not allowed("operator", "acknowledge") and allowed("quality", "acknowledge") and allowed("admin", "recipe")
+
+    d = tmp_path / "recipes"
+    d.mkdir()
+    (d / "a.toml").write_text('[recipe]\nname = "rotor-a"\nnumber = 3\nnominal = 0.0125\ntolerance_percent = 2.0\n')
+    running = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True, "users_file": str(users)},
+                                              recipes={"directory": str(d)}))
+    app = running.app
+
+    def login(name: str, pw: str) -> tuple[Client, str]:
+        c = Client(app.web.url)
+        status, _, page = c.request("/login", {"user": name, "token": pw, "csrf": c.csrf()})
+        assert status == 200 and f"{name} (" in page.decode()
+        return c, page.decode().split('name="csrf-token" content="')[1].split('"')[0]
+
+    c = Client(app.web.url)
+    status, _, body = c.request("/login", {"user": "olga", "token": "wrong-password", "csrf": c.csrf()})
+    assert status == 401 and b"wrong user name or password" in body
+    olga, csrf = login("olga", "olga-password-1")
+    status, body = olga.json("/api/part", data={"recipe": "rotor-a"}, headers={"X-CSRF-Token": csrf})
+    assert status == 403 and "olga (operator) may not change the recipe" in body["error"]
+    assert olga.json("/api/part", data={"part_id": "SN-7"}, headers={"X-CSRF-Token": csrf})[0] == 202
+    quinn, qcsrf = login("quinn", "quinn-password-2")
+    assert quinn.json("/api/part", data={"recipe": "rotor-a"}, headers={"X-CSRF-Token": qcsrf})[0] == 202
+    assert olga.json("/api/measure", method="POST", headers={"X-CSRF-Token": csrf})[0] == 202
+    running.wait_done(1, 60)
+    m = app.store.latest()
+    assert m.trigger == "web:olga" and m.part_verdict == "OK"
+    assert "web:olga" in olga.request(f"/results/{m.uuid}/report")[2].decode()
+    # a fault is acknowledged by a quality engineer, not by an operator
+    app.sequencer.fault("encoder fault: test cable pulled")
+    running.wait_event(lambda e: e.state.value == "FAULT", 10, what="FAULT")
+    status, body = olga.json("/api/abort", method="POST", headers={"X-CSRF-Token": csrf})
+    assert status == 403 and "may not acknowledge a fault" in body["error"]
+    assert quinn.json("/api/abort", method="POST", headers={"X-CSRF-Token": qcsrf})[0] == 202
+    running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")

@@ -10,11 +10,24 @@ needs either
 * ``Authorization: Bearer <token>`` (scripts; a browser never adds it by itself).
 
 A request whose ``Origin`` names another site is refused whatever it carries.
+
+Operators by name: with a users file (``[web] users_file``, made by ``moi user add``) a person logs in
+with their name and password and acts in their role; each measurement they start records their name
+(trigger ``web:<name>``). Roles, each with what the ones before it may do:
+
+* ``operator``: Measure, Abort a running measurement, set the part ID, the tensor set's redo/skip/abort;
+* ``quality``: also change the recipe and acknowledge a fault (the quality engineer);
+* ``admin``: everything (the appliance's token, for scripts and for the set-up, acts as admin).
+
+Passwords are kept as scrypt hashes (RFC 7914, ``hashlib.scrypt``: memory-hard, salted per user),
+compared in constant time. Without a users file the token is the one login, as admin.
 """
 
 from __future__ import annotations
 
 import asyncio
+import base64
+import hashlib
 import hmac
 import logging
 import os
@@ -80,17 +93,87 @@ def read_token(path: str | os.PathLike, *, create: bool) -> str:
     return token
 
 
+#: roles, each allowed what the ones before it are
+ROLES = ("operator", "quality", "admin")
+#: the least role of each action; an action not named here needs an operator
+LEAST_ROLE = {"recipe": "quality", "acknowledge": "quality"}
+#: scrypt cost (RFC 7914): N = 2^14, r = 8, p = 1 takes 16 MiB and some 50 ms on a Raspberry Pi 4
+SCRYPT_N, SCRYPT_R, SCRYPT_P = 2**14, 8, 1
+
+
+def hash_password(password: str, *, salt: bytes | None = None) -> str:
+    """``password`` as "scrypt$N$r$p$salt$hash" (base64) for a users file."""
+    salt = salt if salt is not None else secrets.token_bytes(16)
+    digest = hashlib.scrypt(password.encode("utf-8"), salt=salt, n=SCRYPT_N, r=SCRYPT_R, p=SCRYPT_P, dklen=32)
+    b64 = base64.b64encode
+    return f"scrypt${SCRYPT_N}${SCRYPT_R}${SCRYPT_P}${b64(salt).decode()}${b64(digest).decode()}"
+
+
+def check_password(password: str, stored: str) -> bool:
+    """True when ``password`` matches the stored hash (constant-time comparison)."""
+    try:
+        kind, n, r, p, salt, digest = stored.split("$")
+        if kind != "scrypt":
+            return False
+        got = hashlib.scrypt(password.encode("utf-8"), salt=base64.b64decode(salt), n=int(n), r=int(r), p=int(p),
+                             dklen=len(base64.b64decode(digest)), maxmem=256 * 1024 * 1024)
+    except (ValueError, TypeError):
+        return False
+    return hmac.compare_digest(got, base64.b64decode(digest))
+
+
+@dataclass(frozen=True)
+class User:
+    name: str
+    role: str
+    password: str  # the scrypt hash
+
+
+def allowed(role: str, action: str) -> bool:
+    """Whether ``role`` may do ``action`` (see the module docstring)."""
+    need = LEAST_ROLE.get(action, "operator")
+    return role in ROLES and ROLES.index(role) >= ROLES.index(need)
+
+
+def read_users(path: str | os.PathLike) -> dict[str, User]:
+    """The users of a users file ([[user]] name, role, password hash); StartupError saying what is wrong."""
+    import tomllib
+
+    p = Path(path)
+    try:
+        doc = tomllib.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise StartupError(f"[web] users_file {str(p)!r} does not exist; make it with `moi user add`") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise StartupError(f"[web] cannot read the users file {str(p)!r}: {exc}") from None
+    users: dict[str, User] = {}
+    for i, u in enumerate(doc.get("user") or ()):
+        name, role, pw = (u.get(k) if isinstance(u, dict) else None for k in ("name", "role", "password"))
+        if not (isinstance(name, str) and name.strip()) or role not in ROLES or not (isinstance(pw, str)
+                                                                                    and pw.startswith("scrypt$")):
+            raise StartupError(f"[web] users file {str(p)!r}: user {i + 1} needs name, role (one of "
+                               f"{', '.join(ROLES)}) and a scrypt password hash (moi user add)")
+        if name in users:
+            raise StartupError(f"[web] users file {str(p)!r}: user {name!r} twice")
+        users[name] = User(name, role, pw)
+    return users
+
+
 @dataclass
 class Session:
     csrf: str
     expires: float
+    user: str | None = None  # None: logged in with the token
+    role: str = "admin"
 
 
 class Guard:
     """Sessions and checks for one token."""
 
-    def __init__(self, token: str, clock=time.monotonic) -> None:
+    def __init__(self, token: str, clock=time.monotonic, users: dict[str, User] | None = None) -> None:
         self._token = token
+        self.users = users or {}
+        self._dummy = hash_password(secrets.token_urlsafe(12)) if self.users else ""
         self._clock = clock
         self._sessions: dict[str, Session] = {}
         self._lock = threading.Lock()
@@ -117,12 +200,24 @@ class Guard:
     def token_ok(self, candidate: str | None) -> bool:
         return bool(candidate) and hmac.compare_digest(candidate.encode(), self._token.encode())
 
-    def login(self, candidate: str | None) -> tuple[str, Session] | None:
-        """A new session (id, session) when ``candidate`` is the token, else None."""
-        if not self.token_ok(candidate):
+    def login(self, candidate: str | None, user: str | None = None) -> tuple[str, Session] | None:
+        """A new session (id, session) when ``candidate`` is the token (no ``user``) or ``user``'s password,
+        else None."""
+        if user:
+            u = self.users.get(user)
+            if u is None:
+                check_password(candidate or "", self._dummy)  # as long as for a user: names are not told apart
+                return None
+            if not check_password(candidate or "", u.password):
+                return None
+            who: tuple[str | None, str] = (u.name, u.role)
+        elif self.token_ok(candidate):
+            who = (None, "admin")
+        else:
             return None
         sid = secrets.token_urlsafe(24)
-        s = Session(csrf=secrets.token_urlsafe(24), expires=self._clock() + SESSION_LIFETIME)
+        s = Session(csrf=secrets.token_urlsafe(24), expires=self._clock() + SESSION_LIFETIME, user=who[0],
+                    role=who[1])
         with self._lock:
             self._prune()
             if len(self._sessions) >= MAX_SESSIONS:
@@ -148,6 +243,13 @@ class Guard:
         now = self._clock()
         for k in [k for k, s in self._sessions.items() if s.expires < now]:
             del self._sessions[k]
+
+    def who(self, *, cookie: str | None, bearer: str | None) -> tuple[str | None, str]:
+        """(user name, role) of an authorised request: the bearer token acts as admin without a name."""
+        if bearer is not None:
+            return None, "admin"
+        s = self.session(cookie)
+        return (s.user, s.role) if s is not None else (None, "operator")
 
     def authorise(self, *, cookie: str | None, csrf: str | None, bearer: str | None) -> tuple[int, str] | None:
         """None when the request may act, else (HTTP status, why not): 401 without a valid login or token,

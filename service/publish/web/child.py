@@ -96,11 +96,17 @@ def _lower_priority() -> None:
 # --- the jobs (run in the child: module-level functions of plain arguments) -------------------------------------
 
 def export_file(state_dir: str, fmt: str, filters: Mapping[str, Any]) -> bytes:
-    """The history as ``moi export`` writes it (CSV or JSON, oldest first), of the measurements ``filters`` select."""
+    """The history as ``moi export`` writes it (CSV or JSON, oldest first), of the measurements ``filters`` select;
+    "dfq": the AQDEF file of the recipe's completed parts."""
     from service.commands.export import _csv, _json
     from service.persistence.store import Store
 
     with Store(state_dir, read_only=True) as store:
+        if fmt == "dfq":
+            from service.commands.export import dfq_bytes
+
+            return dfq_bytes(store, filters.get("recipe"), part_id=filters.get("part_id"), since=filters.get("since"),
+                             until=filters.get("until"))
         rows, _ = store.search(limit=None, **filters)
     rows.reverse()
     return (_json(rows) if fmt == "json" else _csv(rows)).encode()
@@ -127,3 +133,17 @@ def replot(state_dir: str, uuid: str, default_rig: Mapping[str, Any], options: A
         m = store.get(uuid, trace=True)
     rig = Rig.from_dict(m.rig or default_rig)
     return render_png(identify(Trace(m.trace_t, m.trace_angle, source=f"measurement {m.seq}"), rig, options))
+
+
+def report_file(state_dir: str, uuid: str, default_unit: str) -> bytes:
+    """The report of the measurement ``uuid`` as PDF (``moi report ID --pdf``)."""
+    from service.persistence.store import Store
+    from service.publish.report import report_pdf
+
+    from .quality import display_unit
+    from .settings import PLOT_NAME
+
+    with Store(state_dir, read_only=True) as store:
+        m = store.get(uuid)
+        got = store.get_attachment(uuid, PLOT_NAME)
+        return report_pdf(m, got[0] if got else None, display_unit(m.payload, default_unit), store.get)

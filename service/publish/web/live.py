@@ -22,7 +22,13 @@ def extras(app: "ApplianceView") -> dict[str, Any]:
     if parts is None:
         return {}
     r = parts.recipe
-    return {"recipe": {"name": r.name, "number": r.number} if r is not None else None, "part_id": parts.part_id}
+    out: dict[str, Any] = {"recipe": {"name": r.name, "number": r.number} if r is not None else None,
+                           "part_id": parts.part_id, "release_next": None}
+    if r is not None and r.spec is not None:
+        o = parts.open_part
+        # the release a trigger now measures (during a capture: the one being measured), of the part's N
+        out["release_next"] = {"k": (o["done"] + 1) if o else 1, "of": r.releases}
+    return out
 
 
 class Live:

@@ -24,7 +24,7 @@ from drivers.aioloop import LoopThread
 from service.errors import StartupError
 from service.publish.port import ApplianceView, Publisher
 
-from .auth import Guard, read_token
+from .auth import Guard, read_token, read_users
 from .child import ChildWork
 from .priority import CAPTURE_STATES
 from .settings import DEFAULT_TOKEN_FILE_NAME, PLOT_NAME, WebSettings
@@ -37,6 +37,10 @@ log = logging.getLogger("moi.web")
 
 #: plots waiting to be drawn at most; a measurement stored beyond them gets its plot when it is asked for
 MAX_PENDING_PLOTS = 8
+#: the latest results whose fit the live page can draw over the swing
+MAX_FITS = 4
+#: points of such a fit at most
+FIT_POINTS = 1500
 #: at most one "connections refused" line per this many seconds, s
 REFUSED_LOG_INTERVAL = 60.0
 
@@ -63,7 +67,8 @@ class WebServer(Publisher):
         self.settings = settings
         token_file = settings.token_file or str(appliance.config.state_dir / DEFAULT_TOKEN_FILE_NAME)
         self.token_file = token_file
-        self.guard = Guard(read_token(token_file, create=settings.token_file is None))
+        users = read_users(settings.users_file) if settings.users_file else None
+        self.guard = Guard(read_token(token_file, create=settings.token_file is None), users=users)
         self.bound_port: int | None = None
         self._io = LoopThread("moi-web")
         self._runner: web.AppRunner | None = None
@@ -73,6 +78,7 @@ class WebServer(Publisher):
         self._listeners: set[asyncio.Queue] = set()
         self._plotter = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="moi-plot")
         self._plots: dict[str, concurrent.futures.Future] = {}
+        self._fits: dict[str, dict[str, Any]] = {}
         self._plots_lock = threading.Lock()
         self.child = ChildWork()
         self.views = Views(self)
@@ -174,6 +180,7 @@ class WebServer(Publisher):
         self.measurement_stored(measurement)
 
     def measurement_stored(self, m: "Measurement") -> None:
+        self._keep_fit(m)
         with self._plots_lock:
             behind = len(self._plots)
         if behind >= MAX_PENDING_PLOTS:
@@ -189,6 +196,26 @@ class WebServer(Publisher):
             return self.child.call(render_png, m.result)
 
         self.submit_plot(m.id, draw)
+
+    def _keep_fit(self, m: "Measurement") -> None:
+        """The fit and its residual of the latest results, thinned to at most FIT_POINTS points, for the live page
+        to draw over the swing it just showed (times from the trace's first sample, s; angles, rad)."""
+        try:
+            a = m.result.arrays
+            t, fitted, residual, t0 = a["t"], a["fitted"], a["residual"], float(a["trace_t"][0])
+        except (AttributeError, KeyError, IndexError, TypeError):  # a result without arrays: nothing to draw
+            return
+        step = max(1, len(t) // FIT_POINTS)
+        fit = {"t": [round(float(x) - t0, 4) for x in t[::step]], "fitted": [round(float(x), 6) for x in fitted[::step]],
+               "residual": [round(float(x), 7) for x in residual[::step]], "unit": "rad", "time_unit": "s"}
+        with self._plots_lock:
+            self._fits[m.id] = fit
+            while len(self._fits) > MAX_FITS:
+                self._fits.pop(next(iter(self._fits)))
+
+    def fit(self, uuid: str) -> dict[str, Any] | None:
+        with self._plots_lock:
+            return self._fits.get(uuid)
 
     def submit_plot(self, uuid: str, make_png) -> concurrent.futures.Future:
         """Keep the PNG ``make_png()`` draws with the measurement ``uuid`` (once, however often asked)."""

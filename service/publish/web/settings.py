@@ -21,7 +21,12 @@ class WebSettings:
     PLC and MQTT). request_timeout: a connection that has not sent a complete request this many seconds after
     it opened (or after its last answer) is closed, s. server_names: host names the page may be asked for
     besides an IP address, localhost and this machine's own names (a request naming another host in its Host
-    header is refused: a DNS-rebinding page on a LAN browser could otherwise read every result)."""
+    header is refused: a DNS-rebinding page on a LAN browser could otherwise read every result). display_unit:
+    the unit of inertia the pages, reports and exports show when the recipe names none (values stay kg·m²).
+    shift_starts: when the shifts begin, "HH:MM" in the appliance's local time: Home counts the parts of the
+    shift in progress. users_file: a TOML file of named users with roles and scrypt password hashes (``moi
+    user add``): people log in by name and each result records who started it; None: the token is the one
+    login."""
 
     host: str = "127.0.0.1"
     port: int = 8080
@@ -30,3 +35,6 @@ class WebSettings:
     max_connections: int = 64
     request_timeout: float = 15.0
     server_names: tuple[str, ...] = ()
+    display_unit: str = "kg·m²"
+    shift_starts: tuple[str, ...] = ("06:00", "14:00", "22:00")
+    users_file: str | None = None

@@ -21,15 +21,17 @@ import jinja2
 from aiohttp import web
 
 from service import __version__
-from service.errors import StoreDamaged
-from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME
-from .child import ChildBusy, export_file, replot, trace_file
+from service.errors import InputFileError, StoreDamaged
+from service.publish.dfq import ENCODING
+from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME, allowed
+from .child import ChildBusy, export_file, replot, report_file, trace_file
 from .priority import CAPTURE_STATES, CaptureFirst
-from .live import Live
+from .live import Live, extras
 from .settings import PLOT_NAME
 from measurement.flags import FLAGS
 
 from .words import STATE_WORDS, flag_words
+from . import quality as Q
 
 if TYPE_CHECKING:  # pragma: no cover
     import concurrent.futures
@@ -54,6 +56,7 @@ if TYPE_CHECKING:  # pragma: no cover
         def plot_future(self, uuid: str) -> concurrent.futures.Future | None: ...
         def submit_plot(self, uuid: str, get_result: Any) -> concurrent.futures.Future: ...
         def stats(self) -> dict[str, Any]: ...
+        def fit(self, uuid: str) -> dict[str, Any] | None: ...
 
 log = logging.getLogger("moi.web")
 
@@ -62,6 +65,8 @@ HERE = Path(__file__).parent
 TICK = 0.25
 #: the largest history page asked for (its offset must stay an SQLite integer; no store has so many)
 MAX_PAGE = 10**9
+#: the latest parts an SPC page charts at most
+SPC_POINTS = 500
 #: keys whose values the set-up page never shows
 SECRET_WORDS = ("password", "token", "secret")
 
@@ -73,18 +78,6 @@ class Refused(web.HTTPException):
         self.status_code = status
         super().__init__(text=message)
         self.message = message
-
-
-def _fmt(v: Any, spec: str = ".6g") -> str:
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return "–"
-    return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
-
-
-def _when(ts: float | None) -> str:
-    if ts is None:
-        return "–"
-    return dt.datetime.fromtimestamp(ts, dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
 def _name(v: Any) -> Any:
@@ -140,12 +133,12 @@ class Views:
         self.env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")),
                                       autoescape=jinja2.select_autoescape(["html"]), trim_blocks=True,
                                       lstrip_blocks=True)
-        self.env.filters.update(fmt=_fmt, when=_when, name=_name)
+        self.env.filters.update(fmt=Q.number, name=_name, inertia=Q.inertia, iso=Q.iso)
         self._names = _own_names(server.settings.server_names)
         self.capture_first = CaptureFirst(self._capturing)
         # file names carry a hash of the content: a browser never keeps a stale script after an update
         stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
-        self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS,
+        self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS, VERDICT_WORDS=Q.VERDICT_WORDS,
                                 static_url=lambda name: f"/static/{name}?v={stamps.get(name, '')}")
 
     def _capturing(self) -> bool:
@@ -157,6 +150,8 @@ class Views:
         app = web.Application(middlewares=[self._errors, self._host_check, self.capture_first.middleware], client_max_size=64 * 1024)
         r = app.router
         r.add_get("/", self.home)
+        r.add_get("/home/summary", self.home_summary)
+        r.add_get("/spc", self.spc)
         r.add_get("/events", self.events)
         r.add_get("/api/state", self.api_state)
         r.add_post("/login", self.login)
@@ -170,6 +165,9 @@ class Views:
         r.add_get("/results/{key}/plot.png", self.plot)
         r.add_get("/results/{key}/trace.csv", self.trace_csv)
         r.add_get("/results/{key}/result.json", self.result_json)
+        r.add_get("/results/{key}/fit.json", self.fit_json)
+        r.add_get("/results/{key}/report", self.report)
+        r.add_get("/results/{key}/report.pdf", self.report_pdf)
         r.add_get("/set", self.tensor_set)
         r.add_get("/api/set", self.api_set)
         r.add_post("/api/set/{action}", self.set_action)
@@ -229,6 +227,8 @@ class Views:
         ctx.setdefault("title", "")
         html = self.env.get_template(template).render(
             device_id=self.app.config.device_id, logged_in=session is not None,
+            user=session.user if session else None, role=session.role if session else None,
+            named_users=bool(self.server.guard.users),
             csrf=session.csrf if session else login_csrf, path=request.path_qs,
             simulated=self.app.config.simulated, **ctx)
         resp = web.Response(text=html, status=status, content_type="text/html",
@@ -239,10 +239,41 @@ class Views:
         return resp
 
     # --- home and live state ---------------------------------------------------------------------
+    def unit(self, payload: Mapping[str, Any] | None = None) -> str:
+        """The unit a result is shown in: its recipe's, else the set-up's."""
+        return Q.display_unit(payload, self.server.settings.display_unit)
+
+    def summary(self) -> dict[str, Any]:
+        """Home's verdict tile (the last completed part: it stays until the next one), the shift's counters, the
+        last parts, the part in progress and the calibration."""
+        store = self.app.store
+        now = dt.datetime.now().astimezone()
+        shift = Q.shift_start(self.server.settings.shift_starts, now)
+        parts = store.list(limit=12, parts_only=True, full=True) if store is not None else []
+        last = store.latest("ok") if store is not None else None
+        counts = store.verdict_counts(since=shift.timestamp()) if store is not None else {}
+        tracker = getattr(self.app, "parts", None)
+        open_part = tracker.open_part if tracker is not None else None
+        calibration = self.app.calibration_state()  # as the next result will be judged
+        if calibration is not None and calibration.get("valid_until"):
+            until = dt.date.fromisoformat(calibration["valid_until"])
+            calibration = {**calibration, "days_left": (until - dt.datetime.now(dt.UTC).date()).days}
+        tile = parts[0] if parts else None
+        return {"tile": tile, "tile_view": Q.part_view(tile.payload) if tile else None,
+                "tile_unit": self.unit(tile.payload if tile else None), "counts": counts,
+                "shift": shift.strftime("%H:%M"), "strip": parts, "open_part": open_part,
+                "next_release": extras(self.app).get("release_next"),
+                "calibration": calibration, "last": last, "last_view": Q.part_view(last.payload) if last else None,
+                "last_unit": self.unit(last.payload if last else None)}
+
     async def home(self, request: web.Request) -> web.Response:
-        last = self.app.store.latest("ok") if self.app.store is not None else None
-        return self._page(request, "home.html", title="Home", state=self.live.snapshot(), last=last,
+        return self._page(request, "home.html", title="Home", state=self.live.snapshot(), s=self.summary(),
                           recipes=self.app.parts.book.recipes)
+
+    async def home_summary(self, request: web.Request) -> web.Response:
+        """Home's verdict tile, counters and last parts alone (the page fetches it after each result)."""
+        html = self.env.get_template("summary.html").render(s=self.summary())
+        return web.Response(text=html, content_type="text/html", headers={"Cache-Control": "no-store"})
 
     async def api_state(self, request: web.Request) -> web.Response:
         return web.json_response(self.live.snapshot())
@@ -294,9 +325,12 @@ class Views:
         csrf, expected = str(form.get("csrf") or ""), request.cookies.get(LOGIN_COOKIE) or ""
         if not csrf or not expected or not hmac.compare_digest(csrf.encode(), expected.encode()):
             raise Refused(403, "missing or wrong CSRF token: reload the page and log in again")
-        made = self.server.guard.login(str(form.get("token") or ""))
+        user = str(form.get("user") or "").strip()
+        made = self.server.guard.login(str(form.get("token") or ""), user or None)
         if made is None:
             await self.server.guard.wrong_token(request.remote)  # a guess costs time
+            if user:
+                raise Refused(401, "wrong user name or password")
             raise Refused(401, "wrong token: it is the first line of the appliance's web token file")
         sid, _ = made
         resp = web.HTTPSeeOther(self._next(request, str(form.get("next") or "")))
@@ -312,7 +346,9 @@ class Views:
         resp.del_cookie(COOKIE, path="/")
         raise resp
 
-    async def _authorise(self, request: web.Request, form: Mapping[str, Any]) -> None:
+    async def _authorise(self, request: web.Request, form: Mapping[str, Any], action: str | None = None) -> str:
+        """Refused unless the request may act (and its role may do ``action``); the source its commands are
+        recorded with: "web", or "web:<name>" for a named user."""
         self._same_origin(request)
         bearer = None
         auth = request.headers.get("Authorization")
@@ -327,14 +363,24 @@ class Views:
             if bearer is not None:
                 await self.server.guard.wrong_token(request.remote)  # a guess costs time
             raise Refused(*why)
+        name, role = self.server.guard.who(cookie=request.cookies.get(COOKIE), bearer=bearer)
+        if action is not None and not allowed(role, action):
+            need = {"recipe": "change the recipe", "acknowledge": "acknowledge a fault"}.get(action, action)
+            raise Refused(403, f"{name or 'this login'} ({role}) may not {need}: log in as a quality engineer "
+                               "or an admin")
+        return f"web:{name}" if name else "web"
 
     async def _action(self, request: web.Request, name: str) -> web.Response:
         form = await _form(request) if request.content_type in ("application/x-www-form-urlencoded",
                                                                  "multipart/form-data") else {}
-        await self._authorise(request, form)
         state = self.app.live_status().state
-        self.app.command(name, "web")
-        log.info("web: %s requested (state %s)", name, state)
+        source = await self._authorise(request, form, "acknowledge" if name == "abort" and state == "FAULT" else name)
+        seq = self.app.sequencer
+        if name == "trigger" and seq is not None and seq.busy:
+            # said, not queued and silently dropped: the sequencer takes no trigger while it measures
+            raise Refused(409, f"a measurement is already running ({state}): Measure again when it is IDLE")
+        self.app.command(name, source)
+        log.info("%s: %s requested (state %s)", source, name, state)
         if "text/html" in request.headers.get("Accept", "") and form:
             raise web.HTTPSeeOther("/")
         return web.json_response({"accepted": True, "command": name, "state": state}, status=202)
@@ -352,9 +398,9 @@ class Views:
         from service.parts.recipes import check_part_id
 
         form = await _form(request)
-        await self._authorise(request, form)
-        data: dict[str, Any] = {}
         recipe = str(form.get("recipe") or "").strip()
+        source = await self._authorise(request, form, "recipe" if recipe else "part_id")
+        data: dict[str, Any] = {}
         if recipe:
             if recipe not in ("0",):
                 try:
@@ -371,7 +417,7 @@ class Views:
             raise Refused(400, "nothing to change: give recipe and/or part_id")
         if self.app.sequencer is not None and self.app.sequencer.busy:
             raise Refused(409, "a measurement runs: the recipe and the part ID cannot change during it")
-        self.app.command("recipe", "web", data)
+        self.app.command("recipe", source, data)
         return web.json_response({"accepted": True, "command": "part", **data}, status=202)
 
     # --- the guided tensor set ---------------------------------------------------------------------
@@ -402,8 +448,8 @@ class Views:
             raise Refused(404, f"no set action {action!r}; expected one of {', '.join(ACTIONS)}")
         form = await _form(request) if request.content_type in ("application/x-www-form-urlencoded",
                                                                  "multipart/form-data") else {}
-        await self._authorise(request, form)
-        self.app.command("set", "web", {"action": action})
+        source = await self._authorise(request, form, "set")
+        self.app.command("set", source, {"action": action})
         log.info("web: set %s requested", action)
         if "text/html" in request.headers.get("Accept", "") and form:
             raise web.HTTPSeeOther("/set")
@@ -423,9 +469,51 @@ class Views:
         m = self._get(request.match_info["key"])
         p = m.payload or {}
         steps = [s for s in p.get("steps") or () if s.get("chosen")]
-        return self._page(request, "result.html", title=f"Result {m.seq}", m=m, p=p, steps=steps,
+        return self._page(request, "result.html", title=f"Result {m.seq}", steps=steps,
                           flags=flag_words(m.flags), baseline=p.get("baseline") or {},
-                          has_trace=self.app.config.store_trace)
+                          has_trace=self.app.config.store_trace, **self._result_context(m))
+
+    def _result_context(self, m: "Measurement") -> dict[str, Any]:
+        p = m.payload or {}
+        unit = self.unit(p)
+        view = Q.part_view(p)
+        if view["kind"] == "release" and m.part_uuid and self.app.store is not None:
+            # an earlier release of a part that has been judged since: where its verdict is
+            later = self.app.store.list(limit=50, part_id=m.part_id, recipe=m.recipe, parts_only=True)
+            done = next((r for r in later if r.part_uuid == m.part_uuid), None)
+            view["part_done"] = {"uuid": done.uuid, "seq": done.seq, "verdict": done.part_verdict} if done else None
+        return {"m": m, "p": p, "unit": unit, "v": view, "band": Q.band(view["recipe"], view.get("value"),
+                                                                           view.get("U"), unit)}
+
+    async def fit_json(self, request: web.Request) -> web.Response:
+        """The fit and its residual of one of the latest results (the live page draws them over the swing)."""
+        key = request.match_info["key"]
+        fit = self.server.fit(key)
+        if fit is None:
+            m = self._get(key)
+            fit = self.server.fit(m.uuid)
+        if fit is None:
+            raise Refused(404, "only the latest results keep their fit for the live page; see the result's plot")
+        return web.json_response(fit)
+
+    async def report(self, request: web.Request) -> web.Response:
+        """The quality record of one result: a page that prints on A4 (the PDF has the same content)."""
+        m = self._get(request.match_info["key"])
+        ctx = self._result_context(m)
+        releases = Q.release_rows(ctx["v"], m.payload, self.app.store.get)
+        seen = sorted({f for r in releases for f in r["flags"] or ()} | set(m.flags))
+        return self._page(request, "report.html", title=f"Report {m.seq}", releases=releases,
+                          flags=flag_words(seen), **ctx)
+
+    async def report_pdf(self, request: web.Request) -> web.Response:
+        m = self._get(request.match_info["key"])
+        fut = self.server.plot_future(m.uuid)
+        if fut is not None:  # the evidence plot is being drawn: the report has it
+            await asyncio.wrap_future(fut)
+        body = await self._in_child(report_file, str(self.app.config.state_dir), m.uuid,
+                                    self.server.settings.display_unit)
+        return web.Response(body=body, content_type="application/pdf", headers={
+            "Content-Disposition": f'attachment; filename="moi-{m.seq}-{m.uuid[:8]}-report.pdf"'})
 
     async def plot(self, request: web.Request) -> web.Response:
 
@@ -522,18 +610,72 @@ class Views:
 
         export = urlencode(args)
         return self._page(request, "history.html", title="History", rows=rows, total=total, page=page, pages=pages,
+                          unit=self.server.settings.display_unit, unit_of=self.unit,
                           q=self._query_args(request), link=link, export=export, flag_names=sorted(FLAGS),
                           recipes=self.app.store.recipes())
 
     async def export(self, request: web.Request) -> web.Response:
         fmt = request.match_info["fmt"]
-        if fmt not in ("csv", "json"):
-            raise Refused(404, f"export format {fmt[:10]!r}: expected export.csv or export.json")
-        name = f"moi-{self.app.config.device_id}-history.{fmt}"
+        if fmt not in ("csv", "json", "dfq"):
+            raise Refused(404, f"export format {fmt[:10]!r}: expected export.csv, export.json or export.dfq")
+        filters = self._filters(request)
+        if fmt == "dfq" and not filters["recipe"]:
+            raise Refused(400, "a DFQ file holds one part type: give recipe=NAME")
+        name = f"moi-{self.app.config.device_id}-{filters['recipe'] if fmt == 'dfq' else 'history'}.{fmt}"
         # the same files as `moi export` (oldest first)
-        body = await self._in_child(export_file, str(self.app.config.state_dir), fmt, self._filters(request))
-        return web.Response(body=body, content_type="application/json" if fmt == "json" else "text/csv",
-                            charset="utf-8", headers={"Content-Disposition": f'attachment; filename="{name}"'})
+        try:
+            body = await self._in_child(export_file, str(self.app.config.state_dir), fmt, filters)
+        except InputFileError as exc:  # no parts of that recipe
+            raise Refused(404, str(exc)) from None
+        media = {"json": "application/json", "csv": "text/csv", "dfq": "text/plain"}[fmt]
+        return web.Response(body=body, content_type=media, charset="utf-8" if fmt != "dfq" else ENCODING,
+                            headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+    # --- SPC ---------------------------------------------------------------------------------------------------
+    async def spc(self, request: web.Request) -> web.Response:
+        """Control chart (I-MR or X̄–R) of one recipe's part values, Cp/Cpk, rule violations marked."""
+        from measurement.errors import InvalidInput
+
+        from service.parts.recipes import recipe_spc
+
+        filters = self._filters(request)
+        chart = request.query.get("chart", "auto")
+        if chart not in ("auto", "I-MR", "Xbar-R"):
+            raise Refused(400, f"chart={chart[:20]!r}: expected auto, I-MR or Xbar-R")
+        store = self.app.store
+        recipes = store.recipes() if store is not None else []
+        recipe = request.query.get("recipe", "").strip() or (recipes[-1] if recipes else "")
+        if recipe and recipe not in recipes:
+            raise Refused(404, f"no completed parts of recipe {recipe[:64]!r} in the store")
+        result = None
+        if recipe:
+            loop = asyncio.get_running_loop()
+            try:
+                result = await loop.run_in_executor(None, lambda: recipe_spc(
+                    store, recipe, since=filters["since"], until=filters["until"], chart=chart, limit=SPC_POINTS))
+            except InvalidInput as exc:  # e.g. X̄–R asked of parts with one release each
+                raise Refused(400, f"chart={chart}: {exc}") from None
+        unit = self.server.settings.display_unit
+        book = getattr(self.app, "parts", None)
+        if book is not None and recipe:
+            try:
+                unit = book.book.find(recipe).display_unit or unit
+            except InvalidInput:  # a recipe in the store that is no longer in the directory: the set-up's unit
+                pass
+        chart_svg = Q.control_chart(result.summary, unit) if result is not None else None
+        q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
+        # the check standard's history (`moi check-standard`): its values as individuals, oldest first
+        checks = [c for c in reversed(store.check_standards(limit=SPC_POINTS) if store is not None else [])
+                  if isinstance(c.get("value"), (int, float))
+                  and (filters["since"] is None or c["finished_at"] >= filters["since"])
+                  and (filters["until"] is None or c["finished_at"] < filters["until"])]
+        check_chart = None
+        if len(checks) >= 2:
+            from measurement.spc import individuals
+
+            check_chart = Q.control_chart(individuals([float(c["value"]) for c in checks]), unit)
+        return self._page(request, "spc.html", title="SPC", recipes=recipes, recipe=recipe, spc=result,
+                          chart=chart_svg, unit=unit, q=q, checks=checks[-10:][::-1], check_chart=check_chart)
 
     # --- set-up -----------------------------------------------------------------------------------------
     def health(self) -> dict[str, Any]:

@@ -14,35 +14,87 @@ var moi = (function () {
         if (r.ok) {
           say({trigger: "measurement requested", abort: "abort / acknowledge sent", part: "recipe / part ID set"}[r.body.command]);
         }
+        else if (r.status === 409) { say(r.body.error, true); }
         else { say("refused (" + r.status + "): " + r.body.error, true); }
       })
       .catch(function (e) { say("no answer from the appliance: " + e, true); });
   }
 
-  // the swing, drawn on a canvas as the samples arrive
-  function Swing(canvas) {
-    this.c = canvas; this.t = []; this.a = []; this.tmax = 10;
+  // tick values of an axis from lo to hi: 1, 2 or 5 times a power of ten apart
+  function ticks(lo, hi, n) {
+    var span = hi - lo, raw = span / Math.max(1, n), p = Math.pow(10, Math.floor(Math.log10(raw))), step = p;
+    [1, 2, 5, 10].forEach(function (m) { if (raw > m * p * 0.999) { step = m * p; } });
+    if (raw > step) { step *= 2; }
+    var out = [], v = Math.ceil(lo / step) * step;
+    for (; v <= hi + step * 1e-9; v += step) { out.push(Math.abs(v) < step * 1e-9 ? 0 : v); }
+    return out;
   }
-  Swing.prototype.reset = function (tmax) { this.t = []; this.a = []; if (tmax) { this.tmax = tmax; } this.draw(); };
+
+  // the swing, drawn on a canvas as the samples arrive (angle in rad against t in s, labelled axes); when
+  // the swing ends, the fit over it and the residual in a panel below
+  function Swing(canvas) {
+    this.c = canvas; this.t = []; this.a = []; this.tmax = 10; this.fit = null;
+    var self = this;
+    window.addEventListener("resize", function () { self.draw(); });
+  }
+  Swing.prototype.reset = function (tmax) { this.t = []; this.a = []; this.fit = null; if (tmax) { this.tmax = tmax; } this.draw(); };
   Swing.prototype.add = function (t, a) {
     for (var i = 0; i < t.length; i++) { this.t.push(t[i]); this.a.push(a[i]); }
     this.draw();
   };
-  Swing.prototype.draw = function () {
-    var c = this.c, g = c.getContext("2d"), w = c.width, h = c.height, n = this.t.length;
-    g.clearRect(0, 0, w, h);
-    g.strokeStyle = "#ccc"; g.beginPath(); g.moveTo(0, h / 2); g.lineTo(w, h / 2); g.stroke();
-    if (!n) { return; }
-    var amax = 1e-6, tmax = Math.max(this.tmax, this.t[n - 1]);
-    for (var i = 0; i < n; i++) { amax = Math.max(amax, Math.abs(this.a[i])); }
-    g.strokeStyle = "#b22"; g.lineWidth = 1; g.beginPath();
-    for (var j = 0; j < n; j++) {
-      var x = this.t[j] / tmax * (w - 4) + 2, y = h / 2 - this.a[j] / amax * (h / 2 - 6);
-      if (j) { g.lineTo(x, y); } else { g.moveTo(x, y); }
+  Swing.prototype.showFit = function (fit) { this.fit = fit; this.draw(); };
+  Swing.prototype.panel = function (g, box, xs, ys, ylabel, tmax, amax, colour, dots) {
+    var L = box.x, T = box.y, W = box.w, H = box.h;
+    g.strokeStyle = "#999"; g.lineWidth = 1; g.strokeRect(L, T, W, H);
+    g.fillStyle = "#333"; g.font = "12px sans-serif"; g.textAlign = "right"; g.textBaseline = "middle";
+    var marks = H > 120 ? ticks(-amax, amax, 4) : [-0.8 * amax, 0, 0.8 * amax];  // a short panel: its range
+    marks.forEach(function (v) {
+      var y = T + H / 2 - v / amax * (H / 2 - 4);
+      g.strokeStyle = "#eee"; g.beginPath(); g.moveTo(L, y); g.lineTo(L + W, y); g.stroke();
+      g.fillText(v === 0 ? "0" : (Math.abs(amax) < 0.01 ? v.toExponential(1) : String(Number(v.toPrecision(2)))), L - 4, y);
+    });
+    g.save(); g.translate(12, T + H / 2); g.rotate(-Math.PI / 2); g.textAlign = "center"; g.fillText(ylabel, 0, 0); g.restore();
+    g.strokeStyle = colour; g.lineWidth = dots ? 1 : 1.5; g.beginPath();
+    for (var j = 0; j < xs.length; j++) {
+      var x = L + xs[j] / tmax * W, y2 = T + H / 2 - ys[j] / amax * (H / 2 - 4);
+      if (j) { g.lineTo(x, y2); } else { g.moveTo(x, y2); }
     }
     g.stroke();
-    g.fillStyle = "#333"; g.font = "12px sans-serif";
-    g.fillText("±" + amax.toFixed(3) + " rad, " + this.t[n - 1].toFixed(1) + " s", 6, 14);
+  };
+  Swing.prototype.draw = function () {
+    var c = this.c, r = window.devicePixelRatio || 1, cw = c.clientWidth || 600, ch = c.clientHeight || 240;
+    if (c.width !== Math.round(cw * r) || c.height !== Math.round(ch * r)) { c.width = Math.round(cw * r); c.height = Math.round(ch * r); }
+    var g = c.getContext("2d"), n = this.t.length, fit = this.fit;
+    g.setTransform(r, 0, 0, r, 0, 0); g.clearRect(0, 0, cw, ch);
+    var L = 58, R = 10, B = 34, T = 8, W = cw - L - R, Htot = ch - T - B;
+    var H = fit ? Htot * 0.68 : Htot, box = {x: L, y: T, w: W, h: H};
+    var tmax = Math.max(this.tmax, n ? this.t[n - 1] : 0), amax = n ? 1e-6 : 0.2, i;
+    for (i = 0; i < n; i++) { amax = Math.max(amax, Math.abs(this.a[i])); }
+    amax *= 1.05;
+    this.panel(g, box, this.t, this.a, "angle [rad]", tmax, amax, "#555", true);
+    if (fit) {
+      g.save(); g.beginPath(); g.rect(L, T, W, H); g.clip();
+      this.panel(g, box, fit.t, fit.fitted, "angle [rad]", tmax, amax, "#c22", false);
+      g.restore();
+      var rmax = 1e-9;
+      for (i = 0; i < fit.residual.length; i++) { rmax = Math.max(rmax, Math.abs(fit.residual[i])); }
+      this.panel(g, {x: L, y: T + H + 8, w: W, h: Htot - H - 8}, fit.t, fit.residual, "residual [rad]", tmax, rmax * 1.1, "#26c", false);
+    }
+    // the time axis
+    var yb = T + Htot;
+    g.fillStyle = "#333"; g.textAlign = "center"; g.textBaseline = "top"; g.font = "12px sans-serif";
+    ticks(0, tmax, Math.max(2, Math.floor(W / 70))).forEach(function (v) {
+      var x = L + v / tmax * W;
+      g.strokeStyle = "#999"; g.beginPath(); g.moveTo(x, yb); g.lineTo(x, yb + 4); g.stroke();
+      g.fillText(String(Math.round(v * 100) / 100), x, yb + 5);
+    });
+    g.fillText("t [s]", L + W / 2, yb + 19);
+    if (fit) {
+      g.textAlign = "right"; g.textBaseline = "top"; g.fillStyle = "#c22";
+      g.fillText("fit (red) over the samples (grey)", L + W - 4, T + 4);
+    }
+    this.c.setAttribute("data-drawn", String(n));
+    this.c.setAttribute("data-fit", fit ? "1" : "0");
   };
 
   function home() {
@@ -58,6 +110,11 @@ var moi = (function () {
       if (s.state === "FAULT" && s.fault) { f.textContent = s.fault; f.hidden = false; } else { f.hidden = true; }
       if (s.recipe !== undefined) { $("recipe").textContent = s.recipe ? s.recipe.number + " " + s.recipe.name : "–"; }
       if (s.part_id !== undefined) { $("part-id").textContent = s.part_id || "–"; }
+      var rk = $("release-k");
+      if (rk && s.release_next !== undefined) {
+        var busy = ["ARMED", "RELEASING", "CAPTURING", "IDENTIFYING", "PUBLISHING"].indexOf(s.state) >= 0;
+        rk.textContent = s.release_next ? (busy ? "measuring release " : "next: release ") + s.release_next.k + " of " + s.release_next.of : "–";
+      }
       var box = $("progress-box"), bar = $("progress-bar"), txt = $("progress-text");
       if (s.state === "CAPTURING" && s.elapsed !== undefined) {
         box.hidden = false; bar.style.width = Math.min(100, 100 * s.elapsed / s.capture_duration) + "%";
@@ -75,13 +132,15 @@ var moi = (function () {
       li.textContent = s.state + " — " + (s.reason || "");
       li.setAttribute("data-state", s.state);
       $("log").appendChild(li);
+      if (s.state === "IDLE" || s.state === "FAULT") { say(""); }  // "measurement requested" is answered now
       if (s.state === "IDLE" && s.previous === "PUBLISHING" && s.measurement_id) {
-        var p = $("latest");
-        p.textContent = "latest result: ";
-        var a = document.createElement("a");
-        a.id = "latest-link"; a.href = "/results/" + s.measurement_id;
-        a.textContent = "J = " + (s.J !== null && s.J !== undefined ? s.J.toPrecision(7) + " kg·m²" : "n/a");
-        p.appendChild(a);
+        var id = s.measurement_id;
+        // the verdict tile, the counters and the last parts as the server now has them
+        fetch("/home/summary", {credentials: "same-origin"}).then(function (r) { return r.ok ? r.text() : null; })
+          .then(function (html) { if (html) { $("summary").outerHTML = html; } });
+        fetch("/results/" + id + "/fit.json", {headers: {"Accept": "application/json"}})
+          .then(function (r) { return r.ok ? r.json() : null; })
+          .then(function (fit) { if (fit && id === mid) { swing.showFit(fit); } });
       }
     }
     var pf = $("part-form");

@@ -1,0 +1,142 @@
+"""The quality record of one stored result as a PDF (A4): what the report page shows, drawn with
+matplotlib's PDF backend (text stays text: a PDF reader finds the verdict)."""
+
+from __future__ import annotations
+
+import io
+from typing import Any
+
+from measurement.units import SI
+
+from .web import quality as Q
+from .web.words import flag_words
+
+#: A4 portrait, inches
+A4 = (8.27, 11.69)
+VERDICT_COLOURS = {"OK": "#1a7f37", "NOK": "#b00020", "INVALID": "#9a6700"}
+
+
+def report_lines(m: Any, unit: str, lookup: Any = None) -> tuple[dict[str, Any], list[tuple[str, str]], list[str]]:
+    """(the part view, the (label, text) facts, the release lines) of a ``StoredMeasurement``; ``lookup(uuid)``:
+    a release's stored measurement (its flags)."""
+    p = m.payload or {}
+    v = Q.part_view(p)
+    r = v["recipe"] or {}
+    cal = p.get("calibration") or None
+    facts = [("measurement", f"#{m.seq} {m.uuid}"), ("part ID", p.get("part_id") or Q.MISSING),
+             ("finished", Q.iso(m.finished_at)), ("operator / started by", m.trigger or Q.MISSING),
+             ("device", m.device_id), ("software", f"moi {m.software_version}")]
+    if r:
+        facts.append(("recipe", f"{r.get('name')} (no. {r.get('number')}, version {r.get('version')})"))
+        if r.get("lower") is not None:
+            facts += [("nominal", Q.inertia(r.get("nominal"), unit)),
+                      ("limits", f"{Q.inertia(r.get('lower'), unit)} … {Q.inertia(r.get('upper'), unit)}"),
+                      ("decision rule", "guard band (ISO 14253-1), unproven: " + str(r.get("uncertain"))
+                       if r.get("rule") == "guard_band" else "simple acceptance (U reported, not used)")]
+    if v.get("U") is not None:
+        facts.append((f"{v.get('quantity') or 'J'} ± U", f"{Q.inertia(v.get('value'), unit)} ± "
+                      f"{Q.inertia(v.get('U'), unit, '.2g')} (k = {Q.number(v.get('k'), '.2g')})"))
+    else:
+        facts.append(("J ± u", f"{Q.inertia(v.get('value'), unit)} ± {Q.inertia(v.get('std'), unit, '.2g')} (1σ)"))
+    for row in v["budget"]:
+        facts.append(("  budget: " + row["name"], (f"{Q.number(row['u'], '.2g')} {row['unit']}" if row["unit"]
+                                                   else Q.inertia(row["u"], unit, ".2g"))
+                      + (f" ({Q.number(row['share'], '.3g')} of u_c²)" if row["share"] is not None else "")))
+    facts.append(("calibration", (f"{cal.get('date')}" + (f", due {cal.get('valid_until')}" if cal.get("valid_until")
+                                                            else "") + (" (DUE)" if cal.get("due") else ""))
+                  if cal else "no calibration record"))
+    releases = []
+    for r in Q.release_rows(v, p, lookup):
+        flags = "flags: " + (", ".join(r["flags"]) or "none") if r["flags"] is not None else ""
+        releases.append(f"release {r['index']} of {r['of']}: {Q.inertia(r['value'], unit)} — {r['status']}"
+                        + (f"; {flags}" if flags else ""))
+    described = [f"{f}: {words}" for f, words in flag_words(m.flags) if words]
+    if described:
+        releases.append("this release's flags: " + "; ".join(described))
+    return v, facts, releases
+
+
+def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = None) -> bytes:
+    """The report of the stored measurement ``m`` (``StoredMeasurement``) as PDF bytes, on as many A4 pages as
+    it takes; ``plot_png``: the evidence plot kept with it (None: said on the page)."""
+    import textwrap
+
+    from matplotlib.backends.backend_pdf import PdfPages
+    from matplotlib.figure import Figure
+
+    v, facts, releases = report_lines(m, unit, lookup)
+    verdict = v.get("verdict")
+    if v["kind"] == "part":
+        head, colour = v["verdict_words"], VERDICT_COLOURS.get(verdict or "", "k")
+    elif v["kind"] == "release":
+        head, colour = f"part in progress: release {v.get('index')} of {v.get('of')} (no part verdict yet)", "0.3"
+    else:
+        head, colour = "no recipe: a value without a verdict", "0.3"
+    lines = [(k, t) for k, t in facts] + [("", "")] + [("", r) for r in releases]
+    lines += [("", "why: " + r) for r in v["reasons"]]
+    buf = io.BytesIO()
+    with PdfPages(buf, metadata={"Title": f"moi report {m.uuid}", "Subject": head}) as pdf:
+        pages = 1
+        fig = Figure(figsize=A4)
+        fig.text(0.06, 0.965, f"Inertia measurement report #{m.seq}", fontsize=15, weight="bold", va="top")
+        fig.text(0.06, 0.93, head, fontsize=20, weight="bold", color=colour, va="top")
+        y = 0.885
+        for label, text in lines:
+            wrapped = textwrap.wrap(text, 78) or [""]
+            if y - 0.017 * len(wrapped) < 0.05:  # the page is full: the rest on the next one
+                pdf.savefig(fig)
+                pages += 1
+                fig = Figure(figsize=A4)
+                fig.text(0.06, 0.965, f"report #{m.seq} ({head}), page {pages}", fontsize=9, va="top")
+                y = 0.93
+            fig.text(0.06, y, label, fontsize=8.5, color="0.35", va="top")
+            for w in wrapped:
+                fig.text(0.32 if label else 0.06, y, w, fontsize=8.5, va="top")
+                y -= 0.017
+        r = v["recipe"] or {}
+        if y < 0.45:  # the band and the evidence need room: a page of their own
+            pdf.savefig(fig)
+            pages += 1
+            fig = Figure(figsize=A4)
+            fig.text(0.06, 0.965, f"report #{m.seq} ({head}), page {pages}", fontsize=9, va="top")
+            y = 0.93
+        if r.get("lower") is not None and r.get("upper") is not None:
+            y = _band(fig, y, r, v.get("value"), v.get("U"), unit)
+        if plot_png is not None:
+            import matplotlib.image as mpimg
+
+            ax = fig.add_axes((0.04, 0.02, 0.92, max(0.1, y - 0.04)))
+            ax.imshow(mpimg.imread(io.BytesIO(plot_png), format="png"))
+            ax.set_axis_off()
+        else:
+            fig.text(0.06, y - 0.02, "no evidence plot is kept with this measurement", fontsize=9, va="top")
+        pdf.savefig(fig)
+    return buf.getvalue()
+
+
+def _band(fig: Any, y: float, recipe: dict[str, Any], value: float | None, U: float | None, unit: str) -> float:
+    """The tolerance band under the facts (as on the result page); returns the height left above it."""
+    from measurement.units import from_si
+
+    f = from_si(1.0, unit) or 1.0
+    lsl, usl = recipe["lower"] * f, recipe["upper"] * f
+    u = (U or 0.0) * f
+    ax = fig.add_axes((0.08, y - 0.07, 0.84, 0.04))
+    ax.axvspan(lsl, usl, color="#d8f5dc", label="tolerance zone")
+    if recipe.get("rule", "guard_band") == "guard_band" and 0 < 2 * u < usl - lsl:
+        ax.axvspan(lsl + u, usl - u, color="#8fd19e", label="proven in (guard band)")
+    for x in (lsl, usl):
+        ax.axvline(x, color="0.25", lw=1.5)
+    span = usl - lsl
+    lo, hi = lsl - 0.35 * span, usl + 0.35 * span
+    if value is not None:
+        x = value * f
+        lo, hi = min(lo, x - u - 0.05 * span), max(hi, x + u + 0.05 * span)
+        ax.errorbar([x], [0.5], xerr=[u], fmt="o", color="#123", capsize=4, label="result ± U")
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(0, 1)
+    ax.set_yticks([])
+    ax.tick_params(labelsize=7)
+    ax.set_xlabel(unit, fontsize=7)
+    ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(0, 1.9), ncol=3, frameon=False)
+    return y - 0.11

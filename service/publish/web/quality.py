@@ -1,0 +1,267 @@
+"""What the pages and the report say about a part: its verdict first, the value in the display unit, the
+tolerance band with the guard band and the result's interval, the shift's counters, control charts as SVG.
+
+Pure functions of stored payloads (dicts) and numbers: the views, the report page and the PDF share them.
+Every number is written with its unit; a missing value is written as "–", never as None or nan.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from typing import Any, Callable, Mapping, Sequence
+
+from measurement.units import SI, UnitError, from_si, inertia_unit
+
+#: what the page says for a value it does not have
+MISSING = "–"
+
+#: verdict words (colour is never the only sign: the word is always written)
+VERDICT_WORDS = {"OK": "part OK", "NOK": "part NOK (not conforming)", "INVALID": "part INVALID (measure again)"}
+
+
+def number(v: Any, spec: str = ".6g") -> str:
+    """A number as text; None, NaN, ±inf and non-numbers that are not text become "–"."""
+    if v is None or isinstance(v, bool):
+        return MISSING
+    if isinstance(v, (int, float)):
+        return format(v, spec) if math.isfinite(v) else MISSING
+    return str(v)
+
+
+def inertia(v: Any, unit: str = SI, spec: str = ".7g") -> str:
+    """``v`` kg·m² written in ``unit`` with the unit ("–" without a value)."""
+    shown = from_si(v, unit) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+    return MISSING if shown is None else f"{format(shown, spec)} {unit}"
+
+
+def iso(ts: float | None) -> str:
+    """Unix time (s) as ISO 8601 with its UTC offset, to the second ("–" without one)."""
+    if ts is None or not math.isfinite(ts):
+        return MISSING
+    return dt.datetime.fromtimestamp(ts, dt.UTC).isoformat(timespec="seconds")
+
+
+def display_unit(payload: Mapping[str, Any] | None, default: str = SI) -> str:
+    """The unit a result is shown in: its recipe's, else ``default`` (the set-up's)."""
+    recipe = (payload or {}).get("recipe") or {}
+    try:
+        return inertia_unit(recipe.get("display_unit") or default)
+    except UnitError:  # a unit this version does not know (a newer recipe): SI
+        return SI
+
+
+def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
+    """What the result page leads with, from a stored payload.
+
+    kind: "part" (the part is complete: its verdict), "release" (a release of a part in progress: no part
+    verdict yet), "plain" (no recipe: a value without a verdict). value, U (kg·m²), k: the number the
+    decision rests on and its expanded uncertainty; std: a 1σ when no U exists.
+    """
+    p = payload or {}
+    recipe = p.get("recipe") or None
+    part = p.get("part") or None
+    release = p.get("release") or None
+    out: dict[str, Any] = {"recipe": recipe, "part": part, "release": release, "excluded": [], "reasons": [],
+                           "budget": budget_rows(p.get("uncertainty_budget"),
+                                                 ((part or release or {}).get("quantity") or (recipe or {}).get("quantity")
+                                                  or "J"))}
+    k = (recipe or {}).get("coverage_factor") or p.get("coverage_factor")
+    if part is not None:
+        out.update(kind="part", verdict=part.get("verdict"), value=part.get("value"), U=part.get("U"), k=k,
+                   quantity=part.get("quantity") or (recipe or {}).get("quantity"),
+                   used=len(part.get("used") or ()), releases=part.get("releases"),
+                   excluded=[{"release": int(e.get("index", 0)) + 1, "reason": e.get("reason") or ""}
+                             for e in part.get("excluded") or ()],
+                   # the exclusions are listed once (the part's reasons repeat them after "release N:")
+                   reasons=[r for r in part.get("reasons") or () if not str(r).startswith("release ")],
+                   zone=part.get("zone"))
+    elif release is not None:
+        out.update(kind="release", verdict=None, value=release.get("value"), U=release.get("U"), k=k,
+                   quantity=release.get("quantity"), index=release.get("index"), of=release.get("of"))
+    else:
+        U = p.get("J_U")
+        out.update(kind="plain", verdict=None, value=p.get("J"), U=U, k=p.get("coverage_factor") if U else None,
+                   quantity="J", std=p.get("J_std"))
+    out["verdict_words"] = VERDICT_WORDS.get(out.get("verdict") or "", "")
+    return out
+
+
+def release_rows(view: Mapping[str, Any], payload: Mapping[str, Any] | None,
+                 lookup: Callable[[str], Any] | None = None) -> list[dict[str, Any]]:
+    """Each release of the part (index, of, value kg·m², status, flags, seq, uuid): every release of a complete
+    part (``lookup(uuid)``: its stored measurement, for its flags), else the one release of the payload."""
+    p = payload or {}
+    part = view.get("part")
+    if part:
+        excluded = {e["release"]: e["reason"] for e in view.get("excluded") or ()}
+        ids = list(part.get("measurements") or ())
+        out = []
+        for i, value in enumerate(part.get("values") or (), start=1):
+            m = lookup(ids[i - 1]) if lookup is not None and i <= len(ids) else None
+            out.append({"index": i, "of": part.get("releases"), "value": value,
+                        "status": f"excluded: {excluded[i]}" if i in excluded else "used",
+                        "flags": list(m.flags) if m is not None else None,
+                        "seq": m.seq if m is not None else None, "uuid": ids[i - 1] if i <= len(ids) else None})
+        return out
+    rel = p.get("release") or {}
+    return [{"index": rel.get("index", 1), "of": rel.get("of", 1), "value": p.get("J") if not rel else rel.get("value"),
+             "status": f"check {rel['verdict']}; the part's verdict is on its last release" if rel.get("verdict")
+             else "no recipe",
+             "flags": list(p.get("flags") or ()), "seq": p.get("seq"), "uuid": p.get("uuid")}]
+
+
+def budget_rows(budget: Any, quantity: str = "J") -> list[dict[str, Any]]:
+    """The rows of a result's uncertainty budget (source, contribution to the measurand's standard
+    uncertainty kg·m², share of u_c²): from the result's measurand → budget mapping (each with its ``lines``,
+    ``measurement.uncertainty``), the budget of ``quantity``; also from a list of rows or a mapping that holds
+    one or maps each source to its u; [] when the result carries none."""
+    if not budget:
+        return []
+    if isinstance(budget, Mapping) and isinstance(budget.get(quantity), Mapping):
+        budget = budget[quantity]
+    rows: Any = budget
+    if isinstance(budget, Mapping) and isinstance(budget.get("lines"), (list, tuple)):
+        rows = budget["lines"]
+    elif isinstance(budget, Mapping):
+        rows = next((budget[k] for k in ("contributions", "rows", "components", "sources") if k in budget), None)
+        if rows is None:
+            rows = [{"name": k, "u": v} for k, v in budget.items() if isinstance(v, (int, float))]
+        elif isinstance(rows, Mapping):
+            rows = [{"name": k, **(v if isinstance(v, Mapping) else {"u": v})} for k, v in rows.items()]
+    out = []
+    for r in rows if isinstance(rows, (list, tuple)) else ():
+        if not isinstance(r, Mapping):
+            continue
+        # the row's contribution to the measurand's uncertainty first (kg·m²); an input's own u only without one,
+        # written in the row's unit when it names one
+        contribution = next((r[k] for k in ("u_J", "u_y", "contribution", "u_i", "u_contribution") if k in r), None)
+        u = contribution if contribution is not None else next(
+            (r[k] for k in ("u", "std", "standard_uncertainty") if k in r), None)
+        unit = r.get("unit") if contribution is None and r.get("unit") not in (None, SI) else None
+        share = next((r[k] for k in ("share", "fraction", "percent_of_variance") if k in r), None)
+        if isinstance(u, (int, float)) and not isinstance(u, bool):
+            u = abs(u)  # a contribution c·u carries the sign of its sensitivity; its size is what the row says
+        out.append({"name": str(next((r[k] for k in ("name", "source", "quantity") if k in r), "")),
+                    "u": u, "unit": unit, "share": share})
+    return out
+
+
+def band(recipe: Mapping[str, Any] | None, value: float | None, U: float | None, unit: str = SI,
+         width: float = 600.0) -> dict[str, Any] | None:
+    """The tolerance band drawing (SVG x coordinates in a ``width`` wide box): LSL, nominal, USL, the guard
+    band (ISO 14253-1: the zone shrunk by U at each end) and the result's interval value ± U."""
+    if not recipe or recipe.get("lower") is None or recipe.get("upper") is None:
+        return None
+    lsl, usl, nominal = float(recipe["lower"]), float(recipe["upper"]), recipe.get("nominal")
+    span = usl - lsl
+    lo, hi = lsl - 0.35 * span, usl + 0.35 * span
+    u = float(U) if U is not None and math.isfinite(U) else 0.0
+    if value is not None and math.isfinite(value):
+        lo, hi = min(lo, value - u - 0.05 * span), max(hi, value + u + 0.05 * span)
+    pad = 12.0
+
+    def x(v: float) -> float:
+        return round(pad + (v - lo) / (hi - lo) * (width - 2 * pad), 1)
+
+    guard = recipe.get("rule", "guard_band") == "guard_band" and 0 < 2 * u < span
+    out: dict[str, Any] = {
+        "width": width, "lsl": x(lsl), "usl": x(usl), "nominal": x(nominal) if nominal is not None else None,
+        "labels": [(x(lsl), "LSL " + inertia(lsl, unit, ".6g")), (x(usl), "USL " + inertia(usl, unit, ".6g"))],
+        "guard": (x(lsl + u), x(usl - u)) if guard else None, "value": None, "interval": None}
+    if value is not None and math.isfinite(value):
+        out["value"] = x(value)
+        out["interval"] = (x(value - u), x(value + u))
+    return out
+
+
+def shift_start(starts: Sequence[str], now: dt.datetime) -> dt.datetime:
+    """The start of the shift ``now`` (local, aware) is in; ``starts``: "HH:MM" local times."""
+    best = None
+    for days in (0, 1):
+        day = (now - dt.timedelta(days=days)).date()
+        for hm in starts:
+            h, m = (int(t) for t in hm.split(":"))
+            t = dt.datetime(day.year, day.month, day.day, h, m, tzinfo=now.tzinfo)
+            if t <= now and (best is None or t > best):
+                best = t
+    return best if best is not None else now.replace(hour=0, minute=0, second=0, microsecond=0)
+
+
+# --- control charts as SVG -----------------------------------------------------------------------------------------
+def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: float = 300.0) -> dict[str, Any]:
+    """An SPC summary (``measurement.spc.SpcSummary``) as SVG geometry: the points (violations marked), the
+    centre line and the control limits, the specification limits when they are near enough not to flatten
+    the chart (else named as off the chart), each labelled on the right; the ranges below. Values in ``unit``."""
+    s = summary
+    f = from_si(1.0, unit) or 1.0
+    pts = [float(v) * f for v in s.points]
+    lines = [("centre", s.mean * f, "centre"), ("UCL", s.ucl * f, "limit"), ("LCL", s.lcl * f, "limit")]
+    width_cl = max((s.ucl - s.lcl) * f, 1e-300)
+    off_chart = []
+    for name, v in (("USL", s.usl), ("LSL", s.lsl)):
+        if v is None:
+            continue
+        v = v * f
+        if s.lcl * f - 2 * width_cl <= v <= s.ucl * f + 2 * width_cl:
+            lines.append((name, v, "spec"))
+        else:
+            off_chart.append(f"{name} {_plain(v, width_cl)} {unit} ({'above' if v > s.ucl * f else 'below'} the chart)")
+    bad = {v.index for v in s.violations} | set(s.outside)
+    rules = sorted({(v.index, v.rule) for v in s.violations} | {(i, "outside the control limits") for i in s.outside})
+    top = _panel(pts, lines, bad, width, height, width_cl)
+    f_r = [float(r) * f for r in s.ranges]
+    r_lines = [("R̄", s.range_mean * f, "centre"), ("UCL", s.range_ucl * f, "limit")]
+    if s.range_lcl > 0:
+        r_lines.append(("LCL", s.range_lcl * f, "limit"))
+    first = 1 if s.subgroup == 1 else 0  # a moving range starts at the second part
+    bottom = _panel(f_r, r_lines, set(), width, height * 0.6, max(s.range_ucl * f, 1e-300), x_offset=first,
+                    n_total=len(pts))
+    return {"top": top, "bottom": bottom, "rules": [(i + 1, r) for i, r in rules], "off_chart": off_chart,
+            "range_name": "moving range" if s.subgroup == 1 else f"range (n = {s.subgroup})"}
+
+
+def _plain(v: float, spread: float) -> str:
+    """``v`` with the decimals that tell values ``spread``/50 apart from each other."""
+    decimals = max(0, min(12, 1 - int(math.floor(math.log10(spread / 50.0))))) if spread > 0 else 6
+    return f"{v:.{decimals}f}" if abs(v) < 1e7 else f"{v:.6g}"
+
+
+def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad: set[int], width: float,
+           height: float, spread: float, x_offset: int = 0, n_total: int | None = None) -> dict[str, Any]:
+    left, right, top, bottom = 90.0, 170.0, 12.0, 26.0
+    n = n_total or len(values)
+    ys = list(values) + [v for _, v, _ in lines]
+    lo, hi = (min(ys), max(ys)) if ys else (0.0, 1.0)
+    if hi - lo <= 0:
+        lo, hi = lo - 1.0, hi + 1.0
+    margin = 0.08 * (hi - lo)
+    lo, hi = lo - margin, hi + margin
+
+    def X(i: int) -> float:
+        return round(left + (i + 0.5) / max(n, 1) * (width - left - right), 1)
+
+    def Y(v: float) -> float:
+        return round(top + (hi - v) / (hi - lo) * (height - top - bottom), 1)
+
+    points = [(X(i + x_offset), Y(v), (i + x_offset) in bad, i + x_offset + 1, _plain(v, spread))
+              for i, v in enumerate(values)]
+    drawn = [(name, Y(v), kind, f"{name} {_plain(v, spread)}") for name, v, kind in lines]
+    # labels at least 13 px apart, in the order of their lines, kept inside the panel
+    order = sorted(drawn, key=lambda d: d[1])
+    ys_l: list[float] = []
+    for _name, y, _kind, _text in order:
+        ys_l.append(max(y, ys_l[-1] + 13.0) if ys_l else y)
+    overflow = ys_l[-1] - (height - bottom) if ys_l else 0.0
+    if overflow > 0:
+        ys_l = [max(top, y - overflow) for y in ys_l]
+        for i in range(1, len(ys_l)):
+            ys_l[i] = max(ys_l[i], ys_l[i - 1] + 13.0)
+    labels = [(y + 4, kind, text) for y, (_n, _y, kind, text) in zip(ys_l, order)]
+    ticks = [(Y(lo + (hi - lo) * i / 4), _plain(lo + (hi - lo) * i / 4, (hi - lo) * 5)) for i in range(5)]
+    step = max(1, n // 10)
+    xticks = [(X(i), str(i + 1)) for i in range(0, n, step)]
+    return {"width": width, "height": height, "left": left, "right": width - right, "top": top,
+            "bottom": height - bottom, "points": points, "lines": drawn, "labels": labels, "yticks": ticks,
+            "xticks": xticks,
+            "path": " ".join(f"{'M' if k == 0 else 'L'}{x},{y}" for k, (x, y, *_rest) in enumerate(points))}

@@ -1,0 +1,154 @@
+"""What the pages and the report say, as pure functions: display units, the tolerance band, the part view of
+a payload (never None or nan in words), the uncertainty budget in any of its shapes, the shift, the
+control chart's geometry (violations marked, labels apart)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+
+import pytest
+
+from measurement.spc import individuals
+from measurement.units import INERTIA_UNITS, UnitError, from_si, inertia_unit
+from service.publish.web import quality as Q
+
+
+def test_units_convert_from_si_exactly_and_unknown_ones_are_refused():
+    assert from_si(1.0, "g·cm²") == pytest.approx(1e7) and from_si(1.0, "kg*mm^2") == pytest.approx(1e6)
+    # 1 lb·in² = 0.45359237 kg · 0.0254² m²; 1 slug·ft² = 14.5939029 kg · 0.3048² m²
+    assert from_si(0.45359237 * 0.0254**2, "lb·in²") == pytest.approx(1.0, rel=1e-12)
+    assert from_si(14.593902937 * 0.3048**2, "slug*ft^2") == pytest.approx(1.0, rel=1e-9)
+    assert set(INERTIA_UNITS) == {"kg·m²", "g·cm²", "kg·mm²", "lb·in²", "slug·ft²"}
+    assert from_si(None, "g·cm²") is None and from_si(math.nan, "g·cm²") is None
+    with pytest.raises(UnitError, match="expected one of kg·m²"):
+        inertia_unit("furlong")
+    assert Q.inertia(0.0125, "g·cm²") == "125000 g·cm²" and Q.inertia(None) == "–" and Q.inertia(math.inf) == "–"
+    assert Q.number(None) == Q.number(math.nan) == Q.number(True) == "–"
+
+
+def test_part_view_never_shows_a_release_verdict_as_the_parts():
+    recipe = {"name": "r", "number": 1, "nominal": 1.0, "lower": 0.9, "upper": 1.1, "rule": "guard_band",
+              "coverage_factor": 2.0, "display_unit": "g·cm²"}
+    in_progress = {"recipe": recipe, "release": {"index": 1, "of": 2, "verdict": "OK", "value": 1.0, "U": 0.01,
+                                                 "quantity": "J"}, "part": None, "verdict": None}
+    v = Q.part_view(in_progress)
+    assert (v["kind"], v["verdict"], v["index"], v["of"]) == ("release", None, 1, 2)
+    done = {"recipe": recipe, "verdict": "INVALID", "part": {
+        "verdict": "INVALID", "value": None, "U": None, "releases": 2, "used": [], "quantity": "J",
+        "excluded": [{"index": 0, "reason": "invalid: x"}, {"index": 1, "reason": "invalid: y"}],
+        "reasons": ["0 usable of 2 releases, fewer than 2", "release 1: invalid: x"]}}
+    v = Q.part_view(done)
+    assert v["verdict_words"] == "part INVALID (measure again)" and [e["release"] for e in v["excluded"]] == [1, 2]
+    assert v["reasons"] == ["0 usable of 2 releases, fewer than 2"]  # the exclusions are said once
+    assert Q.display_unit(done) == "g·cm²" and Q.display_unit({}, "lb*in^2") == "lb·in²"
+    assert Q.part_view(None)["kind"] == "plain"
+
+
+def test_tolerance_band_puts_the_guard_band_inside_the_limits_and_the_interval_around_the_value():
+    b = Q.band({"nominal": 1.0, "lower": 0.9, "upper": 1.1, "rule": "guard_band"}, 1.05, 0.02)
+    assert b["lsl"] < b["guard"][0] < b["nominal"] < b["guard"][1] < b["usl"]
+    assert b["interval"][0] < b["value"] < b["interval"][1]
+    assert Q.band({"nominal": 1.0, "lower": 0.9, "upper": 1.1, "rule": "simple"}, 1.0, 0.02)["guard"] is None
+    assert Q.band(None, 1.0, 0.1) is None
+    far = Q.band({"nominal": 1.0, "lower": 0.9, "upper": 1.1}, 2.0, 0.01)
+    assert 0 <= far["lsl"] < far["usl"] < far["value"] <= far["width"]  # a value far out is still on the drawing
+
+
+@pytest.mark.parametrize("budget", [
+    [{"name": "fit", "u": 1e-6, "share": 0.5}],
+    {"contributions": [{"source": "fit", "std": 1e-6, "share": 0.5}]},
+    {"components": {"fit": {"u": 1e-6, "share": 0.5}}},
+    {"fit": 1e-6},
+    # a result's own: measurand → budget with its lines (measurement.uncertainty)
+    {"J": {"measurand": "J", "unit": "kg·m²", "U": 2e-6, "lines": [
+        {"symbol": "fit", "source": "fit", "std": 3e-6, "unit": "rad/s", "sensitivity": -0.33,
+         "contribution": -1e-6, "share": 0.5}]}, "J_object": {"lines": []}},
+])
+def test_an_uncertainty_budget_is_read_in_any_of_its_shapes(budget):
+    rows = Q.budget_rows(budget)
+    assert rows[0]["name"] == "fit" and rows[0]["u"] == 1e-6 and rows[0]["unit"] is None
+    assert Q.budget_rows(None) == [] and Q.budget_rows("text") == []
+    # an input's own uncertainty in its own unit is not written as kg·m²; its contribution to J is
+    k = Q.budget_rows([{"source": "stiffness k", "u": 0.0018, "unit": "N·m/rad"}])[0]
+    assert (k["u"], k["unit"]) == (0.0018, "N·m/rad")
+    k = Q.budget_rows([{"source": "stiffness k", "u": 0.0018, "unit": "N·m/rad", "u_J": 6e-5}])[0]
+    assert (k["u"], k["unit"]) == (6e-5, None)
+
+
+def test_shift_start_is_the_latest_start_at_or_before_now():
+    tz = dt.timezone(dt.timedelta(hours=2))
+    starts = ("06:00", "14:00", "22:00")
+    assert Q.shift_start(starts, dt.datetime(2026, 3, 2, 15, 30, tzinfo=tz)).hour == 14
+    early = Q.shift_start(starts, dt.datetime(2026, 3, 2, 3, 0, tzinfo=tz))
+    assert (early.day, early.hour) == (1, 22)  # the night shift began yesterday
+
+
+def test_control_chart_marks_violations_and_keeps_labels_apart():
+    values = [1.0, 1.001, 0.999, 1.0005, 0.9995, 1.0, 1.0015, 0.999, 1.05]  # the last point far out
+    s = individuals(values, 0.99, 1.01)
+    chart = Q.control_chart(s, "kg·m²")
+    bad = [p for p in chart["top"]["points"] if p[2]]
+    assert 9 in [p[3] for p in bad] and (9, "outside the control limits") in chart["rules"]
+    assert {p[3] for p in bad} == {n for n, _rule in chart["rules"]}  # every marked point has its rule said
+    ys = sorted(y for y, _kind, _text in chart["top"]["labels"])
+    assert all(b - a >= 13.0 for a, b in zip(ys, ys[1:]))
+    assert all(chart["top"]["top"] <= y - 4 <= chart["top"]["bottom"] for y in ys)
+    texts = [t for _y, _k, t in chart["top"]["labels"]]
+    assert len({t.split()[1] for t in texts}) == len(texts)  # each limit's value written distinguishably
+
+
+def test_an_xbar_r_chart_draws_each_subgroup_and_its_range_in_the_display_unit():
+    from measurement.spc import xbar_r
+
+    groups = [[0.0125, 0.01251, 0.01249], [0.0125, 0.012505, 0.012495], [0.01251, 0.0125, 0.0125],
+              [0.012495, 0.0125, 0.012505]]
+    chart = Q.control_chart(xbar_r(groups, 0.0124, 0.0126), "g·cm²")
+    assert chart["range_name"] == "range (n = 3)"
+    assert len(chart["top"]["points"]) == len(chart["bottom"]["points"]) == 4
+    # 0.0126 kg·m² in g·cm², far above the control limits: named, not drawn (it would flatten the chart)
+    assert [t.split(" g·cm²")[0] for t in chart["off_chart"]] == ["USL 126000.0", "LSL 124000.0"]
+
+
+def test_a_long_report_goes_on_to_more_pages_and_leaves_nothing_out():
+    import io
+    from types import SimpleNamespace
+
+    from pypdf import PdfReader
+
+    from service.publish.report import report_pdf
+
+    n = 20
+    recipe = {"name": "r", "number": 1, "version": "abc", "nominal": 0.0125, "lower": 0.012, "upper": 0.013,
+              "rule": "guard_band", "uncertain": "NOK", "coverage_factor": 2.0}
+    part = {"verdict": "OK", "value": 0.0125, "U": 1e-6, "releases": n, "used": list(range(n)), "quantity": "J",
+            "values": [0.0125 + i * 1e-8 for i in range(n)], "excluded": [], "reasons": []}
+    payload = {"recipe": recipe, "part": part, "verdict": "OK", "part_id": "SN-9",
+               "uncertainty_budget": [{"name": f"source {i}", "u": 1e-7, "share": 0.05} for i in range(n)]}
+    m = SimpleNamespace(seq=7, uuid="u-7", payload=payload, finished_at=1.7e9, trigger="web:olga",
+                        device_id="rig", software_version="9", flags=())
+    text = " ".join(p.extract_text() for p in PdfReader(io.BytesIO(report_pdf(m, None))).pages)
+    assert "part OK" in text and "web:olga" in text
+    assert f"release {n} of {n}" in text and f"source {n - 1}" in text  # the last lines too, on a later page
+
+
+def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_result_has_one():
+    import jinja2
+
+    from service.publish.web.views import HERE
+
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")), autoescape=True)
+    env.filters.update(fmt=Q.number, inertia=Q.inertia, iso=Q.iso, name=lambda v: v)
+    env.globals.update(VERDICT_WORDS=Q.VERDICT_WORDS)
+    budget = {"J": {"value": 0.0125, "U": 1.2e-7, "u": 6e-8, "coverage_factor": 2.0, "correlations": [],
+                    "lines": [{"source": "fit", "value": 5.4, "std": 2e-5, "unit": "rad/s", "sensitivity": -0.0046,
+                               "contribution": -9e-8, "share": 0.6, "note": ""}]}}
+    plain = {"J": 0.0125, "J_std": 5e-8, "J_U": 1.2e-7, "coverage_factor": 2.0, "uncertainty_budget": budget}
+    html = env.get_template("_verdict.html").render(v=Q.part_view(plain), p=plain, unit="g·cm²", band=None)
+    assert "± 1.2 g·cm² (U, k = 2)" in html and "None" not in html
+    html = env.get_template("_budget.html").render(p=plain)
+    assert 'class="scroll"><table class="budget-table">' in html and "fit" in html  # scrolls in its card
+    before = {"J": 0.0125, "J_std": 5e-8}  # a result without U or budget: its 1σ, said to be one
+    html = env.get_template("_verdict.html").render(v=Q.part_view(before), p=before, unit="kg·m²", band=None)
+    assert "± 5e-08 kg·m² (standard uncertainty, 1σ)" in html
+    assert env.get_template("_budget.html").render(p=before).strip() == ""
