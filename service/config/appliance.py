@@ -45,8 +45,9 @@ from service.publish.mqtt import settings as mqtt_settings
 from service.publish.mqtt.settings import MqttSettings
 from service.publish.opcua import settings as opcua_settings
 from service.publish.opcua.settings import OpcUaSettings
+from service.publish.web import settings as web_settings
 from service.publish.web.settings import WebSettings
-from measurement.units import ASCII_NAMES, INERTIA_UNITS, inertia_unit
+from measurement.units import inertia_unit
 
 #: the angle sensors of ``[hardware] sensor``
 SENSORS = ("encoder", "camera")
@@ -237,23 +238,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                        "(cmd/recipe) may change it"),
     }),
     "modbus": _schema(ModbusSettings, modbus_settings.KEYS, extra={"enabled": Key("bool", True, "serve the registers")}),
-    "web": _schema(WebSettings, {
-        "host": _doc("listen address: 127.0.0.1 this machine only, 0.0.0.0 every interface (the LAN)"),
-        "port": _doc("TCP port (0: any free port)", min=0, max=65535),
-        "token_file": _doc("file holding the password/token every action (Measure, Abort) needs (default: "
-                           "web-token in the state directory, made with a random token on first start)", kind="path"),
-        "page_size": _doc("measurements per history page", min=1, max=500),
-        "max_connections": _doc("browser connections at once; one more is closed at once", min=1, max=512),
-        "request_timeout": _doc("close a connection that sent no complete request for this long, s", min=0,
-                                min_open=True, max=3600),
-        "server_names": _doc("host names the page is reached by besides IP addresses, localhost and this "
-                             "machine's names, e.g. [\"moi-rig-3.factory.lan\"] (any other Host is refused)"),
-        "display_unit": _doc("unit of inertia shown when a recipe names none (values stay kg·m²)",
-                             choices=tuple(INERTIA_UNITS) + tuple(ASCII_NAMES)),
-        "shift_starts": _doc("shift start times HH:MM, local time (Home counts the parts of the current shift)"),
-        "users_file": _doc("named users with roles (operator, quality, admin) and password hashes, made by "
-                           "`moi user add` (default: none; the token is the one login)", kind="path"),
-    }, extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
+    "web": _schema(WebSettings, web_settings.KEYS,
+                   extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
     "opcua": _schema(OpcUaSettings, opcua_settings.KEYS,
                      extra={"enabled": Key("bool", True, "serve OPC UA (the table's presence enables it)")}),
 }

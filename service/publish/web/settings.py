@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from measurement.units import ASCII_NAMES, INERTIA_UNITS
+
 #: the name of the plot kept with each measurement in the store
 PLOT_NAME = "plot.png"
 
@@ -13,20 +15,12 @@ DEFAULT_TOKEN_FILE_NAME = "web-token"
 
 @dataclass(frozen=True)
 class WebSettings:
-    """host: the address the page is served on (127.0.0.1: this machine only; 0.0.0.0: every interface).
-    port: TCP port (0: any free port, for tests). token_file: the file holding the password/token that every
-    action (Measure, Abort, acknowledge) needs; None: ``<state_dir>/web-token``, made with a random token
-    on first start. page_size: measurements per history page. max_connections: connections served at once
-    (a newcomer beyond them is closed at once: the descriptors of the process stay with the measurement, the
-    PLC and MQTT). request_timeout: a connection that has not sent a complete request this many seconds after
-    it opened (or after its last answer) is closed, s. server_names: host names the page may be asked for
-    besides an IP address, localhost and this machine's own names (a request naming another host in its Host
-    header is refused: a DNS-rebinding page on a LAN browser could otherwise read every result). display_unit:
-    the unit of inertia the pages, reports and exports show when the recipe names none (values stay kg·m²).
-    shift_starts: when the shifts begin, "HH:MM" in the appliance's local time: Home counts the parts of the
-    shift in progress. users_file: a TOML file of named users with roles and scrypt password hashes (``moi
-    user add``): people log in by name and each result records who started it; None: the token is the one
-    login."""
+    """The appliance's web page (SI units). Each key's meaning and limits: ``KEYS`` below, from which the
+    configuration's ``[web]`` table is built.
+
+    ``max_connections`` and ``request_timeout`` keep the descriptors a client can hold bounded (they stay with
+    the measurement, the PLC and MQTT); ``server_names`` refuses a request naming another host in its Host
+    header (a DNS-rebinding page on a LAN browser could otherwise read every result)."""
 
     host: str = "127.0.0.1"
     port: int = 8080
@@ -38,3 +32,24 @@ class WebSettings:
     display_unit: str = "kg·m²"
     shift_starts: tuple[str, ...] = ("06:00", "14:00", "22:00")
     users_file: str | None = None
+
+
+#: each key of the configuration's ``[web]`` table: what it means, its unit and its limits (the table is
+#: built from this and the dataclass's fields: ``service.config.appliance.SCHEMA``)
+KEYS: dict[str, dict] = {
+    "host": dict(doc="listen address: 127.0.0.1 this machine only, 0.0.0.0 every interface (the LAN)"),
+    "port": dict(doc="TCP port (0: any free port)", min=0, max=65535),
+    "token_file": dict(doc="file holding the password/token every action (Measure, Abort) needs (default: "
+                       "web-token in the state directory, made with a random token on first start)", kind="path"),
+    "page_size": dict(doc="measurements per history page", min=1, max=500),
+    "max_connections": dict(doc="browser connections at once; one more is closed at once", min=1, max=512),
+    "request_timeout": dict(doc="close a connection that sent no complete request for this long, s", min=0,
+                            min_open=True, max=3600),
+    "server_names": dict(doc="host names the page is reached by besides IP addresses, localhost and this "
+                         "machine's names, e.g. [\"moi-rig-3.factory.lan\"] (any other Host is refused)"),
+    "display_unit": dict(doc="unit of inertia shown when a recipe names none (values stay kg·m²)",
+                         choices=tuple(INERTIA_UNITS) + tuple(ASCII_NAMES)),
+    "shift_starts": dict(doc="shift start times HH:MM, local time (Home counts the parts of the current shift)"),
+    "users_file": dict(doc="named users with roles (operator, quality, admin) and password hashes, made by "
+                       "`moi user add` (default: none; the token is the one login)", kind="path"),
+}
