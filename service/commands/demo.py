@@ -251,7 +251,7 @@ def _run(app, args: argparse.Namespace) -> int:
             top = sorted(budget["lines"], key=lambda ln: -ln["share"])[:3]
             print(f"uncertainty budget of {quantity} (one release): U = {_g(budget['U'])} kg·m² "
                   f"(k = {budget['coverage_factor']:.3g}); largest terms: "
-                  + ", ".join(f"{ln['source']} {100 * ln['share']:.2g} %" for ln in top))
+                  + ", ".join(f"{ln['source']} {100 * ln['share']:.3g} %" for ln in top))
         if args.serve:
             print("serving until Ctrl-C")
             try:
