@@ -10,7 +10,6 @@ Run: `.venv/bin/python bench/bench_time_scale.py` (or `make bench`). Numbers are
 from __future__ import annotations
 
 import os
-import resource
 import statistics
 import sys
 import tempfile
@@ -22,16 +21,14 @@ sys.path.insert(0, str(HERE.parent))
 sys.path.insert(1, str(HERE))
 os.environ.setdefault("GPIOZERO_PIN_FACTORY", "mock")
 
+from bench_speed import _status_kb  # noqa: E402  (the benches' reading of /proc/self/status)
+
 N = 40
 PRE, WINDOW = 0.2, 20.0
 
 
 def _rss_mb() -> float:
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return _status_kb("VmRSS") / 1024
 
 
 def main() -> None:

@@ -16,10 +16,11 @@ table name.
 
 from __future__ import annotations
 
+import mmap
 import struct
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 _TABLE_LEAF = 0x0D
 
@@ -81,7 +82,7 @@ def decode_record(payload: bytes) -> tuple:
 
 
 class _File:
-    def __init__(self, data: bytes) -> None:
+    def __init__(self, data: bytes | mmap.mmap) -> None:
         if data[:16] != b"SQLite format 3\x00":
             raise ValueError("not a SQLite database file (header damaged)")
         size = int.from_bytes(data[16:18], "big")
@@ -91,7 +92,7 @@ class _File:
         self.pages = len(data) // self.page_size
 
     def page(self, n: int) -> bytes:
-        return self.data[(n - 1) * self.page_size:n * self.page_size]
+        return bytes(self.data[(n - 1) * self.page_size:n * self.page_size])
 
     def freelist(self) -> set[int]:
         """Pages on the free list (they may hold rows deleted long ago: never read as rows)."""
@@ -132,12 +133,18 @@ class _File:
         return b"".join(parts)
 
 
-def leaf_records(path: str | Path) -> Iterator[LeafRecord]:
-    """Every record of every table-leaf page of the database file at ``path`` that decodes.
+def leaf_records(path: str | Path, wanted: Callable[[int], bool] = lambda rowid: True) -> Iterator[LeafRecord]:
+    """Every record of every table-leaf page of the database file at ``path`` that decodes, of the rowids
+    ``wanted`` accepts (asked before a cell's payload and its overflow chain are read).
 
     Cells that do not decode (a damaged page, a broken overflow chain) are skipped: this reads what
-    is left, it does not judge it. Raises ValueError when the file's header is gone."""
-    f = _File(Path(path).read_bytes())
+    is left, it does not judge it. The file is mapped, not read into memory (a store of traces may be
+    larger than a device's memory). Raises ValueError when the file's header is gone."""
+    with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as data:
+        yield from _records(_File(data), wanted)
+
+
+def _records(f: "_File", wanted: Callable[[int], bool]) -> Iterator[LeafRecord]:
     free = f.freelist()
     for n in range(1, f.pages + 1):
         if n in free:
@@ -154,6 +161,8 @@ def leaf_records(path: str | Path) -> Iterator[LeafRecord]:
                     continue
                 length, i = _varint(page, at)
                 rowid, i = _varint(page, i)
+                if not wanted(rowid):
+                    continue
                 values = decode_record(f.payload(page, i, length))
             except (ValueError, IndexError, UnicodeDecodeError, struct.error):
                 continue

@@ -818,23 +818,27 @@ def _rows_from_leaf_pages(db: sqlite3.Connection, table: str, columns: list[str]
         listed = {u for (u,) in db.execute(f"SELECT uuid FROM {table} INDEXED BY {index}")}
         file = next(r[2] for r in db.execute("PRAGMA database_list") if r[1] == "main")
         pk = [r[1] for r in db.execute(f"PRAGMA table_info({table})") if r[5] == 1 and r[2].upper() == "INTEGER"]
-        records = list(leaf_records(file))
-    except (sqlite3.DatabaseError, OSError, ValueError, StopIteration):
+    except (sqlite3.DatabaseError, StopIteration):
         return []
     at_uuid = columns.index("uuid")
     found: dict[str, tuple] = {}
     claimed: dict[str, int] = {}
-    for rec in records:
-        if rec.rowid in reached or not at_uuid < len(rec.values) <= len(columns):
-            continue
-        values = list(rec.values) + [None] * (len(columns) - len(rec.values))
-        for name in pk:  # an INTEGER PRIMARY KEY is the rowid itself: the record stores NULL there
-            values[columns.index(name)] = rec.rowid
-        uuid = values[at_uuid]
-        if uuid not in listed or not _decodes(table, dict(zip(columns, values))):
-            continue
-        claimed[uuid] = claimed.get(uuid, 0) + 1
-        found[uuid] = tuple(values)
+    try:
+        # the rows the tree reaches are copied already: their cells (and traces) are not decoded again
+        records = leaf_records(file, wanted=lambda rowid: rowid not in reached)
+        for rec in records:
+            if not at_uuid < len(rec.values) <= len(columns):
+                continue
+            values = list(rec.values) + [None] * (len(columns) - len(rec.values))
+            for name in pk:  # an INTEGER PRIMARY KEY is the rowid itself: the record stores NULL there
+                values[columns.index(name)] = rec.rowid
+            uuid = values[at_uuid]
+            if uuid not in listed or not _decodes(table, dict(zip(columns, values))):
+                continue
+            claimed[uuid] = claimed.get(uuid, 0) + 1
+            found[uuid] = tuple(values)
+    except (OSError, ValueError):
+        return []  # the file cannot be mapped, or its header is gone: nothing to read from its pages
     return [row for uuid, row in found.items() if claimed[uuid] == 1]
 
 

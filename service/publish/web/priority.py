@@ -24,6 +24,12 @@ from service.states import STATES
 
 #: the sequencer states in which the sensor is being read
 CAPTURE_STATES = tuple(name for name, s in STATES.items() if s.capturing)
+
+
+def sensor_is_read(appliance: Any) -> bool:
+    """Whether the appliance's sequencer is in a state in which the sensor is being read."""
+    seq = appliance.sequencer
+    return seq is not None and seq.state.value in CAPTURE_STATES
 #: while a capture is in progress, the share of the web thread's CPU time that pages may take at most
 CAPTURE_WEB_SHARE = 0.1
 #: a page's pause after it, s, at most (a page that took long is not made to block the next for minutes)

@@ -26,7 +26,7 @@ from service.publish.port import ApplianceView, Publisher
 
 from .auth import Guard, read_token, read_users
 from .child import ChildWork
-from .priority import CAPTURE_STATES
+from .priority import sensor_is_read
 from .settings import DEFAULT_TOKEN_FILE_NAME, PLOT_NAME, WebSettings
 from .views import Views
 
@@ -239,12 +239,12 @@ class WebServer(Publisher):
                 self._plots.pop(uuid, None)
 
     def _wait_for_no_capture(self, limit: float = 300.0) -> None:
-        """Draw between captures: matplotlib holds the GIL for a good part of a second, which would add
-        jitter to the sample times of a capture that started right after the last result."""
+        """Draw between captures: the child process that draws takes a core for a good part of a second, which
+        on a busy device would add jitter to the sample times of a capture that started right after the last
+        result."""
         deadline = time.monotonic() + limit
         while self._io.running and time.monotonic() < deadline:
-            seq = self.appliance.sequencer
-            if seq is None or seq.state.value not in CAPTURE_STATES:
+            if not sensor_is_read(self.appliance):
                 return
             time.sleep(0.1)
 

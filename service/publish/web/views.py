@@ -25,7 +25,7 @@ from service.errors import InputFileError, StoreDamaged
 from service.publish.dfq import ENCODING
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME, allowed
 from .child import ChildBusy, export_file, replot, report_file, trace_file
-from .priority import CAPTURE_STATES, CaptureFirst
+from .priority import CaptureFirst, sensor_is_read
 from .live import Live, extras
 from .settings import PLOT_NAME
 from measurement.flags import FLAGS
@@ -135,15 +135,11 @@ class Views:
                                       lstrip_blocks=True)
         self.env.filters.update(fmt=Q.number, name=_name, inertia=Q.inertia, iso=Q.iso)
         self._names = _own_names(server.settings.server_names)
-        self.capture_first = CaptureFirst(self._capturing)
+        self.capture_first = CaptureFirst(lambda: sensor_is_read(self.app))
         # file names carry a hash of the content: a browser never keeps a stale script after an update
         stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
         self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS, VERDICT_WORDS=Q.VERDICT_WORDS,
                                 static_url=lambda name: f"/static/{name}?v={stamps.get(name, '')}")
-
-    def _capturing(self) -> bool:
-        seq = self.app.sequencer
-        return seq is not None and seq.state.value in CAPTURE_STATES
 
     # --- application ------------------------------------------------------------------------
     def application(self) -> web.Application:
