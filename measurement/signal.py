@@ -240,10 +240,18 @@ class Swings:
 
     @property
     def damped_frequency(self) -> float:
-        """Median ω_d from the half periods, rad/s (nan with < 2 crossings)."""
-        if self.crossings.size < 2:
+        """Median ω_d from the full periods, rad/s (from the half periods with 2 crossings; nan with fewer).
+
+        A full period runs from a crossing to the next but one: it does not depend on where
+        the centre line is, while a half period does (a centre off by δ lengthens every other
+        half period and shortens the rest, and a sparse record's median then picks one kind).
+        """
+        c = self.crossings
+        if c.size < 2:
             return float("nan")
-        return float(math.pi / np.median(np.diff(self.crossings)))
+        if c.size < 3:
+            return float(math.pi / (c[1] - c[0]))
+        return float(2 * math.pi / np.median(c[2:] - c[:-2]))
 
 
 def find_swings(t: np.ndarray, angle: np.ndarray, centre: float | None = None, hysteresis: float = 0.0) -> Swings:
