@@ -13,6 +13,9 @@
                BIC is the likelihood under the AR noise model, so the power
                grows with the record and coloured noise is not "explained"
                by an effect; no ratio to the noise floor stops the loop.
+    hold     → an effect that moved ω_n by more than its σ is withdrawn when the
+               model it ends in gives another ω_n in each half of the record
+               (``hold_across``); its ω_n stays a rival in the uncertainty
     report   → before/after, the evidence of every step, and
                ``unmodeled_residual`` when structure is left that no library
                effect explains (never forced into a wrong effect).
