@@ -13,6 +13,9 @@
                BIC is the likelihood under the AR noise model, so the power
                grows with the record and coloured noise is not "explained"
                by an effect; no ratio to the noise floor stops the loop.
+    hold     → an effect that moved ω_n by more than its σ is withdrawn when the
+               model it ends in gives another ω_n in each half of the record
+               (``hold_across``); its ω_n stays a rival in the uncertainty
     report   → before/after, the evidence of every step, and
                ``unmodeled_residual`` when structure is left that no library
                effect explains (never forced into a wrong effect).
@@ -31,7 +34,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from . import flags as F
-from .consistency import ModelForm, check_segments, competitors, effect_holds
+from .consistency import Competitor, ModelForm, SegmentCheck, check_segments, competitors, effect_holds
 from .diagnostics import Diagnostics, diagnose
 from .effects import EFFECTS, Effect, candidate_effects, resolve_effects, with_effect
 from .errors import IdentificationError, RigError, TraceError, UnknownEffectError
@@ -418,8 +421,10 @@ def parallel_map(fn: Callable, items: Sequence) -> list:
 
 def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
              f_scale: float | None = None,
-             diagnosis: Callable[[ModelFit], Diagnostics] | None = None) -> tuple[ModelFit, list[DiscoveryStep], int]:
-    """The discovery loop; returns the final fit, its steps and the simulations spent.
+             diagnosis: Callable[[ModelFit], Diagnostics] | None = None
+             ) -> tuple[ModelFit, list[DiscoveryStep], int, list[tuple[str, float, float, ModelFit]]]:
+    """The discovery loop; returns the final fit, its steps, the simulations spent and each added
+    effect with the change of ω_n it made, the σ of ω_n after it (rad/s) and the fit it was added to.
 
     diagnosis: ``diagnose`` of a fit with the record's noise floor (the
     caller's, to diagnose the final fit only once).
@@ -429,6 +434,7 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
             return diagnose(f, prep.noise, prep.stuck)
     current = fit
     steps: list[DiscoveryStep] = []
+    moves: list[tuple[str, float, float, ModelFit]] = []
     spent = 0
     allowed = set(options.candidates) if options.candidates is not None else set(EFFECTS)
     amplitude = float(np.max(np.abs(fit.fitted - fit.value("offset"))))
@@ -517,8 +523,70 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
             reason += "; " + "; ".join(not_held)
         steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, table, best, bf.residual_rms, bf.bic,
                                    evidence, reason, w_before))
+        moves.append((best, bf.value("omega_n") - w_before, bf.stdev("omega_n"), current))
         current = bf
-    return current, steps, spent
+    return current, steps, spent, moves
+
+
+@dataclass(frozen=True)
+class Withdrawn:
+    """Effects taken back because the ω_n they moved does not hold across the record.
+
+    effects: the effects withdrawn; omega_n: the model's with them (rad/s);
+    d_bic: its BIC minus the kept model's; segments: its halves.
+    """
+
+    effects: tuple[str, ...]
+    omega_n: float
+    omega_n_std: float
+    d_bic: float
+    segments: SegmentCheck
+
+    def rival(self, kept_omega_n: float) -> Competitor:
+        return Competitor(f"{', '.join(self.effects)} kept (the ω_n it moves does not hold across the record)",
+                          self.d_bic, 1.0, self.omega_n, self.omega_n - kept_omega_n)
+
+
+def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[tuple[str, float, float, ModelFit]], prep: Prepared,
+                rig: Rig, f_scale: float | None) -> tuple[ModelFit, Withdrawn | None, int]:
+    """The final model, or the one without the effects whose ω_n does not hold across the record.
+
+    An effect that moved ω_n by more than its σ when it was added (``moves``)
+    stands only if the model it ends in holds across the record: the same
+    ω_n from both halves (``check_segments``). BIC alone cannot show it: an
+    effect that mimics a restoring law the model lacks (pre-sliding
+    friction's spring at small amplitude for a law softer than sin θ, a
+    cubic spring for a frequency that drifts with time) lowers it as much as
+    a true one. The model, not each effect, is judged, and on ω_n, not on
+    every parameter: a friction law fitted to half a record legitimately
+    differs from the whole's, and on the way to a law that holds (Coulomb,
+    then Dahl friction) the intermediate models need not hold. Withdrawn,
+    an effect that refines another (dahl, coulomb) falls back to it; the
+    withdrawn model's ω_n stays a rival in the uncertainty (consistency.py).
+    Returns (fit, what was withdrawn or None, simulations spent).
+    """
+    names = final.model.effect_names
+    movers = [n for n, d, sd, _ in moves if abs(d) > sd and n in names and not EFFECTS[n].scale_parameters]
+    w = final.value("omega_n")
+    if not movers or abs(w - base.value("omega_n")) <= final.stdev("omega_n"):
+        return final, None, 0
+    seg = check_segments(final, prep.noise)
+    if seg is None or not seg.disagree:
+        return final, None, 0
+    keep = [n for n in names if n not in movers]
+    keep += [r for n in movers if (r := EFFECTS[n].refines) is not None and r not in keep]
+    model = Model(rig, tuple(resolve_effects(keep, rig)))
+    # the loop's last fit within the kept model: the kept model itself, or a start that it contains
+    earlier = [f for *_, f in moves if set(f.model.effect_names) <= set(keep)]
+    previous = earlier[-1] if earlier else base
+    nfev = 0
+    if previous.model.effect_names != model.effect_names:
+        try:
+            previous = fit_model(model, final.t, final.y, prep.noise, previous=previous, f_scale=f_scale)
+        except IdentificationError:
+            return final, None, 0
+        nfev = previous.nfev
+    return previous, Withdrawn(tuple(movers), w, final.stdev("omega_n"), final.bic - previous.bic, seg), nfev
 
 
 def identify(trace: Trace, rig: Rig, options: Options = Options()) -> IdentificationResult:
@@ -567,6 +635,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         nfev += base.nfev
     steps: list[DiscoveryStep] = []
     final = base
+    withdrawn: Withdrawn | None = None
     diagnosed: dict[int, tuple[ModelFit, Diagnostics]] = {}  # by id, the fit kept so its id is not reused
 
     def diagnosis(fit: ModelFit) -> Diagnostics:
@@ -576,7 +645,9 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         return diagnosed[id(fit)][1]
 
     if options.discover:
-        final, steps, spent = discover(base, prep, rig, options, f_scale, diagnosis)
+        final, steps, spent, moves = discover(base, prep, rig, options, f_scale, diagnosis)
+        nfev += spent
+        final, withdrawn, spent = hold_across(final, base, moves, prep, rig, f_scale)
         nfev += spent
     # Glitches the pre-screen missed show in the final residual; judged there
     # because a structured baseline residual is not Gaussian. While the final
@@ -603,6 +674,12 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     # tell apart give another ω_n (consistency.py)
     segments = check_segments(final, prep.noise)
     rivals, u_rivals = competitors(steps, options.bic_margin)
+    if withdrawn is not None:
+        # BIC prefers the withdrawn model, the halves contradict it: the data do not decide, and
+        # its distance is carried whole
+        rival = withdrawn.rival(w)
+        rivals += (rival,)
+        u_rivals = math.hypot(u_rivals, rival.delta)
     form = ModelForm(segments, rivals, u_rivals)
     ambiguous = form.ambiguous(ws)
     w_u = math.sqrt(ws**2 + (w_cal or 0.0) ** 2 + form.u**2)
@@ -678,6 +755,13 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
                          f"ω_n {w1:.6g} ± {s1:.2g} and {w2:.6g} ± {s2:.2g} rad/s ({segments.z:.1f} σ apart): {verdict}")
     else:
         structure.append("the record is too short to fit each half alone: whether the model holds across it is not checked")
+    if withdrawn is not None:
+        ws_ = withdrawn.segments
+        structure.append(
+            f"{', '.join(withdrawn.effects)} lowered BIC by {-withdrawn.d_bic:.1f} but moved ω_n to "
+            f"{withdrawn.omega_n:.6g} rad/s ({withdrawn.omega_n - w:+.2g}), and the model with it does not hold "
+            f"across the record (halves {ws_.omega_n[0]:.6g} and {ws_.omega_n[1]:.6g} rad/s, {ws_.z:.1f} σ apart): "
+            "it is not kept, its ω_n is a rival in omega_n_u (flag model_ambiguous)")
     for c in rivals if ambiguous else ():
         if c.weight >= 0.05:
             structure.append(f"a rival explanation the data do not decisively reject: {c.change} (ΔBIC {c.d_bic:+.1f}, "
