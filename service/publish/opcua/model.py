@@ -113,7 +113,7 @@ METHODS: dict[str, tuple[int, tuple[_Arg, ...], tuple[_Arg, ...]]] = {
         ("ResultIds", ua.ObjectIds.TrimmedString, True, "the ResultIds of the results acknowledged"),
     ), (
         ("ErrorPerResultId", ua.ObjectIds.Int32, True, "empty when Error is 0; else per ResultId: 0 OK, "
-                                                       "-1 unknown, -2 already acknowledged"),
+                                                       "-1 unknown ResultId, -2 awaits no acknowledgement (acknowledged already)"),
         ("Error", ua.ObjectIds.Int32, False, "0: all acknowledged; -1: not all"),
     )),
 }
@@ -131,7 +131,13 @@ class Model:
 
     def state_id(self, machine: str, state: str) -> ua.NodeId:
         table = ITEM_STATE_NODES if machine == "item" else OPERATION_MODE_NODES
-        return ua.NodeId(table[state][0], self.machinery)
+        return node_id(table[state][0], self.machinery)
+
+
+def node_id(identifier: int | str, ns: int = 0) -> ua.NodeId:
+    """A NodeId from a number or a string in namespace ``ns`` (asyncua's types, for mypy)."""
+    ident: Any = ua.Int32(identifier) if isinstance(identifier, int) else ua.String(identifier)
+    return ua.NodeId(ident, ua.Int16(ns))
 
 
 def _qn(name: str, ns: int) -> ua.QualifiedName:
@@ -150,7 +156,7 @@ async def rereference(parent: Node, child: Node, new: int) -> None:
     Organizes under a folder); the specifications use HasAddIn and HasStructuredComponent, subtypes of
     HasComponent, so a browse for HasComponent and its subtypes finds the child either way."""
     for ref in await parent.get_references(ua.ObjectIds.HierarchicalReferences, ua.BrowseDirection.Forward):
-        if ref.NodeId == child.nodeid and ref.ReferenceTypeId != ua.NodeId(new):
+        if ref.NodeId == child.nodeid and ref.ReferenceTypeId != node_id(new):
             await parent.delete_reference(child, ref.ReferenceTypeId, forward=True, bidirectional=True)
     await parent.add_reference(child, new, forward=True, bidirectional=True)
 
@@ -166,9 +172,9 @@ async def _states(server: Server, model: Model, machine_type: Node, table: dict[
     """The states of a state machine type: objects of StateType with their StateNumber (no modelling rule:
     they belong to the type, as in the specification)."""
     for name, (nid, number) in table.items():
-        s = await machine_type.add_object(ua.NodeId(nid, model.machinery), _qn(name, model.machinery))
-        await retype(s, ua.ObjectIds.BaseObjectType, ua.NodeId(ua.ObjectIds.StateType))
-        await s.add_property(ua.NodeId(f"types.{name}.StateNumber", model.moi), _qn("StateNumber", 0),
+        s = await machine_type.add_object(node_id(nid, model.machinery), _qn(name, model.machinery))
+        await retype(s, ua.ObjectIds.BaseObjectType, node_id(ua.ObjectIds.StateType))
+        await s.add_property(node_id(f"types.{name}.StateNumber", model.moi), _qn("StateNumber", 0),
                              ua.Variant(number, ua.VariantType.UInt32))
 
 
@@ -217,9 +223,9 @@ async def install(server: Server) -> Model:
     n = model.nodes
 
     # --- DI and Machinery: identification --------------------------------------------------------------
-    functional_group = await _object_type(server.get_node(ua.ObjectIds.FolderType), ua.NodeId(1005, di),
+    functional_group = await _object_type(server.get_node(ua.ObjectIds.FolderType), node_id(1005, di),
                                           "FunctionalGroupType")
-    item_ident = await _object_type(functional_group, ua.NodeId(1004, mach), "MachineryItemIdentificationType",
+    item_ident = await _object_type(functional_group, node_id(1004, mach), "MachineryItemIdentificationType",
                                     abstract=True)
     for nid, name, vtype, mandatory in ((6002, "Manufacturer", ua.VariantType.LocalizedText, True),
                                         (6003, "SerialNumber", ua.VariantType.String, True),
@@ -227,42 +233,42 @@ async def install(server: Server) -> Model:
                                         (6011, "SoftwareRevision", ua.VariantType.String, False),
                                         (6001, "ProductInstanceUri", ua.VariantType.String, False)):
         empty = ua.LocalizedText("") if vtype is ua.VariantType.LocalizedText else ""
-        p = await item_ident.add_property(ua.NodeId(nid, mach), _qn(name, di), ua.Variant(empty, vtype))
+        p = await item_ident.add_property(node_id(nid, mach), _qn(name, di), ua.Variant(empty, vtype))
         await p.set_modelling_rule(mandatory)
-    machine_ident = await _object_type(item_ident, ua.NodeId(1012, mach), "MachineIdentificationType")
-    p = await machine_ident.add_property(ua.NodeId(6015, mach), _qn("ProductInstanceUri", di), "")
+    machine_ident = await _object_type(item_ident, node_id(1012, mach), "MachineIdentificationType")
+    p = await machine_ident.add_property(node_id(6015, mach), _qn("ProductInstanceUri", di), "")
     await p.set_modelling_rule(True)
     n["MachineIdentificationType"] = machine_ident.nodeid
 
     # --- Machinery: the two state machines ---------------------------------------------------------------
     fsm = server.get_node(ua.ObjectIds.FiniteStateMachineType)
-    item_sm = await _object_type(fsm, ua.NodeId(1002, mach), "MachineryItemState_StateMachineType")
+    item_sm = await _object_type(fsm, node_id(1002, mach), "MachineryItemState_StateMachineType")
     await _states(server, model, item_sm, ITEM_STATE_NODES)
-    mode_sm = await _object_type(fsm, ua.NodeId(1008, mach), "MachineryOperationModeStateMachineType")
+    mode_sm = await _object_type(fsm, node_id(1008, mach), "MachineryOperationModeStateMachineType")
     await _states(server, model, mode_sm, OPERATION_MODE_NODES)
     n["MachineryItemState_StateMachineType"] = item_sm.nodeid
     n["MachineryOperationModeStateMachineType"] = mode_sm.nodeid
 
     # --- Result Transfer: data types ---------------------------------------------------------------------
-    evaluation = await new_enum(server, ua.NodeId(3002, res), _qn("ResultEvaluationEnum", res),
+    evaluation = await new_enum(server, node_id(3002, res), _qn("ResultEvaluationEnum", res),
                                 list(RESULT_EVALUATION))
-    times = await _structure(server, ua.NodeId(3006, res), ua.NodeId(5003, res), "ProcessingTimesDataType", [
-        _field("StartTime", ua.NodeId(ua.ObjectIds.UtcTime)), _field("EndTime", ua.NodeId(ua.ObjectIds.UtcTime)),
-        _field("AcquisitionDuration", ua.NodeId(ua.ObjectIds.Duration), optional=True),
-        _field("ProcessingDuration", ua.NodeId(ua.ObjectIds.Duration), optional=True),
+    times = await _structure(server, node_id(3006, res), node_id(5003, res), "ProcessingTimesDataType", [
+        _field("StartTime", node_id(ua.ObjectIds.UtcTime)), _field("EndTime", node_id(ua.ObjectIds.UtcTime)),
+        _field("AcquisitionDuration", node_id(ua.ObjectIds.Duration), optional=True),
+        _field("ProcessingDuration", node_id(ua.ObjectIds.Duration), optional=True),
     ], ua.StructureType.StructureWithOptionalFields)
     named = {"ResultEvaluationEnum": evaluation.nodeid, "ProcessingTimesDataType": times.nodeid}
-    meta = await _structure(server, ua.NodeId(3007, res), ua.NodeId(5005, res), "ResultMetaDataType", [
-        _field(name, named[dt] if isinstance(dt, str) else ua.NodeId(dt), array, optional)
+    meta = await _structure(server, node_id(3007, res), node_id(5005, res), "ResultMetaDataType", [
+        _field(name, named[dt] if isinstance(dt, str) else node_id(dt), array, optional)
         for name, dt, array, optional in _META_FIELDS], ua.StructureType.StructureWithOptionalFields)
     # ResultMetaData allows subtypes (it travels as an ExtensionObject); ResultContent is BaseDataType[]
-    result_dt = await _structure(server, ua.NodeId(3008, res), ua.NodeId(5008, res), "ResultDataType", [
+    result_dt = await _structure(server, node_id(3008, res), node_id(5008, res), "ResultDataType", [
         _field("ResultMetaData", meta.nodeid, optional=True),
-        _field("ResultContent", ua.NodeId(ua.ObjectIds.BaseDataType), array=True),
+        _field("ResultContent", node_id(ua.ObjectIds.BaseDataType), array=True),
     ], ua.StructureType.StructureWithSubtypedValues)
-    content_dt = await _structure(server, ua.NodeId("InertiaResultDataType", moi),
-                                  ua.NodeId("InertiaResultDataType.DefaultBinary", moi), "InertiaResultDataType",
-                                  [_field(name, ua.NodeId(dt), array, description=doc)
+    content_dt = await _structure(server, node_id("InertiaResultDataType", moi),
+                                  node_id("InertiaResultDataType.DefaultBinary", moi), "InertiaResultDataType",
+                                  [_field(name, node_id(dt), array, description=doc)
                                    for name, dt, array, doc in CONTENT_FIELDS], ua.StructureType.Structure)
     named["ResultDataType"] = result_dt.nodeid
     n.update(ResultEvaluationEnum=evaluation.nodeid, ResultMetaDataType=meta.nodeid, ResultDataType=result_dt.nodeid,
@@ -270,12 +276,12 @@ async def install(server: Server) -> Model:
 
     # --- Result Transfer: ResultType ---------------------------------------------------------------------
     result_type = await server.get_node(ua.ObjectIds.BaseDataVariableType).add_variable_type(
-        ua.NodeId(2001, res), _qn("ResultType", res), result_dt.nodeid)
-    rm_meta = await result_type.add_variable(ua.NodeId(6009, res), _qn("ResultMetaData", res),
+        node_id(2001, res), _qn("ResultType", res), result_dt.nodeid)
+    rm_meta = await result_type.add_variable(node_id(6009, res), _qn("ResultMetaData", res),
                                              ua.Variant(None, ua.VariantType.Null), datatype=meta.nodeid)
-    rm_content = await result_type.add_variable(ua.NodeId(6010, res), _qn("ResultContent", res),
+    rm_content = await result_type.add_variable(node_id(6010, res), _qn("ResultContent", res),
                                                 ua.Variant([], ua.VariantType.Variant),
-                                                datatype=ua.NodeId(ua.ObjectIds.BaseDataType))
+                                                datatype=node_id(ua.ObjectIds.BaseDataType))
     await rm_content.write_value_rank(1)
     for child, mandatory in ((rm_meta, True), (rm_content, False)):
         await child.set_modelling_rule(mandatory)
@@ -283,32 +289,32 @@ async def install(server: Server) -> Model:
     n["ResultType"] = result_type.nodeid
 
     # --- Result Transfer: ResultManagementType and ResultReadyEventType ----------------------------------
-    rm_type = await _object_type(server.nodes.base_object_type, ua.NodeId(1004, res), "ResultManagementType")
+    rm_type = await _object_type(server.nodes.base_object_type, node_id(1004, res), "ResultManagementType")
     for name, (nid, inputs, outputs) in METHODS.items():
         def args(table: tuple[_Arg, ...]) -> list[ua.Argument]:
-            return [argument(a, named[dt] if isinstance(dt, str) else ua.NodeId(dt), arr, doc)
+            return [argument(a, named[dt] if isinstance(dt, str) else node_id(dt), arr, doc)
                     for a, dt, arr, doc in table]
-        method = await rm_type.add_method(ua.NodeId(nid, res), _qn(name, res), None)
+        method = await rm_type.add_method(node_id(nid, res), _qn(name, res), None)
         await method.set_modelling_rule(False)
         for kind, table in (("InputArguments", inputs), ("OutputArguments", outputs)):
             # added here, not by add_method: it would give them NodeIds of its choosing in the Result namespace
-            prop = await method.add_property(ua.NodeId(f"types.{name}.{kind}", moi), _qn(kind, 0),
+            prop = await method.add_property(node_id(f"types.{name}.{kind}", moi), _qn(kind, 0),
                                              ua.Variant(args(table), ua.VariantType.ExtensionObject),
-                                             datatype=ua.NodeId(ua.ObjectIds.Argument))
+                                             datatype=node_id(ua.ObjectIds.Argument))
             await prop.write_value_rank(1)
             await prop.set_modelling_rule(True)
-    results = await rm_type.add_folder(ua.NodeId(5011, res), _qn("Results", res))
+    results = await rm_type.add_folder(node_id(5011, res), _qn("Results", res))
     await results.set_modelling_rule(False)
     n["ResultManagementType"] = rm_type.nodeid
 
-    ready = await _object_type(server.get_node(ua.ObjectIds.BaseEventType), ua.NodeId(1002, res),
+    ready = await _object_type(server.get_node(ua.ObjectIds.BaseEventType), node_id(1002, res),
                                "ResultReadyEventType", abstract=True)
-    ev_result = await ready.add_variable(ua.NodeId(6032, res), _qn("Result", res),
+    ev_result = await ready.add_variable(node_id(6032, res), _qn("Result", res),
                                          ua.Variant(None, ua.VariantType.Null), datatype=result_dt.nodeid)
     await retype(ev_result, ua.ObjectIds.BaseDataVariableType, result_type.nodeid)
     await ev_result.set_modelling_rule(True)
     await rm_type.add_reference(ready.nodeid, ua.ObjectIds.GeneratesEvent, forward=True, bidirectional=False)
-    inertia_ready = await _object_type(ready, ua.NodeId("InertiaResultReadyEventType", moi),
+    inertia_ready = await _object_type(ready, node_id("InertiaResultReadyEventType", moi),
                                        "InertiaResultReadyEventType")
     n.update(ResultReadyEventType=ready.nodeid, InertiaResultReadyEventType=inertia_ready.nodeid)
     return model

@@ -48,7 +48,7 @@ from service.persistence.acks import AckFile, AckState
 from service.publish.port import ApplianceView, Publisher
 
 from .model import (CONTENT_FIELDS, META_COMPONENTS, NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT,  # noqa: F401
-                    RESULT_EVALUATION, Model, install, rereference, retype)
+                    RESULT_EVALUATION, Model, install, node_id, rereference, retype)
 from .settings import OpcUaSettings
 
 log = logging.getLogger("moi.opcua")
@@ -67,7 +67,8 @@ ACKED_FILE = "opcua-acked"
 #: the method's wait for a result is limited to this, ms
 MAX_TIMEOUT_MS = 60_000
 
-#: AcknowledgeResults' error per ResultId (values < 0: application-specific, OPC 40001-101)
+#: AcknowledgeResults' error per ResultId (values < 0: application-specific, OPC 40001-101): no result has this
+#: ResultId; the result awaits no acknowledgement (acknowledged already, or older than the results_kept offered)
 ACK_UNKNOWN, ACK_ALREADY = -1, -2
 
 
@@ -309,7 +310,8 @@ class OpcUaServer(Publisher):
         model = self._model = await install(server)
         await server.load_data_type_definitions()  # the Python classes of the structures (ua.ResultDataType ...)
         self._types = {name: getattr(ua, name) for name in ("ResultDataType", "ResultMetaDataType",
-                                                             "ProcessingTimesDataType", "InertiaResultDataType")}
+                                                             "ProcessingTimesDataType", "InertiaResultDataType",
+                                                             "ResultEvaluationEnum")}
         di, mach, res, idx = model.di, model.machinery, model.result, model.moi
         t = model.nodes
 
@@ -322,7 +324,7 @@ class OpcUaServer(Publisher):
                                       instantiate_optional=optional))[0]
             return node
 
-        machines = await server.nodes.objects.add_folder(ua.NodeId(1001, mach), ua.QualifiedName("Machines", mach))
+        machines = await server.nodes.objects.add_folder(node_id(1001, mach), ua.QualifiedName("Machines", mach))
         machine = await machines.add_object(nid("Machine"), ua.QualifiedName(self.device_id, idx))
         ident = await typed(machine, "Identification", ua.QualifiedName("Identification", di),
                             t["MachineIdentificationType"])
@@ -369,7 +371,7 @@ class OpcUaServer(Publisher):
         content = await latest.add_variable(nid("Results.LatestResult.ResultContent"),
                                             ua.QualifiedName("ResultContent", res),
                                             ua.Variant([], ua.VariantType.Variant),
-                                            datatype=ua.NodeId(ua.ObjectIds.BaseDataType))
+                                            datatype=node_id(ua.ObjectIds.BaseDataType))
         await content.write_value_rank(1)
         for child in (meta, content):
             await rereference(latest, child, ua.ObjectIds.HasStructuredComponent)
@@ -389,7 +391,7 @@ class OpcUaServer(Publisher):
             self._nodes[f"content.{name}"] = v
         if self._latest is not None:
             await self._write_latest(self._latest)
-        self._event = await server.get_event_generator(t["InertiaResultReadyEventType"], rm)
+        self._event = await server.get_event_generator(t["InertiaResultReadyEventType"], rm.nodeid)
 
     def stop(self, timeout: float = 5.0) -> None:
         if not self._io.running:
@@ -430,7 +432,7 @@ class OpcUaServer(Publisher):
             ResultId=str(m["ResultId"]), IsSimulated=self.simulated, ResultState=1,  # 1: Completed
             PartId=m.get("PartId"), ExternalRecipeId=m.get("ExternalRecipeId"), ProductId=m.get("ProductId"),
             CreationTime=end, ProcessingTimes=times,
-            ResultEvaluation=getattr(ua, "ResultEvaluationEnum")(RESULT_EVALUATION[m["ResultEvaluation"]]))
+            ResultEvaluation=T["ResultEvaluationEnum"](RESULT_EVALUATION[m["ResultEvaluation"]]))
         content = T["InertiaResultDataType"](
             SequenceNumber=int(m.get("SequenceNumber") or 0) & 0xFFFFFFFF,
             **{name: math.nan if c[name] is None else c[name]
@@ -475,6 +477,13 @@ class OpcUaServer(Publisher):
             return _bad(ua.StatusCodes.BadNotFound)
         return self._outputs(doc)
 
+    async def _stored(self, result_id: str) -> bool:
+        """Whether the store holds a result with this ResultId."""
+        if self.store is None or len(result_id) != 36:
+            return False
+        stored = await asyncio.to_thread(self.store.get, result_id)
+        return stored is not None and stored.uuid == result_id
+
     async def _acknowledge(self, parent: ua.NodeId, *args: Any) -> Any:
         ids = getattr(args[0], "Value", None) if len(args) == 1 else None
         if not isinstance(ids, list) or not ids or not all(isinstance(i, str) and i for i in ids):
@@ -488,7 +497,7 @@ class OpcUaServer(Publisher):
                     self._acked_through = max(self._acked_through, seq)
                     errors.append(0)
                 else:
-                    errors.append(ACK_ALREADY if i in self._results else ACK_UNKNOWN)
+                    errors.append(ACK_ALREADY if i in self._results or await self._stored(i) else ACK_UNKNOWN)
             if 0 in errors:
                 state = AckState(self._acked_through, frozenset(
                     s for s in self._unacknowledged.values() if s <= self._acked_through))
