@@ -347,3 +347,18 @@ def test_the_acknowledgements_survive_a_restart(opc):
         restarted.stop()
     kept = AckFile(state_dir / ACKED_FILE).read()
     assert kept is not None and kept.through == app.app.store.get(second).seq and not kept.pending
+
+
+def test_the_acknowledgement_file_reads_what_it_wrote_and_the_modbus_position_of_old(tmp_path):
+    from service.persistence.acks import AckFile, AckState
+
+    f = AckFile(tmp_path / "acked")
+    assert f.read() is None  # none kept: the reader's first start
+    f.write(AckState(41, frozenset({7, 40})))
+    kept = f.read()
+    assert kept == AckState(41, frozenset({7, 40})) and kept.acknowledged(41) and not kept.acknowledged(40)
+    assert not kept.acknowledged(42)
+    (tmp_path / "acked").write_text("12\n", encoding="ascii")  # the Modbus FIFO's file: the position alone
+    assert f.read() == AckState(12)
+    (tmp_path / "acked").write_text("garbage\n", encoding="ascii")
+    assert f.read() is None
