@@ -345,9 +345,9 @@ class OpcUaServer(Publisher):
 
         async def typed(parent: Node, name: str, bname: ua.QualifiedName, typedef: ua.NodeId,
                         optional: bool = True) -> Node:
-            node = (await instantiate(parent, server.get_node(typedef), nid(name), bname,
+            """An instance of an ObjectType with the children its modelling rules ask for."""
+            return (await instantiate(parent, server.get_node(typedef), nid(name), bname,
                                       instantiate_optional=optional))[0]
-            return node
 
         machines = await server.nodes.objects.add_folder(node_id(1001, mach), ua.QualifiedName("Machines", mach))
         machine = await machines.add_object(nid("Machine"), ua.QualifiedName(self.device_id, idx))
