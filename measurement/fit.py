@@ -29,7 +29,7 @@ from scipy.optimize import least_squares, lsq_linear
 from .errors import IdentificationError
 from .model import STATE_PARAMS, Model
 from .noise import NoiseModel, autocorrelation, fit_noise
-from .signal import Swings, find_swings, resample_uniform, savitzky_golay
+from .signal import Swings, find_swings, periodogram_frequency, resample_uniform, savitzky_golay
 
 __all__ = ["ModelFit", "Smoothed", "fit_model", "initial_guess", "smooth", "autocorrelation"]
 
@@ -134,6 +134,8 @@ class Smoothed:
     filter of ``window`` samples (ydd only away from the ends, the only part read).
     supported: per grid point, whether the filter's window there spans measured samples
     only, not a straight line drawn across a gap in the record (None: the record is even).
+    omega_d: the swing's damped angular frequency, rad/s: the swings' own (zero crossings) on
+    an even record; on one with gaps, the least-squares periodogram's near it.
     """
 
     t: np.ndarray
@@ -147,6 +149,7 @@ class Smoothed:
     yd: np.ndarray
     ydd: np.ndarray
     supported: np.ndarray | None = None
+    omega_d: float = float("nan")
 
     def holds(self, t: np.ndarray, y: np.ndarray, sigma: float) -> bool:
         """Whether this was computed from these very samples and noise floor."""
@@ -180,7 +183,11 @@ def smooth(t: np.ndarray, y: np.ndarray, sigma: float, swings: Swings | None = N
     # θ'' is read only a window away from the ends, where every mode gives the same
     # convolution: no polynomial fits of the ends
     ydd = savitzky_golay(yu, window, order, deriv=2, delta=dt, ends="zero")
-    return Smoothed(t, y, sigma, centre, sw, dt, window, ys, yd, ydd, _supported(t, tu, dt, window))
+    supported = _supported(t, tu, dt, window)
+    if supported is not None:
+        # crossings are read off lines drawn across the gaps: weigh the samples themselves
+        wd = periodogram_frequency(t, y, 0.5 * wd, 2.0 * wd)
+    return Smoothed(t, y, sigma, centre, sw, dt, window, ys, yd, ydd, supported, wd)
 
 
 def _supported(t: np.ndarray, tu: np.ndarray, dt: float, window: int) -> np.ndarray | None:
@@ -211,7 +218,7 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
         smoothed = smooth(t, y, sigma)
     centre, sw, window = smoothed.centre, smoothed.swings, smoothed.window
     ys, yd, ydd = smoothed.ys, smoothed.yd, smoothed.ydd
-    wd = sw.damped_frequency
+    wd = smoothed.omega_d
     amplitude = float(np.max(np.abs(ys - centre)))
     theta0 = float(ys[0] - centre)
     omega0 = float(yd[0])
@@ -247,8 +254,10 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
         regression_ok = False
     if regression_ok and coef is not None:
         omega_n = math.sqrt(coef[0])
-        # the regression is biased by noise on θ''; trust it only near ω_d
-        if not 0.7 * wd < omega_n < 1.4 * wd:
+        # the regression is biased by noise on θ''; trust it only near ω_d (closer with gaps,
+        # where fewer rows hold it and the periodogram's ω_d is the sharper figure)
+        near = (0.7, 1.4) if smoothed.supported is None else (0.9, 1.15)
+        if not near[0] * wd < omega_n < near[1] * wd:
             regression_ok = False
     values: dict[str, list[float]] = {}
     if regression_ok and coef is not None:
