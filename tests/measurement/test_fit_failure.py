@@ -22,9 +22,10 @@ from measurement.verdict import INVALID, QualityRules, Reading, Specification, j
 
 from .reference import reference_motion
 
-RIG = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
+STIFFNESS = 0.3651  # N·m/rad
+RIG = Rig(kind="torsion", stiffness=STIFFNESS, declared=("viscous",))
 INERTIA = 0.0125
-OMEGA_N = math.sqrt(RIG.stiffness / INERTIA)
+OMEGA_N = math.sqrt(STIFFNESS / INERTIA)
 
 
 def _trace(coulomb: float = 0.0, seed: int = 2, noise: float = 5e-5, duration: float = 40.0) -> Trace:
@@ -106,7 +107,7 @@ def test_a_fit_that_does_not_follow_the_swing_is_flagged_and_invalid(monkeypatch
         return real_fit(model, t, y, sigma, **kw)
 
     monkeypatch.setattr(ident, "fit_model", slipping)
-    rig = Rig(kind="torsion", stiffness=RIG.stiffness, declared=("viscous", "quadratic"))
+    rig = Rig(kind="torsion", stiffness=STIFFNESS, declared=("viscous", "quadratic"))
     r = identify(_trace(), rig, Options(discover=False))
     assert r.residual_rms > 0.1 * 0.29, r.report()  # the forced start did slip
     assert "fit_not_converged" in r.flags, (r.flags, r.report())
