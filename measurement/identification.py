@@ -16,6 +16,11 @@
     hold     → an effect that moved ω_n by more than its σ is withdrawn when the
                model it ends in gives another ω_n in each half of the record
                (``hold_across``); its ω_n stays a rival in the uncertainty
+    guard    → a final model that fits worse than a model it contains (the declared
+               one, an earlier step) on the same samples left the optimum: refitted
+               from that model's values, or that model kept (``keep_nested_order``);
+               a fit whose residual is comparable to the swing carries
+               ``fit_not_converged`` (``follows_swing``)
     report   → before/after, the evidence of every step, and
                ``unmodeled_residual`` when structure is left that no library
                effect explains (never forced into a wrong effect).
