@@ -16,6 +16,11 @@
     hold     → an effect that moved ω_n by more than its σ is withdrawn when the
                model it ends in gives another ω_n in each half of the record
                (``hold_across``); its ω_n stays a rival in the uncertainty
+    guard    → a final model that fits worse than a model it contains (the declared
+               one, an earlier step) on the same samples left the optimum: refitted
+               from that model's values, or that model kept (``keep_nested_order``);
+               a fit whose residual is comparable to the swing carries
+               ``fit_not_converged`` (``follows_swing``)
     report   → before/after, the evidence of every step, and
                ``unmodeled_residual`` when structure is left that no library
                effect explains (never forced into a wrong effect).
@@ -589,6 +594,80 @@ def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[tuple[str, floa
     return previous, Withdrawn(tuple(movers), w, final.stdev("omega_n"), final.bic - previous.bic, seg), nfev
 
 
+def contains(outer: Model, inner: Model) -> bool:
+    """Whether ``outer`` holds every effect of ``inner``, itself or an effect that refines it (dahl for coulomb)."""
+    names = set(outer.effect_names)
+    refined = {EFFECTS[n].refines for n in names if n in EFFECTS}
+    return all(n in names or n in refined for n in inner.effect_names)
+
+
+def nested_start(model: Model, inner: ModelFit) -> np.ndarray:
+    """The parameter vector of ``model`` whose swing is ``inner``'s: ``inner``'s values, every effect it lacks at
+    its neutral 0, an effect that refines one of ``inner``'s at that one's values (``contains(model, inner.model)``)."""
+    values: dict[str, list[float]] = {}
+    for e in model.effects:
+        if e.name in inner.model.layout:
+            values[e.name] = inner.effect(e.name)
+        elif e.refines is not None and e.refines in inner.model.layout:
+            values[e.name] = inner.effect(e.refines) + [0.0] * (len(e.parameters) - 1)
+    x = model.vector((inner.value("theta0"), inner.value("omega0"), inner.value("omega_n")), values,
+                     inner.value("offset"))
+    lo, hi = model.bounds()
+    return np.clip(x, lo, hi)
+
+
+#: n·ln(RSS / RSS of a model it contains) beyond which a fit is taken to have left the optimum (a likelihood
+#: ratio of e^5): at its optimum a model fits the same samples at least as well as any model it contains
+SLIP_MARGIN = 10.0
+#: residual RMS over the RMS of the fitted swing beyond which the model does not follow the swing (R² < 0.89);
+#: the worst of the real records, a bifilar suspension whose restoring law no effect matches, stands at 0.16
+FOLLOW_LIMIT = 1.0 / 3.0
+
+
+def _worse_than(fit: ModelFit, inner: ModelFit) -> bool:
+    return fit.n * math.log(max(fit.rss, 1e-300) / max(inner.rss, 1e-300)) > SLIP_MARGIN
+
+
+def keep_nested_order(final: ModelFit, nested: Sequence[ModelFit], sigma: float
+                      ) -> tuple[ModelFit, ModelFit | None, int]:
+    """``final``, or, when a model it contains fits the very same samples much better (``SLIP_MARGIN``), the
+    final model refitted from that fit's values, or that fit itself when the refit does not reach it.
+
+    Adding an effect can never fit worse at the optimum; ending worse, a fit went down another basin (a
+    refit after the outliers left, a start a cycle off over a long record) and would report a J from a
+    model that does not follow the swing. sigma: the noise floor (rad). Returns (the fit to report, the
+    contained fit that beat ``final`` or None, simulations spent).
+    """
+    same = [f for f in nested if f is not final and f.f_scale == final.f_scale and f.t.size == final.t.size
+            and np.array_equal(f.t, final.t) and contains(final.model, f.model)]
+    if not same:
+        return final, None, 0
+    best = min(same, key=lambda f: f.rss)
+    if not _worse_than(final, best):
+        return final, None, 0
+    nfev = 0
+    try:
+        refit = fit_model(final.model, final.t, final.y, sigma, x0=nested_start(final.model, best),
+                          scales=final.scales, previous=best, f_scale=final.f_scale)
+        nfev = refit.nfev
+        if not _worse_than(refit, best):
+            return refit, best, nfev
+    except IdentificationError:
+        pass
+    return best, best, nfev
+
+
+def follows_swing(fit: ModelFit, sigma: float) -> tuple[bool, float]:
+    """(whether the fitted model follows the swing, its residual RMS over the fitted swing's RMS).
+
+    It does not when the residual is far above the noise floor (``SCREEN_TRUST``) and comparable to
+    the swing itself (``FOLLOW_LIMIT``): whatever J such a fit implies, it is not read from the swing.
+    """
+    swing = float(np.sqrt(np.mean((fit.fitted - fit.value("offset")) ** 2)))
+    ratio = fit.residual_rms / swing if swing > 0 else math.inf
+    return not (fit.residual_rms > SCREEN_TRUST * sigma and ratio > FOLLOW_LIMIT), ratio
+
+
 def identify(trace: Trace, rig: Rig, options: Options = Options()) -> IdentificationResult:
     """Identify J, ω_n and the damping of ``trace`` on ``rig`` (see module doc)."""
     # The matrices here are tall and thin (samples × a few parameters): BLAS
@@ -636,6 +715,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     steps: list[DiscoveryStep] = []
     final = base
     withdrawn: Withdrawn | None = None
+    moves: list[tuple[str, float, float, ModelFit]] = []
     diagnosed: dict[int, tuple[ModelFit, Diagnostics]] = {}  # by id, the fit kept so its id is not reused
 
     def diagnosis(fit: ModelFit) -> Diagnostics:
@@ -666,6 +746,13 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         else:
             base = final
         diag = diagnose(final, prep.noise, prep.stuck)
+    # never a model worse than one it contains: the declared model's fit and each step's on the same samples
+    slipped_from = final
+    final, beaten_by, spent = keep_nested_order(final, [base] + [f for *_, f in moves], prep.noise)
+    nfev += spent
+    if beaten_by is not None:
+        diag = diagnose(final, prep.noise, prep.stuck)
+    follows, follow_ratio = follows_swing(final, prep.noise)
 
     w, ws = final.value("omega_n"), final.stdev("omega_n")
     # a sensor calibrated from the record itself carries its own uncertainty into ω_n, beside the fit's
@@ -719,7 +806,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     # far above the noise (where the loop's screen is not trusted either) a structured residual
     # is a model that misses the swing itself, whatever ω_n does
     far = prep.noise > 0 and final.residual_rms > SCREEN_TRUST * prep.noise
-    unmodeled = diag.structured and (changes_answer or bool(named) or far)
+    # (a fit that does not follow the swing at all is a failed fit, not structure left: fit_not_converged)
+    unmodeled = follows and diag.structured and (changes_answer or bool(named) or far)
     if unmodeled:
         flags.append(F.UNMODELED_RESIDUAL)
     if segments is not None and segments.disagree:
@@ -734,7 +822,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         flags.append(F.WINDOW_CUT_AT_GAP)
     if prep.n_unwrapped:
         flags.append(F.ANGLE_UNWRAPPED)
-    if not final.success:
+    if not final.success or not follows:
         flags.append(F.FIT_NOT_CONVERGED)
     effect_bounds = [n for n in final.at_bound if "." in n]
     if effect_bounds:
@@ -755,6 +843,20 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
                          f"ω_n {w1:.6g} ± {s1:.2g} and {w2:.6g} ± {s2:.2g} rad/s ({segments.z:.1f} σ apart): {verdict}")
     else:
         structure.append("the record is too short to fit each half alone: whether the model holds across it is not checked")
+    if beaten_by is not None:
+        kept = ("refitted from that model's values" if final is not beaten_by else
+                f"that model is kept ({', '.join(final.model.effect_names) or 'no effect'}): a refit from its values "
+                "did not reach it")
+        structure.append(
+            f"the model {', '.join(slipped_from.model.effect_names)} ended with residual RMS "
+            f"{slipped_from.residual_rms:.3g} rad, worse than the model it contains "
+            f"({', '.join(beaten_by.model.effect_names) or 'no effect'}, {beaten_by.residual_rms:.3g} rad) on the same "
+            f"samples: its fit had left the optimum; {kept}")
+    if not follows:
+        structure.append(
+            f"the fit does not follow the swing: its residual RMS {final.residual_rms:.3g} rad is "
+            f"{100 * follow_ratio:.0f} % of the fitted swing's RMS (limit {100 * FOLLOW_LIMIT:.0f} %) and "
+            f"{final.residual_rms / prep.noise:.0f} × the noise floor; do not use this J (flag fit_not_converged)")
     if withdrawn is not None:
         ws_ = withdrawn.segments
         structure.append(
