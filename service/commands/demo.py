@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
         config = parse_config(_doc(args, state_dir), source="moi demo")
         if args.web_port and not _port_free(args.web_port):
             print(f"port {args.web_port} is taken: the web page goes on a free port")
-            config = dataclasses.replace(config, web=dataclasses.replace(config.web, port=0))
+            config = config.with_publisher("web", dataclasses.replace(config.web, port=0))
         return _run(Appliance(config, stop_grace=5.0), args)
 
 
