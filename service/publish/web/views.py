@@ -31,6 +31,7 @@ from .settings import PLOT_NAME
 from measurement.flags import FLAGS
 
 from .words import STATE_WORDS, flag_words
+from service.states import vocabulary
 from . import quality as Q
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -139,6 +140,7 @@ class Views:
         # file names carry a hash of the content: a browser never keeps a stale script after an update
         stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
         self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS, VERDICT_WORDS=Q.VERDICT_WORDS,
+                                states_json=json.dumps(vocabulary(), separators=(",", ":")),
                                 static_url=lambda name: f"/static/{name}?v={stamps.get(name, '')}")
 
     # --- application ------------------------------------------------------------------------
