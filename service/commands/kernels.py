@@ -112,6 +112,10 @@ def start(kinds: tuple[str, ...]) -> KernelHelper | None:
 
 def serve(kinds: list[str], inp: IO[bytes], out: IO[bytes]) -> None:
     """The helper's side: load the kernels, then answer requests until the input ends."""
+    # numba loads scipy (its BLAS, for linear algebra) and cffi (for CFFI functions) when they are installed,
+    # and does without them when not; the kernels use neither, so this process goes without: half its start
+    for optional in ("scipy", "cffi"):
+        sys.modules.setdefault(optional, None)  # type: ignore[arg-type]
     import numpy as np
 
     from measurement.integrator import kernel, warm_up
