@@ -542,8 +542,8 @@ class Appliance:
 
     def _state_message(self, state: str, previous: str, reason: str, measurement_id: str | None,
                        event: Event | None = None) -> dict[str, Any]:
-        msg = self.public_event(event) if event is not None else {"state": state, "previous": previous,
-                                                                  "reason": reason, "measurement_id": measurement_id}
+        msg: dict[str, Any] = self.public_event(event) if event is not None else {
+            "state": state, "previous": previous, "reason": reason, "measurement_id": measurement_id}
         now = self.wall_clock()
         msg.update({"device_id": self.config.device_id, "timestamp": now, "at": iso_utc(now)})
         return msg

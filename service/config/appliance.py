@@ -27,7 +27,7 @@ import functools
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, overload
 
 from firmware_host import SequencerConfig
 from measurement import Options, Rig
@@ -322,6 +322,10 @@ class Config:
         }
 
 
+@overload
+def _resolve(base: Path, p: str) -> str: ...
+@overload
+def _resolve(base: Path, p: str | None) -> str | None: ...
 def _resolve(base: Path, p: str | None) -> str | None:
     if p is None:
         return None
@@ -388,6 +392,7 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
     if "hardware" in doc:
         hw = c.table("hardware", doc["hardware"], SCHEMA["hardware"])
         sol = _device_table(c, "hardware.solenoid", hw["solenoid"], SolenoidSettings)
+        assert sol is not None  # a required key of [hardware]
         btn = _device_table(c, "hardware.button", hw["button"], ButtonSettings)
         ind = _device_table(c, "hardware.indicator", hw["indicator"], IndicatorSettings)
         enc = hw["encoder"]

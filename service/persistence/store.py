@@ -14,6 +14,7 @@ row). One connection guarded by a lock is shared by the daemon's threads.
 
 from __future__ import annotations
 
+import builtins
 import dataclasses
 import functools
 import json
@@ -646,7 +647,7 @@ class Store:
             rows = self._db.execute(f"SELECT {cols} FROM measurements {where} ORDER BY seq DESC {lim}", args).fetchall()
         return [self._row(r, full=full, trace=False) for r in rows]
 
-    def recipes(self) -> list[str]:
+    def recipes(self) -> builtins.list[str]:
         """Names of the recipes of the completed parts in the store, in order of first use."""
         with self._lock:
             rows = self._db.execute("SELECT recipe FROM measurements WHERE part_verdict IS NOT NULL "
@@ -697,7 +698,7 @@ class Store:
                         json.dumps(record, allow_nan=False)))
 
     @_store_errors("reading tensor sets")
-    def tensor_sets(self, limit: int | None = 20) -> list[dict[str, Any]]:
+    def tensor_sets(self, limit: int | None = 20) -> builtins.list[dict[str, Any]]:
         """Stored tensor sets, newest first: their records with ``finished_at`` and ``started_at``."""
         with self._lock:
             if not self._db.execute("SELECT 1 FROM sqlite_master WHERE name = 'tensor_sets'").fetchone():
@@ -717,7 +718,7 @@ class Store:
                         json.dumps(record, allow_nan=False)))
 
     @_store_errors("reading check standards")
-    def check_standards(self, limit: int | None = 20) -> list[dict[str, Any]]:
+    def check_standards(self, limit: int | None = 20) -> builtins.list[dict[str, Any]]:
         """Stored check-standard measurements, newest first, each with ``finished_at``."""
         with self._lock:
             if not self._db.execute("SELECT 1 FROM sqlite_master WHERE name = 'check_standards'").fetchone():
@@ -738,7 +739,7 @@ class Store:
     @_store_errors("searching measurements")
     def search(self, *, offset: int = 0, limit: int | None = 25, since: float | None = None,
                until: float | None = None, status: str | None = None, flag: str | None = None,
-               part_id: str | None = None, recipe: str | None = None) -> tuple[list[StoredMeasurement], int]:
+               part_id: str | None = None, recipe: str | None = None) -> tuple[builtins.list[StoredMeasurement], int]:
         """One page of measurements (with payloads), newest first, and how many match in all.
         The filters of ``list``, and flag: only those carrying this quality flag."""
         where, args = _where(since=since, until=until, status=status, part_id=part_id, recipe=recipe, flag=flag)
