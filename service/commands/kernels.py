@@ -99,7 +99,8 @@ class _Remote:
 def start(kinds: tuple[str, ...]) -> KernelHelper | None:
     """The helper for these rig kinds, when it can help: each kernel compiled already (else the command
     compiles in-process, as before) and a second core to run on."""
-    if (os.cpu_count() or 1) < 2 or len(os.sched_getaffinity(0)) < 2:
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if cores < 2:
         return None
     from measurement.integrator import is_compiled
     if not all(is_compiled(k) for k in kinds):
