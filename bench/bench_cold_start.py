@@ -11,8 +11,8 @@ after alternating so that both see the same load; "one core" pins the process wi
 the source tree at BEFORE (the last commit that imported scipy.signal for its smoothing and
 loaded every publisher's library with the configuration), or at ``--before REV``, unpacked with
 `git archive`. `moi identify` loads its integration kernel in a helper process on a second core
-(``service.commands.kernels``): its CPU time is counted with the command's, and pinned to one core
-the command runs without it. The
+(``service.commands.kernels``) when a core is idle: its CPU time is counted with the command's;
+pinned to one core, or with no core idle, the command runs without it. Run it on an idle machine. The
 compiled integration kernel is loaded from the on-disk cache in every timed run (one untimed run
 first fills it), as on a device after its first measurement. The CPU time (user + system) is what a
 busy machine does not inflate as it does the wall time.

@@ -8,8 +8,9 @@ cached kernel on another core while the command imports scipy, reads the trace a
 integrates each trajectory the fit asks for (``measurement.integrator.use_kernels``). The same compiled kernel
 runs either way, so the results are bit for bit those of the in-process kernel.
 
-Only with a kernel already compiled (a first run compiles in-process, as before) and with a second core to
-run on; if the helper cannot start or dies, the command falls back to the in-process kernel.
+Only with a kernel already compiled (a first run compiles in-process, as before) and with a core idle to
+run on (on a busy machine the helper's own start would only add to the command's); if the helper cannot
+start or dies, the command falls back to the in-process kernel.
 
 Protocol: pickles on the helper's stdin and stdout, one request (kind and the ``run`` arguments without its
 two outputs) and one answer ("ok", θ, θ') or ("error", text) at a time.
@@ -96,11 +97,23 @@ class _Remote:
         self.helper.run(self.kind, (t, x0, v0, w2, params, holding, max_step), out_x, out_v)
 
 
+def spare_core() -> bool:
+    """Whether a core is idle for the helper besides the command's own: counted by the tasks running right now
+    (Linux's /proc/loadavg, the command among them), else by the 1-min load average. On a busy machine the
+    helper would only add its own start to the command's (it has no core to itself)."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    try:
+        with open("/proc/loadavg", encoding="ascii") as f:
+            others = float(f.read().split()[3].split("/")[0]) - 1
+    except (OSError, ValueError, IndexError):
+        others = os.getloadavg()[0]
+    return cores - others >= 2
+
+
 def start(kinds: tuple[str, ...]) -> KernelHelper | None:
     """The helper for these rig kinds, when it can help: each kernel compiled already (else the command
-    compiles in-process, as before) and a second core to run on."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if cores < 2:
+    compiles in-process, as before) and a core idle to run it on."""
+    if not spare_core():
         return None
     from measurement.integrator import is_compiled
     if not all(is_compiled(k) for k in kinds):
