@@ -1,11 +1,14 @@
 """Bench: the OPC UA server's start time, and the time from the end of identification to the ResultReadyEvent
 at a client.
 
-1. Start time of the server alone (certificate made, address space built, listening), three ways: the first
-   start (it makes the certificate and asyncua's cache of the standard address space), a later start that
-   reads that cache, and a start without a cache (the standard address space built from code). asyncua
-   keeps the cache with Python's ``shelve``: with the gdbm module (Debian/Raspberry Pi OS: python3-gdbm) it
-   is a fast hash file, without it ``dbm.dumb``, which may be slower than building: the numbers say which.
+1. Start time of the server alone (certificate made, address space built with the companion specifications'
+   types, listening), three ways, RUNS times each (medians): cold, the first start of a state directory (it
+   makes the certificate and asyncua's cache of the standard address space); warm, a later start that reads
+   that cache; and a start without a cache (the standard address space built from code). asyncua keeps the
+   cache with Python's ``shelve``; the server uses it only where dbm has a real backend (gdbm, ndbm:
+   Debian/Raspberry Pi OS python3-gdbm), with dbm.dumb alone it builds (faster than reading dbm.dumb): then
+   warm is a start without a cache too. Each start runs in a process of its own; its CPU time (all threads)
+   is printed beside the wall-clock time, as the steadier number on a machine that others share.
 2. The daemon on the simulated rig with the OPC UA server; an asyncua client (Basic256Sha256 Sign & Encrypt,
    user and password) subscribed to the ResultReadyEvent. For each of N measurements:
 
@@ -21,6 +24,7 @@ import asyncio
 import dbm
 import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import threading
@@ -32,28 +36,49 @@ sys.path.insert(0, str(HERE.parent))
 os.environ.setdefault("GPIOZERO_PIN_FACTORY", "mock")
 
 N = 8
+RUNS = 3  # starts per case (medians)
 USER, PASSWORD = "bench", "bench-password"
 
 
-def _start_times(work: Path) -> None:
+def _one_start(state: str, cache: str | None) -> None:
+    """One server start in this process (``--one-start``): prints the start time and the types' share, s."""
     from service.publish.opcua.server import OpcUaServer
     from service.publish.opcua.settings import OpcUaSettings
 
-    cached = OpcUaSettings(port=0, username=USER, password=PASSWORD)
-    uncached = OpcUaSettings(port=0, username=USER, password=PASSWORD, cache_file=str(work / "none" / "x"))
-    for label, settings, state in (("first start (makes certificate and cache)", cached, work / "a"),
-                                   ("later start (reads the cache)", cached, work / "a"),
-                                   ("later start (reads the cache), again", cached, work / "a"),
-                                   ("start without a cache (builds from code)", uncached, work / "b"),
-                                   ("start without a cache, again", uncached, work / "b")):
-        if "without" in label:
-            for p in (work / "none").glob("*"):
-                p.unlink()  # a cache made by the previous start would be read
-        server = OpcUaServer(settings, "bench", state, software_version="bench")
-        server.start()
-        print(f"OPC UA server {label}: {server.start_seconds:.2f} s")
-        server.stop()
-    print(f"  (shelve backend here: {dbm.whichdb(str(work / 'a' / 'opcua' / 'address-space')) or 'dbm.dumb'})")
+    server = OpcUaServer(OpcUaSettings(port=0, username=USER, password=PASSWORD, cache_file=cache), "bench",
+                         Path(state), software_version="bench")
+    cpu = time.process_time()
+    server.start()
+    cpu = time.process_time() - cpu  # all threads of this process: what the start costs, whatever else runs
+    server.stop()
+    print(server.start_seconds, cpu, server.types_seconds)
+
+
+def _start_times(work: Path) -> None:
+    """Each start in a process of its own, as the appliance starts (no address space of an earlier start
+    left in memory for the garbage collector to walk)."""
+    def start(state: Path, cache: Path | None = None) -> tuple[float, float, float]:
+        args = [sys.executable, __file__, "--one-start", str(state)] + ([str(cache)] if cache else [])
+        out = subprocess.run(args, check=True, capture_output=True, text=True).stdout.split()
+        return float(out[-3]), float(out[-2]), float(out[-1])
+
+    cold, warm, uncached = [], [], []
+    for i in range(RUNS):
+        state = work / f"state-{i}"
+        cold.append(start(state))  # a new state directory: makes the certificate and the cache
+        warm.append(start(state))  # reads them
+        uncached.append(start(state, work / f"none-{i}" / "x"))  # the standard address space built from code
+        for p in (work / f"none-{i}").glob("*"):
+            p.unlink()
+    for label, runs in (("cold (first start: makes the certificate and the cache)", cold),
+                        ("warm (reads the cache)", warm), ("without a cache (builds from code)", uncached)):
+        print(f"OPC UA server start, {label}: median {statistics.median(r[0] for r in runs):.2f} s of {RUNS} "
+              f"(CPU {statistics.median(r[1] for r in runs):.2f} s; the companion types "
+              f"{1000 * statistics.median(r[2] for r in runs):.0f} ms)")
+    from service.publish.opcua.server import fast_dbm
+
+    backend = dbm.whichdb(str(work / "state-0" / "opcua" / "address-space")) if fast_dbm() else None
+    print(f"  (the cache: {backend or 'not used, this Python has dbm.dumb only'})")
 
 
 def main() -> None:
@@ -67,7 +92,7 @@ def main() -> None:
     from _appliance import Finished, StampedIdentifier, simulated_doc
     from service.config.appliance import parse_config
     from service.daemon import Appliance
-    from service.publish.opcua.server import NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT
+    from service.publish.opcua.server import NS_MACHINERY, NS_MOI, NS_RESULT
 
     logging.basicConfig(level=logging.WARNING)
     for name in ("asyncua", "pymodbus"):
@@ -110,9 +135,9 @@ def main() -> None:
         c.set_user(USER)
         c.set_password(PASSWORD)
         async with c:
-            ns = {u: await c.get_namespace_index(u) for u in (NS_MACHINERY, NS_MOI, NS_DI, NS_RESULT)}
+            ns = {u: await c.get_namespace_index(u) for u in (NS_MACHINERY, NS_MOI, NS_RESULT)}
             rm = await c.nodes.objects.get_child([f"{ns[NS_MACHINERY]}:Machines", f"{ns[NS_MOI]}:bench",
-                                                  f"{ns[NS_DI]}:MachineryBuildingBlocks",
+                                                  f"{ns[NS_MACHINERY]}:MachineryBuildingBlocks",
                                                   f"{ns[NS_RESULT]}:ResultManagement"])
             etype = await c.nodes.base_event_type.get_child(f"{ns[NS_RESULT]}:ResultReadyEventType")
             arrived = asyncio.Event()
@@ -136,4 +161,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    if sys.argv[1:2] == ["--one-start"]:
+        _one_start(sys.argv[2], sys.argv[3] if len(sys.argv) > 3 else None)
+    else:
+        main()

@@ -112,6 +112,9 @@ class EncoderConfig:
         midpoint of request and reply, is uncertain by half the excess, an angle error of θ'·Δt.
         With the default 1.5 a kept sample's time is off by at most a quarter of the link's round
         trip, however busy the host. 0 keeps every reply.
+    After a time-out the client waits another ``timeout`` for the line to go quiet before the next
+    request; a reply arriving in that wait is ignored and counted in ``stale_replies`` (also
+    counted in ``timeouts``): many of them mean the time-out is shorter than the device's answer.
     """
 
     port: str
@@ -325,7 +328,7 @@ class ModbusEncoder:
     def _zero_counts() -> dict[str, Any]:
         return {"requests": 0, "timeouts": 0, "crc_errors": 0, "exceptions": 0,
                 "connection_errors": 0, "max_run_of_errors": 0, "consecutive_errors": 0,
-                "rtt_max_s": 0.0, "late_replies": 0}
+                "rtt_max_s": 0.0, "late_replies": 0, "stale_replies": 0}
 
     def _snapshot(self) -> dict[str, Any]:
         """The counters as a fault carries them (call with the lock held)."""
@@ -513,3 +516,13 @@ class ModbusEncoder:
             if failed is Failure.CONNECTION:
                 # a refused connection fails instantly: pace the retries at the request time-out
                 await asyncio.sleep(c.timeout)
+            elif failed is Failure.TIMEOUT:
+                # An RTU reply carries no transaction id: one that comes after its time-out, while
+                # the next request is in flight, would be taken for that request's answer, an angle
+                # read one request earlier. The line is let go quiet first; a reply arriving
+                # meanwhile finds no request waiting (pymodbus drops it) and is counted.
+                self._rx = bytearray()
+                await asyncio.sleep(c.timeout)
+                if self._rx:
+                    with self._lock:
+                        self._counts["stale_replies"] += 1

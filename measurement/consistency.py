@@ -23,7 +23,9 @@ that into an uncertainty of the model's form, beside the fit's statistical σ:
 A sensor-scale effect that moves ω_n by more than its own σ must also hold
 across the record: its parameters fitted in each half must agree
 (``effect_holds``), so that a sensor scale that is really an approximate
-restoring law is not bought with a wrong J.
+restoring law is not bought with a wrong J. A damping or stiffness effect
+that moves ω_n is judged on ω_n alone: the model it ends in must give the
+same ω_n from both halves (``identification.hold_across``).
 """
 
 from __future__ import annotations
@@ -45,6 +47,9 @@ MIN_SEGMENT_SWINGS = 3.0
 DISAGREE_P = 0.01
 #: p-value below which an effect's parameters fitted in the two halves disagree
 EFFECT_P = 1e-3
+#: largest leverage of the zero-amplitude extrapolation through the halves (m₂/(m₁ − m₂), m the
+#: halves' mean square angle): 2 where the second half's is a third of the first's
+MAX_LEVERAGE = 2.0
 
 
 @dataclass(frozen=True)
@@ -170,7 +175,18 @@ def segment_fits(fit: ModelFit, sigma: float) -> tuple[float, list[ModelFit]] | 
 
 
 def check_segments(fit: ModelFit, sigma: float) -> SegmentCheck | None:
-    """ω_n of each half against the whole record's (None when the record cannot be split)."""
+    """ω_n of each half against the whole record's (None when the record cannot be split).
+
+    The model-form uncertainty u is the larger of two method-of-moments
+    estimates (each the squared deviation less what the halves' σ explain):
+    the halves' scatter about the whole, and the distance from the whole to
+    ω_n extrapolated to zero amplitude along the line through the halves'
+    values against their mean square angle. A restoring law the model lacks
+    (a bifilar suspension's is not m·g·S·sin θ) makes the frequency depend
+    on the amplitude, and ω_n, the small-swing limit that J is computed from,
+    then lies beyond both halves, not between them; a model that holds
+    gives the same ω_n in both and the term vanishes.
+    """
     fitted = segment_fits(fit, sigma)
     if fitted is None:
         return None
@@ -183,8 +199,20 @@ def check_segments(fit: ModelFit, sigma: float) -> SegmentCheck | None:
     p = float(erfc(z / math.sqrt(2.0)))
     # a half's estimate differs from the whole's by its own information's share: variance σ_h² − σ²
     excess = [(wi - w) ** 2 - max(si**2 - s**2, 0.0) for wi, si in zip(ws, ss)]
-    u = math.sqrt(max(float(np.mean(excess)), 0.0))
-    return SegmentCheck(t_split, tuple(ws), tuple(ss), z, p, u)
+    u_scatter = math.sqrt(max(float(np.mean(excess)), 0.0))
+    # ω(m) = a + b·m through the halves, m the mean square true angle of each: a at m = 0
+    parts = halves(fit)
+    theta = fit.extra["theta"]
+    m1, m2 = (float(np.mean(theta[part] ** 2)) for part in parts) if parts is not None else (0.0, 0.0)
+    u_amp = 0.0
+    if m1 > m2 > 0:
+        # leverage of the extrapolation, bounded where the amplitude barely changes between the
+        # halves (then their difference is not the amplitude's doing and the scatter term holds it)
+        lev = min(m2 / (m1 - m2), MAX_LEVERAGE)
+        a = ws[1] + lev * (ws[1] - ws[0])
+        var_a = ((1 + lev) * ss[1]) ** 2 + (lev * ss[0]) ** 2
+        u_amp = math.sqrt(max((a - w) ** 2 - max(var_a - s**2, 0.0), 0.0))
+    return SegmentCheck(t_split, tuple(ws), tuple(ss), z, p, max(u_scatter, u_amp))
 
 
 def effect_holds(fit: ModelFit, effect: str, sigma: float) -> tuple[bool, str, int]:

@@ -29,7 +29,7 @@ from scipy.optimize import least_squares, lsq_linear
 from .errors import IdentificationError
 from .model import STATE_PARAMS, Model
 from .noise import NoiseModel, autocorrelation, fit_noise
-from .signal import Swings, find_swings, resample_uniform, savitzky_golay
+from .signal import Swings, find_swings, periodogram_frequency, resample_uniform, savitzky_golay
 
 __all__ = ["ModelFit", "Smoothed", "fit_model", "initial_guess", "smooth", "autocorrelation"]
 
@@ -132,6 +132,10 @@ class Smoothed:
     centre: the swing's centre line (rad); swings: about it; ys, yd, ydd:
     θ, θ', θ'' on the even grid of spacing dt (s) from a Savitzky–Golay
     filter of ``window`` samples (ydd only away from the ends, the only part read).
+    supported: per grid point, whether the filter's window there spans measured samples
+    only, not a straight line drawn across a gap in the record (None: the record is even).
+    omega_d: the swing's damped angular frequency, rad/s: the swings' own (zero crossings) on
+    an even record; on one with gaps, the least-squares periodogram's near it.
     """
 
     t: np.ndarray
@@ -144,6 +148,8 @@ class Smoothed:
     ys: np.ndarray
     yd: np.ndarray
     ydd: np.ndarray
+    supported: np.ndarray | None = None
+    omega_d: float = float("nan")
 
     def holds(self, t: np.ndarray, y: np.ndarray, sigma: float) -> bool:
         """Whether this was computed from these very samples and noise floor."""
@@ -177,7 +183,29 @@ def smooth(t: np.ndarray, y: np.ndarray, sigma: float, swings: Swings | None = N
     # θ'' is read only a window away from the ends, where every mode gives the same
     # convolution: no polynomial fits of the ends
     ydd = savitzky_golay(yu, window, order, deriv=2, delta=dt, ends="zero")
-    return Smoothed(t, y, sigma, centre, sw, dt, window, ys, yd, ydd)
+    supported = _supported(t, tu, dt, window)
+    if supported is not None:
+        # crossings are read off lines drawn across the gaps: weigh the samples themselves
+        wd = periodogram_frequency(t, y, 0.5 * wd, 2.0 * wd)
+    return Smoothed(t, y, sigma, centre, sw, dt, window, ys, yd, ydd, supported, wd)
+
+
+def _supported(t: np.ndarray, tu: np.ndarray, dt: float, window: int) -> np.ndarray | None:
+    """Grid points whose filter window holds no interpolated stretch longer than half the window (None: all).
+
+    Across a gap the even grid carries a straight line: its θ'' is zero and its θ' constant,
+    so an equation-error regression over it reads a wrong ω_n (a record from a lossy link,
+    dense bursts between 0.4 s silences, started the fit 10 % off and it slipped a cycle).
+    """
+    if tu is t:
+        return None
+    i = np.clip(np.searchsorted(t, tu), 1, t.size - 1)
+    # a few missing samples are bridged harmlessly: the filter's polynomial spans them anyway
+    bridged = (t[i] - t[i - 1]) > max(2.0, 0.5 * window) * dt
+    if not bridged.any():
+        return None
+    near = np.convolve(bridged.astype(float), np.ones(window), mode="same") > 0
+    return ~near
 
 
 def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
@@ -190,13 +218,20 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
         smoothed = smooth(t, y, sigma)
     centre, sw, window = smoothed.centre, smoothed.swings, smoothed.window
     ys, yd, ydd = smoothed.ys, smoothed.yd, smoothed.ydd
-    wd = sw.damped_frequency
+    wd = smoothed.omega_d
     amplitude = float(np.max(np.abs(ys - centre)))
     theta0 = float(ys[0] - centre)
     omega0 = float(yd[0])
 
     sl = slice(window, max(window + 1, ys.size - window))
-    xs, vs, acc = ys[sl] - centre, yd[sl], ydd[sl]
+    rows = np.arange(ys.size)[sl]
+    regress = True
+    if smoothed.supported is not None:
+        kept = rows[smoothed.supported[rows]]
+        # too few rows between the gaps: ω_n starts at the swings' ω_d instead of a regression
+        regress = kept.size >= 2 * window + len(model.dynamic) + 3
+        rows = kept if regress else rows
+    xs, vs, acc = ys[rows] - centre, yd[rows], ydd[rows]
     restoring = np.sin(xs) if model.rig.kind == "compound" else xs
     columns = [restoring[:, None]] + [e.basis(xs, vs) for e in model.dynamic]
     A = np.hstack(columns)
@@ -210,6 +245,8 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
     regression_ok = False
     coef = None
     try:
+        if not regress:
+            raise ValueError("too few rows between the gaps for the regression")
         sol = lsq_linear(A / col_rms, -acc, bounds=(lo, hi), method="bvls")
         coef = sol.x / col_rms
         regression_ok = bool(sol.success) and coef[0] > 0 and np.all(np.isfinite(coef))
@@ -217,8 +254,10 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
         regression_ok = False
     if regression_ok and coef is not None:
         omega_n = math.sqrt(coef[0])
-        # the regression is biased by noise on θ''; trust it only near ω_d
-        if not 0.7 * wd < omega_n < 1.4 * wd:
+        # the regression is biased by noise on θ''; trust it only near ω_d (closer with gaps,
+        # where fewer rows hold it and the periodogram's ω_d is the sharper figure)
+        near = (0.7, 1.4) if smoothed.supported is None else (0.9, 1.15)
+        if not near[0] * wd < omega_n < near[1] * wd:
             regression_ok = False
     values: dict[str, list[float]] = {}
     if regression_ok and coef is not None:
@@ -389,7 +428,7 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
             trial = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale=scales, method="trf",
                                   ftol=1e-12, xtol=1e-12, gtol=1e-10, max_nfev=max_nfev,
                                   loss=loss, f_scale=1.0 if f_scale is None else f_scale)
-        except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
+        except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError, np.linalg.LinAlgError) as exc:
             failed = exc
             continue
         if sol is None or trial.cost < sol.cost:

@@ -44,7 +44,9 @@ FLAGS: dict[str, str] = {
                         "half-swings), or it stands over 4 × the noise floor; coloured noise alone does not raise it",
     OUTLIERS_REMOVED: "isolated glitch samples were left out of the fit (count in window.n_outliers)",
     PARAMETER_AT_BOUND: "an effect's parameter sits at its physical bound (e.g. a damping of zero)",
-    FIT_NOT_CONVERGED: "the least-squares fit stopped before converging: do not use this J",
+    FIT_NOT_CONVERGED: "the least-squares fit stopped before converging, or ended where the model does not follow "
+                       "the swing (a residual over a third of the swing's RMS, far above the noise floor): do not "
+                       "use this J",
     CORRELATED_RESIDUAL: "the residual is coloured; uncertainties and BIC use the fitted noise model",
     OUTLIERS_DOWNWEIGHTED: "the robust loss gave samples far off the model a reduced weight (count in window.n_downweighted)",
     WINDOW_CUT_AT_GAP: "the fit window ends at a long gap in the samples (window.gap_cut_at gives the time)",

@@ -13,6 +13,14 @@
                BIC is the likelihood under the AR noise model, so the power
                grows with the record and coloured noise is not "explained"
                by an effect; no ratio to the noise floor stops the loop.
+    hold     → an effect that moved ω_n by more than its σ is withdrawn when the
+               model it ends in gives another ω_n in each half of the record
+               (``hold_across``); its ω_n stays a rival in the uncertainty
+    guard    → a final model that fits worse than a model it contains (the declared
+               one, an earlier step) on the same samples left the optimum: refitted
+               from that model's values, or that model kept (``keep_nested_order``);
+               a fit whose residual is comparable to the swing carries
+               ``fit_not_converged`` (``follows_swing``)
     report   → before/after, the evidence of every step, and
                ``unmodeled_residual`` when structure is left that no library
                effect explains (never forced into a wrong effect).
@@ -31,7 +39,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from . import flags as F
-from .consistency import ModelForm, check_segments, competitors, effect_holds
+from .consistency import Competitor, ModelForm, SegmentCheck, check_segments, competitors, effect_holds
 from .diagnostics import Diagnostics, diagnose
 from .effects import EFFECTS, Effect, candidate_effects, resolve_effects, with_effect
 from .errors import IdentificationError, RigError, TraceError, UnknownEffectError
@@ -418,8 +426,10 @@ def parallel_map(fn: Callable, items: Sequence) -> list:
 
 def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
              f_scale: float | None = None,
-             diagnosis: Callable[[ModelFit], Diagnostics] | None = None) -> tuple[ModelFit, list[DiscoveryStep], int]:
-    """The discovery loop; returns the final fit, its steps and the simulations spent.
+             diagnosis: Callable[[ModelFit], Diagnostics] | None = None
+             ) -> tuple[ModelFit, list[DiscoveryStep], int, list[tuple[str, float, float, ModelFit]]]:
+    """The discovery loop; returns the final fit, its steps, the simulations spent and each added
+    effect with the change of ω_n it made, the σ of ω_n after it (rad/s) and the fit it was added to.
 
     diagnosis: ``diagnose`` of a fit with the record's noise floor (the
     caller's, to diagnose the final fit only once).
@@ -429,6 +439,7 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
             return diagnose(f, prep.noise, prep.stuck)
     current = fit
     steps: list[DiscoveryStep] = []
+    moves: list[tuple[str, float, float, ModelFit]] = []
     spent = 0
     allowed = set(options.candidates) if options.candidates is not None else set(EFFECTS)
     amplitude = float(np.max(np.abs(fit.fitted - fit.value("offset"))))
@@ -517,8 +528,144 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options,
             reason += "; " + "; ".join(not_held)
         steps.append(DiscoveryStep(rnd, current.residual_rms, current.bic, table, best, bf.residual_rms, bf.bic,
                                    evidence, reason, w_before))
+        moves.append((best, bf.value("omega_n") - w_before, bf.stdev("omega_n"), current))
         current = bf
-    return current, steps, spent
+    return current, steps, spent, moves
+
+
+@dataclass(frozen=True)
+class Withdrawn:
+    """Effects taken back because the ω_n they moved does not hold across the record.
+
+    effects: the effects withdrawn; omega_n: the model's with them (rad/s);
+    d_bic: its BIC minus the kept model's; segments: its halves.
+    """
+
+    effects: tuple[str, ...]
+    omega_n: float
+    omega_n_std: float
+    d_bic: float
+    segments: SegmentCheck
+
+    def rival(self, kept_omega_n: float) -> Competitor:
+        return Competitor(f"{', '.join(self.effects)} kept (the ω_n it moves does not hold across the record)",
+                          self.d_bic, 1.0, self.omega_n, self.omega_n - kept_omega_n)
+
+
+def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[tuple[str, float, float, ModelFit]], prep: Prepared,
+                rig: Rig, f_scale: float | None) -> tuple[ModelFit, Withdrawn | None, int]:
+    """The final model, or the one without the effects whose ω_n does not hold across the record.
+
+    An effect that moved ω_n by more than its σ when it was added (``moves``)
+    stands only if the model it ends in holds across the record: the same
+    ω_n from both halves (``check_segments``). BIC alone cannot show it: an
+    effect that mimics a restoring law the model lacks (pre-sliding
+    friction's spring at small amplitude for a law softer than sin θ, a
+    cubic spring for a frequency that drifts with time) lowers it as much as
+    a true one. The model, not each effect, is judged, and on ω_n, not on
+    every parameter: a friction law fitted to half a record legitimately
+    differs from the whole's, and on the way to a law that holds (Coulomb,
+    then Dahl friction) the intermediate models need not hold. Withdrawn,
+    an effect that refines another (dahl, coulomb) falls back to it; the
+    withdrawn model's ω_n stays a rival in the uncertainty (consistency.py).
+    Returns (fit, what was withdrawn or None, simulations spent).
+    """
+    names = final.model.effect_names
+    movers = [n for n, d, sd, _ in moves if abs(d) > sd and n in names and not EFFECTS[n].scale_parameters]
+    w = final.value("omega_n")
+    if not movers or abs(w - base.value("omega_n")) <= final.stdev("omega_n"):
+        return final, None, 0
+    seg = check_segments(final, prep.noise)
+    if seg is None or not seg.disagree:
+        return final, None, 0
+    keep = [n for n in names if n not in movers]
+    keep += [r for n in movers if (r := EFFECTS[n].refines) is not None and r not in keep]
+    model = Model(rig, tuple(resolve_effects(keep, rig)))
+    # the loop's last fit within the kept model: the kept model itself, or a start that it contains
+    earlier = [f for *_, f in moves if set(f.model.effect_names) <= set(keep)]
+    previous = earlier[-1] if earlier else base
+    nfev = 0
+    if previous.model.effect_names != model.effect_names:
+        try:
+            previous = fit_model(model, final.t, final.y, prep.noise, previous=previous, f_scale=f_scale)
+        except IdentificationError:
+            return final, None, 0
+        nfev = previous.nfev
+    return previous, Withdrawn(tuple(movers), w, final.stdev("omega_n"), final.bic - previous.bic, seg), nfev
+
+
+def contains(outer: Model, inner: Model) -> bool:
+    """Whether ``outer`` holds every effect of ``inner``, itself or an effect that refines it (dahl for coulomb)."""
+    names = set(outer.effect_names)
+    refined = {EFFECTS[n].refines for n in names if n in EFFECTS}
+    return all(n in names or n in refined for n in inner.effect_names)
+
+
+def nested_start(model: Model, inner: ModelFit) -> np.ndarray:
+    """The parameter vector of ``model`` whose swing is ``inner``'s: ``inner``'s values, every effect it lacks at
+    its neutral 0, an effect that refines one of ``inner``'s at that one's values (``contains(model, inner.model)``)."""
+    values: dict[str, list[float]] = {}
+    for e in model.effects:
+        if e.name in inner.model.layout:
+            values[e.name] = inner.effect(e.name)
+        elif e.refines is not None and e.refines in inner.model.layout:
+            values[e.name] = inner.effect(e.refines) + [0.0] * (len(e.parameters) - 1)
+    x = model.vector((inner.value("theta0"), inner.value("omega0"), inner.value("omega_n")), values,
+                     inner.value("offset"))
+    lo, hi = model.bounds()
+    return np.clip(x, lo, hi)
+
+
+#: n·ln(RSS / RSS of a model it contains) beyond which a fit is taken to have left the optimum (a likelihood
+#: ratio of e^5): at its optimum a model fits the same samples at least as well as any model it contains
+SLIP_MARGIN = 10.0
+#: residual RMS over the RMS of the fitted swing beyond which the model does not follow the swing (R² < 0.89);
+#: the worst of the real records, a bifilar suspension whose restoring law no effect matches, stands at 0.16
+FOLLOW_LIMIT = 1.0 / 3.0
+
+
+def _worse_than(fit: ModelFit, inner: ModelFit) -> bool:
+    return fit.n * math.log(max(fit.rss, 1e-300) / max(inner.rss, 1e-300)) > SLIP_MARGIN
+
+
+def keep_nested_order(final: ModelFit, nested: Sequence[ModelFit], sigma: float
+                      ) -> tuple[ModelFit, ModelFit | None, int]:
+    """``final``, or, when a model it contains fits the very same samples much better (``SLIP_MARGIN``), the
+    final model refitted from that fit's values, or that fit itself when the refit does not reach it.
+
+    Adding an effect can never fit worse at the optimum; ending worse, a fit went down another basin (a
+    refit after the outliers left, a start a cycle off over a long record) and would report a J from a
+    model that does not follow the swing. sigma: the noise floor (rad). Returns (the fit to report, the
+    contained fit that beat ``final`` or None, simulations spent).
+    """
+    same = [f for f in nested if f is not final and f.f_scale == final.f_scale and f.t.size == final.t.size
+            and np.array_equal(f.t, final.t) and contains(final.model, f.model)]
+    if not same:
+        return final, None, 0
+    best = min(same, key=lambda f: f.rss)
+    if not _worse_than(final, best):
+        return final, None, 0
+    nfev = 0
+    try:
+        refit = fit_model(final.model, final.t, final.y, sigma, x0=nested_start(final.model, best),
+                          scales=final.scales, previous=best, f_scale=final.f_scale)
+        nfev = refit.nfev
+        if not _worse_than(refit, best):
+            return refit, best, nfev
+    except IdentificationError:
+        pass
+    return best, best, nfev
+
+
+def follows_swing(fit: ModelFit, sigma: float) -> tuple[bool, float]:
+    """(whether the fitted model follows the swing, its residual RMS over the fitted swing's RMS).
+
+    It does not when the residual is far above the noise floor (``SCREEN_TRUST``) and comparable to
+    the swing itself (``FOLLOW_LIMIT``): whatever J such a fit implies, it is not read from the swing.
+    """
+    swing = float(np.sqrt(np.mean((fit.fitted - fit.value("offset")) ** 2)))
+    ratio = fit.residual_rms / swing if swing > 0 else math.inf
+    return not (fit.residual_rms > SCREEN_TRUST * sigma and ratio > FOLLOW_LIMIT), ratio
 
 
 def identify(trace: Trace, rig: Rig, options: Options = Options()) -> IdentificationResult:
@@ -567,6 +714,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         nfev += base.nfev
     steps: list[DiscoveryStep] = []
     final = base
+    withdrawn: Withdrawn | None = None
+    moves: list[tuple[str, float, float, ModelFit]] = []
     diagnosed: dict[int, tuple[ModelFit, Diagnostics]] = {}  # by id, the fit kept so its id is not reused
 
     def diagnosis(fit: ModelFit) -> Diagnostics:
@@ -576,7 +725,9 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         return diagnosed[id(fit)][1]
 
     if options.discover:
-        final, steps, spent = discover(base, prep, rig, options, f_scale, diagnosis)
+        final, steps, spent, moves = discover(base, prep, rig, options, f_scale, diagnosis)
+        nfev += spent
+        final, withdrawn, spent = hold_across(final, base, moves, prep, rig, f_scale)
         nfev += spent
     # Glitches the pre-screen missed show in the final residual; judged there
     # because a structured baseline residual is not Gaussian. While the final
@@ -595,6 +746,13 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         else:
             base = final
         diag = diagnose(final, prep.noise, prep.stuck)
+    # never a model worse than one it contains: the declared model's fit and each step's on the same samples
+    slipped_from = final
+    final, beaten_by, spent = keep_nested_order(final, [base] + [f for *_, f in moves], prep.noise)
+    nfev += spent
+    if beaten_by is not None:
+        diag = diagnose(final, prep.noise, prep.stuck)
+    follows, follow_ratio = follows_swing(final, prep.noise)
 
     w, ws = final.value("omega_n"), final.stdev("omega_n")
     # a sensor calibrated from the record itself carries its own uncertainty into ω_n, beside the fit's
@@ -603,6 +761,12 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     # tell apart give another ω_n (consistency.py)
     segments = check_segments(final, prep.noise)
     rivals, u_rivals = competitors(steps, options.bic_margin)
+    if withdrawn is not None:
+        # BIC prefers the withdrawn model, the halves contradict it: the data do not decide, and
+        # its distance is carried whole
+        rival = withdrawn.rival(w)
+        rivals += (rival,)
+        u_rivals = math.hypot(u_rivals, rival.delta)
     form = ModelForm(segments, rivals, u_rivals)
     ambiguous = form.ambiguous(ws)
     w_u = math.sqrt(ws**2 + (w_cal or 0.0) ** 2 + form.u**2)
@@ -642,7 +806,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     # far above the noise (where the loop's screen is not trusted either) a structured residual
     # is a model that misses the swing itself, whatever ω_n does
     far = prep.noise > 0 and final.residual_rms > SCREEN_TRUST * prep.noise
-    unmodeled = diag.structured and (changes_answer or bool(named) or far)
+    # (a fit that does not follow the swing at all is a failed fit, not structure left: fit_not_converged)
+    unmodeled = follows and diag.structured and (changes_answer or bool(named) or far)
     if unmodeled:
         flags.append(F.UNMODELED_RESIDUAL)
     if segments is not None and segments.disagree:
@@ -657,7 +822,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         flags.append(F.WINDOW_CUT_AT_GAP)
     if prep.n_unwrapped:
         flags.append(F.ANGLE_UNWRAPPED)
-    if not final.success:
+    if not final.success or not follows:
         flags.append(F.FIT_NOT_CONVERGED)
     effect_bounds = [n for n in final.at_bound if "." in n]
     if effect_bounds:
@@ -678,6 +843,27 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
                          f"ω_n {w1:.6g} ± {s1:.2g} and {w2:.6g} ± {s2:.2g} rad/s ({segments.z:.1f} σ apart): {verdict}")
     else:
         structure.append("the record is too short to fit each half alone: whether the model holds across it is not checked")
+    if beaten_by is not None:
+        kept = ("refitted from that model's values" if final is not beaten_by else
+                f"that model is kept ({', '.join(final.model.effect_names) or 'no effect'}): a refit from its values "
+                "did not reach it")
+        structure.append(
+            f"the model {', '.join(slipped_from.model.effect_names)} ended with residual RMS "
+            f"{slipped_from.residual_rms:.3g} rad, worse than the model it contains "
+            f"({', '.join(beaten_by.model.effect_names) or 'no effect'}, {beaten_by.residual_rms:.3g} rad) on the same "
+            f"samples: its fit had left the optimum; {kept}")
+    if not follows:
+        structure.append(
+            f"the fit does not follow the swing: its residual RMS {final.residual_rms:.3g} rad is "
+            f"{100 * follow_ratio:.0f} % of the fitted swing's RMS (limit {100 * FOLLOW_LIMIT:.0f} %) and "
+            f"{final.residual_rms / prep.noise:.0f} × the noise floor; do not use this J (flag fit_not_converged)")
+    if withdrawn is not None:
+        ws_ = withdrawn.segments
+        structure.append(
+            f"{', '.join(withdrawn.effects)} lowered BIC by {-withdrawn.d_bic:.1f} but moved ω_n to "
+            f"{withdrawn.omega_n:.6g} rad/s ({withdrawn.omega_n - w:+.2g}), and the model with it does not hold "
+            f"across the record (halves {ws_.omega_n[0]:.6g} and {ws_.omega_n[1]:.6g} rad/s, {ws_.z:.1f} σ apart): "
+            "it is not kept, its ω_n is a rival in omega_n_u (flag model_ambiguous)")
     for c in rivals if ambiguous else ():
         if c.weight >= 0.05:
             structure.append(f"a rival explanation the data do not decisively reject: {c.change} (ΔBIC {c.d_bic:+.1f}, "

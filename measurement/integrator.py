@@ -136,6 +136,7 @@ def run(t, x0, v0, w2, P, holding, max_step, out_x, out_v):
     sharp = memory_sharp(P)
     hcap = 1e300
     t_prev = t[0]
+    stalled = 0
     for i in range(1, n):
         ti = t[i]
         if stuck:
@@ -150,6 +151,14 @@ def run(t, x0, v0, w2, P, holding, max_step, out_x, out_v):
         for _ in range(m):
             rem = h
             while rem > 0.0:
+                if not abs(x) < 1e6 or stalled > 1000:
+                    # a trial model that runs away (a softening spring past its hump) or turns
+                    # back again and again without moving: no swing to follow, and the loop
+                    # would never end; the rest of the record is NaN, which the fit rejects
+                    for j in range(i, n):
+                        out_x[j] = np.nan
+                        out_v[j] = np.nan
+                    return
                 hs = rem if hcap >= rem else hcap
                 xn, vn = step(x, v, s, hs, w2, P, xr, zr)
                 if s * vn > 0.0:
@@ -180,6 +189,7 @@ def run(t, x0, v0, w2, P, holding, max_step, out_x, out_v):
                 x, v = step(x, v, s, tau, w2, P, xr, zr)
                 v = 0.0
                 rem -= tau
+                stalled = stalled + 1 if tau <= 1e-12 * hs else 0
                 if holds(x, w2, P, holding):
                     stuck = True
                     break

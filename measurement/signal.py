@@ -43,6 +43,35 @@ def resample_uniform(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return tu, np.interp(tu, t, y), dt
 
 
+def periodogram_frequency(t: np.ndarray, y: np.ndarray, lo: float, hi: float) -> float:
+    """The angular frequency in [lo, hi] (rad/s) whose sinusoid (plus a constant) fits (t, y) best.
+
+    A least-squares periodogram at the true sample times (Lomb and Scargle's idea): unlike zero
+    crossings, which a record of bursts between silences places wherever the line across a
+    silence meets the centre, it weighs every sample where it was taken. A grid of 1/span
+    (a peak is 2π/span wide) is refined by a parabola through the best point and its neighbours.
+    """
+    t = np.asarray(t, dtype=float) - float(t[0])
+    y = np.asarray(y, dtype=float) - float(np.mean(y))
+    span = float(t[-1])
+    if not (span > 0 and hi > lo > 0):
+        return float("nan")
+    w = np.arange(lo, hi + 1.0 / span, 1.0 / span)
+    power = np.empty(w.size)
+    for i, wi in enumerate(w):
+        c, s_ = np.cos(wi * t), np.sin(wi * t)
+        A = np.column_stack([c, s_, np.ones_like(t)])
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        power[i] = float(y @ (A @ coef))  # the explained sum of squares
+    k = int(np.argmax(power))
+    if 0 < k < w.size - 1:
+        a, b, c = power[k - 1], power[k], power[k + 1]
+        den = a - 2 * b + c
+        if den < 0:
+            return float(w[k] + 0.5 * (a - c) / den * (w[1] - w[0]))
+    return float(w[k])
+
+
 def loo_deviations(t: np.ndarray | None, y: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
     """Leave-one-out deviations of each sample from its neighbours, at the true times.
 
@@ -240,10 +269,18 @@ class Swings:
 
     @property
     def damped_frequency(self) -> float:
-        """Median ω_d from the half periods, rad/s (nan with < 2 crossings)."""
-        if self.crossings.size < 2:
+        """Median ω_d from the full periods, rad/s (from the half periods with 2 crossings; nan with fewer).
+
+        A full period runs from a crossing to the next but one: it does not depend on where
+        the centre line is, while a half period does (a centre off by δ lengthens every other
+        half period and shortens the rest, and a sparse record's median then picks one kind).
+        """
+        c = self.crossings
+        if c.size < 2:
             return float("nan")
-        return float(math.pi / np.median(np.diff(self.crossings)))
+        if c.size < 3:
+            return float(math.pi / (c[1] - c[0]))
+        return float(2 * math.pi / np.median(c[2:] - c[:-2]))
 
 
 def find_swings(t: np.ndarray, angle: np.ndarray, centre: float | None = None, hysteresis: float = 0.0) -> Swings:

@@ -34,13 +34,19 @@ def calibrated():
     return out
 
 
-def test_small_swings_of_the_60deg_session_hold_presliding_friction(runs):
+def _withdrawn_presliding(r):
+    """The loop chose pre-sliding friction, but the ω_n it moved does not hold across the record:
+    withdrawn to the Coulomb friction it refines, its ω_n a rival in the uncertainty."""
+    assert "dahl" in [s.chosen for s in r.steps]
+    assert "dahl" not in r.effects and "coulomb" in r.effects and "model_ambiguous" in r.flags
+    rival = next(c for c in r.model_form["competitors"] if c["change"].startswith("dahl kept"))
+    assert abs(rival["delta"]) <= r.omega_n_u
+
+
+def test_small_swings_of_the_60deg_session_ask_for_presliding_friction_that_does_not_hold(runs):
     r = runs["wood_pendulum_60deg.csv"]
-    assert "dahl" in r.added_effects
-    theta_c = r.damping["dahl"]["theta_c"]
-    # a pre-sliding angle well inside the amplitudes the record covers (1 → 0.05 rad)
-    assert 0.03 < theta_c.value < 0.15 and theta_c.std < 0.3 * theta_c.value
-    assert r.residual_rms < 0.5 * r.baseline.residual_rms
+    _withdrawn_presliding(r)
+    assert r.residual_rms < r.baseline.residual_rms
     # the tracked angle keeps the camera's oblique view, which no constant sensor scale explains
     # (a fitted view differs between the halves of the record): the halves disagree on ω_n, and
     # the result says so and carries their scatter in its uncertainty
@@ -93,5 +99,5 @@ def test_the_camera_view_measured_from_the_markers_takes_the_place_of_a_fitted_s
 
 def test_with_the_camera_calibrated_each_session_keeps_its_friction(calibrated):
     c60, c120 = calibrated.values()
-    assert "dahl" in c60.added_effects
+    _withdrawn_presliding(c60)
     assert {"coulomb", "quadratic"} <= set(c120.added_effects)

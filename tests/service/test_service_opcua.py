@@ -1,13 +1,14 @@
 """The OPC UA server of the daemon against asyncua's own client on loopback (Basic256Sha256 Sign & Encrypt,
-user and password): browse the Machinery building blocks, receive the ResultReadyEvent of a measurement,
-read the latest result, call the Result Transfer methods, and be refused without the right credentials.
+user and password): browse the Machinery building blocks and check their type definitions, receive the
+ResultReadyEvent of a measurement, read the latest result as a ResultDataType, call the Result Transfer
+methods, keep the acknowledgements across a restart, and be refused without the right credentials.
 One appliance (and one server) for the module: an encrypted session costs RSA work."""
 
 from __future__ import annotations
 
 import asyncio
-import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from asyncua import Client, ua
@@ -54,30 +55,81 @@ async def connect(opc, user: str | None = USER, password: str | None = PASSWORD)
     return c
 
 
-async def machine(c: Client):
+async def machine(c: Client, device: str = "test-rig"):
     ns = {u: await c.get_namespace_index(u) for u in (NS_MACHINERY, NS_MOI, NS_DI, NS_RESULT)}
-    m = await c.nodes.objects.get_child([f"{ns[NS_MACHINERY]}:Machines", f"{ns[NS_MOI]}:test-rig"])
+    m = await c.nodes.objects.get_child([f"{ns[NS_MACHINERY]}:Machines", f"{ns[NS_MOI]}:{device}"])
     return m, ns
 
 
-def test_browse_machine_identification_and_item_state(opc):
+async def result_management(c: Client, device: str = "test-rig"):
+    m, ns = await machine(c, device)
+    r = ns[NS_RESULT]
+    return await m.get_child([f"{ns[NS_MACHINERY]}:MachineryBuildingBlocks", f"{r}:ResultManagement"]), r, ns
+
+
+class _Changes:
+    """Data changes of the subscribed CurrentState variables, and an event once a wanted value arrives."""
+
+    def __init__(self) -> None:
+        self.values: list[str] = []
+        self.wanted: tuple[str, asyncio.Event] | None = None
+
+    def want(self, text: str) -> asyncio.Event:
+        self.wanted = (text, asyncio.Event())
+        if text in self.values[-2:]:
+            self.wanted[1].set()
+        return self.wanted[1]
+
+    def datachange_notification(self, node, value, data) -> None:
+        self.values.append(value.Text)
+        if self.wanted is not None and value.Text == self.wanted[0]:
+            self.wanted[1].set()
+
+
+def test_the_machine_browses_as_the_companion_specifications_types(opc):
+    app = opc[0]
+
     async def run():
         c = await connect(opc)
         try:
             m, ns = await machine(c)
-            ident = await m.get_child(f"{ns[NS_DI]}:Identification")
+            mach, r, di = ns[NS_MACHINERY], ns[NS_RESULT], ns[NS_DI]
+            ident = await m.get_child(f"{di}:Identification")
+            assert await ident.read_type_definition() == ua.NodeId(1012, mach)  # MachineIdentificationType
             values = {(await n.read_browse_name()).Name: await n.read_value() for n in await ident.get_children()}
             assert values["SerialNumber"] == "SN-0007" and values["Manufacturer"].Text == "moi"
-            assert set(values) == {"Manufacturer", "Model", "SerialNumber", "SoftwareRevision", "ProductInstanceUri"}
-            state = await m.get_child([f"{ns[NS_DI]}:MachineryBuildingBlocks", f"{ns[NS_MACHINERY]}:MachineryItemState",
-                                       "0:CurrentState"])
+            assert {"Manufacturer", "Model", "SerialNumber", "SoftwareRevision", "ProductInstanceUri"} <= set(values)
+            blocks = await m.get_child(f"{mach}:MachineryBuildingBlocks")
+            typed = {(await n.read_browse_name()).Name: await n.read_type_definition()
+                     for n in await blocks.get_children(refs=ua.ObjectIds.HasAddIn)}
+            assert typed == {"Identification": ua.NodeId(1012, mach),
+                             "MachineryItemState": ua.NodeId(1002, mach),  # MachineryItemState_StateMachineType
+                             "MachineryOperationMode": ua.NodeId(1008, mach),  # ...OperationModeStateMachineType
+                             "ResultManagement": ua.NodeId(1004, r)}  # ResultManagementType
+            state = await blocks.get_child([f"{mach}:MachineryItemState", "0:CurrentState"])
             assert (await state.read_value()).Text == "NotExecuting"
-            mode = await m.get_child([f"{ns[NS_DI]}:MachineryBuildingBlocks",
-                                      f"{ns[NS_MACHINERY]}:MachineryOperationMode", "0:CurrentState"])
-            assert (await mode.read_value()).Text == "Processing"
+            assert await (await state.get_child("0:Id")).read_value() == ua.NodeId(5007, mach)  # the state object
+            latest = await blocks.get_child([f"{r}:ResultManagement", f"{r}:Results", f"{r}:LatestResult"])
+            assert await latest.read_type_definition() == ua.NodeId(2001, r)  # ResultType
+            assert await latest.read_data_type() == ua.NodeId(3008, r)  # ResultDataType
             with pytest.raises(ua.UaStatusCodeError):  # read-only: a client changes nothing
                 await state.write_value(ua.LocalizedText("Executing"))
             assert (await state.read_value()).Text == "NotExecuting"
+
+            # MachineryOperationMode follows the appliance: a check standard recipe is Maintenance
+            mode = await blocks.get_child([f"{mach}:MachineryOperationMode", "0:CurrentState"])
+            changes = _Changes()
+            sub = await c.create_subscription(20, changes)
+            await sub.subscribe_data_change(mode)
+            await asyncio.wait_for(changes.want("Processing").wait(), 10)
+            arrived = changes.want("Maintenance")
+            app.app.opcua.on_recipe(SimpleNamespace(check_standard={"name": "ring"}))
+            await asyncio.wait_for(arrived.wait(), 10)
+            assert await (await mode.get_child("0:Id")).read_value() == ua.NodeId(5025, mach)
+            arrived = changes.want("Processing")
+            app.app.opcua.on_recipe(None)
+            await asyncio.wait_for(arrived.wait(), 10)
+            await sub.delete()
         finally:
             await c.disconnect()
 
@@ -101,55 +153,70 @@ class _Events:
             self.executing.set()
 
 
+def _acknowledge(ids: list[str]) -> ua.Variant:
+    return ua.Variant(ids, ua.VariantType.String)
+
+
 def test_a_measurement_raises_result_ready_and_the_methods_give_and_acknowledge_it(opc):
     app = opc[0]
 
     async def run():
         c = await connect(opc)
         try:
-            m, ns = await machine(c)
-            r = ns[NS_RESULT]
-            rm = await m.get_child([f"{ns[NS_DI]}:MachineryBuildingBlocks", f"{r}:ResultManagement"])
+            await c.load_data_type_definitions()
+            rm, r, ns = await result_management(c)
             etype = await c.nodes.base_event_type.get_child(f"{r}:ResultReadyEventType")
             events = _Events()
             sub = await c.create_subscription(50, events)
             await sub.subscribe_events(rm, etype)
-            item_state = await m.get_child([f"{ns[NS_DI]}:MachineryBuildingBlocks",
+            m, _ = await machine(c)
+            item_state = await m.get_child([f"{ns[NS_MACHINERY]}:MachineryBuildingBlocks",
                                             f"{ns[NS_MACHINERY]}:MachineryItemState", "0:CurrentState"])
             await sub.subscribe_data_change(item_state)
             app.press()
             await asyncio.wait_for(events.arrived.wait(), 60)
             ev = events.got[0]
             uuid = app.app.stored[0]
+            stored = app.app.store.get(uuid)
             await asyncio.wait_for(events.executing.wait(), 10)  # the machine was measuring before the result
-            assert ev.ResultId == uuid and ev.ResultEvaluation == RESULT_EVALUATION["Undefined"]  # no recipe
-            doc = json.loads(ev.Result)
-            assert doc["ResultContent"]["J"] == pytest.approx(app.app.store.get(uuid).payload["J"])
+            meta, content = ev.Result.ResultMetaData, ev.Result.ResultContent[0].Value
+            assert type(ev.Result).__name__ == "ResultDataType" and meta.ResultId == uuid
+            assert meta.ResultEvaluation == RESULT_EVALUATION["Undefined"]  # no recipe
+            assert meta.ResultState == 1 and meta.IsSimulated is True and meta.ProcessingTimes is not None
+            assert type(content).__name__ == "InertiaResultDataType" and content.SequenceNumber == stored.seq
+            assert content.J == pytest.approx(stored.payload["J"])
+            assert content.omega_n == pytest.approx(stored.payload["omega_n"])
 
-            latest = await rm.get_child([f"{r}:Results", f"{r}:LatestResult", f"{r}:ResultMetaData", f"{r}:ResultId"])
-            assert await latest.read_value() == uuid
-            handle, text, error = await rm.call_method(f"{r}:GetLatestResult", ua.Variant(0, ua.VariantType.Int32))
-            assert error == 0 and json.loads(text)["ResultMetaData"]["ResultId"] == uuid and handle >= 1
-            text, error = await rm.call_method(f"{r}:GetResultById", uuid, ua.Variant(0, ua.VariantType.Int32))
-            assert json.loads(text)["ResultMetaData"]["ResultId"] == uuid
+            latest = await rm.get_child([f"{r}:Results", f"{r}:LatestResult"])
+            assert (await latest.read_value()).ResultMetaData.ResultId == uuid
+            rid = await latest.get_child([f"{r}:ResultMetaData", f"{r}:ResultId"])
+            assert await rid.read_value() == uuid
+            handle, result, error = await rm.call_method(f"{r}:GetLatestResult", ua.Variant(0, ua.VariantType.Int32))
+            assert (handle, error) == (0, 0) and result.ResultMetaData.ResultId == uuid
+            handle, result, error = await rm.call_method(f"{r}:GetResultById", uuid,
+                                                         ua.Variant(0, ua.VariantType.Int32))
+            assert error == 0 and result.ResultContent[0].Value.J == pytest.approx(stored.payload["J"])
 
             # bad input: a Bad status code, and nothing changes
             with pytest.raises(ua.UaStatusCodeError) as e:
                 await rm.call_method(f"{r}:GetResultById", "no-such-result", ua.Variant(0, ua.VariantType.Int32))
             assert e.value.code == ua.StatusCodes.BadNotFound
-            with pytest.raises(ua.UaStatusCodeError) as e:
-                await rm.call_method(f"{r}:AcknowledgeResults", ua.Variant(["no-such-result", uuid], ua.VariantType.String))
-            assert e.value.code == ua.StatusCodes.BadNotFound
-            with pytest.raises(ua.UaStatusCodeError) as e:
-                await rm.call_method(f"{r}:GetLatestResult", "soon")
-            assert e.value.code == ua.StatusCodes.BadInvalidArgument
+            for method, args in (("GetLatestResult", ["soon"]), ("AcknowledgeResults", [_acknowledge([])]),
+                                 ("AcknowledgeResults", [ua.Variant(7, ua.VariantType.Int32)]),
+                                 ("GetResultById", [uuid, "soon"])):
+                with pytest.raises(ua.UaStatusCodeError) as e:
+                    await rm.call_method(f"{r}:{method}", *args)
+                assert e.value.code == ua.StatusCodes.BadInvalidArgument
             count = await rm.get_child([f"{r}:Results", f"{ns[NS_MOI]}:UnacknowledgedCount"])
             assert await count.read_value() == 1
+            # an unknown ResultId: its own error, the call's error, nothing acknowledged
+            assert await rm.call_method(f"{r}:AcknowledgeResults", _acknowledge(["no-such-result"])) == [[-1], -1]
+            assert await count.read_value() == 1
 
-            assert await rm.call_method(f"{r}:AcknowledgeResults", ua.Variant([uuid], ua.VariantType.String)) == 0
+            assert await rm.call_method(f"{r}:AcknowledgeResults", _acknowledge([uuid])) == [[], 0]
             assert await count.read_value() == 0
-            with pytest.raises(ua.UaStatusCodeError):  # acknowledged once: not again
-                await rm.call_method(f"{r}:AcknowledgeResults", ua.Variant([uuid], ua.VariantType.String))
+            # acknowledged once: not again
+            assert await rm.call_method(f"{r}:AcknowledgeResults", _acknowledge([uuid])) == [[-2], -1]
             await sub.delete()
         finally:
             await c.disconnect()
@@ -198,6 +265,19 @@ def test_every_appliance_state_has_a_machinery_item_state_and_every_verdict_an_e
     assert result_evaluation({}) == "Undefined"
 
 
+def test_the_operation_mode_follows_the_appliance():
+    from service.publish.opcua.model import OPERATION_MODE_NODES
+    from service.publish.opcua.server import operation_mode
+    from service.states import STATES
+
+    modes = {operation_mode(s, c, d) for s in STATES for c in (False, True) for d in (False, True)}
+    assert modes == set(OPERATION_MODE_NODES)  # None, Maintenance, Setup, Processing: each one reached
+    assert operation_mode("STARTING", True, True) == "None"
+    assert operation_mode("IDLE", True, True) == "Maintenance"  # a check standard clears what is due
+    assert operation_mode("CAPTURING", False, True) == "Setup"
+    assert operation_mode("FAULT", False, False) == "Processing"  # the fault is the item state's
+
+
 def test_opcua_is_off_by_default_and_a_table_without_a_way_in_is_refused_with_one_line(tmp_path):
     from service.config.appliance import parse_config
     from service.errors import ConfigError
@@ -231,3 +311,54 @@ def test_a_client_certificate_outside_trusted_clients_is_refused(opc, tmp_path):
         assert e.value.code == ua.StatusCodes.BadCertificateUntrusted
 
     asyncio.run(run())
+
+
+def test_the_acknowledgements_survive_a_restart(opc):
+    """After the module's first result was acknowledged, a second one is not: an OPC UA server started anew on
+    the same state directory and store (a restart) offers the second again, and knows the first as
+    acknowledged. Last in the module: the new server writes the acknowledgements the daemon's server keeps."""
+    from service.persistence.acks import AckFile
+    from service.publish.opcua.server import ACKED_FILE, OpcUaServer
+    from service.publish.opcua.settings import OpcUaSettings
+
+    app = opc[0]
+    first = app.app.stored[0]
+    app.press()
+    app.wait_done(2)
+    second = app.app.stored[1]
+    state_dir = Path(app.config.state_dir)
+    restarted = OpcUaServer(OpcUaSettings(port=0, anonymous=True, allow_unencrypted=True), "test-rig", state_dir,
+                            store=app.app.store)
+    restarted.start()
+
+    async def run():
+        async with Client(restarted.endpoint, timeout=10) as c:
+            rm, r, ns = await result_management(c)
+            count = await rm.get_child([f"{r}:Results", f"{ns[NS_MOI]}:UnacknowledgedCount"])
+            assert await count.read_value() == 1
+            latest = await rm.get_child([f"{r}:Results", f"{r}:LatestResult", f"{r}:ResultMetaData", f"{r}:ResultId"])
+            assert await latest.read_value() == second  # LatestResult from the store before any new result
+            assert await rm.call_method(f"{r}:AcknowledgeResults", _acknowledge([first, second])) == [[-2, 0], -1]
+            assert await count.read_value() == 0
+
+    try:
+        asyncio.run(run())
+    finally:
+        restarted.stop()
+    kept = AckFile(state_dir / ACKED_FILE).read()
+    assert kept is not None and kept.through == app.app.store.get(second).seq and not kept.pending
+
+
+def test_the_acknowledgement_file_reads_what_it_wrote_and_the_modbus_position_of_old(tmp_path):
+    from service.persistence.acks import AckFile, AckState
+
+    f = AckFile(tmp_path / "acked")
+    assert f.read() is None  # none kept: the reader's first start
+    f.write(AckState(41, frozenset({7, 40})))
+    kept = f.read()
+    assert kept == AckState(41, frozenset({7, 40})) and kept.acknowledged(41) and not kept.acknowledged(40)
+    assert not kept.acknowledged(42)
+    (tmp_path / "acked").write_text("12\n", encoding="ascii")  # the Modbus FIFO's file: the position alone
+    assert f.read() == AckState(12)
+    (tmp_path / "acked").write_text("garbage\n", encoding="ascii")
+    assert f.read() is None

@@ -57,7 +57,7 @@ from drivers.aioloop import LoopThread
 
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
-from service.sources.files import write_text_atomic
+from service.persistence.acks import AckFile, AckState
 
 # the settings are read by the configuration without pymodbus; here for the server's users too
 from .settings import _THIS_MACHINE, ModbusSettings, allowed_networks, network_exposure  # noqa: F401
@@ -73,7 +73,7 @@ _READ_COILS = {1}
 _WRITE_COILS = {5, 15}
 _WRITE_REGISTERS = {6, 16}
 
-#: mode "ack": the file in the state directory that keeps the sequence number of the last acknowledged result
+#: mode "ack": the file in the state directory that keeps what the PLC acknowledged (``service.persistence.acks``)
 ACKED_FILE = "modbus-acked-seq"
 
 #: after a trigger coil write, part writes are refused this long (s) until the daemon reports busy
@@ -339,7 +339,7 @@ class ModbusServer(Publisher):
             self._rebuild()
         if self.acked_file is not None:
             try:
-                write_text_atomic(self.acked_file, f"{int(payload['seq'])}\n")
+                AckFile(self.acked_file).write(AckState(int(payload["seq"])))
             except OSError as exc:  # the acknowledgement holds; only a restart would queue the result again
                 log.warning("Modbus: cannot keep the acknowledged position in %s: %s", self.acked_file, exc)
         return True
@@ -348,12 +348,8 @@ class ModbusServer(Publisher):
         """Mode "ack" after a restart: queue the results stored after the one the PLC acknowledged last (the
         newest ``queue_depth`` of them; older ones count as overrun). Without a kept position (the first
         start in this mode), the latest result is shown, as in mode "latest"."""
-        last: int | None = None
-        if self.acked_file is not None:
-            try:
-                last = int(self.acked_file.read_text(encoding="ascii").strip())
-            except (OSError, ValueError):
-                last = None
+        kept = AckFile(self.acked_file).read() if self.acked_file is not None else None
+        last = kept.through if kept is not None else None
         if last is None:
             latest = store.latest("ok")
             if latest is not None and latest.payload is not None:

@@ -1,32 +1,33 @@
 """The OPC UA server (asyncua): the appliance as a machine of OPC 40001-1 Machinery, its results after
-OPC 40001-101 Machinery Result Transfer.
+OPC 40001-101 Machinery Result Transfer, on the specifications' types (``model``: modelled in their
+namespaces with their NodeIds; why not loaded from the NodeSet2 files: docs/opcua.md).
 
-Address space (browse names; the namespace of each in brackets):
+Address space (browse names; the namespace of each in brackets; the type definition after the colon):
 
     Objects/Machines [Machinery]/<device id> [moi]
-        Identification [DI]: Manufacturer, Model, SerialNumber, SoftwareRevision, ProductInstanceUri
-        MachineryBuildingBlocks [DI]
-            MachineryItemState [Machinery]/CurrentState: NotAvailable | OutOfService | NotExecuting | Executing
-            MachineryOperationMode [Machinery]/CurrentState: Processing
-            ResultManagement [Result]: GetLatestResult, GetResultById, AcknowledgeResults (methods);
-                Results/LatestResult/ResultMetaData (ResultId, CreationTime, ProductId, PartId,
-                ExternalRecipeId, ResultEvaluation), Results/LatestResult/ResultContent (J, J_U, J_u, U,
-                omega_n, damping_ratio, flags); emits ResultReadyEventType [Result] per result.
-
-The companion specifications' NodeSet2 files are not loaded (they are not shipped with the package): the
-browse names are modelled in their namespaces with base types (folders, objects, properties), and a
-result travels as the variables above, as a JSON document (methods, event field ``Result``) and in the
-event's own fields. See docs/opcua.md.
+        Identification [DI]: MachineIdentificationType (Manufacturer, Model, SerialNumber, SoftwareRevision,
+            ProductInstanceUri)
+        MachineryBuildingBlocks [Machinery]: FolderType (HasAddIn: Identification and the three below)
+            MachineryItemState [Machinery]: MachineryItemState_StateMachineType
+                CurrentState: NotAvailable | OutOfService | NotExecuting | Executing
+            MachineryOperationMode [Machinery]: MachineryOperationModeStateMachineType
+                CurrentState: None | Maintenance | Setup | Processing
+            ResultManagement [Result]: ResultManagementType; GetResultById, GetLatestResult,
+                AcknowledgeResults; Results/LatestResult: ResultType (a ResultDataType); raises
+                InertiaResultReadyEventType [moi], a ResultReadyEventType [Result], per result.
 
 The server runs on its own asyncio loop in a thread (``drivers.aioloop.LoopThread``); the daemon's hooks
-hand it work and never wait for it.
+hand it work and never wait for it. What the clients acknowledged is kept in the state directory
+(``service.persistence.acks``, as the Modbus FIFO keeps the PLC's).
 """
 
 from __future__ import annotations
 
 import asyncio
+import dbm
+import gc
 import hmac
-import json
+import importlib
 import logging
 import math
 import socket
@@ -36,7 +37,8 @@ from datetime import datetime, UTC
 from pathlib import Path
 from typing import Any, Mapping
 
-from asyncua import Server, ua
+from asyncua import Node, Server, ua
+from asyncua.common.instantiate_util import instantiate
 from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.crypto.truststore import TrustStore
@@ -45,16 +47,14 @@ from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from drivers.aioloop import LoopThread
 from service.errors import ConfigError, OpcUaServerError
+from service.persistence.acks import AckFile, AckState
 from service.publish.port import ApplianceView, Publisher
 
+from .model import (CONTENT_FIELDS, META_COMPONENTS, NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT,  # noqa: F401
+                    RESULT_EVALUATION, Model, install, node_id, rereference, retype)
 from .settings import OpcUaSettings
 
 log = logging.getLogger("moi.opcua")
-
-NS_MACHINERY = "http://opcfoundation.org/UA/Machinery/"
-NS_RESULT = "http://opcfoundation.org/UA/Machinery/Result/"
-NS_DI = "http://opcfoundation.org/UA/DI/"
-NS_MOI = "urn:moi:opcua"
 
 #: the appliance's state → MachineryItemState (OPC 40001-1)
 ITEM_STATES: dict[str, str] = {
@@ -64,15 +64,43 @@ ITEM_STATES: dict[str, str] = {
     "PUBLISHING": "Executing",
 }
 
-#: ResultEvaluationEnum of OPC 40001-101
-RESULT_EVALUATION: dict[str, int] = {"Undefined": 0, "OK": 1, "NotOK": 2, "NotDecidable": 3}
-
-#: the value of a variable before the first result (OPC UA has no null scalar of these types)
-_EMPTY: dict[ua.VariantType, Any] = {ua.VariantType.String: "", ua.VariantType.Int32: 0,
-                                     ua.VariantType.DateTime: datetime(1970, 1, 1, tzinfo=UTC)}
+#: the file in the state directory that keeps what the OPC UA clients acknowledged (``service.persistence.acks``)
+ACKED_FILE = "opcua-acked"
 
 #: the method's wait for a result is limited to this, ms
 MAX_TIMEOUT_MS = 60_000
+
+#: AcknowledgeResults' error per ResultId (values < 0: application-specific, OPC 40001-101): no result has this
+#: ResultId; the result awaits no acknowledgement (acknowledged already, or older than the results_kept offered)
+ACK_UNKNOWN, ACK_ALREADY = -1, -2
+
+
+def operation_mode(state: str, check_standard: bool, calibration_due: bool) -> str:
+    """MachineryOperationMode (OPC 40001-1: None, Maintenance, Setup, Processing) from the appliance's state.
+
+    None while the appliance starts or stops (no mode is available); Maintenance while the active recipe
+    measures a check standard (the rig is verified, no part is measured); Setup while the rig's calibration is
+    due (past its validity, or its newest check standard failed: results are flagged calibration_due until
+    it is calibrated again or a check standard passes); Processing otherwise (parts are measured)."""
+    if state in ("STARTING", "STOPPING"):
+        return "None"
+    if check_standard:
+        return "Maintenance"
+    return "Setup" if calibration_due else "Processing"
+
+
+def fast_dbm() -> bool:
+    """Whether Python's dbm has a backend other than dbm.dumb (gdbm, ndbm; sqlite3 from Python 3.13). asyncua
+    keeps its cache of the standard address space in a shelf: read from gdbm or ndbm, a start takes some 20 ms
+    of CPU for what building it from code takes 0.9 s (on a PC); read from dbm.dumb, 1.6 s: then no cache."""
+    for name in getattr(dbm, "_names", ()):
+        if name != "dbm.dumb":
+            try:
+                importlib.import_module(name)
+                return True
+            except ImportError:
+                continue
+    return False
 
 
 def result_evaluation(payload: Mapping[str, Any]) -> str:
@@ -90,13 +118,25 @@ def _num(v: Any) -> float | None:
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
 
 
+def _time(text: Any) -> datetime | None:
+    try:
+        return datetime.fromisoformat(str(text).replace("Z", "+00:00")) if text else None
+    except ValueError:
+        return None
+
+
 def result_document(payload: Mapping[str, Any]) -> dict[str, Any]:
-    """A result as ResultMetaData and ResultContent (strict JSON: unknown numbers are null)."""
+    """A result's ResultMetaData and ResultContent as plain values (unknown numbers None), from which the
+    ResultDataType is made (``OpcUaServer._structure``)."""
     recipe = payload.get("recipe") or {}
     decision = payload.get("part") or payload.get("release") or {}
+    timing = payload.get("timing") or {}
     meta = {
         "ResultId": payload.get("uuid"),
         "CreationTime": payload.get("finished_at"),
+        "StartTime": payload.get("started_at"),
+        "AcquisitionDuration": _num(timing.get("capture_s")),
+        "ProcessingDuration": _num(timing.get("capture_to_result_s")),
         "ProductId": recipe.get("name"),
         "PartId": payload.get("part_id"),
         "ExternalRecipeId": recipe.get("name"),
@@ -141,23 +181,34 @@ class OpcUaServer(Publisher):
     NAME = "opcua"
 
     def __init__(self, settings: OpcUaSettings, device_id: str, state_dir: Path, *, software_version: str = "",
-                 store: Any = None) -> None:
+                 store: Any = None, simulated: bool = False) -> None:
         self.settings = settings
         self.device_id = device_id
         self.state_dir = Path(state_dir)
         self.software_version = software_version
         self.store = store
+        self.simulated = simulated
         self.password = self._password()
         self._io = LoopThread("moi-opcua")
         self._server: Server | None = None
         self.bound_port: int | None = None
         self.start_seconds: float | None = None  # how long the last start took, s
+        self.types_seconds: float | None = None  # of which the companion specifications' types, s
+        self._model: Model | None = None
+        self._types: dict[str, Any] = {}  # the Python classes of the structures (asyncua makes them at start)
         self._results: OrderedDict[str, dict[str, Any]] = OrderedDict()  # uuid → document, newest last
-        self._unacknowledged: OrderedDict[str, None] = OrderedDict()
+        self._unacknowledged: OrderedDict[str, int] = OrderedDict()  # uuid → seq, oldest first
+        self._acks = AckFile(self.state_dir / ACKED_FILE)
+        self._acked_through = 0  # every result up to this seq acknowledged but those in _unacknowledged
+        self._ack_lock: asyncio.Lock | None = None
+        self._latest: dict[str, Any] | None = None  # the newest result's document (the store's, at start)
         self._new_result: asyncio.Event | None = None
-        self._nodes: dict[str, Any] = {}
+        self._nodes: dict[str, Node] = {}
         self._event: Any = None
         self._state = "STARTING"
+        self._check_standard = False
+        self._calibration_due = False
+        self._mode = "None"
         self.events_sent = 0
 
     def _password(self) -> str | None:
@@ -195,13 +246,18 @@ class OpcUaServer(Publisher):
 
     async def _main(self) -> None:
         s = self.settings
-        cache = self._path(s.cache_file, "address-space")
+        cache = self._path(s.cache_file, "address-space") if fast_dbm() else None
         cert = self._path(s.certificate, "server-cert.der")
         key = self._path(s.private_key, "server-key.pem")
         for p in (cache, cert, key):
-            p.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # the key is never readable by others
+            if p is not None:
+                p.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # the key is never readable by others
         server = Server(user_manager=_Users(s.username, self.password, s.anonymous))  # type: ignore[arg-type]
         await server.init(cache)
+        # asyncua's standard address space is some 0.5 M Python objects that live as long as the server: out of
+        # the collector's generations (unfrozen at stop), no full collection walks them again (one took a third
+        # of a second of each start on a PC, while the types were added)
+        gc.freeze()
         server.set_endpoint(f"opc.tcp://{s.host}:{s.port}/moi/")
         server.set_server_name(f"moi {self.device_id}")
         uri = f"urn:moi:{self.device_id}"
@@ -228,6 +284,8 @@ class OpcUaServer(Publisher):
         if s.anonymous:
             tokens.append(ua.AnonymousIdentityToken)
         server.set_identity_tokens(tokens)
+        self._ack_lock = asyncio.Lock()
+        await asyncio.to_thread(self._restore)
         await self._build(server)
         self._new_result = asyncio.Event()
         await server.start()
@@ -235,89 +293,130 @@ class OpcUaServer(Publisher):
         bserver = server.bserver
         self.bound_port = getattr(bserver, "port", None) if bserver is not None else None
 
+    def _restore(self) -> None:
+        """What the clients had not acknowledged before the restart (the newest ``results_kept``), from the
+        store, and the newest result for LatestResult. The first start (no file kept) owes nothing older
+        than the results stored from now on."""
+        kept = max(1, self.settings.results_kept)
+        latest = self.store.latest("ok") if self.store is not None else None
+        state = self._acks.read()
+        if state is None:
+            state = AckState(latest.seq if latest is not None else 0)
+            self._keep(state)
+        rows: dict[int, Any] = {}
+        if self.store is not None:
+            for r in self.store.list(limit=kept, status="ok", full=True):
+                if r.seq > state.through:
+                    rows[r.seq] = r
+            for seq in sorted(state.pending)[-kept:]:
+                r = self.store.get(seq)
+                if r is not None and r.seq == seq and r.status == "ok":
+                    rows[seq] = r
+        for seq in sorted(rows)[-kept:]:
+            r = rows[seq]
+            if r.payload is not None:
+                self._results[r.uuid] = result_document(r.payload)
+                self._unacknowledged[r.uuid] = seq
+        self._acked_through = state.through
+        if latest is not None and latest.payload is not None:
+            self._latest = result_document(latest.payload)
+            self._results.setdefault(latest.uuid, self._latest)
+
+    def _keep(self, state: AckState) -> None:
+        try:
+            self._acks.write(state)
+        except OSError as exc:  # the acknowledgement holds; only a restart would offer the result again
+            log.warning("OPC UA: cannot keep the acknowledged results in %s: %s", self._acks.path, exc)
+
     async def _build(self, server: Server) -> None:
         s = self.settings
-        idx = await server.register_namespace(NS_MOI)
-        mach = await server.register_namespace(NS_MACHINERY)
-        res = await server.register_namespace(NS_RESULT)
-        di = await server.register_namespace(NS_DI)
+        t0 = time.monotonic()
+        model = self._model = await install(server)
+        await server.load_data_type_definitions()  # the Python classes of the structures (ua.ResultDataType ...)
+        self.types_seconds = time.monotonic() - t0
+        self._types = {name: getattr(ua, name) for name in ("ResultDataType", "ResultMetaDataType",
+                                                             "ProcessingTimesDataType", "InertiaResultDataType",
+                                                             "ResultEvaluationEnum")}
+        di, mach, res, idx = model.di, model.machinery, model.result, model.moi
+        t = model.nodes
 
         def nid(name: str) -> ua.NodeId:
             return ua.NodeId(ua.String(f"{self.device_id}.{name}"), ua.Int16(idx))
 
-        machines = await server.nodes.objects.add_folder(ua.NodeId(ua.String("Machines"), ua.Int16(idx)),
-                                                         ua.QualifiedName("Machines", mach))
+        async def typed(parent: Node, name: str, bname: ua.QualifiedName, typedef: ua.NodeId,
+                        optional: bool = True) -> Node:
+            """An instance of an ObjectType with the children its modelling rules ask for."""
+            return (await instantiate(parent, server.get_node(typedef), nid(name), bname,
+                                      instantiate_optional=optional))[0]
+
+        machines = await server.nodes.objects.add_folder(node_id(1001, mach), ua.QualifiedName("Machines", mach))
         machine = await machines.add_object(nid("Machine"), ua.QualifiedName(self.device_id, idx))
-        ident = await machine.add_object(nid("Identification"), ua.QualifiedName("Identification", di))
+        ident = await typed(machine, "Identification", ua.QualifiedName("Identification", di),
+                            t["MachineIdentificationType"])
+        await rereference(machine, ident, ua.ObjectIds.HasAddIn)
         for name, value in (("Manufacturer", ua.LocalizedText(s.manufacturer)), ("Model", ua.LocalizedText(s.model)),
                             ("SerialNumber", s.serial_number or self.device_id),
                             ("SoftwareRevision", self.software_version),
                             ("ProductInstanceUri", f"urn:moi:{s.manufacturer}:{s.serial_number or self.device_id}")):
-            self._nodes[name] = await ident.add_property(nid(f"Identification.{name}"), ua.QualifiedName(name, di),
-                                                         value)
-        blocks = await machine.add_object(nid("MachineryBuildingBlocks"),
-                                          ua.QualifiedName("MachineryBuildingBlocks", di))
-        item = await blocks.add_object(nid("MachineryItemState"), ua.QualifiedName("MachineryItemState", mach))
-        self._nodes["item_state"] = await item.add_variable(nid("MachineryItemState.CurrentState"),
-                                                            ua.QualifiedName("CurrentState", 0),
-                                                            ua.LocalizedText(ITEM_STATES["STARTING"]))
-        mode = await blocks.add_object(nid("MachineryOperationMode"), ua.QualifiedName("MachineryOperationMode", mach))
-        self._nodes["operation_mode"] = await mode.add_variable(nid("MachineryOperationMode.CurrentState"),
-                                                                ua.QualifiedName("CurrentState", 0),
-                                                                ua.LocalizedText("Processing"))
-        rm = await blocks.add_object(nid("ResultManagement"), ua.QualifiedName("ResultManagement", res))
+            node = await ident.get_child(f"{di}:{name}")
+            await node.write_value(value)
+            self._nodes[name] = node
+        blocks = await machine.add_folder(nid("MachineryBuildingBlocks"),
+                                          ua.QualifiedName("MachineryBuildingBlocks", mach))
+        await blocks.add_reference(ident, ua.ObjectIds.HasAddIn, forward=True, bidirectional=False)
+        for key, bname, typedef in (("item", "MachineryItemState", "MachineryItemState_StateMachineType"),
+                                    ("mode", "MachineryOperationMode", "MachineryOperationModeStateMachineType")):
+            sm = await typed(blocks, bname, ua.QualifiedName(bname, mach), t[typedef], optional=False)
+            await rereference(blocks, sm, ua.ObjectIds.HasAddIn)
+            self._nodes[f"{key}.state"] = await sm.get_child("0:CurrentState")
+            self._nodes[f"{key}.id"] = await sm.get_child(["0:CurrentState", "0:Id"])
+        await self._write_state("item", ITEM_STATES[self._state])
+        await self._write_state("mode", self._mode)
+
+        rm = await typed(blocks, "ResultManagement", ua.QualifiedName("ResultManagement", res),
+                         t["ResultManagementType"])
+        await rereference(blocks, rm, ua.ObjectIds.HasAddIn)
+        await rm.write_attribute(ua.AttributeIds.EventNotifier, ua.DataValue(ua.Variant(1, ua.VariantType.Byte)))
+        for name, callback in (("GetResultById", self._get_by_id), ("GetLatestResult", self._get_latest),
+                               ("AcknowledgeResults", self._acknowledge)):
+            server.link_method(await rm.get_child(f"{res}:{name}"), callback)
         self._nodes["result_management"] = rm
-        results = await rm.add_folder(nid("Results"), ua.QualifiedName("Results", res))
+        results = await rm.get_child(f"{res}:Results")
         self._nodes["unacknowledged"] = await results.add_variable(
-            nid("Results.UnacknowledgedCount"), ua.QualifiedName("UnacknowledgedCount", idx), 0, ua.VariantType.UInt32)
-        latest = await results.add_object(nid("LatestResult"), ua.QualifiedName("LatestResult", res))
-        meta = await latest.add_object(nid("LatestResult.ResultMetaData"), ua.QualifiedName("ResultMetaData", res))
-        content = await latest.add_object(nid("LatestResult.ResultContent"), ua.QualifiedName("ResultContent", res))
-        for name, vtype in (("ResultId", ua.VariantType.String), ("CreationTime", ua.VariantType.DateTime),
-                            ("ProductId", ua.VariantType.String), ("PartId", ua.VariantType.String),
-                            ("ExternalRecipeId", ua.VariantType.String), ("ResultEvaluation", ua.VariantType.Int32)):
-            self._nodes[f"meta.{name}"] = await meta.add_variable(nid(f"LatestResult.{name}"),
-                                                                  ua.QualifiedName(name, res), _EMPTY[vtype], vtype)
-        for name, vtype in (("J", ua.VariantType.Double), ("J_U", ua.VariantType.Double),
-                            ("J_u", ua.VariantType.Double), ("U", ua.VariantType.Double),
-                            ("omega_n", ua.VariantType.Double), ("damping_ratio", ua.VariantType.Double)):
-            self._nodes[f"content.{name}"] = await content.add_variable(nid(f"LatestResult.{name}"),
-                                                                        ua.QualifiedName(name, idx), math.nan, vtype)
-        self._nodes["content.flags"] = await content.add_variable(nid("LatestResult.flags"),
-                                                                  ua.QualifiedName("flags", idx), [],
-                                                                  ua.VariantType.String)
-        self._nodes["content.json"] = await content.add_variable(nid("LatestResult.Document"),
-                                                                 ua.QualifiedName("Document", idx), "", ua.VariantType.String)
-
-        def arg(name: str, vtype: ua.VariantType, description: str, array: bool = False) -> ua.Argument:
-            a = ua.Argument()
-            a.Name = name
-            a.DataType = ua.NodeId(ua.Int32(vtype.value))
-            a.ValueRank = 1 if array else -1
-            a.ArrayDimensions = [0] if array else []
-            a.Description = ua.LocalizedText(description)
-            return a
-
-        result_arg = arg("Result", ua.VariantType.String, "the result: ResultMetaData and ResultContent as JSON")
-        error_arg = arg("Error", ua.VariantType.Int32, "0: no error")
-        await rm.add_method(nid("GetLatestResult"), ua.QualifiedName("GetLatestResult", res), self._get_latest,
-                            [arg("Timeout", ua.VariantType.Int32, "wait at most this long for a result when none "
-                                                                  "exists yet, ms (≤ 0: no wait)")],
-                            [arg("ResultHandle", ua.VariantType.UInt32, "the result's sequence number"),
-                             result_arg, error_arg])
-        await rm.add_method(nid("GetResultById"), ua.QualifiedName("GetResultById", res), self._get_by_id,
-                            [arg("ResultId", ua.VariantType.String, "the result's UUID"),
-                             arg("Timeout", ua.VariantType.Int32, "ignored: a stored result is there at once, ms")],
-                            [result_arg, error_arg])
-        await rm.add_method(nid("AcknowledgeResults"), ua.QualifiedName("AcknowledgeResults", res), self._acknowledge,
-                            [arg("ResultIds", ua.VariantType.String, "the UUIDs of the results acknowledged", True)],
-                            [error_arg])
-        etype = await server.create_custom_event_type(
-            res, "ResultReadyEventType", ua.ObjectIds.BaseEventType,
-            [("ResultId", ua.VariantType.String), ("ResultEvaluation", ua.VariantType.Int32),
-             ("PartId", ua.VariantType.String), ("ExternalRecipeId", ua.VariantType.String),
-             ("Result", ua.VariantType.String)])
-        self._event = await server.get_event_generator(etype, rm.nodeid)
+            nid("Results.UnacknowledgedCount"), ua.QualifiedName("UnacknowledgedCount", idx),
+            ua.Variant(len(self._unacknowledged), ua.VariantType.UInt32))
+        # a variable of ResultType, made by hand: asyncua's instantiation of a VariableType copies attributes
+        # a type has not (and logs each)
+        latest = await results.add_variable(nid("Results.LatestResult"), ua.QualifiedName("LatestResult", res),
+                                            ua.Variant(None, ua.VariantType.Null), datatype=t["ResultDataType"])
+        await retype(latest, ua.ObjectIds.BaseDataVariableType, t["ResultType"])
+        meta = await latest.add_variable(nid("Results.LatestResult.ResultMetaData"),
+                                         ua.QualifiedName("ResultMetaData", res), ua.Variant(None, ua.VariantType.Null),
+                                         datatype=t["ResultMetaDataType"])
+        content = await latest.add_variable(nid("Results.LatestResult.ResultContent"),
+                                            ua.QualifiedName("ResultContent", res),
+                                            ua.Variant([], ua.VariantType.Variant),
+                                            datatype=node_id(ua.ObjectIds.BaseDataType))
+        await content.write_value_rank(1)
+        for child in (meta, content):
+            await rereference(latest, child, ua.ObjectIds.HasStructuredComponent)
+        self._nodes.update({"latest": latest, "latest.meta": meta, "latest.content": content})
+        # the structures' fields the appliance fills, also as variables of their own (for clients that read
+        # scalars): ResultMetaData's structured components [Result], ResultContent's InertiaResultDataType [moi]
+        for name, (_, vtype) in META_COMPONENTS.items():
+            v = await meta.add_variable(nid(f"Results.LatestResult.ResultMetaData.{name}"),
+                                        ua.QualifiedName(name, res), ua.Variant(_EMPTY[vtype], vtype))
+            await rereference(meta, v, ua.ObjectIds.HasStructuredComponent)
+            self._nodes[f"meta.{name}"] = v
+        for name, dt, array, _ in CONTENT_FIELDS:
+            vtype = _VTYPES[dt]
+            v = await content.add_variable(nid(f"Results.LatestResult.ResultContent.{name}"),
+                                           ua.QualifiedName(name, idx),
+                                           ua.Variant([] if array else _EMPTY[vtype], vtype))
+            self._nodes[f"content.{name}"] = v
+        if self._latest is not None:
+            await self._write_latest(self._latest)
+        self._event = await server.get_event_generator(t["InertiaResultReadyEventType"], rm.nodeid)
 
     def stop(self, timeout: float = 5.0) -> None:
         if not self._io.running:
@@ -329,6 +428,7 @@ class OpcUaServer(Publisher):
                 log.warning("OPC UA server stop: %s", exc)
             self._server = None
         self._io.stop(timeout)
+        gc.unfreeze()
 
     def failure(self) -> str | None:
         return None if self._io.running else "the OPC UA server thread stopped"
@@ -338,7 +438,33 @@ class OpcUaServer(Publisher):
 
     def health(self) -> dict[str, Any]:
         return {"endpoint": self.endpoint, "results_unacknowledged": len(self._unacknowledged),
-                "events_sent": self.events_sent, "start_seconds": self.start_seconds}
+                "events_sent": self.events_sent, "start_seconds": self.start_seconds,
+                "operation_mode": self._mode}
+
+    # --- the ResultDataType ----------------------------------------------------------------------
+    def _structure(self, doc: Mapping[str, Any]) -> Any:
+        """A result document as ResultDataType: ResultMetaDataType and, in ResultContent, one
+        InertiaResultDataType."""
+        T = self._types
+        m, c = doc["ResultMetaData"], doc["ResultContent"]
+        start, end = _time(m.get("StartTime")), _time(m.get("CreationTime"))
+        times = None
+        if start is not None and end is not None:
+            times = T["ProcessingTimesDataType"](
+                StartTime=start, EndTime=end,
+                AcquisitionDuration=None if m.get("AcquisitionDuration") is None else 1000 * m["AcquisitionDuration"],
+                ProcessingDuration=None if m.get("ProcessingDuration") is None else 1000 * m["ProcessingDuration"])
+        meta = T["ResultMetaDataType"](
+            ResultId=str(m["ResultId"]), IsSimulated=self.simulated, ResultState=1,  # 1: Completed
+            PartId=m.get("PartId"), ExternalRecipeId=m.get("ExternalRecipeId"), ProductId=m.get("ProductId"),
+            CreationTime=end, ProcessingTimes=times,
+            ResultEvaluation=T["ResultEvaluationEnum"](RESULT_EVALUATION[m["ResultEvaluation"]]))
+        content = T["InertiaResultDataType"](
+            SequenceNumber=int(m.get("SequenceNumber") or 0) & 0xFFFFFFFF,
+            **{name: math.nan if c[name] is None else c[name]
+               for name in ("J", "J_U", "J_u", "U", "omega_n", "damping_ratio")},
+            Flags=[str(f) for f in c["flags"]], Verdict=c.get("verdict") or "")
+        return T["ResultDataType"](ResultMetaData=meta, ResultContent=[ua.Variant(content)])
 
     # --- methods (the server's loop) --------------------------------------------------------------
     @staticmethod
@@ -346,25 +472,27 @@ class OpcUaServer(Publisher):
         value = getattr(v, "Value", v)
         return value if isinstance(value, int) and not isinstance(value, bool) else None
 
+    def _outputs(self, doc: Mapping[str, Any]) -> list[ua.Variant]:
+        # ResultHandle 0: ReleaseResultHandle is not offered (OPC 40001-101); Error 0: OK
+        return [ua.Variant(0, ua.VariantType.UInt32), ua.Variant(self._structure(doc)),
+                ua.Variant(0, ua.VariantType.Int32)]
+
     async def _get_latest(self, parent: ua.NodeId, *args: Any) -> Any:
         if len(args) != 1 or (timeout := self._int32(args[0])) is None:
             return _bad(ua.StatusCodes.BadInvalidArgument)
-        if not self._results and timeout > 0 and self._new_result is not None:
+        if self._latest is None and timeout > 0 and self._new_result is not None:
             try:
                 await asyncio.wait_for(self._new_result.wait(), min(timeout, MAX_TIMEOUT_MS) / 1000)
             except TimeoutError:
                 pass
-        if not self._results:
-            if self.store is not None:
-                last = await asyncio.to_thread(self.store.latest, "ok")
-                if last is not None and last.payload is not None:
-                    return self._outputs(result_document(last.payload), handle=True)
+        if self._latest is None:
             return _bad(ua.StatusCodes.BadNoData)
-        return self._outputs(next(reversed(self._results.values())), handle=True)
+        return self._outputs(self._latest)
 
     async def _get_by_id(self, parent: ua.NodeId, *args: Any) -> Any:
         result_id = getattr(args[0], "Value", None) if args else None
-        if len(args) not in (1, 2) or not isinstance(result_id, str) or not result_id:
+        if len(args) not in (1, 2) or not isinstance(result_id, str) or not result_id or (
+                len(args) == 2 and self._int32(args[1]) is None):
             return _bad(ua.StatusCodes.BadInvalidArgument)
         doc = self._results.get(result_id)
         if doc is None and self.store is not None and len(result_id) == 36:
@@ -373,26 +501,37 @@ class OpcUaServer(Publisher):
                 doc = result_document(stored.payload)
         if doc is None:
             return _bad(ua.StatusCodes.BadNotFound)
-        return self._outputs(doc, handle=False)
+        return self._outputs(doc)
+
+    async def _stored(self, result_id: str) -> bool:
+        """Whether the store holds a result with this ResultId."""
+        if self.store is None or len(result_id) != 36:
+            return False
+        stored = await asyncio.to_thread(self.store.get, result_id)
+        return stored is not None and stored.uuid == result_id
 
     async def _acknowledge(self, parent: ua.NodeId, *args: Any) -> Any:
         ids = getattr(args[0], "Value", None) if len(args) == 1 else None
-        if not isinstance(ids, list) or not ids or not all(isinstance(i, str) for i in ids):
-            return _bad(ua.StatusCodes.BadInvalidArgument)
-        if any(i not in self._unacknowledged for i in ids):
-            return _bad(ua.StatusCodes.BadNotFound)  # none is acknowledged
-        for i in ids:
-            del self._unacknowledged[i]
-        await self._nodes["unacknowledged"].write_value(ua.Variant(len(self._unacknowledged), ua.VariantType.UInt32))
-        return [ua.Variant(0, ua.VariantType.Int32)]
-
-    @staticmethod
-    def _outputs(doc: Mapping[str, Any], handle: bool) -> list[ua.Variant]:
-        out = [ua.Variant(json.dumps(doc, allow_nan=False), ua.VariantType.String), ua.Variant(0, ua.VariantType.Int32)]
-        if handle:
-            seq = doc["ResultMetaData"].get("SequenceNumber") or 0
-            out.insert(0, ua.Variant(int(seq) & 0xFFFFFFFF, ua.VariantType.UInt32))
-        return out
+        if not isinstance(ids, list) or not ids or not all(isinstance(i, str) and i for i in ids):
+            return _bad(ua.StatusCodes.BadInvalidArgument)  # nothing is acknowledged
+        assert self._ack_lock is not None
+        async with self._ack_lock:  # one acknowledgement at a time, kept in the order given
+            errors = []
+            for i in ids:
+                seq = self._unacknowledged.pop(i, None)
+                if seq is not None:
+                    self._acked_through = max(self._acked_through, seq)
+                    errors.append(0)
+                else:
+                    errors.append(ACK_ALREADY if i in self._results or await self._stored(i) else ACK_UNKNOWN)
+            if 0 in errors:
+                state = AckState(self._acked_through, frozenset(
+                    s for s in self._unacknowledged.values() if s <= self._acked_through))
+                await asyncio.to_thread(self._keep, state)
+                await self._nodes["unacknowledged"].write_value(
+                    ua.Variant(len(self._unacknowledged), ua.VariantType.UInt32))
+        ok = all(e == 0 for e in errors)
+        return [ua.Variant([] if ok else errors, ua.VariantType.Int32), ua.Variant(0 if ok else -1, ua.VariantType.Int32)]
 
     # --- the daemon's hooks (main loop thread: hand over, never wait) ---------------------------------
     def _submit(self, coro: Any) -> None:
@@ -406,52 +545,67 @@ class OpcUaServer(Publisher):
         state = str(message.get("state") or "")
         if state and state != self._state:
             self._state = state
-            self._submit(self._write_state(ITEM_STATES.get(state, "NotAvailable")))
+            self._submit(self._write_state("item", ITEM_STATES.get(state, "NotAvailable")))
+            self._update_mode()
 
-    async def _write_state(self, text: str) -> None:
-        await self._nodes["item_state"].write_value(ua.LocalizedText(text))
+    def on_recipe(self, recipe: Any) -> None:
+        self._check_standard = recipe is not None and getattr(recipe, "check_standard", None) is not None
+        self._update_mode()
+
+    def on_live(self, live: Any) -> None:
+        if bool(live.calibration_due) != self._calibration_due:
+            self._calibration_due = bool(live.calibration_due)
+            self._update_mode()
+
+    def _update_mode(self) -> None:
+        mode = operation_mode(self._state, self._check_standard, self._calibration_due)
+        if mode != self._mode:
+            self._mode = mode
+            self._submit(self._write_state("mode", mode))
+
+    async def _write_state(self, machine: str, state: str) -> None:
+        if f"{machine}.state" not in self._nodes or self._model is None:
+            return  # before the address space exists: _build writes the current one
+        await self._nodes[f"{machine}.state"].write_value(ua.LocalizedText(state))
+        await self._nodes[f"{machine}.id"].write_value(self._model.state_id(machine, state))
 
     def on_result(self, stored: Any, measurement: Any) -> None:
         if stored.payload is not None:
             self.publish_result(stored.payload)
 
     def publish_result(self, payload: Mapping[str, Any]) -> None:
-        """A stored result: the LatestResult variables, the list the methods read and a ResultReadyEvent."""
+        """A stored result: LatestResult, the results the methods read, unacknowledged until a client
+        acknowledges it, and a ResultReadyEvent."""
         self._submit(self._publish(result_document(payload)))
 
+    async def _write_latest(self, doc: Mapping[str, Any]) -> None:
+        value = self._structure(doc)
+        meta, content = value.ResultMetaData, value.ResultContent[0].Value
+        await self._nodes["latest"].write_value(ua.Variant(value))
+        await self._nodes["latest.meta"].write_value(ua.Variant(meta))
+        await self._nodes["latest.content"].write_value(ua.Variant([ua.Variant(content)], ua.VariantType.Variant))
+        for name, (_, vtype) in META_COMPONENTS.items():
+            v = getattr(meta, name)
+            v = _EMPTY[vtype] if v is None else int(v) if name == "ResultEvaluation" else v
+            await self._nodes[f"meta.{name}"].write_value(ua.Variant(v, vtype))
+        for name, dt, _, _ in CONTENT_FIELDS:
+            await self._nodes[f"content.{name}"].write_value(ua.Variant(getattr(content, name), _VTYPES[dt]))
+
     async def _publish(self, doc: dict[str, Any]) -> None:
-        meta, content = doc["ResultMetaData"], doc["ResultContent"]
+        meta = doc["ResultMetaData"]
         rid = str(meta["ResultId"])
+        kept = max(1, self.settings.results_kept)
         self._results[rid] = doc
-        while len(self._results) > max(1, self.settings.results_kept):
+        while len(self._results) > kept:
             self._results.popitem(last=False)
-        self._unacknowledged[rid] = None
-        while len(self._unacknowledged) > max(1, self.settings.results_kept):
-            self._unacknowledged.popitem(last=False)
-        created = meta["CreationTime"]
-        values: dict[str, ua.Variant] = {
-            "meta.ResultId": ua.Variant(rid, ua.VariantType.String),
-            "meta.CreationTime": ua.Variant(datetime.fromisoformat(created.replace("Z", "+00:00")) if isinstance(
-                created, str) else _EMPTY[ua.VariantType.DateTime], ua.VariantType.DateTime),
-            "meta.ProductId": ua.Variant(meta["ProductId"] or "", ua.VariantType.String),
-            "meta.PartId": ua.Variant(meta["PartId"] or "", ua.VariantType.String),
-            "meta.ExternalRecipeId": ua.Variant(meta["ExternalRecipeId"] or "", ua.VariantType.String),
-            "meta.ResultEvaluation": ua.Variant(RESULT_EVALUATION[meta["ResultEvaluation"]], ua.VariantType.Int32),
-            "content.flags": ua.Variant(content["flags"], ua.VariantType.String),
-            "content.json": ua.Variant(json.dumps(doc, allow_nan=False), ua.VariantType.String),
-        }
-        for name in ("J", "J_U", "J_u", "U", "omega_n", "damping_ratio"):
-            v = content[name]
-            values[f"content.{name}"] = ua.Variant(math.nan if v is None else v, ua.VariantType.Double)
-        for key, variant in values.items():
-            await self._nodes[key].write_value(variant)
+        self._unacknowledged[rid] = int(meta.get("SequenceNumber") or 0)
+        while len(self._unacknowledged) > kept:
+            self._unacknowledged.popitem(last=False)  # given up: a restart does not offer it again either
+        self._latest = doc
+        await self._write_latest(doc)
         await self._nodes["unacknowledged"].write_value(ua.Variant(len(self._unacknowledged), ua.VariantType.UInt32))
         ev = self._event
-        ev.event.ResultId = rid
-        ev.event.ResultEvaluation = RESULT_EVALUATION[meta["ResultEvaluation"]]
-        ev.event.PartId = meta["PartId"] or ""
-        ev.event.ExternalRecipeId = meta["ExternalRecipeId"] or ""
-        ev.event.Result = json.dumps(doc, allow_nan=False)
+        ev.event.Result = self._structure(doc)
         ev.event.Severity = 500 if meta["ResultEvaluation"] in ("NotOK", "NotDecidable") else 100
         await ev.trigger(message=f"result {meta.get('SequenceNumber')}: {meta['ResultEvaluation']}")
         self.events_sent += 1
@@ -463,8 +617,19 @@ class OpcUaServer(Publisher):
     def build(cls, settings: OpcUaSettings, appliance: ApplianceView) -> "OpcUaServer":
         cfg = appliance.config
         server = cls(settings, cfg.device_id, cfg.state_dir, software_version=appliance.software_version,
-                     store=appliance.store)
+                     store=appliance.store, simulated=bool(cfg.simulated))
+        server.on_recipe(appliance.parts.recipe)
         return server
+
+
+#: the value of a variable before the first result (OPC UA has no null scalar of these types)
+_EMPTY: dict[ua.VariantType, Any] = {ua.VariantType.String: "", ua.VariantType.Int32: 0, ua.VariantType.UInt32: 0,
+                                     ua.VariantType.Boolean: False, ua.VariantType.Double: math.nan,
+                                     ua.VariantType.DateTime: datetime(1970, 1, 1, tzinfo=UTC)}
+#: the variant type of a ns=0 DataType of CONTENT_FIELDS
+_VTYPES: dict[int, ua.VariantType] = {ua.ObjectIds.UInt32: ua.VariantType.UInt32,
+                                      ua.ObjectIds.Double: ua.VariantType.Double,
+                                      ua.ObjectIds.String: ua.VariantType.String}
 
 
 def _bad(code: int) -> ua.StatusCode:

@@ -47,7 +47,8 @@ KEYS: dict[str, dict] = {
     "private_key": dict(doc="the server's private key, PEM (default: opcua/server-key.pem in the state directory)",
                         kind="path"),
     "cache_file": dict(doc="asyncua's cache of the standard address space (default: opcua/address-space in the state "
-                       "directory; made on first start, read on every later one)", kind="path"),
+                       "directory; made on first start, read on every later one; only where Python has gdbm or ndbm, "
+                       "e.g. Debian's python3-gdbm: with dbm.dumb alone, building it is faster)", kind="path"),
     "trusted_clients": dict(doc="directory of the client application certificates (DER or PEM) admitted (default: "
                             "any client certificate; the user and password decide)", kind="path"),
     "manufacturer": dict(doc="MachineIdentification Manufacturer"),
