@@ -1,6 +1,6 @@
 """Cold start: the wall time a technician waits for one command, as a whole process, before and after.
 
-    .venv/bin/python bench/bench_cold_start.py [--repeat 5] [--no-before]
+    .venv/bin/python bench/bench_cold_start.py [--repeat 5] [--no-before] [--before REV]
 
 * `moi identify` of a 30 s, 200 Hz trace (torsion rig, declared viscous): goal ≤ 0.7 s;
 * `moi --help`: goal ≤ 0.1 s.
@@ -9,7 +9,10 @@ Each figure is the median of ``--repeat`` fresh ``python -m service.cli`` proces
 after alternating so that both see the same load; "one core" pins the process with
 ``taskset -c 0`` (the proxy for one Raspberry Pi core, which is 3–4 × slower still). "before" is
 the source tree at BEFORE (the last commit that imported scipy.signal for its smoothing and
-loaded every publisher's library with the configuration), unpacked with `git archive`. The
+loaded every publisher's library with the configuration), or at ``--before REV``, unpacked with
+`git archive`. `moi identify` loads its integration kernel in a helper process on a second core
+(``service.commands.kernels``) when a core is idle: its CPU time is counted with the command's;
+pinned to one core, or with no core idle, the command runs without it. Run it on an idle machine. The
 compiled integration kernel is loaded from the on-disk cache in every timed run (one untimed run
 first fills it), as on a device after its first measurement. The CPU time (user + system) is what a
 busy machine does not inflate as it does the wall time.
@@ -61,6 +64,7 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--no-before", action="store_true", help="time this tree only")
+    ap.add_argument("--before", default=BEFORE, metavar="REV", help=f"the commit to compare with (default {BEFORE})")
     args = ap.parse_args(argv if argv is not None else ([] if __name__ != "__main__" else None))
     sys.path.insert(0, str(REPO))
     import numpy as np
@@ -77,7 +81,7 @@ def main(argv: list[str] | None = None) -> None:
                    fmt="%.17g")
         (work / "rig.toml").write_text(RIG_TOML)
         commands = {"identify": ["identify", str(trace), "--rig", str(work / "rig.toml")], "help": ["--help"]}
-        before = None if args.no_before else _before_tree(work, BEFORE)
+        before = None if args.no_before else _before_tree(work, args.before)
         trees = [("after", REPO)] + ([("before", before)] if before else [])
         pins = [False] + ([True] if shutil.which("taskset") else [])
         for _, tree in trees:  # fills the kernel cache: every timed run only loads it
@@ -90,7 +94,7 @@ def main(argv: list[str] | None = None) -> None:
                         times.setdefault((name, key, pin), []).append(_command(tree, argv_, pin))
         load = os.getloadavg()[0]
         print(f"cold start, whole process, median of {args.repeat} ({os.cpu_count()} cores, load average {load:.1f}); "
-              f"before = {BEFORE}" + ("" if before else " (not available)"))
+              f"before = {args.before}" + ("" if before else " (not available)"))
         print(f"{'':44}" + "".join(f"{name + ' wall':>13}{'CPU':>8}" for name, _ in trees) + f"{'goal':>8}")
         for key in commands:
             for pin in pins:

@@ -42,7 +42,7 @@ import threading
 from functools import lru_cache, cache
 from pathlib import Path
 from types import ModuleType, SimpleNamespace
-from typing import Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -341,6 +341,17 @@ def kernel(kind: str) -> ModuleType:
         return mod
 
 
+#: where ``Dynamics.integrate`` finds a rig kind's kernel: ``kernel`` (compiled in this process) unless a
+#: one-shot command runs the kernels in a helper process (``use_kernels``)
+_source: Callable[[str], Any] | None = None
+
+
+def use_kernels(source: Callable[[str], Any] | None) -> None:
+    """Take the kernels from ``source`` (rig kind → an object with the kernel's ``run``); None: from ``kernel``."""
+    global _source
+    _source = source
+
+
 def warm_up(kind: str) -> None:
     """Load the ``kind`` kernel now (compile it, on a device's very first run) rather than in the first measurement.
 
@@ -388,8 +399,8 @@ class Dynamics:
         t = np.ascontiguousarray(t, dtype=float)
         x = np.empty(t.size)
         v = np.empty(t.size)
-        kernel(self.kind).run(t, float(theta0), float(omega0), float(omega_n) ** 2, self.params,
-                              self.holding, float(max_step), x, v)
+        (_source or kernel)(self.kind).run(t, float(theta0), float(omega0), float(omega_n) ** 2, self.params,
+                                           self.holding, float(max_step), x, v)
         return x, v
 
 

@@ -51,7 +51,7 @@ from service.parts.recipes import PartTracker, Recipe, RecipeBook, RecipeError
 from service.parts.tensor_set import COMPLETE, TensorSet
 from service.publish.modbus.registers import LiveStatus
 from service.persistence.store import Store, quarantine_store
-from service.publish import port
+from service.publish import registry
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply, ReplyTo
 
@@ -161,8 +161,8 @@ class Appliance:
             self._lock_state_dir()
             self.store = self._open_store()
             view = ApplianceView(self)
-            enabled = [(entry.load(), settings) for entry in port.PUBLISHERS
-                       if (settings := getattr(cfg, entry.name, None)) is not None]
+            enabled = [(entry.load(), settings) for entry in registry.PUBLISHERS
+                       if (settings := cfg.publishers.get(entry.name)) is not None]
             self._start_publishers([(kind, s) for kind, s in enabled if kind.EARLY], view)
             self.devices = self._devices or build_devices(cfg)
             d = self.devices
@@ -221,14 +221,14 @@ class Appliance:
 
     def __getattr__(self, name: str) -> Any:
         # app.modbus, app.mqtt, app.web...: a publisher by its table's name (None when off), for tests and tools
-        if any(entry.name == name for entry in port.PUBLISHERS):
+        if any(entry.name == name for entry in registry.PUBLISHERS):
             return next((p for p in self.__dict__.get("publishers", ()) if p.NAME == name), None)
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def publisher_health(self) -> dict[str, dict[str, Any] | None]:
         """Each publisher's health under its name (None when it is off), for the health page."""
         out: dict[str, dict[str, Any] | None] = {}
-        for entry in port.PUBLISHERS:
+        for entry in registry.PUBLISHERS:
             if entry.in_health:
                 p = self.publisher(entry.name)
                 out[entry.name] = p.health() if p is not None else None
@@ -542,8 +542,8 @@ class Appliance:
 
     def _state_message(self, state: str, previous: str, reason: str, measurement_id: str | None,
                        event: Event | None = None) -> dict[str, Any]:
-        msg = self.public_event(event) if event is not None else {"state": state, "previous": previous,
-                                                                  "reason": reason, "measurement_id": measurement_id}
+        msg: dict[str, Any] = self.public_event(event) if event is not None else {
+            "state": state, "previous": previous, "reason": reason, "measurement_id": measurement_id}
         now = self.wall_clock()
         msg.update({"device_id": self.config.device_id, "timestamp": now, "at": iso_utc(now)})
         return msg

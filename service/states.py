@@ -1,19 +1,24 @@
-"""The states the appliance reports, in one table: each one's Modbus code, the words a technician reads, and
-whether the angle sensor is being read in it. (Here, not with the sequencer: reading it must not load the
-sequencer and the science it drives; a test holds it to ``firmware_host.State``.)"""
+"""The states the appliance reports, in one table: each one's Modbus code, the words a technician reads,
+whether a measurement is running in it and whether the angle sensor is being read in it. (Here, not with the
+sequencer: reading it must not load the sequencer and the science it drives; a test holds it to
+``firmware_host.State`` and ``firmware_host.BUSY``.) The web page's script reads it as served with the page
+(``vocabulary``)."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 
 @dataclass(frozen=True)
 class StateInfo:
     """What the appliance says of a state: its code in Modbus register ``state``, the words a technician
-    reads on the web page, and whether the angle sensor is being read in it."""
+    reads on the web page, whether a measurement is running (a request is refused as busy) and whether the
+    angle sensor is being read in it."""
 
     code: int
     words: str
+    busy: bool = False
     capturing: bool = False
 
 
@@ -22,12 +27,17 @@ class StateInfo:
 STATES: dict[str, StateInfo] = {
     "STARTING": StateInfo(0, "the appliance is starting"),
     "IDLE": StateInfo(1, "ready: press Measure (or the push button)"),
-    "ARMED": StateInfo(2, "recording the pendulum at rest before the release", capturing=True),
-    "RELEASING": StateInfo(3, "solenoid pulse: releasing the pendulum", capturing=True),
-    "CAPTURING": StateInfo(4, "the pendulum swings freely; recording", capturing=True),
-    "IDENTIFYING": StateInfo(5, "identifying the equation of motion"),
-    "PUBLISHING": StateInfo(6, "storing and publishing the result"),
+    "ARMED": StateInfo(2, "recording the pendulum at rest before the release", busy=True, capturing=True),
+    "RELEASING": StateInfo(3, "solenoid pulse: releasing the pendulum", busy=True, capturing=True),
+    "CAPTURING": StateInfo(4, "the pendulum swings freely; recording", busy=True, capturing=True),
+    "IDENTIFYING": StateInfo(5, "identifying the equation of motion", busy=True),
+    "PUBLISHING": StateInfo(6, "storing and publishing the result", busy=True),
     "FAULT": StateInfo(7, "fault: acknowledge it once the cause is fixed"),
     "ABORTED": StateInfo(8, "the measurement was abandoned"),
     "STOPPING": StateInfo(9, "the appliance is stopping"),
 }
+
+
+def vocabulary() -> dict[str, dict[str, object]]:
+    """The table, JSON-ready (``{name: {code, words, busy, capturing}}``): what the web page's script reads."""
+    return {name: dataclasses.asdict(info) for name, info in STATES.items()}

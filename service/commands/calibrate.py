@@ -152,6 +152,8 @@ def run(args: argparse.Namespace) -> int:
     cal = calibrate_torsion(load_references(args.calibration, rig))
     references = [{k: v for k, v in ref.items() if v is not None} for ref in cal.to_dict()["references"]]
     record = CalibrationRecord(date, args.valid_days, tuple(references), str(args.calibration))
+    until = record.valid_until
+    assert until is not None  # valid_days was given
     if args.out:
         new = replace(rig, stiffness=cal.stiffness, stiffness_std=cal.stiffness_std,
                       tare_inertia=cal.tare_inertia, tare_inertia_std=cal.tare_inertia_std,
@@ -159,10 +161,10 @@ def run(args: argparse.Namespace) -> int:
         write_rig(new, args.out, comment=f"calibrated by moi calibrate from {args.calibration}", keep_from=args.rig)
     if args.json:
         print(json.dumps(cal.to_dict() | {"date": date.isoformat(), "valid_days": args.valid_days,
-                                          "valid_until": record.valid_until.isoformat()}))
+                                          "valid_until": until.isoformat()}))
     else:
         print(cal.report())
-        print(f"    calibrated on {date.isoformat()}, valid until {record.valid_until.isoformat()}")
+        print(f"    calibrated on {date.isoformat()}, valid until {until.isoformat()}")
         if args.out:
             print(f"rig written to {args.out}")
     return 0

@@ -83,8 +83,8 @@ def _grab(args: argparse.Namespace, config: CameraConfig) -> tuple[np.ndarray, s
     if args.device:
         device = int(args.device) if args.device.isdigit() else args.device
         with open_camera(config, device) as cam:
-            frame = None
-            for _ in range(SETTLE_FRAMES):
+            frame = cam.grab()
+            for _ in range(SETTLE_FRAMES - 1):
                 frame = cam.grab()
             return frame.image, f"camera {args.device}"
     angle = math.radians(args.angle)

@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
         config = parse_config(_doc(args, state_dir), source="moi demo")
         if args.web_port and not _port_free(args.web_port):
             print(f"port {args.web_port} is taken: the web page goes on a free port")
-            config = dataclasses.replace(config, web=dataclasses.replace(config.web, port=0))
+            config = config.with_publisher("web", dataclasses.replace(config.web, port=0))
         return _run(Appliance(config, stop_grace=5.0), args)
 
 
@@ -199,6 +199,7 @@ def _run(app, args: argparse.Namespace) -> int:
         if m.result.J is not None:
             print(f"true J {sim.inertia:g} kg·m² → error {100 * (m.result.J / sim.inertia - 1):+.4f} %")
         stored = app.store.get(m.id)
+        assert stored is not None and stored.payload is not None  # an ok result, stored with its payload
         payload = stored.payload
         print()
         client = ModbusTcpClient("127.0.0.1", port=app.modbus.bound_port, timeout=3)
@@ -207,6 +208,7 @@ def _run(app, args: argparse.Namespace) -> int:
             snap = R.read_snapshot(lambda a, n: client.read_input_registers(a, count=n, device_id=cfg.modbus.unit_id).registers)
         finally:
             client.close()
+        assert snap is not None, "no consistent Modbus snapshot"  # nothing changes it while the demo reads
         print(f"Modbus registers read back over TCP (seq {snap['seq']}, uuid {snap['uuid']}):")
         for reg, key in (("J", "J"), ("J_std", "J_std"), ("omega_n", "omega_n"), ("damping_ratio", "damping_ratio"),
                          ("residual_rms", "residual_rms_after")):

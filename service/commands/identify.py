@@ -28,10 +28,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from measurement import Options, identify  # scipy: only when identifying
-
-    from service.sources.dispatch import load_source
-
     from service.publish.plot import PLOT_FORMATS
 
     fmt = args.plot.rsplit(".", 1)[-1].lower() if args.plot and "." in args.plot else ""
@@ -43,6 +39,27 @@ def run(args: argparse.Namespace) -> int:
         if len(args.source) > 1:
             raise InputFileError("--plot draws one release; give one SOURCE with --plot")
     rig = read_rig(args.rig)
+    # the kernels load in a helper process (numba) while this one loads the fit (scipy): the two largest
+    # imports of the command, on two cores
+    from service.commands import kernels
+    helper = kernels.start((rig.kind,))
+    try:
+        return _identify(args, rig, fmt, helper)
+    finally:
+        if helper is not None:
+            from measurement.integrator import use_kernels
+            use_kernels(None)
+            helper.close()
+
+
+def _identify(args: argparse.Namespace, rig, fmt: str, helper) -> int:
+    from measurement import Options, identify  # scipy: only when identifying
+    from measurement.integrator import use_kernels
+
+    from service.sources.dispatch import load_source
+
+    if helper is not None:
+        use_kernels(helper)
     traces = [load_source(s, camera=args.camera, rig=rig) for s in args.source]
     candidates = None
     if args.candidates is not None:

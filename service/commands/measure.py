@@ -27,12 +27,16 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from typing import TYPE_CHECKING
 
 from measurement.errors import InvalidInput
 
 from service.devices.defaults import DEMO_EFFECTS, DEMO_RIG, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE, demo_camera
 from service.sources.files import read_rig
 from .simulate import EFFECT_SYNTAX, parse_effects
+
+if TYPE_CHECKING:  # pragma: no cover
+    from firmware_host import Measurement
 
 
 #: the demo rig, part and damping when no --rig is given
@@ -148,11 +152,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"simulated {rig.kind} rig: true J = {truth.inertia:g} kg·m², ω_n = {truth.omega_n:.6g} rad/s, {desc}; "
           f"θ0 = {args.theta0:g} rad, time × {args.time_scale:g}", file=out)
 
-    results = []
+    results: list[Measurement] = []
     with build_simulated(rig, simulation, config) as devices:
         for line in devices.notes:
             print(line, file=out)
         clock, solenoid, button = devices.clock, devices.solenoid, devices.button
+        assert button is not None  # the simulated rig has its push button
         with Sequencer(clock=clock, solenoid=solenoid, sensor=devices.sensor, rig=rig, sink=results.append,
                        config=config, options=Options(discover=not args.no_discover), button=button) as seq:
             printer = _StatePrinter(clock, args.time_scale, out, config.capture_duration, _show_progress(args))

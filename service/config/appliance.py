@@ -1,8 +1,11 @@
 """The appliance configuration: one TOML file, validated with one-line errors.
 
-Every table and key is declared below (``SCHEMA``); an unknown key, a wrong
-type, a value out of range or a missing hardware setting raises
-``ConfigError`` naming the file, the table, the key and what was expected.
+Every table and key is declared once: the appliance's own tables below, each
+publisher's table in its settings module (``TABLE``), found through the
+publishers' registry (``service.publish.registry``); ``SCHEMA`` holds them all.
+An unknown key, a wrong type, a value out of range or a missing hardware
+setting raises ``ConfigError`` naming the file, the table, the key and what
+was expected.
 docs/service.md shows the whole file; examples/appliance.toml is a
 commented example.
 
@@ -20,11 +23,11 @@ from __future__ import annotations
 import copy
 import dataclasses
 import difflib
+import functools
 import os
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, overload
 
 from firmware_host import SequencerConfig
 from measurement import Options, Rig
@@ -36,18 +39,10 @@ from drivers.settings import (ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSetti
                               SolenoidSettings)
 
 from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, demo_camera
-from service.config.schema import REQUIRED, Checker as _Checker, Key, doc as _doc, schema as _schema
+from service.config.schema import REQUIRED, Checker as _Checker, Key, PublisherTable, doc as _doc, schema as _schema
 from service.errors import ConfigError
 from service.sources.files import read_rig, read_toml
-from service.publish.modbus import settings as modbus_settings
-from service.publish.modbus.settings import ModbusSettings, allowed_networks
-from service.publish.mqtt import settings as mqtt_settings
-from service.publish.mqtt.settings import MqttSettings
-from service.publish.opcua import settings as opcua_settings
-from service.publish.opcua.settings import OpcUaSettings
-from service.publish.web import settings as web_settings
-from service.publish.web.settings import WebSettings
-from measurement.units import inertia_unit
+from service.publish import registry
 
 #: the angle sensors of ``[hardware] sensor``
 SENSORS = ("encoder", "camera")
@@ -156,7 +151,8 @@ def _sequencer_keys() -> dict[str, dict[str, Any]]:
 
 _PIN = _doc("BCM pin number or gpiozero pin name")
 
-SCHEMA: dict[str, dict[str, Key]] = {
+#: the appliance's own tables; the publishers' follow (``tables``)
+_APPLIANCE: dict[str, dict[str, Key]] = {
     "device": _schema(DeviceSettings, {
         "id": _doc("device id: names the MQTT topics and Home Assistant entities"),
         "state_dir": _doc("result store directory (default $STATE_DIRECTORY, else ./moi-state)", kind="path"),
@@ -229,27 +225,45 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "glitch_rate": _doc("fraction of encoder replies whose position is off by 1/128 turn although the CRC is "
                             "right (a glitch the identification must catch)", min=0, max=1),
     }),
-    "mqtt": _schema(MqttSettings, mqtt_settings.KEYS,
-                    extra={"enabled": Key("bool", True, "publish over MQTT (the table's presence enables it)")}),
     "recipes": _schema(RecipeSettings, {
         "directory": _doc("directory of the recipe files, one TOML file per part type (docs/service.md, Recipes); "
                           "relative to this file", kind="path"),
         "active": _doc("recipe active at start (name or number); the PLC (register recipe_select) or MQTT "
                        "(cmd/recipe) may change it"),
     }),
-    "modbus": _schema(ModbusSettings, modbus_settings.KEYS, extra={"enabled": Key("bool", True, "serve the registers")}),
-    "web": _schema(WebSettings, web_settings.KEYS,
-                   extra={"enabled": Key("bool", True, "serve the appliance's web page")}),
-    "opcua": _schema(OpcUaSettings, opcua_settings.KEYS,
-                     extra={"enabled": Key("bool", True, "serve OPC UA (the table's presence enables it)")}),
 }
 
-#: tables that are plain key/value tables of SCHEMA (the others are sub-tables)
-#: a shift start, HH:MM
-_HHMM = re.compile(r"([01][0-9]|2[0-3]):[0-5][0-9]")
 
-TOP_TABLES = ("device", "sequencer", "identification", "hardware", "simulation", "mqtt", "modbus", "web",
-              "recipes", "opcua")
+
+def publisher_tables() -> dict[str, PublisherTable]:
+    """The publishers' tables, by name, in the registry's order (``service.publish.registry``)."""
+    return _publisher_tables(registry.PUBLISHERS)
+
+
+@functools.cache
+def _publisher_tables(entries: tuple[registry.PublisherEntry, ...]) -> dict[str, PublisherTable]:
+    return {e.name: e.table() for e in entries}
+
+
+def tables() -> dict[str, dict[str, Key]]:
+    """Every table of the file and its keys: the appliance's, then each registered publisher's."""
+    return _tables(registry.PUBLISHERS)
+
+
+@functools.cache
+def _tables(entries: tuple[registry.PublisherEntry, ...]) -> dict[str, dict[str, Key]]:
+    return {**_APPLIANCE, **{name: t.schema() for name, t in _publisher_tables(entries).items()}}
+
+
+def top_tables() -> tuple[str, ...]:
+    """The tables a file may have at its top level (the others are sub-tables, like [hardware.solenoid])."""
+    return tuple(t for t in tables() if "." not in t)
+
+
+#: every table of the file and its keys (the publishers registered when the configuration is imported)
+SCHEMA: dict[str, dict[str, Key]] = tables()
+
+TOP_TABLES = top_tables()
 
 
 # --- the validated configuration ----------------------------------------------------------------
@@ -269,12 +283,20 @@ class Config:
     hardware: HardwareSettings | None
     sequencer: SequencerConfig
     identification: Options
-    mqtt: MqttSettings | None        # None: MQTT off
-    modbus: ModbusSettings | None    # None: Modbus off
-    web: WebSettings | None          # None: no web page
-    opcua: OpcUaSettings | None = None  # None: OPC UA off (the default)
+    #: each registered publisher's settings by its table's name (``config.mqtt``...); None: that publisher is off
+    publishers: Mapping[str, Any] = field(default_factory=dict)
     recipes: Any = None              # service.parts.recipes.RecipeBook (every recipe of [recipes] directory, checked)
     active_recipe: str | None = None  # [recipes] active
+
+    def __getattr__(self, name: str) -> Any:
+        # config.modbus, config.mqtt, config.web...: a publisher's settings by its table's name (None when off)
+        if not name.startswith("_") and name != "publishers" and name in self.__dict__.get("publishers", {}):
+            return self.__dict__["publishers"][name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def with_publisher(self, name: str, settings: Any) -> Config:
+        """This configuration with the settings of publisher ``name`` replaced (None: off)."""
+        return dataclasses.replace(self, publishers={**self.publishers, name: settings})
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary of what the daemon runs with (passwords left out)."""
@@ -291,15 +313,19 @@ class Config:
             "rig_path": self.rig_path, "rig": self.rig.to_dict(), "simulated": self.simulated,
             "simulation": clean(self.simulation) if self.simulated else None,
             "hardware": clean(self.hardware), "sequencer": clean(self.sequencer),
-            "identification": clean(self.identification), "mqtt": clean(self.mqtt), "modbus": clean(self.modbus),
+            "identification": clean(self.identification),
             "recipes": None if self.recipes is None else {
                 "directory": self.recipes.directory, "active": self.active_recipe,
                 "recipes": [{"name": r.name, "number": r.number, "version": r.version, "path": r.path}
                             for r in self.recipes.recipes]},
-            "web": clean(self.web), "opcua": clean(self.opcua),
+            **{name: clean(settings) for name, settings in self.publishers.items()},
         }
 
 
+@overload
+def _resolve(base: Path, p: str) -> str: ...
+@overload
+def _resolve(base: Path, p: str | None) -> str | None: ...
 def _resolve(base: Path, p: str | None) -> str | None:
     if p is None:
         return None
@@ -338,11 +364,12 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
                  state_dir: str | None = None, environ: Mapping[str, str] | None = None) -> Config:
     c = _Checker(source)
     base = base or Path.cwd()
-    unknown = [t for t in doc if t not in TOP_TABLES]
+    top = top_tables()
+    unknown = [t for t in doc if t not in top]
     if unknown:
         t = unknown[0]
-        close = difflib.get_close_matches(t, TOP_TABLES, n=1)
-        hint = f" (did you mean [{close[0]}]?)" if close else f"; expected tables: {', '.join(f'[{x}]' for x in TOP_TABLES)}"
+        close = difflib.get_close_matches(t, top, n=1)
+        hint = f" (did you mean [{close[0]}]?)" if close else f"; expected tables: {', '.join(f'[{x}]' for x in top)}"
         kind = "table" if isinstance(doc[t], Mapping) else "top-level key"
         raise ConfigError(f"{source}: unknown {kind} {t!r}{hint}")
 
@@ -365,6 +392,7 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
     if "hardware" in doc:
         hw = c.table("hardware", doc["hardware"], SCHEMA["hardware"])
         sol = _device_table(c, "hardware.solenoid", hw["solenoid"], SolenoidSettings)
+        assert sol is not None  # a required key of [hardware]
         btn = _device_table(c, "hardware.button", hw["button"], ButtonSettings)
         ind = _device_table(c, "hardware.indicator", hw["indicator"], IndicatorSettings)
         enc = hw["encoder"]
@@ -415,38 +443,6 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         except InvalidInput as exc:
             raise ConfigError(f"{source}: [simulation]: {exc}") from None
 
-    mqtt = None
-    if "mqtt" in doc:
-        m = c.table("mqtt", doc["mqtt"], SCHEMA["mqtt"])
-        if m.pop("enabled"):
-            for k in ("password_file", "ca_file", "cert_file", "key_file"):
-                m[k] = _resolve(base, m[k])
-            if m["password"] is not None and m["password_file"] is not None:
-                raise c.fail("mqtt", "password", "give password or password_file, not both")
-            if (m["password"] is not None or m["password_file"] is not None) and m["username"] is None:
-                raise c.fail("mqtt", "username", "missing: a password needs a username")
-            if (m["cert_file"] is None) != (m["key_file"] is None):
-                raise c.fail("mqtt", "cert_file", "give both cert_file and key_file for mutual TLS, or neither")
-            if not m["tls"] and any(m[k] for k in ("ca_file", "cert_file", "key_file")):
-                raise c.fail("mqtt", "tls", "ca_file/cert_file/key_file are set but tls = false")
-            if m["reconnect_max"] < m["reconnect_min"]:
-                raise c.fail("mqtt", "reconnect_max", "must be >= reconnect_min")
-            if not m["prefix"].strip("/") or any(ch in m["prefix"] for ch in "#+"):
-                raise c.fail("mqtt", "prefix", f"expected topic levels without '#' or '+', got {m['prefix']!r}")
-            mqtt = MqttSettings(**m)
-
-    modbus = None
-    mb = c.table("modbus", doc.get("modbus", {}), SCHEMA["modbus"])
-    if mb.pop("enabled"):
-        if mb["mode"] == "rtu" and not mb["serial_port"]:
-            raise c.fail("modbus", "serial_port", "missing: mode = \"rtu\" needs the serial device, e.g. /dev/ttyAMA0")
-        mb["allow_from"] = tuple(mb["allow_from"] or ())
-        try:
-            allowed_networks(mb["allow_from"])
-        except ValueError as exc:
-            raise c.fail("modbus", "allow_from", str(exc)) from None
-        modbus = ModbusSettings(**mb)
-
     from service.parts.recipes import RecipeBook
     rc = c.table("recipes", doc.get("recipes", {}), SCHEMA["recipes"])
     book = RecipeBook.load(_resolve(base, rc["directory"]))  # RecipeError: one line naming the recipe file
@@ -458,31 +454,8 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
     for r in book.recipes:
         r.check_rig(rig)  # the quantity must be one the rig it measures with can give
 
-    web = None
-    w = c.table("web", doc.get("web", {}), SCHEMA["web"])
-    if w.pop("enabled"):
-        w["token_file"] = _resolve(base, w["token_file"])
-        w["users_file"] = _resolve(base, w["users_file"])
-        w["display_unit"] = inertia_unit(w["display_unit"])
-        for hm in w["shift_starts"]:
-            if not _HHMM.fullmatch(str(hm)):
-                raise c.fail("web", "shift_starts", f"expected times HH:MM (00:00 … 23:59), got {hm!r}")
-        web = WebSettings(**w)
-
-    opcua = None
-    if "opcua" in doc:
-        o = c.table("opcua", doc["opcua"], SCHEMA["opcua"])
-        if o.pop("enabled"):
-            for k in ("password_file", "certificate", "private_key", "cache_file", "trusted_clients"):
-                o[k] = _resolve(base, o[k])
-            if o["password"] is not None and o["password_file"] is not None:
-                raise c.fail("opcua", "password", "give password or password_file, not both")
-            if o["username"] is None and not o["anonymous"]:
-                raise c.fail("opcua", "username", "missing: no client could log in (give username and password_file, "
-                                                  "or set anonymous = true)")
-            if o["username"] is not None and o["password"] is None and o["password_file"] is None:
-                raise c.fail("opcua", "password_file", "missing: the user needs a password")
-            opcua = OpcUaSettings(**o)
+    publishers = {name: _publisher(c, base, name, table, doc)
+                  for name, table in publisher_tables().items()}
 
     sd = state_dir or _resolve(base, dev["state_dir"])
     return Config(
@@ -490,9 +463,25 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         state_dir=Path(sd) if sd else default_state_dir(environ),
         log_level=dev["log_level"], store_trace=dev["store_trace"],
         rig=rig, rig_path=rig_path, simulated=simulated, simulation=simulation, hardware=hardware,
-        sequencer=seq_cfg, identification=options, mqtt=mqtt, modbus=modbus, web=web, opcua=opcua,
+        sequencer=seq_cfg, identification=options, publishers=publishers,
         recipes=book, active_recipe=rc["active"],
     )
+
+
+def _publisher(c: _Checker, base: Path, name: str, table: PublisherTable, doc: Mapping[str, Any]) -> Any:
+    """A publisher's settings from its table (None: off), checked by the publisher's own checks."""
+    if name not in doc and not table.on_without_table:
+        return None
+    schema = tables()[name]
+    values = c.table(name, doc.get(name, {}), schema)
+    if not values.pop("enabled"):
+        return None
+    for key, spec in schema.items():
+        if spec.kind == "path":
+            values[key] = _resolve(base, values[key])
+    if table.check is not None:
+        table.check(values, lambda key, message: c.fail(name, key, message))
+    return table.settings(**values)
 
 
 def _device_table(c: _Checker, table: str, doc: Any, settings: type) -> dict[str, Any] | None:
@@ -533,7 +522,7 @@ def reference_markdown() -> str:
     """The configuration reference (the generated part of docs/service.md): every table and key."""
     L = ["| key | type | default | meaning |", "|---|---|---|---|"]
     out: list[str] = []
-    for table, keys in SCHEMA.items():
+    for table, keys in tables().items():
         out.append(f"**[{table}]**")
         out.append("")
         out += L

@@ -14,7 +14,7 @@ import math
 import typing
 from dataclasses import dataclass
 from types import UnionType
-from typing import Any, Mapping, Union
+from typing import Any, Callable, Mapping, Union
 
 from measurement.effects import EFFECTS
 
@@ -101,6 +101,32 @@ def schema(cls: type, keys: Mapping[str, Mapping[str, Any]], *, extra: Mapping[s
 def doc(text: str = "", **limits: Any) -> dict[str, Any]:
     """A key's doc and limits, for ``schema``."""
     return {"doc": text, **limits}
+
+
+#: a publisher's own checks of its table: ``check(values, fail)`` may adjust the checked values in place and
+#: raises ``fail(key, message)`` (a ConfigError naming the file, the table and the key) for a bad combination
+TableCheck = Callable[[dict[str, Any], Callable[[str, str], ConfigError]], None]
+
+
+@dataclass(frozen=True)
+class PublisherTable:
+    """A publisher's configuration table, declared in its settings module (``TABLE``) and found through the
+    publishers' registry (``service.publish.registry``): the settings dataclass, each key's doc and limits, the
+    doc of its ``enabled`` key, whether it is on without the table, and its own checks.
+
+    Keys of kind "path" are resolved relative to the configuration file before ``check`` sees them.
+    """
+
+    settings: type
+    keys: Mapping[str, Mapping[str, Any]]
+    #: the doc of the table's ``enabled`` key (default true)
+    enabled: str
+    #: on with its defaults when the file has no such table (else off unless the table is given)
+    on_without_table: bool = False
+    check: TableCheck | None = None
+
+    def schema(self) -> dict[str, Key]:
+        return schema(self.settings, self.keys, extra={"enabled": Key("bool", True, self.enabled)})
 
 
 class Checker:

@@ -14,6 +14,8 @@ row). One connection guarded by a lock is shared by the daemon's threads.
 
 from __future__ import annotations
 
+import builtins
+import dataclasses
 import functools
 import json
 import os
@@ -36,52 +38,140 @@ DB_NAME = "results.db"
 SQLITE_MAX_INTEGER = 2**63 - 1
 SCHEMA_VERSION = 2  # 2: part, recipe and verdict columns (added in place to a version-1 store)
 
-#: the part/recipe/verdict columns (schema 2), added to an older store by ``ALTER TABLE`` at open
-PART_COLUMNS = (
-    ("part_id", "TEXT"),          # the part's serial number (PLC / MQTT), None when none was given
-    ("part_uuid", "TEXT"),        # the part: every release of one part shares it
-    ("recipe", "TEXT"),           # recipe name
-    ("recipe_version", "TEXT"),   # hash of the recipe file as used
-    ("release_index", "INTEGER"), # 1 … releases
-    ("releases", "INTEGER"),      # releases per part of the recipe
-    ("verdict", "TEXT"),          # this release's verdict: OK / NOK / INVALID
-    ("part_verdict", "TEXT"),     # the part's verdict, on the release that completed the part
-    ("part_value", "REAL"),       # the part's combined value of the recipe quantity, kg·m²
-    ("part_U", "REAL"),           # its expanded uncertainty, kg·m²
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of ``measurements``: its name (the ``StoredMeasurement`` field it reads back as), its SQL type
+    and constraints, how its text or blob decodes, which reads select it, the store schema that added it,
+    and how ``Store.record`` gets its value from what it is given (``_Given``)."""
+
+    name: str
+    sql: str
+    #: "" as stored; "json": a JSON text; "flags": a JSON list read back as a tuple; "array": a packed float64 array
+    codec: str = ""
+    #: "list": every read (listings); "full": a single measurement, the latest, a search page; "trace": with its trace
+    read: str = "list"
+    #: the store schema that added it: an older store gains it by ``ALTER TABLE`` when opened
+    since: int = 1
+    #: in the listing (``StoredMeasurement.summary``)
+    summary: bool = True
+    #: its value in the INSERT of a new measurement; None: not written there (the row id, the publication time)
+    value: Callable[[_Given], Any] | None = None
+
+
+@dataclass(frozen=True)
+class _Given:
+    """What ``Store.record`` has for a new row: its arguments (``result``: ``IdentificationResult.to_dict()``;
+    ``part``: the part columns' values), the numbers it drew and the payload text."""
+
+    uuid: str
+    seq: int
+    stored_at: float
+    payload: str | None
+    args: Mapping[str, Any]
+
+    @property
+    def result(self) -> Mapping[str, Any]:
+        return self.args.get("result") or {}
+
+    @property
+    def part(self) -> Mapping[str, Any]:
+        return self.args.get("part") or {}
+
+
+def _arg(name: str) -> Callable[[_Given], Any]:
+    return lambda g: g.args[name]
+
+
+def _result(name: str) -> Callable[[_Given], Any]:
+    return lambda g: g.result.get(name)
+
+
+def _part(name: str) -> Callable[[_Given], Any]:
+    return lambda g: g.part.get(name)
+
+
+def _json(name: str, **kw: Any) -> Callable[[_Given], Any]:
+    return lambda g: json.dumps(g.args[name], **kw) if g.args[name] is not None else None
+
+
+def _packed(name: str) -> Callable[[_Given], Any]:
+    return lambda g: _pack(g.args[name])
+
+
+#: every column of ``measurements``, in the table's order: the one place the store's SQL (the table, the
+#: migration, the INSERT, the SELECTs), the row → ``StoredMeasurement`` decoding and the salvage's checks come from
+COLUMNS: tuple[Column, ...] = (
+    Column("id", "INTEGER PRIMARY KEY", summary=False),
+    Column("uuid", "TEXT NOT NULL UNIQUE", value=lambda g: g.uuid),
+    Column("seq", "INTEGER NOT NULL UNIQUE", value=lambda g: g.seq),
+    Column("status", "TEXT NOT NULL CHECK (status IN ('ok', 'failed', 'aborted'))", value=_arg("status")),
+    Column("trigger", "TEXT NOT NULL", value=_arg("trigger")),
+    Column("device_id", "TEXT NOT NULL", value=_arg("device_id")),
+    Column("software_version", "TEXT NOT NULL", value=_arg("software_version")),
+    Column("started_at", "REAL NOT NULL", value=_arg("started_at")),
+    Column("finished_at", "REAL NOT NULL", value=_arg("finished_at")),
+    Column("stored_at", "REAL NOT NULL", summary=False, value=lambda g: g.stored_at),
+    Column("published_at", "REAL"),                       # set when the broker acknowledges it
+    Column("J", "REAL", value=_result("J")),               # kg·m²
+    Column("J_std", "REAL", value=_result("J_std")),       # kg·m²
+    Column("omega_n", "REAL", value=_result("omega_n")),   # rad/s
+    Column("damping_ratio", "REAL", value=_result("damping_ratio")),
+    Column("residual_rms", "REAL", value=_result("residual_rms")),  # rad
+    Column("flags", "TEXT NOT NULL DEFAULT '[]'", codec="flags",
+           value=lambda g: json.dumps(list(g.result.get("flags") or []))),
+    Column("error", "TEXT", value=_arg("error")),
+    Column("payload", "TEXT", codec="json", read="full", summary=False, value=lambda g: g.payload),
+    Column("rig", "TEXT", codec="json", read="full", summary=False, value=_json("rig")),
+    Column("config", "TEXT", codec="json", read="full", summary=False, value=_json("config")),
+    Column("trace_t", "BLOB", codec="array", read="trace", summary=False, value=_packed("trace_t")),  # s
+    Column("trace_angle", "BLOB", codec="array", read="trace", summary=False, value=_packed("trace_angle")),  # rad
+    Column("trace_meta", "TEXT", codec="json", read="trace", summary=False, value=_json("trace_meta", default=str)),
+    # schema 2: the part, recipe and verdict
+    Column("part_id", "TEXT", since=2, value=_part("part_id")),    # the part's serial number (PLC / MQTT)
+    Column("part_uuid", "TEXT", since=2, value=_part("part_uuid")),  # the part: every release of one part shares it
+    Column("recipe", "TEXT", since=2, value=_part("recipe")),        # recipe name
+    Column("recipe_version", "TEXT", since=2, value=_part("recipe_version")),  # hash of the recipe file as used
+    Column("release_index", "INTEGER", since=2, value=_part("release_index")),  # 1 … releases
+    Column("releases", "INTEGER", since=2, value=_part("releases")),  # releases per part of the recipe
+    Column("verdict", "TEXT", since=2, value=_part("verdict")),      # this release's verdict: OK / NOK / INVALID
+    Column("part_verdict", "TEXT", since=2, value=_part("part_verdict")),  # the part's, on the release completing it
+    Column("part_value", "REAL", since=2, value=_part("part_value")),  # the part's combined value, kg·m²
+    Column("part_U", "REAL", since=2, value=_part("part_U")),        # its expanded uncertainty, kg·m²
 )
+
+#: the part/recipe/verdict columns (schema 2), added to an older store by ``ALTER TABLE`` at open
+PART_COLUMNS = tuple((c.name, c.sql) for c in COLUMNS if c.since == 2)
+
+_READS = {"list": ("list",), "full": ("list", "full")}
+
+
+def _columns(read: str, *, trace: bool = False) -> tuple[Column, ...]:
+    """The columns a read selects: "list" or "full", with the trace or without."""
+    groups = _READS[read] + (("trace",) if trace else ())
+    return tuple(c for c in COLUMNS if c.read in groups)
+
+
+def _select(columns: Sequence[Column]) -> str:
+    return ", ".join(c.name for c in columns)
+
+
+_INSERTED = tuple(c for c in COLUMNS if c.value is not None)
+_INSERT = (f"INSERT INTO measurements ({_select(_INSERTED)}) "
+           f"VALUES ({', '.join('?' * len(_INSERTED))})")
+_JSON_COLUMNS = tuple(c.name for c in COLUMNS if c.codec in ("json", "flags"))
+_ARRAY_COLUMNS = tuple(c.name for c in COLUMNS if c.codec == "array")
+#: the measurements table as the first store schema made it (later columns are added by ALTER TABLE at open)
+_MEASUREMENTS = ("CREATE TABLE IF NOT EXISTS measurements (\n"
+                 + ",\n".join(f"    {c.name:<16} {c.sql}" for c in COLUMNS if c.since == 1) + "\n);\n")
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
     key   TEXT PRIMARY KEY,
     value TEXT NOT NULL
 );
-CREATE TABLE IF NOT EXISTS measurements (
-    id               INTEGER PRIMARY KEY,
-    uuid             TEXT NOT NULL UNIQUE,
-    seq              INTEGER NOT NULL UNIQUE,
-    status           TEXT NOT NULL CHECK (status IN ('ok', 'failed', 'aborted')),
-    trigger          TEXT NOT NULL,
-    device_id        TEXT NOT NULL,
-    software_version TEXT NOT NULL,
-    started_at       REAL NOT NULL,
-    finished_at      REAL NOT NULL,
-    stored_at        REAL NOT NULL,
-    published_at     REAL,
-    J                REAL,
-    J_std            REAL,
-    omega_n          REAL,
-    damping_ratio    REAL,
-    residual_rms     REAL,
-    flags            TEXT NOT NULL DEFAULT '[]',
-    error            TEXT,
-    payload          TEXT,
-    rig              TEXT,
-    config           TEXT,
-    trace_t          BLOB,
-    trace_angle      BLOB,
-    trace_meta       TEXT
-);
-CREATE INDEX IF NOT EXISTS measurements_finished ON measurements (finished_at);
+""" + _MEASUREMENTS + """CREATE INDEX IF NOT EXISTS measurements_finished ON measurements (finished_at);
 CREATE TABLE IF NOT EXISTS outbox (
     id             INTEGER PRIMARY KEY,
     measurement_id INTEGER NOT NULL REFERENCES measurements (id),
@@ -245,14 +335,8 @@ class StoredMeasurement:
 
     def summary(self) -> dict[str, Any]:
         """The listing fields (no payload, no trace)."""
-        return {
-            "uuid": self.uuid, "seq": self.seq, "status": self.status, "trigger": self.trigger,
-            "device_id": self.device_id, "software_version": self.software_version,
-            "started_at": self.started_at, "finished_at": self.finished_at, "published_at": self.published_at,
-            "J": self.J, "J_std": self.J_std, "omega_n": self.omega_n, "damping_ratio": self.damping_ratio,
-            "residual_rms": self.residual_rms, "flags": list(self.flags), "error": self.error,
-            **{name: getattr(self, name) for name, _ in PART_COLUMNS},
-        }
+        return {c.name: list(self.flags) if c.codec == "flags" else getattr(self, c.name)
+                for c in COLUMNS if c.summary}
 
 
 @dataclass(frozen=True)
@@ -264,17 +348,8 @@ class OutboxItem:
     attempts: int
 
 
-_BASE_COLUMNS = ("id, uuid, seq, status, trigger, device_id, software_version, started_at, finished_at, stored_at, "
-                 "published_at, J, J_std, omega_n, damping_ratio, residual_rms, flags, error")
-_PART_SELECT = ", ".join(name for name, _ in PART_COLUMNS)
-_LIST_COLUMNS = f"{_BASE_COLUMNS}, {_PART_SELECT}"
-_FULL_COLUMNS = _LIST_COLUMNS + ", payload, rig, config"
-_TRACE_COLUMNS = ", trace_t, trace_angle, trace_meta"
-
-
-def _names(columns: str) -> list[str]:
-    """The column names of a SELECT list above (they are the StoredMeasurement fields)."""
-    return [c.strip() for c in columns.split(",") if c.strip()]
+# the typed mirror of the column table: a column and its field come and go together
+assert [f.name for f in dataclasses.fields(StoredMeasurement)] == [c.name for c in COLUMNS]
 
 
 class Store:
@@ -300,9 +375,9 @@ class Store:
             self._db.executescript(_TENSOR_SCHEMA)
             self._db.executescript(_CHECK_SCHEMA)
             have = {row[1] for row in self._db.execute("PRAGMA table_info(measurements)")}
-            for name, kind in PART_COLUMNS:
-                if name not in have:
-                    self._db.execute(f"ALTER TABLE measurements ADD COLUMN {name} {kind}")
+            for c in COLUMNS:
+                if c.name not in have:
+                    self._db.execute(f"ALTER TABLE measurements ADD COLUMN {c.name} {c.sql}")
             self._db.execute("CREATE INDEX IF NOT EXISTS measurements_part ON measurements (part_id)")
             with self._tx():
                 row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
@@ -457,25 +532,11 @@ class Store:
                 db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('last_seq', ?)", (str(seq),))
                 payload = build_payload(uid, seq) if build_payload is not None else None
                 payload_text = dumps(payload) if payload is not None else None
-                r = result or {}
-                cur = db.execute(
-                    "INSERT INTO measurements (uuid, seq, status, trigger, device_id, software_version, started_at, "
-                    "finished_at, stored_at, J, J_std, omega_n, damping_ratio, residual_rms, flags, error, payload, rig, "
-                    "config, trace_t, trace_angle, trace_meta) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
-                    (uid, seq, status, trigger, device_id, software_version, started_at, finished_at, now,
-                     r.get("J"), r.get("J_std"), r.get("omega_n"), r.get("damping_ratio"), r.get("residual_rms"),
-                     json.dumps(list(r.get("flags") or [])), error, payload_text,
-                     json.dumps(rig) if rig is not None else None,
-                     json.dumps(config) if config is not None else None,
-                     _pack(trace_t), _pack(trace_angle),
-                     json.dumps(trace_meta, default=str) if trace_meta is not None else None),
-                )
-                mid = cur.lastrowid
-                if part:
-                    cols = [name for name, _ in PART_COLUMNS if part.get(name) is not None]
-                    if cols:
-                        db.execute(f"UPDATE measurements SET {', '.join(c + ' = ?' for c in cols)} WHERE id = ?",
-                                   (*[part[c] for c in cols], mid))
+                given = _Given(uid, seq, now, payload_text, dict(
+                    status=status, trigger=trigger, device_id=device_id, software_version=software_version,
+                    started_at=started_at, finished_at=finished_at, result=result, error=error, rig=rig,
+                    config=config, trace_t=trace_t, trace_angle=trace_angle, trace_meta=trace_meta, part=part))
+                mid = db.execute(_INSERT, [c.value(given) for c in _INSERTED if c.value is not None]).lastrowid
                 if payload_text is not None:
                     for kind in enqueue:
                         db.execute("INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at) VALUES (?,?,?,?,?)",
@@ -521,17 +582,18 @@ class Store:
             return int(self._db.execute("SELECT COUNT(*) FROM outbox").fetchone()[0])
 
     # --- reading ------------------------------------------------------------------
-    def _row(self, row: Sequence[Any], full: bool, trace: bool) -> StoredMeasurement:
-        """A row selected with ``_FULL_COLUMNS`` (full) or ``_LIST_COLUMNS``, plus ``_TRACE_COLUMNS`` (trace)."""
-        names = _names(_FULL_COLUMNS if full else _LIST_COLUMNS) + (_names(_TRACE_COLUMNS) if trace else [])
-        d = dict(zip(names, row, strict=True))
-        d["flags"] = tuple(json.loads(d["flags"] or "[]"))
-        for k in ("payload", "rig", "config", "trace_meta"):
-            if d.get(k) is not None:
-                d[k] = json.loads(d[k])
-        for k in ("trace_t", "trace_angle"):
-            if k in d:
-                d[k] = _unpack(d[k])
+    @staticmethod
+    def _row(row: Sequence[Any], full: bool, trace: bool) -> StoredMeasurement:
+        """A row selected with the columns of ``_columns("full" if full else "list", trace=trace)``."""
+        d: dict[str, Any] = {}
+        for c, v in zip(_columns("full" if full else "list", trace=trace), row, strict=True):
+            if c.codec == "flags":
+                v = tuple(json.loads(v or "[]"))
+            elif c.codec == "json" and v is not None:
+                v = json.loads(v)
+            elif c.codec == "array":
+                v = _unpack(v)
+            d[c.name] = v
         return StoredMeasurement(**d)
 
     @_store_errors("reading a measurement")
@@ -540,7 +602,7 @@ class Store:
 
         A key of digits only is a sequence number first and a UUID prefix when no measurement has that
         number (a UUID may start with eight digits)."""
-        cols = _FULL_COLUMNS + (_TRACE_COLUMNS if trace else "")
+        cols = _select(_columns("full", trace=trace))
         with self._lock:
             rows = []
             if (isinstance(key, int) or (isinstance(key, str) and key.isdigit())) and int(key) <= SQLITE_MAX_INTEGER:
@@ -565,7 +627,8 @@ class Store:
         where = "WHERE status = ?" if status else ""
         args: tuple = (status,) if status else ()
         with self._lock:
-            row = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC LIMIT 1", args).fetchone()
+            row = self._db.execute(f"SELECT {_select(_columns('full'))} FROM measurements {where} "
+                                   "ORDER BY seq DESC LIMIT 1", args).fetchone()
         return self._row(row, full=True, trace=False) if row else None
 
     @_store_errors("listing measurements")
@@ -579,12 +642,12 @@ class Store:
         lim = "LIMIT ?" if limit is not None else ""
         if limit is not None:
             args.append(int(limit))
-        cols = _FULL_COLUMNS if full else _LIST_COLUMNS
+        cols = _select(_columns("full" if full else "list"))
         with self._lock:
             rows = self._db.execute(f"SELECT {cols} FROM measurements {where} ORDER BY seq DESC {lim}", args).fetchall()
         return [self._row(r, full=full, trace=False) for r in rows]
 
-    def recipes(self) -> list[str]:
+    def recipes(self) -> builtins.list[str]:
         """Names of the recipes of the completed parts in the store, in order of first use."""
         with self._lock:
             rows = self._db.execute("SELECT recipe FROM measurements WHERE part_verdict IS NOT NULL "
@@ -635,7 +698,7 @@ class Store:
                         json.dumps(record, allow_nan=False)))
 
     @_store_errors("reading tensor sets")
-    def tensor_sets(self, limit: int | None = 20) -> list[dict[str, Any]]:
+    def tensor_sets(self, limit: int | None = 20) -> builtins.list[dict[str, Any]]:
         """Stored tensor sets, newest first: their records with ``finished_at`` and ``started_at``."""
         with self._lock:
             if not self._db.execute("SELECT 1 FROM sqlite_master WHERE name = 'tensor_sets'").fetchone():
@@ -655,7 +718,7 @@ class Store:
                         json.dumps(record, allow_nan=False)))
 
     @_store_errors("reading check standards")
-    def check_standards(self, limit: int | None = 20) -> list[dict[str, Any]]:
+    def check_standards(self, limit: int | None = 20) -> builtins.list[dict[str, Any]]:
         """Stored check-standard measurements, newest first, each with ``finished_at``."""
         with self._lock:
             if not self._db.execute("SELECT 1 FROM sqlite_master WHERE name = 'check_standards'").fetchone():
@@ -676,14 +739,14 @@ class Store:
     @_store_errors("searching measurements")
     def search(self, *, offset: int = 0, limit: int | None = 25, since: float | None = None,
                until: float | None = None, status: str | None = None, flag: str | None = None,
-               part_id: str | None = None, recipe: str | None = None) -> tuple[list[StoredMeasurement], int]:
+               part_id: str | None = None, recipe: str | None = None) -> tuple[builtins.list[StoredMeasurement], int]:
         """One page of measurements (with payloads), newest first, and how many match in all.
         The filters of ``list``, and flag: only those carrying this quality flag."""
         where, args = _where(since=since, until=until, status=status, part_id=part_id, recipe=recipe, flag=flag)
         with self._lock:
             total = int(self._db.execute(f"SELECT COUNT(*) FROM measurements {where}", args).fetchone()[0])
             page = f"LIMIT {int(limit)} OFFSET {int(offset)}" if limit is not None else ""
-            rows = self._db.execute(f"SELECT {_FULL_COLUMNS} FROM measurements {where} ORDER BY seq DESC {page}",
+            rows = self._db.execute(f"SELECT {_select(_columns('full'))} FROM measurements {where} ORDER BY seq DESC {page}",
                                     args).fetchall()
         return [self._row(r, full=True, trace=False) for r in rows], total
 
@@ -779,7 +842,7 @@ def _read_rows(db: sqlite3.Connection, table: str, health: StoreHealth) -> Itera
         row = _read_row(db, table, columns, rowid)
         if row is None and table == "measurements":
             # the trace's pages are the bulk of the file: keep the result without it rather than nothing
-            row = _read_row(db, table, columns, rowid, without=("trace_t", "trace_angle"))
+            row = _read_row(db, table, columns, rowid, without=_ARRAY_COLUMNS)
             if row is not None:
                 health.problems.append(f"measurement row {rowid}: trace not readable (kept without it)")
         if row is None:
@@ -847,10 +910,10 @@ def _decodes(table: str, d: Mapping[str, Any]) -> bool:
     if table != "measurements":
         return True
     try:
-        for k in ("flags", "payload", "rig", "config", "trace_meta"):
+        for k in _JSON_COLUMNS:
             if d.get(k) is not None:
                 json.loads(d[k])
-        for k in ("trace_t", "trace_angle"):
+        for k in _ARRAY_COLUMNS:
             _unpack(d.get(k))
     except (zlib.error, json.JSONDecodeError, UnicodeDecodeError, TypeError, ValueError):
         return False

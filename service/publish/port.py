@@ -4,10 +4,10 @@ A publisher (the Modbus server, the MQTT client, the web page, the OPC UA
 server) is one class with ``NAME`` (its configuration table, and its name in
 the logs and on the health page), a ``build(settings, appliance)`` class
 method, and the hooks below; every hook has a default that does nothing, so a
-publisher implements only what it publishes. ``PUBLISHERS`` lists them: adding
-one is one subpackage with its settings dataclass and one line there. The
-daemon holds the publishers that the configuration enables in a list and never
-names one.
+publisher implements only what it publishes. ``service.publish.registry``
+lists them: adding one is one subpackage (the publisher and its settings) and
+one line there. The daemon holds the publishers that the configuration
+enables in a list and never names one.
 
 Hooks run on the daemon's main loop thread (``on_*``, ``live``, ``status``,
 ``failure``); they must hand work over and never block.
@@ -16,8 +16,6 @@ Hooks run on the daemon's main loop thread (``on_*``, ``live``, ``status``,
 from __future__ import annotations
 
 import concurrent.futures
-import importlib
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, ClassVar, Mapping
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -29,31 +27,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from service.persistence.store import Store, StoredMeasurement
     from service.publish.modbus.registers import LiveStatus
     from service.publish.replies import ReplyTo
-
-
-@dataclass(frozen=True)
-class PublisherEntry:
-    """One publisher: its configuration table (``Config.<name>``, None when off) and the module whose
-    ``PUBLISHER`` class serves it (imported only when the table is given: pymodbus, paho and aiohttp are
-    loaded by the appliances that use them)."""
-
-    name: str
-    module: str
-    #: reported on the health page (``/api/health``) under its name, null when off
-    in_health: bool = True
-
-    def load(self) -> type[Publisher]:
-        return importlib.import_module(self.module).PUBLISHER
-
-
-#: in start order: Modbus first (the PLC sees STARTING while the devices open), the web page once the
-#: sequencer exists, MQTT (its outbox sender delivers at once), OPC UA
-PUBLISHERS: tuple[PublisherEntry, ...] = (
-    PublisherEntry("modbus", "service.publish.modbus.server"),
-    PublisherEntry("web", "service.publish.web.server", in_health=False),
-    PublisherEntry("mqtt", "service.publish.mqtt.client"),
-    PublisherEntry("opcua", "service.publish.opcua.server"),
-)
 
 
 class Publisher:

@@ -56,8 +56,8 @@ class Harness:
         if hasattr(self.solenoid, "add_listener"):
             self.rig.attach(self.solenoid)
         self.sensor = SimulatedAngleSensor(self.rig.angle, self.clock, rate=rate, quantisation_bits=17)
-        self.results = []
-        self.events = []
+        self.results: list = []  # the sink's measurements
+        self.events: list = []
         self.config = config or SequencerConfig(capture_duration=4.0, identify_in_worker=False)
         self.seq = Sequencer(clock=self.clock, solenoid=self.solenoid, sensor=self.sensor, rig=RIG,
                              sink=sink if sink is not None else self.results.append, config=self.config,

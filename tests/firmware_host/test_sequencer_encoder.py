@@ -35,7 +35,8 @@ class Rigged:
         self.server = SimEncoderServer(self.sim.angle, self.clock, server_config).start()
         self.encoder = ModbusEncoder(self.server.encoder_config(timeout=0.02), self.clock)
         self.button = PushButton(27, bounce_time=None, pin_factory=factory) if button else None
-        self.results, self.events = [], []
+        self.results: list = []
+        self.events: list = []
         self.seq = Sequencer(clock=self.clock, solenoid=self.solenoid, sensor=self.encoder, rig=self.rig,
                              sink=self.results.append, button=self.button,
                              config=SequencerConfig(capture_duration=capture, sample_timeout=sample_timeout))

@@ -80,11 +80,11 @@ class Broker:
         self.conf.write_text("\n".join(lines) + "\n")
 
     def start(self) -> None:
-        assert self.proc is None
-        self.proc = subprocess.Popen([MOSQUITTO, "-c", str(self.conf)], stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.PIPE)
+        assert self.proc is None and MOSQUITTO is not None
+        proc = self.proc = subprocess.Popen([MOSQUITTO, "-c", str(self.conf)], stdout=subprocess.DEVNULL,
+                                            stderr=subprocess.PIPE)
         try:
-            wait_until(lambda: port_open(self.port) or self.proc.poll() is not None, 10, what="mosquitto to listen")
+            wait_until(lambda: port_open(self.port) or proc.poll() is not None, 10, what="mosquitto to listen")
         except AssertionError:
             self.stop()
             raise
@@ -151,7 +151,7 @@ class Consumer:
         self._subscribed = threading.Event()
         self.topics = topics
         self.client = mqtt.Client(CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=not persistent)
-        self.client.reconnect_delay_set(0.1, 0.5)
+        self.client.reconnect_delay_set(0.1, 0.5)  # type: ignore[arg-type]  # s; paho's hints say int, it takes float
         self.client.on_connect = self._on_connect
         self.client.on_subscribe = lambda *a: self._subscribed.set()
         self.client.on_message = self._on_message
@@ -254,7 +254,9 @@ class RunningAppliance:
         self.app.start()
         self.events: list = []
         self._cond = threading.Condition()
-        self.app.sequencer.subscribe(self._on_event)
+        seq = self.app.sequencer
+        assert seq is not None  # made by start()
+        seq.subscribe(self._on_event)
         self.thread = threading.Thread(target=self.app.run, name="test-appliance-main", daemon=True)
         self.thread.start()
 
@@ -283,7 +285,9 @@ class RunningAppliance:
                         timeout, count, f"{count} measurement(s) back to IDLE")
 
     def press(self) -> None:
-        pin = self.app.devices.button.pin
+        devices = self.app.devices
+        assert devices is not None and devices.button is not None
+        pin = devices.button.pin
         pin.drive_low()
         pin.drive_high()
 

@@ -6,8 +6,14 @@ import dataclasses
 import threading
 from typing import Any
 
-from service.publish import port
-from service.publish.port import ApplianceView, Publisher, PublisherEntry
+import pytest
+
+from service.config.appliance import parse_config, reference_markdown
+from service.config.schema import PublisherTable
+from service.errors import ConfigError
+from service.publish import registry
+from service.publish.port import ApplianceView, Publisher
+from service.publish.registry import PublisherEntry
 
 from .conftest import appliance_doc
 
@@ -15,6 +21,17 @@ from .conftest import appliance_doc
 @dataclasses.dataclass(frozen=True)
 class DummySettings:
     topic: str = "parts"
+    window: int = 4
+
+
+def _check(values, fail) -> None:
+    if values["topic"] == values["topic"].upper():
+        raise fail("topic", f"expected a topic with lower-case letters, got {values['topic']!r}")
+
+
+#: its configuration table, as a publisher's settings module declares it
+TABLE = PublisherTable(DummySettings, {"topic": dict(doc="where the parts go"), "window": dict(doc="", min=1)},
+                       enabled="publish to the dummy", check=_check)
 
 
 class DummyPublisher(Publisher):
@@ -60,13 +77,36 @@ class DummyPublisher(Publisher):
 PUBLISHER = DummyPublisher
 
 
-def test_a_dummy_publisher_registered_in_one_place_gets_states_and_results(tmp_path, monkeypatch, appliance_factory):
-    monkeypatch.setattr(port, "PUBLISHERS", (*port.PUBLISHERS, PublisherEntry("dummy", __name__)))
+@pytest.fixture
+def registered(monkeypatch):
+    """The one line that adds the dummy publisher: its entry in the registry (this module is its publisher
+    and its settings module)."""
+    monkeypatch.setattr(registry, "PUBLISHERS", (*registry.PUBLISHERS, PublisherEntry("dummy", __name__, __name__)))
+
+
+def test_a_registered_publisher_has_its_configuration_table(registered):
+    assert parse_config({}).dummy is None, "off without its table"
+    config = parse_config({"dummy": {"topic": "rotors"}})
+    assert config.dummy == DummySettings(topic="rotors", window=4)
+    assert config.to_dict()["dummy"] == {"topic": "rotors", "window": 4}
+    assert parse_config({"dummy": {"enabled": False}}).dummy is None
+    with pytest.raises(ConfigError, match=r"\[dummy\] window: expected an integer >= 1, got 0"):
+        parse_config({"dummy": {"window": 0}})
+    with pytest.raises(ConfigError, match=r"\[dummy\] topic: expected a topic with lower-case letters"):
+        parse_config({"dummy": {"topic": "ROTORS"}})
+    with pytest.raises(ConfigError, match=r"unknown key 'topc' \(did you mean 'topic'\?\)"):
+        parse_config({"dummy": {"topc": "x"}})
+    assert "**[dummy]**" in reference_markdown() and "| `topic` | str | `\"parts\"` | where the parts go |" in reference_markdown()
+
+
+def test_an_unregistered_table_is_unknown():
+    with pytest.raises(ConfigError, match=r"unknown table 'dummy'"):
+        parse_config({"dummy": {"topic": "rotors"}})
+
+
+def test_a_dummy_publisher_registered_in_one_place_gets_states_and_results(tmp_path, registered, appliance_factory):
     DummyPublisher.made.clear()
-    # the [dummy] table as the configuration would hold it
-    from service.config.appliance import Config
-    monkeypatch.setattr(Config, "dummy", DummySettings(topic="rotors"), raising=False)
-    app = appliance_factory(appliance_doc(tmp_path / "state"))
+    app = appliance_factory(appliance_doc(tmp_path / "state", dummy={"topic": "rotors"}))
     [dummy] = DummyPublisher.made
     assert dummy.running and app.app.dummy is dummy
     assert app.app.publisher_health()["dummy"] == {"topic": "rotors"}
@@ -82,15 +122,12 @@ def test_a_dummy_publisher_registered_in_one_place_gets_states_and_results(tmp_p
     assert dummy.calls[-1] == ("stop", None) and not dummy.running
 
 
-def test_a_publisher_whose_thread_died_stops_the_daemon(tmp_path, monkeypatch, appliance_factory):
+def test_a_publisher_whose_thread_died_stops_the_daemon(tmp_path, monkeypatch, registered, appliance_factory):
     class Failing(DummyPublisher):
         def failure(self) -> str | None:
             return "the dummy thread stopped"
 
-    monkeypatch.setattr(port, "PUBLISHERS", (*port.PUBLISHERS, PublisherEntry("dummy", __name__)))
     monkeypatch.setattr(__import__(__name__, fromlist=["PUBLISHER"]), "PUBLISHER", Failing)
-    from service.config.appliance import Config
-    monkeypatch.setattr(Config, "dummy", DummySettings(), raising=False)
-    app = appliance_factory(appliance_doc(tmp_path / "state"))
+    app = appliance_factory(appliance_doc(tmp_path / "state", dummy={}))
     app.thread.join(30)
     assert not app.thread.is_alive() and app.app.exit_status == 3

@@ -73,7 +73,9 @@ def plc(app) -> ModbusTcpClient:
 
 
 def snapshot(c: ModbusTcpClient) -> dict:
-    return R.read_snapshot(lambda a, n: c.read_input_registers(a, count=n, device_id=1).registers)
+    snap = R.read_snapshot(lambda a, n: c.read_input_registers(a, count=n, device_id=1).registers)
+    assert snap is not None, "no consistent snapshot"
+    return snap
 
 
 def select(c: ModbusTcpClient, number: int) -> None:

@@ -139,3 +139,62 @@ def test_a_uuid_that_starts_with_digits_is_found_by_its_prefix(tmp_path, result,
         assert m.uuid == str(fixed) and m.seq == 1
         assert store.get("12345678").uuid == m.uuid   # no measurement 12345678: the UUID prefix
         assert store.get("1").uuid == m.uuid          # digits that are a sequence number
+
+
+#: the measurements table of a version-1 store, as that release wrote it (before the part columns)
+_VERSION_1 = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE measurements (
+    id INTEGER PRIMARY KEY, uuid TEXT NOT NULL UNIQUE, seq INTEGER NOT NULL UNIQUE,
+    status TEXT NOT NULL CHECK (status IN ('ok', 'failed', 'aborted')), trigger TEXT NOT NULL,
+    device_id TEXT NOT NULL, software_version TEXT NOT NULL, started_at REAL NOT NULL, finished_at REAL NOT NULL,
+    stored_at REAL NOT NULL, published_at REAL, J REAL, J_std REAL, omega_n REAL, damping_ratio REAL,
+    residual_rms REAL, flags TEXT NOT NULL DEFAULT '[]', error TEXT, payload TEXT, rig TEXT, config TEXT,
+    trace_t BLOB, trace_angle BLOB, trace_meta TEXT);
+CREATE TABLE outbox (id INTEGER PRIMARY KEY, measurement_id INTEGER NOT NULL REFERENCES measurements (id),
+    uuid TEXT NOT NULL, kind TEXT NOT NULL, payload TEXT NOT NULL, created_at REAL NOT NULL,
+    attempts INTEGER NOT NULL DEFAULT 0, last_attempt REAL);
+INSERT INTO meta VALUES ('schema', '1');
+INSERT INTO measurements (uuid, seq, status, trigger, device_id, software_version, started_at, finished_at,
+    stored_at, J, flags, error) VALUES ('0f0e0d0c-0000-4000-8000-000000000001', 7, 'failed', 'plc', 'old', '0.1',
+    100.0, 101.0, 102.0, NULL, '["encoder_gaps"]', 'encoder fault');
+"""
+
+
+def test_a_version_1_store_gains_the_part_columns_and_keeps_its_rows(tmp_path, result):
+    from service.persistence.store import COLUMNS, SCHEMA_VERSION
+
+    db = sqlite3.connect(tmp_path / "results.db")
+    db.executescript(_VERSION_1)
+    db.close()
+    with Store(tmp_path) as store:
+        [old] = store.list()
+        assert (old.seq, old.status, old.error, old.flags, old.part_id) == (7, "failed", "encoder fault",
+                                                                            ("encoder_gaps",), None)
+        m = store.record(status="ok", trigger="button", device_id="new", software_version="9.9", started_at=1.0,
+                         finished_at=2.0, result=result[0].to_dict(),
+                         part={"part_id": "SN-1", "recipe": "rotor", "release_index": 1, "releases": 1,
+                               "verdict": "OK", "part_verdict": "OK", "part_value": 0.0125, "part_U": 1e-5})
+        assert m.seq == 8 and (m.part_id, m.recipe, m.part_verdict, m.part_U) == ("SN-1", "rotor", "OK", 1e-5)
+        assert m.J == result[0].J and m.flags == tuple(result[0].flags)
+        assert store.verdict_counts() == {"OK": 1, "NOK": 0, "INVALID": 0}
+    db = sqlite3.connect(tmp_path / "results.db")
+    assert [r[1] for r in db.execute("PRAGMA table_info(measurements)")] == [c.name for c in COLUMNS]
+    assert db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone() == (str(SCHEMA_VERSION),)
+    db.close()
+
+
+def test_a_new_store_has_the_columns_of_the_table_in_its_order(tmp_path, result):
+    from service.persistence.store import COLUMNS
+
+    with Store(tmp_path) as store:
+        m = store_one(store, result)
+        full = store.get(m.uuid, trace=True)
+    db = sqlite3.connect(tmp_path / "results.db")
+    info = [(r[1], r[2], r[3], r[4]) for r in db.execute("PRAGMA table_info(measurements)")]
+    db.close()
+    assert [name for name, *_ in info] == [c.name for c in COLUMNS]
+    assert [kind for _, kind, *_ in info] == [c.sql.split()[0] for c in COLUMNS]
+    assert ("flags", "TEXT", 1, "'[]'") in info and ("status", "TEXT", 1, None) in info
+    assert full is not None and np.array_equal(full.trace_t, result[1].t) and full.rig == result[2].to_dict()
+    assert full.trace_meta == {"encoder": {"samples": len(result[1])}}

@@ -68,6 +68,9 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
 
     browser.get(url)
     wait.until(lambda d: d.find_element(By.ID, "state").text == "IDLE")
+    # the script knows the states from the table served with the page, not from a copy of its own
+    from service.states import vocabulary
+    assert browser.execute_script("return moi.states") == vocabulary()
 
     # an action without the token is refused, and nothing moves
     browser.find_element(By.ID, "measure").click()

@@ -50,7 +50,7 @@ def truth_swing(duration: float = 21.0) -> Swing:
 
 def write_video(path: Path, frames, fps: float = 60.0) -> Path:
     """MJPG in AVI (what a V4L2 camera streams), quality 95."""
-    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, (CAMERA.width, CAMERA.height), isColor=False)
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), fps, (CAMERA.width, CAMERA.height), isColor=False)
     assert w.isOpened()
     w.set(cv2.VIDEOWRITER_PROP_QUALITY, 95)
     for f in frames:

@@ -151,7 +151,7 @@ class _TrackedHandler(ServerRequestHandler):
             # closed for the cap between its accept and now (asyncio makes connections one loop turn after
             # accepting them): pymodbus had no transport to close then, so the socket would stay open
             transport.close()
-            self.transport = None
+            self.transport = None  # type: ignore[assignment]  # pymodbus types it without None; it means "closed"
             return
         server = self.server
         if not isinstance(server, _BoundedTcpServer):
@@ -590,6 +590,7 @@ class ModbusServer(Publisher):
     async def _main(self) -> None:
         s = self.settings
         device = self._device()
+        server: _BoundedTcpServer | ModbusSerialServer
         if s.mode == "tcp":
             server = _BoundedTcpServer(device, address=(s.host, s.port), ignore_missing_devices=False,
                                        custom_pdu=[_WriteSingleCoil], max_connections=s.max_connections,

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import ipaddress
 from dataclasses import dataclass
+from typing import Any, Callable
 
 from drivers.modbus_words import WORD_ORDERS
+
+from service.config.schema import PublisherTable
+from service.errors import ConfigError
 
 #: clients on this machine are always allowed (local tools: ``moi modbus-map --read``, the web page)
 _THIS_MACHINE = (ipaddress.ip_network("127.0.0.1/32"), ipaddress.ip_network("::1/128"))
@@ -95,3 +99,17 @@ KEYS: dict[str, dict] = {
     "plc_heartbeat_timeout": dict(doc="the PLC's heartbeat register (114) unchanged this long raises "
                                   "plc_heartbeat_lost, s (0: no watchdog)", min=0, max=3600),
 }
+
+
+def _check(mb: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
+    if mb["mode"] == "rtu" and not mb["serial_port"]:
+        raise fail("serial_port", "missing: mode = \"rtu\" needs the serial device, e.g. /dev/ttyAMA0")
+    mb["allow_from"] = tuple(mb["allow_from"] or ())
+    try:
+        allowed_networks(mb["allow_from"])
+    except ValueError as exc:
+        raise fail("allow_from", str(exc)) from None
+
+
+#: the configuration's ``[modbus]`` table: on (with its defaults) without the table
+TABLE = PublisherTable(ModbusSettings, KEYS, enabled="serve the registers", on_without_table=True, check=_check)

@@ -143,7 +143,7 @@ class _Client(mqtt.Client):
 
     on_connect_error: Callable[[OSError], None] | None = None
 
-    def reconnect(self):  # type: ignore[override]
+    def reconnect(self):
         try:
             return super().reconnect()
         except OSError as exc:  # socket.gaierror, ConnectionRefusedError, ssl.SSLError, TimeoutError ...
@@ -170,7 +170,7 @@ class MqttService(Publisher):
         self.topics = Topics(settings.prefix, device_id)
         self.software_version = software_version
         self._on_command = on_command or (lambda name, source, data=None, reply=None: None)
-        self._seen_ids: deque[str] = deque(maxlen=256)
+        self._seen_ids: deque[tuple[str, str]] = deque(maxlen=256)
         self._seen_lock = threading.Lock()
         self.connected_event = threading.Event()
         self.subscribed_event = threading.Event()  # the broker confirmed the command subscriptions

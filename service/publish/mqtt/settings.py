@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Callable
+
+from service.config.schema import PublisherTable
+from service.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -63,3 +67,23 @@ KEYS: dict[str, dict] = {
                      "correlation data) or \"3.1.1\" for a broker that speaks only that (replies on "
                      "<prefix>/<device id>/reply)", choices=PROTOCOLS),
 }
+
+
+def _check(m: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
+    if m["password"] is not None and m["password_file"] is not None:
+        raise fail("password", "give password or password_file, not both")
+    if (m["password"] is not None or m["password_file"] is not None) and m["username"] is None:
+        raise fail("username", "missing: a password needs a username")
+    if (m["cert_file"] is None) != (m["key_file"] is None):
+        raise fail("cert_file", "give both cert_file and key_file for mutual TLS, or neither")
+    if not m["tls"] and any(m[k] for k in ("ca_file", "cert_file", "key_file")):
+        raise fail("tls", "ca_file/cert_file/key_file are set but tls = false")
+    if m["reconnect_max"] < m["reconnect_min"]:
+        raise fail("reconnect_max", "must be >= reconnect_min")
+    if not m["prefix"].strip("/") or any(ch in m["prefix"] for ch in "#+"):
+        raise fail("prefix", f"expected topic levels without '#' or '+', got {m['prefix']!r}")
+
+
+#: the configuration's ``[mqtt]`` table: off unless the file has it
+TABLE = PublisherTable(MqttSettings, KEYS, enabled="publish over MQTT (the table's presence enables it)",
+                       check=_check)

@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Callable
+
+from service.config.schema import PublisherTable
+from service.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -53,3 +57,17 @@ KEYS: dict[str, dict] = {
     "results_kept": dict(doc="results GetResultById finds in memory (older ones: from the store)", min=1,
                          max=100000),
 }
+
+
+def _check(o: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
+    if o["password"] is not None and o["password_file"] is not None:
+        raise fail("password", "give password or password_file, not both")
+    if o["username"] is None and not o["anonymous"]:
+        raise fail("username", "missing: no client could log in (give username and password_file, or set "
+                               "anonymous = true)")
+    if o["username"] is not None and o["password"] is None and o["password_file"] is None:
+        raise fail("password_file", "missing: the user needs a password")
+
+
+#: the configuration's ``[opcua]`` table: off unless the file has it
+TABLE = PublisherTable(OpcUaSettings, KEYS, enabled="serve OPC UA (the table's presence enables it)", check=_check)

@@ -198,7 +198,7 @@ class Guard:
             await asyncio.sleep(GUESS_DELAY)
 
     def token_ok(self, candidate: str | None) -> bool:
-        return bool(candidate) and hmac.compare_digest(candidate.encode(), self._token.encode())
+        return candidate is not None and candidate != "" and hmac.compare_digest(candidate.encode(), self._token.encode())
 
     def login(self, candidate: str | None, user: str | None = None) -> tuple[str, Session] | None:
         """A new session (id, session) when ``candidate`` is the token (no ``user``) or ``user``'s password,

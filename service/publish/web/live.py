@@ -48,7 +48,7 @@ class Live:
         app = self.app
         seq = app.sequencer
         live = app.live_status()
-        out: dict[str, Any] = {"type": "tick", "state": live.state, "words": STATE_WORDS.get(live.state, ""),
+        out: dict[str, Any] = {"type": "tick", "state": live.state, "words": STATE_WORDS.get(live.state or "", ""),
                                "fault": None, "measurement_id": None, **extras(app)}
         if seq is None:
             return out

@@ -173,7 +173,10 @@ class WebServer(Publisher):
 
     def on_event(self, event: "Event") -> None:
         msg = self.views.live.event_message(event)
-        self._call(lambda: [q.put_nowait(msg) for q in self._listeners])
+        def push() -> None:
+            for q in self._listeners:
+                q.put_nowait(msg)
+        self._call(push)
 
     def on_result(self, stored: Any, measurement: "Measurement") -> None:
         """A measurement was stored: draw its plot once, in the plot worker, and keep it with it."""

@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from typing import Any, Callable
 
-from measurement.units import ASCII_NAMES, INERTIA_UNITS
+from measurement.units import ASCII_NAMES, INERTIA_UNITS, inertia_unit
+
+from service.config.schema import PublisherTable
+from service.errors import ConfigError
 
 #: the name of the plot kept with each measurement in the store
 PLOT_NAME = "plot.png"
@@ -53,3 +58,19 @@ KEYS: dict[str, dict] = {
     "users_file": dict(doc="named users with roles (operator, quality, admin) and password hashes, made by "
                        "`moi user add` (default: none; the token is the one login)", kind="path"),
 }
+
+
+#: a shift start, HH:MM
+_HHMM = re.compile(r"([01][0-9]|2[0-3]):[0-5][0-9]")
+
+
+def _check(w: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
+    w["display_unit"] = inertia_unit(w["display_unit"])
+    for hm in w["shift_starts"]:
+        if not _HHMM.fullmatch(str(hm)):
+            raise fail("shift_starts", f"expected times HH:MM (00:00 … 23:59), got {hm!r}")
+
+
+#: the configuration's ``[web]`` table: on (with its defaults) without the table
+TABLE = PublisherTable(WebSettings, KEYS, enabled="serve the appliance's web page", on_without_table=True,
+                       check=_check)

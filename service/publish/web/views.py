@@ -31,12 +31,13 @@ from .settings import PLOT_NAME
 from measurement.flags import FLAGS
 
 from .words import STATE_WORDS, flag_words
+from service.states import vocabulary
 from . import quality as Q
 
 if TYPE_CHECKING:  # pragma: no cover
     import concurrent.futures
 
-    from service.persistence.store import StoredMeasurement as Measurement
+    from service.persistence.store import Store, StoredMeasurement as Measurement
     from service.publish.port import ApplianceView
 
     from .auth import Guard
@@ -139,6 +140,7 @@ class Views:
         # file names carry a hash of the content: a browser never keeps a stale script after an update
         stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
         self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS, VERDICT_WORDS=Q.VERDICT_WORDS,
+                                states_json=json.dumps(vocabulary(), separators=(",", ":")),
                                 static_url=lambda name: f"/static/{name}?v={stamps.get(name, '')}")
 
     # --- application ------------------------------------------------------------------------
@@ -312,8 +314,9 @@ class Views:
 
     def _next(self, request: web.Request, value: str | None) -> str:
         # only a path on this appliance: never an open redirect
-        ok = value and value.startswith("/") and not value.startswith(("//", "/\\")) and "\\" not in value
-        return value if ok else "/"
+        if value and value.startswith("/") and not value.startswith(("//", "/\\")) and "\\" not in value:
+            return value
+        return "/"
 
     async def login(self, request: web.Request) -> web.StreamResponse:
         self._same_origin(request)
@@ -452,6 +455,11 @@ class Views:
         return web.json_response({"accepted": True, "command": "set", "action": action}, status=202)
 
     # --- results ----------------------------------------------------------------------------------
+    def _store(self) -> "Store":
+        store = self.app.store
+        assert store is not None  # the store is open before the page serves
+        return store
+
     def _get(self, key: str, trace: bool = False) -> "Measurement":
         if not key or len(key) > 64 or not all(c.isalnum() or c == "-" for c in key):
             raise Refused(400, f"bad measurement id {key[:64]!r}: expected a UUID, a UUID prefix or a sequence number")
@@ -496,7 +504,7 @@ class Views:
         """The quality record of one result: a page that prints on A4 (the PDF has the same content)."""
         m = self._get(request.match_info["key"])
         ctx = self._result_context(m)
-        releases = Q.release_rows(ctx["v"], m.payload, self.app.store.get)
+        releases = Q.release_rows(ctx["v"], m.payload, self._store().get)
         seen = sorted({f for r in releases for f in r["flags"] or ()} | set(m.flags))
         return self._page(request, "report.html", title=f"Report {m.seq}", releases=releases,
                           flags=flag_words(seen), **ctx)
@@ -519,15 +527,15 @@ class Views:
         fut = self.server.plot_future(m.uuid)
         if fut is not None:
             await asyncio.wrap_future(fut)
-        got = self.app.store.get_attachment(m.uuid, PLOT_NAME)
+        got = self._store().get_attachment(m.uuid, PLOT_NAME)
         if got is None:
             # stored without a plot (the page was off): identify the kept trace again, once, and keep the picture
-            if not self.app.store.has_trace(m.uuid):
+            if not self._store().has_trace(m.uuid):
                 raise Refused(404, f"measurement {m.seq} has no plot and no stored trace to draw one from")
             cfg = self.app.config
             job = (replot, str(cfg.state_dir), m.uuid, cfg.rig.to_dict(), cfg.identification)
             await asyncio.wrap_future(self.server.submit_plot(m.uuid, lambda: self.server.child.call(*job)))
-            got = self.app.store.get_attachment(m.uuid, PLOT_NAME)
+            got = self._store().get_attachment(m.uuid, PLOT_NAME)
         data, media = got
         return web.Response(body=data, content_type=media, headers={"Cache-Control": "max-age=86400, immutable"})
 
@@ -540,7 +548,7 @@ class Views:
 
     async def trace_csv(self, request: web.Request) -> web.Response:
         m = self._get(request.match_info["key"])
-        if not self.app.store.has_trace(m.uuid):
+        if not self._store().has_trace(m.uuid):
             raise Refused(404, f"measurement {m.seq} was stored without its trace ([device] store_trace = false)")
         body = await self._in_child(trace_file, str(self.app.config.state_dir), m.uuid)
         return web.Response(body=body, content_type="text/csv", headers={
@@ -597,7 +605,7 @@ class Views:
             raise Refused(400, f"page={request.query.get('page', '')[:20]!r}: expected a page number 1, 2, ...") from None
         if not 1 <= page <= MAX_PAGE:
             raise Refused(400, f"page: expected a page number 1, 2, ... (at most {MAX_PAGE})")
-        rows, total = self.app.store.search(offset=(page - 1) * size, limit=size, **filters)
+        rows, total = self._store().search(offset=(page - 1) * size, limit=size, **filters)
         pages = max(1, math.ceil(total / size))
         args = {k: v for k, v in self._query_args(request).items() if v}
 
@@ -608,7 +616,7 @@ class Views:
         return self._page(request, "history.html", title="History", rows=rows, total=total, page=page, pages=pages,
                           unit=self.server.settings.display_unit, unit_of=self.unit,
                           q=self._query_args(request), link=link, export=export, flag_names=sorted(FLAGS),
-                          recipes=self.app.store.recipes())
+                          recipes=self._store().recipes())
 
     async def export(self, request: web.Request) -> web.Response:
         fmt = request.match_info["fmt"]

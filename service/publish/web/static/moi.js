@@ -2,6 +2,9 @@
 "use strict";
 var moi = (function () {
   function csrf() { var m = document.querySelector('meta[name="csrf-token"]'); return m ? m.content : ""; }
+  // the states the appliance reports (service/states.py), served with the page: {name: {code, words, busy, capturing}}
+  var STATES = (function () { var m = document.querySelector('meta[name="moi-states"]'); return m ? JSON.parse(m.content) : {}; })();
+  function busy(state) { return !!(STATES[state] && STATES[state].busy); }
   function $(id) { return document.getElementById(id); }
   function say(text, bad) { var m = $("message"); if (m) { m.textContent = text; m.className = "message" + (bad ? " bad" : ""); } }
 
@@ -112,8 +115,7 @@ var moi = (function () {
       if (s.part_id !== undefined) { $("part-id").textContent = s.part_id || "–"; }
       var rk = $("release-k");
       if (rk && s.release_next !== undefined) {
-        var busy = ["ARMED", "RELEASING", "CAPTURING", "IDENTIFYING", "PUBLISHING"].indexOf(s.state) >= 0;
-        rk.textContent = s.release_next ? (busy ? "measuring release " : "next: release ") + s.release_next.k + " of " + s.release_next.of : "–";
+        rk.textContent = s.release_next ? (busy(s.state) ? "measuring release " : "next: release ") + s.release_next.k + " of " + s.release_next.of : "–";
       }
       var box = $("progress-box"), bar = $("progress-bar"), txt = $("progress-text");
       if (s.state === "CAPTURING" && s.elapsed !== undefined) {
@@ -191,5 +193,5 @@ var moi = (function () {
       });
     }
   }
-  return {home: home, setup: setup, act: act};
+  return {home: home, setup: setup, act: act, states: STATES};
 })();
