@@ -371,6 +371,16 @@ def swing_window(t: np.ndarray, angle: np.ndarray, sigma: float) -> SwingWindow:
     if moved.size and moved[0] >= held:
         start = int(moved[0]) - 1
         release = True
+    else:
+        # a hold shorter than five samples (even one) counts when a silence of the link ends it
+        left = np.flatnonzero(np.abs(y - y[0]) > tol)
+        if left.size and left[0] >= 1 and _silence_before(t, int(left[0])):
+            start = int(left[0]) - 1
+            release = True
+    if release and _silence_before(t, start + 1):
+        # the release fell somewhere in a silence: the last held sample is not where the free swing
+        # began (a free swing through it does not exist), the first moving one is the first known
+        start += 1
     # end of motion: the last sample that differs from the final resting value
     tail = y[-max(5, min(n // 50, 50)):]
     rest = float(np.median(tail))
@@ -393,6 +403,17 @@ def swing_window(t: np.ndarray, angle: np.ndarray, sigma: float) -> SwingWindow:
                 stop, stopped = cut, True
     return SwingWindow(start=start, stop=max(stop, start + 1), release_detected=release, stop_detected=stopped,
                        stuck=stuck)
+
+
+#: a gap between two samples longer than this many typical sampling steps is a silence of the link
+SILENCE_STEPS = 5.0
+
+
+def _silence_before(t: np.ndarray, i: int) -> bool:
+    """Whether samples i − 1 and i of ``t`` (s) are a silence apart (no samples where there should be some)."""
+    if not 0 < i < t.size or t.size < 3:
+        return False
+    return bool(t[i] - t[i - 1] > SILENCE_STEPS * float(np.median(np.diff(t))))
 
 
 def savitzky_golay(y: np.ndarray, window: int, order: int, deriv: int = 0, delta: float = 1.0,
