@@ -25,7 +25,9 @@ def test_measure_sim_prints_every_state_and_the_result(capsys):
 
 
 def test_measure_sim_json_on_a_lossy_bus(capsys):
-    rc = main(["measure", "--sim", "--duration", "10", "--time-scale", "8", "--drop-rate", "0.05",
+    # time × 2: a lost reply costs the time-out and the quiet wait after it (0.1 s of wall time), so
+    # at × 8 each left a gap of most of a swing, and a busy host lost enough of them to starve the record
+    rc = main(["measure", "--sim", "--duration", "8", "--time-scale", "2", "--drop-rate", "0.05",
                "--crc-rate", "0.01", "--seed", "4", "--json", "--effects", "viscous=3e-4"])
     captured = capsys.readouterr()
     assert rc == 0, captured.err
