@@ -29,7 +29,7 @@ from scipy.optimize import least_squares, lsq_linear
 from .errors import IdentificationError
 from .model import STATE_PARAMS, Model
 from .noise import NoiseModel, autocorrelation, fit_noise
-from .signal import Swings, find_swings, periodogram_frequency, resample_uniform, savitzky_golay
+from .signal import Swings, find_swings, periodogram_frequency, periodogram_peaks, resample_uniform, savitzky_golay
 
 __all__ = ["ModelFit", "Smoothed", "fit_model", "initial_guess", "smooth", "autocorrelation"]
 
@@ -136,6 +136,8 @@ class Smoothed:
     only, not a straight line drawn across a gap in the record (None: the record is even).
     omega_d: the swing's damped angular frequency, rad/s: the swings' own (zero crossings) on
     an even record; on one with gaps, the least-squares periodogram's near it.
+    peaks: on a record with gaps, the periodogram's comparable peaks over a wide band (rad/s,
+    tallest first): frequencies the samples may not tell from the swing's (aliases); () on an even record.
     """
 
     t: np.ndarray
@@ -150,6 +152,7 @@ class Smoothed:
     ydd: np.ndarray
     supported: np.ndarray | None = None
     omega_d: float = float("nan")
+    peaks: tuple[float, ...] = ()
 
     def holds(self, t: np.ndarray, y: np.ndarray, sigma: float) -> bool:
         """Whether this was computed from these very samples and noise floor."""
@@ -184,10 +187,14 @@ def smooth(t: np.ndarray, y: np.ndarray, sigma: float, swings: Swings | None = N
     # convolution: no polynomial fits of the ends
     ydd = savitzky_golay(yu, window, order, deriv=2, delta=dt, ends="zero")
     supported = _supported(t, tu, dt, window)
+    peaks: tuple[float, ...] = ()
     if supported is not None:
-        # crossings are read off lines drawn across the gaps: weigh the samples themselves
+        # crossings are read off lines drawn across the gaps: weigh the samples themselves. Lines
+        # across the gaps also hide crossings (ω_d of the crossings reads low, at times 4× low):
+        # the peaks over a wide band are each a frequency the swing may have
+        peaks = tuple(periodogram_peaks(t, y, 0.25 * wd, 4.0 * wd))
         wd = periodogram_frequency(t, y, 0.5 * wd, 2.0 * wd)
-    return Smoothed(t, y, sigma, centre, sw, dt, window, ys, yd, ydd, supported, wd)
+    return Smoothed(t, y, sigma, centre, sw, dt, window, ys, yd, ydd, supported, wd, peaks)
 
 
 def _supported(t: np.ndarray, tu: np.ndarray, dt: float, window: int) -> np.ndarray | None:

@@ -43,7 +43,7 @@ from .consistency import Competitor, ModelForm, SegmentCheck, check_segments, co
 from .diagnostics import Diagnostics, diagnose
 from .effects import EFFECTS, Effect, candidate_effects, resolve_effects, with_effect
 from .errors import IdentificationError, RigError, TraceError, UnknownEffectError
-from .fit import ModelFit, fit_model
+from .fit import ModelFit, fit_model, initial_guess
 from .noise import fit_noise
 from .model import Model
 from .result import DiscoveryStep, IdentificationResult, ModelSummary, Quantity
@@ -657,6 +657,53 @@ def keep_nested_order(final: ModelFit, nested: Sequence[ModelFit], sigma: float
     return best, best, nfev
 
 
+def rival_frequencies(base: ModelFit, sigma: float, margin: float) -> tuple[ModelFit, tuple[Competitor, ...], float, int]:
+    """The declared model fitted from each frequency the samples may not tell from the swing's.
+
+    On a record with gaps (mostly silences, dense bursts between them) the sampling has its own
+    quasi-period, and the swing's frequency shifted by it explains the samples nearly as well: the
+    fit can settle on that alias. Each comparable periodogram peak (``Smoothed.peaks``) more than a
+    peak's width from every fitted ω_n starts a fit of the same model; the best by BIC is kept
+    (same parameters, so the lower residual), and the others within ``margin`` of it are rival
+    explanations whose ω_n spread (BIC-weighted, as ``competitors``) enters ω_n's uncertainty.
+    Returns the kept fit, the rivals, their spread (rad/s) and the evaluations spent.
+    """
+    smoothed = base.extra.get("smoothed")
+    if smoothed is None or not smoothed.peaks:
+        return base, (), 0.0, 0
+    model = base.model
+    width = 2 * math.pi / float(base.t[-1] - base.t[0])
+    x_start, scales = initial_guess(model, base.t, base.y, sigma, smoothed)
+    i_w = model.names.index("omega_n")
+    lo, hi = model.bounds()
+    fits = [base]
+    spent = 0
+    for w_alias in smoothed.peaks:
+        if any(abs(w_alias - f.value("omega_n")) <= width for f in fits):
+            continue
+        x0 = x_start.copy()
+        x0[i_w] = w_alias
+        try:
+            fit = fit_model(model, base.t, base.y, sigma, x0=np.clip(x0, lo, hi), scales=scales, f_scale=base.f_scale)
+        except IdentificationError:
+            continue
+        spent += fit.nfev
+        fit.extra["smoothed"] = smoothed
+        fits.append(fit)
+    kept = min(fits, key=lambda f: f.bic)
+    w_kept = kept.value("omega_n")
+    rivals = [f for f in fits if f is not kept and f.bic - kept.bic < margin and abs(f.value("omega_n") - w_kept) > width]
+    if not rivals:
+        return kept, (), 0.0, spent
+    bics = np.array([kept.bic] + [f.bic for f in rivals])
+    weights = np.exp(-(bics - bics.min()) / 2.0)
+    weights /= weights.sum()
+    out = tuple(Competitor(f"the swing at {f.value('omega_n'):.4g} rad/s, which the sampling's gaps do not tell from "
+                           f"{w_kept:.4g} (an alias)", f.bic - kept.bic, float(wi), f.value("omega_n"),
+                           f.value("omega_n") - w_kept) for f, wi in zip(rivals, weights[1:]))
+    return kept, out, math.sqrt(sum(c.weight * c.delta**2 for c in out)), spent
+
+
 def follows_swing(fit: ModelFit, sigma: float) -> tuple[bool, float]:
     """(whether the fitted model follows the swing, its residual RMS over the fitted swing's RMS).
 
@@ -702,6 +749,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     declared = Model.from_names(rig, rig.declared)
     base = fit_model(declared, prep.t, prep.y, prep.noise, swings=prep.swings)
     nfev = base.nfev
+    base, aliases, u_aliases, spent = rival_frequencies(base, prep.noise, options.bic_margin)
+    nfev += spent
     # Wild samples the pre-screen left (bursts, a stalled tracker) must not
     # steer the fit or pass for an effect: with any beyond outlier_sigma robust
     # σ of the declared model's residual, every fit uses a soft-L1 loss whose
@@ -761,6 +810,9 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     # tell apart give another ω_n (consistency.py)
     segments = check_segments(final, prep.noise)
     rivals, u_rivals = competitors(steps, options.bic_margin)
+    if aliases:
+        rivals += aliases
+        u_rivals = math.hypot(u_rivals, u_aliases)
     if withdrawn is not None:
         # BIC prefers the withdrawn model, the halves contradict it: the data do not decide, and
         # its distance is carried whole

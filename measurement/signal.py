@@ -43,6 +43,33 @@ def resample_uniform(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return tu, np.interp(tu, t, y), dt
 
 
+def _periodogram(t: np.ndarray, y: np.ndarray, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Angular frequencies on a grid of 1/span in [lo, hi] (rad/s), each one's explained sum of squares
+    (rad²), and the span (s)."""
+    t = np.asarray(t, dtype=float) - float(t[0])
+    y = np.asarray(y, dtype=float) - float(np.mean(y))
+    span = float(t[-1])
+    if not (span > 0 and hi > lo > 0):
+        return np.zeros(0), np.zeros(0), span
+    w = np.arange(lo, hi + 1.0 / span, 1.0 / span)
+    power = np.empty(w.size)
+    for i, wi in enumerate(w):
+        c, s_ = np.cos(wi * t), np.sin(wi * t)
+        A = np.column_stack([c, s_, np.ones_like(t)])
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        power[i] = float(y @ (A @ coef))  # the explained sum of squares
+    return w, power, span
+
+
+def _refined(w: np.ndarray, power: np.ndarray, k: int) -> float:
+    if 0 < k < w.size - 1:
+        a, b, c = power[k - 1], power[k], power[k + 1]
+        den = a - 2 * b + c
+        if den < 0:
+            return float(w[k] + 0.5 * (a - c) / den * (w[1] - w[0]))
+    return float(w[k])
+
+
 def periodogram_frequency(t: np.ndarray, y: np.ndarray, lo: float, hi: float) -> float:
     """The angular frequency in [lo, hi] (rad/s) whose sinusoid (plus a constant) fits (t, y) best.
 
@@ -51,25 +78,33 @@ def periodogram_frequency(t: np.ndarray, y: np.ndarray, lo: float, hi: float) ->
     silence meets the centre, it weighs every sample where it was taken. A grid of 1/span
     (a peak is 2π/span wide) is refined by a parabola through the best point and its neighbours.
     """
-    t = np.asarray(t, dtype=float) - float(t[0])
-    y = np.asarray(y, dtype=float) - float(np.mean(y))
-    span = float(t[-1])
-    if not (span > 0 and hi > lo > 0):
+    w, power, _ = _periodogram(t, y, lo, hi)
+    if not w.size:
         return float("nan")
-    w = np.arange(lo, hi + 1.0 / span, 1.0 / span)
-    power = np.empty(w.size)
-    for i, wi in enumerate(w):
-        c, s_ = np.cos(wi * t), np.sin(wi * t)
-        A = np.column_stack([c, s_, np.ones_like(t)])
-        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-        power[i] = float(y @ (A @ coef))  # the explained sum of squares
-    k = int(np.argmax(power))
-    if 0 < k < w.size - 1:
-        a, b, c = power[k - 1], power[k], power[k + 1]
-        den = a - 2 * b + c
-        if den < 0:
-            return float(w[k] + 0.5 * (a - c) / den * (w[1] - w[0]))
-    return float(w[k])
+    return _refined(w, power, int(np.argmax(power)))
+
+
+def periodogram_peaks(t: np.ndarray, y: np.ndarray, lo: float, hi: float, comparable: float = 0.5) -> list[float]:
+    """The least-squares periodogram's peaks in [lo, hi] (rad/s) at least ``comparable`` × the highest's
+    power, tallest first, each more than a peak's width (2π/span) from every taller one.
+
+    On a record of bursts between silences the sampling has its own quasi-period: the swing's
+    frequency shifted by it explains the samples nearly as well (an alias), and only a fit at
+    each tells which one the swing is.
+    """
+    w, power, span = _periodogram(t, y, lo, hi)
+    if w.size < 3:
+        return []
+    top = float(np.max(power))
+    local = np.flatnonzero((power[1:-1] >= power[:-2]) & (power[1:-1] >= power[2:])) + 1
+    out: list[float] = []
+    for k in sorted(local, key=lambda k: -power[k]):
+        if power[k] < comparable * top:
+            break
+        wk = _refined(w, power, int(k))
+        if all(abs(wk - o) > 2 * math.pi / span for o in out):
+            out.append(wk)
+    return out
 
 
 def loo_deviations(t: np.ndarray | None, y: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
@@ -371,6 +406,16 @@ def swing_window(t: np.ndarray, angle: np.ndarray, sigma: float) -> SwingWindow:
     if moved.size and moved[0] >= held:
         start = int(moved[0]) - 1
         release = True
+    else:
+        # a hold shorter than five samples (even one) counts when a silence of the link ends it
+        left = np.flatnonzero(np.abs(y - y[0]) > tol)
+        if left.size and left[0] >= 1 and _silence_before(t, int(left[0])):
+            start = int(left[0]) - 1
+            release = True
+    if release and _silence_before(t, start + 1):
+        # the release fell somewhere in a silence: the last held sample is not where the free swing
+        # began (a free swing through it does not exist), the first moving one is the first known
+        start += 1
     # end of motion: the last sample that differs from the final resting value
     tail = y[-max(5, min(n // 50, 50)):]
     rest = float(np.median(tail))
@@ -393,6 +438,17 @@ def swing_window(t: np.ndarray, angle: np.ndarray, sigma: float) -> SwingWindow:
                 stop, stopped = cut, True
     return SwingWindow(start=start, stop=max(stop, start + 1), release_detected=release, stop_detected=stopped,
                        stuck=stuck)
+
+
+#: a gap between two samples longer than this many typical sampling steps is a silence of the link
+SILENCE_STEPS = 5.0
+
+
+def _silence_before(t: np.ndarray, i: int) -> bool:
+    """Whether samples i − 1 and i of ``t`` (s) are a silence apart (no samples where there should be some)."""
+    if not 0 < i < t.size or t.size < 3:
+        return False
+    return bool(t[i] - t[i - 1] > SILENCE_STEPS * float(np.median(np.diff(t))))
 
 
 def savitzky_golay(y: np.ndarray, window: int, order: int, deriv: int = 0, delta: float = 1.0,

@@ -91,3 +91,51 @@ def test_a_trial_model_that_runs_away_gives_nan_instead_of_integrating_forever()
     x = np.array([0.098, -0.895, 1.418, 0.1155, 0.00806, -2381.0, -0.0094])
     theta, omega = model.true_angle(x, np.arange(0.0, 2.0, 0.01), 0.01)
     assert np.isfinite(theta[:10]).all() and np.isnan(theta[-1]) and np.isnan(omega[-1])
+
+
+def _released_in_bursts(seed: int, silence: float) -> tuple[Trace, float]:
+    """A swing held at 0.25 rad until 0.5 s, sampled in bursts between silences of ``silence`` s; its J."""
+    inertia, c, release = 0.0125, 3e-4, 0.5
+    omega_n = math.sqrt(0.3651 / inertia)
+    rng = np.random.default_rng(seed)
+    t = _bursts(10.0, rng, silence=silence)
+    after = t > release
+    # the reference integrates between the points it is given: a half swing inside a silence needs some
+    grid = np.union1d(np.arange(release, t[-1], 0.05), t[after])
+    y = np.full(t.size, 0.25)
+    y[after] = reference_motion("torsion", omega_n, grid, 0.25, viscous=c / inertia)[np.searchsorted(grid, t[after])]
+    return Trace(t, y + rng.normal(0, 5e-5, t.size)), inertia
+
+
+@pytest.mark.parametrize("seed", [15, 19, 28, 9])
+def test_a_record_mostly_of_silences_finds_the_swing_not_an_alias_of_the_sampling(seed):
+    # Bursts of ~0.2 s between silences of 0.85 s on a 1.16 s swing. Seeds 15: the release fell in a
+    # silence after a hold of three samples (the fit once began at the first, held, sample: J −38 %);
+    # 19 and 9: after a longer hold (the fit began at the last held sample, through which no free
+    # swing passes); 28: the crossings read across the silences gave ω_d 2.3 rad/s and the start's
+    # band (½–2 ×) missed the swing's 5.4 (J 21 × too large)
+    rig = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
+    trace, inertia = _released_in_bursts(seed, 0.85)
+    r = identify(trace, rig)
+    assert abs(r.J / inertia - 1) < 0.002, r.report()
+
+
+def test_rival_frequencies_fits_each_comparable_peak_and_keeps_the_best():
+    from measurement.fit import fit_model
+    from measurement.identification import prepare, rival_frequencies
+    from measurement.model import Model
+
+    rig = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
+    trace, inertia = _released_in_bursts(28, 0.85)
+    prep = prepare(trace)
+    base = fit_model(Model.from_names(rig, rig.declared), prep.t, prep.y, prep.noise, swings=prep.swings)
+    peaks = base.extra["smoothed"].peaks
+    omega_n = math.sqrt(rig.stiffness / inertia)
+    assert any(abs(p / omega_n - 1) < 0.02 for p in peaks)  # the swing is among the peaks
+    assert abs(base.value("omega_n") / omega_n - 1) > 0.5  # and the start's band missed it
+    kept, rivals, u, spent = rival_frequencies(base, prep.noise, 10.0)
+    assert kept.value("omega_n") == pytest.approx(omega_n, rel=1e-3) and kept.bic < base.bic - 10.0
+    assert rivals == () and u == 0.0 and spent > 0  # the alias fits far worse: no rival
+    # an even record has no peaks to try: nothing is refitted
+    even = fit_model(Model.from_names(rig, rig.declared), *_swing_with_gap(0.0, n=600), 1e-4)
+    assert even.extra["smoothed"].peaks == () and rival_frequencies(even, 1e-4, 10.0)[3] == 0
