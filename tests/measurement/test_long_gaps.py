@@ -139,3 +139,26 @@ def test_rival_frequencies_fits_each_comparable_peak_and_keeps_the_best():
     # an even record has no peaks to try: nothing is refitted
     even = fit_model(Model.from_names(rig, rig.declared), *_swing_with_gap(0.0, n=600), 1e-4)
     assert even.extra["smoothed"].peaks == () and rival_frequencies(even, 1e-4, 10.0)[3] == 0
+
+
+@pytest.mark.parametrize("period", [0.5, 0.6667])
+def test_a_swing_sampled_once_a_period_cannot_be_told_from_its_alias_and_says_so(period):
+    # One reading every `period` s (three repeats a microsecond apart: no slope in them): the swing
+    # at f and its aliases |f ± k/period| take the same values at every sample, so no fit can tell
+    # them apart. 2 Hz: the swing is the slowest explanation; 1.5 Hz: the crossings read the alias
+    # below it. Whichever the fit keeps, the others are named and their spread is in ω_n's uncertainty
+    # (J_u is that spread propagated linearly: it does not reach J = k/ω_n² of a swing 3× slower).
+    rig = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
+    inertia, c = 0.0125, 3e-4
+    omega_n = math.sqrt(rig.stiffness / inertia)
+    t = (np.arange(0.0, 40.0, period)[:, None] + 1e-6 * np.arange(3)[None, :]).ravel()
+    grid = np.union1d(np.arange(0.0, t[-1], 0.05), t)
+    y = reference_motion("torsion", omega_n, grid, 0.25, viscous=c / inertia)[np.searchsorted(grid, t)]
+    r = identify(Trace(t, y + np.random.default_rng(1).normal(0, 5e-5, t.size)), rig)
+    f, fs = omega_n / (2 * math.pi), 1.0 / period
+    aliases = [2 * math.pi * abs(f + k * fs) for k in (-2, -1, 1)]
+    named = [r.omega_n] + [cc["omega_n"] for cc in r.model_form["competitors"]]
+    assert "model_ambiguous" in r.flags, r.report()
+    assert any(abs(w / omega_n - 1) < 1e-3 for w in named)  # the swing is the kept fit or a named rival
+    assert sum(any(abs(w / a - 1) < 1e-3 for w in named) for a in aliases) >= 2  # and so are its aliases
+    assert abs(r.omega_n - omega_n) <= 2 * r.omega_n_u, r.report()
