@@ -72,6 +72,21 @@ def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id:
     return {**envelope, **result}
 
 
+def decision(payload: Mapping[str, Any]) -> tuple[str | None, Mapping[str, Any]]:
+    """(the verdict, the decision it comes from) of a result: the part's decision once the release completes
+    it, else the release's; (None, {}) without a recipe."""
+    made = payload.get("part") or payload.get("release") or {}
+    return payload.get("verdict") or made.get("verdict"), made
+
+
+def not_decidable(payload: Mapping[str, Any] | None) -> bool:
+    """True when a result's verdict cannot decide: INVALID, or in the guard band's uncertainty range."""
+    if payload is None:
+        return False
+    verdict, made = decision(payload)
+    return verdict == "INVALID" or made.get("zone") == "uncertainty"
+
+
 def dumps(payload: Mapping[str, Any]) -> str:
     """Canonical JSON text of a payload (what MQTT carries and the store keeps)."""
     return json.dumps(payload, ensure_ascii=False, allow_nan=False, separators=(",", ":"))

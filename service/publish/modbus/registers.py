@@ -560,16 +560,6 @@ def error_code(live: LiveStatus, *, plc_heartbeat_lost: bool, overrun: bool) -> 
     return next((ERROR_CODE_BY_NAME[name] for name, present in causes.items() if present), 0)
 
 
-def not_decidable(payload: Mapping[str, Any] | None) -> bool:
-    """True when a result's verdict cannot decide: INVALID, or in the guard band's uncertainty range (the part's
-    decision once complete, else the release's)."""
-    if payload is None:
-        return False
-    decision = payload.get("part") or payload.get("release") or {}
-    verdict = payload.get("verdict") or decision.get("verdict")
-    return verdict == "INVALID" or decision.get("zone") == "uncertainty"
-
-
 def encode_handshake(h: Handshake) -> list[int]:
     """Registers HANDSHAKE_START … HANDSHAKE_END-1 (all uint16/bits16: no word order)."""
     out = [0] * (HANDSHAKE_END - HANDSHAKE_START)

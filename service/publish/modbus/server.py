@@ -55,6 +55,7 @@ from pymodbus.simulator.simcore import SimCore
 
 from drivers.aioloop import LoopThread
 
+from service.publish.payload import not_decidable
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
 from service.persistence.acks import AckFile, AckState
@@ -432,7 +433,7 @@ class ModbusServer(Publisher):
             plc_status=R.plc_status_bits(
                 ready=self._live.state == "IDLE" and not self._live.busy, busy=self._live.busy,
                 result_valid=self._result_valid, result_buffer_overrun=self._overrun, error=error != 0,
-                calibration_due=self._live.calibration_due, not_decidable=R.not_decidable(self._shown),
+                calibration_due=self._live.calibration_due, not_decidable=not_decidable(self._shown),
                 trigger_ack=self._trigger_ack, plc_heartbeat_lost=self._plc_heartbeat_lost),
             error_code=error, heartbeat=self._heartbeat, results_queued=len(self._queue),
             overrun_count=self.overrun_count, command_echo=echo, command_status=status, command_reason=reason,

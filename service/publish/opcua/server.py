@@ -48,6 +48,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID
 from drivers.aioloop import LoopThread
 from service.errors import ConfigError, OpcUaServerError
 from service.persistence.acks import AckFile, AckState
+from service.publish.payload import decision, not_decidable
 from service.publish.port import ApplianceView, Publisher
 
 from .model import (CONTENT_FIELDS, META_COMPONENTS, NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT,  # noqa: F401
@@ -107,9 +108,8 @@ def result_evaluation(payload: Mapping[str, Any]) -> str:
     """The verdict as ResultEvaluation: OK → OK, NOK → NotOK, INVALID or inside the guard band's uncertainty
     range → NotDecidable; no verdict (no recipe, part incomplete) → Undefined. The part's decision once the
     release completes it, else the release's."""
-    decision = payload.get("part") or payload.get("release") or {}
-    verdict = payload.get("verdict") or decision.get("verdict")
-    if verdict == "INVALID" or (verdict is not None and decision.get("zone") == "uncertainty"):
+    verdict, _ = decision(payload)
+    if verdict is not None and not_decidable(payload):
         return "NotDecidable"
     return {"OK": "OK", "NOK": "NotOK"}.get(verdict or "", "Undefined")
 
@@ -129,7 +129,7 @@ def result_document(payload: Mapping[str, Any]) -> dict[str, Any]:
     """A result's ResultMetaData and ResultContent as plain values (unknown numbers None), from which the
     ResultDataType is made (``OpcUaServer._structure``)."""
     recipe = payload.get("recipe") or {}
-    decision = payload.get("part") or payload.get("release") or {}
+    verdict, made = decision(payload)
     timing = payload.get("timing") or {}
     meta = {
         "ResultId": payload.get("uuid"),
@@ -149,11 +149,11 @@ def result_document(payload: Mapping[str, Any]) -> dict[str, Any]:
         # (fit ⊕ calibration ⊕ model form), always; U: the verdict's expanded uncertainty (with a recipe)
         "J_U": _num(payload.get("J_U")),
         "J_u": _num(payload.get("J_u")),
-        "U": _num(decision.get("U")),
+        "U": _num(made.get("U")),
         "omega_n": _num(payload.get("omega_n")),
         "damping_ratio": _num(payload.get("damping_ratio")),
         "flags": list(payload.get("flags") or ()),
-        "verdict": payload.get("verdict") or decision.get("verdict"),
+        "verdict": verdict,
     }
     return {"ResultMetaData": meta, "ResultContent": content}
 
