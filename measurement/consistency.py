@@ -186,7 +186,19 @@ def check_segments(fit: ModelFit, sigma: float) -> SegmentCheck | None:
     on the amplitude, and ω_n, the small-swing limit that J is computed from,
     then lies beyond both halves, not between them; a model that holds
     gives the same ω_n in both and the term vanishes.
+
+    Kept on the fit (``fit.extra``): the identification asks it of the same final fit twice (whether
+    an effect holds across the record, then the model-form uncertainty), and each asking fits two halves.
     """
+    kept = fit.extra.get("segments")
+    if kept is not None and kept[0] == sigma:
+        return kept[1]
+    check = _check_segments(fit, sigma)
+    fit.extra["segments"] = (sigma, check)
+    return check
+
+
+def _check_segments(fit: ModelFit, sigma: float) -> SegmentCheck | None:
     fitted = segment_fits(fit, sigma)
     if fitted is None:
         return None
