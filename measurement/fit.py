@@ -29,7 +29,7 @@ from scipy.optimize import least_squares, lsq_linear
 from .errors import IdentificationError
 from .model import STATE_PARAMS, Model
 from .noise import NoiseModel, autocorrelation, fit_noise
-from .signal import Swings, find_swings, periodogram_frequency, periodogram_peaks, resample_uniform, savitzky_golay
+from .signal import Swings, find_swings, periodogram, resample_uniform, savitzky_golay
 
 __all__ = ["ModelFit", "Smoothed", "fit_model", "initial_guess", "smooth", "autocorrelation"]
 
@@ -192,8 +192,9 @@ def smooth(t: np.ndarray, y: np.ndarray, sigma: float, swings: Swings | None = N
         # crossings are read off lines drawn across the gaps: weigh the samples themselves. Lines
         # across the gaps also hide crossings (ω_d of the crossings reads low, at times 4× low):
         # the peaks over a wide band are each a frequency the swing may have
-        peaks = tuple(periodogram_peaks(t, y, 0.25 * wd, 4.0 * wd))
-        wd = periodogram_frequency(t, y, 0.5 * wd, 2.0 * wd)
+        pg = periodogram(t, y, 0.25 * wd, 4.0 * wd)
+        peaks = tuple(pg.peaks())
+        wd = pg.frequency(0.5 * wd, 2.0 * wd)
     return Smoothed(t, y, sigma, centre, sw, dt, window, ys, yd, ydd, supported, wd, peaks)
 
 
@@ -251,14 +252,13 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
     omega_guess = wd
     regression_ok = False
     coef = None
-    try:
-        if not regress:
-            raise ValueError("too few rows between the gaps for the regression")
-        sol = lsq_linear(A / col_rms, -acc, bounds=(lo, hi), method="bvls")
-        coef = sol.x / col_rms
-        regression_ok = bool(sol.success) and coef[0] > 0 and np.all(np.isfinite(coef))
-    except (ValueError, np.linalg.LinAlgError):
-        regression_ok = False
+    if regress:
+        try:
+            sol = lsq_linear(A / col_rms, -acc, bounds=(lo, hi), method="bvls")
+            coef = sol.x / col_rms
+            regression_ok = bool(sol.success) and coef[0] > 0 and np.all(np.isfinite(coef))
+        except (ValueError, np.linalg.LinAlgError):
+            regression_ok = False
     if regression_ok and coef is not None:
         omega_n = math.sqrt(coef[0])
         # the regression is biased by noise on θ''; trust it only near ω_d (closer with gaps,

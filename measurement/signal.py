@@ -43,68 +43,74 @@ def resample_uniform(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return tu, np.interp(tu, t, y), dt
 
 
-def _periodogram(t: np.ndarray, y: np.ndarray, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """Angular frequencies on a grid of 1/span in [lo, hi] (rad/s), each one's explained sum of squares
-    (rad²), and the span (s)."""
+@dataclass(frozen=True)
+class Periodogram:
+    """A least-squares periodogram at the true sample times (Lomb and Scargle's idea).
+
+    w: angular frequencies on a grid of 1/span (a peak is 2π/span wide), rad/s; power: each one's
+    explained sum of squares by a sinusoid plus a constant, rad²; span: the record's, s. Unlike zero
+    crossings, which a record of bursts between silences places wherever the line across a silence
+    meets the centre, it weighs every sample where it was taken.
+    """
+
+    w: np.ndarray
+    power: np.ndarray
+    span: float
+
+    def _refined(self, k: int) -> float:
+        """Grid point k moved to the vertex of the parabola through it and its neighbours, rad/s."""
+        w, power = self.w, self.power
+        if 0 < k < w.size - 1:
+            a, b, c = power[k - 1], power[k], power[k + 1]
+            den = a - 2 * b + c
+            if den < 0:
+                return float(w[k] + 0.5 * (a - c) / den * (w[1] - w[0]))
+        return float(w[k])
+
+    def frequency(self, lo: float, hi: float) -> float:
+        """The angular frequency in [lo, hi] (rad/s) whose sinusoid fits best; nan when none is on the grid."""
+        inside = np.flatnonzero((self.w >= lo) & (self.w <= hi))
+        if not inside.size:
+            return float("nan")
+        return self._refined(int(inside[np.argmax(self.power[inside])]))
+
+    def peaks(self, comparable: float = 0.5) -> list[float]:
+        """The peaks at least ``comparable`` × the highest's power, tallest first, each more than a peak's
+        width (2π/span) from every taller one, rad/s.
+
+        On a record of bursts between silences the sampling has its own quasi-period: the swing's
+        frequency shifted by it explains the samples nearly as well (an alias), and only a fit at
+        each tells which one the swing is.
+        """
+        power = self.power
+        if power.size < 3:
+            return []
+        top = float(np.max(power))
+        local = np.flatnonzero((power[1:-1] >= power[:-2]) & (power[1:-1] >= power[2:])) + 1
+        out: list[float] = []
+        for k in sorted(local, key=lambda k: -power[k]):
+            if power[k] < comparable * top:
+                break
+            wk = self._refined(int(k))
+            if all(abs(wk - o) > 2 * math.pi / self.span for o in out):
+                out.append(wk)
+        return out
+
+
+def periodogram(t: np.ndarray, y: np.ndarray, lo: float, hi: float) -> Periodogram:
+    """The least-squares periodogram of (t in s, y in rad) over [lo, hi] rad/s (empty for a bad band or span)."""
     t = np.asarray(t, dtype=float) - float(t[0])
     y = np.asarray(y, dtype=float) - float(np.mean(y))
     span = float(t[-1])
     if not (span > 0 and hi > lo > 0):
-        return np.zeros(0), np.zeros(0), span
+        return Periodogram(np.zeros(0), np.zeros(0), span)
     w = np.arange(lo, hi + 1.0 / span, 1.0 / span)
     power = np.empty(w.size)
     for i, wi in enumerate(w):
-        c, s_ = np.cos(wi * t), np.sin(wi * t)
-        A = np.column_stack([c, s_, np.ones_like(t)])
+        A = np.column_stack([np.cos(wi * t), np.sin(wi * t), np.ones_like(t)])
         coef, *_ = np.linalg.lstsq(A, y, rcond=None)
         power[i] = float(y @ (A @ coef))  # the explained sum of squares
-    return w, power, span
-
-
-def _refined(w: np.ndarray, power: np.ndarray, k: int) -> float:
-    if 0 < k < w.size - 1:
-        a, b, c = power[k - 1], power[k], power[k + 1]
-        den = a - 2 * b + c
-        if den < 0:
-            return float(w[k] + 0.5 * (a - c) / den * (w[1] - w[0]))
-    return float(w[k])
-
-
-def periodogram_frequency(t: np.ndarray, y: np.ndarray, lo: float, hi: float) -> float:
-    """The angular frequency in [lo, hi] (rad/s) whose sinusoid (plus a constant) fits (t, y) best.
-
-    A least-squares periodogram at the true sample times (Lomb and Scargle's idea): unlike zero
-    crossings, which a record of bursts between silences places wherever the line across a
-    silence meets the centre, it weighs every sample where it was taken. A grid of 1/span
-    (a peak is 2π/span wide) is refined by a parabola through the best point and its neighbours.
-    """
-    w, power, _ = _periodogram(t, y, lo, hi)
-    if not w.size:
-        return float("nan")
-    return _refined(w, power, int(np.argmax(power)))
-
-
-def periodogram_peaks(t: np.ndarray, y: np.ndarray, lo: float, hi: float, comparable: float = 0.5) -> list[float]:
-    """The least-squares periodogram's peaks in [lo, hi] (rad/s) at least ``comparable`` × the highest's
-    power, tallest first, each more than a peak's width (2π/span) from every taller one.
-
-    On a record of bursts between silences the sampling has its own quasi-period: the swing's
-    frequency shifted by it explains the samples nearly as well (an alias), and only a fit at
-    each tells which one the swing is.
-    """
-    w, power, span = _periodogram(t, y, lo, hi)
-    if w.size < 3:
-        return []
-    top = float(np.max(power))
-    local = np.flatnonzero((power[1:-1] >= power[:-2]) & (power[1:-1] >= power[2:])) + 1
-    out: list[float] = []
-    for k in sorted(local, key=lambda k: -power[k]):
-        if power[k] < comparable * top:
-            break
-        wk = _refined(w, power, int(k))
-        if all(abs(wk - o) > 2 * math.pi / span for o in out):
-            out.append(wk)
-    return out
+    return Periodogram(w, power, span)
 
 
 def loo_deviations(t: np.ndarray | None, y: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
