@@ -97,6 +97,7 @@ class Prepared:
     n_unwrapped: int = 0  # 2π jumps removed from the angle
     gap_cut_at: float | None = None  # s: the window ends at a long gap starting here
     swings: Swings | None = None  # of (t, y) about their median, hysteresis 3·noise
+    noise_robust: float = 0.0  # the noise floor from the median absolute deviation (immune to wild samples), rad
 
 
 def unwrap_angle(y: np.ndarray) -> tuple[np.ndarray, int]:
@@ -152,8 +153,8 @@ def prepare(trace: Trace, options: Options = Options()) -> Prepared:
         raise TraceError(f"{trace.source}: the angle never changes; expected a free swing")
     floor = 1e-9 * span  # noise-free simulations still need a scale
     table = deviation_table(y_all, t_all)  # the neighbour predictions both floors and the glitch screen read
-    spikes = spike_candidates(y_all, max(noise_floor(y_all, robust=True, t=t_all, table=table), floor), t=t_all,
-                              table=table)
+    noise_robust = max(noise_floor(y_all, robust=True, t=t_all, table=table), floor)
+    spikes = spike_candidates(y_all, noise_robust, t=t_all, table=table)
     noise = max(noise_floor(y_all, exclude=spikes, t=t_all, table=table), floor)
     keep = np.ones(y_all.size, dtype=bool)
     keep[spikes] = False
@@ -181,7 +182,7 @@ def prepare(trace: Trace, options: Options = Options()) -> Prepared:
     return Prepared(t=t, y=y, noise=noise, start=int(idx[0]), stop=int(idx[-1]) + 1,
                     release_detected=win.release_detected, stopped=win.stop_detected or gap_cut_at is not None,
                     stuck=win.stuck, outliers=np.asarray(spikes, dtype=int), n_unwrapped=n_unwrapped,
-                    gap_cut_at=gap_cut_at, swings=sw)
+                    gap_cut_at=gap_cut_at, swings=sw, noise_robust=noise_robust)
 
 
 def _propagate(fn: Callable[[np.ndarray], float], x: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
@@ -310,6 +311,31 @@ def budgets(rig: Rig, omega_n: float, omega_n_std: float, *, dof: float = math.i
         object_mass=None if obj is None else obj.mass, object_mass_std=None if obj is None else obj.mass_std,
         axis_offset=None if obj is None else obj.axis_offset, axis_offset_std=None if obj is None else obj.axis_offset_std,
     ).budgets()
+
+
+#: identification passes on a record with wild samples: each sets aside those its model shows
+CLEANING_PASSES = 3
+
+
+def _without_wild(fit: ModelFit, prep: Prepared, trace: Trace, options: Options) -> Prepared | None:
+    """``prep`` without the samples beyond outlier_sigma robust σ of ``fit``'s residual, or None if none is.
+
+    The scale is the residual's own robust σ, floored by the robust noise floor: the noise floor
+    itself is raised by the very samples to be found.
+    """
+    r = np.abs(fit.residual - np.median(fit.residual)) / max(robust_std(fit.residual), prep.noise_robust)
+    # isolated samples only: where the neighbours depart as well, the residual has a shape (a mode,
+    # an effect the model lacks), and its peaks are not wild samples
+    bound = np.maximum(options.outlier_sigma, r) / 2
+    calm = np.r_[True, r[:-1] < bound[1:]] & np.r_[r[1:] < bound[:-1], True]
+    wild = (r > options.outlier_sigma) & calm
+    if not wild.any():
+        return None
+    keep = ~np.isin(prep.t, fit.t[wild])
+    if keep.sum() < 30:
+        return None
+    found = np.searchsorted(trace.t, prep.t[~keep])
+    return replace(prep, t=prep.t[keep], y=prep.y[keep], outliers=np.union1d(prep.outliers, found).astype(int))
 
 
 def _remove_outliers(fit: ModelFit, prep: Prepared, options: Options) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -747,37 +773,48 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         rig = replace(rig, sensor_calibrated=True)
     prep = prepare(trace, options)
     declared = Model.from_names(rig, rig.declared)
-    base = fit_model(declared, prep.t, prep.y, prep.noise, swings=prep.swings)
-    nfev = base.nfev
-    base, aliases, u_aliases, spent = rival_frequencies(base, prep.noise, options.bic_margin)
-    nfev += spent
-    # Wild samples the pre-screen left (bursts, a stalled tracker) must not
-    # steer the fit or pass for an effect: with any beyond outlier_sigma robust
-    # σ of the declared model's residual, every fit uses a soft-L1 loss whose
-    # scale is set once here (one loss for all models keeps their BIC comparable).
-    f_scale = None
-    scale = max(robust_std(base.residual), prep.noise)
-    if np.any(np.abs(base.residual - np.median(base.residual)) > options.outlier_sigma * scale):
-        f_scale = options.robust_scale * scale
-        base = fit_model(declared, prep.t, prep.y, prep.noise, previous=base, f_scale=f_scale)
+    nfev = 0
+    # Samples that the robust loss had to tame (wild or mis-dated ones) still weigh in every
+    # model's BIC, where they drown an effect's evidence: once a pass has a model, those beyond
+    # outlier_sigma of its residual are set aside and the loop runs again (CLEANING_PASSES at most).
+    for last_pass in (k == CLEANING_PASSES - 1 for k in range(CLEANING_PASSES)):
+        base = fit_model(declared, prep.t, prep.y, prep.noise, swings=prep.swings)
         nfev += base.nfev
-    steps: list[DiscoveryStep] = []
-    final = base
-    withdrawn: Withdrawn | None = None
-    moves: list[tuple[str, float, float, ModelFit]] = []
-    diagnosed: dict[int, tuple[ModelFit, Diagnostics]] = {}  # by id, the fit kept so its id is not reused
-
-    def diagnosis(fit: ModelFit) -> Diagnostics:
-        # the loop's last round may have diagnosed the final fit already
-        if id(fit) not in diagnosed:
-            diagnosed[id(fit)] = (fit, diagnose(fit, prep.noise, prep.stuck))
-        return diagnosed[id(fit)][1]
-
-    if options.discover:
-        final, steps, spent, moves = discover(base, prep, rig, options, f_scale, diagnosis)
+        base, aliases, u_aliases, spent = rival_frequencies(base, prep.noise, options.bic_margin)
         nfev += spent
-        final, withdrawn, spent = hold_across(final, base, moves, prep, rig, f_scale)
-        nfev += spent
+        # Wild samples the pre-screen left (bursts, a stalled tracker) must not
+        # steer the fit or pass for an effect: with any beyond outlier_sigma robust
+        # σ of the declared model's residual, every fit uses a soft-L1 loss whose
+        # scale is set once here (one loss for all models keeps their BIC comparable).
+        f_scale = None
+        scale = max(robust_std(base.residual), prep.noise)
+        if np.any(np.abs(base.residual - np.median(base.residual)) > options.outlier_sigma * scale):
+            f_scale = options.robust_scale * scale
+            base = fit_model(declared, prep.t, prep.y, prep.noise, previous=base, f_scale=f_scale)
+            nfev += base.nfev
+        steps: list[DiscoveryStep] = []
+        final = base
+        withdrawn: Withdrawn | None = None
+        moves: list[tuple[str, float, float, ModelFit]] = []
+        diagnosed: dict[int, tuple[ModelFit, Diagnostics]] = {}  # by id, the fit kept so its id is not reused
+
+        def diagnosis(fit: ModelFit) -> Diagnostics:
+            # the loop's last round may have diagnosed the final fit already
+            if id(fit) not in diagnosed:
+                diagnosed[id(fit)] = (fit, diagnose(fit, prep.noise, prep.stuck))
+            return diagnosed[id(fit)][1]
+
+        if options.discover:
+            final, steps, spent, moves = discover(base, prep, rig, options, f_scale, diagnosis)
+            nfev += spent
+            final, withdrawn, spent = hold_across(final, base, moves, prep, rig, f_scale)
+            nfev += spent
+        if last_pass or f_scale is None:
+            break
+        cleaner = _without_wild(final, prep, trace, options)
+        if cleaner is None:
+            break
+        prep = cleaner
     # Glitches the pre-screen missed show in the final residual; judged there
     # because a structured baseline residual is not Gaussian. While the final
     # residual is itself structured, its peaks are not glitches: keep the data.
