@@ -37,6 +37,9 @@ from .result import IdentificationResult, Quantity, _budget_table, _jsonable, _n
 from .rig import Rig
 from .trace import Trace
 
+#: distance (in combined σ) beyond which the joint fit's ω_n and the releases' weighted value disagree
+FIT_APART_Z = 2.0
+
 #: p-value of the releases' χ² below which they are inconsistent (flag releases_disagree)
 CONSISTENT_P = 0.01
 
@@ -121,6 +124,9 @@ class JointResult:
                  " (the releases weighted by their whole uncertainty)")
         jf = c["joint_fit"]
         L.append(f"    joint fit    : ω_n {jf['omega_n']:.7g} ± {jf['omega_n_std']:.2g} rad/s (all samples, the laws below shared)")
+        if jf.get("apart"):
+            L.append(f"    the joint fit and the releases' value are {jf['z']:.1f} σ apart: the shared laws do not hold over "
+                     f"the releases' amplitudes; the distance enters u (flag model_ambiguous)")
         for group in (self.damping, self.stiffness):
             for eff, params in group.items():
                 for name, q in params.items():
@@ -278,13 +284,20 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
                                           for res in results])) / np.sum(wts))
     u_joint = max(s_joint * birge, common)
     flags = [F.RELEASES_DISAGREE] if p < CONSISTENT_P else []
+    # The joint fit (the laws shared by all samples) and the releases' weighted value estimate the same
+    # ω_n: apart beyond their uncertainties, the shared laws do not hold over the releases' amplitudes
+    # (a law the model lacks), and which value to believe is not decided by the data: the distance
+    # enters u and the result says so.
+    u_joint, fit_z = with_joint_fit(w_joint, u_joint, w_fit, s_fit)
+    if fit_z > FIT_APART_Z:
+        flags.append(F.MODEL_AMBIGUOUS)
     flags = list(dict.fromkeys(flags + [fl for res in results for fl in res.flags]))
     consistency = {
         "chi2": chi2, "dof": dof, "p": p, "birge_ratio": birge, "z": [float(v) for v in zs],
         "omega_n": [float(v) for v in w_i], "u": [float(v) for v in u_i],
         "largest_z": float(zs[k]), "largest_release": results[k].source,
         "pairwise_max": float(pair[0]), "pairwise_releases": [results[pair[1]].source, results[pair[2]].source],
-        "joint_fit": {"omega_n": w_fit, "omega_n_std": s_fit},
+        "joint_fit": {"omega_n": w_fit, "omega_n_std": s_fit, "z": fit_z, "apart": fit_z > FIT_APART_Z},
     }
     # the shared laws, read through the first release's model (the same effects for all)
     x0 = release_x(z, 0)
@@ -310,6 +323,15 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
         residual_rms=rms, consistency=consistency, flags=tuple(flags), releases=tuple(results),
         uncertainty_budget={k: b.to_dict() for k, b in budget.items()},
     )
+
+
+def with_joint_fit(w_joint: float, u_joint: float, w_fit: float, s_fit: float) -> tuple[float, float]:
+    """The releases' joint ω_n's u (rad/s) once the joint fit's ω_n ± σ (rad/s) is heard, and their distance in σ.
+
+    Within FIT_APART_Z combined σ the two agree and u is unchanged; beyond, their distance enters u.
+    """
+    z = abs(w_fit - w_joint) / math.hypot(u_joint, s_fit)
+    return (math.hypot(u_joint, w_fit - w_joint) if z > FIT_APART_Z else u_joint), z
 
 
 @dataclass(frozen=True, eq=False)

@@ -76,3 +76,17 @@ def test_presliding_friction_that_moves_omega_n_without_holding_is_withdrawn():
     w = [r.omega_n for r in joint("bifilar").releases]
     assert "dahl" not in joint("bifilar").releases[0].effects
     assert (max(w) - min(w)) / min(w) < 2e-3
+
+
+def test_a_joint_fit_apart_from_the_releases_value_widens_the_joint_uncertainty():
+    from measurement.joint import FIT_APART_Z, with_joint_fit
+
+    # agreeing within their uncertainties: the joint u is the releases' own
+    assert with_joint_fit(5.7724, 0.0013, 5.7730, 0.0001) == (0.0013, pytest.approx(0.6 / math.hypot(1.3, 0.1)))
+    # apart (the shared laws do not hold over the releases' amplitudes): the distance enters u
+    u, z = with_joint_fit(5.77235, 0.00008, 5.77365, 0.00006)
+    assert z > FIT_APART_Z and u == pytest.approx(math.hypot(0.00008, 0.0013)) and u > 0.0013
+    # the real sets' joint fits agree with their releases' value: nothing is widened or flagged
+    for name in SETS:
+        fit = joint(name).consistency["joint_fit"]
+        assert not fit["apart"] and fit["z"] <= FIT_APART_Z, (name, fit)
