@@ -317,13 +317,23 @@ def budgets(rig: Rig, omega_n: float, omega_n_std: float, *, dof: float = math.i
 CLEANING_PASSES = 3
 
 
-def _without_wild(fit: ModelFit, prep: Prepared, trace: Trace, options: Options) -> Prepared | None:
-    """``prep`` without the samples beyond outlier_sigma robust σ of ``fit``'s residual, or None if none is.
+def _departures(residual: np.ndarray, floor: float) -> tuple[np.ndarray, float]:
+    """Each residual's distance from their median in robust σ, and that σ floored by ``floor`` (rad).
 
-    The scale is the residual's own robust σ, floored by the robust noise floor: the noise floor
-    itself is raised by the very samples to be found.
+    outlier_sigma is read on this scale: the floor keeps a residual quieter than the noise (an
+    encoder's steps) from making every sample an outlier.
     """
-    r = np.abs(fit.residual - np.median(fit.residual)) / max(robust_std(fit.residual), prep.noise_robust)
+    scale = max(robust_std(residual), floor)
+    return np.abs(residual - np.median(residual)) / scale, scale
+
+
+def _without_wild(fit: ModelFit, prep: Prepared, trace: Trace, options: Options) -> Prepared | None:
+    """``prep`` without the isolated samples beyond outlier_sigma robust σ of ``fit``'s residual, or None if none is.
+
+    The scale is floored by the robust noise floor, not the noise floor: that is itself raised by the very
+    samples to be found.
+    """
+    r, _ = _departures(fit.residual, prep.noise_robust)
     # isolated samples only: where the neighbours depart as well, the residual has a shape (a mode,
     # an effect the model lacks), and its peaks are not wild samples
     bound = np.maximum(options.outlier_sigma, r) / 2
@@ -339,9 +349,7 @@ def _without_wild(fit: ModelFit, prep: Prepared, trace: Trace, options: Options)
 
 
 def _remove_outliers(fit: ModelFit, prep: Prepared, options: Options) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    r = fit.residual
-    scale = max(robust_std(r), prep.noise)
-    bad = np.abs(r - np.median(r)) > options.outlier_sigma * scale
+    bad = _departures(fit.residual, prep.noise)[0] > options.outlier_sigma
     return fit.t[~bad], fit.y[~bad], np.flatnonzero(bad)
 
 
@@ -774,6 +782,15 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     prep = prepare(trace, options)
     declared = Model.from_names(rig, rig.declared)
     nfev = 0
+    diagnosed: dict[int, tuple[ModelFit, Diagnostics]] = {}  # by id, the fit kept so its id is not reused
+
+    def diagnosis(fit: ModelFit) -> Diagnostics:
+        # the loop's last round may have diagnosed the final fit already (a fit is diagnosed with the
+        # samples of its own pass: ``prep`` changes only between passes)
+        if id(fit) not in diagnosed:
+            diagnosed[id(fit)] = (fit, diagnose(fit, prep.noise, prep.stuck))
+        return diagnosed[id(fit)][1]
+
     # Samples that the robust loss had to tame (wild or mis-dated ones) still weigh in every
     # model's BIC, where they drown an effect's evidence: once a pass has a model, those beyond
     # outlier_sigma of its residual are set aside and the loop runs again (CLEANING_PASSES at most).
@@ -787,8 +804,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         # σ of the declared model's residual, every fit uses a soft-L1 loss whose
         # scale is set once here (one loss for all models keeps their BIC comparable).
         f_scale = None
-        scale = max(robust_std(base.residual), prep.noise)
-        if np.any(np.abs(base.residual - np.median(base.residual)) > options.outlier_sigma * scale):
+        departures, scale = _departures(base.residual, prep.noise)
+        if np.any(departures > options.outlier_sigma):
             f_scale = options.robust_scale * scale
             base = fit_model(declared, prep.t, prep.y, prep.noise, previous=base, f_scale=f_scale)
             nfev += base.nfev
@@ -796,14 +813,6 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         final = base
         withdrawn: Withdrawn | None = None
         moves: list[tuple[str, float, float, ModelFit]] = []
-        diagnosed: dict[int, tuple[ModelFit, Diagnostics]] = {}  # by id, the fit kept so its id is not reused
-
-        def diagnosis(fit: ModelFit) -> Diagnostics:
-            # the loop's last round may have diagnosed the final fit already
-            if id(fit) not in diagnosed:
-                diagnosed[id(fit)] = (fit, diagnose(fit, prep.noise, prep.stuck))
-            return diagnosed[id(fit)][1]
-
         if options.discover:
             final, steps, spent, moves = discover(base, prep, rig, options, f_scale, diagnosis)
             nfev += spent
