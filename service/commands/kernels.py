@@ -23,7 +23,7 @@ import pickle
 import subprocess
 import sys
 import threading
-from typing import IO, Any, Callable
+from typing import IO, Any
 
 
 class KernelHelper:
@@ -36,7 +36,6 @@ class KernelHelper:
         self._proc: subprocess.Popen | None = subprocess.Popen(
             [sys.executable, "-m", __name__, *kinds], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL)
-        self._local: Callable[[str], Any] | None = None
 
     def __call__(self, kind: str) -> Any:
         """The kernel of ``kind``: the helper's, or the in-process one once the helper is gone."""

@@ -141,9 +141,6 @@ COLUMNS: tuple[Column, ...] = (
     Column("part_U", "REAL", since=2, value=_part("part_U")),        # its expanded uncertainty, kg·m²
 )
 
-#: the part/recipe/verdict columns (schema 2), added to an older store by ``ALTER TABLE`` at open
-PART_COLUMNS = tuple((c.name, c.sql) for c in COLUMNS if c.since == 2)
-
 _READS = {"list": ("list",), "full": ("list", "full")}
 
 
@@ -516,7 +513,7 @@ class Store:
         build_payload(uuid, seq) makes the published payload once the sequence
         number is known (ok results). enqueue: outbox kinds to queue (e.g.
         ("result",)); the payload is queued as it is stored. part: values of
-        the PART_COLUMNS (part ID, recipe, verdicts...), missing keys are NULL.
+        the schema-2 part columns (``COLUMNS`` with ``since=2``: part ID, recipe, verdicts...), missing keys are NULL.
         """
         from service.publish.payload import dumps
 
