@@ -263,8 +263,6 @@ def top_tables() -> tuple[str, ...]:
 #: every table of the file and its keys (the publishers registered when the configuration is imported)
 SCHEMA: dict[str, dict[str, Key]] = tables()
 
-TOP_TABLES = top_tables()
-
 
 # --- the validated configuration ----------------------------------------------------------------
 @dataclass(frozen=True)

@@ -298,14 +298,16 @@ class OpcUaServer(Publisher):
         store, and the newest result for LatestResult. The first start (no file kept) owes nothing older
         than the results stored from now on."""
         kept = max(1, self.settings.results_kept)
-        latest = self.store.latest("ok") if self.store is not None else None
+        # newest first: the newest is LatestResult's
+        recent = self.store.list(limit=kept, status="ok", full=True) if self.store is not None else []
+        latest = recent[0] if recent else None
         state = self._acks.read()
         if state is None:
             state = AckState(latest.seq if latest is not None else 0)
             self._keep(state)
         rows: dict[int, Any] = {}
         if self.store is not None:
-            for r in self.store.list(limit=kept, status="ok", full=True):
+            for r in recent:
                 if r.seq > state.through:
                     rows[r.seq] = r
             for seq in sorted(state.pending)[-kept:]:
@@ -319,7 +321,7 @@ class OpcUaServer(Publisher):
                 self._unacknowledged[r.uuid] = seq
         self._acked_through = state.through
         if latest is not None and latest.payload is not None:
-            self._latest = result_document(latest.payload)
+            self._latest = self._results.get(latest.uuid) or result_document(latest.payload)
             self._results.setdefault(latest.uuid, self._latest)
 
     def _keep(self, state: AckState) -> None:
@@ -415,7 +417,7 @@ class OpcUaServer(Publisher):
                                            ua.Variant([] if array else _EMPTY[vtype], vtype))
             self._nodes[f"content.{name}"] = v
         if self._latest is not None:
-            await self._write_latest(self._latest)
+            await self._write_latest(self._structure(self._latest))
         self._event = await server.get_event_generator(t["InertiaResultReadyEventType"], rm.nodeid)
 
     def stop(self, timeout: float = 5.0) -> None:
@@ -495,20 +497,20 @@ class OpcUaServer(Publisher):
                 len(args) == 2 and self._int32(args[1]) is None):
             return _bad(ua.StatusCodes.BadInvalidArgument)
         doc = self._results.get(result_id)
-        if doc is None and self.store is not None and len(result_id) == 36:
-            stored = await asyncio.to_thread(self.store.get, result_id)
-            if stored is not None and stored.uuid == result_id and stored.payload is not None:
+        if doc is None:
+            stored = await self._stored(result_id)
+            if stored is not None and stored.payload is not None:
                 doc = result_document(stored.payload)
         if doc is None:
             return _bad(ua.StatusCodes.BadNotFound)
         return self._outputs(doc)
 
-    async def _stored(self, result_id: str) -> bool:
-        """Whether the store holds a result with this ResultId."""
+    async def _stored(self, result_id: str) -> Any:
+        """The stored result with this ResultId (a uuid), or None."""
         if self.store is None or len(result_id) != 36:
-            return False
+            return None
         stored = await asyncio.to_thread(self.store.get, result_id)
-        return stored is not None and stored.uuid == result_id
+        return stored if stored is not None and stored.uuid == result_id else None
 
     async def _acknowledge(self, parent: ua.NodeId, *args: Any) -> Any:
         ids = getattr(args[0], "Value", None) if len(args) == 1 else None
@@ -523,7 +525,7 @@ class OpcUaServer(Publisher):
                     self._acked_through = max(self._acked_through, seq)
                     errors.append(0)
                 else:
-                    errors.append(ACK_ALREADY if i in self._results or await self._stored(i) else ACK_UNKNOWN)
+                    errors.append(ACK_ALREADY if i in self._results or await self._stored(i) is not None else ACK_UNKNOWN)
             if 0 in errors:
                 state = AckState(self._acked_through, frozenset(
                     s for s in self._unacknowledged.values() if s <= self._acked_through))
@@ -578,8 +580,8 @@ class OpcUaServer(Publisher):
         acknowledges it, and a ResultReadyEvent."""
         self._submit(self._publish(result_document(payload)))
 
-    async def _write_latest(self, doc: Mapping[str, Any]) -> None:
-        value = self._structure(doc)
+    async def _write_latest(self, value: Any) -> None:
+        """LatestResult and its components from a result as ResultDataType (``_structure``)."""
         meta, content = value.ResultMetaData, value.ResultContent[0].Value
         await self._nodes["latest"].write_value(ua.Variant(value))
         await self._nodes["latest.meta"].write_value(ua.Variant(meta))
@@ -602,10 +604,11 @@ class OpcUaServer(Publisher):
         while len(self._unacknowledged) > kept:
             self._unacknowledged.popitem(last=False)  # given up: a restart does not offer it again either
         self._latest = doc
-        await self._write_latest(doc)
+        value = self._structure(doc)
+        await self._write_latest(value)
         await self._nodes["unacknowledged"].write_value(ua.Variant(len(self._unacknowledged), ua.VariantType.UInt32))
         ev = self._event
-        ev.event.Result = self._structure(doc)
+        ev.event.Result = value
         ev.event.Severity = 500 if meta["ResultEvaluation"] in ("NotOK", "NotDecidable") else 100
         await ev.trigger(message=f"result {meta.get('SequenceNumber')}: {meta['ResultEvaluation']}")
         self.events_sent += 1
