@@ -78,8 +78,10 @@ class Effect:
     #: "damping" (dissipative torque), "stiffness" (conservative torque) or "sensor".
     role: ClassVar[str]
     parameters: ClassVar[tuple[Parameter, ...]]
-    #: rig kinds the effect exists on
+    #: rig kinds the effect exists on (may be declared, is integrated)
     rigs: ClassVar[tuple[str, ...]] = ("torsion", "compound")
+    #: rig kinds the discovery loop offers it on as a candidate (None: all of ``rigs``)
+    offered: ClassVar[tuple[str, ...] | None] = None
     cause: ClassVar[str] = ""
     #: torque law as printed in reports
     law: ClassVar[str] = ""
@@ -135,6 +137,10 @@ class Effect:
     #: The effect this one generalises (it contains it as a limit and replaces
     #: it in a model): offered as a candidate only where that one is present.
     refines: ClassVar[str | None] = None
+    #: The restoring-law effect whose signature this one shares (what it does to the swing a
+    #: restoring law can also do): on a rig where that law is not offered, the data cannot weigh
+    #: the two by their discovery, and the law's reading of ω_n is a rival (``identification.law_rival``).
+    mimics: ClassVar[str | None] = None
 
     def refined_start(self, refined_values: Sequence[float], amplitudes: Sequence[float]) -> list[list[float]]:
         """Start values that reproduce (nearly) the refined effect with ``refined_values``.
@@ -351,6 +357,8 @@ class Dahl(Coulomb):
             "dry friction at large"
     law = "dT/dθ = (T_c/θ_c)·(1 − T/T_c·sgn θ') (Dahl; compound: T_c ∝ cos θ)"
     refines = "coulomb"
+    # the pre-sliding spring makes small swings faster, as a restoring law softer at large angles does
+    mimics = "cubic_stiffness"
 
     # The Dahl law integrates in closed form over a half-swing: with z = T/T_c
     # and z_r its value at the last turning point x_r,
@@ -460,8 +468,11 @@ class CubicStiffness(Effect):
             description="cubic spring coefficient over J (>0 hardening)",
         ),
     )
-    rigs = ("torsion",)
-    cause = "nonlinear (hardening or softening) spring"
+    # On a compound rig m·g·S·sin θ is the law of a rigid body on a pivot: a cubic term there is a
+    # suspension's own law (a bifilar's), which a user declares; offered, it would stand in for
+    # pre-sliding friction and the sensor's scale, whose signatures it shares
+    offered = ("torsion",)
+    cause = "nonlinear (hardening or softening) spring; on a compound rig, a suspension's law beyond sin θ"
     law = "k₃·θ³"
 
     term = "p0 * x * x * x"
@@ -606,7 +617,7 @@ def candidate_effects(rig: "Rig", present: Iterable[str]) -> list[Effect]:
     present = set(present)
     contained = {EFFECTS[n].refines for n in present if n in EFFECTS}
     return [cls(rig) for n, cls in EFFECTS.items()
-            if n not in present and n not in contained and rig.kind in cls.rigs
+            if n not in present and n not in contained and rig.kind in (cls.offered or cls.rigs)
             and (cls.refines is None or cls.refines in present)
             and not (rig.sensor_calibrated and cls.scale_parameters)]
 

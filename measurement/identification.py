@@ -628,6 +628,66 @@ def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[tuple[str, floa
     return previous, Withdrawn(tuple(movers), w, final.stdev("omega_n"), final.bic - previous.bic, seg), nfev
 
 
+@dataclass(frozen=True)
+class LawRival:
+    """A restoring law the loop does not offer on this rig, fitted in place of an effect that mimics it.
+
+    effect: the kept effect (e.g. dahl); law: the mimicking law's effect (e.g. cubic_stiffness);
+    omega_n: ω_n of the model with the law instead (rad/s); d_bic: that model's BIC minus the kept
+    one's; weight: its BIC weight against the kept model.
+    """
+
+    effect: str
+    law: str
+    omega_n: float
+    d_bic: float
+    weight: float
+
+    def rival(self, kept_omega_n: float) -> Competitor:
+        return Competitor(f"{self.law} (a restoring law, not offered on this rig) instead of {self.effect}",
+                          self.d_bic, self.weight, self.omega_n, self.omega_n - kept_omega_n)
+
+
+def law_rival(final: ModelFit, moves: Sequence[tuple[str, float, float, ModelFit]], prep: Prepared, rig: Rig,
+              f_scale: float | None) -> tuple[LawRival | None, int]:
+    """The restoring law that a kept effect may stand for, fitted in its place as a rival model.
+
+    Dahl's pre-sliding spring makes the small swings faster; so does a
+    restoring law softer than m·g·S·sin θ at large angles (a bifilar
+    suspension, a cable), and the two read ω_n on opposite sides: the
+    spring's ω_n is the large swings' law with a spring added at small
+    amplitude, the law's is the small-swing limit. The loop does not offer
+    such a law on a compound rig (there it would stand for friction it
+    cannot tell from), so it never weighs it. Where an effect that mimics a
+    law (``Effect.mimics``) moved ω_n by more than its σ when it was added
+    (``moves``) and the law is not offered, the model with the law in the
+    effect's place (and the effect it refines: Coulomb for Dahl) is fitted;
+    its BIC weight against the kept model says whether the data separate
+    them. Returns (the rival or None, simulations spent).
+    """
+    names = final.model.effect_names
+    mimics = [n for n, d, sd, _ in moves if n in names and abs(d) > sd and (law := EFFECTS[n].mimics) is not None
+              and law not in names and rig.kind in EFFECTS[law].rigs
+              and rig.kind not in (EFFECTS[law].offered or EFFECTS[law].rigs)]
+    if not mimics:
+        return None, 0
+    effect = mimics[-1]
+    law = EFFECTS[effect].mimics or ""
+    keep = [n for n in names if n != effect]
+    refined = EFFECTS[effect].refines
+    if refined is not None and refined not in keep:
+        keep.append(refined)
+    model = Model(rig, tuple(resolve_effects(keep + [law], rig)))
+    earlier = [f for *_, f in moves if set(f.model.effect_names) <= set(keep)]
+    try:
+        fit = fit_model(model, final.t, final.y, prep.noise, previous=earlier[-1] if earlier else final, f_scale=f_scale)
+    except IdentificationError:
+        return None, 0
+    d_bic = fit.bic - final.bic
+    weight = 1.0 / (1.0 + math.exp(min(d_bic / 2.0, 700.0)))
+    return LawRival(effect, law, fit.value("omega_n"), d_bic, weight), fit.nfev
+
+
 def contains(outer: Model, inner: Model) -> bool:
     """Whether ``outer`` holds every effect of ``inner``, itself or an effect that refines it (dahl for coulomb)."""
     names = set(outer.effect_names)
@@ -865,6 +925,12 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         rival = withdrawn.rival(w)
         rivals += (rival,)
         u_rivals = math.hypot(u_rivals, rival.delta)
+    law, spent = law_rival(final, moves, prep, rig, f_scale) if withdrawn is None else (None, 0)
+    nfev += spent
+    if law is not None and law.d_bic < options.bic_margin:
+        rival = law.rival(w)
+        rivals += (rival,)
+        u_rivals = math.hypot(u_rivals, math.sqrt(rival.weight) * rival.delta)
     form = ModelForm(segments, rivals, u_rivals)
     ambiguous = form.ambiguous(ws)
     w_u = math.sqrt(ws**2 + (w_cal or 0.0) ** 2 + form.u**2)
@@ -962,6 +1028,13 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
             f"{withdrawn.omega_n:.6g} rad/s ({withdrawn.omega_n - w:+.2g}), and the model with it does not hold "
             f"across the record (halves {ws_.omega_n[0]:.6g} and {ws_.omega_n[1]:.6g} rad/s, {ws_.z:.1f} σ apart): "
             "it is not kept, its ω_n is a rival in omega_n_u (flag model_ambiguous)")
+    if law is not None:
+        verdict = ("the data do not separate them: its ω_n enters omega_n_u by its BIC weight"
+                   if law.d_bic < options.bic_margin else "the data separate them: the effect stands")
+        structure.append(
+            f"{law.effect} makes the small swings faster, as a restoring law softer than the rig's at large angles "
+            f"would: fitted in its place, {law.law} (not offered on this rig) gives ω_n {law.omega_n:.6g} rad/s "
+            f"({law.omega_n - w:+.2g}) at ΔBIC {law.d_bic:+.1f}; {verdict}")
     for c in rivals if ambiguous else ():
         if c.weight >= 0.05:
             structure.append(f"a rival explanation the data do not decisively reject: {c.change} (ΔBIC {c.d_bic:+.1f}, "

@@ -263,8 +263,12 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
     # model, so that a difference is the releases', not the models'), with its own fit σ and the
     # model-form and calibration terms of its own identification
     w_i = np.array([f.value("omega_n") for f in fits])
-    u_i = np.array([math.sqrt(f.stdev("omega_n") ** 2 + res.omega_n_std_model**2 + (res.omega_n_std_calibration or 0.0) ** 2)
-                    for f, res in zip(fits, results)])
+    # A release that its own identification gave another model reads another ω_n under the shared
+    # one; which of the two is right its record did not decide (the other releases chose the shared
+    # effects): their distance is model form of that release
+    form_i = np.array([math.hypot(res.omega_n_std_model, w - res.omega_n) for w, res in zip(w_i, results)])
+    u_i = np.array([math.sqrt(f.stdev("omega_n") ** 2 + m**2 + (res.omega_n_std_calibration or 0.0) ** 2)
+                    for f, m, res in zip(fits, form_i, results)])
     # The joint ω_n weighs each release by its whole uncertainty, which the least squares over the
     # samples cannot know: a release whose model does not hold across it (its model-form term)
     # counts for less. The joint fit's own ω_n is reported beside it (joint_fit).
@@ -280,8 +284,8 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
                 for a in range(len(results)) for b in range(a + 1, len(results))), key=lambda v: v[0])
     birge = math.sqrt(max(chi2 / dof, 1.0))
     # what the releases share is not averaged away: their model-form and calibration terms
-    common = float(np.sum(wts * np.array([math.hypot(res.omega_n_std_model, res.omega_n_std_calibration or 0.0)
-                                          for res in results])) / np.sum(wts))
+    common = float(np.sum(wts * np.array([math.hypot(m, res.omega_n_std_calibration or 0.0)
+                                          for m, res in zip(form_i, results)])) / np.sum(wts))
     u_joint = max(s_joint * birge, common)
     flags = [F.RELEASES_DISAGREE] if p < CONSISTENT_P else []
     # The joint fit (the laws shared by all samples) and the releases' weighted value estimate the same

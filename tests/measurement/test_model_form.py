@@ -101,3 +101,46 @@ def test_dropouts_and_a_drifting_zero_do_not_pass_for_presliding_friction(seed):
     assert "dahl" not in r.effects and {"coulomb", "drift"} <= set(r.effects)
     assert abs(r.omega_n - 2.4) < 3 * r.omega_n_u
     assert "halves_disagree" not in r.flags
+
+
+# a compound pendulum whose restoring law is softer than sin θ (a suspension's, written as a cubic
+# term the loop does not offer on a compound rig), or which has true pre-sliding friction
+_RIG = Rig(kind="compound", mass=1.0, com_distance=1.0, g=9.81, declared=("viscous",))
+_J = 9.81 / 5.8**2
+
+
+def _swing(truth: dict, seed: int) -> Trace:
+    from measurement.simulate import Pendulum, simulate_trace
+
+    return simulate_trace(Pendulum(_RIG, _J, truth), theta0=1.0, duration=28, rate=60, noise_std=0.005, seed=seed)
+
+
+def test_presliding_friction_that_a_softer_law_explains_as_well_carries_the_laws_omega_n():
+    # no friction: the small swings are faster because the law softens at large angles; the loop
+    # keeps dahl (its halves agree), which put ω_n 8 u from the truth before the law was fitted
+    r = identify(_swing({"viscous": {"c_per_J": 0.05}, "cubic_stiffness": {"k3_per_J": -6.0}}, seed=2), _RIG)
+    assert "dahl" in r.effects and "model_ambiguous" in r.flags
+    law = [c for c in r.model_form["competitors"] if c["change"].startswith("cubic_stiffness")]
+    assert law and law[0]["d_bic"] < 10 and law[0]["weight"] > 0.05
+    assert any("fitted in its place, cubic_stiffness" in s and "do not separate them" in s for s in r.structure)
+    assert abs(r.omega_n - 5.8) < 2 * r.omega_n_u
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_true_presliding_friction_is_not_widened_by_the_law_it_could_stand_for(seed):
+    r = identify(_swing({"viscous": {"c_per_J": 0.1}, "dahl": {"Tc_per_J": 0.19, "theta_c": 0.08}}, seed), _RIG)
+    assert r.added_effects == ("dahl",) and "model_ambiguous" not in r.flags
+    assert any("cubic_stiffness" in s and "the data separate them" in s for s in r.structure)
+    assert not any(c["change"].startswith("cubic_stiffness") for c in r.model_form["competitors"])
+    assert abs(r.omega_n - 5.8) < 3 * r.omega_n_u
+
+
+def test_a_suspensions_cubic_law_is_declared_on_a_compound_rig_not_offered():
+    from measurement.effects import candidate_effects
+
+    assert "cubic_stiffness" not in [e.name for e in candidate_effects(_RIG, ("viscous",))]
+    declared = Rig(kind="compound", mass=1.0, com_distance=1.0, declared=("viscous", "cubic_stiffness"))
+    r = identify(_swing({"viscous": {"c_per_J": 0.05}, "cubic_stiffness": {"k3_per_J": -6.0}}, seed=1),
+                 declared)
+    assert abs(r.stiffness["cubic_stiffness"]["k3_per_J"].value + 6.0) < 4 * r.stiffness["cubic_stiffness"]["k3_per_J"].std
+    assert abs(r.omega_n - 5.8) < 3 * r.omega_n_u
