@@ -91,6 +91,11 @@ class Effect:
         if "name" in cls.__dict__:
             EFFECTS[cls.name] = cls
 
+    @classmethod
+    def offered_on(cls, kind: str) -> bool:
+        """Whether the discovery loop offers this effect as a candidate on a ``kind`` rig."""
+        return kind in (cls.offered or cls.rigs)
+
     def __init__(self, rig: "Rig"):
         self.rig = rig
 
@@ -617,7 +622,7 @@ def candidate_effects(rig: "Rig", present: Iterable[str]) -> list[Effect]:
     present = set(present)
     contained = {EFFECTS[n].refines for n in present if n in EFFECTS}
     return [cls(rig) for n, cls in EFFECTS.items()
-            if n not in present and n not in contained and rig.kind in (cls.offered or cls.rigs)
+            if n not in present and n not in contained and cls.offered_on(rig.kind)
             and (cls.refines is None or cls.refines in present)
             and not (rig.sensor_calibrated and cls.scale_parameters)]
 

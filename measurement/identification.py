@@ -586,6 +586,16 @@ class Withdrawn:
                           self.d_bic, 1.0, self.omega_n, self.omega_n - kept_omega_n)
 
 
+def _fallback(names: Sequence[str], taken: Sequence[str],
+              moves: Sequence[tuple[str, float, float, ModelFit]]) -> tuple[list[str], ModelFit | None]:
+    """The effect names without ``taken``, each one's refined effect (Coulomb for Dahl) in its place, and
+    the loop's last fit within them (the model itself, or a start that it contains; None: none)."""
+    keep = [n for n in names if n not in taken]
+    keep += [r for n in taken if (r := EFFECTS[n].refines) is not None and r not in keep]
+    earlier = [f for *_, f in moves if set(f.model.effect_names) <= set(keep)]
+    return keep, (earlier[-1] if earlier else None)
+
+
 def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[tuple[str, float, float, ModelFit]], prep: Prepared,
                 rig: Rig, f_scale: float | None) -> tuple[ModelFit, Withdrawn | None, int]:
     """The final model, or the one without the effects whose ω_n does not hold across the record.
@@ -612,12 +622,9 @@ def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[tuple[str, floa
     seg = check_segments(final, prep.noise)
     if seg is None or not seg.disagree:
         return final, None, 0
-    keep = [n for n in names if n not in movers]
-    keep += [r for n in movers if (r := EFFECTS[n].refines) is not None and r not in keep]
+    keep, earlier = _fallback(names, movers, moves)
     model = Model(rig, tuple(resolve_effects(keep, rig)))
-    # the loop's last fit within the kept model: the kept model itself, or a start that it contains
-    earlier = [f for *_, f in moves if set(f.model.effect_names) <= set(keep)]
-    previous = earlier[-1] if earlier else base
+    previous = earlier or base
     nfev = 0
     if previous.model.effect_names != model.effect_names:
         try:
@@ -667,20 +674,15 @@ def law_rival(final: ModelFit, moves: Sequence[tuple[str, float, float, ModelFit
     """
     names = final.model.effect_names
     mimics = [n for n, d, sd, _ in moves if n in names and abs(d) > sd and (law := EFFECTS[n].mimics) is not None
-              and law not in names and rig.kind in EFFECTS[law].rigs
-              and rig.kind not in (EFFECTS[law].offered or EFFECTS[law].rigs)]
+              and law not in names and rig.kind in EFFECTS[law].rigs and not EFFECTS[law].offered_on(rig.kind)]
     if not mimics:
         return None, 0
     effect = mimics[-1]
     law = EFFECTS[effect].mimics or ""
-    keep = [n for n in names if n != effect]
-    refined = EFFECTS[effect].refines
-    if refined is not None and refined not in keep:
-        keep.append(refined)
+    keep, earlier = _fallback(names, [effect], moves)
     model = Model(rig, tuple(resolve_effects(keep + [law], rig)))
-    earlier = [f for *_, f in moves if set(f.model.effect_names) <= set(keep)]
     try:
-        fit = fit_model(model, final.t, final.y, prep.noise, previous=earlier[-1] if earlier else final, f_scale=f_scale)
+        fit = fit_model(model, final.t, final.y, prep.noise, previous=earlier or final, f_scale=f_scale)
     except IdentificationError:
         return None, 0
     d_bic = fit.bic - final.bic
