@@ -86,7 +86,9 @@ class Competitor:
     change: what differs from the kept model, in words; d_bic: its BIC
     minus the kept model's (under the noise model); weight: its BIC weight
     in its round; omega_n: its ω_n, rad/s; delta: minus the kept model's ω_n
-    in the same round, rad/s.
+    in the same round, rad/s; effects: the rival model's effects where it is a
+    whole model of its own (an effect withdrawn, a law in an effect's place),
+    so that several releases together can weigh it again; empty otherwise.
     """
 
     change: str
@@ -94,10 +96,11 @@ class Competitor:
     weight: float
     omega_n: float
     delta: float
+    effects: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        return {"change": self.change, "d_bic": _num(self.d_bic),
-                "weight": _num(self.weight), "omega_n": _num(self.omega_n), "delta": _num(self.delta)}
+        return {"change": self.change, "d_bic": _num(self.d_bic), "weight": _num(self.weight),
+                "omega_n": _num(self.omega_n), "delta": _num(self.delta), "effects": list(self.effects)}
 
 
 @dataclass(frozen=True)

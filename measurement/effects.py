@@ -531,6 +531,8 @@ class Gain(Effect):
     extra_units = {"g": "1"}
     #: below this amplitude sin θ is too close to θ for g to be told from the amplitude
     min_amplitude = 0.5
+    # a scale error changes how the frequency depends on the amplitude, as another restoring law does
+    mimics = "cubic_stiffness"
 
     def sensor_basis(self, t, theta):
         return np.asarray(theta, dtype=float)[:, None]
@@ -573,6 +575,8 @@ class View(Effect):
     cause = "camera not square to the swing plane (oblique view, lens): the image of the swing is an ellipse"
     law = "θ_meas = a + θ + e₁·sin 2θ + e₂·(cos 2θ − 1) (an affine image of the marker's direction, to first order)"
     min_amplitude = 0.5
+    # its stretch changes the angle's scale with the angle, and so how the frequency depends on the amplitude
+    mimics = "cubic_stiffness"
 
     def sensor_basis(self, t, theta):
         # the direction (sin θ, cos θ) seen through the image map [[1+e₁, e₂], [e₂, 1−e₁]]:

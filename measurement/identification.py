@@ -572,7 +572,7 @@ class Withdrawn:
     """Effects taken back because the ω_n they moved does not hold across the record.
 
     effects: the effects withdrawn; omega_n: the model's with them (rad/s);
-    d_bic: its BIC minus the kept model's; segments: its halves.
+    d_bic: its BIC minus the kept model's; segments: its halves; model_effects: that model's effects.
     """
 
     effects: tuple[str, ...]
@@ -580,10 +580,11 @@ class Withdrawn:
     omega_n_std: float
     d_bic: float
     segments: SegmentCheck
+    model_effects: tuple[str, ...]
 
     def rival(self, kept_omega_n: float) -> Competitor:
         return Competitor(f"{', '.join(self.effects)} kept (the ω_n it moves does not hold across the record)",
-                          self.d_bic, 1.0, self.omega_n, self.omega_n - kept_omega_n)
+                          self.d_bic, 1.0, self.omega_n, self.omega_n - kept_omega_n, self.model_effects)
 
 
 def _fallback(names: Sequence[str], taken: Sequence[str],
@@ -632,16 +633,18 @@ def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[tuple[str, floa
         except IdentificationError:
             return final, None, 0
         nfev = previous.nfev
-    return previous, Withdrawn(tuple(movers), w, final.stdev("omega_n"), final.bic - previous.bic, seg), nfev
+    return previous, Withdrawn(tuple(movers), w, final.stdev("omega_n"), final.bic - previous.bic, seg,
+                               final.model.effect_names), nfev
 
 
 @dataclass(frozen=True)
 class LawRival:
     """A restoring law the loop does not offer on this rig, fitted in place of an effect that mimics it.
 
-    effect: the kept effect (e.g. dahl); law: the mimicking law's effect (e.g. cubic_stiffness);
+    effect: the kept effects that stand for it, comma-separated (dahl; gain, view); law: the law's
+    effect (cubic_stiffness);
     omega_n: ω_n of the model with the law instead (rad/s); d_bic: that model's BIC minus the kept
-    one's; weight: its BIC weight against the kept model.
+    one's; weight: its BIC weight against the kept model; model_effects: that model's effects.
     """
 
     effect: str
@@ -649,10 +652,11 @@ class LawRival:
     omega_n: float
     d_bic: float
     weight: float
+    model_effects: tuple[str, ...]
 
     def rival(self, kept_omega_n: float) -> Competitor:
         return Competitor(f"{self.law} (a restoring law, not offered on this rig) instead of {self.effect}",
-                          self.d_bic, self.weight, self.omega_n, self.omega_n - kept_omega_n)
+                          self.d_bic, self.weight, self.omega_n, self.omega_n - kept_omega_n, self.model_effects)
 
 
 def law_rival(final: ModelFit, moves: Sequence[tuple[str, float, float, ModelFit]], prep: Prepared, rig: Rig,
@@ -670,16 +674,19 @@ def law_rival(final: ModelFit, moves: Sequence[tuple[str, float, float, ModelFit
     (``moves``) and the law is not offered, the model with the law in the
     effect's place (and the effect it refines: Coulomb for Dahl) is fitted;
     its BIC weight against the kept model says whether the data separate
-    them. Returns (the rival or None, simulations spent).
+    them. A sensor's fitted scale (gain, view's stretch) changes how the
+    frequency depends on the amplitude as such a law does, and gives way to
+    it the same way. Returns (the rival or None, simulations spent).
     """
     names = final.model.effect_names
     mimics = [n for n, d, sd, _ in moves if n in names and abs(d) > sd and (law := EFFECTS[n].mimics) is not None
               and law not in names and rig.kind in EFFECTS[law].rigs and not EFFECTS[law].offered_on(rig.kind)]
     if not mimics:
         return None, 0
-    effect = mimics[-1]
-    law = EFFECTS[effect].mimics or ""
-    keep, earlier = _fallback(names, [effect], moves)
+    law = EFFECTS[mimics[-1]].mimics or ""
+    # every kept effect that stands for the same law gives way to it (a sensor's gain and view both)
+    taken = [n for n in names if EFFECTS[n].mimics == law]
+    keep, earlier = _fallback(names, taken, moves)
     model = Model(rig, tuple(resolve_effects(keep + [law], rig)))
     try:
         fit = fit_model(model, final.t, final.y, prep.noise, previous=earlier or final, f_scale=f_scale)
@@ -687,7 +694,7 @@ def law_rival(final: ModelFit, moves: Sequence[tuple[str, float, float, ModelFit
         return None, 0
     d_bic = fit.bic - final.bic
     weight = 1.0 / (1.0 + math.exp(min(d_bic / 2.0, 700.0)))
-    return LawRival(effect, law, fit.value("omega_n"), d_bic, weight), fit.nfev
+    return LawRival(", ".join(taken), law, fit.value("omega_n"), d_bic, weight, model.effect_names), fit.nfev
 
 
 def contains(outer: Model, inner: Model) -> bool:
@@ -1034,8 +1041,8 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         verdict = ("the data do not separate them: its ω_n enters omega_n_u by its BIC weight"
                    if law.d_bic < options.bic_margin else "the data separate them: the effect stands")
         structure.append(
-            f"{law.effect} makes the small swings faster, as a restoring law softer than the rig's at large angles "
-            f"would: fitted in its place, {law.law} (not offered on this rig) gives ω_n {law.omega_n:.6g} rad/s "
+            f"{law.effect} changes how the swing's frequency depends on its amplitude, as a restoring law other than "
+            f"the rig's would: fitted in its place, {law.law} (not offered on this rig) gives ω_n {law.omega_n:.6g} rad/s "
             f"({law.omega_n - w:+.2g}) at ΔBIC {law.d_bic:+.1f}; {verdict}")
     for c in rivals if ambiguous else ():
         if c.weight >= 0.05:

@@ -29,8 +29,9 @@ from scipy.special import gammaincc
 from . import flags as F
 from .effects import EFFECTS, resolve_effects
 from .errors import IdentificationError, InvalidInput
+from .consistency import check_segments
 from .fit import ModelFit, block_covariance, fit_model
-from .identification import Options, _blas, _effect_quantities, _inertia, budgets, identify
+from .identification import Options, _blas, _fallback, _effect_quantities, _inertia, budgets, identify
 from .model import STATE_PARAMS, Model
 from .noise import fit_noise
 from .result import IdentificationResult, Quantity, _budget_table, _jsonable, _num
@@ -127,6 +128,20 @@ class JointResult:
         if jf.get("apart"):
             L.append(f"    the joint fit and the releases' value are {jf['z']:.1f} σ apart: the shared laws do not hold over "
                      f"the releases' amplitudes; the distance enters u (flag model_ambiguous)")
+        if len(c.get("models", ())) > 1:
+            L.append("    shared laws weighed by all the releases together (joint BIC under each release's noise model):")
+            for m in c["models"]:
+                what = ", ".join(m["effects"]) or "(none)"
+                what += f" (no {', '.join(m['without'])})" if m["without"] else ""
+                L.append(f"      {what:<40} ΔBIC {m['d_bic']:+9.1f}  weight {m['weight']:.2f}  "
+                         f"joint-fit ω_n {m['omega_n']:.7g} ± {m['omega_n_std']:.2g}" + ("  (kept)" if m["chosen"] else ""))
+            if c.get("not_held"):
+                L.append(f"    the laws of least BIC do not hold across {', '.join(c['not_held'])} as the releases' own "
+                         "models did (the halves disagree more): the first set is kept, and the distance of the two "
+                         "readings enters u")
+            if c["u_models"] > self.omega_n_std:
+                L.append(f"    the releases do not separate these laws: their spread {c['u_models']:.2g} rad/s enters u "
+                         "(flag model_ambiguous)")
         for group in (self.damping, self.stiffness):
             for eff, params in group.items():
                 for name, q in params.items():
@@ -142,15 +157,16 @@ class JointResult:
         return "\n".join(L)
 
 
+def _dynamic(names: Sequence[str], rig: Rig) -> tuple[str, ...]:
+    """The dynamic effects among ``names`` (a refinement replacing what it refines), in library order."""
+    kept = {n for n in names if EFFECTS[n].role != "sensor"}
+    kept -= {EFFECTS[n].refines for n in kept}
+    return tuple(e.name for e in resolve_effects(kept, rig))
+
+
 def _shared_effects(results: Sequence[IdentificationResult], rig: Rig) -> tuple[str, ...]:
-    """The dynamic effects any release needed (a refinement replacing what it refines), in library order."""
-    names: set[str] = set()
-    for r in results:
-        names.update(n for n in r.effects if EFFECTS[n].role != "sensor")
-    for n in list(names):
-        if EFFECTS[n].refines in names:
-            names.discard(EFFECTS[n].refines)
-    return tuple(e.name for e in resolve_effects(names, rig))
+    """The dynamic effects any release needed, in library order."""
+    return _dynamic([n for r in results for n in r.effects], rig)
 
 
 def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options | None = None) -> JointResult:
@@ -158,21 +174,66 @@ def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options | None
     options = Options() if options is None else options
     if len(traces) < 2:
         raise InvalidInput(f"a joint identification needs at least 2 releases, got {len(traces)}")
-    return _joint([identify(tr, rig, options) for tr in traces], rig)
+    return _joint([identify(tr, rig, options) for tr in traces], rig, options.bic_margin)
 
 
-def _joint(results: list[IdentificationResult], rig: Rig) -> JointResult:
+def _joint(results: list[IdentificationResult], rig: Rig, margin: float = Options().bic_margin) -> JointResult:
     # tall, thin matrices, as in ``identify``: BLAS threads would only contend
     with _blas().limit(limits=1, user_api="blas"):
-        return _fit_jointly(results, rig)
+        return _fit_jointly(results, rig, margin)
 
 
-def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
-    shared = _shared_effects(results, rig)
+@dataclass(frozen=True, eq=False)
+class _SharedModelFit:
+    """One joint fit of the releases with a shared set of dynamic effects.
+
+    dropped: sensor effects of the releases' own models left out (a law stands for them);
+    fits: each release alone with the shared model (the start, and its reading of ω_n);
+    z, cov: the joint parameters (ω_n, the shared laws, then each release's own) and covariance;
+    bic: the joint BIC, each release's residual under its own AR noise model, rad.
+    """
+
+    shared: tuple[str, ...]
+    dropped: frozenset[str]
+    models: list[Model]
+    fits: list[ModelFit]
+    z: np.ndarray
+    cov: np.ndarray
+    residuals: list[np.ndarray]
+    blocks: list[tuple[int, int]]
+    bic: float
+
+    @property
+    def omega_n(self) -> float:
+        return float(self.z[0])
+
+    @property
+    def omega_n_std(self) -> float:
+        return float(math.sqrt(max(self.cov[0, 0], 0.0)))
+
+    def release_x(self, i: int) -> np.ndarray:
+        """Release i's parameter vector in its own model's order."""
+        return _release_x(self.models[i], self.blocks[i], self.z)
+
+
+def _release_x(model: Model, block: tuple[int, int], z: np.ndarray) -> np.ndarray:
+    """A release's parameters from the joint vector z: the shared ω_n and laws, then its own (``block``)."""
+    a, b = block
+    x = np.empty(model.size)
+    x[0], x[1] = z[a], z[a + 1]
+    x[2:model.n_dynamic] = z[:model.n_dynamic - len(STATE_PARAMS) + 1]
+    x[model.n_dynamic:] = z[a + 2:b]
+    return x
+
+
+def _fit_shared(results: Sequence[IdentificationResult], rig: Rig, shared: tuple[str, ...],
+                drop: frozenset[str] = frozenset()) -> _SharedModelFit:
+    """The releases fitted jointly with the dynamic effects ``shared`` and each release's own sensor
+    terms but those in ``drop``."""
     models: list[Model] = []
     fits: list[ModelFit] = []
     for r in results:
-        sensor = tuple(n for n in r.effects if EFFECTS[n].role == "sensor")
+        sensor = tuple(n for n in r.effects if EFFECTS[n].role == "sensor" and n not in drop)
         model = Model.from_names(rig, shared + sensor)
         t, y = r.arrays["t"], r.arrays["angle"]
         # each release alone with the shared model: the start of the joint fit
@@ -209,18 +270,8 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
         scales += [f.scales[0], f.scales[1]] + list(f.scales[m.n_dynamic:])
     scales = np.asarray(scales)
 
-    def release_x(z: np.ndarray, i: int) -> np.ndarray:
-        m = models[i]
-        a, b = blocks[i]
-        x = np.empty(m.size)
-        x[0], x[1] = z[a], z[a + 1]
-        x[2] = z[0]
-        x[3:m.n_dynamic] = z[1:n_shared]
-        x[m.n_dynamic:] = z[a + 2:b]
-        return x
-
     def release_residual(z: np.ndarray, i: int) -> np.ndarray:
-        x = release_x(z, i)
+        x = _release_x(models[i], blocks[i], z)
         t = fits[i].t
         th, _ = models[i].true_angle(x, t, fits[i].max_step)
         return (models[i].measured(x, t - t[0], th) - fits[i].y) * weights[i]
@@ -255,9 +306,96 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
     r = sol.fun
     # covariance: the sandwich with each release's own AR noise model (its residual's colour)
     parts = [slice(offsets[i], offsets[i + 1]) for i in range(len(models))]
-    cov = block_covariance(Jm, scales, [(sl, fit_noise(r[sl]), z.size / len(models)) for sl in parts])
-    w_fit = float(z[0])
-    s_fit = float(math.sqrt(max(cov[0, 0], 0.0)))
+    noises = [fit_noise(r[sl]) for sl in parts]
+    cov = block_covariance(Jm, scales, [(sl, nm, z.size / len(models)) for sl, nm in zip(parts, noises)])
+    # the joint BIC: each release's residual under its own AR noise model (in rad², the weight taken
+    # out of its innovation variance), as ModelFit.bic
+    residuals = [r[sl] / weights[i] for i, sl in enumerate(parts)]
+    n_all = int(offsets[-1])
+    bic = float(sum(res.size * math.log(max(nm.innovation_var / w**2, 1e-300))
+                    for res, nm, w in zip(residuals, noises, weights))
+                + (z.size + sum(nm.order for nm in noises)) * math.log(n_all))
+    return _SharedModelFit(shared, drop, models, fits, z, cov, residuals, blocks, bic)
+
+
+#: most shared models fitted jointly (each costs about one identification of every release)
+MAX_SHARED_MODELS = 8
+
+
+def _candidate_sets(results: Sequence[IdentificationResult], rig: Rig) -> list[tuple[tuple[str, ...], frozenset[str]]]:
+    """The shared dynamic effects the releases are fitted with, and the sensor effects left out of each
+    release's own; the union first (``_shared_effects``), with every release's sensor terms.
+
+    The others are what a release's own identification chose alone. Where
+    effects mimic a restoring law the rig does not offer (Dahl's pre-sliding
+    spring, a sensor's fitted scale: ``Effect.mimics``), each of these, and
+    the union with each whole rival model a release could not rule out (an
+    effect withdrawn because its ω_n did not hold across that record: the
+    law the model lacked may be why), is fitted again with the law in their
+    place: across releases at different amplitudes the data can tell them
+    apart where one record could not. A withdrawn effect comes back only
+    with the law: alone, its record already showed that it does not hold.
+    """
+    union = _shared_effects(results, rig)
+    rivals = [c["effects"] for r in results for c in r.model_form.get("competitors", ()) if c.get("effects")]
+    bases = list(dict.fromkeys([union] + [_dynamic(r.effects, rig) for r in results]))
+    sets: list[tuple[tuple[str, ...], frozenset[str]]] = [(b, frozenset()) for b in bases]
+    bases = list(dict.fromkeys(bases + [_dynamic(list(union) + e, rig) for e in rivals]))
+    used = list(dict.fromkeys([n for b in bases for n in b] + [n for r in results for n in r.effects]
+                              + [n for e in rivals for n in e]))
+    for law in dict.fromkeys(m for n in used if (m := EFFECTS[n].mimics) is not None):
+        if rig.kind not in EFFECTS[law].rigs or EFFECTS[law].offered_on(rig.kind):
+            continue
+        drop = frozenset(n for n in used if EFFECTS[n].mimics == law and EFFECTS[n].role == "sensor")
+        for base in bases:
+            if law in base:
+                continue
+            keep, _ = _fallback(base, [n for n in base if EFFECTS[n].mimics == law], ())
+            key = (_dynamic(keep + [law], rig), drop)
+            if key not in sets:
+                sets.append(key)
+    return sets[:MAX_SHARED_MODELS]
+
+
+def _not_held(chosen: _SharedModelFit, results: Sequence[IdentificationResult]) -> list[str]:
+    """The releases in which the shared model's halves disagree more than their own model's did."""
+    out = []
+    for f, r in zip(chosen.fits, results):
+        seg = check_segments(f, r.noise_floor)
+        own = (r.model_form.get("segments") or {}).get("z")
+        if seg is not None and seg.disagree and (own is None or seg.z > own):
+            out.append(r.source)
+    return out
+
+
+def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -> JointResult:
+    # every candidate set of shared effects fitted jointly; the joint BIC chooses, and the sets within
+    # ``margin`` of it are rivals whose joint ω_n enters u by their BIC weight
+    candidates: list[_SharedModelFit] = []
+    for shared, drop in _candidate_sets(results, rig):
+        try:
+            candidates.append(_fit_shared(results, rig, shared, drop))
+        except IdentificationError:
+            if not candidates:  # the union must fit: it is the model every release's physics is in
+                raise
+    best = min(candidates, key=lambda c: c.bic)
+    # BIC alone can prefer a law that does not hold (``identification.hold_across``): a shared model
+    # other than the union is kept only if, in each release, it holds across the record as well as
+    # that release's own model; otherwise the union stays and the distance of the two readings is
+    # model form, as a withdrawn effect's is
+    not_held = [] if best is candidates[0] else _not_held(best, results)
+    chosen = candidates[0] if not_held else best
+    bics = np.array([c.bic for c in candidates])
+    near = [i for i, c in enumerate(candidates) if c.bic - best.bic < margin]
+    wts_m = np.exp(-(bics[near] - best.bic) / 2.0)
+    wts_m /= wts_m.sum()
+    u_models = float(math.sqrt(sum(w * (candidates[i].omega_n - chosen.omega_n) ** 2 for w, i in zip(wts_m, near))))
+    weight = dict(zip(near, wts_m))
+    models_table = [{"effects": list(c.shared), "without": sorted(c.dropped), "bic": c.bic, "d_bic": c.bic - best.bic,
+                     "weight": float(weight.get(i, 0.0)), "omega_n": c.omega_n, "omega_n_std": c.omega_n_std,
+                     "chosen": c is chosen} for i, c in enumerate(candidates)]
+    shared, models, fits, cov = chosen.shared, chosen.models, chosen.fits, chosen.cov
+    w_fit, s_fit = chosen.omega_n, chosen.omega_n_std
 
     # the releases against the joint value, each fitted alone with the shared effects (the same
     # model, so that a difference is the releases', not the models'), with its own fit σ and the
@@ -295,6 +433,10 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
     u_joint, fit_z = with_joint_fit(w_joint, u_joint, w_fit, s_fit)
     if fit_z > FIT_APART_Z:
         flags.append(F.MODEL_AMBIGUOUS)
+    # shared laws the releases together do not decisively separate: their spread is model form
+    u_joint = math.hypot(u_joint, u_models)
+    if u_models > s_joint:
+        flags.append(F.MODEL_AMBIGUOUS)
     flags = list(dict.fromkeys(flags + [fl for res in results for fl in res.flags]))
     consistency = {
         "chi2": chi2, "dof": dof, "p": p, "birge_ratio": birge, "z": [float(v) for v in zs],
@@ -302,11 +444,12 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
         "largest_z": float(zs[k]), "largest_release": results[k].source,
         "pairwise_max": float(pair[0]), "pairwise_releases": [results[pair[1]].source, results[pair[2]].source],
         "joint_fit": {"omega_n": w_fit, "omega_n_std": s_fit, "z": fit_z, "apart": fit_z > FIT_APART_Z},
+        "models": models_table, "u_models": u_models, "not_held": not_held,
     }
     # the shared laws, read through the first release's model (the same effects for all)
-    x0 = release_x(z, 0)
+    x0 = chosen.release_x(0)
     m0 = models[0]
-    idx = [0] + list(range(1, n_shared))
+    idx = list(range(m0.n_dynamic - len(STATE_PARAMS) + 1))
     cov0 = np.zeros((m0.size, m0.size))
     pos = [2] + list(range(3, m0.n_dynamic))
     cov0[np.ix_(pos, pos)] = cov[np.ix_(idx, idx)]
@@ -318,8 +461,7 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig) -> JointResult:
     # constants come in here. Its degrees of freedom: the releases' when their scatter sets it
     budget = budgets(rig, w_joint, u_joint, dof=float(dof) if s_joint * birge > common and birge > 1 else math.inf,
                      scale_response=None)
-    rms = float(math.sqrt(np.mean(np.concatenate([(r[offsets[i]:offsets[i + 1]] / weights[i]) ** 2
-                                                  for i in range(len(models))]))))
+    rms = float(math.sqrt(np.mean(np.concatenate(chosen.residuals) ** 2)))
     return JointResult(
         rig_kind=rig.kind, effects=shared, omega_n=w_joint, omega_n_std=s_joint, omega_n_u=u_joint,
         J=J, J_std=J_std, J_u=J_u,

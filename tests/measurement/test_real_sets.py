@@ -90,3 +90,16 @@ def test_a_joint_fit_apart_from_the_releases_value_widens_the_joint_uncertainty(
     for name in SETS:
         fit = joint(name).consistency["joint_fit"]
         assert not fit["apart"] and fit["z"] <= FIT_APART_Z, (name, fit)
+
+
+def test_shared_laws_of_least_bic_that_do_not_hold_across_a_release_are_not_kept():
+    # the bifilar's releases together prefer Coulomb friction with a cubic law (ΔBIC thousands),
+    # but with it the halves of each record disagree more than under its own model: BIC alone
+    # does not make a law true, so the releases' own laws stay and the distance enters u
+    j = joint("bifilar")
+    c = j.consistency
+    best = min(c["models"], key=lambda m: m["d_bic"])
+    assert "cubic_stiffness" in best["effects"] and not best["chosen"]
+    assert c["not_held"] and j.effects == ("viscous", "coulomb")
+    assert c["u_models"] >= abs(best["omega_n"] - c["joint_fit"]["omega_n"])
+    assert j.omega_n_u >= c["u_models"]
