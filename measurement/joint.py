@@ -5,7 +5,11 @@ discovery and model form). The releases are then fitted jointly: the
 physics is shared (ω_n and the damping and stiffness laws: the union of the
 dynamic effects any release needed), the nuisance is per release (initial
 state, sensor zero, drift and other sensor terms). Releases at different
-amplitudes are how amplitude-dependent physics is told from a constant ω_n.
+amplitudes are how amplitude-dependent physics is told from a constant ω_n:
+the shared laws are chosen by the joint BIC among the union, each release's
+own set, and the same with a restoring law in place of what mimics it
+(``_candidate_sets``), provided the choice holds across every release's
+record as well as its own model did (``_not_held``).
 
 The releases are then tested against the joint value: χ² of each release's
 own ω_n (with its combined uncertainty) about the joint one, the largest

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 
 def _num(v: Any) -> Any:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from measurement import Pendulum, simulate_trace
+from measurement.result import SCHEMA_VERSION
 from measurement.rig import CalibrationRecord
 from service.cli import main
 from service.daemon import Appliance
@@ -79,7 +80,7 @@ def test_bad_check_standard_input_is_one_line(swing, rig_file, capsys, extra, wo
 def test_identify_json_carries_the_expanded_uncertainty_and_its_budget(swing, rig_file, capsys):
     assert main(["identify", str(swing), "--rig", str(rig_file), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
-    assert d["schema"] == 3 and d["coverage_factor"] == 2.0
+    assert d["schema"] == SCHEMA_VERSION and d["coverage_factor"] == 2.0
     assert d["J_U"] == pytest.approx(2 * d["J_u"]) and d["J_object_U"] < d["J_U"]  # k and I0 correlated
     lines = {ln["symbol"]: ln for ln in d["uncertainty_budget"]["J_object"]["lines"]}
     assert {"omega_n_fit", "clock", "k", "I0"} <= set(lines)
