@@ -259,6 +259,12 @@ def effect_holds(fit: ModelFit, effect: str, sigma: float) -> tuple[bool, str, i
                            f"(χ² {chi2:.1f} on {d.size}, p = {p:.2g})"), a.nfev + b.nfev
 
 
+def bic_weights(bics: np.ndarray) -> np.ndarray:
+    """Each model's BIC weight, exp(−ΔBIC/2) normalised over the models (ΔBIC from the least)."""
+    w = np.exp(-(bics - bics.min()) / 2.0)
+    return w / w.sum()
+
+
 def competitors(steps: Sequence[Any], margin: float) -> tuple[tuple[Competitor, ...], float]:
     """Models within ``margin`` of BIC of the one each discovery round kept, and ω_n's spread over them (rad/s).
 
@@ -287,9 +293,7 @@ def competitors(steps: Sequence[Any], margin: float) -> tuple[tuple[Competitor, 
             rivals = {k: v for k, v in fitted.items() if v["bic"] - ref_bic < margin}
         if not rivals:
             continue
-        bics = np.array([ref_bic] + [v["bic"] for v in rivals.values()])
-        w = np.exp(-(bics - bics.min()) / 2.0)
-        w /= w.sum()
+        w = bic_weights(np.array([ref_bic] + [v["bic"] for v in rivals.values()]))
         for (name, v), wi in zip(rivals.items(), w[1:]):
             delta = v["omega_n"] - ref_w
             var += float(wi) * delta**2

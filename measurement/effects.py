@@ -96,6 +96,15 @@ class Effect:
         """Whether the discovery loop offers this effect as a candidate on a ``kind`` rig."""
         return kind in (cls.offered or cls.rigs)
 
+    @classmethod
+    def unweighed_law(cls, kind: str) -> str | None:
+        """The restoring law this effect mimics (``mimics``) where a ``kind`` rig may hold it but the loop
+        does not offer it, so that discovery never weighs the two; None otherwise."""
+        law = cls.mimics
+        if law is None or kind not in EFFECTS[law].rigs or EFFECTS[law].offered_on(kind):
+            return None
+        return law
+
     def __init__(self, rig: "Rig"):
         self.rig = rig
 

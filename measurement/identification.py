@@ -39,7 +39,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from . import flags as F
-from .consistency import Competitor, ModelForm, SegmentCheck, check_segments, competitors, effect_holds
+from .consistency import Competitor, ModelForm, SegmentCheck, bic_weights, check_segments, competitors, effect_holds
 from .diagnostics import Diagnostics, diagnose
 from .effects import EFFECTS, Effect, candidate_effects, resolve_effects, with_effect
 from .errors import IdentificationError, RigError, TraceError, UnknownEffectError
@@ -679,11 +679,11 @@ def law_rival(final: ModelFit, moves: Sequence[tuple[str, float, float, ModelFit
     it the same way. Returns (the rival or None, simulations spent).
     """
     names = final.model.effect_names
-    mimics = [n for n, d, sd, _ in moves if n in names and abs(d) > sd and (law := EFFECTS[n].mimics) is not None
-              and law not in names and rig.kind in EFFECTS[law].rigs and not EFFECTS[law].offered_on(rig.kind)]
+    mimics = [law for n, d, sd, _ in moves if n in names and abs(d) > sd
+              and (law := EFFECTS[n].unweighed_law(rig.kind)) is not None and law not in names]
     if not mimics:
         return None, 0
-    law = EFFECTS[mimics[-1]].mimics or ""
+    law = mimics[-1]
     # every kept effect that stands for the same law gives way to it (a sensor's gain and view both)
     taken = [n for n in names if EFFECTS[n].mimics == law]
     keep, earlier = _fallback(names, taken, moves)
@@ -693,7 +693,7 @@ def law_rival(final: ModelFit, moves: Sequence[tuple[str, float, float, ModelFit
     except IdentificationError:
         return None, 0
     d_bic = fit.bic - final.bic
-    weight = 1.0 / (1.0 + math.exp(min(d_bic / 2.0, 700.0)))
+    weight = float(bic_weights(np.array([final.bic, fit.bic]))[1])
     return LawRival(", ".join(taken), law, fit.value("omega_n"), d_bic, weight, model.effect_names), fit.nfev
 
 

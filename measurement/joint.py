@@ -33,7 +33,7 @@ from scipy.special import gammaincc
 from . import flags as F
 from .effects import EFFECTS, resolve_effects
 from .errors import IdentificationError, InvalidInput
-from .consistency import check_segments
+from .consistency import bic_weights, check_segments
 from .fit import ModelFit, block_covariance, fit_model
 from .identification import Options, _blas, _fallback, _effect_quantities, _inertia, budgets, identify
 from .model import STATE_PARAMS, Model
@@ -347,9 +347,7 @@ def _candidate_sets(results: Sequence[IdentificationResult], rig: Rig) -> list[t
     bases = list(dict.fromkeys(bases + [_dynamic(list(union) + e, rig) for e in rivals]))
     used = list(dict.fromkeys([n for b in bases for n in b] + [n for r in results for n in r.effects]
                               + [n for e in rivals for n in e]))
-    for law in dict.fromkeys(m for n in used if (m := EFFECTS[n].mimics) is not None):
-        if rig.kind not in EFFECTS[law].rigs or EFFECTS[law].offered_on(rig.kind):
-            continue
+    for law in dict.fromkeys(m for n in used if (m := EFFECTS[n].unweighed_law(rig.kind)) is not None):
         drop = frozenset(n for n in used if EFFECTS[n].mimics == law and EFFECTS[n].role == "sensor")
         for base in bases:
             if law in base:
@@ -391,8 +389,7 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
     chosen = candidates[0] if not_held else best
     bics = np.array([c.bic for c in candidates])
     near = [i for i, c in enumerate(candidates) if c.bic - best.bic < margin]
-    wts_m = np.exp(-(bics[near] - best.bic) / 2.0)
-    wts_m /= wts_m.sum()
+    wts_m = bic_weights(bics[near])
     u_models = float(math.sqrt(sum(w * (candidates[i].omega_n - chosen.omega_n) ** 2 for w, i in zip(wts_m, near))))
     weight = dict(zip(near, wts_m))
     models_table = [{"effects": list(c.shared), "without": sorted(c.dropped), "bic": c.bic, "d_bic": c.bic - best.bic,
