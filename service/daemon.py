@@ -43,13 +43,14 @@ from measurement.integrator import is_compiled
 
 from . import __version__
 from service.config.appliance import Config
+from service.core import vocabulary as V
+from service.core.live import LiveStatus
 from .errors import ServiceError, StartupError, StoreDamaged, StoreError
 from service.devices.hardware import Devices, build_devices
 from .notify import Notifier
 from service.publish.payload import iso_utc, result_payload
 from service.parts.recipes import PartTracker, Recipe, RecipeBook, RecipeError
 from service.parts.tensor_set import COMPLETE, TensorSet
-from service.publish.modbus.registers import LiveStatus
 from service.persistence.store import Store, quarantine_store
 from service.publish import registry
 from service.publish.port import ApplianceView, Publisher
@@ -133,11 +134,10 @@ class Appliance:
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str, data: Mapping[str, Any] | None = None,
                 reply: ReplyTo | None = None) -> None:
-        """Queue a command from ``source`` ("button", "modbus", "mqtt", "cli", "web"): "trigger" (data
-        may carry ``part_id``, and ``recipe`` as a name or number), "abort", "acknowledge_fault", "recipe" (data
-        ``recipe``), "part_id" (data ``part_id``), "set" (data ``action`` redo | skip | abort, optional
-        ``orientation``: the tensor set's operator actions) or "set_redo" / "set_skip" / "set_abort" (the
-        Modbus coils). ``reply`` hears the outcome (``service.publish.replies``) on the main loop thread."""
+        """Queue a command from ``source`` ("button", "modbus", "mqtt", "cli", "web"): a name of
+        ``service.core.vocabulary.COMMANDS`` with its data (a trigger's may carry ``part_id``, and ``recipe``
+        as a name or number). ``reply`` hears the outcome (``service.publish.replies``) on the main loop
+        thread."""
         self._commands.put((name, source, data, reply))
         self._wakeup.set()
 
@@ -173,7 +173,7 @@ class Appliance:
                                        options=cfg.identification, button=None, indicator=d.indicator,
                                        identifier=self._identify)
             if d.button is not None:
-                d.button.when_pressed = lambda: self.command("trigger", "button")
+                d.button.when_pressed = lambda: self.command(V.TRIGGER, "button")
             self.sequencer.subscribe(self._on_event)
             if not is_compiled(cfg.rig.kind):
                 # a device's first run: the integrator is compiled (some 10 s on a Pi) in a child
@@ -340,7 +340,11 @@ class Appliance:
         def refused(reason: str, detail: str = "") -> CommandReply:
             return CommandReply(name, "refused", reason, detail)
 
-        if name in ("recipe", "part_id") or (name == "trigger" and data):
+        command = V.COMMANDS.get(name)
+        if command is None:
+            log.warning("unknown command %r from %s", name, source)
+            return refused("unknown_command", f"{name!r}")
+        if command.sets_part and (data or command.act == "part"):
             if seq.busy:
                 self._log_ignored(f"{name} from {source} refused: a measurement runs (the part cannot change "
                                   "during it)")
@@ -350,39 +354,54 @@ class Appliance:
             except InvalidInput as exc:
                 log.warning("%s from %s refused: %s", name, source, exc)
                 return refused("unknown_recipe" if isinstance(exc, RecipeError) else "malformed", str(exc))
-            if name != "trigger":
+            if command.act == "part":
                 return CommandReply(name, "done")
-        if name in ("set", "set_redo", "set_skip", "set_abort"):
-            action = name[4:] if name != "set" else str((data or {}).get("action"))
-            return self._set_action(action, (data or {}).get("orientation"), source, name)
-        if name == "trigger":
-            unwritable = self._store_unwritable()
-            if unwritable is not None:
-                now = time.monotonic()
-                if now - self._refused_logged_at >= IGNORED_LOG_INTERVAL:
-                    log.error("trigger from %s refused: %s", source, unwritable)
-                    self._refused_logged_at = now
-                return refused("store_unwritable", unwritable)
-            if seq.request_measurement(source):
-                self._accepted_source = source
-                self._accepted_reply = reply
-                self._accepted_part = (self.parts.part_id, self.parts.recipe)
-                self._open_set()
-                return CommandReply(name, "accepted")
-            self._log_ignored(f"trigger from {source} ignored (state {seq.state.value})")
-            state = seq.state
-            return refused("fault" if state is State.FAULT else "busy" if seq.busy else "not_ready",
-                           f"state {state.value}")
-        if name in ("abort", "acknowledge_fault"):
-            if seq.state is State.FAULT:
-                seq.abort(f"fault acknowledged by {source}")
-                return CommandReply(name, "done")
-            if name == "abort" and seq.abort(f"aborted by {source}"):
-                return CommandReply(name, "done")
-            log.info("%s from %s: nothing to %s", name, source, "abort" if name == "abort" else "acknowledge")
-            return refused("nothing_to_abort")
-        log.warning("unknown command %r from %s", name, source)
-        return refused("unknown_command", f"{name!r}")
+        return self._ACTS[command.act](self, name, command, source, data, reply)
+
+    def _act_measure(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,
+                     reply: ReplyTo | None) -> CommandReply:
+        """A trigger (its part data applied already): a measurement starts, or the reason it cannot."""
+        seq = self.sequencer
+        assert seq is not None
+        unwritable = self._store_unwritable()
+        if unwritable is not None:
+            now = time.monotonic()
+            if now - self._refused_logged_at >= IGNORED_LOG_INTERVAL:
+                log.error("trigger from %s refused: %s", source, unwritable)
+                self._refused_logged_at = now
+            return CommandReply(name, "refused", "store_unwritable", unwritable)
+        if seq.request_measurement(source):
+            self._accepted_source = source
+            self._accepted_reply = reply
+            self._accepted_part = (self.parts.part_id, self.parts.recipe)
+            self._open_set()
+            return CommandReply(name, "accepted")
+        self._log_ignored(f"trigger from {source} ignored (state {seq.state.value})")
+        state = seq.state
+        return CommandReply(name, "refused", "fault" if state is State.FAULT else "busy" if seq.busy else "not_ready",
+                            f"state {state.value}")
+
+    def _act_stop(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,
+                  reply: ReplyTo | None) -> CommandReply:
+        """Abort the running measurement, or acknowledge a FAULT (an abort does both)."""
+        seq = self.sequencer
+        assert seq is not None
+        if seq.state is State.FAULT:
+            seq.abort(f"fault acknowledged by {source}")
+            return CommandReply(name, "done")
+        if name == V.ABORT and seq.abort(f"aborted by {source}"):
+            return CommandReply(name, "done")
+        log.info("%s from %s: nothing to %s", name, source, "abort" if name == V.ABORT else "acknowledge")
+        return CommandReply(name, "refused", "nothing_to_abort")
+
+    def _act_set(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,
+                 reply: ReplyTo | None) -> CommandReply:
+        """An operator action of the tensor set: the coil's own (``set_action``) or the data's ``action``."""
+        action = command.set_action or str((data or {}).get("action"))
+        return self._set_action(action, (data or {}).get("orientation"), source, name)
+
+    #: how the daemon acts on each ``Command.act`` but "part" (whose data is applied in ``_execute``)
+    _ACTS: dict[str, Callable[..., CommandReply]] = {"measure": _act_measure, "stop": _act_stop, "set": _act_set}
 
     def _log_ignored(self, what: str) -> None:
         """One line per IGNORED_LOG_INTERVAL for the commands a stuck button or a looping client repeats."""
@@ -614,7 +633,7 @@ class Appliance:
         self._to_publishers("on_result", stored, m)
         self._note_stored(m.id)
         if (reply := self._run_reply.pop(m.id, None)) is not None:
-            reply(CommandReply("trigger", "done", data={"uuid": m.id, "seq": stored.seq}))
+            reply(CommandReply(V.TRIGGER, "done", data={"uuid": m.id, "seq": stored.seq}))
         log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, result.get("J"),
                  ", ".join(result.get("flags") or []) or "none")
         if part["verdict"] is not None and recipe is not None:
@@ -677,7 +696,7 @@ class Appliance:
         part_id, recipe = self._run_part.pop(event.measurement_id, (None, None))
         status = "failed" if event.state is State.FAULT else "aborted"
         if (reply := self._run_reply.pop(event.measurement_id, None)) is not None:
-            reply(CommandReply("trigger", "failed", "measurement_failed", event.reason or status,
+            reply(CommandReply(V.TRIGGER, "failed", "measurement_failed", event.reason or status,
                                {"uuid": event.measurement_id}))
         try:
             self.store.record(uuid=event.measurement_id, status=status, trigger=trigger,

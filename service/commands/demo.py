@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Iterator
 
 from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
+from service.core import vocabulary as V
 from service.errors import InputFileError
 
 
@@ -176,7 +177,7 @@ def _run(app, args: argparse.Namespace) -> int:
         print(f"recipe {recipe.name} (version {recipe.version}): {recipe.spec.quantity} = {recipe.spec.nominal:g} "
               f"± {recipe.spec.upper - recipe.spec.nominal:.3g} kg·m², {recipe.releases} release(s) per part, "
               f"decision rule {recipe.spec.rule} (U = {recipe.spec.coverage_factor:g}·u_c)")
-        app.command("part_id", "cli", {"part_id": DEMO_PART_ID})  # as the PLC writes it before the trigger
+        app.command(V.PART_ID, "cli", {"part_id": DEMO_PART_ID})  # as the PLC writes it before the trigger
         pin = app.devices.button.pin
         limit = 60.0 + (cfg.sequencer.pre_trigger + cfg.sequencer.capture_duration) / cfg.simulation.time_scale
         for i in range(1, recipe.releases + 1):

@@ -21,11 +21,11 @@ from typing import TYPE_CHECKING, Any, Callable, ClassVar, Mapping
 if TYPE_CHECKING:  # pragma: no cover
     from firmware_host import Event, Measurement, Sequencer
     from service.config.appliance import Config
+    from service.core.live import LiveStatus
     from service.devices.hardware import Devices
     from service.notify import Notifier
     from service.parts.recipes import PartTracker, Recipe
     from service.persistence.store import Store, StoredMeasurement
-    from service.publish.modbus.registers import LiveStatus
     from service.publish.replies import ReplyTo
 
 

@@ -10,6 +10,7 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 from pymodbus.framer import FramerType
 
+from service.core.live import LiveStatus
 from service.publish.modbus import registers as R
 from service.publish.modbus.server import ModbusServer, ModbusSettings
 
@@ -114,7 +115,7 @@ def test_command_coils_fire_once_per_write_of_one_and_read_back_zero(server, cli
 
 
 def test_live_status_and_discrete_inputs(server, client):
-    server.set_live(R.LiveStatus(state="CAPTURING", busy=True, mqtt_connected=True, outbox_pending=3, started=7))
+    server.set_live(LiveStatus(state="CAPTURING", busy=True, mqtt_connected=True, outbox_pending=3, started=7))
     d = R.decode_image(client.read_input_registers(0, count=R.SNAPSHOT_START, device_id=1).registers)
     assert d["state"] == R.STATE_CODES["CAPTURING"]
     assert d["measurements_started"] == 7 and d["outbox_pending"] == 3

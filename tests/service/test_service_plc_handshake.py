@@ -9,6 +9,7 @@ import threading
 import pytest
 from pymodbus.client import ModbusTcpClient
 
+from service.core.live import LiveStatus
 from service.publish.modbus import registers as R
 from service.publish.modbus.server import ModbusServer, ModbusSettings
 from service.publish.replies import CommandReply
@@ -133,33 +134,33 @@ def test_the_command_register_answers_and_refuses_bad_codes_with_illegal_value(p
 
 def test_heartbeat_advances_with_the_main_loop_and_a_silent_plc_heartbeat_is_flagged(plc):
     srv, c, _, clock = plc
-    srv.set_live(R.LiveStatus(state="IDLE"))
+    srv.set_live(LiveStatus(state="IDLE"))
     first = image(c)["heartbeat"]
     clock.t += R.HEARTBEAT_PERIOD
-    srv.set_live(R.LiveStatus(state="IDLE"))
+    srv.set_live(LiveStatus(state="IDLE"))
     v = image(c)
     assert v["heartbeat"] == (first + 1) & 0xFFFF and bit(v, "ready")
 
     assert not write(c, "plc_heartbeat", 1).isError()
     clock.t += 1.5
-    srv.set_live(R.LiveStatus(state="IDLE"))
+    srv.set_live(LiveStatus(state="IDLE"))
     assert not bit(image(c), "plc_heartbeat_lost")
     clock.t += 1.0  # 2.5 s since the PLC's last change, timeout 2 s
-    srv.set_live(R.LiveStatus(state="IDLE"))
+    srv.set_live(LiveStatus(state="IDLE"))
     v = image(c)
     assert bit(v, "plc_heartbeat_lost") and v["error_code"] in (R.ERROR_CODE_BY_NAME["plc_heartbeat_lost"],)
     assert srv.health()["plc_heartbeat_lost"] and any("PLC heartbeat" in s for s in srv.status())
     assert not write(c, "plc_heartbeat", 1).isError()  # the same value is no sign of life
-    srv.set_live(R.LiveStatus(state="IDLE"))
+    srv.set_live(LiveStatus(state="IDLE"))
     assert bit(image(c), "plc_heartbeat_lost")
     assert not write(c, "plc_heartbeat", 2).isError()
-    srv.set_live(R.LiveStatus(state="IDLE"))
+    srv.set_live(LiveStatus(state="IDLE"))
     assert not bit(image(c), "plc_heartbeat_lost")
 
 
 def test_status_word_says_calibration_due_and_not_decidable(plc):
     srv, c, _, _ = plc
-    srv.set_live(R.LiveStatus(state="FAULT", fault=True, calibration_due=True))
+    srv.set_live(LiveStatus(state="FAULT", fault=True, calibration_due=True))
     p = synthetic(40) | {"verdict": "NOK", "part": {"verdict": "NOK", "zone": "uncertainty"}}
     srv.publish_result(p)
     v = image(c)
@@ -170,7 +171,7 @@ def test_status_word_says_calibration_due_and_not_decidable(plc):
         v = image(c)
     assert v["seq"] == 40 and bit(v, "not_decidable")
     assert not write(c, "result_ack", 40).isError()
-    srv.set_live(R.LiveStatus(state="IDLE"))
+    srv.set_live(LiveStatus(state="IDLE"))
 
 
 def test_modbus_map_read_prints_strict_json_with_raw_and_decoded_apart(plc, capsys):

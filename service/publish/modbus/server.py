@@ -55,6 +55,8 @@ from pymodbus.simulator.simcore import SimCore
 
 from drivers.aioloop import LoopThread
 
+from service.core import vocabulary as V
+from service.core.live import LiveStatus
 from service.publish.payload import not_decidable
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
@@ -271,7 +273,7 @@ class ModbusServer(Publisher):
         self._lock = threading.Lock()
         self._clock = clock
         self.acked_file = acked_file
-        self._live = R.LiveStatus()
+        self._live = LiveStatus()
         self._snapshot = R.encode_snapshot(None, settings.word_order)
         self._verdict: str | None = None
         self._inputs = [0] * (R.WRITABLE_END - R.WRITABLE_START)  # the writable holding registers
@@ -388,7 +390,7 @@ class ModbusServer(Publisher):
         return {"part_id": R.decode_ascii(words[a - R.WRITABLE_START: a - R.WRITABLE_START + n]),
                 "recipe_select": words[R.WRITABLE["recipe_select"][0] - R.WRITABLE_START]}
 
-    def set_live(self, live: R.LiveStatus) -> None:
+    def set_live(self, live: LiveStatus) -> None:
         """The live status (the daemon's main loop, every iteration): also advances the heartbeat and
         watches the PLC's."""
         if live.busy:
@@ -418,7 +420,7 @@ class ModbusServer(Publisher):
         return self._plc_heartbeat_lost
 
     @property
-    def live(self) -> R.LiveStatus:
+    def live(self) -> LiveStatus:
         return self._live
 
     def image(self) -> tuple[int, ...]:
@@ -440,7 +442,7 @@ class ModbusServer(Publisher):
             command_count=count)
         # one assignment: a request handler sees the old or the new tuple, never a mix
         self._image = R.assemble_image(live, self._snapshot, R.encode_handshake(handshake))
-        self._status_bits = self._live.status_bits(self._result_valid, self._verdict)
+        self._status_bits = R.status_bits(self._live, self._result_valid, self._verdict)
 
     def _reply_to(self, code: int) -> Callable[[CommandReply], None]:
         """The reply of a command written to register `command` (the daemon's main loop calls it)."""
@@ -449,9 +451,9 @@ class ModbusServer(Publisher):
             with self._lock:
                 count = (self._command[3] + 1) & 0xFFFF
                 self._command = (code, R.COMMAND_STATUS[r.status], r.reason_code, count)
-                if R.COMMANDS[code] == "trigger" and r.status == "accepted":
+                if R.COMMANDS[code] == V.TRIGGER and r.status == "accepted":
                     self._trigger_ack = True
-                if R.COMMANDS[code] == "acknowledge_fault" and r.status in ("done", "refused"):
+                if R.COMMANDS[code] == V.ACKNOWLEDGE_FAULT and r.status in ("done", "refused"):
                     self._overrun = False  # the overrun is acknowledged with the fault (its count stays)
                 self._rebuild()
 
@@ -480,7 +482,7 @@ class ModbusServer(Publisher):
             for i, v in enumerate(values):
                 if v:
                     name = names[address + i]
-                    if name == "trigger":  # the part ID written before it is queued before it: it applies
+                    if name == V.TRIGGER:  # the part ID written before it is queued before it: it applies
                         self._hold_until = self._clock() + TRIGGER_HOLD
                     self._on_command(name, "modbus")
                 values[i] = False  # command coils are pulses: they read back 0
@@ -535,9 +537,9 @@ class ModbusServer(Publisher):
         if written("result_ack"):
             self.acknowledge(word(new, "result_ack"))
         if any(a <= t < a + n for t in touched):
-            self._on_command("part_id", "modbus", {"part_id": R.decode_ascii(part_words)})
+            self._on_command(V.PART_ID, "modbus", {"part_id": R.decode_ascii(part_words)})
         if written("recipe_select"):
-            self._on_command("recipe", "modbus", {"recipe": recipe})
+            self._on_command(V.RECIPE, "modbus", {"recipe": recipe})
         if written("command"):
             with self._lock:
                 self._trigger_ack = False  # the PLC took its hand off the trigger (or gives a new command)
@@ -549,11 +551,11 @@ class ModbusServer(Publisher):
     def _dispatch(self, code: int, parameter: int) -> None:
         name = R.COMMANDS[code]
         reply = self._reply_to(code)
-        if name == "trigger":
+        if name == V.TRIGGER:
             self._hold_until = self._clock() + TRIGGER_HOLD
-            self._on_command("trigger", "modbus", None, reply)
-        elif name == "select_recipe":
-            self._on_command("recipe", "modbus", {"recipe": parameter}, reply)
+            self._on_command(V.TRIGGER, "modbus", None, reply)
+        elif R.DAEMON_COMMAND.get(name) == V.RECIPE:
+            self._on_command(V.RECIPE, "modbus", {"recipe": parameter}, reply)
         else:
             self._on_command(name, "modbus", None, reply)
 
@@ -671,7 +673,7 @@ class ModbusServer(Publisher):
         server.set_inputs(recipe=parts.recipe.number if parts.recipe else 0)
         if store is not None:
             # until the main loop runs, the PLC sees STARTING and the true outbox backlog, not defaults
-            server.set_live(R.LiveStatus(state="STARTING", simulated=appliance.config.simulated,
+            server.set_live(LiveStatus(state="STARTING", simulated=appliance.config.simulated,
                                          outbox_pending=store.outbox_count()))
             if settings.result_handshake == "ack":
                 server.restore_queue(store)  # the results the PLC has not acknowledged, again
@@ -702,7 +704,7 @@ class ModbusServer(Publisher):
             out.append(f"{self.overrun_count} result(s) found the PLC's queue full")
         return out
 
-    def on_live(self, live: R.LiveStatus) -> None:
+    def on_live(self, live: LiveStatus) -> None:
         self.set_live(live)
 
     def on_result(self, stored: Any, measurement: Any) -> None:

@@ -52,6 +52,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
+from service.core import vocabulary as V
 from service.errors import ConfigError
 from service.persistence.outbox import OutboxSender
 from service.publish.port import ApplianceView, Publisher
@@ -120,6 +121,8 @@ class Topics:
         self.cmd_recipe = f"{base}/cmd/recipe"
         self.cmd_set = f"{base}/cmd/set"  # a tensor set: {"action": "redo" | "skip" | "abort", "orientation": name}
         self.cmd_part_id = f"{base}/cmd/part_id"
+        #: command topic → the daemon's command (``service.core.vocabulary``)
+        self.commands = {f"{base}/cmd/{topic}": name for topic, name in V.BY_TOPIC.items()}
         self.reply = f"{base}/reply"      # commands' outcomes (unless an MQTT 5 response topic was given)
         self.recipe = f"{base}/recipe"    # retained: the active recipe {"name", "number"} (name "none": none)
         self.part_id = f"{base}/part_id"  # retained: the next part's ID {"part_id"}
@@ -349,9 +352,7 @@ class MqttService(Publisher):
         if message.retain:
             log.warning("MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
             return
-        name = {self.topics.cmd_measure: "trigger", self.topics.cmd_abort: "abort",
-                self.topics.cmd_recipe: "recipe", self.topics.cmd_set: "set",
-                self.topics.cmd_part_id: "part_id"}.get(message.topic)
+        name = self.topics.commands.get(message.topic)
         if name is None:
             return
         if not message.payload:
@@ -375,12 +376,12 @@ class MqttService(Publisher):
             log.warning("MQTT: %s refused: %s", message.topic, detail)
             reply(CommandReply(name, "refused", reason, detail))
 
-        keys = {"set": ("action", "orientation"), "part_id": ("part_id",)}.get(name, ("part_id", "recipe"))
+        keys = V.COMMANDS[name].data or V.PART_DATA  # an abort's are passed on and ignored
         if isinstance(doc, dict):
             data = {k: doc[k] for k in keys if k in doc}
-        if name == "set" and not isinstance(data.get("action"), str):
+        if name == V.SET and not isinstance(data.get("action"), str):
             return refuse("malformed", 'expected JSON {"action": "redo" | "skip" | "abort"}')
-        if name in ("recipe", "part_id"):
+        if V.COMMANDS[name].act == "part":
             if len(message.payload) > MAX_COMMAND_PAYLOAD:  # no recipe or part has such a name
                 return refuse("malformed", f"{len(message.payload)} bytes (at most {MAX_COMMAND_PAYLOAD})")
             if not isinstance(doc, dict):  # a bare name, number or ID

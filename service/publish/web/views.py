@@ -21,6 +21,7 @@ import jinja2
 from aiohttp import web
 
 from service import __version__
+from service.core import vocabulary as V
 from service.errors import InputFileError, StoreDamaged
 from service.publish.dfq import ENCODING
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME, allowed
@@ -373,9 +374,9 @@ class Views:
         form = await _form(request) if request.content_type in ("application/x-www-form-urlencoded",
                                                                  "multipart/form-data") else {}
         state = self.app.live_status().state
-        source = await self._authorise(request, form, "acknowledge" if name == "abort" and state == "FAULT" else name)
+        source = await self._authorise(request, form, "acknowledge" if name == V.ABORT and state == "FAULT" else name)
         seq = self.app.sequencer
-        if name == "trigger" and seq is not None and seq.busy:
+        if name == V.TRIGGER and seq is not None and seq.busy:
             # said, not queued and silently dropped: the sequencer takes no trigger while it measures
             raise Refused(409, f"a measurement is already running ({state}): Measure again when it is IDLE")
         self.app.command(name, source)
@@ -385,10 +386,10 @@ class Views:
         return web.json_response({"accepted": True, "command": name, "state": state}, status=202)
 
     async def measure(self, request: web.Request) -> web.Response:
-        return await self._action(request, "trigger")
+        return await self._action(request, V.TRIGGER)
 
     async def abort(self, request: web.Request) -> web.Response:
-        return await self._action(request, "abort")
+        return await self._action(request, V.ABORT)
 
     async def part(self, request: web.Request) -> web.Response:
         """Select the recipe (name or number; 0 deselects) and/or set the part ID of the next measurements."""
@@ -398,7 +399,7 @@ class Views:
 
         form = await _form(request)
         recipe = str(form.get("recipe") or "").strip()
-        source = await self._authorise(request, form, "recipe" if recipe else "part_id")
+        source = await self._authorise(request, form, V.RECIPE if recipe else V.PART_ID)
         data: dict[str, Any] = {}
         if recipe:
             if recipe not in ("0",):
@@ -416,7 +417,7 @@ class Views:
             raise Refused(400, "nothing to change: give recipe and/or part_id")
         if self.app.sequencer is not None and self.app.sequencer.busy:
             raise Refused(409, "a measurement runs: the recipe and the part ID cannot change during it")
-        self.app.command("recipe", source, data)
+        self.app.command(V.RECIPE, source, data)
         return web.json_response({"accepted": True, "command": "part", **data}, status=202)
 
     # --- the guided tensor set ---------------------------------------------------------------------
@@ -448,7 +449,7 @@ class Views:
         form = await _form(request) if request.content_type in ("application/x-www-form-urlencoded",
                                                                  "multipart/form-data") else {}
         source = await self._authorise(request, form, "set")
-        self.app.command("set", source, {"action": action})
+        self.app.command(V.SET, source, {"action": action})
         log.info("web: set %s requested", action)
         if "text/html" in request.headers.get("Accept", "") and form:
             raise web.HTTPSeeOther("/set")
