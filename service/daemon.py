@@ -51,7 +51,8 @@ from .notify import Notifier
 from service.publish.payload import iso_utc, result_payload
 from service.parts.recipes import PartTracker, Recipe, RecipeBook, RecipeError
 from service.parts.tensor_set import COMPLETE, TensorSet
-from service.persistence.store import Store, quarantine_store
+from service.persistence.salvage import quarantine_store
+from service.persistence.store import Store
 from service.publish import registry
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply, ReplyTo

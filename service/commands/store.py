@@ -21,7 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from service.persistence.store import DB_NAME, check_store, salvage_store
+    from service.persistence.salvage import check_store, salvage_store
+    from service.persistence.store import DB_NAME
 
     if args.db:
         path = Path(args.db)

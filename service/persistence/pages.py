@@ -10,7 +10,7 @@ not carry the page virtual table it needs.
 
 Only the main database file is read: run it on a checkpointed file (a salvage reads the file that was
 moved aside; pages still in its write-ahead log are read by SQLite itself). The caller decides which
-decoded records are rows of the table it wants (see ``store.salvage_store``): a leaf page carries no
+decoded records are rows of the table it wants (see ``salvage.salvage_store``): a leaf page carries no
 table name.
 """
 

@@ -665,7 +665,8 @@ def test_rows_a_damaged_table_root_hides_are_read_from_their_leaf_pages(tmp_path
     every row from them, with its trace, and the check says what happened."""
     import sqlite3
 
-    from service.persistence.store import Store, check_store, salvage_store
+    from service.persistence.salvage import check_store, salvage_store
+    from service.persistence.store import Store
 
     state = tmp_path / "state"
     with Store(state) as s:
