@@ -9,6 +9,7 @@ import of the submodule, not of the package's ``__init__``.
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,6 +26,7 @@ def modules() -> dict[str, tuple[Path, bool]]:
     return found
 
 
+@functools.lru_cache(maxsize=1)  # parsed once for the tests of this file; none changes it
 def import_graph() -> dict[str, set[str]]:
     mods = modules()
     graph: dict[str, set[str]] = {m: set() for m in mods}
@@ -103,3 +105,96 @@ def test_the_science_layer_imports_no_service_driver_or_host_module():
     upward = {(m, t) for m, ts in graph.items() if m.startswith("measurement") for t in ts
               if not t.startswith("measurement")}
     assert upward == set()
+
+
+# --- the layer matrix --------------------------------------------------------------------------------------------
+
+#: the rooms of the four packages: a module's room is its package's name, ``service``'s subpackage (``service.X``),
+#: or, for the publishers, ``publish.<name>``; ``service`` alone is the package's ``__init__`` (its version)
+PUBLISHERS = ("modbus", "mqtt", "opcua", "web")
+
+#: room → the rooms it may import. The whole matrix: an import into a room not listed fails, so a new dependency
+#: is a decision written here, and the list only shrinks. Read it as the layers, bottom up: the science
+#: (``measurement``), the drivers and the host's sequencer; the neutral core of the service (``errors``,
+#: ``states``, ``core``: the live status and the command vocabulary, ``notify``); what the appliance is made of
+#: (``config``, ``devices``, ``sources``, ``parts``, ``persistence``); the publishers; the daemon; the command line
+#: (``commands``), which only ``cli`` imports.
+LAYERS: dict[str, set[str]] = {
+    "measurement": set(),
+    "drivers": {"measurement"},
+    "firmware_host": {"drivers", "measurement"},
+    "service": set(),
+    "errors": {"measurement"},
+    "states": set(),
+    "notify": set(),
+    "core": set(),
+    "sources": {"config", "drivers", "errors", "measurement"},
+    "config": {"devices", "drivers", "errors", "firmware_host", "measurement", "parts", "sources",
+               # the publishers' settings tables (``registry``; ``check`` reads Modbus's network exposure)
+               "publish", "publish.modbus"},
+    "devices": {"config", "drivers", "errors", "firmware_host", "measurement"},
+    "parts": {"config", "errors", "measurement", "sources"},
+    # the store writes the payload's JSON as the publishers do (``payload.dumps``)
+    "persistence": {"errors", "publish", "sources"},
+    # the port, payload, report, plot and export: what every publisher shares (the payload's flag bits are the
+    # Modbus map's; the PDF report draws the web page's quality words)
+    "publish": {"config", "core", "devices", "errors", "firmware_host", "measurement", "notify", "parts",
+                "persistence", "publish.modbus", "publish.web", "service"},
+    "publish.modbus": {"config", "core", "drivers", "errors", "measurement", "parts", "persistence", "publish",
+                       "states"},
+    # the Home Assistant discovery lists the flags in the Modbus map's bit order
+    "publish.mqtt": {"config", "core", "errors", "measurement", "parts", "persistence", "publish", "publish.modbus"},
+    "publish.opcua": {"config", "drivers", "errors", "persistence", "publish"},
+    "publish.web": {"config", "core", "drivers", "errors", "firmware_host", "measurement", "parts", "persistence",
+                    "publish", "service", "sources", "states"},
+    "daemon": {"config", "core", "devices", "errors", "firmware_host", "measurement", "notify", "parts",
+               "persistence", "publish", "service"},
+    "commands": {"config", "core", "daemon", "devices", "drivers", "errors", "firmware_host", "measurement",
+                 "parts", "persistence", "publish", "publish.modbus", "publish.web", "sources"},
+    "cli": {"errors", "measurement", "service"},
+}
+
+
+def room(module: str) -> str:
+    parts = module.split(".")
+    if parts[0] != "service" or len(parts) == 1:
+        return parts[0]
+    if parts[1] == "publish" and len(parts) > 2 and parts[2] in PUBLISHERS:
+        return f"publish.{parts[2]}"
+    return parts[1]
+
+
+def room_imports(graph: dict[str, set[str]]) -> dict[tuple[str, str], list[str]]:
+    """(importing room, imported room) → the imports that make it (modules of one room among themselves left out)."""
+    edges: dict[tuple[str, str], list[str]] = {}
+    for m, targets in graph.items():
+        for t in targets:
+            if room(m) != room(t):
+                edges.setdefault((room(m), room(t)), []).append(f"{m} -> {t}")
+    return edges
+
+
+def test_every_room_has_a_row_of_the_matrix():
+    assert {room(m) for m in import_graph()} == set(LAYERS)
+    assert all(deps <= set(LAYERS) for deps in LAYERS.values())
+
+
+def test_the_layer_matrix_holds():
+    outside = {edge: imports for edge, imports in room_imports(import_graph()).items() if edge[1] not in LAYERS[edge[0]]}
+    assert outside == {}, "imports the layer matrix does not allow (LAYERS): " + repr(outside)
+
+
+def test_the_walker_sees_an_import_the_matrix_refuses():
+    graph = {"service.publish.web.views": {"service.commands.export"}, "service.commands.export": set()}
+    edges = room_imports(graph)
+    assert ("publish.web", "commands") in edges and "commands" not in LAYERS["publish.web"]
+
+
+def test_only_the_command_line_imports_the_commands_and_no_publisher_imports_the_daemon():
+    for r, deps in LAYERS.items():
+        assert "commands" not in deps or r == "cli", r
+        assert "daemon" not in deps or r == "commands", r
+
+
+def test_the_core_imports_nothing_of_the_service():
+    assert LAYERS["core"] == set() and LAYERS["states"] == set()

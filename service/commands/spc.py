@@ -16,7 +16,8 @@ from pathlib import Path
 
 from service.errors import InputFileError
 from service.parts.recipes import recipe_spc
-from ._common import add_store_arguments, fmt_time, open_store, parse_time
+from service.publish.payload import fmt_time
+from ._common import add_store_arguments, open_store, parse_time
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -35,6 +35,13 @@ def iso_utc(t: float) -> str:
     return datetime.fromtimestamp(t, UTC).isoformat(timespec="milliseconds")
 
 
+def fmt_time(t: float | None) -> str:
+    """Unix time (s) → "YYYY-MM-DD HH:MM:SS" in UTC, as a person reads it ("-": none)."""
+    if t is None:
+        return "-"
+    return datetime.fromtimestamp(t, UTC).strftime("%Y-%m-%d %H:%M:%S")
+
+
 def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id: str, trigger: str,
                    started_at: float, finished_at: float, software_version: str,
                    timing: Mapping[str, Any] | None = None, part: Mapping[str, Any] | None = None) -> dict[str, Any]:

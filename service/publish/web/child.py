@@ -98,23 +98,23 @@ def _lower_priority() -> None:
 def export_file(state_dir: str, fmt: str, filters: Mapping[str, Any]) -> bytes:
     """The history as ``moi export`` writes it (CSV or JSON, oldest first), of the measurements ``filters`` select;
     "dfq": the AQDEF file of the recipe's completed parts."""
-    from service.commands.export import _csv, _json
+    from service.publish.export import csv_text, json_text
     from service.persistence.store import Store
 
     with Store(state_dir, read_only=True) as store:
         if fmt == "dfq":
-            from service.commands.export import dfq_bytes
+            from service.publish.export import dfq_bytes
 
             return dfq_bytes(store, filters.get("recipe"), part_id=filters.get("part_id"), since=filters.get("since"),
                              until=filters.get("until"))
         rows, _ = store.search(limit=None, **filters)
     rows.reverse()
-    return (_json(rows) if fmt == "json" else _csv(rows)).encode()
+    return (json_text(rows) if fmt == "json" else csv_text(rows)).encode()
 
 
 def trace_file(state_dir: str, uuid: str) -> bytes:
     """The stored trace of the measurement ``uuid`` as trace CSV (``moi export --trace``)."""
-    from service.commands.export import trace_text
+    from service.publish.export import trace_text
     from service.persistence.store import Store
 
     with Store(state_dir, read_only=True) as store:

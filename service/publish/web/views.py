@@ -790,7 +790,7 @@ def axes_drawing(axis: Any, offset: Any = None, size: int = 220) -> dict[str, An
 def _annotated_png(frame, config) -> bytes:
     import cv2
 
-    from service.commands.camera_check import check_image
+    from service.sources.marker_check import check_image
     annotated, _report, _lines = check_image(frame, config)
     ok, buf = cv2.imencode(".png", annotated)
     if not ok:
