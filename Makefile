@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench install broker browser clean
+.PHONY: demo test lint bench install broker browser clean pi-check
 
 # pip shows its progress: the first install downloads numpy, scipy, OpenCV and friends
 $(STAMP): pyproject.toml
@@ -49,6 +49,11 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/run.py
+
+# Installs moi in an emulated Debian arm64 root (the Pi's architecture) as systemd/README.md says and
+# checks it computes the J this machine computes. Needs root; slow (emulation); not part of `make test`.
+pi-check: $(STAMP)
+	sh scripts/pi-check.sh
 
 clean:
 	rm -rf $(VENV) build *.egg-info
