@@ -12,6 +12,9 @@ $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --progress-bar on -e '.[test,lint]'
+	@# the Sparkplug tests' host application decodes with pysparkplug, an implementation independent of ours;
+	@# it pins paho-mqtt below 2 for its own client, which the tests do not use: installed without that pin
+	$(PY) -m pip install --quiet --no-deps 'pysparkplug>=0.6.1,<0.7'
 	@touch $(STAMP)
 	@echo "moi is installed in $(VENV)"
 
