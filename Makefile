@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench install broker browser clean
+.PHONY: demo test lint bench install broker browser clean pi-check
 
 # pip shows its progress: the first install downloads numpy, scipy, OpenCV and friends
 $(STAMP): pyproject.toml
@@ -12,6 +12,9 @@ $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --progress-bar on -e '.[test,lint]'
+	@# the Sparkplug tests' host application decodes with pysparkplug, an implementation independent of ours;
+	@# it pins paho-mqtt below 2 for its own client, which the tests do not use: installed without that pin
+	$(PY) -m pip install --quiet --no-deps 'pysparkplug>=0.6.1,<0.7'
 	@touch $(STAMP)
 	@echo "moi is installed in $(VENV)"
 
@@ -49,6 +52,11 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/run.py
+
+# Installs moi in an emulated Debian arm64 root (the Pi's architecture) as systemd/README.md says and
+# checks it computes the J this machine computes. Needs root; slow (emulation); not part of `make test`.
+pi-check: $(STAMP)
+	sh scripts/pi-check.sh
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -621,7 +621,7 @@ class Appliance:
                 software_version=__version__, started_at=started, finished_at=finished, result=result,
                 build_payload=build, rig=rig.to_dict(), config=cfg.to_dict(),
                 trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
-                trace_meta=dict(trace.meta), enqueue=tuple(kind for p in self.publishers for kind in p.OUTBOX),
+                trace_meta=dict(trace.meta), enqueue={p.NAME: p.OUTBOX for p in self.publishers if p.OUTBOX},
                 part=_part_columns(part),
             )
         except BaseException:

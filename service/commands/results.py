@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
                 return 0
             print(f"measurement {m.uuid}  (seq {m.seq}, {m.status}, triggered by {m.trigger})")
             print(f"  started   {fmt_time(m.started_at)} UTC, finished {fmt_time(m.finished_at)} UTC")
-            print(f"  published {fmt_time(m.published_at) + ' UTC' if m.published_at else 'not yet (in the MQTT outbox or MQTT off)'}")
+            print(f"  published {fmt_time(m.published_at) + ' UTC' if m.published_at else 'not yet (in the outbox, or no publisher delivers from it)'}")
             print(f"  device {m.device_id}, software {m.software_version}")
             if m.error:
                 print(f"  error: {m.error}")

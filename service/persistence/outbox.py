@@ -1,9 +1,12 @@
 """Delivery from the durable outbox: publish what the store holds until the broker acknowledges it.
 
 The outbox rows live in the result store (``Store.outbox_*``), written in the
-same transaction as the measurement. ``OutboxSender`` runs one thread that
+same transaction as the measurement, one row per consumer: each publisher that
+delivers from the outbox (``Publisher.OUTBOX``) names its rows by its ``NAME``
+and runs its own ``OutboxSender`` over them, so MQTT and Sparkplug acknowledge
+and resend independently. ``OutboxSender`` runs one thread that
 
-* hands pending rows to the MQTT client while it is connected (at most
+* hands its consumer's pending rows to the client while it may publish (at most
   ``window`` unacknowledged at a time, oldest first),
 * deletes a row when the broker acknowledges its publication (QoS 1 PUBACK,
   reported by paho's ``on_publish``),
@@ -55,10 +58,11 @@ class _InFlight:
 class OutboxSender:
     """Moves outbox rows to the broker. Start with ``start()``, stop with ``stop()``."""
 
-    def __init__(self, store: Store, publish: PublishFn, *, window: int = 10, resend_after: float = 30.0,
+    def __init__(self, store: Store, publish: PublishFn, *, consumer: str, window: int = 10, resend_after: float = 30.0,
                  clock: Callable[[], float] = time.monotonic,
                  on_delivered: Callable[[str], None] | None = None) -> None:
         self.store = store
+        self.consumer = consumer  # the publisher whose rows these are (``Publisher.NAME``)
         self._publish = publish
         self.window = window
         self.resend_after = resend_after
@@ -74,7 +78,7 @@ class OutboxSender:
         self._write_logged = False
         self._idle = threading.Condition()
         self._thread: threading.Thread | None = None
-        self.pending = store.outbox_count()  # rows not yet acknowledged (updated by the sender thread)
+        self.pending = store.outbox_count(consumer)  # rows not yet acknowledged (updated by the sender thread)
         self.delivered = 0
         self.error: BaseException | None = None
 
@@ -105,7 +109,7 @@ class OutboxSender:
 
     # --- lifecycle -----------------------------------------------------------------------
     def start(self) -> None:
-        self._thread = threading.Thread(target=self._run, name="moi-outbox", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"moi-outbox-{self.consumer}", daemon=True)
         self._thread.start()
 
     def stop(self, timeout: float = 5.0) -> None:
@@ -150,7 +154,7 @@ class OutboxSender:
             self._drain_acks()  # acknowledgements that arrived while stopping still count
         except BaseException as exc:  # reported to the daemon, whose main loop turns it into a fault
             self.error = exc
-            log.exception("outbox sender stopped")
+            log.exception("outbox sender (%s) stopped", self.consumer)
             raise
 
     def _drain_acks(self) -> None:
@@ -192,7 +196,7 @@ class OutboxSender:
             now = self._clock()
             for fl in list(self._inflight.values()):
                 if now - fl.sent_at > self.resend_after:
-                    item = next((i for i in self.store.outbox_pending(limit=self.window + len(self._inflight))
+                    item = next((i for i in self.store.outbox_pending(self.consumer, limit=self.window + len(self._inflight))
                                  if i.id == fl.item_id), None)
                     if item is None:  # acknowledged meanwhile through another path
                         self._inflight.pop(fl.item_id, None)
@@ -201,11 +205,11 @@ class OutboxSender:
                     self._send(item.id, item.uuid, item.kind, item.payload)
             free = self.window - len(self._inflight)
             if free > 0:
-                for item in self.store.outbox_pending(limit=free, exclude=[*self._inflight, *self._delivered]):
+                for item in self.store.outbox_pending(self.consumer, limit=free, exclude=[*self._inflight, *self._delivered]):
                     if not self._connected.is_set():
                         break
                     self._send(item.id, item.uuid, item.kind, item.payload)
-        self.pending = self.store.outbox_count() - len(self._delivered)
+        self.pending = self.store.outbox_count(self.consumer) - len(self._delivered)
         if self.store.write_failure is None:
             self._write_logged = False
         with self._idle:

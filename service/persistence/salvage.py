@@ -20,7 +20,7 @@ from typing import Any, Callable, Iterator, Mapping
 from service.errors import StoreError
 from service.persistence.pages import leaf_records
 from service.persistence.store import (
-    ARRAY_COLUMNS, DB_NAME, JSON_COLUMNS, Store, read_only_connection, read_seq_floor, unpack,
+    ARRAY_COLUMNS, DB_NAME, JSON_COLUMNS, LEGACY_CONSUMER, Store, read_only_connection, read_seq_floor, unpack,
 )
 
 #: tables read back by check and salvage, in the order rows are copied (foreign keys point backwards)
@@ -242,12 +242,15 @@ def salvage_store(path: str | Path, dest_dir: str | Path) -> StoreHealth:
                     any(p.startswith("outbox:") for p in health.problems)
                 if outbox_used:
                     # an unsent result whose outbox row was on a lost page is queued again from its stored
-                    # payload (consumers dedupe by uuid); without MQTT in use nothing was ever queued
-                    requeued = db.execute(
-                        "INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at) "
-                        "SELECT id, uuid, 'result', payload, stored_at FROM measurements m WHERE status = 'ok' "
-                        "AND payload IS NOT NULL AND published_at IS NULL "
-                        "AND NOT EXISTS (SELECT 1 FROM outbox o WHERE o.measurement_id = m.id)").rowcount
+                    # payload, for each consumer seen in the outbox (consumers dedupe by uuid); without a
+                    # publisher delivering from the outbox nothing was ever queued
+                    consumers = [r[0] for r in db.execute("SELECT DISTINCT consumer FROM outbox")] or [LEGACY_CONSUMER]
+                    requeued = sum(db.execute(
+                        "INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at, consumer) "
+                        "SELECT id, uuid, 'result', payload, stored_at, ? FROM measurements m WHERE status = 'ok' "
+                        "AND payload IS NOT NULL AND published_at IS NULL AND NOT EXISTS "
+                        "(SELECT 1 FROM outbox o WHERE o.measurement_id = m.id AND o.consumer = ?)",
+                        (c, c)).rowcount for c in consumers)
                     if requeued:
                         health.problems.append(f"outbox: {requeued} unsent result(s) queued again from their "
                                                "stored payload")

@@ -2,8 +2,8 @@
 
 One row per measurement (ok, failed or aborted) with the raw trace, the
 published payload (which contains ``IdentificationResult.to_dict()``), the rig
-and configuration used, timestamps and the software version. The MQTT outbox
-lives in the same database so that a result and its pending publication are
+and configuration used, timestamps and the software version. The outbox (the
+publications of each store-and-forward publisher: MQTT, Sparkplug) lives in the same database so that a result and its pending publication are
 written in one transaction, before anything is published: a crash either
 loses the measurement entirely (it never reached the store, nothing was
 published) or keeps both.
@@ -36,7 +36,8 @@ from service.errors import StoreDamaged, StoreError
 DB_NAME = "results.db"
 #: the largest integer SQLite stores (a longer sequence number is no measurement's)
 SQLITE_MAX_INTEGER = 2**63 - 1
-SCHEMA_VERSION = 2  # 2: part, recipe and verdict columns (added in place to a version-1 store)
+SCHEMA_VERSION = 3  # 2: part, recipe and verdict columns (added in place to a version-1 store);
+                    # 3: the outbox row names its consumer (the publisher delivering it; rows of an older store: mqtt)
 
 
 
@@ -113,7 +114,7 @@ COLUMNS: tuple[Column, ...] = (
     Column("started_at", "REAL NOT NULL", value=_arg("started_at")),
     Column("finished_at", "REAL NOT NULL", value=_arg("finished_at")),
     Column("stored_at", "REAL NOT NULL", summary=False, value=lambda g: g.stored_at),
-    Column("published_at", "REAL"),                       # set when the broker acknowledges it
+    Column("published_at", "REAL"),                       # set when its last outbox row is acknowledged
     Column("J", "REAL", value=_result("J")),               # kg·m²
     Column("J_std", "REAL", value=_result("J_std")),       # kg·m²
     Column("omega_n", "REAL", value=_result("omega_n")),   # rad/s
@@ -346,6 +347,12 @@ class OutboxItem:
     attempts: int
 
 
+#: the consumer of the outbox rows of a store made before rows named theirs (only MQTT delivered from it)
+LEGACY_CONSUMER = "mqtt"
+#: schema 3: which publisher delivers the row (``Publisher.NAME``); each consumer acknowledges its own rows
+_OUTBOX_CONSUMER = f"consumer TEXT NOT NULL DEFAULT '{LEGACY_CONSUMER}'"
+
+
 # the typed mirror of the column table: a column and its field come and go together
 assert [f.name for f in dataclasses.fields(StoredMeasurement)] == [c.name for c in COLUMNS]
 
@@ -376,6 +383,9 @@ class Store:
             for c in COLUMNS:
                 if c.name not in have:
                     self._db.execute(f"ALTER TABLE measurements ADD COLUMN {c.name} {c.sql}")
+            if "consumer" not in {row[1] for row in self._db.execute("PRAGMA table_info(outbox)")}:
+                self._db.execute(f"ALTER TABLE outbox ADD COLUMN {_OUTBOX_CONSUMER}")
+            self._db.execute("CREATE INDEX IF NOT EXISTS outbox_consumer ON outbox (consumer, id)")
             self._db.execute("CREATE INDEX IF NOT EXISTS measurements_part ON measurements (part_id)")
             with self._tx():
                 row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
@@ -511,15 +521,16 @@ class Store:
         trace_t: np.ndarray | None = None,
         trace_angle: np.ndarray | None = None,
         trace_meta: Mapping[str, Any] | None = None,
-        enqueue: Sequence[str] = (),
+        enqueue: Mapping[str, Sequence[str]] | None = None,
         uuid: str | None = None,
         part: Mapping[str, Any] | None = None,
     ) -> StoredMeasurement:
         """Store one measurement and queue its publications, atomically.
 
         build_payload(uuid, seq) makes the published payload once the sequence
-        number is known (ok results). enqueue: outbox kinds to queue (e.g.
-        ("result",)); the payload is queued as it is stored. part: values of
+        number is known (ok results). enqueue: the outbox kinds to queue per consumer (the publisher
+        that delivers them, e.g. {"mqtt": ("result",)}); the payload is queued as it is stored, one row
+        per consumer and kind, each acknowledged by its consumer alone. part: values of
         the schema-2 part columns (``COLUMNS`` with ``since=2``: part ID, recipe, verdicts...), missing keys are NULL.
         """
         from service.publish.payload import dumps
@@ -542,9 +553,10 @@ class Store:
                     config=config, trace_t=trace_t, trace_angle=trace_angle, trace_meta=trace_meta, part=part))
                 mid = db.execute(_INSERT, [c.value(given) for c in _INSERTED if c.value is not None]).lastrowid
                 if payload_text is not None:
-                    for kind in enqueue:
-                        db.execute("INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at) VALUES (?,?,?,?,?)",
-                                   (mid, uid, kind, payload_text, now))
+                    for consumer, kinds in (enqueue or {}).items():
+                        for kind in kinds:
+                            db.execute("INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at, consumer) "
+                                       "VALUES (?,?,?,?,?,?)", (mid, uid, kind, payload_text, now, consumer))
         except sqlite3.Error as exc:
             raise StoreError(f"cannot write to the result store {str(self.path)!r}: {exc}") from None
         write_seq_floor(self.state_dir, seq)
@@ -553,37 +565,44 @@ class Store:
         return m
 
     # --- outbox -------------------------------------------------------------------
-    @_store_errors("reading the MQTT outbox")
-    def outbox_pending(self, limit: int = 100, exclude: Sequence[int] = ()) -> list[OutboxItem]:
-        """Oldest unacknowledged publications first."""
+    @_store_errors("reading the outbox")
+    def outbox_pending(self, consumer: str | None = None, limit: int = 100,
+                       exclude: Sequence[int] = ()) -> list[OutboxItem]:
+        """Oldest unacknowledged publications first: a consumer's (a publisher's ``NAME``), or everyone's."""
+        where, args = ("WHERE consumer = ? ", (consumer,)) if consumer is not None else ("", ())
         with self._lock:
             rows = self._db.execute(
-                "SELECT id, uuid, kind, payload, attempts FROM outbox ORDER BY id LIMIT ?", (limit + len(exclude),)
-            ).fetchall()
+                f"SELECT id, uuid, kind, payload, attempts FROM outbox {where}ORDER BY id LIMIT ?",
+                (*args, limit + len(exclude))).fetchall()
         skip = set(exclude)
         return [OutboxItem(*row) for row in rows if row[0] not in skip][:limit]
 
-    @_store_errors("updating the MQTT outbox")
+    @_store_errors("updating the outbox")
     def outbox_attempt(self, item_id: int) -> None:
         with self._lock, self._tx() as db:
             db.execute("UPDATE outbox SET attempts = attempts + 1, last_attempt = ? WHERE id = ?", (time.time(), item_id))
 
-    @_store_errors("updating the MQTT outbox")
+    @_store_errors("updating the outbox")
     def outbox_ack(self, item_id: int) -> bool:
-        """The broker acknowledged the publication: drop it from the outbox. False if it was not there."""
+        """Its consumer delivered the row (the broker acknowledged it): drop it from the outbox. False if it
+        was not there. The measurement's ``published_at`` is set when its last row goes: every consumer
+        that delivers from the outbox has it."""
         now = time.time()
         with self._lock, self._tx() as db:
             row = db.execute("SELECT measurement_id FROM outbox WHERE id = ?", (item_id,)).fetchone()
             if row is None:
                 return False
             db.execute("DELETE FROM outbox WHERE id = ?", (item_id,))
-            db.execute("UPDATE measurements SET published_at = COALESCE(published_at, ?) WHERE id = ?", (now, row[0]))
+            db.execute("UPDATE measurements SET published_at = COALESCE(published_at, ?) WHERE id = ? "
+                       "AND NOT EXISTS (SELECT 1 FROM outbox WHERE measurement_id = ?)", (now, row[0], row[0]))
         return True
 
-    @_store_errors("counting the MQTT outbox")
-    def outbox_count(self) -> int:
+    @_store_errors("counting the outbox")
+    def outbox_count(self, consumer: str | None = None) -> int:
+        """Rows not yet acknowledged: a consumer's, or everyone's."""
+        where, args = (" WHERE consumer = ?", (consumer,)) if consumer is not None else ("", ())
         with self._lock:
-            return int(self._db.execute("SELECT COUNT(*) FROM outbox").fetchone()[0])
+            return int(self._db.execute(f"SELECT COUNT(*) FROM outbox{where}", args).fetchone()[0])
 
     # --- reading ------------------------------------------------------------------
     @staticmethod

@@ -36,7 +36,8 @@ class Publisher:
     NAME: ClassVar[str] = ""
     #: started before the devices are built (a camera or an encoder may take seconds to open)
     EARLY: ClassVar[bool] = False
-    #: the store's outbox rows queued with each result, for a publisher that delivers from the durable outbox
+    #: the store's outbox rows queued with each result, for a publisher that delivers from the durable outbox:
+    #: its own rows (consumer ``NAME``), which its ``OutboxSender(consumer=NAME)`` sends and acknowledges
     OUTBOX: ClassVar[tuple[str, ...]] = ()
 
     @classmethod

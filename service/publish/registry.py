@@ -36,10 +36,11 @@ class PublisherEntry:
 
 
 #: in start order: Modbus first (the PLC sees STARTING while the devices open), the web page once the
-#: sequencer exists, MQTT (its outbox sender delivers at once), OPC UA
+#: sequencer exists, MQTT (its outbox sender delivers at once), OPC UA, Sparkplug B
 PUBLISHERS: tuple[PublisherEntry, ...] = (
     PublisherEntry("modbus", "service.publish.modbus.server", "service.publish.modbus.settings"),
     PublisherEntry("web", "service.publish.web.server", "service.publish.web.settings", in_health=False),
     PublisherEntry("mqtt", "service.publish.mqtt.client", "service.publish.mqtt.settings"),
     PublisherEntry("opcua", "service.publish.opcua.server", "service.publish.opcua.settings"),
+    PublisherEntry("sparkplug", "service.publish.sparkplug.node", "service.publish.sparkplug.settings"),
 )

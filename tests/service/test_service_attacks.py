@@ -489,7 +489,7 @@ def test_the_latest_delivered_result_is_retained_for_home_assistant(tmp_path, br
     try:
         for i in range(2):
             store.record(status="ok", trigger="button", device_id="rig", software_version="t", started_at=1e9 + i,
-                         finished_at=1e9 + i + 1, result={"J": 0.01 + i, "flags": []}, enqueue=("result",),
+                         finished_at=1e9 + i + 1, result={"J": 0.01 + i, "flags": []}, enqueue={"mqtt": ("result",)},
                          build_payload=lambda u, q: {"uuid": u, "seq": q, "J": 0.01 + q, "timestamp": 1e9})
         svc.wake()
         wait_until(lambda: store.outbox_count() == 0, 20, what="both results delivered")

@@ -24,7 +24,7 @@ def add_rows(store: Store, n: int) -> list[str]:
         m = store.record(status="ok", trigger="test", device_id="d1", software_version="0", started_at=1.0,
                          finished_at=2.0, result={"J": 0.01 * (i + 1)},
                          build_payload=lambda uuid, seq: {"uuid": uuid, "seq": seq, "J": 0.01 * seq},
-                         enqueue=("result",))
+                         enqueue={"mqtt": ("result",)})
         uuids.append(m.uuid)
     return uuids
 

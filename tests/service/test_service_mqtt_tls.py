@@ -61,7 +61,7 @@ def test_results_go_out_over_tls_with_a_password_from_a_file(tmp_path, tls_broke
     cfg = _settings(tmp_path, tls_broker, "s3cret")
     store = Store(cfg.state_dir)
     m = store.record(status="ok", trigger="test", device_id="tls-rig", software_version="0", started_at=1.0,
-                     finished_at=2.0, result={}, build_payload=lambda u, s: {"uuid": u, "seq": s}, enqueue=("result",))
+                     finished_at=2.0, result={}, build_payload=lambda u, s: {"uuid": u, "seq": s}, enqueue={"mqtt": ("result",)})
     svc = MqttService(cfg.mqtt, cfg.device_id, store)
     svc.start()
     try:
@@ -77,7 +77,7 @@ def test_a_wrong_password_is_reported_and_nothing_leaves_the_outbox(tmp_path, tl
     cfg = _settings(tmp_path, tls_broker, "wrong")
     store = Store(cfg.state_dir)
     store.record(status="ok", trigger="test", device_id="tls-rig", software_version="0", started_at=1.0,
-                 finished_at=2.0, result={}, build_payload=lambda u, s: {"uuid": u, "seq": s}, enqueue=("result",))
+                 finished_at=2.0, result={}, build_payload=lambda u, s: {"uuid": u, "seq": s}, enqueue={"mqtt": ("result",)})
     svc = MqttService(cfg.mqtt, cfg.device_id, store)
     svc.start()
     try:

@@ -24,7 +24,10 @@ def result():
     return identify(trace, rig), trace, rig
 
 
-def store_one(store: Store, result, status: str = "ok", enqueue=("result",), t0: float = 1_700_000_000.0):
+MQTT_RESULT = {"mqtt": ("result",)}  # the outbox rows MQTT queues with each result
+
+
+def store_one(store: Store, result, status: str = "ok", enqueue=MQTT_RESULT, t0: float = 1_700_000_000.0):
     res, trace, rig = result
     d = res.to_dict()
 
@@ -181,6 +184,48 @@ def test_a_version_1_store_gains_the_part_columns_and_keeps_its_rows(tmp_path, r
     db = sqlite3.connect(tmp_path / "results.db")
     assert [r[1] for r in db.execute("PRAGMA table_info(measurements)")] == [c.name for c in COLUMNS]
     assert db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone() == (str(SCHEMA_VERSION),)
+    db.close()
+
+
+def test_each_consumer_acknowledges_its_own_rows_and_published_at_waits_for_the_last(tmp_path, result):
+    """Two store-and-forward publishers: each sees and acknowledges only its rows; the measurement counts as
+    published once every consumer has it."""
+    with Store(tmp_path) as store:
+        m = store_one(store, result, enqueue={"mqtt": ("result",), "sparkplug": ("result",)})
+        [a] = store.outbox_pending("mqtt")
+        [b] = store.outbox_pending("sparkplug")
+        assert a.id != b.id and a.uuid == b.uuid == m.uuid and a.payload == b.payload
+        assert (store.outbox_count(), store.outbox_count("mqtt"), store.outbox_count("sparkplug")) == (2, 1, 1)
+        assert store.outbox_ack(a.id)
+        assert store.outbox_pending("mqtt") == [] and [i.id for i in store.outbox_pending("sparkplug")] == [b.id]
+        assert store.get(m.uuid).published_at is None  # Sparkplug does not have it yet
+        assert store.outbox_ack(b.id)
+        assert store.get(m.uuid).published_at is not None and store.outbox_count() == 0
+
+
+def test_a_version_2_store_keeps_its_pending_rows_pending_for_mqtt(tmp_path, result):
+    """A state directory of the release before rows named their consumer: its unsent results stay MQTT's,
+    and a new consumer sees none of them."""
+    with Store(tmp_path) as store:
+        a = store_one(store, result)
+        b = store_one(store, result)
+    db = sqlite3.connect(tmp_path / "results.db")  # as version 2 left it: no consumer column
+    db.executescript("""
+        CREATE TABLE outbox_v2 (id INTEGER PRIMARY KEY, measurement_id INTEGER NOT NULL REFERENCES measurements (id),
+            uuid TEXT NOT NULL, kind TEXT NOT NULL, payload TEXT NOT NULL, created_at REAL NOT NULL,
+            attempts INTEGER NOT NULL DEFAULT 0, last_attempt REAL);
+        INSERT INTO outbox_v2 SELECT id, measurement_id, uuid, kind, payload, created_at, attempts, last_attempt FROM outbox;
+        DROP INDEX outbox_consumer; DROP TABLE outbox; ALTER TABLE outbox_v2 RENAME TO outbox;
+        UPDATE meta SET value = '2' WHERE key = 'schema';""")
+    db.close()
+    with Store(tmp_path) as store:
+        assert [i.uuid for i in store.outbox_pending("mqtt")] == [a.uuid, b.uuid]
+        assert store.outbox_pending("sparkplug") == [] and store.outbox_count("sparkplug") == 0
+        [first, _] = store.outbox_pending("mqtt")
+        assert store.outbox_ack(first.id) and store.get(a.uuid).published_at is not None
+    db = sqlite3.connect(tmp_path / "results.db")
+    assert db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone() == ("3",)
+    assert db.execute("SELECT consumer FROM outbox").fetchall() == [("mqtt",)]
     db.close()
 
 

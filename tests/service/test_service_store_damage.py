@@ -24,7 +24,7 @@ def fill(state: Path, n: int = 30) -> None:
             s.record(status="ok", trigger="button", device_id="test-rig", software_version="t", started_at=1e9 + i,
                      finished_at=1e9 + i + 1, result={"J": 0.01 + i * 1e-5, "flags": []},
                      build_payload=lambda u, q: {"uuid": u, "seq": q, "J": 0.01, "timestamp": 1e9 + q},
-                     trace_t=t, trace_angle=np.sin(t * (i + 1)), enqueue=("result",))
+                     trace_t=t, trace_angle=np.sin(t * (i + 1)), enqueue={"mqtt": ("result",)})
 
 
 def damaged_copy(src: Path, dest: Path, page: int) -> Path:

@@ -205,7 +205,7 @@ class MqttService(Publisher):
         self.client.on_publish = self._on_publish
         self.client.on_message = self._on_message
         self.client.on_subscribe = self._on_subscribe
-        self.sender = OutboxSender(store, self._publish_kind, window=settings.window,
+        self.sender = OutboxSender(store, self._publish_kind, consumer=self.NAME, window=settings.window,
                                    resend_after=settings.resend_after, on_delivered=on_delivered)
 
     def _configure_auth(self) -> None:
@@ -460,7 +460,7 @@ class MqttService(Publisher):
     def health(self) -> dict[str, Any]:
         store = self.sender.store
         return {"broker": f"{self.settings.host}:{self.settings.port}", "connected": self.is_connected,
-                "outbox_backlog": store.outbox_count() if store is not None else None}
+                "outbox_backlog": store.outbox_count(self.NAME) if store is not None else None}
 
     def live_fields(self) -> dict[str, Any]:
         return {"mqtt_connected": self.is_connected, "outbox_pending": self.sender.pending}
