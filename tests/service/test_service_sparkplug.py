@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import time
 from datetime import datetime, UTC
 
@@ -25,20 +26,21 @@ def settings(port: int, **kw) -> SparkplugSettings:
     return SparkplugSettings(host="127.0.0.1", port=port, reconnect_min=0.1, reconnect_max=0.5, keepalive=5, **kw)
 
 
+def result_payload(uuid: str, seq: int, *, i: int, finished: float) -> dict:
+    """A published result payload (the keys the Sparkplug metrics read)."""
+    return {"uuid": uuid, "seq": seq, "J": 0.01 * (i + 1), "J_U": 2e-5, "J_std": 1e-5, "omega_n": 5.4,
+            "damping_ratio": 0.003, "flags": ["drift_corrected"], "flag_bits": 4, "timestamp": finished,
+            "trigger": "test", "part_id": f"SN-{i}", "verdict": "OK"}
+
+
 def add_results(store: Store, n: int, start: int = 0) -> list[str]:
-    uuids = []
+    """n results stored with their Sparkplug outbox rows, finished now (after any birth so far)."""
     now = time.time()
-    for i in range(start, start + n):
-        part = {"part_id": f"SN-{i}", "verdict": "OK"}
-        m = store.record(status="ok", trigger="test", device_id="rig1", software_version="0", started_at=1.0,
+    return [store.record(status="ok", trigger="test", device_id="rig1", software_version="0", started_at=1.0,
                          finished_at=2.0, result={"J": 0.01 * (i + 1)},
-                         build_payload=lambda uuid, seq, i=i, part=part: {
-                             "uuid": uuid, "seq": seq, "J": 0.01 * (i + 1), "J_U": 2e-5, "J_std": 1e-5,
-                             "omega_n": 5.4, "damping_ratio": 0.003, "flags": ["drift_corrected"], "flag_bits": 4,
-                             "timestamp": now + 1e-3 * i, "trigger": "test", **part},
-                         enqueue={"sparkplug": ("result",)})
-        uuids.append(m.uuid)
-    return uuids
+                         build_payload=functools.partial(result_payload, i=i, finished=now + 1e-3 * i),
+                         enqueue={"sparkplug": ("result",)}).uuid
+            for i in range(start, start + n)]
 
 
 @pytest.fixture
