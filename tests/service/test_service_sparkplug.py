@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import time
 from datetime import datetime, UTC
 
@@ -25,20 +26,21 @@ def settings(port: int, **kw) -> SparkplugSettings:
     return SparkplugSettings(host="127.0.0.1", port=port, reconnect_min=0.1, reconnect_max=0.5, keepalive=5, **kw)
 
 
+def result_payload(uuid: str, seq: int, *, i: int, finished: float) -> dict:
+    """A published result payload (the keys the Sparkplug metrics read)."""
+    return {"uuid": uuid, "seq": seq, "J": 0.01 * (i + 1), "J_U": 2e-5, "J_std": 1e-5, "omega_n": 5.4,
+            "damping_ratio": 0.003, "flags": ["drift_corrected"], "flag_bits": 4, "timestamp": finished,
+            "trigger": "test", "part_id": f"SN-{i}", "verdict": "OK"}
+
+
 def add_results(store: Store, n: int, start: int = 0) -> list[str]:
-    uuids = []
+    """n results stored with their Sparkplug outbox rows, finished now (after any birth so far)."""
     now = time.time()
-    for i in range(start, start + n):
-        part = {"part_id": f"SN-{i}", "verdict": "OK"}
-        m = store.record(status="ok", trigger="test", device_id="rig1", software_version="0", started_at=1.0,
+    return [store.record(status="ok", trigger="test", device_id="rig1", software_version="0", started_at=1.0,
                          finished_at=2.0, result={"J": 0.01 * (i + 1)},
-                         build_payload=lambda uuid, seq, i=i, part=part: {
-                             "uuid": uuid, "seq": seq, "J": 0.01 * (i + 1), "J_U": 2e-5, "J_std": 1e-5,
-                             "omega_n": 5.4, "damping_ratio": 0.003, "flags": ["drift_corrected"], "flag_bits": 4,
-                             "timestamp": now + 1e-3 * i, "trigger": "test", **part},
-                         enqueue={"sparkplug": ("result",)})
-        uuids.append(m.uuid)
-    return uuids
+                         build_payload=functools.partial(result_payload, i=i, finished=now + 1e-3 * i),
+                         enqueue={"sparkplug": ("result",)}).uuid
+            for i in range(start, start + n)]
 
 
 @pytest.fixture
@@ -220,3 +222,48 @@ def test_seq_runs_0_to_255_and_wraps(broker, host, node_factory):
     host.wait(lambda h: len(h.results()) >= 260, 30, "260 results")
     seqs = [r.decoded.seq for r in host.received if r.kind in ("NBIRTH", "DBIRTH", "DDATA")]
     assert seqs == [i % 256 for i in range(len(seqs))]
+
+
+def test_a_daemon_delivers_every_result_once_across_a_sigkill_a_broker_restart_and_a_host_away(tmp_path,
+                                                                                             persistent_broker):
+    """`moi run` with [sparkplug]: a measurement asked for by DCMD, one measured while the primary host is
+    away, the daemon then killed (SIGKILL) and the broker restarted: the host gets both, once each, in order."""
+    from .conftest import appliance_doc, free_port, port_open, write_toml
+    from .test_service_process import start_daemon, trigger_and_wait
+
+    state, mb_port = tmp_path / "state", free_port()
+    cfg = write_toml(tmp_path / "appliance.toml", appliance_doc(state, modbus_port=mb_port, sparkplug={
+        "host": "127.0.0.1", "port": persistent_broker.port, "primary_host": "scada", "reconnect_min": 0.1,
+        "reconnect_max": 0.5, "keepalive": 5}))
+    host = SparkplugHost(persistent_broker.port, persistent=True)
+    host.online()
+    daemon = start_daemon(cfg)
+    try:
+        host.wait(_births, 60, "the daemon's births")
+        host.command("test-rig", "test-rig", [("Command/Measure", DT.BOOLEAN, True)])
+        host.wait(lambda h: h.results(), 60, "the result of the DCMD measurement")
+        assert [(r["command"], r["status"]) for r in host.replies()][-1] == ("trigger", "done")
+        host.online(False)
+        host.wait(lambda h: h.of("NDEATH"), 10, "NDEATH when the host left")
+        trigger_and_wait(mb_port, 2)
+    finally:
+        daemon.kill()
+        daemon.communicate(timeout=10)
+    with Store(state, read_only=True) as store:
+        stored = [m.uuid for m in reversed(store.list())]
+        assert len(stored) == 2 and store.outbox_count("sparkplug") == 1
+    assert len(host.results()) == 1
+    persistent_broker.stop()
+    persistent_broker.start()
+    daemon = start_daemon(cfg)
+    try:
+        wait_until(lambda: port_open(mb_port) or daemon.poll() is not None, 30, what="the restarted daemon")
+        host.online(True)
+        host.wait(lambda h: len(h.results()) >= 2, 60, "the held result")
+        got = host.results()
+        assert [r["Result/UUID"] for r in got] == stored and [r["_historical"] for r in got] == [False, True]
+        assert all(r["_device"] == "test-rig" for r in got) and host.errors == []
+    finally:
+        daemon.kill()
+        daemon.communicate(timeout=10)
+        host.close()

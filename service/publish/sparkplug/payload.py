@@ -45,11 +45,11 @@ class DataType(enum.IntEnum):
 
 #: the field of the value oneof that carries each data type
 VALUE_FIELD: dict[DataType, str] = {
-    **{t: "int_value" for t in (DataType.Int8, DataType.Int16, DataType.Int32, DataType.UInt8, DataType.UInt16,
-                                DataType.UInt32)},
-    **{t: "long_value" for t in (DataType.Int64, DataType.UInt64, DataType.DateTime)},
+    **dict.fromkeys((DataType.Int8, DataType.Int16, DataType.Int32, DataType.UInt8, DataType.UInt16, DataType.UInt32),
+                    "int_value"),
+    **dict.fromkeys((DataType.Int64, DataType.UInt64, DataType.DateTime), "long_value"),
     DataType.Float: "float_value", DataType.Double: "double_value", DataType.Boolean: "boolean_value",
-    **{t: "string_value" for t in (DataType.String, DataType.Text, DataType.UUID)},
+    **dict.fromkeys((DataType.String, DataType.Text, DataType.UUID), "string_value"),
 }
 
 _F = descriptor_pb2.FieldDescriptorProto
@@ -96,8 +96,8 @@ def _declare() -> Any:
                 fd.type, fd.type_name = _F.TYPE_MESSAGE, f".{_PACKAGE}.Payload.{ftype}"
             if oneof:
                 fd.oneof_index = 0
-    for fname, number, ftype, repeated in (("timestamp", 1, "uint64", False), ("seq", 3, "uint64", False),
-                                           ("uuid", 4, "string", False), ("body", 5, "bytes", False)):
+    for fname, number, ftype in (("timestamp", 1, "uint64"), ("seq", 3, "uint64"), ("uuid", 4, "string"),
+                                 ("body", 5, "bytes")):
         payload.field.add(name=fname, number=number, label=_OPT, type=_TYPES[ftype])
     payload.field.add(name="metrics", number=2, label=_REP, type=_F.TYPE_MESSAGE,
                       type_name=f".{_PACKAGE}.Payload.Metric")
