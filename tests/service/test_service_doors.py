@@ -27,3 +27,166 @@ def test_a_failure_while_the_part_is_judged_still_stores_the_measurement_with_it
     assert "judging broke" in (rows[0].error or "")
     stored = app.app.store.get(rows[0].uuid, trace=True)
     assert stored.trace_angle is not None and len(stored.trace_angle) > 100
+
+
+# --- OPC UA before and after a login --------------------------------------------------------------------------
+
+import asyncio  # noqa: E402
+import socket  # noqa: E402
+import struct  # noqa: E402
+
+from asyncua import Client, ua  # noqa: E402
+
+from .conftest import RunningAppliance  # noqa: E402
+
+OPC_USER, OPC_PASSWORD = "line-7", "s3cret-pw"
+
+
+@pytest.fixture(scope="module")
+def opc(tmp_path_factory):
+    """An appliance whose OPC UA server also offers the unencrypted endpoint (no RSA work per session: cheap)."""
+    base = tmp_path_factory.mktemp("opcua-doors")
+    pw = base / "opcua-password"
+    pw.write_text(OPC_PASSWORD + "\n", encoding="utf-8")
+    pw.chmod(0o600)
+    doc = appliance_doc(base / "state", opcua={"host": "127.0.0.1", "port": 0, "username": OPC_USER,
+                                               "password_file": str(pw), "allow_unencrypted": True,
+                                               "max_connections": 8, "max_nodes_per_request": 100})
+    app = RunningAppliance(doc)
+    try:
+        yield app
+    finally:
+        app.stop()
+
+
+async def _client(app, user: str = OPC_USER, password: str = OPC_PASSWORD) -> Client:
+    c = Client(app.app.opcua.endpoint, timeout=10)
+    c.set_user(user)
+    c.set_password(password)
+    await c.connect()
+    return c
+
+
+def _closed_within(s: socket.socket, payload: bytes, budget: int) -> bool:
+    """Send ``payload`` until ``budget`` bytes went out; True once the server closed the connection."""
+    sent = 0
+    s.settimeout(10)
+    try:
+        while sent < budget:
+            s.sendall(payload)
+            sent += len(payload)
+        s.shutdown(socket.SHUT_WR)
+        return s.recv(1) == b""  # the server closes (it would wait for the rest of a 4 GB body otherwise)
+    except (ConnectionResetError, BrokenPipeError):
+        return True
+    except TimeoutError:
+        return False
+
+
+def test_an_opcua_chunk_announcing_4_gb_is_refused_on_its_header(opc):
+    """Before any login: a UA TCP header that announces a 4 GB body, then zeros. The server closes the connection
+    at once instead of buffering the body; a client is served afterwards."""
+    app = opc
+    port = app.app.opcua.bound_port
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(b"HELF" + struct.pack("<I", 0xFFFFFFF0))
+        assert _closed_within(s, bytes(65536), 8 * 1024 * 1024)
+    assert app.app.opcua.health()["oversized_chunks"] >= 1
+
+    async def run():
+        c = await _client(app)
+        try:
+            return await c.nodes.server_state.read_value()
+        finally:
+            await c.disconnect()
+
+    assert asyncio.run(run()) == ua.ServerState.Running
+
+
+def test_an_opcua_read_naming_too_many_nodes_is_refused(opc):
+    """A Read of more nodes than max_nodes_per_request is BadTooManyOperations; one within it is answered."""
+    app = opc
+
+    async def run():
+        c = await _client(app)
+        try:
+            node = c.nodes.server_state
+            assert len(await c.read_values([node] * 100)) == 100
+            with pytest.raises(ua.UaStatusCodeError) as err:
+                await c.read_values([node] * 5000)
+            assert err.value.code == ua.StatusCodes.BadTooManyOperations
+        finally:
+            await c.disconnect()
+
+    asyncio.run(run())
+    assert app.app.opcua.health()["too_many_nodes"] >= 1
+
+
+def test_1100_idle_opcua_connections_neither_lock_the_plc_out_nor_lose_the_measurement(tmp_path):
+    """The daemon with the unit's descriptor limit (1024): 1,100 connections to the OPC UA port that never say a
+    word. The PLC still reads and triggers, and the measurement is stored, not FAULTed for want of a descriptor."""
+    import resource
+
+    from service.publish.modbus import registers as R
+
+    from .conftest import free_port, moi_subprocess, port_open, write_toml
+    from .test_service_hardening import _plc_image, _plc_trigger
+
+    mb_port, ua_port = free_port(), free_port()
+    pw = tmp_path / "opcua-password"
+    pw.write_text(OPC_PASSWORD, encoding="utf-8")
+    pw.chmod(0o600)
+    doc = appliance_doc(tmp_path / "state", modbus_port=mb_port,
+                        opcua={"host": "127.0.0.1", "port": ua_port, "username": OPC_USER, "password_file": str(pw)})
+    cfg = write_toml(tmp_path / "appliance.toml", doc)
+    daemon = moi_subprocess(["run", "--config", str(cfg)],
+                            preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024)))
+    flood: list[socket.socket] = []
+    try:
+        wait_until(lambda: (port_open(mb_port) and port_open(ua_port)) or daemon.poll() is not None, 120,
+                   what="the daemon's ports")
+        assert daemon.poll() is None
+        for _ in range(1100):
+            try:
+                flood.append(socket.create_connection(("127.0.0.1", ua_port), timeout=5))
+            except OSError:
+                break
+        assert len(flood) > 1024, f"only {len(flood)} attack connections: the attack proved nothing"
+        assert _plc_image(mb_port)["state"] == R.STATE_CODES["IDLE"]
+        _plc_trigger(mb_port)
+        image = wait_until(lambda: (lambda i: i if i["seq"] == 1 else None)(_plc_image(mb_port)), 60,
+                           what="the result in the registers")
+        assert image["state"] != R.STATE_CODES["FAULT"] and image["J"] > 0
+    finally:
+        for s in flood:
+            s.close()
+        daemon.terminate()
+        _, err = daemon.communicate(timeout=30)
+    assert b"Too many open files" not in err, err[-2000:]
+    assert b"INFO asyncua" not in err  # asyncua's chatter (some 10 lines a connection) at WARNING
+    assert len(err) < 20_000, f"{len(err)} bytes of log for the flood: {err[-2000:]!r}"
+
+
+# --- replies go where the appliance decides ---------------------------------------------------------------------
+
+def test_an_mqtt_response_topic_outside_the_reply_namespace_is_not_honoured(tmp_path, broker, appliance_factory):
+    """A client that may only set part IDs names cmd/measure (this appliance's, then another's) as its response
+    topic, with 4 kB of correlation data: the reply goes to the reply topic without it; nothing fires."""
+    from .test_service_mqtt_replies import BASE, V5Client
+
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
+    assert app.app.mqtt.subscribed_event.wait(10)
+    c = V5Client(broker.port, [f"{BASE}/reply", f"{BASE}/cmd/measure", "moi/other-rig/cmd/measure"])
+    try:
+        c.send("part_id", {"id": "p1", "part_id": "SN-1"}, response_topic=f"{BASE}/cmd/measure",
+               correlation=b"\x01" * 4096)
+        c.send("part_id", {"id": "p2", "part_id": "SN-2"}, response_topic="moi/other-rig/cmd/measure",
+               correlation=b"\x02")
+        for cid in ("p1", "p2"):
+            topic, doc, corr = c.wait_for(lambda g, cid=cid: g[1].get("id") == cid)
+            assert topic == f"{BASE}/reply" and doc["status"] == "done"
+        assert c.wait_for(lambda g: g[1].get("id") == "p1")[2] is None  # 4 kB are not echoed
+        assert all(g[0] == f"{BASE}/reply" for g in c.got), c.got
+        assert "ARMED" not in app.states()
+    finally:
+        c.close()
