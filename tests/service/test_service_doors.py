@@ -190,3 +190,37 @@ def test_an_mqtt_response_topic_outside_the_reply_namespace_is_not_honoured(tmp_
         assert "ARMED" not in app.states()
     finally:
         c.close()
+
+
+def test_opcua_password_guessing_is_slowed_then_locked_out_with_the_peer_address(opc, monkeypatch, caplog):
+    """Wrong logins from one host: each later message of that host before a login waits its turn, and after
+    LOCKOUT_AFTER of them even the right password is refused for a while; the log names the peer."""
+    from service.publish.opcua import guard as G
+
+    app = opc
+    g = app.app.opcua.guard
+    monkeypatch.setattr(G, "LOCKOUT_AFTER", 3)
+    monkeypatch.setattr(G, "GUESS_DELAY", 0.01)
+    before = g.health()
+
+    async def attempt(password: str) -> bool:
+        try:
+            c = await _client(app, password=password)
+        except Exception:
+            return False
+        await c.disconnect()
+        return True
+
+    try:
+        with caplog.at_level("WARNING", logger="moi.opcua"):
+            assert [asyncio.run(attempt(f"guess-{i}")) for i in range(3)] == [False] * 3
+            assert not asyncio.run(attempt(OPC_PASSWORD))  # locked out: the right password too
+        after = g.health()
+        assert after["wrong_logins"] - before["wrong_logins"] == 3
+        assert after["locked_out"] > before["locked_out"]
+        assert after["delayed_before_login"] > before["delayed_before_login"]
+        assert any("127.0.0.1 locked out" in r.getMessage() for r in caplog.records), caplog.text
+    finally:
+        g._locked.clear()
+        g._wrong.clear()
+    assert asyncio.run(attempt(OPC_PASSWORD))
