@@ -3,6 +3,8 @@ measurement or lose one: attacks on the running daemon (simulated rig, loopback 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from .conftest import appliance_doc, wait_until
@@ -224,3 +226,52 @@ def test_opcua_password_guessing_is_slowed_then_locked_out_with_the_peer_address
         g._locked.clear()
         g._wrong.clear()
     assert asyncio.run(attempt(OPC_PASSWORD))
+
+
+# --- names are data, not syntax ---------------------------------------------------------------------------------
+
+HOSTILE = ["rotor\nA12", "rotor\x07A12", "rotor\x1b[2JA12", "rotor\u2028A12", "x" * 65]
+
+
+@pytest.mark.parametrize("name", HOSTILE)
+def test_a_hostile_name_is_refused_at_every_door_that_takes_one(tmp_path, name):
+    """A line break, a bell, an escape, a Unicode line separator or an overlong name: refused in a recipe file,
+    as the device id, a web user, the OPC UA user and a part ID, each saying what a name may hold."""
+    from service.config.appliance import parse_config
+    from service.errors import ConfigError, StartupError
+    from service.parts.recipes import check_part_id, load_recipe
+    from service.publish.web.auth import hash_password, read_users
+
+    from measurement.errors import InvalidInput
+
+    recipe = (Path(__file__).resolve().parents[2] / "examples" / "recipes" / "rotor-a12.toml").read_text()
+    bad = tmp_path / "bad.toml"
+    import tomli_w
+    bad.write_text(recipe.replace('name = "rotor-A12"', f"name = {tomli_w.dumps({'n': name})[4:].strip()}"))
+    with pytest.raises(ConfigError, match="recipe name must be"):
+        load_recipe(bad)
+    with pytest.raises(ConfigError, match="device id must be"):
+        parse_config(appliance_doc(tmp_path / "state", device_id=name), source="test.toml")
+    with pytest.raises(ConfigError, match="user name must be"):
+        parse_config(appliance_doc(tmp_path / "state", opcua={"username": name, "password": "p" * 16}),
+                     source="test.toml")
+    users = tmp_path / "users.toml"
+    users.write_text(tomli_w.dumps({"user": [{"name": name, "role": "operator", "password": hash_password("pw-123456")}]}))
+    with pytest.raises(StartupError, match="user name must be"):
+        read_users(users)
+    with pytest.raises(InvalidInput, match="part ID must be"):
+        check_part_id(name[:21])
+    assert check_part_id(" SN-0042 ") == "SN-0042" and check_part_id("") == ""
+
+
+def test_a_download_named_after_a_hostile_name_still_gets_a_valid_header():
+    """A recipe name from a store written before the check: the export's Content-Disposition carries it
+    percent-encoded, and aiohttp sends it (a line break in a header raised, and the connection dropped)."""
+    from aiohttp import web
+
+    from service.names import content_disposition
+
+    header = content_disposition("moi-test-rig-rotor\nA\x07 \"ü\".dfq")
+    assert header.isprintable() and header.isascii() and "\n" not in header
+    assert "filename*=UTF-8''moi-test-rig-rotor%0AA%07%20%22%C3%BC%22.dfq" in header
+    web.Response(body=b"", headers={"Content-Disposition": header})  # no ValueError

@@ -7,6 +7,7 @@ from typing import Any, Callable
 
 from service.config.schema import PublisherTable
 from service.errors import ConfigError
+from service.names import name_problem
 
 
 @dataclass(frozen=True)
@@ -70,6 +71,8 @@ KEYS: dict[str, dict] = {
 
 
 def _check(o: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
+    if o["username"] is not None and (problem := name_problem("user", o["username"])) is not None:
+        raise fail("username", problem)
     if o["password"] is not None and o["password_file"] is not None:
         raise fail("password", "give password or password_file, not both")
     if o["username"] is None and not o["anonymous"]:

@@ -22,6 +22,7 @@ from aiohttp import web
 
 from service import __version__
 from service.errors import InputFileError, StoreDamaged
+from service.names import content_disposition
 from service.publish.dfq import ENCODING
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME, allowed
 from .child import ChildBusy, export_file, replot, report_file, trace_file
@@ -633,7 +634,7 @@ class Views:
             raise Refused(404, str(exc)) from None
         media = {"json": "application/json", "csv": "text/csv", "dfq": "text/plain"}[fmt]
         return web.Response(body=body, content_type=media, charset="utf-8" if fmt != "dfq" else ENCODING,
-                            headers={"Content-Disposition": f'attachment; filename="{name}"'})
+                            headers={"Content-Disposition": content_disposition(name)})
 
     # --- SPC ---------------------------------------------------------------------------------------------------
     async def spc(self, request: web.Request) -> web.Response:
