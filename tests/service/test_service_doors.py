@@ -275,3 +275,44 @@ def test_a_download_named_after_a_hostile_name_still_gets_a_valid_header():
     assert header.isprintable() and header.isascii() and "\n" not in header
     assert "filename*=UTF-8''moi-test-rig-rotor%0AA%07%20%22%C3%BC%22.dfq" in header
     web.Response(body=b"", headers={"Content-Disposition": header})  # no ValueError
+
+
+# --- the web page's live streams --------------------------------------------------------------------------------
+
+def test_live_streams_never_lock_the_page_out_and_end_after_their_lifetime(tmp_path, appliance_factory):
+    """More unauthenticated /events streams than the page has connections: only max_streams_per_client of them
+    are served (the others get a 503 at once), the page and its Measure still answer, and a stream ends after
+    stream_lifetime (the browser reconnects by itself)."""
+    import urllib.request
+
+    app = appliance_factory(appliance_doc(tmp_path / "state", web={
+        "enabled": True, "max_connections": 8, "max_streams_per_client": 2, "stream_lifetime": 1.0}))
+    web = app.app.web
+    port = web.bound_port
+    streams = []
+    try:
+        heads = []
+        for _ in range(12):
+            s = socket.create_connection(("127.0.0.1", port), timeout=10)
+            s.sendall(b"GET /events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+            streams.append(s)
+            heads.append(s.recv(12))
+        assert sum(h.startswith(b"HTTP/1.1 200") for h in heads) == 2, heads
+        assert sum(h.startswith(b"HTTP/1.1 503") for h in heads) == 10, heads
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/state", timeout=10) as r:
+            assert r.status == 200
+        token = Path(web.token_file).read_text().strip()
+        req = urllib.request.Request(f"http://127.0.0.1:{port}/api/measure", method="POST",
+                                     headers={"Authorization": f"Bearer {token}"})
+        with urllib.request.urlopen(req, timeout=10) as r:
+            assert r.status in (200, 202)
+        for s, head in zip(streams, heads):
+            if head.startswith(b"HTTP/1.1 200"):
+                s.settimeout(30)
+                while s.recv(65536):  # the stream's events, until the server ends it
+                    pass
+        assert web.stats()["streams"] == 0
+        app.wait_done(1, 60)
+    finally:
+        for s in streams:
+            s.close()
