@@ -585,7 +585,45 @@ class Appliance:
         return self.config.simulation.time_scale if self.config.simulated else 1.0
 
     def _store_measurement(self, m: Measurement) -> None:
-        """The sequencer's result sink: store (with the outbox row), then Modbus, then wake MQTT."""
+        """The sequencer's result sink: store (with the outbox row), then Modbus, then wake MQTT. Whatever fails
+        before the row is written (judging, a lazy import, no descriptor left), a failed row keeps the trace and
+        the failure; the error goes on to the sequencer, whose FAULT the PLC and MQTT see."""
+        try:
+            self._store_result(m)
+        except BaseException as exc:
+            if m.id not in self._durable_results:
+                self._store_lost(m, exc)
+            raise
+
+    def _store_lost(self, m: Measurement, exc: BaseException) -> None:
+        """A captured measurement whose result could not be stored: a failed row with its trace (always, it is
+        the evidence) and what went wrong."""
+        assert self.store is not None
+        finished = self.wall_clock()
+        self._run_started.pop(m.id, None)
+        part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
+        error = f"captured, but not stored as a result: {type(exc).__name__}: {exc}"
+        if (reply := self._run_reply.pop(m.id, None)) is not None:
+            reply(CommandReply("trigger", "failed", "measurement_failed", error, {"uuid": m.id}))
+        try:
+            result = m.result.to_dict()
+        except Exception:
+            result = None
+        try:
+            self.store.record(uuid=m.id, status="failed", trigger=m.requested_by, device_id=self.config.device_id,
+                              software_version=__version__, finished_at=finished, error=error, result=result,
+                              started_at=finished - (m.finished_at - m.requested_at) / self._clock_scale(),
+                              rig=self.config.rig.to_dict(), config=self.config.to_dict(), trace_t=m.trace.t,
+                              trace_angle=m.trace.angle, trace_meta=dict(m.trace.meta),
+                              part={"part_id": part_id, "recipe": recipe.name if recipe else None,
+                                    "recipe_version": recipe.version if recipe else None})
+        except BaseException:
+            log.exception("could not store the failed measurement %s either", m.id)
+            return
+        log.error("measurement %s stored as failed: %s", m.id, error)
+        self._note_stored(m.id)
+
+    def _store_result(self, m: Measurement) -> None:
         assert self.store is not None
         finished = self.wall_clock()
         armed = self._run_started.pop(m.id, (None, ""))[0]

@@ -29,6 +29,9 @@ def setup_logging(level: str) -> None:
     # journald adds its own timestamps; the level and the logger name are what helps there
     logging.basicConfig(level=getattr(logging, level.upper()), stream=sys.stderr,
                         format="%(levelname)s %(name)s: %(message)s", force=True)
+    from service.logs import install
+
+    install(getattr(logging, level.upper()))
     if level != "debug":
         # pymodbus logs every refused request (e.g. a PLC writing a read-only register) as an error
         logging.getLogger("pymodbus").setLevel(logging.CRITICAL)

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from service.errors import InputFileError, StartupError
+from service.names import name_problem
 from service.publish.web.auth import ROLES, User, hash_password, read_users
 
 #: shortest and longest password accepted, characters
@@ -57,8 +58,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"{u.name}\t{u.role}")
         return 0
     name = (args.name or "").strip()
-    if not name or len(name) > 64 or any(c in name for c in "\n\r\t$"):
-        raise InputFileError("give the user's NAME (1–64 characters, no tabs, line breaks or '$')")
+    if (problem := name_problem("user", name)) is not None:
+        raise InputFileError(f"give the user's NAME: {problem}")
     if args.action == "remove":
         if users.pop(name, None) is None:
             raise InputFileError(f"no user {name!r} in {path}")

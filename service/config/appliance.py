@@ -41,6 +41,7 @@ from drivers.settings import (ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSetti
 from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, demo_camera
 from service.config.schema import REQUIRED, Checker as _Checker, Key, PublisherTable, doc as _doc, schema as _schema
 from service.errors import ConfigError
+from service.names import name_problem
 from service.sources.files import read_rig, read_toml
 from service.publish import registry
 
@@ -372,8 +373,8 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         raise ConfigError(f"{source}: unknown {kind} {t!r}{hint}")
 
     dev = c.table("device", doc.get("device", {}), SCHEMA["device"])
-    if not dev["id"] or any(ch in dev["id"] for ch in "/#+ ") or len(dev["id"]) > 64:
-        raise c.fail("device", "id", f"expected 1–64 characters without '/', '#', '+' or spaces (it is an MQTT topic level), got {dev['id']!r}")
+    if (problem := name_problem("device_id", dev["id"])) is not None:
+        raise c.fail("device", "id", problem)
     seq_doc = c.table("sequencer", doc.get("sequencer", {}), SCHEMA["sequencer"])
     try:
         seq_cfg = SequencerConfig(**seq_doc, identify_in_worker=True)

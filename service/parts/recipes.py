@@ -95,12 +95,13 @@ from measurement.verdict import (QUANTITIES, RULES, PartResult, QualityRules, Re
                                  Specification, combine, judge_release)
 
 from service.errors import ConfigError
+from service.names import NAMES, name_problem
 from service.sources.files import read_rig, read_text
 
 log = logging.getLogger("moi.recipes")
 
 #: characters of a part ID (the Modbus block holds 2 per register)
-PART_ID_LENGTH = 20
+PART_ID_LENGTH = NAMES["part_id"].length
 
 
 class RecipeError(ConfigError):
@@ -112,8 +113,8 @@ def check_part_id(text: str) -> str:
     if not isinstance(text, str):
         raise InvalidInput(f"part_id must be a string, got {text!r}")
     s = text.strip()
-    if len(s) > PART_ID_LENGTH or not all(32 <= ord(ch) < 127 for ch in s):
-        raise InvalidInput(f"part_id must be at most {PART_ID_LENGTH} printable ASCII characters, got {text!r}")
+    if s and (problem := name_problem("part_id", s)) is not None:  # empty: no part ID
+        raise InvalidInput(problem)
     return s
 
 
@@ -244,9 +245,8 @@ def load_recipe(path: str | Path) -> Recipe:
     dec = c.table("decision", doc.get("decision", {}), schemas["decision"])
     qual = c.table("quality", doc.get("quality", {}), schemas["quality"])
     name = rec["name"]
-    if not name or any(ch in name for ch in "/#+") or len(name) > 64 or name != name.strip():
-        raise c.fail("recipe", "name", f"expected 1–64 characters without '/', '#', '+' (it names an MQTT topic "
-                     f"level), got {name!r}")
+    if (problem := name_problem("recipe", name)) is not None:
+        raise c.fail("recipe", "name", problem)
     tensor = None
     if "tensor" in doc:
         if not isinstance(doc["tensor"], dict):

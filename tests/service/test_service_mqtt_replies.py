@@ -65,7 +65,7 @@ class V5Client:
 def test_commands_are_answered_accepted_done_or_refused_with_the_reason(tmp_path, broker, appliance_factory):
     app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
     assert app.app.mqtt.subscribed_event.wait(10)
-    mine = f"{BASE}/plant-mes/replies"
+    mine = f"{BASE}/reply/plant-mes"
     c = V5Client(broker.port, [mine, f"{BASE}/reply"])
     try:
         c.send("measure", {"id": "m1"}, response_topic=mine, correlation=b"\x01corr")

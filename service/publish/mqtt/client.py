@@ -57,6 +57,7 @@ from service.errors import ConfigError
 from service.persistence.outbox import OutboxSender
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
+from service.logs import Throttle
 
 # the settings are read by the configuration without paho; here for the client's users too
 from .settings import MqttSettings  # noqa: F401
@@ -90,6 +91,10 @@ def default_client_id(device_id: str, store_path: str | os.PathLike) -> str:
 
 #: a command payload longer than this is a command without an id (its JSON is not parsed), bytes
 MAX_COMMAND_PAYLOAD = 1024
+#: an MQTT 5 response topic is honoured only under the appliance's reply topic and up to this length, characters
+MAX_TOPIC = 256
+#: correlation data longer than this is not echoed, bytes
+MAX_CORRELATION = 128
 
 
 def _never_raises(callback: Callable[..., None]) -> Callable[..., None]:
@@ -175,6 +180,7 @@ class MqttService(Publisher):
         self._on_command = on_command or (lambda name, source, data=None, reply=None: None)
         self._seen_ids: deque[tuple[str, str]] = deque(maxlen=256)
         self._seen_lock = threading.Lock()
+        self._say = Throttle(log)  # the lines a client makes the appliance repeat, one per message
         self.connected_event = threading.Event()
         self.subscribed_event = threading.Event()  # the broker confirmed the command subscriptions
         self.last_error: str | None = None
@@ -350,7 +356,7 @@ class MqttService(Publisher):
     @_never_raises
     def _on_message(self, client, userdata, message) -> None:
         if message.retain:
-            log.warning("MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
+            self._say(logging.WARNING, "MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
             return
         name = self.topics.commands.get(message.topic)
         if name is None:
@@ -358,7 +364,7 @@ class MqttService(Publisher):
         if not message.payload:
             # how a retained command is cleared (the broker hands the empty message on to the subscribers
             # as a plain one): never a command itself
-            log.info("MQTT: empty message on %s ignored (the clearing of a retained command)", message.topic)
+            self._say(logging.INFO, "MQTT: empty message on %s ignored (the clearing of a retained command)", message.topic)
             return
         cmd_id = None
         data: dict[str, Any] = {}
@@ -373,7 +379,7 @@ class MqttService(Publisher):
         reply = self._replier(message, cmd_id)
 
         def refuse(reason: str, detail: str) -> None:
-            log.warning("MQTT: %s refused: %s", message.topic, detail)
+            self._say(logging.WARNING, "MQTT: %s refused: %s", message.topic, detail)
             reply(CommandReply(name, "refused", reason, detail))
 
         keys = V.COMMANDS[name].data or V.PART_DATA  # an abort's are passed on and ignored
@@ -391,7 +397,7 @@ class MqttService(Publisher):
         if cmd_id is not None:
             with self._seen_lock:
                 if (name, cmd_id) in self._seen_ids:
-                    log.info("MQTT: duplicate %s command id %s ignored", name, cmd_id)
+                    self._say(logging.INFO, "MQTT: duplicate %s command id %s ignored", name, cmd_id)
                     reply(CommandReply(name, "refused", "duplicate"))
                     return
                 self._seen_ids.append((name, cmd_id))
@@ -405,6 +411,15 @@ class MqttService(Publisher):
         correlation = getattr(props, "CorrelationData", None) if props is not None else None
         if not isinstance(topic, str) or not topic or any(ch in topic for ch in "#+\0"):
             topic = self.topics.reply  # none, or one no PUBLISH may name
+        elif not (topic == self.topics.reply or topic.startswith(self.topics.reply + "/")) or len(topic) > MAX_TOPIC:
+            # replies go where the appliance decides: a response topic naming cmd/measure would fire the solenoid
+            self._say(logging.WARNING, "MQTT: response topic %r refused (only under %s/); replying there",
+                      topic[:MAX_TOPIC], self.topics.reply)
+            topic = self.topics.reply
+        if isinstance(correlation, (bytes, bytearray)) and len(correlation) > MAX_CORRELATION:
+            self._say(logging.WARNING, "MQTT: correlation data of %d bytes dropped (at most %d)", len(correlation),
+                      MAX_CORRELATION)
+            correlation = None
         command = message.topic.rsplit("/", 1)[-1]
 
         def reply(r: CommandReply) -> None:

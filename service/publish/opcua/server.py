@@ -50,9 +50,11 @@ from service.errors import ConfigError, OpcUaServerError
 from service.persistence.acks import AckFile, AckState
 from service.publish.payload import decision, not_decidable
 from service.publish.port import ApplianceView, Publisher
+from service.states import STATES
 
 from .model import (CONTENT_FIELDS, META_COMPONENTS, NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT,  # noqa: F401
                     RESULT_EVALUATION, Model, install, node_id, rereference, retype)
+from .guard import PEER, Guard, GuardedServer, Limits
 from .settings import OpcUaSettings
 
 log = logging.getLogger("moi.opcua")
@@ -159,19 +161,26 @@ def result_document(payload: Mapping[str, Any]) -> dict[str, Any]:
 
 
 class _Users:
-    """asyncua's user manager: the one configured user (and anonymous clients when allowed)."""
+    """asyncua's user manager: the one configured user (and anonymous clients when allowed); wrong logins and
+    locked-out hosts are the guard's (``guard.Guard``)."""
 
-    def __init__(self, username: str | None, password: str | None, anonymous: bool) -> None:
+    def __init__(self, username: str | None, password: str | None, anonymous: bool, guard: Guard | None = None) -> None:
         self.username, self.password, self.anonymous = username, password, anonymous
+        self.guard = guard
 
     def get_user(self, iserver: Any, username: str | None = None, password: str | None = None,
                  certificate: Any = None) -> User | None:
         if username is None:
             return User(role=UserRole.User) if self.anonymous else None
-        if self.username is None or self.password is None:
+        host = PEER.get()
+        if self.guard is not None and self.guard.locked(host):
+            self.guard.login_refused(host)
             return None
-        ok = hmac.compare_digest(username.encode(), self.username.encode()) & hmac.compare_digest(
-            (password or "").encode(), self.password.encode())
+        ok = self.username is not None and self.password is not None and bool(
+            hmac.compare_digest(username.encode(), self.username.encode()) & hmac.compare_digest(
+                (password or "").encode(), self.password.encode()))
+        if not ok and self.guard is not None:
+            self.guard.login_failed(host)
         return User(role=UserRole.User, name=username) if ok else None
 
 
@@ -210,6 +219,9 @@ class OpcUaServer(Publisher):
         self._calibration_due = False
         self._mode = "None"
         self.events_sent = 0
+        self.guard = Guard(Limits(max_connections=settings.max_connections, login_timeout=settings.login_timeout,
+                                  max_nodes_per_request=settings.max_nodes_per_request),
+                           capturing=lambda: STATES.get(self._state, STATES["STARTING"]).capturing)
 
     def _password(self) -> str | None:
         s = self.settings
@@ -252,7 +264,7 @@ class OpcUaServer(Publisher):
         for p in (cache, cert, key):
             if p is not None:
                 p.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # the key is never readable by others
-        server = Server(user_manager=_Users(s.username, self.password, s.anonymous))  # type: ignore[arg-type]
+        server = GuardedServer(self.guard, user_manager=_Users(s.username, self.password, s.anonymous, self.guard))
         await server.init(cache)
         # asyncua's standard address space is some 0.5 M Python objects that live as long as the server: out of
         # the collector's generations (unfrozen at stop), no full collection walks them again (one took a third
@@ -441,7 +453,7 @@ class OpcUaServer(Publisher):
     def health(self) -> dict[str, Any]:
         return {"endpoint": self.endpoint, "results_unacknowledged": len(self._unacknowledged),
                 "events_sent": self.events_sent, "start_seconds": self.start_seconds,
-                "operation_mode": self._mode}
+                "operation_mode": self._mode} | self.guard.health()
 
     # --- the ResultDataType ----------------------------------------------------------------------
     def _structure(self, doc: Mapping[str, Any]) -> Any:

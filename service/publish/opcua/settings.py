@@ -7,6 +7,7 @@ from typing import Any, Callable
 
 from service.config.schema import PublisherTable
 from service.errors import ConfigError
+from service.names import name_problem
 
 
 @dataclass(frozen=True)
@@ -29,6 +30,9 @@ class OpcUaSettings:
     model: str = "pendulum inertia appliance"
     serial_number: str | None = None
     results_kept: int = 100
+    max_connections: int = 16
+    login_timeout: float = 10.0
+    max_nodes_per_request: int = 1000
 
 
 #: each key of the configuration's ``[opcua]`` table: what it means, its unit and its limits (the table is
@@ -56,10 +60,19 @@ KEYS: dict[str, dict] = {
     "serial_number": dict(doc="MachineIdentification SerialNumber (default: the device id)"),
     "results_kept": dict(doc="results GetResultById finds in memory (older ones: from the store)", min=1,
                          max=100000),
+    "max_connections": dict(doc="connections served at once (at the cap, the oldest without a login makes room): far "
+                            "below the daemon's descriptor limit, which the measurement, the store and the PLC share",
+                            min=1, max=256),
+    "login_timeout": dict(doc="a connection that has not logged in after this long is closed, s", min=1.0,
+                          max=600.0),
+    "max_nodes_per_request": dict(doc="nodes one Read, Write, Browse, Call or monitored-item request may name",
+                                  min=10, max=100000),
 }
 
 
 def _check(o: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
+    if o["username"] is not None and (problem := name_problem("user", o["username"])) is not None:
+        raise fail("username", problem)
     if o["password"] is not None and o["password_file"] is not None:
         raise fail("password", "give password or password_file, not both")
     if o["username"] is None and not o["anonymous"]:

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from service.errors import StartupError
+from service.names import name_problem
 
 log = logging.getLogger("moi.web")
 
@@ -153,6 +154,8 @@ def read_users(path: str | os.PathLike) -> dict[str, User]:
                                                                                     and pw.startswith("scrypt$")):
             raise StartupError(f"[web] users file {str(p)!r}: user {i + 1} needs name, role (one of "
                                f"{', '.join(ROLES)}) and a scrypt password hash (moi user add)")
+        if (problem := name_problem("user", name)) is not None:
+            raise StartupError(f"[web] users file {str(p)!r}: user {i + 1}: {problem}")
         if name in users:
             raise StartupError(f"[web] users file {str(p)!r}: user {name!r} twice")
         users[name] = User(name, role, pw)

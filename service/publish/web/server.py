@@ -28,6 +28,7 @@ from .auth import Guard, read_token, read_users
 from .child import ChildWork
 from .priority import sensor_is_read
 from .settings import DEFAULT_TOKEN_FILE_NAME, PLOT_NAME, WebSettings
+from .streams import StreamSlots
 from .views import Views
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -74,6 +75,7 @@ class WebServer(Publisher):
         self._runner: web.AppRunner | None = None
         self._listener: asyncio.AbstractServer | None = None
         self.connections_refused = 0
+        self.streams = StreamSlots(settings.max_streams, settings.max_streams_per_client)
         self._refused_logged_at = -float("inf")
         self._listeners: set[asyncio.Queue] = set()
         self._plotter = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="moi-plot")
@@ -125,7 +127,8 @@ class WebServer(Publisher):
         """aiohttp's protocol for a new connection, or one that closes it at once beyond ``max_connections``:
         every descriptor a client can hold here is one the process may lack for the sensor or the store."""
         assert self._runner is not None and self._runner.server is not None
-        if len(self._runner.server.connections) < self.settings.max_connections:
+        # the live streams have slots of their own (``streams``): they do not take the pages' connections
+        if len(self._runner.server.connections) - self.streams.open < self.settings.max_connections:
             return self._runner.server()
         self.connections_refused += 1
         now = time.monotonic()
@@ -276,7 +279,8 @@ class WebServer(Publisher):
         server = self._runner.server if self._runner is not None else None
         return {"url": self.url, "listeners": len(self._listeners), "token_file": self.token_file,
                 "connections": len(server.connections) if server is not None else 0,
-                "connections_refused": self.connections_refused}
+                "connections_refused": self.connections_refused, "streams": self.streams.open,
+                "streams_refused": self.streams.refused}
 
 
 PUBLISHER = WebServer

@@ -37,6 +37,9 @@ class WebSettings:
     display_unit: str = "kg·m²"
     shift_starts: tuple[str, ...] = ("06:00", "14:00", "22:00")
     users_file: str | None = None
+    max_streams: int = 16
+    max_streams_per_client: int = 4
+    stream_lifetime: float = 600.0
 
 
 #: each key of the configuration's ``[web]`` table: what it means, its unit and its limits (the table is
@@ -57,6 +60,11 @@ KEYS: dict[str, dict] = {
     "shift_starts": dict(doc="shift start times HH:MM, local time (Home counts the parts of the current shift)"),
     "users_file": dict(doc="named users with roles (operator, quality, admin) and password hashes, made by "
                        "`moi user add` (default: none; the token is the one login)", kind="path"),
+    "max_streams": dict(doc="live streams (/events) at once, counted apart from max_connections; one more is "
+                        "refused (503)", min=1, max=256),
+    "max_streams_per_client": dict(doc="live streams at once from one address", min=1, max=256),
+    "stream_lifetime": dict(doc="a live stream ends after this long (the browser opens a new one by itself), s",
+                            min=1.0, max=86400.0),
 }
 
 

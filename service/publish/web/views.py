@@ -23,6 +23,7 @@ from aiohttp import web
 from service import __version__
 from service.core import vocabulary as V
 from service.errors import InputFileError, StoreDamaged
+from service.names import content_disposition
 from service.publish.dfq import ENCODING
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME, allowed
 from .child import ChildBusy, export_file, replot, report_file, trace_file
@@ -278,7 +279,19 @@ class Views:
         return web.json_response(self.live.snapshot())
 
     async def events(self, request: web.Request) -> web.StreamResponse:
-        """Server-sent events: ``state`` on every transition, ``tick`` every 0.25 s (progress, new samples)."""
+        """Server-sent events: ``state`` on every transition, ``tick`` every 0.25 s (progress, new samples); in a
+        slot of its own (``streams``), for ``stream_lifetime`` at most."""
+        client = request.remote or "?"
+        if (why := self.server.streams.take(client)) is not None:
+            refused = web.Response(status=503, text=f"no live stream now: {why}", headers={"Retry-After": "10"})
+            refused.force_close()  # a refused stream keeps no connection of the pages'
+            return refused
+        try:
+            return await self._stream(request)
+        finally:
+            self.server.streams.give_back(client)
+
+    async def _stream(self, request: web.Request) -> web.StreamResponse:
         resp = web.StreamResponse(headers={"Content-Type": "text/event-stream", "Cache-Control": "no-cache",
                                            "X-Accel-Buffering": "no"})
         await resp.prepare(request)
@@ -288,7 +301,8 @@ class Views:
         try:
             await resp.write(b"retry: 1000\n\n")
             next_tick = 0.0
-            while True:
+            ends = loop.time() + self.server.settings.stream_lifetime
+            while loop.time() < ends:
                 timeout = max(0.0, next_tick - loop.time())
                 try:
                     msg = await asyncio.wait_for(q.get(), timeout) if timeout > 0 else q.get_nowait()
@@ -634,7 +648,7 @@ class Views:
             raise Refused(404, str(exc)) from None
         media = {"json": "application/json", "csv": "text/csv", "dfq": "text/plain"}[fmt]
         return web.Response(body=body, content_type=media, charset="utf-8" if fmt != "dfq" else ENCODING,
-                            headers={"Content-Disposition": f'attachment; filename="{name}"'})
+                            headers={"Content-Disposition": content_disposition(name)})
 
     # --- SPC ---------------------------------------------------------------------------------------------------
     async def spc(self, request: web.Request) -> web.Response:

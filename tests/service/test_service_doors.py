@@ -1,0 +1,318 @@
+"""The doors added since the last attack pass (OPC UA, MQTT replies, hostile names) must not let anyone stop a
+measurement or lose one: attacks on the running daemon (simulated rig, loopback only, bounded in count)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from .conftest import appliance_doc, wait_until
+
+
+# --- a measurement once captured is always stored ---------------------------------------------------------------
+
+def test_a_failure_while_the_part_is_judged_still_stores_the_measurement_with_its_trace(tmp_path, appliance_factory):
+    """The swing was captured and identified, then judging it raised: a failed row holds the trace and the
+    failure, and the appliance goes to FAULT (what the PLC and MQTT see)."""
+    app = appliance_factory(appliance_doc(tmp_path / "state"))
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("judging broke")
+
+    app.app.parts.release = broken
+    app.press()
+    app.wait_event(lambda e: e.state.value == "FAULT", 60, what="FAULT after judging failed")
+    wait_until(lambda: app.app.stored, 10, what="the failed row")
+    rows = app.app.store.list(limit=None, full=True)
+    assert [r.status for r in rows] == ["failed"]
+    assert "judging broke" in (rows[0].error or "")
+    stored = app.app.store.get(rows[0].uuid, trace=True)
+    assert stored.trace_angle is not None and len(stored.trace_angle) > 100
+
+
+# --- OPC UA before and after a login --------------------------------------------------------------------------
+
+import asyncio  # noqa: E402
+import socket  # noqa: E402
+import struct  # noqa: E402
+
+from asyncua import Client, ua  # noqa: E402
+
+from .conftest import RunningAppliance  # noqa: E402
+
+OPC_USER, OPC_PASSWORD = "line-7", "s3cret-pw"
+
+
+@pytest.fixture(scope="module")
+def opc(tmp_path_factory):
+    """An appliance whose OPC UA server also offers the unencrypted endpoint (no RSA work per session: cheap)."""
+    base = tmp_path_factory.mktemp("opcua-doors")
+    pw = base / "opcua-password"
+    pw.write_text(OPC_PASSWORD + "\n", encoding="utf-8")
+    pw.chmod(0o600)
+    doc = appliance_doc(base / "state", opcua={"host": "127.0.0.1", "port": 0, "username": OPC_USER,
+                                               "password_file": str(pw), "allow_unencrypted": True,
+                                               "max_connections": 8, "max_nodes_per_request": 100})
+    app = RunningAppliance(doc)
+    try:
+        yield app
+    finally:
+        app.stop()
+
+
+async def _client(app, user: str = OPC_USER, password: str = OPC_PASSWORD) -> Client:
+    c = Client(app.app.opcua.endpoint, timeout=10)
+    c.set_user(user)
+    c.set_password(password)
+    await c.connect()
+    return c
+
+
+def _closed_within(s: socket.socket, payload: bytes, budget: int) -> bool:
+    """Send ``payload`` until ``budget`` bytes went out; True once the server closed the connection."""
+    sent = 0
+    s.settimeout(10)
+    try:
+        while sent < budget:
+            s.sendall(payload)
+            sent += len(payload)
+        s.shutdown(socket.SHUT_WR)
+        return s.recv(1) == b""  # the server closes (it would wait for the rest of a 4 GB body otherwise)
+    except (ConnectionResetError, BrokenPipeError):
+        return True
+    except TimeoutError:
+        return False
+
+
+def test_an_opcua_chunk_announcing_4_gb_is_refused_on_its_header(opc):
+    """Before any login: a UA TCP header that announces a 4 GB body, then zeros. The server closes the connection
+    at once instead of buffering the body; a client is served afterwards."""
+    app = opc
+    port = app.app.opcua.bound_port
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(b"HELF" + struct.pack("<I", 0xFFFFFFF0))
+        assert _closed_within(s, bytes(65536), 8 * 1024 * 1024)
+    assert app.app.opcua.health()["oversized_chunks"] >= 1
+
+    async def run():
+        c = await _client(app)
+        try:
+            return await c.nodes.server_state.read_value()
+        finally:
+            await c.disconnect()
+
+    assert asyncio.run(run()) == ua.ServerState.Running
+
+
+def test_an_opcua_read_naming_too_many_nodes_is_refused(opc):
+    """A Read of more nodes than max_nodes_per_request is BadTooManyOperations; one within it is answered."""
+    app = opc
+
+    async def run():
+        c = await _client(app)
+        try:
+            node = c.nodes.server_state
+            assert len(await c.read_values([node] * 100)) == 100
+            with pytest.raises(ua.UaStatusCodeError) as err:
+                await c.read_values([node] * 5000)
+            assert err.value.code == ua.StatusCodes.BadTooManyOperations
+        finally:
+            await c.disconnect()
+
+    asyncio.run(run())
+    assert app.app.opcua.health()["too_many_nodes"] >= 1
+
+
+def test_1100_idle_opcua_connections_neither_lock_the_plc_out_nor_lose_the_measurement(tmp_path):
+    """The daemon with the unit's descriptor limit (1024): 1,100 connections to the OPC UA port that never say a
+    word. The PLC still reads and triggers, and the measurement is stored, not FAULTed for want of a descriptor."""
+    import resource
+
+    from service.publish.modbus import registers as R
+
+    from .conftest import free_port, moi_subprocess, port_open, write_toml
+    from .test_service_hardening import _plc_image, _plc_trigger
+
+    mb_port, ua_port = free_port(), free_port()
+    pw = tmp_path / "opcua-password"
+    pw.write_text(OPC_PASSWORD, encoding="utf-8")
+    pw.chmod(0o600)
+    doc = appliance_doc(tmp_path / "state", modbus_port=mb_port,
+                        opcua={"host": "127.0.0.1", "port": ua_port, "username": OPC_USER, "password_file": str(pw)})
+    cfg = write_toml(tmp_path / "appliance.toml", doc)
+    daemon = moi_subprocess(["run", "--config", str(cfg)],
+                            preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024)))
+    flood: list[socket.socket] = []
+    try:
+        wait_until(lambda: (port_open(mb_port) and port_open(ua_port)) or daemon.poll() is not None, 120,
+                   what="the daemon's ports")
+        assert daemon.poll() is None
+        for _ in range(1100):
+            try:
+                flood.append(socket.create_connection(("127.0.0.1", ua_port), timeout=5))
+            except OSError:
+                break
+        assert len(flood) > 1024, f"only {len(flood)} attack connections: the attack proved nothing"
+        assert _plc_image(mb_port)["state"] == R.STATE_CODES["IDLE"]
+        _plc_trigger(mb_port)
+        image = wait_until(lambda: (lambda i: i if i["seq"] == 1 else None)(_plc_image(mb_port)), 60,
+                           what="the result in the registers")
+        assert image["state"] != R.STATE_CODES["FAULT"] and image["J"] > 0
+    finally:
+        for s in flood:
+            s.close()
+        daemon.terminate()
+        _, err = daemon.communicate(timeout=30)
+    assert b"Too many open files" not in err, err[-2000:]
+    assert b"INFO asyncua" not in err  # asyncua's chatter (some 10 lines a connection) at WARNING
+    assert len(err) < 20_000, f"{len(err)} bytes of log for the flood: {err[-2000:]!r}"
+
+
+# --- replies go where the appliance decides ---------------------------------------------------------------------
+
+def test_an_mqtt_response_topic_outside_the_reply_namespace_is_not_honoured(tmp_path, broker, appliance_factory):
+    """A client that may only set part IDs names cmd/measure (this appliance's, then another's) as its response
+    topic, with 4 kB of correlation data: the reply goes to the reply topic without it; nothing fires."""
+    from .test_service_mqtt_replies import BASE, V5Client
+
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
+    assert app.app.mqtt.subscribed_event.wait(10)
+    c = V5Client(broker.port, [f"{BASE}/reply", f"{BASE}/cmd/measure", "moi/other-rig/cmd/measure"])
+    try:
+        c.send("part_id", {"id": "p1", "part_id": "SN-1"}, response_topic=f"{BASE}/cmd/measure",
+               correlation=b"\x01" * 4096)
+        c.send("part_id", {"id": "p2", "part_id": "SN-2"}, response_topic="moi/other-rig/cmd/measure",
+               correlation=b"\x02")
+        for cid in ("p1", "p2"):
+            topic, doc, corr = c.wait_for(lambda g, cid=cid: g[1].get("id") == cid)
+            assert topic == f"{BASE}/reply" and doc["status"] == "done"
+        assert c.wait_for(lambda g: g[1].get("id") == "p1")[2] is None  # 4 kB are not echoed
+        assert all(g[0] == f"{BASE}/reply" for g in c.got), c.got
+        assert "ARMED" not in app.states()
+    finally:
+        c.close()
+
+
+def test_opcua_password_guessing_is_slowed_then_locked_out_with_the_peer_address(opc, monkeypatch, caplog):
+    """Wrong logins from one host: each later message of that host before a login waits its turn, and after
+    LOCKOUT_AFTER of them even the right password is refused for a while; the log names the peer."""
+    from service.publish.opcua import guard as G
+
+    app = opc
+    g = app.app.opcua.guard
+    monkeypatch.setattr(G, "LOCKOUT_AFTER", 3)
+    monkeypatch.setattr(G, "GUESS_DELAY", 0.01)
+    before = g.health()
+
+    async def attempt(password: str) -> bool:
+        try:
+            c = await _client(app, password=password)
+        except Exception:
+            return False
+        await c.disconnect()
+        return True
+
+    try:
+        with caplog.at_level("WARNING", logger="moi.opcua"):
+            assert [asyncio.run(attempt(f"guess-{i}")) for i in range(3)] == [False] * 3
+            assert not asyncio.run(attempt(OPC_PASSWORD))  # locked out: the right password too
+        after = g.health()
+        assert after["wrong_logins"] - before["wrong_logins"] == 3
+        assert after["locked_out"] > before["locked_out"]
+        assert after["delayed_before_login"] > before["delayed_before_login"]
+        assert any("127.0.0.1 locked out" in r.getMessage() for r in caplog.records), caplog.text
+    finally:
+        g._locked.clear()
+        g._wrong.clear()
+    assert asyncio.run(attempt(OPC_PASSWORD))
+
+
+# --- names are data, not syntax ---------------------------------------------------------------------------------
+
+HOSTILE = ["rotor\nA12", "rotor\x07A12", "rotor\x1b[2JA12", "rotor\u2028A12", "x" * 65]
+
+
+@pytest.mark.parametrize("name", HOSTILE)
+def test_a_hostile_name_is_refused_at_every_door_that_takes_one(tmp_path, name):
+    """A line break, a bell, an escape, a Unicode line separator or an overlong name: refused in a recipe file,
+    as the device id, a web user, the OPC UA user and a part ID, each saying what a name may hold."""
+    from service.config.appliance import parse_config
+    from service.errors import ConfigError, StartupError
+    from service.parts.recipes import check_part_id, load_recipe
+    from service.publish.web.auth import hash_password, read_users
+
+    from measurement.errors import InvalidInput
+
+    recipe = (Path(__file__).resolve().parents[2] / "examples" / "recipes" / "rotor-a12.toml").read_text()
+    bad = tmp_path / "bad.toml"
+    import tomli_w
+    bad.write_text(recipe.replace('name = "rotor-A12"', f"name = {tomli_w.dumps({'n': name})[4:].strip()}"))
+    with pytest.raises(ConfigError, match="recipe name must be"):
+        load_recipe(bad)
+    with pytest.raises(ConfigError, match="device id must be"):
+        parse_config(appliance_doc(tmp_path / "state", device_id=name), source="test.toml")
+    with pytest.raises(ConfigError, match="user name must be"):
+        parse_config(appliance_doc(tmp_path / "state", opcua={"username": name, "password": "p" * 16}),
+                     source="test.toml")
+    users = tmp_path / "users.toml"
+    users.write_text(tomli_w.dumps({"user": [{"name": name, "role": "operator", "password": hash_password("pw-123456")}]}))
+    with pytest.raises(StartupError, match="user name must be"):
+        read_users(users)
+    with pytest.raises(InvalidInput, match="part ID must be"):
+        check_part_id(name[:21])
+    assert check_part_id(" SN-0042 ") == "SN-0042" and check_part_id("") == ""
+
+
+def test_a_download_named_after_a_hostile_name_still_gets_a_valid_header():
+    """A recipe name from a store written before the check: the export's Content-Disposition carries it
+    percent-encoded, and aiohttp sends it (a line break in a header raised, and the connection dropped)."""
+    from aiohttp import web
+
+    from service.names import content_disposition
+
+    header = content_disposition("moi-test-rig-rotor\nA\x07 \"ü\".dfq")
+    assert header.isprintable() and header.isascii() and "\n" not in header
+    assert "filename*=UTF-8''moi-test-rig-rotor%0AA%07%20%22%C3%BC%22.dfq" in header
+    web.Response(body=b"", headers={"Content-Disposition": header})  # no ValueError
+
+
+# --- the web page's live streams --------------------------------------------------------------------------------
+
+def test_live_streams_never_lock_the_page_out_and_end_after_their_lifetime(tmp_path, appliance_factory):
+    """More unauthenticated /events streams than the page has connections: only max_streams_per_client of them
+    are served (the others get a 503 at once), the page and its Measure still answer, and a stream ends after
+    stream_lifetime (the browser reconnects by itself)."""
+    import urllib.request
+
+    app = appliance_factory(appliance_doc(tmp_path / "state", web={
+        "enabled": True, "max_connections": 8, "max_streams_per_client": 2, "stream_lifetime": 1.0}))
+    web = app.app.web
+    port = web.bound_port
+    streams = []
+    try:
+        heads = []
+        for _ in range(12):
+            s = socket.create_connection(("127.0.0.1", port), timeout=10)
+            s.sendall(b"GET /events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+            streams.append(s)
+            heads.append(s.recv(12))
+        assert sum(h.startswith(b"HTTP/1.1 200") for h in heads) == 2, heads
+        assert sum(h.startswith(b"HTTP/1.1 503") for h in heads) == 10, heads
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/state", timeout=10) as r:
+            assert r.status == 200
+        token = Path(web.token_file).read_text().strip()
+        req = urllib.request.Request(f"http://127.0.0.1:{port}/api/measure", method="POST",
+                                     headers={"Authorization": f"Bearer {token}"})
+        with urllib.request.urlopen(req, timeout=10) as r:
+            assert r.status in (200, 202)
+        for s, head in zip(streams, heads):
+            if head.startswith(b"HTTP/1.1 200"):
+                s.settimeout(30)
+                while s.recv(65536):  # the stream's events, until the server ends it
+                    pass
+        assert web.stats()["streams"] == 0
+        app.wait_done(1, 60)
+    finally:
+        for s in streams:
+            s.close()
