@@ -147,6 +147,14 @@ def test_setup_page_masks_secrets_and_reports_health(appliance_factory, tmp_path
     c = Client(running.app.web.url)
     status, _, page = c.request("/setup")
     assert status == 200 and b"a-long-enough-token" not in page and b"client(s) connected" in page
+    # the configuration in words, not JSON; no file or folder of the appliance shown to a visitor
+    text = page.decode()
+    assert "request timeout" in text and "null" not in text and '": ' not in text
+    assert str(token_file) not in text and str(tmp_path) not in text and "shown after logging in" in text
+    # the simulated in-process sensor has no one-off reading: no button that would only fail
+    assert 'id="angle-button"' not in text and 'id="angle-none"' in text
+    c.request("/login", {"token": "a-long-enough-token", "csrf": c.csrf()})
+    assert str(token_file) in c.request("/setup")[2].decode()  # logged in: where the token is
     status, health = c.json("/api/health")
     assert status == 200 and health["modbus"]["clients"] == 0 and health["disk"]["free_bytes"] > 0
     assert Client(running.app.web.url).json("/api/abort", method="POST", headers={
@@ -240,7 +248,11 @@ def test_recipe_and_part_id_set_from_the_page_reach_the_result_and_the_history(a
     app = running.app
     bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
     c = Client(app.web.url)
-    assert b"rotor-a" in c.request("/")[2]  # offered on the home page
+    home = c.request("/")[2].decode()
+    # a visitor is not offered a recipe menu he may not use; the part ID field takes what the server takes
+    assert 'id="recipe-select"' not in home and 'maxlength="20"' in home
+    recipes = c.request("/recipes")[2].decode()  # every recipe readable by all, with its limits
+    assert "rotor-a" in recipes and "0.012250 kg·m² … 0.012750 kg·m²" in recipes
     status, body = c.json("/api/part", data={"recipe": "rotor-b"}, headers=bearer)
     assert status == 400 and "no recipe 'rotor-b'" in body["error"]
     assert c.json("/api/part", data={"part_id": "x" * 200}, headers=bearer)[0] == 400
@@ -274,6 +286,10 @@ def test_a_result_stored_without_its_plot_gets_it_drawn_once_from_its_trace(appl
 
 #: what must never reach a page: a Python None, a NaN or infinity, a raw dict or list, a traceback
 RAW = re.compile(r"\bNone\b|\bnan\b|\bNaN\b|\binf\b|Traceback|\{'|\['|\bTrue\b|\bFalse\b")
+#: a number in e-notation, a machine's time (ISO 8601 with its offset), a measurement's UUID (which may look like both)
+E_NOTATION = re.compile(r"(?<![\w.])\d+(\.\d+)?e[+-]?\d+\b", re.I)
+ISO_TIME = re.compile(r"\d{4}-\d\d-\d\dT\d\d:\d\d")
+UUID = re.compile(r"[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}")
 
 
 def _recipes(d: Path) -> Path:
@@ -324,7 +340,8 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     page = c.request(f"/results/{ok.uuid}")[2].decode()
     part = ok.payload["part"]
     # the part's value ± U in the recipe's unit (g·cm² = 1e7 kg·m²), the limits, the band
-    assert f"{part['value'] * 1e7:.7g} g·cm²" in page and f"{part['U'] * 1e7:.2g} g·cm²" in page
+    # (in the recipe's decimals: those that resolve a hundredth of its ± 2500 g·cm² tolerance, U with them)
+    assert f"{part['value'] * 1e7:.0f} g·cm² <span>± {part['U'] * 1e7:.0f} g·cm²" in page
     assert "part value from 2 of 2 releases, none excluded" in page and 'id="band"' in page
     assert f"{0.0125 * 0.98 * 1e7:.7g} g·cm² … {0.0125 * 1.02 * 1e7:.7g} g·cm²" in page
     assert 'class="verdict-tile verdict-OK" id="verdict"><span class="tile-word">OK' in page
@@ -377,6 +394,10 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
         assert status == 200, (path, status, text[:300])
         found = RAW.search(re.sub(r"<script.*?</script>", "", text, flags=re.S))
         assert found is None, (path, found and text[max(0, found.start() - 120):found.end() + 60])
+        # what a person reads: no number in e-notation, no raw UTC ISO time
+        shown = UUID.sub("", re.sub(r"<script.*?</script>|<[^>]+>", " ", text, flags=re.S))
+        found = E_NOTATION.search(shown) or ISO_TIME.search(shown)
+        assert found is None, (path, found and shown[max(0, found.start() - 120):found.end() + 60])
 
     # the quality record: the report's PDF from the page and from `moi report`, its text read back
     from pypdf import PdfReader

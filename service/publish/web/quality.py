@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import datetime as dt
 import math
+import re
 from typing import Any, Callable, Mapping, Sequence
 
 from measurement.units import SI, UnitError, from_si, inertia_unit
@@ -20,26 +21,117 @@ MISSING = "–"
 VERDICT_WORDS = {"OK": "part OK", "NOK": "part NOK (not conforming)", "INVALID": "part INVALID (measure again)"}
 
 
-def number(v: Any, spec: str = ".6g") -> str:
-    """A number as text; None, NaN, ±inf and non-numbers that are not text become "–"."""
+def _plain_g(x: float, spec: str) -> str:
+    """``x`` with the significant digits of a "g" spec (".7g", "+.3g"), in fixed-point: never e-notation."""
+    sign = "+" if spec.startswith("+") else ""
+    digits = int(spec.strip("+").lstrip(".").rstrip("g") or 6)
+    if x == 0:
+        return f"{x:{sign}.0f}"
+    decimals = max(0, digits - 1 - int(math.floor(math.log10(abs(x)))))
+    text = f"{x:{sign}.{decimals}f}"
+    # "g" drops trailing zeros; so does this, with its decimal point
+    return text.rstrip("0").rstrip(".") if "." in text else text
+
+
+#: a number in e-notation inside a sentence (1.2e-05, 9e+03)
+_E_NUMBER = re.compile(r"(?<![\w.])([+-]?)(\d+(?:\.(\d+))?)[eE]([+-]?\d+)\b")
+
+
+def plain_text(text: Any) -> str:
+    """``text`` with every number in e-notation written out in fixed-point with its significant digits (the
+    sentences of the identification and the verdict are made for logs; a person reads them without exponents)."""
+    def fixed(m: re.Match) -> str:
+        digits = len((m.group(2) or "").replace(".", "").lstrip("0")) or 1
+        return m.group(1) + _plain_g(float(m.group(2) + "e" + m.group(4)), f".{digits}g")
+
+    return _E_NUMBER.sub(fixed, str(text)) if text is not None else MISSING
+
+
+def number(v: Any, spec: str | int = ".6g") -> str:
+    """A number as text, never in e-notation (a "g" spec keeps its significant digits in fixed-point; an int:
+    that many decimals); None, NaN, ±inf and non-numbers that are not text become "–"."""
     if v is None or isinstance(v, bool):
         return MISSING
     if isinstance(v, (int, float)):
-        return format(v, spec) if math.isfinite(v) else MISSING
+        if not math.isfinite(v):
+            return MISSING
+        if isinstance(spec, int):
+            return f"{v:.{max(0, spec)}f}"
+        return _plain_g(float(v), spec) if spec.endswith("g") else format(v, spec)
     return str(v)
 
 
-def inertia(v: Any, unit: str = SI, spec: str = ".7g") -> str:
-    """``v`` kg·m² written in ``unit`` with the unit ("–" without a value)."""
+def inertia(v: Any, unit: str = SI, spec: str | int = ".7g") -> str:
+    """``v`` kg·m² written in ``unit`` with the unit ("–" without a value); ``spec``: significant digits as a
+    "g" spec, or an int: decimals (a recipe's, ``places``)."""
     shown = from_si(v, unit) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
-    return MISSING if shown is None else f"{format(shown, spec)} {unit}"
+    return MISSING if shown is None else f"{number(shown, spec)} {unit}"
+
+
+def places(recipe: Mapping[str, Any] | None, unit: str = SI, U: float | None = None) -> int:
+    """Decimals a person reads a value of ``recipe`` with in ``unit``: the recipe's ``display_decimals``, else
+    those that resolve a hundredth of its tolerance; without a tolerance, those of U to two significant digits
+    (else seven significant digits)."""
+    r = recipe or {}
+    given = r.get("display_decimals")
+    if isinstance(given, int) and not isinstance(given, bool):
+        return given
+    f = from_si(1.0, unit) or 1.0
+    step = None
+    if r.get("upper") is not None and r.get("nominal") is not None:
+        step = abs(float(r["upper"]) - float(r["nominal"])) * f / 100.0
+    elif U is not None and math.isfinite(U) and U > 0:
+        step = U * f / 10.0
+    if not step:
+        return 6
+    return max(0, min(12, int(math.ceil(-math.log10(step) - 1e-9))))
 
 
 def iso(ts: float | None) -> str:
-    """Unix time (s) as ISO 8601 with its UTC offset, to the second ("–" without one)."""
+    """Unix time (s) as ISO 8601 with its UTC offset, to the second ("–" without one): exports and APIs."""
     if ts is None or not math.isfinite(ts):
         return MISSING
     return dt.datetime.fromtimestamp(ts, dt.UTC).isoformat(timespec="seconds")
+
+
+#: how a person reads a time on the pages unless [web] time_format says otherwise (local time)
+TIME_FORMAT = "%Y-%m-%d %H:%M:%S"
+
+
+def local_time(ts: float | None, fmt: str = TIME_FORMAT) -> str:
+    """Unix time (s) as the appliance's local time in ``fmt`` (strftime), "–" without one: what a person reads."""
+    if ts is None or not isinstance(ts, (int, float)) or not math.isfinite(ts):
+        return MISSING
+    return dt.datetime.fromtimestamp(ts).astimezone().strftime(fmt)
+
+
+def judgement(view: Mapping[str, Any], unit: str = SI) -> dict[str, Any] | None:
+    """Why a part has its verdict, in the recipe's decimals: nominal, limits, the deviation from the nominal in %
+    and where the value lies ("below LSL", "within the limits", ...); None without limits or value."""
+    r = view.get("recipe") or {}
+    value, U = view.get("value"), view.get("U")
+    if r.get("lower") is None or r.get("upper") is None or r.get("nominal") is None:
+        return None
+    n = places(r, unit, U)
+    lsl, usl, nominal = float(r["lower"]), float(r["upper"]), float(r["nominal"])
+    out: dict[str, Any] = {"places": n, "nominal": inertia(nominal, unit, n),
+                           "limits": f"{inertia(lsl, unit, n)} … {inertia(usl, unit, n)}",
+                           "tolerance": inertia(usl - nominal, unit, n), "deviation": None, "where": None}
+    if not isinstance(value, (int, float)) or not math.isfinite(value):
+        return out
+    u = float(U) if isinstance(U, (int, float)) and math.isfinite(U) else 0.0
+    if value < lsl:
+        where = "below LSL"
+    elif value > usl:
+        where = "above USL"
+    elif u and value - u < lsl:
+        where = "within the limits, but U reaches below LSL"
+    elif u and value + u > usl:
+        where = "within the limits, but U reaches above USL"
+    else:
+        where = "within the limits"
+    out.update(deviation=f"{number(100.0 * (value - nominal) / nominal, '+.1f').replace('-', '−')} %", where=where)
+    return out
 
 
 def display_unit(payload: Mapping[str, Any] | None, default: str = SI) -> str:
@@ -71,10 +163,10 @@ def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
         out.update(kind="part", verdict=part.get("verdict"), value=part.get("value"), U=part.get("U"), k=k,
                    quantity=part.get("quantity") or (recipe or {}).get("quantity"),
                    used=len(part.get("used") or ()), releases=part.get("releases"),
-                   excluded=[{"release": int(e.get("index", 0)) + 1, "reason": e.get("reason") or ""}
+                   excluded=[{"release": int(e.get("index", 0)) + 1, "reason": plain_text(e.get("reason") or "")}
                              for e in part.get("excluded") or ()],
                    # the exclusions are listed once (the part's reasons repeat them after "release N:")
-                   reasons=[r for r in part.get("reasons") or () if not str(r).startswith("release ")],
+                   reasons=[plain_text(r) for r in part.get("reasons") or () if not str(r).startswith("release ")],
                    zone=part.get("zone"))
     elif release is not None:
         out.update(kind="release", verdict=None, value=release.get("value"), U=release.get("U"), k=k,

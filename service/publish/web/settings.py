@@ -37,6 +37,8 @@ class WebSettings:
     display_unit: str = "kg·m²"
     shift_starts: tuple[str, ...] = ("06:00", "14:00", "22:00")
     users_file: str | None = None
+    time_format: str = "%Y-%m-%d %H:%M:%S"
+    contact: str = "the quality engineer on shift"
 
 
 #: each key of the configuration's ``[web]`` table: what it means, its unit and its limits (the table is
@@ -57,6 +59,10 @@ KEYS: dict[str, dict] = {
     "shift_starts": dict(doc="shift start times HH:MM, local time (Home counts the parts of the current shift)"),
     "users_file": dict(doc="named users with roles (operator, quality, admin) and password hashes, made by "
                        "`moi user add` (default: none; the token is the one login)", kind="path"),
+    "time_format": dict(doc="how the pages write a time a person reads: strftime codes, the appliance's local "
+                        "time (exports and the JSON API keep ISO 8601 with the UTC offset)"),
+    "contact": dict(doc="whom the operator calls when the calibration is due or a check standard failed, "
+                    "e.g. \"quality lab, ext. 2345\" (said on the banner that refuses Measure)"),
 }
 
 
@@ -69,6 +75,8 @@ def _check(w: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
     for hm in w["shift_starts"]:
         if not _HHMM.fullmatch(str(hm)):
             raise fail("shift_starts", f"expected times HH:MM (00:00 … 23:59), got {hm!r}")
+    if "%" not in w["time_format"] or len(w["time_format"]) > 64:
+        raise fail("time_format", f"expected strftime codes such as \"%d.%m.%Y %H:%M\", got {w['time_format']!r}")
 
 
 #: the configuration's ``[web]`` table: on (with its defaults) without the table
