@@ -112,7 +112,7 @@ var moi = (function () {
   }
 
   function home() {
-    var swing = new Swing($("swing")), mid = null, measure = $("measure"), lastState = null;
+    var swing = new Swing($("swing")), mid = null, measure = $("measure"), lastState = null, seen = null;
     function refresh() {
       return fetch("/home/summary", {credentials: "same-origin"}).then(function (r) { return r.ok ? r.text() : null; })
         .then(function (html) { if (html) { swap(html); syncMeasure(); } });
@@ -128,6 +128,7 @@ var moi = (function () {
     function measuring(s) {
       var now = $("now");
       if (!now || now.getAttribute("data-measuring") === "1") { return; }
+      s = s || seen;  // pressed: the part and the release the appliance last said are next
       var pid = (s && s.part_id) || ($("part-id").textContent !== "–" ? $("part-id").textContent : "(no part ID)");
       var rn = s && s.release_next;
       now.className = "now now-measuring"; now.setAttribute("data-measuring", "1");
@@ -150,9 +151,10 @@ var moi = (function () {
       act("/api/measure").then(function (r) { if (r.ok) { measuring(null); } });
     });
     $("abort").addEventListener("click", function () {
-      act("/api/abort").then(function (r) { if (r.ok) { say("aborted"); } });
+      act("/api/abort");  // "aborted" is said when the sequencer says so (ABORTED), not on the request alone
     });
     function show(s) {
+      if (s.release_next !== undefined) { seen = s; }
       var el = $("state");
       el.textContent = s.state; el.className = "state state-" + s.state;
       $("words").textContent = s.words || "";
