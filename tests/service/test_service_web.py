@@ -438,6 +438,13 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     status, _, web_dfq = c.request("/history/export.dfq?recipe=rotor-ok", timeout=180)  # the file of the SPC page
     assert status == 200 and web_dfq == out.read_bytes() and "/history/export.dfq?recipe=rotor-nok" in spc
     assert c.request("/history/export.dfq")[0] == 400
+    # an INVALID part is in the DFQ too, with its status: marked not for SPC (attribute 255), and why
+    status, _, bad_dfq = c.request("/history/export.dfq?recipe=rotor-bad", timeout=180)
+    line = next(x for x in bad_dfq.decode("cp1252").split("\r\n") if "\x14" in x).split("\x14")
+    assert status == 200 and line[1] == "255" and line[7].startswith("verdict INVALID: ") and float(line[0]) > 0
+    # the CSV starts with a byte-order mark: Excel on Windows reads kg·m² as written
+    status, _, csv_bytes = c.request("/history/export.csv", timeout=180)
+    assert status == 200 and csv_bytes.startswith("\ufeff".encode()) and "kg·m²" in csv_bytes.decode("utf-8-sig")
     assert c.request("/history/export.dfq?recipe=none", timeout=180)[0] == 404
 
 

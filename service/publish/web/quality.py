@@ -143,6 +143,20 @@ def display_unit(payload: Mapping[str, Any] | None, default: str = SI) -> str:
         return SI
 
 
+def plot_labels(stored: Any, simulated: bool, default_unit: str = SI) -> tuple[str, str | None]:
+    """(unit, title source) of a result's plot: its recipe's display unit, and "measurement #N" with the sensor
+    that took it (the simulated rig said as such, whatever sensor it imitates)."""
+    payload = getattr(stored, "payload", None) or {}
+    unit = display_unit(payload, default_unit)
+    seq = getattr(stored, "seq", None)
+    acquisition = payload.get("acquisition") or {}
+    sensor = "simulated rig" if simulated else next((k for k in ("camera", "encoder") if k in acquisition),
+                                                    payload.get("source") or "sensor")
+    part = payload.get("part_id")
+    head = f"measurement #{seq}" if seq is not None else "measurement"
+    return unit, f"{head}{f', part {part}' if part else ''}, {sensor}"
+
+
 def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
     """What the result page leads with, from a stored payload.
 

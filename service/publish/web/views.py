@@ -569,7 +569,7 @@ class Views:
         if fut is not None:  # the evidence plot is being drawn: the report has it
             await asyncio.wrap_future(fut)
         body = await self._in_child(report_file, str(self.app.config.state_dir), m.uuid,
-                                    self.server.settings.display_unit)
+                                    self.server.settings.display_unit, self.server.settings.time_format)
         return web.Response(body=body, content_type="application/pdf", headers={
             "Content-Disposition": f'attachment; filename="moi-{m.seq}-{m.uuid[:8]}-report.pdf"'})
 
@@ -587,7 +587,8 @@ class Views:
             if not self._store().has_trace(m.uuid):
                 raise Refused(404, f"measurement {m.seq} has no plot and no stored trace to draw one from")
             cfg = self.app.config
-            job = (replot, str(cfg.state_dir), m.uuid, cfg.rig.to_dict(), cfg.identification)
+            job = (replot, str(cfg.state_dir), m.uuid, cfg.rig.to_dict(), cfg.identification, cfg.simulated,
+                   self.server.settings.display_unit)
             await asyncio.wrap_future(self.server.submit_plot(m.uuid, lambda: self.server.child.call(*job)))
             got = self._store().get_attachment(m.uuid, PLOT_NAME)
         data, media = got
@@ -685,6 +686,8 @@ class Views:
             body = await self._in_child(export_file, str(self.app.config.state_dir), fmt, filters)
         except InputFileError as exc:  # no parts of that recipe
             raise Refused(404, str(exc)) from None
+        if fmt == "csv":  # a byte-order mark: Excel on Windows reads the file as UTF-8 (kg·m², not kgÂ·mÂ²)
+            body = "\ufeff".encode() + body
         media = {"json": "application/json", "csv": "text/csv", "dfq": "text/plain"}[fmt]
         return web.Response(body=body, content_type=media, charset="utf-8" if fmt != "dfq" else ENCODING,
                             headers={"Content-Disposition": f'attachment; filename="{name}"'})
