@@ -186,3 +186,24 @@ def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_re
     # the value with the decimals of its uncertainty, never in e-notation
     assert "J = 0.012500000 kg·m² <span>± 0.000000050 kg·m² (standard uncertainty, 1σ)" in html
     assert env.get_template("_budget.html").render(p=before).strip() == ""
+
+
+def test_each_of_the_six_orientations_of_a_tensor_set_is_drawn_differently_along_its_axis():
+    from service.publish.web.views import axes_drawing, project
+
+    r = 0.5 ** 0.5
+    six = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1), "xy": (r, r, 0), "xz": (r, 0, r), "yz": (0, r, r)}
+    drawn = {}
+    for name, axis in six.items():
+        (ax, ay), (bx, by) = axes_drawing(axis)["axis"]
+        d = (bx - ax, ay - by)  # SVG's y points down
+        p = project(axis)
+        # along its own axis: the drawn line is the axis as seen from the view, in its direction
+        assert abs(d[0] * p[1] - d[1] * p[0]) < 1e-2 * math.hypot(*d) * math.hypot(*p), name
+        assert d[0] * p[0] + d[1] * p[1] > 0 and math.hypot(*d) > 40, name  # long enough to see
+        drawn[name] = (d[0] / math.hypot(*d), d[1] / math.hypot(*d))
+    for a in six:
+        for b in six:
+            if a < b:  # no two drawn parallel (xy once fell on z): at least 10° apart
+                cos = abs(drawn[a][0] * drawn[b][0] + drawn[a][1] * drawn[b][1])
+                assert cos < math.cos(math.radians(10)), (a, b)

@@ -308,13 +308,22 @@ class Views:
         """A time as a person reads it on the pages: local, in [web] time_format."""
         return Q.local_time(ts, self.server.settings.time_format)
 
+    async def _summary(self) -> dict[str, Any]:
+        """``summary()`` with the running tensor set's orientation to mount (read on the main loop, which owns it)."""
+        progress = await asyncio.wrap_future(self.app.call_soon(self.app.set_progress))
+        s = self.summary()
+        if progress is not None and progress.get("status") == "running" and progress.get("orientation"):
+            o = progress["orientation"]
+            s.update(mode="set", set=progress, drawing=axes_drawing(o["axis"], o.get("offset"), size=150))
+        return s
+
     async def home(self, request: web.Request) -> web.Response:
-        return self._page(request, "home.html", title="Home", state=self.live.snapshot(), s=self.summary(),
+        return self._page(request, "home.html", title="Home", state=self.live.snapshot(), s=await self._summary(),
                           recipes=self.app.parts.book.recipes)
 
     async def home_summary(self, request: web.Request) -> web.Response:
-        """Home's verdict tile, counters and last parts alone (the page fetches it after each result)."""
-        html = self.env.get_template("summary.html").render(s=self.summary())
+        """Home's operator panel, counters and last parts alone (the page fetches it after each result)."""
+        html = self.env.get_template("summary.html").render(s=await self._summary())
         return web.Response(text=html, content_type="text/html", headers={"Cache-Control": "no-store"})
 
     async def api_state(self, request: web.Request) -> web.Response:
@@ -484,7 +493,7 @@ class Views:
         o = (progress or {}).get("orientation")
         drawing = axes_drawing(o["axis"], o.get("offset")) if o else None
         return self._page(request, "tensor_set.html", title="Tensor set", progress=progress, latest=latest,
-                          drawing=drawing)
+                          drawing=drawing, s=self.summary())
 
     async def api_set(self, request: web.Request) -> web.Response:
         progress, latest = await self._set_state()
@@ -915,23 +924,40 @@ def setup_words(config: Mapping[str, Any], *, shown_paths: bool) -> list[tuple[s
     return out
 
 
+#: the view the tensor set's drawing is seen from: azimuth and elevation, degrees. An isometric view (45°, 35.3°)
+#: would draw the axis [1, 1, 0] on top of z (both point at the viewer's vertical); from here no two of the
+#: usual six orientations (x, y, z, xy, xz, yz) are drawn within 25° of each other
+VIEW_AZIMUTH, VIEW_ELEVATION = 13.0, 28.0
+
+
+def project(v: Any) -> tuple[float, float]:
+    """A direction in the part's frame as seen on the drawing (right, up), from ``VIEW_AZIMUTH``/``VIEW_ELEVATION``."""
+    a, e = math.radians(VIEW_AZIMUTH), math.radians(VIEW_ELEVATION)
+    x, y, z = (float(t) for t in v)
+    right = -math.sin(a) * x + math.cos(a) * y
+    up = -math.sin(e) * math.cos(a) * x - math.sin(e) * math.sin(a) * y + math.cos(e) * z
+    return right, up
+
+
 def axes_drawing(axis: Any, offset: Any = None, size: int = 220) -> dict[str, Any]:
-    """A small isometric drawing of the part's frame and the swing axis (SVG coordinates, px): the part's
-    x, y, z as arrows from its centre of mass, the swing axis as a line through the point the offset gives."""
-    c30, s30 = math.cos(math.radians(30)), math.sin(math.radians(30))
+    """A small axonometric drawing of the part's frame and the swing axis (SVG coordinates, px): the part's
+    x, y, z as arrows from its centre of mass, the swing axis as a line along ``axis`` through the point the
+    offset gives (m from the centre of mass)."""
     half = size / 2
     scale = size * 0.32
 
     def at(v: Any) -> tuple[float, float]:
-        x, y, z = (float(t) for t in v)
-        return round(half + scale * (x - y) * c30, 1), round(half - scale * (z - (x + y) * s30), 1)
+        r, u = project(v)
+        return round(half + scale * r, 1), round(half - scale * u, 1)
 
     n = [float(t) for t in axis]
+    length = math.sqrt(sum(t * t for t in n)) or 1.0
+    n = [t / length for t in n]
     d = [float(t) for t in (offset or (0.0, 0.0, 0.0))]
     norm = math.sqrt(sum(t * t for t in d)) or 1.0
     # the swing axis passes the centre of mass at the offset (drawn at most half the frame's length away)
     p = [-t / norm * min(0.5, norm / 0.05) for t in d] if offset else [0.0, 0.0, 0.0]
-    a, b = at([p[i] - 1.3 * n[i] for i in range(3)]), at([p[i] + 1.3 * n[i] for i in range(3)])
+    a, b = at([p[i] - 1.2 * n[i] for i in range(3)]), at([p[i] + 1.2 * n[i] for i in range(3)])
     return {"size": size, "origin": at((0, 0, 0)),
             "frame": [("x", at((1, 0, 0))), ("y", at((0, 1, 0))), ("z", at((0, 0, 1)))],
             "axis": (a, b), "axis_label": b}

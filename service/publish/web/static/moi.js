@@ -265,5 +265,17 @@ var moi = (function () {
       });
     }
   }
-  return {home: home, setup: setup, act: act, states: STATES};
+  // the tensor set's page: Measure and Abort, and the page as the appliance has it after each release
+  function tensorSet() {
+    var m = $("measure"), a = $("abort");
+    if (m) { m.addEventListener("click", function () { act("/api/measure"); }); }
+    if (a) { a.addEventListener("click", function () { act("/api/abort"); }); }
+    var es = new EventSource("/events");
+    es.addEventListener("state", function (e) {
+      var s = JSON.parse(e.data);
+      if (busy(s.state)) { say(s.state + ": " + (s.words || "")); }
+      if (s.state === "IDLE" && (s.previous === "PUBLISHING" || s.previous === "ABORTED")) { es.close(); window.location.reload(); }
+    });
+  }
+  return {home: home, setup: setup, tensorSet: tensorSet, act: act, states: STATES};
 })();
