@@ -111,15 +111,41 @@ def test_shift_start_is_the_latest_start_at_or_before_now():
 def test_control_chart_marks_violations_and_keeps_labels_apart():
     values = [1.0, 1.001, 0.999, 1.0005, 0.9995, 1.0, 1.0015, 0.999, 1.05]  # the last point far out
     s = individuals(values, 0.99, 1.01)
-    chart = Q.control_chart(s, "kg·m²")
+    names = [f"SN-{i}" for i in range(1, 10)]
+    chart = Q.control_chart(s, "kg·m²", names=names)
     bad = [p for p in chart["top"]["points"] if p[2]]
-    assert 9 in [p[3] for p in bad] and (9, "outside the control limits") in chart["rules"]
-    assert {p[3] for p in bad} == {n for n, _rule in chart["rules"]}  # every marked point has its rule said
+    rules = dict(chart["rules"])
+    # said in words, once per point (beyond the limits is one rule however found), the point by its name
+    assert "SN-9" in [p[3] for p in bad] and rules["SN-9"][0] == "a point beyond the 3σ control limits (WE 1, Nelson 1)"
+    assert len(rules["SN-9"]) == len(set(rules["SN-9"])) and len(rules) == len(chart["rules"])
+    assert {p[3] for p in bad} <= set(rules)  # every marked point has its rule said
+    # the moving range into the far point is beyond its UCL: marked on the MR chart and listed too
+    mr_bad = [p[3] for p in chart["bottom"]["points"] if p[2]]
+    assert mr_bad == ["SN-9"] and any("range beyond" in r for r in rules["SN-9"])
+    # a range is never negative: neither is the range chart's axis
+    assert all(float(text) >= 0 for _y, text in chart["bottom"]["yticks"])
+    # a phone's chart: narrower, the same points
+    narrow = Q.control_chart(s, "kg·m²", width=380.0, names=names)
+    assert narrow["top"]["width"] == 380.0 and len(narrow["top"]["points"]) == 9 and narrow["rules"] == chart["rules"]
     ys = sorted(y for y, _kind, _text in chart["top"]["labels"])
     assert all(b - a >= 13.0 for a, b in zip(ys, ys[1:]))
     assert all(chart["top"]["top"] <= y - 4 <= chart["top"]["bottom"] for y in ys)
     texts = [t for _y, _k, t in chart["top"]["labels"]]
     assert len({t.split()[1] for t in texts}) == len(texts)  # each limit's value written distinguishably
+
+
+def test_capability_has_a_confidence_interval_and_xbar_s_its_constants():
+    from measurement.spc import c4, capability_interval, xbar_s
+
+    assert c4(2) == pytest.approx(0.7979, abs=1e-4) and c4(10) == pytest.approx(0.9727, abs=1e-4)
+    ci = capability_interval(1.33, 1.2, 7)
+    assert ci["cp"][0] < 1.33 < ci["cp"][1] and ci["cpk"][0] < 1.2 < ci["cpk"][1]
+    assert ci["cp"][1] - ci["cp"][0] > 1.0  # 7 values: too wide to decide on
+    wide, narrow = capability_interval(1.33, 1.2, 7)["cp"], capability_interval(1.33, 1.2, 100)["cp"]
+    assert narrow[1] - narrow[0] < (wide[1] - wide[0]) / 2
+    s = xbar_s([[1.0, 2.0, 3.0], [2.0, 3.0, 4.0], [1.5, 2.5, 2.0]])
+    assert s.chart == "Xbar-S" and s.range_lcl == 0.0 and s.ranges[0] == pytest.approx(1.0)
+    assert Q.control_chart(s, "kg·m²")["range_name"] == "standard deviation (n = 3)"
 
 
 def test_an_xbar_r_chart_draws_each_subgroup_and_its_range_in_the_display_unit():

@@ -357,11 +357,18 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     # SPC of a recipe: the chart of its 3 parts, its capability, the limits labelled with their values
     spc = c.request("/spc?recipe=rotor-nok")[2].decode()
     assert 'id="chart-points"' in spc and 'id="chart-ranges"' in spc and "I-MR" in spc and "Cpk" in spc
-    assert spc.count('class="point"') + spc.count('class="violation"') == 3 + 2  # 3 parts, 2 moving ranges
+    # 3 parts, 2 moving ranges; drawn for a desktop and for a phone
+    assert spc.count('class="point"') + spc.count('class="violation"') == 2 * (3 + 2)
+    assert "<title>SN-2a " in spc  # each point named by its serial (and time)
+    # 3 parts: Cp and Cpk with their confidence interval, and said to be too few to decide on
+    assert "95 % confidence" in spc and 'id="small-sample"' in spc and "fewer than 25" in spc
     assert "USL 0.0153" in spc and "LSL 0.0147" in spc and "part value [kg·m²]" in spc
     assert c.request("/spc?recipe=no-such")[0] == 404 and c.request("/spc?chart=pie")[0] == 400
-    status, _, body = c.request("/spc?recipe=rotor-nok&chart=Xbar-R")  # one release a part: no subgroups
-    assert status == 400 and b"subgroups of 2 to 10" in body
+    for chart in ("Xbar-R", "Xbar-S"):  # one release a part: no subgroups; said, and I-MR drawn, not a bare 400
+        status, _, body = c.request(f"/spc?recipe=rotor-nok&chart={chart}")
+        assert status == 200 and 'id="spc-note"' in body.decode() and b'id="chart-points"' in body
+    status, _, body = c.request("/spc?recipe=rotor-ok&chart=Xbar-S")  # one part: said, no chart
+    assert status == 200 and b'id="spc-none"' in body
     assert "no calibration record" in home
     # the check standard's history on the SPC page: its control chart and each check with its E_n
     assert "no check standard measured yet" in spc
@@ -370,7 +377,9 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
                                          "reference": 0.0125, "reference_U": 2e-5, "E_n": (value - 0.0125) / 2.8e-5,
                                          "passed": passed}, finished_at=1.7e9 + i)
     spc = c.request("/spc?recipe=rotor-nok")[2].decode()
-    assert 'id="check-points"' in spc and spc.count("disc CS-1") == 3 and "FAILED" in spc and "4.3" in spc
+    assert 'id="check-points"' in spc and spc.count("<td>disc CS-1</td>") == 3 and "FAILED" in spc and "4.3" in spc
+    cal = c.request("/calibration")[2].decode()  # the check standard's history on the calibration page too
+    assert 'id="check-points"' in cal and cal.count("<td>disc CS-1</td>") == 3
     # the calibration of the rig the active recipe measures with, and its due date, on Home
     assert c.json("/api/part", data={"recipe": "rotor-cal"}, headers=bearer)[0] == 202
     # (the main loop applies the selection: the page shows it once it did)

@@ -295,10 +295,22 @@ def shift_start(starts: Sequence[str], now: dt.datetime) -> dt.datetime:
 
 
 # --- control charts as SVG -----------------------------------------------------------------------------------------
-def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: float = 300.0) -> dict[str, Any]:
+#: the run rules in words, with the rule's number in the Western Electric handbook (WE) and in Nelson (1984)
+RULE_WORDS = {
+    "beyond_limits": "a point beyond the 3σ control limits (WE 1, Nelson 1)",
+    "run_of_8": "8 points in a row on one side of the centre line (Nelson 2)",
+    "trend_of_6": "6 points in a row steadily rising or falling (Nelson 3)",
+    "2_of_3_beyond_2sigma": "2 of 3 points in a row beyond 2σ on one side (WE 2, Nelson 5)",
+    "range_beyond_limits": "a range beyond its control limits: the spread within a part changed",
+}
+
+
+def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: float = 300.0,
+                  names: Sequence[str] = ()) -> dict[str, Any]:
     """An SPC summary (``measurement.spc.SpcSummary``) as SVG geometry: the points (violations marked), the
     centre line and the control limits, the specification limits when they are near enough not to flatten
-    the chart (else named as off the chart), each labelled on the right; the ranges below. Values in ``unit``."""
+    the chart (else named as off the chart), each labelled on the right; the ranges below, theirs marked too.
+    ``names``: what each point is called (serial and time), else "part N". Values in ``unit``."""
     s = summary
     f = from_si(1.0, unit) or 1.0
     pts = [float(v) * f for v in s.points]
@@ -313,18 +325,29 @@ def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: fl
             lines.append((name, v, "spec"))
         else:
             off_chart.append(f"{name} {_plain(v, width_cl)} {unit} ({'above' if v > s.ucl * f else 'below'} the chart)")
+    label = [names[i] if i < len(names) and names[i] else f"part {i + 1}" for i in range(len(pts))]
+    first = 1 if s.subgroup == 1 else 0  # a moving range starts at the second part
+    range_bad = {i + first for i, r in enumerate(s.ranges)
+                 if r > s.range_ucl or (s.range_lcl > 0 and r < s.range_lcl)}
+    # one entry per point, every rule it breaks (the point beyond the limits is one rule, said once)
+    broken: dict[int, list[str]] = {}
+    for i, rule in sorted({(v.index, v.rule) for v in s.violations} | {(i, "beyond_limits") for i in s.outside}):
+        broken.setdefault(i, []).append(RULE_WORDS.get(rule, rule))
+    for i in sorted(range_bad):
+        broken.setdefault(i, []).append(RULE_WORDS["range_beyond_limits"])
     bad = {v.index for v in s.violations} | set(s.outside)
-    rules = sorted({(v.index, v.rule) for v in s.violations} | {(i, "outside the control limits") for i in s.outside})
-    top = _panel(pts, lines, bad, width, height, width_cl)
+    top = _panel(pts, lines, bad, width, height, width_cl, names=label)
     f_r = [float(r) * f for r in s.ranges]
-    r_lines = [("R̄", s.range_mean * f, "centre"), ("UCL", s.range_ucl * f, "limit")]
+    rname = {"Xbar-S": "S̄"}.get(s.chart, "R̄")
+    r_lines = [(rname, s.range_mean * f, "centre"), ("UCL", s.range_ucl * f, "limit")]
     if s.range_lcl > 0:
         r_lines.append(("LCL", s.range_lcl * f, "limit"))
-    first = 1 if s.subgroup == 1 else 0  # a moving range starts at the second part
-    bottom = _panel(f_r, r_lines, set(), width, height * 0.6, max(s.range_ucl * f, 1e-300), x_offset=first,
-                    n_total=len(pts))
-    return {"top": top, "bottom": bottom, "rules": [(i + 1, r) for i, r in rules], "off_chart": off_chart,
-            "range_name": "moving range" if s.subgroup == 1 else f"range (n = {s.subgroup})"}
+    bottom = _panel(f_r, r_lines, range_bad, width, height * 0.6, max(s.range_ucl * f, 1e-300), x_offset=first,
+                    n_total=len(pts), names=label, floor=0.0)
+    range_name = ("moving range" if s.subgroup == 1 else
+                  f"standard deviation (n = {s.subgroup})" if s.chart == "Xbar-S" else f"range (n = {s.subgroup})")
+    return {"top": top, "bottom": bottom, "rules": [(label[i], words) for i, words in sorted(broken.items())],
+            "off_chart": off_chart, "range_name": range_name}
 
 
 def _plain(v: float, spread: float) -> str:
@@ -334,8 +357,10 @@ def _plain(v: float, spread: float) -> str:
 
 
 def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad: set[int], width: float,
-           height: float, spread: float, x_offset: int = 0, n_total: int | None = None) -> dict[str, Any]:
-    left, right, top, bottom = 90.0, 170.0, 12.0, 26.0
+           height: float, spread: float, x_offset: int = 0, n_total: int | None = None,
+           names: Sequence[str] = (), floor: float | None = None) -> dict[str, Any]:
+    narrow = width < 500  # a phone's chart: narrower margins, labels as readable
+    left, right, top, bottom = (62.0, 92.0, 12.0, 26.0) if narrow else (90.0, 170.0, 12.0, 26.0)
     n = n_total or len(values)
     ys = list(values) + [v for _, v, _ in lines]
     lo, hi = (min(ys), max(ys)) if ys else (0.0, 1.0)
@@ -343,6 +368,8 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
         lo, hi = lo - 1.0, hi + 1.0
     margin = 0.08 * (hi - lo)
     lo, hi = lo - margin, hi + margin
+    if floor is not None:
+        lo = max(lo, floor)  # a range is never below zero: neither is its axis
 
     def X(i: int) -> float:
         return round(left + (i + 0.5) / max(n, 1) * (width - left - right), 1)
@@ -350,7 +377,8 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
     def Y(v: float) -> float:
         return round(top + (hi - v) / (hi - lo) * (height - top - bottom), 1)
 
-    points = [(X(i + x_offset), Y(v), (i + x_offset) in bad, i + x_offset + 1, _plain(v, spread))
+    points = [(X(i + x_offset), Y(v), (i + x_offset) in bad,
+               names[i + x_offset] if i + x_offset < len(names) else f"part {i + x_offset + 1}", _plain(v, spread))
               for i, v in enumerate(values)]
     drawn = [(name, Y(v), kind, f"{name} {_plain(v, spread)}") for name, v, kind in lines]
     # labels at least 13 px apart, in the order of their lines, kept inside the panel
@@ -365,7 +393,7 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
             ys_l[i] = max(ys_l[i], ys_l[i - 1] + 13.0)
     labels = [(y + 4, kind, text) for y, (_n, _y, kind, text) in zip(ys_l, order)]
     ticks = [(Y(lo + (hi - lo) * i / 4), _plain(lo + (hi - lo) * i / 4, (hi - lo) * 5)) for i in range(5)]
-    step = max(1, n // 10)
+    step = max(1, n // (5 if narrow else 10))
     xticks = [(X(i), str(i + 1)) for i in range(0, n, step)]
     return {"width": width, "height": height, "left": left, "right": width - right, "top": top,
             "bottom": height - bottom, "points": points, "lines": drawn, "labels": labels, "yticks": ticks,

@@ -69,6 +69,8 @@ TICK = 0.25
 MAX_PAGE = 10**9
 #: the latest parts an SPC page charts at most
 SPC_POINTS = 500
+#: the control charts the SPC page draws
+CHARTS = ("auto", "I-MR", "Xbar-R", "Xbar-S")
 #: keys whose values the set-up page never shows
 SECRET_WORDS = ("password", "token", "secret")
 
@@ -703,28 +705,35 @@ class Views:
 
     # --- SPC ---------------------------------------------------------------------------------------------------
     async def spc(self, request: web.Request) -> web.Response:
-        """Control chart (I-MR or X̄–R) of one recipe's part values, Cp/Cpk, rule violations marked."""
+        """Control chart (I-MR, X̄–R or X̄–S) of one recipe's part values, Cp/Cpk with their confidence interval, rule
+        violations marked and said in words."""
         from measurement.errors import InvalidInput
+        from measurement.spc import SMALL_SAMPLE, capability_interval
 
         from service.parts.recipes import recipe_spc
 
         filters = self._filters(request)
         chart = request.query.get("chart", "auto")
-        if chart not in ("auto", "I-MR", "Xbar-R"):
-            raise Refused(400, f"chart={chart[:20]!r}: expected auto, I-MR or Xbar-R")
+        if chart not in CHARTS:
+            raise Refused(400, f"chart={chart[:20]!r}: expected {', '.join(CHARTS)}")
         store = self.app.store
         recipes = store.recipes() if store is not None else []
         recipe = request.query.get("recipe", "").strip() or (recipes[-1] if recipes else "")
         if recipe and recipe not in recipes:
             raise Refused(404, f"no completed parts of recipe {recipe[:64]!r} in the store")
-        result = None
+        result, note = None, None
         if recipe:
             loop = asyncio.get_running_loop()
+
+            def compute(kind: str):
+                return recipe_spc(store, recipe, since=filters["since"], until=filters["until"], chart=kind,
+                                  limit=SPC_POINTS)
             try:
-                result = await loop.run_in_executor(None, lambda: recipe_spc(
-                    store, recipe, since=filters["since"], until=filters["until"], chart=chart, limit=SPC_POINTS))
-            except InvalidInput as exc:  # e.g. X̄–R asked of parts with one release each
-                raise Refused(400, f"chart={chart}: {exc}") from None
+                result = await loop.run_in_executor(None, compute, chart)
+            except InvalidInput as exc:  # subgroups of unequal size (a release excluded), or of one release
+                note = (f"{chart} cannot be drawn from these parts ({exc}): every part needs the same number of "
+                        "usable releases. Shown as I-MR of the part values instead.")
+                result = await loop.run_in_executor(None, compute, "I-MR")
         unit = self.server.settings.display_unit
         book = getattr(self.app, "parts", None)
         if book is not None and recipe:
@@ -732,11 +741,20 @@ class Views:
                 unit = book.book.find(recipe).display_unit or unit
             except InvalidInput:  # a recipe in the store that is no longer in the directory: the set-up's unit
                 pass
-        chart_svg = Q.control_chart(result.summary, unit) if result is not None else None
+        charts = capability = None
+        if result is not None:
+            names = [f"{p or '(no ID)'} {self.when(t)}" for p, t in zip(result.parts, result.finished)]
+            charts = {w: Q.control_chart(result.summary, unit, width=w, names=names) for w in (720.0, 380.0)}
+            s = result.summary
+            values = s.n_points * s.subgroup
+            capability = {"interval": capability_interval(s.cp, s.cpk, values), "values": values,
+                          "small": values < SMALL_SAMPLE, "small_sample": SMALL_SAMPLE}
         q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
         checks, check_chart = self._checks(filters, unit)
         return self._page(request, "spc.html", title="SPC", recipes=recipes, recipe=recipe, spc=result,
-                          chart=chart_svg, unit=unit, q=q, checks=checks[-10:][::-1], check_chart=check_chart)
+                          chart=charts[720.0] if charts else None, narrow=charts[380.0] if charts else None,
+                          note=note, capability=capability, charts=CHARTS, unit=unit, q=q,
+                          checks=checks[-10:][::-1], check_chart=check_chart)
 
     def _checks(self, filters: Mapping[str, Any], unit: str) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
         """The check standard's history (`moi check-standard`) in the period, oldest first, and its control chart
@@ -750,7 +768,10 @@ class Views:
         if len(checks) >= 2:
             from measurement.spc import individuals
 
-            check_chart = Q.control_chart(individuals([float(c["value"]) for c in checks]), unit)
+            summary = individuals([float(c["value"]) for c in checks])
+            names = [f"{c.get('name') or 'check'} {self.when(c['finished_at'])}" for c in checks]
+            check_chart = {kind: Q.control_chart(summary, unit, width=w, names=names)
+                           for kind, w in (("wide", 720.0), ("narrow", 380.0))}
         return checks, check_chart
 
     async def calibration(self, request: web.Request) -> web.Response:
