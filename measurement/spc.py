@@ -12,6 +12,11 @@ Part 2: Shewhart control charts"):
   σ_within = R̄/d2(n), limits X̿ ± A2(n)·R̄ with A2 = 3/(d2·√n);
   R chart UCL = D4(n)·R̄, LCL = D3(n)·R̄, D3,4 = 1 ∓ 3·d3/d2 (D3 ≥ 0).
 
+* X̄–S, one subgroup per part (its n releases, 2 ≤ n ≤ 25): centre X̿, S̄ (mean
+  sample standard deviation), σ_within = S̄/c4(n), limits X̿ ± 3σ_within/√n;
+  S chart UCL = B4(n)·S̄, LCL = B3(n)·S̄, B3,4 = 1 ∓ 3·√(1 − c4²)/c4 (B3 ≥ 0),
+  c4(n) = √(2/(n − 1))·Γ(n/2)/Γ((n − 1)/2).
+
 Capability against the specification limits LSL/USL:
 Cp = (USL − LSL)/(6σ_within), Cpk = min(USL − x̄, x̄ − LSL)/(3σ_within);
 the same with the overall sample σ (ddof 1) of the individual values gives
@@ -27,6 +32,12 @@ with σ of a point = σ_within (I) or σ_within/√n (X̄), after Western Electr
 4. ``2_of_3_beyond_2sigma``: 2 of 3 points in a row beyond 2σ on the same side.
 
 Each violation is reported at the index of the point that completes it.
+
+The confidence interval of Cp and Cpk (``capability_interval``): Cp from the χ²
+distribution of the sample variance with ν = N − 1, Cpk by Bissell's normal
+approximation, Cpk ± z·√(1/(9N) + Cpk²/(2(N − 1))) (Montgomery, ch. 8.3; N: the
+values the σ rests on). Below ``SMALL_SAMPLE`` values they are too wide to
+decide on, and are said to be.
 """
 
 from __future__ import annotations
@@ -40,6 +51,9 @@ from .errors import InvalidInput
 #: control chart constants d2 and d3 for subgroup size n (Montgomery, Appendix Table VI)
 D2 = {2: 1.128, 3: 1.693, 4: 2.059, 5: 2.326, 6: 2.534, 7: 2.704, 8: 2.847, 9: 2.970, 10: 3.078}
 D3_SIGMA = {2: 0.853, 3: 0.888, 4: 0.880, 5: 0.864, 6: 0.848, 7: 0.833, 8: 0.820, 9: 0.808, 10: 0.797}
+
+#: fewer values than this give a capability index too uncertain to decide on (Montgomery, ch. 8)
+SMALL_SAMPLE = 25
 
 RUN_LENGTH = 8
 TREND_LENGTH = 6
@@ -135,6 +149,30 @@ class SpcSummary:
         return "\n".join(L)
 
 
+def c4(n: int) -> float:
+    """The bias of a sample standard deviation of ``n`` normal values: E[s] = c4·σ."""
+    return math.sqrt(2.0 / (n - 1)) * math.exp(math.lgamma(n / 2) - math.lgamma((n - 1) / 2))
+
+
+def capability_interval(cp: float | None, cpk: float | None, n: int,
+                        level: float = 0.95) -> dict[str, tuple[float, float] | None]:
+    """The two-sided ``level`` confidence intervals of Cp and Cpk from ``n`` values (see the module docstring);
+    None for an index that is missing or with fewer than 2 values."""
+    from scipy.stats import chi2, norm
+
+    out: dict[str, tuple[float, float] | None] = {"cp": None, "cpk": None}
+    if n < 2:
+        return out
+    a = 1.0 - level
+    nu = n - 1
+    if cp is not None and math.isfinite(cp):
+        out["cp"] = (cp * math.sqrt(float(chi2.ppf(a / 2, nu)) / nu), cp * math.sqrt(float(chi2.ppf(1 - a / 2, nu)) / nu))
+    if cpk is not None and math.isfinite(cpk):
+        half = float(norm.ppf(1 - a / 2)) * math.sqrt(1.0 / (9 * n) + cpk**2 / (2.0 * nu))
+        out["cpk"] = (cpk - half, cpk + half)
+    return out
+
+
 def _capability(lsl: float | None, usl: float | None, mean: float, sigma: float) -> tuple[float | None, float | None]:
     if lsl is None or usl is None or not sigma > 0:
         return None, None
@@ -187,6 +225,35 @@ def individuals(values: Sequence[float], lsl: float | None = None, usl: float | 
     outside = tuple(i for i, v in enumerate(x) if v > ucl or v < lcl)
     return SpcSummary("I-MR", len(x), 1, tuple(x), tuple(mr), mean, sw, so, ucl, lcl, mr_mean, c["D4"] * mr_mean,
                       c["D3"] * mr_mean, lsl, usl, cp, cpk, pp, ppk, outside, tuple(run_rules(x, mean, sw)))
+
+
+def xbar_s(subgroups: Sequence[Sequence[float]], lsl: float | None = None, usl: float | None = None) -> SpcSummary:
+    """X̄–S chart of equal-size subgroups (2 … 25 values each, at least 2 subgroups); ``ranges``: the
+    subgroups' standard deviations."""
+    groups = [[float(v) for v in g] for g in subgroups]
+    if len(groups) < 2:
+        raise SpcError(f"an X̄–S chart needs at least 2 subgroups, got {len(groups)}")
+    sizes = {len(g) for g in groups}
+    if len(sizes) != 1:
+        raise SpcError(f"X̄–S needs subgroups of one size, got sizes {sorted(sizes)}")
+    n = sizes.pop()
+    if not 2 <= n <= SMALL_SAMPLE:
+        raise SpcError(f"X̄–S needs subgroups of 2 to {SMALL_SAMPLE} values, got {n}")
+    k = c4(n)
+    means = [sum(g) / n for g in groups]
+    sds = [_sample_std(g) for g in groups]
+    xbb = sum(means) / len(means)
+    sbar = sum(sds) / len(sds)
+    sw = sbar / k
+    so = _sample_std([v for g in groups for v in g])
+    ucl, lcl = xbb + 3 * sw / math.sqrt(n), xbb - 3 * sw / math.sqrt(n)
+    spread = 3 * math.sqrt(1 - k * k) / k
+    cp, cpk = _capability(lsl, usl, xbb, sw)
+    pp, ppk = _capability(lsl, usl, xbb, so)
+    outside = tuple(i for i, v in enumerate(means) if v > ucl or v < lcl)
+    return SpcSummary("Xbar-S", len(groups), n, tuple(means), tuple(sds), xbb, sw, so, ucl, lcl, sbar,
+                      (1 + spread) * sbar, max(0.0, 1 - spread) * sbar, lsl, usl, cp, cpk, pp, ppk, outside,
+                      tuple(run_rules(means, xbb, sw / math.sqrt(n))))
 
 
 def xbar_r(subgroups: Sequence[Sequence[float]], lsl: float | None = None, usl: float | None = None) -> SpcSummary:

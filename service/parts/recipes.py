@@ -508,6 +508,7 @@ class RecipeSpc:
     first: float                      # finished_at of the first and last part, Unix s
     last: float
     quantity: str
+    finished: tuple[float, ...] = ()  # finished_at of each plotted part, Unix s
 
     def to_dict(self, include_points: bool = False) -> dict[str, Any]:
         return {"recipe": self.recipe, "quantity": self.quantity, "versions": list(self.versions),
@@ -524,10 +525,10 @@ def recipe_spc(store: Any, recipe: str, *, since: float | None = None, until: fl
     """SPC of ``recipe``'s completed parts in the store (None with fewer than 2 usable parts).
 
     chart "auto": X̄–R when every part combined the same number (2…10) of releases, else I-MR
-    of the part values; "I-MR" or "Xbar-R" to choose. Limits: the newest part's recipe.
+    of the part values; "I-MR", "Xbar-R" or "Xbar-S" to choose. Limits: the newest part's recipe.
     limit: only the latest ``limit`` completed parts.
     """
-    from measurement.spc import D2, individuals, xbar_r
+    from measurement.spc import D2, individuals, xbar_r, xbar_s
 
     rows = list(reversed(store.list(limit=limit, recipe=recipe, parts_only=True, since=since, until=until, full=True)))
     usable = [m for m in rows if m.part_verdict != "INVALID" and m.payload and (m.payload.get("part") or {}).get("mean")
@@ -539,7 +540,11 @@ def recipe_spc(store: Any, recipe: str, *, since: float | None = None, until: fl
     groups = [[p["values"][i] for i in p["used"]] for p in (m.payload["part"] for m in usable)]
     sizes = {len(g) for g in groups}
     use_xbar = chart == "Xbar-R" or (chart == "auto" and len(sizes) == 1 and next(iter(sizes)) in D2)
-    summary = xbar_r(groups, lsl, usl) if use_xbar else individuals([m.part_value for m in usable], lsl, usl)
+    if chart == "Xbar-S":
+        summary = xbar_s(groups, lsl, usl)
+    else:
+        summary = xbar_r(groups, lsl, usl) if use_xbar else individuals([m.part_value for m in usable], lsl, usl)
     versions = tuple(dict.fromkeys(m.recipe_version for m in usable if m.recipe_version))
     return RecipeSpc(recipe, summary, tuple(m.part_id or m.part_uuid or "" for m in usable), versions,
-                     len(rows) - len(usable), usable[0].finished_at, usable[-1].finished_at, spec["quantity"])
+                     len(rows) - len(usable), usable[0].finished_at, usable[-1].finished_at, spec["quantity"],
+                     tuple(m.finished_at for m in usable))

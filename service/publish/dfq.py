@@ -8,9 +8,10 @@ One part type (the recipe) with one characteristic (its measurand: J, J_object o
   ``K2022`` decimal places, ``K2101`` nominal, ``K2110``/``K2111`` lower and upper specification limit,
   ``K2142`` unit — in the recipe's display unit (stored values are kg·m²).
 * One value line per completed part, fields separated by the DC4 character (0x14) in the AQDEF order
-  K0001 value, K0002 attribute (0: valid; 255: the part's verdict is INVALID, the value is not for SPC),
+  K0001 value, K0002 attribute (0: valid; 255: the part's verdict is INVALID, the value is not for SPC: the
+  mean of its releases, or empty when none gave a value),
   K0004 date/time (dd.mm.yyyy/HH:MM:SS, UTC), K0005 events, K0006 batch, K0007 nest, K0008 operator,
-  K0009 text (the verdict), K0010 machine (the device ID); then ``K0014`` the part ident (serial).
+  K0009 text (the verdict; an INVALID part's with its first reason), K0010 machine (the device ID); then ``K0014`` the part ident (serial).
 
 The file is written in Windows-1252, the code page DFQ readers expect (it has · and ²).
 """
@@ -41,6 +42,17 @@ def _decimals(tolerance: float) -> int:
     return max(3, min(15, int(math.ceil(-math.log10(tolerance / 1e4))) if tolerance > 0 else 8))
 
 
+def _recorded_value(m: Any) -> float | None:
+    """The part's value (kg·m²); of an INVALID part without one, the mean of its releases' values (what was
+    measured, marked not for SPC); None when no release gave a value."""
+    value = m.part_value
+    if value is not None and math.isfinite(value):
+        return float(value)
+    values = [float(v) for v in (((m.payload or {}).get("part") or {}).get("values") or ())
+              if isinstance(v, (int, float)) and math.isfinite(v)]
+    return sum(values) / len(values) if values else None
+
+
 def dfq_text(recipe: Mapping[str, Any], parts: Iterable[Any], unit: str = SI) -> str:
     """The DFQ file of ``parts`` (``StoredMeasurement`` rows that completed a part, oldest first) of ``recipe``
     (the payload's recipe dict: name, number, quantity, nominal, lower, upper)."""
@@ -60,13 +72,15 @@ def dfq_text(recipe: Mapping[str, Any], parts: Iterable[Any], unit: str = SI) ->
              f"K2111/1 {upper:.{places}f}",
              f"K2142/1 {unit}"]
     for m in parts:
-        value = m.part_value
-        if value is None or not math.isfinite(value):
-            continue  # an INVALID part without a value: nothing to chart
+        value = _recorded_value(m)
         when = dt.datetime.fromtimestamp(m.finished_at, dt.UTC).strftime("%d.%m.%Y/%H:%M:%S")
-        attribute = ATTRIBUTE_INVALID if m.part_verdict == "INVALID" else 0
-        fields = [f"{value * f:.{places}f}", str(attribute), when, "", "", "", _clean(m.trigger),
-                  _clean(f"verdict {m.part_verdict}"), _clean(m.device_id)]
+        invalid = m.part_verdict == "INVALID" or value is None
+        attribute = ATTRIBUTE_INVALID if invalid else 0
+        # an INVALID part is recorded too, marked not for SPC, with why (its first reason)
+        why = next(iter(((m.payload or {}).get("part") or {}).get("reasons") or ()), "") if invalid else ""
+        fields = [f"{value * f:.{places}f}" if value is not None else "", str(attribute), when, "", "", "",
+                  _clean(m.trigger), _clean(f"verdict {m.part_verdict}" + (f": {why}" if why else ""))[:255],
+                  _clean(m.device_id)]
         lines.append(FIELD.join(fields))
         lines.append(f"K0014/1 {_clean(m.part_id or m.part_uuid)}")
     return "\r\n".join(lines) + "\r\n"

@@ -16,8 +16,13 @@ PLOT_FORMATS = ("png", "svg", "pdf")
 
 
 def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO, *, dpi: int = 110,
-                fmt: str = "png") -> None:
-    """Draw the result into ``path`` (a file name or a binary file object) as ``fmt`` (png, svg or pdf)."""
+                fmt: str = "png", unit: str = "kg·m²", source: str | None = None) -> None:
+    """Draw the result into ``path`` (a file name or a binary file object) as ``fmt`` (png, svg or pdf); the title
+    names ``source`` (default: the trace's own, e.g. its file) and gives J in ``unit``."""
+    from measurement.units import from_si
+
+    from .web.quality import inertia, number
+
     # a Figure without pyplot: no global state, so the daemon's plot worker thread may draw too
     from matplotlib.figure import Figure
 
@@ -29,9 +34,12 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO
     ax.plot(a["trace_t"], a["trace_angle"], color="0.75", lw=0.8, label="trace (all samples)")
     ax.plot(t, y, ".", ms=1.5, color="k", label="fitted samples")
     ax.plot(t, a["fitted"], color="tab:red", lw=0.9, label=f"final model: {', '.join(result.effects) or 'undamped'}")
-    title = f"{os.path.basename(result.source)} — "
-    title += f"J = {result.J:.6g} ± {result.J_std:.2g} kg·m²" if result.J is not None else "J n/a (rig lacks k or m·S)"
-    title += f", ω_n = {result.omega_n:.6g} rad/s"
+    title = f"{source or os.path.basename(result.source)} — "
+    if result.J is not None and from_si(result.J, unit) is not None:
+        title += f"J = {inertia(result.J, unit)} ± {inertia(result.J_std, unit, '.2g')} (1σ)"
+    else:
+        title += "J n/a (rig lacks k or m·S)"
+    title += f", ω_n = {number(result.omega_n, '.6g')} rad/s"
     ax.set_title(title)
     ax.set_ylabel("angle [rad]")
     ax.legend(loc="upper right", fontsize=8)
@@ -53,15 +61,16 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO
     fig.savefig(path, dpi=dpi, format=fmt)
 
 
-def render_png(result: IdentificationResult, *, dpi: int = 80) -> bytes:
+def render_png(result: IdentificationResult, *, dpi: int = 80, unit: str = "kg·m²", source: str | None = None) -> bytes:
     """The picture of ``result`` as PNG bytes (what the result store keeps with the measurement)."""
-    return render(result, "png", dpi=dpi)
+    return render(result, "png", dpi=dpi, unit=unit, source=source)
 
 
-def render(result: IdentificationResult, fmt: str, *, dpi: int = 110) -> bytes:
+def render(result: IdentificationResult, fmt: str, *, dpi: int = 110, unit: str = "kg·m²",
+           source: str | None = None) -> bytes:
     """The picture of ``result`` as ``fmt`` (png, svg, pdf) bytes."""
     buf = io.BytesIO()
-    plot_result(result, buf, dpi=dpi, fmt=fmt)
+    plot_result(result, buf, dpi=dpi, fmt=fmt, unit=unit, source=source)
     return buf.getvalue()
 
 

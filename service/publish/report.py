@@ -3,6 +3,7 @@ matplotlib's PDF backend (text stays text: a PDF reader finds the verdict)."""
 
 from __future__ import annotations
 
+import datetime as dt
 import io
 from typing import Any
 
@@ -16,7 +17,8 @@ A4 = (8.27, 11.69)
 VERDICT_COLOURS = {"OK": "#1a7f37", "NOK": "#b00020", "INVALID": "#9a6700"}
 
 
-def report_lines(m: Any, unit: str, lookup: Any = None) -> tuple[dict[str, Any], list[tuple[str, str]], list[str]]:
+def report_lines(m: Any, unit: str, lookup: Any = None,
+                 time_format: str = Q.TIME_FORMAT) -> tuple[dict[str, Any], list[tuple[str, str]], list[str]]:
     """(the part view, the (label, text) facts, the release lines) of a ``StoredMeasurement``; ``lookup(uuid)``:
     a release's stored measurement (its flags)."""
     p = m.payload or {}
@@ -24,20 +26,24 @@ def report_lines(m: Any, unit: str, lookup: Any = None) -> tuple[dict[str, Any],
     r = v["recipe"] or {}
     cal = p.get("calibration") or None
     facts = [("measurement", f"#{m.seq} {m.uuid}"), ("part ID", p.get("part_id") or Q.MISSING),
-             ("finished", Q.iso(m.finished_at)), ("operator / started by", m.trigger or Q.MISSING),
+             ("finished", Q.local_time(m.finished_at, time_format)), ("operator / started by", m.trigger or Q.MISSING),
              ("device", m.device_id), ("software", f"moi {m.software_version}")]
+    pl = Q.places(r, unit, v.get("U") or v.get("std"))
     if r:
         facts.append(("recipe", f"{r.get('name')} (no. {r.get('number')}, version {r.get('version')})"))
         if r.get("lower") is not None:
-            facts += [("nominal", Q.inertia(r.get("nominal"), unit)),
-                      ("limits", f"{Q.inertia(r.get('lower'), unit)} … {Q.inertia(r.get('upper'), unit)}"),
+            facts += [("nominal", Q.inertia(r.get("nominal"), unit, pl)),
+                      ("limits", f"{Q.inertia(r.get('lower'), unit, pl)} … {Q.inertia(r.get('upper'), unit, pl)}"),
                       ("decision rule", "guard band (ISO 14253-1), unproven: " + str(r.get("uncertain"))
                        if r.get("rule") == "guard_band" else "simple acceptance (U reported, not used)")]
     if v.get("U") is not None:
-        facts.append((f"{v.get('quantity') or 'J'} ± U", f"{Q.inertia(v.get('value'), unit)} ± "
-                      f"{Q.inertia(v.get('U'), unit, '.2g')} (k = {Q.number(v.get('k'), '.2g')})"))
+        facts.append((f"{v.get('quantity') or 'J'} ± U", f"{Q.inertia(v.get('value'), unit, pl)} ± "
+                      f"{Q.inertia(v.get('U'), unit, pl)} (k = {Q.number(v.get('k'), '.2g')})"))
+        why = Q.judgement(v, unit) if v["kind"] == "part" else None
+        if why and why["deviation"]:
+            facts.append(("deviation", f"{why['deviation']} from the nominal, {why['where']}"))
     else:
-        facts.append(("J ± u", f"{Q.inertia(v.get('value'), unit)} ± {Q.inertia(v.get('std'), unit, '.2g')} (1σ)"))
+        facts.append(("J ± u", f"{Q.inertia(v.get('value'), unit, pl)} ± {Q.inertia(v.get('std'), unit, pl)} (1σ)"))
     for row in v["budget"]:
         facts.append(("  budget: " + row["name"], (f"{Q.number(row['u'], '.2g')} {row['unit']}" if row["unit"]
                                                    else Q.inertia(row["u"], unit, ".2g"))
@@ -56,15 +62,18 @@ def report_lines(m: Any, unit: str, lookup: Any = None) -> tuple[dict[str, Any],
     return v, facts, releases
 
 
-def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = None) -> bytes:
+def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = None,
+               time_format: str = Q.TIME_FORMAT) -> bytes:
     """The report of the stored measurement ``m`` (``StoredMeasurement``) as PDF bytes, on as many A4 pages as
-    it takes; ``plot_png``: the evidence plot kept with it (None: said on the page)."""
+    it takes, each with "page x of y" and the print date (local, ``time_format``), the last with signature
+    lines; ``plot_png``: the evidence plot kept with it (None: said on the page)."""
     import textwrap
 
     from matplotlib.backends.backend_pdf import PdfPages
     from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
 
-    v, facts, releases = report_lines(m, unit, lookup)
+    v, facts, releases = report_lines(m, unit, lookup, time_format)
     verdict = v.get("verdict")
     if v["kind"] == "part":
         head, colour = v["verdict_words"], VERDICT_COLOURS.get(verdict or "", "k")
@@ -74,43 +83,52 @@ def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = Non
         head, colour = "no recipe: a value without a verdict", "0.3"
     lines = [(k, t) for k, t in facts] + [("", "")] + [("", r) for r in releases]
     lines += [("", "why: " + r) for r in v["reasons"]]
+    figs: list[Any] = []
+    fig = Figure(figsize=A4)
+    fig.text(0.06, 0.965, f"Inertia measurement report #{m.seq}", fontsize=15, weight="bold", va="top")
+    fig.text(0.06, 0.93, head, fontsize=20, weight="bold", color=colour, va="top")
+    y = 0.885
+    bottom = 0.08  # the footer (page x of y, print date) below
+    for label, text in lines:
+        wrapped = textwrap.wrap(text, 78) or [""]
+        if y - 0.017 * len(wrapped) < bottom:  # the page is full: the rest on the next one
+            figs.append(fig)
+            fig = Figure(figsize=A4)
+            fig.text(0.06, 0.965, f"report #{m.seq} ({head})", fontsize=9, va="top")
+            y = 0.93
+        fig.text(0.06, y, label, fontsize=8.5, color="0.35", va="top")
+        for w in wrapped:
+            fig.text(0.32 if label else 0.06, y, w, fontsize=8.5, va="top")
+            y -= 0.017
+    r = v["recipe"] or {}
+    if y < 0.5:  # the band, the evidence and the signatures need room: a page of their own
+        figs.append(fig)
+        fig = Figure(figsize=A4)
+        fig.text(0.06, 0.965, f"report #{m.seq} ({head})", fontsize=9, va="top")
+        y = 0.93
+    if r.get("lower") is not None and r.get("upper") is not None:
+        y = _band(fig, y, r, v.get("value"), v.get("U"), unit)
+    signatures = 0.14  # the signature lines above the footer
+    if plot_png is not None:
+        import matplotlib.image as mpimg
+
+        ax = fig.add_axes((0.04, signatures + 0.02, 0.92, max(0.1, y - signatures - 0.06)))
+        ax.imshow(mpimg.imread(io.BytesIO(plot_png), format="png"))
+        ax.set_axis_off()
+    else:
+        fig.text(0.06, y - 0.02, "no evidence plot is kept with this measurement", fontsize=9, va="top")
+    for x, who in ((0.06, "measured by (name, signature, date)"), (0.54, "released by quality (name, signature, date)")):
+        fig.add_artist(Line2D([x, x + 0.4], [signatures, signatures], color="0.2", lw=0.8))
+        fig.text(x, signatures - 0.008, who, fontsize=8, color="0.3", va="top")
+    figs.append(fig)
+    printed = dt.datetime.now().astimezone().strftime(time_format)
     buf = io.BytesIO()
     with PdfPages(buf, metadata={"Title": f"moi report {m.uuid}", "Subject": head}) as pdf:
-        pages = 1
-        fig = Figure(figsize=A4)
-        fig.text(0.06, 0.965, f"Inertia measurement report #{m.seq}", fontsize=15, weight="bold", va="top")
-        fig.text(0.06, 0.93, head, fontsize=20, weight="bold", color=colour, va="top")
-        y = 0.885
-        for label, text in lines:
-            wrapped = textwrap.wrap(text, 78) or [""]
-            if y - 0.017 * len(wrapped) < 0.05:  # the page is full: the rest on the next one
-                pdf.savefig(fig)
-                pages += 1
-                fig = Figure(figsize=A4)
-                fig.text(0.06, 0.965, f"report #{m.seq} ({head}), page {pages}", fontsize=9, va="top")
-                y = 0.93
-            fig.text(0.06, y, label, fontsize=8.5, color="0.35", va="top")
-            for w in wrapped:
-                fig.text(0.32 if label else 0.06, y, w, fontsize=8.5, va="top")
-                y -= 0.017
-        r = v["recipe"] or {}
-        if y < 0.45:  # the band and the evidence need room: a page of their own
-            pdf.savefig(fig)
-            pages += 1
-            fig = Figure(figsize=A4)
-            fig.text(0.06, 0.965, f"report #{m.seq} ({head}), page {pages}", fontsize=9, va="top")
-            y = 0.93
-        if r.get("lower") is not None and r.get("upper") is not None:
-            y = _band(fig, y, r, v.get("value"), v.get("U"), unit)
-        if plot_png is not None:
-            import matplotlib.image as mpimg
-
-            ax = fig.add_axes((0.04, 0.02, 0.92, max(0.1, y - 0.04)))
-            ax.imshow(mpimg.imread(io.BytesIO(plot_png), format="png"))
-            ax.set_axis_off()
-        else:
-            fig.text(0.06, y - 0.02, "no evidence plot is kept with this measurement", fontsize=9, va="top")
-        pdf.savefig(fig)
+        for i, page in enumerate(figs, start=1):
+            page.text(0.06, 0.03, f"moi report #{m.seq} · {m.uuid}", fontsize=7.5, color="0.35")
+            page.text(0.94, 0.03, f"page {i} of {len(figs)} · printed {printed}", fontsize=7.5, color="0.35",
+                      ha="right")
+            pdf.savefig(page)
     return buf.getvalue()
 
 

@@ -27,6 +27,30 @@ def test_units_convert_from_si_exactly_and_unknown_ones_are_refused():
     assert Q.number(None) == Q.number(math.nan) == Q.number(True) == "–"
 
 
+def test_numbers_are_written_without_exponents_and_a_verdict_says_why():
+    # what pages used to show as 2.3e+02 and 8.42e+03, and sentences with exponents in them
+    assert Q.inertia(2.3e-5, "g·cm²", ".2g") == "230 g·cm²" and Q.number(8420.3, ".3g") == "8420"
+    assert Q.number(1.5e-7, ".2g") == "0.00000015" and Q.number(-0.25, "+.2g") == "-0.25" and Q.number(2, 3) == "2.000"
+    assert Q.plain_text("u 9.3e-08 kg·m² above 1e-15, n 2.5E+03; id ab1e-5") == \
+        "u 0.000000093 kg·m² above 0.000000000000001, n 2500; id ab1e-5"
+    # a recipe's decimals: given, else those that resolve a hundredth of the tolerance; U with the value's
+    recipe = {"nominal": 0.0125, "lower": 0.012375, "upper": 0.012625}
+    assert Q.places(recipe, "g·cm²") == 0 and Q.places(recipe, "kg·m²") == 6
+    assert Q.places({**recipe, "display_decimals": 2}, "g·cm²") == 2 and Q.places(None, "g·cm²", 2.3e-5) == 0
+    why = Q.judgement({"recipe": recipe, "value": 0.0125 * 0.99 - 1e-9, "U": 2e-6}, "g·cm²")
+    assert (why["deviation"], why["where"]) == ("−1.0 %", "below LSL")
+    assert why["nominal"] == "125000 g·cm²" and why["limits"] == "123750 g·cm² … 126250 g·cm²"
+    assert Q.judgement({"recipe": recipe, "value": 0.0125, "U": 2e-6}, "g·cm²")["where"] == "within the limits"
+    assert Q.judgement({"recipe": {}, "value": 1.0}, "kg·m²") is None
+    assert Q.local_time(None) == "–" and "T" not in Q.local_time(1.7e9) and Q.local_time(1.7e9, "%Y") == "2023"
+    # a plot's title: the sensor that took the trace (a simulated rig said as such), J in the recipe's unit
+    from types import SimpleNamespace
+    m = SimpleNamespace(seq=7, payload={"recipe": {"display_unit": "g·cm²"}, "part_id": "SN-9",
+                                        "acquisition": {"camera": {}}})
+    assert Q.plot_labels(m, False) == ("g·cm²", "measurement #7, part SN-9, camera")
+    assert Q.plot_labels(m, True, "kg·m²")[1] == "measurement #7, part SN-9, simulated rig"
+
+
 def test_part_view_never_shows_a_release_verdict_as_the_parts():
     recipe = {"name": "r", "number": 1, "nominal": 1.0, "lower": 0.9, "upper": 1.1, "rule": "guard_band",
               "coverage_factor": 2.0, "display_unit": "g·cm²"}
@@ -87,15 +111,41 @@ def test_shift_start_is_the_latest_start_at_or_before_now():
 def test_control_chart_marks_violations_and_keeps_labels_apart():
     values = [1.0, 1.001, 0.999, 1.0005, 0.9995, 1.0, 1.0015, 0.999, 1.05]  # the last point far out
     s = individuals(values, 0.99, 1.01)
-    chart = Q.control_chart(s, "kg·m²")
+    names = [f"SN-{i}" for i in range(1, 10)]
+    chart = Q.control_chart(s, "kg·m²", names=names)
     bad = [p for p in chart["top"]["points"] if p[2]]
-    assert 9 in [p[3] for p in bad] and (9, "outside the control limits") in chart["rules"]
-    assert {p[3] for p in bad} == {n for n, _rule in chart["rules"]}  # every marked point has its rule said
+    rules = dict(chart["rules"])
+    # said in words, once per point (beyond the limits is one rule however found), the point by its name
+    assert "SN-9" in [p[3] for p in bad] and rules["SN-9"][0] == "a point beyond the 3σ control limits (WE 1, Nelson 1)"
+    assert len(rules["SN-9"]) == len(set(rules["SN-9"])) and len(rules) == len(chart["rules"])
+    assert {p[3] for p in bad} <= set(rules)  # every marked point has its rule said
+    # the moving range into the far point is beyond its UCL: marked on the MR chart and listed too
+    mr_bad = [p[3] for p in chart["bottom"]["points"] if p[2]]
+    assert mr_bad == ["SN-9"] and any("range beyond" in r for r in rules["SN-9"])
+    # a range is never negative: neither is the range chart's axis
+    assert all(float(text) >= 0 for _y, text in chart["bottom"]["yticks"])
+    # a phone's chart: narrower, the same points
+    narrow = Q.control_chart(s, "kg·m²", width=380.0, names=names)
+    assert narrow["top"]["width"] == 380.0 and len(narrow["top"]["points"]) == 9 and narrow["rules"] == chart["rules"]
     ys = sorted(y for y, _kind, _text in chart["top"]["labels"])
     assert all(b - a >= 13.0 for a, b in zip(ys, ys[1:]))
     assert all(chart["top"]["top"] <= y - 4 <= chart["top"]["bottom"] for y in ys)
     texts = [t for _y, _k, t in chart["top"]["labels"]]
     assert len({t.split()[1] for t in texts}) == len(texts)  # each limit's value written distinguishably
+
+
+def test_capability_has_a_confidence_interval_and_xbar_s_its_constants():
+    from measurement.spc import c4, capability_interval, xbar_s
+
+    assert c4(2) == pytest.approx(0.7979, abs=1e-4) and c4(10) == pytest.approx(0.9727, abs=1e-4)
+    ci = capability_interval(1.33, 1.2, 7)
+    assert ci["cp"][0] < 1.33 < ci["cp"][1] and ci["cpk"][0] < 1.2 < ci["cpk"][1]
+    assert ci["cp"][1] - ci["cp"][0] > 1.0  # 7 values: too wide to decide on
+    wide, narrow = capability_interval(1.33, 1.2, 7)["cp"], capability_interval(1.33, 1.2, 100)["cp"]
+    assert narrow[1] - narrow[0] < (wide[1] - wide[0]) / 2
+    s = xbar_s([[1.0, 2.0, 3.0], [2.0, 3.0, 4.0], [1.5, 2.5, 2.0]])
+    assert s.chart == "Xbar-S" and s.range_lcl == 0.0 and s.ranges[0] == pytest.approx(1.0)
+    assert Q.control_chart(s, "kg·m²")["range_name"] == "standard deviation (n = 3)"
 
 
 def test_an_xbar_r_chart_draws_each_subgroup_and_its_range_in_the_display_unit():
@@ -127,9 +177,16 @@ def test_a_long_report_goes_on_to_more_pages_and_leaves_nothing_out():
                "uncertainty_budget": [{"name": f"source {i}", "u": 1e-7, "share": 0.05} for i in range(n)]}
     m = SimpleNamespace(seq=7, uuid="u-7", payload=payload, finished_at=1.7e9, trigger="web:olga",
                         device_id="rig", software_version="9", flags=())
-    text = " ".join(p.extract_text() for p in PdfReader(io.BytesIO(report_pdf(m, None))).pages)
+    pages = [p.extract_text() for p in PdfReader(io.BytesIO(report_pdf(m, None, time_format="%d.%m.%Y"))).pages]
+    text = " ".join(pages)
     assert "part OK" in text and "web:olga" in text
     assert f"release {n} of {n}" in text and f"source {n - 1}" in text  # the last lines too, on a later page
+    # every page numbered "x of y" with the print date; the last one signed by who measured and who released
+    import datetime as dt
+    today = dt.date.today().strftime("%d.%m.%Y")
+    assert len(pages) >= 2 and all(f"page {i} of {len(pages)} · printed {today}" in p for i, p in enumerate(pages, 1))
+    assert "measured by" in pages[-1] and "released by quality" in pages[-1]
+    assert "e-0" not in text and "e+0" not in text  # numbers without exponents
 
 
 def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_result_has_one():
@@ -144,11 +201,35 @@ def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_re
                     "lines": [{"source": "fit", "value": 5.4, "std": 2e-5, "unit": "rad/s", "sensitivity": -0.0046,
                                "contribution": -9e-8, "share": 0.6, "note": ""}]}}
     plain = {"J": 0.0125, "J_std": 5e-8, "J_U": 1.2e-7, "coverage_factor": 2.0, "uncertainty_budget": budget}
-    html = env.get_template("_verdict.html").render(v=Q.part_view(plain), p=plain, unit="g·cm²", band=None)
+    html = env.get_template("_verdict.html").render(v=Q.part_view(plain), p=plain, unit="g·cm²", band=None,
+                                                    places=Q.places(None, "g·cm²", 1.2e-7))
     assert "± 1.2 g·cm² (U, k = 2)" in html and "None" not in html
     html = env.get_template("_budget.html").render(p=plain)
     assert 'class="scroll"><table class="budget-table">' in html and "fit" in html  # scrolls in its card
     before = {"J": 0.0125, "J_std": 5e-8}  # a result without U or budget: its 1σ, said to be one
-    html = env.get_template("_verdict.html").render(v=Q.part_view(before), p=before, unit="kg·m²", band=None)
-    assert "± 5e-08 kg·m² (standard uncertainty, 1σ)" in html
+    html = env.get_template("_verdict.html").render(v=Q.part_view(before), p=before, unit="kg·m²", band=None,
+                                                    places=Q.places(None, "kg·m²", 5e-8))
+    # the value with the decimals of its uncertainty, never in e-notation
+    assert "J = 0.012500000 kg·m² <span>± 0.000000050 kg·m² (standard uncertainty, 1σ)" in html
     assert env.get_template("_budget.html").render(p=before).strip() == ""
+
+
+def test_each_of_the_six_orientations_of_a_tensor_set_is_drawn_differently_along_its_axis():
+    from service.publish.web.views import axes_drawing, project
+
+    r = 0.5 ** 0.5
+    six = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1), "xy": (r, r, 0), "xz": (r, 0, r), "yz": (0, r, r)}
+    drawn = {}
+    for name, axis in six.items():
+        (ax, ay), (bx, by) = axes_drawing(axis)["axis"]
+        d = (bx - ax, ay - by)  # SVG's y points down
+        p = project(axis)
+        # along its own axis: the drawn line is the axis as seen from the view, in its direction
+        assert abs(d[0] * p[1] - d[1] * p[0]) < 1e-2 * math.hypot(*d) * math.hypot(*p), name
+        assert d[0] * p[0] + d[1] * p[1] > 0 and math.hypot(*d) > 40, name  # long enough to see
+        drawn[name] = (d[0] / math.hypot(*d), d[1] / math.hypot(*d))
+    for a in six:
+        for b in six:
+            if a < b:  # no two drawn parallel (xy once fell on z): at least 10° apart
+                cos = abs(drawn[a][0] * drawn[b][0] + drawn[a][1] * drawn[b][1])
+                assert cos < math.cos(math.radians(10)), (a, b)

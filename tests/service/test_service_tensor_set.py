@@ -178,7 +178,10 @@ def test_the_web_page_shows_the_orientation_to_mount_and_takes_the_actions(tmp_p
     base = app.app.web.url
     html = urllib.request.urlopen(base + "set", timeout=10).read().decode()
     assert "mount orientation 1 of 6 &#39;x&#39;" in html or "mount orientation 1 of 6 'x'" in html
-    assert "<svg" in html and "swing axis" in html
+    assert "<svg" in html and "swing axis" in html and 'id="measure"' in html  # measured from the set's page
+    # Home, the operator's screen, says which orientation to mount, with its drawing
+    home = urllib.request.urlopen(base, timeout=10).read().decode()
+    assert 'TENSOR SET' in home and 'id="set-orientation">x<' in home and 'id="set-drawing"' in home
     token = Path(app.app.web.token_file).read_text().strip()
     req = urllib.request.Request(base + "api/set/skip", data=b"", method="POST",
                                  headers={"Authorization": f"Bearer {token}", "Origin": base.rstrip("/")})

@@ -147,6 +147,14 @@ def test_setup_page_masks_secrets_and_reports_health(appliance_factory, tmp_path
     c = Client(running.app.web.url)
     status, _, page = c.request("/setup")
     assert status == 200 and b"a-long-enough-token" not in page and b"client(s) connected" in page
+    # the configuration in words, not JSON; no file or folder of the appliance shown to a visitor
+    text = page.decode()
+    assert "request timeout" in text and "null" not in text and '": ' not in text
+    assert str(token_file) not in text and str(tmp_path) not in text and "shown after logging in" in text
+    # the simulated in-process sensor has no one-off reading: no button that would only fail
+    assert 'id="angle-button"' not in text and 'id="angle-none"' in text
+    c.request("/login", {"token": "a-long-enough-token", "csrf": c.csrf()})
+    assert str(token_file) in c.request("/setup")[2].decode()  # logged in: where the token is
     status, health = c.json("/api/health")
     assert status == 200 and health["modbus"]["clients"] == 0 and health["disk"]["free_bytes"] > 0
     assert Client(running.app.web.url).json("/api/abort", method="POST", headers={
@@ -240,7 +248,11 @@ def test_recipe_and_part_id_set_from_the_page_reach_the_result_and_the_history(a
     app = running.app
     bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
     c = Client(app.web.url)
-    assert b"rotor-a" in c.request("/")[2]  # offered on the home page
+    home = c.request("/")[2].decode()
+    # a visitor is not offered a recipe menu he may not use; the part ID field takes what the server takes
+    assert 'id="recipe-select"' not in home and 'maxlength="20"' in home
+    recipes = c.request("/recipes")[2].decode()  # every recipe readable by all, with its limits
+    assert "rotor-a" in recipes and "0.012250 kg·m² … 0.012750 kg·m²" in recipes
     status, body = c.json("/api/part", data={"recipe": "rotor-b"}, headers=bearer)
     assert status == 400 and "no recipe 'rotor-b'" in body["error"]
     assert c.json("/api/part", data={"part_id": "x" * 200}, headers=bearer)[0] == 400
@@ -274,6 +286,10 @@ def test_a_result_stored_without_its_plot_gets_it_drawn_once_from_its_trace(appl
 
 #: what must never reach a page: a Python None, a NaN or infinity, a raw dict or list, a traceback
 RAW = re.compile(r"\bNone\b|\bnan\b|\bNaN\b|\binf\b|Traceback|\{'|\['|\bTrue\b|\bFalse\b")
+#: a number in e-notation, a machine's time (ISO 8601 with its offset), a measurement's UUID (which may look like both)
+E_NOTATION = re.compile(r"(?<![\w.])\d+(\.\d+)?e[+-]?\d+\b", re.I)
+ISO_TIME = re.compile(r"\d{4}-\d\d-\d\dT\d\d:\d\d")
+UUID = re.compile(r"[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}")
 
 
 def _recipes(d: Path) -> Path:
@@ -324,7 +340,8 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     page = c.request(f"/results/{ok.uuid}")[2].decode()
     part = ok.payload["part"]
     # the part's value ± U in the recipe's unit (g·cm² = 1e7 kg·m²), the limits, the band
-    assert f"{part['value'] * 1e7:.7g} g·cm²" in page and f"{part['U'] * 1e7:.2g} g·cm²" in page
+    # (in the recipe's decimals: those that resolve a hundredth of its ± 2500 g·cm² tolerance, U with them)
+    assert f"{part['value'] * 1e7:.0f} g·cm² <span>± {part['U'] * 1e7:.0f} g·cm²" in page
     assert "part value from 2 of 2 releases, none excluded" in page and 'id="band"' in page
     assert f"{0.0125 * 0.98 * 1e7:.7g} g·cm² … {0.0125 * 1.02 * 1e7:.7g} g·cm²" in page
     assert 'class="verdict-tile verdict-OK" id="verdict"><span class="tile-word">OK' in page
@@ -340,11 +357,18 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     # SPC of a recipe: the chart of its 3 parts, its capability, the limits labelled with their values
     spc = c.request("/spc?recipe=rotor-nok")[2].decode()
     assert 'id="chart-points"' in spc and 'id="chart-ranges"' in spc and "I-MR" in spc and "Cpk" in spc
-    assert spc.count('class="point"') + spc.count('class="violation"') == 3 + 2  # 3 parts, 2 moving ranges
+    # 3 parts, 2 moving ranges; drawn for a desktop and for a phone
+    assert spc.count('class="point"') + spc.count('class="violation"') == 2 * (3 + 2)
+    assert "<title>SN-2a " in spc  # each point named by its serial (and time)
+    # 3 parts: Cp and Cpk with their confidence interval, and said to be too few to decide on
+    assert "95 % confidence" in spc and 'id="small-sample"' in spc and "fewer than 25" in spc
     assert "USL 0.0153" in spc and "LSL 0.0147" in spc and "part value [kg·m²]" in spc
     assert c.request("/spc?recipe=no-such")[0] == 404 and c.request("/spc?chart=pie")[0] == 400
-    status, _, body = c.request("/spc?recipe=rotor-nok&chart=Xbar-R")  # one release a part: no subgroups
-    assert status == 400 and b"subgroups of 2 to 10" in body
+    for chart in ("Xbar-R", "Xbar-S"):  # one release a part: no subgroups; said, and I-MR drawn, not a bare 400
+        status, _, body = c.request(f"/spc?recipe=rotor-nok&chart={chart}")
+        assert status == 200 and 'id="spc-note"' in body.decode() and b'id="chart-points"' in body
+    status, _, body = c.request("/spc?recipe=rotor-ok&chart=Xbar-S")  # one part: said, no chart
+    assert status == 200 and b'id="spc-none"' in body
     assert "no calibration record" in home
     # the check standard's history on the SPC page: its control chart and each check with its E_n
     assert "no check standard measured yet" in spc
@@ -353,7 +377,9 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
                                          "reference": 0.0125, "reference_U": 2e-5, "E_n": (value - 0.0125) / 2.8e-5,
                                          "passed": passed}, finished_at=1.7e9 + i)
     spc = c.request("/spc?recipe=rotor-nok")[2].decode()
-    assert 'id="check-points"' in spc and spc.count("disc CS-1") == 3 and "FAILED" in spc and "4.3" in spc
+    assert 'id="check-points"' in spc and spc.count("<td>disc CS-1</td>") == 3 and "FAILED" in spc and "4.3" in spc
+    cal = c.request("/calibration")[2].decode()  # the check standard's history on the calibration page too
+    assert 'id="check-points"' in cal and cal.count("<td>disc CS-1</td>") == 3
     # the calibration of the rig the active recipe measures with, and its due date, on Home
     assert c.json("/api/part", data={"recipe": "rotor-cal"}, headers=bearer)[0] == 202
     # (the main loop applies the selection: the page shows it once it did)
@@ -377,6 +403,10 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
         assert status == 200, (path, status, text[:300])
         found = RAW.search(re.sub(r"<script.*?</script>", "", text, flags=re.S))
         assert found is None, (path, found and text[max(0, found.start() - 120):found.end() + 60])
+        # what a person reads: no number in e-notation, no raw UTC ISO time
+        shown = UUID.sub("", re.sub(r"<script.*?</script>|<[^>]+>", " ", text, flags=re.S))
+        found = E_NOTATION.search(shown) or ISO_TIME.search(shown)
+        assert found is None, (path, found and shown[max(0, found.start() - 120):found.end() + 60])
 
     # the quality record: the report's PDF from the page and from `moi report`, its text read back
     from pypdf import PdfReader
@@ -417,6 +447,13 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     status, _, web_dfq = c.request("/history/export.dfq?recipe=rotor-ok", timeout=180)  # the file of the SPC page
     assert status == 200 and web_dfq == out.read_bytes() and "/history/export.dfq?recipe=rotor-nok" in spc
     assert c.request("/history/export.dfq")[0] == 400
+    # an INVALID part is in the DFQ too, with its status: marked not for SPC (attribute 255), and why
+    status, _, bad_dfq = c.request("/history/export.dfq?recipe=rotor-bad", timeout=180)
+    line = next(x for x in bad_dfq.decode("cp1252").split("\r\n") if "\x14" in x).split("\x14")
+    assert status == 200 and line[1] == "255" and line[7].startswith("verdict INVALID: ") and float(line[0]) > 0
+    # the CSV starts with a byte-order mark: Excel on Windows reads kg·m² as written
+    status, _, csv_bytes = c.request("/history/export.csv", timeout=180)
+    assert status == 200 and csv_bytes.startswith("\ufeff".encode()) and "kg·m²" in csv_bytes.decode("utf-8-sig")
     assert c.request("/history/export.dfq?recipe=none", timeout=180)[0] == 404
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from .conftest import appliance_doc, wait_until
+from .test_service_web import E_NOTATION, ISO_TIME, UUID
 
 pytestmark = pytest.mark.browser
 
@@ -57,7 +58,11 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
                                       'tolerance_percent = 1.0\ndisplay_unit = "kg*mm^2"\n')
     (recipes / "bad.toml").write_text('[recipe]\nname = "rotor-bad"\nnumber = 14\nnominal = 0.0125\nreleases = 2\n'
                                       'tolerance_percent = 1.0\n[quality]\nmax_J_std = 1.0e-15\n')
-    doc = appliance_doc(tmp_path / "state", time_scale=5.0, web={"enabled": True},
+    (tmp_path / "cal-rig.toml").write_text('[rig]\nkind = "torsion"\nstiffness = 0.3651\n[calibration]\n'
+                                          'date = 2020-01-15\nvalid_days = 365\n')
+    (recipes / "cal.toml").write_text('[recipe]\nname = "rotor-cal"\nnumber = 15\nnominal = 0.0125\n'
+                                      'tolerance_percent = 1.0\nrig = "../cal-rig.toml"\n')
+    doc = appliance_doc(tmp_path / "state", time_scale=5.0, web={"enabled": True, "contact": "the lab, ext. 2345"},
                         recipes={"directory": str(recipes), "active": "rotor-12"},
                         simulation={"effects": {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 6e-4}}})
     running = appliance_factory(doc)
@@ -74,13 +79,19 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
 
     # an action without the token is refused, and nothing moves
     browser.find_element(By.ID, "measure").click()
-    wait.until(lambda d: "refused (401)" in d.find_element(By.ID, "message").text)
+    wait.until(lambda d: "log in first" in d.find_element(By.ID, "message").text)
     assert app.sequencer.state.value == "IDLE" and app.store.count() == 0
 
+    # a wrong token: said beside the field (not a bare 401 page), the form still there
+    browser.find_element(By.ID, "token").send_keys("not-the-token")
+    browser.find_element(By.ID, "login-button").click()
+    wait.until(lambda d: "wrong token" in d.find_element(By.ID, "login-error").text)
+    assert browser.find_element(By.CSS_SELECTOR, "label[for=token]").text == "token"
     # log in with the token; back on the home page, logged in
     browser.find_element(By.ID, "token").send_keys(token)
     browser.find_element(By.ID, "login-button").click()
     wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, ".who .ok"))
+
     # the live stream is connected (its first tick arrived): no transition can be missed from here on
     wait.until(lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-live") == "1")
     assert browser.find_element(By.ID, "state").text == "IDLE"
@@ -116,7 +127,8 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     steps = [st for st in app.store.latest().payload["steps"] if st["chosen"]]
     shown = [li.text for li in browser.find_elements(By.CSS_SELECTOR, ".steps li")]
     assert [t.split(" ")[0] for t in shown] == [st["chosen"] for st in steps], (steps, shown)
-    assert all(st["reason"] in t and st["evidence"] in t for st, t in zip(steps, shown)), (steps, shown)
+    from service.publish.web.quality import plain_text  # (their numbers written out, without exponents)
+    assert all(plain_text(st["reason"]) in t and plain_text(st["evidence"]) in t for st, t in zip(steps, shown)), (steps, shown)
     wait.until(lambda d: d.execute_script(
         "var i = document.getElementById('plot'); return i.complete && i.naturalWidth > 400;"))
     shot = tmp_path / "result-page.png"
@@ -149,7 +161,8 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     pages = {"home": ("/", None), "result-ok": (f"/results/{ok.uuid}", "OK"),
              "result-nok": (f"/results/{nok.uuid}", "NOK"), "result-invalid": (f"/results/{bad.uuid}", "INVALID"),
              "history": ("/history", None), "spc": ("/spc?recipe=rotor-nok", None),
-             "report": (f"/results/{bad.uuid}/report", "INVALID")}
+             "report": (f"/results/{bad.uuid}/report", "INVALID"), "recipes": ("/recipes", None),
+             "calibration": ("/calibration", None), "setup": ("/setup", None)}
     for width in (390, 1280):
         browser.set_window_size(width, 900)
         for name, (path, verdict) in pages.items():
@@ -162,6 +175,11 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
                 " > window.innerWidth + 1).slice(0, 5).map(e => e.tagName + '.' + e.className + '#' + e.id)")
             # nothing wider than the window: tables scroll inside their card
             assert wide <= inner, (name, width, wide, inner, offenders)
+            # a person reads no number in e-notation and no machine time on the operator's and quality pages
+            shown = UUID.sub("", browser.find_element(By.TAG_NAME, "body").text)
+            found = E_NOTATION.search(shown) or ISO_TIME.search(shown)
+            assert found is None, (name, width, found and shown[max(0, found.start() - 80):found.end() + 40])
+            assert len(browser.find_elements(By.TAG_NAME, "h1")) == 1  # one main heading on every page
             if verdict is not None:
                 head = browser.find_element(By.ID, "verdict")
                 assert head.text.split()[0] == verdict and head.is_displayed()
@@ -200,12 +218,52 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
         wait.until(lambda d: d.execute_script("return document.readyState") == "complete")
         assert browser.execute_script("return document.documentElement.scrollWidth <= window.innerWidth"), path
 
-    # the live swing on a phone: labelled axes at a readable height, then the fit over it and the residual
-    browser.set_window_size(390, 900)
+    # the operator's phone, 390×844: the part in hand and Measure on one screen, without scrolling
+    browser.set_window_size(390, 844)
     browser.get(url)
     wait.until(lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-live") == "1")
+    height = browser.execute_script("return window.innerHeight")
+
+    def on_screen(el) -> bool:
+        r = browser.execute_script("var r = arguments[0].getBoundingClientRect(); return [r.top, r.bottom, r.left,"
+                                   " r.right];", el)
+        return el.is_displayed() and 0 <= r[0] and r[1] <= height and 0 <= r[2] and r[3] <= 390
+
+    measure = browser.find_element(By.ID, "measure")
+    tile = browser.find_element(By.ID, "tile")
+    # verdict and Measure both inside the 390×844 viewport, the verdict not under the action bar
+    assert browser.execute_script("return window.scrollY") == 0
+    assert on_screen(tile) and on_screen(measure) and tile.rect["y"] + tile.rect["height"] <= measure.rect["y"]
+    assert browser.find_element(By.ID, "tile-verdict").text == "INVALID"
+    assert "SN-0044" in browser.find_element(By.ID, "tile-part").text
+    assert browser.find_element(By.ID, "now").get_attribute("aria-live") == "polite"  # announced when it changes
+    # Measure within three tab stops (the skip link first), and legible: WCAG AA contrast of Measure and IDLE
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.keys import Keys
+    stops = []
+    for _ in range(3):
+        ActionChains(browser).send_keys(Keys.TAB).perform()
+        stops.append(browser.execute_script("return document.activeElement.id || document.activeElement.tagName"))
+        if stops[-1] == "measure":
+            break
+    assert stops[-1] == "measure", stops
+    for el in (measure, browser.find_element(By.ID, "state")):
+        assert _contrast(browser, el) >= 4.5, (el.get_attribute("id"), _contrast(browser, el))
+
+    # the part is complete and its ID still set: Measure asks before measuring it again as a new part
     done = app.store.count()
-    browser.find_element(By.ID, "measure").click()
+    measure.click()
+    alert = wait.until(lambda d: d.switch_to.alert)
+    assert "SN-0044 is complete" in alert.text
+    alert.dismiss()
+    wait.until(lambda d: "not measured" in d.find_element(By.ID, "message").text)
+    assert app.store.count() == done and not app.sequencer.busy
+    measure.click()
+    wait.until(lambda d: d.switch_to.alert).accept()
+    # at once a neutral "measuring" for the part in hand: the last verdict is gone while the next part swings
+    line = wait.until(lambda d: d.find_element(By.ID, "now-line"))
+    assert line.text.startswith("MEASURING SN-0044 · release 1 of 2"), line.text
+    assert not browser.find_elements(By.ID, "tile-verdict") and on_screen(line)
     wait.until(lambda d: d.find_element(By.ID, "swing").get_attribute("data-fit") == "1")
     assert app.store.count() == done + 1
     swing = browser.find_element(By.ID, "swing")
@@ -213,8 +271,51 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     assert browser.execute_script("return document.documentElement.scrollWidth") <= 390
     # the same part ID again starts a new part: its first release is in, the second is next
     wait.until(lambda d: d.find_element(By.ID, "release-k").text == "next: release 2 of 2")
-    browser.execute_script("document.getElementById('swing').scrollIntoView()")
-    browser.save_screenshot(str(artifacts / "live-390.png"))
+    wait.until(lambda d: d.find_element(By.ID, "now-line").text.startswith("IN PROGRESS SN-0044"))
+    browser.save_screenshot(str(artifacts / "operator-390.png"))
+
+    # Abort during the capture: the page says "aborted" (and does not drop silently to IDLE)
+    browser.find_element(By.ID, "measure").click()
+    wait.until(lambda d: d.find_element(By.ID, "state").text == "CAPTURING")
+    browser.find_element(By.ID, "abort").click()
+    wait.until(lambda d: "aborted" in d.find_element(By.ID, "message").text)
+    wait.until(lambda d: d.find_element(By.ID, "state").text == "IDLE")
+    assert "aborted" in browser.find_element(By.ID, "message").text
+    assert app.store.latest(None).status == "aborted"
+
+    # an expired calibration: a banner that says what to do and whom to call, and Measure refused
+    bearer = {"Authorization": f"Bearer {token}", "Accept": "application/json"}
+    _post(url + "api/part", {"recipe": "rotor-cal", "part_id": "SN-0045"}, bearer)
+    wait_until(lambda: app.parts.recipe.name == "rotor-cal", 10, what="rotor-cal selected")
+    browser.get(url)
+    banner = wait.until(lambda d: d.find_element(By.ID, "blocked"))
+    assert on_screen(banner) and "expired on 2021-01-14" in banner.text and "the lab, ext. 2345" in banner.text
+    done = app.store.count()
+    browser.find_element(By.ID, "measure").click()
+    wait.until(lambda d: "Measure refused" in d.find_element(By.ID, "message").text)
+    assert app.store.count() == done and not app.sequencer.busy
+    browser.save_screenshot(str(artifacts / "blocked-390.png"))
+    if os.environ.get("MOI_UPDATE_SCREENSHOT"):
+        for name in ("operator-390", "blocked-390", "recipes-1280", "calibration-1280", "setup-1280"):
+            shutil.copy(artifacts / f"{name}.png", REPO / "docs" / "img" / f"web-{name}.png")
+
+
+def _contrast(browser, el) -> float:
+    """The WCAG 2 contrast ratio of an element's text against its background (the first opaque one up the tree)."""
+    fg, bg = browser.execute_script("""
+        var e = arguments[0], fg = getComputedStyle(e).color, bg = null;
+        for (var n = e; n && !bg; n = n.parentElement) {
+          var c = getComputedStyle(n).backgroundColor; if (c && !/rgba\(.*, 0\)$/.test(c) && c !== 'transparent') { bg = c; }
+        }
+        return [fg, bg || 'rgb(255, 255, 255)'];""", el)
+
+    def luminance(css: str) -> float:
+        r, g, b = (int(x) / 255 for x in re.findall(r"[\d.]+", css)[:3])
+        lin = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in (r, g, b)]
+        return 0.2126 * lin[0] + 0.7152 * lin[1] + 0.0722 * lin[2]
+
+    a, b = sorted((luminance(fg), luminance(bg)), reverse=True)
+    return (a + 0.05) / (b + 0.05)
 
 
 def _post(url: str, data: dict, headers: dict) -> None:

@@ -122,20 +122,25 @@ def trace_file(state_dir: str, uuid: str) -> bytes:
     return trace_text(m).encode()
 
 
-def replot(state_dir: str, uuid: str, default_rig: Mapping[str, Any], options: Any) -> bytes:
+def replot(state_dir: str, uuid: str, default_rig: Mapping[str, Any], options: Any, simulated: bool = False,
+           default_unit: str = "kg·m²") -> bytes:
     """The plot of the measurement ``uuid`` (PNG) from its stored trace, identified again with its rig."""
     from measurement import Rig, Trace, identify
 
     from service.publish.plot import render_png
     from service.persistence.store import Store
 
+    from .quality import plot_labels
+
     with Store(state_dir, read_only=True) as store:
         m = store.get(uuid, trace=True)
     rig = Rig.from_dict(m.rig or default_rig)
-    return render_png(identify(Trace(m.trace_t, m.trace_angle, source=f"measurement {m.seq}"), rig, options))
+    unit, source = plot_labels(m, simulated, default_unit)
+    return render_png(identify(Trace(m.trace_t, m.trace_angle, source=f"measurement {m.seq}"), rig, options),
+                      unit=unit, source=source)
 
 
-def report_file(state_dir: str, uuid: str, default_unit: str) -> bytes:
+def report_file(state_dir: str, uuid: str, default_unit: str, time_format: str | None = None) -> bytes:
     """The report of the measurement ``uuid`` as PDF (``moi report ID --pdf``)."""
     from service.persistence.store import Store
     from service.publish.report import report_pdf
@@ -146,4 +151,5 @@ def report_file(state_dir: str, uuid: str, default_unit: str) -> bytes:
     with Store(state_dir, read_only=True) as store:
         m = store.get(uuid)
         got = store.get_attachment(uuid, PLOT_NAME)
-        return report_pdf(m, got[0] if got else None, display_unit(m.payload, default_unit), store.get)
+        return report_pdf(m, got[0] if got else None, display_unit(m.payload, default_unit), store.get,
+                          **({"time_format": time_format} if time_format else {}))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import datetime as dt
 import math
+import re
 from typing import Any, Callable, Mapping, Sequence
 
 from measurement.units import SI, UnitError, from_si, inertia_unit
@@ -20,26 +21,117 @@ MISSING = "–"
 VERDICT_WORDS = {"OK": "part OK", "NOK": "part NOK (not conforming)", "INVALID": "part INVALID (measure again)"}
 
 
-def number(v: Any, spec: str = ".6g") -> str:
-    """A number as text; None, NaN, ±inf and non-numbers that are not text become "–"."""
+def _plain_g(x: float, spec: str) -> str:
+    """``x`` with the significant digits of a "g" spec (".7g", "+.3g"), in fixed-point: never e-notation."""
+    sign = "+" if spec.startswith("+") else ""
+    digits = int(spec.strip("+").lstrip(".").rstrip("g") or 6)
+    if x == 0:
+        return f"{x:{sign}.0f}"
+    decimals = max(0, digits - 1 - int(math.floor(math.log10(abs(x)))))
+    text = f"{x:{sign}.{decimals}f}"
+    # "g" drops trailing zeros; so does this, with its decimal point
+    return text.rstrip("0").rstrip(".") if "." in text else text
+
+
+#: a number in e-notation inside a sentence (1.2e-05, 9e+03)
+_E_NUMBER = re.compile(r"(?<![\w.])([+-]?)(\d+(?:\.(\d+))?)[eE]([+-]?\d+)\b")
+
+
+def plain_text(text: Any) -> str:
+    """``text`` with every number in e-notation written out in fixed-point with its significant digits (the
+    sentences of the identification and the verdict are made for logs; a person reads them without exponents)."""
+    def fixed(m: re.Match) -> str:
+        digits = len((m.group(2) or "").replace(".", "").lstrip("0")) or 1
+        return m.group(1) + _plain_g(float(m.group(2) + "e" + m.group(4)), f".{digits}g")
+
+    return _E_NUMBER.sub(fixed, str(text)) if text is not None else MISSING
+
+
+def number(v: Any, spec: str | int = ".6g") -> str:
+    """A number as text, never in e-notation (a "g" spec keeps its significant digits in fixed-point; an int:
+    that many decimals); None, NaN, ±inf and non-numbers that are not text become "–"."""
     if v is None or isinstance(v, bool):
         return MISSING
     if isinstance(v, (int, float)):
-        return format(v, spec) if math.isfinite(v) else MISSING
+        if not math.isfinite(v):
+            return MISSING
+        if isinstance(spec, int):
+            return f"{v:.{max(0, spec)}f}"
+        return _plain_g(float(v), spec) if spec.endswith("g") else format(v, spec)
     return str(v)
 
 
-def inertia(v: Any, unit: str = SI, spec: str = ".7g") -> str:
-    """``v`` kg·m² written in ``unit`` with the unit ("–" without a value)."""
+def inertia(v: Any, unit: str = SI, spec: str | int = ".7g") -> str:
+    """``v`` kg·m² written in ``unit`` with the unit ("–" without a value); ``spec``: significant digits as a
+    "g" spec, or an int: decimals (a recipe's, ``places``)."""
     shown = from_si(v, unit) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
-    return MISSING if shown is None else f"{format(shown, spec)} {unit}"
+    return MISSING if shown is None else f"{number(shown, spec)} {unit}"
+
+
+def places(recipe: Mapping[str, Any] | None, unit: str = SI, U: float | None = None) -> int:
+    """Decimals a person reads a value of ``recipe`` with in ``unit``: the recipe's ``display_decimals``, else
+    those that resolve a hundredth of its tolerance; without a tolerance, those of U to two significant digits
+    (else seven significant digits)."""
+    r = recipe or {}
+    given = r.get("display_decimals")
+    if isinstance(given, int) and not isinstance(given, bool):
+        return given
+    f = from_si(1.0, unit) or 1.0
+    step = None
+    if r.get("upper") is not None and r.get("nominal") is not None:
+        step = abs(float(r["upper"]) - float(r["nominal"])) * f / 100.0
+    elif U is not None and math.isfinite(U) and U > 0:
+        step = U * f / 10.0
+    if not step:
+        return 6
+    return max(0, min(12, int(math.ceil(-math.log10(step) - 1e-9))))
 
 
 def iso(ts: float | None) -> str:
-    """Unix time (s) as ISO 8601 with its UTC offset, to the second ("–" without one)."""
+    """Unix time (s) as ISO 8601 with its UTC offset, to the second ("–" without one): exports and APIs."""
     if ts is None or not math.isfinite(ts):
         return MISSING
     return dt.datetime.fromtimestamp(ts, dt.UTC).isoformat(timespec="seconds")
+
+
+#: how a person reads a time on the pages unless [web] time_format says otherwise (local time)
+TIME_FORMAT = "%Y-%m-%d %H:%M:%S"
+
+
+def local_time(ts: float | None, fmt: str = TIME_FORMAT) -> str:
+    """Unix time (s) as the appliance's local time in ``fmt`` (strftime), "–" without one: what a person reads."""
+    if ts is None or not isinstance(ts, (int, float)) or not math.isfinite(ts):
+        return MISSING
+    return dt.datetime.fromtimestamp(ts).astimezone().strftime(fmt)
+
+
+def judgement(view: Mapping[str, Any], unit: str = SI) -> dict[str, Any] | None:
+    """Why a part has its verdict, in the recipe's decimals: nominal, limits, the deviation from the nominal in %
+    and where the value lies ("below LSL", "within the limits", ...); None without limits or value."""
+    r = view.get("recipe") or {}
+    value, U = view.get("value"), view.get("U")
+    if r.get("lower") is None or r.get("upper") is None or r.get("nominal") is None:
+        return None
+    n = places(r, unit, U)
+    lsl, usl, nominal = float(r["lower"]), float(r["upper"]), float(r["nominal"])
+    out: dict[str, Any] = {"places": n, "nominal": inertia(nominal, unit, n),
+                           "limits": f"{inertia(lsl, unit, n)} … {inertia(usl, unit, n)}",
+                           "tolerance": inertia(usl - nominal, unit, n), "deviation": None, "where": None}
+    if not isinstance(value, (int, float)) or not math.isfinite(value):
+        return out
+    u = float(U) if isinstance(U, (int, float)) and math.isfinite(U) else 0.0
+    if value < lsl:
+        where = "below LSL"
+    elif value > usl:
+        where = "above USL"
+    elif u and value - u < lsl:
+        where = "within the limits, but U reaches below LSL"
+    elif u and value + u > usl:
+        where = "within the limits, but U reaches above USL"
+    else:
+        where = "within the limits"
+    out.update(deviation=f"{number(100.0 * (value - nominal) / nominal, '+.1f').replace('-', '−')} %", where=where)
+    return out
 
 
 def display_unit(payload: Mapping[str, Any] | None, default: str = SI) -> str:
@@ -49,6 +141,20 @@ def display_unit(payload: Mapping[str, Any] | None, default: str = SI) -> str:
         return inertia_unit(recipe.get("display_unit") or default)
     except UnitError:  # a unit this version does not know (a newer recipe): SI
         return SI
+
+
+def plot_labels(stored: Any, simulated: bool, default_unit: str = SI) -> tuple[str, str | None]:
+    """(unit, title source) of a result's plot: its recipe's display unit, and "measurement #N" with the sensor
+    that took it (the simulated rig said as such, whatever sensor it imitates)."""
+    payload = getattr(stored, "payload", None) or {}
+    unit = display_unit(payload, default_unit)
+    seq = getattr(stored, "seq", None)
+    acquisition = payload.get("acquisition") or {}
+    sensor = "simulated rig" if simulated else next((k for k in ("camera", "encoder") if k in acquisition),
+                                                    payload.get("source") or "sensor")
+    part = payload.get("part_id")
+    head = f"measurement #{seq}" if seq is not None else "measurement"
+    return unit, f"{head}{f', part {part}' if part else ''}, {sensor}"
 
 
 def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -71,10 +177,10 @@ def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
         out.update(kind="part", verdict=part.get("verdict"), value=part.get("value"), U=part.get("U"), k=k,
                    quantity=part.get("quantity") or (recipe or {}).get("quantity"),
                    used=len(part.get("used") or ()), releases=part.get("releases"),
-                   excluded=[{"release": int(e.get("index", 0)) + 1, "reason": e.get("reason") or ""}
+                   excluded=[{"release": int(e.get("index", 0)) + 1, "reason": plain_text(e.get("reason") or "")}
                              for e in part.get("excluded") or ()],
                    # the exclusions are listed once (the part's reasons repeat them after "release N:")
-                   reasons=[r for r in part.get("reasons") or () if not str(r).startswith("release ")],
+                   reasons=[plain_text(r) for r in part.get("reasons") or () if not str(r).startswith("release ")],
                    zone=part.get("zone"))
     elif release is not None:
         out.update(kind="release", verdict=None, value=release.get("value"), U=release.get("U"), k=k,
@@ -189,10 +295,22 @@ def shift_start(starts: Sequence[str], now: dt.datetime) -> dt.datetime:
 
 
 # --- control charts as SVG -----------------------------------------------------------------------------------------
-def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: float = 300.0) -> dict[str, Any]:
+#: the run rules in words, with the rule's number in the Western Electric handbook (WE) and in Nelson (1984)
+RULE_WORDS = {
+    "beyond_limits": "a point beyond the 3σ control limits (WE 1, Nelson 1)",
+    "run_of_8": "8 points in a row on one side of the centre line (Nelson 2)",
+    "trend_of_6": "6 points in a row steadily rising or falling (Nelson 3)",
+    "2_of_3_beyond_2sigma": "2 of 3 points in a row beyond 2σ on one side (WE 2, Nelson 5)",
+    "range_beyond_limits": "a range beyond its control limits: the spread within a part changed",
+}
+
+
+def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: float = 300.0,
+                  names: Sequence[str] = ()) -> dict[str, Any]:
     """An SPC summary (``measurement.spc.SpcSummary``) as SVG geometry: the points (violations marked), the
     centre line and the control limits, the specification limits when they are near enough not to flatten
-    the chart (else named as off the chart), each labelled on the right; the ranges below. Values in ``unit``."""
+    the chart (else named as off the chart), each labelled on the right; the ranges below, theirs marked too.
+    ``names``: what each point is called (serial and time), else "part N". Values in ``unit``."""
     s = summary
     f = from_si(1.0, unit) or 1.0
     pts = [float(v) * f for v in s.points]
@@ -207,18 +325,29 @@ def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: fl
             lines.append((name, v, "spec"))
         else:
             off_chart.append(f"{name} {_plain(v, width_cl)} {unit} ({'above' if v > s.ucl * f else 'below'} the chart)")
+    label = [names[i] if i < len(names) and names[i] else f"part {i + 1}" for i in range(len(pts))]
+    first = 1 if s.subgroup == 1 else 0  # a moving range starts at the second part
+    range_bad = {i + first for i, r in enumerate(s.ranges)
+                 if r > s.range_ucl or (s.range_lcl > 0 and r < s.range_lcl)}
+    # one entry per point, every rule it breaks (the point beyond the limits is one rule, said once)
+    broken: dict[int, list[str]] = {}
+    for i, rule in sorted({(v.index, v.rule) for v in s.violations} | {(i, "beyond_limits") for i in s.outside}):
+        broken.setdefault(i, []).append(RULE_WORDS.get(rule, rule))
+    for i in sorted(range_bad):
+        broken.setdefault(i, []).append(RULE_WORDS["range_beyond_limits"])
     bad = {v.index for v in s.violations} | set(s.outside)
-    rules = sorted({(v.index, v.rule) for v in s.violations} | {(i, "outside the control limits") for i in s.outside})
-    top = _panel(pts, lines, bad, width, height, width_cl)
+    top = _panel(pts, lines, bad, width, height, width_cl, names=label)
     f_r = [float(r) * f for r in s.ranges]
-    r_lines = [("R̄", s.range_mean * f, "centre"), ("UCL", s.range_ucl * f, "limit")]
+    rname = {"Xbar-S": "S̄"}.get(s.chart, "R̄")
+    r_lines = [(rname, s.range_mean * f, "centre"), ("UCL", s.range_ucl * f, "limit")]
     if s.range_lcl > 0:
         r_lines.append(("LCL", s.range_lcl * f, "limit"))
-    first = 1 if s.subgroup == 1 else 0  # a moving range starts at the second part
-    bottom = _panel(f_r, r_lines, set(), width, height * 0.6, max(s.range_ucl * f, 1e-300), x_offset=first,
-                    n_total=len(pts))
-    return {"top": top, "bottom": bottom, "rules": [(i + 1, r) for i, r in rules], "off_chart": off_chart,
-            "range_name": "moving range" if s.subgroup == 1 else f"range (n = {s.subgroup})"}
+    bottom = _panel(f_r, r_lines, range_bad, width, height * 0.6, max(s.range_ucl * f, 1e-300), x_offset=first,
+                    n_total=len(pts), names=label, floor=0.0)
+    range_name = ("moving range" if s.subgroup == 1 else
+                  f"standard deviation (n = {s.subgroup})" if s.chart == "Xbar-S" else f"range (n = {s.subgroup})")
+    return {"top": top, "bottom": bottom, "rules": [(label[i], words) for i, words in sorted(broken.items())],
+            "off_chart": off_chart, "range_name": range_name}
 
 
 def _plain(v: float, spread: float) -> str:
@@ -228,8 +357,10 @@ def _plain(v: float, spread: float) -> str:
 
 
 def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad: set[int], width: float,
-           height: float, spread: float, x_offset: int = 0, n_total: int | None = None) -> dict[str, Any]:
-    left, right, top, bottom = 90.0, 170.0, 12.0, 26.0
+           height: float, spread: float, x_offset: int = 0, n_total: int | None = None,
+           names: Sequence[str] = (), floor: float | None = None) -> dict[str, Any]:
+    narrow = width < 500  # a phone's chart: narrower margins, labels as readable
+    left, right, top, bottom = (62.0, 92.0, 12.0, 26.0) if narrow else (90.0, 170.0, 12.0, 26.0)
     n = n_total or len(values)
     ys = list(values) + [v for _, v, _ in lines]
     lo, hi = (min(ys), max(ys)) if ys else (0.0, 1.0)
@@ -237,6 +368,8 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
         lo, hi = lo - 1.0, hi + 1.0
     margin = 0.08 * (hi - lo)
     lo, hi = lo - margin, hi + margin
+    if floor is not None:
+        lo = max(lo, floor)  # a range is never below zero: neither is its axis
 
     def X(i: int) -> float:
         return round(left + (i + 0.5) / max(n, 1) * (width - left - right), 1)
@@ -244,7 +377,8 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
     def Y(v: float) -> float:
         return round(top + (hi - v) / (hi - lo) * (height - top - bottom), 1)
 
-    points = [(X(i + x_offset), Y(v), (i + x_offset) in bad, i + x_offset + 1, _plain(v, spread))
+    points = [(X(i + x_offset), Y(v), (i + x_offset) in bad,
+               names[i + x_offset] if i + x_offset < len(names) else f"part {i + x_offset + 1}", _plain(v, spread))
               for i, v in enumerate(values)]
     drawn = [(name, Y(v), kind, f"{name} {_plain(v, spread)}") for name, v, kind in lines]
     # labels at least 13 px apart, in the order of their lines, kept inside the panel
@@ -259,7 +393,7 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
             ys_l[i] = max(ys_l[i], ys_l[i - 1] + 13.0)
     labels = [(y + 4, kind, text) for y, (_n, _y, kind, text) in zip(ys_l, order)]
     ticks = [(Y(lo + (hi - lo) * i / 4), _plain(lo + (hi - lo) * i / 4, (hi - lo) * 5)) for i in range(5)]
-    step = max(1, n // 10)
+    step = max(1, n // (5 if narrow else 10))
     xticks = [(X(i), str(i + 1)) for i in range(0, n, step)]
     return {"width": width, "height": height, "left": left, "right": width - right, "top": top,
             "bottom": height - bottom, "points": points, "lines": drawn, "labels": labels, "yticks": ticks,

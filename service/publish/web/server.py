@@ -183,9 +183,9 @@ class WebServer(Publisher):
 
     def on_result(self, stored: Any, measurement: "Measurement") -> None:
         """A measurement was stored: draw its plot once, in the plot worker, and keep it with it."""
-        self.measurement_stored(measurement)
+        self.measurement_stored(measurement, stored)
 
-    def measurement_stored(self, m: "Measurement") -> None:
+    def measurement_stored(self, m: "Measurement", stored: Any = None) -> None:
         self._keep_fit(m)
         with self._plots_lock:
             behind = len(self._plots)
@@ -199,7 +199,10 @@ class WebServer(Publisher):
             # matplotlib holds the interpreter lock for a good part of a second: in the child process, where
             # it cannot delay the sensor's reader of the next capture
             from service.publish.plot import render_png
-            return self.child.call(render_png, m.result)
+
+            from .quality import plot_labels
+            unit, source = plot_labels(stored, self.appliance.config.simulated, self.settings.display_unit)
+            return self.child.call(render_png, m.result, unit=unit, source=source)
 
         self.submit_plot(m.id, draw)
 

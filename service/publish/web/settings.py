@@ -40,6 +40,8 @@ class WebSettings:
     max_streams: int = 16
     max_streams_per_client: int = 4
     stream_lifetime: float = 600.0
+    time_format: str = "%Y-%m-%d %H:%M:%S"
+    contact: str = "the quality engineer on shift"
 
 
 #: each key of the configuration's ``[web]`` table: what it means, its unit and its limits (the table is
@@ -65,6 +67,10 @@ KEYS: dict[str, dict] = {
     "max_streams_per_client": dict(doc="live streams at once from one address", min=1, max=256),
     "stream_lifetime": dict(doc="a live stream ends after this long (the browser opens a new one by itself), s",
                             min=1.0, max=86400.0),
+    "time_format": dict(doc="how the pages write a time a person reads: strftime codes, the appliance's local "
+                        "time (exports and the JSON API keep ISO 8601 with the UTC offset)"),
+    "contact": dict(doc="whom the operator calls when the calibration is due or a check standard failed, "
+                    "e.g. \"quality lab, ext. 2345\" (said on the banner that refuses Measure)"),
 }
 
 
@@ -77,6 +83,8 @@ def _check(w: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
     for hm in w["shift_starts"]:
         if not _HHMM.fullmatch(str(hm)):
             raise fail("shift_starts", f"expected times HH:MM (00:00 … 23:59), got {hm!r}")
+    if "%" not in w["time_format"] or len(w["time_format"]) > 64:
+        raise fail("time_format", f"expected strftime codes such as \"%d.%m.%Y %H:%M\", got {w['time_format']!r}")
 
 
 #: the configuration's ``[web]`` table: on (with its defaults) without the table

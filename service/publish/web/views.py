@@ -32,6 +32,7 @@ from .live import Live, extras
 from .settings import PLOT_NAME
 from measurement.flags import FLAGS
 
+from service.parts.recipes import PART_ID_LENGTH
 from .words import STATE_WORDS, flag_words
 from service.states import vocabulary
 from . import quality as Q
@@ -70,6 +71,8 @@ TICK = 0.25
 MAX_PAGE = 10**9
 #: the latest parts an SPC page charts at most
 SPC_POINTS = 500
+#: the control charts the SPC page draws
+CHARTS = ("auto", "I-MR", "Xbar-R", "Xbar-S")
 #: keys whose values the set-up page never shows
 SECRET_WORDS = ("password", "token", "secret")
 
@@ -136,12 +139,13 @@ class Views:
         self.env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")),
                                       autoescape=jinja2.select_autoescape(["html"]), trim_blocks=True,
                                       lstrip_blocks=True)
-        self.env.filters.update(fmt=Q.number, name=_name, inertia=Q.inertia, iso=Q.iso)
+        self.env.filters.update(fmt=Q.number, name=_name, inertia=Q.inertia, iso=Q.iso, when=self.when,
+                                plain=Q.plain_text)
         self._names = _own_names(server.settings.server_names)
         self.capture_first = CaptureFirst(lambda: sensor_is_read(self.app))
         # file names carry a hash of the content: a browser never keeps a stale script after an update
         stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
-        self.env.globals.update(version=__version__, STATE_WORDS=STATE_WORDS, VERDICT_WORDS=Q.VERDICT_WORDS,
+        self.env.globals.update(version=__version__, PART_ID_LENGTH=PART_ID_LENGTH, allowed=allowed, STATE_WORDS=STATE_WORDS, VERDICT_WORDS=Q.VERDICT_WORDS,
                                 states_json=json.dumps(vocabulary(), separators=(",", ":")),
                                 static_url=lambda name: f"/static/{name}?v={stamps.get(name, '')}")
 
@@ -172,6 +176,8 @@ class Views:
         r.add_get("/api/set", self.api_set)
         r.add_post("/api/set/{action}", self.set_action)
         r.add_get("/setup", self.setup)
+        r.add_get("/recipes", self.recipes)
+        r.add_get("/calibration", self.calibration)
         r.add_get("/api/health", self.api_health)
         r.add_get("/api/angle", self.api_angle)
         r.add_get("/setup/snapshot.png", self.snapshot)
@@ -244,14 +250,15 @@ class Views:
         return Q.display_unit(payload, self.server.settings.display_unit)
 
     def summary(self) -> dict[str, Any]:
-        """Home's verdict tile (the last completed part: it stays until the next one), the shift's counters, the
-        last parts, the part in progress and the calibration."""
+        """Home: the operator's panel (the part in hand: ready, in progress or its verdict; a calibration that
+        refuses Measure), the shift's counters, the last parts and the calibration."""
         store = self.app.store
         now = dt.datetime.now().astimezone()
         shift = Q.shift_start(self.server.settings.shift_starts, now)
         parts = store.list(limit=12, parts_only=True, full=True) if store is not None else []
         last = store.latest("ok") if store is not None else None
         counts = store.verdict_counts(since=shift.timestamp()) if store is not None else {}
+        live = extras(self.app)
         tracker = getattr(self.app, "parts", None)
         open_part = tracker.open_part if tracker is not None else None
         calibration = self.app.calibration_state()  # as the next result will be judged
@@ -259,20 +266,68 @@ class Views:
             until = dt.date.fromisoformat(calibration["valid_until"])
             calibration = {**calibration, "days_left": (until - dt.datetime.now(dt.UTC).date()).days}
         tile = parts[0] if parts else None
-        return {"tile": tile, "tile_view": Q.part_view(tile.payload) if tile else None,
-                "tile_unit": self.unit(tile.payload if tile else None), "counts": counts,
+        tile_view = Q.part_view(tile.payload) if tile else None
+        tile_unit = self.unit(tile.payload if tile else None)
+        part_id = live.get("part_id")
+        # the verdict is shown big only for the part that owns it: none in progress, and no other part ID set
+        if open_part and open_part.get("done"):
+            mode = "progress"
+        elif tile is not None and (not part_id or part_id == tile.part_id):
+            mode = "verdict"
+        else:
+            mode = "ready"
+        why = Q.judgement(tile_view, tile_unit) if tile_view else None
+        return {"tile": tile, "tile_view": tile_view, "tile_unit": tile_unit, "counts": counts,
+                "tile_places": Q.places((tile_view or {}).get("recipe"), tile_unit, (tile_view or {}).get("U")),
+                "why": why, "tile_band": Q.band(tile_view["recipe"], tile_view.get("value"), tile_view.get("U"),
+                                                tile_unit) if tile_view else None,
+                "mode": mode, "part_id": part_id, "recipe": live.get("recipe"),
+                "repeat": bool(tile is not None and part_id and part_id == tile.part_id and mode == "verdict"),
                 "shift": shift.strftime("%H:%M"), "strip": parts, "open_part": open_part,
-                "next_release": extras(self.app).get("release_next"),
+                "next_release": live.get("release_next"), "blocked": self.blocked(calibration),
                 "calibration": calibration, "last": last, "last_view": Q.part_view(last.payload) if last else None,
                 "last_unit": self.unit(last.payload if last else None)}
 
+    def blocked(self, calibration: Mapping[str, Any] | None) -> dict[str, str] | None:
+        """Why the page refuses Measure, what to do and whom to call (a due calibration or a failed check
+        standard: every part would be INVALID, and measuring again cannot change that); None when it may."""
+        if not calibration or not calibration.get("due"):
+            return None
+        recipe = getattr(getattr(self.app, "parts", None), "recipe", None)
+        if recipe is not None and recipe.check_standard is not None:
+            return None  # the check standard is what clears a failed one: it is always measured
+        contact = self.server.settings.contact
+        check = calibration.get("check_standard") or {}
+        if check and not check.get("passed"):
+            what = (f"The check standard {check.get('name') or ''} failed (E_n = {Q.number(check.get('E_n'), '.2g')}, "
+                    f"{self.when(check.get('finished_at'))}): the rig no longer measures within its uncertainty.")
+            do = f"Do not measure parts. Call {contact} to find the cause and measure the check standard again."
+        else:
+            what = f"The rig's calibration expired on {calibration.get('valid_until') or '–'}."
+            do = (f"Do not measure parts: every result would be INVALID, and measuring again cannot change that. "
+                  f"Call {contact} to calibrate the rig.")
+        return {"what": what, "do": do}
+
+    def when(self, ts: float | None) -> str:
+        """A time as a person reads it on the pages: local, in [web] time_format."""
+        return Q.local_time(ts, self.server.settings.time_format)
+
+    async def _summary(self) -> dict[str, Any]:
+        """``summary()`` with the running tensor set's orientation to mount (read on the main loop, which owns it)."""
+        progress = await asyncio.wrap_future(self.app.call_soon(self.app.set_progress))
+        s = self.summary()
+        if progress is not None and progress.get("status") == "running" and progress.get("orientation"):
+            o = progress["orientation"]
+            s.update(mode="set", set=progress, drawing=axes_drawing(o["axis"], o.get("offset"), size=150))
+        return s
+
     async def home(self, request: web.Request) -> web.Response:
-        return self._page(request, "home.html", title="Home", state=self.live.snapshot(), s=self.summary(),
+        return self._page(request, "home.html", title="Home", state=self.live.snapshot(), s=await self._summary(),
                           recipes=self.app.parts.book.recipes)
 
     async def home_summary(self, request: web.Request) -> web.Response:
-        """Home's verdict tile, counters and last parts alone (the page fetches it after each result)."""
-        html = self.env.get_template("summary.html").render(s=self.summary())
+        """Home's operator panel, counters and last parts alone (the page fetches it after each result)."""
+        html = self.env.get_template("summary.html").render(s=await self._summary())
         return web.Response(text=html, content_type="text/html", headers={"Cache-Control": "no-store"})
 
     async def api_state(self, request: web.Request) -> web.Response:
@@ -343,9 +398,13 @@ class Views:
         made = self.server.guard.login(str(form.get("token") or ""), user or None)
         if made is None:
             await self.server.guard.wrong_token(request.remote)  # a guess costs time
-            if user:
-                raise Refused(401, "wrong user name or password")
-            raise Refused(401, "wrong token: it is the first line of the appliance's web token file")
+            why = ("wrong user name or password" if user else
+                   "wrong token: it is the first line of the appliance's web token file")
+            if _wants_json(request):
+                raise Refused(401, why)
+            # the form again, with what was typed (not the password) and the error beside it
+            return self._page(request, "login.html", status=401, title="Log in", login_error=why,
+                              login_user=user[:64], login_next=self._next(request, str(form.get("next") or "")))
         sid, _ = made
         resp = web.HTTPSeeOther(self._next(request, str(form.get("next") or "")))
         resp.set_cookie(COOKIE, sid, max_age=int(SESSION_LIFETIME), httponly=True, samesite="Strict", path="/")
@@ -390,6 +449,10 @@ class Views:
         state = self.app.live_status().state
         source = await self._authorise(request, form, "acknowledge" if name == V.ABORT and state == "FAULT" else name)
         seq = self.app.sequencer
+        if name == V.TRIGGER:
+            blocked = self.blocked(self.app.calibration_state())
+            if blocked is not None:
+                raise Refused(409, f"{blocked['what']} {blocked['do']}")
         if name == V.TRIGGER and seq is not None and seq.busy:
             # said, not queued and silently dropped: the sequencer takes no trigger while it measures
             raise Refused(409, f"a measurement is already running ({state}): Measure again when it is IDLE")
@@ -447,7 +510,7 @@ class Views:
         o = (progress or {}).get("orientation")
         drawing = axes_drawing(o["axis"], o.get("offset")) if o else None
         return self._page(request, "tensor_set.html", title="Tensor set", progress=progress, latest=latest,
-                          drawing=drawing)
+                          drawing=drawing, s=self.summary())
 
     async def api_set(self, request: web.Request) -> web.Response:
         progress, latest = await self._set_state()
@@ -502,7 +565,9 @@ class Views:
             done = next((r for r in later if r.part_uuid == m.part_uuid), None)
             view["part_done"] = {"uuid": done.uuid, "seq": done.seq, "verdict": done.part_verdict} if done else None
         return {"m": m, "p": p, "unit": unit, "v": view, "band": Q.band(view["recipe"], view.get("value"),
-                                                                           view.get("U"), unit)}
+                                                                           view.get("U"), unit),
+                "places": Q.places(view["recipe"], unit, view.get("U") or view.get("std")),
+                "why": Q.judgement(view, unit) if view["kind"] == "part" else None}
 
     async def fit_json(self, request: web.Request) -> web.Response:
         """The fit and its residual of one of the latest results (the live page draws them over the swing)."""
@@ -530,7 +595,7 @@ class Views:
         if fut is not None:  # the evidence plot is being drawn: the report has it
             await asyncio.wrap_future(fut)
         body = await self._in_child(report_file, str(self.app.config.state_dir), m.uuid,
-                                    self.server.settings.display_unit)
+                                    self.server.settings.display_unit, self.server.settings.time_format)
         return web.Response(body=body, content_type="application/pdf", headers={
             "Content-Disposition": f'attachment; filename="moi-{m.seq}-{m.uuid[:8]}-report.pdf"'})
 
@@ -548,7 +613,8 @@ class Views:
             if not self._store().has_trace(m.uuid):
                 raise Refused(404, f"measurement {m.seq} has no plot and no stored trace to draw one from")
             cfg = self.app.config
-            job = (replot, str(cfg.state_dir), m.uuid, cfg.rig.to_dict(), cfg.identification)
+            job = (replot, str(cfg.state_dir), m.uuid, cfg.rig.to_dict(), cfg.identification, cfg.simulated,
+                   self.server.settings.display_unit)
             await asyncio.wrap_future(self.server.submit_plot(m.uuid, lambda: self.server.child.call(*job)))
             got = self._store().get_attachment(m.uuid, PLOT_NAME)
         data, media = got
@@ -646,34 +712,43 @@ class Views:
             body = await self._in_child(export_file, str(self.app.config.state_dir), fmt, filters)
         except InputFileError as exc:  # no parts of that recipe
             raise Refused(404, str(exc)) from None
+        if fmt == "csv":  # a byte-order mark: Excel on Windows reads the file as UTF-8 (kg·m², not kgÂ·mÂ²)
+            body = "\ufeff".encode() + body
         media = {"json": "application/json", "csv": "text/csv", "dfq": "text/plain"}[fmt]
         return web.Response(body=body, content_type=media, charset="utf-8" if fmt != "dfq" else ENCODING,
                             headers={"Content-Disposition": content_disposition(name)})
 
     # --- SPC ---------------------------------------------------------------------------------------------------
     async def spc(self, request: web.Request) -> web.Response:
-        """Control chart (I-MR or X̄–R) of one recipe's part values, Cp/Cpk, rule violations marked."""
+        """Control chart (I-MR, X̄–R or X̄–S) of one recipe's part values, Cp/Cpk with their confidence interval, rule
+        violations marked and said in words."""
         from measurement.errors import InvalidInput
+        from measurement.spc import SMALL_SAMPLE, capability_interval
 
         from service.parts.recipes import recipe_spc
 
         filters = self._filters(request)
         chart = request.query.get("chart", "auto")
-        if chart not in ("auto", "I-MR", "Xbar-R"):
-            raise Refused(400, f"chart={chart[:20]!r}: expected auto, I-MR or Xbar-R")
+        if chart not in CHARTS:
+            raise Refused(400, f"chart={chart[:20]!r}: expected {', '.join(CHARTS)}")
         store = self.app.store
         recipes = store.recipes() if store is not None else []
         recipe = request.query.get("recipe", "").strip() or (recipes[-1] if recipes else "")
         if recipe and recipe not in recipes:
             raise Refused(404, f"no completed parts of recipe {recipe[:64]!r} in the store")
-        result = None
+        result, note = None, None
         if recipe:
             loop = asyncio.get_running_loop()
+
+            def compute(kind: str):
+                return recipe_spc(store, recipe, since=filters["since"], until=filters["until"], chart=kind,
+                                  limit=SPC_POINTS)
             try:
-                result = await loop.run_in_executor(None, lambda: recipe_spc(
-                    store, recipe, since=filters["since"], until=filters["until"], chart=chart, limit=SPC_POINTS))
-            except InvalidInput as exc:  # e.g. X̄–R asked of parts with one release each
-                raise Refused(400, f"chart={chart}: {exc}") from None
+                result = await loop.run_in_executor(None, compute, chart)
+            except InvalidInput as exc:  # subgroups of unequal size (a release excluded), or of one release
+                note = (f"{chart} cannot be drawn from these parts ({exc}): every part needs the same number of "
+                        "usable releases. Shown as I-MR of the part values instead.")
+                result = await loop.run_in_executor(None, compute, "I-MR")
         unit = self.server.settings.display_unit
         book = getattr(self.app, "parts", None)
         if book is not None and recipe:
@@ -681,20 +756,76 @@ class Views:
                 unit = book.book.find(recipe).display_unit or unit
             except InvalidInput:  # a recipe in the store that is no longer in the directory: the set-up's unit
                 pass
-        chart_svg = Q.control_chart(result.summary, unit) if result is not None else None
+        charts = capability = None
+        if result is not None:
+            names = [f"{p or '(no ID)'} {self.when(t)}" for p, t in zip(result.parts, result.finished)]
+            charts = {w: Q.control_chart(result.summary, unit, width=w, names=names) for w in (720.0, 380.0)}
+            s = result.summary
+            values = s.n_points * s.subgroup
+            capability = {"interval": capability_interval(s.cp, s.cpk, values), "values": values,
+                          "small": values < SMALL_SAMPLE, "small_sample": SMALL_SAMPLE}
         q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
-        # the check standard's history (`moi check-standard`): its values as individuals, oldest first
+        checks, check_chart = self._checks(filters, unit)
+        return self._page(request, "spc.html", title="SPC", recipes=recipes, recipe=recipe, spc=result,
+                          chart=charts[720.0] if charts else None, narrow=charts[380.0] if charts else None,
+                          note=note, capability=capability, charts=CHARTS, unit=unit, q=q,
+                          checks=checks[-10:][::-1], check_chart=check_chart)
+
+    def _checks(self, filters: Mapping[str, Any], unit: str) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+        """The check standard's history (`moi check-standard`) in the period, oldest first, and its control chart
+        (individuals) from two checks on."""
+        store = self.app.store
         checks = [c for c in reversed(store.check_standards(limit=SPC_POINTS) if store is not None else [])
                   if isinstance(c.get("value"), (int, float))
-                  and (filters["since"] is None or c["finished_at"] >= filters["since"])
-                  and (filters["until"] is None or c["finished_at"] < filters["until"])]
+                  and (filters.get("since") is None or c["finished_at"] >= filters["since"])
+                  and (filters.get("until") is None or c["finished_at"] < filters["until"])]
         check_chart = None
         if len(checks) >= 2:
             from measurement.spc import individuals
 
-            check_chart = Q.control_chart(individuals([float(c["value"]) for c in checks]), unit)
-        return self._page(request, "spc.html", title="SPC", recipes=recipes, recipe=recipe, spc=result,
-                          chart=chart_svg, unit=unit, q=q, checks=checks[-10:][::-1], check_chart=check_chart)
+            summary = individuals([float(c["value"]) for c in checks])
+            names = [f"{c.get('name') or 'check'} {self.when(c['finished_at'])}" for c in checks]
+            check_chart = {kind: Q.control_chart(summary, unit, width=w, names=names)
+                           for kind, w in (("wide", 720.0), ("narrow", 380.0))}
+        return checks, check_chart
+
+    async def calibration(self, request: web.Request) -> web.Response:
+        """Each rig's calibration (date, due date, stiffness, the references it rests on) and the check
+        standard's history with its control chart."""
+        cfg = self.app.config
+        book = getattr(self.app, "parts", None)
+        rigs: list[tuple[str, Any, list[str]]] = [("the set-up's rig", cfg.rig, [])]
+        for r in book.book.recipes if book is not None else ():
+            if r.rig is not None:
+                rigs.append((Path(r.rig_path).name if r.rig_path else r.name, r.rig, [r.name]))
+        today = dt.datetime.now(dt.UTC).date()
+        rows = []
+        for name, rig, used_by in rigs:
+            cal = rig.calibration
+            until = cal.valid_until if cal is not None else None
+            rows.append({"name": name, "used_by": used_by, "cal": cal, "until": until,
+                         "days_left": (until - today).days if until is not None else None,
+                         "due": cal is not None and cal.due(today), "stiffness": rig.stiffness,
+                         "stiffness_std": rig.stiffness_std})
+        unit = self.server.settings.display_unit
+        checks, check_chart = self._checks({}, unit)
+        return self._page(request, "calibration.html", title="Calibration", rows=rows, unit=unit,
+                          checks=checks[-20:][::-1], check_chart=check_chart, state=self.app.calibration_state(),
+                          blocked=self.blocked(self.app.calibration_state()))
+
+    # --- recipes and calibration ---------------------------------------------------------------------------
+    async def recipes(self, request: web.Request) -> web.Response:
+        """Every recipe as a quality engineer reads it before measuring: nominal, tolerance, limits, releases,
+        decision rule and quality rules, in the recipe's unit and decimals."""
+        book = getattr(self.app, "parts", None)
+        rows = []
+        active = getattr(book, "recipe", None)
+        for r in book.book.recipes if book is not None else ():
+            d = r.to_dict()
+            unit = Q.display_unit({"recipe": d}, self.server.settings.display_unit)
+            rows.append({"r": d, "unit": unit, "places": Q.places(d, unit), "active": active is not None
+                         and active.name == r.name, "rig": Path(r.rig_path).name if r.rig_path else None})
+        return self._page(request, "recipes.html", title="Recipes", rows=rows)
 
     # --- set-up -----------------------------------------------------------------------------------------
     def health(self) -> dict[str, Any]:
@@ -724,9 +855,12 @@ class Views:
     async def setup(self, request: web.Request) -> web.Response:
         cfg = self.app.config
         sensor = "camera" if self._camera() is not None else "encoder"
+        devices = self.app.devices
+        readable = devices is not None and getattr(devices.sensor, "read_position", None) is not None
+        logged_in = self.server.guard.session(request.cookies.get(COOKIE)) is not None
         return self._page(request, "setup.html", title="Set-up", health=self.health(),
-                          config_json=json.dumps(mask(cfg.to_dict()), indent=2, default=str), sensor=sensor,
-                          web=self.server.stats())
+                          config=setup_words(mask(cfg.to_dict()), shown_paths=logged_in), sensor=sensor,
+                          readable=readable, web=self.server.stats())
 
     def _camera(self):
         cfg = self.app.config
@@ -779,23 +913,87 @@ class Views:
         return web.Response(body=png, content_type="image/png", headers={"Cache-Control": "no-store"})
 
 
+#: keys whose values name a file or a folder on the appliance: shown only to someone logged in
+PATH_WORDS = ("file", "dir", "path", "port_name", "device")
+
+
+def _words(v: Any) -> str:
+    """A set-up value as a person reads it: yes/no, "not set", numbers without exponents, lists joined."""
+    if v is None:
+        return "not set"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, (int, float)):
+        return Q.number(v, ".7g")
+    if isinstance(v, (list, tuple)):
+        return ", ".join(_words(x) for x in v) or "none"
+    return str(v)
+
+
+def setup_words(config: Mapping[str, Any], *, shown_paths: bool) -> list[tuple[str, list[tuple[str, str]]]]:
+    """The running configuration as (section, [(setting, value in words)]) for the set-up page: nested tables
+    flattened to "table › key", secrets already masked; without a login, paths are not shown."""
+    out: list[tuple[str, list[tuple[str, str]]]] = []
+
+    def walk(prefix: str, d: Mapping[str, Any], rows: list[tuple[str, str]]) -> None:
+        for k, v in d.items():
+            label = f"{prefix} › {k}" if prefix else str(k)
+            label = label.replace("_", " ")
+            if isinstance(v, Mapping):
+                walk(label, v, rows)
+            elif isinstance(v, (list, tuple)) and v and all(isinstance(x, Mapping) for x in v):
+                for i, x in enumerate(v, 1):
+                    walk(f"{label} {i}", x, rows)
+            elif not shown_paths and v and any(w in str(k).lower() for w in PATH_WORDS):
+                rows.append((label, "(shown after logging in)"))
+            else:
+                rows.append((label, _words(v)))
+
+    for section, d in config.items():
+        rows: list[tuple[str, str]] = []
+        if isinstance(d, Mapping):
+            walk("", d, rows)
+        else:
+            rows.append((str(section), _words(d) if shown_paths or not any(w in str(section) for w in PATH_WORDS)
+                         else "(shown after logging in)"))
+        out.append((str(section).replace("_", " "), rows))
+    return out
+
+
+#: the view the tensor set's drawing is seen from: azimuth and elevation, degrees. An isometric view (45°, 35.3°)
+#: would draw the axis [1, 1, 0] on top of z (both point at the viewer's vertical); from here no two of the
+#: usual six orientations (x, y, z, xy, xz, yz) are drawn within 25° of each other
+VIEW_AZIMUTH, VIEW_ELEVATION = 13.0, 28.0
+
+
+def project(v: Any) -> tuple[float, float]:
+    """A direction in the part's frame as seen on the drawing (right, up), from ``VIEW_AZIMUTH``/``VIEW_ELEVATION``."""
+    a, e = math.radians(VIEW_AZIMUTH), math.radians(VIEW_ELEVATION)
+    x, y, z = (float(t) for t in v)
+    right = -math.sin(a) * x + math.cos(a) * y
+    up = -math.sin(e) * math.cos(a) * x - math.sin(e) * math.sin(a) * y + math.cos(e) * z
+    return right, up
+
+
 def axes_drawing(axis: Any, offset: Any = None, size: int = 220) -> dict[str, Any]:
-    """A small isometric drawing of the part's frame and the swing axis (SVG coordinates, px): the part's
-    x, y, z as arrows from its centre of mass, the swing axis as a line through the point the offset gives."""
-    c30, s30 = math.cos(math.radians(30)), math.sin(math.radians(30))
+    """A small axonometric drawing of the part's frame and the swing axis (SVG coordinates, px): the part's
+    x, y, z as arrows from its centre of mass, the swing axis as a line along ``axis`` through the point the
+    offset gives (m from the centre of mass)."""
     half = size / 2
     scale = size * 0.32
 
     def at(v: Any) -> tuple[float, float]:
-        x, y, z = (float(t) for t in v)
-        return round(half + scale * (x - y) * c30, 1), round(half - scale * (z - (x + y) * s30), 1)
+        r, u = project(v)
+        return round(half + scale * r, 1), round(half - scale * u, 1)
 
     n = [float(t) for t in axis]
+    length = math.sqrt(sum(t * t for t in n)) or 1.0
+    n = [t / length for t in n]
     d = [float(t) for t in (offset or (0.0, 0.0, 0.0))]
     norm = math.sqrt(sum(t * t for t in d)) or 1.0
     # the swing axis passes the centre of mass at the offset (drawn at most half the frame's length away)
     p = [-t / norm * min(0.5, norm / 0.05) for t in d] if offset else [0.0, 0.0, 0.0]
-    a, b = at([p[i] - 1.3 * n[i] for i in range(3)]), at([p[i] + 1.3 * n[i] for i in range(3)])
+    a, b = at([p[i] - 1.2 * n[i] for i in range(3)]), at([p[i] + 1.2 * n[i] for i in range(3)])
     return {"size": size, "origin": at((0, 0, 0)),
             "frame": [("x", at((1, 0, 0))), ("y", at((0, 1, 0))), ("z", at((0, 0, 1)))],
             "axis": (a, b), "axis_label": b}

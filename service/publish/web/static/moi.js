@@ -8,19 +8,23 @@ var moi = (function () {
   function $(id) { return document.getElementById(id); }
   function say(text, bad) { var m = $("message"); if (m) { m.textContent = text; m.className = "message" + (bad ? " bad" : ""); } }
 
-  // POST an action with the session's CSRF token; the answer (or the refusal) is shown in words
-  function act(url, body) {
+  // POST an action with the session's CSRF token; the answer (or the refusal) is shown in words where given
+  // (else in the page's message line); resolves to {ok, status, body}
+  function act(url, body, where) {
     return fetch(url, {method: "POST", headers: {"X-CSRF-Token": csrf(), "Accept": "application/json"},
                        credentials: "same-origin", body: body})
       .then(function (r) { return r.json().then(function (body) { return {ok: r.ok, status: r.status, body: body}; }); })
       .then(function (r) {
+        var tell = where || say;
         if (r.ok) {
-          say({trigger: "measurement requested", abort: "abort / acknowledge sent", part: "recipe / part ID set"}[r.body.command]);
+          tell({trigger: "measurement requested", abort: "abort sent", part: "recipe / part ID set"}[r.body.command] || "");
         }
-        else if (r.status === 409) { say(r.body.error, true); }
-        else { say("refused (" + r.status + "): " + r.body.error, true); }
+        else if (r.status === 409) { tell(r.body.error, true); }
+        else if (r.status === 401) { tell("log in first (name and password at the top of the page)", true); }
+        else { tell("refused (" + r.status + "): " + r.body.error, true); }
+        return r;
       })
-      .catch(function (e) { say("no answer from the appliance: " + e, true); });
+      .catch(function (e) { say("no answer from the appliance: " + e, true); return {ok: false}; });
   }
 
   // tick values of an axis from lo to hi: 1, 2 or 5 times a power of ten apart
@@ -100,23 +104,73 @@ var moi = (function () {
     this.c.setAttribute("data-fit", fit ? "1" : "0");
   };
 
+  // replace the parts of the page a fragment of the server's holds (elements with data-part, by id)
+  function swap(html) {
+    var t = document.createElement("template");
+    t.innerHTML = html;
+    t.content.querySelectorAll("[data-part]").forEach(function (el) { var old = $(el.id); if (old) { old.replaceWith(el); } });
+  }
+
   function home() {
-    var swing = new Swing($("swing")), mid = null;
-    document.querySelectorAll("button[data-action]").forEach(function (b) {
-      b.addEventListener("click", function () { act(b.getAttribute("data-action")); });
+    var swing = new Swing($("swing")), mid = null, measure = $("measure"), lastState = null, seen = null;
+    function refresh() {
+      return fetch("/home/summary", {credentials: "same-origin"}).then(function (r) { return r.ok ? r.text() : null; })
+        .then(function (html) { if (html) { swap(html); syncMeasure(); } });
+    }
+    // the Measure button carries what the server says about the part in hand: refused, or a part to repeat
+    function syncMeasure() {
+      var b = $("blocked");
+      if (b) { measure.setAttribute("aria-disabled", "true"); } else { measure.removeAttribute("aria-disabled"); }
+      var now = $("now");
+      measure.setAttribute("data-repeat", now ? now.getAttribute("data-repeat") || "" : "");
+    }
+    // the part in hand while it is measured: neutral, never the previous part's verdict
+    function measuring(s) {
+      var now = $("now");
+      if (!now || now.getAttribute("data-measuring") === "1") { return; }
+      s = s || seen;  // pressed: the part and the release the appliance last said are next
+      var pid = (s && s.part_id) || ($("part-id").textContent !== "–" ? $("part-id").textContent : "(no part ID)");
+      var rn = s && s.release_next;
+      now.className = "now now-measuring"; now.setAttribute("data-measuring", "1");
+      now.innerHTML = "";
+      var p = document.createElement("p"); p.className = "now-line"; p.id = "now-line";
+      var w = document.createElement("span"); w.className = "now-word"; w.textContent = "MEASURING";
+      p.appendChild(w);
+      p.appendChild(document.createTextNode(" " + pid + (rn ? " · release " + rn.k + " of " + rn.of : "")));
+      var n = document.createElement("p"); n.className = "next"; n.id = "next-step";
+      n.textContent = "Do not touch the part until the result is shown.";
+      now.appendChild(p); now.appendChild(n);
+    }
+    measure.addEventListener("click", function () {
+      var b = $("blocked");
+      if (measure.getAttribute("aria-disabled") === "true" && b) { say(b.textContent, true); return; }
+      var rep = measure.getAttribute("data-repeat");
+      if (rep && !window.confirm("Part " + rep + " is complete. Measure it again as a new part with the same ID?")) {
+        say("not measured: enter the next part's ID first"); var pb = $("part-box"); if (pb) { pb.open = true; } return;
+      }
+      act("/api/measure").then(function (r) { if (r.ok) { measuring(null); } });
+    });
+    $("abort").addEventListener("click", function () {
+      act("/api/abort");  // "aborted" is said when the sequencer says so (ABORTED), not on the request alone
     });
     function show(s) {
+      if (s.release_next !== undefined) { seen = s; }
       var el = $("state");
       el.textContent = s.state; el.className = "state state-" + s.state;
       $("words").textContent = s.words || "";
       var f = $("fault");
       if (s.state === "FAULT" && s.fault) { f.textContent = s.fault; f.hidden = false; } else { f.hidden = true; }
       if (s.recipe !== undefined) { $("recipe").textContent = s.recipe ? s.recipe.number + " " + s.recipe.name : "–"; }
-      if (s.part_id !== undefined) { $("part-id").textContent = s.part_id || "–"; }
+      if (s.part_id !== undefined) {
+        var shown = $("part-id").textContent, pid = s.part_id || "–";
+        $("part-id").textContent = pid;
+        if (shown !== pid && !busy(s.state)) { refresh(); }  // another part in hand: ready, not the last verdict
+      }
       var rk = $("release-k");
       if (rk && s.release_next !== undefined) {
         rk.textContent = s.release_next ? (busy(s.state) ? "measuring release " : "next: release ") + s.release_next.k + " of " + s.release_next.of : "–";
       }
+      if (busy(s.state) && s.state !== "ABORTED") { measuring(s); }
       var box = $("progress-box"), bar = $("progress-bar"), txt = $("progress-text");
       if (s.state === "CAPTURING" && s.elapsed !== undefined) {
         box.hidden = false; bar.style.width = Math.min(100, 100 * s.elapsed / s.capture_duration) + "%";
@@ -134,24 +188,42 @@ var moi = (function () {
       li.textContent = s.state + " — " + (s.reason || "");
       li.setAttribute("data-state", s.state);
       $("log").appendChild(li);
-      if (s.state === "IDLE" || s.state === "FAULT") { say(""); }  // "measurement requested" is answered now
-      if (s.state === "IDLE" && s.previous === "PUBLISHING" && s.measurement_id) {
+      if (s.state === "ABORTED") { say("aborted: this release is not counted; Measure measures it again"); }
+      else if (s.state === "FAULT" || (s.state === "IDLE" && lastState !== "ABORTED")) { say(""); }  // answered now
+      lastState = s.state;
+      if (s.state === "IDLE" && (s.previous === "PUBLISHING" || s.previous === "ABORTED")) {
         var id = s.measurement_id;
-        // the verdict tile, the counters and the last parts as the server now has them
-        fetch("/home/summary", {credentials: "same-origin"}).then(function (r) { return r.ok ? r.text() : null; })
-          .then(function (html) { if (html) { $("summary").outerHTML = html; } });
-        fetch("/results/" + id + "/fit.json", {headers: {"Accept": "application/json"}})
-          .then(function (r) { return r.ok ? r.json() : null; })
-          .then(function (fit) { if (fit && id === mid) { swing.showFit(fit); } });
+        // the part in hand, the counters and the last parts as the server now has them
+        refresh();
+        if (s.previous === "PUBLISHING") {
+          fetch("/results/" + id + "/fit.json", {headers: {"Accept": "application/json"}})
+            .then(function (r) { return r.ok ? r.json() : null; })
+            .then(function (fit) { if (fit && id === mid) { swing.showFit(fit); } });
+        }
       }
     }
     var pf = $("part-form");
     if (pf) {
+      var err = $("part-id-error"), input = $("part-id-input");
+      function fieldError(text) {
+        err.textContent = text || "";
+        if (text) { input.setAttribute("aria-invalid", "true"); } else { input.removeAttribute("aria-invalid"); }
+      }
       pf.addEventListener("submit", function (e) {
         e.preventDefault();
-        var fd = new FormData(pf);
-        if (!fd.get("part_id")) { fd.delete("part_id"); }
-        act(pf.getAttribute("data-action"), new URLSearchParams(fd));
+        var fd = new FormData(pf), pid = String(fd.get("part_id") || "");
+        if (!pid) { fd.delete("part_id"); }
+        else if (!/^[ -~]*$/.test(pid) || pid.trim().length > Number(input.getAttribute("maxlength"))) {
+          fieldError("at most " + input.getAttribute("maxlength") + " printable ASCII characters"); input.focus(); return;
+        }
+        if (!fd.get("recipe")) { fd.delete("recipe"); }
+        act(pf.getAttribute("data-action"), new URLSearchParams(fd), function (text, bad) {
+          if (bad) { fieldError(text); input.focus(); } else { fieldError(""); say(text); }
+        }).then(function (r) {
+          var sel = $("recipe-select");
+          if (sel) { sel.value = ""; }  // a refused recipe is not sent again with the next part ID
+          if (r.ok) { input.value = ""; $("part-box").open = false; }
+        });
       });
     }
     var es = new EventSource("/events");
@@ -193,5 +265,17 @@ var moi = (function () {
       });
     }
   }
-  return {home: home, setup: setup, act: act, states: STATES};
+  // the tensor set's page: Measure and Abort, and the page as the appliance has it after each release
+  function tensorSet() {
+    var m = $("measure"), a = $("abort");
+    if (m) { m.addEventListener("click", function () { act("/api/measure"); }); }
+    if (a) { a.addEventListener("click", function () { act("/api/abort"); }); }
+    var es = new EventSource("/events");
+    es.addEventListener("state", function (e) {
+      var s = JSON.parse(e.data);
+      if (busy(s.state)) { say(s.state + ": " + (s.words || "")); }
+      if (s.state === "IDLE" && (s.previous === "PUBLISHING" || s.previous === "ABORTED")) { es.close(); window.location.reload(); }
+    });
+  }
+  return {home: home, setup: setup, tensorSet: tensorSet, act: act, states: STATES};
 })();
