@@ -308,6 +308,25 @@ def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_
         tracker.select("x")
 
 
+def test_a_release_under_a_tensor_recipe_is_not_judged_and_ends_the_open_part(tmp_path):
+    # a tensor recipe has no single quantity (spec None): its release outside a set gets no verdict
+    from service.commands.demo_tensor import recipe_text
+    from service.parts.recipes import PartTracker
+
+    d = tmp_path / "recipes"
+    write(d / "r.toml", recipe("r", 1, J_TRUE, tolerance_percent=1.0, releases=2))
+    write(d / "t.toml", recipe_text(1))
+    book = RecipeBook.load(d)
+    tracker = PartTracker(book, "r")
+    result = {"J": J_TRUE, "J_std": 1e-7, "flags": [], "omega_n": 5.4, "window": {"t_start": 0.0, "t_stop": 10.0}}
+    tracker.release(result, "m1", "A", tracker.recipe)
+    assert tracker.open_part is not None
+    tensor = next(r for r in book.recipes if r.spec is None)
+    out = tracker.release(result, "m2", "A", tensor)
+    assert out["release"] is None and out["part"] is None and out["verdict"] is None
+    assert out["recipe"]["name"] == tensor.name and tracker.open_part is None
+
+
 def test_a_part_whose_swing_carries_an_unmodelled_effect_is_invalid(tmp_path, recipe_dir, appliance_factory):
     # the part rubs (Coulomb friction) but the model may not learn it: the residual keeps the structure
     doc = appliance_doc(tmp_path / "state", time_scale=10.0,

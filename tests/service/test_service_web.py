@@ -225,6 +225,31 @@ def test_setup_camera_snapshot_and_fault_shown_and_acknowledged(appliance_factor
     running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")
 
 
+def test_a_snapshot_asked_before_the_sequencer_exists_is_refused_plainly():
+    # the devices built but no sequencer yet (or no longer): a clear 503, never an AttributeError's text
+    import asyncio
+    import concurrent.futures
+    from types import SimpleNamespace
+
+    from service.publish.web.views import Refused, Views
+
+    def call_soon(fn):
+        fut: concurrent.futures.Future = concurrent.futures.Future()
+        try:
+            fut.set_result(fn())
+        except Exception as exc:
+            fut.set_exception(exc)
+        return fut
+
+    views = Views.__new__(Views)
+    views.app = SimpleNamespace(  # type: ignore[assignment]
+        config=SimpleNamespace(simulated=True, simulation=SimpleNamespace(sensor="camera", camera_config=object())),
+        devices=SimpleNamespace(sensor=SimpleNamespace(camera=object())), sequencer=None, call_soon=call_soon)
+    with pytest.raises(Refused) as got:
+        asyncio.run(views.snapshot(None))  # type: ignore[arg-type]
+    assert got.value.status_code == 503 and got.value.message == "the appliance is not running its devices yet"
+
+
 def test_setup_encoder_angle_now(appliance_factory, tmp_path):
     running = appliance_factory(appliance_doc(tmp_path / "state", web=ON, simulation={"sensor": "encoder", "time_scale": 1.0}))
     status, body = Client(running.app.web.url).json("/api/angle")
