@@ -127,6 +127,7 @@ def coverage_case(args):
     spec = TORSION
     trace = make_trace("torsion", {}, noise, seed)
     r = identify(trace, spec.rig.with_declared(tuple(spec.base)), Options(discover=False))
+    assert r.J is not None and r.J_std is not None, "a torsion rig with its k gives J"
     return noise, seed, (r.J - spec.J) / r.J_std
 
 

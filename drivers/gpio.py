@@ -4,7 +4,7 @@ state and released by ``close()`` (safe twice), usable as a context manager."""
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable
+from typing import Any, Callable, Self
 
 
 class GpioDevice:
@@ -40,7 +40,7 @@ class GpioDevice:
         if after is not None:
             after()
 
-    def __enter__(self) -> GpioDevice:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

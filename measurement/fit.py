@@ -256,7 +256,7 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
         try:
             sol = lsq_linear(A / col_rms, -acc, bounds=(lo, hi), method="bvls")
             coef = sol.x / col_rms
-            regression_ok = bool(sol.success) and coef[0] > 0 and np.all(np.isfinite(coef))
+            regression_ok = bool(sol.success and coef[0] > 0 and np.all(np.isfinite(coef)))
         except (ValueError, np.linalg.LinAlgError):
             regression_ok = False
     if regression_ok and coef is not None:
@@ -326,13 +326,13 @@ def start_candidates(model: Model, x: np.ndarray, previous: "ModelFit | None") -
             if e.role == "sensor":
                 state[model.layout[e.name]] = previous.effect(e.name)
     starts += [np.clip(full, lo_b, hi_b), np.clip(state, lo_b, hi_b)]
-    refining = [e for e in model.effects if e.refines is not None and e.refines in pm.layout]
+    refining = [(e, e.refines) for e in model.effects if e.refines is not None and e.refines in pm.layout]
     if refining:
         # start from the fit it refines: the same values, the new parameters at sizes worth trying
         theta = np.abs(previous.extra["theta"])
         amplitudes = (float(np.max(theta)), float(np.max(theta[-max(1, theta.size // 10):])))
-        for e in refining:
-            for vals in e.refined_start(previous.effect(e.refines), amplitudes):
+        for e, refined in refining:
+            for vals in e.refined_start(previous.effect(refined), amplitudes):
                 x_ref = full.copy()
                 x_ref[model.layout[e.name]] = vals
                 starts.append(np.clip(x_ref, lo_b, hi_b))

@@ -139,7 +139,7 @@ def matrix_from_components(components: Mapping[str, float], convention: str) -> 
     return matrix_of(np.array([float(components[c]) for c in COMPONENTS]) * convention_signs(convention))
 
 
-def axis_offset_inertia(mass: float, axis: Sequence[float], offset: Sequence[float]) -> float:
+def axis_offset_inertia(mass: float, axis: Sequence[float] | np.ndarray, offset: Sequence[float] | np.ndarray) -> float:
     """m·(|d|² − (n·d)²), kg·m²: what a swing axis n (unit) that misses the centre of mass by d (m) adds."""
     n = np.asarray(axis, dtype=float)
     d = np.asarray(offset, dtype=float)

@@ -467,8 +467,8 @@ class Appliance:
             log.warning("set %s from %s refused: %s", action, source, exc)
             return CommandReply(name, "refused", "malformed", str(exc))
         log.info("tensor set %s: %s by %s; %s", s.uuid, action, source, s.instruction())
-        if s.done:
-            self._finish_set(s)
+        if s.done:  # act() may have ended the set (mypy keeps the narrowing of s.done above across the call)
+            self._finish_set(s)  # type: ignore[unreachable]
         self._publish_set()
         return CommandReply(name, "done")
 

@@ -447,9 +447,9 @@ class PartTracker:
         if len(o.readings) >= recipe.releases:
             joint_of = None
             if rig is not None and all(r is not None for r in o.identified):
-                found = o.identified
+                found, quantity = o.identified, spec.quantity
 
-                def joint_of(used, quantity=spec.quantity, found=found, rig=rig):
+                def joint_of(used, quantity=quantity, found=found, rig=rig):
                     from measurement.joint import joint_value  # scipy: only when a part completes
                     try:
                         return joint_value([found[i] for i in used], rig, quantity)

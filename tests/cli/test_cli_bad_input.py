@@ -132,6 +132,7 @@ def test_a_reader_that_goes_away_is_no_traceback(store_dir):
     env = dict(os.environ, PYTHONPATH=str(REPO))
     p = subprocess.Popen([sys.executable, "-m", "service.cli", "export", "--state-dir", str(store_dir), "--trace", "1"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=str(REPO), env=env)
+    assert p.stdout is not None and p.stderr is not None
     p.stdout.close()  # like `| head` that already exited: every write meets a closed pipe
     err = p.stderr.read().decode()
     assert p.wait(60) == 141 and "Traceback" not in err, err

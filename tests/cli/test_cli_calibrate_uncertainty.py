@@ -30,6 +30,7 @@ def test_a_references_certificate_moves_ks_uncertainty_and_the_rig_gets_the_cova
     assert wider["stiffness_std"] > 1.1 * base["stiffness_std"]
     rig = read_rig(str(tmp_path / "rig.toml"))
     assert rig.stiffness_tare_covariance == pytest.approx(base["stiffness_tare_covariance"])
+    assert rig.stiffness_tare_covariance is not None and rig.stiffness_std and rig.tare_inertia_std
     assert rig.stiffness_tare_covariance / (rig.stiffness_std * rig.tare_inertia_std) == pytest.approx(
         base["correlation"])
 

@@ -8,6 +8,7 @@ import json
 import time
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -58,13 +59,14 @@ def test_check_standard_passes_fails_is_stored_and_charted(swing, rig_file, tmp_
     assert (tmp_path / "cs.png").read_bytes()[:4] == b"\x89PNG"
     # the appliance: its results are calibration_due while the newest check since the calibration failed
     with Store(state) as store:
-        app = SimpleNamespace(store=store)
+        app: Any = SimpleNamespace(store=store)
         now = time.time()
         state_now = Appliance.calibration_state(app, DEMO_RIG, now)
-        assert state_now["due"] and state_now["check_standard"]["passed"] is False
+        assert state_now is not None and state_now["due"] and state_now["check_standard"]["passed"] is False
         recalibrated = DEMO_RIG.__class__(**{**DEMO_RIG.__dict__, "calibration": CalibrationRecord(
             dt.datetime.now(dt.UTC).date() + dt.timedelta(days=1), 365)})
-        assert not Appliance.calibration_state(app, recalibrated, now)["due"]
+        state_later = Appliance.calibration_state(app, recalibrated, now)
+        assert state_later is not None and not state_later["due"]
 
 
 @pytest.mark.parametrize("extra, words", [
@@ -88,6 +90,7 @@ def test_identify_json_carries_the_expanded_uncertainty_and_its_budget(swing, ri
     # the published budget against a Monte Carlo propagation of the same inputs (JCGM 101)
     rig = read_rig(str(rig_file))
     assert rig.stiffness_std and rig.tare_inertia_std and rig.stiffness_tare_covariance and rig.clock_accuracy_ppm
+    assert rig.stiffness is not None and rig.tare_inertia is not None
     rng = np.random.default_rng(5)
     n = 20_000
     cov = [[rig.stiffness_std**2, rig.stiffness_tare_covariance], [rig.stiffness_tare_covariance,

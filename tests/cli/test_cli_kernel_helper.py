@@ -64,7 +64,11 @@ def test_identify_gives_the_same_result_with_and_without_the_helper(tmp_path, ca
     argv = ["identify", str(tmp_path / "trace.csv"), "--rig", str(tmp_path / "rig.toml"), "--json"]
     started: list[kernels.KernelHelper | None] = []
     real_start = kernels.start
-    monkeypatch.setattr(kernels, "start", lambda kinds: started.append(real_start(kinds)) or started[-1])
+
+    def start(kinds):
+        started.append(real_start(kinds))
+        return started[-1]
+    monkeypatch.setattr(kernels, "start", start)
     assert main(argv) == 0
     with_helper = json.loads(capsys.readouterr().out)
     monkeypatch.setattr(kernels, "start", lambda kinds: None)

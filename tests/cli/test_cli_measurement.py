@@ -116,6 +116,7 @@ added_inertia_std = 3e-6
     assert "added_inertia_std" not in refs["empty"] and "inertia_residual" in refs["empty"]
     assert doc["rig"]["stiffness_std"] > 0  # three references: k has an uncertainty, which enters U
     rig = Rig.from_dict(doc)
+    assert rig.calibration is not None
     assert rig.calibration.due(datetime.date(2024, 8, 29)) and not rig.calibration.due(datetime.date(2024, 8, 28))
     r = moi("calibrate", cal, "--rig", tmp_path / "rig.toml", "--date", "March 1st")
     assert r.returncode == 2 and "--date must be a date" in r.stderr

@@ -33,7 +33,7 @@ def test_every_command_is_listed():
     # a command module that fails to import raises instead of silently vanishing from `moi --help`
     parser = build_parser(["--help"])
     sub = next(a for a in parser._actions if a.dest == "command")
-    assert list(sub.choices) == list(COMMANDS)
+    assert sub.choices is not None and list(sub.choices) == list(COMMANDS)
 
 
 @pytest.mark.parametrize("name", list(COMMANDS))
@@ -41,4 +41,4 @@ def test_every_command_module_imports_and_builds_its_arguments(name):
     # `moi --help` imports no command module, so each is imported here as its own run would
     parser = build_parser([name, "--help"])
     sub = next(a for a in parser._actions if a.dest == "command")
-    assert callable(sub.choices[name].get_default("_run"))
+    assert isinstance(sub.choices, dict) and callable(sub.choices[name].get_default("_run"))

@@ -290,7 +290,7 @@ def test_settings_are_checked():
     with pytest.raises(DriverConfigError, match="640×480 px, the camera file says 320×240"):
         CameraAngleSensor(cam, small, clock)
     with pytest.raises(DriverConfigError, match="Camera"):
-        CameraAngleSensor(object(), CONFIG, clock)
+        CameraAngleSensor(object(), CONFIG, clock)  # type: ignore[arg-type]
     with V4L2Camera(0, CAMERA, capture_factory=StreamingCapture([])) as v4l2, \
             pytest.raises(NotImplementedError, match="read it from a thread"):
         v4l2.grab_ready()

@@ -37,7 +37,7 @@ def test_button_is_pressed_follows_the_pin_and_close_detaches(factory):
     pin.drive_high()
     b.close()
     b.close()
-    assert not b.is_pressed and b.when_pressed is None and calls == [1]
+    assert (b.is_pressed, b.when_pressed, calls) == (False, None, [1])
 
 
 def test_button_bounce_time_is_validated(factory):

@@ -21,7 +21,7 @@ def test_held_until_the_solenoid_fires_then_swings_by_the_physics(factory):
     with Solenoid(17, max_on_time=0.2, pin_factory=factory) as sol, \
             SimRig(TRUTH, theta0=0.25, clock=clock, duration=10.0).attach(sol) as rig:
         clock.advance(3.0)
-        assert rig.angle(clock.now()) == 0.25 and rig.released_at is None
+        assert (rig.angle(clock.now()), rig.released_at) == (0.25, None)
         sol.pulse(0.1)
         released = clock.now()
         assert rig.released_at == released and rig.releases == 1

@@ -28,9 +28,9 @@ def test_off_on_construction(factory):
 
 def test_active_low_wiring_is_off_at_high_level(factory):
     with Solenoid(17, active_high=False, max_on_time=MAX_ON, pin_factory=factory) as s:
-        assert s.pin.state is True and not s.is_active
+        assert (s.pin.state, s.is_active) == (True, False)
         s.pulse(10.0)
-        assert s.pin.state is False and s.is_active
+        assert (s.pin.state, s.is_active) == (False, True)
         assert s.wait_off(MAX_ON + SLACK + 1)
         assert s.pin.state is True
 
@@ -42,7 +42,7 @@ def test_pulse_never_exceeds_the_maximum_whatever_is_asked(factory, asked):
         assert granted == MAX_ON
         assert s.is_active
         assert s.wait_off(MAX_ON + SLACK + 1), "the cut-off timer did not switch the coil off"
-        assert not s.is_active and s.pin.state is False
+        assert (s.is_active, s.pin.state) == (False, False)
         (on,) = on_durations(s.pin)
         assert 0.9 * MAX_ON <= on < MAX_ON + SLACK
 
@@ -77,7 +77,7 @@ def test_off_cuts_a_pulse_early_and_a_stale_timer_does_not_cut_the_next(factory)
     with Solenoid(17, max_on_time=0.3, pin_factory=factory) as s:
         s.pulse(0.3)
         s.off()
-        assert not s.is_active
+        assert (s.is_active, s.pin.state) == (False, False)
         s.pulse(0.3)  # the first pulse's timer was cancelled: this one runs its own course
         assert s.is_active
         assert s.wait_off(0.3 + SLACK + 1)
@@ -119,7 +119,7 @@ def test_off_when_switching_on_fails(factory, monkeypatch):
 
 
 def test_listeners_see_on_and_off_and_cannot_keep_the_coil_on(factory):
-    seen = []
+    seen: list[bool] = []
     with Solenoid(17, max_on_time=MAX_ON, pin_factory=factory) as s:
         s.add_listener(seen.append)
 

@@ -22,7 +22,7 @@ from drivers.errors import SensorFault
 from drivers.sensor import SimulatedAngleSensor
 from drivers.simrig import SimRig
 from drivers.solenoid import Solenoid
-from firmware_host import Sequencer, SequencerConfig, State
+from firmware_host import Event, Measurement, Sequencer, SequencerConfig, State
 from measurement import Trace
 from measurement.vision import CameraConfig, CameraModel, CameraPose, Imaging, MarkerGeometry
 from sequencer_harness import MAX_ON, RIG, TRUTH, assert_solenoid_safe, fake_identify, on_durations
@@ -52,7 +52,8 @@ class CameraRig:
         self.camera = camera_cls(CONFIG, self.sim.angle, self.clock, imaging=Imaging(blur=1.0, noise=2.0), seed=5,
                                  pose=CameraPose(yaw=math.radians(yaw_deg)))
         self.sensor = CameraAngleSensor(self.camera, CONFIG, self.clock)
-        self.results, self.events = [], []
+        self.results: list[Measurement] = []
+        self.events: list[Event] = []
         self.seq = Sequencer(clock=self.clock, solenoid=self.solenoid, sensor=self.sensor, rig=RIG,
                              sink=self.results.append, identifier=identifier,
                              config=SequencerConfig(capture_duration=capture, identify_in_worker=False))
@@ -164,7 +165,7 @@ def test_the_finish_hook_runs_once_before_identification_and_its_trace_is_publis
     with Solenoid(17, max_on_time=MAX_ON, pin_factory=factory) as solenoid:
         sim = SimRig(TRUTH, theta0=0.25, clock=clock, duration=5.0).attach(solenoid)
         sensor = Finishing(sim.angle, clock, rate=100.0)
-        results = []
+        results: list[Measurement] = []
         with Sequencer(clock=clock, solenoid=solenoid, sensor=sensor, rig=RIG, sink=results.append,
                        identifier=identifier, config=SequencerConfig(capture_duration=2.0, identify_in_worker=False)) as seq:
             seq.request_measurement("test")
@@ -177,7 +178,7 @@ def test_the_finish_hook_runs_once_before_identification_and_its_trace_is_publis
         # a failing hook is a FAULT naming the sensor, with the solenoid off
         def broken(trace):
             raise ValueError("no swing in the record")
-        sensor.finish = broken
+        sensor.finish = broken  # type: ignore[method-assign]
         sim.relatch()
         with Sequencer(clock=clock, solenoid=solenoid, sensor=sensor, rig=RIG, sink=results.append,
                        identifier=identifier, config=SequencerConfig(capture_duration=2.0, identify_in_worker=False)) as seq:

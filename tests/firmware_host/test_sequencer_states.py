@@ -8,16 +8,17 @@ that the solenoid is off (on the gpiozero mock pin's recorded history).
 from __future__ import annotations
 
 import threading
+from typing import Any
 
 import pytest
 
 from drivers.errors import DeviceFault
-from firmware_host import TRANSITIONS, Sequencer, SequencerConfig, SequencerConfigError, State
+from firmware_host import TRANSITIONS, Event, Sequencer, SequencerConfig, SequencerConfigError, State
 from measurement.errors import InvalidInput, TraceError
 from sequencer_harness import RIG, Blocking, Harness, assert_solenoid_safe, fake_result
 
 NORMAL = ["ARMED", "RELEASING", "CAPTURING", "IDENTIFYING", "PUBLISHING", "IDLE"]
-WORKER = dict(capture_duration=4.0, identify_in_worker=True, identify_timeout=5.0)
+WORKER: dict[str, Any] = dict(capture_duration=4.0, identify_in_worker=True, identify_timeout=5.0)
 
 
 def start(h: Harness, source: str = "test") -> None:
@@ -357,7 +358,7 @@ def test_a_broken_subscriber_neither_stops_others_nor_the_measurement(harness):
     def broken(event):
         raise RuntimeError("listener bug")
     h.seq.subscribe(broken)
-    seen = []
+    seen: list[Event] = []
     unsubscribe = h.seq.subscribe(seen.append)
     start(h)
     h.run_to(State.CAPTURING)

@@ -84,6 +84,8 @@ def test_loop_finds_presliding_friction_and_its_angle(seed, tc, theta_c):
     r = identify(trace, RIG)
     assert r.added_effects == ("dahl",), r.steps
     d = r.damping["dahl"]
+    assert d["theta_c"].value is not None and d["theta_c"].std is not None
+    assert d["Tc_per_J"].value is not None and d["Tc_per_J"].std is not None
     assert abs(d["theta_c"].value - theta_c) < 4 * d["theta_c"].std
     assert abs(d["Tc_per_J"].value - tc) < 4 * d["Tc_per_J"].std
     assert abs(r.omega_n - 5.8) < 4 * r.omega_n_std
@@ -121,7 +123,9 @@ def test_dry_friction_declared_as_dahl_reports_cleanly():
     truth = {"viscous": {"c_per_J": 0.1}, "coulomb": {"Tc_per_J": 0.19}}
     trace = simulate_trace(Pendulum(rig, J, truth), theta0=1.0, duration=28, rate=60, noise_std=0.005, seed=1)
     r = identify(trace, rig, Options(discover=False))
-    assert r.damping["dahl"]["theta_c"].value < 3 * r.damping["dahl"]["theta_c"].std + 1e-3
-    assert abs(r.damping["dahl"]["Tc_per_J"].value - 0.19) < 4 * r.damping["dahl"]["Tc_per_J"].std
+    theta_c, tc = r.damping["dahl"]["theta_c"], r.damping["dahl"]["Tc_per_J"]
+    assert theta_c.value is not None and theta_c.std is not None and tc.value is not None and tc.std is not None
+    assert theta_c.value < 3 * theta_c.std + 1e-3
+    assert abs(tc.value - 0.19) < 4 * tc.std
     json.dumps(r.to_dict(), allow_nan=False)
     assert EFFECTS["dahl"](rig).physical([0.19, 0.0], 1.0, 5.8)["presliding_stiffness"] is None

@@ -55,6 +55,7 @@ def test_hardening_spring_is_discovered_and_fixes_J():
     k3_per_J = 40.0
     trace = torsion_trace(viscous=0.01, cubic=k3_per_J)
     r = identify(trace, torsion_rig())
+    assert r.baseline.J is not None
     assert abs(r.baseline.J / J - 1) > 3e-3, "the case must matter: viscous-only J off by > 0.3 %"
     assert r.added_effects == ("cubic_stiffness",)
     assert r.J == pytest.approx(J, rel=1e-3)

@@ -40,6 +40,6 @@ def test_a_tare_larger_than_J_is_flagged_not_published_silently():
                            noise_std=1e-4, seed=2)
     right = identify(trace, Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5e-3, declared=("viscous",)))
     wrong = identify(trace, Rig(kind="torsion", stiffness=0.3651, tare_inertia=0.02, declared=("viscous",)))
-    assert right.J_object > 0 and F.NEGATIVE_INERTIA not in right.flags
-    assert wrong.J_object < 0 and F.NEGATIVE_INERTIA in wrong.flags
+    assert right.J_object is not None and right.J_object > 0 and F.NEGATIVE_INERTIA not in right.flags
+    assert wrong.J_object is not None and wrong.J_object < 0 and F.NEGATIVE_INERTIA in wrong.flags
     assert wrong.J == right.J   # J itself is unaffected: only the subtraction is suspect

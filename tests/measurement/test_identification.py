@@ -38,11 +38,12 @@ def _viscous_trace(seed: int, J: float = 0.0125, c: float = 1.5e-4):
 
 def test_viscous_torsion_J_within_0_02_percent_and_uncertainty_matches_scatter():
     J = 0.0125
-    values, stds = [], []
+    values: list[float] = []
+    stds: list[float] = []
     for seed in range(20):
         rig, trace = _viscous_trace(seed, J)
         r = identify(trace, rig, Options(discover=False))
-        assert r.J == pytest.approx(J, rel=2e-4)
+        assert r.J is not None and r.J_std is not None and r.J == pytest.approx(J, rel=2e-4)
         values.append(r.J)
         stds.append(r.J_std)
     scatter = float(np.std(values, ddof=1))
@@ -75,7 +76,7 @@ def test_parallel_axis_transfer():
     doc = {"rig": {"kind": "torsion", "stiffness": K_SEED001, "tare_inertia": 4.5e-3},
            "object": {"mass": 12.0, "axis_offset": 0.01}, "model": {"declared": ["viscous"]}}
     r = identify(trace, Rig.from_dict(doc))
-    assert r.J_object_axis == pytest.approx(r.J - 4.5e-3 - 12.0 * 0.01**2)
+    assert r.J is not None and r.J_object_axis == pytest.approx(r.J - 4.5e-3 - 12.0 * 0.01**2)
 
 
 def test_rig_without_constant_reports_omega_and_normalised_damping():

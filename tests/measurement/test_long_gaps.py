@@ -72,6 +72,7 @@ def test_a_record_of_bursts_between_silences_does_not_start_the_fit_a_cycle_off(
     # then slipped a cycle and J came out 1.5–3 % low with nothing but unmodeled_residual said.
     rig = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
     inertia, c, release = 0.0125, 3e-4, 0.5
+    assert rig.stiffness is not None
     omega_n = math.sqrt(rig.stiffness / inertia)
     rng = np.random.default_rng(seed)
     t = _bursts(10.0, rng)
@@ -80,7 +81,7 @@ def test_a_record_of_bursts_between_silences_does_not_start_the_fit_a_cycle_off(
     y[after] = reference_motion("torsion", omega_n, np.concatenate([[release], t[after]]), 0.25,
                                 viscous=c / inertia)[1:]
     r = identify(Trace(t, y + rng.normal(0, 5e-5, t.size)), rig)
-    assert abs(r.J / inertia - 1) < 0.002, r.report()
+    assert r.J is not None and abs(r.J / inertia - 1) < 0.002, r.report()
 
 
 def test_a_trial_model_that_runs_away_gives_nan_instead_of_integrating_forever():
@@ -117,7 +118,7 @@ def test_a_record_mostly_of_silences_finds_the_swing_not_an_alias_of_the_samplin
     rig = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
     trace, inertia = _released_in_bursts(seed, 0.85)
     r = identify(trace, rig)
-    assert abs(r.J / inertia - 1) < 0.002, r.report()
+    assert r.J is not None and abs(r.J / inertia - 1) < 0.002, r.report()
 
 
 def test_rival_frequencies_fits_each_comparable_peak_and_keeps_the_best():
@@ -131,6 +132,7 @@ def test_rival_frequencies_fits_each_comparable_peak_and_keeps_the_best():
     prep = prepare(trace)
     base = fit_model(Model.from_names(rig, rig.declared), prep.t, prep.y, prep.noise, swings=prep.swings)
     peaks = base.extra["smoothed"].peaks
+    assert rig.stiffness is not None
     omega_n = math.sqrt(rig.stiffness / inertia)
     assert any(abs(p / omega_n - 1) < 0.02 for p in peaks)  # the swing is among the peaks
     assert abs(base.value("omega_n") / omega_n - 1) > 0.5  # and the start's band missed it
@@ -151,6 +153,7 @@ def test_a_swing_sampled_once_a_period_cannot_be_told_from_its_alias_and_says_so
     # (J_u is that spread propagated linearly: it does not reach J = k/ω_n² of a swing 3× slower).
     rig = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
     inertia, c = 0.0125, 3e-4
+    assert rig.stiffness is not None
     omega_n = math.sqrt(rig.stiffness / inertia)
     t = (np.arange(0.0, 40.0, period)[:, None] + 1e-6 * np.arange(3)[None, :]).ravel()
     grid = np.union1d(np.arange(0.0, t[-1], 0.05), t)
@@ -162,4 +165,4 @@ def test_a_swing_sampled_once_a_period_cannot_be_told_from_its_alias_and_says_so
     assert "model_ambiguous" in r.flags, r.report()
     assert any(abs(w / omega_n - 1) < 1e-3 for w in named)  # the swing is the kept fit or a named rival
     assert sum(any(abs(w / a - 1) < 1e-3 for w in named) for a in aliases) >= 2  # and so are its aliases
-    assert abs(r.omega_n - omega_n) <= 2 * r.omega_n_u, r.report()
+    assert r.omega_n_u is not None and abs(r.omega_n - omega_n) <= 2 * r.omega_n_u, r.report()

@@ -50,7 +50,7 @@ def test_coloured_quantised_noise_adds_no_effect_and_widens_J_std():
         assert r.added_effects == (), r.report()
         assert r.statistics["covariance"].startswith("ar(") and r.statistics["noise_model_order"] >= 1
         assert "correlated_residual" in r.flags and "unmodeled_residual" not in r.flags  # colour is not structure
-        assert abs(r.J / J - 1) < 4 * r.J_std / J
+        assert r.J is not None and r.J_std is not None and abs(r.J / J - 1) < 4 * r.J_std / J
 
 
 def test_sensor_gain_is_found_on_a_compound_rig_and_not_offered_at_small_amplitude():

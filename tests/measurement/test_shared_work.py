@@ -87,9 +87,10 @@ def test_prepare_keeps_the_swings_of_its_window(trace):
 
     prep = prepare(trace, Options())
     sw = find_swings(prep.t, prep.y, hysteresis=3 * prep.noise)
+    assert prep.swings is not None
     assert np.array_equal(prep.swings.crossings, sw.crossings) and prep.swings.centre == sw.centre
     keep = (trace.t < 6.0) | (trace.t > 9.5)  # half a second after a 3.5 s gap: the window ends at the gap
     cut = prepare(Trace(trace.t[keep], trace.angle[keep], source="gap"), Options())
     assert cut.gap_cut_at is not None and cut.t[-1] < 6.0
     sw_cut = find_swings(cut.t, cut.y, hysteresis=3 * cut.noise)
-    assert np.array_equal(cut.swings.crossings, sw_cut.crossings) and cut.swings.crossings[-1] < 6.0
+    assert cut.swings is not None and np.array_equal(cut.swings.crossings, sw_cut.crossings) and cut.swings.crossings[-1] < 6.0

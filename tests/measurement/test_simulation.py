@@ -67,6 +67,7 @@ def test_viscous_torsion_matches_closed_form():
     t = np.linspace(0, 30, 3001)
     x, _ = pendulum.motion(t, theta0)
     sigma = c / (2 * inertia)
+    assert rig.stiffness is not None
     wd = math.sqrt(rig.stiffness / inertia - sigma**2)
     exact = theta0 * np.exp(-sigma * t) * (np.cos(wd * t) + sigma / wd * np.sin(wd * t))
     # RK4 at ω·h ≤ 0.05: phase error ~1e-6 rad after 180 rad of swing (J bias ~1e-8)

@@ -40,6 +40,7 @@ def test_torsion_budget_agrees_with_monte_carlo_with_k_and_tare_correlated():
                             tare=cal.tare_inertia, tare_std=cal.tare_inertia_std, cov_k_tare=cal.covariance)
     budgets = inputs.budgets()
     b = budgets["J_object"]
+    assert cal.stiffness_std is not None and cal.covariance is not None and cal.tare_inertia_std is not None
     rng = np.random.default_rng(7)
     cov = np.array([[cal.stiffness_std**2, cal.covariance], [cal.covariance, cal.tare_inertia_std**2]])
     kk, ii = rng.multivariate_normal([cal.stiffness, cal.tare_inertia], cov, DRAWS).T
@@ -117,6 +118,7 @@ def test_a_references_uncertainty_raises_ks_as_the_algebra_says_and_a_perfect_fi
     for cal, u in ((small, 1e-6), (large, 1e-4)):
         assert cal.birge_ratio == pytest.approx(0.0, abs=1e-6)
         assert cal.stiffness_std == pytest.approx(_gls_k_std(refs(u), 1 / k), rel=1e-6)
+    assert large.stiffness_std is not None and small.stiffness_std is not None
     assert large.stiffness_std > 1.5 * small.stiffness_std
     assert large.stiffness_std / k > 1e-4
 
@@ -131,7 +133,7 @@ def test_references_scattering_beyond_their_sigma_scale_it_up_by_the_birge_ratio
                      r.omega_n, r.omega_n_std, r.added_inertia_std) for r in true]
     cal, ok = calibrate_torsion(bad), calibrate_torsion(true)
     assert cal.birge_ratio is not None and cal.birge_ratio > 3
-    assert cal.stiffness_std > 3 * ok.stiffness_std
+    assert cal.stiffness_std is not None and ok.stiffness_std is not None and cal.stiffness_std > 3 * ok.stiffness_std
     assert any("Birge" in n for n in cal.notes)
 
 
@@ -163,6 +165,8 @@ def test_verdict_flips_from_ok_to_nok_and_invalid_as_the_guard_band_widens():
 def test_part_of_three_scattered_releases_gets_students_t_for_two_degrees_of_freedom():
     spec = Specification.symmetric("J", 0.0125, 1e-3)
     part = combine([Reading(v, 1e-5, 0.0) for v in (0.01249, 0.01250, 0.01252)], spec, QualityRules())
+    assert part.u_typeA is not None and part.u_fit is not None and part.uncertainty is not None
+    assert part.decision.U is not None and part.decision.u_c is not None
     assert part.u_typeA > part.u_fit and len(part.used) == 3
     assert part.decision.U == pytest.approx(coverage_factor(2) * part.decision.u_c, rel=1e-9)
     assert part.decision.U / part.decision.u_c > 4

@@ -32,6 +32,8 @@ def test_loop_finds_an_oblique_view(seed, stretch, shear):
     r = identify(_trace({"view": {"stretch": stretch, "shear": shear}}, seed), RIG)
     assert r.added_effects == ("view",)
     view = r.sensor["view"]
+    assert view["shear"].value is not None and view["shear"].std is not None
+    assert view["stretch"].value is not None and view["stretch"].std is not None
     assert abs(view["shear"].value - shear) < 4 * view["shear"].std
     assert abs(view["stretch"].value - stretch) < 4 * view["stretch"].std
     assert abs(r.omega_n - 5.8) < 4 * r.omega_n_std

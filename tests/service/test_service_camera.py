@@ -167,6 +167,7 @@ def test_the_hardware_camera_is_a_camera_sensor_on_the_configured_device(tmp_pat
 
     path = write_hardware(tmp_path, '[hardware.camera]\ndevice = "0"\nfile = "cam.toml"\nmax_lost_time = 0.3\n')
     config = load_config(path)
+    assert config.hardware is not None and config.hardware.camera is not None
     settings = config.hardware.camera
     assert settings.device == 0 and settings.file == str(tmp_path / "cam.toml") and settings.max_lost_time == 0.3
     assert settings.config.camera.fps == 100.0 and settings.config.marker.radius == 0.10
@@ -269,7 +270,8 @@ def test_a_bad_simulated_camera_is_one_clear_line_and_exit_2(tmp_path, capsys, n
 
 def test_the_camera_example_loads_for_the_device_and_for_the_simulation():
     cfg = load_config(REPO / "examples" / "appliance-camera.toml")
-    assert not cfg.simulated and cfg.hardware.sensor == "camera" and cfg.hardware.encoder is None
+    assert not cfg.simulated and cfg.hardware is not None and cfg.hardware.sensor == "camera"
+    assert cfg.hardware.encoder is None and cfg.hardware.camera is not None
     cam = cfg.hardware.camera
     assert cam.device == "/dev/video0" and cam.file == str(REPO / "examples" / "camera.toml")
     assert (cam.config.camera.width, cam.config.camera.height, cam.config.camera.fps) == (640, 480, 100.0)

@@ -40,7 +40,7 @@ def write(tmp_path: Path, text: str, name: str = "appliance.toml") -> Path:
 
 def test_the_example_configs_load():
     full = load_config(REPO / "examples" / "appliance.toml")
-    assert not full.simulated and full.hardware.solenoid["pin"] == 17
+    assert not full.simulated and full.hardware is not None and full.hardware.solenoid["pin"] == 17
     assert full.mqtt.tls and full.mqtt.port == 8883 and full.modbus.port == 5020
     assert full.rig.kind == "torsion"
     sim = load_config(REPO / "examples" / "appliance.toml", sim=True)
@@ -59,7 +59,8 @@ def test_no_config_means_a_simulated_appliance_without_mqtt(monkeypatch, tmp_pat
 
 def test_hardware_config_with_the_sim_switch(tmp_path):
     c = load_config(write(tmp_path, HARDWARE))
-    assert not c.simulated and c.hardware.encoder["port"] == "/dev/ttyUSB0"
+    assert not c.simulated and c.hardware is not None and c.hardware.encoder is not None
+    assert c.hardware.encoder["port"] == "/dev/ttyUSB0"
     assert load_config(write(tmp_path, HARDWARE), sim=True).simulated
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import resource
 from pathlib import Path
+from typing import Any
 import socket
 import struct
 
@@ -273,8 +274,11 @@ def test_clearing_a_retained_command_starts_and_aborts_nothing(tmp_path, broker,
     c.wait_subscribed()
     commands: list[str] = []
     forward = app.app.command
-    app.app.mqtt._on_command = lambda name, source, data=None, reply=None: (commands.append(name),
-                                                                           forward(name, source, data, reply))
+
+    def spy(name, source, data=None, reply=None):
+        commands.append(name)
+        forward(name, source, data, reply)
+    app.app.mqtt._on_command = spy
     c.publish("moi/test-rig/cmd/measure", "", retain=True)
     c.publish("moi/test-rig/cmd/abort", "", retain=True)
     app.press()  # a measurement of 5 s at time scale 1: the clearing below arrives while it runs
@@ -728,7 +732,7 @@ def test_the_main_loop_wakes_for_the_release_at_any_time_scale(tmp_path):
 
     cfg = parse_config(appliance_doc(tmp_path / "state", time_scale=1000.0, sequencer={"pre_trigger": 0.5}),
                        source="test.toml")
-    app = Appliance(cfg, poll_interval=0.02)
+    app: Any = Appliance(cfg, poll_interval=0.02)  # its devices and sequencer are stand-ins below
     now = {"t": 100.0}
     app.devices = SimpleNamespace(clock=SimpleNamespace(now=lambda: now["t"]))
     app.sequencer = SimpleNamespace(state=State.ARMED)
@@ -770,7 +774,11 @@ def test_every_action_of_the_web_page_needs_the_token(tmp_path, appliance_factor
     port = app.app.web.bound_port
     queued: list[str] = []
     forward = app.app.command
-    app.app.command = lambda name, source, data=None: (queued.append(name), forward(name, source, data))
+
+    def spy(name, source, data=None):
+        queued.append(name)
+        forward(name, source, data)
+    app.app.command = spy
     posts = [r.resource.canonical for r in app.app.web._runner.app.router.routes() if r.method == "POST"]
     assert "/api/measure" in posts
     for path in posts:

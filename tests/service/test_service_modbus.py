@@ -51,8 +51,8 @@ def server():
 
     srv = ModbusServer(ModbusSettings(host="127.0.0.1", port=0, unit_id=1), on_command=on_command)
     srv.start()
-    srv.commands = commands
-    srv.command_event = got
+    srv.commands = commands  # type: ignore[attr-defined]
+    srv.command_event = got  # type: ignore[attr-defined]
     yield srv
     srv.stop()
 
@@ -195,6 +195,7 @@ def test_a_busy_port_is_a_clear_startup_error():
     first = ModbusServer(ModbusSettings(host="127.0.0.1", port=0))
     first.start()
     try:
+        assert first.bound_port is not None
         second = ModbusServer(ModbusSettings(host="127.0.0.1", port=first.bound_port))
         with pytest.raises(ModbusServerError, match="cannot listen"):
             second.start()

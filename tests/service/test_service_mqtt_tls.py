@@ -43,7 +43,7 @@ def tls_broker(tmp_path):
         f"cafile {d / 'ca.pem'}", f"certfile {d / 'server.pem'}", f"keyfile {d / 'server.key'}",
     ])
     b.start()
-    b.dir = d
+    b.dir = d  # type: ignore[attr-defined]
     yield b
     b.stop()
 
@@ -82,7 +82,7 @@ def test_a_wrong_password_is_reported_and_nothing_leaves_the_outbox(tmp_path, tl
     svc.start()
     try:
         wait_until(lambda: svc.last_error, 15, what="the broker's refusal")
-        assert "refused" in svc.last_error and not svc.is_connected
+        assert "refused" in (svc.last_error or "") and not svc.is_connected
         assert store.outbox_count() == 1
     finally:
         svc.stop()

@@ -95,23 +95,23 @@ def test_the_machine_browses_as_the_companion_specifications_types(opc):
             m, ns = await machine(c)
             mach, r, di = ns[NS_MACHINERY], ns[NS_RESULT], ns[NS_DI]
             ident = await m.get_child(f"{di}:Identification")
-            assert await ident.read_type_definition() == ua.NodeId(1012, mach)  # MachineIdentificationType
+            assert await ident.read_type_definition() == ua.NodeId(ua.Int32(1012), mach)  # MachineIdentificationType
             values = {(await n.read_browse_name()).Name: await n.read_value() for n in await ident.get_children()}
             assert values["SerialNumber"] == "SN-0007" and values["Manufacturer"].Text == "moi"
             assert {"Manufacturer", "Model", "SerialNumber", "SoftwareRevision", "ProductInstanceUri"} <= set(values)
             blocks = await m.get_child(f"{mach}:MachineryBuildingBlocks")
             typed = {(await n.read_browse_name()).Name: await n.read_type_definition()
                      for n in await blocks.get_children(refs=ua.ObjectIds.HasAddIn)}
-            assert typed == {"Identification": ua.NodeId(1012, mach),
-                             "MachineryItemState": ua.NodeId(1002, mach),  # MachineryItemState_StateMachineType
-                             "MachineryOperationMode": ua.NodeId(1008, mach),  # ...OperationModeStateMachineType
-                             "ResultManagement": ua.NodeId(1004, r)}  # ResultManagementType
+            assert typed == {"Identification": ua.NodeId(ua.Int32(1012), mach),
+                             "MachineryItemState": ua.NodeId(ua.Int32(1002), mach),  # MachineryItemState_StateMachineType
+                             "MachineryOperationMode": ua.NodeId(ua.Int32(1008), mach),  # ...OperationModeStateMachineType
+                             "ResultManagement": ua.NodeId(ua.Int32(1004), r)}  # ResultManagementType
             state = await blocks.get_child([f"{mach}:MachineryItemState", "0:CurrentState"])
             assert (await state.read_value()).Text == "NotExecuting"
-            assert await (await state.get_child("0:Id")).read_value() == ua.NodeId(5007, mach)  # the state object
+            assert await (await state.get_child("0:Id")).read_value() == ua.NodeId(ua.Int32(5007), mach)  # the state object
             latest = await blocks.get_child([f"{r}:ResultManagement", f"{r}:Results", f"{r}:LatestResult"])
-            assert await latest.read_type_definition() == ua.NodeId(2001, r)  # ResultType
-            assert await latest.read_data_type() == ua.NodeId(3008, r)  # ResultDataType
+            assert await latest.read_type_definition() == ua.NodeId(ua.Int32(2001), r)  # ResultType
+            assert await latest.read_data_type() == ua.NodeId(ua.Int32(3008), r)  # ResultDataType
             with pytest.raises(ua.UaStatusCodeError):  # read-only: a client changes nothing
                 await state.write_value(ua.LocalizedText("Executing"))
             assert (await state.read_value()).Text == "NotExecuting"
@@ -125,7 +125,7 @@ def test_the_machine_browses_as_the_companion_specifications_types(opc):
             arrived = changes.want("Maintenance")
             app.app.opcua.on_recipe(SimpleNamespace(check_standard={"name": "ring"}))
             await asyncio.wait_for(arrived.wait(), 10)
-            assert await (await mode.get_child("0:Id")).read_value() == ua.NodeId(5025, mach)
+            assert await (await mode.get_child("0:Id")).read_value() == ua.NodeId(ua.Int32(5025), mach)
             arrived = changes.want("Processing")
             app.app.opcua.on_recipe(None)
             await asyncio.wait_for(arrived.wait(), 10)

@@ -45,6 +45,7 @@ def plc():
                                       plc_heartbeat_timeout=2.0),
                        on_command=on_command, recipe_numbers=frozenset({7}), clock=clock)
     srv.start()
+    assert srv.bound_port is not None
     c = ModbusTcpClient("127.0.0.1", port=srv.bound_port, timeout=3, retries=0)
     assert c.connect()
     yield srv, c, commands, clock

@@ -69,6 +69,7 @@ def test_nothing_is_lost_when_the_daemon_is_killed_while_the_broker_is_down(tmp_
     daemon = start_daemon(cfg)
     try:
         wait_until(lambda: port_open(mb_port) or daemon.poll() is not None, 30, what="the daemon's Modbus port")
+        assert daemon.stderr is not None
         assert daemon.poll() is None, daemon.stderr.read().decode()
         for i in (1, 2, 3):
             trigger_and_wait(mb_port, i)

@@ -71,12 +71,14 @@ def test_part_view_never_shows_a_release_verdict_as_the_parts():
 
 def test_tolerance_band_puts_the_guard_band_inside_the_limits_and_the_interval_around_the_value():
     b = Q.band({"nominal": 1.0, "lower": 0.9, "upper": 1.1, "rule": "guard_band"}, 1.05, 0.02)
+    assert b is not None
     assert b["lsl"] < b["guard"][0] < b["nominal"] < b["guard"][1] < b["usl"]
     assert b["interval"][0] < b["value"] < b["interval"][1]
-    assert Q.band({"nominal": 1.0, "lower": 0.9, "upper": 1.1, "rule": "simple"}, 1.0, 0.02)["guard"] is None
+    simple = Q.band({"nominal": 1.0, "lower": 0.9, "upper": 1.1, "rule": "simple"}, 1.0, 0.02)
+    assert simple is not None and simple["guard"] is None
     assert Q.band(None, 1.0, 0.1) is None
     far = Q.band({"nominal": 1.0, "lower": 0.9, "upper": 1.1}, 2.0, 0.01)
-    assert 0 <= far["lsl"] < far["usl"] < far["value"] <= far["width"]  # a value far out is still on the drawing
+    assert far is not None and 0 <= far["lsl"] < far["usl"] < far["value"] <= far["width"]  # a value far out is still on the drawing
 
 
 @pytest.mark.parametrize("budget", [

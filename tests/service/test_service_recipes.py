@@ -294,7 +294,7 @@ def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_
     result = {"J": J_TRUE, "J_std": 1e-7, "flags": [], "omega_n": 5.4, "window": {"t_start": 0.0, "t_stop": 10.0}}
     r = tracker.recipe
     first = tracker.release(result, "m1", "A", r)
-    assert first["release"]["index"] == 1 and first["verdict"] is None and tracker.open_part["done"] == 1
+    assert first["release"]["index"] == 1 and first["verdict"] is None and (tracker.open_part or {}).get("done") == 1
     tracker.undo_last()  # m1 could not be stored
     assert tracker.open_part is None
     tracker.release(result, "m1b", "A", r)
@@ -306,6 +306,25 @@ def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_
     assert done["verdict"] == "OK" and done["part"]["measurements"] == ["m2", "m3"]
     with pytest.raises(RecipeError, match="no recipe 'x'"):
         tracker.select("x")
+
+
+def test_a_release_under_a_tensor_recipe_is_not_judged_and_ends_the_open_part(tmp_path):
+    # a tensor recipe has no single quantity (spec None): its release outside a set gets no verdict
+    from service.commands.demo_tensor import recipe_text
+    from service.parts.recipes import PartTracker
+
+    d = tmp_path / "recipes"
+    write(d / "r.toml", recipe("r", 1, J_TRUE, tolerance_percent=1.0, releases=2))
+    write(d / "t.toml", recipe_text(1))
+    book = RecipeBook.load(d)
+    tracker = PartTracker(book, "r")
+    result = {"J": J_TRUE, "J_std": 1e-7, "flags": [], "omega_n": 5.4, "window": {"t_start": 0.0, "t_stop": 10.0}}
+    tracker.release(result, "m1", "A", tracker.recipe)
+    assert (tracker.open_part or {}).get("done") == 1
+    tensor = next(r for r in book.recipes if r.spec is None)
+    out = tracker.release(result, "m2", "A", tensor)
+    assert out["release"] is None and out["part"] is None and out["verdict"] is None
+    assert out["recipe"]["name"] == tensor.name and tracker.open_part is None
 
 
 def test_a_part_whose_swing_carries_an_unmodelled_effect_is_invalid(tmp_path, recipe_dir, appliance_factory):
@@ -328,13 +347,14 @@ def test_a_part_needs_all_its_releases_unless_the_recipe_says_otherwise(tmp_path
     from measurement.verdict import Reading, combine
 
     two = load_recipe(write(tmp_path / "two.toml", recipe("two", 1, J_TRUE, tolerance_percent=1.0, releases=2)))
-    assert two.quality.min_valid_releases == 2
+    assert two.quality.min_valid_releases == 2 and two.spec is not None
     good = Reading(J_TRUE, 1e-7)
     bad = Reading(J_TRUE, 1e-7, flags=("unmodeled_residual",))
     part = combine([good, bad], two.spec, two.quality)
     assert part.verdict == "INVALID" and part.excluded[0]["index"] == 1  # one INVALID release: no pass, said
     lenient = load_recipe(write(tmp_path / "one.toml", recipe("one", 2, J_TRUE, tolerance_percent=1.0, releases=2)
                                 + "[quality]\nmin_valid_releases = 1\n"))
+    assert lenient.spec is not None
     assert combine([good, bad], lenient.spec, lenient.quality).verdict == "OK"
     with pytest.raises(RecipeError, match="display_unit: unknown unit of inertia 'cubits'"):
         load_recipe(write(tmp_path / "u.toml", recipe("u", 3, J_TRUE, tolerance_percent=1.0, display_unit="cubits")))

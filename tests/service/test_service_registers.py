@@ -72,7 +72,7 @@ def test_every_known_flag_has_its_own_bit():
 
 def test_the_whole_image_fits_one_request_and_registers_do_not_overlap():
     assert R.IMAGE_SIZE <= 125
-    seen = set()
+    seen: set[int] = set()
     for r in R.REGISTERS:
         span = set(range(r.address, r.address + r.count))
         assert not (span & seen), r.name

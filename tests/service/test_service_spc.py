@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import pytest
 
@@ -20,7 +20,7 @@ def _returning(payload: dict[str, Any]) -> Callable[[str, int], dict[str, Any]]:
     return lambda uuid, seq: payload
 
 
-def add_part(store: Store, t: float, serial: str, values: list[float], verdict: str = "OK",
+def add_part(store: Store, t: float, serial: str, values: Sequence[float], verdict: str = "OK",
              recipe: dict = RECIPE) -> None:
     """Store the releases of one part as the daemon does (the last release carries the part)."""
     n = len(values)

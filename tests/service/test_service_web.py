@@ -89,8 +89,8 @@ def test_actions_need_the_token_and_the_csrf_token(running):
                                                          "Origin": "http://evil.example"})[0] == 403
     assert app.store.count() == 0 and not app.sequencer.busy
     # with it: accepted, and the measurement runs
-    status, body = c.json("/api/measure", method="POST", headers={"X-CSRF-Token": csrf})
-    assert (status, body["accepted"]) == (202, True)
+    status, doc = c.json("/api/measure", method="POST", headers={"X-CSRF-Token": csrf})
+    assert (status, doc["accepted"]) == (202, True)
     running.wait_done(1, 60)
     assert app.store.latest().trigger == "web"
     # a script with the token as a bearer: no session, no CSRF needed
@@ -115,8 +115,8 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
     assert "stiffness k (calibration)" in budget and "<meter" in budget and "U = " in budget
     status, _, csv_text = c.request(f"/results/{m.uuid}/trace.csv")
     assert status == 200 and b"t,angle" in csv_text
-    status, body = c.json(f"/results/{m.uuid[:8]}/result.json")
-    assert status == 200 and body["uuid"] == m.uuid and body["J"] == m.J
+    status, doc = c.json(f"/results/{m.uuid[:8]}/result.json")
+    assert status == 200 and doc["uuid"] == m.uuid and doc["J"] == m.J
     # history: newest first, filters in the query
     assert m.uuid.encode() in c.request("/history")[2]
     assert m.uuid.encode() not in c.request("/history?status=failed")[2]
@@ -135,8 +135,8 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
                               ("/nothing-here", 404, b"no page")):
         status, _, body = c.request(path)
         assert (status, words in body, b"Traceback" in body) == (code, True, False), (path, status, body[:300])
-    status, body = c.json("/api/measure", method="GET")
-    assert status == 405 and "not allowed" in body["error"]
+    status, doc = c.json("/api/measure", method="GET")
+    assert status == 405 and "not allowed" in doc["error"]
 
 
 def test_setup_page_masks_secrets_and_reports_health(appliance_factory, tmp_path):
@@ -220,7 +220,7 @@ def test_setup_camera_snapshot_and_fault_shown_and_acknowledged(appliance_factor
     import cv2
     import numpy as np
     img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
-    assert img.shape[:2] == (480, 640)
+    assert img is not None and img.shape[:2] == (480, 640)
     # the fitted edge is drawn in red (B, G, R = 0, 0, 255): the marker was found in the frame
     assert np.count_nonzero((img[:, :, 2] == 255) & (img[:, :, 1] == 0) & (img[:, :, 0] == 0)) > 20
     # a FAULT is shown with its reason; the token acknowledges it
@@ -231,6 +231,31 @@ def test_setup_camera_snapshot_and_fault_shown_and_acknowledged(appliance_factor
     token = Path(app.web.token_file).read_text().strip()
     assert c.json("/api/abort", method="POST", headers={"Authorization": f"Bearer {token}"})[0] == 202
     running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")
+
+
+def test_a_snapshot_asked_before_the_sequencer_exists_is_refused_plainly():
+    # the devices built but no sequencer yet (or no longer): a clear 503, never an AttributeError's text
+    import asyncio
+    import concurrent.futures
+    from types import SimpleNamespace
+
+    from service.publish.web.views import Refused, Views
+
+    def call_soon(fn):
+        fut: concurrent.futures.Future = concurrent.futures.Future()
+        try:
+            fut.set_result(fn())
+        except Exception as exc:
+            fut.set_exception(exc)
+        return fut
+
+    views = Views.__new__(Views)
+    views.app = SimpleNamespace(  # type: ignore[assignment]
+        config=SimpleNamespace(simulated=True, simulation=SimpleNamespace(sensor="camera", camera_config=object())),
+        devices=SimpleNamespace(sensor=SimpleNamespace(camera=object())), sequencer=None, call_soon=call_soon)
+    with pytest.raises(Refused) as got:
+        asyncio.run(views.snapshot(None))  # type: ignore[arg-type]
+    assert got.value.status_code == 503 and got.value.message == "the appliance is not running its devices yet"
 
 
 def test_setup_encoder_angle_now(appliance_factory, tmp_path):
@@ -253,8 +278,8 @@ def test_recipe_and_part_id_set_from_the_page_reach_the_result_and_the_history(a
     assert 'id="recipe-select"' not in home and 'maxlength="20"' in home
     recipes = c.request("/recipes")[2].decode()  # every recipe readable by all, with its limits
     assert "rotor-a" in recipes and "0.012250 kg·m² … 0.012750 kg·m²" in recipes
-    status, body = c.json("/api/part", data={"recipe": "rotor-b"}, headers=bearer)
-    assert status == 400 and "no recipe 'rotor-b'" in body["error"]
+    status, doc = c.json("/api/part", data={"recipe": "rotor-b"}, headers=bearer)
+    assert status == 400 and "no recipe 'rotor-b'" in doc["error"]
     assert c.json("/api/part", data={"part_id": "x" * 200}, headers=bearer)[0] == 400
     assert c.json("/api/part", data={"recipe": "rotor-a"})[0] == 401  # no token, no change
     assert c.json("/api/part", data={"recipe": "rotor-a", "part_id": "SN-0042"}, headers=bearer)[0] == 202
@@ -467,8 +492,8 @@ def test_a_second_measure_during_a_capture_is_refused_in_words(appliance_factory
     c = Client(app.web.url)
     assert c.json("/api/measure", method="POST", headers=bearer)[0] == 202
     running.wait_event(lambda e: e.state.value == "CAPTURING", 30, what="the capture")
-    status, body = c.json("/api/measure", method="POST", headers=bearer)
-    assert status == 409 and "already running" in body["error"] and "IDLE" in body["error"]
+    status, doc = c.json("/api/measure", method="POST", headers=bearer)
+    assert status == 409 and "already running" in doc["error"] and "IDLE" in doc["error"]
     assert c.json("/api/abort", method="POST", headers=bearer)[0] == 202
     running.wait_done(1, 30)
     assert app.store.latest(None).status == "aborted"
@@ -506,8 +531,8 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     status, _, body = c.request("/login", {"user": "olga", "token": "wrong-password", "csrf": c.csrf()})
     assert status == 401 and b"wrong user name or password" in body
     olga, csrf = login("olga", "olga-password-1")
-    status, body = olga.json("/api/part", data={"recipe": "rotor-a"}, headers={"X-CSRF-Token": csrf})
-    assert status == 403 and "olga (operator) may not change the recipe" in body["error"]
+    status, doc = olga.json("/api/part", data={"recipe": "rotor-a"}, headers={"X-CSRF-Token": csrf})
+    assert status == 403 and "olga (operator) may not change the recipe" in doc["error"]
     assert olga.json("/api/part", data={"part_id": "SN-7"}, headers={"X-CSRF-Token": csrf})[0] == 202
     quinn, qcsrf = login("quinn", "quinn-password-2")
     assert quinn.json("/api/part", data={"recipe": "rotor-a"}, headers={"X-CSRF-Token": qcsrf})[0] == 202
@@ -519,7 +544,7 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     # a fault is acknowledged by a quality engineer, not by an operator
     app.sequencer.fault("encoder fault: test cable pulled")
     running.wait_event(lambda e: e.state.value == "FAULT", 10, what="FAULT")
-    status, body = olga.json("/api/abort", method="POST", headers={"X-CSRF-Token": csrf})
-    assert status == 403 and "may not acknowledge a fault" in body["error"]
+    status, doc = olga.json("/api/abort", method="POST", headers={"X-CSRF-Token": csrf})
+    assert status == 403 and "may not acknowledge a fault" in doc["error"]
     assert quinn.json("/api/abort", method="POST", headers={"X-CSRF-Token": qcsrf})[0] == 202
     running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")

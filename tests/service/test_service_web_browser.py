@@ -119,7 +119,9 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     rows = wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, "#history td a"))
     rows[0].click()
     text = wait.until(lambda d: d.find_element(By.ID, "J")).text
-    J, U = (float(x) for x in re.match(r"J = ([0-9.e+-]+) kg·m² ± ([0-9.e+-]+) kg·m² \(U, k = 2\)", text).groups())
+    said = re.match(r"J = ([0-9.e+-]+) kg·m² ± ([0-9.e+-]+) kg·m² \(U, k = 2\)", text)
+    assert said is not None, text
+    J, U = (float(x) for x in said.groups())
     assert browser.find_element(By.ID, "verdict").text.split() == ["OK", "part", "OK"]
     assert browser.find_element(By.ID, "part-id").text == "SN-0042"
     truth = app.devices.sim.inertia
@@ -154,7 +156,7 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     # every result's plot is drawn (in the page's child process, at a lower priority: slow on a busy machine)
     # before the pages that show it are opened within the browser's page-load time
     for m in app.store.list(limit=None):
-        wait_until(lambda m=m: app.store.get_attachment(m.uuid, "plot.png") is not None, 300, 0.2, f"plot {m.seq}")
+        wait_until(lambda: app.store.get_attachment(m.uuid, "plot.png") is not None, 300, 0.2, f"plot {m.seq}")
 
     artifacts = Path(os.environ.get("MOI_ARTIFACTS") or tmp_path / "screens")
     artifacts.mkdir(parents=True, exist_ok=True)

@@ -168,7 +168,7 @@ def test_the_views_uncertainty_is_carried_into_omega_n():
         e = np.array([[d_stretch, d_shear], [d_shear, -d_stretch]])
         shifted = dataclasses.replace(view, matrix=tuple(((np.eye(2) - e) @ s).ravel()))
         moved.append(identify(pair_trace(track, shifted), CALIBRATED).omega_n - r.omega_n)
-    refit = float(np.hypot(*moved))
+    refit = float(np.hypot(moved[0], moved[1]))
     assert 0.7 < r.omega_n_std_calibration / refit < 1.4
     # a trace read as it is carries none
     assert identify(pair_trace(track, None), CALIBRATED).omega_n_std_calibration is None
@@ -180,6 +180,7 @@ def test_a_record_whose_view_was_measured_is_not_given_a_fitted_scale_again():
     track = MarkerTrack(trace.t, a, b, source="synthetic")
     r = identify(pair_trace(track, measure_view(a, b)), RIG)  # the rig says nothing of its sensor
     assert r.sensor_calibrated and not {"gain", "view"} & {name for s in r.steps for name in s.candidates}
+    assert r.omega_n_std_calibration is not None
     assert abs(r.omega_n - OMEGA_N) < 4 * np.hypot(r.omega_n_std, r.omega_n_std_calibration)
 
 

@@ -138,7 +138,7 @@ def test_v4l2_camera_settings_timestamps_and_drops():
     fake = FakeCapture(stamps)
     cam = V4L2Camera(0, CAMERA, capture_factory=fake)
     assert fake.args == (0, cv2.CAP_V4L2)
-    assert fake.props[cv2.CAP_PROP_FOURCC] == cv2.VideoWriter_fourcc(*"MJPG")
+    assert fake.props[cv2.CAP_PROP_FOURCC] == cv2.VideoWriter.fourcc(*"MJPG")
     assert fake.props[cv2.CAP_PROP_BUFFERSIZE] == 2 and fake.props[cv2.CAP_PROP_FPS] == 60.0
     frames = [cam.grab() for _ in range(6)]
     assert [f.index for f in frames] == [0, 1, 2, 4, 5, 8]

@@ -19,7 +19,7 @@ def test_mock_camera_by_default(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "mock camera" in text and "angle +5.00" in text and str(out) in text
     png = cv2.imread(str(out))
-    assert png.shape == (480, 640, 3)
+    assert png is not None and png.shape == (480, 640, 3)
     # the annotation is drawn in colour over the grey frame
     assert np.any(png[..., 2].astype(int) - png[..., 1].astype(int) > 100)
 

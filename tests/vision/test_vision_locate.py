@@ -121,7 +121,7 @@ def test_lost_marker_and_corrupt_frames_are_flagged_not_raised():
     y_ref = tracker.y_ref
     for bad in (None, np.zeros((480, 640, 3), np.uint8), np.zeros((240, 320), np.uint8),
                 np.zeros((480, 640), np.float32), "frame"):
-        obs = tracker.locate(bad)
+        obs = tracker.locate(bad)  # type: ignore[arg-type]
         assert not obs.found and obs.reason == CORRUPT and obs.detail
     for _ in range(3):
         obs = tracker.locate(occluded(r.render(0.1)))

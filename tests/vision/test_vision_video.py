@@ -138,7 +138,7 @@ def test_image_folder_with_timestamps_a_broken_file_and_dropped_frames(tmp_path)
 
 def test_millisecond_container_times_snap_to_the_frame_grid(tmp_path):
     path = tmp_path / "clip.mkv"
-    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), 60.0, (640, 480), isColor=False)
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"FFV1"), 60.0, (640, 480), isColor=False)
     for img in short_swing_frames(90, 23):
         w.write(img)
     w.release()
@@ -155,7 +155,7 @@ def test_millisecond_container_times_snap_to_the_frame_grid(tmp_path):
 
 def test_video_of_the_wrong_size_is_an_input_error(tmp_path, capsys):
     small = tmp_path / "small.avi"
-    w = cv2.VideoWriter(str(small), cv2.VideoWriter_fourcc(*"MJPG"), 60.0, (320, 240), isColor=False)
+    w = cv2.VideoWriter(str(small), cv2.VideoWriter.fourcc(*"MJPG"), 60.0, (320, 240), isColor=False)
     for _ in range(5):
         w.write(np.zeros((240, 320), np.uint8))
     w.release()

@@ -893,12 +893,15 @@ class Views:
         config = self._camera()
         if config is None:
             raise Refused(404, "this appliance has no camera")
-        camera = getattr(self.app.devices.sensor, "camera", None) if self.app.devices is not None else None
+        seq, devices = self.app.sequencer, self.app.devices
+        if seq is None or devices is None:
+            raise Refused(503, "the appliance is not running its devices yet")
+        camera = getattr(devices.sensor, "camera", None)
         if camera is None:
             raise Refused(404, "this camera sensor gives no single frames")
 
         def grab():  # on the main loop: never while a measurement reads the camera
-            if self.app.sequencer.busy:
+            if seq.busy:
                 raise Refused(409, "a measurement is running: the camera is busy; try again when it is idle")
             return camera.grab().image
 
