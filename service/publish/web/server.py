@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import functools
 import logging
 import threading
 import time
@@ -202,7 +203,7 @@ class WebServer(Publisher):
 
             from .quality import plot_labels
             unit, source = plot_labels(stored, self.appliance.config.simulated, self.settings.display_unit)
-            return self.child.call(render_png, m.result, unit=unit, source=source)
+            return self.child.call(functools.partial(render_png, unit=unit, source=source), m.result)
 
         self.submit_plot(m.id, draw)
 
