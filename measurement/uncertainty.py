@@ -139,9 +139,25 @@ class Line:
                 "share": self.share, "kind": self.kind, "dof": _finite(self.dof), "stated": self.stated,
                 "note": self.note}
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Line:
+        """Read back ``to_dict`` (null: a value or sensitivity that was not finite, NaN; dof ∞)."""
+        return cls(d["symbol"], d["source"], _nan(d["value"]), _nan(d["std"]), d["unit"], _nan(d["sensitivity"]),
+                   _nan(d["contribution"]), _nan(d["share"]), d["kind"], _inf(d["dof"]), d["stated"], d["note"])
+
 
 def _finite(v: float) -> float | None:
     return v if math.isfinite(v) else None
+
+
+def _nan(v: float | None) -> float:
+    """A number of the JSON as written, NaN where it held null (a value that was not finite)."""
+    return math.nan if v is None else v
+
+
+def _inf(v: float | None) -> float:
+    """Degrees of freedom as written, ∞ where the JSON held null."""
+    return math.inf if v is None else v
 
 
 @dataclass(frozen=True)
@@ -177,6 +193,14 @@ class Budget:
                 "correlation_share": self.correlation_share, "u": self.u, "u_random": self.u_random,
                 "u_systematic": self.u_systematic, "dof": self.dof if self.dof < 1e6 else None,
                 "coverage_factor": self.coverage_factor, "U": self.U}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Budget:
+        """Read back ``to_dict`` (a result JSON's budget): dof null is ∞, another null a value that was not finite."""
+        return cls(d["measurand"], _nan(d["value"]), d["unit"], tuple(Line.from_dict(ln) for ln in d["lines"]),
+                   tuple(dict(c) for c in d["correlations"]), _nan(d["correlation_share"]), _nan(d["u"]),
+                   _nan(d["u_random"]), _nan(d["u_systematic"]), _inf(d["dof"]), _nan(d["coverage_factor"]),
+                   _nan(d["U"]))
 
 
 def evaluate(measurand: str, unit: str, f: Callable[[Mapping[str, float]], float], inputs: Sequence[Input],
