@@ -11,13 +11,10 @@ import math
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Mapping
 
+from .wire import read_number
+
 #: the key prefix of each envelope law's error in ``as_dict``
 _ENVELOPE = "envelope_error_"
-
-
-def _read(v: Any) -> Any:
-    """A number of the JSON as written, NaN where it held null (a value that was not finite)."""
-    return math.nan if v is None else v
 
 #: residual RMS / noise floor below which the model is "at the noise floor" (reported, decides nothing)
 AT_NOISE = 1.10
@@ -117,14 +114,14 @@ class Diagnostics:
         kw: dict[str, Any] = {}
         for f in fields(cls):
             if f.name in ("decrement", "decrement_t"):
-                kw[f.name] = tuple(_read(d[f"{f.name}_{name}"]) for name in ("const", "linear", "quadratic"))
+                kw[f.name] = tuple(read_number(d[f"{f.name}_{name}"]) for name in ("const", "linear", "quadratic"))
             elif f.name == "envelope_errors":
                 # a law's error is ∞ where the law does not apply (1/A crossing zero), written null
                 kw[f.name] = {k.removeprefix(_ENVELOPE): math.inf if v is None else v
                               for k, v in d.items() if k.startswith(_ENVELOPE)}
             elif f.name in d:
                 # null is a number that was not finite, except where None is a value (no line, no law)
-                kw[f.name] = d[f.name] if "None" in str(f.type) else _read(d[f.name])
+                kw[f.name] = d[f.name] if "None" in str(f.type) else read_number(d[f.name])
         return cls(**kw)
 
     def describe(self) -> list[str]:

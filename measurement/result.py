@@ -25,6 +25,7 @@ import numpy as np
 from .errors import ResultSchemaError
 from .residual import Diagnostics
 from .uncertainty import Budget
+from .wire import read_number
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
 SCHEMA_VERSION = 4
@@ -53,11 +54,6 @@ def _jsonable(v: Any) -> Any:
 
 #: two-sided p-value below which the halves' ω_n disagree (the model does not hold across the record)
 DISAGREE_P = 0.01
-
-
-def _read(v: Any) -> Any:
-    """A number of the JSON as written, NaN where it held null (a value that was not finite)."""
-    return math.nan if v is None else v
 
 
 @dataclass(frozen=True)
@@ -89,8 +85,9 @@ class SegmentCheck:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> SegmentCheck:
         """Read back ``to_dict`` (``disagree`` is the property that computes it)."""
-        return cls(_read(d["t_split"]), tuple(_read(w) for w in d["omega_n"]),
-                   tuple(_read(s) for s in d["omega_n_std"]), _read(d["z"]), _read(d["p"]), _read(d["u"]))
+        return cls(read_number(d["t_split"]), tuple(read_number(w) for w in d["omega_n"]),
+                   tuple(read_number(s) for s in d["omega_n_std"]), read_number(d["z"]), read_number(d["p"]),
+                   read_number(d["u"]))
 
 
 @dataclass(frozen=True)
@@ -119,8 +116,8 @@ class Competitor:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Competitor:
         """Read back ``to_dict``."""
-        return cls(d["change"], _read(d["d_bic"]), _read(d["weight"]), _read(d["omega_n"]), _read(d["delta"]),
-                   tuple(d["effects"]))
+        return cls(d["change"], read_number(d["d_bic"]), read_number(d["weight"]), read_number(d["omega_n"]),
+                   read_number(d["delta"]), tuple(d["effects"]))
 
 
 @dataclass(frozen=True)
@@ -152,7 +149,7 @@ class ModelForm:
     def from_dict(cls, d: Mapping[str, Any]) -> ModelForm:
         """Read back ``to_dict`` (``u`` and ``u_segments`` are the properties that compute them)."""
         segments = None if d["segments"] is None else SegmentCheck.from_dict(d["segments"])
-        return cls(segments, tuple(Competitor.from_dict(c) for c in d["competitors"]), _read(d["u_competitors"]))
+        return cls(segments, tuple(Competitor.from_dict(c) for c in d["competitors"]), read_number(d["u_competitors"]))
 
 
 def budget_table(b: Budget) -> list[str]:
@@ -224,8 +221,9 @@ class ModelSummary:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> ModelSummary:
         """Read back ``to_dict``."""
-        return cls(tuple(d["effects"]), d["J"], d["J_std"], _read(d["omega_n"]), _read(d["omega_n_std"]),
-                   _read(d["residual_rms"]), _read(d["bic"]), _read(d["aic"]), quantities_from_dict(d["damping"]))
+        return cls(tuple(d["effects"]), d["J"], d["J_std"], read_number(d["omega_n"]), read_number(d["omega_n_std"]),
+                   read_number(d["residual_rms"]), read_number(d["bic"]), read_number(d["aic"]),
+                   quantities_from_dict(d["damping"]))
 
 
 def quantities_from_dict(d: Mapping[str, Any]) -> dict[str, dict[str, Quantity]]:
@@ -268,7 +266,7 @@ class DiscoveryStep:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> DiscoveryStep:
         """Read back ``to_dict``."""
-        return cls(d["round"], _read(d["residual_rms_before"]), _read(d["bic_before"]),
+        return cls(d["round"], read_number(d["residual_rms_before"]), read_number(d["bic_before"]),
                    {k: dict(v) for k, v in d["candidates"].items()}, d["chosen"], d["residual_rms_after"],
                    d["bic_after"], d["evidence"], d["reason"], d["omega_n_before"])
 
@@ -419,7 +417,7 @@ class IdentificationResult:
                    "residual_rms", "noise_floor", "omega_n_std_model")
         return cls(
             source=d["source"], rig_kind=d["rig_kind"], **{k: d[k] for k in optional},
-            **{k: _read(d[k]) for k in numbers},
+            **{k: read_number(d[k]) for k in numbers},
             offset=Quantity.from_dict(d["offset"]), damping=quantities_from_dict(d["damping"]),
             stiffness=quantities_from_dict(d["stiffness"]), sensor=quantities_from_dict(d["sensor"]),
             declared_effects=tuple(d["declared_effects"]), effects=tuple(d["effects"]),

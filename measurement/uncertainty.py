@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
 from .errors import InvalidInput
+from .wire import read_number
 
 #: coverage probability of U (GUM 6.2: k = 2 ↔ 95.45 % for a normal distribution)
 COVERAGE_PROBABILITY = 0.9545
@@ -142,17 +143,13 @@ class Line:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Line:
         """Read back ``to_dict`` (null: a value or sensitivity that was not finite, NaN; dof ∞)."""
-        return cls(d["symbol"], d["source"], _nan(d["value"]), _nan(d["std"]), d["unit"], _nan(d["sensitivity"]),
-                   _nan(d["contribution"]), _nan(d["share"]), d["kind"], _inf(d["dof"]), d["stated"], d["note"])
+        return cls(d["symbol"], d["source"], read_number(d["value"]), read_number(d["std"]), d["unit"],
+                   read_number(d["sensitivity"]), read_number(d["contribution"]), read_number(d["share"]), d["kind"],
+                   _inf(d["dof"]), d["stated"], d["note"])
 
 
 def _finite(v: float) -> float | None:
     return v if math.isfinite(v) else None
-
-
-def _nan(v: float | None) -> float:
-    """A number of the JSON as written, NaN where it held null (a value that was not finite)."""
-    return math.nan if v is None else v
 
 
 def _inf(v: float | None) -> float:
@@ -197,10 +194,10 @@ class Budget:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Budget:
         """Read back ``to_dict`` (a result JSON's budget): dof null is ∞, another null a value that was not finite."""
-        return cls(d["measurand"], _nan(d["value"]), d["unit"], tuple(Line.from_dict(ln) for ln in d["lines"]),
-                   tuple(dict(c) for c in d["correlations"]), _nan(d["correlation_share"]), _nan(d["u"]),
-                   _nan(d["u_random"]), _nan(d["u_systematic"]), _inf(d["dof"]), _nan(d["coverage_factor"]),
-                   _nan(d["U"]))
+        return cls(d["measurand"], read_number(d["value"]), d["unit"], tuple(Line.from_dict(ln) for ln in d["lines"]),
+                   tuple(dict(c) for c in d["correlations"]), read_number(d["correlation_share"]), read_number(d["u"]),
+                   read_number(d["u_random"]), read_number(d["u_systematic"]), _inf(d["dof"]),
+                   read_number(d["coverage_factor"]), read_number(d["U"]))
 
 
 def evaluate(measurand: str, unit: str, f: Callable[[Mapping[str, float]], float], inputs: Sequence[Input],
