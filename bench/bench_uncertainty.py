@@ -58,7 +58,7 @@ def repeat(i: int) -> tuple[float, float, float, float]:
                   tare_inertia=old.tare_inertia, tare_inertia_std=old.tare_inertia_std,
                   stiffness_tare_covariance=old.covariance, declared=("viscous",))
     old_b = budgets(old_rig, res.omega_n, res.omega_n_std, model=res.omega_n_std_model)["J_object"]
-    return b["value"] - PART, b["U"], b["coverage_factor"], old_b.U
+    return b.value - PART, b.U, b.coverage_factor, old_b.U
 
 
 def main(repeats: int = 200) -> None:

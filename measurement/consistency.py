@@ -20,6 +20,9 @@ that into an uncertainty of the model's form, beside the fit's statistical σ:
   weights (Burnham and Anderson, "Model Selection and Multimodel Inference",
   ch. 4), is carried into the uncertainty and the models are named.
 
+What they find is plain data the result carries (``result.SegmentCheck``,
+``result.Competitor``, ``result.ModelForm``).
+
 A sensor-scale effect that moves ω_n by more than its own σ must also hold
 across the record: its parameters fitted in each half must agree
 (``effect_holds``), so that a sensor scale that is really an approximate
@@ -31,7 +34,6 @@ same ω_n from both halves (``identification.rivals.hold_across``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
@@ -39,94 +41,15 @@ from scipy.special import erfc, gammaincc
 
 from .errors import IdentificationError
 from .fit import ModelFit, fit_model
-from .result import _num
+from .result import Competitor, SegmentCheck
 
 #: fewest full swings a segment must hold to be fitted on its own
 MIN_SEGMENT_SWINGS = 3.0
-#: two-sided p-value below which the halves' ω_n disagree (the model does not hold across the record)
-DISAGREE_P = 0.01
 #: p-value below which an effect's parameters fitted in the two halves disagree
 EFFECT_P = 1e-3
 #: largest leverage of the zero-amplitude extrapolation through the halves (m₂/(m₁ − m₂), m the
 #: halves' mean square angle): 2 where the second half's is a third of the first's
 MAX_LEVERAGE = 2.0
-
-
-@dataclass(frozen=True)
-class SegmentCheck:
-    """The final model fitted to each half of the record.
-
-    omega_n / omega_n_std: per half, rad/s. z: |ω₁ − ω₂| over their combined
-    σ; p: its two-sided p-value. u: the model-form standard uncertainty of
-    ω_n (rad/s) from the halves' scatter about the whole record's value
-    beyond their own σ (0 when they scatter no more than that).
-    """
-
-    t_split: float
-    omega_n: tuple[float, ...]
-    omega_n_std: tuple[float, ...]
-    z: float
-    p: float
-    u: float
-
-    @property
-    def disagree(self) -> bool:
-        return self.p < DISAGREE_P
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"t_split": _num(self.t_split), "omega_n": [_num(w) for w in self.omega_n],
-                "omega_n_std": [_num(s) for s in self.omega_n_std], "z": _num(self.z), "p": _num(self.p),
-                "u": _num(self.u), "disagree": self.disagree}
-
-
-@dataclass(frozen=True)
-class Competitor:
-    """A model the data do not decisively separate from the one kept.
-
-    change: what differs from the kept model, in words; d_bic: its BIC
-    minus the kept model's (under the noise model); weight: its BIC weight
-    in its round; omega_n: its ω_n, rad/s; delta: minus the kept model's ω_n
-    in the same round, rad/s; effects: the rival model's effects where it is a
-    whole model of its own (an effect withdrawn, a law in an effect's place),
-    so that several releases together can weigh it again; empty otherwise.
-    """
-
-    change: str
-    d_bic: float
-    weight: float
-    omega_n: float
-    delta: float
-    effects: tuple[str, ...] = ()
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"change": self.change, "d_bic": _num(self.d_bic), "weight": _num(self.weight),
-                "omega_n": _num(self.omega_n), "delta": _num(self.delta), "effects": list(self.effects)}
-
-
-@dataclass(frozen=True)
-class ModelForm:
-    """The model-form part of ω_n's uncertainty: segments and competing explanations (rad/s)."""
-
-    segments: SegmentCheck | None
-    competitors: tuple[Competitor, ...]
-    u_competitors: float
-
-    @property
-    def u_segments(self) -> float:
-        return 0.0 if self.segments is None else self.segments.u
-
-    @property
-    def u(self) -> float:
-        return math.hypot(self.u_segments, self.u_competitors)
-
-    def ambiguous(self, omega_n_std: float) -> bool:
-        """Rival models within the margin spread ω_n by more than the fit's σ (rad/s) says."""
-        return self.u_competitors > omega_n_std
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"u": _num(self.u), "u_segments": _num(self.u_segments), "u_competitors": _num(self.u_competitors),
-                "segments": None if self.segments is None else self.segments.to_dict(),
-                "competitors": [c.to_dict() for c in self.competitors]}
 
 
 def _swings_in(theta: np.ndarray) -> float:

@@ -3,13 +3,13 @@
 The numbers here decide when the discovery loop stops (residual at the
 noise floor and white) and what the report says about a residual the model
 library cannot explain. Each effect reads them in ``evidence`` to say why it
-is a plausible cause.
+is a plausible cause. They are computed here (``diagnose``); the record of
+them and its words, which a result carries, is ``measurement.residual``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
 from typing import Callable
 
 import numpy as np
@@ -17,125 +17,8 @@ from scipy.linalg import cho_factor, cho_solve
 
 from .fit import ModelFit
 from .noise import autocorrelation, fit_noise, ljung_box
+from .residual import Diagnostics
 from .signal import find_swings, resample_uniform
-
-#: residual RMS / noise floor below which the model is "at the noise floor" (reported, decides nothing)
-AT_NOISE = 1.10
-#: BIC gain (under the noise model) above which the residual holds structure
-STRUCTURE_MARGIN = 10.0
-#: residual RMS over the noise floor from which a named shape in it is worth a flag
-NAMED_ABOVE_NOISE = 1.5
-
-
-@dataclass(frozen=True)
-class Diagnostics:
-    """Residual diagnostics of one fit. Angles in rad, frequencies in Hz."""
-
-    residual_rms: float
-    noise_floor: float
-    rms_ratio: float
-    lag1: float
-    whiteness_p: float
-    white: bool
-    swing_hz: float
-    line_hz: float | None
-    line_fraction: float
-    low_frequency_fraction: float
-    envelope_law: str | None
-    envelope_errors: dict
-    stopped: bool
-    freq_amp_slope: float
-    freq_amp_t: float
-    centre_slope: float
-    centre_t: float
-    asymmetry: float
-    asymmetry_t: float
-    #: amplitude lost per full swing, ΔA = d0 + d1·A + d2·A² (rad), with t-values:
-    #: d0 is dry friction's signature, d1 linear damping's, d2 air drag's
-    decrement: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    decrement_t: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    #: BIC change when the residual is regressed on the shapes an unmodelled
-    #: effect leaves (``structure_test``), under the noise model; < −margin: structure
-    structure_bic: float = 0.0
-    #: BIC change when the residual is regressed on the envelope shapes θ·τ, θ·τ² alone
-    envelope_bic: float = 0.0
-
-    @property
-    def at_noise_floor(self) -> bool:
-        return self.rms_ratio <= AT_NOISE
-
-    @property
-    def structured(self) -> bool:
-        """The residual holds deterministic structure beyond its noise model: something is unmodelled."""
-        return self.structure_bic < -STRUCTURE_MARGIN
-
-    def named_structure(self) -> list[str]:
-        """The shapes in the residual that can be named, each large enough to matter, in words.
-
-        An envelope that decays otherwise than the model's (a damping law
-        it lacks); a spectral line away from the swing frequency (another
-        mode, a vibration), a trend slower than the swing, unequal
-        half-swings: each of these must hold a fair share of a residual
-        that stands clear of the noise (a line at the swing frequency is the
-        model's own phase error, judged by what it does to ω_n instead).
-        """
-        out: list[str] = []
-        # the envelope test carries its own margin (it is a BIC under the noise model, two shapes):
-        # a damping law the model lacks shows there even close to the noise
-        if self.envelope_bic < -STRUCTURE_MARGIN:
-            out.append(f"the swing decays otherwise than the model: its envelope departs from the model's "
-                       f"(ΔBIC {self.envelope_bic:+.0f})")
-        if self.rms_ratio < NAMED_ABOVE_NOISE:
-            return out
-        off_swing = (self.line_hz is not None and math.isfinite(self.swing_hz) and self.swing_hz > 0
-                     and abs(self.line_hz / self.swing_hz - 1.0) > 0.15)
-        if off_swing and self.line_fraction >= 0.3:
-            out.append(f"a spectral line at {self.line_hz:.4g} Hz holds {100 * self.line_fraction:.0f} % of the residual power")
-        if self.low_frequency_fraction >= 0.5:
-            out.append(f"a trend slower than the swing holds {100 * self.low_frequency_fraction:.0f} % of the residual power")
-        if abs(self.asymmetry_t) >= 6 and abs(self.asymmetry) >= 3 * self.noise_floor:
-            out.append(f"the half-swings differ by {self.asymmetry:+.3g} rad (t = {self.asymmetry_t:.1f})")
-        return out
-
-    def as_dict(self) -> dict:
-        d = asdict(self)
-        d.pop("envelope_errors")
-        for key in ("decrement", "decrement_t"):
-            for name, v in zip(("const", "linear", "quadratic"), d.pop(key)):
-                d[f"{key}_{name}"] = v
-        for law, err in self.envelope_errors.items():
-            d[f"envelope_error_{law}"] = err
-        d["structured"] = self.structured
-        d["at_noise_floor"] = self.at_noise_floor
-        return d
-
-    def describe(self) -> list[str]:
-        """Plain sentences on the residual's size and shape."""
-        out = [f"RMS {self.residual_rms:.3g} rad = {self.rms_ratio:.3g} × the noise floor ({self.noise_floor:.3g} rad, estimated from the data)"]
-        if self.white:
-            out.append(f"white (lag-1 autocorrelation {self.lag1:+.2f}, Ljung–Box p = {self.whiteness_p:.2g})")
-        else:
-            out.append(f"not white: lag-1 autocorrelation {self.lag1:+.2f} (Ljung–Box p = {self.whiteness_p:.2g})")
-        if self.line_hz is not None and self.line_fraction >= 0.2:
-            ratio = self.line_hz / self.swing_hz if self.swing_hz > 0 else float("nan")
-            out.append(f"spectral line at {self.line_hz:.4g} Hz ({ratio:.3g} × the swing frequency {self.swing_hz:.4g} Hz)"
-                       f" holds {100 * self.line_fraction:.0f} % of the residual power")
-        if self.low_frequency_fraction >= 0.3:
-            out.append(f"{100 * self.low_frequency_fraction:.0f} % of the residual power is slower than the swing (trend or drift)")
-        if abs(self.freq_amp_t) >= 4:
-            out.append(f"frequency depends on amplitude beyond the model: dω/d(A²) = {self.freq_amp_slope:+.3g} rad/s per rad² (t = {self.freq_amp_t:.1f})")
-        if abs(self.centre_t) >= 4:
-            out.append(f"the swing centre moves by {self.centre_slope:+.3g} rad/s against the model (t = {self.centre_t:.1f})")
-        if abs(self.asymmetry_t) >= 4:
-            out.append(f"positive and negative half-swings differ by {self.asymmetry:+.3g} rad in amplitude (t = {self.asymmetry_t:.1f})")
-        terms = [f"{name} part (t = {t:.1f})" for name, t in zip(("a constant", "a linear", "a quadratic"), self.decrement_t) if t >= 3]
-        if terms:
-            out.append("the amplitude lost per swing has " + ", ".join(terms) + " in the amplitude")
-        if self.envelope_law:
-            out.append(f"the measured envelope decays most like a{'n' if self.envelope_law[0] in 'aeiou' else ''} {self.envelope_law} law")
-        if self.stopped:
-            out.append("the pendulum came to rest within the record (stuck by friction)")
-        return out
 
 
 def _envelope_law(times: np.ndarray, amps: np.ndarray) -> tuple[str | None, dict]:

@@ -40,3 +40,7 @@ class IdentificationError(MeasurementError):
 
 class TensorError(InvalidInput):
     """A tensor plan or a multi-orientation set that cannot determine the inertia tensor."""
+
+
+class ResultSchemaError(InvalidInput):
+    """A stored or received result JSON is of another schema than the one this version reads."""

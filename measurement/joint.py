@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -42,7 +42,8 @@ from .identification.rivals import fallback
 from .identification.threads import one_blas_thread
 from .model import STATE_PARAMS, Model
 from .noise import fit_noise
-from .result import IdentificationResult, Quantity, _budget_table, _jsonable, _num
+from .result import IdentificationResult, Quantity, _jsonable, _num, budget_table, quantities_from_dict
+from .uncertainty import Budget
 from .rig import Rig
 from .trace import Trace
 
@@ -84,15 +85,15 @@ class JointResult:
     releases: tuple[IdentificationResult, ...]
     #: measurand → its GUM budget (``measurement.uncertainty``) on the joint ω_n ± omega_n_u; the releases'
     #: scatter (when it sets omega_n_u) counts with its n − 1 degrees of freedom
-    uncertainty_budget: dict[str, Any] = field(default_factory=dict)
+    uncertainty_budget: dict[str, Budget] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         declared = self.releases[0].declared_effects
         return {
             "joint": True, "rig_kind": self.rig_kind,
             "J": _num(self.J), "J_std": _num(self.J_std), "J_u": _num(self.J_u),
-            "J_U": _num((self.uncertainty_budget.get("J") or {}).get("U")),
-            "uncertainty_budget": _jsonable(self.uncertainty_budget),
+            "J_U": _num(self.uncertainty_budget["J"].U) if "J" in self.uncertainty_budget else None,
+            "uncertainty_budget": _jsonable({k: b.to_dict() for k, b in self.uncertainty_budget.items()}),
             "omega_n": _num(self.omega_n), "omega_n_std": _num(self.omega_n_std), "omega_n_u": _num(self.omega_n_u),
             "declared_effects": list(declared), "effects": list(self.effects),
             "added_effects": [e for e in self.effects if e not in declared],
@@ -104,6 +105,19 @@ class JointResult:
             "flags": list(self.flags),
             "releases": [r.to_dict() for r in self.releases],
         }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> JointResult:
+        """Read back ``to_dict`` (each release by ``IdentificationResult.from_dict``; the keys derived from the
+        releases and the budget, declared_effects, added_effects, baseline and J_U, are computed again)."""
+        number = {k: math.nan if d[k] is None else d[k] for k in ("omega_n", "omega_n_std", "omega_n_u", "residual_rms")}
+        return cls(
+            rig_kind=d["rig_kind"], effects=tuple(d["effects"]), J=d["J"], J_std=d["J_std"], J_u=d["J_u"], **number,
+            damping=quantities_from_dict(d["damping"]), stiffness=quantities_from_dict(d["stiffness"]),
+            consistency=dict(d["consistency"]), flags=tuple(d["flags"]),
+            releases=tuple(IdentificationResult.from_dict(r) for r in d["releases"]),
+            uncertainty_budget={k: Budget.from_dict(b) for k, b in d["uncertainty_budget"].items()},
+        )
 
     def to_json(self) -> str:
         import json
@@ -126,7 +140,7 @@ class JointResult:
                      " (the releases' ω_n alone)")
             for measurand, b in self.uncertainty_budget.items():
                 L.append(f"[[Uncertainty budget]] {measurand} (GUM: the joint ω_n and the rig's constants)")
-                L.extend(_budget_table(b))
+                L.extend(budget_table(b))
         else:
             L.append("    J            = n/a: the rig gives no stiffness (torsion) or mass·com_distance (compound)")
         L.append(f"    omega_n      = {self.omega_n:.7g} rad/s, σ {self.omega_n_std:.2g}, combined u {self.omega_n_u:.2g} rad/s"
@@ -345,7 +359,7 @@ def _candidate_sets(results: Sequence[IdentificationResult], rig: Rig) -> list[t
     with the law: alone, its record already showed that it does not hold.
     """
     union = _shared_effects(results, rig)
-    rivals = [c["effects"] for r in results for c in r.model_form.get("competitors", ()) if c.get("effects")]
+    rivals = [list(c.effects) for r in results for c in r.model_form.competitors if c.effects]
     bases = list(dict.fromkeys([union] + [_dynamic(r.effects, rig) for r in results]))
     sets: list[tuple[tuple[str, ...], frozenset[str]]] = [(b, frozenset()) for b in bases]
     bases = list(dict.fromkeys(bases + [_dynamic(list(union) + e, rig) for e in rivals]))
@@ -368,7 +382,9 @@ def _not_held(chosen: _SharedModelFit, results: Sequence[IdentificationResult]) 
     out = []
     for f, r in zip(chosen.fits, results):
         seg = check_segments(f, r.noise_floor)
-        own = (r.model_form.get("segments") or {}).get("z")
+        segments = r.model_form.segments
+        # halves of zero σ (z not finite) say nothing of their own model
+        own = segments.z if segments is not None and math.isfinite(segments.z) else None
         if seg is not None and seg.disagree and (own is None or seg.z > own):
             out.append(r.source)
     return out
@@ -472,7 +488,7 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
         J=J, J_std=J_std, J_u=J_u,
         damping=effect_quantities(shim, rig, ("damping",)), stiffness=effect_quantities(shim, rig, ("stiffness",)),
         residual_rms=rms, consistency=consistency, flags=tuple(flags), releases=tuple(results),
-        uncertainty_budget={k: b.to_dict() for k, b in budget.items()},
+        uncertainty_budget=budget,
     )
 
 

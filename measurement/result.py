@@ -4,6 +4,13 @@ The JSON of ``moi identify --json``, the MQTT payload and the Modbus
 registers are all produced from this object (``to_dict``), so they cannot
 disagree. Arrays (trace, fit, residuals) stay on the object for plots and the
 result store and are left out of ``to_dict`` unless asked for.
+
+Typed all the way down: the model's form (``ModelForm``), the uncertainty
+budgets (``measurement.uncertainty.Budget``) and the residual's diagnostics
+(``measurement.residual.Diagnostics``) are objects, and ``from_dict`` reads a
+result JSON of this schema back into the same object (a number the JSON cannot
+hold, NaN or ±∞, is written null and read back NaN): ``to_dict`` of what
+``from_dict`` read is the JSON it read.
 """
 
 from __future__ import annotations
@@ -11,9 +18,14 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
+
+from .errors import ResultSchemaError
+from .residual import Diagnostics
+from .uncertainty import Budget
+from .wire import read_number
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
 SCHEMA_VERSION = 4
@@ -40,21 +52,121 @@ def _jsonable(v: Any) -> Any:
     return _num(v)
 
 
-def _budget_table(b: dict[str, Any]) -> list[str]:
-    """A budget dict (``measurement.uncertainty.Budget.to_dict``) as the report's table."""
+#: two-sided p-value below which the halves' ω_n disagree (the model does not hold across the record)
+DISAGREE_P = 0.01
+
+
+@dataclass(frozen=True)
+class SegmentCheck:
+    """The final model fitted to each half of the record (``measurement.consistency.check_segments``).
+
+    omega_n / omega_n_std: per half, rad/s. z: |ω₁ − ω₂| over their combined
+    σ; p: its two-sided p-value. u: the model-form standard uncertainty of
+    ω_n (rad/s) from the halves' scatter about the whole record's value
+    beyond their own σ (0 when they scatter no more than that).
+    """
+
+    t_split: float
+    omega_n: tuple[float, ...]
+    omega_n_std: tuple[float, ...]
+    z: float
+    p: float
+    u: float
+
+    @property
+    def disagree(self) -> bool:
+        return self.p < DISAGREE_P
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"t_split": _num(self.t_split), "omega_n": [_num(w) for w in self.omega_n],
+                "omega_n_std": [_num(s) for s in self.omega_n_std], "z": _num(self.z), "p": _num(self.p),
+                "u": _num(self.u), "disagree": self.disagree}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> SegmentCheck:
+        """Read back ``to_dict`` (``disagree`` is the property that computes it)."""
+        return cls(read_number(d["t_split"]), tuple(read_number(w) for w in d["omega_n"]),
+                   tuple(read_number(s) for s in d["omega_n_std"]), read_number(d["z"]), read_number(d["p"]),
+                   read_number(d["u"]))
+
+
+@dataclass(frozen=True)
+class Competitor:
+    """A model the data do not decisively separate from the one kept.
+
+    change: what differs from the kept model, in words; d_bic: its BIC
+    minus the kept model's (under the noise model); weight: its BIC weight
+    in its round; omega_n: its ω_n, rad/s; delta: minus the kept model's ω_n
+    in the same round, rad/s; effects: the rival model's effects where it is a
+    whole model of its own (an effect withdrawn, a law in an effect's place),
+    so that several releases together can weigh it again; empty otherwise.
+    """
+
+    change: str
+    d_bic: float
+    weight: float
+    omega_n: float
+    delta: float
+    effects: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"change": self.change, "d_bic": _num(self.d_bic), "weight": _num(self.weight),
+                "omega_n": _num(self.omega_n), "delta": _num(self.delta), "effects": list(self.effects)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Competitor:
+        """Read back ``to_dict``."""
+        return cls(d["change"], read_number(d["d_bic"]), read_number(d["weight"]), read_number(d["omega_n"]),
+                   read_number(d["delta"]), tuple(d["effects"]))
+
+
+@dataclass(frozen=True)
+class ModelForm:
+    """The model-form part of ω_n's uncertainty: segments and competing explanations (rad/s)."""
+
+    segments: SegmentCheck | None
+    competitors: tuple[Competitor, ...]
+    u_competitors: float
+
+    @property
+    def u_segments(self) -> float:
+        return 0.0 if self.segments is None else self.segments.u
+
+    @property
+    def u(self) -> float:
+        return math.hypot(self.u_segments, self.u_competitors)
+
+    def ambiguous(self, omega_n_std: float) -> bool:
+        """Rival models within the margin spread ω_n by more than the fit's σ (rad/s) says."""
+        return self.u_competitors > omega_n_std
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"u": _num(self.u), "u_segments": _num(self.u_segments), "u_competitors": _num(self.u_competitors),
+                "segments": None if self.segments is None else self.segments.to_dict(),
+                "competitors": [c.to_dict() for c in self.competitors]}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ModelForm:
+        """Read back ``to_dict`` (``u`` and ``u_segments`` are the properties that compute them)."""
+        segments = None if d["segments"] is None else SegmentCheck.from_dict(d["segments"])
+        return cls(segments, tuple(Competitor.from_dict(c) for c in d["competitors"]), read_number(d["u_competitors"]))
+
+
+def budget_table(b: Budget) -> list[str]:
+    """A budget (``measurement.uncertainty.Budget``) as the report's table."""
     out = [f"    {'source':<32}{'value':>12}{'u':>10}  {'unit':<8}{'c':>10}{'c·u':>10}{'share':>8}"]
-    for ln in b["lines"]:
-        note = f"  ({ln['note']})" if ln.get("note") else ""
-        value = ln["value"] if ln["value"] is not None else float("nan")
-        c = ln["sensitivity"] if ln["sensitivity"] is not None else float("nan")
-        out.append(f"    {ln['source'][:32]:<32}{value:>12.6g}{ln['std']:>10.2g}  {ln['unit']:<8}{c:>10.3g}"
-                   f"{ln['contribution']:>10.2g}{100 * ln['share']:>7.1f}%{note}")
-    for c in b.get("correlations", ()):
-        out.append(f"    correlation r({c['a']}, {c['b']}) = {c['r']:+.4f}: {100 * b['correlation_share']:+.1f} % of u²")
-    dof = "∞" if b.get("dof") is None else f"{b['dof']:.0f}"
-    rel = f" ({100 * b['U'] / abs(b['value']):.3g} %)" if b.get("value") else ""
-    out.append(f"    u = {b['u']:.3g} {b['unit']}, ν_eff = {dof}, k = {b['coverage_factor']:.2f}, "
-               f"U = {b['U']:.3g} {b['unit']}{rel}")
+    for ln in b.lines:
+        note = f"  ({ln.note})" if ln.note else ""
+        value = ln.value if _num(ln.value) is not None else float("nan")
+        c = ln.sensitivity if _num(ln.sensitivity) is not None else float("nan")
+        out.append(f"    {ln.source[:32]:<32}{value:>12.6g}{ln.std:>10.2g}  {ln.unit:<8}{c:>10.3g}"
+                   f"{ln.contribution:>10.2g}{100 * ln.share:>7.1f}%{note}")
+    for r in b.correlations:
+        out.append(f"    correlation r({r['a']}, {r['b']}) = {r['r']:+.4f}: {100 * b.correlation_share:+.1f} % of u²")
+    dof = "∞" if _num(b.dof) is None or b.dof >= 1e6 else f"{b.dof:.0f}"
+    rel = f" ({100 * b.U / abs(b.value):.3g} %)" if b.value else ""
+    out.append(f"    u = {b.u:.3g} {b.unit}, ν_eff = {dof}, k = {b.coverage_factor:.2f}, "
+               f"U = {b.U:.3g} {b.unit}{rel}")
     return out
 
 
@@ -68,6 +180,11 @@ class Quantity:
 
     def to_dict(self) -> dict[str, Any]:
         return {"value": _num(self.value), "std": _num(self.std), "unit": self.unit}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Quantity:
+        """Read back ``to_dict``."""
+        return cls(d["value"], d["std"], d["unit"])
 
     def __str__(self) -> str:
         if self.value is None:
@@ -101,6 +218,18 @@ class ModelSummary:
             "damping": {e: {k: q.to_dict() for k, q in ps.items()} for e, ps in self.damping.items()},
         }
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ModelSummary:
+        """Read back ``to_dict``."""
+        return cls(tuple(d["effects"]), d["J"], d["J_std"], read_number(d["omega_n"]), read_number(d["omega_n_std"]),
+                   read_number(d["residual_rms"]), read_number(d["bic"]), read_number(d["aic"]),
+                   quantities_from_dict(d["damping"]))
+
+
+def quantities_from_dict(d: Mapping[str, Any]) -> dict[str, dict[str, Quantity]]:
+    """effect → parameter → ``Quantity``, read back from its JSON."""
+    return {e: {k: Quantity.from_dict(q) for k, q in ps.items()} for e, ps in d.items()}
+
 
 @dataclass(frozen=True)
 class DiscoveryStep:
@@ -133,6 +262,13 @@ class DiscoveryStep:
             "residual_rms_after": _num(self.residual_rms_after), "bic_after": _num(self.bic_after),
             "evidence": self.evidence, "reason": self.reason,
         }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> DiscoveryStep:
+        """Read back ``to_dict``."""
+        return cls(d["round"], read_number(d["residual_rms_before"]), read_number(d["bic_before"]),
+                   {k: dict(v) for k, v in d["candidates"].items()}, d["chosen"], d["residual_rms_after"],
+                   d["bic_after"], d["evidence"], d["reason"], d["omega_n_before"])
 
 
 @dataclass(frozen=True, eq=False)
@@ -177,7 +313,8 @@ class IdentificationResult:
     flags: tuple[str, ...]
     baseline: ModelSummary
     steps: tuple[DiscoveryStep, ...]
-    diagnostics: dict[str, Any]
+    #: the final residual's (``measurement.residual``)
+    diagnostics: Diagnostics
     structure: tuple[str, ...]
     window: dict[str, Any]
     #: facts from the sensor path (camera yaw, dropped frames, encoder errors...), from Trace.meta
@@ -191,10 +328,11 @@ class IdentificationResult:
     #: combined standard uncertainty of ω_n (rad/s) and J (kg·m²): fit ⊕ calibration ⊕ model form
     omega_n_u: float | None = None
     J_u: float | None = None
-    model_form: dict[str, Any] = field(default_factory=dict)
-    #: measurand ("J", "J_object", "J_object_axis") → its GUM budget (``measurement.uncertainty.Budget.to_dict``):
+    #: the halves of the record and the rival models
+    model_form: ModelForm = field(default_factory=lambda: ModelForm(None, (), 0.0))
+    #: measurand ("J", "J_object", "J_object_axis") → its GUM budget (``measurement.uncertainty.Budget``):
     #: lines (source, value, u, sensitivity, contribution, share), u, coverage factor, U
-    uncertainty_budget: dict[str, Any] = field(default_factory=dict)
+    uncertainty_budget: dict[str, Budget] = field(default_factory=dict)
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -206,7 +344,7 @@ class IdentificationResult:
 
     def _budget(self, measurand: str, key: str) -> float | None:
         b = self.uncertainty_budget.get(measurand)
-        return None if b is None else _num(b.get(key))
+        return None if b is None else _num(getattr(b, key))
 
     @property
     def J_U(self) -> float | None:
@@ -235,8 +373,8 @@ class IdentificationResult:
             "J_object_u": self._budget("J_object", "u"), "J_object_U": self._budget("J_object", "U"),
             "J_object_axis_u": self._budget("J_object_axis", "u"),
             "J_object_axis_U": self._budget("J_object_axis", "U"),
-            "uncertainty_budget": _jsonable(self.uncertainty_budget),
-            "model_form": _jsonable(self.model_form),
+            "uncertainty_budget": _jsonable({k: b.to_dict() for k, b in self.uncertainty_budget.items()}),
+            "model_form": _jsonable(self.model_form.to_dict()),
             "damping_ratio": _num(self.damping_ratio), "damping_ratio_std": _num(self.damping_ratio_std),
             "reference_amplitude": _num(self.reference_amplitude),
             "offset": self.offset.to_dict(),
@@ -253,7 +391,7 @@ class IdentificationResult:
             "flags": list(self.flags),
             "baseline": self.baseline.to_dict(),
             "steps": [s.to_dict() for s in self.steps],
-            "diagnostics": {k: _num(v) for k, v in self.diagnostics.items()},
+            "diagnostics": {k: _num(v) for k, v in self.diagnostics.as_dict().items()},
             "structure": list(self.structure),
             "window": {k: _num(v) for k, v in self.window.items()},
             "acquisition": _jsonable(self.acquisition),
@@ -262,6 +400,35 @@ class IdentificationResult:
         if include_arrays:
             d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
         return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> IdentificationResult:
+        """Read back ``to_dict`` of this schema (``SCHEMA_VERSION``; with ``arrays`` when it holds them).
+
+        The keys ``to_dict`` derives (J_U, coverage_factor, J_object_u and _U, J_object_axis_u and _U,
+        error_reduction) are the properties that compute them; keys beyond the result's (a payload's
+        envelope) are not read. Raises ResultSchemaError for a result of another schema.
+        """
+        if d.get("schema") != SCHEMA_VERSION:
+            raise ResultSchemaError(f"a result of schema {d.get('schema')!r}; expected schema {SCHEMA_VERSION}")
+        optional = ("J", "J_std", "J_std_calibration", "J_object", "J_object_std", "J_object_axis",
+                    "J_object_axis_std", "omega_n_std_calibration", "J_std_model", "omega_n_u", "J_u")
+        numbers = ("omega_n", "omega_n_std", "damping_ratio", "damping_ratio_std", "reference_amplitude",
+                   "residual_rms", "noise_floor", "omega_n_std_model")
+        return cls(
+            source=d["source"], rig_kind=d["rig_kind"], **{k: d[k] for k in optional},
+            **{k: read_number(d[k]) for k in numbers},
+            offset=Quantity.from_dict(d["offset"]), damping=quantities_from_dict(d["damping"]),
+            stiffness=quantities_from_dict(d["stiffness"]), sensor=quantities_from_dict(d["sensor"]),
+            declared_effects=tuple(d["declared_effects"]), effects=tuple(d["effects"]),
+            added_effects=tuple(d["added_effects"]), statistics=dict(d["statistics"]), flags=tuple(d["flags"]),
+            baseline=ModelSummary.from_dict(d["baseline"]), steps=tuple(DiscoveryStep.from_dict(s) for s in d["steps"]),
+            diagnostics=Diagnostics.from_dict(d["diagnostics"]), structure=tuple(d["structure"]),
+            window=dict(d["window"]), acquisition=dict(d["acquisition"]), sensor_calibrated=d["sensor_calibrated"],
+            model_form=ModelForm.from_dict(d["model_form"]),
+            uncertainty_budget={k: Budget.from_dict(b) for k, b in d["uncertainty_budget"].items()},
+            arrays={k: np.asarray(v, dtype=float) for k, v in (d.get("arrays") or {}).items()},
+        )
 
     def to_json(self, **kwargs: Any) -> str:
         return json.dumps(self.to_dict(**kwargs), ensure_ascii=False, allow_nan=False)
@@ -277,7 +444,7 @@ class IdentificationResult:
         L.append("[[Result]]")
         def expanded(measurand: str) -> str:
             b = self.uncertainty_budget.get(measurand)
-            return "" if not b else f"; U = {b['U']:.2g} kg·m² (k = {b['coverage_factor']:.3g}, budget below)"
+            return "" if b is None else f"; U = {b.U:.2g} kg·m² (k = {b.coverage_factor:.3g}, budget below)"
 
         if self.J is not None:
             extra = f" (calibration adds ±{self.J_std_calibration:.2g})" if self.J_std_calibration else ""
@@ -298,9 +465,9 @@ class IdentificationResult:
             ju = f"; J ± {self.J_u:.2g} kg·m²" if self.J_u is not None else ""
             L.append(f"    model form   = ±{self.omega_n_std_model:.2g} rad/s (halves of the record, rival models)"
                      f" → combined u: ω_n ± {self.omega_n_u:.2g} rad/s{ju}")
-        for measurand, b in self.uncertainty_budget.items():
+        for measurand, budget in self.uncertainty_budget.items():
             L.append(f"[[Uncertainty budget]] {measurand} (GUM; J_std above is the fit's 1σ alone)")
-            L.extend(_budget_table(b))
+            L.extend(budget_table(budget))
         L.append(f"    damping ratio= {Quantity(self.damping_ratio, self.damping_ratio_std, '')}"
                  f" (equivalent viscous, at {self.reference_amplitude:.4g} rad)")
         for group in (self.damping, self.stiffness, self.sensor):

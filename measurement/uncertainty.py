@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
 from .errors import InvalidInput
+from .wire import read_number
 
 #: coverage probability of U (GUM 6.2: k = 2 ↔ 95.45 % for a normal distribution)
 COVERAGE_PROBABILITY = 0.9545
@@ -139,9 +140,21 @@ class Line:
                 "share": self.share, "kind": self.kind, "dof": _finite(self.dof), "stated": self.stated,
                 "note": self.note}
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Line:
+        """Read back ``to_dict`` (null: a value or sensitivity that was not finite, NaN; dof ∞)."""
+        return cls(d["symbol"], d["source"], read_number(d["value"]), read_number(d["std"]), d["unit"],
+                   read_number(d["sensitivity"]), read_number(d["contribution"]), read_number(d["share"]), d["kind"],
+                   _inf(d["dof"]), d["stated"], d["note"])
+
 
 def _finite(v: float) -> float | None:
     return v if math.isfinite(v) else None
+
+
+def _inf(v: float | None) -> float:
+    """Degrees of freedom as written, ∞ where the JSON held null."""
+    return math.inf if v is None else v
 
 
 @dataclass(frozen=True)
@@ -177,6 +190,14 @@ class Budget:
                 "correlation_share": self.correlation_share, "u": self.u, "u_random": self.u_random,
                 "u_systematic": self.u_systematic, "dof": self.dof if self.dof < 1e6 else None,
                 "coverage_factor": self.coverage_factor, "U": self.U}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Budget:
+        """Read back ``to_dict`` (a result JSON's budget): dof null is ∞, another null a value that was not finite."""
+        return cls(d["measurand"], read_number(d["value"]), d["unit"], tuple(Line.from_dict(ln) for ln in d["lines"]),
+                   tuple(dict(c) for c in d["correlations"]), read_number(d["correlation_share"]), read_number(d["u"]),
+                   read_number(d["u_random"]), read_number(d["u_systematic"]), _inf(d["dof"]),
+                   read_number(d["coverage_factor"]), read_number(d["U"]))
 
 
 def evaluate(measurand: str, unit: str, f: Callable[[Mapping[str, float]], float], inputs: Sequence[Input],

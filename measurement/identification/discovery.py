@@ -18,12 +18,13 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from ..consistency import effect_holds
-from ..diagnostics import Diagnostics, diagnose
+from ..diagnostics import diagnose
 from ..effects import EFFECTS, Effect, candidate_effects, resolve_effects, with_effect
 from ..errors import IdentificationError
 from ..fit import ModelFit, fit_model
 from ..model import Model
 from ..noise import fit_noise
+from ..residual import Diagnostics
 from ..result import DiscoveryStep
 from ..rig import Rig
 from .options import Options

@@ -7,11 +7,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..consistency import ModelForm, SegmentCheck
-from ..diagnostics import Diagnostics
 from ..fit import ModelFit
 from ..model import Model
-from ..result import DiscoveryStep
+from ..residual import Diagnostics
+from ..result import DiscoveryStep, ModelForm, SegmentCheck
 from ..rig import Rig
 from ..trace import Trace
 from .preparation import Prepared

@@ -8,11 +8,12 @@ from typing import Any
 import numpy as np
 
 from ..consistency import check_segments
-from ..diagnostics import Diagnostics, diagnose
+from ..diagnostics import diagnose
 from ..effects import EFFECTS
 from ..errors import RigError, UnknownEffectError
 from ..fit import ModelFit, fit_model
 from ..model import Model
+from ..residual import Diagnostics
 from ..result import DiscoveryStep, IdentificationResult
 from ..rig import Rig
 from ..trace import Trace

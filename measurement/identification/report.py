@@ -8,7 +8,7 @@ sentences become the result's ``structure`` (the report's [[Residual]]).
 from __future__ import annotations
 
 from .. import flags as F
-from ..consistency import SegmentCheck
+from ..result import SegmentCheck
 from .discovery import SCREEN_TRUST
 from .findings import Findings
 from .flags import FOLLOW_LIMIT, Leftover

@@ -19,12 +19,12 @@ from typing import Sequence
 
 import numpy as np
 
-from ..consistency import Competitor, ModelForm, SegmentCheck, bic_weights, check_segments, competitors
+from ..consistency import bic_weights, check_segments, competitors
 from ..effects import EFFECTS, resolve_effects
 from ..errors import IdentificationError
 from ..fit import ModelFit, fit_model
 from ..model import Model
-from ..result import DiscoveryStep
+from ..result import Competitor, DiscoveryStep, ModelForm, SegmentCheck
 from ..rig import Rig
 from .discovery import Move
 from .preparation import Prepared
@@ -164,7 +164,7 @@ def law_rival(final: ModelFit, moves: Sequence[Move], prep: Prepared, rig: Rig,
 
 def model_form(final: ModelFit, segments: SegmentCheck | None, steps: Sequence[DiscoveryStep], aliases: Aliases,
                withdrawn: Withdrawn | None, law: LawRival | None, margin: float) -> ModelForm:
-    """The model-form part of ``final``'s ω_n uncertainty (``consistency.ModelForm``).
+    """The model-form part of ``final``'s ω_n uncertainty (``result.ModelForm``).
 
     Its halves (``check_segments``), the discovery's rounds' near rivals (``competitors``), the
     sampling's aliases, the withdrawn model (its distance carried whole: BIC prefers it, the halves

@@ -16,11 +16,11 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from ..consistency import Competitor
 from ..effects import EFFECTS
 from ..errors import IdentificationError
 from ..fit import ModelFit, fit_model, initial_guess
 from ..model import Model
+from ..result import Competitor
 
 
 def contains(outer: Model, inner: Model) -> bool:

@@ -69,9 +69,9 @@ def run(args: argparse.Namespace) -> int:
     if budget is None:
         raise InputFileError(f"{args.rig}: the rig gives no {args.quantity} (stiffness or m·S, a tare for J_object, "
                              "[object] for J_object_axis); expected a rig that does")
-    check = check_standard(args.name, args.quantity, budget["value"], budget["U"], args.reference, args.reference_U)
+    check = check_standard(args.name, args.quantity, budget.value, budget.U, args.reference, args.reference_U)
     record = check.to_dict() | {"source": str(args.source), "rig": args.rig, "flags": list(result.flags),
-                                "coverage_factor": budget["coverage_factor"]}
+                                "coverage_factor": budget.coverage_factor}
     stored = None
     if args.state_dir or args.config:
         from service.persistence.store import Store

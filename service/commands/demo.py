@@ -249,12 +249,12 @@ def _run(app, args: argparse.Namespace) -> int:
             print(json.dumps(payload, ensure_ascii=False))
         print(f"the result page: {app.web.url}results/{payload['uuid']}")
         quantity = recipe.spec.quantity if recipe.spec is not None else "J"
-        budget = (payload.get("uncertainty_budget") or {}).get(quantity)
-        if budget:
-            top = sorted(budget["lines"], key=lambda ln: -ln["share"])[:3]
-            print(f"uncertainty budget of {quantity} (one release): U = {_g(budget['U'])} kg·m² "
-                  f"(k = {budget['coverage_factor']:.3g}); largest terms: "
-                  + ", ".join(f"{ln['source']} {100 * ln['share']:.3g} %" for ln in top))
+        budget = m.result.uncertainty_budget.get(quantity)
+        if budget is not None:
+            top = sorted(budget.lines, key=lambda ln: -ln.share)[:3]
+            print(f"uncertainty budget of {quantity} (one release): U = {_g(budget.U)} kg·m² "
+                  f"(k = {budget.coverage_factor:.3g}); largest terms: "
+                  + ", ".join(f"{ln.source} {100 * ln.share:.3g} %" for ln in top))
         if args.serve:
             print("serving until Ctrl-C")
             try:

@@ -321,7 +321,7 @@ class _StatePrinter:
 
 def _print_acquisition(m, out) -> None:
     """What the encoder kept and dropped: late replies are left out of the trace, and said so here."""
-    enc = (m.to_dict().get("acquisition") or {}).get("encoder")
+    enc = m.result.acquisition.get("encoder")
     if not enc or "late_replies" not in enc:  # the in-process simulated sensor has no link
         return
     req = enc.get("requests") or 0

@@ -161,7 +161,7 @@ def test_a_swing_sampled_once_a_period_cannot_be_told_from_its_alias_and_says_so
     r = identify(Trace(t, y + np.random.default_rng(1).normal(0, 5e-5, t.size)), rig)
     f, fs = omega_n / (2 * math.pi), 1.0 / period
     aliases = [2 * math.pi * abs(f + k * fs) for k in (-2, -1, 1)]
-    named = [r.omega_n] + [cc["omega_n"] for cc in r.model_form["competitors"]]
+    named = [r.omega_n] + [cc.omega_n for cc in r.model_form.competitors]
     assert "model_ambiguous" in r.flags, r.report()
     assert any(abs(w / omega_n - 1) < 1e-3 for w in named)  # the swing is the kept fit or a named rival
     assert sum(any(abs(w / a - 1) < 1e-3 for w in named) for a in aliases) >= 2  # and so are its aliases

@@ -1,11 +1,14 @@
 """The two measured wood-pendulum sessions: what the loop finds in each, as tracked and with the camera's view
 measured from the two markers, and that what still separates them is flagged."""
 
+import json
 from pathlib import Path
 
 import pytest
 
 from measurement import identify, parse_trace_csv
+from measurement.errors import ResultSchemaError
+from measurement.result import IdentificationResult
 from measurement.rig import Rig
 from measurement.vision.marker_pair import measure_view, pair_trace, parse_marker_csv
 
@@ -39,8 +42,8 @@ def _withdrawn_presliding(r):
     withdrawn to the Coulomb friction it refines, its ω_n a rival in the uncertainty."""
     assert "dahl" in [s.chosen for s in r.steps]
     assert "dahl" not in r.effects and "coulomb" in r.effects and "model_ambiguous" in r.flags
-    rival = next(c for c in r.model_form["competitors"] if c["change"].startswith("dahl kept"))
-    assert abs(rival["delta"]) <= r.omega_n_u
+    rival = next(c for c in r.model_form.competitors if c.change.startswith("dahl kept"))
+    assert abs(rival.delta) <= r.omega_n_u
 
 
 def test_small_swings_of_the_60deg_session_ask_for_presliding_friction_that_does_not_hold(runs):
@@ -63,7 +66,7 @@ def test_oblique_view_explains_the_unequal_half_swings_of_the_120deg_session(run
     r = runs["wood_pendulum_120deg.csv"]
     assert "view" in r.added_effects
     assert "unmodeled_residual" not in r.flags
-    assert abs(r.diagnostics["asymmetry_t"]) < 4
+    assert abs(r.diagnostics.asymmetry_t) < 4
 
 
 def test_sessions_that_disagree_on_omega_n_say_what_is_left(runs):
@@ -101,3 +104,18 @@ def test_with_the_camera_calibrated_each_session_keeps_its_friction(calibrated):
     c60, c120 = calibrated.values()
     _withdrawn_presliding(c60)
     assert {"coulomb", "quadratic"} <= set(c120.added_effects)
+
+
+def test_a_result_reads_back_as_typed_fields_and_writes_the_same_json(runs, calibrated):
+    # the tracked sessions (a withdrawn rival, a fitted view) and the marker pairs (a measured view, perspective)
+    for r in [*runs.values(), *calibrated.values()]:
+        text = r.to_json()
+        back = IdentificationResult.from_dict(json.loads(text))
+        assert back.to_json() == text
+        assert back.model_form == r.model_form and back.diagnostics == r.diagnostics and back.steps == r.steps
+        assert back.uncertainty_budget.keys() == r.uncertainty_budget.keys()
+        assert back.report() == r.report()
+    older = json.loads(text) | {"schema": 3}
+    with pytest.raises(ResultSchemaError, match="schema 3; expected schema 4"):
+        IdentificationResult.from_dict(older)
+

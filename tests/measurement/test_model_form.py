@@ -45,7 +45,7 @@ def test_presliding_friction_that_stands_for_a_softer_law_is_not_kept(seed):
     # from the truth, but the model with it gives another ω_n in each half of the record
     r = identify(_bifilar_trace(-0.3, seed), Rig(kind="compound", declared=("viscous",)))
     assert "dahl" not in r.effects and "model_ambiguous" in r.flags
-    assert any(c["change"].startswith("dahl kept") for c in r.model_form["competitors"])
+    assert any(c.change.startswith("dahl kept") for c in r.model_form.competitors)
     assert any("dahl lowered BIC" in s and "does not hold across the record" in s for s in r.structure)
     # never confidently wrong: the error is within the stated uncertainty
     assert r.omega_n_u is not None and abs(r.omega_n - 2.4) < 2 * r.omega_n_u
@@ -55,7 +55,7 @@ def test_the_law_of_a_clean_swing_holds_across_the_record():
     r = identify(_bifilar_trace(0.0), Rig(kind="compound", declared=("viscous",)))
     assert r.added_effects == () and "halves_disagree" not in r.flags
     assert r.omega_n_u is not None and abs(r.omega_n - 2.4) < 3 * r.omega_n_u
-    assert r.model_form["segments"]["z"] < 3
+    assert r.model_form.segments.z < 3
 
 
 def _step(chosen, table, bic_before=0.0, w_before=None):
@@ -120,8 +120,8 @@ def test_presliding_friction_that_a_softer_law_explains_as_well_carries_the_laws
     # keeps dahl (its halves agree), which put ω_n 8 u from the truth before the law was fitted
     r = identify(_swing({"viscous": {"c_per_J": 0.05}, "cubic_stiffness": {"k3_per_J": -6.0}}, seed=2), _RIG)
     assert "dahl" in r.effects and "model_ambiguous" in r.flags
-    law = [c for c in r.model_form["competitors"] if c["change"].startswith("cubic_stiffness")]
-    assert law and law[0]["d_bic"] < 10 and law[0]["weight"] > 0.05
+    law = [c for c in r.model_form.competitors if c.change.startswith("cubic_stiffness")]
+    assert law and law[0].d_bic < 10 and law[0].weight > 0.05
     assert any("fitted in its place, cubic_stiffness" in s and "do not separate them" in s for s in r.structure)
     assert r.omega_n_u is not None and abs(r.omega_n - 5.8) < 2 * r.omega_n_u
 
@@ -131,7 +131,7 @@ def test_true_presliding_friction_is_not_widened_by_the_law_it_could_stand_for(s
     r = identify(_swing({"viscous": {"c_per_J": 0.1}, "dahl": {"Tc_per_J": 0.19, "theta_c": 0.08}}, seed), _RIG)
     assert r.added_effects == ("dahl",) and "model_ambiguous" not in r.flags
     assert any("cubic_stiffness" in s and "the data separate them" in s for s in r.structure)
-    assert not any(c["change"].startswith("cubic_stiffness") for c in r.model_form["competitors"])
+    assert not any(c.change.startswith("cubic_stiffness") for c in r.model_form.competitors)
     assert r.omega_n_u is not None and abs(r.omega_n - 5.8) < 3 * r.omega_n_u
 
 

@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import functools
 import itertools
+import json
 import math
 from pathlib import Path
 
 import pytest
 
-from measurement.joint import identify_releases
+from measurement.joint import JointResult, identify_releases
+from measurement.result import IdentificationResult
 from service.sources.dispatch import load_source
 from service.sources.files import read_rig
 
@@ -103,3 +105,20 @@ def test_shared_laws_of_least_bic_that_do_not_hold_across_a_release_are_not_kept
     assert c["not_held"] and j.effects == ("viscous", "coulomb")
     assert c["u_models"] >= abs(best["omega_n"] - c["joint_fit"]["omega_n"])
     assert j.omega_n_u >= c["u_models"]
+
+
+@pytest.mark.parametrize("name", sorted(SETS))
+def test_a_joint_result_and_its_releases_read_back_as_the_json_they_were_written_as(name):
+    # the result JSON is a contract read outside the repo: what from_dict reads, to_dict writes again byte for byte
+    j = joint(name)
+    text = j.to_json()
+    again = JointResult.from_dict(json.loads(text))
+    assert again.to_json() == text
+    assert {k: b.U for k, b in again.uncertainty_budget.items()} == {k: b.U for k, b in j.uncertainty_budget.items()}
+    assert bool(j.uncertainty_budget) == (name == "cart")  # the cart's rig gives J, the bifilar's does not
+    for r, back in zip(j.releases, again.releases):
+        assert back.model_form == r.model_form and back.diagnostics == r.diagnostics
+        assert back.uncertainty_budget.keys() == r.uncertainty_budget.keys()
+        assert back.J_U == r.J_U and back.report() == r.report()
+        with_arrays = r.to_json(include_arrays=True)
+        assert IdentificationResult.from_dict(json.loads(with_arrays)).to_json(include_arrays=True) == with_arrays
