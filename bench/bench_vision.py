@@ -18,11 +18,11 @@ import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))
 
-import cv2  # noqa: E402
-import numpy as np  # noqa: E402
+import cv2
+import numpy as np
 
-from measurement import Pendulum, Rig, Swing, identify  # noqa: E402
-from measurement.vision import (CameraConfig, CameraModel, CameraPose, Imaging, MarkerGeometry,  # noqa: E402
+from measurement import Pendulum, Rig, Swing, identify
+from measurement.vision import (CameraConfig, CameraModel, CameraPose, Imaging, MarkerGeometry,
                                 MarkerRenderer, MarkerTracker, TrackerSettings, angle_from_normalised)
 
 CAMERA = CameraModel(width=640, height=480, fps=60.0, fx=600.0, fy=600.0, cx=319.5, cy=239.5)

@@ -155,7 +155,6 @@ class SimEncoderServer:
         self._server: ModbusSerialServer | None = None
         self._lock = threading.Lock()
         self.counts = {"reads": 0, "replies": 0, "dropped": 0, "corrupted": 0, "exceptions": 0, "glitches": 0}
-        self.last_latch: tuple[float, float] | None = None  # (clock time, true angle) of the last read
 
     @property
     def url(self) -> str:
@@ -241,7 +240,6 @@ class SimEncoderServer:
         await self._wait(request_wire + 0.5 * c.latency)
         t = self._clock.now()
         true_angle = float(self._angle(t))
-        self.last_latch = (t, true_angle)
         measured = true_angle + (self._rng.normal(0.0, c.noise_std) if c.noise_std else 0.0)
         value = c.counts(measured)
         if c.glitch_rate and self._rng.random() < c.glitch_rate:

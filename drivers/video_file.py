@@ -40,7 +40,7 @@ from .errors import VideoFileError
 # FFmpeg reports every damaged packet on stderr; the count goes into the result instead.
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
-import cv2  # noqa: E402  (after the log level, which FFmpeg reads when first used)
+import cv2  # after the log level, which FFmpeg reads when first used
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm"}
 TIMESTAMPS_FILE = "timestamps.csv"

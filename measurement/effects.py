@@ -132,7 +132,7 @@ class Effect:
         cols = []
         for j in range(len(self.parameters)):
             env.update({f"p{i}": float(i == j) for i in range(len(self.parameters))})
-            cols.append(np.broadcast_to(eval(code, env), theta.shape))  # noqa: S307 - library terms only
+            cols.append(np.broadcast_to(eval(code, env), theta.shape))  # library terms only
         return np.stack(cols, axis=1)
     #: Static friction capacity at rest (rad/s², a θ'' magnitude) as an
     #: expression in x and p0...; empty when the effect cannot hold the pendulum.

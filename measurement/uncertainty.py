@@ -180,10 +180,6 @@ class Budget:
     coverage_factor: float
     U: float
 
-    def largest(self, n: int = 3) -> list[Line]:
-        """The ``n`` lines that contribute most, largest first."""
-        return sorted((ln for ln in self.lines if ln.contribution), key=lambda ln: -abs(ln.contribution))[:n]
-
     def to_dict(self) -> dict[str, Any]:
         return {"measurand": self.measurand, "value": self.value, "unit": self.unit,
                 "lines": [ln.to_dict() for ln in self.lines], "correlations": [dict(c) for c in self.correlations],

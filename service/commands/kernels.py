@@ -145,7 +145,7 @@ def serve(kinds: list[str], inp: IO[bytes], out: IO[bytes]) -> None:
         try:
             kernel(kind).run(t, x0, v0, w2, params, holding, max_step, x, v)
             answer: tuple = ("ok", x, v)
-        except Exception as exc:  # noqa: BLE001 - the command then runs the kernel itself and raises there
+        except Exception as exc:  # the command then runs the kernel itself and raises there
             answer = ("error", f"{type(exc).__name__}: {exc}")
         pickle.dump(answer, out, protocol=pickle.HIGHEST_PROTOCOL)
         out.flush()

@@ -31,7 +31,8 @@ from typing import TYPE_CHECKING
 
 from measurement.errors import InvalidInput
 
-from service.devices.defaults import DEMO_EFFECTS, DEMO_RIG, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE, demo_camera
+from service.devices.defaults import DEMO_EFFECTS, DEMO_RIG, SIM_ENCODER_NOISE, demo_camera
+from service.devices.sensors import registry as sensors
 from service.sources.files import read_rig
 from .simulate import EFFECT_SYNTAX, parse_effects
 
@@ -45,9 +46,6 @@ DEFAULT_EFFECTS = [f"{name}:{p}={v:g}" for name, params in DEMO_EFFECTS.items() 
 
 #: exit status when the measurement ended in FAULT (not a bug: exit 1; not bad input: exit 2)
 EXIT_FAULT = 3
-
-#: default --time-scale per sensor (the camera renders its frames in real time)
-DEFAULT_TIME_SCALE = {"encoder": SIM_ENCODER_TIME_SCALE, "camera": 1.0}
 
 #: wall-clock seconds between two progress lines of the capture
 PROGRESS_EVERY = 1.0
@@ -86,7 +84,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="capture before the release, s (default %(default)g)")
     p.add_argument("--decay-threshold", type=float, default=seq("decay_threshold"), metavar="RAD",
                    help="end the capture early once the swing amplitude is below this, rad (default %(default)g: off)")
-    p.add_argument("--sensor", choices=("encoder", "camera"), default=sim("sensor"),
+    p.add_argument("--sensor", choices=sensors.names(hardware=True), default=sim("sensor"),
                    help="what records the swing: the Modbus encoder (default) or the camera")
     p.add_argument("--time-scale", type=float, default=None, metavar="X",
                    help="simulated seconds per wall-clock second (default 1; at most 20 with the encoder, whose "
@@ -121,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.sim:
         raise InvalidInput("moi measure: give --sim (the simulated rig) or --config FILE (the configured hardware)")
     if args.time_scale is None:
-        args.time_scale = DEFAULT_TIME_SCALE[args.sensor]
+        args.time_scale = sensors.sensor(args.sensor).DEFAULT_TIME_SCALE
     if not (args.duration > 0 and args.pre_trigger >= 0):
         raise InvalidInput("--duration must be > 0 s and --pre-trigger >= 0 s")
 

@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
     app = Appliance(config)
 
-    def on_signal(signum, frame):  # noqa: ARG001 (signal handler signature)
+    def on_signal(signum, frame):  # a signal handler's signature
         logging.getLogger("moi.daemon").info("signal %s: stopping", signal.Signals(signum).name)
         app.request_stop()
 

@@ -5,16 +5,40 @@ from __future__ import annotations
 import argparse
 import math
 
-from measurement.effects import EFFECTS
+from measurement.effects import EFFECTS, Effect
 from measurement.errors import InvalidInput, UnknownEffectError
 
 from service.sources.files import read_rig, write_text_atomic
 
 
+def _given_unit(effect: type[Effect], given: str) -> str:
+    """The unit of a value given by the name ``given`` (a parameter, its physical quantity, or another)."""
+    for p in effect.parameters:
+        if given == p.physical:
+            return p.physical_unit or ""
+        if given == p.name:
+            return p.unit
+    return effect.extra_units.get(given, "")
+
+
+def _value_syntax(name: str, effect: type[Effect]) -> str:
+    """What ``NAME=VALUE`` gives for one effect: its first parameter by the name and unit it is given in, per
+    rig kind where they differ."""
+    first, *others = effect.rigs
+    given = effect.default_given(first)
+    text = f"{name} {given} [{_given_unit(effect, given)}]"
+    for kind in others:
+        g = effect.default_given(kind)
+        if g != given:
+            text += f" or {g} [{_given_unit(effect, g)}] on a {kind} rig"
+    return text
+
+
+#: the help of --effects, written from the effect classes (every effect of the library, its value's name and unit)
 EFFECT_SYNTAX = (
-    "effects as NAME=VALUE (the effect's physical parameter: viscous c [N·m·s/rad], coulomb Tc [N·m] "
-    "or mu [m] on a compound rig, quadratic K [N·m·s²/rad²], cubic_stiffness k3 [N·m/rad³], drift rate [rad/s]) "
-    "or NAME:PARAM=VALUE, e.g. viscous=2e-4 coulomb:Tc=1e-4"
+    "effects as NAME=VALUE (the effect's physical parameter: "
+    + ", ".join(_value_syntax(name, effect) for name, effect in EFFECTS.items())
+    + ") or NAME:PARAM=VALUE, e.g. viscous=2e-4 coulomb:Tc=1e-4"
 )
 
 

@@ -38,15 +38,17 @@ from drivers.errors import DriverConfigError
 from drivers.settings import (ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSettings, IndicatorSettings,
                               SolenoidSettings)
 
-from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, demo_camera
+from service.devices.defaults import (DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, MAX_ENCODER_TIME_SCALE,
+                                      demo_camera)
+from service.devices.sensors import registry as sensors
 from service.config.schema import REQUIRED, Checker as _Checker, Key, PublisherTable, doc as _doc, schema as _schema
 from service.errors import ConfigError
 from service.names import name_problem
 from service.sources.files import read_rig, read_toml
 from service.publish import registry
 
-#: the angle sensors of ``[hardware] sensor``
-SENSORS = ("encoder", "camera")
+#: the angle sensors of ``[hardware] sensor`` (the sensor port's registry; ``[simulation] sensor`` has them all)
+SENSORS = sensors.names(hardware=True)
 
 #: the rig simulated when ``[device] rig`` is not given (the demo rig of `moi demo`)
 DEFAULT_SIM_RIG = DEMO_RIG
@@ -89,20 +91,15 @@ class SimulationSettings:
         ts = self.time_scale
         if not (isinstance(ts, (int, float)) and not isinstance(ts, bool) and 0 < ts <= MAX_TIME_SCALE):
             raise InvalidInput(f"time_scale must be in (0, {MAX_TIME_SCALE:g}] simulated s per wall-clock s, got {ts!r}")
-        if self.sensor == "encoder" and ts > MAX_ENCODER_TIME_SCALE:
-            raise InvalidInput(
-                f"time_scale {ts:g} is above {MAX_ENCODER_TIME_SCALE:g}, the largest the simulated encoder keeps up "
-                f"with: its Modbus link answers some 500–1500 reads per wall-clock second, and a capture needs "
-                f"dozens of samples per swing (use time_scale <= {MAX_ENCODER_TIME_SCALE:g})")
+        kind = sensors.sensor(self.sensor) if self.sensor in sensors.names() else None
+        if kind is not None and kind.MAX_TIME_SCALE is not None and ts > kind.MAX_TIME_SCALE:
+            raise InvalidInput(f"time_scale {ts:g} is above {kind.MAX_TIME_SCALE:g}, {kind.TIME_SCALE_REASON} "
+                               f"(use time_scale <= {kind.MAX_TIME_SCALE:g})")
 
 
 #: largest [simulation] time_scale: simulated seconds per wall-clock second
 MAX_TIME_SCALE = 1000.0
 
-#: largest time_scale with sensor = "encoder": the simulated Modbus link serves some 500–1500 reads per
-#: wall-clock second (bench/bench_encoder.py), about 30 samples per simulated second at 20× (some 35 per
-#: swing of the demo rig) on a busy 2-core host; at 50× it was 7
-MAX_ENCODER_TIME_SCALE = 20.0
 
 
 @dataclass(frozen=True)
@@ -214,7 +211,7 @@ _APPLIANCE: dict[str, dict[str, Key]] = {
         "sensor": _doc("\"encoder\": a simulated Modbus RTU encoder on a loopback socket read by the real encoder "
                        "client; \"direct\": an in-process sensor sampling at rate (faster); \"camera\": a mock camera "
                        "rendering the marker, read by the real camera sensor (keep time_scale = 1: frames are "
-                       "rendered in real time)", choices=("encoder", "direct", "camera")),
+                       "rendered in real time)", choices=sensors.names()),
         "latency": _doc("simulated encoder reply latency, s of real time", min=0, max=1),
         "camera": _doc("camera file of the simulated camera (sensor = \"camera\"; default: the demo camera, 640×480 px "
                        "at 100 frames/s, fx = 600 px, marker radius 0.10 m at 0.25 m); relative to this file",

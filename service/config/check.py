@@ -13,6 +13,8 @@ from typing import Any
 
 from service.publish.modbus.settings import network_exposure
 
+from service.devices.sensors import registry as sensors
+
 from .appliance import Config
 
 #: gpiozero pin factory name → the module it needs
@@ -103,15 +105,7 @@ def check_config(config: Config) -> list[Check]:
             except Exception as exc:  # an import of a hardware library may fail in many ways
                 checks.append(Check("GPIO backend", False, f"{backend or 'lgpio'}: cannot import {module} "
                                     f"({type(exc).__name__}: {exc}); on a Pi: pip install 'moi[pi]'"))
-        if hw.sensor == "encoder" and hw.encoder:
-            port = str(hw.encoder.get("port", ""))
-            if port and "://" not in port:
-                checks.append(Check("encoder serial port", Path(port).exists(),
-                                    port + (" present" if Path(port).exists() else " does not exist")))
-        if hw.sensor == "camera" and hw.camera is not None:
-            dev = hw.camera.device
-            path = Path(f"/dev/video{dev}") if isinstance(dev, int) else Path(str(dev))
-            checks.append(Check("camera", path.exists(), f"{path}" + (" present" if path.exists() else " does not exist")))
+        checks += [Check(*line) for line in sensors.sensor(hw.sensor).health(config)]
     m = config.mqtt
     if m is not None:
         for path, what in ((m.password_file, "MQTT password_file"), (m.ca_file, "MQTT ca_file"),

@@ -35,6 +35,11 @@ SIM_ENCODER_NOISE = 5e-5
 #: timestamp jitter already colours the residual of a 17-bit encoder (correlated_residual, outliers)
 SIM_ENCODER_TIME_SCALE = 1.0
 
+#: largest [simulation] time_scale of the simulated encoder: its Modbus link serves some 500–1500 reads per
+#: wall-clock second (bench/bench_encoder.py), about 30 samples per simulated second at 20× (some 35 per swing of
+#: the demo rig) on a busy 2-core host; at 50× it was 7
+MAX_ENCODER_TIME_SCALE = 20.0
+
 #: the simulated camera when no camera file is given (the camera file's tables): 640×480 px at
 #: 100 frames/s, 56° field of view, the marker on a 0.10 m radius seen from 0.25 m (240 px per rad at rest)
 DEMO_CAMERA: dict[str, Any] = {

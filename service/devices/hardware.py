@@ -15,21 +15,22 @@ fits the yaw in its ``finish`` hook.
 
 Hardware: the Modbus encoder of ``[hardware.encoder]``, or the V4L2 camera of
 ``[hardware.camera]`` through ``CameraAngleSensor``.
+
+Each sensor, its driver and its simulated twin, is one module of ``service.devices.sensors`` (the
+sensor port); this builder asks the registry for the one the configuration names.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from drivers.backend import pin_factory
 from drivers.button import PushButton
 from drivers.clock import Clock, MonotonicClock, ScaledClock
-from drivers.errors import DriverConfigError
 from drivers.indicator import Indicator
-from drivers.sensor import AngleSensor, SimulatedAngleSensor
+from drivers.sensor import AngleSensor
 from drivers.settings import SolenoidSettings
 from drivers.simrig import MAX_DURATION as SIM_MAX_DURATION, SimRig
 from drivers.solenoid import Solenoid
@@ -37,8 +38,8 @@ from firmware_host import SequencerConfig
 from measurement import Pendulum, Rig
 
 from service.config.appliance import Config, HardwareSettings, SimulationSettings
-from .defaults import SIM_BUTTON_PIN, SIM_SOLENOID_PIN, demo_camera
-from service.errors import ConfigError, StartupError
+from .defaults import SIM_BUTTON_PIN, SIM_SOLENOID_PIN
+from .sensors import registry as sensors
 
 log = logging.getLogger("moi.hardware")
 
@@ -108,10 +109,6 @@ def build_devices(config: Config) -> Devices:
     return _hardware(config)
 
 
-#: the simulated encoder client's reply time-out, s of real time (a scaled clock must not stretch it)
-SIM_ENCODER_TIMEOUT = 0.05
-
-
 def build_simulated(rig: Rig, sim: SimulationSettings, sequencer: SequencerConfig,
                     hardware: HardwareSettings | None = None) -> Devices:
     """The simulated appliance: mock pins, the simulated pendulum and the angle sensor of ``sim.sensor``.
@@ -139,34 +136,10 @@ def build_simulated(rig: Rig, sim: SimulationSettings, sequencer: SequencerConfi
                           duration=duration).attach(solenoid)
         closers: list[Callable[[], None]] = [pendulum.close]
         opened.append(pendulum.close)
-        if sim.sensor == "encoder":
-            from drivers.encoder import ModbusEncoder
-            from drivers.sim_encoder import SimEncoderConfig, SimEncoderServer
-
-            bits = sim.bits or 17
-            server = SimEncoderServer(pendulum.angle, clock, SimEncoderConfig(
-                counts_per_turn=1 << bits, registers=1 if bits <= 16 else 2, noise_std=sim.noise,
-                latency=sim.latency, drop_rate=sim.drop_rate, crc_error_rate=sim.crc_rate, glitch_rate=sim.glitch_rate,
-                seed=sim.seed)).start()
-            opened.append(server.stop)
-            closers.insert(0, server.stop)
-            notes.append(f"simulated encoder: Modbus RTU on {server.url}, {bits} bits")
-            if sim.time_scale > 1.0:
-                # the round trip's jitter (tens of µs of wall time) is time_scale× longer on the simulated clock
-                log.warning("simulated encoder at time_scale %g: the timestamps jitter %g× more in simulated time "
-                            "than in real time; expect correlated_residual or outlier flags a real-time capture "
-                            "would not raise (the default time_scale 1 keeps up)", sim.time_scale, sim.time_scale)
-            # requests paced at `rate` (simulated time), as a device's client would be: back to back the
-            # simulated link answers some 2000 reads/s and loads the host that dates them
-            inner: Any = ModbusEncoder(server.encoder_config(
-                timeout=SIM_ENCODER_TIMEOUT, min_interval=min(1.0 / (sim.rate * sim.time_scale), 1.0)), clock)
-        elif sim.sensor == "camera":
-            inner = _simulated_camera(sim, pendulum, clock, notes)
-            opened.append(inner.close)
-        else:
-            inner = SimulatedAngleSensor(pendulum.angle, clock, rate=sim.rate, noise_std=sim.noise,
-                                         quantisation_bits=sim.bits or None, seed=sim.seed, source="encoder")
-            notes.append(f"simulated sensor: in process at {sim.rate:g} Hz")
+        inner, stops = sensors.sensor(sim.sensor).simulate(sim, pendulum, clock, notes)
+        opened.append(inner.close)
+        closers[:0] = stops
+        opened += stops
         sensor = _RelatchingSensor(inner, pendulum)
     except BaseException:
         for close in reversed(opened):
@@ -198,81 +171,9 @@ def _hardware(config: Config) -> Devices:
             i = hw.indicator
             indicator = Indicator(i["pin"], kind=i["kind"], active_high=i["active_high"], pin_factory=factory)
             opened.append(indicator)
-        if hw.sensor == "encoder":
-            from drivers.encoder import EncoderConfig, ModbusEncoder
-
-            try:
-                enc = EncoderConfig.from_dict(dict(hw.encoder or {}))
-            except DriverConfigError as exc:
-                raise ConfigError(f"{config.source}: [hardware.encoder]: {exc}") from None
-            sensor = ModbusEncoder(enc, clock)
-        elif hw.sensor == "camera":
-            sensor = _camera(config, clock)
-        else:  # guarded by the config schema
-            raise ConfigError(f"[hardware] sensor {hw.sensor!r} is not supported")
+        sensor = sensors.sensor(hw.sensor).build(config, clock)
     except BaseException:
         for obj in opened:
             obj.close()
         raise
     return Devices(clock=clock, solenoid=solenoid, sensor=sensor, button=button, indicator=indicator)
-
-
-def _simulated_camera(sim: SimulationSettings, rig: SimRig, clock: Clock, notes: list[str]) -> Any:
-    """A mock camera filming the simulated rig (yawed by ``camera_yaw_deg``) and the device's camera sensor on it."""
-    from drivers.camera import open_camera
-    from drivers.camera_sensor import CameraAngleSensor
-    from measurement.vision.render import CameraPose
-
-    cfg = sim.camera_config
-    if cfg is None:  # SimulationSettings built by hand rather than by parse_config, which reads the file
-        from service.config.camera import read_camera
-        cfg = read_camera(sim.camera) if sim.camera else demo_camera()
-    if sim.time_scale != 1.0:
-        # frames are rendered on the main loop's thread (~5 ms each at 640×480); faster than real time,
-        # more frames fall due between two polls than the mock's 8-frame buffer holds: the rest are dropped
-        log.warning("simulated camera at time_scale %g: %g frames/s of swing to render per real second; "
-                    "expect dropped_frames (use time_scale = 1 with the camera)", sim.time_scale,
-                    cfg.camera.fps * sim.time_scale)
-    camera = open_camera(cfg, angle_source=rig.angle, clock=clock,
-                         pose=CameraPose(yaw=math.radians(sim.camera_yaw_deg)), drop_probability=sim.drop_rate,
-                         seed=sim.seed)
-    try:
-        sensor = CameraAngleSensor(camera, cfg, clock)
-    except BaseException:
-        camera.close()
-        raise
-    cam = cfg.camera
-    notes.append(f"simulated camera: {cam.width}×{cam.height} px at {cam.fps:g} frames/s, yaw {sim.camera_yaw_deg:g}°, "
-                 f"marker radius {cfg.marker.radius:g} m at {cfg.marker.distance:g} m")
-    return sensor
-
-
-def _camera(config: Config, clock: Clock) -> Any:
-    """The V4L2 camera of ``[hardware.camera]`` as the angle sensor.
-
-    The camera file was read and checked with the configuration; a device that is missing,
-    busy or cannot deliver the file's resolution is a ``StartupError`` (exit 3, systemd
-    restarts the daemon: a USB camera may still be enumerating) naming the setting.
-    """
-    from drivers.camera import open_camera
-    from drivers.camera_sensor import CameraAngleSensor
-
-    hw = config.hardware
-    assert hw is not None and hw.camera is not None, "guarded by the config: sensor = camera needs [hardware.camera]"
-    settings = hw.camera
-    try:
-        camera = open_camera(settings.config, settings.device)
-    except DriverConfigError as exc:
-        raise StartupError(f"{config.source}: [hardware.camera] device: {exc}") from None
-    try:
-        sensor = CameraAngleSensor(camera, settings.config, clock, max_lost_time=settings.max_lost_time)
-    except DriverConfigError as exc:
-        camera.close()
-        raise ConfigError(f"{config.source}: [hardware.camera]: {exc}") from None
-    except BaseException:
-        camera.close()
-        raise
-    cam = settings.config.camera
-    log.info("camera %s: %d×%d px at %g frames/s (camera file %s)", settings.device, cam.width, cam.height, cam.fps,
-             settings.file)
-    return sensor

@@ -91,7 +91,7 @@ from measurement.errors import InvalidInput, MeasurementError
 from measurement.tensor import RigShared, TensorPlan
 from measurement.uncertainty import check_standard
 from measurement.units import inertia_unit
-from measurement.verdict import (QUANTITIES, RULES, PartResult, QualityRules, Reading,
+from measurement.verdict import (QUANTITIES, RULES, QualityRules, Reading,
                                  Specification, combine, judge_release)
 
 from service.errors import ConfigError
@@ -392,7 +392,6 @@ class PartTracker:
         self.part_id: str | None = None
         self._open: _OpenPart | None = None
         self._undo: tuple[_OpenPart | None, int] | None = None
-        self.last_part: PartResult | None = None
 
     def select(self, key: str | int) -> Recipe:
         """Make a recipe active (RecipeError if it does not exist); 0 or "" deselects."""
@@ -458,7 +457,6 @@ class PartTracker:
                                     part_id or o.uuid, exc)
                         return None
             part = combine(o.readings, spec, recipe.quality, joint_of)
-            self.last_part = part
             out["part"] = {"uuid": o.uuid, "part_id": part_id, "measurements": list(o.measurements),
                            "quantity": spec.quantity, **part.to_dict()}
             cs = recipe.check_standard

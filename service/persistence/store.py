@@ -677,9 +677,6 @@ class Store:
                                     "GROUP BY recipe ORDER BY MIN(seq)").fetchall()
         return [r[0] for r in rows if r[0] is not None]
 
-    def iter_all(self, **kwargs: Any) -> Iterator[StoredMeasurement]:
-        yield from self.list(limit=None, **kwargs)
-
     @_store_errors("counting verdicts")
     def verdict_counts(self, since: float | None = None) -> dict[str, int]:
         """Completed parts by verdict (OK, NOK, INVALID) finished at or after ``since`` (Unix s)."""

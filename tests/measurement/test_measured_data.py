@@ -70,14 +70,23 @@ def test_oblique_view_explains_the_unequal_half_swings_of_the_120deg_session(run
 
 
 def test_sessions_that_disagree_on_omega_n_say_what_is_left(runs):
-    _name_what_is_left(runs["wood_pendulum_60deg.csv"], runs["wood_pendulum_120deg.csv"], {"unmodeled_residual": "left unexplained", "sensor_scale_fitted": "scale was fitted"})
+    r60, r120 = runs["wood_pendulum_60deg.csv"], runs["wood_pendulum_120deg.csv"]
+    # as tracked, the sessions disagree (the 60° one keeps the camera's oblique view in its angle): the rule
+    # below has something to hold, and each session names what it leaves
+    assert not _agree(r60, r120)
+    _name_what_is_left(r60, r120, {"unmodeled_residual": "left unexplained", "sensor_scale_fitted": "scale was fitted"})
+
+
+def _agree(r60, r120) -> bool:
+    """The two sessions give the same ω_n, within 0.1 % and 3 σ of their fits, with the same model."""
+    gap = abs(r60.omega_n - r120.omega_n)
+    combined = sum(r.omega_n_std**2 + (r.omega_n_std_calibration or 0.0) ** 2 for r in (r60, r120)) ** 0.5
+    return gap < 1e-3 * r60.omega_n and gap < 3 * combined and set(r60.effects) == set(r120.effects)
 
 
 def _name_what_is_left(r60, r120, named):
     gap = abs(r60.omega_n - r120.omega_n)
-    combined = sum(r.omega_n_std**2 + (r.omega_n_std_calibration or 0.0) ** 2 for r in (r60, r120)) ** 0.5
-    agree = gap < 1e-3 * r60.omega_n and gap < 3 * combined and set(r60.effects) == set(r120.effects)
-    if not agree:  # the product's rule: agreement, or a flag naming what is left
+    if not _agree(r60, r120):  # the product's rule: agreement, or a flag naming what is left
         for r in (r60, r120):
             raised = [f for f in named if f in r.flags]
             assert raised

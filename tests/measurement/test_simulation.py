@@ -110,7 +110,7 @@ def test_every_effect_term_matches_its_basis(name):
         env.update({f"p{j}": p for j, p in enumerate(params)})
         # an effect that remembers the last turning point is compared far from it, its memory
         # saturated in the direction of motion (its regressors are that limit)
-        term = [eval(eff.term, dict(env, x=a, v=b, s=math.copysign(1.0, b), xr=a - 1e3 * math.copysign(1.0, b),  # noqa: S307
+        term = [eval(eff.term, dict(env, x=a, v=b, s=math.copysign(1.0, b), xr=a - 1e3 * math.copysign(1.0, b),
                                     zr=math.copysign(1.0, b))) for a, b in zip(th, om)]
         assert np.allclose(term, basis, rtol=1e-12, atol=1e-12)
 

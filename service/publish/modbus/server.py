@@ -63,7 +63,7 @@ from service.publish.replies import CommandReply
 from service.persistence.acks import AckFile, AckState
 
 # the settings are read by the configuration without pymodbus; here for the server's users too
-from .settings import _THIS_MACHINE, ModbusSettings, allowed_networks, network_exposure  # noqa: F401
+from .settings import _THIS_MACHINE, ModbusSettings, allowed_networks, network_exposure
 
 from . import registers as R
 from service.errors import ModbusServerError

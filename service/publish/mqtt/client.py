@@ -60,7 +60,7 @@ from service.publish.replies import CommandReply
 from service.logs import Throttle
 
 # the settings are read by the configuration without paho; here for the client's users too
-from .settings import MqttSettings  # noqa: F401
+from .settings import MqttSettings
 from measurement.verdict import DEFAULT_INVALID_FLAGS
 
 from service.publish.modbus.registers import FLAG_BITS

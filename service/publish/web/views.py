@@ -856,7 +856,7 @@ class Views:
 
     async def setup(self, request: web.Request) -> web.Response:
         cfg = self.app.config
-        sensor = "camera" if self._camera() is not None else "encoder"
+        sensor = self._sensor().LABEL
         devices = self.app.devices
         readable = devices is not None and getattr(devices.sensor, "read_position", None) is not None
         logged_in = self.server.guard.session(request.cookies.get(COOKIE)) is not None
@@ -864,11 +864,15 @@ class Views:
                           config=setup_words(mask(cfg.to_dict()), shown_paths=logged_in), sensor=sensor,
                           readable=readable, web=self.server.stats())
 
-    def _camera(self):
+    def _sensor(self) -> Any:
+        """The kind of angle sensor the appliance reads (``service.devices.sensors``)."""
+        from service.devices.sensors import registry as sensors
+
         cfg = self.app.config
-        if cfg.simulated:
-            return cfg.simulation.camera_config if cfg.simulation.sensor == "camera" else None
-        return cfg.hardware.camera.config if cfg.hardware is not None and cfg.hardware.camera is not None else None
+        return sensors.sensor(cfg.simulation.sensor if cfg.simulated or cfg.hardware is None else cfg.hardware.sensor)
+
+    def _camera(self) -> Any:
+        return self._sensor().camera_config(self.app.config)
 
     async def api_angle(self, request: web.Request) -> web.Response:
         """The angle now: the last sample while a measurement captures, else one read of the encoder."""
@@ -888,7 +892,7 @@ class Views:
             _, angle = await loop.run_in_executor(None, read)
         except Exception as exc:  # a sensor fault is the answer, not a server error
             raise Refused(503, f"angle read failed: {exc}") from None
-        return web.json_response({"angle_rad": angle, "angle_deg": math.degrees(angle), "source": "encoder"})
+        return web.json_response({"angle_rad": angle, "angle_deg": math.degrees(angle), "source": self._sensor().LABEL})
 
     async def snapshot(self, request: web.Request) -> web.Response:
         """One camera frame with the search window and the fitted edge (what `moi camera-check` draws)."""

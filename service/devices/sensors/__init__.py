@@ -1,0 +1,1 @@
+"""The angle sensors: one module each (``port``: the interface), listed in ``registry``."""

@@ -1,0 +1,61 @@
+"""The sensor port: what the appliance knows of a kind of angle sensor.
+
+A sensor kind (the Modbus encoder, the camera, the in-process simulated sensor) is one class with ``NAME`` (its
+name in ``[hardware] sensor`` / ``[simulation] sensor``) and the class methods below: the driver built from its
+settings, its simulated twin on the simulated rig, the health lines of `moi check` and, for a camera, the
+camera file its frames are read with. ``service.devices.sensors.registry`` lists them: adding one is one module
+and one line there. The device builder, `moi check` and the web page hold a sensor kind and never name one.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Callable, ClassVar
+
+if TYPE_CHECKING:  # pragma: no cover
+    from drivers.clock import Clock
+    from drivers.sensor import AngleSensor
+    from drivers.simrig import SimRig
+    from service.config.appliance import Config, SimulationSettings
+
+
+class SensorKind:
+    """The interface; a sensor kind subclasses it."""
+
+    #: its name in the configuration
+    NAME: ClassVar[str] = ""
+    #: what the web page calls it (its set-up panel, the source of a one-off angle read)
+    LABEL: ClassVar[str] = ""
+    #: a device on the appliance ([hardware] sensor), or only a simulation ([simulation] sensor)
+    HARDWARE: ClassVar[bool] = True
+    #: the largest [simulation] time_scale its simulated twin keeps up with (None: any the simulation allows)
+    MAX_TIME_SCALE: ClassVar[float | None] = None
+    #: why the twin cannot go faster (said when time_scale is above MAX_TIME_SCALE)
+    TIME_SCALE_REASON: ClassVar[str] = ""
+    #: the groups whose devices it opens, and the device classes (``DeviceAllow=``, names as in /proc/devices):
+    #: the systemd unit grants them (a test holds the unit to every sensor's)
+    GROUPS: ClassVar[tuple[str, ...]] = ()
+    DEVICE_CLASSES: ClassVar[tuple[str, ...]] = ()
+    #: the time_scale of `moi measure --sim` with this sensor when none is given
+    DEFAULT_TIME_SCALE: ClassVar[float] = 1.0
+
+    @classmethod
+    def build(cls, config: Config, clock: Clock) -> AngleSensor:
+        """The device's sensor from ``config.hardware`` (ConfigError / StartupError saying what is wrong)."""
+        raise NotImplementedError
+
+    @classmethod
+    def simulate(cls, sim: SimulationSettings, pendulum: SimRig, clock: Clock,
+                 notes: list[str]) -> tuple[AngleSensor, list[Callable[[], None]]]:
+        """Its simulated twin reading ``pendulum``, and what to stop after the sensor is closed (a simulated
+        peer); one line per device built in ``notes``."""
+        raise NotImplementedError
+
+    @classmethod
+    def health(cls, config: Config) -> list[tuple[str, bool, str]]:
+        """`moi check`'s lines on the device: (what, ok, detail)."""
+        return []
+
+    @classmethod
+    def camera_config(cls, config: Config) -> Any:
+        """The camera file its frames are read with (``CameraConfig``), None when it gives no frames."""
+        return None
