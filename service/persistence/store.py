@@ -15,6 +15,7 @@ row). One connection guarded by a lock is shared by the daemon's threads.
 from __future__ import annotations
 
 import builtins
+import contextlib
 import dataclasses
 import functools
 import json
@@ -474,10 +475,8 @@ class Store:
             if self.read_only:
                 self._db.close()
                 return
-            try:
+            with contextlib.suppress(sqlite3.Error):  # another reader holds the WAL: the checkpoint happens later
                 self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-            except sqlite3.Error:
-                pass  # another reader holds the WAL: the checkpoint happens later
             self._db.close()
 
     def __enter__(self) -> "Store":

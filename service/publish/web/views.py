@@ -4,6 +4,7 @@ unexpected error is logged and answered 500 with its type, never with a tracebac
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import datetime as dt
 import hashlib
 import hmac
@@ -662,10 +663,8 @@ class Views:
         unit = self.server.settings.display_unit
         book = getattr(self.app, "parts", None)
         if book is not None and recipe:
-            try:
+            with contextlib.suppress(InvalidInput):  # a recipe in the store no longer in the directory: the set-up's unit
                 unit = book.book.find(recipe).display_unit or unit
-            except InvalidInput:  # a recipe in the store that is no longer in the directory: the set-up's unit
-                pass
         chart_svg = Q.control_chart(result.summary, unit) if result is not None else None
         q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
         # the check standard's history (`moi check-standard`): its values as individuals, oldest first
