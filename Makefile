@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench install broker browser clean pi-check
+.PHONY: demo test lint lint-fix coverage bench install broker browser clean pi-check
 
 # pip shows its progress: the first install downloads numpy, scipy, OpenCV and friends
 $(STAMP): pyproject.toml
@@ -49,6 +49,10 @@ test: $(STAMP) broker browser
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
+
+# ruff's mechanical fixes for the rule families added to the gates (import order, pytest style, SIM, RUF100)
+lint-fix: $(STAMP)
+	tools/lint_autofix.sh
 
 bench: $(STAMP)
 	$(PY) bench/run.py

@@ -443,10 +443,8 @@ class ModbusEncoder:
         regs = list(reply.registers)
         if len(regs) != c.registers:
             return ReadFailure(Failure.EXCEPTION, f"expected {c.registers} register(s), got {len(regs)}")
-        if c.registers == 1:
-            value = regs[0]
-        else:
-            value = int(from_registers(regs, "uint32", c.word_order))  # already an int: uint32 decodes to one
+        # int() of an int: uint32 decodes to one already
+        value = regs[0] if c.registers == 1 else int(from_registers(regs, "uint32", c.word_order))
         with self._lock:
             self._counts["rtt_max_s"] = max(self._counts["rtt_max_s"], t_reply - t_send)
         return 0.5 * (t_send + t_reply), value, t_reply - t_send

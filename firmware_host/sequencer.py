@@ -460,9 +460,9 @@ class Sequencer:
     def _wait(self, seconds: float) -> None:
         # while a worker identifies, wake up as soon as it is done rather than after a full interval
         run = self._run
-        if self._state is State.IDENTIFYING and run is not None and run.job is not None and not run.job.done.is_set():
-            if run.job.done.wait(0.0):
-                return
+        if (self._state is State.IDENTIFYING and run is not None and run.job is not None
+                and not run.job.done.is_set() and run.job.done.wait(0.0)):
+            return
         self.clock.sleep(seconds)
 
     def _transition(self, now: float, new: State, reason: str, measurement: Measurement | None = None) -> None:

@@ -161,7 +161,7 @@ class Calibration:
 CONSISTENCY_LEVEL = 0.95
 
 
-def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
+def calibrate_torsion(references: Sequence[Reference]) -> Calibration:  # noqa: C901
     """Fit k and I0 from references (at least two distinct added inertias); see the module doc."""
     refs = tuple(references)
     if len(refs) < 2:

@@ -342,7 +342,7 @@ def start_candidates(model: Model, x: np.ndarray, previous: "ModelFit | None") -
 # -- least squares --------------------------------------------------------------------
 
 
-def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
+def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,  # noqa: C901
               x0: np.ndarray | None = None, scales: np.ndarray | None = None,
               previous: ModelFit | None = None, max_step: float | None = None,
               max_nfev: int = 200, f_scale: float | None = None, swings: Swings | None = None) -> ModelFit:

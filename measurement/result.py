@@ -434,7 +434,7 @@ class IdentificationResult:
         return json.dumps(self.to_dict(**kwargs), ensure_ascii=False, allow_nan=False)
 
     # -- readable report -------------------------------------------------------
-    def report(self) -> str:
+    def report(self) -> str:  # noqa: C901
         """A plain-text report for the technician (lmfit ``fit_report`` style)."""
         L: list[str] = []
         s = self.statistics

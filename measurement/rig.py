@@ -213,7 +213,7 @@ class Rig:
 
     # -- (de)serialisation ---------------------------------------------------
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> "Rig":
+    def from_dict(cls, doc: Mapping[str, Any]) -> "Rig":  # noqa: C901
         """Build a rig from the parsed rig TOML document ([rig], [object], [model], [calibration])."""
         unknown_tables = set(doc) - {"rig", "object", "model", "calibration", "sensor"}
         if unknown_tables:

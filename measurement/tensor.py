@@ -546,7 +546,7 @@ def _sqrt_psd(C: np.ndarray) -> np.ndarray:
     return Q * np.sqrt(np.clip(w, 0.0, None))
 
 
-def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigShared = RigShared(), *,
+def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigShared = RigShared(), *,  # noqa: C901
           coverage_factor: float = COVERAGE_FACTOR, draws: int = MONTE_CARLO_DRAWS,
           seed: int = MONTE_CARLO_SEED) -> TensorResult:
     """The tensor from one reading per orientation of the plan (None or ``invalid``: excluded and named).

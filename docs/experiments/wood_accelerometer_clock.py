@@ -40,7 +40,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def read_accelerometer(path: str) -> np.ndarray:
     rows, inside = [], False
-    for line in open(path, encoding="utf-8", errors="replace"):
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        lines = list(fh)
+    for line in lines:
         low = line.lower()
         if "=== begin data ===" in low:
             inside = True

@@ -38,7 +38,8 @@ def read_track(path: Path) -> MarkerTrack:
     with open(path, encoding="utf-8") as fh:
         head = [line for line in fh if not line.startswith("#")][:1]
     if head and "g_center" in head[0]:  # the source repository's combined-data file
-        rows = [r for r in csv.DictReader(open(path, encoding="utf-8")) if r["g_center"] and r["r_center"]]
+        with open(path, encoding="utf-8") as fh:
+            rows = [r for r in csv.DictReader(fh) if r["g_center"] and r["r_center"]]
         t = np.array([float(r["time"]) for r in rows])
         a = np.array([[float(v) for v in r["g_center"].split(":")] for r in rows])
         b = np.array([[float(v) for v in r["r_center"].split(":")] for r in rows])

@@ -20,6 +20,7 @@ Exit status 0 when the check passes, 3 when it fails (2: bad input).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
@@ -106,10 +107,8 @@ def _history(args: argparse.Namespace) -> int:
     if args.name != "check standard":
         rows = [r for r in rows if r["name"] == args.name]
     chart = None
-    try:
+    with contextlib.suppress(SpcError):  # fewer than 2 checks: no chart yet
         chart = individuals([r["deviation"] for r in rows])
-    except SpcError:
-        pass  # fewer than 2 checks: no chart yet
     if args.plot and chart is not None:
         from service.publish.plot import plot_control_chart
 

@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
         return _run(Appliance(config, stop_grace=5.0), args)
 
 
-def _run(app, args: argparse.Namespace) -> int:
+def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
     from pymodbus.client import ModbusTcpClient
 
     from service.publish.modbus import registers as R

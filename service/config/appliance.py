@@ -356,7 +356,7 @@ def load_config(path: str | os.PathLike | None, *, sim: bool = False, state_dir:
     return parse_config(doc, source=source, base=base, sim=sim, state_dir=state_dir, environ=environ)
 
 
-def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path | None = None, sim: bool = False,
+def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path | None = None, sim: bool = False,  # noqa: C901
                  state_dir: str | None = None, environ: Mapping[str, str] | None = None) -> Config:
     c = _Checker(source)
     base = base or Path.cwd()

@@ -88,7 +88,7 @@ def _bindable(host: str, port: int, what: str) -> Check:
     return Check(what, True, f"{host}:{port} free")
 
 
-def check_config(config: Config) -> list[Check]:
+def check_config(config: Config) -> list[Check]:  # noqa: C901
     """Every check of the configuration and of the environment it names."""
     checks: list[Check] = [Check("configuration", True, f"{config.source} parsed")]
     checks += [Check("GPIO pins", False, p) for p in pin_problems(config)]

@@ -159,7 +159,7 @@ class Checker:
             out[key] = self.value(name, key, doc[key], spec)
         return out
 
-    def value(self, table: str, key: str, v: Any, spec: Key) -> Any:
+    def value(self, table: str, key: str, v: Any, spec: Key) -> Any:  # noqa: C901
         bad = self.fail(table, key, f"expected {spec.expected()}, got {v!r}")
         k = spec.kind
         if k in ("str", "path"):

@@ -215,7 +215,7 @@ def _schemas() -> dict[str, dict[str, Any]]:
     }
 
 
-def load_recipe(path: str | Path) -> Recipe:
+def load_recipe(path: str | Path) -> Recipe:  # noqa: C901
     """Read and check one recipe file (``RecipeError`` naming the file, table and key)."""
     from measurement.effects import EFFECTS
 

@@ -491,10 +491,8 @@ class Store:
             if self.read_only:
                 self._db.close()
                 return
-            try:
+            with contextlib.suppress(sqlite3.Error):  # another reader holds the WAL: the checkpoint happens later
                 self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-            except sqlite3.Error:
-                pass  # another reader holds the WAL: the checkpoint happens later
             self._db.close()
 
     def __enter__(self) -> "Store":

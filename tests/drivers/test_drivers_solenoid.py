@@ -58,7 +58,7 @@ def test_short_pulse_is_granted_as_asked(factory):
 @pytest.mark.parametrize("bad", [0.0, -1.0, math.nan, "1"])
 def test_nonsense_duration_is_refused_and_the_coil_stays_off(factory, bad):
     with Solenoid(17, max_on_time=MAX_ON, pin_factory=factory) as s:
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match="solenoid pulse duration must be > 0 s"):
             s.pulse(bad)
         assert not s.is_active
         assert on_durations(s.pin) == [] and s.pin.state is False
@@ -97,11 +97,16 @@ def test_off_on_close_twice_and_no_pulse_after_close(factory):
 
 
 def test_off_when_an_exception_leaves_the_with_block(factory):
-    with pytest.raises(RuntimeError):
+    pins = []
+
+    def release_and_crash():
         with Solenoid(17, max_on_time=1.0, pin_factory=factory) as s:
-            pin = s.pin
+            pins.append(s.pin)
             s.pulse(1.0)
             raise RuntimeError("caller crashed mid-release")
+    with pytest.raises(RuntimeError, match="caller crashed mid-release"):
+        release_and_crash()
+    (pin,) = pins
     assert pin.state is False
     assert pin.states[-1].state is False
 

@@ -229,8 +229,7 @@ def test_a_measurement_raises_result_ready_and_the_methods_give_and_acknowledge_
 def test_anonymous_and_wrong_credentials_are_refused(opc, user, password):
     async def run():
         with pytest.raises(ua.UaStatusCodeError) as e:
-            c = await connect(opc, user, password)
-            await c.disconnect()
+            await connect(opc, user, password)
         assert e.value.code in (ua.StatusCodes.BadUserAccessDenied, ua.StatusCodes.BadIdentityTokenRejected,
                                 ua.StatusCodes.BadIdentityTokenInvalid)
 
@@ -307,7 +306,6 @@ def test_a_client_certificate_outside_trusted_clients_is_refused(opc, tmp_path):
         c.set_password(PASSWORD)  # the right password does not admit an untrusted application
         with pytest.raises(ua.UaStatusCodeError) as e:
             await c.connect()
-            await c.disconnect()
         assert e.value.code == ua.StatusCodes.BadCertificateUntrusted
 
     asyncio.run(run())

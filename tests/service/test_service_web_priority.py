@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 
 from aiohttp import web
 from aiohttp.test_utils import TestClient, TestServer
@@ -21,10 +22,9 @@ async def _serve_two_at_once(capturing: bool, method: str = "GET", path: str = "
         most = max(most, active)
         if active == 2:
             both_in.set()
-        try:  # without the gate the first waits here for the second; with it, the wait runs out alone
+        # without the gate the first waits here for the second; with it, the wait runs out alone
+        with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(both_in.wait(), 0.5 if capturing and method == "GET" and path == "/page" else 30)
-        except TimeoutError:
-            pass
         active -= 1
         return web.Response(text="ok")
 

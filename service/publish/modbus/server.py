@@ -493,7 +493,7 @@ class ModbusServer(Publisher):
         # be answered as done and not applied: the PLC is told instead that it is not served
         return ExcCodes.ILLEGAL_FUNCTION
 
-    def _write_inputs(self, address: int, values: list) -> ExcCodes | None:
+    def _write_inputs(self, address: int, values: list) -> ExcCodes | None:  # noqa: C901
         """FC 6 / FC 16 to the writable holding registers (pymodbus refused every other address). Everything
         written is checked first: a refused write changes nothing."""
         if address < R.WRITABLE_START or address + len(values) > R.WRITABLE_END:

@@ -36,6 +36,7 @@ underscores (Home Assistant's rule), every numeric sensor has its unit.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import logging
@@ -256,10 +257,8 @@ class MqttService(Publisher):
         if self.connected_event.is_set():
             self.sender.wait_idle(flush_timeout)
             info = self.client.publish(self.topics.status, "offline", qos=1, retain=True)
-            try:
+            with contextlib.suppress(RuntimeError, ValueError):  # connection gone meanwhile: the last will says offline
                 info.wait_for_publish(timeout=min(flush_timeout, 1.0))
-            except (RuntimeError, ValueError):
-                pass  # connection gone meanwhile: the last will says offline instead
         self.sender.stop()
         self.client.disconnect()
         self.client.loop_stop()
@@ -354,7 +353,7 @@ class MqttService(Publisher):
         self.sender.acked(mid)
 
     @_never_raises
-    def _on_message(self, client, userdata, message) -> None:
+    def _on_message(self, client, userdata, message) -> None:  # noqa: C901
         if message.retain:
             self._say(logging.WARNING, "MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
             return

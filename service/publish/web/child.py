@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import logging
 import multiprocessing
 import os
@@ -87,10 +88,8 @@ class ChildWork:
 
 
 def _lower_priority() -> None:
-    try:
+    with contextlib.suppress(OSError):  # not allowed here: the job still runs, at the daemon's priority
         os.nice(CHILD_NICENESS)
-    except OSError:  # not allowed here: the job still runs, at the daemon's priority
-        pass
 
 
 # --- the jobs (run in the child: module-level functions of plain arguments) -------------------------------------

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import functools
 import logging
 import threading
@@ -261,10 +262,8 @@ class WebServer(Publisher):
     def _call(self, fn) -> None:
         if not self._io.running:
             return
-        try:
+        with contextlib.suppress(RuntimeError):  # stopping
             self._io.loop.call_soon_threadsafe(fn)
-        except RuntimeError:
-            pass  # stopping
 
     # --- for the views -----------------------------------------------------------------
     def listen(self) -> asyncio.Queue:

@@ -4,6 +4,7 @@ unexpected error is logged and answered 500 with its type, never with a tracebac
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import datetime as dt
 import hashlib
 import hmac
@@ -754,10 +755,8 @@ class Views:
         unit = self.server.settings.display_unit
         book = getattr(self.app, "parts", None)
         if book is not None and recipe:
-            try:
+            with contextlib.suppress(InvalidInput):  # a recipe in the store no longer in the directory: the set-up's unit
                 unit = book.book.find(recipe).display_unit or unit
-            except InvalidInput:  # a recipe in the store that is no longer in the directory: the set-up's unit
-                pass
         charts = capability = None
         if result is not None:
             names = [f"{p or '(no ID)'} {self.when(t)}" for p, t in zip(result.parts, result.finished)]
