@@ -316,3 +316,43 @@ def test_live_streams_never_lock_the_page_out_and_end_after_their_lifetime(tmp_p
     finally:
         for s in streams:
             s.close()
+
+
+# --- moi run --check ------------------------------------------------------------------------------------------
+
+def test_check_refuses_what_the_start_refuses_and_warns_of_open_opcua_doors(tmp_path, capsys):
+    """--check reads the secrets as the start does: a missing trusted_clients directory, an 8-character token,
+    a directory as the users file are problems; a world-readable token, anonymous or unencrypted OPC UA
+    are warnings."""
+    from service.cli import main
+
+    pw = tmp_path / "pw"
+    pw.write_text("opcua-secret-16ch")
+    pw.chmod(0o600)
+
+    def config(extra: str) -> str:
+        path = tmp_path / "appliance.toml"
+        path.write_text(f'[device]\nstate_dir = "{tmp_path / "state"}"\n[modbus]\nport = 0\n{extra}')
+        return str(path)
+
+    def check(extra: str) -> tuple[int, str]:
+        status = main(["run", "--check", "--config", config(extra)])
+        out = capsys.readouterr()
+        return status, out.out + out.err
+
+    opc = f'[opcua]\nport = 0\nusername = "line-7"\npassword_file = "{pw}"\n'
+    status, out = check(opc + f'trusted_clients = "{tmp_path / "nowhere"}"\n[web]\nenabled = false\n')
+    assert status == 2 and "trusted_clients" in out and "is not a directory" in out
+    status, out = check(opc + 'anonymous = true\nallow_unencrypted = true\n[web]\nenabled = false\n')
+    assert status == 0 and "WARNING  OPC UA exposure: clients without a user" in out and "unencrypted" in out
+    short = tmp_path / "token"
+    short.write_text("12345678")
+    short.chmod(0o644)
+    status, out = check(f'[web]\nenabled = true\nport = 0\ntoken_file = "{short}"\n')
+    assert status == 2 and "shorter than 16 characters" in out
+    short.write_text("a-long-enough-token-1234")
+    status, out = check(f'[web]\nenabled = true\nport = 0\ntoken_file = "{short}"\n')
+    assert status == 0 and "WARNING  web token_file" in out and "chmod 600" in out
+    short.chmod(0o600)
+    status, out = check(f'[web]\nenabled = true\nport = 0\ntoken_file = "{short}"\nusers_file = "{tmp_path}"\n')
+    assert status == 2 and "users file" in out
