@@ -356,3 +356,43 @@ def test_check_refuses_what_the_start_refuses_and_warns_of_open_opcua_doors(tmp_
     short.chmod(0o600)
     status, out = check(f'[web]\nenabled = true\nport = 0\ntoken_file = "{short}"\nusers_file = "{tmp_path}"\n')
     assert status == 2 and "users file" in out
+
+
+# --- acknowledgements ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("damage", [b"\x00\x00\x00", b"12x\n", b"\xff\xfe garbage", b"-5\n"])
+def test_a_damaged_acknowledgement_file_is_quarantined_and_owed_results_stay_owed(tmp_path, caplog, damage):
+    """OPC UA's acknowledgement file (which the Modbus FIFO reads in the same format) damaged while two results
+    were owed: both are still offered after the restart by OPC UA and by the Modbus FIFO, the damaged file is
+    kept aside, and the log says so."""
+    from service.persistence.store import Store
+    from service.publish.modbus.server import ModbusServer
+    from service.publish.modbus.settings import ModbusSettings
+    from service.publish.opcua.server import ACKED_FILE, OpcUaServer
+    from service.publish.opcua.settings import OpcUaSettings
+
+    from .test_service_registers import payload
+
+    state = tmp_path / "state"
+    state.mkdir()
+    store = Store(state)
+    try:
+        for i in range(3):
+            store.record(status="ok", trigger="test", device_id="test-rig", software_version="t", started_at=i,
+                         finished_at=i + 1, result={"J": 0.01, "flags": []},
+                         build_payload=lambda uuid, seq: payload(seq, uuid=uuid))
+        acked = state / ACKED_FILE
+        acked.write_bytes(b"1\n")  # the first result acknowledged, two owed ...
+        acked.write_bytes(damage)  # ... and then the file was damaged
+        server = OpcUaServer(OpcUaSettings(username="u", password="p"), "test-rig", state, store=store)
+        with caplog.at_level("WARNING", logger="moi.acks"):
+            server._restore()
+        assert sorted(server._unacknowledged.values())[-2:] == [2, 3]
+        assert (state / (ACKED_FILE + ".damaged")).read_bytes() == damage
+        assert any("is damaged" in r.getMessage() for r in caplog.records)
+        acked.write_bytes(damage)
+        fifo = ModbusServer(ModbusSettings(host="127.0.0.1", port=0, result_handshake="ack"), acked_file=acked)
+        fifo.restore_queue(store)
+        assert fifo.results_queued() >= 2
+    finally:
+        store.close()
