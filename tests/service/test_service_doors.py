@@ -3,6 +3,7 @@ measurement or lose one: attacks on the running daemon (simulated rig, loopback 
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -396,3 +397,38 @@ def test_a_damaged_acknowledgement_file_is_quarantined_and_owed_results_stay_owe
         assert fifo.results_queued() >= 2
     finally:
         store.close()
+
+
+# --- tensor sets cut short ----------------------------------------------------------------------------------------
+
+def test_a_tensor_set_cut_short_by_a_stop_or_a_kill_is_recorded_as_interrupted(tmp_path, appliance_factory, caplog):
+    """One release of a six-orientation set, then a normal stop: the set is stored as interrupted with its
+    release. The file a kill -9 would have left behind (taken before the stop) makes the next start store
+    that set as interrupted and say so; the new set begins at the first orientation."""
+    from service.parts.tensor_set import OPEN_SET_FILE
+
+    from .test_service_tensor_set import measure_step, progress, tensor_doc
+
+    doc = tensor_doc(tmp_path)
+    app = appliance_factory(doc)
+    measure_step(app, 0)
+    left = (tmp_path / "state" / OPEN_SET_FILE).read_text()  # what a kill -9 now would leave
+    first = progress(app)["uuid"]
+    assert app.stop() == 0
+    store_sets = __import__("service.persistence.store", fromlist=["Store"]).Store(tmp_path / "state")
+    try:
+        sets = store_sets.tensor_sets()
+    finally:
+        store_sets.close()
+    assert [(s["uuid"], s["status"], s["interrupted"]) for s in sets] == [(first, "aborted", True)]
+    assert sum(len(v) for v in sets[0]["releases"].values()) == 1 and "1 release(s) stay stored" in sets[0]["error"]
+    assert not (tmp_path / "state" / OPEN_SET_FILE).exists()
+
+    killed = json.loads(left) | {"uuid": "00000000-0000-4000-8000-000000000001"}
+    (tmp_path / "state" / OPEN_SET_FILE).write_text(json.dumps(killed))
+    with caplog.at_level("WARNING", logger="moi.daemon"):
+        again = appliance_factory(doc)
+    assert any("was interrupted" in r.getMessage() and killed["uuid"] in r.getMessage() for r in caplog.records)
+    sets = again.app.store.tensor_sets()
+    assert [s.get("interrupted") for s in sets] == [True, True] and sets[0]["uuid"] == killed["uuid"]
+    assert progress(again)["step"] == 1
