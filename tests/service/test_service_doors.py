@@ -432,3 +432,26 @@ def test_a_tensor_set_cut_short_by_a_stop_or_a_kill_is_recorded_as_interrupted(t
     sets = again.app.store.tensor_sets()
     assert [s.get("interrupted") for s in sets] == [True, True] and sets[0]["uuid"] == killed["uuid"]
     assert progress(again)["step"] == 1
+
+
+def test_opcua_requests_during_a_capture_wait_their_turn(opc):
+    """While the sensor is read, an authenticated client's reads pass the capture's gate one at a time (the
+    measurement's priority, as on the web page); the measurement completes."""
+    app = opc
+    g = app.app.opcua.guard
+    before = g.gated
+    n_done = sum(1 for e in app.events if e.state.value == "IDLE" and e.previous.value == "PUBLISHING")
+
+    async def run():
+        c = await _client(app)
+        try:
+            node = c.nodes.server_state
+            app.press()
+            while "IDENTIFYING" not in app.states()[-8:] and "FAULT" not in app.states()[-8:]:
+                await c.read_values([node] * 50)
+        finally:
+            await c.disconnect()
+
+    asyncio.run(run())
+    app.wait_done(n_done + 1, 60)
+    assert g.gated > before
