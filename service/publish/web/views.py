@@ -44,6 +44,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .auth import Guard
     from .child import ChildWork
     from .settings import WebSettings
+    from .streams import StreamSlots
 
     class WebServer(Protocol):
         """What the views use of the server that owns them (``server.WebServer``)."""
@@ -52,6 +53,7 @@ if TYPE_CHECKING:  # pragma: no cover
         settings: WebSettings
         guard: Guard
         child: ChildWork
+        streams: StreamSlots
 
         def listen(self) -> asyncio.Queue: ...
         def unlisten(self, q: asyncio.Queue) -> None: ...
