@@ -216,16 +216,17 @@ def main() -> None:
                     app.finished.faults = 0
                     a.command("abort", "bench")  # leave the FAULT for the next row
                     ok = False
-                m = a.store.latest()
+                m = a.store.latest(None)
                 enc = ((m.payload or {}).get("acquisition") or {}).get("encoder") or {} if m is not None else {}
-                rows.append((label, ok and m is not None and m.status == "ok", enc.get("rate_hz"),
-                             enc.get("timeouts"), (m.payload or {}).get("J") if m is not None else None))
+                rows.append((label, "yes" if ok and m is not None and m.status == "ok" else
+                             (m.status if m is not None else "none"), enc.get("rate_hz"), enc.get("timeouts"),
+                             (m.payload or {}).get("J") if m is not None else None,
+                             "" if m is None or m.status == "ok" else (m.error or "")[:60]))
         finally:
             app.stop()
-    print(f"{'load':16} {'stored':>6} {'samples/s':>10} {'timeouts':>9} {'J kg·m²':>12}")
-    for label, ok, rate, timeouts, j in rows:
-        print(f"{label:16} {'yes' if ok else 'NO':>6} {rate or float('nan'):10.1f} {timeouts or 0:9d} "
-              f"{j or float('nan'):12.6g}")
+    print(f"{'load':16} {'result':>7} {'samples/s':>10} {'timeouts':>9} {'J kg·m²':>12}  why not")
+    for label, ok, rate, timeouts, j, why in rows:
+        print(f"{label:16} {ok:>7} {rate or float('nan'):10.1f} {timeouts or 0:9d} {j or float('nan'):12.6g}  {why}")
 
 
 if __name__ == "__main__":
