@@ -110,6 +110,31 @@ def _opcua_doors(ua: Any) -> list[Check]:
     return checks
 
 
+#: descriptors kept for the measurement (sensor, camera, GPIO), the store, logs and the daemon's own threads
+DESCRIPTOR_RESERVE = 128
+
+
+def descriptor_budget(config: Config, limit: int | None = None) -> Check:
+    """Whether the clients' connection caps of every protocol, with ``DESCRIPTOR_RESERVE`` kept for the
+    measurement and the store, fit under the process's descriptor limit (systemd's LimitNOFILE, 1,024)."""
+    import resource
+
+    limit = limit if limit is not None else resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    caps = {}
+    if config.modbus is not None and config.modbus.mode == "tcp":
+        caps["Modbus"] = config.modbus.max_connections
+    web: Any = getattr(config, "web", None)
+    if web is not None:
+        # aiohttp accepts up to a backlog's worth beyond the cap before it closes any
+        caps["web"] = 2 * web.max_connections + web.max_streams
+    if config.opcua is not None:
+        caps["OPC UA"] = config.opcua.max_connections
+    used = sum(caps.values()) + DESCRIPTOR_RESERVE
+    detail = (", ".join(f"{k} {v}" for k, v in caps.items()) or "no servers") + \
+        f" + {DESCRIPTOR_RESERVE} kept for the measurement and the store = {used} of {limit} descriptors"
+    return Check("connection caps", used <= limit, detail + ("" if used <= limit else ": lower max_connections"))
+
+
 def _bindable(host: str, port: int, what: str) -> Check:
     if port == 0:
         return Check(what, True, f"{host}: any free port")
@@ -182,6 +207,7 @@ def check_config(config: Config) -> list[Check]:
             if c is not None:
                 checks.append(c)
         checks += _opcua_doors(ua)
+    checks.append(descriptor_budget(config))
     state = Path(config.state_dir)
     parent = state if state.exists() else next((p for p in state.parents if p.exists()), Path("/"))
     writable = os.access(parent, os.W_OK)

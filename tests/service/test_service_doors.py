@@ -455,3 +455,18 @@ def test_opcua_requests_during_a_capture_wait_their_turn(opc):
     asyncio.run(run())
     app.wait_done(n_done + 1, 60)
     assert g.gated > before
+
+
+def test_the_connection_caps_must_leave_descriptors_for_the_measurement():
+    """Under the unit's 1,024 descriptors, every protocol's cap together with the reserve for the measurement
+    and the store: the defaults fit; a web page allowed 512 connections does not, and --check says so."""
+    from service.config.appliance import parse_config
+    from service.config.check import descriptor_budget
+
+    ok = parse_config(appliance_doc(Path("/tmp/unused"), web={"enabled": True},
+                                    opcua={"username": "u", "password": "p" * 16}), source="t")
+    assert descriptor_budget(ok, limit=1024).ok
+    greedy = parse_config(appliance_doc(Path("/tmp/unused"), web={"enabled": True, "max_connections": 512}),
+                          source="t")
+    check = descriptor_budget(greedy, limit=1024)
+    assert not check.ok and "lower max_connections" in check.detail
