@@ -38,6 +38,8 @@ sys.path.insert(0, str(HERE.parent))
 os.environ.setdefault("GPIOZERO_PIN_FACTORY", "mock")
 
 CAPTURE = 6.0  # s of swing per capture
+#: the flags of the result shown
+SHOWN = ("capture_slowed", "encoder_errors")
 USER, PASSWORD = "bench", "bench-password-1234"
 
 
@@ -221,12 +223,14 @@ def main() -> None:
                 rows.append((label, "yes" if ok and m is not None and m.status == "ok" else
                              (m.status if m is not None else "none"), enc.get("rate_hz"), enc.get("timeouts"),
                              (m.payload or {}).get("J") if m is not None else None,
-                             "" if m is None or m.status == "ok" else (m.error or "")[:60]))
+                             "" if m is None or m.status == "ok" else (m.error or "")[:60],
+                             ",".join(f for f in ((m.payload or {}).get("flags") or []) if f in SHOWN) if m else ""))
         finally:
             app.stop()
-    print(f"{'load':16} {'result':>7} {'samples/s':>10} {'timeouts':>9} {'J kg·m²':>12}  why not")
-    for label, ok, rate, timeouts, j, why in rows:
-        print(f"{label:16} {ok:>7} {rate or float('nan'):10.1f} {timeouts or 0:9d} {j or float('nan'):12.6g}  {why}")
+    print(f"{'load':16} {'result':>7} {'samples/s':>10} {'timeouts':>9} {'J kg·m²':>12}  flags / why not")
+    for label, outcome, rate, timeouts, j, why, flags in rows:
+        print(f"{label:16} {outcome:>7} {rate or float('nan'):10.1f} {timeouts or 0:9d} {j or float('nan'):12.6g}  "
+              f"{flags or why}")
 
 
 if __name__ == "__main__":

@@ -45,6 +45,7 @@ from . import __version__
 from service.config.appliance import Config
 from .errors import ServiceError, StartupError, StoreDamaged, StoreError
 from service.devices.hardware import Devices, build_devices
+from .contention import CaptureWatch
 from .notify import Notifier
 from service.publish.payload import iso_utc, result_payload
 from service.parts.recipes import PartTracker, Recipe, RecipeBook, RecipeError
@@ -102,6 +103,7 @@ class Appliance:
         self._stop = threading.Event()
         self._compiling: subprocess.Popen | None = None  # the integrator compiled on a first run
         self._started_runs = 0
+        self._capture_watch = CaptureWatch(lambda: sum(p.capture_requests() for p in self.publishers))
         # measurement id → (monotonic time of ARMED, trigger source): a run's start is the wall clock at its end
         # less the monotonic time it took, so a step of the wall clock never gives a negative duration
         self._run_started: dict[str, tuple[float, str]] = {}
@@ -552,6 +554,7 @@ class Appliance:
         self._armed_at = event.time if event.state is State.ARMED else None
         if event.state is State.ARMED:
             self._started_runs += 1
+            self._capture_watch.armed()
             if event.measurement_id:
                 self._run_started[event.measurement_id] = (time.monotonic(), self._accepted_source)
                 if self._accepted_reply is not None:
@@ -643,6 +646,8 @@ class Appliance:
         calibration = self.calibration_state(rig, finished)
         if calibration is not None and calibration["due"] and F.CALIBRATION_DUE not in result["flags"]:
             result["flags"] = [*result["flags"], F.CALIBRATION_DUE]
+        if self._capture_watch.slowed(result.get("acquisition")) and F.CAPTURE_SLOWED not in result["flags"]:
+            result["flags"] = [*result["flags"], F.CAPTURE_SLOWED]
         tensor_set = self.tensor_set if recipe is not None and recipe.tensor is not None else None
         if tensor_set is not None and (tensor_set.done or tensor_set.recipe is not recipe):
             tensor_set = None  # the set ended (aborted) while this release ran: it counts for nothing

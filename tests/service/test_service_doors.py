@@ -470,3 +470,28 @@ def test_the_connection_caps_must_leave_descriptors_for_the_measurement():
                           source="t")
     check = descriptor_budget(greedy, limit=1024)
     assert not check.ok and "lower max_connections" in check.detail
+
+
+def test_a_capture_slowed_while_clients_were_served_is_flagged():
+    """Quiet captures give the reference rate; a capture during which requests passed the gates and whose
+    rate fell from 139 to 84 samples/s (what a 50,000-node Read loop did) is flagged, one at 130 is not, and
+    without a quiet capture to compare with there is no flag. The flag has its Modbus bit."""
+    from measurement import flags as F
+    from service.contention import CaptureWatch
+    from service.publish.modbus import registers as R
+
+    served = [0]
+    watch = CaptureWatch(lambda: served[0])
+
+    def capture(rate: float, requests: int) -> bool:
+        watch.armed()
+        served[0] += requests
+        return watch.slowed({"encoder": {"rate_hz": rate, "samples": 900}})
+
+    assert not capture(84.0, 10)  # nothing to compare with yet
+    assert not capture(139.0, 0) and not capture(137.0, 0)
+    assert capture(84.0, 25)
+    assert not capture(130.0, 25)
+    assert not capture(60.0, 0)  # slow without clients: the bus, not the appliance's doors
+    assert F.CAPTURE_SLOWED in F.FLAGS and R.FLAG_BITS[F.CAPTURE_SLOWED] == 24
+    assert R.flags_from_bits(R.flag_bits([F.CAPTURE_SLOWED])) == [F.CAPTURE_SLOWED]
