@@ -28,6 +28,7 @@ MARKER_LOST = "marker_lost"
 DROPPED_FRAMES = "dropped_frames"
 CORRUPT_FRAME = "corrupt_frame"
 CAMERA_PERSPECTIVE = "camera_perspective"
+CAPTURE_SLOWED = "capture_slowed"
 # -- the rig ---------------------------------------------------------------------------
 CALIBRATION_DUE = "calibration_due"
 NEGATIVE_INERTIA = "negative_inertia"
@@ -72,6 +73,9 @@ FLAGS: dict[str, str] = {
                         "oblique view (measured and removed) explains: perspective (parts of the swing nearer the "
                         "camera) or a position-dependent tracker bias; the angle keeps an error of that kind "
                         "(acquisition.view.distance_pattern)",
+    CAPTURE_SLOWED: "clients (OPC UA, the web page) were served while the sensor was read, and the capture's "
+                    "sample rate fell below 80 % of the median of the last captures without them "
+                    "(acquisition.*.rate_hz): J rests on fewer samples than usual",
     NEGATIVE_INERTIA: "J_object (J − tare) or J_object_axis came out negative, which no part can have: the rig file's tare "
                       "inertia or [object] mass/axis_offset does not fit this set-up",
     CALIBRATION_DUE: "the rig's calibration is past its validity period ([calibration] date + valid_days of the rig file)",

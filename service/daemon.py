@@ -47,10 +47,11 @@ from service.core import vocabulary as V
 from service.core.live import LiveStatus
 from .errors import ServiceError, StartupError, StoreDamaged, StoreError
 from service.devices.hardware import Devices, build_devices
+from .contention import CaptureWatch
 from .notify import Notifier
 from service.publish.payload import iso_utc, result_payload
 from service.parts.recipes import PartTracker, Recipe, RecipeBook, RecipeError
-from service.parts.tensor_set import COMPLETE, TensorSet
+from service.parts.tensor_set import COMPLETE, OpenSetFile, TensorSet, interrupted
 from service.persistence.salvage import quarantine_store
 from service.persistence.store import Store
 from service.publish import registry
@@ -104,6 +105,7 @@ class Appliance:
         self._stop = threading.Event()
         self._compiling: subprocess.Popen | None = None  # the integrator compiled on a first run
         self._started_runs = 0
+        self._capture_watch = CaptureWatch(lambda: sum(p.capture_requests() for p in self.publishers))
         # measurement id → (monotonic time of ARMED, trigger source): a run's start is the wall clock at its end
         # less the monotonic time it took, so a step of the wall clock never gives a negative duration
         self._run_started: dict[str, tuple[float, str]] = {}
@@ -189,6 +191,7 @@ class Appliance:
         except BaseException:
             self._shutdown_components()
             raise
+        self._recover_set()
         self._open_set()  # a tensor recipe active from the configuration: its set waits for the first release
         self._refresh_live()
         self._to_publishers("on_state", self._state_message("IDLE", "IDLE", "daemon started", None), None)
@@ -472,15 +475,16 @@ class Appliance:
         self._publish_set()
         return CommandReply(name, "done")
 
-    def _finish_set(self, s: TensorSet) -> None:
-        """Store a finished set (complete, failed or aborted) and hand it to the publishers."""
+    def _finish_set(self, s: TensorSet, record: dict[str, Any] | None = None) -> None:
+        """Store a finished set (complete, failed, aborted or interrupted) and hand it to the publishers."""
         assert self.store is not None
-        record = s.to_dict()
+        record = record or s.to_dict()
         try:
             self.store.record_tensor_set(record, started_at=s.started_at, finished_at=self.wall_clock())
         except ServiceError:
             log.exception("could not store the tensor set %s", s.uuid)
             return
+        OpenSetFile(self.config.state_dir).drop()
         if s.status == COMPLETE and s.result is not None:
             r = s.result
             log.info("tensor set %s complete: principal moments %s kg·m², flags %s", s.uuid,
@@ -488,7 +492,31 @@ class Appliance:
         self._to_publishers("on_tensor_set", record | {"device_id": self.config.device_id,
                                                       "timestamp": self.wall_clock()})
 
+    def _interrupt_set(self, why: str) -> None:
+        """A running set with releases, cut short: stored as interrupted (a new set begins at the next start)."""
+        s = self.tensor_set
+        if s is not None and not s.done and any(s.releases().values()) and self.store is not None:
+            log.warning("tensor set %s interrupted at %s: %s", s.uuid, s.instruction(), why)
+            self._finish_set(s, interrupted(s.to_dict(), why))
+
+    def _recover_set(self) -> None:
+        """The set a kill cut short (its file is left): stored as interrupted, and said; a new set starts."""
+        left = OpenSetFile(self.config.state_dir).left()
+        if left is None or self.store is None:
+            return
+        record = interrupted(left, "the daemon was stopped during the set without storing it")
+        try:
+            self.store.record_tensor_set(record, started_at=left.get("started_at"), finished_at=self.wall_clock())
+        except ServiceError:
+            log.exception("could not store the interrupted tensor set %s", left["uuid"])
+            return
+        OpenSetFile(self.config.state_dir).drop()
+        log.warning("tensor set %s (%s, part %s) was interrupted: %s; a new set starts at the first orientation",
+                    left["uuid"], left.get("recipe"), left.get("part_id") or "-", record["error"])
+
     def _publish_set(self) -> None:
+        if self.tensor_set is not None and not self.tensor_set.done:
+            OpenSetFile(self.config.state_dir).keep(self.tensor_set)
         progress = self.set_progress()
         if progress is not None:
             self._to_publishers("on_set", progress)
@@ -546,6 +574,7 @@ class Appliance:
         self._armed_at = event.time if event.state is State.ARMED else None
         if event.state is State.ARMED:
             self._started_runs += 1
+            self._capture_watch.armed()
             if event.measurement_id:
                 self._run_started[event.measurement_id] = (time.monotonic(), self._accepted_source)
                 if self._accepted_reply is not None:
@@ -637,6 +666,8 @@ class Appliance:
         calibration = self.calibration_state(rig, finished)
         if calibration is not None and calibration["due"] and F.CALIBRATION_DUE not in result["flags"]:
             result["flags"] = [*result["flags"], F.CALIBRATION_DUE]
+        if self._capture_watch.slowed(result.get("acquisition")) and F.CAPTURE_SLOWED not in result["flags"]:
+            result["flags"] = [*result["flags"], F.CAPTURE_SLOWED]
         tensor_set = self.tensor_set if recipe is not None and recipe.tensor is not None else None
         if tensor_set is not None and (tensor_set.done or tensor_set.recipe is not recipe):
             tensor_set = None  # the set ended (aborted) while this release ran: it counts for nothing
@@ -841,6 +872,7 @@ class Appliance:
                 log.exception("error while finishing the measurement at stop")
             finally:
                 seq.close()
+        self._interrupt_set("the daemon stopped")
         self._shutdown_components()
 
     def _shutdown_components(self) -> None:

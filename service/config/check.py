@@ -75,6 +75,68 @@ def _readable(path: str | None, what: str) -> Check | None:
     return Check(what, True, str(path))
 
 
+def _web_secrets(web: Any) -> list[Check]:
+    """The token file and the users file, read as the web page reads them at start (a token file not there yet
+    is made at the first start unless it is named)."""
+    from service.errors import StartupError
+    from service.publish.web.auth import read_token, read_users
+
+    checks = []
+    if web.token_file is not None:
+        try:
+            read_token(web.token_file, create=False)
+            mode = Path(web.token_file).stat().st_mode & 0o077
+            checks.append(Check("web token_file", True, web.token_file + (
+                f": readable by other users (mode {mode:o}); chmod 600 it" if mode else ""), warning=bool(mode)))
+        except StartupError as exc:
+            checks.append(Check("web token_file", False, str(exc)))
+    if web.users_file is not None:
+        try:
+            checks.append(Check("web users_file", True, f"{web.users_file}: {len(read_users(web.users_file))} user(s)"))
+        except StartupError as exc:
+            checks.append(Check("web users_file", False, str(exc)))
+    return checks
+
+
+def _opcua_doors(ua: Any) -> list[Check]:
+    """The OPC UA server's trusted clients (a directory, as the start needs) and who may come in unencrypted or
+    without a user."""
+    checks = []
+    if ua.trusted_clients is not None:
+        ok = Path(ua.trusted_clients).is_dir()
+        checks.append(Check("OPC UA trusted_clients", ok, ua.trusted_clients + ("" if ok else " is not a directory")))
+    if ua.anonymous or ua.allow_unencrypted:
+        doors = [d for d, on in (("clients without a user (anonymous = true)", ua.anonymous),
+                                 ("unencrypted sessions (allow_unencrypted = true)", ua.allow_unencrypted)) if on]
+        checks.append(Check("OPC UA exposure", True, f"{' and '.join(doors)} on {ua.host}:{ua.port}", warning=True))
+    return checks
+
+
+#: descriptors kept for the measurement (sensor, camera, GPIO), the store, logs and the daemon's own threads
+DESCRIPTOR_RESERVE = 128
+
+
+def descriptor_budget(config: Config, limit: int | None = None) -> Check:
+    """Whether the clients' connection caps of every protocol, with ``DESCRIPTOR_RESERVE`` kept for the
+    measurement and the store, fit under the process's descriptor limit (systemd's LimitNOFILE, 1,024)."""
+    import resource
+
+    limit = limit if limit is not None else resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    caps = {}
+    if config.modbus is not None and config.modbus.mode == "tcp":
+        caps["Modbus"] = config.modbus.max_connections
+    web: Any = getattr(config, "web", None)
+    if web is not None:
+        # aiohttp accepts up to a backlog's worth beyond the cap before it closes any
+        caps["web"] = 2 * web.max_connections + web.max_streams
+    if config.opcua is not None:
+        caps["OPC UA"] = config.opcua.max_connections
+    used = sum(caps.values()) + DESCRIPTOR_RESERVE
+    detail = (", ".join(f"{k} {v}" for k, v in caps.items()) or "no servers") + \
+        f" + {DESCRIPTOR_RESERVE} kept for the measurement and the store = {used} of {limit} descriptors"
+    return Check("connection caps", used <= limit, detail + ("" if used <= limit else ": lower max_connections"))
+
+
 def _bindable(host: str, port: int, what: str) -> Check:
     if port == 0:
         return Check(what, True, f"{host}: any free port")
@@ -127,9 +189,7 @@ def check_config(config: Config) -> list[Check]:  # noqa: C901
     web: Any = getattr(config, "web", None)
     if web is not None:
         checks.append(_bindable(web.host, web.port, "web page port"))
-        c = _readable(web.token_file, "web token_file")
-        if c is not None:
-            checks.append(c)
+        checks += _web_secrets(web)
     ua = config.opcua
     if ua is not None:
         checks.append(_bindable(ua.host, ua.port, "OPC UA port"))
@@ -140,6 +200,8 @@ def check_config(config: Config) -> list[Check]:  # noqa: C901
             c = _readable(path, what)
             if c is not None:
                 checks.append(c)
+        checks += _opcua_doors(ua)
+    checks.append(descriptor_budget(config))
     state = Path(config.state_dir)
     parent = state if state.exists() else next((p for p in state.parents if p.exists()), Path("/"))
     writable = os.access(parent, os.W_OK)

@@ -63,6 +63,10 @@ class Publisher:
         """What the health page shows of it."""
         return None
 
+    def capture_requests(self) -> int:
+        """How many client requests it has served while the sensor was read, since it started."""
+        return 0
+
     def live_fields(self) -> dict[str, Any]:
         """Its part of the live status (``LiveStatus`` fields)."""
         return {}

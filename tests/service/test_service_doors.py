@@ -3,6 +3,8 @@ measurement or lose one: attacks on the running daemon (simulated rig, loopback 
 
 from __future__ import annotations
 
+import json
+import socket
 from pathlib import Path
 
 import pytest
@@ -31,144 +33,6 @@ def test_a_failure_while_the_part_is_judged_still_stores_the_measurement_with_it
     assert stored.trace_angle is not None and len(stored.trace_angle) > 100
 
 
-# --- OPC UA before and after a login --------------------------------------------------------------------------
-
-import asyncio  # noqa: E402
-import socket  # noqa: E402
-import struct  # noqa: E402
-
-from asyncua import Client, ua  # noqa: E402
-
-from .conftest import RunningAppliance  # noqa: E402
-
-OPC_USER, OPC_PASSWORD = "line-7", "s3cret-pw"
-
-
-@pytest.fixture(scope="module")
-def opc(tmp_path_factory):
-    """An appliance whose OPC UA server also offers the unencrypted endpoint (no RSA work per session: cheap)."""
-    base = tmp_path_factory.mktemp("opcua-doors")
-    pw = base / "opcua-password"
-    pw.write_text(OPC_PASSWORD + "\n", encoding="utf-8")
-    pw.chmod(0o600)
-    doc = appliance_doc(base / "state", opcua={"host": "127.0.0.1", "port": 0, "username": OPC_USER,
-                                               "password_file": str(pw), "allow_unencrypted": True,
-                                               "max_connections": 8, "max_nodes_per_request": 100})
-    app = RunningAppliance(doc)
-    try:
-        yield app
-    finally:
-        app.stop()
-
-
-async def _client(app, user: str = OPC_USER, password: str = OPC_PASSWORD) -> Client:
-    c = Client(app.app.opcua.endpoint, timeout=10)
-    c.set_user(user)
-    c.set_password(password)
-    await c.connect()
-    return c
-
-
-def _closed_within(s: socket.socket, payload: bytes, budget: int) -> bool:
-    """Send ``payload`` until ``budget`` bytes went out; True once the server closed the connection."""
-    sent = 0
-    s.settimeout(10)
-    try:
-        while sent < budget:
-            s.sendall(payload)
-            sent += len(payload)
-        s.shutdown(socket.SHUT_WR)
-        return s.recv(1) == b""  # the server closes (it would wait for the rest of a 4 GB body otherwise)
-    except (ConnectionResetError, BrokenPipeError):
-        return True
-    except TimeoutError:
-        return False
-
-
-def test_an_opcua_chunk_announcing_4_gb_is_refused_on_its_header(opc):
-    """Before any login: a UA TCP header that announces a 4 GB body, then zeros. The server closes the connection
-    at once instead of buffering the body; a client is served afterwards."""
-    app = opc
-    port = app.app.opcua.bound_port
-    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
-        s.sendall(b"HELF" + struct.pack("<I", 0xFFFFFFF0))
-        assert _closed_within(s, bytes(65536), 8 * 1024 * 1024)
-    assert app.app.opcua.health()["oversized_chunks"] >= 1
-
-    async def run():
-        c = await _client(app)
-        try:
-            return await c.nodes.server_state.read_value()
-        finally:
-            await c.disconnect()
-
-    assert asyncio.run(run()) == ua.ServerState.Running
-
-
-def test_an_opcua_read_naming_too_many_nodes_is_refused(opc):
-    """A Read of more nodes than max_nodes_per_request is BadTooManyOperations; one within it is answered."""
-    app = opc
-
-    async def run():
-        c = await _client(app)
-        try:
-            node = c.nodes.server_state
-            assert len(await c.read_values([node] * 100)) == 100
-            with pytest.raises(ua.UaStatusCodeError) as err:
-                await c.read_values([node] * 5000)
-            assert err.value.code == ua.StatusCodes.BadTooManyOperations
-        finally:
-            await c.disconnect()
-
-    asyncio.run(run())
-    assert app.app.opcua.health()["too_many_nodes"] >= 1
-
-
-def test_1100_idle_opcua_connections_neither_lock_the_plc_out_nor_lose_the_measurement(tmp_path):
-    """The daemon with the unit's descriptor limit (1024): 1,100 connections to the OPC UA port that never say a
-    word. The PLC still reads and triggers, and the measurement is stored, not FAULTed for want of a descriptor."""
-    import resource
-
-    from service.publish.modbus import registers as R
-
-    from .conftest import free_port, moi_subprocess, port_open, write_toml
-    from .test_service_hardening import _plc_image, _plc_trigger
-
-    mb_port, ua_port = free_port(), free_port()
-    pw = tmp_path / "opcua-password"
-    pw.write_text(OPC_PASSWORD, encoding="utf-8")
-    pw.chmod(0o600)
-    doc = appliance_doc(tmp_path / "state", modbus_port=mb_port,
-                        opcua={"host": "127.0.0.1", "port": ua_port, "username": OPC_USER, "password_file": str(pw)})
-    cfg = write_toml(tmp_path / "appliance.toml", doc)
-    daemon = moi_subprocess(["run", "--config", str(cfg)],
-                            preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024)))
-    flood: list[socket.socket] = []
-    try:
-        wait_until(lambda: (port_open(mb_port) and port_open(ua_port)) or daemon.poll() is not None, 120,
-                   what="the daemon's ports")
-        assert daemon.poll() is None
-        for _ in range(1100):
-            try:
-                flood.append(socket.create_connection(("127.0.0.1", ua_port), timeout=5))
-            except OSError:
-                break
-        assert len(flood) > 1024, f"only {len(flood)} attack connections: the attack proved nothing"
-        assert _plc_image(mb_port)["state"] == R.STATE_CODES["IDLE"]
-        _plc_trigger(mb_port)
-        image = wait_until(lambda: (lambda i: i if i["seq"] == 1 else None)(_plc_image(mb_port)), 60,
-                           what="the result in the registers")
-        assert image["state"] != R.STATE_CODES["FAULT"] and image["J"] > 0
-    finally:
-        for s in flood:
-            s.close()
-        daemon.terminate()
-        _, err = daemon.communicate(timeout=30)
-    assert b"Too many open files" not in err, err[-2000:]
-    assert b"INFO asyncua" not in err  # asyncua's chatter (some 10 lines a connection) at WARNING
-    assert len(err) < 20_000, f"{len(err)} bytes of log for the flood: {err[-2000:]!r}"
-
-
 # --- replies go where the appliance decides ---------------------------------------------------------------------
 
 def test_an_mqtt_response_topic_outside_the_reply_namespace_is_not_honoured(tmp_path, broker, appliance_factory):
@@ -192,40 +56,6 @@ def test_an_mqtt_response_topic_outside_the_reply_namespace_is_not_honoured(tmp_
         assert "ARMED" not in app.states()
     finally:
         c.close()
-
-
-def test_opcua_password_guessing_is_slowed_then_locked_out_with_the_peer_address(opc, monkeypatch, caplog):
-    """Wrong logins from one host: each later message of that host before a login waits its turn, and after
-    LOCKOUT_AFTER of them even the right password is refused for a while; the log names the peer."""
-    from service.publish.opcua import guard as G
-
-    app = opc
-    g = app.app.opcua.guard
-    monkeypatch.setattr(G, "LOCKOUT_AFTER", 3)
-    monkeypatch.setattr(G, "GUESS_DELAY", 0.01)
-    before = g.health()
-
-    async def attempt(password: str) -> bool:
-        try:
-            c = await _client(app, password=password)
-        except Exception:
-            return False
-        await c.disconnect()
-        return True
-
-    try:
-        with caplog.at_level("WARNING", logger="moi.opcua"):
-            assert [asyncio.run(attempt(f"guess-{i}")) for i in range(3)] == [False] * 3
-            assert not asyncio.run(attempt(OPC_PASSWORD))  # locked out: the right password too
-        after = g.health()
-        assert after["wrong_logins"] - before["wrong_logins"] == 3
-        assert after["locked_out"] > before["locked_out"]
-        assert after["delayed_before_login"] > before["delayed_before_login"]
-        assert any("127.0.0.1 locked out" in r.getMessage() for r in caplog.records), caplog.text
-    finally:
-        g._locked.clear()
-        g._wrong.clear()
-    assert asyncio.run(attempt(OPC_PASSWORD))
 
 
 # --- names are data, not syntax ---------------------------------------------------------------------------------
@@ -316,3 +146,158 @@ def test_live_streams_never_lock_the_page_out_and_end_after_their_lifetime(tmp_p
     finally:
         for s in streams:
             s.close()
+
+
+# --- moi run --check ------------------------------------------------------------------------------------------
+
+def test_check_refuses_what_the_start_refuses_and_warns_of_open_opcua_doors(tmp_path, capsys):
+    """--check reads the secrets as the start does: a missing trusted_clients directory, an 8-character token,
+    a directory as the users file are problems; a world-readable token, anonymous or unencrypted OPC UA
+    are warnings."""
+    from service.cli import main
+
+    pw = tmp_path / "pw"
+    pw.write_text("opcua-secret-16ch")
+    pw.chmod(0o600)
+
+    def config(extra: str) -> str:
+        path = tmp_path / "appliance.toml"
+        path.write_text(f'[device]\nstate_dir = "{tmp_path / "state"}"\n[modbus]\nport = 0\n{extra}')
+        return str(path)
+
+    def check(extra: str) -> tuple[int, str]:
+        status = main(["run", "--check", "--config", config(extra)])
+        out = capsys.readouterr()
+        return status, out.out + out.err
+
+    opc = f'[opcua]\nport = 0\nusername = "line-7"\npassword_file = "{pw}"\n'
+    status, out = check(opc + f'trusted_clients = "{tmp_path / "nowhere"}"\n[web]\nenabled = false\n')
+    assert status == 2 and "trusted_clients" in out and "is not a directory" in out
+    status, out = check(opc + 'anonymous = true\nallow_unencrypted = true\n[web]\nenabled = false\n')
+    assert status == 0 and "WARNING  OPC UA exposure: clients without a user" in out and "unencrypted" in out
+    short = tmp_path / "token"
+    short.write_text("12345678")
+    short.chmod(0o644)
+    status, out = check(f'[web]\nenabled = true\nport = 0\ntoken_file = "{short}"\n')
+    assert status == 2 and "shorter than 16 characters" in out
+    short.write_text("a-long-enough-token-1234")
+    status, out = check(f'[web]\nenabled = true\nport = 0\ntoken_file = "{short}"\n')
+    assert status == 0 and "WARNING  web token_file" in out and "chmod 600" in out
+    short.chmod(0o600)
+    status, out = check(f'[web]\nenabled = true\nport = 0\ntoken_file = "{short}"\nusers_file = "{tmp_path}"\n')
+    assert status == 2 and "users file" in out
+
+
+# --- acknowledgements ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("damage", [b"\x00\x00\x00", b"12x\n", b"\xff\xfe garbage", b"-5\n"])
+def test_a_damaged_acknowledgement_file_is_quarantined_and_owed_results_stay_owed(tmp_path, caplog, damage):
+    """OPC UA's acknowledgement file (which the Modbus FIFO reads in the same format) damaged while two results
+    were owed: both are still offered after the restart by OPC UA and by the Modbus FIFO, the damaged file is
+    kept aside, and the log says so."""
+    from service.persistence.store import Store
+    from service.publish.modbus.server import ModbusServer
+    from service.publish.modbus.settings import ModbusSettings
+    from service.publish.opcua.server import ACKED_FILE, OpcUaServer
+    from service.publish.opcua.settings import OpcUaSettings
+
+    from .test_service_registers import payload
+
+    state = tmp_path / "state"
+    state.mkdir()
+    store = Store(state)
+    try:
+        for i in range(3):
+            store.record(status="ok", trigger="test", device_id="test-rig", software_version="t", started_at=i,
+                         finished_at=i + 1, result={"J": 0.01, "flags": []},
+                         build_payload=lambda uuid, seq: payload(seq, uuid=uuid))
+        acked = state / ACKED_FILE
+        acked.write_bytes(b"1\n")  # the first result acknowledged, two owed ...
+        acked.write_bytes(damage)  # ... and then the file was damaged
+        server = OpcUaServer(OpcUaSettings(username="u", password="p"), "test-rig", state, store=store)
+        with caplog.at_level("WARNING", logger="moi.acks"):
+            server._restore()
+        assert sorted(server._unacknowledged.values())[-2:] == [2, 3]
+        assert (state / (ACKED_FILE + ".damaged")).read_bytes() == damage
+        assert any("is damaged" in r.getMessage() for r in caplog.records)
+        acked.write_bytes(damage)
+        fifo = ModbusServer(ModbusSettings(host="127.0.0.1", port=0, result_handshake="ack"), acked_file=acked)
+        fifo.restore_queue(store)
+        assert fifo.results_queued() >= 2
+    finally:
+        store.close()
+
+
+# --- tensor sets cut short ----------------------------------------------------------------------------------------
+
+def test_a_tensor_set_cut_short_by_a_stop_or_a_kill_is_recorded_as_interrupted(tmp_path, appliance_factory, caplog):
+    """One release of a six-orientation set, then a normal stop: the set is stored as interrupted with its
+    release. The file a kill -9 would have left behind (taken before the stop) makes the next start store
+    that set as interrupted and say so; the new set begins at the first orientation."""
+    from service.parts.tensor_set import OPEN_SET_FILE
+
+    from .test_service_tensor_set import measure_step, progress, tensor_doc
+
+    doc = tensor_doc(tmp_path)
+    app = appliance_factory(doc)
+    measure_step(app, 0)
+    left = (tmp_path / "state" / OPEN_SET_FILE).read_text()  # what a kill -9 now would leave
+    first = progress(app)["uuid"]
+    assert app.stop() == 0
+    store_sets = __import__("service.persistence.store", fromlist=["Store"]).Store(tmp_path / "state")
+    try:
+        sets = store_sets.tensor_sets()
+    finally:
+        store_sets.close()
+    assert [(s["uuid"], s["status"], s["interrupted"]) for s in sets] == [(first, "aborted", True)]
+    assert sum(len(v) for v in sets[0]["releases"].values()) == 1 and "1 release(s) stay stored" in sets[0]["error"]
+    assert not (tmp_path / "state" / OPEN_SET_FILE).exists()
+
+    killed = json.loads(left) | {"uuid": "00000000-0000-4000-8000-000000000001"}
+    (tmp_path / "state" / OPEN_SET_FILE).write_text(json.dumps(killed))
+    with caplog.at_level("WARNING", logger="moi.daemon"):
+        again = appliance_factory(doc)
+    assert any("was interrupted" in r.getMessage() and killed["uuid"] in r.getMessage() for r in caplog.records)
+    sets = again.app.store.tensor_sets()
+    assert [s.get("interrupted") for s in sets] == [True, True] and sets[0]["uuid"] == killed["uuid"]
+    assert progress(again)["step"] == 1
+
+
+def test_a_capture_slowed_while_clients_were_served_is_flagged():
+    """Quiet captures give the reference rate; a capture during which requests passed the gates and whose
+    rate fell from 139 to 84 samples/s (what a 50,000-node Read loop did) is flagged, one at 130 is not, and
+    without a quiet capture to compare with there is no flag. The flag has its Modbus bit."""
+    from measurement import flags as F
+    from service.contention import CaptureWatch
+    from service.publish.modbus import registers as R
+
+    served = [0]
+    watch = CaptureWatch(lambda: served[0])
+
+    def capture(rate: float, requests: int) -> bool:
+        watch.armed()
+        served[0] += requests
+        return watch.slowed({"encoder": {"rate_hz": rate, "samples": 900}})
+
+    assert not capture(84.0, 10)  # nothing to compare with yet
+    assert not capture(139.0, 0) and not capture(137.0, 0)
+    assert capture(84.0, 25)
+    assert not capture(130.0, 25)
+    assert not capture(60.0, 0)  # slow without clients: the bus, not the appliance's doors
+    assert F.CAPTURE_SLOWED in F.FLAGS and R.FLAG_BITS[F.CAPTURE_SLOWED] == 24
+    assert R.flags_from_bits(R.flag_bits([F.CAPTURE_SLOWED])) == [F.CAPTURE_SLOWED]
+
+
+def test_the_connection_caps_must_leave_descriptors_for_the_measurement():
+    """Under the unit's 1,024 descriptors, every protocol's cap together with the reserve for the measurement
+    and the store: the defaults fit; a web page allowed 512 connections does not, and --check says so."""
+    from service.config.appliance import parse_config
+    from service.config.check import descriptor_budget
+
+    ok = parse_config(appliance_doc(Path("/tmp/unused"), web={"enabled": True},
+                                    opcua={"username": "u", "password": "p" * 16}), source="t")
+    assert descriptor_budget(ok, limit=1024).ok
+    greedy = parse_config(appliance_doc(Path("/tmp/unused"), web={"enabled": True, "max_connections": 512}),
+                          source="t")
+    check = descriptor_budget(greedy, limit=1024)
+    assert not check.ok and "lower max_connections" in check.detail

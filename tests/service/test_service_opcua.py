@@ -359,4 +359,4 @@ def test_the_acknowledgement_file_reads_what_it_wrote_and_the_modbus_position_of
     (tmp_path / "acked").write_text("12\n", encoding="ascii")  # the Modbus FIFO's file: the position alone
     assert f.read() == AckState(12)
     (tmp_path / "acked").write_text("garbage\n", encoding="ascii")
-    assert f.read() is None
+    assert f.read() == AckState(0)  # damaged: nothing acknowledged (quarantined)

@@ -8,6 +8,9 @@ subscriptions. A guard in front where it has none:
   core for 30 s and hundreds of MB before its own size check ran on the whole body);
 * at the connection cap, the oldest connection without a session makes room (asyncua refuses the newcomer:
   parked sockets would lock the real client out);
+* one host opens at most ``NEW_PER_SECOND`` connections a second (a burst of ``NEW_BURST``): one more is
+  closed before asyncua makes anything for it (a loop of connections each sending a hostile header cost the
+  server's thread more than the header check saves);
 * requests name at most ``max_nodes_per_request`` nodes (Read, Write, Browse, Call, monitored items...);
 * wrong logins: each later message of that peer host before a session is activated waits ``GUESS_DELAY``,
   one at a time for the whole server; ``LOCKOUT_AFTER`` wrong ones within ``LOCKOUT_WINDOW`` shut the host
@@ -46,6 +49,8 @@ GUESS_DELAY = 0.5
 LOCKOUT_AFTER, LOCKOUT_WINDOW, LOCKOUT_SECONDS = 10, 60.0, 300.0
 #: at most one line per this many seconds for each kind of refusal, s
 LOG_INTERVAL = 60.0
+#: new connections a host may open per second, and at once
+NEW_PER_SECOND, NEW_BURST = 10.0, 40
 #: while the sensor is read, the share of the OPC UA thread's time requests may take at most
 CAPTURE_SHARE = 0.1
 #: a request's pause after it while the sensor is read, s, at most
@@ -107,6 +112,8 @@ class Guard:
         self.wrong_logins = _Refusals("wrong login(s)", clock)
         self.locked_out = _Refusals("login(s) refused: the host is locked out", clock)
         self.gated = 0  # requests served through the capture's gate
+        self._buckets: dict[str, list[float]] = {}  # host → [tokens, when counted]
+        self.too_fast = _Refusals("connection(s) closed: their host opened them too fast", clock)
         self.delayed = 0  # messages before a login that waited for their host's wrong logins
 
     def install(self, server: Server) -> None:
@@ -140,6 +147,19 @@ class Guard:
 
         ip, port = server._get_bind_socket_info()
         return _Binary(server.iserver, ip, port, server.limits)  # type: ignore[arg-type]
+
+    def admit(self, host: str) -> bool:
+        """Whether ``host`` may open one more connection now (a token bucket per host)."""
+        now = self._clock()
+        tokens, then = self._buckets.pop(host, (float(NEW_BURST), now))
+        tokens = min(float(NEW_BURST), tokens + (now - then) * NEW_PER_SECOND)
+        ok = tokens >= 1.0
+        self._buckets[host] = [tokens - 1.0 if ok else tokens, now]  # newest last: the oldest go first
+        while len(self._buckets) > 1024:
+            self._buckets.pop(next(iter(self._buckets)))
+        if not ok:
+            self.too_fast(host)
+        return ok
 
     # --- nodes per request ------------------------------------------------------------------------------------
     def _bounded(self, method: Callable[..., Any], field: str | None) -> Callable[..., Any]:
@@ -212,7 +232,7 @@ class Guard:
     def health(self) -> dict[str, int]:
         return {"oversized_chunks": self.oversized.count, "evicted_connections": self.evicted.count,
                 "too_many_nodes": self.too_many.count, "wrong_logins": self.wrong_logins.count,
-                "locked_out": self.locked_out.count, "delayed_before_login": self.delayed,
+                "locked_out": self.locked_out.count, "too_fast": self.too_fast.count, "delayed_before_login": self.delayed,
                 "gated_requests": self.gated}
 
 
@@ -230,6 +250,10 @@ class _Protocol(OPCUAProtocol):
 
     def connection_made(self, transport: Any) -> None:
         PEER.set(host_of(transport.get_extra_info("peername")))  # the task made below inherits it
+        if not self.guard.admit(PEER.get()):
+            self.peer_name = transport.get_extra_info("peername")
+            transport.close()  # nothing of asyncua's is made for it
+            return
         if len(self.clients) >= self.iserver.max_connections:
             waiting = [c for c in self.clients if not _activated(c)]
             if waiting:

@@ -450,6 +450,9 @@ class OpcUaServer(Publisher):
     def where(self) -> str:
         return f"OPC UA {self.endpoint}"
 
+    def capture_requests(self) -> int:
+        return self.guard.gated
+
     def health(self) -> dict[str, Any]:
         return {"endpoint": self.endpoint, "results_unacknowledged": len(self._unacknowledged),
                 "events_sent": self.events_sent, "start_seconds": self.start_seconds,

@@ -159,6 +159,9 @@ class WebServer(Publisher):
     def where(self) -> str:
         return f"web page {self.url}"
 
+    def capture_requests(self) -> int:
+        return self.views.capture_first.gated
+
     def stop(self, timeout: float = 5.0) -> None:
         """Close the live streams and the server, end the loop thread, let a plot in progress finish; safe twice."""
         if self._io.running:

@@ -17,7 +17,7 @@ from service.publish.replies import REASONS
 from service.states import STATES
 
 #: bumped whenever an address or an encoding of the map changes; what each version changed is in CHANGELOG.md
-MAP_VERSION = 11
+MAP_VERSION = 12
 
 
 # --- enumerations ------------------------------------------------------------
@@ -52,6 +52,7 @@ FLAG_BITS: dict[str, int] = {
     F.HALVES_DISAGREE: 21,  # map version 8: the model's form (register flags_high, bits 5-7)
     F.MODEL_AMBIGUOUS: 22,
     F.RELEASES_DISAGREE: 23,
+    F.CAPTURE_SLOWED: 24,  # map version 12: register flags_high, bit 8
 }
 FLAG_OTHER_BIT = 15
 
