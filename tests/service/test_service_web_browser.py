@@ -188,9 +188,13 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
                 swing = browser.find_element(By.ID, "swing")
                 assert swing.size["height"] >= 200 and swing.size["width"] <= inner  # readable on a phone
                 assert browser.find_element(By.ID, "tile-verdict").text == "INVALID"
-            if name == "spc":  # the chart, in the recipe's unit, scrolls inside its box on a phone
-                chart = browser.find_element(By.ID, "chart-points")
+            if name == "spc":  # the chart in the recipe's unit; on a phone its own drawing, labels readable
+                chart = browser.find_element(By.ID, "chart-points" if width > 600 else "chart-points-narrow")
                 assert chart.is_displayed() and "kg·mm²" in chart.text and "UCL" in chart.text
+                assert chart.rect["x"] >= 0 and chart.rect["x"] + chart.rect["width"] <= inner
+                tick = chart.find_element(By.CSS_SELECTOR, "text.tick")
+                assert tick.rect["height"] >= 9, tick.rect  # px: not the 7 px text of a shrunken desktop chart
+                assert "95 % confidence" in browser.find_element(By.ID, "capability").text
             if name == "report" and width == 1280:  # it prints cleanly: the record, not the page's navigation
                 import base64
                 import io
@@ -302,7 +306,7 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
 
 def _contrast(browser, el) -> float:
     """The WCAG 2 contrast ratio of an element's text against its background (the first opaque one up the tree)."""
-    fg, bg = browser.execute_script("""
+    fg, bg = browser.execute_script(r"""
         var e = arguments[0], fg = getComputedStyle(e).color, bg = null;
         for (var n = e; n && !bg; n = n.parentElement) {
           var c = getComputedStyle(n).backgroundColor; if (c && !/rgba\(.*, 0\)$/.test(c) && c !== 'transparent') { bg = c; }

@@ -199,7 +199,7 @@ class WebServer(Publisher):
 
             from .quality import plot_labels
             unit, source = plot_labels(stored, self.appliance.config.simulated, self.settings.display_unit)
-            return self.child.call(render_png, m.result, unit=unit, source=source)
+            return self.child.call(render_png, m.result, unit, source)
 
         self.submit_plot(m.id, draw)
 
