@@ -232,6 +232,25 @@ def test_setup_camera_snapshot_and_fault_shown_and_acknowledged(appliance_factor
     assert c.json("/api/abort", method="POST", headers={"Authorization": f"Bearer {token}"})[0] == 202
     running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")
 
+    # the users, for an admin only: add one (a short password refused on the page, the name kept), remove one
+    assert quinn.request("/users")[0] == 403
+    admin = Client(app.web.url)
+    admin.request("/login", {"token": Path(app.web.token_file).read_text().strip(), "csrf": admin.csrf()})
+    page = admin.request("/users")[2].decode()
+    acsrf = page.split('name="csrf-token" content="')[1].split('"')[0]
+    assert "<td>olga</td><td>operator</td>" in page and 'id="lockout"' in page and "Wrong logins" in page
+    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
+                                               "password": "short", "csrf": acsrf})
+    assert status == 400 and "a password needs 10" in page.decode() and 'value="ada"' in page.decode()
+    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
+                                               "password": "ada-password-3", "csrf": acsrf})
+    assert status == 200 and "<td>ada</td><td>quality</td>" in page.decode()  # (after the redirect)
+    assert "ada" in users.read_text() and "ada-password-3" not in users.read_text()
+    login("ada", "ada-password-3")
+    assert admin.request("/users", {"action": "remove", "name": "olga", "csrf": acsrf})[0] == 200
+    c = Client(app.web.url)
+    assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401
+
 
 def test_setup_encoder_angle_now(appliance_factory, tmp_path):
     running = appliance_factory(appliance_doc(tmp_path / "state", web=ON, simulation={"sensor": "encoder", "time_scale": 1.0}))
@@ -388,7 +407,8 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert c.request("/home/summary")[2].decode().startswith('<div class="summary" id="summary">')
     # the history keeps the part's verdict and each release's check apart
     hist = c.request("/history")[2].decode()
-    assert "1 of 2: check OK" in hist and "comes with release 2 of 2" in hist
+    assert "1 of 2: check OK" in hist and "on release 2 of 2" in hist
+    assert '<option value="calibration_due" >calibration due: ' in hist  # the flags offered in words
     # the first release, once its part is judged, points to the verdict (and is not called in progress)
     page = c.request(f"/results/{first.uuid}")[2].decode()
     assert f'<a id="part-verdict-link" href="/results/{ok.uuid}">part OK (#{ok.seq})</a>' in page
@@ -523,3 +543,22 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     assert status == 403 and "may not acknowledge a fault" in body["error"]
     assert quinn.json("/api/abort", method="POST", headers={"X-CSRF-Token": qcsrf})[0] == 202
     running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")
+
+    # the users, for an admin only: add one (a short password refused on the page, the name kept), remove one
+    assert quinn.request("/users")[0] == 403
+    admin = Client(app.web.url)
+    admin.request("/login", {"token": Path(app.web.token_file).read_text().strip(), "csrf": admin.csrf()})
+    page = admin.request("/users")[2].decode()
+    acsrf = page.split('name="csrf-token" content="')[1].split('"')[0]
+    assert "<td>olga</td><td>operator</td>" in page and 'id="lockout"' in page and "Wrong logins" in page
+    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
+                                               "password": "short", "csrf": acsrf})
+    assert status == 400 and "a password needs 10" in page.decode() and 'value="ada"' in page.decode()
+    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
+                                               "password": "ada-password-3", "csrf": acsrf})
+    assert status == 200 and "<td>ada</td><td>quality</td>" in page.decode()  # (after the redirect)
+    assert "ada" in users.read_text() and "ada-password-3" not in users.read_text()
+    login("ada", "ada-password-3")
+    assert admin.request("/users", {"action": "remove", "name": "olga", "csrf": acsrf})[0] == 200
+    c = Client(app.web.url)
+    assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401

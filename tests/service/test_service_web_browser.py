@@ -207,6 +207,9 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
             if name == "history":
                 table = browser.find_element(By.ID, "history")
                 assert "part verdict" in table.text and "NOK" in table.text
+                if width == 1280:  # the whole row on a desktop: no sideways scrolling to the status and flags
+                    box = table.find_element(By.XPATH, "..")
+                    assert browser.execute_script("return arguments[0].scrollWidth <= arguments[0].clientWidth", box)
             # the whole page in one picture
             height = browser.execute_script("return document.documentElement.scrollHeight")
             browser.set_window_size(width, min(max(height + 120, 600), 6000))
@@ -294,13 +297,17 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     browser.get(url)
     banner = wait.until(lambda d: d.find_element(By.ID, "blocked"))
     assert on_screen(banner) and "expired on 2021-01-14" in banner.text and "the lab, ext. 2345" in banner.text
+    # the part left at release 1 of 2 (SN-0044, another recipe) is not this part's progress: this one is ready
+    assert browser.find_element(By.ID, "now-line").text.startswith("READY SN-0045 · release 1 of 1")
+    assert "SN-0044" in browser.find_element(By.ID, "left-part").text
     done = app.store.count()
     browser.find_element(By.ID, "measure").click()
     wait.until(lambda d: "Measure refused" in d.find_element(By.ID, "message").text)
     assert app.store.count() == done and not app.sequencer.busy
     browser.save_screenshot(str(artifacts / "blocked-390.png"))
     if os.environ.get("MOI_UPDATE_SCREENSHOT"):
-        for name in ("operator-390", "blocked-390", "recipes-1280", "calibration-1280", "setup-1280"):
+        for name in ("operator-390", "blocked-390", "recipes-1280", "calibration-1280", "setup-1280", "spc-1280",
+                     "spc-390"):
             shutil.copy(artifacts / f"{name}.png", REPO / "docs" / "img" / f"web-{name}.png")
 
 
