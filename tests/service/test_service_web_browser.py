@@ -194,6 +194,10 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
                 assert chart.rect["x"] >= 0 and chart.rect["x"] + chart.rect["width"] <= inner
                 tick = chart.find_element(By.CSS_SELECTOR, "text.tick")
                 assert tick.rect["height"] >= 9, tick.rect  # px: not the 7 px text of a shrunken desktop chart
+                clipped = browser.execute_script(
+                    "var r = arguments[0].getBoundingClientRect(); return Array.from(arguments[0].querySelectorAll("
+                    "'text')).filter(t => t.getBoundingClientRect().right > r.right + 0.5).map(t => t.textContent)", chart)
+                assert not clipped, clipped  # every label whole
                 assert "95 % confidence" in browser.find_element(By.ID, "capability").text
             if name == "report" and width == 1280:  # it prints cleanly: the record, not the page's navigation
                 import base64

@@ -754,7 +754,7 @@ class Views:
             charts = {w: Q.control_chart(result.summary, unit, width=w, names=names) for w in (720.0, 380.0)}
             s = result.summary
             values = s.n_points * s.subgroup
-            capability = {"interval": capability_interval(s.cp, s.cpk, values), "values": values,
+            capability = {"interval": capability_interval(s.cp, s.cpk, values), "n": values,
                           "small": values < SMALL_SAMPLE, "small_sample": SMALL_SAMPLE}
         q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
         checks, check_chart = self._checks(filters, unit)
