@@ -11,11 +11,8 @@ import sys
 from pathlib import Path
 
 from service.errors import InputFileError, StartupError
-from service.names import name_problem
-from service.publish.web.auth import ROLES, User, hash_password, read_users
+from service.publish.web.auth import ROLES, User, check_user, hash_password, read_users, save_users
 
-#: shortest and longest password accepted, characters
-MIN_PASSWORD, MAX_PASSWORD = 10, 1024
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -37,15 +34,7 @@ def _load(path: Path) -> dict[str, User]:
 
 
 def _save(path: Path, users: dict[str, User]) -> None:
-    import tomli_w
-
-    text = "# moi web users: name, role (operator | quality | admin), scrypt password hash (moi user add)\n"
-    text += tomli_w.dumps({"user": [{"name": u.name, "role": u.role, "password": u.password} for u in users.values()]})
-    tmp = path.with_name(f".{path.name}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "w", encoding="utf-8") as f:
-        f.write(text)
-    os.replace(tmp, path)
+    save_users(path, users)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -57,9 +46,10 @@ def run(args: argparse.Namespace) -> int:
         for u in users.values():
             print(f"{u.name}\t{u.role}")
         return 0
-    name = (args.name or "").strip()
-    if (problem := name_problem("user", name)) is not None:
-        raise InputFileError(f"give the user's NAME: {problem}")
+    try:
+        name = check_user(args.name or "")
+    except ValueError as exc:
+        raise InputFileError(f"give the user's NAME: {exc}") from None
     if args.action == "remove":
         if users.pop(name, None) is None:
             raise InputFileError(f"no user {name!r} in {path}")
@@ -72,8 +62,10 @@ def run(args: argparse.Namespace) -> int:
         password = getpass.getpass(f"password for {name}: ")
         if getpass.getpass("again: ") != password:
             raise InputFileError("the two passwords differ")
-    if not MIN_PASSWORD <= len(password) <= MAX_PASSWORD:
-        raise InputFileError(f"a password needs {MIN_PASSWORD} to {MAX_PASSWORD} characters")
+    try:
+        check_user(name, password)
+    except ValueError as exc:
+        raise InputFileError(str(exc)) from None
     users[name] = User(name, args.role, hash_password(password))
     _save(path, users)
     print(f"user {name} ({args.role}) saved in {path}")

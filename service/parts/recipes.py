@@ -15,6 +15,8 @@ directory (``[recipes] directory``)::
     declared = ["viscous"]        # optional: the declared model (default: the rig's)
     display_unit = "g·cm²"        # optional: the unit pages and reports show (kg·m², g·cm², kg·mm², lb·in², slug·ft²;
                                   # default: [web] display_unit); stored values stay kg·m²
+    display_decimals = 0          # optional: decimals of values and U on pages and reports (default: those that
+                                  # resolve a hundredth of the tolerance)
 
     [decision]                    # optional
     rule = "guard_band"           # guard_band (ISO 14253-1) | simple
@@ -135,6 +137,7 @@ class Recipe:
     declared: tuple[str, ...] | None = None
     tensor: TensorPlan | None = None  # the orientations of a guided tensor set
     display_unit: str | None = None   # the unit pages and reports show (None: the set-up's); values stay kg·m²
+    display_decimals: int | None = None  # decimals pages and reports show (None: from the tolerance)
     #: a check standard: {name, reference, reference_U} (kg·m²); None for a part type
     check_standard: dict[str, Any] | None = None
 
@@ -166,7 +169,7 @@ class Recipe:
         return {"name": self.name, "number": self.number, "version": self.version, "path": self.path,
                 "releases": self.releases, "rig_path": self.rig_path,
                 "declared": list(self.declared) if self.declared is not None else None,
-                "display_unit": self.display_unit,
+                "display_unit": self.display_unit, "display_decimals": self.display_decimals,
                 **(self.spec.to_dict() if self.spec is not None else {}), "quality": self.quality.to_dict(),
                 **({"tensor": self.tensor.to_dict()} if self.tensor is not None else {}),
                 **({"check_standard": dict(self.check_standard)} if self.check_standard is not None else {})}
@@ -191,6 +194,8 @@ def _schemas() -> dict[str, dict[str, Any]]:
             "rig": Key("path", None, "rig file of this part type, relative to the recipe file"),
             "declared": Key("strlist", None, "declared model"),
             "display_unit": Key("str", None, "unit the pages and reports show (values stay kg·m²)"),
+            "display_decimals": Key("int", None, "decimals pages and reports show values and U with (default: those "
+                                    "that resolve a hundredth of the tolerance)", min=0, max=12),
         },
         "decision": _schema(Specification, {
             "rule": _doc("", choices=RULES), "uncertain": _doc("", choices=("NOK", "INVALID")),
@@ -323,7 +328,7 @@ def load_recipe(path: str | Path) -> Recipe:  # noqa: C901
     return Recipe(name=name, number=rec["number"], description=rec["description"], path=str(p),
                   version=hashlib.sha256(raw).hexdigest()[:16], releases=releases, spec=spec, quality=quality,
                   rig=rig, rig_path=rig_path, declared=None if declared is None else tuple(declared), tensor=tensor,
-                  display_unit=unit, check_standard=check)
+                  display_unit=unit, display_decimals=rec["display_decimals"], check_standard=check)
 
 
 @dataclass(frozen=True)

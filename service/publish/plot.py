@@ -61,8 +61,9 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO
     fig.savefig(path, dpi=dpi, format=fmt)
 
 
-def render_png(result: IdentificationResult, *, dpi: int = 80, unit: str = "kg·m²", source: str | None = None) -> bytes:
-    """The picture of ``result`` as PNG bytes (what the result store keeps with the measurement)."""
+def render_png(result: IdentificationResult, unit: str = "kg·m²", source: str | None = None, *, dpi: int = 80) -> bytes:
+    """The picture of ``result`` as PNG bytes (what the result store keeps with the measurement); J in ``unit``,
+    the title naming ``source``."""
     return render(result, "png", dpi=dpi, unit=unit, source=source)
 
 

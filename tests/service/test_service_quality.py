@@ -197,7 +197,7 @@ def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_re
     from service.publish.web.views import HERE
 
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")), autoescape=True)
-    env.filters.update(fmt=Q.number, inertia=Q.inertia, iso=Q.iso, name=lambda v: v)
+    env.filters.update(fmt=Q.number, inertia=Q.inertia, iso=Q.iso, name=lambda v: v, plain=Q.plain_text)
     env.globals.update(VERDICT_WORDS=Q.VERDICT_WORDS)
     budget = {"J": {"value": 0.0125, "U": 1.2e-7, "u": 6e-8, "coverage_factor": 2.0, "correlations": [],
                     "lines": [{"source": "fit", "value": 5.4, "std": 2e-5, "unit": "rad/s", "sensitivity": -0.0046,
@@ -206,14 +206,17 @@ def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_re
     html = env.get_template("_verdict.html").render(v=Q.part_view(plain), p=plain, unit="g·cm²", band=None,
                                                     places=Q.places(None, "g·cm²", 1.2e-7))
     assert "± 1.2 g·cm² (U, k = 2)" in html and "None" not in html
-    html = env.get_template("_budget.html").render(p=plain)
+    html = env.get_template("_budget.html").render(p=plain, unit="g·cm²")
     assert 'class="scroll"><table class="budget-table">' in html and "fit" in html  # scrolls in its card
+    # in the page's unit, not kg·m² on a g·cm² page; the share second, where a phone still shows it
+    assert "J = 125000 g·cm², U = 1.2 g·cm²" in html and "contribution [g·cm²]" in html and "kg·m²" not in html
+    assert html.index("share of u²") < html.index("contribution")
     before = {"J": 0.0125, "J_std": 5e-8}  # a result without U or budget: its 1σ, said to be one
     html = env.get_template("_verdict.html").render(v=Q.part_view(before), p=before, unit="kg·m²", band=None,
                                                     places=Q.places(None, "kg·m²", 5e-8))
     # the value with the decimals of its uncertainty, never in e-notation
     assert "J = 0.012500000 kg·m² <span>± 0.000000050 kg·m² (standard uncertainty, 1σ)" in html
-    assert env.get_template("_budget.html").render(p=before).strip() == ""
+    assert env.get_template("_budget.html").render(p=before, unit="kg·m²").strip() == ""
 
 
 def test_each_of_the_six_orientations_of_a_tensor_set_is_drawn_differently_along_its_axis():

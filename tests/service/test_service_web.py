@@ -232,6 +232,25 @@ def test_setup_camera_snapshot_and_fault_shown_and_acknowledged(appliance_factor
     assert c.json("/api/abort", method="POST", headers={"Authorization": f"Bearer {token}"})[0] == 202
     running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")
 
+    # the users, for an admin only: add one (a short password refused on the page, the name kept), remove one
+    assert quinn.request("/users")[0] == 403
+    admin = Client(app.web.url)
+    admin.request("/login", {"token": Path(app.web.token_file).read_text().strip(), "csrf": admin.csrf()})
+    page = admin.request("/users")[2].decode()
+    acsrf = page.split('name="csrf-token" content="')[1].split('"')[0]
+    assert "<td>olga</td><td>operator</td>" in page and 'id="lockout"' in page and "Wrong logins" in page
+    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
+                                               "password": "short", "csrf": acsrf})
+    assert status == 400 and "a password needs 10" in page.decode() and 'value="ada"' in page.decode()
+    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
+                                               "password": "ada-password-3", "csrf": acsrf})
+    assert status == 200 and "<td>ada</td><td>quality</td>" in page.decode()  # (after the redirect)
+    assert "ada" in users.read_text() and "ada-password-3" not in users.read_text()
+    login("ada", "ada-password-3")
+    assert admin.request("/users", {"action": "remove", "name": "olga", "csrf": acsrf})[0] == 200
+    c = Client(app.web.url)
+    assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401
+
 
 def test_a_snapshot_asked_before_the_sequencer_exists_is_refused_plainly():
     # the devices built but no sequencer yet (or no longer): a clear 503, never an AttributeError's text
@@ -310,7 +329,7 @@ def test_a_result_stored_without_its_plot_gets_it_drawn_once_from_its_trace(appl
 
 
 #: what must never reach a page: a Python None, a NaN or infinity, a raw dict or list, a traceback
-RAW = re.compile(r"\bNone\b|\bnan\b|\bNaN\b|\binf\b|Traceback|\{'|\['|\bTrue\b|\bFalse\b")
+RAW = re.compile(r"\bNone\b|\bnan\b|\bNaN\b|\binf\b|Traceback|\{'|\['|\bTrue\b|\bFalse\b|built-in method")
 #: a number in e-notation, a machine's time (ISO 8601 with its offset), a measurement's UUID (which may look like both)
 E_NOTATION = re.compile(r"(?<![\w.])\d+(\.\d+)?e[+-]?\d+\b", re.I)
 ISO_TIME = re.compile(r"\d{4}-\d\d-\d\dT\d\d:\d\d")
@@ -386,7 +405,7 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert spc.count('class="point"') + spc.count('class="violation"') == 2 * (3 + 2)
     assert "<title>SN-2a " in spc  # each point named by its serial (and time)
     # 3 parts: Cp and Cpk with their confidence interval, and said to be too few to decide on
-    assert "95 % confidence" in spc and 'id="small-sample"' in spc and "fewer than 25" in spc
+    assert "95 % confidence" in spc and 'id="small-sample"' in spc and "only 3 values (fewer than 25)" in spc
     assert "USL 0.0153" in spc and "LSL 0.0147" in spc and "part value [kg·m²]" in spc
     assert c.request("/spc?recipe=no-such")[0] == 404 and c.request("/spc?chart=pie")[0] == 400
     for chart in ("Xbar-R", "Xbar-S"):  # one release a part: no subgroups; said, and I-MR drawn, not a bare 400
@@ -413,7 +432,8 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert c.request("/home/summary")[2].decode().startswith('<div class="summary" id="summary">')
     # the history keeps the part's verdict and each release's check apart
     hist = c.request("/history")[2].decode()
-    assert "1 of 2: check OK" in hist and "comes with release 2 of 2" in hist
+    assert "1 of 2: check OK" in hist and "on release 2 of 2" in hist
+    assert '<option value="calibration_due" >calibration due: ' in hist  # the flags offered in words
     # the first release, once its part is judged, points to the verdict (and is not called in progress)
     page = c.request(f"/results/{first.uuid}")[2].decode()
     assert f'<a id="part-verdict-link" href="/results/{ok.uuid}">part OK (#{ok.seq})</a>' in page
@@ -548,3 +568,22 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     assert status == 403 and "may not acknowledge a fault" in doc["error"]
     assert quinn.json("/api/abort", method="POST", headers={"X-CSRF-Token": qcsrf})[0] == 202
     running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")
+
+    # the users, for an admin only: add one (a short password refused on the page, the name kept), remove one
+    assert quinn.request("/users")[0] == 403
+    admin = Client(app.web.url)
+    admin.request("/login", {"token": Path(app.web.token_file).read_text().strip(), "csrf": admin.csrf()})
+    page = admin.request("/users")[2].decode()
+    acsrf = page.split('name="csrf-token" content="')[1].split('"')[0]
+    assert "<td>olga</td><td>operator</td>" in page and 'id="lockout"' in page and "Wrong logins" in page
+    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
+                                               "password": "short", "csrf": acsrf})
+    assert status == 400 and "a password needs 10" in page.decode() and 'value="ada"' in page.decode()
+    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
+                                               "password": "ada-password-3", "csrf": acsrf})
+    assert status == 200 and "<td>ada</td><td>quality</td>" in page.decode()  # (after the redirect)
+    assert "ada" in users.read_text() and "ada-password-3" not in users.read_text()
+    login("ada", "ada-password-3")
+    assert admin.request("/users", {"action": "remove", "name": "olga", "csrf": acsrf})[0] == 200
+    c = Client(app.web.url)
+    assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401

@@ -190,9 +190,17 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
                 swing = browser.find_element(By.ID, "swing")
                 assert swing.size["height"] >= 200 and swing.size["width"] <= inner  # readable on a phone
                 assert browser.find_element(By.ID, "tile-verdict").text == "INVALID"
-            if name == "spc":  # the chart, in the recipe's unit, scrolls inside its box on a phone
-                chart = browser.find_element(By.ID, "chart-points")
+            if name == "spc":  # the chart in the recipe's unit; on a phone its own drawing, labels readable
+                chart = browser.find_element(By.ID, "chart-points" if width > 600 else "chart-points-narrow")
                 assert chart.is_displayed() and "kg·mm²" in chart.text and "UCL" in chart.text
+                assert chart.rect["x"] >= 0 and chart.rect["x"] + chart.rect["width"] <= inner
+                tick = chart.find_element(By.CSS_SELECTOR, "text.tick")
+                assert tick.rect["height"] >= 9, tick.rect  # px: not the 7 px text of a shrunken desktop chart
+                clipped = browser.execute_script(
+                    "var r = arguments[0].getBoundingClientRect(); return Array.from(arguments[0].querySelectorAll("
+                    "'text')).filter(t => t.getBoundingClientRect().right > r.right + 0.5).map(t => t.textContent)", chart)
+                assert not clipped, clipped  # every label whole
+                assert "95 % confidence" in browser.find_element(By.ID, "capability").text
             if name == "report" and width == 1280:  # it prints cleanly: the record, not the page's navigation
                 import base64
                 import io
@@ -205,6 +213,9 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
             if name == "history":
                 table = browser.find_element(By.ID, "history")
                 assert "part verdict" in table.text and "NOK" in table.text
+                if width == 1280:  # the whole row on a desktop: no sideways scrolling to the status and flags
+                    box = table.find_element(By.XPATH, "..")
+                    assert browser.execute_script("return arguments[0].scrollWidth <= arguments[0].clientWidth", box)
             # the whole page in one picture
             height = browser.execute_script("return document.documentElement.scrollHeight")
             browser.set_window_size(width, min(max(height + 120, 600), 6000))
@@ -292,19 +303,23 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     browser.get(url)
     banner = wait.until(lambda d: d.find_element(By.ID, "blocked"))
     assert on_screen(banner) and "expired on 2021-01-14" in banner.text and "the lab, ext. 2345" in banner.text
+    # the part left at release 1 of 2 (SN-0044, another recipe) is not this part's progress: this one is ready
+    assert browser.find_element(By.ID, "now-line").text.startswith("READY SN-0045 · release 1 of 1")
+    assert "SN-0044" in browser.find_element(By.ID, "left-part").text
     done = app.store.count()
     browser.find_element(By.ID, "measure").click()
     wait.until(lambda d: "Measure refused" in d.find_element(By.ID, "message").text)
     assert app.store.count() == done and not app.sequencer.busy
     browser.save_screenshot(str(artifacts / "blocked-390.png"))
     if os.environ.get("MOI_UPDATE_SCREENSHOT"):
-        for name in ("operator-390", "blocked-390", "recipes-1280", "calibration-1280", "setup-1280"):
+        for name in ("operator-390", "blocked-390", "recipes-1280", "calibration-1280", "setup-1280", "spc-1280",
+                     "spc-390"):
             shutil.copy(artifacts / f"{name}.png", REPO / "docs" / "img" / f"web-{name}.png")
 
 
 def _contrast(browser, el) -> float:
     """The WCAG 2 contrast ratio of an element's text against its background (the first opaque one up the tree)."""
-    fg, bg = browser.execute_script("""
+    fg, bg = browser.execute_script(r"""
         var e = arguments[0], fg = getComputedStyle(e).color, bg = null;
         for (var n = e; n && !bg; n = n.parentElement) {
           var c = getComputedStyle(n).backgroundColor; if (c && !/rgba\(.*, 0\)$/.test(c) && c !== 'transparent') { bg = c; }

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from service.errors import StartupError
-from service.names import name_problem
+from service.names import NAMES, name_problem
 
 log = logging.getLogger("moi.web")
 
@@ -97,7 +97,22 @@ def read_token(path: str | os.PathLike, *, create: bool) -> str:
 #: roles, each allowed what the ones before it are
 ROLES = ("operator", "quality", "admin")
 #: the least role of each action; an action not named here needs an operator
-LEAST_ROLE = {"recipe": "quality", "acknowledge": "quality"}
+LEAST_ROLE = {"recipe": "quality", "acknowledge": "quality", "users": "admin"}
+#: shortest and longest password accepted, characters
+MIN_PASSWORD, MAX_PASSWORD = 10, 1024
+#: longest user name, characters
+MAX_USER_NAME = NAMES["user"].length
+
+
+def check_user(name: str, password: str | None = None) -> str:
+    """``name`` stripped, when it is a user name (the names table's rule for a user) and
+    ``password`` (when given) has MIN_PASSWORD to MAX_PASSWORD characters; else ValueError saying what is wrong."""
+    n = (name or "").strip()
+    if (problem := name_problem("user", n)) is not None:
+        raise ValueError(problem)
+    if password is not None and not MIN_PASSWORD <= len(password) <= MAX_PASSWORD:
+        raise ValueError(f"a password needs {MIN_PASSWORD} to {MAX_PASSWORD} characters")
+    return n
 #: scrypt cost (RFC 7914): N = 2^14, r = 8, p = 1 takes 16 MiB and some 50 ms on a Raspberry Pi 4
 SCRYPT_N, SCRYPT_R, SCRYPT_P = 2**14, 8, 1
 
@@ -160,6 +175,20 @@ def read_users(path: str | os.PathLike) -> dict[str, User]:
             raise StartupError(f"[web] users file {str(p)!r}: user {name!r} twice")
         users[name] = User(name, role, pw)
     return users
+
+
+def save_users(path: str | os.PathLike, users: dict[str, User]) -> None:
+    """Write ``users`` to the users file ``path`` (mode 0600, replaced in one step: a reader never sees half)."""
+    import tomli_w
+
+    p = Path(path)
+    text = "# moi web users: name, role (operator | quality | admin), scrypt password hash (moi user add)\n"
+    text += tomli_w.dumps({"user": [{"name": u.name, "role": u.role, "password": u.password} for u in users.values()]})
+    tmp = p.with_name(f".{p.name}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(text)
+    os.replace(tmp, p)
 
 
 @dataclass

@@ -26,8 +26,10 @@ def extras(app: "ApplianceView") -> dict[str, Any]:
                            "part_id": parts.part_id, "release_next": None}
     if r is not None and r.spec is not None:
         o = parts.open_part
-        # the release a trigger now measures (during a capture: the one being measured), of the part's N
-        out["release_next"] = {"k": (o["done"] + 1) if o else 1, "of": r.releases}
+        # the release a trigger now measures (during a capture: the one being measured), of the part's N; an
+        # open part of another part ID or recipe is abandoned by the next release, which starts a new part
+        same = o is not None and o["part_id"] == parts.part_id and o["recipe"] == r.name
+        out["release_next"] = {"k": (o["done"] + 1) if same else 1, "of": r.releases}
     return out
 
 

@@ -360,7 +360,7 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
            height: float, spread: float, x_offset: int = 0, n_total: int | None = None,
            names: Sequence[str] = (), floor: float | None = None) -> dict[str, Any]:
     narrow = width < 500  # a phone's chart: narrower margins, labels as readable
-    left, right, top, bottom = (62.0, 92.0, 12.0, 26.0) if narrow else (90.0, 170.0, 12.0, 26.0)
+    left, right, top, bottom = (62.0, 122.0, 12.0, 26.0) if narrow else (90.0, 170.0, 12.0, 26.0)
     n = n_total or len(values)
     ys = list(values) + [v for _, v, _ in lines]
     lo, hi = (min(ys), max(ys)) if ys else (0.0, 1.0)

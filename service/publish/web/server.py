@@ -207,7 +207,7 @@ class WebServer(Publisher):
 
             from .quality import plot_labels
             unit, source = plot_labels(stored, self.appliance.config.simulated, self.settings.display_unit)
-            return self.child.call(functools.partial(render_png, unit=unit, source=source), m.result)
+            return self.child.call(render_png, m.result, unit, source)
 
         self.submit_plot(m.id, draw)
 

@@ -26,7 +26,8 @@ from service.core import vocabulary as V
 from service.errors import InputFileError, StoreDamaged
 from service.names import content_disposition
 from service.publish.dfq import ENCODING
-from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, SESSION_LIFETIME, allowed
+from .auth import (COOKIE, CSRF_HEADER, GUESS_DELAY, LOGIN_COOKIE, MAX_USER_NAME, MIN_PASSWORD, ROLES,
+                   SESSION_LIFETIME, User, allowed, check_user, hash_password, save_users)
 from .child import ChildBusy, export_file, replot, report_file, trace_file
 from .priority import CaptureFirst, sensor_is_read
 from .live import Live, extras
@@ -181,6 +182,8 @@ class Views:
         r.add_get("/setup", self.setup)
         r.add_get("/recipes", self.recipes)
         r.add_get("/calibration", self.calibration)
+        r.add_get("/users", self.users)
+        r.add_post("/users", self.users_change)
         r.add_get("/api/health", self.api_health)
         r.add_get("/api/angle", self.api_angle)
         r.add_get("/setup/snapshot.png", self.snapshot)
@@ -272,6 +275,10 @@ class Views:
         tile_view = Q.part_view(tile.payload) if tile else None
         tile_unit = self.unit(tile.payload if tile else None)
         part_id = live.get("part_id")
+        recipe = live.get("recipe") or {}
+        left = None
+        if open_part and (open_part.get("part_id") != part_id or open_part.get("recipe") != recipe.get("name")):
+            left, open_part = open_part, None  # another part's: the next release abandons it
         # the verdict is shown big only for the part that owns it: none in progress, and no other part ID set
         if open_part and open_part.get("done"):
             mode = "progress"
@@ -286,7 +293,7 @@ class Views:
                                                 tile_unit) if tile_view else None,
                 "mode": mode, "part_id": part_id, "recipe": live.get("recipe"),
                 "repeat": bool(tile is not None and part_id and part_id == tile.part_id and mode == "verdict"),
-                "shift": shift.strftime("%H:%M"), "strip": parts, "open_part": open_part,
+                "shift": shift.strftime("%H:%M"), "strip": parts, "open_part": open_part, "left": left,
                 "next_release": live.get("release_next"), "blocked": self.blocked(calibration),
                 "calibration": calibration, "last": last, "last_view": Q.part_view(last.payload) if last else None,
                 "last_unit": self.unit(last.payload if last else None)}
@@ -699,7 +706,7 @@ class Views:
         export = urlencode(args)
         return self._page(request, "history.html", title="History", rows=rows, total=total, page=page, pages=pages,
                           unit=self.server.settings.display_unit, unit_of=self.unit,
-                          q=self._query_args(request), link=link, export=export, flag_names=sorted(FLAGS),
+                          q=self._query_args(request), link=link, export=export, flag_names=[(f, f"{f.replace('_', ' ')}: {w}" if w else f) for f, w in flag_words(sorted(FLAGS))],
                           recipes=self._store().recipes())
 
     async def export(self, request: web.Request) -> web.Response:
@@ -763,7 +770,7 @@ class Views:
             charts = {w: Q.control_chart(result.summary, unit, width=w, names=names) for w in (720.0, 380.0)}
             s = result.summary
             values = s.n_points * s.subgroup
-            capability = {"interval": capability_interval(s.cp, s.cpk, values), "values": values,
+            capability = {"interval": capability_interval(s.cp, s.cpk, values), "n": values,
                           "small": values < SMALL_SAMPLE, "small_sample": SMALL_SAMPLE}
         q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
         checks, check_chart = self._checks(filters, unit)
@@ -827,6 +834,57 @@ class Views:
             rows.append({"r": d, "unit": unit, "places": Q.places(d, unit), "active": active is not None
                          and active.name == r.name, "rig": Path(r.rig_path).name if r.rig_path else None})
         return self._page(request, "recipes.html", title="Recipes", rows=rows)
+
+    # --- users (admin) ----------------------------------------------------------------------------
+    def _admin(self, request: web.Request) -> None:
+        session = self.server.guard.session(request.cookies.get(COOKIE))
+        if session is None or not allowed(session.role, "users"):
+            raise Refused(403, "only an admin sees and changes the users: log in as one")
+
+    async def users(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
+        """The named users and their roles, with forms to add one, reset a password or change a role, and remove
+        one; how many wrong logins there were (each costs GUESS_DELAY, one at a time: nobody is locked out)."""
+        self._admin(request)
+        guard = self.server.guard
+        return self._page(request, "users.html", status=status, title="Users", users=list(guard.users.values()),
+                          roles=ROLES, users_file=self.server.settings.users_file, wrong=guard.wrong_tokens,
+                          delay=GUESS_DELAY, max_name=MAX_USER_NAME, min_password=MIN_PASSWORD, **ctx)
+
+    async def users_change(self, request: web.Request) -> web.StreamResponse:
+        """add (or reset the password and role of) a user, or remove one; the users file is written and the
+        change holds at once. A refusal is said on the page, with what was typed (not the password)."""
+        form = await _form(request)
+        await self._authorise(request, form, "users")
+        path = self.server.settings.users_file
+        if not path:
+            raise Refused(409, "no [web] users_file: the token is the one login (set users_file to name users)")
+        guard = self.server.guard
+        users = dict(guard.users)
+        action, role = str(form.get("action") or ""), str(form.get("role") or "operator")
+        typed = {"typed_name": str(form.get("name") or "")[:MAX_USER_NAME], "typed_role": role}
+        try:
+            if action == "remove":
+                name = check_user(str(form.get("name") or ""))
+                if name not in users:
+                    raise ValueError(f"no user {name!r}")
+                if users[name].role == "admin" and sum(u.role == "admin" for u in users.values()) == 1:
+                    raise ValueError("the last admin cannot be removed: add another admin first")
+                del users[name]
+            elif action == "add":
+                name = check_user(str(form.get("name") or ""), str(form.get("password") or ""))
+                if role not in ROLES:
+                    raise ValueError(f"role: expected one of {', '.join(ROLES)}")
+                users[name] = User(name, role, hash_password(str(form["password"])))
+            else:
+                raise ValueError("action: expected add or remove")
+        except ValueError as exc:
+            return await self.users(request, status=400, users_error=str(exc), **typed)
+        loop = asyncio.get_running_loop()
+        await loop.run_in_executor(None, save_users, path, users)
+        guard.users = users
+        log.info("web: user %s %s by %s", name, {"add": "saved", "remove": "removed"}[action],
+                 guard.who(cookie=request.cookies.get(COOKIE), bearer=None)[0] or "the token")
+        raise web.HTTPSeeOther("/users")
 
     # --- set-up -----------------------------------------------------------------------------------------
     def health(self) -> dict[str, Any]:

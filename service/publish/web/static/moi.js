@@ -128,7 +128,8 @@ var moi = (function () {
     function measuring(s) {
       var now = $("now");
       if (!now || now.getAttribute("data-measuring") === "1") { return; }
-      s = s || seen;  // pressed: the part and the release the appliance last said are next
+      // a tick says the part and the release being measured; a transition or the press alone: the last tick's
+      if (!s || s.release_next === undefined) { s = seen; }
       var pid = (s && s.part_id) || ($("part-id").textContent !== "–" ? $("part-id").textContent : "(no part ID)");
       var rn = s && s.release_next;
       now.className = "now now-measuring"; now.setAttribute("data-measuring", "1");
