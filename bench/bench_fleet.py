@@ -108,7 +108,7 @@ def main() -> None:
             doc = appliance_doc(root / name, mqtt_port=broker.port, modbus_port=ports[name], device_id=name,
                                 sparkplug={"host": "127.0.0.1", "port": broker.port, "primary_host": "fleet-scada",
                                            "reconnect_min": 0.1, "reconnect_max": 0.5, "keepalive": 5})
-            doc["device"]["log_level"] = "warning"
+            doc["simulation"]["time_scale"] = 10.0  # five daemons share the cores: a 5 s swing in 0.5 s
             daemons[name] = _daemon(write_toml(root / f"{name}.toml", doc), root / f"{name}.log")
         for name in names:
             wait_until(lambda n=name: port_open(ports[n]) or daemons[n].poll() is not None, 120, what=f"{name} up")
