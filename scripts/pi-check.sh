@@ -70,7 +70,6 @@ bind() {  # bind $1 at $ROOT$2
 mount -t proc proc "$ROOT/proc" && MOUNTS="$ROOT/proc $MOUNTS"
 bind /dev /dev
 mount -t tmpfs tmpfs "$ROOT/dev/shm" && MOUNTS="$ROOT/dev/shm $MOUNTS"
-bind "$REPO" /mnt/moi-src
 cp /etc/resolv.conf "$ROOT/etc/resolv.conf"
 # pip in the root trusts what this host trusts (a TLS-inspecting proxy's CA, where there is one)
 cp /etc/ssl/certs/ca-certificates.crt "$ROOT/etc/ssl/certs/host-ca-certificates.crt"
@@ -90,8 +89,9 @@ debver=$(cat "$ROOT/etc/debian_version")
 commit=$(git -C "$REPO" rev-parse --short HEAD)
 git -C "$REPO" diff --quiet HEAD || say "note: uncommitted changes are not checked (the clone takes HEAD $commit)"
 say "Debian $debver ($SUITE) $machine, Python $pyver; installing moi $commit as systemd/README.md says"
-arm sh -c 'rm -rf /opt/moi && git clone --quiet /mnt/moi-src /opt/moi && python3 -m venv /opt/moi/.venv' ||
-    die "git clone / venv"
+# the clone is made by this machine's git (a work tree of another clone points outside the root), the rest in the root
+rm -rf "$ROOT/opt/moi" && git clone --quiet "$REPO" "$ROOT/opt/moi" || die "git clone"
+arm python3 -m venv /opt/moi/.venv || die "python3 -m venv"
 if ! arm /opt/moi/.venv/bin/pip install '/opt/moi[pi]' >"$OUT/pip-install.log" 2>&1; then
     tail -30 "$OUT/pip-install.log"
     die "pip install '/opt/moi[pi]' on arm64 (log: $OUT/pip-install.log)"

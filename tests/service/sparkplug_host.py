@@ -47,12 +47,18 @@ class SparkplugHost:
                                   clean_session=not persistent)
         self.client.reconnect_delay_set(0.1, 0.5)  # type: ignore[arg-type]
         self.client.will_set(self.state_topic, self._state(False), qos=1, retain=True)
-        self.client.on_connect = lambda c, u, f, rc, p: c.subscribe([(f"spBv1.0/{group}/#", 1)])
+        self._online = False  # announced online: announced again at each reconnect, as a host does
+        self.client.on_connect = self._on_connect
         self.client.on_subscribe = lambda *a: self._subscribed.set()
         self.client.on_message = self._on_message
         self.client.connect_async("127.0.0.1", port, keepalive=10)
         self.client.loop_start()
         assert self._subscribed.wait(10), "the Sparkplug host did not subscribe"
+
+    def _on_connect(self, client, userdata, flags, rc, props) -> None:
+        client.subscribe([(f"spBv1.0/{self.group}/#", 1)])
+        if self._online:
+            client.publish(self.state_topic, self._state(True), qos=1, retain=True)
 
     @staticmethod
     def _state(online: bool) -> str:
@@ -60,6 +66,7 @@ class SparkplugHost:
 
     def online(self, online: bool = True) -> None:
         """Publish this host's retained STATE."""
+        self._online = online
         self.client.publish(self.state_topic, self._state(online), qos=1, retain=True).wait_for_publish(5)
 
     def _on_message(self, client, userdata, msg) -> None:
