@@ -42,6 +42,8 @@ class Rig(Protocol):
     def g(self) -> float: ...
     @property
     def sensor_calibrated(self) -> bool: ...
+    @property
+    def measures(self) -> str: ...
 
 #: names the effects' ``term`` expressions may use, in their numpy form
 _NUMPY_NAMES = {"cos": np.cos, "sin": np.sin, "abs": np.abs, "exp": np.exp}
@@ -82,6 +84,8 @@ class Effect:
     rigs: ClassVar[tuple[str, ...]] = ("torsion", "compound")
     #: rig kinds the discovery loop offers it on as a candidate (None: all of ``rigs``)
     offered: ClassVar[tuple[str, ...] | None] = None
+    #: what a sensor must read for the effect to exist in it ("angle", "rate"; ``Rig.measures``)
+    readings: ClassVar[tuple[str, ...]] = ("angle", "rate")
     cause: ClassVar[str] = ""
     #: torque law as printed in reports
     law: ClassVar[str] = ""
@@ -192,9 +196,11 @@ class Effect:
 
     # -- sensor effects --------------------------------------------------------
     def sensor_basis(self, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
-        """Regressors ψ_j(t, θ), shape (n, m), added to the measured angle (rad).
+        """Regressors ψ_j(t, θ), shape (n, m), added to the sensor's reading.
 
-        t: time since the first fitted sample (s); theta: the pendulum's true angle (rad).
+        t: time since the first fitted sample (s); theta: what the pendulum gives the sensor:
+        its true angle (rad), or its angular rate (rad/s) on a rate sensor (a gyro), whose
+        zero, drift and scale then act on the rate.
         """
         raise NotImplementedError
 
@@ -580,6 +586,8 @@ class View(Effect):
     )
     #: told apart from the swing only at large angles, where sin 2θ and cos 2θ are not θ and θ²
     rigs = ("compound",)
+    #: a camera's geometry: a gyro has no view
+    readings = ("angle",)
     scale_parameters = ("stretch",)
     cause = "camera not square to the swing plane (oblique view, lens): the image of the swing is an ellipse"
     law = "θ_meas = a + θ + e₁·sin 2θ + e₂·(cos 2θ − 1) (an affine image of the marker's direction, to first order)"
@@ -624,6 +632,9 @@ def resolve_effects(names: Iterable[str], rig: "Rig") -> list[Effect]:
         seen.add(n)
         if rig.kind not in EFFECTS[n].rigs:
             raise RigError(f"effect {n!r} does not exist on a {rig.kind} rig (only on: {', '.join(EFFECTS[n].rigs)})")
+        if rig.measures not in EFFECTS[n].readings:
+            raise RigError(f"effect {n!r} does not exist in a sensor that reads {rig.measures} "
+                           f"(only in one that reads: {', '.join(EFFECTS[n].readings)})")
     return [EFFECTS[n](rig) for n in EFFECTS if n in seen]
 
 
@@ -635,7 +646,7 @@ def candidate_effects(rig: "Rig", present: Iterable[str]) -> list[Effect]:
     present = set(present)
     contained = {EFFECTS[n].refines for n in present if n in EFFECTS}
     return [cls(rig) for n, cls in EFFECTS.items()
-            if n not in present and n not in contained and cls.offered_on(rig.kind)
+            if n not in present and n not in contained and cls.offered_on(rig.kind) and rig.measures in cls.readings
             and (cls.refines is None or cls.refines in present)
             and not (rig.sensor_calibrated and cls.scale_parameters)]
 
