@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 
 
 def _num(v: Any) -> Any:
@@ -195,6 +195,8 @@ class IdentificationResult:
     #: measurand ("J", "J_object", "J_object_axis") → its GUM budget (``measurement.uncertainty.Budget.to_dict``):
     #: lines (source, value, u, sensitivity, contribution, share), u, coverage factor, U
     uncertainty_budget: dict[str, Any] = field(default_factory=dict)
+    #: what the sensor read: "angle" (rad) or "rate" (rad/s, a gyro: offset and the arrays' "angle" are then rates)
+    measures: str = "angle"
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -258,6 +260,7 @@ class IdentificationResult:
             "window": {k: _num(v) for k, v in self.window.items()},
             "acquisition": _jsonable(self.acquisition),
             "sensor_calibrated": self.sensor_calibrated,
+            "measures": self.measures,
         }
         if include_arrays:
             d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
