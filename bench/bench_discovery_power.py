@@ -34,7 +34,7 @@ import numpy as np
 from measurement import Options, Pendulum, Rig, Trace, identify, quantise, simulate_trace
 from measurement.effects import EFFECTS
 from measurement.fit import fit_model
-from measurement.identification import prepare
+from measurement.identification.preparation import prepare
 from measurement.model import Model
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ import numpy as np
 
 from measurement import Options, Pendulum, Rig, identify, simulate_trace
 from measurement.calibration import Reference, calibrate_torsion
-from measurement.identification import budgets
+from measurement.identification.quantities import budgets
 
 K, I0 = 0.3651, 4.5043e-3
 LOADS = (0.0, 0.005, 0.0125)          # true added inertias, kg·m²

@@ -25,7 +25,7 @@ across the record: its parameters fitted in each half must agree
 (``effect_holds``), so that a sensor scale that is really an approximate
 restoring law is not bought with a wrong J. A damping or stiffness effect
 that moves ω_n is judged on ω_n alone: the model it ends in must give the
-same ω_n from both halves (``identification.hold_across``).
+same ω_n from both halves (``identification.rivals.hold_across``).
 """
 
 from __future__ import annotations

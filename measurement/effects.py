@@ -157,7 +157,7 @@ class Effect:
     refines: ClassVar[str | None] = None
     #: The restoring-law effect whose signature this one shares (what it does to the swing a
     #: restoring law can also do): on a rig where that law is not offered, the data cannot weigh
-    #: the two by their discovery, and the law's reading of ω_n is a rival (``identification.law_rival``).
+    #: the two by their discovery, and the law's reading of ω_n is a rival (``identification.rivals.law_rival``).
     mimics: ClassVar[str | None] = None
 
     def refined_start(self, refined_values: Sequence[float], amplitudes: Sequence[float]) -> list[list[float]]:

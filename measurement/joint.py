@@ -35,7 +35,11 @@ from .effects import EFFECTS, resolve_effects
 from .errors import IdentificationError, InvalidInput
 from .consistency import bic_weights, check_segments
 from .fit import ModelFit, block_covariance, fit_model
-from .identification import Options, _blas, _fallback, _effect_quantities, _inertia, budgets, identify
+from .identification.options import Options
+from .identification.pipeline import identify
+from .identification.quantities import budgets, effect_quantities, inertia
+from .identification.rivals import fallback
+from .identification.threads import one_blas_thread
 from .model import STATE_PARAMS, Model
 from .noise import fit_noise
 from .result import IdentificationResult, Quantity, _budget_table, _jsonable, _num
@@ -183,7 +187,7 @@ def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options | None
 
 def _joint(results: list[IdentificationResult], rig: Rig, margin: float = Options().bic_margin) -> JointResult:
     # tall, thin matrices, as in ``identify``: BLAS threads would only contend
-    with _blas().limit(limits=1, user_api="blas"):
+    with one_blas_thread():
         return _fit_jointly(results, rig, margin)
 
 
@@ -352,7 +356,7 @@ def _candidate_sets(results: Sequence[IdentificationResult], rig: Rig) -> list[t
         for base in bases:
             if law in base:
                 continue
-            keep, _ = _fallback(base, [n for n in base if EFFECTS[n].mimics == law], ())
+            keep, _ = fallback(base, [n for n in base if EFFECTS[n].mimics == law], ())
             key = (_dynamic(keep + [law], rig), drop)
             if key not in sets:
                 sets.append(key)
@@ -381,7 +385,7 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
             if not candidates:  # the union must fit: it is the model every release's physics is in
                 raise
     best = min(candidates, key=lambda c: c.bic)
-    # BIC alone can prefer a law that does not hold (``identification.hold_across``): a shared model
+    # BIC alone can prefer a law that does not hold (``identification.rivals.hold_across``): a shared model
     # other than the union is kept only if, in each release, it holds across the record as well as
     # that release's own model; otherwise the union stays and the distance of the two readings is
     # model form, as a withdrawn effect's is
@@ -455,7 +459,7 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
     pos = [2] + list(range(3, m0.n_dynamic))
     cov0[np.ix_(pos, pos)] = cov[np.ix_(idx, idx)]
     shim = _SharedFit(m0, x0, cov0)
-    J = _inertia(rig, w_joint)
+    J = inertia(rig, w_joint)
     J_std = None if J is None else 2 * J * s_joint / w_joint
     J_u = None if J is None else 2 * J * u_joint / w_joint
     # the joint ω_n's u already holds the releases' model form and camera view (``common``); the rig's
@@ -466,7 +470,7 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
     return JointResult(
         rig_kind=rig.kind, effects=shared, omega_n=w_joint, omega_n_std=s_joint, omega_n_u=u_joint,
         J=J, J_std=J_std, J_u=J_u,
-        damping=_effect_quantities(shim, rig, ("damping",)), stiffness=_effect_quantities(shim, rig, ("stiffness",)),
+        damping=effect_quantities(shim, rig, ("damping",)), stiffness=effect_quantities(shim, rig, ("stiffness",)),
         residual_rms=rms, consistency=consistency, flags=tuple(flags), releases=tuple(results),
         uncertainty_budget={k: b.to_dict() for k, b in budget.items()},
     )
@@ -483,7 +487,7 @@ def with_joint_fit(w_joint: float, u_joint: float, w_fit: float, s_fit: float) -
 
 @dataclass(frozen=True, eq=False)
 class _SharedFit:
-    """The shared laws as a fit of the first release's model (what ``_effect_quantities`` reads)."""
+    """The shared laws as a fit of the first release's model (what ``effect_quantities`` reads)."""
 
     model: Model
     x: np.ndarray

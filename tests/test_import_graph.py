@@ -91,7 +91,7 @@ def test_the_import_graph_covers_the_packages():
     graph = import_graph()
     assert len(graph) > 80
     assert "service.publish.port" in graph["service.daemon"]
-    assert "measurement.flags" in graph["measurement.identification"]
+    assert "measurement.flags" in graph["measurement.identification.flags"]
 
 
 def test_no_import_circles():

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.special import ellipk
 
 from measurement import Trace, identify
-from measurement.identification import prepare
+from measurement.identification.preparation import prepare
 from measurement.signal import find_swings
 from service.sources.files import read_rig, read_trace
 

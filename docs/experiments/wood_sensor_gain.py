@@ -13,7 +13,7 @@ from scipy.optimize import least_squares
 
 from measurement import Rig
 from measurement.fit import fit_model
-from measurement.identification import prepare
+from measurement.identification.preparation import prepare
 from measurement.model import Model
 from service.sources.files import read_trace
 

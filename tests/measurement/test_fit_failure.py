@@ -14,9 +14,11 @@ import numpy as np
 import pytest
 
 from measurement import Rig, Trace, identify
-from measurement import identification as ident
+from measurement.identification import pipeline, starts
 from measurement.fit import fit_model, initial_guess
-from measurement.identification import Options, contains, keep_nested_order, nested_start, prepare
+from measurement.identification.options import Options
+from measurement.identification.preparation import prepare
+from measurement.identification.starts import contains, keep_nested_order, nested_start
 from measurement.model import Model
 from measurement.verdict import INVALID, QualityRules, Reading, Specification, judge_release
 
@@ -48,7 +50,7 @@ def test_a_refit_that_slips_a_cycle_after_the_outliers_left_is_not_reported(monk
     # refines; here it is forced to start at 2.5 × ω_n, and lands in another basin (residual
     # comparable to the swing). The declared model, refitted on the same samples, stays at the
     # noise floor: the reported model must not be the slipped one.
-    real_fit = ident.fit_model
+    real_fit = pipeline.fit_model
 
     def slipping(model, t, y, sigma, *, previous=None, **kw):
         if previous is not None and previous.t.size != t.size and len(model.effects) > 1:
@@ -60,8 +62,8 @@ def test_a_refit_that_slips_a_cycle_after_the_outliers_left_is_not_reported(monk
         keep[fit.t.size // 2] = False
         return fit.t[keep], fit.y[keep], np.flatnonzero(~keep)
 
-    monkeypatch.setattr(ident, "fit_model", slipping)
-    monkeypatch.setattr(ident, "_remove_outliers", one_glitch)
+    monkeypatch.setattr(pipeline, "fit_model", slipping)  # the refit after the glitches left
+    monkeypatch.setattr(pipeline, "remove_outliers", one_glitch)
     r = identify(_trace(coulomb=0.05), RIG)
     assert r.residual_rms < 3 * r.noise_floor, r.report()
     assert abs(r.J / INERTIA - 1) < 1e-3, r.report()
@@ -86,7 +88,7 @@ def test_a_slipped_fit_is_refitted_from_the_contained_model_or_replaced_by_it(mo
     assert beaten_by is base and fit.model is larger and nfev > 0
     assert fit.residual_rms <= base.residual_rms * (1 + 1e-6) and fit.value("omega_n") == pytest.approx(OMEGA_N, rel=1e-4)
     # a refit that fails outright leaves the contained model itself
-    monkeypatch.setattr(ident, "fit_model", lambda *a, **k: slipped)
+    monkeypatch.setattr(starts, "fit_model", lambda *a, **k: slipped)
     assert keep_nested_order(slipped, [base], prep.noise)[0] is base
     # a fit at its optimum stands
     assert keep_nested_order(fit, [base], prep.noise) == (fit, None, 0)
@@ -96,7 +98,7 @@ def test_a_fit_that_does_not_follow_the_swing_is_flagged_and_invalid(monkeypatch
     # The declared model alone, its first fit forced to start at 2.5 × ω_n: it converges in another
     # basin. Whatever J that implies, it must carry fit_not_converged (INVALID), not pass as a
     # model with some structure left.
-    real_fit = ident.fit_model
+    real_fit = pipeline.fit_model
     first = [True]
 
     def slipping(model, t, y, sigma, **kw):
@@ -106,7 +108,7 @@ def test_a_fit_that_does_not_follow_the_swing_is_flagged_and_invalid(monkeypatch
             kw.update(x0=_slip(x0, model), scales=scales)
         return real_fit(model, t, y, sigma, **kw)
 
-    monkeypatch.setattr(ident, "fit_model", slipping)
+    monkeypatch.setattr(pipeline, "fit_model", slipping)  # the declared model's first fit
     rig = Rig(kind="torsion", stiffness=STIFFNESS, declared=("viscous", "quadratic"))
     r = identify(_trace(), rig, Options(discover=False))
     assert r.residual_rms > 0.1 * 0.29, r.report()  # the forced start did slip

@@ -122,7 +122,8 @@ def test_a_record_mostly_of_silences_finds_the_swing_not_an_alias_of_the_samplin
 
 def test_rival_frequencies_fits_each_comparable_peak_and_keeps_the_best():
     from measurement.fit import fit_model
-    from measurement.identification import prepare, rival_frequencies
+    from measurement.identification.preparation import prepare
+    from measurement.identification.starts import rival_frequencies
     from measurement.model import Model
 
     rig = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))

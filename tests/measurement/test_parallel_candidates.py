@@ -4,7 +4,8 @@ import threading
 
 import numpy as np
 
-import measurement.identification as identification
+from measurement.identification import discovery, pipeline
+from measurement.identification import threads as pool
 from measurement import Pendulum, Rig, identify, simulate_trace
 
 
@@ -14,16 +15,17 @@ def test_parallel_candidate_fits_change_nothing(monkeypatch):
     truth = Pendulum(rig, 0.0125, {"viscous": {"c": 1e-4}, "quadratic": {"K": 2e-3}, "drift": {"rate": 3e-4}})
     trace = simulate_trace(truth, theta0=0.25, duration=30, rate=200, noise_std=1e-4, quantisation_bits=17, seed=11)
     fitted_on: list[str] = []
-    fit_model = identification.fit_model
+    fit_model = pipeline.fit_model
 
     def recording_fit(*args, **kwargs):
         fitted_on.append(threading.current_thread().name)
         return fit_model(*args, **kwargs)
 
-    monkeypatch.setattr(identification, "fit_model", recording_fit)
+    monkeypatch.setattr(pipeline, "fit_model", recording_fit)  # the declared model's fits
+    monkeypatch.setattr(discovery, "fit_model", recording_fit)  # the candidates'
     results = {}
     for cores in (1, 4):
-        monkeypatch.setattr(identification, "usable_cores", lambda cores=cores: cores)
+        monkeypatch.setattr(pool, "usable_cores", lambda cores=cores: cores)
         fitted_on.clear()
         results[cores] = identify(trace, rig)
         threads = {name.startswith("moi-fit") for name in fitted_on}

@@ -6,7 +6,7 @@ import pytest
 from measurement import Options, Pendulum, Rig, Trace, simulate_trace
 from measurement.diagnostics import _fit_residual
 from measurement.fit import fit_model, smooth
-from measurement.identification import prepare
+from measurement.identification.preparation import prepare
 from measurement.model import Model
 from measurement.noise import autocorrelation, lagged_products
 from measurement.signal import deviation_table, loo_deviations, noise_floor, spike_candidates

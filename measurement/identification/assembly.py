@@ -1,0 +1,73 @@
+"""Step 7, the result's assembly: the ``IdentificationResult`` from what the steps found."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..result import IdentificationResult, Quantity
+from .findings import Findings
+from .quantities import budgets, damping_ratio, effect_quantities, model_summary, omega_n_per_scale
+
+
+def _statistics(found: Findings) -> dict[str, Any]:
+    final, noise = found.final, found.prep.noise
+    return {
+        "n": final.n, "k": final.k, "dof": final.dof, "rss": final.rss,
+        "chi2": final.rss / noise**2, "redchi": final.rss / noise**2 / max(final.dof, 1),
+        "aic": final.aic, "bic": final.bic, "nfev": found.nfev, "success": final.success, "message": final.message,
+        "covariance": final.cov_method, "covariance_inflation": final.cov_inflation,
+        "noise_model_order": final.noise.order, "innovation_std": math.sqrt(final.noise.innovation_var),
+        "robust_loss_scale": final.f_scale,
+    }
+
+
+def _window(found: Findings) -> dict[str, Any]:
+    final, prep = found.final, found.prep
+    return {
+        "t_start": float(final.t[0]), "t_stop": float(final.t[-1]), "n_used": final.n, "n_total": len(found.trace),
+        "n_outliers": found.n_outliers, "release_detected": prep.release_detected, "stop_detected": prep.stopped,
+        "came_to_rest": prep.stuck, "n_downweighted": final.n_downweighted, "n_unwrapped": prep.n_unwrapped,
+        "gap_cut_at": prep.gap_cut_at,
+    }
+
+
+def _arrays(found: Findings) -> dict[str, np.ndarray]:
+    final, base, trace = found.final, found.base, found.trace
+    return {
+        "t": final.t, "angle": final.y, "fitted": final.fitted, "residual": final.residual,
+        "baseline_fitted": base.fitted, "baseline_residual": base.residual,
+        "trace_t": trace.t, "trace_angle": trace.angle,
+    }
+
+
+def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]) -> IdentificationResult:
+    """The result of one record: its quantities, uncertainty budgets, flags and sentences (``report``)."""
+    final, rig, trace, form = found.final, found.rig, found.trace, found.form
+    w, ws, w_cal, j = found.omega_n, found.omega_n_std, found.omega_n_view, found.inertias
+    w_u = math.sqrt(ws**2 + (w_cal or 0.0) ** 2 + form.u**2)
+    budget = budgets(rig, w, ws, dof=float(final.dof), model=form.u, view=w_cal,
+                     scale_response=omega_n_per_scale(final) if rig.sensor_calibrated else None)
+    J_u = budget["J"].u if "J" in budget else None
+    zeta, zeta_std, amp_ref = damping_ratio(final)
+    return IdentificationResult(
+        source=trace.source, rig_kind=rig.kind,
+        J=j.J, J_std=j.J_std, J_std_calibration=j.J_calibration, J_object=j.J_object, J_object_std=j.J_object_std,
+        J_object_axis=j.J_object_axis, J_object_axis_std=j.J_object_axis_std,
+        omega_n=w, omega_n_std=ws, omega_n_std_calibration=w_cal, omega_n_std_model=form.u, omega_n_u=w_u,
+        J_std_model=j.J_model, J_u=J_u, model_form=form.to_dict(),
+        uncertainty_budget={k: b.to_dict() for k, b in budget.items()}, damping_ratio=zeta,
+        damping_ratio_std=zeta_std, reference_amplitude=amp_ref,
+        offset=Quantity(final.value("offset"), final.stdev("offset"), "rad"),
+        damping=effect_quantities(final, rig, ("damping",)),
+        stiffness=effect_quantities(final, rig, ("stiffness",)),
+        sensor=effect_quantities(final, rig, ("sensor",)),
+        declared_effects=found.declared.effect_names, effects=final.model.effect_names,
+        added_effects=tuple(n for n in final.model.effect_names if n not in found.declared.effect_names),
+        residual_rms=final.residual_rms, noise_floor=found.prep.noise, statistics=_statistics(found), flags=flags,
+        baseline=model_summary(found.base, rig), steps=found.steps, diagnostics=found.diag.as_dict(),
+        structure=structure, window=_window(found), acquisition={k: v for k, v in trace.meta.items() if k != "truth"},
+        sensor_calibrated=rig.sensor_calibrated, arrays=_arrays(found),
+    )

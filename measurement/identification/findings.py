@@ -1,0 +1,69 @@
+"""What the identification's steps found on one record, read by the flags, the report's sentences and
+the result's assembly (each its own module: the words apart from the fitting, as lmfit keeps its
+report apart from its minimizer)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from ..consistency import ModelForm, SegmentCheck
+from ..diagnostics import Diagnostics
+from ..fit import ModelFit
+from ..model import Model
+from ..result import DiscoveryStep
+from ..rig import Rig
+from ..trace import Trace
+from .preparation import Prepared
+from .quantities import Inertias
+from .rivals import LawRival, Withdrawn
+
+
+@dataclass(frozen=True, eq=False)
+class Findings:
+    """One record identified. SI units.
+
+    base: the declared model's fit on the final samples; final: the model reported; slipped_from:
+    the final model before ``keep_nested_order`` (``beaten_by``: the model it contains that fitted
+    better, or None); follows / follow_ratio: ``follows_swing`` of the final fit; view: the camera
+    view measured on the record (``measurement.vision.marker_pair``) or None; omega_n_view: the
+    1σ of ω_n it carries (rad/s); nominal: the sensor's fitted scale parameters and ω_n were they
+    at their nominal 0 (``omega_n_at_nominal_scale``); nfev: the simulations spent.
+    """
+
+    trace: Trace
+    rig: Rig
+    prep: Prepared
+    declared: Model
+    base: ModelFit
+    final: ModelFit
+    steps: tuple[DiscoveryStep, ...]
+    withdrawn: Withdrawn | None
+    law: LawRival | None
+    segments: SegmentCheck | None
+    form: ModelForm
+    diag: Diagnostics
+    n_outliers: int
+    slipped_from: ModelFit
+    beaten_by: ModelFit | None
+    follows: bool
+    follow_ratio: float
+    view: dict[str, Any] | None
+    omega_n_view: float | None
+    inertias: Inertias
+    nominal: tuple[list[str], float] | None
+    nfev: int
+    bic_margin: float
+
+    @property
+    def omega_n(self) -> float:
+        return self.final.value("omega_n")
+
+    @property
+    def omega_n_std(self) -> float:
+        return self.final.stdev("omega_n")
+
+    @property
+    def ambiguous(self) -> bool:
+        """Rival models spread ω_n by more than the fit's σ."""
+        return self.form.ambiguous(self.omega_n_std)

@@ -1,0 +1,32 @@
+"""The identification's settings: plain values, no numerics imported (the configuration reads them)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Options:
+    """Identification settings.
+
+    discover: run the discovery loop (False: fit the declared model only).
+    candidates: effects the loop may add (None: every library effect that
+    exists on the rig).
+    min_swings: fewer full swings in the record is an input error.
+    bic_margin: an added effect must lower BIC (under the noise model) by
+    more than this: e^(−margin/2) is the Bayes factor it must beat.
+    outlier_sigma: residuals beyond this many robust σ are glitches.
+    robust_scale: the soft-L1 loss's scale in robust σ of the declared
+    model's residual (used only when wild samples are left after the screen).
+    gap_periods: a gap of more than this many swing periods without samples
+    ends the window, unless the swing clearly continues after it.
+    """
+
+    discover: bool = True
+    candidates: tuple[str, ...] | None = None
+    min_swings: float = 3.0
+    bic_margin: float = 10.0
+    outlier_sigma: float = 6.0
+    robust_scale: float = 3.0
+    gap_periods: float = 1.5
+    max_rounds: int = 5

@@ -1,0 +1,186 @@
+"""Step 4, rivals and the model's form: models the data do not decisively separate from the one kept.
+
+    hold  → an effect that moved ω_n by more than its σ is withdrawn when the
+            model it ends in gives another ω_n in each half of the record
+            (``hold_across``); its ω_n stays a rival in the uncertainty
+    law   → an effect that mimics a restoring law the rig does not offer
+            (Dahl's pre-sliding spring, a sensor's fitted scale) is fitted with
+            the law in its place (``law_rival``); its BIC weight says whether
+            the data separate them
+    form  → the record's halves, the discovery's near rivals, the sampling's
+            aliases, the withdrawn model and the law, as one ``ModelForm``
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ..consistency import Competitor, ModelForm, SegmentCheck, bic_weights, check_segments, competitors
+from ..effects import EFFECTS, resolve_effects
+from ..errors import IdentificationError
+from ..fit import ModelFit, fit_model
+from ..model import Model
+from ..result import DiscoveryStep
+from ..rig import Rig
+from .discovery import Move
+from .preparation import Prepared
+from .starts import Aliases
+
+
+@dataclass(frozen=True)
+class Withdrawn:
+    """Effects taken back because the ω_n they moved does not hold across the record.
+
+    effects: the effects withdrawn; omega_n: the model's with them (rad/s);
+    d_bic: its BIC minus the kept model's; segments: its halves; model_effects: that model's effects.
+    """
+
+    effects: tuple[str, ...]
+    omega_n: float
+    omega_n_std: float
+    d_bic: float
+    segments: SegmentCheck
+    model_effects: tuple[str, ...]
+
+    def rival(self, kept_omega_n: float) -> Competitor:
+        """This model as a rival of the kept one of ω_n ``kept_omega_n`` (rad/s), carried whole."""
+        return Competitor(f"{', '.join(self.effects)} kept (the ω_n it moves does not hold across the record)",
+                          self.d_bic, 1.0, self.omega_n, self.omega_n - kept_omega_n, self.model_effects)
+
+
+def fallback(names: Sequence[str], taken: Sequence[str], moves: Sequence[Move]) -> tuple[list[str], ModelFit | None]:
+    """The effect names without ``taken``, each one's refined effect (Coulomb for Dahl) in its place, and
+    the loop's last fit within them (the model itself, or a start that it contains; None: none)."""
+    keep = [n for n in names if n not in taken]
+    keep += [r for n in taken if (r := EFFECTS[n].refines) is not None and r not in keep]
+    earlier = [m.start for m in moves if set(m.start.model.effect_names) <= set(keep)]
+    return keep, (earlier[-1] if earlier else None)
+
+
+def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[Move], prep: Prepared,
+                rig: Rig, f_scale: float | None) -> tuple[ModelFit, Withdrawn | None, int]:
+    """The final model, or the one without the effects whose ω_n does not hold across the record.
+
+    An effect that moved ω_n by more than its σ when it was added (``moves``)
+    stands only if the model it ends in holds across the record: the same
+    ω_n from both halves (``check_segments``). BIC alone cannot show it: an
+    effect that mimics a restoring law the model lacks (pre-sliding
+    friction's spring at small amplitude for a law softer than sin θ, a
+    cubic spring for a frequency that drifts with time) lowers it as much as
+    a true one. The model, not each effect, is judged, and on ω_n, not on
+    every parameter: a friction law fitted to half a record legitimately
+    differs from the whole's, and on the way to a law that holds (Coulomb,
+    then Dahl friction) the intermediate models need not hold. Withdrawn,
+    an effect that refines another (dahl, coulomb) falls back to it; the
+    withdrawn model's ω_n stays a rival in the uncertainty (consistency.py).
+    Returns (fit, what was withdrawn or None, simulations spent).
+    """
+    names = final.model.effect_names
+    movers = [m.effect for m in moves if m.moved and m.effect in names and not EFFECTS[m.effect].scale_parameters]
+    w = final.value("omega_n")
+    if not movers or abs(w - base.value("omega_n")) <= final.stdev("omega_n"):
+        return final, None, 0
+    seg = check_segments(final, prep.noise)
+    if seg is None or not seg.disagree:
+        return final, None, 0
+    keep, earlier = fallback(names, movers, moves)
+    model = Model(rig, tuple(resolve_effects(keep, rig)))
+    previous = earlier or base
+    nfev = 0
+    if previous.model.effect_names != model.effect_names:
+        try:
+            previous = fit_model(model, final.t, final.y, prep.noise, previous=previous, f_scale=f_scale)
+        except IdentificationError:
+            return final, None, 0
+        nfev = previous.nfev
+    return previous, Withdrawn(tuple(movers), w, final.stdev("omega_n"), final.bic - previous.bic, seg,
+                               final.model.effect_names), nfev
+
+
+@dataclass(frozen=True)
+class LawRival:
+    """A restoring law the loop does not offer on this rig, fitted in place of an effect that mimics it.
+
+    effect: the kept effects that stand for it, comma-separated (dahl; gain, view); law: the law's
+    effect (cubic_stiffness);
+    omega_n: ω_n of the model with the law instead (rad/s); d_bic: that model's BIC minus the kept
+    one's; weight: its BIC weight against the kept model; model_effects: that model's effects.
+    """
+
+    effect: str
+    law: str
+    omega_n: float
+    d_bic: float
+    weight: float
+    model_effects: tuple[str, ...]
+
+    def rival(self, kept_omega_n: float) -> Competitor:
+        """This model as a rival of the kept one of ω_n ``kept_omega_n`` (rad/s), by its BIC weight."""
+        return Competitor(f"{self.law} (a restoring law, not offered on this rig) instead of {self.effect}",
+                          self.d_bic, self.weight, self.omega_n, self.omega_n - kept_omega_n, self.model_effects)
+
+
+def law_rival(final: ModelFit, moves: Sequence[Move], prep: Prepared, rig: Rig,
+              f_scale: float | None) -> tuple[LawRival | None, int]:
+    """The restoring law that a kept effect may stand for, fitted in its place as a rival model.
+
+    Dahl's pre-sliding spring makes the small swings faster; so does a
+    restoring law softer than m·g·S·sin θ at large angles (a bifilar
+    suspension, a cable), and the two read ω_n on opposite sides: the
+    spring's ω_n is the large swings' law with a spring added at small
+    amplitude, the law's is the small-swing limit. The loop does not offer
+    such a law on a compound rig (there it would stand for friction it
+    cannot tell from), so it never weighs it. Where an effect that mimics a
+    law (``Effect.mimics``) moved ω_n by more than its σ when it was added
+    (``moves``) and the law is not offered, the model with the law in the
+    effect's place (and the effect it refines: Coulomb for Dahl) is fitted;
+    its BIC weight against the kept model says whether the data separate
+    them. A sensor's fitted scale (gain, view's stretch) changes how the
+    frequency depends on the amplitude as such a law does, and gives way to
+    it the same way. Returns (the rival or None, simulations spent).
+    """
+    names = final.model.effect_names
+    mimics = [law for m in moves if m.effect in names and m.moved
+              and (law := EFFECTS[m.effect].unweighed_law(rig.kind)) is not None and law not in names]
+    if not mimics:
+        return None, 0
+    law = mimics[-1]
+    # every kept effect that stands for the same law gives way to it (a sensor's gain and view both)
+    taken = [n for n in names if EFFECTS[n].mimics == law]
+    keep, earlier = fallback(names, taken, moves)
+    model = Model(rig, tuple(resolve_effects(keep + [law], rig)))
+    try:
+        fit = fit_model(model, final.t, final.y, prep.noise, previous=earlier or final, f_scale=f_scale)
+    except IdentificationError:
+        return None, 0
+    d_bic = fit.bic - final.bic
+    weight = float(bic_weights(np.array([final.bic, fit.bic]))[1])
+    return LawRival(", ".join(taken), law, fit.value("omega_n"), d_bic, weight, model.effect_names), fit.nfev
+
+
+def model_form(final: ModelFit, segments: SegmentCheck | None, steps: Sequence[DiscoveryStep], aliases: Aliases,
+               withdrawn: Withdrawn | None, law: LawRival | None, margin: float) -> ModelForm:
+    """The model-form part of ``final``'s ω_n uncertainty (``consistency.ModelForm``).
+
+    Its halves (``check_segments``), the discovery's rounds' near rivals (``competitors``), the
+    sampling's aliases, the withdrawn model (its distance carried whole: BIC prefers it, the halves
+    contradict it) and the law in a mimicking effect's place (by its BIC weight, when within ``margin``).
+    """
+    w = final.value("omega_n")
+    rivals, u_rivals = competitors(steps, margin)
+    if aliases.rivals:
+        rivals += aliases.rivals
+        u_rivals = math.hypot(u_rivals, aliases.u)
+    if withdrawn is not None:
+        rival = withdrawn.rival(w)
+        rivals += (rival,)
+        u_rivals = math.hypot(u_rivals, rival.delta)
+    if law is not None and law.d_bic < margin:
+        rival = law.rival(w)
+        rivals += (rival,)
+        u_rivals = math.hypot(u_rivals, math.sqrt(rival.weight) * rival.delta)
+    return ModelForm(segments, rivals, u_rivals)
