@@ -4,8 +4,10 @@ Honesty (releases agree within the u moi states) is not enough: the spread
 between releases of one object must be no wider than that of the plainest fit
 that would do, a damped sinusoid y = c + e^(−σt)·(A·cos ω_d t + B·sin ω_d t)
 fitted to the whole record (ω_n = √(ω_d² + σ²)). For every set in data/,
-each release is identified alone by moi (default), by ``moi --no-discover``
-(the declared model only) and by that damped sinusoid; per object the table
+each release is identified by moi (default: the releases together, as
+``moi identify A B C`` does, which weighs the laws a release adds across
+its sisters), by ``moi --no-discover`` (each release alone, the declared
+model only) and by that damped sinusoid; per object the table
 gives the spread (max − min)/mean of ω_n and the worst pairwise
 |Δω_n|/√(u_i² + u_j²) (for the damped sinusoid its fit σ under white noise,
 which is what such a fit would state).
@@ -29,6 +31,7 @@ from scipy.optimize import least_squares
 
 from measurement.errors import MeasurementError
 from measurement.identification import Options, identify
+from measurement.joint import identify_releases
 from measurement.signal import find_swings
 from service.sources.dispatch import load_source
 from service.sources.files import read_rig
@@ -118,13 +121,28 @@ def damped_sinusoid(t: np.ndarray, y: np.ndarray) -> Estimate:
     return Estimate(wn, float(math.sqrt(max(grad @ cov[:2, :2] @ grad, 0.0))))
 
 
-def moi(trace_file: Path, rig_file: Path, discover: bool) -> Estimate:
+def _failed(exc: Exception) -> Estimate:
+    # e.g. a sensor this version cannot read: the message without the file's path
+    return Estimate(float("nan"), float("nan"), f"error: {str(exc).split(': ', 1)[-1][:50]}")
+
+
+def moi_alone(trace_file: Path, rig_file: Path) -> Estimate:
+    """``moi identify FILE --no-discover``."""
     try:
-        trace = load_source(trace_file)
-        res = identify(trace, read_rig(rig_file), Options(discover=discover))
-    except MeasurementError as exc:  # e.g. a sensor this version cannot read
-        return Estimate(float("nan"), float("nan"), f"error: {str(exc)[:60]}")
+        res = identify(load_source(trace_file), read_rig(rig_file), Options(discover=False))
+    except MeasurementError as exc:
+        return _failed(exc)
     return Estimate(res.omega_n, res.omega_n_u, ", ".join(res.added_effects) or "-")
+
+
+def moi_together(releases: list[tuple[str, str]]) -> tuple[list[Estimate], str]:
+    """``moi identify A B C``: each release's own ω_n ± u, and the set's flags."""
+    try:
+        j = identify_releases([load_source(ROOT / f) for f, _ in releases], read_rig(ROOT / releases[0][1]))
+    except MeasurementError as exc:
+        return [_failed(exc)] * len(releases), ""
+    return [Estimate(r.omega_n, r.omega_n_u, ", ".join(r.added_effects) or "-") for r in j.releases], \
+        ", ".join(j.flags)
 
 
 def spread(estimates: list[Estimate]) -> tuple[float, float]:
@@ -137,23 +155,24 @@ def spread(estimates: list[Estimate]) -> tuple[float, float]:
     return 100 * (max(w) - min(w)) / statistics.fmean(w), z
 
 
-def measure(sets: list[tuple[str, list[tuple[str, str]]]]) -> list[tuple[str, dict[str, list[Estimate]]]]:
+def measure(sets: list[tuple[str, list[tuple[str, str]]]]) -> list[tuple[str, dict[str, list[Estimate]], str]]:
     out = []
     for name, releases in sets:
         per: dict[str, list[Estimate]] = {m: [] for m in METHODS}
         for trace_file, rig_file in releases:
             per["damped sinusoid"].append(damped_sinusoid(*_columns(ROOT / trace_file)))
-            per["moi --no-discover"].append(moi(ROOT / trace_file, ROOT / rig_file, discover=False))
-            per["moi"].append(moi(ROOT / trace_file, ROOT / rig_file, discover=True))
-        out.append((name, per))
+            per["moi --no-discover"].append(moi_alone(ROOT / trace_file, ROOT / rig_file))
+        per["moi"], flags = moi_together(releases)
+        out.append((name, per, flags))
     return out
 
 
-def table(rows: list[tuple[str, dict[str, list[Estimate]]]]) -> str:
-    head = "| object (releases) | " + " | ".join(f"{m}: spread, worst z" for m in METHODS) + " | moi / sinusoid | moi's effects |"
+def table(rows: list[tuple[str, dict[str, list[Estimate]], str]]) -> str:
+    head = ("| object (releases) | " + " | ".join(f"{m}: spread, worst z" for m in METHODS)
+            + " | moi / sinusoid | moi's added effects; the set's flags |")
     lines = [head, "|" + "---|" * (len(METHODS) + 3)]
     ratios: dict[str, list[float]] = {m: [] for m in METHODS}
-    for name, per in rows:
+    for name, per, flags in rows:
         cells = []
         for m in METHODS:
             s, z = spread(per[m])
@@ -161,7 +180,7 @@ def table(rows: list[tuple[str, dict[str, list[Estimate]]]]) -> str:
             cells.append("–" if not math.isfinite(s) else f"{s:.3f} %, {z:.2f}")
         s_moi, s_sin = spread(per["moi"])[0], spread(per["damped sinusoid"])[0]
         ratio = f"{s_moi / s_sin:.2f}" if math.isfinite(s_moi) and s_sin > 0 else "–"
-        notes = "; ".join(e.note for e in per["moi"])
+        notes = "; ".join(e.note for e in per["moi"]) + (f"; **{flags}**" if flags else "")
         lines.append(f"| {name} ({len(per['moi'])}) | " + " | ".join(cells) + f" | {ratio} | {notes} |")
     med = []
     for m in METHODS:
@@ -171,9 +190,9 @@ def table(rows: list[tuple[str, dict[str, list[Estimate]]]]) -> str:
     return "\n".join(lines)
 
 
-def detail(rows: list[tuple[str, dict[str, list[Estimate]]]]) -> str:
+def detail(rows: list[tuple[str, dict[str, list[Estimate]], str]]) -> str:
     lines = []
-    for name, per in rows:
+    for name, per, _ in rows:
         lines.append(f"{name}")
         for i in range(len(per["moi"])):
             cells = "  ".join(f"{per[m][i].omega_n:9.5f} ± {per[m][i].u:<8.2g}" for m in METHODS)

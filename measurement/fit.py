@@ -496,6 +496,14 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,
     )
 
 
+def swing_amplitude(fit: ModelFit) -> float:
+    """The fitted swing's largest angle, rad: as the sensor reads it about its zero (an angle sensor's
+    terms included), or on a rate sensor, whose reading is a rate, the true swing's."""
+    if fit.model.measures == "rate":
+        return float(np.max(np.abs(fit.extra["theta"])))
+    return float(np.max(np.abs(fit.fitted - fit.value("offset"))))
+
+
 def robust_residual(residual: np.ndarray, f_scale: float | None) -> tuple[np.ndarray, np.ndarray]:
     """(effective residual, weight) of the soft-L1 loss ρ(z) = 2(√(1+z) − 1), z = (r/f)².
 

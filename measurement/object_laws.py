@@ -19,6 +19,8 @@ from typing import Sequence
 
 from .effects import EFFECTS
 from .errors import MeasurementError
+from .identification.options import Options
+from .identification.pipeline import identify
 from .result import IdentificationResult
 from .rig import Rig
 from .trace import Trace
@@ -71,11 +73,9 @@ def restoring_laws() -> list[str]:
 
 
 def law_across(law: str, results: Sequence[IdentificationResult], traces: Sequence[Trace], rig: Rig,
-               options) -> LawAcross:
+               options: Options) -> LawAcross:
     """``law`` fitted to every release: from its own result where it kept it, else its final model with the law
     declared (no discovery: the release's own effects and the law)."""
-    from .identification import identify  # the identification imports this module's users
-
     parameter = EFFECTS[law].parameters[0].name
     values: list[float | None] = []
     stds: list[float | None] = []
@@ -95,15 +95,13 @@ def law_across(law: str, results: Sequence[IdentificationResult], traces: Sequen
 
 
 def laws_of_the_object(results: list[IdentificationResult], traces: Sequence[Trace], rig: Rig,
-                       options) -> tuple[list[IdentificationResult], list[LawAcross]]:
+                       options: Options) -> tuple[list[IdentificationResult], list[LawAcross]]:
     """The releases' results with every restoring law that is not a property of the object withdrawn.
 
     Returns (the results, the laws weighed across the releases). A release that kept an unstable
     law is identified again with that law neither offered nor kept, its ω_n with the law a rival
     carried whole into its uncertainty (``Options.rival_laws``).
     """
-    from .identification import identify
-
     weighed: list[LawAcross] = []
     for law in restoring_laws():
         if not any(law in r.added_effects for r in results) or len(results) < 2:
