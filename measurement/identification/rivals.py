@@ -105,9 +105,9 @@ def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[Move], prep: Pr
     then Dahl friction) the intermediate models need not hold. Withdrawn,
     an effect that refines another (dahl, coulomb) falls back to it; the
     withdrawn model's ω_n stays a rival in the uncertainty (consistency.py).
-    Halves that disagree still keep the model where they disagree far more
-    without its movers (``EXPLAINED_SHARE``): the model has explained
-    something, and what is left enters u through the halves. A restoring
+    Halves that disagree still keep a restoring law (role "stiffness") where
+    they disagree far more without it (``EXPLAINED_SHARE``): the law has
+    explained something, and what is left enters u through the halves. A restoring
     law (a cubic spring) that moved ω_n must also be determined by the
     record, each of its parameters ``LAW_SIGMA`` σ from zero under the
     residual's noise model: a slow line in the sensor or a drifting zero
@@ -134,7 +134,9 @@ def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[Move], prep: Pr
         except IdentificationError:
             return final, None, 0
         nfev = previous.nfev
-    if undetermined is None and seg is not None:
+    if undetermined is None and seg is not None and all(EFFECTS[n].role == "stiffness" for n in taken):
+        # a restoring law explains the halves where they disagree far more without it; an effect that
+        # mimics one (Dahl's pre-sliding spring) brings them closer without being the law
         without = check_segments(previous, prep.noise)
         if without is not None and without.disagree and seg.z <= EXPLAINED_SHARE * without.z:
             return final, None, nfev
