@@ -132,7 +132,7 @@ def moi_alone(trace_file: Path, rig_file: Path) -> Estimate:
         res = identify(load_source(trace_file), read_rig(rig_file), Options(discover=False))
     except MeasurementError as exc:
         return _failed(exc)
-    return Estimate(res.omega_n, res.omega_n_u, ", ".join(res.added_effects) or "-")
+    return Estimate(res.omega_n, res.omega_n_u or res.omega_n_std, ", ".join(res.added_effects) or "-")
 
 
 def moi_together(releases: list[tuple[str, str]]) -> tuple[list[Estimate], str]:
@@ -141,7 +141,7 @@ def moi_together(releases: list[tuple[str, str]]) -> tuple[list[Estimate], str]:
         j = identify_releases([load_source(ROOT / f) for f, _ in releases], read_rig(ROOT / releases[0][1]))
     except MeasurementError as exc:
         return [_failed(exc)] * len(releases), ""
-    return [Estimate(r.omega_n, r.omega_n_u, ", ".join(r.added_effects) or "-") for r in j.releases], \
+    return [Estimate(r.omega_n, r.omega_n_u or r.omega_n_std, ", ".join(r.added_effects) or "-") for r in j.releases], \
         ", ".join(j.flags)
 
 

@@ -180,6 +180,12 @@ class Effect:
         """Highest swing frequency over ω_n at this amplitude (rad) (sets the integration step)."""
         return 1.0
 
+    def amplitude_stiffness(self, values: Sequence[float], amplitude: float) -> float:
+        """What this law adds to ω² (1/s²) for a swing of this amplitude (rad), to first order (the
+        describing function: the linear spring that stores the same work over the swing); 0 for a law
+        whose frequency does not depend on the amplitude."""
+        return 0.0
+
     def fallback_start(self, peak_times: np.ndarray, peak_amplitudes: np.ndarray) -> list[float] | None:
         """Start values when the equation-error regression is unusable (None: zeros).
 
@@ -496,6 +502,10 @@ class CubicStiffness(Effect):
     law = "k₃·θ³"
 
     term = "p0 * x * x * x"
+
+    def amplitude_stiffness(self, values, amplitude):
+        # k₃θ³ over a swing θ = A cos ωt: its fundamental is (3/4)·k₃·A²·θ
+        return 0.75 * float(values[0]) * amplitude**2
 
     def frequency_factor(self, values, omega_n, amplitude):
         # a hardening spring raises the frequency at large amplitude

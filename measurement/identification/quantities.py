@@ -221,6 +221,22 @@ def inertias(rig: Rig, omega_n: float, omega_n_std: float, omega_n_view: float |
     return Inertias(J, J_std, J_cal, J_model, J_obj, J_obj_std, J_ax, J_ax_std)
 
 
+def omega_at_amplitude(fit: ModelFit, amplitude: float) -> tuple[float, float] | None:
+    """(ω, its 1σ) of the swing at ``amplitude`` (rad) by the fitted restoring laws, rad/s; None when no law
+    of the model makes the frequency depend on the amplitude (then it is ω_n at every amplitude)."""
+    model = fit.model
+    laws = [e for e in model.dynamic if e.role == "stiffness"]
+    if not laws:
+        return None
+
+    def omega(xx: np.ndarray) -> float:
+        w2 = model.value(xx, "omega_n") ** 2 + sum(e.amplitude_stiffness(model.values(xx, e.name), amplitude)
+                                                   for e in laws)
+        return math.sqrt(max(w2, 0.0))
+
+    return propagate(omega, fit.x, fit.cov)
+
+
 def damping_ratio(fit: ModelFit) -> tuple[float, float, float]:
     """(ζ, its 1σ, the amplitude it is read at, rad): the equivalent viscous damping ratio of every
     dynamic effect at the fitted swing's largest amplitude."""

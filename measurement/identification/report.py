@@ -14,6 +14,8 @@ from ..consistency import SegmentCheck
 from .discovery import SCREEN_TRUST
 from .findings import Findings
 from .flags import FOLLOW_LIMIT, Leftover
+from ..fit import swing_amplitude
+from .quantities import omega_at_amplitude
 from .rivals import LAW_SIGMA
 
 
@@ -114,7 +116,20 @@ def _sensor(found: Findings) -> list[str]:
     return out
 
 
+def _measurand(found: Findings) -> list[str]:
+    """Where a restoring law is kept: ω_n is its small-swing limit; the swing's own frequency beside it."""
+    amplitude = swing_amplitude(found.final)
+    at = omega_at_amplitude(found.final, amplitude)
+    if at is None:
+        return []
+    w = found.omega_n
+    laws = ", ".join(e.name for e in found.final.model.dynamic if e.role == "stiffness")
+    return [f"ω_n is the small-swing limit of the restoring law ({laws} kept): at the record's largest swing, {amplitude:.3g} rad, the law gives ω {at[0]:.6g} ± {at[1]:.2g} rad/s "
+            f"({100 * (at[0] - w) / w:+.2f} %); a stiffness calibrated from plain periods at a stated amplitude is "
+            "the stiffness at that amplitude, and J from it takes ω at the same amplitude"]
+
+
 def describe(found: Findings, left: Leftover) -> tuple[str, ...]:
     """The report's sentences on the residual and every check, in the order a reader needs them."""
     return tuple(found.diag.describe() + [_halves(found.segments)] + _guards(found) + _rivals(found) + _left(left)
-                 + _sensor(found))
+                 + _sensor(found) + _measurand(found))

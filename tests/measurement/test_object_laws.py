@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from measurement import Options, Pendulum, Rig, Trace, identify, simulate_trace
+from measurement import Pendulum, Rig, Trace, identify, simulate_trace
 from measurement.object_laws import LawAcross
 
 
