@@ -10,6 +10,10 @@ size (within ``SIZE_RATIO`` of each other where it is determined, beyond
 it is identified again without it: the point estimate is the simpler
 model's, and the distance to the law's ω_n enters its uncertainty, named
 (a rival model of weight 1, flag model_ambiguous when it exceeds the fit's σ).
+Where it does, and every release determines it, it is the object's law in
+every release: one that did not add it alone (its swing too small for the
+loop to pay for it) is reported with the law fitted, so that every release
+reads ω_n at zero amplitude, not some at their own amplitude.
 """
 
 from __future__ import annotations
@@ -37,7 +41,8 @@ class LawAcross:
 
     law: the effect; parameter: the one judged (its first); values / stds: per release, fitted with
     the law (None where the release could not be fitted with it); kept_in: the releases whose own
-    identification kept it; stable: one sign and a consistent size where determined.
+    identification kept it; stable: one sign and a consistent size where determined; with_law: per
+    release, its identification with the law declared where its own did not keep it (else None).
     """
 
     law: str
@@ -45,6 +50,12 @@ class LawAcross:
     values: tuple[float | None, ...]
     stds: tuple[float | None, ...]
     kept_in: tuple[int, ...]
+    with_law: tuple[IdentificationResult | None, ...] = ()
+
+    @property
+    def everywhere(self) -> bool:
+        """Stable, and determined in every release: the object's law in each."""
+        return self.stable and len(self.determined) == len(self.values) >= 2
 
     @property
     def determined(self) -> list[float]:
@@ -79,7 +90,9 @@ def law_across(law: str, results: Sequence[IdentificationResult], traces: Sequen
     parameter = EFFECTS[law].parameters[0].name
     values: list[float | None] = []
     stds: list[float | None] = []
+    with_law: list[IdentificationResult | None] = []
     for r, tr in zip(results, traces):
+        with_law.append(None)
         if law not in r.effects:
             try:
                 r = identify(tr, rig.with_declared(tuple(r.effects) + (law,)), replace(options, discover=False))
@@ -87,11 +100,12 @@ def law_across(law: str, results: Sequence[IdentificationResult], traces: Sequen
                 values.append(None)
                 stds.append(None)
                 continue
+            with_law[-1] = r
         q = r.stiffness.get(law, {}).get(parameter)
         values.append(None if q is None else q.value)
         stds.append(None if q is None else q.std)
     kept = tuple(i for i, r in enumerate(results) if law in r.added_effects)
-    return LawAcross(law, parameter, tuple(values), tuple(stds), kept)
+    return LawAcross(law, parameter, tuple(values), tuple(stds), kept, tuple(with_law))
 
 
 def laws_of_the_object(results: list[IdentificationResult], traces: Sequence[Trace], rig: Rig,
@@ -108,9 +122,14 @@ def laws_of_the_object(results: list[IdentificationResult], traces: Sequence[Tra
             continue
         across = law_across(law, results, traces, rig, options)
         weighed.append(across)
+        note = across.describe()
+        if across.everywhere:
+            for i, r_law in enumerate(across.with_law):
+                if r_law is not None:
+                    results[i] = _with_the_objects_law(r_law, results[i], note)
+            continue
         if across.stable:
             continue
-        note = across.describe()
         for i in across.kept_in:
             r = results[i]
             allowed = options.candidates if options.candidates is not None else tuple(EFFECTS)
@@ -122,3 +141,15 @@ def laws_of_the_object(results: list[IdentificationResult], traces: Sequence[Tra
             except MeasurementError:
                 continue
     return results, weighed
+
+
+def _with_the_objects_law(r_law: IdentificationResult, own: IdentificationResult, note: str) -> IdentificationResult:
+    """A release's identification with the object's law declared, reported as the release's own with the
+    law added by its sisters."""
+    law = next(n for n in r_law.effects if n not in own.effects)
+    return replace(r_law, declared_effects=own.declared_effects,
+                   added_effects=tuple(n for n in r_law.effects if n not in own.declared_effects),
+                   steps=own.steps, structure=r_law.structure + (
+                       f"{law} was added from this object's other releases, which keep it: {note}; this release "
+                       "alone did not pay for it, and without it its ω_n would read the swing's own amplitude, "
+                       f"{own.omega_n:.6g} rad/s",))
