@@ -78,11 +78,12 @@ def refit_segment(fit: ModelFit, part: slice, sigma: float) -> ModelFit:
     """
     model = fit.model
     t, y = fit.t[part], fit.y[part]
-    theta = fit.extra["theta"][part]
+    theta, omega = fit.extra["theta"][part], fit.extra["omega"][part]
     x0 = fit.x.copy()
     x0[model.index("theta0")] = float(theta[0])
-    x0[model.index("omega0")] = float(fit.extra["omega"][part][0])
-    x0[model.n_dynamic:], *_ = np.linalg.lstsq(model.sensor_columns(t - t[0], theta), y - theta, rcond=None)
+    x0[model.index("omega0")] = float(omega[0])
+    reading = model.reading(theta, omega)
+    x0[model.n_dynamic:], *_ = np.linalg.lstsq(model.sensor_columns(t - t[0], reading), y - reading, rcond=None)
     lo, hi = model.bounds()
     return fit_model(model, t, y, sigma, x0=np.clip(x0, lo, hi), scales=fit.scales, max_step=fit.max_step,
                      f_scale=fit.f_scale)

@@ -42,6 +42,8 @@ class Rig(Protocol):
     def g(self) -> float: ...
     @property
     def sensor_calibrated(self) -> bool: ...
+    @property
+    def measures(self) -> str: ...
 
 #: names the effects' ``term`` expressions may use, in their numpy form
 _NUMPY_NAMES = {"cos": np.cos, "sin": np.sin, "abs": np.abs, "exp": np.exp}
@@ -82,6 +84,8 @@ class Effect:
     rigs: ClassVar[tuple[str, ...]] = ("torsion", "compound")
     #: rig kinds the discovery loop offers it on as a candidate (None: all of ``rigs``)
     offered: ClassVar[tuple[str, ...] | None] = None
+    #: what a sensor must read for the effect to exist in it ("angle", "rate"; ``Rig.measures``)
+    readings: ClassVar[tuple[str, ...]] = ("angle", "rate")
     cause: ClassVar[str] = ""
     #: torque law as printed in reports
     law: ClassVar[str] = ""
@@ -176,6 +180,12 @@ class Effect:
         """Highest swing frequency over ω_n at this amplitude (rad) (sets the integration step)."""
         return 1.0
 
+    def amplitude_stiffness(self, values: Sequence[float], amplitude: float) -> float:
+        """What this law adds to ω² (1/s²) for a swing of this amplitude (rad), to first order (the
+        describing function: the linear spring that stores the same work over the swing); 0 for a law
+        whose frequency does not depend on the amplitude."""
+        return 0.0
+
     def fallback_start(self, peak_times: np.ndarray, peak_amplitudes: np.ndarray) -> list[float] | None:
         """Start values when the equation-error regression is unusable (None: zeros).
 
@@ -192,9 +202,11 @@ class Effect:
 
     # -- sensor effects --------------------------------------------------------
     def sensor_basis(self, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
-        """Regressors ψ_j(t, θ), shape (n, m), added to the measured angle (rad).
+        """Regressors ψ_j(t, θ), shape (n, m), added to the sensor's reading.
 
-        t: time since the first fitted sample (s); theta: the pendulum's true angle (rad).
+        t: time since the first fitted sample (s); theta: what the pendulum gives the sensor:
+        its true angle (rad), or its angular rate (rad/s) on a rate sensor (a gyro), whose
+        zero, drift and scale then act on the rate.
         """
         raise NotImplementedError
 
@@ -491,6 +503,10 @@ class CubicStiffness(Effect):
 
     term = "p0 * x * x * x"
 
+    def amplitude_stiffness(self, values, amplitude):
+        # k₃θ³ over a swing θ = A cos ωt: its fundamental is (3/4)·k₃·A²·θ
+        return 0.75 * float(values[0]) * amplitude**2
+
     def frequency_factor(self, values, omega_n, amplitude):
         # a hardening spring raises the frequency at large amplitude
         return math.sqrt(1.0 + 3.0 * max(float(values[0]), 0.0) / max(omega_n, 1e-9) ** 2 * amplitude**2)
@@ -580,6 +596,8 @@ class View(Effect):
     )
     #: told apart from the swing only at large angles, where sin 2θ and cos 2θ are not θ and θ²
     rigs = ("compound",)
+    #: a camera's geometry: a gyro has no view
+    readings = ("angle",)
     scale_parameters = ("stretch",)
     cause = "camera not square to the swing plane (oblique view, lens): the image of the swing is an ellipse"
     law = "θ_meas = a + θ + e₁·sin 2θ + e₂·(cos 2θ − 1) (an affine image of the marker's direction, to first order)"
@@ -624,6 +642,9 @@ def resolve_effects(names: Iterable[str], rig: "Rig") -> list[Effect]:
         seen.add(n)
         if rig.kind not in EFFECTS[n].rigs:
             raise RigError(f"effect {n!r} does not exist on a {rig.kind} rig (only on: {', '.join(EFFECTS[n].rigs)})")
+        if rig.measures not in EFFECTS[n].readings:
+            raise RigError(f"effect {n!r} does not exist in a sensor that reads {rig.measures} "
+                           f"(only in one that reads: {', '.join(EFFECTS[n].readings)})")
     return [EFFECTS[n](rig) for n in EFFECTS if n in seen]
 
 
@@ -635,7 +656,7 @@ def candidate_effects(rig: "Rig", present: Iterable[str]) -> list[Effect]:
     present = set(present)
     contained = {EFFECTS[n].refines for n in present if n in EFFECTS}
     return [cls(rig) for n, cls in EFFECTS.items()
-            if n not in present and n not in contained and cls.offered_on(rig.kind)
+            if n not in present and n not in contained and cls.offered_on(rig.kind) and rig.measures in cls.readings
             and (cls.refines is None or cls.refines in present)
             and not (rig.sensor_calibrated and cls.scale_parameters)]
 

@@ -225,21 +225,24 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
     if smoothed is None or not smoothed.holds(t, y, sigma):
         smoothed = smooth(t, y, sigma)
     centre, sw, window = smoothed.centre, smoothed.swings, smoothed.window
-    ys, yd, ydd = smoothed.ys, smoothed.yd, smoothed.ydd
     wd = smoothed.omega_d
-    amplitude = float(np.max(np.abs(ys - centre)))
-    theta0 = float(ys[0] - centre)
-    omega0 = float(yd[0])
+    if model.measures == "rate":
+        centre, angle, rate, accel, sw = _from_rate(smoothed)
+    else:
+        angle, rate, accel = smoothed.ys - centre, smoothed.yd, smoothed.ydd
+    amplitude = float(np.max(np.abs(angle)))
+    theta0 = float(angle[0])
+    omega0 = float(rate[0])
 
-    sl = slice(window, max(window + 1, ys.size - window))
-    rows = np.arange(ys.size)[sl]
+    sl = slice(window, max(window + 1, angle.size - window))
+    rows = np.arange(angle.size)[sl]
     regress = True
     if smoothed.supported is not None:
         kept = rows[smoothed.supported[rows]]
         # too few rows between the gaps: ω_n starts at the swings' ω_d instead of a regression
         regress = kept.size >= 2 * window + len(model.dynamic) + 3
         rows = kept if regress else rows
-    xs, vs, acc = ys[rows] - centre, yd[rows], ydd[rows]
+    xs, vs, acc = angle[rows], rate[rows], accel[rows]
     restoring = np.sin(xs) if model.rig.kind == "compound" else xs
     columns = [restoring[:, None]] + [e.basis(xs, vs) for e in model.dynamic]
     A = np.hstack(columns)
@@ -275,7 +278,8 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
     else:
         omega_n = omega_guess
         amps = np.abs(sw.peak_values)
-        good = amps > 10 * sigma
+        # well above the noise as the sensor reads them (a rate sensor reads ω·amplitude)
+        good = amps * (wd if model.measures == "rate" else 1.0) > 10 * sigma
         for e in model.dynamic:
             start = e.fallback_start(sw.peak_times[good], amps[good]) if good.sum() >= 3 else None
             values[e.name] = start if start is not None else [0.0] * len(e.parameters)
@@ -295,14 +299,39 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
     for e in model.dynamic:
         sl = model.layout[e.name]
         scales[sl] = [s if size is None else size for s, size in zip(scales[sl], e.parameter_scales(amplitude))]
-    scales[model.layout["offset"]] = max(amplitude, 1e-6)
+    # the swing's size as the sensor reads it: an angle, or a rate
+    reading = amplitude * (omega_n if model.measures == "rate" else 1.0)
+    scales[model.layout["offset"]] = max(reading, 1e-6)
     for e in model.sensor:
         # a sensor term of the swing's size over the record
-        size = e.sensor_basis(t - t[0], np.full(t.size, amplitude))
-        scales[model.layout[e.name]] = max(amplitude, 1e-6) / np.maximum(np.max(np.abs(size), axis=0), 1e-12)
+        size = e.sensor_basis(t - t[0], np.full(t.size, reading))
+        scales[model.layout[e.name]] = max(reading, 1e-6) / np.maximum(np.max(np.abs(size), axis=0), 1e-12)
     lo_b, hi_b = model.bounds()
     x = np.clip(x, lo_b, hi_b)
     return x, scales
+
+
+def _from_rate(smoothed: Smoothed) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, Swings]:
+    """(zero, θ, θ', θ'', swings of θ) on the even grid, from a rate sensor's smoothed reading (rad/s).
+
+    The rate's centre line is the sensor's zero; the angle is the rate integrated, its
+    constant and the ramp that a zero off by δ leaves (δ·t) taken out by the line through
+    the midpoints of its successive turning points (only starting values: the fit takes
+    the zero as a parameter, and never reads this integral).
+    """
+    rate = smoothed.ys - smoothed.centre
+    tu = smoothed.t[0] + smoothed.dt * np.arange(rate.size)
+    angle = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * smoothed.dt)])
+    sw = find_swings(tu, angle)
+    pv, pt = sw.peak_values, sw.peak_times
+    slope = 0.0
+    if pv.size >= 4:
+        mids, when = 0.5 * (pv[:-1] + pv[1:]) + sw.centre, 0.5 * (pt[:-1] + pt[1:])
+        slope, level = np.polyfit(when, mids, 1)
+        angle = angle - (level + slope * tu)
+    else:
+        angle = angle - sw.centre
+    return smoothed.centre + float(slope), angle, rate - slope, smoothed.yd, find_swings(tu, angle, centre=0.0)
 
 
 def start_candidates(model: Model, x: np.ndarray, previous: "ModelFit | None") -> list[np.ndarray]:
@@ -346,7 +375,8 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,  # no
               x0: np.ndarray | None = None, scales: np.ndarray | None = None,
               previous: ModelFit | None = None, max_step: float | None = None,
               max_nfev: int = 200, f_scale: float | None = None, swings: Swings | None = None) -> ModelFit:
-    """Fit ``model`` to every sample (t in s, y in rad); sigma: noise floor, rad.
+    """Fit ``model`` to every sample (t in s, y the sensor's reading: rad, or rad/s on a rate sensor);
+    sigma: noise floor, in y's unit.
 
     f_scale: with a value (rad), a robust soft-L1 loss: residuals well beyond
     f_scale count in proportion to their size rather than its square.
@@ -365,8 +395,7 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,  # no
     lo, hi = model.bounds()
     nd = model.n_dynamic
     if max_step is None:
-        amp = max(abs(model.value(x0, "theta0")), float(np.max(np.abs(y - model.value(x0, "offset")))))
-        max_step = model.max_step(x0, amp)
+        max_step = model.max_step(x0, model.amplitude(x0, y))
     ts = t - t[0]
     steps = 1e-7 * scales[:nd]
     nfev = [0]
@@ -388,7 +417,7 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,  # no
         hit = evaluated.get(key)
         if hit is None:
             theta, omega = simulate(x)
-            hit = (model.measured(x, ts, theta), theta, omega)
+            hit = (model.measured(x, ts, theta, omega), theta, omega)
             if len(evaluated) >= 4:
                 del evaluated[next(iter(evaluated))]
             evaluated[key] = hit
@@ -401,7 +430,7 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,  # no
         key = x.tobytes()
         if key in last_jac:
             return last_jac[key].copy()
-        base, theta, _ = evaluate(x)
+        base, theta, omega = evaluate(x)
         J = np.empty((t.size, x.size))
         for j in range(nd):
             xp = x.copy()
@@ -410,8 +439,8 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,  # no
             if xp[j] + h > hi[j]:
                 h = -h
             xp[j] += h
-            J[:, j] = (model.measured(xp, ts, simulate(xp)[0]) - base) / h
-        J[:, nd:] = model.sensor_columns(ts, theta)
+            J[:, j] = (model.measured(xp, ts, *simulate(xp)) - base) / h
+        J[:, nd:] = model.sensor_columns(ts, model.reading(theta, omega))
         last_jac.clear()
         last_jac[key] = J.copy()
         return J
@@ -465,6 +494,14 @@ def fit_model(model: Model, t: np.ndarray, y: np.ndarray, sigma: float, *,  # no
         # the true swing at x (rad, rad/s); what the starting values read from (t, y), for the next model
         extra={"theta": theta, "omega": omega, "smoothed": smoothed},
     )
+
+
+def swing_amplitude(fit: ModelFit) -> float:
+    """The fitted swing's largest angle, rad: as the sensor reads it about its zero (an angle sensor's
+    terms included), or on a rate sensor, whose reading is a rate, the true swing's."""
+    if fit.model.measures == "rate":
+        return float(np.max(np.abs(fit.extra["theta"])))
+    return float(np.max(np.abs(fit.fitted - fit.value("offset"))))
 
 
 def robust_residual(residual: np.ndarray, f_scale: float | None) -> tuple[np.ndarray, np.ndarray]:

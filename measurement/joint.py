@@ -4,7 +4,10 @@ Each release is identified on its own first (its window, noise, glitches,
 discovery and model form). The releases are then fitted jointly: the
 physics is shared (ω_n and the damping and stiffness laws: the union of the
 dynamic effects any release needed), the nuisance is per release (initial
-state, sensor zero, drift and other sensor terms). Releases at different
+state, sensor zero, drift and other sensor terms). Before that, a restoring law a
+release added is weighed across the releases (``object_laws``): one not of
+the object (its value changes sign or size between releases) is withdrawn
+from every release that kept it. Releases at different
 amplitudes are how amplitude-dependent physics is told from a constant ω_n:
 the shared laws are chosen by the joint BIC among the union, each release's
 own set, and the same with a restoring law in place of what mimics it
@@ -23,7 +26,7 @@ squares", Phys. Rev. 40, 1932) and the result is flagged.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -42,6 +45,7 @@ from .identification.rivals import fallback
 from .identification.threads import one_blas_thread
 from .model import STATE_PARAMS, Model
 from .noise import fit_noise
+from .object_laws import laws_of_the_object
 from .result import IdentificationResult, Quantity, _jsonable, _num, budget_table, quantities_from_dict
 from .uncertainty import Budget
 from .rig import Rig
@@ -196,7 +200,8 @@ def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options | None
     options = Options() if options is None else options
     if len(traces) < 2:
         raise InvalidInput(f"a joint identification needs at least 2 releases, got {len(traces)}")
-    return _joint([identify(tr, rig, options) for tr in traces], rig, options.bic_margin)
+    results, _ = laws_of_the_object([identify(tr, rig, options) for tr in traces], traces, rig, options)
+    return _joint(results, rig, options.bic_margin)
 
 
 def _joint(results: list[IdentificationResult], rig: Rig, margin: float = Options().bic_margin) -> JointResult:
@@ -256,7 +261,8 @@ def _fit_shared(results: Sequence[IdentificationResult], rig: Rig, shared: tuple
     fits: list[ModelFit] = []
     for r in results:
         sensor = tuple(n for n in r.effects if EFFECTS[n].role == "sensor" and n not in drop)
-        model = Model.from_names(rig, shared + sensor)
+        # each release's own sensor: an angle, or a gyro's rate
+        model = Model.from_names(replace(rig, measures=r.measures), shared + sensor)
         t, y = r.arrays["t"], r.arrays["angle"]
         # each release alone with the shared model: the start of the joint fit
         fits.append(fit_model(model, t, y, r.noise_floor))
@@ -295,8 +301,8 @@ def _fit_shared(results: Sequence[IdentificationResult], rig: Rig, shared: tuple
     def release_residual(z: np.ndarray, i: int) -> np.ndarray:
         x = _release_x(models[i], blocks[i], z)
         t = fits[i].t
-        th, _ = models[i].true_angle(x, t, fits[i].max_step)
-        return (models[i].measured(x, t - t[0], th) - fits[i].y) * weights[i]
+        th, om = models[i].true_angle(x, t, fits[i].max_step)
+        return (models[i].measured(x, t - t[0], th, om) - fits[i].y) * weights[i]
 
     def fun(z: np.ndarray) -> np.ndarray:
         return np.concatenate([release_residual(z, i) for i in range(len(models))])

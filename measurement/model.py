@@ -7,6 +7,10 @@ Parameter vector (all SI, J-normalised where dynamic):
     <dynamic effects>   e.g. c_per_J, Tc_per_J, K_per_J, k3_per_J
     offset              sensor zero offset a (rad), always fitted
     <sensor effects>    e.g. rate (drift, rad/s)
+
+A sensor reads the angle or, a gyro, the angular rate (``Rig.measures``): the
+model's reading is then the simulated velocity θ', and offset and sensor
+terms act on the rate (offset in rad/s, drift in rad/s²).
 """
 
 from __future__ import annotations
@@ -150,8 +154,23 @@ class Model:
     def dynamics(self, x: Vector) -> Dynamics:
         return Dynamics(self.rig.kind, self.dynamic, [self.values(x, e.name) for e in self.dynamic])
 
+    @property
+    def measures(self) -> str:
+        """What the sensor reads: "angle" (rad) or "rate" (rad/s)."""
+        return self.rig.measures
+
+    def reading(self, theta: np.ndarray, omega: np.ndarray | None) -> np.ndarray:
+        """What the pendulum gives the sensor: its angle θ (rad), or its rate θ' (rad/s) on a rate sensor."""
+        if self.rig.measures == "angle":
+            return theta
+        if omega is None:
+            raise ValueError("a rate sensor reads the velocity: pass omega (rad/s)")
+        return omega
+
     def sensor_columns(self, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
-        """Columns of the measured-angle model that are linear: offset, then sensor effects."""
+        """Columns of the measured-reading model that are linear: offset, then sensor effects.
+
+        theta: the pendulum's ``reading`` (its angle, or its rate on a rate sensor)."""
         cols = [np.ones_like(t)[:, None]] + [e.sensor_basis(t, theta) for e in self.sensor]
         return np.hstack(cols)
 
@@ -160,12 +179,21 @@ class Model:
         return self.dynamics(x).integrate(t, self.value(x, "theta0"), self.value(x, "omega0"),
                                           self.value(x, "omega_n"), max_step)
 
-    def measured(self, x: Vector, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
-        """Measured angle θ + a + sensor terms (rad) from the true angle θ at times t."""
+    def measured(self, x: Vector, t: np.ndarray, theta: np.ndarray, omega: np.ndarray | None = None) -> np.ndarray:
+        """The sensor's reading from the true swing θ (rad), θ' (rad/s) at times t: θ + a + sensor terms
+        (rad) on an angle sensor, θ' + a + sensor terms (rad/s) on a rate sensor (which needs omega)."""
+        r = self.reading(theta, omega)
         if not self.sensor:  # the offset alone: the same sum without building a column of ones
-            return theta + float(x[self.n_dynamic])
+            return r + float(x[self.n_dynamic])
         lin = np.asarray(x[self.n_dynamic:], dtype=float)
-        return theta + self.sensor_columns(t, theta) @ lin
+        return r + self.sensor_columns(t, r) @ lin
+
+    def amplitude(self, x: Vector, y: np.ndarray) -> float:
+        """The swing's largest angle (rad) as the readings y show it about the offset in x."""
+        a = float(np.max(np.abs(y - self.value(x, "offset"))))
+        if self.rig.measures == "rate":
+            a /= max(self.value(x, "omega_n"), 1e-9)
+        return max(abs(self.value(x, "theta0")), a)
 
 
 def omega_n_of(rig: Rig, inertia: float) -> float:

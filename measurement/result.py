@@ -28,7 +28,7 @@ from .uncertainty import Budget
 from .wire import read_number
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 
 
 def _num(v: Any) -> Any:
@@ -333,6 +333,8 @@ class IdentificationResult:
     #: measurand ("J", "J_object", "J_object_axis") → its GUM budget (``measurement.uncertainty.Budget``):
     #: lines (source, value, u, sensitivity, contribution, share), u, coverage factor, U
     uncertainty_budget: dict[str, Budget] = field(default_factory=dict)
+    #: what the sensor read: "angle" (rad) or "rate" (rad/s, a gyro: offset and the arrays' "angle" are then rates)
+    measures: str = "angle"
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -396,6 +398,7 @@ class IdentificationResult:
             "window": {k: _num(v) for k, v in self.window.items()},
             "acquisition": _jsonable(self.acquisition),
             "sensor_calibrated": self.sensor_calibrated,
+            "measures": self.measures,
         }
         if include_arrays:
             d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
@@ -425,6 +428,7 @@ class IdentificationResult:
             baseline=ModelSummary.from_dict(d["baseline"]), steps=tuple(DiscoveryStep.from_dict(s) for s in d["steps"]),
             diagnostics=Diagnostics.from_dict(d["diagnostics"]), structure=tuple(d["structure"]),
             window=dict(d["window"]), acquisition=dict(d["acquisition"]), sensor_calibrated=d["sensor_calibrated"],
+            measures=d["measures"],
             model_form=ModelForm.from_dict(d["model_form"]),
             uncertainty_budget={k: Budget.from_dict(b) for k, b in d["uncertainty_budget"].items()},
             arrays={k: np.asarray(v, dtype=float) for k, v in (d.get("arrays") or {}).items()},

@@ -19,6 +19,7 @@ from typing import Any, Mapping
 
 from .effects import resolve_effects
 from .errors import RigError
+from .trace import READINGS
 from .uncertainty import check_covariance
 
 STANDARD_GRAVITY = 9.80665  # m/s²
@@ -139,6 +140,8 @@ class Rig:
     sensor_calibrated: the angle sensor's scale and view are known (``[sensor] calibrated``):
         sensor effects that would fit the angle's scale from the swing (gain, view) are neither
         declared nor offered, so ω_n rests on the calibration, not on the fit.
+    measures: what the sensor reads, "angle" (rad: an encoder, a camera) or "rate" (rad/s: a gyro or an
+        IMU's rate axis); set from the trace it identifies (a trace's ``quantity``), not from the rig file.
     """
 
     kind: str
@@ -159,10 +162,13 @@ class Rig:
     g_std: float | None = None
     clock_accuracy_ppm: float | None = None
     angle_scale_std: float | None = None
+    measures: str = "angle"
 
     def __post_init__(self) -> None:
         if self.kind not in RIG_KINDS:
             raise RigError(f"rig: unknown kind {self.kind!r}; expected one of {', '.join(RIG_KINDS)}")
+        if self.measures not in READINGS:
+            raise RigError(f"rig: the sensor measures {self.measures!r}; expected one of {', '.join(READINGS)}")
         if self.kind == "torsion" and (self.mass is not None or self.com_distance is not None):
             # m and S do not enter a torsion rig's equation; accepting them silently
             # would let a user believe they were used.

@@ -1,4 +1,11 @@
-"""Angle traces: validation and the trace CSV format (parsing only, no file I/O)."""
+"""Traces of a swing: validation and the trace CSV format (parsing only, no file I/O).
+
+A trace is what one sensor read: the angle (an encoder, a camera; column
+``angle``, rad) or the angular rate (a gyro, an IMU's rate axis; column
+``rate``, rad/s). A rate is fitted as a rate (the model's velocity), never
+integrated first: integrating turns the gyro's zero into a ramp and its noise
+into a random walk, which a fit would read as physics.
+"""
 
 from __future__ import annotations
 
@@ -18,12 +25,17 @@ MIN_STEP = 1e-9
 #: bounds of a plausible trace: Unix times fit, a swing's angle is a few rad
 MAX_ABS_TIME = 1e10
 MAX_ABS_ANGLE = 1e3
+#: what a trace's sensor reads: its column name, also its ``quantity``
+READINGS = ("angle", "rate")
+_UNITS = {"angle": "rad", "rate": "rad/s"}
 
 
 @dataclass(frozen=True, eq=False)
 class Trace:
-    """A recorded swing: times t (s, strictly increasing, possibly uneven) and angle (rad).
+    """A recorded swing: times t (s, strictly increasing, possibly uneven) and the sensor's reading.
 
+    angle: the reading, one per time: the angle (rad), or with quantity "rate" the angular
+    rate (rad/s) as a gyro gives it, its zero and drift left in (the fit takes them).
     flags: facts about the acquisition the identification must report
     (e.g. "dropped_frames"); meta: free-form provenance (source, sensor).
     """
@@ -33,12 +45,15 @@ class Trace:
     source: str = "trace"
     flags: tuple[str, ...] = ()
     meta: dict = field(default_factory=dict)
+    quantity: str = "angle"
 
     def __post_init__(self) -> None:
         t = np.asarray(self.t, dtype=float)
         a = np.asarray(self.angle, dtype=float)
         if t.ndim != 1 or a.ndim != 1 or t.shape != a.shape:
             raise TraceError(f"{self.source}: t and angle must be 1-D columns of equal length, got {t.shape} and {a.shape}")
+        if self.quantity not in READINGS:
+            raise TraceError(f"{self.source}: a trace reads {self.quantity!r}; expected one of {', '.join(READINGS)}")
         if t.size == 0:
             raise TraceError(f"{self.source}: the trace is empty; expected rows of t (s) and angle (rad)")
         bad = ~np.isfinite(t) | ~np.isfinite(a)
@@ -65,7 +80,8 @@ class Trace:
         if big_t > MAX_ABS_TIME or big_a > MAX_ABS_ANGLE:
             raise TraceError(
                 f"{self.source}: |t| up to {big_t:.3g} s and |angle| up to {big_a:.3g} rad; expected |t| <= "
-                f"{MAX_ABS_TIME:g} s and |angle| <= {MAX_ABS_ANGLE:g} rad (angles in rad, not counts or degrees)"
+                f"{MAX_ABS_TIME:g} s and |{self.quantity}| <= {MAX_ABS_ANGLE:g} {_UNITS[self.quantity]} "
+                "(in rad, not counts or degrees)"
             )
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "angle", a)
@@ -84,12 +100,12 @@ class Trace:
         return float(1.0 / np.median(np.diff(self.t))) if len(self) > 1 else float("nan")
 
     def to_csv(self, header_comment: str | None = None) -> str:
-        """CSV text with columns t (s) and angle (rad); comment lines start with '#'."""
+        """CSV text with columns t (s) and angle (rad) (or rate, rad/s); comment lines start with '#'."""
         buf = io.StringIO()
         if header_comment:
             for line in header_comment.splitlines():
                 buf.write(f"# {line}\n")
-        buf.write("t,angle\n")
+        buf.write(f"t,{self.quantity}\n")
         for ti, ai in zip(self.t, self.angle):
             buf.write(f"{ti:.9f},{ai:.12g}\n")
         return buf.getvalue()
@@ -109,19 +125,22 @@ def csv_header(content: list[tuple[int, str]]) -> list[str]:
 
 
 def parse_trace_csv(lines: Iterable[str], source: str = "trace") -> Trace:
-    """Parse a trace CSV: a header row with columns t (s) and angle (rad).
+    """Parse a trace CSV: a header row with columns t (s) and angle (rad), or t and rate (rad/s, a gyro).
 
-    Other columns are ignored, lines starting with '#' are comments.
+    A trace with an angle column is an angle trace whatever else it holds; other
+    columns are ignored, lines starting with '#' are comments.
     Raises TraceError naming the row and what was expected.
     """
     content = csv_content(lines)
     if not content:
         raise TraceError(f"{source}: no header row; expected a CSV with columns t (s) and angle (rad)")
     header = csv_header(content)
-    missing = [c for c in ("t", "angle") if c not in header]
+    quantity = "rate" if "rate" in header and "angle" not in header else "angle"
+    missing = [c for c in ("t", quantity) if c not in header]
     if missing:
-        raise TraceError(f"{source}: missing column(s) {', '.join(missing)} in header {header}; expected columns t (s) and angle (rad)")
-    it, ia = header.index("t"), header.index("angle")
+        raise TraceError(f"{source}: missing column(s) {', '.join(missing)} in header {header}; expected columns t (s) "
+                         "and angle (rad), or t and rate (rad/s)")
+    it, ia = header.index("t"), header.index(quantity)
     t, a = [], []
     for n, line in content[1:]:
         try:
@@ -142,4 +161,4 @@ def parse_trace_csv(lines: Iterable[str], source: str = "trace") -> Trace:
             # find the file line of this data row for the message
             line_no = content[1 + n_value][0]
             raise TraceError(f"{source}: line {line_no}: NaN/inf in t or angle; expected finite numbers (drop gap rows instead)")
-    return Trace(np.asarray(t), np.asarray(a), source=source)
+    return Trace(np.asarray(t), np.asarray(a), source=source, quantity=quantity)

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..result import IdentificationResult, Quantity
 from .findings import Findings
-from .quantities import budgets, damping_ratio, effect_quantities, model_summary, omega_n_per_scale
+from .quantities import RATE_UNITS, budgets, damping_ratio, effect_quantities, model_summary, omega_n_per_scale
 
 
 def _statistics(found: Findings) -> dict[str, Any]:
@@ -60,7 +60,7 @@ def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]
         J_std_model=j.J_model, J_u=J_u, model_form=form,
         uncertainty_budget=budget, damping_ratio=zeta,
         damping_ratio_std=zeta_std, reference_amplitude=amp_ref,
-        offset=Quantity(final.value("offset"), final.stdev("offset"), "rad"),
+        offset=Quantity(final.value("offset"), final.stdev("offset"), RATE_UNITS["rad"] if rig.measures == "rate" else "rad"),
         damping=effect_quantities(final, rig, ("damping",)),
         stiffness=effect_quantities(final, rig, ("stiffness",)),
         sensor=effect_quantities(final, rig, ("sensor",)),
@@ -69,5 +69,5 @@ def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]
         residual_rms=final.residual_rms, noise_floor=found.prep.noise, statistics=_statistics(found), flags=flags,
         baseline=model_summary(found.base, rig), steps=found.steps, diagnostics=found.diag,
         structure=structure, window=_window(found), acquisition={k: v for k, v in trace.meta.items() if k != "truth"},
-        sensor_calibrated=rig.sensor_calibrated, arrays=_arrays(found),
+        sensor_calibrated=rig.sensor_calibrated, measures=rig.measures, arrays=_arrays(found),
     )

@@ -21,7 +21,7 @@ from ..consistency import effect_holds
 from ..diagnostics import diagnose
 from ..effects import EFFECTS, Effect, candidate_effects, resolve_effects, with_effect
 from ..errors import IdentificationError
-from ..fit import ModelFit, fit_model
+from ..fit import ModelFit, fit_model, swing_amplitude
 from ..model import Model
 from ..noise import fit_noise
 from ..residual import Diagnostics
@@ -78,7 +78,7 @@ def score_effect(current: ModelFit, effect: Effect, q: np.ndarray | None = None)
     base = current.fitted
     sl = cand.layout[effect.name]
     if effect.role == "sensor":
-        G = effect.sensor_basis(ts, theta)
+        G = effect.sensor_basis(ts, model.reading(theta, omega))
     else:
         # a step whose torque is 1e-6 of the restoring one: linear, and far above round-off
         w = current.value("omega_n")
@@ -92,7 +92,7 @@ def score_effect(current: ModelFit, effect: Effect, q: np.ndarray | None = None)
         for j in range(G.shape[1]):
             xp = x.copy()
             xp[sl.start + j] += h[j]
-            G[:, j] = (cand.measured(xp, ts, cand.true_angle(xp, t, current.max_step)[0]) - base) / h[j]
+            G[:, j] = (cand.measured(xp, ts, *cand.true_angle(xp, t, current.max_step)) - base) / h[j]
     r = current.effective
     if q is None:
         q = current_basis(current)
@@ -271,7 +271,7 @@ def discover(fit: ModelFit, prep: Prepared, rig: Rig, options: Options, f_scale:
     moves: list[Move] = []
     spent = 0
     allowed = set(options.candidates) if options.candidates is not None else set(EFFECTS)
-    amplitude = float(np.max(np.abs(fit.fitted - fit.value("offset"))))
+    amplitude = swing_amplitude(fit)
     for number in range(1, options.max_rounds + 1):
         cands = [c for c in candidate_effects(rig, current.model.effect_names)
                  if c.name in allowed and c.identifiable(amplitude)]

@@ -27,7 +27,8 @@ class Findings:
     better, or None); follows / follow_ratio: ``follows_swing`` of the final fit; view: the camera
     view measured on the record (``measurement.vision.marker_pair``) or None; omega_n_view: the
     1σ of ω_n it carries (rad/s); nominal: the sensor's fitted scale parameters and ω_n were they
-    at their nominal 0 (``omega_n_at_nominal_scale``); nfev: the simulations spent.
+    at their nominal 0 (``omega_n_at_nominal_scale``); nfev: the simulations spent; rival_laws: the
+    restoring laws the releases of the object withdrew together (``Options.rival_laws``).
     """
 
     trace: Trace
@@ -53,6 +54,7 @@ class Findings:
     nominal: tuple[list[str], float] | None
     nfev: int
     bic_margin: float
+    rival_laws: tuple[tuple[str, float, tuple[str, ...], str], ...] = ()
 
     @property
     def omega_n(self) -> float:

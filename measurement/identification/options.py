@@ -20,6 +20,10 @@ class Options:
     model's residual (used only when wild samples are left after the screen).
     gap_periods: a gap of more than this many swing periods without samples
     ends the window, unless the swing clearly continues after it.
+    rival_laws: restoring laws that the releases of one object withdrew together
+    (``measurement.object_laws``): (law, the release's ω_n with it in rad/s, that
+    model's effects, why in words); each is neither offered nor kept, and its
+    ω_n is a rival carried whole into ω_n's uncertainty.
     """
 
     discover: bool = True
@@ -30,3 +34,4 @@ class Options:
     robust_scale: float = 3.0
     gap_periods: float = 1.5
     max_rounds: int = 5
+    rival_laws: tuple[tuple[str, float, tuple[str, ...], str], ...] = ()

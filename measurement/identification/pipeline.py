@@ -72,6 +72,10 @@ def checked_inputs(trace: Trace, rig: Rig, options: Options) -> tuple[Rig, dict[
             raise RigError(f"{trace.source}: the camera's view was measured from the marker pair, but the rig declares "
                            f"{', '.join(scaling)}, which would fit the angle's scale again; drop it from [model] declared")
         rig = replace(rig, sensor_calibrated=True)
+    if trace.quantity != rig.measures:
+        # what the sensor reads is the trace's (an angle, or a gyro's rate): every model of this
+        # identification reads it
+        rig = replace(rig, measures=trace.quantity)
     return rig, view
 
 
@@ -203,12 +207,14 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     # tell apart give another ω_n (consistency.py, rivals.py)
     segments = check_segments(final, prep.noise)
     law, spent = law_rival(final, run.moves, prep, rig, run.f_scale) if run.withdrawn is None else (None, 0)
-    form = model_form(final, segments, run.steps, run.aliases, run.withdrawn, law, options.bic_margin)
+    form = model_form(final, segments, run.steps, run.aliases, run.withdrawn, law, options.bic_margin,
+                      options.rival_laws)
     found = Findings(
         trace=trace, rig=rig, prep=prep, declared=declared, base=g.base, final=final, steps=tuple(run.steps),
         withdrawn=run.withdrawn, law=law, segments=segments, form=form, diag=g.diag, n_outliers=g.n_outliers,
         slipped_from=g.slipped_from, beaten_by=g.beaten_by, follows=follows, follow_ratio=follow_ratio,
         view=view, omega_n_view=w_cal, inertias=inertias(rig, w, ws, w_cal, form.u),
-        nominal=omega_n_at_nominal_scale(final), nfev=run.nfev + g.nfev + spent, bic_margin=options.bic_margin)
+        nominal=omega_n_at_nominal_scale(final), nfev=run.nfev + g.nfev + spent, bic_margin=options.bic_margin,
+        rival_laws=options.rival_laws)
     left = leftover(found)
     return assemble(found, raise_flags(found, left), describe(found, left))

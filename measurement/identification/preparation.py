@@ -84,7 +84,8 @@ def gap_cut(t: np.ndarray, y: np.ndarray, noise: float, periods: float, sw: Swin
 def prepare(trace: Trace, options: Options = Options()) -> Prepared:
     """Unwrapping, noise floor, swing window and glitch removal; raises TraceError when too little swings."""
     t_all = trace.t
-    y_all, n_unwrapped = unwrap_angle(trace.angle)
+    # a rate has no turns to unwrap
+    y_all, n_unwrapped = unwrap_angle(trace.angle) if trace.quantity == "angle" else (trace.angle, 0)
     if len(trace) < 30:
         raise TraceError(f"{trace.source}: only {len(trace)} samples; expected at least 30 covering {options.min_swings:g} swings")
     span = float(np.ptp(y_all))

@@ -12,7 +12,7 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from ..effects import Effect
-from ..fit import ModelFit
+from ..fit import ModelFit, swing_amplitude
 from ..model import Model
 from ..result import ModelSummary, Quantity
 from ..rig import Rig
@@ -60,6 +60,10 @@ def defined(value: float | None) -> float:
     return math.nan if value is None else float(value)
 
 
+#: a sensor parameter's unit on an angle sensor → on a rate sensor
+RATE_UNITS = {"rad": "rad/s", "rad/s": "rad/s²"}
+
+
 def effect_quantities(fit: FittedParameters, rig: Rig, role: Sequence[str]) -> dict[str, dict[str, Quantity]]:
     """Effect → its fitted (normalised) and physical values with uncertainties, for effects of ``role``."""
     model, x, cov = fit.model, fit.x, fit.cov
@@ -70,7 +74,9 @@ def effect_quantities(fit: FittedParameters, rig: Rig, role: Sequence[str]) -> d
         sl = model.layout[e.name]
         params: dict[str, Quantity] = {}
         for p, v, s in zip(e.parameters, x[sl], fit.std[sl]):
-            params[p.name] = Quantity(float(v), float(s), p.unit)
+            # a sensor term on a rate sensor acts on the rate: its unit is a time derivative's
+            unit = RATE_UNITS.get(p.unit, p.unit) if e.role == "sensor" and rig.measures == "rate" else p.unit
+            params[p.name] = Quantity(float(v), float(s), unit)
 
         def physical(xx: np.ndarray, _e: Effect = e) -> dict[str, float | None]:
             w = model.value(xx, "omega_n")
@@ -215,11 +221,27 @@ def inertias(rig: Rig, omega_n: float, omega_n_std: float, omega_n_view: float |
     return Inertias(J, J_std, J_cal, J_model, J_obj, J_obj_std, J_ax, J_ax_std)
 
 
+def omega_at_amplitude(fit: ModelFit, amplitude: float) -> tuple[float, float] | None:
+    """(ω, its 1σ) of the swing at ``amplitude`` (rad) by the fitted restoring laws, rad/s; None when no law
+    of the model makes the frequency depend on the amplitude (then it is ω_n at every amplitude)."""
+    model = fit.model
+    laws = [e for e in model.dynamic if e.role == "stiffness"]
+    if not laws:
+        return None
+
+    def omega(xx: np.ndarray) -> float:
+        w2 = model.value(xx, "omega_n") ** 2 + sum(e.amplitude_stiffness(model.values(xx, e.name), amplitude)
+                                                   for e in laws)
+        return math.sqrt(max(w2, 0.0))
+
+    return propagate(omega, fit.x, fit.cov)
+
+
 def damping_ratio(fit: ModelFit) -> tuple[float, float, float]:
     """(ζ, its 1σ, the amplitude it is read at, rad): the equivalent viscous damping ratio of every
     dynamic effect at the fitted swing's largest amplitude."""
     model = fit.model
-    amp_ref = float(np.max(np.abs(fit.fitted - fit.value("offset"))))
+    amp_ref = swing_amplitude(fit)
 
     def ratio(xx: np.ndarray) -> float:
         w = model.value(xx, "omega_n")

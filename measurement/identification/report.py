@@ -7,11 +7,16 @@ sentences become the result's ``structure`` (the report's [[Residual]]).
 
 from __future__ import annotations
 
+import math
+
 from .. import flags as F
 from ..result import SegmentCheck
 from .discovery import SCREEN_TRUST
 from .findings import Findings
 from .flags import FOLLOW_LIMIT, Leftover
+from ..fit import swing_amplitude
+from .quantities import omega_at_amplitude
+from .rivals import LAW_SIGMA
 
 
 def _halves(segments: SegmentCheck | None) -> str:
@@ -51,12 +56,21 @@ def _rivals(found: Findings) -> list[str]:
     out = []
     w, withdrawn, law = found.omega_n, found.withdrawn, found.law
     if withdrawn is not None:
+        head = (f"{', '.join(withdrawn.effects)} lowered BIC by {-withdrawn.d_bic:.1f} but moved ω_n to "
+                f"{withdrawn.omega_n:.6g} rad/s ({withdrawn.omega_n - w:+.2g})")
         ws_ = withdrawn.segments
-        out.append(
-            f"{', '.join(withdrawn.effects)} lowered BIC by {-withdrawn.d_bic:.1f} but moved ω_n to "
-            f"{withdrawn.omega_n:.6g} rad/s ({withdrawn.omega_n - w:+.2g}), and the model with it does not hold "
-            f"across the record (halves {ws_.omega_n[0]:.6g} and {ws_.omega_n[1]:.6g} rad/s, {ws_.z:.1f} σ apart): "
-            "it is not kept, its ω_n is a rival in omega_n_u (flag model_ambiguous)")
+        if withdrawn.undetermined is not None or ws_ is None:
+            name, value, std = withdrawn.undetermined or ("", math.nan, math.nan)
+            why = (f"and the record does not determine the law it adds ({name} {value:.3g} ± {std:.2g}, "
+                   f"{abs(value) / std:.1f} σ from zero, needs {LAW_SIGMA:g}): a restoring law that moves ω_n must "
+                   "be a property of the object, not a stand-in for what the model lacks elsewhere")
+        else:
+            why = (f"and the model with it does not hold across the record (halves {ws_.omega_n[0]:.6g} and "
+                   f"{ws_.omega_n[1]:.6g} rad/s, {ws_.z:.1f} σ apart, and not far closer than without it)")
+        out.append(f"{head}, {why}: it is not kept, its ω_n is a rival in omega_n_u (flag model_ambiguous)")
+    for name, w_law, _, why_law in found.rival_laws:
+        out.append(f"{name} was not kept: {why_law}; the releases of this object withdrew it together, and its "
+                   f"ω_n here ({w_law:.6g} rad/s, {w_law - w:+.2g}) is a rival in omega_n_u (flag model_ambiguous)")
     if law is not None:
         verdict = ("the data do not separate them: its ω_n enters omega_n_u by its BIC weight"
                    if law.d_bic < found.bic_margin else "the data separate them: the effect stands")
@@ -102,7 +116,20 @@ def _sensor(found: Findings) -> list[str]:
     return out
 
 
+def _measurand(found: Findings) -> list[str]:
+    """Where a restoring law is kept: ω_n is its small-swing limit; the swing's own frequency beside it."""
+    amplitude = swing_amplitude(found.final)
+    at = omega_at_amplitude(found.final, amplitude)
+    if at is None:
+        return []
+    w = found.omega_n
+    laws = ", ".join(e.name for e in found.final.model.dynamic if e.role == "stiffness")
+    return [f"ω_n is the small-swing limit of the restoring law ({laws} kept): at the record's largest swing, {amplitude:.3g} rad, the law gives ω {at[0]:.6g} ± {at[1]:.2g} rad/s "
+            f"({100 * (at[0] - w) / w:+.2f} %); a stiffness calibrated from plain periods at a stated amplitude is "
+            "the stiffness at that amplitude, and J from it takes ω at the same amplitude"]
+
+
 def describe(found: Findings, left: Leftover) -> tuple[str, ...]:
     """The report's sentences on the residual and every check, in the order a reader needs them."""
     return tuple(found.diag.describe() + [_halves(found.segments)] + _guards(found) + _rivals(found) + _left(left)
-                 + _sensor(found))
+                 + _sensor(found) + _measurand(found))

@@ -2,7 +2,9 @@
 
     hold  → an effect that moved ω_n by more than its σ is withdrawn when the
             model it ends in gives another ω_n in each half of the record
-            (``hold_across``); its ω_n stays a rival in the uncertainty
+            (and no closer one than without it), or when it is a restoring
+            law the record does not determine (``hold_across``); its ω_n
+            stays a rival in the uncertainty
     law   → an effect that mimics a restoring law the rig does not offer
             (Dahl's pre-sliding spring, a sensor's fitted scale) is fitted with
             the law in its place (``law_rival``); its BIC weight says whether
@@ -36,20 +38,46 @@ class Withdrawn:
     """Effects taken back because the ω_n they moved does not hold across the record.
 
     effects: the effects withdrawn; omega_n: the model's with them (rad/s);
-    d_bic: its BIC minus the kept model's; segments: its halves; model_effects: that model's effects.
+    d_bic: its BIC minus the kept model's; segments: its halves (None: the record is too short to split);
+    model_effects: that model's effects; undetermined: where the withdrawn effect is a restoring law the
+    record does not determine, its parameter (name, value, 1σ), else None.
     """
 
     effects: tuple[str, ...]
     omega_n: float
     omega_n_std: float
     d_bic: float
-    segments: SegmentCheck
+    segments: SegmentCheck | None
     model_effects: tuple[str, ...]
+    undetermined: tuple[str, float, float] | None = None
 
     def rival(self, kept_omega_n: float) -> Competitor:
         """This model as a rival of the kept one of ω_n ``kept_omega_n`` (rad/s), carried whole."""
-        return Competitor(f"{', '.join(self.effects)} kept (the ω_n it moves does not hold across the record)",
+        why = ("the record does not determine it" if self.undetermined is not None else
+               "the ω_n it moves does not hold across the record")
+        return Competitor(f"{', '.join(self.effects)} kept ({why})",
                           self.d_bic, 1.0, self.omega_n, self.omega_n - kept_omega_n, self.model_effects)
+
+
+#: a restoring law that moves ω_n is kept only where the record determines it: each parameter this many σ from 0
+LAW_SIGMA = 3.0
+#: a model whose halves disagree still explains them when its halves' z is at most this share of the z of
+#: the model without its movers (a law that turns 53 σ of disagreement into 2.6 σ has explained something)
+EXPLAINED_SHARE = 0.25
+
+
+def undetermined_law(fit: ModelFit, names: Sequence[str]) -> tuple[str, float, float] | None:
+    """The first parameter of a restoring law among ``names`` less than LAW_SIGMA σ from zero in ``fit``:
+    (its name, value, 1σ); None when every one is determined."""
+    for n in names:
+        if EFFECTS[n].role != "stiffness":
+            continue
+        for q in EFFECTS[n].parameters:
+            name = f"{n}.{q.name}"
+            value, std = fit.value(name), fit.stdev(name)
+            if not abs(value) >= LAW_SIGMA * std:
+                return name, value, std
+    return None
 
 
 def fallback(names: Sequence[str], taken: Sequence[str], moves: Sequence[Move]) -> tuple[list[str], ModelFit | None]:
@@ -77,6 +105,13 @@ def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[Move], prep: Pr
     then Dahl friction) the intermediate models need not hold. Withdrawn,
     an effect that refines another (dahl, coulomb) falls back to it; the
     withdrawn model's ω_n stays a rival in the uncertainty (consistency.py).
+    Halves that disagree still keep a restoring law (role "stiffness") where
+    they disagree far more without it (``EXPLAINED_SHARE``): the law has
+    explained something, and what is left enters u through the halves. A restoring
+    law (a cubic spring) that moved ω_n must also be determined by the
+    record, each of its parameters ``LAW_SIGMA`` σ from zero under the
+    residual's noise model: a slow line in the sensor or a drifting zero
+    buys a law that lowers BIC while its own value is barely told from zero.
     Returns (fit, what was withdrawn or None, simulations spent).
     """
     names = final.model.effect_names
@@ -84,10 +119,12 @@ def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[Move], prep: Pr
     w = final.value("omega_n")
     if not movers or abs(w - base.value("omega_n")) <= final.stdev("omega_n"):
         return final, None, 0
+    undetermined = undetermined_law(final, movers)
     seg = check_segments(final, prep.noise)
-    if seg is None or not seg.disagree:
+    if undetermined is None and (seg is None or not seg.disagree):
         return final, None, 0
-    keep, earlier = fallback(names, movers, moves)
+    taken = [undetermined[0].split(".")[0]] if undetermined is not None else movers
+    keep, earlier = fallback(names, taken, moves)
     model = Model(rig, tuple(resolve_effects(keep, rig)))
     previous = earlier or base
     nfev = 0
@@ -97,8 +134,14 @@ def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[Move], prep: Pr
         except IdentificationError:
             return final, None, 0
         nfev = previous.nfev
-    return previous, Withdrawn(tuple(movers), w, final.stdev("omega_n"), final.bic - previous.bic, seg,
-                               final.model.effect_names), nfev
+    if undetermined is None and seg is not None and all(EFFECTS[n].role == "stiffness" for n in taken):
+        # a restoring law explains the halves where they disagree far more without it; an effect that
+        # mimics one (Dahl's pre-sliding spring) brings them closer without being the law
+        without = check_segments(previous, prep.noise)
+        if without is not None and without.disagree and seg.z <= EXPLAINED_SHARE * without.z:
+            return final, None, nfev
+    return previous, Withdrawn(tuple(taken), w, final.stdev("omega_n"), final.bic - previous.bic, seg,
+                               final.model.effect_names, undetermined), nfev
 
 
 @dataclass(frozen=True)
@@ -163,12 +206,14 @@ def law_rival(final: ModelFit, moves: Sequence[Move], prep: Prepared, rig: Rig,
 
 
 def model_form(final: ModelFit, segments: SegmentCheck | None, steps: Sequence[DiscoveryStep], aliases: Aliases,
-               withdrawn: Withdrawn | None, law: LawRival | None, margin: float) -> ModelForm:
+               withdrawn: Withdrawn | None, law: LawRival | None, margin: float,
+               rival_laws: Sequence[tuple[str, float, tuple[str, ...], str]] = ()) -> ModelForm:
     """The model-form part of ``final``'s ω_n uncertainty (``result.ModelForm``).
 
     Its halves (``check_segments``), the discovery's rounds' near rivals (``competitors``), the
     sampling's aliases, the withdrawn model (its distance carried whole: BIC prefers it, the halves
-    contradict it) and the law in a mimicking effect's place (by its BIC weight, when within ``margin``).
+    contradict it), the law in a mimicking effect's place (by its BIC weight, when within ``margin``)
+    and the laws the releases of the object withdrew together (``Options.rival_laws``, carried whole).
     """
     w = final.value("omega_n")
     rivals, u_rivals = competitors(steps, margin)
@@ -183,4 +228,8 @@ def model_form(final: ModelFit, segments: SegmentCheck | None, steps: Sequence[D
         rival = law.rival(w)
         rivals += (rival,)
         u_rivals = math.hypot(u_rivals, math.sqrt(rival.weight) * rival.delta)
+    for name, w_law, effects, _ in rival_laws:
+        rivals += (Competitor(f"{name} kept (not a law of the object: its releases do not agree on it)",
+                              0.0, 1.0, w_law, w_law - w, effects),)
+        u_rivals = math.hypot(u_rivals, w_law - w)
     return ModelForm(segments, rivals, u_rivals)

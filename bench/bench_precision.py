@@ -1,0 +1,216 @@
+"""Precision as a figure of merit: the spread of ω_n between releases of one object, moi against a plain fit.
+
+Honesty (releases agree within the u moi states) is not enough: the spread
+between releases of one object must be no wider than that of the plainest fit
+that would do, a damped sinusoid y = c + e^(−σt)·(A·cos ω_d t + B·sin ω_d t)
+fitted to the whole record (ω_n = √(ω_d² + σ²)). For every set in data/,
+each release is identified by moi (default: the releases together, as
+``moi identify A B C`` does, which weighs the laws a release adds across
+its sisters), by ``moi --no-discover`` (each release alone, the declared
+model only) and by that damped sinusoid; per object the table
+gives the spread (max − min)/mean of ω_n and the worst pairwise
+|Δω_n|/√(u_i² + u_j²) (for the damped sinusoid its fit σ under white noise,
+which is what such a fit would state).
+
+    .venv/bin/python bench/bench_precision.py            # every set (about 3 min)
+    .venv/bin/python bench/bench_precision.py bicycle    # the sets whose name holds "bicycle"
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import statistics
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from measurement.errors import MeasurementError
+from measurement.identification import Options, identify
+from measurement.joint import identify_releases
+from measurement.signal import find_swings
+from service.sources.dispatch import load_source
+from service.sources.files import read_rig
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _bicycle(part: str, n: int, rate: bool) -> list[tuple[str, str]]:
+    suffix = "_rate" if rate else ""
+    return [(f"data/bicycle_{part}_first_{i}{suffix}.csv", f"data/bicycle_{part}_first_{i}_rig.toml") for i in range(1, n + 1)]
+
+
+#: (object, [(trace, rig)] of its releases)
+SETS: list[tuple[str, list[tuple[str, str]]]] = [
+    ("cart pendulum, encoder", [(f"data/cart_pendulum_{a}deg.csv", "examples/cart_pendulum.toml") for a in (20, 40, 80, 180)]),
+    ("bifilar suspension, IMU", [(f"data/bifilar_yaw_{a}deg.csv", "examples/bifilar_yaw.toml") for a in (65, 86)]),
+    ("wood pendulum, as tracked", [(f"data/wood_pendulum_{a}deg.csv", "examples/wood_pendulum.toml") for a in (60, 120)]),
+    ("wood pendulum, view measured", [(f"data/wood_markers_{a}deg.csv", "examples/wood_pendulum.toml") for a in (60, 120)]),
+    ("bicycle rod, torsion, angle", _bicycle("rod_torsional", 5, False)),
+    ("bicycle rod, torsion, rate", _bicycle("rod_torsional", 5, True)),
+    ("front wheel, torsion, angle", _bicycle("fwheel_torsional", 3, False)),
+    ("front wheel, torsion, rate", _bicycle("fwheel_torsional", 3, True)),
+    ("front wheel, compound, angle", _bicycle("fwheel_compound", 3, False)),
+    ("front wheel, compound, rate", _bicycle("fwheel_compound", 3, True)),
+]
+
+METHODS = ("damped sinusoid", "moi --no-discover", "moi")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    omega_n: float  # rad/s
+    u: float        # rad/s: the u the method states
+    note: str = ""  # effects added, or why there is no estimate
+
+
+def _columns(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """t and the reading (angle, or a gyro's rate) of a release: the plain fit reads any sensor."""
+    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+    header = [h.strip() for h in lines[0].split(",")]
+    if "rate" in header and "angle" not in header:
+        data = np.array([[float(c) for c in ln.split(",")] for ln in lines[1:]])
+        return data[:, header.index("t")], data[:, header.index("rate")]
+    trace = load_source(path)  # an angle trace, or a marker track (its angle with the camera's view measured)
+    return trace.t, trace.angle
+
+
+def damped_sinusoid(t: np.ndarray, y: np.ndarray) -> Estimate:
+    """ω_n of y = c + e^(−σt)(A cos ω_d t + B sin ω_d t) fitted to every sample (variable projection)."""
+    t = t - t[0]
+    ok = np.isfinite(y)
+    t, y = t[ok], y[ok]
+    wd0 = find_swings(t, y).damped_frequency
+    if not math.isfinite(wd0):
+        return Estimate(float("nan"), float("nan"), "no swing")
+
+    def basis(p: np.ndarray) -> np.ndarray:
+        e = np.exp(-p[0] * t)
+        return np.column_stack([np.ones_like(t), e * np.cos(p[1] * t), e * np.sin(p[1] * t)])
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        b = basis(p)
+        coef, *_ = np.linalg.lstsq(b, y, rcond=None)
+        return b @ coef - y
+
+    sol = least_squares(residual, [0.05, wd0], x_scale=[0.05, 0.01 * wd0], method="lm")
+    sigma, wd = sol.x
+    coef, *_ = np.linalg.lstsq(basis(sol.x), y, rcond=None)
+    c, a, b = coef
+
+    def full(q: np.ndarray) -> np.ndarray:  # every parameter, for the covariance
+        e = np.exp(-q[0] * t)
+        return q[2] + e * (q[3] * np.cos(q[1] * t) + q[4] * np.sin(q[1] * t)) - y
+
+    q = np.array([sigma, wd, c, a, b])
+    jac = np.empty((t.size, q.size))
+    for i in range(q.size):
+        h = 1e-7 * max(abs(q[i]), 1e-3)
+        dq = np.zeros_like(q)
+        dq[i] = h
+        jac[:, i] = (full(q + dq) - full(q - dq)) / (2 * h)
+    r = full(q)
+    s2 = float(r @ r) / max(t.size - q.size, 1)
+    cov = s2 * np.linalg.pinv(jac.T @ jac)
+    wn = math.hypot(wd, sigma)
+    grad = np.array([sigma / wn, wd / wn])
+    return Estimate(wn, float(math.sqrt(max(grad @ cov[:2, :2] @ grad, 0.0))))
+
+
+def _failed(exc: Exception) -> Estimate:
+    # e.g. a sensor this version cannot read: the message without the file's path
+    return Estimate(float("nan"), float("nan"), f"error: {str(exc).split(': ', 1)[-1][:50]}")
+
+
+def moi_alone(trace_file: Path, rig_file: Path) -> Estimate:
+    """``moi identify FILE --no-discover``."""
+    try:
+        res = identify(load_source(trace_file), read_rig(rig_file), Options(discover=False))
+    except MeasurementError as exc:
+        return _failed(exc)
+    return Estimate(res.omega_n, res.omega_n_u or res.omega_n_std, ", ".join(res.added_effects) or "-")
+
+
+def moi_together(releases: list[tuple[str, str]]) -> tuple[list[Estimate], str]:
+    """``moi identify A B C``: each release's own ω_n ± u, and the set's flags."""
+    try:
+        j = identify_releases([load_source(ROOT / f) for f, _ in releases], read_rig(ROOT / releases[0][1]))
+    except MeasurementError as exc:
+        return [_failed(exc)] * len(releases), ""
+    return [Estimate(r.omega_n, r.omega_n_u or r.omega_n_std, ", ".join(r.added_effects) or "-") for r in j.releases], \
+        ", ".join(j.flags)
+
+
+def spread(estimates: list[Estimate]) -> tuple[float, float]:
+    """(max − min)/mean of ω_n (%), and the worst pairwise |Δω_n|/√(u_i² + u_j²)."""
+    w = [e.omega_n for e in estimates]
+    if not all(math.isfinite(x) for x in w):
+        return float("nan"), float("nan")
+    z = max((abs(a.omega_n - b.omega_n) / math.hypot(a.u, b.u) for a, b in itertools.combinations(estimates, 2)),
+            default=float("nan"))
+    return 100 * (max(w) - min(w)) / statistics.fmean(w), z
+
+
+def measure(sets: list[tuple[str, list[tuple[str, str]]]]) -> list[tuple[str, dict[str, list[Estimate]], str]]:
+    out = []
+    for name, releases in sets:
+        per: dict[str, list[Estimate]] = {m: [] for m in METHODS}
+        for trace_file, rig_file in releases:
+            per["damped sinusoid"].append(damped_sinusoid(*_columns(ROOT / trace_file)))
+            per["moi --no-discover"].append(moi_alone(ROOT / trace_file, ROOT / rig_file))
+        per["moi"], flags = moi_together(releases)
+        out.append((name, per, flags))
+    return out
+
+
+def table(rows: list[tuple[str, dict[str, list[Estimate]], str]]) -> str:
+    head = ("| object (releases) | " + " | ".join(f"{m}: spread, worst z" for m in METHODS)
+            + " | moi / sinusoid | moi's added effects; the set's flags |")
+    lines = [head, "|" + "---|" * (len(METHODS) + 3)]
+    ratios: dict[str, list[float]] = {m: [] for m in METHODS}
+    for name, per, flags in rows:
+        cells = []
+        for m in METHODS:
+            s, z = spread(per[m])
+            ratios[m].append(s)
+            cells.append("–" if not math.isfinite(s) else f"{s:.3f} %, {z:.2f}")
+        s_moi, s_sin = spread(per["moi"])[0], spread(per["damped sinusoid"])[0]
+        ratio = f"{s_moi / s_sin:.2f}" if math.isfinite(s_moi) and s_sin > 0 else "–"
+        notes = "; ".join(e.note for e in per["moi"]) + (f"; **{flags}**" if flags else "")
+        lines.append(f"| {name} ({len(per['moi'])}) | " + " | ".join(cells) + f" | {ratio} | {notes} |")
+    med = []
+    for m in METHODS:
+        finite = [s for s in ratios[m] if math.isfinite(s)]
+        med.append(f"{statistics.median(finite):.3f} % ({len(finite)} objects)" if finite else "–")
+    lines.append("| median spread | " + " | ".join(med) + " | | |")
+    return "\n".join(lines)
+
+
+def detail(rows: list[tuple[str, dict[str, list[Estimate]], str]]) -> str:
+    lines = []
+    for name, per, _ in rows:
+        lines.append(f"{name}")
+        for i in range(len(per["moi"])):
+            cells = "  ".join(f"{per[m][i].omega_n:9.5f} ± {per[m][i].u:<8.2g}" for m in METHODS)
+            lines.append(f"  release {i + 1}: {cells}  {per['moi'][i].note}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    argv = sys.argv[1:] if argv is None else argv
+    sets = [s for s in SETS if not argv or any(a in s[0] for a in argv)]
+    t0 = time.perf_counter()
+    rows = measure(sets)
+    print("spread of ω_n between releases of one object, (max − min)/mean, and the worst pairwise |Δω_n|/u;")
+    print(f"per release ω_n ± u [rad/s]: {', '.join(METHODS)} ({time.perf_counter() - t0:.0f} s)")
+    print(detail(rows))
+    print()
+    print(table(rows))
+
+
+if __name__ == "__main__":
+    main()

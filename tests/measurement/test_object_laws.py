@@ -1,0 +1,88 @@
+"""A restoring law is kept only where it is a property of the object.
+
+Within one record: a law that moves ω_n must be determined by the record
+(a slow sensor line buys a cubic spring barely told from zero), and a law
+whose model's halves disagree is still kept where they disagree far more
+without it. Across the releases of one object: its value keeps one sign
+and a consistent size, or it is withdrawn from every release that kept it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from measurement import Pendulum, Rig, Trace, identify, simulate_trace
+from measurement.object_laws import LawAcross
+
+
+def test_a_law_that_changes_sign_between_releases_is_not_one_of_the_object():
+    # the front wheel on a torsion rod: k3/J fitted to three releases, +818, +3220 and −440
+    wheel = LawAcross("cubic_stiffness", "k3_per_J", (818.0, 3220.0, -440.0), (160.0, 350.0, 100.0), (0, 1, 2))
+    assert not wheel.stable and "not a law of the object" in wheel.describe()
+    # the calibration rod: softening in all five, within a factor 1.4
+    rod = LawAcross("cubic_stiffness", "k3_per_J", (-10.8, -9.5, -7.8, -9.7, -7.9), (0.6, 0.4, 0.3, 0.5, 0.3),
+                    (0, 1, 2, 3, 4))
+    assert rod.stable and rod.everywhere
+    # one sign but sizes a factor 10 apart: not one law either
+    assert not LawAcross("cubic_stiffness", "k3_per_J", (5.0, 50.0), (1.0, 1.0), (0, 1)).stable
+    # values not told from zero say nothing against it, but it is not the object's law in every release
+    loose = LawAcross("cubic_stiffness", "k3_per_J", (5.0, -1.0, None), (1.0, 2.0, None), (0,))
+    assert loose.stable and not loose.everywhere
+
+
+def _hardening(seed: int) -> tuple[Trace, Rig, float]:
+    rig = Rig(kind="torsion", stiffness=0.3651)
+    J = 0.0125
+    spring = Pendulum(rig, J, {"viscous": {"c_per_J": 0.1}, "cubic_stiffness": {"k3": 1.5 * 0.3651}})
+    return simulate_trace(spring, theta0=math.radians(5), duration=30.0, rate=200.0, noise_std=2e-4,
+                          quantisation_bits=17, seed=seed), rig, J
+
+
+def test_a_hardening_torsion_spring_is_found_and_kept():
+    trace, rig, J = _hardening(seed=1)
+    r = identify(trace, rig)
+    assert "cubic_stiffness" in r.added_effects
+    assert abs(r.J / J - 1) < 2e-3
+    k3 = r.stiffness["cubic_stiffness"]["k3"]
+    assert abs(k3.value - 1.5 * 0.3651) < 4 * k3.std
+    # the measurand is the small-swing limit; the swing's frequency at its largest amplitude is beside it
+    # (3/8 · 1.5 · (5°)² = +0.43 % by the describing function)
+    line = next(s for s in r.structure if "small-swing limit" in s)
+    assert "+0.4" in line
+
+
+def test_a_slow_sensor_line_and_drift_buy_no_amplitude_law():
+    rig = Rig(kind="torsion", stiffness=11.67)
+    J = 0.27
+    rod = Pendulum(rig, J, {"viscous": {"c_per_J": 0.1}})
+    clean = simulate_trace(rod, theta0=math.radians(5), duration=30.0, rate=200.0, noise_std=1e-4, seed=2)
+    rng = np.random.default_rng(2)
+    # a 0.2 Hz line in the sensor, 3.4 % of the release angle, and a drifting zero
+    line = 3e-3 * np.sin(2 * math.pi * 0.2 * clean.t + rng.uniform(0, 2 * math.pi)) + 2e-5 * clean.t
+    r = identify(Trace(clean.t, clean.angle + line, source="slow line"), rig)
+    assert "cubic_stiffness" not in r.effects
+    assert abs(r.J - J) < 2 * r.J_u
+    # where the loop added it, the report says why it went, and its ω_n is in u
+    for c in r.model_form["competitors"]:
+        if c["change"].startswith("cubic_stiffness"):
+            assert "does not determine" in c["change"] and abs(c["delta"]) <= r.omega_n_std_model
+
+
+@pytest.mark.parametrize("part", ["rod_torsional_first_5", "fwheel_compound_first_1"])
+def test_a_rate_record_and_its_integrated_angle_give_one_omega_n(part):
+    from pathlib import Path
+
+    from service.sources.dispatch import load_source
+    from service.sources.files import read_rig
+
+    data = Path(__file__).resolve().parents[2] / "data"
+    rig = read_rig(data / f"bicycle_{part}_rig.toml")
+    rate = identify(load_source(data / f"bicycle_{part}_rate.csv"), rig)
+    angle = identify(load_source(data / f"bicycle_{part}.csv"), rig)
+    assert rate.measures == "rate" and rate.offset.unit == "rad/s" and angle.measures == "angle"
+    # the gyro's bias, about 1 °/s, is the rate's fitted zero
+    assert 0.002 < abs(rate.offset.value) < 0.05
+    assert abs(rate.omega_n - angle.omega_n) <= 2 * math.hypot(rate.omega_n_u, angle.omega_n_u)
