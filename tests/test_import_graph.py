@@ -132,12 +132,18 @@ LAYERS: dict[str, set[str]] = {
     "states": set(),
     "notify": set(),
     "core": set(),
+    # the rule for every name that reaches a topic, a header, a file name or an export; the log's repeat filter;
+    # the capture's contention watch
+    "names": {"measurement"},
+    "logs": set(),
+    "contention": set(),
     "sources": {"config", "drivers", "errors", "measurement"},
-    "config": {"devices", "drivers", "errors", "firmware_host", "measurement", "parts", "sources",
-               # the publishers' settings tables (``registry``; ``check`` reads Modbus's network exposure)
-               "publish", "publish.modbus"},
+    "config": {"devices", "drivers", "errors", "firmware_host", "measurement", "names", "parts", "sources",
+               # the publishers' settings tables (``registry``; ``check`` reads Modbus's network exposure, and the
+               # web page's token and users files as its start does)
+               "publish", "publish.modbus", "publish.web"},
     "devices": {"config", "drivers", "errors", "firmware_host", "measurement"},
-    "parts": {"config", "errors", "measurement", "sources"},
+    "parts": {"config", "errors", "measurement", "names", "sources"},
     # the store writes the payload's JSON as the publishers do (``payload.dumps``)
     "persistence": {"errors", "publish", "sources"},
     # the port, payload, report, plot and export: what every publisher shares (the payload's flag bits are the
@@ -147,14 +153,15 @@ LAYERS: dict[str, set[str]] = {
     "publish.modbus": {"config", "core", "drivers", "errors", "measurement", "parts", "persistence", "publish",
                        "states"},
     # the Home Assistant discovery lists the flags in the Modbus map's bit order
-    "publish.mqtt": {"config", "core", "errors", "measurement", "parts", "persistence", "publish", "publish.modbus"},
-    "publish.opcua": {"config", "drivers", "errors", "persistence", "publish"},
+    "publish.mqtt": {"config", "core", "errors", "logs", "measurement", "parts", "persistence", "publish",
+                     "publish.modbus"},
+    "publish.opcua": {"config", "drivers", "errors", "names", "persistence", "publish", "states"},
     # the web page shows the angle sensor's set-up view (``devices.sensors``)
-    "publish.web": {"config", "core", "devices", "drivers", "errors", "firmware_host", "measurement", "parts",
-                    "persistence", "publish", "service", "sources", "states"},
-    "daemon": {"config", "core", "devices", "errors", "firmware_host", "measurement", "notify", "parts",
+    "publish.web": {"config", "core", "devices", "drivers", "errors", "firmware_host", "measurement", "names",
+                    "parts", "persistence", "publish", "service", "sources", "states"},
+    "daemon": {"config", "contention", "core", "devices", "errors", "firmware_host", "measurement", "notify", "parts",
                "persistence", "publish", "service"},
-    "commands": {"config", "core", "daemon", "devices", "drivers", "errors", "firmware_host", "measurement",
+    "commands": {"config", "core", "daemon", "devices", "drivers", "errors", "firmware_host", "logs", "measurement",
                  "parts", "persistence", "publish", "publish.modbus", "publish.web", "sources"},
     "cli": {"errors", "measurement", "service"},
 }
