@@ -217,3 +217,27 @@ def test_a_tensor_set_shares_k_and_the_tare_with_their_correlation():
                            stiffness_std=rig.stiffness_std, tare=rig.tare_inertia, tare_std=rig.tare_inertia_std,
                            cov_k_tare=rig.stiffness_tare_covariance).budgets()["J_object"]
         assert math.sqrt(shared.common_covariance(J)[i, i]) == pytest.approx(b.u, rel=1e-4)
+
+
+def test_the_budgets_with_their_correlation_read_back_as_the_json_they_were_written_as():
+    # k and the tare correlated, an object moved to its own axis: every budget a result can carry, with
+    # Type B lines (infinite degrees of freedom, written null); what from_dict reads, to_dict writes again
+    import json
+
+    from measurement import Pendulum, identify, simulate_trace
+    from measurement.result import IdentificationResult
+    from measurement.rig import ObjectTransfer
+
+    rig = Rig(kind="torsion", stiffness=0.3651, stiffness_std=3.373e-4, tare_inertia=4.5043e-3,
+              tare_inertia_std=4.177e-6, stiffness_tare_covariance=1.4076e-9,
+              object=ObjectTransfer(mass=0.8, axis_offset=0.05, mass_std=1e-3), declared=("viscous",))
+    trace = simulate_trace(Pendulum(rig, 0.0125, {"viscous": {"c": 1.5e-4}}), theta0=0.2, duration=8, rate=100,
+                           noise_std=1e-4, seed=2)
+    r = identify(trace, rig)
+    assert set(r.uncertainty_budget) == {"J", "J_object", "J_object_axis"}
+    assert r.uncertainty_budget["J_object"].correlations  # the k–I0 term
+    text = r.to_json()
+    back = IdentificationResult.from_dict(json.loads(text))
+    assert back.to_json() == text and back.report() == r.report()
+    assert back.uncertainty_budget["J_object"].U == r.uncertainty_budget["J_object"].U
+    assert back.uncertainty_budget["J"].lines == r.uncertainty_budget["J"].lines
