@@ -12,7 +12,7 @@ gives the spread (max − min)/mean of ω_n and the worst pairwise
 |Δω_n|/√(u_i² + u_j²) (for the damped sinusoid its fit σ under white noise,
 which is what such a fit would state).
 
-    .venv/bin/python bench/bench_precision.py            # every set (about 3 min)
+    .venv/bin/python bench/bench_precision.py            # every set (several minutes)
     .venv/bin/python bench/bench_precision.py bicycle    # the sets whose name holds "bicycle"
 """
 
