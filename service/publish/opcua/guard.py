@@ -72,7 +72,7 @@ class Limits:
     """The guard's limits (``[opcua]``'s keys: ``OpcUaSettings``)."""
 
     max_connections: int = 16
-    login_timeout: float = 10.0
+    login_timeout: float = 30.0
     max_nodes_per_request: int = 1000
     max_subscriptions: int = 50
 
