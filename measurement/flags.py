@@ -73,7 +73,8 @@ FLAGS: dict[str, str] = {
                         "oblique view (measured and removed) explains: perspective (parts of the swing nearer the "
                         "camera) or a position-dependent tracker bias; the angle keeps an error of that kind "
                         "(acquisition.view.distance_pattern)",
-    CAPTURE_SLOWED: "clients (OPC UA, the web page) were served while the sensor was read, and the capture's "
+    CAPTURE_SLOWED: "clients (OPC UA, the web page) were served or connected while the sensor was read, and the "
+                    "capture's "
                     "sample rate fell below 80 % of the median of the last captures without them "
                     "(acquisition.*.rate_hz): J rests on fewer samples than usual",
     NEGATIVE_INERTIA: "J_object (J − tare) or J_object_axis came out negative, which no part can have: the rig file's tare "

@@ -301,3 +301,42 @@ def test_the_connection_caps_must_leave_descriptors_for_the_measurement():
                           source="t")
     check = descriptor_budget(greedy, limit=1024)
     assert not check.ok and "lower max_connections" in check.detail
+
+
+# --- the log ------------------------------------------------------------------------------------------------------
+
+def test_what_a_client_repeats_is_logged_once_a_minute_with_a_count(tmp_path, broker, appliance_factory, caplog):
+    """200 part ID commands with one id (duplicates after the first) and 200 retained commands: a line each for
+    the first, the rest held back; the repeat filter of the daemon's handler says how many lines it held."""
+    import logging
+
+    from service.logs import RepeatFilter
+
+    from .test_service_mqtt_replies import BASE, V5Client
+
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
+    assert app.app.mqtt.subscribed_event.wait(10)
+    c = V5Client(broker.port, [f"{BASE}/reply"])
+    try:
+        with caplog.at_level("INFO", logger="moi.mqtt"):
+            for _ in range(200):
+                c.send("part_id", {"id": "same", "part_id": "SN-1"})
+            for _ in range(200):
+                c.client.publish(f"{BASE}/cmd/part_id", "SN-2", qos=1, retain=True).wait_for_publish(5)
+            c.client.publish(f"{BASE}/cmd/part_id", "", qos=1, retain=True).wait_for_publish(5)
+            c.wait_for(lambda g: g[1].get("reason") == "duplicate")
+            wait_until(lambda: app.app.mqtt._say._seen.get(
+                "MQTT: duplicate %s command id %s ignored", [0, 0])[1] >= 198, 30, what="the duplicates")
+    finally:
+        c.close()
+    lines = [r.getMessage() for r in caplog.records if r.name == "moi.mqtt"]
+    assert sum("duplicate" in m for m in lines) == 1 and sum("retained" in m for m in lines) <= 1, lines
+
+    clock = [0.0]
+    f = RepeatFilter(interval=60.0, clock=lambda: clock[0])
+    rec = lambda msg, *args: logging.LogRecord("asyncua.server", logging.WARNING, "x", 1, msg, args, None)  # noqa: E731
+    assert f.filter(rec("Closing idle connection from %s", ("127.0.0.1", 1)))
+    assert not any(f.filter(rec("Closing idle connection from %s", ("127.0.0.1", p))) for p in range(2, 500))
+    clock[0] = 61.0
+    last = rec("Closing idle connection from %s", ("127.0.0.1", 501))
+    assert f.filter(last) and "(and 498 more like it in the last 60 s)" in last.getMessage()

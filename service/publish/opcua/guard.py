@@ -72,7 +72,7 @@ class Limits:
     """The guard's limits (``[opcua]``'s keys: ``OpcUaSettings``)."""
 
     max_connections: int = 16
-    login_timeout: float = 10.0
+    login_timeout: float = 30.0
     max_nodes_per_request: int = 1000
     max_subscriptions: int = 50
 
@@ -115,6 +115,7 @@ class Guard:
         self._buckets: dict[str, list[float]] = {}  # host → [tokens, when counted]
         self.too_fast = _Refusals("connection(s) closed: their host opened them too fast", clock)
         self.delayed = 0  # messages before a login that waited for their host's wrong logins
+        self.connected_in_capture = 0  # connections opened while the sensor was read (each costs the server's thread)
 
     def install(self, server: Server) -> None:
         lim = self.limits
@@ -250,6 +251,8 @@ class _Protocol(OPCUAProtocol):
 
     def connection_made(self, transport: Any) -> None:
         PEER.set(host_of(transport.get_extra_info("peername")))  # the task made below inherits it
+        if self.guard.capturing():
+            self.guard.connected_in_capture += 1
         if not self.guard.admit(PEER.get()):
             self.peer_name = transport.get_extra_info("peername")
             transport.close()  # nothing of asyncua's is made for it

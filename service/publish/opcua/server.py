@@ -451,7 +451,7 @@ class OpcUaServer(Publisher):
         return f"OPC UA {self.endpoint}"
 
     def capture_requests(self) -> int:
-        return self.guard.gated
+        return self.guard.gated + self.guard.connected_in_capture
 
     def health(self) -> dict[str, Any]:
         return {"endpoint": self.endpoint, "results_unacknowledged": len(self._unacknowledged),

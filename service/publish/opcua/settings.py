@@ -31,7 +31,7 @@ class OpcUaSettings:
     serial_number: str | None = None
     results_kept: int = 100
     max_connections: int = 16
-    login_timeout: float = 10.0
+    login_timeout: float = 30.0
     max_nodes_per_request: int = 1000
 
 
