@@ -250,6 +250,17 @@ class Views:
         """The unit a result is shown in: its recipe's, else the set-up's."""
         return Q.display_unit(payload, self.server.settings.display_unit)
 
+    def decimals(self, view: dict[str, Any]) -> dict[str, Any]:
+        """``view`` (a ``Q.part_view``) with its recipe's ``display_decimals`` from the recipe directory (the
+        published payload does not carry them: a page setting, not part of the result)."""
+        recipe = view.get("recipe")
+        book = getattr(self.app, "parts", None)
+        if recipe and book is not None:
+            found = next((r for r in book.book.recipes if r.name == recipe.get("name")), None)
+            if found is not None and found.display_decimals is not None:
+                view["recipe"] = {**recipe, "display_decimals": found.display_decimals}
+        return view
+
     def summary(self) -> dict[str, Any]:
         """Home: the operator's panel (the part in hand: ready, in progress or its verdict; a calibration that
         refuses Measure), the shift's counters, the last parts and the calibration."""
@@ -267,7 +278,7 @@ class Views:
             until = dt.date.fromisoformat(calibration["valid_until"])
             calibration = {**calibration, "days_left": (until - dt.datetime.now(dt.UTC).date()).days}
         tile = parts[0] if parts else None
-        tile_view = Q.part_view(tile.payload) if tile else None
+        tile_view = self.decimals(Q.part_view(tile.payload)) if tile else None
         tile_unit = self.unit(tile.payload if tile else None)
         part_id = live.get("part_id")
         recipe = live.get("recipe") or {}
@@ -550,7 +561,7 @@ class Views:
     def _result_context(self, m: "Measurement") -> dict[str, Any]:
         p = m.payload or {}
         unit = self.unit(p)
-        view = Q.part_view(p)
+        view = self.decimals(Q.part_view(p))
         if view["kind"] == "release" and m.part_uuid and self.app.store is not None:
             # an earlier release of a part that has been judged since: where its verdict is
             later = self.app.store.list(limit=50, part_id=m.part_id, recipe=m.recipe, parts_only=True)
@@ -586,8 +597,10 @@ class Views:
         fut = self.server.plot_future(m.uuid)
         if fut is not None:  # the evidence plot is being drawn: the report has it
             await asyncio.wrap_future(fut)
+        decimals = self.decimals(Q.part_view(m.payload))["recipe"] or {}
         body = await self._in_child(report_file, str(self.app.config.state_dir), m.uuid,
-                                    self.server.settings.display_unit, self.server.settings.time_format)
+                                    self.server.settings.display_unit, self.server.settings.time_format,
+                                    decimals.get("display_decimals"))
         return web.Response(body=body, content_type="application/pdf", headers={
             "Content-Disposition": f'attachment; filename="moi-{m.seq}-{m.uuid[:8]}-report.pdf"'})
 
@@ -813,7 +826,7 @@ class Views:
         rows = []
         active = getattr(book, "recipe", None)
         for r in book.book.recipes if book is not None else ():
-            d = r.to_dict()
+            d = {**r.to_dict(), "display_decimals": r.display_decimals}
             unit = Q.display_unit({"recipe": d}, self.server.settings.display_unit)
             rows.append({"r": d, "unit": unit, "places": Q.places(d, unit), "active": active is not None
                          and active.name == r.name, "rig": Path(r.rig_path).name if r.rig_path else None})
