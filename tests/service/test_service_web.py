@@ -384,7 +384,13 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert c.json("/api/part", data={"recipe": "rotor-cal"}, headers=bearer)[0] == 202
     # (the main loop applies the selection: the page shows it once it did)
     wait_until(lambda: c.json("/api/state")[1]["recipe"] == {"name": "rotor-cal", "number": 4}, 10, what="rotor-cal")
-    assert "DUE</b> (valid until 2021-01-14)" in c.request("/")[2].decode()
+    home = c.request("/")[2].decode()
+    assert "DUE</b> (valid until 2021-01-14)" in home
+    # an expired calibration: a banner that says what to do and whom to call; Measure refused, nothing measured
+    assert 'id="blocked"' in home and "calibration expired on 2021-01-14" in home and "Call the quality" in home
+    done = app.store.count()
+    status, body = c.json("/api/measure", method="POST", headers=bearer)
+    assert status == 409 and "expired on 2021-01-14" in body["error"] and app.store.count() == done
     assert c.request("/home/summary")[2].decode().startswith('<div class="summary" id="summary">')
     # the history keeps the part's verdict and each release's check apart
     hist = c.request("/history")[2].decode()

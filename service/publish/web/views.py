@@ -314,15 +314,21 @@ class Views:
             return None  # the check standard is what clears a failed one: it is always measured
         contact = self.server.settings.contact
         check = calibration.get("check_standard") or {}
+        until = calibration.get("valid_until")
+        expired = bool(until) and dt.date.fromisoformat(until) < dt.datetime.now(dt.UTC).date()
+        what, do = [], []
+        if expired or not check or check.get("passed"):
+            what.append(f"The rig's calibration expired on {until or '–'}.")
+            do.append("calibrate the rig")
         if check and not check.get("passed"):
-            what = (f"The check standard {check.get('name') or ''} failed (E_n = {Q.number(check.get('E_n'), '.2g')}, "
-                    f"{self.when(check.get('finished_at'))}): the rig no longer measures within its uncertainty.")
-            do = f"Do not measure parts. Call {contact} to find the cause and measure the check standard again."
-        else:
-            what = f"The rig's calibration expired on {calibration.get('valid_until') or '–'}."
-            do = (f"Do not measure parts: every result would be INVALID, and measuring again cannot change that. "
-                  f"Call {contact} to calibrate the rig.")
-        return {"what": what, "do": do}
+            what.append(f"The check standard {check.get('name') or ''} failed (E_n = "
+                        f"{Q.number(check.get('E_n'), '.2g')}, {self.when(check.get('finished_at'))}): the rig no "
+                        "longer measures within its uncertainty.")
+            do.append("find the cause and measure the check standard again")
+        what_text = " ".join(what)
+        do_text = (f"Do not measure parts: every result would be INVALID, and measuring again cannot change that. "
+                   f"Call {contact} to {' and to '.join(do)}.")
+        return {"what": what_text, "do": do_text}
 
     def when(self, ts: float | None) -> str:
         """A time as a person reads it on the pages: local, in [web] time_format."""
