@@ -315,7 +315,7 @@ class Views:
         contact = self.server.settings.contact
         check = calibration.get("check_standard") or {}
         until = calibration.get("valid_until")
-        expired = bool(until) and dt.date.fromisoformat(until) < dt.datetime.now(dt.UTC).date()
+        expired = isinstance(until, str) and dt.date.fromisoformat(until) < dt.datetime.now(dt.UTC).date()
         what, do = [], []
         if expired or not check or check.get("passed"):
             what.append(f"The rig's calibration expired on {until or '–'}.")
