@@ -227,16 +227,21 @@ def individuals(values: Sequence[float], lsl: float | None = None, usl: float | 
                       c["D3"] * mr_mean, lsl, usl, cp, cpk, pp, ppk, outside, tuple(run_rules(x, mean, sw)))
 
 
+def _subgroups(subgroups: Sequence[Sequence[float]], chart: str) -> tuple[list[list[float]], int]:
+    """The subgroups as floats and their one size; SpcError with fewer than 2 or sizes that differ."""
+    groups = [[float(v) for v in g] for g in subgroups]
+    if len(groups) < 2:
+        raise SpcError(f"an {chart} chart needs at least 2 subgroups, got {len(groups)}")
+    sizes = {len(g) for g in groups}
+    if len(sizes) != 1:
+        raise SpcError(f"{chart} needs subgroups of one size, got sizes {sorted(sizes)}")
+    return groups, sizes.pop()
+
+
 def xbar_s(subgroups: Sequence[Sequence[float]], lsl: float | None = None, usl: float | None = None) -> SpcSummary:
     """X̄–S chart of equal-size subgroups (2 … 25 values each, at least 2 subgroups); ``ranges``: the
     subgroups' standard deviations."""
-    groups = [[float(v) for v in g] for g in subgroups]
-    if len(groups) < 2:
-        raise SpcError(f"an X̄–S chart needs at least 2 subgroups, got {len(groups)}")
-    sizes = {len(g) for g in groups}
-    if len(sizes) != 1:
-        raise SpcError(f"X̄–S needs subgroups of one size, got sizes {sorted(sizes)}")
-    n = sizes.pop()
+    groups, n = _subgroups(subgroups, "X̄–S")
     if not 2 <= n <= SMALL_SAMPLE:
         raise SpcError(f"X̄–S needs subgroups of 2 to {SMALL_SAMPLE} values, got {n}")
     k = c4(n)
@@ -258,13 +263,7 @@ def xbar_s(subgroups: Sequence[Sequence[float]], lsl: float | None = None, usl: 
 
 def xbar_r(subgroups: Sequence[Sequence[float]], lsl: float | None = None, usl: float | None = None) -> SpcSummary:
     """X̄–R chart of equal-size subgroups (2 … 10 values each, at least 2 subgroups)."""
-    groups = [[float(v) for v in g] for g in subgroups]
-    if len(groups) < 2:
-        raise SpcError(f"an X̄–R chart needs at least 2 subgroups, got {len(groups)}")
-    sizes = {len(g) for g in groups}
-    if len(sizes) != 1:
-        raise SpcError(f"X̄–R needs subgroups of one size, got sizes {sorted(sizes)}")
-    n = sizes.pop()
+    groups, n = _subgroups(subgroups, "X̄–R")
     c = chart_constants(n)
     means = [sum(g) / n for g in groups]
     ranges = [max(g) - min(g) for g in groups]

@@ -169,7 +169,7 @@ class Recipe:
         return {"name": self.name, "number": self.number, "version": self.version, "path": self.path,
                 "releases": self.releases, "rig_path": self.rig_path,
                 "declared": list(self.declared) if self.declared is not None else None,
-                "display_unit": self.display_unit, "display_decimals": self.display_decimals,
+                "display_unit": self.display_unit,
                 **(self.spec.to_dict() if self.spec is not None else {}), "quality": self.quality.to_dict(),
                 **({"tensor": self.tensor.to_dict()} if self.tensor is not None else {}),
                 **({"check_standard": dict(self.check_standard)} if self.check_standard is not None else {})}

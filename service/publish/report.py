@@ -17,12 +17,14 @@ A4 = (8.27, 11.69)
 VERDICT_COLOURS = {"OK": "#1a7f37", "NOK": "#b00020", "INVALID": "#9a6700"}
 
 
-def report_lines(m: Any, unit: str, lookup: Any = None,
-                 time_format: str = Q.TIME_FORMAT) -> tuple[dict[str, Any], list[tuple[str, str]], list[str]]:
+def report_lines(m: Any, unit: str, lookup: Any = None, time_format: str = Q.TIME_FORMAT,
+                 decimals: int | None = None) -> tuple[dict[str, Any], list[tuple[str, str]], list[str]]:
     """(the part view, the (label, text) facts, the release lines) of a ``StoredMeasurement``; ``lookup(uuid)``:
     a release's stored measurement (its flags)."""
     p = m.payload or {}
     v = Q.part_view(p)
+    if v["recipe"] and decimals is not None:  # the recipe's display_decimals (not in the stored payload)
+        v["recipe"] = {**v["recipe"], "display_decimals": decimals}
     r = v["recipe"] or {}
     cal = p.get("calibration") or None
     facts = [("measurement", f"#{m.seq} {m.uuid}"), ("part ID", p.get("part_id") or Q.MISSING),
@@ -63,7 +65,7 @@ def report_lines(m: Any, unit: str, lookup: Any = None,
 
 
 def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = None,
-               time_format: str = Q.TIME_FORMAT) -> bytes:
+               time_format: str = Q.TIME_FORMAT, decimals: int | None = None) -> bytes:
     """The report of the stored measurement ``m`` (``StoredMeasurement``) as PDF bytes, on as many A4 pages as
     it takes, each with "page x of y" and the print date (local, ``time_format``), the last with signature
     lines; ``plot_png``: the evidence plot kept with it (None: said on the page)."""
@@ -73,7 +75,7 @@ def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = Non
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
-    v, facts, releases = report_lines(m, unit, lookup, time_format)
+    v, facts, releases = report_lines(m, unit, lookup, time_format, decimals)
     verdict = v.get("verdict")
     if v["kind"] == "part":
         head, colour = v["verdict_words"], VERDICT_COLOURS.get(verdict or "", "k")

@@ -232,25 +232,6 @@ def test_setup_camera_snapshot_and_fault_shown_and_acknowledged(appliance_factor
     assert c.json("/api/abort", method="POST", headers={"Authorization": f"Bearer {token}"})[0] == 202
     running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")
 
-    # the users, for an admin only: add one (a short password refused on the page, the name kept), remove one
-    assert quinn.request("/users")[0] == 403
-    admin = Client(app.web.url)
-    admin.request("/login", {"token": Path(app.web.token_file).read_text().strip(), "csrf": admin.csrf()})
-    page = admin.request("/users")[2].decode()
-    acsrf = page.split('name="csrf-token" content="')[1].split('"')[0]
-    assert "<td>olga</td><td>operator</td>" in page and 'id="lockout"' in page and "Wrong logins" in page
-    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
-                                               "password": "short", "csrf": acsrf})
-    assert status == 400 and "a password needs 10" in page.decode() and 'value="ada"' in page.decode()
-    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
-                                               "password": "ada-password-3", "csrf": acsrf})
-    assert status == 200 and "<td>ada</td><td>quality</td>" in page.decode()  # (after the redirect)
-    assert "ada" in users.read_text() and "ada-password-3" not in users.read_text()
-    login("ada", "ada-password-3")
-    assert admin.request("/users", {"action": "remove", "name": "olga", "csrf": acsrf})[0] == 200
-    c = Client(app.web.url)
-    assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401
-
 
 def test_a_snapshot_asked_before_the_sequencer_exists_is_refused_plainly():
     # the devices built but no sequencer yet (or no longer): a clear 503, never an AttributeError's text
@@ -341,7 +322,7 @@ def _recipes(d: Path) -> Path:
     one whose nominal is 20 % off (NOK), one whose 1σ limit no release meets (INVALID)."""
     d.mkdir()
     (d / "ok.toml").write_text('[recipe]\nname = "rotor-ok"\nnumber = 1\nnominal = 0.0125\ntolerance_percent = 2.0\n'
-                               'releases = 2\ndisplay_unit = "g*cm^2"\n')
+                               'releases = 2\ndisplay_unit = "g*cm^2"\ndisplay_decimals = 1\n')
     (d / "nok.toml").write_text('[recipe]\nname = "rotor-nok"\nnumber = 2\nnominal = 0.015\ntolerance_percent = 2.0\n')
     (d / "bad.toml").write_text('[recipe]\nname = "rotor-bad"\nnumber = 3\nnominal = 0.0125\ntolerance_percent = 2.0\n'
                                 '[quality]\nmax_J_std = 1.0e-15\n')
@@ -384,10 +365,10 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     page = c.request(f"/results/{ok.uuid}")[2].decode()
     part = ok.payload["part"]
     # the part's value ± U in the recipe's unit (g·cm² = 1e7 kg·m²), the limits, the band
-    # (in the recipe's decimals: those that resolve a hundredth of its ± 2500 g·cm² tolerance, U with them)
-    assert f"{part['value'] * 1e7:.0f} g·cm² <span>± {part['U'] * 1e7:.0f} g·cm²" in page
+    # (in the recipe's display_decimals, U with them)
+    assert f"{part['value'] * 1e7:.1f} g·cm² <span>± {part['U'] * 1e7:.1f} g·cm²" in page
     assert "part value from 2 of 2 releases, none excluded" in page and 'id="band"' in page
-    assert f"{0.0125 * 0.98 * 1e7:.7g} g·cm² … {0.0125 * 1.02 * 1e7:.7g} g·cm²" in page
+    assert f"{0.0125 * 0.98 * 1e7:.1f} g·cm² … {0.0125 * 1.02 * 1e7:.1f} g·cm²" in page
     assert 'class="verdict-tile verdict-OK" id="verdict"><span class="tile-word">OK' in page
     page = c.request(f"/results/{bad.uuid}")[2].decode()
     assert '<span class="tile-word">INVALID' in page and "part OK" not in page
@@ -428,7 +409,13 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     assert c.json("/api/part", data={"recipe": "rotor-cal"}, headers=bearer)[0] == 202
     # (the main loop applies the selection: the page shows it once it did)
     wait_until(lambda: c.json("/api/state")[1]["recipe"] == {"name": "rotor-cal", "number": 4}, 10, what="rotor-cal")
-    assert "DUE</b> (valid until 2021-01-14)" in c.request("/")[2].decode()
+    home = c.request("/")[2].decode()
+    assert "DUE</b> (valid until 2021-01-14)" in home
+    # an expired calibration: a banner that says what to do and whom to call; Measure refused, nothing measured
+    assert 'id="blocked"' in home and "calibration expired on 2021-01-14" in home and "Call the quality" in home
+    done = app.store.count()
+    status, body = c.json("/api/measure", method="POST", headers=bearer)
+    assert status == 409 and "expired on 2021-01-14" in body["error"] and app.store.count() == done
     assert c.request("/home/summary")[2].decode().startswith('<div class="summary" id="summary">')
     # the history keeps the part's verdict and each release's check apart
     hist = c.request("/history")[2].decode()

@@ -139,7 +139,8 @@ def replot(state_dir: str, uuid: str, default_rig: Mapping[str, Any], options: A
                       unit=unit, source=source)
 
 
-def report_file(state_dir: str, uuid: str, default_unit: str, time_format: str | None = None) -> bytes:
+def report_file(state_dir: str, uuid: str, default_unit: str, time_format: str | None = None,
+                decimals: int | None = None) -> bytes:
     """The report of the measurement ``uuid`` as PDF (``moi report ID --pdf``)."""
     from service.persistence.store import Store
     from service.publish.report import report_pdf
@@ -151,4 +152,4 @@ def report_file(state_dir: str, uuid: str, default_unit: str, time_format: str |
         m = store.get(uuid)
         got = store.get_attachment(uuid, PLOT_NAME)
         return report_pdf(m, got[0] if got else None, display_unit(m.payload, default_unit), store.get,
-                          **({"time_format": time_format} if time_format else {}))
+                          decimals=decimals, **({"time_format": time_format} if time_format else {}))

@@ -255,6 +255,17 @@ class Views:
         """The unit a result is shown in: its recipe's, else the set-up's."""
         return Q.display_unit(payload, self.server.settings.display_unit)
 
+    def decimals(self, view: dict[str, Any]) -> dict[str, Any]:
+        """``view`` (a ``Q.part_view``) with its recipe's ``display_decimals`` from the recipe directory (the
+        published payload does not carry them: a page setting, not part of the result)."""
+        recipe = view.get("recipe")
+        book = getattr(self.app, "parts", None)
+        if recipe and book is not None:
+            found = next((r for r in book.book.recipes if r.name == recipe.get("name")), None)
+            if found is not None and found.display_decimals is not None:
+                view["recipe"] = {**recipe, "display_decimals": found.display_decimals}
+        return view
+
     def summary(self) -> dict[str, Any]:
         """Home: the operator's panel (the part in hand: ready, in progress or its verdict; a calibration that
         refuses Measure), the shift's counters, the last parts and the calibration."""
@@ -272,7 +283,7 @@ class Views:
             until = dt.date.fromisoformat(calibration["valid_until"])
             calibration = {**calibration, "days_left": (until - dt.datetime.now(dt.UTC).date()).days}
         tile = parts[0] if parts else None
-        tile_view = Q.part_view(tile.payload) if tile else None
+        tile_view = self.decimals(Q.part_view(tile.payload)) if tile else None
         tile_unit = self.unit(tile.payload if tile else None)
         part_id = live.get("part_id")
         recipe = live.get("recipe") or {}
@@ -308,15 +319,21 @@ class Views:
             return None  # the check standard is what clears a failed one: it is always measured
         contact = self.server.settings.contact
         check = calibration.get("check_standard") or {}
+        until = calibration.get("valid_until")
+        expired = isinstance(until, str) and dt.date.fromisoformat(until) < dt.datetime.now(dt.UTC).date()
+        what, do = [], []
+        if expired or not check or check.get("passed"):
+            what.append(f"The rig's calibration expired on {until or '–'}.")
+            do.append("calibrate the rig")
         if check and not check.get("passed"):
-            what = (f"The check standard {check.get('name') or ''} failed (E_n = {Q.number(check.get('E_n'), '.2g')}, "
-                    f"{self.when(check.get('finished_at'))}): the rig no longer measures within its uncertainty.")
-            do = f"Do not measure parts. Call {contact} to find the cause and measure the check standard again."
-        else:
-            what = f"The rig's calibration expired on {calibration.get('valid_until') or '–'}."
-            do = (f"Do not measure parts: every result would be INVALID, and measuring again cannot change that. "
-                  f"Call {contact} to calibrate the rig.")
-        return {"what": what, "do": do}
+            what.append(f"The check standard {check.get('name') or ''} failed (E_n = "
+                        f"{Q.number(check.get('E_n'), '.2g')}, {self.when(check.get('finished_at'))}): the rig no "
+                        "longer measures within its uncertainty.")
+            do.append("find the cause and measure the check standard again")
+        what_text = " ".join(what)
+        do_text = (f"Do not measure parts: every result would be INVALID, and measuring again cannot change that. "
+                   f"Call {contact} to {' and to '.join(do)}.")
+        return {"what": what_text, "do": do_text}
 
     def when(self, ts: float | None) -> str:
         """A time as a person reads it on the pages: local, in [web] time_format."""
@@ -568,7 +585,7 @@ class Views:
     def _result_context(self, m: "Measurement") -> dict[str, Any]:
         p = m.payload or {}
         unit = self.unit(p)
-        view = Q.part_view(p)
+        view = self.decimals(Q.part_view(p))
         if view["kind"] == "release" and m.part_uuid and self.app.store is not None:
             # an earlier release of a part that has been judged since: where its verdict is
             later = self.app.store.list(limit=50, part_id=m.part_id, recipe=m.recipe, parts_only=True)
@@ -604,8 +621,10 @@ class Views:
         fut = self.server.plot_future(m.uuid)
         if fut is not None:  # the evidence plot is being drawn: the report has it
             await asyncio.wrap_future(fut)
+        decimals = self.decimals(Q.part_view(m.payload))["recipe"] or {}
         body = await self._in_child(report_file, str(self.app.config.state_dir), m.uuid,
-                                    self.server.settings.display_unit, self.server.settings.time_format)
+                                    self.server.settings.display_unit, self.server.settings.time_format,
+                                    decimals.get("display_decimals"))
         return web.Response(body=body, content_type="application/pdf", headers={
             "Content-Disposition": f'attachment; filename="moi-{m.seq}-{m.uuid[:8]}-report.pdf"'})
 
@@ -829,7 +848,7 @@ class Views:
         rows = []
         active = getattr(book, "recipe", None)
         for r in book.book.recipes if book is not None else ():
-            d = r.to_dict()
+            d = {**r.to_dict(), "display_decimals": r.display_decimals}
             unit = Q.display_unit({"recipe": d}, self.server.settings.display_unit)
             rows.append({"r": d, "unit": unit, "places": Q.places(d, unit), "active": active is not None
                          and active.name == r.name, "rig": Path(r.rig_path).name if r.rig_path else None})
