@@ -199,6 +199,11 @@ class CameraAngleSensor:
             keep = np.isin(t_rel, trace.t)
             tracking = live.subset(keep)
             tracking.t = t_rel[keep].tolist()
+            if tracking.t:
+                # the frames of the kept record, on its time axis: what the tracked share is judged against
+                seen = np.asarray(live.seen_times, dtype=float) - origin
+                span = (seen >= tracking.t[0] - 1e-9) & (seen <= tracking.t[-1] + 1e-9)
+                tracking.seen_times = seen[span].tolist()
             dropped = self._dropped
         fitted = trace_from_tracking(tracking, self.config, source=trace.source, settings=self.vision,
                                      dropped=dropped)

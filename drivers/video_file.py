@@ -32,7 +32,6 @@ import numpy as np
 
 from measurement.errors import VisionError
 from measurement.vision.config import CameraConfig
-from measurement.vision.locate import to_grey
 from measurement.vision.pipeline import count_dropped
 
 from .errors import VideoFileError

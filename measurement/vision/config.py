@@ -231,7 +231,8 @@ class CameraConfig:
             if missing:
                 raise VisionError(f"camera file: [camera] is missing {', '.join(missing)} (the edge on a cylinder is "
                                   "measured with the camera's calibration)")
-        m = _table(doc, "marker", _MARKER_KEYS, target.kind == "edge")
+        m = (_table(doc, "marker", _MARKER_KEYS, True) if target.kind == "edge"
+             else _table(doc, "marker", _MARKER_KEYS, False))
         p = _table(doc, "pose", _POSE_KEYS, False)
         cx = _number("camera", "cx", c.get("cx", (width - 1) / 2), "px", positive=False)
         cy = _number("camera", "cy", c.get("cy", (height - 1) / 2), "px", positive=False)

@@ -85,8 +85,9 @@ class Locator:
         """Where to look first: around the predicted centre, else the whole region of interest."""
         if self._last is None or not self._size:
             return self.roi
-        cu = self._last[0] + self._velocity[0]
-        cv = self._last[1] + self._velocity[1]
+        last = self._last
+        cu = last[0] + self._velocity[0]
+        cv = last[1] + self._velocity[1]
         half = WINDOW_SIZES * self._size + 2 * max(abs(self._velocity[0]), abs(self._velocity[1])) + 4
         box = _clip_box((cu - half, cv - half, cu + half, cv + half), self.roi)
         return box if box[2] - box[0] >= 8 and box[3] - box[1] >= 8 else self.roi
@@ -122,8 +123,9 @@ class Locator:
         if not obs.found and box != self.roi:
             obs = self._find(frame, self.roi)
         if obs.found:
-            centre = obs.b if obs.a is None else ((obs.a[0] + obs.b[0]) / 2, (obs.a[1] + obs.b[1]) / 2)
-            assert centre is not None, "a found target has its point b"
+            assert obs.b is not None, "a found target has its point b"
+            b = obs.b
+            centre = b if obs.a is None else ((obs.a[0] + b[0]) / 2, (obs.a[1] + b[1]) / 2)
             self.moved(centre, obs.size)
         else:
             self.forget()
@@ -307,7 +309,7 @@ class PatchLocator(Locator):
         local[1, 2] -= wy0
         try:
             score, local = cv2.findTransformECC(self._template, grey[wy0:wy1, wx0:wx1].astype(np.float32), local,
-                                                cv2.MOTION_EUCLIDEAN, self._criteria, None, 5)
+                                                cv2.MOTION_EUCLIDEAN, self._criteria, None, 5)  # type: ignore[call-overload]
         except cv2.error:
             return _lost("the patch's alignment did not converge")
         if not score >= MIN_PATCH_CORRELATION:

@@ -38,6 +38,8 @@ MAX_JUMPS = 0.02
 #: a swing within this many jitter σ (or under STILL_RANGE rad) is a target that does not move
 STILL_SIGMAS = 10.0
 STILL_RANGE = 1e-3
+#: the neighbours of a sample judged for a jump lie within this many frame periods
+SPAN_PERIODS = 6.0
 # the residual of the cubic through samples i−2, i−1, i+1, i+2 at i is a combination of 5 samples
 # with weights (1, −4, 6, −4, 1)/6: its σ is √70/6 times one sample's
 _RESIDUAL_GAIN = math.sqrt(70.0) / 6.0
@@ -70,11 +72,26 @@ class TrackQuality:
                 "jumps": self.jumps}
 
 
-def _jump_residual(theta: np.ndarray) -> np.ndarray:
-    """Distance of each sample from the cubic through its two neighbours on each side (0 at the ends)."""
+def _jump_residual(t: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Distance of each sample from the cubic through its two neighbours on each side, at their own times
+    (frames may be missing); 0 at the ends and where the neighbours span more than ``SPAN_PERIODS`` frame
+    periods (across a gap a cubic says nothing)."""
     r = np.zeros_like(theta)
-    if theta.size >= 5:
-        r[2:-2] = theta[2:-2] - (-theta[:-4] + 4 * theta[1:-3] + 4 * theta[3:-1] - theta[4:]) / 6
+    if theta.size < 5:
+        return r
+    x = t[2:-2]
+    nodes = [t[:-4], t[1:-3], t[3:-1], t[4:]]
+    values = [theta[:-4], theta[1:-3], theta[3:-1], theta[4:]]
+    fit = np.zeros_like(x)
+    for j in range(4):
+        w = np.ones_like(x)
+        for k in range(4):
+            if k != j:
+                w *= (x - nodes[k]) / (nodes[j] - nodes[k])
+        fit += w * values[j]
+    period = float(np.median(np.diff(t)))
+    judged = (nodes[3] - nodes[0]) <= SPAN_PERIODS * period
+    r[2:-2] = np.where(judged, theta[2:-2] - fit, 0.0)
     return r
 
 
@@ -109,8 +126,8 @@ def assess(t_all: np.ndarray, t: np.ndarray, theta: np.ndarray, *, source: str =
                           f"{why}, longest gap {gap:.2f} s from {gap_from:.2f} s; expected at least "
                           f"{100 * MIN_SHARE:.0f} % (set the target and its region of interest in the camera "
                           "file; check with `moi camera-check`)")
-    r = _jump_residual(theta)
-    inner = r[2:-2] if r.size >= 5 else r
+    r = _jump_residual(t, theta)
+    inner = r[2:-2][r[2:-2] != 0] if r.size >= 5 else r
     jitter = 1.4826 * float(np.median(np.abs(inner))) / _RESIDUAL_GAIN if inner.size else math.nan
     swing = float(np.ptp(theta)) if theta.size else 0.0
     if not swing > max(STILL_SIGMAS * (jitter if math.isfinite(jitter) else 0.0), STILL_RANGE):

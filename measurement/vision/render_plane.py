@@ -46,7 +46,9 @@ class PlaneScene:
         if spec.view == "along-axis" or spec.kind in ("blobs", "patch"):
             return cls(pivot=((width - 1) / 2, (height - 1) / 2), radius=0.3 * height, size=0.08 * height,
                        colour=colour)  # type: ignore[arg-type]
-        return cls(pivot=((width - 1) / 2, 0.08 * height), radius=0.62 * height, size=0.13 * height,
+        # a tag a quarter of the frame high: 60 px or more across, as docs/vision.md asks of a printed tag
+        size = (0.25 if spec.kind == "tag" else 0.13) * height
+        return cls(pivot=((width - 1) / 2, 0.05 * height), radius=0.62 * height, size=size,
                    colour=colour)  # type: ignore[arg-type]
 
 
@@ -98,7 +100,7 @@ class PlaneRenderer:
             board = cv2.copyMakeBorder(tag, quiet, quiet, quiet, quiet, cv2.BORDER_CONSTANT, value=255)
             n = board.shape[0]
             # the tag laid on with sub-pixel placement (a translation warp of the printed board)
-            m = np.float32([[1, 0, cu - (n - 1) / 2], [0, 1, cv_ - (n - 1) / 2]])
+            m = np.array([[1, 0, cu - (n - 1) / 2], [0, 1, cv_ - (n - 1) / 2]], dtype=np.float32)
             placed = cv2.warpAffine(board.astype(np.float32), m, (self.width, self.height), flags=cv2.INTER_LINEAR)
             cover = cv2.warpAffine(np.ones_like(board, np.float32), m, (self.width, self.height), flags=cv2.INTER_LINEAR)
             layer[:] = layer * (1 - cover[..., None]) + placed[..., None] * cover[..., None]

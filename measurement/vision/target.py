@@ -106,7 +106,8 @@ class TargetSpec:
             raise VisionError(f"camera file: [target] id must be a whole number ≥ 0, got {tag_id!r}")
         colour = None
         if "colour" in t:
-            colour = _numbers("colour", t["colour"], 3, "R, G, B from 0 to 255")
+            r, g, b = _numbers("colour", t["colour"], 3, "R, G, B from 0 to 255")
+            colour = (r, g, b)
             if not all(0 <= c <= 255 for c in colour):
                 raise VisionError(f"camera file: [target] colour must be R, G, B from 0 to 255, got {t['colour']!r}")
         tolerance = t.get("tolerance", DEFAULT_TOLERANCE)

@@ -252,8 +252,12 @@ def _check_points(img: np.ndarray, config: CameraConfig, pivot: tuple[float, flo
     from measurement.vision.body import provisional_angle
     from measurement.vision.pipeline import tracker_for
 
+    from measurement.vision.locators import Locator
+
     spec = config.target
-    obs = tracker_for(config).locate(img)
+    locator = tracker_for(config)
+    assert isinstance(locator, Locator), "a target other than the edge has a point locator"
+    obs = locator.locate(img)
     report: dict = {"target": spec.kind, "view": spec.view, "found": obs.found}
     if obs.found:
         assert obs.b is not None, "a found target has its point b"
@@ -310,8 +314,8 @@ def run(args: argparse.Namespace) -> int:
     refusal = ""
     if tracking is not None:
         facts, extra, refusal = _share(tracking, config, args.seconds)
-    pivot = tuple(facts["pivot_px"]) if "pivot_px" in facts else None
-    annotated, found, lines = check_image(img, config, pivot, extra)  # type: ignore[arg-type]
+    pivot = (float(facts["pivot_px"][0]), float(facts["pivot_px"][1])) if "pivot_px" in facts else None
+    annotated, found, lines = check_image(img, config, pivot, extra)
     report: dict = {"source": where, "png": args.out, **found, **facts}
     if refusal:
         report["refusal"] = refusal

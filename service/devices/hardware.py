@@ -242,8 +242,10 @@ def _simulated_camera(sim: SimulationSettings, rig: SimRig, clock: Clock, notes:
         camera.close()
         raise
     cam = cfg.camera
+    seen = (f"marker radius {cfg.cylinder.radius:g} m at {cfg.cylinder.distance:g} m" if cfg.edge
+            else f"{cfg.target.kind} target, {cfg.target.view}")
     notes.append(f"simulated camera: {cam.width}×{cam.height} px at {cam.fps:g} frames/s, yaw {sim.camera_yaw_deg:g}°, "
-                 f"marker radius {cfg.marker.radius:g} m at {cfg.marker.distance:g} m")
+                 f"{seen}")
     return sensor
 
 
