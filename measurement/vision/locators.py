@@ -150,6 +150,8 @@ class TagLocator(Locator):
         # the default stops at 0.1 px: 0.2° on a 60 px tag
         params.cornerRefinementMinAccuracy = 0.001
         params.cornerRefinementMaxIterations = 100
+        # two adaptive-threshold passes (5 and 21 px) instead of three: a printed tag is high-contrast
+        params.adaptiveThreshWinSizeMin, params.adaptiveThreshWinSizeMax, params.adaptiveThreshWinSizeStep = 5, 21, 16
         self.detector = cv2.aruco.ArucoDetector(dictionary, params)
 
     def _find(self, frame: np.ndarray, box: tuple[int, int, int, int]) -> PointObservation:
@@ -200,6 +202,7 @@ class BlobLocator(Locator):
             self._lab_hi = np.clip(self._lab + room, 0, 255).astype(np.uint8)
         self._threshold: float | None = None
         self._points: list[tuple[float, float]] | None = None
+        self._blob_size = 0.0
 
     def mask(self, frame: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
         """Pixels of the target's colour or brightness inside ``box`` (uint8 0/255)."""
@@ -222,16 +225,45 @@ class BlobLocator(Locator):
         kind = cv2.THRESH_BINARY_INV if self.spec.polarity == "dark" else cv2.THRESH_BINARY
         return cv2.threshold(grey[y0:y1, x0:x1], self._threshold, 255, kind)[1]
 
+    def window(self) -> tuple[int, int, int, int]:
+        if self.count == 2 and self._points is not None and self._last is not None:
+            return self.roi  # two blobs are looked for each in its own window first (``_find``)
+        return super().window()
+
     def _find(self, frame: np.ndarray, box: tuple[int, int, int, int]) -> PointObservation:
+        if self.count == 2 and self._points is not None and self._last is not None:
+            pair = self._find_each(frame)
+            if pair is not None:
+                return pair
+        return self._find_in(frame, box)
+
+    def _find_each(self, frame: np.ndarray) -> PointObservation | None:
+        """Each of two followed blobs in a window around its last position (None: not both found whole)."""
+        assert self._points is not None
+        half = WINDOW_SIZES * self._blob_size + 2 * max(abs(self._velocity[0]), abs(self._velocity[1])) + 4
+        found = []
+        for pu, pv in self._points:
+            box = _clip_box((pu - half, pv - half, pu + half, pv + half), self.roi)
+            obs = self._find_in(frame, box, count=1)
+            if not obs.found or obs.b is None:
+                return None
+            found.append(obs.b)
+        pts = self._keep_identity(found)
+        span = math.hypot(pts[1][0] - pts[0][0], pts[1][1] - pts[0][1])
+        return PointObservation(True, a=pts[0], b=pts[1], size=span, score=1.0)
+
+    def _find_in(self, frame: np.ndarray, box: tuple[int, int, int, int], count: int | None = None
+                 ) -> PointObservation:
+        count = count or self.count
         m = self.mask(frame, box)
         m = cv2.morphologyEx(m, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
         _, labels, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
         areas = stats[1:, cv2.CC_STAT_AREA]
-        order = np.argsort(areas)[::-1][: self.count]
+        order = np.argsort(areas)[::-1][:count]
         order = order[areas[order] >= MIN_BLOB_AREA]
         what = "colour" if self._lab is not None else f"{self.spec.polarity} brightness"
-        if order.size < self.count:
-            return _lost(f"{order.size} blob(s) of the target's {what} in view; expected {self.count}")
+        if order.size < count:
+            return _lost(f"{order.size} blob(s) of the target's {what} in view; expected {count}")
         x0, y0 = box[0], box[1]
         pts = [_filled_centre(labels, stats, 1 + int(k), x0, y0) for k in order]
         # the blob must be whole: one touching the window's border is cut (search the region instead)
@@ -240,7 +272,8 @@ class BlobLocator(Locator):
             if box != self.roi and (bx == 0 or by == 0 or bx + bw == m.shape[1] or by + bh == m.shape[0]):
                 return _lost("the blob reaches the search window's border")
         size = float(2 * math.sqrt(float(areas[order].mean()) / math.pi))
-        if self.count == 1:
+        self._blob_size = size
+        if count == 1:
             return PointObservation(True, b=pts[0], size=size, score=float(areas[order[0]]))
         pts = self._keep_identity(pts)
         span = math.hypot(pts[1][0] - pts[0][0], pts[1][1] - pts[0][1])
@@ -282,10 +315,15 @@ class PatchLocator(Locator):
         super().__init__(spec, width, height)
         self._template: np.ndarray | None = None
         self._warp = np.eye(2, 3, dtype=np.float32)
-        self._criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 60, 1e-6)
+        self._criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-5)
+        self._step = np.zeros((2, 3), dtype=np.float32)  # the last frame-to-frame change of the warp
 
     def window(self) -> tuple[int, int, int, int]:
         return self.roi  # the patch keeps its own window (around its last pose)
+
+    def forget(self) -> None:
+        super().forget()
+        self._step = np.zeros((2, 3), dtype=np.float32)  # lost: start again from the last pose, not its motion
 
     def _find(self, frame: np.ndarray, box: tuple[int, int, int, int]) -> PointObservation:
         grey = grey_of(frame)
@@ -294,8 +332,9 @@ class PatchLocator(Locator):
             self._template = grey[y0:y1, x0:x1].astype(np.float32)
             self._warp = np.array([[1, 0, x0], [0, 1, y0]], dtype=np.float32)
         h, w = self._template.shape
-        # a window of the frame around where the patch was (ECC's cost grows with the image it reads)
-        warp = self._warp.copy()
+        # a window of the frame around where the patch was (ECC's cost grows with the image it reads),
+        # starting from where its motion takes it (fewer iterations)
+        warp = self._warp + self._step
         margin = int(0.5 * max(h, w)) + 8
         corners = np.array([[0, 0, 1], [w, 0, 1], [0, h, 1], [w, h, 1]], dtype=np.float32) @ warp.T
         wx0 = max(int(corners[:, 0].min()) - margin, 0)
@@ -316,6 +355,7 @@ class PatchLocator(Locator):
             return _lost(f"the patch matches the frame with a correlation of only {score:.2f}")
         local[0, 2] += wx0
         local[1, 2] += wy0
+        self._step = local - self._warp
         self._warp = local
         centre = np.array([w / 2, h / 2, 1.0])
         below = np.array([w / 2, h, 1.0])
