@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint lint-fix coverage bench install broker browser clean pi-check
+.PHONY: demo test lint lint-fix coverage bench install broker browser ffmpeg clean pi-check
 
 # pip shows its progress: the first install downloads numpy, scipy, OpenCV and friends
 $(STAMP): pyproject.toml
@@ -39,10 +39,19 @@ browser:
 	    echo "note: could not install chromium/chromium-driver; the browser test will be skipped"; \
 	  else echo "note: chromium or chromedriver missing and not root; the browser test will be skipped"; fi; }
 
+# The vision tests encode rendered videos to H.264 with Debian's FFmpeg (real codec artefacts).
+ffmpeg:
+	@command -v ffmpeg >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    (apt-get install -y -qq ffmpeg >/dev/null 2>&1 || \
+	     (apt-get update -qq >/dev/null && apt-get install -y -qq ffmpeg >/dev/null)) || \
+	    echo "note: could not install ffmpeg; the H.264 video tests will be skipped"; \
+	  else echo "note: ffmpeg missing and not root; the H.264 video tests will be skipped"; fi; }
+
 demo: $(STAMP)
 	$(VENV)/bin/moi demo
 
-test: $(STAMP) broker browser
+test: $(STAMP) broker browser ffmpeg
 	$(PY) -m pytest -q
 
 # ruff (pyflakes, bugbear, pyupgrade...) and mypy, configured in pyproject.toml, over the whole tree

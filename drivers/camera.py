@@ -38,6 +38,7 @@ from measurement.vision.config import CameraConfig, CameraModel
 from measurement.vision.locate import to_grey
 from measurement.vision.pipeline import DropCounter
 from measurement.vision.render import CameraPose, Imaging, MarkerPattern, MarkerRenderer
+from measurement.vision.render_plane import PlaneRenderer, PlaneScene
 
 from .errors import DriverConfigError, SensorFault
 
@@ -108,16 +109,19 @@ class V4L2Camera(Camera):
     max_failures: consecutive failed reads before ``SensorFault``.
     capture_factory: ``cv2.VideoCapture`` (tests pass a fake with the same methods).
     clock: fallback time source (s) when the driver gives no buffer timestamps.
+    colour: deliver BGR frames (a colour target), else grey ones.
     """
 
     def __init__(self, device: str | int, model: CameraModel, *, buffer_size: int = 2, max_failures: int = 10,
-                 capture_factory: Callable[..., Any] = cv2.VideoCapture, clock: Callable[[], float] = time.monotonic):
+                 capture_factory: Callable[..., Any] = cv2.VideoCapture, clock: Callable[[], float] = time.monotonic,
+                 colour: bool = False):
         if not (isinstance(buffer_size, int) and 1 <= buffer_size <= 32):
             raise DriverConfigError(f"camera: buffer_size must be 1..32 buffers, got {buffer_size!r}")
         if isinstance(device, str) and device.startswith("/dev/") and not os.path.exists(device):
             raise DriverConfigError(f"camera: device {device} does not exist (is the camera plugged in? `v4l2-ctl --list-devices`)")
         self.model = model
         self.device = device
+        self.colour = colour
         self._clock = clock
         self._max_failures = max_failures
         self._cap = capture_factory(device, cv2.CAP_V4L2)
@@ -167,7 +171,7 @@ class V4L2Camera(Camera):
         missing = self._drops.add(t)
         self._index += 1 + missing
         self._frames += 1
-        return Frame(t=t, image=to_grey(image), index=self._index)
+        return Frame(t=t, image=image if self.colour and image.ndim == 3 else to_grey(image), index=self._index)
 
     def stats(self) -> dict:
         return {"frames": self._frames, "dropped_frames": self._drops.dropped, "read_failures": self._failed_total,
@@ -222,8 +226,16 @@ class MockCamera(Camera):
             self._now, self._sleep = clock, sleep
         else:
             raise DriverConfigError(f"mock camera: clock must be a Clock or a callable returning s, got {clock!r}")
-        self.renderer = MarkerRenderer(config.camera, config.marker, pattern=pattern, pose=pose, imaging=imaging,
-                                       seed=seed)
+        self.renderer: MarkerRenderer | PlaneRenderer
+        if config.edge:
+            self.renderer = MarkerRenderer(config.camera, config.cylinder, pattern=pattern, pose=pose,
+                                           imaging=imaging, seed=seed)
+        else:
+            # the camera file's target, drawn on a pendulum (face-on) or a platform (along the axis)
+            cam = config.camera
+            self.renderer = PlaneRenderer(cam.width, cam.height, config.target,
+                                          PlaneScene.for_view(cam.width, cam.height, config.target),
+                                          imaging=imaging, seed=0 if seed is None else seed)
         self._rng = np.random.default_rng(None if seed is None else seed + 1)
         self._drop_p = float(drop_probability)
         self._buffer = buffer_size
@@ -293,5 +305,5 @@ def open_camera(config: CameraConfig, device: str | int | None = None, *, angle_
     if device is not None:
         if mock_options:
             raise DriverConfigError(f"camera: {sorted(mock_options)} apply only to the mock camera")
-        return V4L2Camera(device, config.camera)
+        return V4L2Camera(device, config.camera, colour=config.target.needs_colour)
     return MockCamera(config, angle_source or (lambda t: 0.0), clock or time.monotonic, **mock_options)

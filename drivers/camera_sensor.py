@@ -43,8 +43,10 @@ import numpy as np
 from measurement.trace import Trace
 from measurement.vision.config import CameraConfig
 from measurement.vision.geometry import angle_from_normalised
-from measurement.vision.locate import CORRUPT, LOST, MarkerTracker, TrackerSettings
-from measurement.vision.pipeline import DROPPED, Tracking, VisionSettings, trace_from_tracking
+from measurement.vision.locate import CORRUPT, LOST, TrackerSettings
+from measurement.vision.body import provisional_angle
+from measurement.vision.locators import PointObservation
+from measurement.vision.pipeline import DROPPED, Tracking, VisionSettings, trace_from_tracking, tracker_for
 
 from .camera import Camera, Frame
 from .clock import Clock, MonotonicClock
@@ -99,7 +101,7 @@ class CameraAngleSensor:
         self._stop_reading = threading.Event()
         self._capturing = False
         self._closed = False
-        self._tracker = MarkerTracker(config.camera, tracker)
+        self._tracker = tracker_for(config, tracker)
         self._reset(math.inf)
 
     # -- AngleSensor ---------------------------------------------------------------
@@ -113,7 +115,7 @@ class CameraAngleSensor:
                               "(camera not delivering frames?)")
         with self._lock:
             self._reset(float(self.clock.now()))
-            self._tracker = MarkerTracker(self.config.camera, self.tracker_settings)
+            self._tracker = tracker_for(self.config, self.tracker_settings)
             self._capturing = True
         if self._threaded:
             self._stop_reading = threading.Event()
@@ -197,6 +199,11 @@ class CameraAngleSensor:
             keep = np.isin(t_rel, trace.t)
             tracking = live.subset(keep)
             tracking.t = t_rel[keep].tolist()
+            if tracking.t:
+                # the frames of the kept record, on its time axis: what the tracked share is judged against
+                seen = np.asarray(live.seen_times, dtype=float) - origin
+                span = (seen >= tracking.t[0] - 1e-9) & (seen <= tracking.t[-1] + 1e-9)
+                tracking.seen_times = seen[span].tolist()
             dropped = self._dropped
         fitted = trace_from_tracking(tracking, self.config, source=trace.source, settings=self.vision,
                                      dropped=dropped)
@@ -229,6 +236,7 @@ class CameraAngleSensor:
         self._tracking = Tracking()  # only the counters and the edge figures: times/angles go to the buffer
         self._dropped = 0
         self._early = 0
+        self._pivot = self.config.target.pivot
         self._run = 0
         self._max_run = 0
         self._last_index: int | None = None
@@ -246,8 +254,15 @@ class CameraAngleSensor:
             return True
         obs = self._tracker.locate(frame.image)
         theta = math.nan
-        if obs.found:
-            theta = float(angle_from_normalised(obs.x, self.config.marker, self.vision.yaw, 0.0))
+        if isinstance(obs, PointObservation):
+            # the live angle of a body vector (a single blob's pivot may be known only after the swing:
+            # ``finish`` measures it, the view and the quality over the whole record)
+            if self._pivot is None and obs.found and obs.a is None and obs.b is not None:
+                # until the arc is known: a pivot ten image heights above the first sighting
+                self._pivot = (obs.b[0], obs.b[1] - 10.0 * self.config.camera.height)
+            theta = provisional_angle(obs, self._pivot)
+        elif obs.found:
+            theta = float(angle_from_normalised(obs.x, self.config.cylinder, self.vision.yaw, 0.0))
             if not math.isfinite(theta):
                 obs = replace(obs, found=False, reason=LOST,
                               detail="beyond the cylinder's silhouette (check radius and distance in the camera file)")

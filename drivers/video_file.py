@@ -32,7 +32,6 @@ import numpy as np
 
 from measurement.errors import VisionError
 from measurement.vision.config import CameraConfig
-from measurement.vision.locate import to_grey
 from measurement.vision.pipeline import count_dropped
 
 from .errors import VideoFileError
@@ -40,12 +39,22 @@ from .errors import VideoFileError
 # FFmpeg reports every damaged packet on stderr; the count goes into the result instead.
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
+import av
 import cv2  # after the log level, which FFmpeg reads when first used
+
+# PyAV's FFmpeg logs every damaged packet; the counts go into the result instead
+av.logging.set_level(av.logging.PANIC)
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm"}
 TIMESTAMPS_FILE = "timestamps.csv"
 #: consecutive undecodable frames after which a stream is taken to have ended
 MAX_CONSECUTIVE_FAILURES = 25
+
+
+def _why(e: BaseException) -> str:
+    """FFmpeg's own words for an error, without the path it repeats."""
+    text = getattr(e, "strerror", None) or str(e)
+    return str(text).split(":")[0].strip() or type(e).__name__
 
 
 def _natural_key(name: str) -> list:
@@ -55,15 +64,25 @@ def _natural_key(name: str) -> list:
 class FrameSource:
     """Frames of a video file or an image folder as (t in s or None, grey uint8 frame or None).
 
+    colour: yield BGR frames (uint8, h×w×3) instead of grey ones.
     After iteration: ``count`` frames offered, ``failed`` undecodable ones, ``timing`` how times
-    were obtained, ``dropped`` frames missing from the stream.
+    were obtained, ``dropped`` frames missing from the stream; for a video also ``listed`` (frames the
+    container lists), ``decoded``, ``codec``, ``intra_only`` (every frame coded alone, as MJPEG: rows
+    repeated bit for bit are then the decoder concealing damage) and ``truncated`` (why the stream
+    ended early, '' if it did not).
     """
 
-    def __init__(self, path: str | os.PathLike, config: CameraConfig):
+    def __init__(self, path: str | os.PathLike, config: CameraConfig, colour: bool = False):
         self.path = Path(path)
         self.config = config
+        self.colour = colour
         self.count = 0
         self.failed = 0
+        self.decoded = 0
+        self.listed = 0
+        self.codec = ""
+        self.intra_only = True
+        self.truncated = ""
         self.dropped = 0
         self.timing = ""
         self._fps = config.camera.fps
@@ -88,9 +107,11 @@ class FrameSource:
         self.dropped = count_dropped(np.asarray(times), self.config.camera.fps)
         for p, t in zip(files, times):
             self.count += 1
-            img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+            img = cv2.imread(str(p), cv2.IMREAD_COLOR if self.colour else cv2.IMREAD_GRAYSCALE)
             if img is None:
                 self.failed += 1
+            else:
+                self.decoded += 1
             yield t, img
 
     def _folder_times(self, files: list[Path]) -> list[float]:
@@ -109,51 +130,82 @@ class FrameSource:
                 raise VideoFileError(f"{ts}: line {n}: t must be a number in s, got {row.get('t')!r}") from None
         missing = [p.name for p in files if p.name not in table]
         if missing:
-            raise VideoFileError(f"{ts}: no time for {missing[0]}" + (f" and {len(missing) - 1} more" if len(missing) > 1 else ""))
+            more = f" and {len(missing) - 1} more" if len(missing) > 1 else ""
+            raise VideoFileError(f"{ts}: no time for {missing[0]}{more}")
         return [table[p.name] for p in files]
 
     # -- video file -------------------------------------------------------
     def _video(self) -> Iterator[tuple[float | None, np.ndarray | None]]:
-        """Container times are yielded raw; ``frame_times`` turns them into the trace's times afterwards."""
-        cap = cv2.VideoCapture(str(self.path))
-        if not cap.isOpened():
-            raise VideoFileError(f"video {str(self.path)!r} cannot be opened (not a video OpenCV can decode)")
+        """Decode with FFmpeg (PyAV) packet by packet; container times are yielded raw (s, from the first
+        decoded frame), ``frame_times`` turns them into the trace's times afterwards."""
+        if self.path.stat().st_size == 0:
+            raise VideoFileError(f"video {str(self.path)!r} is empty (0 bytes)")
         try:
-            total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
-            fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
+            container = av.open(str(self.path))
+        except (av.error.FFmpegError, OSError) as e:
+            raise VideoFileError(f"video {str(self.path)!r} cannot be opened ({_why(e)}); expected a video file "
+                                 "FFmpeg reads (MP4, MKV, AVI, MOV…)") from None
+        try:
+            if not container.streams.video:
+                raise VideoFileError(f"{str(self.path)!r} holds no video stream")
+            stream = container.streams.video[0]
+            stream.thread_type = "AUTO"
+            codec = stream.codec_context
+            self.codec = codec.name
+            # an intra-only codec (MJPEG) codes every frame alone: rows repeated bit for bit are the decoder
+            # concealing damage; an inter-frame codec (H.264, HEVC) repeats unchanged regions by design
+            self.intra_only = bool(codec.codec.intra_only)
+            self.listed = int(stream.frames or 0)
+            rate = stream.average_rate or stream.guessed_rate
+            fps = float(rate) if rate else 0.0
             self._fps = fps if math.isfinite(fps) and 0 < fps < 10000 else self.config.camera.fps
-            pending = 0  # failed grabs not yet known to be damage rather than the end
-            first = True
-            while True:
-                if not cap.grab():
-                    # FFmpeg fails a damaged frame and goes on with the next one; at the end of the
-                    # stream every grab fails.
-                    pending += 1
-                    if (total and self.count + pending > total) or pending > MAX_CONSECUTIVE_FAILURES:
-                        break
-                    continue
-                for _ in range(pending):
+            time_base = float(stream.time_base) if stream.time_base else 0.0
+            yield from self._decode(container, stream, time_base)
+        finally:
+            container.close()
+        if self.decoded == 0:
+            raise VideoFileError(f"video {str(self.path)!r}: no frame could be decoded ({self.listed} listed, "
+                                 f"{self.failed} undecodable)")
+
+    def _decode(self, container, stream, time_base: float) -> Iterator[tuple[float | None, np.ndarray | None]]:
+        packets = 0
+        t0: float | None = None
+        first = True
+
+        def out(frames) -> Iterator[tuple[float | None, np.ndarray | None]]:
+            nonlocal t0, first
+            for fr in frames:
+                img = fr.to_ndarray(format="bgr24" if self.colour else "gray")
+                if first and img.shape[:2] != (self.config.camera.height, self.config.camera.width):
+                    raise VisionError(f"video {str(self.path)!r} is {img.shape[1]}×{img.shape[0]} px; the camera "
+                                      f"file says {self.config.camera.width}×{self.config.camera.height}")
+                first = False
+                t = fr.pts * time_base if fr.pts is not None and time_base else None
+                if t is not None and t0 is None:
+                    t0 = t
+                self.count += 1
+                self.decoded += 1
+                yield (None if t is None or t0 is None else t - t0), img
+
+        try:
+            for packet in container.demux(stream):
+                if packet.size == 0:
+                    continue  # the demuxer's end-of-stream marker
+                packets += 1
+                try:
+                    frames = packet.decode()
+                except av.error.FFmpegError:
+                    # a damaged packet: its slot in the stream is kept, its picture is not
                     self.count += 1
                     self.failed += 1
                     yield None, None
-                pending = 0
-                ok, frame = cap.retrieve()
-                t_ms = cap.get(cv2.CAP_PROP_POS_MSEC)
-                self.count += 1
-                if not ok or frame is None:
-                    self.failed += 1
-                    yield None, None
                     continue
-                grey = to_grey(frame)
-                if first and grey.shape != (self.config.camera.height, self.config.camera.width):
-                    raise VisionError(f"video {str(self.path)!r} is {grey.shape[1]}×{grey.shape[0]} px; the camera "
-                                      f"file says {self.config.camera.width}×{self.config.camera.height}")
-                first = False
-                yield (t_ms / 1000.0 if math.isfinite(t_ms) else None), grey
-        finally:
-            cap.release()
-        if self.count == 0:
-            raise VideoFileError(f"video {str(self.path)!r} has no frames")
+                yield from out(frames)
+            yield from out(stream.decode(None))  # frames the decoder still holds
+        except av.error.FFmpegError as e:
+            # the file ends early (truncated) or the container is damaged past this point
+            self.truncated = _why(e)
+        self.listed = max(self.listed, packets)
 
     def frame_times(self, pts: list[float | None]) -> list[float | None]:
         """Times (s) of the frames yielded, from their raw times (None: undecodable frame).

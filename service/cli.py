@@ -34,7 +34,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "check-standard": ("service.commands.check_standard",
         "measure a reference artifact of certified J ± U: the normalised error E_n, its history and control chart"),
     "camera-check": ("service.commands.camera_check",
-        "find the marker in one camera frame: position, angle, annotated PNG for alignment"),
+        "find the target in the first frame (annotated PNG) and the share of the first seconds tracked"),
     "measure": ("service.commands.measure",
         "one push-button measurement cycle, on the simulated rig (--sim) or the configured devices (--config), printed"),
     "run": ("service.commands.run",

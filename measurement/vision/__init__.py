@@ -1,12 +1,17 @@
-"""Monocular vision: from camera frames of a marker on the swinging cylinder to the swing angle.
+"""Monocular vision: from camera frames of a target on the swinging body to the swing angle.
 
-    config     the camera file (intrinsics, distortion, marker radius/distance, pose settings)
+    config     the camera file (intrinsics, distortion, marker radius/distance, pose settings, [target])
+    target     the [target] table: tag, blob, blobs, patch or edge; view; region of interest
+    locators   frame → a vector fixed to the body: printed tag, blob(s), textured patch (ECC)
+    body       that vector → angle: pivot from the arc, the oblique view removed when the swing shows it
+    quality    tracked share, longest gap, jitter, jumps, a target that does not move: the refusal rules
     locate     grey frame → marker edge, sub-pixel, in ideal normalised coordinates (MarkerTracker)
     geometry   normalised coordinate → angle, exact (R·sin θ lateral, R·(1 − cos θ) deeper)
     pose       the camera's yaw, fitted as a parameter of the projection over a whole swing
     pipeline   frames → Trace (gaps and flags for lost/corrupt/dropped frames, yaw corrected)
     marker_pair  two markers on the pendulum → angle, the camera's oblique view measured from their distance
     render     ray-traced synthetic frames: the truth for tests, bench and the mock camera
+    render_plane  frames of a body turning in the image plane (tag, bob, blobs, plate) for the other targets
 
 Pure numpy/scipy/opencv: decoding files and talking to cameras live in
 ``drivers.video_file`` and ``drivers.camera``.

@@ -16,7 +16,14 @@ distance = 0.25        # m, camera (optical centre) to the marker at rest
 [pose]                 # optional
 yaw_limit_deg = 2.0    # flag camera_pose above this |yaw|, degrees
 estimate = true        # estimate the yaw from the swing and correct the angle
+[target]               # optional: what is tracked and how the camera looks (measurement.vision.target)
+kind = "tag"           # tag | blob | blobs | patch | edge (default edge, which needs [marker])
 ```
+
+Only the edge on a cylinder needs the calibration (fx … distortion) and
+``[marker]``; the other targets are measured in the image plane, where the
+image size and frame rate are all that is needed (fx … default to a centred,
+undistorted camera).
 
 Every error says which key is wrong and what was expected; they are
 ``VisionError`` (an ``InvalidInput``: one line on stderr, exit status 2).
@@ -31,6 +38,7 @@ from typing import Any, Literal, Mapping, overload
 import numpy as np
 
 from ..errors import VisionError
+from .target import TargetSpec
 
 _CAMERA_KEYS = ("width", "height", "fps", "fx", "fy", "cx", "cy", "distortion")
 _MARKER_KEYS = ("radius", "distance")
@@ -182,38 +190,69 @@ class CameraConfig:
     """A parsed camera file: intrinsics, marker geometry and pose settings."""
 
     camera: CameraModel
-    marker: MarkerGeometry
+    marker: MarkerGeometry | None
     pose: PoseSettings = field(default_factory=PoseSettings)
+    target: TargetSpec = field(default_factory=TargetSpec)
+
+    @property
+    def edge(self) -> bool:
+        """The target is the edge on a cylinder (side view), measured with the calibration and [marker]."""
+        return self.target.kind == "edge"
+
+    @property
+    def cylinder(self) -> MarkerGeometry:
+        """The edge's cylinder ([marker]); only an edge target has one (checked when the file is read)."""
+        assert self.marker is not None, "an edge target's camera file has [marker]"
+        return self.marker
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> "CameraConfig":
         """Build from the parsed TOML document; raises VisionError naming the bad key."""
         if not isinstance(doc, Mapping):
             raise VisionError("camera file: expected a TOML document with [camera] and [marker] tables")
-        unknown = sorted(set(doc) - {"camera", "marker", "pose"})
+        unknown = sorted(set(doc) - {"camera", "marker", "pose", "target"})
         if unknown:
-            raise VisionError(f"camera file: unknown table(s) {unknown}; expected [camera], [marker] and optionally [pose]")
-        c = _table(doc, "camera", _CAMERA_KEYS, True)
-        m = _table(doc, "marker", _MARKER_KEYS, True)
-        p = _table(doc, "pose", _POSE_KEYS, False)
+            raise VisionError(f"camera file: unknown table(s) {unknown}; expected [camera], optionally [target], "
+                              "and [marker] for an edge target, [pose]")
+        c = _table(doc, "camera", _CAMERA_KEYS, False)
+        if c is None:
+            raise VisionError("camera file: missing [camera] table; expected at least width, height and fps")
+        for k in ("width", "height", "fps"):
+            if k not in c:
+                raise VisionError(f"camera file: [camera] is missing {k}")
         width = _integer("camera", "width", c["width"], "px")
         height = _integer("camera", "height", c["height"], "px")
-        cx = _number("camera", "cx", c["cx"], "px", positive=False)
-        cy = _number("camera", "cy", c["cy"], "px", positive=False)
+        t = doc.get("target", {})
+        if not isinstance(t, Mapping):
+            raise VisionError(f"camera file: target must be a table [target], got {type(t).__name__}")
+        target = TargetSpec.from_dict(t, width, height)
+        if target.kind == "edge":
+            missing = [k for k in _CAMERA_KEYS if k not in c]
+            if missing:
+                raise VisionError(f"camera file: [camera] is missing {', '.join(missing)} (the edge on a cylinder is "
+                                  "measured with the camera's calibration)")
+        m = (_table(doc, "marker", _MARKER_KEYS, True) if target.kind == "edge"
+             else _table(doc, "marker", _MARKER_KEYS, False))
+        p = _table(doc, "pose", _POSE_KEYS, False)
+        cx = _number("camera", "cx", c.get("cx", (width - 1) / 2), "px", positive=False)
+        cy = _number("camera", "cy", c.get("cy", (height - 1) / 2), "px", positive=False)
         if not (0 <= cx <= width - 1 and 0 <= cy <= height - 1):
             raise VisionError(f"camera file: [camera] principal point ({cx:g}, {cy:g}) px lies outside the "
                               f"{width}×{height} image; expected 0 ≤ cx ≤ {width - 1}, 0 ≤ cy ≤ {height - 1}")
-        dist = c["distortion"]
+        dist = c.get("distortion", [0.0] * 5)
         if not isinstance(dist, list) or len(dist) != 5:
             raise VisionError(f"camera file: [camera] distortion must be a list of 5 numbers [k1, k2, p1, p2, k3], got {dist!r}")
         k1, k2, p1, p2, k3 = (_number("camera", f"distortion[{i}]", d, "", positive=False) for i, d in enumerate(dist))
+        focal = float(max(width, height))
         camera = CameraModel(
             width=width, height=height, fps=_number("camera", "fps", c["fps"], "frames/s"),
-            fx=_number("camera", "fx", c["fx"], "px"), fy=_number("camera", "fy", c["fy"], "px"),
+            fx=_number("camera", "fx", c.get("fx", focal), "px"), fy=_number("camera", "fy", c.get("fy", focal), "px"),
             cx=cx, cy=cy, distortion=(k1, k2, p1, p2, k3),
         )
-        marker = MarkerGeometry(radius=_number("marker", "radius", m["radius"], "m"),
-                                distance=_number("marker", "distance", m["distance"], "m"))
+        marker = None
+        if m is not None:
+            marker = MarkerGeometry(radius=_number("marker", "radius", m["radius"], "m"),
+                                    distance=_number("marker", "distance", m["distance"], "m"))
         pose = PoseSettings()
         if p is not None:
             estimate = p.get("estimate", True)
@@ -221,8 +260,13 @@ class CameraConfig:
                 raise VisionError(f"camera file: [pose] estimate must be true or false, got {estimate!r}")
             limit = _number("pose", "yaw_limit_deg", p.get("yaw_limit_deg", DEFAULT_YAW_LIMIT_DEG), "degrees")
             pose = PoseSettings(yaw_limit_deg=limit, estimate=estimate)
-        return cls(camera=camera, marker=marker, pose=pose)
+        return cls(camera=camera, marker=marker, pose=pose, target=target)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"camera": self.camera.to_dict(), "marker": self.marker.to_dict(),
-                "pose": {"yaw_limit_deg": self.pose.yaw_limit_deg, "estimate": self.pose.estimate}}
+        out: dict[str, Any] = {"camera": self.camera.to_dict()}
+        if self.marker is not None:
+            out["marker"] = self.marker.to_dict()
+        out["pose"] = {"yaw_limit_deg": self.pose.yaw_limit_deg, "estimate": self.pose.estimate}
+        if not self.edge or self.target != TargetSpec():
+            out["target"] = self.target.to_dict()
+        return out

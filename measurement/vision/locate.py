@@ -56,7 +56,10 @@ class TrackerSettings:
     max_residual: largest RMS distance of the rows from the fitted line, px.
     trim_rows: rows left out at each end of the marker (its corners are not a clean edge).
     reject_repeated: rows identical to the previous frame are a decoder's stand-in for a damaged
-        frame, not a measurement (switch off only for noise-free synthetic frames of a still marker).
+        frame, not a measurement. True only for an intra-only stream (MJPEG, a V4L2 camera): an
+        inter-frame codec (H.264, HEVC) repeats an unchanged region by design; switch off too for
+        noise-free synthetic frames of a still marker.
+    roi: (x0, y0, x1, y1) px, x1/y1 exclusive: where the edge is searched (None: the whole frame).
     """
 
     track: bool = True
@@ -69,6 +72,7 @@ class TrackerSettings:
     max_residual: float = 0.35
     trim_rows: int = 4
     reject_repeated: bool = True
+    roi: tuple[int, int, int, int] | None = None
 
 
 @dataclass(frozen=True)
@@ -173,6 +177,12 @@ class MarkerTracker:
         g[:, 1:-1] = f[:, 2:] - f[:, :-2]
         k = min(s.search_rows, img.shape[0] - (1 - img.shape[0] % 2))
         tall = cv2.blur(g, (1, k), borderType=cv2.BORDER_CONSTANT) if k > 1 else g
+        if s.roi is not None:
+            # only an edge inside the region of interest may be the marker
+            x0, y0, x1, y1 = s.roi
+            inside = np.zeros_like(tall)
+            inside[y0:y1, x0:x1] = tall[y0:y1, x0:x1]
+            tall = inside
         i, j = (int(n) for n in np.unravel_index(int(np.argmax(np.abs(tall))), tall.shape))
         peak = float(tall[i, j])
         polarity = 1 if peak > 0 else -1
@@ -181,9 +191,10 @@ class MarkerTracker:
         strong = 0.5 * abs(peak)
         rows = []
         col = j
+        top, bottom = (s.roi[1], s.roi[3]) if s.roi is not None else (0, img.shape[0])
         for direction in (-1, 1):
             r, c = i, col
-            while 0 <= r < img.shape[0]:
+            while top <= r < bottom:
                 lo, hi = max(c - half, 1), min(c + half + 1, img.shape[1] - 1)
                 seg = polarity * g[r, lo:hi]
                 if seg.size == 0 or seg.max() < strong:

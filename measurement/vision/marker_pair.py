@@ -37,6 +37,10 @@ MARKER_COLUMNS = ("t", "ax", "ay", "bx", "by")
 OUTLIER_SIGMAS = 6.0
 #: fewest samples the view is measured from
 MIN_SAMPLES = 20
+#: least turn of the marker pair (rad) over which the ellipse of its vector, the camera's oblique view, is measured
+MIN_VIEW_SWING = 0.2
+#: largest 1σ of the measured axis ratio for the view correction to be applied (``view_trace``)
+MAX_VIEW_STD = 0.02
 #: the swing's angle range is cut into this many bins to see how the marker distance follows the angle
 ANGLE_BINS = 12
 #: a systematic distance change (relative) beyond which the report says the view is more than oblique
@@ -165,9 +169,9 @@ def measure_view(a: np.ndarray, b: np.ndarray) -> PairView:
     if not np.all(np.isfinite(v)) or np.any(dist == 0):
         raise VisionError("marker positions must be finite and the two markers distinct; expected px coordinates")
     span = np.ptp(_direction(v))
-    if span < 0.2:
-        raise VisionError(f"the marker pair turns by only {span:.3f} rad; expected a swing of at least 0.2 rad to "
-                          "measure the camera's view")
+    if span < MIN_VIEW_SWING:
+        raise VisionError(f"the marker pair turns by only {span:.3f} rad; expected a swing of at least "
+                          f"{MIN_VIEW_SWING} rad to measure the camera's view")
     X = np.column_stack([v[:, 0] ** 2, 2 * v[:, 0] * v[:, 1], v[:, 1] ** 2])
     keep = np.ones(len(v), dtype=bool)
     q = np.zeros(3)
@@ -255,6 +259,28 @@ def parse_marker_csv(lines: Iterable[str], source: str = "markers") -> MarkerTra
                           f"{', '.join(MARKER_COLUMNS)}")
     arr = np.asarray(rows)
     return MarkerTrack(t=arr[:, 0], a=arr[:, 1:3], b=arr[:, 3:5], source=source, missing=missing)
+
+
+def view_trace(track: MarkerTrack) -> Trace:
+    """The swing of a marker track, the camera's view measured and removed when the swing shows it (it turns
+    by ``MIN_VIEW_SWING`` or more and the axis ratio comes out within ``MAX_VIEW_STD``), else the angle as the
+    image shows it (``meta["view_note"]`` says so): a small swing's scale matters only through sin θ, which
+    is then close to θ."""
+    span = float(np.ptp(_direction(np.asarray(track.b, float) - np.asarray(track.a, float))))
+    if span < MIN_VIEW_SWING:
+        note = (f"the swing spans {span:.3f} rad, less than the {MIN_VIEW_SWING} rad that show the camera's oblique "
+                "view: the angle is taken as the image shows it")
+    else:
+        view = measure_view(track.a, track.b)
+        if view.axis_ratio_std <= MAX_VIEW_STD:
+            return pair_trace(track, view)
+        # a correction less certain than the error it would remove: the angle as seen (its scale matters
+        # only through sin θ, and the identification fits the angle's scale where the rig allows it)
+        note = (f"the swing does not determine the camera's view (axis ratio {view.axis_ratio:.3f} ± "
+                f"{view.axis_ratio_std:.3f}): the angle is taken as the image shows it")
+    trace = pair_trace(track, None)
+    trace.meta["view_note"] = note
+    return trace
 
 
 def pair_trace(track: MarkerTrack, view: PairView | None) -> Trace:

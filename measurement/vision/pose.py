@@ -114,8 +114,18 @@ def estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, *, harmon
     """Estimate the camera yaw ψ (rad) from a free swing seen at ideal normalised coordinates x(t).
 
     t: s, increasing (gaps allowed); x: dimensionless, finite. Needs at least
-    three full swings; otherwise returns ``estimated=False`` with a reason.
+    three full swings; otherwise (or when the swing cannot tell it: a track
+    that hardly moves) returns ``estimated=False`` with a reason.
     """
+    try:
+        return _estimate_yaw(t, x, marker, harmonics, max_iterations, outlier_sigma)
+    except np.linalg.LinAlgError:
+        return PoseEstimate(False, reason="the swing does not determine the camera yaw (a singular fit: does the "
+                            "marker move?)")
+
+
+def _estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, harmonics: tuple[int, ...],
+                  max_iterations: int, outlier_sigma: float) -> PoseEstimate:
     t = np.asarray(t, dtype=float)
     x = np.asarray(x, dtype=float)
     if t.size < 40:

@@ -1,15 +1,19 @@
-"""`moi camera-check`: grab one frame, find the marker, show where and at what angle, write a PNG.
+"""`moi camera-check [VIDEO|DEVICE]`: the first frame with the target found, and how well the first seconds track.
 
-For the technician setting the camera up: the PNG marks the search window,
-every row's edge point, the fitted edge line and the principal point; the
-text gives the marker's offset from the principal point, the edge's tilt
-and the angle. With the pendulum at rest and the camera on the line to the
-swing axis, the marker should sit on the principal point with no tilt; an
-offset means the optical axis is yawed (the implied yaw is printed).
+For the technician setting the camera up, and for a user about to identify a
+video: the PNG shows the first frame with the region of interest (yellow),
+the target found (red: the edge line, or the tag's outline and the body
+vector's ends), the pivot (cyan) and the angle axis (green: the direction
+whose turn is the swing angle). The text and ``--json`` give the target's
+position and angle, and the share of the frames of the first ``--seconds``
+in which it was tracked, judged by the rule ``moi identify`` applies
+(``measurement.vision.quality``): below it, exit status 2, as identify would
+refuse. For the edge on a cylinder, the marker's offset from the principal
+point, its tilt and the yaw implied if it is at rest are given too.
 
-Frame from: ``--source`` (an image, a video file or an image folder),
-``--device`` (a V4L2 camera), else the mock camera (the marker rendered at
-``--angle``), which needs no hardware.
+Frames from: VIDEO (a video file, an image, an image folder) or DEVICE
+(``/dev/videoN``), also as ``--source``/``--device``; else the mock camera
+(the camera file's target rendered at ``--angle``), which needs no hardware.
 """
 
 from __future__ import annotations
@@ -33,32 +37,52 @@ if TYPE_CHECKING:  # the vision modules load OpenCV: imported where used, not fo
     import numpy as np
 
     from measurement.vision.config import CameraConfig
+    from measurement.vision.pipeline import Tracking
 
 
 #: frames grabbed from a live camera before the one measured (exposure and gain settle)
 SETTLE_FRAMES = 5
+#: seconds of a video or camera tracked for the share reported
+DEFAULT_SECONDS = 3.0
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", nargs="?", metavar="VIDEO|DEVICE",
+                   help="a video file, image or image folder, or a V4L2 camera such as /dev/video0")
     p.add_argument("--camera", metavar="CAM.toml", help="camera file (default: the demo camera, 640×480, fx 600 px)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--source", metavar="FILE", help="an image, a video file or an image folder instead of a camera")
     g.add_argument("--device", metavar="DEV", help="V4L2 camera, e.g. /dev/video0 (default: the mock camera)")
-    p.add_argument("--frame", type=int, default=0, metavar="N", help="with --source video/folder: frame number (default 0)")
+    p.add_argument("--frame", type=int, default=0, metavar="N", help="with a video/folder: frame number drawn (default 0)")
+    p.add_argument("--seconds", type=float, default=DEFAULT_SECONDS, metavar="S",
+                   help=f"frames of the first S seconds tracked for the share (default {DEFAULT_SECONDS:g})")
     p.add_argument("--angle", type=float, default=0.0, metavar="DEG",
-                   help="mock camera only: the marker's angle, degrees (default 0, at rest)")
+                   help="mock camera only: the target's angle, degrees (default 0, at rest)")
     p.add_argument("--out", default="camera-check.png", metavar="FILE.png", help="annotated image (default camera-check.png)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the text")
 
 
-def _grab(args: argparse.Namespace, config: CameraConfig) -> tuple[np.ndarray, str]:
+def _device_of(args: argparse.Namespace) -> tuple[str | None, str | None]:
+    """(file source, device) from the positional argument or the options."""
+    if args.input:
+        if args.source or args.device:
+            raise InputFileError("give the video or device once: as VIDEO|DEVICE or with --source/--device")
+        is_device = args.input.startswith("/dev/") or args.input.isdigit()
+        return (None, args.input) if is_device else (args.input, None)
+    return args.source, args.device
+
+
+def _grab(args: argparse.Namespace, config: CameraConfig) -> tuple[np.ndarray, str, Tracking | None]:
+    """The frame to draw (grey, or BGR for a colour target), where it came from, and the tracking of the first
+    ``--seconds`` (None for a still image or the mock camera)."""
     import cv2
     import numpy as np
 
     from measurement.vision.locate import to_grey
 
-    if args.source:
-        path = Path(args.source)
+    source, device = _device_of(args)
+    if source:
+        path = Path(source)
         if not path.exists():
             raise InputFileError(f"source {str(path)!r} not found")
         from drivers.video_file import IMAGE_SUFFIXES, FrameSource
@@ -69,45 +93,106 @@ def _grab(args: argparse.Namespace, config: CameraConfig) -> tuple[np.ndarray, s
                 raise InputFileError(f"image {str(path)!r} cannot be decoded")
             if img.dtype != np.uint8:
                 raise InputFileError(f"image {str(path)!r} has {img.dtype} pixels; expected 8-bit")
-            return to_grey(img), str(path)
+            if not config.target.needs_colour:
+                img = to_grey(img)
+            elif img.ndim == 2:
+                img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+            return img[..., :3] if img.ndim == 3 else img, str(path), None
         if args.frame < 0:
             raise InputFileError(f"--frame must be >= 0, got {args.frame}")
-        for n, (_, img) in enumerate(FrameSource(path, config)):
+        if not args.seconds > 0:
+            raise InputFileError(f"--seconds must be > 0, got {args.seconds}")
+        from service.sources.video import track_source
+
+        drawn = None
+        for n, (_, img) in enumerate(FrameSource(path, config, colour=config.target.needs_colour)):
             if n == args.frame:
                 if img is None:
                     raise InputFileError(f"{path}: frame {n} cannot be decoded")
-                return img, f"{path} frame {n}"
-        raise InputFileError(f"{path}: has no frame {args.frame}")
+                drawn = img
+                break
+        if drawn is None:
+            raise InputFileError(f"{path}: has no frame {args.frame}")
+        tracking, _ = track_source(path, config, seconds=args.seconds)
+        return drawn, f"{path} frame {args.frame}", tracking
     from drivers.camera import open_camera
 
-    if args.device:
-        device = int(args.device) if args.device.isdigit() else args.device
-        with open_camera(config, device) as cam:
+    if device:
+        from measurement.vision.pipeline import Tracking, tracker_for
+
+        dev = int(device) if device.isdigit() else device
+        with open_camera(config, dev) as cam:
             frame = cam.grab()
             for _ in range(SETTLE_FRAMES - 1):
                 frame = cam.grab()
-            return frame.image, f"camera {args.device}"
+            tracker, tracking = tracker_for(config), Tracking()
+            first = frame
+            while True:
+                tracking.add(frame.t - first.t, tracker.locate(frame.image))
+                if frame.t - first.t >= args.seconds:
+                    break
+                frame = cam.grab()
+            return first.image, f"camera {device}", tracking
     angle = math.radians(args.angle)
     with open_camera(config, angle_source=lambda t: angle, clock=lambda: 0.0, seed=0) as cam:
-        return cam.grab().image, f"mock camera, marker at {args.angle:g}°"
+        return cam.grab().image, f"mock camera, target at {args.angle:g}°", None
+
+
+def _share(tracking: Tracking, config: CameraConfig, seconds: float) -> tuple[dict, list[str], str]:
+    """The share of the first seconds tracked, judged by identify's rule: (facts, lines, refusal or '')."""
+    from measurement.vision.body import fit_pivot
+    from measurement.vision.quality import MIN_SHARE
+
+    decoded = max(len(tracking.decoded_times) - tracking.repeated, len(tracking.t))
+    share = len(tracking.t) / decoded if decoded else 0.0
+    facts: dict = {"seconds": seconds, "frames_checked": decoded, "frames_tracked": len(tracking.t),
+                   "repeated_frames": tracking.repeated, "tracked_share": round(share, 4),
+                   "min_tracked_share": MIN_SHARE, "failures": dict(tracking.reasons)}
+    lines = [f"first {seconds:g} s: target tracked in {len(tracking.t)} of {decoded} frames ({100 * share:.0f} %)"]
+    refusal = ""
+    if share < MIN_SHARE:
+        refusal = (f"the target was tracked in {100 * share:.0f} % of the first {seconds:g} s "
+                   f"({tracking.reasons_text() or 'no frames'}); `moi identify` needs {100 * MIN_SHARE:.0f} %")
+    if not config.edge and tracking.b and tracking.a and tracking.a[0] is None and config.target.pivot is None:
+        import numpy as np
+
+        try:
+            p = fit_pivot(np.asarray(tracking.b, dtype=float), "first seconds")
+            facts["pivot_px"] = [round(p.u, 2), round(p.v, 2)]
+        except VisionError as e:
+            facts["pivot_note"] = str(e)
+    return facts, lines, refusal
 
 
 def run(args: argparse.Namespace) -> int:
     import cv2
 
     config = read_camera(args.camera) if args.camera else demo_camera()
-    img, where = _grab(args, config)
-    annotated, facts, lines = check_image(img, config)
-    report: dict = {"source": where, "png": args.out, **facts}
+    img, where, tracking = _grab(args, config)
+    facts: dict = {}
+    extra: list[str] = []
+    refusal = ""
+    if tracking is not None:
+        facts, extra, refusal = _share(tracking, config, args.seconds)
+    pivot = (float(facts["pivot_px"][0]), float(facts["pivot_px"][1])) if "pivot_px" in facts else None
+    annotated, found, lines = check_image(img, config, pivot, extra)
+    report: dict = {"source": where, "png": args.out, **found, **facts}
+    if refusal:
+        report["refusal"] = refusal
     if not cv2.imwrite(args.out, annotated):
         raise InputFileError(f"cannot write {args.out!r} (directory missing or not writable, or not a .png name)")
     if args.json:
-        sys.stdout.write(json.dumps(report) + "\n")
+        sys.stdout.write(json.dumps(report, allow_nan=False) + "\n")
     else:
         print(f"camera-check: {where}")
-        for line in lines:
+        for line in lines + extra:
             print(f"  {line}")
+        if refusal:
+            print(f"  NOT ready: {refusal}")
         print(f"  annotated image written to {args.out}")
-    if not facts["found"]:
-        raise VisionError(f"marker not found in {where}: {facts['detail'] or facts['reason']} (see {args.out})")
+    if not found["found"]:
+        what = "marker" if config.edge else config.target.kind
+        raise VisionError(f"{what} not found in {where}: {found.get('detail') or found.get('reason')} (see {args.out})")
+    if refusal:
+        raise VisionError(f"{where}: {refusal} (see {args.out})")
     return 0

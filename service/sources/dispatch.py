@@ -2,7 +2,7 @@
 
 The dispatcher above the low-level readers: a CSV is read by ``service.sources.files``
 (a marker track becomes the angle of its two markers, the camera's oblique view
-measured from their distance and removed: ``measurement.vision.marker_pair``),
+measured from their distance and removed when the swing is wide enough to show it: ``measurement.vision.marker_pair``),
 a video or an image folder goes through the vision path (``service.sources.video``,
 imported only then: it loads OpenCV).
 """
@@ -32,6 +32,6 @@ def load_source(path: str | os.PathLike, camera: str | os.PathLike | None = None
     samples = read_samples(p)
     if isinstance(samples, Trace):
         return samples
-    from measurement.vision.marker_pair import measure_view, pair_trace
+    from measurement.vision.marker_pair import view_trace
 
-    return pair_trace(samples, measure_view(samples.a, samples.b))
+    return view_trace(samples)

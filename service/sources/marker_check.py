@@ -1,68 +1,110 @@
-"""One frame checked for the marker: where it is, at what angle, drawn on the frame. What the technician sees
+"""One frame checked for the target: where it is, at what angle, drawn on the frame. What the technician sees
 from `moi camera-check` and on the web page's camera set-up view.
 
-The image marks the search window, every row's edge point, the fitted edge line and the principal point; the
-facts give the marker's offset from the principal point, the edge's tilt and the angle. With the pendulum at rest
-and the camera on the line to the swing axis, the marker sits on the principal point with no tilt; an offset
-means the optical axis is yawed (the implied yaw is given).
+The image marks the region of interest (yellow), the target found (red: the edge line, or the tag's outline and
+the body vector's ends), the pivot (cyan) and the angle axis (green). For the edge on a cylinder the facts give the
+marker's offset from the principal point, the edge's tilt and the angle: with the pendulum at rest and the camera
+on the line to the swing axis, the marker sits on the principal point with no tilt; an offset means the optical
+axis is yawed (the implied yaw is given). Facts are JSON-ready: a number that is not finite is null.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # the vision modules load OpenCV: imported where used
     import numpy as np
 
     from measurement.vision.config import CameraConfig
     from measurement.vision.locate import MarkerObservation
+    from measurement.vision.locators import PointObservation
 
 
-def _annotate(img: np.ndarray, obs: MarkerObservation, config: CameraConfig, lines: list[str]) -> np.ndarray:
+def _point(p: tuple[float, float]) -> tuple[int, int]:
+    return int(round(p[0])), int(round(p[1]))
+
+
+def _annotate(img: np.ndarray, obs: MarkerObservation | PointObservation, config: CameraConfig, lines: list[str],
+              pivot: tuple[float, float] | None = None) -> np.ndarray:
     import cv2
     import numpy as np
 
-    out = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    from measurement.vision.locators import PointObservation
+
+    out = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR) if img.ndim == 2 else img.copy()
     cam = config.camera
-    c = (int(round(cam.cx)), int(round(cam.cy)))
-    cv2.drawMarker(out, c, (255, 255, 0), cv2.MARKER_CROSS, 25, 1)
-    if obs.roi is not None:
-        r0, r1, c0, c1 = obs.roi
-        cv2.rectangle(out, (c0, r0), (c1 - 1, r1 - 1), (0, 255, 255), 1)
-    if obs.found:
-        if obs.points is not None:
-            for u, v in zip(*obs.points):
-                out[int(round(v)), min(max(int(round(u)), 0), cam.width - 1)] = (0, 255, 0)
-        # the fitted edge line, drawn through the lens model over the marker's rows
-        if obs.points is not None and obs.points[0].size:
-            y_pts = cam.undistort(*obs.points)[1]
-            ys = np.linspace(float(y_pts.min()), float(y_pts.max()), 40)
-        else:
-            ys = np.full(2, obs.y_ref)
-        us, vs = cam.distort(obs.x + obs.slope * (ys - obs.y_ref), ys)
-        pts = np.stack([us, vs], axis=1).round().astype(np.int32).reshape(-1, 1, 2)
-        cv2.polylines(out, [pts], False, (0, 0, 255), 1)
-        cv2.drawMarker(out, (int(round(obs.u)), int(round(obs.v))), (0, 0, 255), cv2.MARKER_DIAMOND, 12, 1)
+    roi = config.target.roi
+    if roi is not None:
+        cv2.rectangle(out, (roi[0], roi[1]), (roi[2] - 1, roi[3] - 1), (0, 255, 255), 1)
+    if isinstance(obs, PointObservation):
+        if obs.corners is not None:
+            cv2.polylines(out, [np.round(obs.corners).astype(np.int32).reshape(-1, 1, 2)], True, (0, 0, 255), 1)
+        start = obs.a if obs.a is not None else pivot
+        if pivot is not None:
+            cv2.drawMarker(out, _point(pivot), (255, 255, 0), cv2.MARKER_CROSS, 25, 2)
+        if obs.found and obs.b is not None:
+            cv2.drawMarker(out, _point(obs.b), (0, 0, 255), cv2.MARKER_DIAMOND, 12, 2)
+            if obs.a is not None:
+                cv2.drawMarker(out, _point(obs.a), (0, 0, 255), cv2.MARKER_DIAMOND, 12, 2)
+            if start is not None:
+                # the angle axis: the body vector, drawn long enough to see its direction
+                du, dv = obs.b[0] - start[0], obs.b[1] - start[1]
+                k = max(1.0, 60.0 / max(math.hypot(du, dv), 1e-9))
+                length = k * math.hypot(du, dv)
+                cv2.arrowedLine(out, _point(start), _point((start[0] + k * du, start[1] + k * dv)), (0, 255, 0), 2,
+                                tipLength=min(0.3, 15.0 / max(length, 1.0)))
+    else:
+        c = (int(round(cam.cx)), int(round(cam.cy)))
+        cv2.drawMarker(out, c, (255, 255, 0), cv2.MARKER_CROSS, 25, 1)
+        if obs.roi is not None:
+            r0, r1, c0, c1 = obs.roi
+            cv2.rectangle(out, (c0, r0), (c1 - 1, r1 - 1), (0, 255, 255), 1)
+        if obs.found:
+            if obs.points is not None:
+                for u, v in zip(*obs.points):
+                    out[int(round(v)), min(max(int(round(u)), 0), cam.width - 1)] = (0, 255, 0)
+            # the fitted edge line, drawn through the lens model over the marker's rows
+            if obs.points is not None and obs.points[0].size:
+                y_pts = cam.undistort(*obs.points)[1]
+                ys = np.linspace(float(y_pts.min()), float(y_pts.max()), 40)
+            else:
+                ys = np.full(2, obs.y_ref)
+            us, vs = cam.distort(obs.x + obs.slope * (ys - obs.y_ref), ys)
+            pts = np.stack([us, vs], axis=1).round().astype(np.int32).reshape(-1, 1, 2)
+            cv2.polylines(out, [pts], False, (0, 0, 255), 1)
+            cv2.drawMarker(out, (int(round(obs.u)), int(round(obs.v))), (0, 0, 255), cv2.MARKER_DIAMOND, 12, 1)
     if lines:
         # a dark box keeps the text readable on any scene
-        width = max(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)[0][0] for t in lines[:4])
-        cv2.rectangle(out, (2, 2), (14 + width, 8 + 18 * len(lines[:4])), (0, 0, 0), -1)
-    for i, text in enumerate(lines[:4]):
+        width = max(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)[0][0] for t in lines[:5])
+        cv2.rectangle(out, (2, 2), (14 + width, 8 + 18 * len(lines[:5])), (0, 0, 0), -1)
+    for i, text in enumerate(lines[:5]):
         cv2.putText(out, text, (8, 18 + 18 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
     return out
 
 
-def check_image(img: np.ndarray, config: CameraConfig) -> tuple[np.ndarray, dict, list[str]]:
-    """Find the marker in a grey frame: (the annotated BGR image, the facts, the lines of text drawn on it).
-    What the technician sees here and on the web page's set-up view."""
-    from measurement.vision.geometry import angle_from_normalised
-    from measurement.vision.locate import MarkerTracker
+def _finite(value: Any) -> Any:
+    """JSON has no NaN: a non-finite number is null."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
-    obs = MarkerTracker(config.camera).locate(img, keep_points=True)
-    report: dict = {"found": obs.found}
+
+def check_image(img: np.ndarray, config: CameraConfig, pivot: tuple[float, float] | None = None,
+                extra: list[str] | None = None) -> tuple[np.ndarray, dict, list[str]]:
+    """Find the target in one frame: (the annotated BGR image, the facts, the lines of text about the frame).
+    What the technician sees here and on the web page's set-up view. pivot: a single blob's pivot (px), when
+    known (given in the camera file or found from the first seconds' arc); extra: more lines drawn."""
+    if not config.edge:
+        return _check_points(img, config, pivot or config.target.pivot, extra or [])
+    from measurement.vision.geometry import angle_from_normalised
+    from measurement.vision.locate import MarkerTracker, to_grey
+
+    grey = to_grey(img)
+    obs = MarkerTracker(config.camera).locate(grey, keep_points=True)
+    report: dict = {"target": "edge", "found": obs.found}
     if obs.found:
-        theta = float(angle_from_normalised(obs.x, config.marker))
+        theta = float(angle_from_normalised(obs.x, config.cylinder))
         offset_px = obs.x * config.camera.fx
         # at rest, a marker facing a camera on the line to the axis is seen on the optical axis
         implied_yaw = -math.degrees(math.atan(obs.x))
@@ -75,7 +117,44 @@ def check_image(img: np.ndarray, config: CameraConfig) -> tuple[np.ndarray, dict
                  f"angle {math.degrees(theta):+.3f} deg, edge tilt {obs.tilt_deg:+.2f} deg",
                  f"{obs.rows} rows, line RMS {obs.residual:.3f} px, edge strength {obs.contrast:.0f}",
                  f"if at rest: camera yaw {implied_yaw:+.2f} deg"]
+        if not math.isfinite(theta):
+            # what identify will say of this edge: it cannot lie where the camera file's cylinder is seen
+            report.update({"found": False, "reason": "marker_lost",
+                           "detail": f"the edge lies beyond the cylinder's silhouette for radius {config.cylinder.radius:g} m "
+                                     f"and distance {config.cylinder.distance:g} m in the camera file"})
+            lines[1] = f"angle: none ({report['detail']})"
     else:
         report.update({"reason": obs.reason, "detail": obs.detail})
         lines = [f"marker NOT found: {obs.detail or obs.reason}"]
-    return _annotate(img, obs, config, lines), report, lines
+    return _annotate(grey, obs, config, lines + (extra or [])), {k: _finite(v) for k, v in report.items()}, lines
+
+
+def _check_points(img: np.ndarray, config: CameraConfig, pivot: tuple[float, float] | None, extra: list[str]
+                  ) -> tuple[np.ndarray, dict, list[str]]:
+    from measurement.vision.body import provisional_angle
+    from measurement.vision.pipeline import tracker_for
+
+    from measurement.vision.locators import Locator
+
+    spec = config.target
+    locator = tracker_for(config)
+    assert isinstance(locator, Locator), "a target other than the edge has a point locator"
+    obs = locator.locate(img)
+    report: dict = {"target": spec.kind, "view": spec.view, "found": obs.found}
+    if obs.found:
+        assert obs.b is not None, "a found target has its point b"
+        theta = provisional_angle(obs, pivot)
+        report.update({"b_px": list(obs.b), "size_px": obs.size})
+        if obs.a is not None:
+            report["a_px"] = list(obs.a)
+        if pivot is not None:
+            report["pivot_px"] = list(pivot)
+        report["angle_deg"] = math.degrees(theta) if math.isfinite(theta) else None
+        where = f"at u={obs.b[0]:.1f} v={obs.b[1]:.1f} px" + (f" and u={obs.a[0]:.1f} v={obs.a[1]:.1f} px" if obs.a else "")
+        lines = [f"{spec.kind} {where}, size {obs.size:.0f} px",
+                 (f"angle {math.degrees(theta):+.3f} deg (the body vector from straight down)"
+                  if math.isfinite(theta) else "angle: the pivot comes from the swing's arc (or [target] pivot)")]
+    else:
+        report.update({"reason": obs.reason, "detail": obs.detail})
+        lines = [f"{spec.kind} NOT found: {obs.detail or obs.reason}"]
+    return _annotate(img, obs, config, lines + extra, pivot), {k: _finite(v) for k, v in report.items()}, lines

@@ -294,3 +294,32 @@ def test_settings_are_checked():
     with V4L2Camera(0, CAMERA, capture_factory=StreamingCapture([])) as v4l2, \
             pytest.raises(NotImplementedError, match="read it from a thread"):
         v4l2.grab_ready()
+
+
+def test_a_tag_target_is_tracked_live_with_the_rules_of_a_video():
+    """The live path takes the camera file's target (here a printed tag on a face-on pendulum, rendered by the
+    mock) and the same quality rules as a video: a record where the tag is missing from half the frames is refused."""
+    from measurement.errors import VisionError
+
+    config = CameraConfig.from_dict({"camera": {"width": 320, "height": 240, "fps": 30.0}, "target": {"kind": "tag"}})
+    clock = ManualClock()
+    rig = SimRig(TRUTH, theta0=0.2, clock=clock, duration=30.0)
+    cam = Glitching(config, rig.angle, clock, imaging=IMAGING, seed=7)
+    with CameraAngleSensor(cam, config, clock) as sensor:
+        sensor.start()
+        rig.release()
+        t, a = capture(sensor, clock, 4.0, dt=1 / 30)
+        sensor.stop()
+        done = sensor.finish(Trace(t - t[0], a, source="camera", meta={"camera": sensor.stats()}))
+        truth = np.array([rig.angle(x) for x in t])
+        err = done.angle - truth[np.isin(t - t[0], done.t)]
+        assert np.ptp(err - np.mean(err)) < math.radians(0.5)
+        cam_meta = done.meta["camera"]
+        assert cam_meta["target"]["kind"] == "tag" and cam_meta["tracking"]["tracked_share"] == 1.0
+
+        cam.blank = set(range(0, 100_000, 2))  # every other frame without the tag: never long enough for a fault
+        sensor.start()
+        t, a = capture(sensor, clock, 2.5, dt=1 / 30)
+        sensor.stop()
+        with pytest.raises(VisionError, match="tracked in"):
+            sensor.finish(Trace(t - t[0], a, source="camera", meta={"camera": sensor.stats()}))

@@ -33,7 +33,7 @@ THETA0 = 0.2  # rad, 11.5°: where sin θ and tan θ differ by 2 %
 
 
 def camera_toml(config: CameraConfig = CONFIG, **pose) -> dict:
-    doc = {"camera": config.camera.to_dict(), "marker": config.marker.to_dict()}
+    doc = {"camera": config.camera.to_dict(), "marker": config.cylinder.to_dict()}
     if pose:
         doc["pose"] = pose
     return doc

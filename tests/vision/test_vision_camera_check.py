@@ -67,3 +67,39 @@ def test_bad_arguments_are_one_line_errors(tmp_path, capsys):
     assert "cannot write" in capsys.readouterr().err
     assert main(["camera-check", "--device", "/dev/video-not-here", "--out", str(tmp_path / "c.png")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("target", [{"kind": "tag"}, {"kind": "blob", "colour": [200, 30, 40]},
+                                    {"kind": "blobs", "view": "along-axis"},
+                                    {"kind": "patch", "view": "along-axis", "roi": [110, 70, 210, 170]}])
+def test_each_target_rendered_by_the_mock_is_found_and_drawn(tmp_path, capsys, target):
+    cam = write_toml(tmp_path / "cam.toml", {"camera": {"width": 320, "height": 240, "fps": 30.0}, "target": target})
+    out = tmp_path / "c.png"
+    assert main(["camera-check", "--camera", str(cam), "--angle", "8", "--out", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["found"] is True and report["target"] == target["kind"]
+    if target["kind"] not in ("blob", "patch"):  # a blob needs its pivot; a patch turns from its first frame
+        assert report["angle_deg"] == pytest.approx(8.0 + (90.0 if target["kind"] == "blobs" else 0.0), abs=0.3)
+    png = cv2.imread(str(out))
+    drawn = np.abs(png[..., 1].astype(int) - png[..., 2].astype(int)) > 100  # the green axis or the red target
+    assert png.shape == (240, 320, 3) and drawn.any()
+
+
+def test_a_video_positional_reports_the_share_and_refuses_like_identify(tmp_path, capsys):
+    """A still edge that camera-check finds in the first frame but cannot place on the cylinder: exit 2 and
+    valid JSON (no NaN), as identify refuses it."""
+    r = MarkerRenderer(CAMERA, MARKER, imaging=IMAGING, seed=2)
+    video = write_video(tmp_path / "v.avi", (r.render(0.1 * math.sin(k / 5)) for k in range(40)))
+    assert main(["camera-check", str(video), "--seconds", "0.5", "--out", str(tmp_path / "c.png"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["frames_checked"] == 31 and report["tracked_share"] == 1.0 and "refusal" not in report
+    narrow = write_toml(tmp_path / "narrow.toml", {**camera_toml(), "marker": {"radius": 0.01, "distance": 0.25}})
+    wall = np.full((480, 640), 100, np.uint8)
+    wall[:, 600:] = 200  # a bright bar near the edge of the image: beyond a 1 cm cylinder's silhouette
+    cv2.imwrite(str(tmp_path / "bar.png"), wall)
+    code = main(["camera-check", str(tmp_path / "bar.png"), "--camera", str(narrow), "--out", str(tmp_path / "c.png"),
+                 "--json"])
+    captured = capsys.readouterr()
+    report = json.loads(captured.out, parse_constant=lambda c: pytest.fail(f"{c} in the JSON"))
+    assert code == 2 and report["found"] is False and report["angle_deg"] is None
+    assert "silhouette" in captured.err and len(captured.err.strip().splitlines()) == 1

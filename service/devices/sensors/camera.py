@@ -86,8 +86,10 @@ class Camera(SensorKind):
             camera.close()
             raise
         cam = cfg.camera
+        seen = (f"marker radius {cfg.cylinder.radius:g} m at {cfg.cylinder.distance:g} m" if cfg.edge
+                else f"{cfg.target.kind} target, {cfg.target.view}")
         notes.append(f"simulated camera: {cam.width}×{cam.height} px at {cam.fps:g} frames/s, yaw "
-                     f"{sim.camera_yaw_deg:g}°, marker radius {cfg.marker.radius:g} m at {cfg.marker.distance:g} m")
+                     f"{sim.camera_yaw_deg:g}°, {seen}")
         return sensor, []
 
     @staticmethod
