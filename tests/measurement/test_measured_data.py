@@ -8,7 +8,7 @@ import pytest
 
 from measurement import identify, parse_trace_csv
 from measurement.errors import ResultSchemaError
-from measurement.result import IdentificationResult
+from measurement.result import SCHEMA_VERSION, IdentificationResult
 from measurement.rig import Rig
 from measurement.vision.marker_pair import measure_view, pair_trace, parse_marker_csv
 
@@ -125,6 +125,6 @@ def test_a_result_reads_back_as_typed_fields_and_writes_the_same_json(runs, cali
         assert back.uncertainty_budget.keys() == r.uncertainty_budget.keys()
         assert back.report() == r.report()
     older = json.loads(text) | {"schema": 3}
-    with pytest.raises(ResultSchemaError, match="schema 3; expected schema 4"):
+    with pytest.raises(ResultSchemaError, match=f"schema 3; expected schema {SCHEMA_VERSION}"):
         IdentificationResult.from_dict(older)
 

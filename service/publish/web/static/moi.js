@@ -4,6 +4,8 @@ var moi = (function () {
   function csrf() { var m = document.querySelector('meta[name="csrf-token"]'); return m ? m.content : ""; }
   // the states the appliance reports (service/states.py), served with the page: {name: {code, words, busy, capturing}}
   var STATES = (function () { var m = document.querySelector('meta[name="moi-states"]'); return m ? JSON.parse(m.content) : {}; })();
+  // a release came to its end (its result published, or aborted): the page shows what the server now has
+  function finished(s) { return s.previous === "PUBLISHING" || s.previous === "ABORTED"; }
   function busy(state) { return !!(STATES[state] && STATES[state].busy); }
   function $(id) { return document.getElementById(id); }
   function say(text, bad) { var m = $("message"); if (m) { m.textContent = text; m.className = "message" + (bad ? " bad" : ""); } }
@@ -190,9 +192,10 @@ var moi = (function () {
       li.setAttribute("data-state", s.state);
       $("log").appendChild(li);
       if (s.state === "ABORTED") { say("aborted: this release is not counted; Measure measures it again"); }
-      else if (s.state === "FAULT" || (s.state === "IDLE" && lastState !== "ABORTED")) { say(""); }  // answered now
+      else if (s.state === "FAULT") { say(""); }  // answered now
+      else if (s.state === "IDLE" && lastState !== "ABORTED") { say(""); }
       lastState = s.state;
-      if (s.state === "IDLE" && (s.previous === "PUBLISHING" || s.previous === "ABORTED")) {
+      if (s.state === "IDLE" && finished(s)) {
         var id = s.measurement_id;
         // the part in hand, the counters and the last parts as the server now has them
         refresh();
@@ -275,7 +278,7 @@ var moi = (function () {
     es.addEventListener("state", function (e) {
       var s = JSON.parse(e.data);
       if (busy(s.state)) { say(s.state + ": " + (s.words || "")); }
-      if (s.state === "IDLE" && (s.previous === "PUBLISHING" || s.previous === "ABORTED")) { es.close(); window.location.reload(); }
+      if (s.state === "IDLE" && finished(s)) { es.close(); window.location.reload(); }
     });
   }
   return {home: home, setup: setup, tensorSet: tensorSet, act: act, states: STATES};
