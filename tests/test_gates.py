@@ -24,7 +24,7 @@ ALLOWED_OVER_LIMIT: dict[str, set[str]] = {
     "measurement/result.py": {"report"},
     "measurement/rig.py": {"from_dict"},
     "measurement/tensor.py": {"solve"},
-    "measurement/vision/pose.py": {"estimate_yaw"},
+    "measurement/vision/pose.py": {"_estimate_yaw"},  # estimate_yaw's body, moved unchanged
     "service/commands/demo.py": {"_run"},
     "service/config/appliance.py": {"parse_config"},
     "service/config/check.py": {"check_config"},

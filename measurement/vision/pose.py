@@ -109,7 +109,7 @@ def _bspline_basis(t: np.ndarray, t0: float, t1: float, spacing: float) -> np.nd
     return BSpline.design_matrix(tt, knots, 3).toarray()
 
 
-def estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, *, harmonics: tuple[int, ...] = (1, 3, 5),  # noqa: C901
+def estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, *, harmonics: tuple[int, ...] = (1, 3, 5),
                  max_iterations: int = 12, outlier_sigma: float = 6.0) -> PoseEstimate:
     """Estimate the camera yaw ψ (rad) from a free swing seen at ideal normalised coordinates x(t).
 
@@ -124,7 +124,7 @@ def estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, *, harmon
                             "marker move?)")
 
 
-def _estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, harmonics: tuple[int, ...],
+def _estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, harmonics: tuple[int, ...],  # noqa: C901
                   max_iterations: int, outlier_sigma: float) -> PoseEstimate:
     t = np.asarray(t, dtype=float)
     x = np.asarray(x, dtype=float)

@@ -75,67 +75,85 @@ def _device_of(args: argparse.Namespace) -> tuple[str | None, str | None]:
 def _grab(args: argparse.Namespace, config: CameraConfig) -> tuple[np.ndarray, str, Tracking | None]:
     """The frame to draw (grey, or BGR for a colour target), where it came from, and the tracking of the first
     ``--seconds`` (None for a still image or the mock camera)."""
-    import cv2
-    import numpy as np
-
-    from measurement.vision.locate import to_grey
-
     source, device = _device_of(args)
     if source:
         path = Path(source)
         if not path.exists():
             raise InputFileError(f"source {str(path)!r} not found")
-        from drivers.video_file import IMAGE_SUFFIXES, FrameSource
+        from drivers.video_file import IMAGE_SUFFIXES
 
         if path.is_file() and path.suffix.lower() in IMAGE_SUFFIXES:
-            img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-            if img is None:
-                raise InputFileError(f"image {str(path)!r} cannot be decoded")
-            if img.dtype != np.uint8:
-                raise InputFileError(f"image {str(path)!r} has {img.dtype} pixels; expected 8-bit")
-            if not config.target.needs_colour:
-                img = to_grey(img)
-            elif img.ndim == 2:
-                img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-            return img[..., :3] if img.ndim == 3 else img, str(path), None
-        if args.frame < 0:
-            raise InputFileError(f"--frame must be >= 0, got {args.frame}")
-        if not args.seconds > 0:
-            raise InputFileError(f"--seconds must be > 0, got {args.seconds}")
-        from service.sources.video import track_source
-
-        drawn = None
-        for n, (_, img) in enumerate(FrameSource(path, config, colour=config.target.needs_colour)):
-            if n == args.frame:
-                if img is None:
-                    raise InputFileError(f"{path}: frame {n} cannot be decoded")
-                drawn = img
-                break
-        if drawn is None:
-            raise InputFileError(f"{path}: has no frame {args.frame}")
-        tracking, _ = track_source(path, config, seconds=args.seconds)
-        return drawn, f"{path} frame {args.frame}", tracking
+            return _still(path, config), str(path), None
+        return _from_video(path, args, config)
     from drivers.camera import open_camera
 
     if device:
-        from measurement.vision.pipeline import Tracking, tracker_for
-
-        dev = int(device) if device.isdigit() else device
-        with open_camera(config, dev) as cam:
-            frame = cam.grab()
-            for _ in range(SETTLE_FRAMES - 1):
-                frame = cam.grab()
-            tracker, tracking = tracker_for(config), Tracking()
-            first = frame
-            while True:
-                tracking.add(frame.t - first.t, tracker.locate(frame.image))
-                if frame.t - first.t >= args.seconds:
-                    break
-                frame = cam.grab()
-            return first.image, f"camera {device}", tracking
+        return _from_device(device, args, config)
     angle = math.radians(args.angle)
     with open_camera(config, angle_source=lambda t: angle, clock=lambda: 0.0, seed=0) as cam:
         return cam.grab().image, f"mock camera, target at {args.angle:g}°", None
+
+
+def _still(path: Path, config: CameraConfig) -> np.ndarray:
+    """An image file as the target's tracker reads it: grey, or BGR for a colour target."""
+    import cv2
+    import numpy as np
+
+    from measurement.vision.locate import to_grey
+
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise InputFileError(f"image {str(path)!r} cannot be decoded")
+    if img.dtype != np.uint8:
+        raise InputFileError(f"image {str(path)!r} has {img.dtype} pixels; expected 8-bit")
+    if not config.target.needs_colour:
+        img = to_grey(img)
+    elif img.ndim == 2:
+        img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    return img[..., :3] if img.ndim == 3 else img
+
+
+def _from_video(path: Path, args: argparse.Namespace, config: CameraConfig) -> tuple[np.ndarray, str, Tracking]:
+    """Frame ``--frame`` of a video or image folder, and the tracking of its first ``--seconds``."""
+    from drivers.video_file import FrameSource
+    from service.sources.video import track_source
+
+    if args.frame < 0:
+        raise InputFileError(f"--frame must be >= 0, got {args.frame}")
+    if not args.seconds > 0:
+        raise InputFileError(f"--seconds must be > 0, got {args.seconds}")
+    drawn = None
+    for n, (_, img) in enumerate(FrameSource(path, config, colour=config.target.needs_colour)):
+        if n == args.frame:
+            if img is None:
+                raise InputFileError(f"{path}: frame {n} cannot be decoded")
+            drawn = img
+            break
+    if drawn is None:
+        raise InputFileError(f"{path}: has no frame {args.frame}")
+    tracking, _ = track_source(path, config, seconds=args.seconds)
+    return drawn, f"{path} frame {args.frame}", tracking
+
+
+def _from_device(device: str, args: argparse.Namespace, config: CameraConfig) -> tuple[np.ndarray, str, Tracking]:
+    """A live camera's first frame once exposure settled, and the tracking of its first ``--seconds``."""
+    from drivers.camera import open_camera
+    from measurement.vision.pipeline import Tracking, tracker_for
+
+    dev = int(device) if device.isdigit() else device
+    with open_camera(config, dev) as cam:
+        frame = cam.grab()
+        for _ in range(SETTLE_FRAMES - 1):
+            frame = cam.grab()
+        tracker, tracking = tracker_for(config), Tracking()
+        first = frame
+        while True:
+            tracking.add(frame.t - first.t, tracker.locate(frame.image))
+            if frame.t - first.t >= args.seconds:
+                break
+            frame = cam.grab()
+        return first.image, f"camera {device}", tracking
+
 
 
 def _share(tracking: Tracking, config: CameraConfig, seconds: float) -> tuple[dict, list[str], str]:

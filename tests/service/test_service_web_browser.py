@@ -170,59 +170,7 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
         for name, (path, verdict) in pages.items():
             browser.get(url.rstrip("/") + path)
             wait.until(lambda d: d.execute_script("return document.readyState") == "complete")
-            inner = browser.execute_script("return window.innerWidth")
-            wide = browser.execute_script("return document.documentElement.scrollWidth")
-            offenders = browser.execute_script(
-                "return Array.from(document.querySelectorAll('body *')).filter(e => e.getBoundingClientRect().right"
-                " > window.innerWidth + 1).slice(0, 5).map(e => e.tagName + '.' + e.className + '#' + e.id)")
-            # nothing wider than the window: tables scroll inside their card
-            assert wide <= inner, (name, width, wide, inner, offenders)
-            # a person reads no number in e-notation and no machine time on the operator's and quality pages
-            shown = UUID.sub("", browser.find_element(By.TAG_NAME, "body").text)
-            found = E_NOTATION.search(shown) or ISO_TIME.search(shown)
-            assert found is None, (name, width, found and shown[max(0, found.start() - 80):found.end() + 40])
-            assert len(browser.find_elements(By.TAG_NAME, "h1")) == 1  # one main heading on every page
-            if verdict is not None:
-                head = browser.find_element(By.ID, "verdict")
-                assert head.text.split()[0] == verdict and head.is_displayed()
-                assert head.rect["x"] >= 0 and head.rect["x"] + head.rect["width"] <= inner
-            if name == "home":
-                swing = browser.find_element(By.ID, "swing")
-                assert swing.size["height"] >= 200 and swing.size["width"] <= inner  # readable on a phone
-                assert browser.find_element(By.ID, "tile-verdict").text == "INVALID"
-            if name == "spc":  # the chart in the recipe's unit; on a phone its own drawing, labels readable
-                chart = browser.find_element(By.ID, "chart-points" if width > 600 else "chart-points-narrow")
-                assert chart.is_displayed() and "kg·mm²" in chart.text and "UCL" in chart.text
-                assert chart.rect["x"] >= 0 and chart.rect["x"] + chart.rect["width"] <= inner
-                tick = chart.find_element(By.CSS_SELECTOR, "text.tick")
-                assert tick.rect["height"] >= 9, tick.rect  # px: not the 7 px text of a shrunken desktop chart
-                clipped = browser.execute_script(
-                    "var r = arguments[0].getBoundingClientRect(); return Array.from(arguments[0].querySelectorAll("
-                    "'text')).filter(t => t.getBoundingClientRect().right > r.right + 0.5).map(t => t.textContent)", chart)
-                assert not clipped, clipped  # every label whole
-                assert "95 % confidence" in browser.find_element(By.ID, "capability").text
-            if name == "report" and width == 1280:  # it prints cleanly: the record, not the page's navigation
-                import base64
-                import io
-
-                from pypdf import PdfReader
-                printed = PdfReader(io.BytesIO(base64.b64decode(browser.print_page())))
-                text = " ".join(pg.extract_text() for pg in printed.pages)
-                assert "part INVALID" in text and "SN-0044" in text and "Tensor set" not in text
-                assert len(printed.pages) <= 3
-            if name == "history":
-                table = browser.find_element(By.ID, "history")
-                assert "part verdict" in table.text and "NOK" in table.text
-                if width == 1280:  # the whole row on a desktop: no sideways scrolling to the status and flags
-                    box = table.find_element(By.XPATH, "..")
-                    assert browser.execute_script("return arguments[0].scrollWidth <= arguments[0].clientWidth", box)
-            # the whole page in one picture
-            height = browser.execute_script("return document.documentElement.scrollHeight")
-            browser.set_window_size(width, min(max(height + 120, 600), 6000))
-            shot = artifacts / f"{name}-{width}.png"
-            browser.save_screenshot(str(shot))
-            assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-            browser.set_window_size(width, 900)
+            _check_page(browser, name, width, verdict, artifacts)
 
     # the narrowest phone the layout is made for: still nothing wider than the window
     browser.set_window_size(360, 900)
@@ -315,6 +263,66 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
         for name in ("operator-390", "blocked-390", "recipes-1280", "calibration-1280", "setup-1280", "spc-1280",
                      "spc-390"):
             shutil.copy(artifacts / f"{name}.png", REPO / "docs" / "img" / f"web-{name}.png")
+
+
+def _check_page(browser, name: str, width: int, verdict: str | None, artifacts: Path) -> None:
+    """One page at one window width: nothing wider than the window, no e-notation nor machine time, one main
+    heading, the verdict where the page has one, what the page itself must show; then its screenshot."""
+    from selenium.webdriver.common.by import By
+
+    inner = browser.execute_script("return window.innerWidth")
+    wide = browser.execute_script("return document.documentElement.scrollWidth")
+    offenders = browser.execute_script(
+        "return Array.from(document.querySelectorAll('body *')).filter(e => e.getBoundingClientRect().right"
+        " > window.innerWidth + 1).slice(0, 5).map(e => e.tagName + '.' + e.className + '#' + e.id)")
+    # nothing wider than the window: tables scroll inside their card
+    assert wide <= inner, (name, width, wide, inner, offenders)
+    # a person reads no number in e-notation and no machine time on the operator's and quality pages
+    shown = UUID.sub("", browser.find_element(By.TAG_NAME, "body").text)
+    found = E_NOTATION.search(shown) or ISO_TIME.search(shown)
+    assert found is None, (name, width, found and shown[max(0, found.start() - 80):found.end() + 40])
+    assert len(browser.find_elements(By.TAG_NAME, "h1")) == 1  # one main heading on every page
+    if verdict is not None:
+        head = browser.find_element(By.ID, "verdict")
+        assert head.text.split()[0] == verdict and head.is_displayed()
+        assert head.rect["x"] >= 0 and head.rect["x"] + head.rect["width"] <= inner
+    if name == "home":
+        swing = browser.find_element(By.ID, "swing")
+        assert swing.size["height"] >= 200 and swing.size["width"] <= inner  # readable on a phone
+        assert browser.find_element(By.ID, "tile-verdict").text == "INVALID"
+    if name == "spc":  # the chart in the recipe's unit; on a phone its own drawing, labels readable
+        chart = browser.find_element(By.ID, "chart-points" if width > 600 else "chart-points-narrow")
+        assert chart.is_displayed() and "kg·mm²" in chart.text and "UCL" in chart.text
+        assert chart.rect["x"] >= 0 and chart.rect["x"] + chart.rect["width"] <= inner
+        tick = chart.find_element(By.CSS_SELECTOR, "text.tick")
+        assert tick.rect["height"] >= 9, tick.rect  # px: not the 7 px text of a shrunken desktop chart
+        clipped = browser.execute_script(
+            "var r = arguments[0].getBoundingClientRect(); return Array.from(arguments[0].querySelectorAll("
+            "'text')).filter(t => t.getBoundingClientRect().right > r.right + 0.5).map(t => t.textContent)", chart)
+        assert not clipped, clipped  # every label whole
+        assert "95 % confidence" in browser.find_element(By.ID, "capability").text
+    if name == "report" and width == 1280:  # it prints cleanly: the record, not the page's navigation
+        import base64
+        import io
+
+        from pypdf import PdfReader
+        printed = PdfReader(io.BytesIO(base64.b64decode(browser.print_page())))
+        text = " ".join(pg.extract_text() for pg in printed.pages)
+        assert "part INVALID" in text and "SN-0044" in text and "Tensor set" not in text
+        assert len(printed.pages) <= 3
+    if name == "history":
+        table = browser.find_element(By.ID, "history")
+        assert "part verdict" in table.text and "NOK" in table.text
+        if width == 1280:  # the whole row on a desktop: no sideways scrolling to the status and flags
+            box = table.find_element(By.XPATH, "..")
+            assert browser.execute_script("return arguments[0].scrollWidth <= arguments[0].clientWidth", box)
+    # the whole page in one picture
+    height = browser.execute_script("return document.documentElement.scrollHeight")
+    browser.set_window_size(width, min(max(height + 120, 600), 6000))
+    shot = artifacts / f"{name}-{width}.png"
+    browser.save_screenshot(str(shot))
+    assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    browser.set_window_size(width, 900)
 
 
 def _contrast(browser, el) -> float:
