@@ -272,31 +272,32 @@ def _fit_shared(results: Sequence[IdentificationResult], rig: Rig, shared: tuple
     weights = np.array([1.0 / max(f.residual_rms, 1e-12) for f in fits])
     # start: ω_n and the laws averaged over the releases, each by its information
     var_w = np.array([max(f.stdev("omega_n"), 1e-12) ** 2 for f in fits])
-    z0 = [float(np.sum([f.value("omega_n") for f in fits] / var_w) / np.sum(1 / var_w))]
+    start: list[float] = [float(np.sum([f.value("omega_n") for f in fits] / var_w) / np.sum(1 / var_w))]
     for name in dyn:
         vals = np.array([f.value(name) for f in fits])
-        z0.append(float(np.median(vals)))
+        start.append(float(np.median(vals)))
     blocks: list[tuple[int, int]] = []  # each release's own parameters in z
     for m, f in zip(models, fits):
-        start = len(z0)
-        z0 += [f.value("theta0"), f.value("omega0")] + list(f.x[m.n_dynamic:])
-        blocks.append((start, len(z0)))
-    z0 = np.asarray(z0)
-    lo_all, hi_all = [0.0], [np.inf]
+        first = len(start)
+        start += [f.value("theta0"), f.value("omega0")] + list(f.x[m.n_dynamic:])
+        blocks.append((first, len(start)))
+    z0 = np.asarray(start)
+    lo: list[float] = [0.0]
+    hi: list[float] = [np.inf]
     lo_m, hi_m = models[0].bounds()
-    lo_all += list(lo_m[len(STATE_PARAMS):models[0].n_dynamic])
-    hi_all += list(hi_m[len(STATE_PARAMS):models[0].n_dynamic])
+    lo += list(lo_m[len(STATE_PARAMS):models[0].n_dynamic])
+    hi += list(hi_m[len(STATE_PARAMS):models[0].n_dynamic])
     for m in models:
-        lo, hi = m.bounds()
-        lo_all += [-np.inf, -np.inf] + list(lo[m.n_dynamic:])
-        hi_all += [np.inf, np.inf] + list(hi[m.n_dynamic:])
-    lo_all, hi_all = np.asarray(lo_all), np.asarray(hi_all)
+        lo_r, hi_r = m.bounds()
+        lo += [-np.inf, -np.inf] + list(lo_r[m.n_dynamic:])
+        hi += [np.inf, np.inf] + list(hi_r[m.n_dynamic:])
+    lo_all, hi_all = np.asarray(lo), np.asarray(hi)
     z0 = np.clip(z0, lo_all, hi_all)
-    scales = [fits[0].scales[2]] + list(np.median([f.scales[3:m.n_dynamic] for f, m in zip(fits, models)], axis=0)) \
+    scale_list = [fits[0].scales[2]] + list(np.median([f.scales[3:m.n_dynamic] for f, m in zip(fits, models)], axis=0)) \
         if dyn else [fits[0].scales[2]]
     for m, f in zip(models, fits):
-        scales += [f.scales[0], f.scales[1]] + list(f.scales[m.n_dynamic:])
-    scales = np.asarray(scales)
+        scale_list += [f.scales[0], f.scales[1]] + list(f.scales[m.n_dynamic:])
+    scales = np.asarray(scale_list)
 
     def release_residual(z: np.ndarray, i: int) -> np.ndarray:
         x = _release_x(models[i], blocks[i], z)

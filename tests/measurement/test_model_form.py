@@ -55,7 +55,7 @@ def test_the_law_of_a_clean_swing_holds_across_the_record():
     r = identify(_bifilar_trace(0.0), Rig(kind="compound", declared=("viscous",)))
     assert r.added_effects == () and "halves_disagree" not in r.flags
     assert r.omega_n_u is not None and abs(r.omega_n - 2.4) < 3 * r.omega_n_u
-    assert r.model_form.segments.z < 3
+    assert r.model_form.segments is not None and r.model_form.segments.z < 3
 
 
 def _step(chosen, table, bic_before=0.0, w_before=None):

@@ -45,7 +45,7 @@ def test_a_hardening_torsion_spring_is_found_and_kept():
     trace, rig, J = _hardening(seed=1)
     r = identify(trace, rig)
     assert "cubic_stiffness" in r.added_effects
-    assert abs(r.J / J - 1) < 2e-3
+    assert r.J is not None and abs(r.J / J - 1) < 2e-3
     k3 = r.stiffness["cubic_stiffness"]["k3"]
     assert abs(k3.value - 1.5 * 0.3651) < 4 * k3.std
     # the measurand is the small-swing limit; the swing's frequency at its largest amplitude is beside it
@@ -64,11 +64,12 @@ def test_a_slow_sensor_line_and_drift_buy_no_amplitude_law():
     line = 3e-3 * np.sin(2 * math.pi * 0.2 * clean.t + rng.uniform(0, 2 * math.pi)) + 2e-5 * clean.t
     r = identify(Trace(clean.t, clean.angle + line, source="slow line"), rig)
     assert "cubic_stiffness" not in r.effects
-    assert abs(r.J - J) < 2 * r.J_u
+    assert r.J is not None and r.J_u is not None and abs(r.J - J) < 2 * r.J_u
     # where the loop added it, the report says why it went, and its ω_n is in u
-    for c in r.model_form["competitors"]:
-        if c["change"].startswith("cubic_stiffness"):
-            assert "does not determine" in c["change"] and abs(c["delta"]) <= r.omega_n_std_model
+    assert r.omega_n_std_model is not None
+    for c in r.model_form.competitors:
+        if c.change.startswith("cubic_stiffness"):
+            assert "does not determine" in c.change and abs(c.delta) <= r.omega_n_std_model
 
 
 @pytest.mark.parametrize("part", ["rod_torsional_first_5", "fwheel_compound_first_1"])
@@ -85,4 +86,5 @@ def test_a_rate_record_and_its_integrated_angle_give_one_omega_n(part):
     assert rate.measures == "rate" and rate.offset.unit == "rad/s" and angle.measures == "angle"
     # the gyro's bias, about 1 °/s, is the rate's fitted zero
     assert 0.002 < abs(rate.offset.value) < 0.05
+    assert rate.omega_n_u is not None and angle.omega_n_u is not None
     assert abs(rate.omega_n - angle.omega_n) <= 2 * math.hypot(rate.omega_n_u, angle.omega_n_u)

@@ -38,6 +38,7 @@ def test_numbers_are_written_without_exponents_and_a_verdict_says_why():
     assert Q.places(recipe, "g·cm²") == 0 and Q.places(recipe, "kg·m²") == 6
     assert Q.places({**recipe, "display_decimals": 2}, "g·cm²") == 2 and Q.places(None, "g·cm²", 2.3e-5) == 0
     why = Q.judgement({"recipe": recipe, "value": 0.0125 * 0.99 - 1e-9, "U": 2e-6}, "g·cm²")
+    assert why is not None
     assert (why["deviation"], why["where"]) == ("−1.0 %", "below LSL")
     assert why["nominal"] == "125000 g·cm²" and why["limits"] == "123750 g·cm² … 126250 g·cm²"
     assert Q.judgement({"recipe": recipe, "value": 0.0125, "U": 2e-6}, "g·cm²")["where"] == "within the limits"
@@ -141,9 +142,12 @@ def test_capability_has_a_confidence_interval_and_xbar_s_its_constants():
 
     assert c4(2) == pytest.approx(0.7979, abs=1e-4) and c4(10) == pytest.approx(0.9727, abs=1e-4)
     ci = capability_interval(1.33, 1.2, 7)
-    assert ci["cp"][0] < 1.33 < ci["cp"][1] and ci["cpk"][0] < 1.2 < ci["cpk"][1]
-    assert ci["cp"][1] - ci["cp"][0] > 1.0  # 7 values: too wide to decide on
+    cp, cpk = ci["cp"], ci["cpk"]
+    assert cp is not None and cpk is not None
+    assert cp[0] < 1.33 < cp[1] and cpk[0] < 1.2 < cpk[1]
+    assert cp[1] - cp[0] > 1.0  # 7 values: too wide to decide on
     wide, narrow = capability_interval(1.33, 1.2, 7)["cp"], capability_interval(1.33, 1.2, 100)["cp"]
+    assert wide is not None and narrow is not None
     assert narrow[1] - narrow[0] < (wide[1] - wide[0]) / 2
     s = xbar_s([[1.0, 2.0, 3.0], [2.0, 3.0, 4.0], [1.5, 2.5, 2.0]])
     assert s.chart == "Xbar-S" and s.range_lcl == 0.0 and s.ranges[0] == pytest.approx(1.0)

@@ -414,8 +414,8 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     # an expired calibration: a banner that says what to do and whom to call; Measure refused, nothing measured
     assert 'id="blocked"' in home and "calibration expired on 2021-01-14" in home and "Call the quality" in home
     done = app.store.count()
-    status, body = c.json("/api/measure", method="POST", headers=bearer)
-    assert status == 409 and "expired on 2021-01-14" in body["error"] and app.store.count() == done
+    status, refused = c.json("/api/measure", method="POST", headers=bearer)
+    assert status == 409 and "expired on 2021-01-14" in refused["error"] and app.store.count() == done
     assert c.request("/home/summary")[2].decode().startswith('<div class="summary" id="summary">')
     # the history keeps the part's verdict and each release's check apart
     hist = c.request("/history")[2].decode()
@@ -563,12 +563,12 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     page = admin.request("/users")[2].decode()
     acsrf = page.split('name="csrf-token" content="')[1].split('"')[0]
     assert "<td>olga</td><td>operator</td>" in page and 'id="lockout"' in page and "Wrong logins" in page
-    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
-                                               "password": "short", "csrf": acsrf})
-    assert status == 400 and "a password needs 10" in page.decode() and 'value="ada"' in page.decode()
-    status, _, page = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
-                                               "password": "ada-password-3", "csrf": acsrf})
-    assert status == 200 and "<td>ada</td><td>quality</td>" in page.decode()  # (after the redirect)
+    status, _, answer = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
+                                                 "password": "short", "csrf": acsrf})
+    assert status == 400 and "a password needs 10" in answer.decode() and 'value="ada"' in answer.decode()
+    status, _, answer = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
+                                                 "password": "ada-password-3", "csrf": acsrf})
+    assert status == 200 and "<td>ada</td><td>quality</td>" in answer.decode()  # (after the redirect)
     assert "ada" in users.read_text() and "ada-password-3" not in users.read_text()
     login("ada", "ada-password-3")
     assert admin.request("/users", {"action": "remove", "name": "olga", "csrf": acsrf})[0] == 200

@@ -19,6 +19,7 @@ def test_mock_camera_by_default(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "mock camera" in text and "angle +5.00" in text and str(out) in text
     png = cv2.imread(str(out))
+    assert png is not None
     assert png is not None and png.shape == (480, 640, 3)
     # the annotation is drawn in colour over the grey frame
     assert np.any(png[..., 2].astype(int) - png[..., 1].astype(int) > 100)
@@ -81,6 +82,7 @@ def test_each_target_rendered_by_the_mock_is_found_and_drawn(tmp_path, capsys, t
     if target["kind"] not in ("blob", "patch"):  # a blob needs its pivot; a patch turns from its first frame
         assert report["angle_deg"] == pytest.approx(8.0 + (90.0 if target["kind"] == "blobs" else 0.0), abs=0.3)
     png = cv2.imread(str(out))
+    assert png is not None
     drawn = np.abs(png[..., 1].astype(int) - png[..., 2].astype(int)) > 100  # the green axis or the red target
     assert png.shape == (240, 320, 3) and drawn.any()
 

@@ -28,7 +28,7 @@ def with_change(table, key, value):
 def test_round_trip_and_defaults():
     cfg = CameraConfig.from_dict(GOOD)
     assert cfg.camera.width == 640 and cfg.camera.fx == 600.0 and cfg.camera.distortion == (0.0,) * 5
-    assert cfg.marker.radius == 0.10 and cfg.marker.distance == 0.25
+    assert cfg.marker is not None and cfg.marker.radius == 0.10 and cfg.marker.distance == 0.25
     assert cfg.pose.estimate is True and cfg.pose.yaw_limit_deg == 2.0
     doc = copy.deepcopy(GOOD)
     doc["pose"] = {"yaw_limit_deg": 0.5, "estimate": False}
