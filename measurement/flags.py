@@ -63,7 +63,8 @@ FLAGS: dict[str, str] = {
                      "omega_n_u and J_u",
     RELEASES_DISAGREE: "releases of one object identified jointly scatter about the joint ω_n beyond their "
                        "uncertainties (consistency.p < 0.01; consistency.largest_release departs most): the joint σ "
-                       "is scaled by the Birge ratio",
+                       "is scaled by the Birge ratio; or two releases' own readings are more than 2 u apart "
+                       "(consistency.own_pairwise_releases)",
     ENCODER_ERRORS: "the encoder had time-outs, CRC errors or late replies (counts in acquisition)",
     CAMERA_POSE: "the camera's yaw was beyond the limit (yaw_limit_deg): the angles were corrected; check the mounting",
     MARKER_LOST: "the tracker lost the marker in some frames",

@@ -57,6 +57,10 @@ FIT_APART_Z = 2.0
 #: p-value of the releases' χ² below which they are inconsistent (flag releases_disagree)
 CONSISTENT_P = 0.01
 
+#: distance (in combined u) beyond which two releases' own readings of ω_n, each as its own identification
+#: reports it, disagree (flag releases_disagree): what a user comparing two reports of one object sees
+OWN_PAIR_Z = 2.0
+
 
 @dataclass(frozen=True, eq=False)
 class JointResult:
@@ -179,8 +183,21 @@ class JointResult:
         L.append("    " + ("the releases agree with one ω_n within their uncertainties" if c["p"] >= CONSISTENT_P else
                           f"the releases disagree beyond their uncertainties (flag releases_disagree): the joint σ is "
                           f"scaled by the Birge ratio {c['birge_ratio']:.2f}; {c['largest_release']} departs most"))
+        if c["own_pairwise_max"] > OWN_PAIR_Z:
+            a, b = c["own_pairwise_releases"]
+            L.append(f"    as each release reports it alone, {a} and {b} are {c['own_pairwise_max']:.1f} u apart "
+                     f"(more than {OWN_PAIR_Z:g}: flag releases_disagree)")
         L.append(f"[[Flags]] {', '.join(self.flags) if self.flags else 'none'}")
         return "\n".join(L)
+
+
+def _own_pair(results: Sequence[IdentificationResult]) -> tuple[float, int, int]:
+    """The two releases whose own readings of ω_n (each with its stated u) are furthest apart: (|Δω_n|/u, i, j)."""
+    def u(r: IdentificationResult) -> float:
+        return r.omega_n_u if r.omega_n_u is not None else r.omega_n_std
+
+    return max(((abs(results[a].omega_n - results[b].omega_n) / math.hypot(u(results[a]), u(results[b])), a, b)
+                for a in range(len(results)) for b in range(a + 1, len(results))), key=lambda v: v[0])
 
 
 def _dynamic(names: Sequence[str], rig: Rig) -> tuple[str, ...]:
@@ -453,7 +470,8 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
     common = float(np.sum(wts * np.array([math.hypot(m, res.omega_n_std_calibration or 0.0)
                                           for m, res in zip(form_i, results)])) / np.sum(wts))
     u_joint = max(s_joint * birge, common)
-    flags = [F.RELEASES_DISAGREE] if p < CONSISTENT_P else []
+    own = _own_pair(results)
+    flags = [F.RELEASES_DISAGREE] if p < CONSISTENT_P or own[0] > OWN_PAIR_Z else []
     # The joint fit (the laws shared by all samples) and the releases' weighted value estimate the same
     # ω_n: apart beyond their uncertainties, the shared laws do not hold over the releases' amplitudes
     # (a law the model lacks), and which value to believe is not decided by the data: the distance
@@ -471,6 +489,7 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
         "omega_n": [float(v) for v in w_i], "u": [float(v) for v in u_i],
         "largest_z": float(zs[k]), "largest_release": results[k].source,
         "pairwise_max": float(pair[0]), "pairwise_releases": [results[pair[1]].source, results[pair[2]].source],
+        "own_pairwise_max": own[0], "own_pairwise_releases": [results[own[1]].source, results[own[2]].source],
         "joint_fit": {"omega_n": w_fit, "omega_n_std": s_fit, "z": fit_z, "apart": fit_z > FIT_APART_Z},
         "models": models_table, "u_models": u_models, "not_held": not_held,
     }
