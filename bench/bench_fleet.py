@@ -82,7 +82,7 @@ def _daemon(cfg: Path, log: Path) -> subprocess.Popen:
 
 def main() -> None:
     from tests.service.conftest import MOSQUITTO, Broker, appliance_doc, free_port, port_open, wait_until, write_toml
-    from tests.service.test_service_process import trigger_and_wait
+    from tests.service.test_service_process import read_snapshot
 
     try:
         from tests.service.sparkplug_host import SparkplugHost
@@ -118,10 +118,33 @@ def main() -> None:
         done = threading.Event()
         errors: list[str] = []
 
+        faults: Counter = Counter()
+
+        def coil(port: int, name: str) -> None:
+            from pymodbus.client import ModbusTcpClient
+            from service.publish.modbus import registers as R
+            c = ModbusTcpClient("127.0.0.1", port=port, timeout=3, retries=0)
+            assert c.connect()
+            try:
+                assert not c.write_coil(R.COILS[name], True, device_id=1).isError()
+            finally:
+                c.close()
+
         def plc(name: str) -> None:
+            """Like a PLC: trigger, wait for the end; a FAULT (a starved simulated capture on a loaded
+            machine) is acknowledged and counted, and the next one triggered."""
+            from service.publish.modbus import registers as R
+            idle, fault = R.STATE_CODES["IDLE"], R.STATE_CODES["FAULT"]
             try:
                 for n in range(1, N + 1):
-                    trigger_and_wait(ports[name], n, timeout=300)
+                    coil(ports[name], "trigger")
+                    s = wait_until(lambda: (s := read_snapshot(ports[name])) and s["measurements_started"] == n
+                                   and s["state"] in (idle, fault) and s, 300, 0.05, f"{name} measurement {n}")
+                    if s["state"] == fault:
+                        faults[name] += 1
+                        coil(ports[name], "abort")
+                        wait_until(lambda: (s := read_snapshot(ports[name])) and s["state"] == idle, 60, 0.05,
+                                   f"{name} back to IDLE")
             except Exception as exc:
                 errors.append(f"{name}: {exc}")
 
@@ -172,7 +195,7 @@ def main() -> None:
         mqtt_counts = Counter(sub.got)
         print(f"{APPLIANCES} appliances × {N} measurements, broker restarted {RESTARTS} times; "
               f"measuring took {measured:.0f} s, all delivered after {elapsed:.0f} s")
-        print(f"{'appliance':<10} {'stored':>6} | {'Sparkplug':>9} {'lost':>4} {'dup':>4} | {'MQTT':>5} {'lost':>4} {'dup':>4}")
+        print(f"{'appliance':<10} {'faults':>6} {'stored':>6} | {'Sparkplug':>9} {'lost':>4} {'dup':>4} | {'MQTT':>5} {'lost':>4} {'dup':>4}")
         tot = Counter()
         for name in names:
             s = set(stored[name])
@@ -182,9 +205,9 @@ def main() -> None:
                        sp_dup=sum(c - 1 for c in sp.values()), mq=len(mq.keys() & s), mq_lost=len(s - mq.keys()),
                        mq_dup=sum(c - 1 for c in mq.values()))
             tot.update(row)
-            print(f"{name:<10} {row['stored']:>6} | {row['sp']:>9} {row['sp_lost']:>4} {row['sp_dup']:>4} | "
+            print(f"{name:<10} {faults[name]:>6} {row['stored']:>6} | {row['sp']:>9} {row['sp_lost']:>4} {row['sp_dup']:>4} | "
                   f"{row['mq']:>5} {row['mq_lost']:>4} {row['mq_dup']:>4}")
-        print(f"{'all':<10} {tot['stored']:>6} | {tot['sp']:>9} {tot['sp_lost']:>4} {tot['sp_dup']:>4} | "
+        print(f"{'all':<10} {sum(faults.values()):>6} {tot['stored']:>6} | {tot['sp']:>9} {tot['sp_lost']:>4} {tot['sp_dup']:>4} | "
               f"{tot['mq']:>5} {tot['mq_lost']:>4} {tot['mq_dup']:>4}")
         msgs = len(host.received) + sub.messages
         print(f"messages received by the host and the subscriber: {msgs} ({msgs / elapsed:.1f}/s over the run; "
