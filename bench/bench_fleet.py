@@ -15,6 +15,7 @@ asserted.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import subprocess
@@ -80,8 +81,13 @@ def _daemon(cfg: Path, log: Path) -> subprocess.Popen:
                                 env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err)
 
 
+def _up(port: int, daemon: subprocess.Popen) -> bool:
+    from tests.service.conftest import port_open
+    return port_open(port) or daemon.poll() is not None
+
+
 def main() -> None:
-    from tests.service.conftest import MOSQUITTO, Broker, appliance_doc, free_port, port_open, wait_until, write_toml
+    from tests.service.conftest import MOSQUITTO, Broker, appliance_doc, free_port, wait_until, write_toml
     from tests.service.test_service_process import read_snapshot
 
     try:
@@ -111,7 +117,7 @@ def main() -> None:
             doc["simulation"]["time_scale"] = 10.0  # five daemons share the cores: a 5 s swing in 0.5 s
             daemons[name] = _daemon(write_toml(root / f"{name}.toml", doc), root / f"{name}.log")
         for name in names:
-            wait_until(lambda n=name: port_open(ports[n]) or daemons[n].poll() is not None, 120, what=f"{name} up")
+            wait_until(functools.partial(_up, ports[name], daemons[name]), 120, what=f"{name} up")
         host.wait(lambda h: h.count("DBIRTH") >= APPLIANCES, 60, "every appliance's DBIRTH")
 
         peak = [_rss_kib(broker.proc.pid)]  # type: ignore[union-attr]
@@ -196,7 +202,7 @@ def main() -> None:
         print(f"{APPLIANCES} appliances × {N} measurements, broker restarted {RESTARTS} times; "
               f"measuring took {measured:.0f} s, all delivered after {elapsed:.0f} s")
         print(f"{'appliance':<10} {'faults':>6} {'stored':>6} | {'Sparkplug':>9} {'lost':>4} {'dup':>4} | {'MQTT':>5} {'lost':>4} {'dup':>4}")
-        tot = Counter()
+        tot: Counter = Counter()
         for name in names:
             s = set(stored[name])
             sp = {u: c for (d, u), c in spb_counts.items() if d == name}
