@@ -112,11 +112,11 @@ arm sh -c "cd /opt/moi && /opt/moi/.venv/bin/moi identify $TRACE --rig $TRACE_RI
 
 SIM="--rig $SIM_RIG --inertia 0.02 --effects viscous=2e-4 coulomb=1e-4 --theta0 0.3 --duration 20 --noise 2e-4 --seed 7"
 say "moi simulate --seed 7 and moi identify it (arm64, emulated)"
-arm sh -c "cd /opt/moi && /opt/moi/.venv/bin/moi simulate $SIM --out /tmp/sim.csv && \
+arm sh -c "cd /opt/moi && /opt/moi/.venv/bin/moi simulate $SIM --out /tmp/sim.csv >/dev/null && \
     /opt/moi/.venv/bin/moi identify /tmp/sim.csv --rig $SIM_RIG --json" >"$OUT/sim-identify-arm64.json" ||
     die "moi simulate / identify on arm64"
 cp "$ROOT/tmp/sim.csv" "$OUT/sim-arm64.csv"
-(cd "$REPO" && "$HOST_MOI" simulate $SIM --out "$OUT/sim-x86_64.csv" &&
+(cd "$REPO" && "$HOST_MOI" simulate $SIM --out "$OUT/sim-x86_64.csv" >/dev/null &&
     "$HOST_MOI" identify "$OUT/sim-x86_64.csv" --rig $SIM_RIG --json) >"$OUT/sim-identify-x86_64.json" ||
     die "moi simulate / identify on $(uname -m)"
 
