@@ -15,6 +15,7 @@ asserted.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import subprocess
@@ -80,9 +81,14 @@ def _daemon(cfg: Path, log: Path) -> subprocess.Popen:
                                 env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err)
 
 
+def _up(port: int, daemon: subprocess.Popen) -> bool:
+    from tests.service.conftest import port_open
+    return port_open(port) or daemon.poll() is not None
+
+
 def main() -> None:
-    from tests.service.conftest import MOSQUITTO, Broker, appliance_doc, free_port, port_open, wait_until, write_toml
-    from tests.service.test_service_process import trigger_and_wait
+    from tests.service.conftest import MOSQUITTO, Broker, appliance_doc, free_port, wait_until, write_toml
+    from tests.service.test_service_process import read_snapshot
 
     try:
         from tests.service.sparkplug_host import SparkplugHost
@@ -111,17 +117,40 @@ def main() -> None:
             doc["simulation"]["time_scale"] = 10.0  # five daemons share the cores: a 5 s swing in 0.5 s
             daemons[name] = _daemon(write_toml(root / f"{name}.toml", doc), root / f"{name}.log")
         for name in names:
-            wait_until(lambda n=name: port_open(ports[n]) or daemons[n].poll() is not None, 120, what=f"{name} up")
+            wait_until(functools.partial(_up, ports[name], daemons[name]), 120, what=f"{name} up")
         host.wait(lambda h: h.count("DBIRTH") >= APPLIANCES, 60, "every appliance's DBIRTH")
 
         peak = [_rss_kib(broker.proc.pid)]  # type: ignore[union-attr]
         done = threading.Event()
         errors: list[str] = []
 
+        faults: Counter = Counter()
+
+        def coil(port: int, name: str) -> None:
+            from pymodbus.client import ModbusTcpClient
+            from service.publish.modbus import registers as R
+            c = ModbusTcpClient("127.0.0.1", port=port, timeout=3, retries=0)
+            assert c.connect()
+            try:
+                assert not c.write_coil(R.COILS[name], True, device_id=1).isError()
+            finally:
+                c.close()
+
         def plc(name: str) -> None:
+            """Like a PLC: trigger, wait for the end; a FAULT (a starved simulated capture on a loaded
+            machine) is acknowledged and counted, and the next one triggered."""
+            from service.publish.modbus import registers as R
+            idle, fault = R.STATE_CODES["IDLE"], R.STATE_CODES["FAULT"]
             try:
                 for n in range(1, N + 1):
-                    trigger_and_wait(ports[name], n, timeout=300)
+                    coil(ports[name], "trigger")
+                    s = wait_until(lambda: (s := read_snapshot(ports[name])) and s["measurements_started"] == n
+                                   and s["state"] in (idle, fault) and s, 300, 0.05, f"{name} measurement {n}")
+                    if s["state"] == fault:
+                        faults[name] += 1
+                        coil(ports[name], "abort")
+                        wait_until(lambda: (s := read_snapshot(ports[name])) and s["state"] == idle, 60, 0.05,
+                                   f"{name} back to IDLE")
             except Exception as exc:
                 errors.append(f"{name}: {exc}")
 
@@ -148,7 +177,7 @@ def main() -> None:
         measured = time.monotonic() - t0
         done.set()
         threads[-1].join()
-        total = APPLIANCES * N
+        total = APPLIANCES * N - sum(faults.values())  # a FAULT has no result
         try:
             wait_until(lambda: len({u for _, u in sub.got}) >= total
                        and len({r["Result/UUID"] for r in host.results()}) >= total, 180, 0.2, "every result")
@@ -172,8 +201,8 @@ def main() -> None:
         mqtt_counts = Counter(sub.got)
         print(f"{APPLIANCES} appliances × {N} measurements, broker restarted {RESTARTS} times; "
               f"measuring took {measured:.0f} s, all delivered after {elapsed:.0f} s")
-        print(f"{'appliance':<10} {'stored':>6} | {'Sparkplug':>9} {'lost':>4} {'dup':>4} | {'MQTT':>5} {'lost':>4} {'dup':>4}")
-        tot = Counter()
+        print(f"{'appliance':<10} {'faults':>6} {'stored':>6} | {'Sparkplug':>9} {'lost':>4} {'dup':>4} | {'MQTT':>5} {'lost':>4} {'dup':>4}")
+        tot: Counter = Counter()
         for name in names:
             s = set(stored[name])
             sp = {u: c for (d, u), c in spb_counts.items() if d == name}
@@ -182,9 +211,9 @@ def main() -> None:
                        sp_dup=sum(c - 1 for c in sp.values()), mq=len(mq.keys() & s), mq_lost=len(s - mq.keys()),
                        mq_dup=sum(c - 1 for c in mq.values()))
             tot.update(row)
-            print(f"{name:<10} {row['stored']:>6} | {row['sp']:>9} {row['sp_lost']:>4} {row['sp_dup']:>4} | "
+            print(f"{name:<10} {faults[name]:>6} {row['stored']:>6} | {row['sp']:>9} {row['sp_lost']:>4} {row['sp_dup']:>4} | "
                   f"{row['mq']:>5} {row['mq_lost']:>4} {row['mq_dup']:>4}")
-        print(f"{'all':<10} {tot['stored']:>6} | {tot['sp']:>9} {tot['sp_lost']:>4} {tot['sp_dup']:>4} | "
+        print(f"{'all':<10} {sum(faults.values()):>6} {tot['stored']:>6} | {tot['sp']:>9} {tot['sp_lost']:>4} {tot['sp_dup']:>4} | "
               f"{tot['mq']:>5} {tot['mq_lost']:>4} {tot['mq_dup']:>4}")
         msgs = len(host.received) + sub.messages
         print(f"messages received by the host and the subscriber: {msgs} ({msgs / elapsed:.1f}/s over the run; "
