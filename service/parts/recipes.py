@@ -374,7 +374,7 @@ def edit_recipe(recipe: Recipe, typed: Mapping[str, str]) -> tuple[Recipe, dict[
     trial = path.with_name(f".{path.name}.edit")
     try:
         write_atomic(trial, text, "recipe file")
-        new = load_recipe(trial)
+        load_recipe(trial)  # the edited file must read as a recipe before it replaces the old one
     except RecipeError as exc:
         raise RecipeError(str(exc).replace(str(trial), str(path))) from None
     finally:
