@@ -83,6 +83,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import math
 import uuid as uuidlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -361,6 +362,8 @@ def edit_recipe(recipe: Recipe, typed: Mapping[str, str]) -> tuple[Recipe, dict[
         except ValueError:
             raise RecipeError(f"{path}: [recipe] {key}: expected a {'whole ' if schema[key].kind == 'int' else ''}"
                               f"number, got {text!r}") from None
+        if isinstance(after, float) and not math.isfinite(after):
+            raise RecipeError(f"{path}: [recipe] {key}: expected a finite number, got {text!r}")
         if after == before:
             continue
         changes[key] = (before, after)

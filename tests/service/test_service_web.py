@@ -566,6 +566,8 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
                                                    "tolerance_percent": "200", "releases": "2", "csrf": qcsrf})
     assert status == 400 and 'id="recipe-error"' in answer.decode() and "tolerance" in answer.decode()
     assert 'value="200"' in answer.decode() and "releases" not in (d / "a.toml").read_text()  # kept, not written
+    status, _, answer = quinn.request("/recipes", {"recipe": "rotor-a", "nominal": "nan", "csrf": qcsrf})
+    assert status == 400 and "expected a finite number, got &#39;nan&#39;" in answer.decode()
     status, _, answer = quinn.request("/recipes", {"recipe": "rotor-a", "nominal": "0.013", "releases": "2",
                                                    "tolerance_percent": "2.0", "display_decimals": "",
                                                    "csrf": qcsrf})

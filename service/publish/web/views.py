@@ -881,13 +881,13 @@ class Views:
         loop = asyncio.get_running_loop()
         try:
             new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed)
-            if changes:
-                book = await loop.run_in_executor(None, RecipeBook.load, parts.book.directory)
-        except RecipeError as exc:
+        except (RecipeError, InputFileError) as exc:
             return await self.recipes(request, status=400, edit_error={"recipe": recipe.name, "error": str(exc),
                                                                        "typed": typed})
         if changes:
-            # swapped whole: a part already open keeps the recipe it started with
+            # the book swapped whole, the other recipes as they were read: a part already open keeps its recipe
+            book = RecipeBook(parts.book.directory, tuple(new if r.name == new.name else r
+                                                          for r in parts.book.recipes))
             parts.book = book
             if parts.recipe is not None and parts.recipe.name == new.name:
                 parts.recipe = book.find(new.name)
