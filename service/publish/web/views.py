@@ -899,8 +899,7 @@ class Views:
 
     # --- users (admin) ----------------------------------------------------------------------------
     def _admin(self, request: web.Request) -> None:
-        session = self.server.guard.session(request.cookies.get(COOKIE))
-        if session is None or not allowed(session.role, "users"):
+        if not self._may(request, "users"):
             raise Refused(403, "only an admin sees and changes the users: log in as one")
 
     async def users(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
