@@ -370,7 +370,7 @@ def test_a_recipe_edit_keeps_the_file_s_comments_and_a_refused_one_leaves_it_as_
                  'tolerance = 0.0002\n')
     new, changes = edit_recipe(load_recipe(f), {"nominal": "0.013", "tolerance": "0.0002", "display_decimals": "6"})
     assert changes == {"nominal": (0.0125, 0.013), "display_decimals": (None, 6)}
-    assert new.spec.nominal == 0.013 and new.display_decimals == 6
+    assert new.spec is not None and new.spec.nominal == 0.013 and new.display_decimals == 6
     text = f.read_text()
     assert "# rotor A, drawing 4711" in text and "nominal = 0.013  # kg·m²" in text
     with pytest.raises(RecipeError, match=r"a\.toml: \[recipe\] tolerance: expected less than the nominal"):
