@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         check_user(name, password)
     except ValueError as exc:
         raise InputFileError(str(exc)) from None
-    users[name] = User(name, args.role, hash_password(password))
+    users[name] = User(name, args.role, hash_password(password), name in users and users[name].disabled)  # enable is said, not implied
     _save(path, users)
     print(f"user {name} ({args.role}) saved in {path}")
     return 0

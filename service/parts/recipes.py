@@ -83,6 +83,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import math
 import uuid as uuidlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -329,6 +330,82 @@ def load_recipe(path: str | Path) -> Recipe:  # noqa: C901
                   version=hashlib.sha256(raw).hexdigest()[:16], releases=releases, spec=spec, quality=quality,
                   rig=rig, rig_path=rig_path, declared=None if declared is None else tuple(declared), tensor=tensor,
                   display_unit=unit, display_decimals=rec["display_decimals"], check_standard=check)
+
+
+#: the [recipe] keys a quality engineer edits on the recipes page (what a part type's decision rests on)
+#: the append-only log of recipe edits, in the state directory
+RECIPE_AUDIT_FILE = "recipe-audit.log"
+EDITABLE = ("nominal", "tolerance", "tolerance_percent", "releases", "display_unit", "display_decimals")
+
+
+def edit_recipe(recipe: Recipe, typed: Mapping[str, str]) -> tuple[Recipe, dict[str, tuple[Any, Any]]]:
+    """Set the [recipe] keys of ``typed`` (text as typed; empty removes an optional key) in ``recipe``'s file,
+    keeping its comments and layout; the new file goes through ``load_recipe`` before it replaces the old one
+    in one step (RecipeError naming the key, the file unchanged). Returns the re-read recipe and
+    {key: (before, after)} of what changed."""
+    import tomlkit
+
+    from service.sources.files import write_atomic
+
+    schema = _schemas()["recipe"]
+    path = Path(recipe.path)
+    doc = tomlkit.parse(read_text(path, "recipe file"))
+    table = doc["recipe"]
+    changes: dict[str, tuple[Any, Any]] = {}
+    for key in EDITABLE:
+        if key not in typed:
+            continue
+        text, before = str(typed[key]).strip(), table.get(key)
+        before = before.unwrap() if hasattr(before, "unwrap") else before
+        try:
+            after: Any = None if text == "" else int(text) if schema[key].kind == "int" else                 float(text) if schema[key].kind == "float" else text
+        except ValueError:
+            raise RecipeError(f"{path}: [recipe] {key}: expected a {'whole ' if schema[key].kind == 'int' else ''}"
+                              f"number, got {text!r}") from None
+        if isinstance(after, float) and not math.isfinite(after):
+            raise RecipeError(f"{path}: [recipe] {key}: expected a finite number, got {text!r}")
+        if after == before:
+            continue
+        changes[key] = (before, after)
+        if after is None:
+            table.pop(key, None)
+        else:
+            table[key] = after
+    if not changes:
+        return recipe, changes
+    text = tomlkit.dumps(doc)
+    trial = path.with_name(f".{path.name}.edit")
+    try:
+        write_atomic(trial, text, "recipe file")
+        load_recipe(trial)  # the edited file must read as a recipe before it replaces the old one
+    except RecipeError as exc:
+        raise RecipeError(str(exc).replace(str(trial), str(path))) from None
+    finally:
+        trial.unlink(missing_ok=True)
+    write_atomic(path, text, "recipe file")
+    return load_recipe(path), changes
+
+
+def recipe_values(recipe: Recipe) -> dict[str, Any]:
+    """The EDITABLE keys as ``recipe``'s file holds them, as text a person types (numbers without e-notation;
+    None: not in the file)."""
+    import tomllib
+    from decimal import Decimal
+
+    rec = tomllib.loads(read_text(Path(recipe.path), "recipe file")).get("recipe") or {}
+    return {k: None if rec.get(k) is None else f"{Decimal(repr(rec[k])):f}" if isinstance(rec[k], float)
+            else str(rec[k]) for k in EDITABLE}
+
+
+def audit_recipe(log_path: str | Path, who: str, recipe: Recipe, changes: Mapping[str, tuple[Any, Any]],
+                 when: str) -> str:
+    """Append one line to the recipe audit log (``when`` ISO time, who, recipe, file, key: before → after)
+    and return it; the log is only ever appended to."""
+    what = "; ".join(f"{k}: {'–' if b is None else b} → {'–' if a is None else a}" for k, (b, a) in changes.items())
+    line = f"{when}\t{who}\t{recipe.name}\t{Path(recipe.path).name}\t{what}\n"
+    with open(log_path, "a", encoding="utf-8") as f:
+        f.write(line)
+    return line
 
 
 @dataclass(frozen=True)

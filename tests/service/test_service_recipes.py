@@ -360,3 +360,19 @@ def test_a_part_needs_all_its_releases_unless_the_recipe_says_otherwise(tmp_path
         load_recipe(write(tmp_path / "u.toml", recipe("u", 3, J_TRUE, tolerance_percent=1.0, display_unit="cubits")))
     assert load_recipe(write(tmp_path / "g.toml", recipe("g", 4, J_TRUE, tolerance_percent=1.0,
                                                          display_unit="g*cm^2"))).to_dict()["display_unit"] == "g·cm²"
+
+
+def test_a_recipe_edit_keeps_the_file_s_comments_and_a_refused_one_leaves_it_as_it_was(tmp_path):
+    from service.parts.recipes import edit_recipe
+
+    f = tmp_path / "a.toml"
+    f.write_text('# rotor A, drawing 4711\n[recipe]\nname = "rotor-a"\nnumber = 3\nnominal = 0.0125  # kg·m²\n'
+                 'tolerance = 0.0002\n')
+    new, changes = edit_recipe(load_recipe(f), {"nominal": "0.013", "tolerance": "0.0002", "display_decimals": "6"})
+    assert changes == {"nominal": (0.0125, 0.013), "display_decimals": (None, 6)}
+    assert new.spec is not None and new.spec.nominal == 0.013 and new.display_decimals == 6
+    text = f.read_text()
+    assert "# rotor A, drawing 4711" in text and "nominal = 0.013  # kg·m²" in text
+    with pytest.raises(RecipeError, match=r"a\.toml: \[recipe\] tolerance: expected less than the nominal"):
+        edit_recipe(new, {"tolerance": "0.5"})
+    assert f.read_text() == text and sorted(p.name for p in tmp_path.iterdir()) == ["a.toml"]  # no trial file left

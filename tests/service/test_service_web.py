@@ -556,6 +556,27 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     assert quinn.json("/api/abort", method="POST", headers={"X-CSRF-Token": qcsrf})[0] == 202
     running.wait_event(lambda e: e.state.value == "IDLE" and e.previous.value == "ABORTED", 10, what="acknowledged")
 
+    # a recipe edited by a quality engineer: checked as a recipe file is, written back, shown, and audited
+    assert 'id="edit-3"' not in olga.request("/recipes")[2].decode()  # not offered to an operator
+    status, _, _ = olga.request("/recipes", {"recipe": "rotor-a", "nominal": "0.013", "csrf": csrf})
+    assert status == 403 and "nominal = 0.0125" in (d / "a.toml").read_text()
+    page = quinn.request("/recipes")[2].decode()
+    assert 'id="edit-3"' in page and 'name="tolerance_percent"' in page and 'value="0.0125"' in page
+    status, _, answer = quinn.request("/recipes", {"recipe": "rotor-a", "nominal": "0.0125",
+                                                   "tolerance_percent": "200", "releases": "2", "csrf": qcsrf})
+    assert status == 400 and 'id="recipe-error"' in answer.decode() and "tolerance" in answer.decode()
+    assert 'value="200"' in answer.decode() and "releases" not in (d / "a.toml").read_text()  # kept, not written
+    status, _, answer = quinn.request("/recipes", {"recipe": "rotor-a", "nominal": "nan", "csrf": qcsrf})
+    assert status == 400 and "expected a finite number, got &#39;nan&#39;" in answer.decode()
+    status, _, answer = quinn.request("/recipes", {"recipe": "rotor-a", "nominal": "0.013", "releases": "2",
+                                                   "tolerance_percent": "2.0", "display_decimals": "",
+                                                   "csrf": qcsrf})
+    text = (d / "a.toml").read_text()
+    assert status == 200 and "nominal = 0.013\n" in text and "releases = 2" in text
+    assert "0.012740 kg·m² … 0.013260 kg·m²" in answer.decode() and app.parts.book.find("rotor-a").releases == 2
+    audit = (tmp_path / "state" / "recipe-audit.log").read_text().splitlines()
+    assert len(audit) == 1 and "web:quinn\trotor-a\ta.toml\tnominal: 0.0125 → 0.013; releases: – → 2" in audit[0]
+
     # the users, for an admin only: add one (a short password refused on the page, the name kept), remove one
     assert quinn.request("/users")[0] == 403
     admin = Client(app.web.url)
@@ -563,6 +584,15 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     page = admin.request("/users")[2].decode()
     acsrf = page.split('name="csrf-token" content="')[1].split('"')[0]
     assert "<td>olga</td><td>operator</td>" in page and 'id="lockout"' in page and "Wrong logins" in page
+    # olga's one wrong password is counted against her name; disabled, she is shown so and cannot log in
+    assert page.split('id="user-olga"')[1].split('class="wrong-logins">')[1].startswith("1<")
+    assert admin.request("/users", {"action": "disable", "name": "olga", "csrf": acsrf})[0] == 200
+    assert "disabled = true" in users.read_text() and olga.request("/users")[0] == 403
+    assert olga.json("/api/part", data={"part_id": "SN-8"}, headers={"X-CSRF-Token": csrf})[0] == 401  # session ended
+    c = Client(app.web.url)
+    assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401
+    page = admin.request("/users")[2].decode()
+    assert page.split('id="user-olga"')[1].split('class="login-state">')[1].startswith("disabled<")
     status, _, answer = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
                                                  "password": "short", "csrf": acsrf})
     assert status == 400 and "a password needs 10" in answer.decode() and 'value="ada"' in answer.decode()

@@ -143,6 +143,7 @@ class User:
     name: str
     role: str
     password: str  # the scrypt hash
+    disabled: bool = False  # kept, but may not log in (its sessions end at once)
 
 
 def allowed(role: str, action: str) -> bool:
@@ -165,6 +166,9 @@ def read_users(path: str | os.PathLike) -> dict[str, User]:
     users: dict[str, User] = {}
     for i, u in enumerate(doc.get("user") or ()):
         name, role, pw = (u.get(k) if isinstance(u, dict) else None for k in ("name", "role", "password"))
+        disabled = u.get("disabled", False) if isinstance(u, dict) else False
+        if not isinstance(disabled, bool):
+            raise StartupError(f"[web] users file {str(p)!r}: user {i + 1}: disabled must be true or false")
         if not (isinstance(name, str) and name.strip()) or role not in ROLES or not (isinstance(pw, str)
                                                                                     and pw.startswith("scrypt$")):
             raise StartupError(f"[web] users file {str(p)!r}: user {i + 1} needs name, role (one of "
@@ -173,7 +177,7 @@ def read_users(path: str | os.PathLike) -> dict[str, User]:
             raise StartupError(f"[web] users file {str(p)!r}: user {i + 1}: {problem}")
         if name in users:
             raise StartupError(f"[web] users file {str(p)!r}: user {name!r} twice")
-        users[name] = User(name, role, pw)
+        users[name] = User(name, role, pw, disabled)
     return users
 
 
@@ -183,7 +187,8 @@ def save_users(path: str | os.PathLike, users: dict[str, User]) -> None:
 
     p = Path(path)
     text = "# moi web users: name, role (operator | quality | admin), scrypt password hash (moi user add)\n"
-    text += tomli_w.dumps({"user": [{"name": u.name, "role": u.role, "password": u.password} for u in users.values()]})
+    text += tomli_w.dumps({"user": [{"name": u.name, "role": u.role, "password": u.password,
+                                     **({"disabled": True} if u.disabled else {})} for u in users.values()]})
     tmp = p.with_name(f".{p.name}.tmp")
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     with os.fdopen(fd, "w", encoding="utf-8") as f:
@@ -211,6 +216,7 @@ class Guard:
         self._lock = threading.Lock()
         self._guessing: asyncio.Lock | None = None  # made on the web loop, at the first wrong token
         self.wrong_tokens = 0
+        self.wrong_logins: dict[str, int] = {}  # wrong passwords per user name, since the start
         self._wrong_since_log = 0
         self._guess_logged_at = -float("inf")
 
@@ -241,6 +247,9 @@ class Guard:
                 check_password(candidate or "", self._dummy)  # as long as for a user: names are not told apart
                 return None
             if not check_password(candidate or "", u.password):
+                self.wrong_logins[u.name] = self.wrong_logins.get(u.name, 0) + 1
+                return None
+            if u.disabled:
                 return None
             who: tuple[str | None, str] = (u.name, u.role)
         elif self.token_ok(candidate):
@@ -266,10 +275,17 @@ class Guard:
             return None
         with self._lock:
             s = self._sessions.get(sid)
-            if s is not None and s.expires < self._clock():
+            if s is not None and (s.expires < self._clock() or not self._may_log_in(s.user)):
                 del self._sessions[sid]
                 return None
             return s
+
+    def _may_log_in(self, user: str | None) -> bool:
+        """A session's user still exists and is not disabled (the token's session has no user)."""
+        if user is None:
+            return True
+        u = self.users.get(user)
+        return u is not None and not u.disabled
 
     def _prune(self) -> None:
         now = self._clock()

@@ -34,7 +34,8 @@ from .live import Live, extras
 from .settings import PLOT_NAME
 from measurement.flags import FLAGS
 
-from service.parts.recipes import PART_ID_LENGTH
+from service.parts.recipes import (EDITABLE, PART_ID_LENGTH, RECIPE_AUDIT_FILE, RecipeBook, RecipeError,
+                                   audit_recipe, edit_recipe, recipe_values)
 from .words import STATE_WORDS, flag_words
 from service.states import vocabulary
 from . import quality as Q
@@ -181,6 +182,7 @@ class Views:
         r.add_post("/api/set/{action}", self.set_action)
         r.add_get("/setup", self.setup)
         r.add_get("/recipes", self.recipes)
+        r.add_post("/recipes", self.recipes_change)
         r.add_get("/calibration", self.calibration)
         r.add_get("/users", self.users)
         r.add_post("/users", self.users_change)
@@ -841,9 +843,10 @@ class Views:
                           blocked=self.blocked(self.app.calibration_state()))
 
     # --- recipes and calibration ---------------------------------------------------------------------------
-    async def recipes(self, request: web.Request) -> web.Response:
+    async def recipes(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
         """Every recipe as a quality engineer reads it before measuring: nominal, tolerance, limits, releases,
-        decision rule and quality rules, in the recipe's unit and decimals."""
+        decision rule and quality rules, in the recipe's unit and decimals; for the quality role, a form per
+        recipe to edit them."""
         book = getattr(self.app, "parts", None)
         rows = []
         active = getattr(book, "recipe", None)
@@ -851,22 +854,62 @@ class Views:
             d = {**r.to_dict(), "display_decimals": r.display_decimals}
             unit = Q.display_unit({"recipe": d}, self.server.settings.display_unit)
             rows.append({"r": d, "unit": unit, "places": Q.places(d, unit), "active": active is not None
-                         and active.name == r.name, "rig": Path(r.rig_path).name if r.rig_path else None})
-        return self._page(request, "recipes.html", title="Recipes", rows=rows)
+                         and active.name == r.name, "rig": Path(r.rig_path).name if r.rig_path else None,
+                         "file": recipe_values(r)})
+        return self._page(request, "recipes.html", status=status, title="Recipes", rows=rows, editable=EDITABLE,
+                          may_edit=self._may(request, "recipe"), **ctx)
+
+    def _may(self, request: web.Request, action: str) -> bool:
+        """Whether the logged-in session may do ``action`` (what a page offers it)."""
+        session = self.server.guard.session(request.cookies.get(COOKIE))
+        return session is not None and allowed(session.role, action)
+
+    async def recipes_change(self, request: web.Request) -> web.StreamResponse:
+        """Edit one recipe's [recipe] keys (quality role): checked as a recipe file is, written back in one
+        step, the running recipes re-read, and one line per edit appended to the recipe audit log. A refusal is
+        said on the page beside the recipe, with what was typed."""
+        form = await _form(request)
+        source = await self._authorise(request, form, "recipe")
+        parts = getattr(self.app, "parts", None)
+        if parts is None or parts.book.directory is None:
+            raise Refused(409, "no recipe directory ([recipes] directory): there is no recipe to edit")
+        try:
+            recipe = parts.book.find(str(form.get("recipe") or ""))
+        except RecipeError as exc:
+            raise Refused(404, str(exc)) from None
+        typed = {k: str(form[k]) for k in EDITABLE if k in form}
+        loop = asyncio.get_running_loop()
+        try:
+            new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed)
+        except (RecipeError, InputFileError) as exc:
+            return await self.recipes(request, status=400, edit_error={"recipe": recipe.name, "error": str(exc),
+                                                                       "typed": typed})
+        if changes:
+            # the book swapped whole, the other recipes as they were read: a part already open keeps its recipe
+            book = RecipeBook(parts.book.directory, tuple(new if r.name == new.name else r
+                                                          for r in parts.book.recipes))
+            parts.book = book
+            if parts.recipe is not None and parts.recipe.name == new.name:
+                parts.recipe = book.find(new.name)
+            line = await loop.run_in_executor(None, audit_recipe, self.app.config.state_dir / RECIPE_AUDIT_FILE,
+                                              source, new, changes, dt.datetime.now(dt.UTC).isoformat(
+                                                  timespec="seconds"))
+            log.info("web: recipe edited: %s", line.strip())
+        raise web.HTTPSeeOther(f"/recipes#recipe-{new.number}")
 
     # --- users (admin) ----------------------------------------------------------------------------
     def _admin(self, request: web.Request) -> None:
-        session = self.server.guard.session(request.cookies.get(COOKIE))
-        if session is None or not allowed(session.role, "users"):
+        if not self._may(request, "users"):
             raise Refused(403, "only an admin sees and changes the users: log in as one")
 
     async def users(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
         """The named users and their roles, with forms to add one, reset a password or change a role, and remove
-        one; how many wrong logins there were (each costs GUESS_DELAY, one at a time: nobody is locked out)."""
+        disable or enable one, and remove one; how many wrong logins there were, in all and per user (each costs
+        GUESS_DELAY, one at a time: nobody is locked out)."""
         self._admin(request)
         guard = self.server.guard
         return self._page(request, "users.html", status=status, title="Users", users=list(guard.users.values()),
-                          roles=ROLES, users_file=self.server.settings.users_file, wrong=guard.wrong_tokens,
+                          roles=ROLES, users_file=self.server.settings.users_file, wrong=guard.wrong_tokens, wrong_logins=guard.wrong_logins,
                           delay=GUESS_DELAY, max_name=MAX_USER_NAME, min_password=MIN_PASSWORD, **ctx)
 
     async def users_change(self, request: web.Request) -> web.StreamResponse:
@@ -889,19 +932,29 @@ class Views:
                 if users[name].role == "admin" and sum(u.role == "admin" for u in users.values()) == 1:
                     raise ValueError("the last admin cannot be removed: add another admin first")
                 del users[name]
+            elif action in ("disable", "enable"):
+                name = check_user(str(form.get("name") or ""))
+                if name not in users:
+                    raise ValueError(f"no user {name!r}")
+                u = users[name]
+                if action == "disable" and u.role == "admin" and sum(
+                        v.role == "admin" and not v.disabled for v in users.values()) == 1 and not u.disabled:
+                    raise ValueError("the last admin cannot be disabled: add another admin first")
+                users[name] = User(u.name, u.role, u.password, action == "disable")
             elif action == "add":
                 name = check_user(str(form.get("name") or ""), str(form.get("password") or ""))
                 if role not in ROLES:
                     raise ValueError(f"role: expected one of {', '.join(ROLES)}")
-                users[name] = User(name, role, hash_password(str(form["password"])))
+                users[name] = User(name, role, hash_password(str(form["password"])),
+                                   name in users and users[name].disabled)  # enable is said, not implied
             else:
-                raise ValueError("action: expected add or remove")
+                raise ValueError("action: expected add, disable, enable or remove")
         except ValueError as exc:
             return await self.users(request, status=400, users_error=str(exc), **typed)
         loop = asyncio.get_running_loop()
         await loop.run_in_executor(None, save_users, path, users)
         guard.users = users
-        log.info("web: user %s %s by %s", name, {"add": "saved", "remove": "removed"}[action],
+        log.info("web: user %s %s by %s", name, {"add": "saved", "remove": "removed", "disable": "disabled", "enable": "enabled"}[action],
                  guard.who(cookie=request.cookies.get(COOKIE), bearer=None)[0] or "the token")
         raise web.HTTPSeeOther("/users")
 
