@@ -37,6 +37,7 @@ from measurement.fit import fit_model
 from measurement.identification.preparation import prepare
 from measurement.model import Model
 
+
 @dataclass(frozen=True)
 class RigCase:
     """A simulated rig: its part's J (kg·m²), the release angle (rad), the record length (s), the

@@ -22,6 +22,7 @@ Run: `.venv/bin/python bench/bench_doors.py` (or `make bench`). Numbers are prin
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import multiprocessing
 import os
 import socket
@@ -114,10 +115,8 @@ def _web_streams(info: dict, stop) -> None:
         while not stop.is_set():
             for s in held:
                 s.setblocking(False)
-                try:
+                with contextlib.suppress(OSError):
                     s.recv(65536)
-                except OSError:
-                    pass
             stop.wait(0.05)  # a bench's load may pace itself on the wall clock
     finally:
         for s in held:

@@ -25,6 +25,7 @@ import threading
 import time
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
@@ -86,9 +87,61 @@ def _up(port: int, daemon: subprocess.Popen) -> bool:
     return port_open(port) or daemon.poll() is not None
 
 
+def _coil(port: int, name: str) -> None:
+    """Write one command coil of an appliance's Modbus map, as a PLC does."""
+    from pymodbus.client import ModbusTcpClient
+
+    from service.publish.modbus import registers as R
+    c = ModbusTcpClient("127.0.0.1", port=port, timeout=3, retries=0)
+    assert c.connect()
+    try:
+        assert not c.write_coil(R.COILS[name], True, device_id=1).isError()
+    finally:
+        c.close()
+
+
+def _plc(name: str, port: int, faults: Counter, errors: list[str]) -> None:
+    """Like a PLC: trigger, wait for the end; a FAULT (a starved simulated capture on a loaded
+    machine) is acknowledged and counted, and the next one triggered."""
+    from service.publish.modbus import registers as R
+    from tests.service.conftest import wait_until
+    from tests.service.test_service_process import read_snapshot
+
+    idle, fault = R.STATE_CODES["IDLE"], R.STATE_CODES["FAULT"]
+    try:
+        for n in range(1, N + 1):
+            _coil(port, "trigger")
+            def ended(n: int = n) -> Any:
+                s = read_snapshot(port)
+                return s and s["measurements_started"] == n and s["state"] in (idle, fault) and s
+
+            s = wait_until(ended, 300, 0.05, f"{name} measurement {n}")
+            if s["state"] == fault:
+                faults[name] += 1
+                _coil(port, "abort")
+                wait_until(lambda: (s := read_snapshot(port)) and s["state"] == idle, 60, 0.05,
+                           f"{name} back to IDLE")
+    except Exception as exc:
+        errors.append(f"{name}: {exc}")
+
+
+def _restarter(sub: Any, broker: Any, peak: list[int], done: threading.Event) -> None:
+    """Restarts of the broker spread over the run (by the fleet's progress, read from the subscriber's count)."""
+    for k in range(1, RESTARTS + 1):
+        target = k * APPLIANCES * N // (RESTARTS + 1)
+        while len(sub.got) < target and not done.is_set():
+            peak.append(_rss_kib(broker.proc.pid) if broker.proc else 0)
+            done.wait(0.2)
+        if done.is_set():
+            return
+        peak.append(_rss_kib(broker.proc.pid, "VmHWM") if broker.proc else 0)
+        broker.stop()
+        done.wait(1.0)  # the broker stays down a second: results pile up in the outboxes
+        broker.start()
+
+
 def main() -> None:
     from tests.service.conftest import MOSQUITTO, Broker, appliance_doc, free_port, wait_until, write_toml
-    from tests.service.test_service_process import read_snapshot
 
     try:
         from tests.service.sparkplug_host import SparkplugHost
@@ -126,50 +179,9 @@ def main() -> None:
 
         faults: Counter = Counter()
 
-        def coil(port: int, name: str) -> None:
-            from pymodbus.client import ModbusTcpClient
-            from service.publish.modbus import registers as R
-            c = ModbusTcpClient("127.0.0.1", port=port, timeout=3, retries=0)
-            assert c.connect()
-            try:
-                assert not c.write_coil(R.COILS[name], True, device_id=1).isError()
-            finally:
-                c.close()
-
-        def plc(name: str) -> None:
-            """Like a PLC: trigger, wait for the end; a FAULT (a starved simulated capture on a loaded
-            machine) is acknowledged and counted, and the next one triggered."""
-            from service.publish.modbus import registers as R
-            idle, fault = R.STATE_CODES["IDLE"], R.STATE_CODES["FAULT"]
-            try:
-                for n in range(1, N + 1):
-                    coil(ports[name], "trigger")
-                    s = wait_until(lambda: (s := read_snapshot(ports[name])) and s["measurements_started"] == n
-                                   and s["state"] in (idle, fault) and s, 300, 0.05, f"{name} measurement {n}")
-                    if s["state"] == fault:
-                        faults[name] += 1
-                        coil(ports[name], "abort")
-                        wait_until(lambda: (s := read_snapshot(ports[name])) and s["state"] == idle, 60, 0.05,
-                                   f"{name} back to IDLE")
-            except Exception as exc:
-                errors.append(f"{name}: {exc}")
-
-        def restarter() -> None:
-            # restarts spread over the run (by the fleet's progress, read from the subscriber's count)
-            for k in range(1, RESTARTS + 1):
-                target = k * APPLIANCES * N // (RESTARTS + 1)
-                while len(sub.got) < target and not done.is_set():
-                    peak.append(_rss_kib(broker.proc.pid) if broker.proc else 0)
-                    done.wait(0.2)
-                if done.is_set():
-                    return
-                peak.append(_rss_kib(broker.proc.pid, "VmHWM") if broker.proc else 0)
-                broker.stop()
-                done.wait(1.0)  # the broker stays down a second: results pile up in the outboxes
-                broker.start()
-
         t0 = time.monotonic()
-        threads = [threading.Thread(target=plc, args=(n,)) for n in names] + [threading.Thread(target=restarter)]
+        threads = [threading.Thread(target=_plc, args=(n, ports[n], faults, errors)) for n in names]
+        threads.append(threading.Thread(target=_restarter, args=(sub, broker, peak, done)))
         for t in threads:
             t.start()
         for t in threads[:-1]:

@@ -50,6 +50,7 @@ def main():
           f"{1e6 * (r.J / 1000 - 1):>+9.2f} ppm{1e6 * r.J_std / 1000:>7.2f} ppm  "
           f"mu {r.damping['coulomb']['mu'].value:.5f} m, K {r.damping['quadratic']['K'].value:.3f} N·m·s²")
     from pathlib import Path
+
     from service.sources.files import read_rig, read_trace
     root = Path(__file__).resolve().parents[1]
     rig_wood = read_rig(root / "examples" / "wood_pendulum.toml")

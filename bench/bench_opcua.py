@@ -84,12 +84,12 @@ def _start_times(work: Path) -> None:
 def main() -> None:
     import logging
 
+    from _appliance import Finished, StampedIdentifier, simulated_doc
     from asyncua import Client, ua
     from asyncua.crypto.cert_gen import setup_self_signed_certificate
     from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
     from cryptography.x509.oid import ExtendedKeyUsageOID
 
-    from _appliance import Finished, StampedIdentifier, simulated_doc
     from service.config.appliance import parse_config
     from service.daemon import Appliance
     from service.publish.opcua.server import NS_MACHINERY, NS_MOI, NS_RESULT

@@ -71,13 +71,13 @@ def _pct(xs: list[float], q: float) -> float:
 
 def main() -> None:
     import paho.mqtt.client as mqtt
+    from _appliance import Finished, StampedIdentifier, simulated_doc
     from paho.mqtt.enums import CallbackAPIVersion
     from pymodbus.client import ModbusTcpClient
 
-    from _appliance import Finished, StampedIdentifier, simulated_doc
-    from service.publish.modbus import registers as R
     from service.config.appliance import parse_config
     from service.daemon import Appliance
+    from service.publish.modbus import registers as R
 
     work = Path(tempfile.mkdtemp(prefix="moi-bench-service-"))
     broker, mqtt_port = _start_broker(work)

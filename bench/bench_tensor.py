@@ -10,8 +10,8 @@ pinned with `taskset -c 0 .venv/bin/python bench/bench_tensor.py` for the Pi pro
 """
 
 import statistics
-from dataclasses import replace
 import time
+from dataclasses import replace
 
 import numpy as np
 

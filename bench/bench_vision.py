@@ -24,8 +24,17 @@ import cv2
 import numpy as np
 
 from measurement import Pendulum, Rig, Swing, identify
-from measurement.vision import (CameraConfig, CameraModel, CameraPose, Imaging, MarkerGeometry,
-                                MarkerRenderer, MarkerTracker, TrackerSettings, angle_from_normalised)
+from measurement.vision import (
+    CameraConfig,
+    CameraModel,
+    CameraPose,
+    Imaging,
+    MarkerGeometry,
+    MarkerRenderer,
+    MarkerTracker,
+    TrackerSettings,
+    angle_from_normalised,
+)
 
 CAMERA = CameraModel(width=640, height=480, fps=60.0, fx=600.0, fy=600.0, cx=319.5, cy=239.5)
 MARKER = MarkerGeometry(radius=0.10, distance=0.25)

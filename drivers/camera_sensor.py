@@ -41,10 +41,10 @@ from typing import Any
 import numpy as np
 
 from measurement.trace import Trace
+from measurement.vision.body import provisional_angle
 from measurement.vision.config import CameraConfig
 from measurement.vision.geometry import angle_from_normalised
 from measurement.vision.locate import CORRUPT, LOST, TrackerSettings
-from measurement.vision.body import provisional_angle
 from measurement.vision.locators import PointObservation
 from measurement.vision.pipeline import DROPPED, Tracking, VisionSettings, trace_from_tracking, tracker_for
 

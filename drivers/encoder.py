@@ -40,8 +40,8 @@ from measurement.flags import ENCODER_ERRORS
 from .aioloop import LoopThread
 from .clock import Clock, MonotonicClock
 from .errors import DriverConfigError, EncoderFault
-from .sensor import SampleBuffer
 from .modbus_words import WORD_ORDERS, from_registers
+from .sensor import SampleBuffer
 
 if TYPE_CHECKING:  # as a type only: pymodbus is imported where a client is made
     from pymodbus.client import AsyncModbusSerialClient

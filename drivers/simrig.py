@@ -16,16 +16,14 @@ from __future__ import annotations
 
 import math
 import threading
+from typing import Any, Callable
 
 import numpy as np
-from typing import Any, Callable
 
 from measurement import Pendulum, Swing
 
 from .clock import Clock
 from .errors import DriverConfigError
-
-
 
 #: longest simulated swing, s (θ holds its last value afterwards)
 MAX_DURATION = 3600.0

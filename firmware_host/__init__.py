@@ -95,8 +95,17 @@ by ``clock.scale`` when the clock has one).
 
 from drivers.clock import Clock, ManualClock, MonotonicClock, ScaledClock
 
-from .errors import (CaptureTimeout, CaptureTooShort, IdentificationFailed, IdentificationTimeout, IllegalTransition,
-                     PublishFailed, SequencerConfigError, SequencerError, SequencerFault)
+from .errors import (
+                     CaptureTimeout,
+                     CaptureTooShort,
+                     IdentificationFailed,
+                     IdentificationTimeout,
+                     IllegalTransition,
+                     PublishFailed,
+                     SequencerConfigError,
+                     SequencerError,
+                     SequencerFault,
+)
 from .sequencer import Identifier, Measurement, ResultSink, Sequencer, SequencerConfig
 from .states import BUSY, TRANSITIONS, Event, State
 

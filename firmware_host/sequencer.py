@@ -39,8 +39,16 @@ from drivers.sensor import AngleSensor
 from measurement import IdentificationResult, Options, Rig, Trace, identify
 from measurement.errors import MeasurementError
 
-from .errors import (CaptureTimeout, CaptureTooShort, IdentificationFailed, IdentificationTimeout, IllegalTransition,
-                     PublishFailed, SequencerConfigError, SequencerFault)
+from .errors import (
+    CaptureTimeout,
+    CaptureTooShort,
+    IdentificationFailed,
+    IdentificationTimeout,
+    IllegalTransition,
+    PublishFailed,
+    SequencerConfigError,
+    SequencerFault,
+)
 from .states import BUSY, TRANSITIONS, Event, Measurement, State
 
 log = logging.getLogger("moi.sequencer")

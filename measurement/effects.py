@@ -30,7 +30,6 @@ import numpy as np
 from .errors import InvalidInput, RigError, UnknownEffectError
 
 
-
 class Rig(Protocol):
     """What an effect reads of its rig (``measurement.rig.Rig``, whose module imports this one)."""
 

@@ -39,7 +39,7 @@ import re
 import sys
 import tempfile
 import threading
-from functools import lru_cache, cache
+from functools import cache, lru_cache
 from pathlib import Path
 from types import ModuleType, SimpleNamespace
 from typing import Any, Callable, Sequence

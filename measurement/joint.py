@@ -34,9 +34,9 @@ from scipy.optimize import least_squares
 from scipy.special import gammaincc
 
 from . import flags as F
+from .consistency import bic_weights, check_segments
 from .effects import EFFECTS, resolve_effects
 from .errors import IdentificationError, InvalidInput
-from .consistency import bic_weights, check_segments
 from .fit import ModelFit, block_covariance, fit_model
 from .identification.options import Options
 from .identification.pipeline import identify
@@ -47,9 +47,9 @@ from .model import STATE_PARAMS, Model
 from .noise import fit_noise
 from .object_laws import laws_of_the_object
 from .result import IdentificationResult, Quantity, _jsonable, _num, budget_table, quantities_from_dict
-from .uncertainty import Budget
 from .rig import Rig
 from .trace import Trace
+from .uncertainty import Budget
 
 #: distance (in combined σ) beyond which the joint fit's ω_n and the releases' weighted value disagree
 FIT_APART_Z = 2.0

@@ -243,7 +243,7 @@ class Rig:
         obj = None
         if "object" in doc:
             o = doc["object"]
-            if not isinstance(o, Mapping) or not _OBJECT_KEYS <= set(o) or set(o) - _OBJECT_KEYS - _OBJECT_STD_KEYS:
+            if not isinstance(o, Mapping) or not set(o) >= _OBJECT_KEYS or set(o) - _OBJECT_KEYS - _OBJECT_STD_KEYS:
                 raise RigError("rig file: [object] needs mass (kg) and axis_offset (m), optionally mass_std (kg) "
                                "and axis_offset_std (m)")
             obj = ObjectTransfer(

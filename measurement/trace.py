@@ -19,7 +19,6 @@ import numpy as np
 
 from .errors import TraceError
 
-
 #: the smallest time step a trace may have, s (the trace CSV writes t with 1 ns resolution)
 MIN_STEP = 1e-9
 #: bounds of a plausible trace: Unix times fit, a swing's angle is a few rad

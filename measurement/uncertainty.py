@@ -317,7 +317,7 @@ class PendulumInputs:
     def restoring(self, x: Mapping[str, float]) -> float | None:
         """C of J = C/ω² (N·m/rad or N·m), from the inputs."""
         if self.rig_kind == "torsion":
-            return x["k"] if "k" in x else None
+            return x.get("k", None)
         if "m" in x:
             return x["m"] * x["g"] * x["S"]
         return None

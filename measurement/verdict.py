@@ -70,7 +70,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 from . import flags as F
 from .errors import InvalidInput
-from .uncertainty import coverage_factor as _coverage_factor, welch_satterthwaite
+from .uncertainty import coverage_factor as _coverage_factor
+from .uncertainty import welch_satterthwaite
 
 OK, NOK, INVALID = "OK", "NOK", "INVALID"
 
@@ -250,7 +251,7 @@ def decide(value: float, u_c: float, spec: Specification, k: float | None = None
     U = max(spec.coverage_factor, k or 0.0) * u_c
     cap = None if rules is None else rules.max_uncertainty_ratio
     half = (spec.upper - spec.lower) / 2
-    if cap is not None and U > cap * half:
+    if cap is not None and cap * half < U:
         return Decision(INVALID, value, u_c, U, value - spec.nominal, None, spec.rule,
                         (f"expanded uncertainty U = {U:.2g} kg·m² exceeds {cap:g} of the half-tolerance "
                          f"{half:.2g} kg·m² (test uncertainty ratio {half / U:.1f}, the recipe asks for at least "

@@ -23,16 +23,16 @@ that died ends the daemon with status 3 so that systemd restarts it.
 
 from __future__ import annotations
 
-import datetime as _dt
 import concurrent.futures
+import datetime as _dt
 import logging
 import queue
 import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 from collections import deque
+from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from firmware_host import Event, Measurement, Sequencer, State
@@ -40,23 +40,23 @@ from measurement import IdentificationResult, Rig, Trace, identify
 from measurement import flags as F
 from measurement.errors import InvalidInput
 from measurement.integrator import is_compiled
-
-from . import __version__
 from service.config.appliance import Config
 from service.core import vocabulary as V
 from service.core.live import LiveStatus
-from .errors import ServiceError, StartupError, StoreDamaged, StoreError
 from service.devices.hardware import Devices, build_devices
-from .contention import CaptureWatch
-from .notify import Notifier
-from service.publish.payload import iso_utc, result_payload
 from service.parts.recipes import PartTracker, Recipe, RecipeBook, RecipeError
 from service.parts.tensor_set import COMPLETE, OpenSetFile, TensorSet, interrupted
 from service.persistence.salvage import quarantine_store
 from service.persistence.store import Store
 from service.publish import registry
+from service.publish.payload import iso_utc, result_payload
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply, ReplyTo
+
+from . import __version__
+from .contention import CaptureWatch
+from .errors import ServiceError, StartupError, StoreDamaged, StoreError
+from .notify import Notifier
 
 log = logging.getLogger("moi.daemon")
 
@@ -221,12 +221,12 @@ class Appliance:
 
     def publisher(self, name: str) -> Publisher | None:
         """The running publisher of configuration table ``name``, or None."""
-        return next((p for p in self.publishers if p.NAME == name), None)
+        return next((p for p in self.publishers if name == p.NAME), None)
 
     def __getattr__(self, name: str) -> Any:
         # app.modbus, app.mqtt, app.web...: a publisher by its table's name (None when off), for tests and tools
         if any(entry.name == name for entry in registry.PUBLISHERS):
-            return next((p for p in self.__dict__.get("publishers", ()) if p.NAME == name), None)
+            return next((p for p in self.__dict__.get("publishers", ()) if name == p.NAME), None)
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def publisher_health(self) -> dict[str, dict[str, Any] | None]:

@@ -31,7 +31,6 @@ from .options import Options
 from .preparation import Prepared
 from .threads import parallel_map
 
-
 #: residual RMS over the noise floor up to which a candidate's first-order score is trusted to skip its fit
 SCREEN_TRUST = 4.0
 

@@ -14,8 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import TraceError
-from ..signal import (MAX_GRID_PER_SAMPLE, Swings, deviation_table, find_swings, noise_floor, spike_candidates,
-                      swing_window)
+from ..signal import MAX_GRID_PER_SAMPLE, Swings, deviation_table, find_swings, noise_floor, spike_candidates, swing_window
 from ..trace import Trace
 from .options import Options
 

@@ -10,11 +10,11 @@ from __future__ import annotations
 import math
 
 from .. import flags as F
+from ..fit import swing_amplitude
 from ..result import SegmentCheck
 from .discovery import SCREEN_TRUST
 from .findings import Findings
 from .flags import FOLLOW_LIMIT, Leftover
-from ..fit import swing_amplitude
 from .quantities import omega_at_amplitude
 from .rivals import LAW_SIGMA
 

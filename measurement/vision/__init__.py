@@ -41,8 +41,8 @@ __getattr__, __dir__ = lazy_exports(__name__, globals(), _WHERE)
 if TYPE_CHECKING:  # pragma: no cover
     from .config import CameraConfig, CameraModel, MarkerGeometry, PoseSettings
     from .geometry import angle_from_normalised, normalised_from_angle
-    from .marker_pair import MarkerTrack, PairView, measure_view, pair_angle, pair_trace, parse_marker_csv
     from .locate import MarkerObservation, MarkerTracker, TrackerSettings
+    from .marker_pair import MarkerTrack, PairView, measure_view, pair_angle, pair_trace, parse_marker_csv
     from .pipeline import Tracking, VisionSettings, count_dropped, trace_from_tracking, track_frames
     from .pose import PoseEstimate, estimate_yaw
     from .render import CameraPose, Imaging, MarkerPattern, MarkerRenderer

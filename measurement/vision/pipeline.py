@@ -19,9 +19,9 @@ import numpy as np
 from ..errors import VisionError
 from ..flags import CAMERA_POSE, DROPPED_FRAMES
 from ..trace import Trace
+from .body import body_trace
 from .config import CameraConfig
 from .geometry import angle_from_normalised
-from .body import body_trace
 from .locate import CORRUPT, LOST, MarkerObservation, MarkerTracker, TrackerSettings
 from .locators import REPEATED, Locator, PointObservation, make_locator
 from .pose import PoseEstimate, estimate_yaw

@@ -46,9 +46,7 @@ from pathlib import Path
 from measurement.calibration import Cylinder, Reference, calibrate_torsion, cylinder_inertia_std
 from measurement.errors import CalibrationError
 from measurement.rig import CalibrationRecord
-
 from service.sources.files import read_rig, read_toml, read_trace, write_rig
-
 
 _REF_KEYS = {"name", "trace", "added_inertia", "added_inertia_std", "cylinders", "omega", "zeta", "omega_n",
              "omega_n_std"}

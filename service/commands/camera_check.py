@@ -23,11 +23,9 @@ import json
 import math
 import sys
 from pathlib import Path
-
 from typing import TYPE_CHECKING
 
 from measurement.errors import VisionError
-
 from service.config.camera import read_camera
 from service.devices.defaults import demo_camera
 from service.errors import InputFileError

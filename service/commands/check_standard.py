@@ -26,7 +26,6 @@ import sys
 import time
 
 from measurement.verdict import QUANTITIES
-
 from service.commands._common import add_store_arguments, find_store_dir
 from service.errors import InputFileError
 
@@ -60,7 +59,6 @@ def run(args: argparse.Namespace) -> int:
                              "(kg·m²), or --history")
     from measurement import Options, identify  # scipy: only when identifying
     from measurement.uncertainty import check_standard
-
     from service.sources.dispatch import load_source
     from service.sources.files import read_rig
 
@@ -94,7 +92,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _history(args: argparse.Namespace) -> int:
     from measurement.spc import SpcError, individuals
-
     from service.commands._common import open_store
     from service.sources.files import check_output_path
 

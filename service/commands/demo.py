@@ -25,10 +25,9 @@ import time
 from pathlib import Path
 from typing import Iterator
 
-from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
 from service.core import vocabulary as V
+from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
 from service.errors import InputFileError
-
 
 EXIT_FAULT = 3
 

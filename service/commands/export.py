@@ -12,6 +12,7 @@ import sys
 from service.errors import InputFileError
 from service.publish.export import csv_text, dfq_bytes, json_text, trace_text
 from service.sources.files import write_atomic, write_text_atomic
+
 from ._common import add_store_arguments, open_store, parse_time
 
 

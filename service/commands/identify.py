@@ -6,7 +6,6 @@ import argparse
 import sys
 
 from measurement.effects import EFFECTS
-
 from service.errors import InputFileError
 from service.sources.files import check_output_path, read_rig, write_atomic
 
@@ -55,7 +54,6 @@ def run(args: argparse.Namespace) -> int:
 def _identify(args: argparse.Namespace, rig, fmt: str, helper) -> int:
     from measurement import Options, identify  # scipy: only when identifying
     from measurement.integrator import use_kernels
-
     from service.sources.dispatch import load_source
 
     if helper is not None:

@@ -30,10 +30,10 @@ import sys
 from typing import TYPE_CHECKING
 
 from measurement.errors import InvalidInput
-
 from service.devices.defaults import DEMO_EFFECTS, DEMO_RIG, SIM_ENCODER_NOISE, demo_camera
 from service.devices.sensors import registry as sensors
 from service.sources.files import read_rig
+
 from .simulate import EFFECT_SYNTAX, parse_effects
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -55,7 +55,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     # the defaults are the settings classes' own (imported here, when this command is chosen: `moi --help`
     # loads no command)
     from firmware_host import SequencerConfig
-
     from service.config.appliance import SimulationSettings
     from service.config.schema import default_of
 
@@ -126,7 +125,6 @@ def run(args: argparse.Namespace) -> int:
     # imported here: `moi --help` must not pay for gpiozero/pymodbus
     from firmware_host import Sequencer, SequencerConfig
     from measurement import Options, Pendulum
-
     from service.config.appliance import SimulationSettings
     from service.devices.hardware import build_simulated
 
@@ -186,12 +184,11 @@ def run(args: argparse.Namespace) -> int:
 def _measure_configured(args: argparse.Namespace) -> int:
     """One measurement on the devices of the configuration, built by the daemon's own builder."""
     from firmware_host import Sequencer
-
-    from service.config.check import pin_problems
     from service.config.appliance import load_config
+    from service.config.check import pin_problems
     from service.daemon import lock_state_dir
-    from service.errors import ConfigError, StartupError
     from service.devices.hardware import build_devices
+    from service.errors import ConfigError, StartupError
 
     config = load_config(args.config)
     if pin_problems(config):

@@ -7,9 +7,9 @@ from __future__ import annotations
 import argparse
 
 from measurement.units import SI, inertia_unit
-
 from service.errors import InputFileError
 from service.sources.files import check_output_path, write_atomic
+
 from ._common import add_store_arguments, open_store
 
 

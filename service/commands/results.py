@@ -8,6 +8,7 @@ import json
 
 from service.errors import InputFileError
 from service.publish.payload import fmt_time
+
 from ._common import add_store_arguments, open_store, parse_time
 
 

@@ -7,7 +7,6 @@ import math
 
 from measurement.effects import EFFECTS, Effect
 from measurement.errors import InvalidInput, UnknownEffectError
-
 from service.sources.files import read_rig, write_text_atomic
 
 

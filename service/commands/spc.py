@@ -17,6 +17,7 @@ from pathlib import Path
 from service.errors import InputFileError
 from service.parts.recipes import recipe_spc
 from service.publish.payload import fmt_time
+
 from ._common import add_store_arguments, open_store, parse_time
 
 

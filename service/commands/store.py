@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from service.errors import InputFileError
+
 from ._common import add_store_arguments, find_store_dir
 
 

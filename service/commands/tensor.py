@@ -71,7 +71,6 @@ def run(args: argparse.Namespace) -> int:
 
     from measurement import identify
     from measurement.tensor import solve_results
-
     from service.sources.dispatch import load_source
 
     results = [[identify(load_source(p, rig=rig), rig).to_dict() for p in paths] for paths in traces]

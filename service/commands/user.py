@@ -13,7 +13,6 @@ from service.errors import InputFileError, StartupError
 from service.publish.web.auth import ROLES, User, check_user, hash_password, read_users, save_users
 
 
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("action", choices=("add", "remove", "list"), help="add (or change) a user, remove one, list them")
     p.add_argument("name", nargs="?", metavar="NAME", help="the user's name (what results record)")

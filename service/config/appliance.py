@@ -29,23 +29,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, overload
 
+from drivers.errors import DriverConfigError
+from drivers.settings import ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSettings, IndicatorSettings, SolenoidSettings
 from firmware_host import SequencerConfig
 from measurement import Options, Rig
 from measurement.effects import EFFECTS
 from measurement.errors import InvalidInput
-
-from drivers.errors import DriverConfigError
-from drivers.settings import (ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSettings, IndicatorSettings,
-                              SolenoidSettings)
-
-from service.devices.defaults import (DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, MAX_ENCODER_TIME_SCALE,
-                                      demo_camera)
+from service.config.schema import REQUIRED, Key, PublisherTable
+from service.config.schema import Checker as _Checker
+from service.config.schema import doc as _doc
+from service.config.schema import schema as _schema
+from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, MAX_ENCODER_TIME_SCALE, demo_camera
 from service.devices.sensors import registry as sensors
-from service.config.schema import REQUIRED, Checker as _Checker, Key, PublisherTable, doc as _doc, schema as _schema
 from service.errors import ConfigError
 from service.names import name_problem
-from service.sources.files import read_rig, read_toml
 from service.publish import registry
+from service.sources.files import read_rig, read_toml
 
 #: the angle sensors of ``[hardware] sensor`` (the sensor port's registry; ``[simulation] sensor`` has them all)
 SENSORS = sensors.names(hardware=True)

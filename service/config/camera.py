@@ -7,7 +7,6 @@ import os
 
 from measurement.errors import VisionError
 from measurement.vision.config import CameraConfig
-
 from service.sources.files import read_toml_as
 
 

@@ -11,9 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from service.publish.modbus.settings import network_exposure
-
 from service.devices.sensors import registry as sensors
+from service.publish.modbus.settings import network_exposure
 
 from .appliance import Config
 

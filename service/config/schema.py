@@ -17,7 +17,6 @@ from types import UnionType
 from typing import Any, Callable, Mapping, Union
 
 from measurement.effects import EFFECTS
-
 from service.errors import ConfigError
 
 #: the default of a key that must be given

@@ -32,12 +32,13 @@ from drivers.clock import Clock, MonotonicClock, ScaledClock
 from drivers.indicator import Indicator
 from drivers.sensor import AngleSensor
 from drivers.settings import SolenoidSettings
-from drivers.simrig import MAX_DURATION as SIM_MAX_DURATION, SimRig
+from drivers.simrig import MAX_DURATION as SIM_MAX_DURATION
+from drivers.simrig import SimRig
 from drivers.solenoid import Solenoid
 from firmware_host import SequencerConfig
 from measurement import Pendulum, Rig
-
 from service.config.appliance import Config, HardwareSettings, SimulationSettings
+
 from .defaults import SIM_BUTTON_PIN, SIM_SOLENOID_PIN
 from .sensors import registry as sensors
 

@@ -94,9 +94,7 @@ from measurement.errors import InvalidInput, MeasurementError
 from measurement.tensor import RigShared, TensorPlan
 from measurement.uncertainty import check_standard
 from measurement.units import inertia_unit
-from measurement.verdict import (QUANTITIES, RULES, QualityRules, Reading,
-                                 Specification, combine, judge_release)
-
+from measurement.verdict import QUANTITIES, RULES, QualityRules, Reading, Specification, combine, judge_release
 from service.errors import ConfigError
 from service.names import NAMES, name_problem
 from service.sources.files import read_rig, read_text
@@ -180,7 +178,9 @@ class Recipe:
 def _schemas() -> dict[str, dict[str, Any]]:
     """The keys of a recipe file: [recipe] here, [decision] and [quality] from the settings they fill
     (``Specification``, ``QualityRules``: their defaults are the recipe's)."""
-    from service.config.schema import REQUIRED, Key, doc as _doc, schema as _schema
+    from service.config.schema import REQUIRED, Key
+    from service.config.schema import doc as _doc
+    from service.config.schema import schema as _schema
 
     return {
         "recipe": {
@@ -224,7 +224,6 @@ def _schemas() -> dict[str, dict[str, Any]]:
 def load_recipe(path: str | Path) -> Recipe:  # noqa: C901
     """Read and check one recipe file (``RecipeError`` naming the file, table and key)."""
     from measurement.effects import EFFECTS
-
     from service.config.schema import Checker as _Checker
     from service.sources.files import read_toml
 

@@ -23,7 +23,6 @@ from typing import Any, Mapping
 from measurement.errors import InvalidInput
 from measurement.rig import Rig
 from measurement.tensor import AxisReading, RigShared, TensorResult, axis_reading, solve
-
 from service.errors import ServiceError
 
 log = logging.getLogger("moi.tensor_set")

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from service.errors import StoreDamaged, StoreError
+
 from .store import Store
 
 log = logging.getLogger("moi.outbox")

@@ -20,7 +20,14 @@ from typing import Any, Callable, Iterator, Mapping
 from service.errors import StoreError
 from service.persistence.pages import leaf_records
 from service.persistence.store import (
-    ARRAY_COLUMNS, DB_NAME, JSON_COLUMNS, LEGACY_CONSUMER, Store, read_only_connection, read_seq_floor, unpack,
+    ARRAY_COLUMNS,
+    DB_NAME,
+    JSON_COLUMNS,
+    LEGACY_CONSUMER,
+    Store,
+    read_only_connection,
+    read_seq_floor,
+    unpack,
 )
 
 #: tables read back by check and salvage, in the order rows are copied (foreign keys point backwards)
@@ -224,45 +231,44 @@ def salvage_store(path: str | Path, dest_dir: str | Path) -> StoreHealth:
                        (str(read_seq_floor(path.parent)),))
         return health
     try:
-        with Store(dest) as new:
-            with new.transaction() as db:
-                max_seq = 0
-                for table in _TABLES:
-                    for columns, row in _read_rows(src, table, health):
-                        try:
-                            db.execute(f"INSERT OR IGNORE INTO {table} ({', '.join(columns)}) "
-                                       f"VALUES ({', '.join('?' * len(columns))})", row)
-                        except sqlite3.IntegrityError:  # e.g. an outbox row whose measurement was lost
-                            health.readable[table] -= 1
-                            health.lost[table] += 1
-                            continue
-                        if table == "measurements":
-                            max_seq = max(max_seq, int(row[columns.index("seq")]))
-                outbox_used = health.readable["outbox"] + health.lost["outbox"] > 0 or \
+        with Store(dest) as new, new.transaction() as db:
+            max_seq = 0
+            for table in _TABLES:
+                for columns, row in _read_rows(src, table, health):
+                    try:
+                        db.execute(f"INSERT OR IGNORE INTO {table} ({', '.join(columns)}) "
+                                   f"VALUES ({', '.join('?' * len(columns))})", row)
+                    except sqlite3.IntegrityError:  # e.g. an outbox row whose measurement was lost
+                        health.readable[table] -= 1
+                        health.lost[table] += 1
+                        continue
+                    if table == "measurements":
+                        max_seq = max(max_seq, int(row[columns.index("seq")]))
+            outbox_used = health.readable["outbox"] + health.lost["outbox"] > 0 or \
                     any(p.startswith("outbox:") for p in health.problems)
-                if outbox_used:
-                    # an unsent result whose outbox row was on a lost page is queued again from its stored
-                    # payload, for each consumer seen in the outbox (consumers dedupe by uuid); without a
-                    # publisher delivering from the outbox nothing was ever queued
-                    consumers = [r[0] for r in db.execute("SELECT DISTINCT consumer FROM outbox")] or [LEGACY_CONSUMER]
-                    requeued = sum(db.execute(
-                        "INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at, consumer) "
-                        "SELECT id, uuid, 'result', payload, stored_at, ? FROM measurements m WHERE status = 'ok' "
-                        "AND payload IS NOT NULL AND published_at IS NULL AND NOT EXISTS "
-                        "(SELECT 1 FROM outbox o WHERE o.measurement_id = m.id AND o.consumer = ?)",
-                        (c, c)).rowcount for c in consumers)
-                    if requeued:
-                        health.problems.append(f"outbox: {requeued} unsent result(s) queued again from their "
-                                               "stored payload")
-                try:
-                    counter = src.execute("SELECT value FROM meta WHERE key='last_seq'").fetchone()
-                    max_seq = max(max_seq, int(counter[0])) if counter else max_seq
-                except (sqlite3.DatabaseError, ValueError):
-                    pass  # the counter is lost: the largest salvaged seq is the floor
-                # the copy of the counter beside the file: a PLC keyed on seq never sees an old number again,
-                # even when the header (and with it every row) is gone
-                max_seq = max(max_seq, read_seq_floor(path.parent))
-                db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('last_seq', ?)", (str(max_seq),))
+            if outbox_used:
+                # an unsent result whose outbox row was on a lost page is queued again from its stored
+                # payload, for each consumer seen in the outbox (consumers dedupe by uuid); without a
+                # publisher delivering from the outbox nothing was ever queued
+                consumers = [r[0] for r in db.execute("SELECT DISTINCT consumer FROM outbox")] or [LEGACY_CONSUMER]
+                requeued = sum(db.execute(
+                    "INSERT INTO outbox (measurement_id, uuid, kind, payload, created_at, consumer) "
+                    "SELECT id, uuid, 'result', payload, stored_at, ? FROM measurements m WHERE status = 'ok' "
+                    "AND payload IS NOT NULL AND published_at IS NULL AND NOT EXISTS "
+                    "(SELECT 1 FROM outbox o WHERE o.measurement_id = m.id AND o.consumer = ?)",
+                    (c, c)).rowcount for c in consumers)
+                if requeued:
+                    health.problems.append(f"outbox: {requeued} unsent result(s) queued again from their "
+                                           "stored payload")
+            try:
+                counter = src.execute("SELECT value FROM meta WHERE key='last_seq'").fetchone()
+                max_seq = max(max_seq, int(counter[0])) if counter else max_seq
+            except (sqlite3.DatabaseError, ValueError):
+                pass  # the counter is lost: the largest salvaged seq is the floor
+            # the copy of the counter beside the file: a PLC keyed on seq never sees an old number again,
+            # even when the header (and with it every row) is gone
+            max_seq = max(max_seq, read_seq_floor(path.parent))
+            db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('last_seq', ?)", (str(max_seq),))
     finally:
         src.close()
     return health

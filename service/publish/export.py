@@ -12,7 +12,6 @@ import json
 
 from measurement import Trace
 from measurement.units import SI, inertia_unit
-
 from service.errors import InputFileError
 from service.publish.dfq import ENCODING, dfq_text
 from service.publish.payload import fmt_time, iso_utc

@@ -10,7 +10,7 @@ Modbus image is encoded from it (``service.publish.modbus.registers.encode_snaps
 from __future__ import annotations
 
 import json
-from datetime import datetime, UTC
+from datetime import UTC, datetime
 from typing import Any, Mapping
 
 from service.publish.modbus.registers import flag_bits

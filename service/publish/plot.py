@@ -10,7 +10,6 @@ import numpy as np
 
 from measurement.result import IdentificationResult
 
-
 #: the picture formats a plot may be written in (by the file name's extension)
 PLOT_FORMATS = ("png", "svg", "pdf")
 
@@ -19,12 +18,12 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO
                 fmt: str = "png", unit: str = "kg·m²", source: str | None = None) -> None:
     """Draw the result into ``path`` (a file name or a binary file object) as ``fmt`` (png, svg or pdf); the title
     names ``source`` (default: the trace's own, e.g. its file) and gives J in ``unit``."""
+    # a Figure without pyplot: no global state, so the daemon's plot worker thread may draw too
+    from matplotlib.figure import Figure
+
     from measurement.units import from_si
 
     from .web.quality import inertia, number
-
-    # a Figure without pyplot: no global state, so the daemon's plot worker thread may draw too
-    from matplotlib.figure import Figure
 
     a = result.arrays
     t, y = a["t"], a["angle"]

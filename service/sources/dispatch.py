@@ -14,8 +14,8 @@ from pathlib import Path
 
 from measurement.rig import Rig
 from measurement.trace import Trace
-
 from service.errors import InputFileError
+
 from .files import read_samples
 
 VIDEO_SUFFIXES = {".avi", ".mp4", ".mkv", ".mov", ".m4v", ".webm", ".mjpg", ".mjpeg", ".ogv"}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tomllib
 from pathlib import Path
@@ -12,7 +13,6 @@ import tomli_w
 from measurement.errors import RigError
 from measurement.rig import Rig
 from measurement.trace import Trace, csv_content, csv_header, parse_trace_csv
-
 from service.errors import InputFileError
 
 if TYPE_CHECKING:  # the vision package only when a marker track is read
@@ -173,10 +173,8 @@ def write_atomic(path: str | os.PathLike, data: str | bytes, what: str = "output
         raise InputFileError(f"cannot write {what} {str(p)!r}: {exc.strerror or exc}") from None
     finally:
         if tmp is not None:
-            try:
+            with contextlib.suppress(OSError):
                 os.unlink(tmp)
-            except OSError:
-                pass
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:

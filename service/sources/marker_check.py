@@ -132,9 +132,8 @@ def check_image(img: np.ndarray, config: CameraConfig, pivot: tuple[float, float
 def _check_points(img: np.ndarray, config: CameraConfig, pivot: tuple[float, float] | None, extra: list[str]
                   ) -> tuple[np.ndarray, dict, list[str]]:
     from measurement.vision.body import provisional_angle
-    from measurement.vision.pipeline import tracker_for
-
     from measurement.vision.locators import Locator
+    from measurement.vision.pipeline import tracker_for
 
     spec = config.target
     locator = tracker_for(config)

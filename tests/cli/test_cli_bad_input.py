@@ -110,7 +110,7 @@ def test_a_trace_as_spreadsheet_programs_write_it_is_read(tmp_path, capsys):
     assert '"J"' in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("body,expected", [
+@pytest.mark.parametrize(("body", "expected"), [
     ("reference = [1, 2]\n", "expected a [[reference]] table"),
     ('[[reference]]\nname = "a"\nomega = 7.0\nzeta = -0.06\nadded_inertia = nan\n', "finite number"),
 ])

@@ -69,7 +69,7 @@ def test_check_standard_passes_fails_is_stored_and_charted(swing, rig_file, tmp_
         assert state_later is not None and not state_later["due"]
 
 
-@pytest.mark.parametrize("extra, words", [
+@pytest.mark.parametrize(("extra", "words"), [
     (["--reference", "0.0125", "--reference-U=-1e-5"], "must be >= 0"),
     (["--reference", "0.0125"], "give SOURCE, --rig, --reference"),
 ])
@@ -101,7 +101,7 @@ def test_identify_json_carries_the_expanded_uncertainty_and_its_budget(swing, ri
     assert np.std(k / w**2 - i0) == pytest.approx(d["J_object_u"], rel=0.1)
 
 
-@pytest.mark.parametrize("line, words", [
+@pytest.mark.parametrize(("line", "words"), [
     ('[sensor]\nclock_accuracy_ppm = "fast"\n', "clock_accuracy_ppm must be a number in ppm"),
     ("[rig]\nkind = \"torsion\"\nstiffness = 0.36\nstiffness_std = -1e-4\n", "stiffness_std must be >= 0"),
     ("[rig]\nkind = \"torsion\"\nstiffness = 0.36\nstiffness_std = 1e-4\ntare_inertia = 4e-3\n"

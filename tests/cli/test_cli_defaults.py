@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from firmware_host import SequencerConfig
-
 from service.cli import build_parser
 from service.config.appliance import SimulationSettings
 from service.publish.web.settings import WebSettings

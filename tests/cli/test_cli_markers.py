@@ -46,7 +46,7 @@ def test_the_view_is_measured_reported_and_written_with_the_trace(tmp_path, caps
     assert 0.005 < np.max(np.abs(change)) < 0.1
 
 
-@pytest.mark.parametrize("body, expected", [
+@pytest.mark.parametrize(("body", "expected"), [
     ("t,ax,ay,bx\n0,1,2,3\n", "missing column(s) by"),
     ("t,ax,ay,bx,by\n0,1,2,3,x\n", "non-numeric"),
     ("t,ax,ay,bx,by\n" + "".join(f"{i / 60},0,0,0,{100 + i}\n" for i in range(100)), "turns by only"),

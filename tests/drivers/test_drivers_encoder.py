@@ -163,7 +163,7 @@ def test_crc_check():
     assert not bad_crc(b"\x01\x03")
 
 
-@pytest.mark.parametrize("field,value,match", [
+@pytest.mark.parametrize(("field", "value", "match"), [
     ("device_id", 0, "device_id"), ("device_id", 248, "device_id"), ("registers", 3, "registers"),
     ("counts_per_turn", 1 << 17, "counts_per_turn"), ("parity", "X", "parity"), ("timeout", 0, "timeout"),
     ("direction", 2, "direction"), ("register_type", "coil", "register_type"), ("word_order", "middle", "word_order"),

@@ -4,7 +4,6 @@ import logging
 
 import pytest
 from gpiozero.pins.mock import MockFactory
-
 from sequencer_harness import Harness
 
 
@@ -31,4 +30,4 @@ def harness(factory):
 @pytest.fixture(autouse=True)
 def _quiet_pymodbus():
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-    yield
+    return

@@ -1,8 +1,9 @@
 """The push button on its gpiozero mock pin drives the sequencer: one press, one measurement."""
 
+from sequencer_harness import assert_solenoid_safe
+
 from drivers.button import PushButton
 from firmware_host import State
-from sequencer_harness import assert_solenoid_safe
 
 
 def press(button):

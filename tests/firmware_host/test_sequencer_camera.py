@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 import pytest
+from sequencer_harness import MAX_ON, RIG, TRUTH, assert_solenoid_safe, fake_identify, on_durations
 
 from drivers.camera import MockCamera
 from drivers.camera_sensor import CameraAngleSensor
@@ -25,7 +26,6 @@ from drivers.solenoid import Solenoid
 from firmware_host import Event, Measurement, Sequencer, SequencerConfig, State
 from measurement import Trace
 from measurement.vision import CameraConfig, CameraModel, CameraPose, Imaging, MarkerGeometry
-from sequencer_harness import MAX_ON, RIG, TRUTH, assert_solenoid_safe, fake_identify, on_durations
 
 CAMERA = CameraModel(width=640, height=480, fps=100.0, fx=600.0, fy=600.0, cx=319.5, cy=239.5)
 CONFIG = CameraConfig(camera=CAMERA, marker=MarkerGeometry(radius=0.10, distance=0.25))

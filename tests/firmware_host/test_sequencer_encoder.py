@@ -8,6 +8,7 @@ takes 4 s of wall time).
 from __future__ import annotations
 
 import pytest
+from sequencer_harness import on_durations
 
 from drivers.button import PushButton
 from drivers.clock import ScaledClock
@@ -17,7 +18,6 @@ from drivers.simrig import SimRig
 from drivers.solenoid import Solenoid
 from firmware_host import Sequencer, SequencerConfig, State
 from measurement import Pendulum, Rig
-from sequencer_harness import on_durations
 
 SCALE = 5.0
 MAX_ON = 0.5

@@ -11,11 +11,11 @@ import threading
 from typing import Any
 
 import pytest
+from sequencer_harness import RIG, Blocking, Harness, assert_solenoid_safe, fake_result
 
 from drivers.errors import DeviceFault
 from firmware_host import TRANSITIONS, Event, Sequencer, SequencerConfig, SequencerConfigError, State
 from measurement.errors import InvalidInput, TraceError
-from sequencer_harness import RIG, Blocking, Harness, assert_solenoid_safe, fake_result
 
 NORMAL = ["ARMED", "RELEASING", "CAPTURING", "IDENTIFYING", "PUBLISHING", "IDLE"]
 WORKER: dict[str, Any] = dict(capture_duration=4.0, identify_in_worker=True, identify_timeout=5.0)
@@ -400,7 +400,7 @@ def test_status_snapshot(harness):
     assert s["measurements"] == 1 and s["last_measurement_id"] == h.results[0].id and s["measurement_id"] is None
 
 
-@pytest.mark.parametrize("field,value", [
+@pytest.mark.parametrize(("field", "value"), [
     ("pre_trigger", -1.0), ("release_pulse", 0.0), ("capture_duration", float("inf")), ("sample_timeout", 0),
     ("decay_threshold", -0.1), ("min_samples", 1), ("identify_timeout", "60"),
 ])

@@ -6,9 +6,9 @@ import re
 from pathlib import Path
 
 from firmware_host.states import BUSY, State
-from service.states import STATES
 from service.publish.modbus import registers as R
 from service.publish.web.words import STATE_WORDS
+from service.states import STATES
 
 
 def test_every_sequencer_state_has_a_code_and_words():
@@ -42,8 +42,8 @@ def test_the_page_serves_the_table_as_json():
 
 
 def test_the_registers_and_the_page_read_the_table():
-    assert R.STATE_CODES == {name: s.code for name, s in STATES.items()}
-    assert STATE_WORDS == {name: s.words for name, s in STATES.items()}
+    assert {name: s.code for name, s in STATES.items()} == R.STATE_CODES
+    assert {name: s.words for name, s in STATES.items()} == STATE_WORDS
 
 
 def test_an_event_says_when_a_measurement_ends_and_when_it_is_published():

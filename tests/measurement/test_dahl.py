@@ -77,7 +77,7 @@ def test_dahl_is_offered_only_as_a_refinement_of_dry_friction():
 
 
 @pytest.mark.parametrize("seed", [1, 2])
-@pytest.mark.parametrize("tc, theta_c", [(0.19, 0.08), (0.10, 0.02)])
+@pytest.mark.parametrize(("tc", "theta_c"), [(0.19, 0.08), (0.10, 0.02)])
 def test_loop_finds_presliding_friction_and_its_angle(seed, tc, theta_c):
     truth = {"viscous": {"c_per_J": 0.1}, "dahl": {"Tc_per_J": tc, "theta_c": theta_c}}
     trace = simulate_trace(Pendulum(RIG, J, truth), theta0=1.0, duration=28, rate=60, noise_std=0.005, seed=seed)

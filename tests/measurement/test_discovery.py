@@ -36,7 +36,7 @@ def rms_vs_noise(r):
 def test_coulomb_friction_is_discovered():
     r = identify(torsion_trace(viscous=0.008, coulomb=0.012), torsion_rig())
     assert r.added_effects == ("coulomb",)
-    assert r.J == pytest.approx(J, rel=1e-3)
+    assert pytest.approx(J, rel=1e-3) == r.J
     assert abs(rms_vs_noise(r) - 1) < 0.2
     assert r.residual_rms < r.baseline.residual_rms
     assert "unmodeled_residual" not in r.flags
@@ -47,7 +47,7 @@ def test_coulomb_friction_is_discovered():
 def test_air_drag_is_discovered():
     r = identify(torsion_trace(viscous=0.005, quadratic=0.15), torsion_rig())
     assert r.added_effects == ("quadratic",)
-    assert r.J == pytest.approx(J, rel=1e-3)
+    assert pytest.approx(J, rel=1e-3) == r.J
     assert abs(rms_vs_noise(r) - 1) < 0.2
 
 
@@ -58,7 +58,7 @@ def test_hardening_spring_is_discovered_and_fixes_J():
     assert r.baseline.J is not None
     assert abs(r.baseline.J / J - 1) > 3e-3, "the case must matter: viscous-only J off by > 0.3 %"
     assert r.added_effects == ("cubic_stiffness",)
-    assert r.J == pytest.approx(J, rel=1e-3)
+    assert pytest.approx(J, rel=1e-3) == r.J
     assert r.stiffness["cubic_stiffness"]["k3"].value == pytest.approx(k3_per_J * J, rel=0.02)
 
 
@@ -71,7 +71,7 @@ def test_compound_rig_with_undeclared_viscous_damping():
     rig = Rig(kind="compound", mass=m, com_distance=S, g=g, declared=("coulomb", "quadratic"))
     r = identify(trace, rig)
     assert r.added_effects == ("viscous",)
-    assert r.J == pytest.approx(inertia, rel=1e-3)
+    assert pytest.approx(inertia, rel=1e-3) == r.J
 
 
 def test_sensor_zero_drift_is_discovered():
@@ -79,7 +79,7 @@ def test_sensor_zero_drift_is_discovered():
     r = identify(torsion_trace(viscous=0.01, extra=lambda t: rate * t), torsion_rig())
     assert r.added_effects == ("drift",)
     assert r.sensor["drift"]["rate"].value == pytest.approx(rate, rel=0.02)
-    assert r.J == pytest.approx(J, rel=1e-3)
+    assert pytest.approx(J, rel=1e-3) == r.J
 
 
 def test_no_false_discovery_on_clean_viscous_traces():
@@ -88,7 +88,7 @@ def test_no_false_discovery_on_clean_viscous_traces():
     for seed in range(20):
         r = identify(torsion_trace(seed=seed, viscous=0.012, t=t), torsion_rig())
         added.append(r.added_effects)
-        assert r.J == pytest.approx(J, rel=2e-4)
+        assert pytest.approx(J, rel=2e-4) == r.J
         assert "unmodeled_residual" not in r.flags
     assert all(a == () for a in added), added
 
@@ -100,7 +100,7 @@ def test_effect_outside_the_library_is_flagged_not_forced():
     assert "unmodeled_residual" in r.flags
     assert "outliers_removed" not in r.flags  # the structure's peaks are not glitches
     assert r.added_effects == ()
-    assert r.J == pytest.approx(J, rel=3e-3)
+    assert pytest.approx(J, rel=3e-3) == r.J
     assert any("13.7" in line or "13.6" in line or "13.8" in line for line in r.structure), r.structure
 
 
@@ -113,7 +113,7 @@ def test_glitches_are_removed_and_flagged():
     r = identify(Trace(trace.t, y, source="glitchy"), torsion_rig())
     assert "outliers_removed" in r.flags
     assert r.window["n_outliers"] >= 8
-    assert r.J == pytest.approx(J, rel=2e-4)
+    assert pytest.approx(J, rel=2e-4) == r.J
     assert r.added_effects == ()
 
 
@@ -129,7 +129,7 @@ def test_record_is_trimmed_to_the_swing():
     assert r.window["release_detected"] and r.window["came_to_rest"]
     assert release - 0.02 <= r.window["t_start"] <= release + 0.02
     assert r.window["t_stop"] < 16.0
-    assert r.J == pytest.approx(J, rel=2e-4)
+    assert pytest.approx(J, rel=2e-4) == r.J
 
 
 def test_uneven_timestamps_are_used_as_they_are():
@@ -138,7 +138,7 @@ def test_uneven_timestamps_are_used_as_they_are():
     t = np.cumsum(rng.uniform(0.6 * dt, 1.4 * dt, int(25 / dt)))
     t -= t[0]
     r = identify(torsion_trace(viscous=0.01, t=t), torsion_rig())
-    assert r.J == pytest.approx(J, rel=2e-4)
+    assert pytest.approx(J, rel=2e-4) == r.J
     assert r.added_effects == ()
 
 
@@ -153,4 +153,4 @@ def test_gaps_from_dropped_samples_do_not_inflate_the_noise_floor():
     assert abs(rms_vs_noise(r) - 1) < 0.2
     assert r.noise_floor == pytest.approx(r.residual_rms, rel=0.2)
     assert "outliers_removed" not in r.flags
-    assert r.J == pytest.approx(J, rel=2e-4)
+    assert pytest.approx(J, rel=2e-4) == r.J

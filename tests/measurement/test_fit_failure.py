@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from measurement import Rig, Trace, identify
-from measurement.identification import pipeline, starts
 from measurement.fit import fit_model, initial_guess
+from measurement.identification import pipeline, starts
 from measurement.identification.options import Options
 from measurement.identification.preparation import prepare
 from measurement.identification.starts import contains, keep_nested_order, nested_start

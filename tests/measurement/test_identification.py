@@ -23,7 +23,7 @@ def test_compound_friction_drag_example_identified_with_declared_coulomb_quadrat
     rng = np.random.default_rng(7)
     trace = Trace(t, sensor(rng, theta, 1e-4, bits=17), source="compound-friction-drag")
     r = identify(trace, rig, Options(discover=False))
-    assert r.J == pytest.approx(J, rel=5e-4)
+    assert pytest.approx(J, rel=5e-4) == r.J
     assert r.damping["coulomb"]["mu"].value == pytest.approx(mu, rel=0.05)
     assert r.damping["quadratic"]["K"].value == pytest.approx(K, rel=0.05)
     assert r.effects == ("coulomb", "quadratic")
@@ -43,7 +43,7 @@ def test_viscous_torsion_J_within_0_02_percent_and_uncertainty_matches_scatter()
     for seed in range(20):
         rig, trace = _viscous_trace(seed, J)
         r = identify(trace, rig, Options(discover=False))
-        assert r.J is not None and r.J_std is not None and r.J == pytest.approx(J, rel=2e-4)
+        assert r.J is not None and r.J_std is not None and pytest.approx(J, rel=2e-4) == r.J
         values.append(r.J)
         stds.append(r.J_std)
     scatter = float(np.std(values, ddof=1))
@@ -104,4 +104,4 @@ def test_a_short_hold_before_the_release_is_found():
     r = identify(trace, rig)
     assert r.window["release_detected"] and r.window["t_start"] >= 0.09
     assert r.added_effects == () and "unmodeled_residual" not in r.flags
-    assert r.J == pytest.approx(0.0125, rel=2e-4)
+    assert pytest.approx(0.0125, rel=2e-4) == r.J

@@ -60,7 +60,7 @@ def test_sensor_gain_is_found_on_a_compound_rig_and_not_offered_at_small_amplitu
     r = identify(big, rig)
     assert r.added_effects == ("gain",)
     assert r.sensor["gain"]["g"].value == pytest.approx(1.02, abs=1e-3)
-    assert r.J == pytest.approx(0.12, rel=1e-3)
+    assert pytest.approx(0.12, rel=1e-3) == r.J
     clean = simulate_trace(Pendulum(rig, 0.12, {"viscous": {"c": 1e-3}}), theta0=0.8, duration=20, rate=100,
                            noise_std=2e-4, seed=4)
     assert identify(clean, rig).added_effects == ()
@@ -83,7 +83,7 @@ def test_a_burst_of_wild_samples_is_downweighted_not_taken_for_an_effect():
     r = identify(Trace(t, y, source="burst"), Rig(kind="torsion", stiffness=K))
     assert r.added_effects == ()
     assert {"outliers_removed", "outliers_downweighted"} & set(r.flags)
-    assert r.J == pytest.approx(J, rel=2e-4)
+    assert pytest.approx(J, rel=2e-4) == r.J
 
 
 def test_window_ends_at_a_long_gap_with_wild_samples_after_it():
@@ -94,7 +94,7 @@ def test_window_ends_at_a_long_gap_with_wild_samples_after_it():
     r = identify(Trace(t2, y2, source="gap"), Rig(kind="torsion", stiffness=K), )
     assert "window_cut_at_gap" in r.flags and r.window["t_stop"] < 15.0
     assert r.added_effects == ()
-    assert r.J == pytest.approx(J, rel=2e-4)
+    assert pytest.approx(J, rel=2e-4) == r.J
 
 
 def test_angle_wrapped_at_pi_is_unwrapped():
@@ -102,7 +102,7 @@ def test_angle_wrapped_at_pi_is_unwrapped():
     wrapped = np.angle(np.exp(1j * (y + math.pi - 0.1)))  # the rest angle near ±π: the reading jumps by 2π
     r = identify(Trace(t, wrapped, source="wrapped"), Rig(kind="torsion", stiffness=K))
     assert "angle_unwrapped" in r.flags and r.window["n_unwrapped"] > 10
-    assert r.J == pytest.approx(J, rel=2e-4)
+    assert pytest.approx(J, rel=2e-4) == r.J
 
 
 def test_wild_samples_at_the_ends_of_the_record_are_glitches_not_the_swing():
@@ -115,7 +115,7 @@ def test_wild_samples_at_the_ends_of_the_record_are_glitches_not_the_swing():
     assert "outliers_removed" in r.flags and r.window["n_outliers"] >= 4
     assert r.window["t_start"] > t[1] and r.window["t_stop"] < t[-2]
     assert r.added_effects == ()
-    assert r.J == pytest.approx(J, rel=2e-4)
+    assert pytest.approx(J, rel=2e-4) == r.J
 
 
 def test_a_burst_of_wild_samples_before_a_final_gap_ends_the_window():
@@ -130,7 +130,7 @@ def test_a_burst_of_wild_samples_before_a_final_gap_ends_the_window():
     r = identify(Trace(t2, y2, source="burst"), Rig(kind="torsion", stiffness=K))
     assert "window_cut_at_gap" in r.flags and r.window["t_stop"] < t[keep][-10]
     assert r.added_effects == ()
-    assert r.J == pytest.approx(J, rel=2e-4)
+    assert pytest.approx(J, rel=2e-4) == r.J
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -157,4 +157,4 @@ def test_samples_a_busy_host_dated_late_do_not_hide_friction(seed):
     assert r.effects == ("viscous", "coulomb"), (r.effects, r.flags)
     assert not {"model_ambiguous", "unmodeled_residual", "correlated_residual"} & set(r.flags), r.flags
     assert "outliers_removed" in r.flags and r.window["n_outliers"] >= 0.5 * late.sum()
-    assert r.J == pytest.approx(J, rel=1e-4)
+    assert pytest.approx(J, rel=1e-4) == r.J

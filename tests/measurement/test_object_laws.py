@@ -47,6 +47,7 @@ def test_a_hardening_torsion_spring_is_found_and_kept():
     assert "cubic_stiffness" in r.added_effects
     assert r.J is not None and abs(r.J / J - 1) < 2e-3
     k3 = r.stiffness["cubic_stiffness"]["k3"]
+    assert k3.value is not None and k3.std is not None
     assert abs(k3.value - 1.5 * 0.3651) < 4 * k3.std
     # the measurand is the small-swing limit; the swing's frequency at its largest amplitude is beside it
     # (3/8 · 1.5 · (5°)² = +0.43 % by the describing function)
@@ -85,6 +86,6 @@ def test_a_rate_record_and_its_integrated_angle_give_one_omega_n(part):
     angle = identify(load_source(data / f"bicycle_{part}.csv"), rig)
     assert rate.measures == "rate" and rate.offset.unit == "rad/s" and angle.measures == "angle"
     # the gyro's bias, about 1 °/s, is the rate's fitted zero
-    assert 0.002 < abs(rate.offset.value) < 0.05
+    assert rate.offset.value is not None and 0.002 < abs(rate.offset.value) < 0.05
     assert rate.omega_n_u is not None and angle.omega_n_u is not None
     assert abs(rate.omega_n - angle.omega_n) <= 2 * math.hypot(rate.omega_n_u, angle.omega_n_u)

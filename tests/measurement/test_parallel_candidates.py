@@ -4,9 +4,9 @@ import threading
 
 import numpy as np
 
+from measurement import Pendulum, Rig, identify, simulate_trace
 from measurement.identification import discovery, pipeline
 from measurement.identification import threads as pool
-from measurement import Pendulum, Rig, identify, simulate_trace
 
 
 def test_parallel_candidate_fits_change_nothing(monkeypatch):

@@ -199,7 +199,7 @@ def test_shared_rig_uncertainties_enter_the_covariance_but_not_chi2():
     assert TS.solve(plan, scaled, RigShared(scale_rel=1e-3, tare=4.5e-3)).flags == ()
 
 
-@pytest.mark.parametrize("doc, message", [
+@pytest.mark.parametrize(("doc", "message"), [
     ({"orientation": [{"axis": [1, 0, 0]}] * 5}, "at least 6"),
     ({"orientation": [{"axis": a} for _, a in TS.DEFAULT_AXES[:5]] + [{"axis": [0, 0, 0]}]}, "zero vector"),
     ({"orientation": [{"axis": [math.cos(t), math.sin(t), 0]} for t in np.linspace(0, 3, 7)]}, "rank"),

@@ -11,7 +11,7 @@ import pytest
 from measurement.calibration import Reference, calibrate_torsion
 from measurement.errors import CalibrationError, InvalidInput, RigError
 from measurement.rig import Rig
-from measurement.uncertainty import PendulumInputs, coverage_factor, evaluate, Input
+from measurement.uncertainty import Input, PendulumInputs, coverage_factor, evaluate
 from measurement.verdict import INVALID, NOK, OK, QualityRules, Reading, Specification, combine, judge_release
 
 DRAWS = 20_000
@@ -159,7 +159,7 @@ def test_verdict_flips_from_ok_to_nok_and_invalid_as_the_guard_band_widens():
     # the budget's own coverage factor (few degrees of freedom) widens U beyond the recipe's k = 2
     assert judge_release(Reading(0.01253, 1e-6, 2e-5), spec, QualityRules()).verdict == OK
     wide = judge_release(Reading(0.01253, 1e-6, 2e-5, coverage_factor=4.5), spec, QualityRules())
-    assert wide.verdict == NOK and wide.U == pytest.approx(4.5 * math.hypot(1e-6, 2e-5))
+    assert wide.verdict == NOK and pytest.approx(4.5 * math.hypot(1e-6, 2e-5)) == wide.U
 
 
 def test_part_of_three_scattered_releases_gets_students_t_for_two_degrees_of_freedom():
@@ -168,7 +168,7 @@ def test_part_of_three_scattered_releases_gets_students_t_for_two_degrees_of_fre
     assert part.u_typeA is not None and part.u_fit is not None and part.uncertainty is not None
     assert part.decision.U is not None and part.decision.u_c is not None
     assert part.u_typeA > part.u_fit and len(part.used) == 3
-    assert part.decision.U == pytest.approx(coverage_factor(2) * part.decision.u_c, rel=1e-9)
+    assert pytest.approx(coverage_factor(2) * part.decision.u_c, rel=1e-9) == part.decision.U
     assert part.decision.U / part.decision.u_c > 4
     lines = part.uncertainty["lines"]
     assert lines[0]["dof"] == 2 and lines[0]["u"] == part.u_typeA and part.uncertainty["dof"] == pytest.approx(2.0)
@@ -181,7 +181,7 @@ def test_reading_takes_the_budget_of_its_quantity():
     assert (r.u_random, r.u_systematic, r.coverage_factor) == (2e-7, 3e-6, 2.1)
 
 
-@pytest.mark.parametrize("doc, expected", [
+@pytest.mark.parametrize(("doc", "expected"), [
     ({"stiffness": 0.3, "stiffness_std": -1e-3}, "stiffness_std must be >= 0"),
     ({"stiffness": 0.3, "stiffness_std": "big"}, "stiffness_std must be a number"),
     ({"stiffness": 0.3, "stiffness_std": 1e-3, "tare_inertia": 4e-3, "tare_inertia_std": 1e-5,

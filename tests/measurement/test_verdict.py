@@ -6,8 +6,18 @@ import math
 
 import pytest
 
-from measurement.verdict import (INVALID, NOK, OK, QualityRules, Reading, Specification, VerdictError, combine,
-                                 decide, judge_release)
+from measurement.verdict import (
+    INVALID,
+    NOK,
+    OK,
+    QualityRules,
+    Reading,
+    Specification,
+    VerdictError,
+    combine,
+    decide,
+    judge_release,
+)
 
 SPEC = Specification.symmetric("J", 0.0125, 0.0001)  # 0.0124 … 0.0126 kg·m², guard band, k = 2
 
@@ -15,7 +25,7 @@ SPEC = Specification.symmetric("J", 0.0125, 0.0001)  # 0.0124 … 0.0126 kg·m²
 def test_guard_band_proves_conformance_only_inside_the_zone_shrunk_by_U():
     # |x − nominal| + U = 0.00006 + 0.00002 ≤ 0.0001 → conformance proven
     d = decide(0.01256, 1e-5, SPEC)
-    assert d.verdict == OK and d.zone == "conformance" and d.U == pytest.approx(2e-5)
+    assert d.verdict == OK and d.zone == "conformance" and pytest.approx(2e-5) == d.U
     assert d.deviation == pytest.approx(6e-5)
     # inside the tolerance, but |x − nominal| + U = 0.00009 + 0.00002 > 0.0001: plain comparison says OK, the rule NOK
     d = decide(0.01259, 1e-5, SPEC)

@@ -27,7 +27,7 @@ def test_view_is_the_first_order_affine_image_of_the_direction():
 
 
 @pytest.mark.parametrize("seed", [1, 2])
-@pytest.mark.parametrize("stretch, shear", [(0.02, 0.01), (0.0, 0.01)])
+@pytest.mark.parametrize(("stretch", "shear"), [(0.02, 0.01), (0.0, 0.01)])
 def test_loop_finds_an_oblique_view(seed, stretch, shear):
     r = identify(_trace({"view": {"stretch": stretch, "shear": shear}}, seed), RIG)
     assert r.added_effects == ("view",)

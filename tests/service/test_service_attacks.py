@@ -4,16 +4,16 @@ illegal Modbus writes, connection floods. Each attack is bounded in count and ti
 from __future__ import annotations
 
 import json
-from pathlib import Path
 import socket
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from service.persistence.store import Store
 from service.publish.modbus import registers as R
 from service.publish.mqtt.client import MqttService, MqttSettings
-from service.persistence.store import Store
 
 from .conftest import appliance_doc, free_port, wait_until
 
@@ -452,7 +452,7 @@ def test_ignored_triggers_are_logged_at_most_once_per_interval(tmp_path, applian
 
 # --- moi run --check ---------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("hardware,mqtt,expected", [
+@pytest.mark.parametrize(("hardware", "mqtt", "expected"), [
     ('solenoid = { pin = 17 }\nbutton = { pin = "GPIO17" }', "", "already the solenoid's pin"),
     ("solenoid = { pin = 99999 }", "", "99999 is not a GPIO pin"),
     ('solenoid = { pin = "BANANA" }', "", "'BANANA' is not a GPIO pin"),

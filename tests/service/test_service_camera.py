@@ -25,11 +25,11 @@ from pymodbus.client import ModbusTcpClient
 
 from drivers.camera_sensor import CameraAngleSensor
 from drivers.errors import SensorFault
-from service.publish.modbus import registers as R
 from service.cli import main
 from service.config.appliance import load_config, parse_config
-from service.errors import StartupError
 from service.devices.hardware import build_devices
+from service.errors import StartupError
+from service.publish.modbus import registers as R
 
 from .conftest import appliance_doc, write_toml
 
@@ -237,7 +237,7 @@ BAD = [
 ]
 
 
-@pytest.mark.parametrize("name,extra,camera_file,message", BAD, ids=[b[0] for b in BAD])
+@pytest.mark.parametrize(("name", "extra", "camera_file", "message"), BAD, ids=[b[0] for b in BAD])
 def test_a_bad_camera_configuration_is_one_clear_line_and_exit_2(tmp_path, capsys, name, extra, camera_file, message):
     path = write_hardware(tmp_path, extra, camera_file)
     if message is None:
@@ -259,7 +259,7 @@ SIM_BAD = [
 ]
 
 
-@pytest.mark.parametrize("name,simulation,message", SIM_BAD, ids=[b[0] for b in SIM_BAD])
+@pytest.mark.parametrize(("name", "simulation", "message"), SIM_BAD, ids=[b[0] for b in SIM_BAD])
 def test_a_bad_simulated_camera_is_one_clear_line_and_exit_2(tmp_path, capsys, name, simulation, message):
     path = write_toml(tmp_path / "sim.toml", {"simulation": simulation})
     assert main(["run", "--config", str(path), "--check"]) == 2

@@ -98,7 +98,7 @@ BAD = [
 ]
 
 
-@pytest.mark.parametrize("name,text,message", BAD, ids=[b[0] for b in BAD])
+@pytest.mark.parametrize(("name", "text", "message"), BAD, ids=[b[0] for b in BAD])
 def test_bad_config_is_one_clear_line_and_exit_2(tmp_path, capsys, name, text, message):
     path = write(tmp_path, text)
     assert main(["run", "--config", str(path)]) == 2

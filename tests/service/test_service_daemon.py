@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from service.publish.modbus import registers as R
 from service.persistence.store import Store
+from service.publish.modbus import registers as R
 
 from .conftest import appliance_doc, wait_until
 

@@ -11,7 +11,6 @@ import pytest
 
 from .conftest import appliance_doc, wait_until
 
-
 # --- a measurement once captured is always stored ---------------------------------------------------------------
 
 def test_a_failure_while_the_part_is_judged_still_stores_the_measurement_with_its_trace(tmp_path, appliance_factory):
@@ -67,12 +66,11 @@ HOSTILE = ["rotor\nA12", "rotor\x07A12", "rotor\x1b[2JA12", "rotor\u2028A12", "x
 def test_a_hostile_name_is_refused_at_every_door_that_takes_one(tmp_path, name):
     """A line break, a bell, an escape, a Unicode line separator or an overlong name: refused in a recipe file,
     as the device id, a web user, the OPC UA user and a part ID, each saying what a name may hold."""
+    from measurement.errors import InvalidInput
     from service.config.appliance import parse_config
     from service.errors import ConfigError, StartupError
     from service.parts.recipes import check_part_id, load_recipe
     from service.publish.web.auth import hash_password, read_users
-
-    from measurement.errors import InvalidInput
 
     recipe = (Path(__file__).resolve().parents[2] / "examples" / "recipes" / "rotor-a12.toml").read_text()
     bad = tmp_path / "bad.toml"

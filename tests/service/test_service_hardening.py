@@ -6,10 +6,10 @@ from __future__ import annotations
 import contextlib
 import json
 import resource
-from pathlib import Path
-from typing import Any
 import socket
 import struct
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest

@@ -8,8 +8,8 @@ import threading
 
 import pytest
 
-from service.publish.mqtt.client import MqttService, MqttSettings, discovery_messages, Topics
 from service.persistence.store import Store
+from service.publish.mqtt.client import MqttService, MqttSettings, Topics, discovery_messages
 
 pytestmark = pytest.mark.broker
 

@@ -8,8 +8,8 @@ import subprocess
 import pytest
 
 from service.config.appliance import parse_config
-from service.publish.mqtt.client import MqttService
 from service.persistence.store import Store
+from service.publish.mqtt.client import MqttService
 
 from .conftest import MOSQUITTO, Broker, wait_until
 

@@ -184,7 +184,7 @@ def test_a_measurement_raises_result_ready_and_the_methods_give_and_acknowledge_
             assert meta.ResultEvaluation == RESULT_EVALUATION["Undefined"]  # no recipe
             assert meta.ResultState == 1 and meta.IsSimulated is True and meta.ProcessingTimes is not None
             assert type(content).__name__ == "InertiaResultDataType" and content.SequenceNumber == stored.seq
-            assert content.J == pytest.approx(stored.payload["J"])
+            assert pytest.approx(stored.payload["J"]) == content.J
             assert content.omega_n == pytest.approx(stored.payload["omega_n"])
 
             latest = await rm.get_child([f"{r}:Results", f"{r}:LatestResult"])
@@ -195,7 +195,7 @@ def test_a_measurement_raises_result_ready_and_the_methods_give_and_acknowledge_
             assert (handle, error) == (0, 0) and result.ResultMetaData.ResultId == uuid
             handle, result, error = await rm.call_method(f"{r}:GetResultById", uuid,
                                                          ua.Variant(0, ua.VariantType.Int32))
-            assert error == 0 and result.ResultContent[0].Value.J == pytest.approx(stored.payload["J"])
+            assert error == 0 and pytest.approx(stored.payload["J"]) == result.ResultContent[0].Value.J
 
             # bad input: a Bad status code, and nothing changes
             with pytest.raises(ua.UaStatusCodeError) as e:
@@ -225,7 +225,7 @@ def test_a_measurement_raises_result_ready_and_the_methods_give_and_acknowledge_
     app.wait_done(1)
 
 
-@pytest.mark.parametrize("user, password", [(None, None), (USER, "wrong"), ("nobody", PASSWORD)])
+@pytest.mark.parametrize(("user", "password"), [(None, None), (USER, "wrong"), ("nobody", PASSWORD)])
 def test_anonymous_and_wrong_credentials_are_refused(opc, user, password):
     async def run():
         with pytest.raises(ua.UaStatusCodeError) as e:

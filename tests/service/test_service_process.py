@@ -10,8 +10,8 @@ import time
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from service.publish.modbus import registers as R
 from service.persistence.store import Store
+from service.publish.modbus import registers as R
 
 from .conftest import appliance_doc, free_port, moi_subprocess, port_open, wait_until, write_toml
 

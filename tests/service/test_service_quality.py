@@ -41,7 +41,8 @@ def test_numbers_are_written_without_exponents_and_a_verdict_says_why():
     assert why is not None
     assert (why["deviation"], why["where"]) == ("−1.0 %", "below LSL")
     assert why["nominal"] == "125000 g·cm²" and why["limits"] == "123750 g·cm² … 126250 g·cm²"
-    assert Q.judgement({"recipe": recipe, "value": 0.0125, "U": 2e-6}, "g·cm²")["where"] == "within the limits"
+    within = Q.judgement({"recipe": recipe, "value": 0.0125, "U": 2e-6}, "g·cm²")
+    assert within is not None and within["where"] == "within the limits"
     assert Q.judgement({"recipe": {}, "value": 1.0}, "kg·m²") is None
     assert Q.local_time(None) == "–" and "T" not in Q.local_time(1.7e9) and Q.local_time(1.7e9, "%Y") == "2023"
     # a plot's title: the sensor that took the trace (a simulated rig said as such), J in the recipe's unit

@@ -11,9 +11,9 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 
 from measurement.verdict import Specification, decide
-from service.publish.modbus import registers as R
 from service.errors import ConfigError
 from service.parts.recipes import RecipeBook, RecipeError, load_recipe
+from service.publish.modbus import registers as R
 
 from .conftest import appliance_doc, wait_until
 

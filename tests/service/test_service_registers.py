@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from service.publish.modbus import registers as R
 from service.commands import modbus_map
+from service.publish.modbus import registers as R
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -10,13 +10,13 @@ import pytest
 
 from drivers.sensor import SimulatedAngleSensor
 from firmware_host import SequencerConfig
+from measurement.errors import InvalidInput
 from service.config.appliance import SimulationSettings, parse_config
 from service.config.check import check_config
 from service.devices.hardware import build_devices, build_simulated
 from service.devices.sensors import registry
 from service.devices.sensors.port import SensorKind
 from service.devices.sensors.registry import SensorEntry
-from measurement.errors import InvalidInput
 
 
 class DummySensor(SensorKind):
@@ -58,7 +58,7 @@ def registered(monkeypatch):
 def test_the_registered_sensors_are_modules_of_the_port():
     for entry in registry.SENSORS:
         kind = entry.load()
-        assert issubclass(kind, SensorKind) and kind.NAME == entry.name and kind.HARDWARE == entry.hardware
+        assert issubclass(kind, SensorKind) and entry.name == kind.NAME and entry.hardware == kind.HARDWARE
     assert registry.names(hardware=True) == ("encoder", "camera")
     with pytest.raises(ValueError, match="no angle sensor 'imu'; expected one of encoder, direct, camera"):
         registry.sensor("imu")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import functools
 import time
-from datetime import datetime, UTC
+from datetime import UTC, datetime
 
 import pytest
 

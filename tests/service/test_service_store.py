@@ -12,8 +12,8 @@ import pytest
 
 from measurement import Pendulum, Rig, identify, simulate_trace
 from service.cli import main
-from service.publish.payload import dumps, result_payload
 from service.persistence.store import Store
+from service.publish.payload import dumps, result_payload
 
 
 @pytest.fixture(scope="module")

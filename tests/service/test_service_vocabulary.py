@@ -56,7 +56,7 @@ def test_the_live_status_is_encoded_by_the_modbus_codec_not_by_itself():
 
 
 def test_plc_status_bits_are_one_table_with_their_meaning():
-    assert R.PLC_STATUS_BITS == {name: bit for name, (bit, _) in R.PLC_STATUS.items()}
+    assert {name: bit for name, (bit, _) in R.PLC_STATUS.items()} == R.PLC_STATUS_BITS
     doc = R.markdown()
     for name, (bit, meaning) in R.PLC_STATUS.items():
         assert f"| {bit} | `{name}` | {meaning} |" in doc

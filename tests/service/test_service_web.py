@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import io
 import json
-import re
 import os
+import re
 import stat
 import urllib.error
 import urllib.request
@@ -18,7 +18,6 @@ import pytest
 from service.errors import StartupError
 
 from .conftest import appliance_doc, wait_until
-
 
 ON = {"enabled": True}
 

@@ -188,7 +188,7 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     def on_screen(el) -> bool:
         r = browser.execute_script("var r = arguments[0].getBoundingClientRect(); return [r.top, r.bottom, r.left,"
                                    " r.right];", el)
-        return el.is_displayed() and 0 <= r[0] and r[1] <= height and 0 <= r[2] and r[3] <= 390
+        return el.is_displayed() and r[0] >= 0 and r[1] <= height and r[2] >= 0 and r[3] <= 390
 
     measure = browser.find_element(By.ID, "measure")
     tile = browser.find_element(By.ID, "tile")

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from measurement import identify
-from measurement.errors import RigError, VisionError
 from measurement.effects import candidate_effects
+from measurement.errors import RigError, VisionError
 from measurement.rig import Rig
 from measurement.simulate import Pendulum, simulate_trace
 from measurement.vision.marker_pair import MarkerTrack, measure_view, pair_angle, pair_trace, parse_marker_csv
@@ -45,7 +45,7 @@ def _swing(seed, theta0=1.5, duration=20.0):
                           rate=60, noise_std=0.0, seed=seed)
 
 
-@pytest.mark.parametrize("stretch, shear", [(0.03, -0.02), (-0.05, 0.0), (0.0, 0.0)])
+@pytest.mark.parametrize(("stretch", "shear"), [(0.03, -0.02), (-0.05, 0.0), (0.0, 0.0)])
 def test_view_is_measured_from_the_markers_distance(stretch, shear):
     theta = _swing(1).angle
     a, b = _image(theta, stretch, shear, rng=np.random.default_rng(5))

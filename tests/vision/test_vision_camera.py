@@ -11,7 +11,7 @@ from drivers.clock import ManualClock
 from drivers.errors import DriverConfigError, SensorFault
 from drivers.simrig import SimRig
 from measurement import Pendulum
-from measurement.vision import MarkerTracker, angle_from_normalised, track_frames, trace_from_tracking
+from measurement.vision import MarkerTracker, angle_from_normalised, trace_from_tracking, track_frames
 
 from .conftest import CAMERA, CONFIG, IMAGING, J_TRUE, MARKER, RIG, VISCOUS_C
 

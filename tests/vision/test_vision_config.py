@@ -8,8 +8,8 @@ import pytest
 
 from measurement.errors import InvalidInput, VisionError
 from measurement.vision import CameraConfig
-from service.config.camera import read_camera
 from service.cli import main
+from service.config.camera import read_camera
 
 from .conftest import RIG, camera_toml, write_toml
 
@@ -36,7 +36,7 @@ def test_round_trip_and_defaults():
     assert (cfg.pose.yaw_limit_deg, cfg.pose.estimate) == (0.5, False)
 
 
-@pytest.mark.parametrize("doc, words", [
+@pytest.mark.parametrize(("doc", "words"), [
     (with_change("camera", "fx", None), "[camera] is missing fx"),
     (with_change("marker", "radius", None), "[marker] is missing radius"),
     (with_change("camera", "fx", "600"), "fx must be a number"),

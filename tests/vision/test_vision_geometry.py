@@ -25,7 +25,7 @@ def project_with_opencv(theta, yaw=0.0, rest=0.0):
     return img.reshape(-1, 2)[:, 0]
 
 
-@pytest.mark.parametrize("yaw_deg, rest_deg", [(0, 0), (4, 0), (-4, 0), (3, 6)])
+@pytest.mark.parametrize(("yaw_deg", "rest_deg"), [(0, 0), (4, 0), (-4, 0), (3, 6)])
 def test_forward_model_matches_opencv_projection(yaw_deg, rest_deg):
     theta = np.linspace(-1.0, 1.0, 41)
     x = normalised_from_angle(theta, MARKER, math.radians(yaw_deg), math.radians(rest_deg))
@@ -33,7 +33,7 @@ def test_forward_model_matches_opencv_projection(yaw_deg, rest_deg):
     assert np.max(np.abs(x - ref)) < 1e-12
 
 
-@pytest.mark.parametrize("yaw_deg, rest_deg", [(0, 0), (4, 0), (-2, 5)])
+@pytest.mark.parametrize(("yaw_deg", "rest_deg"), [(0, 0), (4, 0), (-2, 5)])
 def test_inverse_is_exact(yaw_deg, rest_deg):
     yaw, rest = math.radians(yaw_deg), math.radians(rest_deg)
     theta = np.linspace(-1.1, 1.1, 201)

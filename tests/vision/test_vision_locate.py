@@ -5,8 +5,15 @@ import math
 import numpy as np
 import pytest
 
-from measurement.vision import (CameraModel, CameraPose, Imaging, MarkerRenderer, MarkerTracker,
-                                TrackerSettings, angle_from_normalised)
+from measurement.vision import (
+    CameraModel,
+    CameraPose,
+    Imaging,
+    MarkerRenderer,
+    MarkerTracker,
+    TrackerSettings,
+    angle_from_normalised,
+)
 from measurement.vision.locate import CORRUPT, LOST
 
 from .conftest import CAMERA, IMAGING, MARKER

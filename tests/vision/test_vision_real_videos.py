@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from service.cli import main
-from service.sources.video import track_source
 from service.config.camera import read_camera
+from service.sources.video import track_source
 
 VIDEOS = Path(__file__).resolve().parents[2] / "data" / "video"
 
@@ -21,7 +21,7 @@ def identify(capsys, name: str, rig: str) -> dict:
     return json.loads(captured.out)
 
 
-@pytest.mark.parametrize("name, omega_independent", [("bartek_film2_vga", 3.9296), ("juangomez_pendulum", 2.3935)])
+@pytest.mark.parametrize(("name", "omega_independent"), [("bartek_film2_vga", 3.9296), ("juangomez_pendulum", 2.3935)])
 def test_bob_on_a_string_omega_n_within_0_2_percent(capsys, name, omega_independent):
     out = identify(capsys, name, "pendulum_rig.toml")
     assert out["omega_n"] == pytest.approx(omega_independent, rel=2e-3)

@@ -28,7 +28,7 @@ def test_a_target_needs_no_calibration_and_the_edge_still_does():
         CameraConfig.from_dict({"camera": CAMERA})
 
 
-@pytest.mark.parametrize("target, words", [
+@pytest.mark.parametrize(("target", "words"), [
     ({"kind": "dot"}, "kind must be one of"),
     ({"kind": "tag", "view": "side"}, "does not go with kind"),
     ({"kind": "blob", "roi": [0, 0, 400, 100]}, "roi"),

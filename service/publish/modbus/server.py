@@ -54,19 +54,18 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 from pymodbus.simulator.simcore import SimCore
 
 from drivers.aioloop import LoopThread
-
 from service.core import vocabulary as V
 from service.core.live import LiveStatus
+from service.errors import ModbusServerError
+from service.persistence.acks import AckFile, AckState
 from service.publish.payload import not_decidable
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
-from service.persistence.acks import AckFile, AckState
+
+from . import registers as R
 
 # the settings are read by the configuration without pymodbus; here for the server's users too
 from .settings import _THIS_MACHINE, ModbusSettings, allowed_networks, network_exposure
-
-from . import registers as R
-from service.errors import ModbusServerError
 
 log = logging.getLogger("moi.modbus")
 

@@ -7,7 +7,6 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from drivers.modbus_words import WORD_ORDERS
-
 from service.config.schema import PublisherTable
 from service.errors import ConfigError
 

@@ -53,19 +53,18 @@ from paho.mqtt.enums import CallbackAPIVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
+from measurement.verdict import DEFAULT_INVALID_FLAGS
 from service.core import vocabulary as V
 from service.errors import ConfigError
+from service.logs import Throttle
 from service.persistence.outbox import OutboxSender
+from service.persistence.store import Store
+from service.publish.modbus.registers import FLAG_BITS
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
-from service.logs import Throttle
 
 # the settings are read by the configuration without paho; here for the client's users too
 from .settings import MqttSettings
-from measurement.verdict import DEFAULT_INVALID_FLAGS
-
-from service.publish.modbus.registers import FLAG_BITS
-from service.persistence.store import Store
 
 log = logging.getLogger("moi.mqtt")
 

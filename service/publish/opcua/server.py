@@ -24,6 +24,7 @@ hand it work and never wait for it. What the clients acknowledged is kept in the
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dbm
 import gc
 import hmac
@@ -33,7 +34,7 @@ import math
 import socket
 import time
 from collections import OrderedDict
-from datetime import datetime, UTC
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -52,9 +53,21 @@ from service.publish.payload import decision, not_decidable
 from service.publish.port import ApplianceView, Publisher
 from service.states import STATES
 
-from .model import (CONTENT_FIELDS, META_COMPONENTS, NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT,  # noqa: F401
-                    RESULT_EVALUATION, Model, install, node_id, rereference, retype)
 from .guard import PEER, Guard, GuardedServer, Limits
+from .model import (  # noqa: F401
+    CONTENT_FIELDS,
+    META_COMPONENTS,
+    NS_DI,
+    NS_MACHINERY,
+    NS_MOI,
+    NS_RESULT,
+    RESULT_EVALUATION,
+    Model,
+    install,
+    node_id,
+    rereference,
+    retype,
+)
 from .settings import OpcUaSettings
 
 log = logging.getLogger("moi.opcua")
@@ -498,10 +511,8 @@ class OpcUaServer(Publisher):
         if len(args) != 1 or (timeout := self._int32(args[0])) is None:
             return _bad(ua.StatusCodes.BadInvalidArgument)
         if self._latest is None and timeout > 0 and self._new_result is not None:
-            try:
+            with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._new_result.wait(), min(timeout, MAX_TIMEOUT_MS) / 1000)
-            except TimeoutError:
-                pass
         if self._latest is None:
             return _bad(ua.StatusCodes.BadNoData)
         return self._outputs(self._latest)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping
 
 from service.publish.payload import decision
+
 from .payload import DataType
 
 #: the node's own metrics (NBIRTH): bdSeq is sent by name only, as the specification wants it

@@ -28,6 +28,7 @@ events; one lock keeps ``seq`` and the order of the node's messages.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import queue
@@ -44,6 +45,7 @@ from service.persistence.outbox import OutboxSender
 from service.persistence.store import Store
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
+
 from . import metrics as M
 from .payload import VALUE_FIELD, DataType, Payload, add_metric, get_value, now_ms, state_topic, topic
 from .settings import SparkplugSettings
@@ -166,10 +168,9 @@ class SparkplugNode(Publisher):
             self._born = False
             self.born_event.clear()
             info = self.client.publish(self.topic("NDEATH"), self._death(), qos=1)
-        try:
+        # the connection may go meanwhile: the broker sends the will instead
+        with contextlib.suppress(RuntimeError, ValueError):
             info.wait_for_publish(timeout=timeout)
-        except (RuntimeError, ValueError):
-            pass  # the connection went meanwhile: the broker sends the will instead
 
     def _control_loop(self) -> None:
         """Work that may not run in paho's thread: leaving the session when the primary host goes away."""

@@ -97,8 +97,8 @@ def _lower_priority() -> None:
 def export_file(state_dir: str, fmt: str, filters: Mapping[str, Any]) -> bytes:
     """The history as ``moi export`` writes it (CSV or JSON, oldest first), of the measurements ``filters`` select;
     "dfq": the AQDEF file of the recipe's completed parts."""
-    from service.publish.export import csv_text, json_text
     from service.persistence.store import Store
+    from service.publish.export import csv_text, json_text
 
     with Store(state_dir, read_only=True) as store:
         if fmt == "dfq":
@@ -113,8 +113,8 @@ def export_file(state_dir: str, fmt: str, filters: Mapping[str, Any]) -> bytes:
 
 def trace_file(state_dir: str, uuid: str) -> bytes:
     """The stored trace of the measurement ``uuid`` as trace CSV (``moi export --trace``)."""
-    from service.publish.export import trace_text
     from service.persistence.store import Store
+    from service.publish.export import trace_text
 
     with Store(state_dir, read_only=True) as store:
         m = store.get(uuid, trace=True)
@@ -125,9 +125,8 @@ def replot(state_dir: str, uuid: str, default_rig: Mapping[str, Any], options: A
            default_unit: str = "kg·m²") -> bytes:
     """The plot of the measurement ``uuid`` (PNG) from its stored trace, identified again with its rig."""
     from measurement import Rig, Trace, identify
-
-    from service.publish.plot import render_png
     from service.persistence.store import Store
+    from service.publish.plot import render_png
 
     from .quality import plot_labels
 

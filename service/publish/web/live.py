@@ -9,7 +9,6 @@ from .words import STATE_WORDS
 
 if TYPE_CHECKING:  # pragma: no cover
     from firmware_host import Event
-
     from service.publish.port import ApplianceView
 
 #: at most this many samples in one tick (a page that opens late catches up over a few ticks)

@@ -7,7 +7,6 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from measurement.units import ASCII_NAMES, INERTIA_UNITS, inertia_unit
-
 from service.config.schema import PublisherTable
 from service.errors import ConfigError
 

@@ -21,29 +21,51 @@ from urllib.parse import urlencode, urlsplit
 import jinja2
 from aiohttp import web
 
+from measurement.flags import FLAGS
 from service import __version__
 from service.core import vocabulary as V
 from service.errors import InputFileError, StoreDamaged
 from service.names import content_disposition
+from service.parts.recipes import (
+    EDITABLE,
+    PART_ID_LENGTH,
+    RECIPE_AUDIT_FILE,
+    RecipeBook,
+    RecipeError,
+    audit_recipe,
+    edit_recipe,
+    recipe_values,
+)
 from service.publish.dfq import ENCODING
-from .auth import (COOKIE, CSRF_HEADER, GUESS_DELAY, LOGIN_COOKIE, MAX_USER_NAME, MIN_PASSWORD, ROLES,
-                   SESSION_LIFETIME, User, allowed, check_user, hash_password, save_users)
-from .child import ChildBusy, export_file, replot, report_file, trace_file
-from .priority import CaptureFirst, sensor_is_read
-from .live import Live, extras
-from .settings import PLOT_NAME
-from measurement.flags import FLAGS
-
-from service.parts.recipes import (EDITABLE, PART_ID_LENGTH, RECIPE_AUDIT_FILE, RecipeBook, RecipeError,
-                                   audit_recipe, edit_recipe, recipe_values)
-from .words import STATE_WORDS, flag_words
 from service.states import vocabulary
+
 from . import quality as Q
+from .auth import (
+    COOKIE,
+    CSRF_HEADER,
+    GUESS_DELAY,
+    LOGIN_COOKIE,
+    MAX_USER_NAME,
+    MIN_PASSWORD,
+    ROLES,
+    SESSION_LIFETIME,
+    User,
+    allowed,
+    check_user,
+    hash_password,
+    save_users,
+)
+from .child import ChildBusy, export_file, replot, report_file, trace_file
+from .live import Live, extras
+from .priority import CaptureFirst, sensor_is_read
+from .settings import PLOT_NAME
+from .words import STATE_WORDS, flag_words
 
 if TYPE_CHECKING:  # pragma: no cover
     import concurrent.futures
 
-    from service.persistence.store import Store, StoredMeasurement as Measurement
+    from service.persistence.store import Store
+    from service.persistence.store import StoredMeasurement as Measurement
     from service.publish.port import ApplianceView
 
     from .auth import Guard
@@ -500,7 +522,6 @@ class Views:
     async def part(self, request: web.Request) -> web.Response:
         """Select the recipe (name or number; 0 deselects) and/or set the part ID of the next measurements."""
         from measurement.errors import InvalidInput
-
         from service.parts.recipes import check_part_id
 
         form = await _form(request)
@@ -755,7 +776,6 @@ class Views:
         violations marked and said in words."""
         from measurement.errors import InvalidInput
         from measurement.spc import SMALL_SAMPLE, capability_interval
-
         from service.parts.recipes import recipe_spc
 
         filters = self._filters(request)

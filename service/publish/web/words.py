@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from service.states import STATES
 from measurement.flags import describe
+from service.states import STATES
 
 #: sequencer state → what is happening
 STATE_WORDS: dict[str, str] = {name: s.words for name, s in STATES.items()}
