@@ -603,3 +603,27 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     assert admin.request("/users", {"action": "remove", "name": "olga", "csrf": acsrf})[0] == 200
     c = Client(app.web.url)
     assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401
+
+
+def test_a_user_given_too_many_wrong_passwords_is_locked_out_for_a_while_and_an_admin_lifts_it():
+    from service.publish.web.auth import LOCKOUT_TIME, LOCKOUT_WINDOW, LOCKOUT_WRONG, Guard, User, hash_password
+
+    now = [0.0]
+    olga = User("olga", "operator", hash_password("olga-password-1"))
+    guard = Guard("t" * 24, clock=lambda: now[0], users={"olga": olga})
+    # wrong passwords spread wider than the window lock nobody out
+    for _ in range(LOCKOUT_WRONG):
+        assert guard.login("wrong", "olga") is None
+        now[0] += LOCKOUT_WINDOW / (LOCKOUT_WRONG - 1)
+    assert guard.locked_for("olga") == 0 and guard.login("olga-password-1", "olga") is not None
+    for _ in range(LOCKOUT_WRONG):  # within the window: locked, the right password refused too
+        assert guard.login("wrong", "olga") is None
+    assert guard.locked_for("olga") == LOCKOUT_TIME and guard.login("olga-password-1", "olga") is None
+    assert guard.wrong_logins["olga"] == 2 * LOCKOUT_WRONG
+    now[0] += LOCKOUT_TIME / 2
+    guard.unlock("olga")  # the admin's "enable"
+    assert guard.locked_for("olga") == 0 and guard.login("olga-password-1", "olga") is not None
+    for _ in range(LOCKOUT_WRONG):
+        guard.login("wrong", "olga")
+    now[0] += LOCKOUT_TIME  # and the lockout ends by itself
+    assert guard.login("olga-password-1", "olga") is not None

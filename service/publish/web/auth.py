@@ -58,6 +58,9 @@ MIN_TOKEN_LENGTH = 16
 GUESS_DELAY = 0.5
 #: at most one "wrong tokens" line per this many seconds, s
 GUESS_LOG_INTERVAL = 60.0
+#: a user given this many wrong passwords within LOCKOUT_WINDOW s is locked out for LOCKOUT_TIME s (its right
+#: password refused too; an admin's "enable" lifts it): short, so that a guesser cannot keep an operator out
+LOCKOUT_WRONG, LOCKOUT_WINDOW, LOCKOUT_TIME = 5, 900.0, 900.0
 
 
 def read_token(path: str | os.PathLike, *, create: bool) -> str:
@@ -217,6 +220,8 @@ class Guard:
         self._guessing: asyncio.Lock | None = None  # made on the web loop, at the first wrong token
         self.wrong_tokens = 0
         self.wrong_logins: dict[str, int] = {}  # wrong passwords per user name, since the start
+        self._recent_wrong: dict[str, list[float]] = {}  # their times within LOCKOUT_WINDOW
+        self._locked_until: dict[str, float] = {}
         self._wrong_since_log = 0
         self._guess_logged_at = -float("inf")
 
@@ -247,9 +252,9 @@ class Guard:
                 check_password(candidate or "", self._dummy)  # as long as for a user: names are not told apart
                 return None
             if not check_password(candidate or "", u.password):
-                self.wrong_logins[u.name] = self.wrong_logins.get(u.name, 0) + 1
+                self._wrong_password(u.name)
                 return None
-            if u.disabled:
+            if u.disabled or self.locked_for(u.name) > 0:
                 return None
             who: tuple[str | None, str] = (u.name, u.role)
         elif self.token_ok(candidate):
@@ -265,6 +270,25 @@ class Guard:
                 del self._sessions[min(self._sessions, key=lambda k: self._sessions[k].expires)]
             self._sessions[sid] = s
         return sid, s
+
+    def _wrong_password(self, name: str) -> None:
+        now = self._clock()
+        self.wrong_logins[name] = self.wrong_logins.get(name, 0) + 1
+        recent = [t for t in self._recent_wrong.get(name, []) if now - t < LOCKOUT_WINDOW] + [now]
+        self._recent_wrong[name] = recent
+        if len(recent) >= LOCKOUT_WRONG and self.locked_for(name) == 0:
+            self._locked_until[name] = now + LOCKOUT_TIME
+            log.warning("web: user %s locked out for %.0f s after %d wrong passwords within %.0f s", name,
+                        LOCKOUT_TIME, len(recent), LOCKOUT_WINDOW)
+
+    def locked_for(self, name: str) -> float:
+        """How much longer ``name`` is locked out, s (0: not locked)."""
+        return max(0.0, self._locked_until.get(name, 0.0) - self._clock())
+
+    def unlock(self, name: str) -> None:
+        """Lift ``name``'s lockout and forget its recent wrong passwords (an admin enabled the user)."""
+        self._locked_until.pop(name, None)
+        self._recent_wrong.pop(name, None)
 
     def logout(self, sid: str | None) -> None:
         with self._lock:

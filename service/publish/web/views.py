@@ -44,6 +44,9 @@ from .auth import (
     COOKIE,
     CSRF_HEADER,
     GUESS_DELAY,
+    LOCKOUT_TIME,
+    LOCKOUT_WINDOW,
+    LOCKOUT_WRONG,
     LOGIN_COOKIE,
     MAX_USER_NAME,
     MIN_PASSWORD,
@@ -923,13 +926,16 @@ class Views:
             raise Refused(403, "only an admin sees and changes the users: log in as one")
 
     async def users(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
-        """The named users and their roles, with forms to add one, reset a password or change a role, and remove
-        disable or enable one, and remove one; how many wrong logins there were, in all and per user (each costs
-        GUESS_DELAY, one at a time: nobody is locked out)."""
+        """The named users and their roles, with forms to add one, reset a password or change a role, disable or
+        enable one, and remove one; how many wrong logins there were, in all and per user (each costs
+        GUESS_DELAY, one at a time), and who is locked out and for how long (LOCKOUT_WRONG within
+        LOCKOUT_WINDOW)."""
         self._admin(request)
         guard = self.server.guard
         return self._page(request, "users.html", status=status, title="Users", users=list(guard.users.values()),
                           roles=ROLES, users_file=self.server.settings.users_file, wrong=guard.wrong_tokens, wrong_logins=guard.wrong_logins,
+                          locked={n: guard.locked_for(n) for n in guard.users},
+                          lockout_wrong=LOCKOUT_WRONG, lockout_window=LOCKOUT_WINDOW, lockout_time=LOCKOUT_TIME,
                           delay=GUESS_DELAY, max_name=MAX_USER_NAME, min_password=MIN_PASSWORD, **ctx)
 
     async def users_change(self, request: web.Request) -> web.StreamResponse:
@@ -961,6 +967,8 @@ class Views:
                         v.role == "admin" and not v.disabled for v in users.values()) == 1 and not u.disabled:
                     raise ValueError("the last admin cannot be disabled: add another admin first")
                 users[name] = User(u.name, u.role, u.password, action == "disable")
+                if action == "enable":
+                    guard.unlock(name)
             elif action == "add":
                 name = check_user(str(form.get("name") or ""), str(form.get("password") or ""))
                 if role not in ROLES:
