@@ -51,9 +51,8 @@ ffmpeg:
 demo: $(STAMP)
 	$(VENV)/bin/moi demo
 
-# two workers, one per core of the CI machine (a test file stays on one worker: its module fixtures are made once)
 test: $(STAMP) broker browser ffmpeg
-	$(PY) -m pytest -q -n 2 --dist loadfile
+	$(PY) -m pytest -q
 
 # the suite under pytest-cov, serial, failing below the floor (fail_under in pyproject.toml); the tracer slows
 # Python-heavy tests by a third or more, which is why `make test` (and so CI) does not run it
