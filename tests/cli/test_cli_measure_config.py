@@ -11,6 +11,9 @@ import pytest
 
 from service.cli import main
 
+# a measurement on the simulated rig, its encoder on a pymodbus bus in wall-clock time
+pytestmark = pytest.mark.clock
+
 REPO = Path(__file__).resolve().parents[2]
 
 
