@@ -25,7 +25,7 @@ from pathlib import Path
 import pytest
 
 from measurement import flags as F
-from measurement.joint import OWN_PAIR_Z, JointResult, identify_releases
+from measurement.joint import CONSISTENT_P, OWN_PAIR_Z, JointResult, identify_releases
 from measurement.result import IdentificationResult
 from service.sources.dispatch import load_source
 from service.sources.files import read_rig
@@ -67,12 +67,9 @@ def test_the_spread_between_releases_is_no_wider_than_a_plain_damped_sinusoids(p
     j = joint(part, reading)
     moi = _spread([r.omega_n for r in j.releases])
     plain = _spread([damped_sinusoid(*reading_columns(f))[0] for f in _files(part, reading)])
-    if moi > SPREAD_RATIO * plain:
-        # only a law of the object (kept in every release, one sign and size) may move ω_n apart
-        law = "one sign and a consistent size: a law of the object"  # LawAcross.describe of a stable law
-        assert any(law in line for r in j.releases for line in r.structure), (moi, plain)
-    else:
-        assert moi <= SPREAD_RATIO * plain, (moi, plain)
+    # only a law of the object (kept in every release, one sign and size) may move ω_n further apart
+    law = "one sign and a consistent size: a law of the object"  # LawAcross.describe of a stable law
+    assert moi <= SPREAD_RATIO * plain or any(law in line for r in j.releases for line in r.structure), (moi, plain)
 
 
 @pytest.mark.parametrize(("part", "reading"), SETS)
@@ -82,7 +79,7 @@ def test_releases_apart_beyond_their_stated_u_are_flagged_with_the_two_named(par
                   for x, y in itertools.combinations(j.releases, 2))
     c = j.consistency
     assert c["own_pairwise_max"] == pytest.approx(z)
-    assert (F.RELEASES_DISAGREE in j.flags) == (z > OWN_PAIR_Z or c["p"] < 0.01), (z, c["p"], j.flags)
+    assert (F.RELEASES_DISAGREE in j.flags) == (z > OWN_PAIR_Z or c["p"] < CONSISTENT_P), (z, c["p"], j.flags)
     if z > OWN_PAIR_Z:
         report = j.report()
         assert f"{a} and {b} are {z:.1f} u apart" in report or f"{b} and {a} are {z:.1f} u apart" in report
@@ -90,18 +87,18 @@ def test_releases_apart_beyond_their_stated_u_are_flagged_with_the_two_named(par
     assert (F.RELEASES_DISAGREE in j.flags) == (part == "fwheel_compound")
 
 
-#: a release whose rate and angle records are more than OWN_PAIR_Z stated u apart: the rate's model-form u
-#: (from its halves) is 0.00028 rad/s over the whole record, 0.0017-0.0028 when its first 0.2-1 s are left out
-APART = {("fwheel_compound", 2): "rate and angle 2.6 u apart: the rate's u over its whole record is too small"}
+#: the releases whose rate and angle records are more than OWN_PAIR_Z stated u apart, and why: the compound
+#: wheel's 2nd reads 4.41840 ± 0.00028 rad/s as a rate, 4.42040 ± 0.00071 as an angle; the rate's model-form u
+#: (from its record's halves) is 0.00025 rad/s over the whole record, 0.0017-0.0028 with its first 0.2-1 s left out
+APART = {("fwheel_compound", 2): "the rate's model-form u over its whole record is too small"}
 
 
-@pytest.mark.parametrize(("part", "release"), [
-    pytest.param(part, i, marks=[pytest.mark.xfail(strict=True, reason=APART[(part, i)])] if (part, i) in APART else [])
-    for part, n in OBJECTS.items() for i in range(1, n + 1)])
+@pytest.mark.parametrize(("part", "release"), [(part, i) for part, n in OBJECTS.items() for i in range(1, n + 1)])
 def test_a_rate_record_and_its_integrated_angle_give_one_omega_n_within_their_u(part, release):
     rate, angle = (joint(part, reading).releases[release - 1] for reading in ("rate", "angle"))
     assert rate.measures == "rate" and rate.offset.unit == "rad/s" and angle.measures == "angle"
     # the gyro's bias, about 1 °/s, is the rate's fitted zero
     assert rate.offset.value is not None and 0.002 < abs(rate.offset.value) < 0.05
     z = abs(rate.omega_n - angle.omega_n) / math.hypot(_u(rate), _u(angle))
-    assert z <= OWN_PAIR_Z, (rate.omega_n, _u(rate), angle.omega_n, _u(angle))
+    # a known exception stays one until its u covers it; then it joins the others (remove it from APART)
+    assert (z > OWN_PAIR_Z) == ((part, release) in APART), (z, rate.omega_n, _u(rate), angle.omega_n, _u(angle))
