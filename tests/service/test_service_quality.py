@@ -1,6 +1,6 @@
 """What the pages and the report say, as pure functions: display units, the tolerance band, the part view of
 a payload (never None or nan in words), the uncertainty budget in any of its shapes, the shift, the
-control chart's geometry (violations marked, labels apart)."""
+control chart's geometry (violations marked, labels apart), a result plot's axes (what the sensor read)."""
 
 from __future__ import annotations
 
