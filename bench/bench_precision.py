@@ -27,16 +27,17 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import least_squares
-
-from measurement.errors import MeasurementError
-from measurement.identification import Options, identify
-from measurement.joint import identify_releases
-from measurement.signal import find_swings
-from service.sources.dispatch import load_source
-from service.sources.files import read_rig
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # the plain fit is the tests' reference
+
+from measurement.errors import MeasurementError  # noqa: E402
+from measurement.identification import Options, identify  # noqa: E402
+from measurement.joint import identify_releases  # noqa: E402
+from service.sources.dispatch import load_source  # noqa: E402
+from service.sources.files import read_rig  # noqa: E402
+from tests.measurement.reference import damped_sinusoid as plain_fit  # noqa: E402
+from tests.measurement.reference import reading_columns  # noqa: E402
 
 
 def _bicycle(part: str, n: int, rate: bool) -> list[tuple[str, str]]:
@@ -68,57 +69,10 @@ class Estimate:
     note: str = ""  # effects added, or why there is no estimate
 
 
-def _columns(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """t and the reading (angle, or a gyro's rate) of a release: the plain fit reads any sensor."""
-    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
-    header = [h.strip() for h in lines[0].split(",")]
-    if "rate" in header and "angle" not in header:
-        data = np.array([[float(c) for c in ln.split(",")] for ln in lines[1:]])
-        return data[:, header.index("t")], data[:, header.index("rate")]
-    trace = load_source(path)  # an angle trace, or a marker track (its angle with the camera's view measured)
-    return trace.t, trace.angle
-
-
 def damped_sinusoid(t: np.ndarray, y: np.ndarray) -> Estimate:
-    """ω_n of y = c + e^(−σt)(A cos ω_d t + B sin ω_d t) fitted to every sample (variable projection)."""
-    t = t - t[0]
-    ok = np.isfinite(y)
-    t, y = t[ok], y[ok]
-    wd0 = find_swings(t, y).damped_frequency
-    if not math.isfinite(wd0):
-        return Estimate(float("nan"), float("nan"), "no swing")
-
-    def basis(p: np.ndarray) -> np.ndarray:
-        e = np.exp(-p[0] * t)
-        return np.column_stack([np.ones_like(t), e * np.cos(p[1] * t), e * np.sin(p[1] * t)])
-
-    def residual(p: np.ndarray) -> np.ndarray:
-        b = basis(p)
-        coef, *_ = np.linalg.lstsq(b, y, rcond=None)
-        return b @ coef - y
-
-    sol = least_squares(residual, [0.05, wd0], x_scale=[0.05, 0.01 * wd0], method="lm")
-    sigma, wd = sol.x
-    coef, *_ = np.linalg.lstsq(basis(sol.x), y, rcond=None)
-    c, a, b = coef
-
-    def full(q: np.ndarray) -> np.ndarray:  # every parameter, for the covariance
-        e = np.exp(-q[0] * t)
-        return q[2] + e * (q[3] * np.cos(q[1] * t) + q[4] * np.sin(q[1] * t)) - y
-
-    q = np.array([sigma, wd, c, a, b])
-    jac = np.empty((t.size, q.size))
-    for i in range(q.size):
-        h = 1e-7 * max(abs(q[i]), 1e-3)
-        dq = np.zeros_like(q)
-        dq[i] = h
-        jac[:, i] = (full(q + dq) - full(q - dq)) / (2 * h)
-    r = full(q)
-    s2 = float(r @ r) / max(t.size - q.size, 1)
-    cov = s2 * np.linalg.pinv(jac.T @ jac)
-    wn = math.hypot(wd, sigma)
-    grad = np.array([sigma / wn, wd / wn])
-    return Estimate(wn, float(math.sqrt(max(grad @ cov[:2, :2] @ grad, 0.0))))
+    """ω_n of y = c + e^(−σt)(A cos ω_d t + B sin ω_d t) fitted to every sample (tests/measurement/reference.py)."""
+    wn, s = plain_fit(t, y)
+    return Estimate(wn, s) if math.isfinite(wn) else Estimate(wn, s, "no swing")
 
 
 def _failed(exc: Exception) -> Estimate:
@@ -160,7 +114,7 @@ def measure(sets: list[tuple[str, list[tuple[str, str]]]]) -> list[tuple[str, di
     for name, releases in sets:
         per: dict[str, list[Estimate]] = {m: [] for m in METHODS}
         for trace_file, rig_file in releases:
-            per["damped sinusoid"].append(damped_sinusoid(*_columns(ROOT / trace_file)))
+            per["damped sinusoid"].append(damped_sinusoid(*reading_columns(ROOT / trace_file)))
             per["moi --no-discover"].append(moi_alone(ROOT / trace_file, ROOT / rig_file))
         per["moi"], flags = moi_together(releases)
         out.append((name, per, flags))

@@ -26,7 +26,8 @@ MAX_ABS_TIME = 1e10
 MAX_ABS_ANGLE = 1e3
 #: what a trace's sensor reads: its column name, also its ``quantity``
 READINGS = ("angle", "rate")
-_UNITS = {"angle": "rad", "rate": "rad/s"}
+#: the SI unit of each reading
+READING_UNITS = {"angle": "rad", "rate": "rad/s"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,7 +80,7 @@ class Trace:
         if big_t > MAX_ABS_TIME or big_a > MAX_ABS_ANGLE:
             raise TraceError(
                 f"{self.source}: |t| up to {big_t:.3g} s and |angle| up to {big_a:.3g} rad; expected |t| <= "
-                f"{MAX_ABS_TIME:g} s and |{self.quantity}| <= {MAX_ABS_ANGLE:g} {_UNITS[self.quantity]} "
+                f"{MAX_ABS_TIME:g} s and |{self.quantity}| <= {MAX_ABS_ANGLE:g} {READING_UNITS[self.quantity]} "
                 "(in rad, not counts or degrees)"
             )
         object.__setattr__(self, "t", t)

@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import io
 import os
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
 
 from measurement.result import IdentificationResult
+from measurement.trace import READING_UNITS
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 #: the picture formats a plot may be written in (by the file name's extension)
 PLOT_FORMATS = ("png", "svg", "pdf")
@@ -18,6 +22,18 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO
                 fmt: str = "png", unit: str = "kg·m²", source: str | None = None) -> None:
     """Draw the result into ``path`` (a file name or a binary file object) as ``fmt`` (png, svg or pdf); the title
     names ``source`` (default: the trace's own, e.g. its file) and gives J in ``unit``."""
+    figure(result, unit=unit, source=source).savefig(path, dpi=dpi, format=fmt)
+
+
+def reading_label(result: IdentificationResult) -> tuple[str, str]:
+    """(what the sensor read, its unit): ("angle", "rad"), or ("rate", "rad/s") for a gyro, whose trace, fit
+    and residuals are rates."""
+    return result.measures, READING_UNITS[result.measures]
+
+
+def figure(result: IdentificationResult, *, unit: str = "kg·m²", source: str | None = None) -> Figure:
+    """The picture of ``result`` as a matplotlib Figure: the trace and the final model's fit above, the declared
+    and the final model's residuals below, each axis labelled with what the sensor read."""
     # a Figure without pyplot: no global state, so the daemon's plot worker thread may draw too
     from matplotlib.figure import Figure
 
@@ -25,8 +41,9 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO
 
     from .web.quality import inertia, number
 
+    reading, ru = reading_label(result)
     a = result.arrays
-    t, y = a["t"], a["angle"]
+    t, y = a["t"], a["angle"]  # the arrays' "angle" is the reading, a rate on a gyro
     fig = Figure(figsize=(10, 8), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [2.2, 1, 1]})
     ax = axes[0]
@@ -40,16 +57,17 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO
         title += "J n/a (rig lacks k or m·S)"
     title += f", ω_n = {number(result.omega_n, '.6g')} rad/s"
     ax.set_title(title)
-    ax.set_ylabel("angle [rad]")
+    ax.set_ylabel(f"{reading} [{ru}]")
     ax.legend(loc="upper right", fontsize=8)
     b = result.baseline
     for ax, res, label in (
-        (axes[1], a["baseline_residual"], f"declared ({', '.join(b.effects) or 'none'}): RMS {b.residual_rms:.3g} rad"),
-        (axes[2], a["residual"], f"final ({', '.join(result.effects) or 'none'}): RMS {result.residual_rms:.3g} rad"),
+        (axes[1], a["baseline_residual"], f"declared ({', '.join(b.effects) or 'none'}): RMS {b.residual_rms:.3g} {ru}"),
+        (axes[2], a["residual"], f"final ({', '.join(result.effects) or 'none'}): RMS {result.residual_rms:.3g} {ru}"),
     ):
         ax.plot(t, res, lw=0.6, color="tab:blue")
-        ax.axhspan(-result.noise_floor, result.noise_floor, color="tab:green", alpha=0.2, label=f"±noise floor {result.noise_floor:.2g} rad")
-        ax.set_ylabel("residual [rad]")
+        ax.axhspan(-result.noise_floor, result.noise_floor, color="tab:green", alpha=0.2,
+                   label=f"±noise floor {result.noise_floor:.2g} {ru}")
+        ax.set_ylabel(f"residual [{ru}]")
         ax.set_title(label, fontsize=9, loc="left")
         ax.legend(loc="upper right", fontsize=8)
         lim = float(np.max(np.abs(res))) * 1.1 if res.size else 1.0
@@ -57,7 +75,7 @@ def plot_result(result: IdentificationResult, path: str | os.PathLike | BinaryIO
     axes[2].set_xlabel("t [s]")
     if result.flags:
         axes[2].text(0.01, 0.03, "flags: " + ", ".join(result.flags), transform=axes[2].transAxes, fontsize=8, color="tab:red")
-    fig.savefig(path, dpi=dpi, format=fmt)
+    return fig
 
 
 def render_png(result: IdentificationResult, unit: str = "kg·m²", source: str | None = None, *, dpi: int = 80) -> bytes:

@@ -1,6 +1,6 @@
 """What the pages and the report say, as pure functions: display units, the tolerance band, the part view of
 a payload (never None or nan in words), the uncertainty budget in any of its shapes, the shift, the
-control chart's geometry (violations marked, labels apart)."""
+control chart's geometry (violations marked, labels apart), a result plot's axes (what the sensor read)."""
 
 from __future__ import annotations
 
@@ -243,3 +243,28 @@ def test_each_of_the_six_orientations_of_a_tensor_set_is_drawn_differently_along
             if a < b:  # no two drawn parallel (xy once fell on z): at least 10° apart
                 cos = abs(drawn[a][0] * drawn[b][0] + drawn[a][1] * drawn[b][1])
                 assert cos < math.cos(math.radians(10)), (a, b)
+
+
+@pytest.mark.parametrize(("reading", "unit"), [("angle", "rad"), ("rate", "rad/s")])
+def test_a_plot_labels_its_axes_with_what_the_sensor_read(reading, unit):
+    # a gyro's trace, fit and residuals are rates: "moi identify gyro.csv --plot" said "angle [rad]" over them
+    import numpy as np
+
+    from measurement import Pendulum, Rig, Trace, identify
+    from measurement.identification import Options
+    from service.publish.plot import figure
+
+    rig = Rig(kind="torsion", stiffness=11.67)
+    t = np.arange(0.0, 8.0, 0.005)
+    theta, omega = Pendulum(rig, 0.27, {"viscous": {"c_per_J": 0.1}}).motion(t, 0.1)
+    y = (theta if reading == "angle" else omega) + 1e-4 * np.random.default_rng(5).standard_normal(t.size)
+    r = identify(Trace(t, y, source=f"{reading}.csv", quantity=reading), rig, Options(discover=False))
+    assert r.measures == reading
+    top, declared, final = figure(r).axes
+    assert top.get_ylabel() == f"{reading} [{unit}]"
+    assert declared.get_ylabel() == final.get_ylabel() == f"residual [{unit}]"
+    for ax in (declared, final):
+        assert ax.get_title(loc="left").endswith(f" {unit}")  # "...: RMS 0.0001 rad/s"
+        legend = ax.get_legend()
+        assert legend is not None and legend.get_texts()[0].get_text().endswith(f" {unit}")  # the noise floor's band
+    assert final.get_xlabel() == "t [s]" and "ω_n = " in top.get_title() and top.get_title().endswith(" rad/s")
