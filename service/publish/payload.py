@@ -83,12 +83,23 @@ def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id:
     return {**envelope, **result}
 
 
+#: result schema → what makes a result JSON of it one of the next schema: the keys added then, with the value every
+#: result had before them (CHANGELOG.md). A row the previous release stored reads as this schema's; a new result
+#: schema adds its line here (``tests/service/test_service_quality.py`` holds it to ``SCHEMA_VERSION``).
+_NEXT_SCHEMA = {
+    4: {"measures": "angle"},  # schema 5: what the sensor read; before it, always the angle
+}
+
+
 def stored_result(payload: Mapping[str, Any] | None) -> IdentificationResult | None:
     """The result a stored or published payload carries, typed (``IdentificationResult.from_dict``: the envelope is
-    not read); None when it carries none (a failed or aborted measurement) or one of another result schema (a row an
-    older release stored: what it holds beyond the store's columns is not shown)."""
+    not read; a result of the previous schema is read with the keys added since, ``_NEXT_SCHEMA``); None when it
+    carries none (a failed or aborted measurement) or one of an older schema (a row an older release stored: what it
+    holds beyond the store's columns is not shown)."""
     if not payload or "schema" not in payload:
         return None
+    while (schema := payload["schema"]) in _NEXT_SCHEMA:
+        payload = {**_NEXT_SCHEMA[schema], **payload, "schema": schema + 1}
     try:
         return IdentificationResult.from_dict(payload)
     except ResultSchemaError:

@@ -115,8 +115,18 @@ def test_the_budget_rows_are_each_lines_contribution_to_the_measurand(identified
     assert (v["kind"], v["value"], v["U"], v["k"]) == ("plain", stored.J, stored.J_U, stored.coverage_factor)
     assert v["budget"] == rows
     assert Q.part_view({"recipe": None}, None)["budget"] == [], "a row of an older result schema: no budget shown"
-    # a payload of another result schema (an older release's row) reads as no result, a failed one too
+    # a payload of an older result schema (an older release's row) reads as no result, a failed one too
     assert stored_result({**identified.to_dict(), "schema": 3}) is None and stored_result(None) is None
+
+
+def test_a_row_the_previous_release_stored_reads_as_a_result_of_this_schema(identified):
+    from measurement.result import SCHEMA_VERSION
+    from service.publish.payload import _NEXT_SCHEMA
+
+    assert max(_NEXT_SCHEMA) == SCHEMA_VERSION - 1, "a new result schema says how its previous one reads"
+    previous = {k: v for k, v in identified.to_dict().items() if k not in _NEXT_SCHEMA[SCHEMA_VERSION - 1]}
+    read = stored_result({**previous, "schema": SCHEMA_VERSION - 1, "uuid": "u-1"})
+    assert read is not None and read.to_json() == identified.to_json()
 
 
 def test_shift_start_is_the_latest_start_at_or_before_now():
