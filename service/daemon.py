@@ -24,6 +24,7 @@ that died ends the daemon with status 3 so that systemd restarts it.
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import datetime as _dt
 import logging
 import queue
@@ -659,15 +660,16 @@ class Appliance:
         took = time.monotonic() - armed if armed is not None else (m.finished_at - m.requested_at) / self._clock_scale()
         started = finished - took
         cfg = self.config
-        result = m.result.to_dict()
         timing = m.to_dict().get("timing", {})
         part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
         rig = recipe.rig_for(cfg.rig) if recipe is not None else cfg.rig
         calibration = self.calibration_state(rig, finished)
-        if calibration is not None and calibration["due"] and F.CALIBRATION_DUE not in result["flags"]:
-            result["flags"] = [*result["flags"], F.CALIBRATION_DUE]
-        if self._capture_watch.slowed(result.get("acquisition")) and F.CAPTURE_SLOWED not in result["flags"]:
-            result["flags"] = [*result["flags"], F.CAPTURE_SLOWED]
+        # the station's own flags, raised on the typed result before anything reads it
+        raised = ((calibration is not None and calibration["due"], F.CALIBRATION_DUE),
+                  (self._capture_watch.slowed(m.result.acquisition), F.CAPTURE_SLOWED))
+        flags = m.result.flags + tuple(f for up, f in raised if up and f not in m.result.flags)
+        typed = dataclasses.replace(m.result, flags=flags) if flags != m.result.flags else m.result
+        result = typed.to_dict()
         tensor_set = self.tensor_set if recipe is not None and recipe.tensor is not None else None
         if tensor_set is not None and (tensor_set.done or tensor_set.recipe is not recipe):
             tensor_set = None  # the set ended (aborted) while this release ran: it counts for nothing
@@ -704,8 +706,8 @@ class Appliance:
         self._note_stored(m.id)
         if (reply := self._run_reply.pop(m.id, None)) is not None:
             reply(CommandReply(V.TRIGGER, "done", data={"uuid": m.id, "seq": stored.seq}))
-        log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, result.get("J"),
-                 ", ".join(result.get("flags") or []) or "none")
+        log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, typed.J,
+                 ", ".join(typed.flags) or "none")
         if part["verdict"] is not None and recipe is not None:
             log.info("part %s (%s): %s", part_id or "(no ID)", recipe.name, part["verdict"])
             self._to_publishers("on_part_done", recipe)
@@ -718,7 +720,7 @@ class Appliance:
                     check["name"], check["E_n"], "pass" if check["passed"] else "FAIL")
             try:
                 self.store.record_check_standard(check | {"part_id": part_id, "measurement": m.id,
-                                                          "flags": list(result.get("flags") or [])},
+                                                          "flags": list(typed.flags)},
                                                  finished_at=finished)
             except StoreError:
                 log.exception("could not store the check standard of measurement %s", m.id)

@@ -5,9 +5,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+from typing import TYPE_CHECKING, Any, Mapping
 
 from service.errors import InputFileError
-from service.publish.payload import fmt_time
+from service.publish.payload import fmt_time, stored_result
+
+if TYPE_CHECKING:  # pragma: no cover
+    from measurement.result import IdentificationResult
 
 from ._common import add_store_arguments, open_store, parse_time
 
@@ -24,7 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _num(v, fmt: str) -> str:
-    return "-" if v is None else format(v, fmt)
+    """A number as text, "-" without one (None, or NaN: a number the result JSON wrote null)."""
+    return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
 
 
 def _part(store, serial: str, as_json: bool) -> int:
@@ -67,6 +73,24 @@ def _part(store, serial: str, as_json: bool) -> int:
     return 0
 
 
+def _show_result(r: IdentificationResult, p: Mapping[str, Any]) -> None:
+    """One result in words: its fields, and the part keys of its payload's envelope ``p``."""
+    print(f"  J             = {_num(r.J, '.7g')} ± {_num(r.J_std, '.2g')} kg·m²")
+    if r.J_object is not None:
+        print(f"  J_object      = {_num(r.J_object, '.7g')} ± {_num(r.J_object_std, '.2g')} kg·m² (J − tare)")
+    print(f"  omega_n       = {_num(r.omega_n, '.7g')} ± {_num(r.omega_n_std, '.2g')} rad/s")
+    print(f"  damping ratio = {_num(r.damping_ratio, '.4g')} ± {_num(r.damping_ratio_std, '.2g')}")
+    print(f"  effects       : {', '.join(r.effects) or '-'} (added: {', '.join(r.added_effects) or 'none'})")
+    print(f"  residual RMS  : {_num(r.baseline.residual_rms, '.3g')} rad declared model → "
+          f"{_num(r.residual_rms, '.3g')} rad final; noise floor {_num(r.noise_floor, '.3g')} rad")
+    print(f"  flags         : {', '.join(r.flags) or 'none'}")
+    if p.get("recipe"):
+        rel = p.get("release") or {}
+        print(f"  part          : {p.get('part_id') or '-'}, recipe {p['recipe']['name']} (version "
+              f"{p['recipe']['version']}), release {rel.get('index')}/{rel.get('of')} {rel.get('verdict')}"
+              + (f", part verdict {p['verdict']}" if p.get("verdict") else ""))
+
+
 def run(args: argparse.Namespace) -> int:
     with open_store(args) as store:
         if args.part:
@@ -86,23 +110,13 @@ def run(args: argparse.Namespace) -> int:
             if m.error:
                 print(f"  error: {m.error}")
             p = m.payload or {}
-            if p:
-                print(f"  J             = {_num(p.get('J'), '.7g')} ± {_num(p.get('J_std'), '.2g')} kg·m²")
-                if p.get("J_object") is not None:
-                    print(f"  J_object      = {_num(p.get('J_object'), '.7g')} ± {_num(p.get('J_object_std'), '.2g')} "
-                          "kg·m² (J − tare)")
-                print(f"  omega_n       = {_num(p.get('omega_n'), '.7g')} ± {_num(p.get('omega_n_std'), '.2g')} rad/s")
-                print(f"  damping ratio = {_num(p.get('damping_ratio'), '.4g')} ± {_num(p.get('damping_ratio_std'), '.2g')}")
-                print(f"  effects       : {', '.join(p.get('effects') or []) or '-'} "
-                      f"(added: {', '.join(p.get('added_effects') or []) or 'none'})")
-                print(f"  residual RMS  : {_num(p.get('residual_rms_before'), '.3g')} rad declared model → "
-                      f"{_num(p.get('residual_rms_after'), '.3g')} rad final; noise floor {_num(p.get('noise_floor'), '.3g')} rad")
-                print(f"  flags         : {', '.join(p.get('flags') or []) or 'none'}")
-                if p.get("recipe"):
-                    rel = p.get("release") or {}
-                    print(f"  part          : {p.get('part_id') or '-'}, recipe {p['recipe']['name']} (version "
-                          f"{p['recipe']['version']}), release {rel.get('index')}/{rel.get('of')} {rel.get('verdict')}"
-                          + (f", part verdict {p['verdict']}" if p.get("verdict") else ""))
+            r = stored_result(p)
+            if r is not None:
+                _show_result(r, p)
+            elif p:  # a row of an older result schema: what the store's columns hold
+                print(f"  J             = {_num(m.J, '.7g')} ± {_num(m.J_std, '.2g')} kg·m²")
+                print(f"  omega_n       = {_num(m.omega_n, '.7g')} rad/s, damping ratio {_num(m.damping_ratio, '.4g')}")
+                print(f"  flags         : {', '.join(m.flags) or 'none'}  (a result of an older schema: its columns)")
             return 0
         since = parse_time(args.since) if args.since else None
         rows = store.list(limit=args.limit, since=since, status=args.status, full=True)  # full: J_object

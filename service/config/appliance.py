@@ -12,10 +12,10 @@ commented example.
 Without a ``[hardware]`` table (or with ``--sim``) the appliance runs on the
 simulated rig described by ``[simulation]``.
 
-The angle sensor is the Modbus encoder (``[hardware.encoder]``) or a camera
-(``sensor = "camera"``, ``[hardware.camera]`` naming the V4L2 device and the
-camera file of docs/vision.md). Camera files are read and checked here, so a
-missing or malformed one is a configuration error naming both files.
+The angle sensor (``[hardware] sensor``) brings its own table, ``[hardware.<sensor>]``: its keys, docs and parse
+are its sensor module's (``SensorKind.TABLE``, found through the sensors' registry,
+``service.devices.sensors.registry``), so this module names no sensor. Files a sensor's table names (the camera
+file) are read and checked here, so a missing or malformed one is a configuration error naming both files.
 """
 
 from __future__ import annotations
@@ -35,19 +35,16 @@ from firmware_host import SequencerConfig
 from measurement import Options, Rig
 from measurement.effects import EFFECTS
 from measurement.errors import InvalidInput
-from service.config.schema import REQUIRED, Key, PublisherTable
+from service.config.schema import REQUIRED, Key, PublisherTable, SensorTable
 from service.config.schema import Checker as _Checker
 from service.config.schema import doc as _doc
 from service.config.schema import schema as _schema
-from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, MAX_ENCODER_TIME_SCALE, demo_camera
-from service.devices.sensors import registry as sensors
+from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, MAX_ENCODER_TIME_SCALE
+from service.devices.sensors import registry as sensor_registry
 from service.errors import ConfigError
 from service.names import name_problem
 from service.publish import registry
 from service.sources.files import read_rig, read_toml
-
-#: the angle sensors of ``[hardware] sensor`` (the sensor port's registry; ``[simulation] sensor`` has them all)
-SENSORS = sensors.names(hardware=True)
 
 #: the rig simulated when ``[device] rig`` is not given (the demo rig of `moi demo`)
 DEFAULT_SIM_RIG = DEMO_RIG
@@ -90,7 +87,7 @@ class SimulationSettings:
         ts = self.time_scale
         if not (isinstance(ts, (int, float)) and not isinstance(ts, bool) and 0 < ts <= MAX_TIME_SCALE):
             raise InvalidInput(f"time_scale must be in (0, {MAX_TIME_SCALE:g}] simulated s per wall-clock s, got {ts!r}")
-        kind = sensors.sensor(self.sensor) if self.sensor in sensors.names() else None
+        kind = sensor_registry.sensor(self.sensor) if self.sensor in sensor_registry.names() else None
         if kind is not None and kind.MAX_TIME_SCALE is not None and ts > kind.MAX_TIME_SCALE:
             raise InvalidInput(f"time_scale {ts:g} is above {kind.MAX_TIME_SCALE:g}, {kind.TIME_SCALE_REASON} "
                                f"(use time_scale <= {kind.MAX_TIME_SCALE:g})")
@@ -109,27 +106,32 @@ class RecipeSettings:
     active: str | None = None
 
 
-@dataclass(frozen=True)
-class CameraSettings:
-    """``[hardware.camera]``: the V4L2 device, the camera file (path and parsed content), the lost-marker limit."""
-
-    device: str | int
-    file: str
-    max_lost_time: float = 0.5
-    config: Any = None  # measurement.vision.CameraConfig (imported lazily: it loads OpenCV)
-
-
 @dataclass(frozen=True, kw_only=True)
 class HardwareSettings:
-    """``[hardware]``: the GPIO backend, the angle sensor and the device tables (checked by the drivers' settings)."""
+    """``[hardware]``: the GPIO backend, the angle sensor and the device tables (checked by the drivers' settings).
+
+    sensors: the chosen sensor's settings by its name, parsed from its table ``[hardware.<sensor>]`` by its
+    sensor module (``SensorKind.TABLE``); ``hardware.<name>`` reads them (None for another sensor).
+    """
 
     gpio_backend: str | None = None
     sensor: str = "encoder"
     solenoid: Mapping[str, Any]
     button: Mapping[str, Any] | None = None
     indicator: Mapping[str, Any] | None = None
-    encoder: Mapping[str, Any] | None = None
-    camera: CameraSettings | None = None
+    sensors: Mapping[str, Any] = field(default_factory=dict)
+
+    def __getattr__(self, name: str) -> Any:
+        # hardware.encoder, hardware.camera...: a hardware sensor's settings by its table's name
+        if not name.startswith("_") and name in sensor_registry.names(hardware=True):
+            return self.__dict__.get("sensors", {}).get(name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the tables as the file has them, one key per hardware sensor (null: not the chosen one)."""
+        d = dataclasses.asdict(self)
+        chosen = d.pop("sensors")
+        return {**d, **{name: chosen.get(name) for name in sensor_registry.names(hardware=True)}}
 
 
 def _sequencer_keys() -> dict[str, dict[str, Any]]:
@@ -148,7 +150,8 @@ def _sequencer_keys() -> dict[str, dict[str, Any]]:
 
 _PIN = _doc("BCM pin number or gpiozero pin name")
 
-#: the appliance's own tables; the publishers' follow (``tables``)
+#: the appliance's own tables up to [hardware]; the sensors' tables, the rest (``_AFTER_SENSORS``) and the
+#: publishers' follow (``tables``)
 _APPLIANCE: dict[str, dict[str, Key]] = {
     "device": _schema(DeviceSettings, {
         "id": _doc("device id: names the MQTT topics and Home Assistant entities"),
@@ -164,16 +167,13 @@ _APPLIANCE: dict[str, dict[str, Key]] = {
         "min_swings": _doc("fewer full swings is an input error", min=0),
         "bic_margin": _doc("an added effect must lower BIC by more than this", min=0),
     }),
+    # its sensor key and one key per sensor's table are added from the sensors' registry (``_hardware``)
     "hardware": _schema(HardwareSettings, {
         "gpio_backend": _doc("gpiozero pin factory (lgpio on a Pi, mock for tests; default: gpiozero's)"),
-        "sensor": _doc("angle sensor: the Modbus encoder ([hardware.encoder]) or a camera ([hardware.camera])",
-                       choices=SENSORS),
+        "sensor": _doc(""),
         "solenoid": _doc("[hardware.solenoid] pin, active_high, max_on_time"),
         "button": _doc("[hardware.button] pin, pull_up, bounce_time"),
         "indicator": _doc("[hardware.indicator] pin, kind, active_high"),
-        "encoder": _doc("[hardware.encoder]: drivers.encoder.EncoderConfig (port, device_id, baudrate, parity, "
-                        "register, registers, counts_per_turn, direction, zero, timeout, ...)"),
-        "camera": _doc("[hardware.camera] device, file, max_lost_time (required with sensor = \"camera\")"),
     }),
     # the GPIO tables: keys and defaults of the drivers' settings, which also check the values
     "hardware.solenoid": _schema(SolenoidSettings, {
@@ -187,14 +187,8 @@ _APPLIANCE: dict[str, dict[str, Key]] = {
     "hardware.indicator": _schema(IndicatorSettings, {
         "pin": _PIN, "kind": _doc("", choices=INDICATOR_KINDS), "active_high": _doc(""),
     }),
-    "hardware.camera": _schema(CameraSettings, {
-        "device": _doc("V4L2 capture device: a path like \"/dev/video0\" (better: a stable /dev/v4l/by-id/... link) "
-                       "or an index", kind="videodevice"),
-        "file": _doc("camera file: intrinsics, resolution and fps, marker radius and distance, optional [pose] "
-                     "(docs/vision.md); relative to this file", kind="path"),
-        "max_lost_time": _doc("no marker in the frames (lost or corrupt) for this long in a row → FAULT, s "
-                              "(at least 5 frames)", min=0, min_open=True),
-    }),
+}
+_AFTER_SENSORS: dict[str, dict[str, Key]] = {
     "simulation": _schema(SimulationSettings, {
         "inertia": _doc("true J of the simulated part, kg·m²", min=0, min_open=True),
         "effects": _doc("true damping: effect = { parameter = value }", kind="effects"),
@@ -210,7 +204,7 @@ _APPLIANCE: dict[str, dict[str, Key]] = {
         "sensor": _doc("\"encoder\": a simulated Modbus RTU encoder on a loopback socket read by the real encoder "
                        "client; \"direct\": an in-process sensor sampling at rate (faster); \"camera\": a mock camera "
                        "rendering the marker, read by the real camera sensor (keep time_scale = 1: frames are "
-                       "rendered in real time)", choices=sensors.names()),
+                       "rendered in real time)", choices=sensor_registry.names()),
         "latency": _doc("simulated encoder reply latency, s of real time", min=0, max=1),
         "camera": _doc("camera file of the simulated camera (sensor = \"camera\"; default: the demo camera, 640×480 px "
                        "at 100 frames/s, fx = 600 px, marker radius 0.10 m at 0.25 m); relative to this file",
@@ -242,14 +236,37 @@ def _publisher_tables(entries: tuple[registry.PublisherEntry, ...]) -> dict[str,
     return {e.name: e.table() for e in entries}
 
 
-def tables() -> dict[str, dict[str, Key]]:
-    """Every table of the file and its keys: the appliance's, then each registered publisher's."""
-    return _tables(registry.PUBLISHERS)
+def sensor_tables() -> dict[str, SensorTable]:
+    """The hardware sensors' tables ``[hardware.<name>]``, by name, in the registry's order."""
+    return _sensor_tables(sensor_registry.SENSORS)
 
 
 @functools.cache
-def _tables(entries: tuple[registry.PublisherEntry, ...]) -> dict[str, dict[str, Key]]:
-    return {**_APPLIANCE, **{name: t.schema() for name, t in _publisher_tables(entries).items()}}
+def _sensor_tables(entries: tuple[sensor_registry.SensorEntry, ...]) -> dict[str, SensorTable]:
+    return {e.name: table for e in entries if e.hardware and (table := e.table()) is not None}
+
+
+def _hardware(own: Mapping[str, SensorTable]) -> dict[str, Key]:
+    """[hardware]: its own keys, the sensor key naming every hardware sensor, one key per sensor's table."""
+    said = " or ".join(f"{t.what} ([hardware.{name}])" for name, t in own.items())
+    keys = dict(_APPLIANCE["hardware"])
+    keys["sensor"] = dataclasses.replace(keys["sensor"], doc=f"angle sensor: {said}",
+                                         choices=sensor_registry.names(hardware=True))
+    return {**keys, **{name: Key("table", None, t.doc) for name, t in own.items()}}
+
+
+def tables() -> dict[str, dict[str, Key]]:
+    """Every table of the file and its keys: the appliance's, each registered sensor's, each registered publisher's."""
+    return _tables(registry.PUBLISHERS, sensor_registry.SENSORS)
+
+
+@functools.cache
+def _tables(entries: tuple[registry.PublisherEntry, ...],
+            sensor_entries: tuple[sensor_registry.SensorEntry, ...]) -> dict[str, dict[str, Key]]:
+    own = _sensor_tables(sensor_entries)
+    declared = {f"hardware.{name}": keys for name, t in own.items() if (keys := t.schema()) is not None}
+    return {**_APPLIANCE, "hardware": _hardware(own), **declared, **_AFTER_SENSORS,
+            **{name: t.schema() for name, t in _publisher_tables(entries).items()}}
 
 
 def top_tables() -> tuple[str, ...]:
@@ -307,7 +324,7 @@ class Config:
             "source": self.source, "device_id": self.device_id, "state_dir": str(self.state_dir),
             "rig_path": self.rig_path, "rig": self.rig.to_dict(), "simulated": self.simulated,
             "simulation": clean(self.simulation) if self.simulated else None,
-            "hardware": clean(self.hardware), "sequencer": clean(self.sequencer),
+            "hardware": None if self.hardware is None else self.hardware.to_dict(), "sequencer": clean(self.sequencer),
             "identification": clean(self.identification),
             "recipes": None if self.recipes is None else {
                 "directory": self.recipes.directory, "active": self.active_recipe,
@@ -355,10 +372,8 @@ def load_config(path: str | os.PathLike | None, *, sim: bool = False, state_dir:
     return parse_config(doc, source=source, base=base, sim=sim, state_dir=state_dir, environ=environ)
 
 
-def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path | None = None, sim: bool = False,  # noqa: C901
-                 state_dir: str | None = None, environ: Mapping[str, str] | None = None) -> Config:
-    c = _Checker(source)
-    base = base or Path.cwd()
+def _check_top_tables(doc: Mapping[str, Any], source: str) -> None:
+    """Every table at the file's top level is one of ours (else the one it was likely meant to be)."""
     top = top_tables()
     unknown = [t for t in doc if t not in top]
     if unknown:
@@ -367,6 +382,13 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         hint = f" (did you mean [{close[0]}]?)" if close else f"; expected tables: {', '.join(f'[{x}]' for x in top)}"
         kind = "table" if isinstance(doc[t], Mapping) else "top-level key"
         raise ConfigError(f"{source}: unknown {kind} {t!r}{hint}")
+
+
+def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path | None = None, sim: bool = False,
+                 state_dir: str | None = None, environ: Mapping[str, str] | None = None) -> Config:
+    c = _Checker(source)
+    base = base or Path.cwd()
+    _check_top_tables(doc, source)
 
     dev = c.table("device", doc.get("device", {}), SCHEMA["device"])
     if (problem := name_problem("device_id", dev["id"])) is not None:
@@ -383,40 +405,9 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
                 raise c.fail("identification", "candidates", f"unknown effect {name!r}; expected names from {', '.join(EFFECTS)}")
     options = Options(**ident)
 
-    hardware = None
-    if "hardware" in doc:
-        hw = c.table("hardware", doc["hardware"], SCHEMA["hardware"])
-        sol = _device_table(c, "hardware.solenoid", hw["solenoid"], SolenoidSettings)
-        assert sol is not None  # a required key of [hardware]
-        btn = _device_table(c, "hardware.button", hw["button"], ButtonSettings)
-        ind = _device_table(c, "hardware.indicator", hw["indicator"], IndicatorSettings)
-        enc = hw["encoder"]
-        if hw["sensor"] == "encoder":
-            if enc is None:
-                raise c.fail("hardware", "encoder", "missing: sensor = \"encoder\" needs a [hardware.encoder] table "
-                              "(port, device id, register, counts per turn)")
-            _check_encoder_keys(c, enc)
-        camera = None
-        if hw["camera"] is not None:
-            cam = c.table("hardware.camera", hw["camera"], SCHEMA["hardware.camera"])
-            if hw["sensor"] == "camera":
-                file = _resolve(base, cam["file"])
-                camera = CameraSettings(device=cam["device"], file=file, max_lost_time=cam["max_lost_time"],
-                                        config=_read_camera(c, "hardware.camera", "file", file))
-        elif hw["sensor"] == "camera":
-            raise c.fail("hardware", "camera", "missing: sensor = \"camera\" needs a [hardware.camera] table "
-                          "(device = \"/dev/video0\", file = the camera file)")
-        hardware = HardwareSettings(gpio_backend=hw["gpio_backend"], sensor=hw["sensor"], solenoid=sol, button=btn,
-                                    indicator=ind, encoder=enc, camera=camera)
+    hardware = _hardware_settings(c, base, doc["hardware"]) if "hardware" in doc else None
 
-    sim_doc = c.table("simulation", doc.get("simulation", {}), SCHEMA["simulation"])
-    sim_doc["camera"] = _resolve(base, sim_doc["camera"])
-    if sim_doc["sensor"] == "camera":
-        sim_doc["camera_config"] = _read_camera(c, "simulation", "camera", sim_doc["camera"])
-    try:
-        simulation = SimulationSettings(**sim_doc)
-    except InvalidInput as exc:
-        raise ConfigError(f"{source}: [simulation]: {exc}") from None
+    simulation = _simulation_settings(c, base, doc.get("simulation", {}))
     simulated = sim or hardware is None
 
     rig_path = _resolve(base, dev["rig"])
@@ -491,26 +482,45 @@ def _device_table(c: _Checker, table: str, doc: Any, settings: type) -> dict[str
     return values
 
 
-def _check_encoder_keys(c: _Checker, enc: Mapping[str, Any]) -> None:
-    """[hardware.encoder] is the encoder driver's own settings table: let the driver check it."""
-    from drivers.encoder import EncoderConfig
-
+def _simulation_settings(c: _Checker, base: Path, doc: Any) -> SimulationSettings:
+    """[simulation], completed by its sensor (the simulated camera reads its camera file)."""
+    values = c.table("simulation", doc, SCHEMA["simulation"])
+    values["camera"] = _resolve(base, values["camera"])
+    if values["sensor"] in sensor_registry.names():  # else SimulationSettings names the choices
+        sensor_registry.sensor(values["sensor"]).simulation_values(
+            values, functools.partial(c.fail, "simulation"))
     try:
-        EncoderConfig.from_dict(dict(enc))
-    except DriverConfigError as exc:
-        raise c.fail("hardware.encoder", None, str(exc)) from None
+        return SimulationSettings(**values)
+    except InvalidInput as exc:
+        raise ConfigError(f"{c.source}: [simulation]: {exc}") from None
 
 
-def _read_camera(c: _Checker, table: str, key: str, path: str | None) -> Any:
-    """The camera file at ``path`` (None: the demo camera) as a ``CameraConfig``;
-    a missing or malformed file is a one-line error naming the config file, the key and the camera file."""
-    from .camera import read_camera
-    if path is None:
-        return demo_camera()
-    try:
-        return read_camera(path)
-    except InvalidInput as exc:  # InputFileError (not found, not TOML) or VisionError (naming the file)
-        raise c.fail(table, key, str(exc)) from None
+def _hardware_settings(c: _Checker, base: Path, doc: Any) -> HardwareSettings:
+    """[hardware] and its device tables; the chosen sensor's table parsed by its sensor module."""
+    schema = tables()
+    hw = c.table("hardware", doc, schema["hardware"])
+    sol = _device_table(c, "hardware.solenoid", hw["solenoid"], SolenoidSettings)
+    assert sol is not None  # a required key of [hardware]
+    btn = _device_table(c, "hardware.button", hw["button"], ButtonSettings)
+    ind = _device_table(c, "hardware.indicator", hw["indicator"], IndicatorSettings)
+    chosen = hw["sensor"]
+    parsed: dict[str, Any] = {}
+    for name, table in sensor_tables().items():
+        where = f"hardware.{name}"
+        if hw[name] is None:
+            if name == chosen:
+                raise c.fail("hardware", name, f"missing: sensor = \"{name}\" needs a [{where}] table ({table.needs})")
+            continue
+        keys = schema.get(where)
+        values = dict(hw[name]) if keys is None else c.table(where, hw[name], keys)  # None: the driver's own keys
+        if name != chosen:
+            continue  # another sensor's table: its keys checked, not used
+        for key, spec in (keys or {}).items():
+            if spec.kind == "path":
+                values[key] = _resolve(base, values[key])
+        parsed[name] = table.read(values, functools.partial(c.fail, where))
+    return HardwareSettings(gpio_backend=hw["gpio_backend"], sensor=chosen, solenoid=sol, button=btn,
+                            indicator=ind, sensors=parsed)
 
 
 def reference_markdown() -> str:

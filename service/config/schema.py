@@ -2,7 +2,7 @@
 checker that validates a TOML table against it with one-line errors.
 
 Shared by the appliance configuration (``service.config.appliance``) and the recipe files
-(``service.parts.recipes``).
+(``service.parts.recipes``); the tables a publisher (``PublisherTable``) and a sensor (``SensorTable``) declare.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import dataclasses
 import difflib
 import math
 import typing
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import UnionType
 from typing import Any, Callable, Mapping, Union
 
@@ -126,6 +126,47 @@ class PublisherTable:
 
     def schema(self) -> dict[str, Key]:
         return schema(self.settings, self.keys, extra={"enabled": Key("bool", True, self.enabled)})
+
+
+#: ``fail(key, message)``: the ConfigError naming the configuration file, the table and the key (None: the table)
+SensorFail = Callable[[str | None, str], ConfigError]
+
+
+@dataclass(frozen=True)
+class SensorTable:
+    """A hardware sensor's settings table ``[hardware.<name>]``, declared in its sensor module (``TABLE`` of its
+    ``service.devices.sensors.port.SensorKind``) and found through the sensors' registry: the configuration builds
+    the table's schema, its key in ``[hardware]``, the reference (docs/service.md) and the parse from it, and names
+    no sensor.
+
+    The table is optional in the file; with ``[hardware] sensor = "<name>"`` it is required, and it is parsed
+    (``parse``) only then: ``HardwareSettings.sensors[<name>]`` holds what ``parse`` returns.
+    """
+
+    #: the sensor in a few words, for the doc of ``[hardware] sensor`` ("the Modbus encoder")
+    what: str
+    #: the doc of its key in ``[hardware]``: what the table holds
+    doc: str
+    #: what the table must give, said when ``sensor = "<name>"`` has no table ("port, device id, ...")
+    needs: str
+    #: the settings dataclass and each key's doc and limits, as a publisher's table (``service.config.schema.schema``;
+    #: keys of kind "path" are resolved relative to the configuration file before ``parse`` sees them);
+    #: None: the keys are the driver's own, handed to ``parse`` as written for the driver to check
+    settings: type | None = None
+    keys: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    #: the sensor's settings from its table's values (``SensorFail`` for a bad one); None: ``settings(**values)``
+    parse: Callable[[dict[str, Any], SensorFail], Any] | None = None
+
+    def schema(self) -> dict[str, Key] | None:
+        """The table's keys (None: the driver's own, not declared here)."""
+        return None if self.settings is None else schema(self.settings, self.keys)
+
+    def read(self, values: dict[str, Any], fail: SensorFail) -> Any:
+        """The sensor's settings from the checked values of its table."""
+        if self.parse is not None:
+            return self.parse(values, fail)
+        assert self.settings is not None, "a table without a settings dataclass parses its own values"
+        return self.settings(**values)
 
 
 class Checker:

@@ -80,7 +80,6 @@ class OutboxSender:
         self._idle = threading.Condition()
         self._thread: threading.Thread | None = None
         self.pending = store.outbox_count(consumer)  # rows not yet acknowledged (updated by the sender thread)
-        self.delivered = 0
         self.error: BaseException | None = None
 
     # --- called from other threads (must not block) ----------------------------------
@@ -103,10 +102,6 @@ class OutboxSender:
     @property
     def is_connected(self) -> bool:
         return self._connected.is_set()
-
-    @property
-    def inflight(self) -> int:
-        return len(self._inflight)
 
     # --- lifecycle -----------------------------------------------------------------------
     def start(self) -> None:
@@ -181,10 +176,8 @@ class OutboxSender:
                 self._write_failed(exc)
                 return  # the rows stay acknowledged in memory; the next step tries again
             del self._delivered[item_id]
-            if removed:
-                self.delivered += 1
-                if uuid:
-                    self._on_delivered(uuid)
+            if removed and uuid:
+                self._on_delivered(uuid)
 
     def _write_failed(self, exc: StoreError) -> None:
         if not self._write_logged:  # once per episode: a full disk fails every step

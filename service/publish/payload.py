@@ -5,6 +5,8 @@ an envelope (uuid, sequence number, device, trigger, timestamps, software
 version) plus the two residual RMS values under explicit before/after names.
 The result store keeps this exact dict; the outbox sends it as JSON; the
 Modbus image is encoded from it (``service.publish.modbus.registers.encode_snapshot``).
+A reader of a stored or received payload reads its result typed (``stored_result``), once, where the row is
+loaded, and its fields from there; the envelope's part keys stay plain dicts.
 """
 
 from __future__ import annotations
@@ -13,6 +15,8 @@ import json
 from datetime import UTC, datetime
 from typing import Any, Mapping
 
+from measurement.errors import ResultSchemaError
+from measurement.result import IdentificationResult
 from service.publish.modbus.registers import flag_bits
 
 #: the version of the published envelope and topics; what each version changed is in CHANGELOG.md
@@ -77,6 +81,29 @@ def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id:
         raise ValueError(f"unknown part keys {sorted(unknown)}; expected {PART_KEYS}")
     envelope.update({k: part.get(k) for k in PART_KEYS})
     return {**envelope, **result}
+
+
+#: result schema → what makes a result JSON of it one of the next schema: the keys added then, with the value every
+#: result had before them (CHANGELOG.md). A row the previous release stored reads as this schema's; a new result
+#: schema adds its line here (``tests/service/test_service_quality.py`` holds it to ``SCHEMA_VERSION``).
+_NEXT_SCHEMA = {
+    4: {"measures": "angle"},  # schema 5: what the sensor read; before it, always the angle
+}
+
+
+def stored_result(payload: Mapping[str, Any] | None) -> IdentificationResult | None:
+    """The result a stored or published payload carries, typed (``IdentificationResult.from_dict``: the envelope is
+    not read; a result of the previous schema is read with the keys added since, ``_NEXT_SCHEMA``); None when it
+    carries none (a failed or aborted measurement) or one of an older schema (a row an older release stored: what it
+    holds beyond the store's columns is not shown)."""
+    if not payload or "schema" not in payload:
+        return None
+    while (schema := payload["schema"]) in _NEXT_SCHEMA:
+        payload = {**_NEXT_SCHEMA[schema], **payload, "schema": schema + 1}
+    try:
+        return IdentificationResult.from_dict(payload)
+    except ResultSchemaError:
+        return None
 
 
 def decision(payload: Mapping[str, Any]) -> tuple[str | None, Mapping[str, Any]]:

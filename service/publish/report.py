@@ -9,6 +9,7 @@ from typing import Any
 
 from measurement.units import SI
 
+from .payload import stored_result
 from .web import quality as Q
 from .web.words import flag_words
 
@@ -22,7 +23,8 @@ def report_lines(m: Any, unit: str, lookup: Any = None, time_format: str = Q.TIM
     """(the part view, the (label, text) facts, the release lines) of a ``StoredMeasurement``; ``lookup(uuid)``:
     a release's stored measurement (its flags)."""
     p = m.payload or {}
-    v = Q.part_view(p)
+    result = stored_result(p)
+    v = Q.part_view(p, result)
     if v["recipe"] and decimals is not None:  # the recipe's display_decimals (not in the stored payload)
         v["recipe"] = {**v["recipe"], "display_decimals": decimals}
     r = v["recipe"] or {}
@@ -47,14 +49,13 @@ def report_lines(m: Any, unit: str, lookup: Any = None, time_format: str = Q.TIM
     else:
         facts.append(("J ± u", f"{Q.inertia(v.get('value'), unit, pl)} ± {Q.inertia(v.get('std'), unit, pl)} (1σ)"))
     for row in v["budget"]:
-        facts.append(("  budget: " + row["name"], (f"{Q.number(row['u'], '.2g')} {row['unit']}" if row["unit"]
-                                                   else Q.inertia(row["u"], unit, ".2g"))
-                      + (f" ({Q.number(row['share'], '.3g')} of u_c²)" if row["share"] is not None else "")))
+        facts.append(("  budget: " + row["name"],
+                      f"{Q.inertia(row['u'], unit, '.2g')} ({Q.number(row['share'], '.3g')} of u_c²)"))
     facts.append(("calibration", (f"{cal.get('date')}" + (f", due {cal.get('valid_until')}" if cal.get("valid_until")
                                                             else "") + (" (DUE)" if cal.get("due") else ""))
                   if cal else "no calibration record"))
     releases = []
-    for r in Q.release_rows(v, p, lookup):
+    for r in Q.release_rows(v, p, result, lookup):
         flags = "flags: " + (", ".join(r["flags"]) or "none") if r["flags"] is not None else ""
         releases.append(f"release {r['index']} of {r['of']}: {Q.inertia(r['value'], unit)} — {r['status']}"
                         + (f"; {flags}" if flags else ""))

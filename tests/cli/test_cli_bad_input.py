@@ -139,17 +139,22 @@ def test_a_reader_that_goes_away_is_no_traceback(store_dir):
 
 
 def test_results_list_and_show_J_object(tmp_path, capsys):
+    from measurement import Pendulum, Rig, identify, simulate_trace
+
+    rig = Rig(kind="torsion", stiffness=0.3651, tare_inertia=4.5043e-3, declared=("viscous",))
+    r = identify(simulate_trace(Pendulum(rig, 0.0125, {"viscous": {"c": 1.5e-4}}), theta0=0.25, duration=5,
+                                rate=100, noise_std=1e-4, seed=3), rig)
+    assert r.J_object is not None
     d = tmp_path / "s"
     with Store(d) as s:
         s.record(status="ok", trigger="button", device_id="rig", software_version="t", started_at=1e9,
-                 finished_at=1e9 + 1, result={"J": 0.0125, "flags": []},
-                 build_payload=lambda u, q: {"uuid": u, "seq": q, "J": 0.0125, "J_object": 0.0079957,
-                                             "J_object_std": 1e-6, "timestamp": 1e9})
+                 finished_at=1e9 + 1, result=r.to_dict(),
+                 build_payload=lambda u, q: {"uuid": u, "seq": q, "timestamp": 1e9, **r.to_dict()})
     assert main(["results", "--state-dir", str(d)]) == 0
     out = capsys.readouterr().out
-    assert "J_object" in out.splitlines()[0] and "0.0079957" in out
+    assert "J_object" in out.splitlines()[0] and f"{r.J_object:.7g}" in out
     assert main(["results", "1", "--state-dir", str(d)]) == 0
-    assert "J_object      = 0.0079957" in capsys.readouterr().out
+    assert f"J_object      = {r.J_object:.7g} ± {r.J_object_std:.2g}" in capsys.readouterr().out
 
 
 def test_the_license_is_an_spdx_expression():

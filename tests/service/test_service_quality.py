@@ -1,9 +1,10 @@
 """What the pages and the report say, as pure functions: display units, the tolerance band, the part view of
-a payload (never None or nan in words), the uncertainty budget in any of its shapes, the shift, the
+a payload and its typed result (never None or nan in words), the uncertainty budget's rows, the shift, the
 control chart's geometry (violations marked, labels apart), a result plot's axes (what the sensor read)."""
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import math
 
@@ -11,7 +12,19 @@ import pytest
 
 from measurement.spc import individuals
 from measurement.units import INERTIA_UNITS, UnitError, from_si, inertia_unit
+from service.publish.payload import stored_result
 from service.publish.web import quality as Q
+
+
+@pytest.fixture(scope="module")
+def identified():
+    """A result with its uncertainty budget (the stiffness stated with its σ), as a stored payload carries it."""
+    from measurement import Pendulum, Rig, identify, simulate_trace
+
+    rig = Rig(kind="torsion", stiffness=0.3651, stiffness_std=3.4e-4, declared=("viscous",))
+    trace = simulate_trace(Pendulum(rig, 0.0125, {"viscous": {"c": 1.5e-4}}), theta0=0.25, duration=5, rate=100,
+                           noise_std=1e-4, seed=3)
+    return identify(trace, rig)
 
 
 def test_units_convert_from_si_exactly_and_unknown_ones_are_refused():
@@ -27,7 +40,7 @@ def test_units_convert_from_si_exactly_and_unknown_ones_are_refused():
     assert Q.number(None) == Q.number(math.nan) == Q.number(True) == "–"
 
 
-def test_numbers_are_written_without_exponents_and_a_verdict_says_why():
+def test_numbers_are_written_without_exponents_and_a_verdict_says_why(identified):
     # what pages used to show as 2.3e+02 and 8.42e+03, and sentences with exponents in them
     assert Q.inertia(2.3e-5, "g·cm²", ".2g") == "230 g·cm²" and Q.number(8420.3, ".3g") == "8420"
     assert Q.number(1.5e-7, ".2g") == "0.00000015" and Q.number(-0.25, "+.2g") == "-0.25" and Q.number(2, 3) == "2.000"
@@ -47,10 +60,11 @@ def test_numbers_are_written_without_exponents_and_a_verdict_says_why():
     assert Q.local_time(None) == "–" and "T" not in Q.local_time(1.7e9) and Q.local_time(1.7e9, "%Y") == "2023"
     # a plot's title: the sensor that took the trace (a simulated rig said as such), J in the recipe's unit
     from types import SimpleNamespace
-    m = SimpleNamespace(seq=7, payload={"recipe": {"display_unit": "g·cm²"}, "part_id": "SN-9",
-                                        "acquisition": {"camera": {}}})
-    assert Q.plot_labels(m, False) == ("g·cm²", "measurement #7, part SN-9, camera")
-    assert Q.plot_labels(m, True, "kg·m²")[1] == "measurement #7, part SN-9, simulated rig"
+    m = SimpleNamespace(seq=7, payload={"recipe": {"display_unit": "g·cm²"}, "part_id": "SN-9"})
+    filmed = dataclasses.replace(identified, acquisition={"camera": {}})
+    assert Q.plot_labels(m, filmed, False) == ("g·cm²", "measurement #7, part SN-9, camera")
+    assert Q.plot_labels(m, filmed, True, "kg·m²")[1] == "measurement #7, part SN-9, simulated rig"
+    assert Q.plot_labels(m, None, False)[1] == "measurement #7, part SN-9, sensor"
 
 
 def test_part_view_never_shows_a_release_verdict_as_the_parts():
@@ -83,25 +97,36 @@ def test_tolerance_band_puts_the_guard_band_inside_the_limits_and_the_interval_a
     assert far is not None and 0 <= far["lsl"] < far["usl"] < far["value"] <= far["width"]  # a value far out is still on the drawing
 
 
-@pytest.mark.parametrize("budget", [
-    [{"name": "fit", "u": 1e-6, "share": 0.5}],
-    {"contributions": [{"source": "fit", "std": 1e-6, "share": 0.5}]},
-    {"components": {"fit": {"u": 1e-6, "share": 0.5}}},
-    {"fit": 1e-6},
-    # a result's own: measurand → budget with its lines (measurement.uncertainty)
-    {"J": {"measurand": "J", "unit": "kg·m²", "U": 2e-6, "lines": [
-        {"symbol": "fit", "source": "fit", "std": 3e-6, "unit": "rad/s", "sensitivity": -0.33,
-         "contribution": -1e-6, "share": 0.5}]}, "J_object": {"lines": []}},
-])
-def test_an_uncertainty_budget_is_read_in_any_of_its_shapes(budget):
+def test_the_budget_rows_are_each_lines_contribution_to_the_measurand(identified):
+    stored = stored_result({**identified.to_dict(), "uuid": "u-1", "recipe": None})  # as a payload carries it
+    assert stored is not None
+    budget = stored.uncertainty_budget["J"]
     rows = Q.budget_rows(budget)
-    assert rows[0]["name"] == "fit" and rows[0]["u"] == 1e-6 and rows[0]["unit"] is None
-    assert Q.budget_rows(None) == [] and Q.budget_rows("text") == []
-    # an input's own uncertainty in its own unit is not written as kg·m²; its contribution to J is
-    k = Q.budget_rows([{"source": "stiffness k", "u": 0.0018, "unit": "N·m/rad"}])[0]
-    assert (k["u"], k["unit"]) == (0.0018, "N·m/rad")
-    k = Q.budget_rows([{"source": "stiffness k", "u": 0.0018, "unit": "N·m/rad", "u_J": 6e-5}])[0]
-    assert (k["u"], k["unit"]) == (6e-5, None)
+    assert [r["name"] for r in rows] == [ln.source for ln in budget.lines] and len(rows) >= 2
+    # its contribution to J in kg·m² (c·u carries the sign of its sensitivity: its size is what the row says),
+    # never the input's own u in the input's unit
+    k = next(r for r, ln in zip(rows, budget.lines) if ln.unit == "N·m/rad")
+    line = next(ln for ln in budget.lines if ln.unit == "N·m/rad")
+    assert k["u"] == abs(line.contribution) != line.std and k["share"] == line.share
+    assert sum(r["share"] for r in rows) == pytest.approx(1.0)
+    assert Q.budget_rows(None) == []
+    # the part view of a plain result (no recipe) leads with J ± U and the budget of J
+    v = Q.part_view({"recipe": None, "part": None, "release": None}, stored)
+    assert (v["kind"], v["value"], v["U"], v["k"]) == ("plain", stored.J, stored.J_U, stored.coverage_factor)
+    assert v["budget"] == rows
+    assert Q.part_view({"recipe": None}, None)["budget"] == [], "a row of an older result schema: no budget shown"
+    # a payload of an older result schema (an older release's row) reads as no result, a failed one too
+    assert stored_result({**identified.to_dict(), "schema": 3}) is None and stored_result(None) is None
+
+
+def test_a_row_the_previous_release_stored_reads_as_a_result_of_this_schema(identified):
+    from measurement.result import SCHEMA_VERSION
+    from service.publish.payload import _NEXT_SCHEMA
+
+    assert max(_NEXT_SCHEMA) == SCHEMA_VERSION - 1, "a new result schema says how its previous one reads"
+    previous = {k: v for k, v in identified.to_dict().items() if k not in _NEXT_SCHEMA[SCHEMA_VERSION - 1]}
+    read = stored_result({**previous, "schema": SCHEMA_VERSION - 1, "uuid": "u-1"})
+    assert read is not None and read.to_json() == identified.to_json()
 
 
 def test_shift_start_is_the_latest_start_at_or_before_now():
@@ -167,12 +192,13 @@ def test_an_xbar_r_chart_draws_each_subgroup_and_its_range_in_the_display_unit()
     assert [t.split(" g·cm²")[0] for t in chart["off_chart"]] == ["USL 126000.0", "LSL 124000.0"]
 
 
-def test_a_long_report_goes_on_to_more_pages_and_leaves_nothing_out():
+def test_a_long_report_goes_on_to_more_pages_and_leaves_nothing_out(identified):
     import io
     from types import SimpleNamespace
 
     from pypdf import PdfReader
 
+    from measurement.uncertainty import Line
     from service.publish.report import report_pdf
 
     n = 20
@@ -180,8 +206,11 @@ def test_a_long_report_goes_on_to_more_pages_and_leaves_nothing_out():
               "rule": "guard_band", "uncertain": "NOK", "coverage_factor": 2.0}
     part = {"verdict": "OK", "value": 0.0125, "U": 1e-6, "releases": n, "used": list(range(n)), "quantity": "J",
             "values": [0.0125 + i * 1e-8 for i in range(n)], "excluded": [], "reasons": []}
-    payload = {"recipe": recipe, "part": part, "verdict": "OK", "part_id": "SN-9",
-               "uncertainty_budget": [{"name": f"source {i}", "u": 1e-7, "share": 0.05} for i in range(n)]}
+    lines = tuple(Line(f"x{i}", f"source {i}", 1.0, 1e-7, "kg·m²", 1.0, 1e-7, 0.05, "random", math.inf, True, "")
+                  for i in range(n))
+    budget = dataclasses.replace(identified.uncertainty_budget["J"], lines=lines)
+    result = dataclasses.replace(identified, uncertainty_budget={"J": budget})
+    payload = {**result.to_dict(), "recipe": recipe, "part": part, "verdict": "OK", "part_id": "SN-9"}
     m = SimpleNamespace(seq=7, uuid="u-7", payload=payload, finished_at=1.7e9, trigger="web:olga",
                         device_id="rig", software_version="9", flags=())
     pages = [p.extract_text() for p in PdfReader(io.BytesIO(report_pdf(m, None, time_format="%d.%m.%Y"))).pages]
@@ -196,7 +225,7 @@ def test_a_long_report_goes_on_to_more_pages_and_leaves_nothing_out():
     assert "e-0" not in text and "e+0" not in text  # numbers without exponents
 
 
-def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_result_has_one():
+def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_result_has_one(identified):
     import jinja2
 
     from service.publish.web.views import HERE
@@ -204,24 +233,31 @@ def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_re
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")), autoescape=True)
     env.filters.update(fmt=Q.number, inertia=Q.inertia, iso=Q.iso, name=lambda v: v, plain=Q.plain_text)
     env.globals.update(VERDICT_WORDS=Q.VERDICT_WORDS)
-    budget = {"J": {"value": 0.0125, "U": 1.2e-7, "u": 6e-8, "coverage_factor": 2.0, "correlations": [],
-                    "lines": [{"source": "fit", "value": 5.4, "std": 2e-5, "unit": "rad/s", "sensitivity": -0.0046,
-                               "contribution": -9e-8, "share": 0.6, "note": ""}]}}
-    plain = {"J": 0.0125, "J_std": 5e-8, "J_U": 1.2e-7, "coverage_factor": 2.0, "uncertainty_budget": budget}
-    html = env.get_template("_verdict.html").render(v=Q.part_view(plain), p=plain, unit="g·cm²", band=None,
+    from measurement.uncertainty import Budget
+
+    budget = Budget.from_dict({
+        "measurand": "J", "value": 0.0125, "unit": "kg·m²", "U": 1.2e-7, "u": 6e-8, "u_random": 6e-8,
+        "u_systematic": 0.0, "dof": None, "coverage_factor": 2.0, "correlations": [], "correlation_share": 0.0,
+        "lines": [{"symbol": "omega_n", "source": "fit", "value": 5.4, "std": 2e-5, "unit": "rad/s",
+                   "sensitivity": -0.0046, "contribution": -9e-8, "share": 0.6, "kind": "random", "dof": None,
+                   "stated": True, "note": ""}]})
+    plain = dataclasses.replace(identified, J=0.0125, J_std=5e-8, uncertainty_budget={"J": budget})
+    p = {"recipe": None, "part": None, "release": None, "part_id": None}  # the payload's envelope
+    html = env.get_template("_verdict.html").render(v=Q.part_view(p, plain), p=p, unit="g·cm²", band=None,
                                                     places=Q.places(None, "g·cm²", 1.2e-7))
     assert "± 1.2 g·cm² (U, k = 2)" in html and "None" not in html
-    html = env.get_template("_budget.html").render(p=plain, unit="g·cm²")
+    html = env.get_template("_budget.html").render(r=plain, unit="g·cm²")
     assert 'class="scroll"><table class="budget-table">' in html and "fit" in html  # scrolls in its card
     # in the page's unit, not kg·m² on a g·cm² page; the share second, where a phone still shows it
     assert "J = 125000 g·cm², U = 1.2 g·cm²" in html and "contribution [g·cm²]" in html and "kg·m²" not in html
     assert html.index("share of u²") < html.index("contribution")
-    before = {"J": 0.0125, "J_std": 5e-8}  # a result without U or budget: its 1σ, said to be one
-    html = env.get_template("_verdict.html").render(v=Q.part_view(before), p=before, unit="kg·m²", band=None,
+    before = dataclasses.replace(plain, uncertainty_budget={})  # a result without U or budget: its 1σ, said to be one
+    html = env.get_template("_verdict.html").render(v=Q.part_view(p, before), p=p, unit="kg·m²", band=None,
                                                     places=Q.places(None, "kg·m²", 5e-8))
     # the value with the decimals of its uncertainty, never in e-notation
     assert "J = 0.012500000 kg·m² <span>± 0.000000050 kg·m² (standard uncertainty, 1σ)" in html
-    assert env.get_template("_budget.html").render(p=before, unit="kg·m²").strip() == ""
+    assert env.get_template("_budget.html").render(r=before, unit="kg·m²").strip() == ""
+    assert env.get_template("_budget.html").render(r=None, unit="kg·m²").strip() == ""
 
 
 def test_each_of_the_six_orientations_of_a_tensor_set_is_drawn_differently_along_its_axis():

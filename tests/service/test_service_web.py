@@ -112,6 +112,15 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
     # the uncertainty budget: a table per measurand, each line's share as a bar
     budget = page.decode().split('id="uncertainty-budget"')[1]
     assert "stiffness k (calibration)" in budget and "<meter" in budget and "U = " in budget
+    # the model before and after, and the noise floor: the stored result's fields
+    from service.publish.payload import stored_result
+    from service.publish.web.quality import number
+
+    r = stored_result(m.payload)
+    assert r is not None
+    model = page.decode().split('class="model"')[1].split("</table>")[0]
+    assert number(r.baseline.omega_n, ".7g") in model and number(r.statistics["bic"], ".1f") in model
+    assert f"noise floor {number(r.noise_floor, '.3g')} rad" in page.decode()
     status, _, csv_text = c.request(f"/results/{m.uuid}/trace.csv")
     assert status == 200 and b"t,angle" in csv_text
     status, doc = c.json(f"/results/{m.uuid[:8]}/result.json")

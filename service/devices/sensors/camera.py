@@ -7,10 +7,13 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from drivers.errors import DriverConfigError
+from measurement.errors import InvalidInput
+from service.config.schema import SensorFail, SensorTable, doc
 from service.errors import ConfigError, StartupError
 
 from .port import SensorKind
@@ -23,12 +26,50 @@ if TYPE_CHECKING:  # pragma: no cover
 log = logging.getLogger("moi.hardware")
 
 
+@dataclass(frozen=True)
+class CameraSettings:
+    """``[hardware.camera]``: the V4L2 device, the camera file (path and parsed content), the lost-marker limit."""
+
+    device: str | int
+    file: str
+    max_lost_time: float = 0.5
+    config: Any = None  # measurement.vision.CameraConfig (imported lazily: it loads OpenCV)
+
+
+def read_camera_file(path: str | None, key: str, fail: SensorFail) -> Any:
+    """The camera file at ``path`` (None: the demo camera) as a ``CameraConfig``; a missing or malformed file is
+    a one-line error naming the configuration file, the key and the camera file."""
+    from service.config.camera import read_camera
+    from service.devices.defaults import demo_camera
+
+    if path is None:
+        return demo_camera()
+    try:
+        return read_camera(path)
+    except InvalidInput as exc:  # InputFileError (not found, not TOML) or VisionError (naming the file)
+        raise fail(key, str(exc)) from None
+
+
+def _parse(values: dict[str, Any], fail: SensorFail) -> CameraSettings:
+    return CameraSettings(**values, config=read_camera_file(values["file"], "file", fail))
+
+
 class Camera(SensorKind):
     NAME = "camera"
     LABEL = "camera"
     DEFAULT_TIME_SCALE = 1.0  # the mock camera renders its frames in real time
     GROUPS = ("video",)
     DEVICE_CLASSES = ("char-video4linux", "char-media")
+    TABLE = SensorTable(
+        what="a camera", doc="[hardware.camera] device, file, max_lost_time (required with sensor = \"camera\")",
+        needs="device = \"/dev/video0\", file = the camera file", settings=CameraSettings, keys={
+            "device": doc("V4L2 capture device: a path like \"/dev/video0\" (better: a stable /dev/v4l/by-id/... "
+                          "link) or an index", kind="videodevice"),
+            "file": doc("camera file: intrinsics, resolution and fps, marker radius and distance, optional [pose] "
+                        "(docs/vision.md); relative to this file", kind="path"),
+            "max_lost_time": doc("no marker in the frames (lost or corrupt) for this long in a row → FAULT, s "
+                                 "(at least 5 frames)", min=0, min_open=True),
+        }, parse=_parse)
 
     @classmethod
     def build(cls, config: Config, clock: Clock) -> Any:
@@ -41,9 +82,8 @@ class Camera(SensorKind):
         from drivers.camera import open_camera
         from drivers.camera_sensor import CameraAngleSensor
 
-        hw = config.hardware
-        assert hw is not None and hw.camera is not None, "guarded by the config: sensor = camera needs [hardware.camera]"
-        settings = hw.camera
+        settings = cls._settings(config)
+        assert settings is not None, "guarded by the config: sensor = camera needs [hardware.camera]"
         try:
             camera = open_camera(settings.config, settings.device)
         except DriverConfigError as exc:
@@ -60,6 +100,14 @@ class Camera(SensorKind):
         log.info("camera %s: %d×%d px at %g frames/s (camera file %s)", settings.device, cam.width, cam.height,
                  cam.fps, settings.file)
         return sensor
+
+    @classmethod
+    def _settings(cls, config: Config) -> CameraSettings | None:
+        return None if config.hardware is None else config.hardware.sensors.get(cls.NAME)
+
+    @classmethod
+    def simulation_values(cls, values: dict[str, Any], fail: SensorFail) -> None:
+        values["camera_config"] = read_camera_file(values["camera"], "camera", fail)
 
     @classmethod
     def simulate(cls, sim: SimulationSettings, pendulum: SimRig, clock: Clock,
@@ -103,10 +151,10 @@ class Camera(SensorKind):
 
     @classmethod
     def health(cls, config: Config) -> list[tuple[str, bool, str]]:
-        hw = config.hardware
-        if hw is None or hw.camera is None:
+        settings = cls._settings(config)
+        if settings is None:
             return []
-        dev = hw.camera.device
+        dev = settings.device
         path = Path(f"/dev/video{dev}") if isinstance(dev, int) else Path(str(dev))
         return [("camera", path.exists(), f"{path}" + (" present" if path.exists() else " does not exist"))]
 
@@ -114,7 +162,8 @@ class Camera(SensorKind):
     def camera_config(cls, config: Config) -> Any:
         if config.simulated:
             return config.simulation.camera_config
-        return config.hardware.camera.config if config.hardware is not None and config.hardware.camera else None
+        settings = cls._settings(config)
+        return None if settings is None else settings.config
 
 
 SENSOR = Camera

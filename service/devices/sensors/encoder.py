@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from drivers.errors import DriverConfigError
+from service.config.schema import SensorFail, SensorTable
 from service.devices.defaults import MAX_ENCODER_TIME_SCALE, SIM_ENCODER_TIME_SCALE
 from service.errors import ConfigError
 
@@ -25,6 +26,17 @@ SIM_ENCODER_TIMEOUT = 0.05
 
 
 
+def _parse(values: dict[str, Any], fail: SensorFail) -> dict[str, Any]:
+    """[hardware.encoder] is the encoder driver's own settings table: the driver checks it; kept as written."""
+    from drivers.encoder import EncoderConfig
+
+    try:
+        EncoderConfig.from_dict(dict(values))
+    except DriverConfigError as exc:
+        raise fail(None, str(exc)) from None
+    return values
+
+
 class Encoder(SensorKind):
     NAME = "encoder"
     LABEL = "encoder"
@@ -34,6 +46,11 @@ class Encoder(SensorKind):
     DEVICE_CLASSES = ("char-ttyUSB", "char-ttyACM", "char-ttyAMA", "char-ttyS")
     TIME_SCALE_REASON = ("the largest the simulated encoder keeps up with: its Modbus link answers some 500–1500 "
                          "reads per wall-clock second, and a capture needs dozens of samples per swing")
+    TABLE = SensorTable(
+        what="the Modbus encoder",
+        doc="[hardware.encoder]: drivers.encoder.EncoderConfig (port, device_id, baudrate, parity, register, "
+            "registers, counts_per_turn, direction, zero, timeout, ...)",
+        needs="port, device id, register, counts per turn", parse=_parse)
 
     @classmethod
     def build(cls, config: Config, clock: Clock) -> Any:
@@ -42,7 +59,7 @@ class Encoder(SensorKind):
         hw = config.hardware
         assert hw is not None
         try:
-            enc = EncoderConfig.from_dict(dict(hw.encoder or {}))
+            enc = EncoderConfig.from_dict(dict(hw.sensors.get(cls.NAME) or {}))
         except DriverConfigError as exc:
             raise ConfigError(f"{config.source}: [hardware.encoder]: {exc}") from None
         return ModbusEncoder(enc, clock)
@@ -77,7 +94,7 @@ class Encoder(SensorKind):
     @classmethod
     def health(cls, config: Config) -> list[tuple[str, bool, str]]:
         hw = config.hardware
-        port = str((hw.encoder or {}).get("port", "")) if hw is not None else ""
+        port = str((hw.sensors.get(cls.NAME) or {}).get("port", "")) if hw is not None else ""
         if not port or "://" in port:
             return []
         present = Path(port).exists()

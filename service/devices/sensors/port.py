@@ -2,14 +2,18 @@
 
 A sensor kind (the Modbus encoder, the camera, the in-process simulated sensor) is one class with ``NAME`` (its
 name in ``[hardware] sensor`` / ``[simulation] sensor``) and the class methods below: the driver built from its
-settings, its simulated twin on the simulated rig, the health lines of `moi check` and, for a camera, the
-camera file its frames are read with. ``service.devices.sensors.registry`` lists them: adding one is one module
-and one line there. The device builder, `moi check` and the web page hold a sensor kind and never name one.
+settings, its settings table ``[hardware.<name>]`` (``service.config.schema.SensorTable``: its keys, their docs and defaults, the
+parse of the table), its simulated twin on the simulated rig, the health lines of `moi check` and, for a camera,
+the camera file its frames are read with. ``service.devices.sensors.registry`` lists them: adding one is one module
+and one line there. The configuration, the device builder, `moi check` and the web page hold a sensor kind and
+never name one.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Callable, ClassVar
+
+from service.config.schema import SensorFail, SensorTable
 
 if TYPE_CHECKING:  # pragma: no cover
     from drivers.clock import Clock
@@ -37,11 +41,18 @@ class SensorKind:
     DEVICE_CLASSES: ClassVar[tuple[str, ...]] = ()
     #: the time_scale of `moi measure --sim` with this sensor when none is given
     DEFAULT_TIME_SCALE: ClassVar[float] = 1.0
+    #: its settings table ``[hardware.<NAME>]`` (None: a sensor without settings)
+    TABLE: ClassVar[SensorTable | None] = None
 
     @classmethod
     def build(cls, config: Config, clock: Clock) -> AngleSensor:
         """The device's sensor from ``config.hardware`` (ConfigError / StartupError saying what is wrong)."""
         raise NotImplementedError
+
+    @classmethod
+    def simulation_values(cls, values: dict[str, Any], fail: SensorFail) -> None:
+        """Completes the checked ``[simulation]`` values in place when it is the simulation's sensor (paths already
+        resolved; the camera reads its camera file here, so a bad one is a configuration error)."""
 
     @classmethod
     def simulate(cls, sim: SimulationSettings, pendulum: SimRig, clock: Clock,

@@ -1,7 +1,8 @@
 """The angle sensors the appliance knows: adding one is one module and one line here.
 
 Each entry names the sensor's configuration name and the module of its ``SENSOR`` class (the port,
-``service.devices.sensors.port``), imported only when it is built, checked or shown.
+``service.devices.sensors.port``), imported when the configuration reads the sensors' settings tables
+(``SensorKind.TABLE``, no driver imported there) and when a sensor is built, checked or shown.
 """
 
 from __future__ import annotations
@@ -23,6 +24,10 @@ class SensorEntry:
     def load(self) -> Any:
         """The sensor kind (``service.devices.sensors.port.SensorKind``)."""
         return importlib.import_module(self.module).SENSOR
+
+    def table(self) -> Any:
+        """Its settings table ``[hardware.<name>]`` (``service.devices.sensors.port.SensorTable``; None: none)."""
+        return self.load().TABLE
 
 
 SENSORS: tuple[SensorEntry, ...] = (

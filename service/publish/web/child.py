@@ -126,6 +126,7 @@ def replot(state_dir: str, uuid: str, default_rig: Mapping[str, Any], options: A
     """The plot of the measurement ``uuid`` (PNG) from its stored trace, identified again with its rig."""
     from measurement import Rig, Trace, identify
     from service.persistence.store import Store
+    from service.publish.payload import stored_result
     from service.publish.plot import render_png
 
     from .quality import plot_labels
@@ -133,7 +134,7 @@ def replot(state_dir: str, uuid: str, default_rig: Mapping[str, Any], options: A
     with Store(state_dir, read_only=True) as store:
         m = store.get(uuid, trace=True)
     rig = Rig.from_dict(m.rig or default_rig)
-    unit, source = plot_labels(m, simulated, default_unit)
+    unit, source = plot_labels(m, stored_result(m.payload), simulated, default_unit)
     return render_png(identify(Trace(m.trace_t, m.trace_angle, source=f"measurement {m.seq}"), rig, options),
                       unit=unit, source=source)
 

@@ -1,8 +1,10 @@
 """What the pages and the report say about a part: its verdict first, the value in the display unit, the
 tolerance band with the guard band and the result's interval, the shift's counters, control charts as SVG.
 
-Pure functions of stored payloads (dicts) and numbers: the views, the report page and the PDF share them.
-Every number is written with its unit; a missing value is written as "–", never as None or nan.
+Pure functions of stored payloads and their typed results (``service.publish.payload.stored_result``: the result's
+fields; the envelope's part keys, recipe, release and part, are plain dicts) and numbers: the views, the report page
+and the PDF share them. Every number is written with its unit; a missing value is written as "–", never as None or
+nan.
 """
 
 from __future__ import annotations
@@ -10,9 +12,13 @@ from __future__ import annotations
 import datetime as dt
 import math
 import re
-from typing import Any, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 from measurement.units import SI, UnitError, from_si, inertia_unit
+
+if TYPE_CHECKING:  # pragma: no cover
+    from measurement.result import IdentificationResult
+    from measurement.uncertainty import Budget
 
 #: what the page says for a value it does not have
 MISSING = "–"
@@ -143,22 +149,24 @@ def display_unit(payload: Mapping[str, Any] | None, default: str = SI) -> str:
         return SI
 
 
-def plot_labels(stored: Any, simulated: bool, default_unit: str = SI) -> tuple[str, str | None]:
-    """(unit, title source) of a result's plot: its recipe's display unit, and "measurement #N" with the sensor
-    that took it (the simulated rig said as such, whatever sensor it imitates)."""
+def plot_labels(stored: Any, result: IdentificationResult | None, simulated: bool,
+                default_unit: str = SI) -> tuple[str, str | None]:
+    """(unit, title source) of a result's plot (``stored``: its stored measurement, ``result``: its typed result):
+    its recipe's display unit, and "measurement #N" with the sensor that took it (the simulated rig said as such,
+    whatever sensor it imitates)."""
     payload = getattr(stored, "payload", None) or {}
     unit = display_unit(payload, default_unit)
     seq = getattr(stored, "seq", None)
-    acquisition = payload.get("acquisition") or {}
+    acquisition = result.acquisition if result is not None else {}
     sensor = "simulated rig" if simulated else next((k for k in ("camera", "encoder") if k in acquisition),
-                                                    payload.get("source") or "sensor")
+                                                    (result.source if result is not None else None) or "sensor")
     part = payload.get("part_id")
     head = f"measurement #{seq}" if seq is not None else "measurement"
     return unit, f"{head}{f', part {part}' if part else ''}, {sensor}"
 
 
-def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
-    """What the result page leads with, from a stored payload.
+def part_view(payload: Mapping[str, Any] | None, result: IdentificationResult | None = None) -> dict[str, Any]:
+    """What the result page leads with, from a stored payload (its envelope) and its typed result.
 
     kind: "part" (the part is complete: its verdict), "release" (a release of a part in progress: no part
     verdict yet), "plain" (no recipe: a value without a verdict). value, U (kg·m²), k: the number the
@@ -168,11 +176,10 @@ def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
     recipe = p.get("recipe") or None
     part = p.get("part") or None
     release = p.get("release") or None
+    quantity = (part or release or {}).get("quantity") or (recipe or {}).get("quantity") or "J"
     out: dict[str, Any] = {"recipe": recipe, "part": part, "release": release, "excluded": [], "reasons": [],
-                           "budget": budget_rows(p.get("uncertainty_budget"),
-                                                 ((part or release or {}).get("quantity") or (recipe or {}).get("quantity")
-                                                  or "J"))}
-    k = (recipe or {}).get("coverage_factor") or p.get("coverage_factor")
+                           "budget": budget_rows(result.uncertainty_budget.get(quantity) if result is not None else None)}
+    k = (recipe or {}).get("coverage_factor") or (result.coverage_factor if result is not None else None)
     if part is not None:
         out.update(kind="part", verdict=part.get("verdict"), value=part.get("value"), U=part.get("U"), k=k,
                    quantity=part.get("quantity") or (recipe or {}).get("quantity"),
@@ -186,17 +193,18 @@ def part_view(payload: Mapping[str, Any] | None) -> dict[str, Any]:
         out.update(kind="release", verdict=None, value=release.get("value"), U=release.get("U"), k=k,
                    quantity=release.get("quantity"), index=release.get("index"), of=release.get("of"))
     else:
-        U = p.get("J_U")
-        out.update(kind="plain", verdict=None, value=p.get("J"), U=U, k=p.get("coverage_factor") if U else None,
-                   quantity="J", std=p.get("J_std"))
+        U = result.J_U if result is not None else None
+        out.update(kind="plain", verdict=None, value=result.J if result is not None else None, U=U,
+                   k=k if U else None, quantity="J", std=result.J_std if result is not None else None)
     out["verdict_words"] = VERDICT_WORDS.get(out.get("verdict") or "", "")
     return out
 
 
-def release_rows(view: Mapping[str, Any], payload: Mapping[str, Any] | None,
+def release_rows(view: Mapping[str, Any], payload: Mapping[str, Any] | None, result: IdentificationResult | None,
                  lookup: Callable[[str], Any] | None = None) -> list[dict[str, Any]]:
     """Each release of the part (index, of, value kg·m², status, flags, seq, uuid): every release of a complete
-    part (``lookup(uuid)``: its stored measurement, for its flags), else the one release of the payload."""
+    part (``lookup(uuid)``: its stored measurement, for its flags), else the one release of the payload (its
+    typed ``result``: J and flags)."""
     p = payload or {}
     part = view.get("part")
     if part:
@@ -211,46 +219,20 @@ def release_rows(view: Mapping[str, Any], payload: Mapping[str, Any] | None,
                         "seq": m.seq if m is not None else None, "uuid": ids[i - 1] if i <= len(ids) else None})
         return out
     rel = p.get("release") or {}
-    return [{"index": rel.get("index", 1), "of": rel.get("of", 1), "value": p.get("J") if not rel else rel.get("value"),
+    value = rel.get("value") if rel else (result.J if result is not None else None)
+    return [{"index": rel.get("index", 1), "of": rel.get("of", 1), "value": value,
              "status": f"check {rel['verdict']}; the part's verdict is on its last release" if rel.get("verdict")
              else "no recipe",
-             "flags": list(p.get("flags") or ()), "seq": p.get("seq"), "uuid": p.get("uuid")}]
+             "flags": list(result.flags) if result is not None else [], "seq": p.get("seq"), "uuid": p.get("uuid")}]
 
 
-def budget_rows(budget: Any, quantity: str = "J") -> list[dict[str, Any]]:
-    """The rows of a result's uncertainty budget (source, contribution to the measurand's standard
-    uncertainty kg·m², share of u_c²): from the result's measurand → budget mapping (each with its ``lines``,
-    ``measurement.uncertainty``), the budget of ``quantity``; also from a list of rows or a mapping that holds
-    one or maps each source to its u; [] when the result carries none."""
-    if not budget:
+def budget_rows(budget: Budget | None) -> list[dict[str, Any]]:
+    """The rows of a measurand's uncertainty budget (``measurement.uncertainty.Budget``): each line's source, its
+    contribution to the measurand's standard uncertainty (kg·m², its size: c·u carries the sign of the
+    sensitivity) and its share of u_c²; [] without a budget."""
+    if budget is None:
         return []
-    if isinstance(budget, Mapping) and isinstance(budget.get(quantity), Mapping):
-        budget = budget[quantity]
-    rows: Any = budget
-    if isinstance(budget, Mapping) and isinstance(budget.get("lines"), (list, tuple)):
-        rows = budget["lines"]
-    elif isinstance(budget, Mapping):
-        rows = next((budget[k] for k in ("contributions", "rows", "components", "sources") if k in budget), None)
-        if rows is None:
-            rows = [{"name": k, "u": v} for k, v in budget.items() if isinstance(v, (int, float))]
-        elif isinstance(rows, Mapping):
-            rows = [{"name": k, **(v if isinstance(v, Mapping) else {"u": v})} for k, v in rows.items()]
-    out = []
-    for r in rows if isinstance(rows, (list, tuple)) else ():
-        if not isinstance(r, Mapping):
-            continue
-        # the row's contribution to the measurand's uncertainty first (kg·m²); an input's own u only without one,
-        # written in the row's unit when it names one
-        contribution = next((r[k] for k in ("u_J", "u_y", "contribution", "u_i", "u_contribution") if k in r), None)
-        u = contribution if contribution is not None else next(
-            (r[k] for k in ("u", "std", "standard_uncertainty") if k in r), None)
-        unit = r.get("unit") if contribution is None and r.get("unit") not in (None, SI) else None
-        share = next((r[k] for k in ("share", "fraction", "percent_of_variance") if k in r), None)
-        if isinstance(u, (int, float)) and not isinstance(u, bool):
-            u = abs(u)  # a contribution c·u carries the sign of its sensitivity; its size is what the row says
-        out.append({"name": str(next((r[k] for k in ("name", "source", "quantity") if k in r), "")),
-                    "u": u, "unit": unit, "share": share})
-    return out
+    return [{"name": ln.source, "u": abs(ln.contribution), "share": ln.share} for ln in budget.lines]
 
 
 def band(recipe: Mapping[str, Any] | None, value: float | None, U: float | None, unit: str = SI,

@@ -205,7 +205,8 @@ class WebServer(Publisher):
             from service.publish.plot import render_png
 
             from .quality import plot_labels
-            unit, source = plot_labels(stored, self.appliance.config.simulated, self.settings.display_unit)
+            unit, source = plot_labels(stored, m.result, self.appliance.config.simulated,
+                                       self.settings.display_unit)
             return self.child.call(render_png, m.result, unit, source)
 
         self.submit_plot(m.id, draw)

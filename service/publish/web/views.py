@@ -37,6 +37,7 @@ from service.parts.recipes import (
     recipe_values,
 )
 from service.publish.dfq import ENCODING
+from service.publish.payload import stored_result
 from service.states import vocabulary
 
 from . import quality as Q
@@ -310,7 +311,7 @@ class Views:
             until = dt.date.fromisoformat(calibration["valid_until"])
             calibration = {**calibration, "days_left": (until - dt.datetime.now(dt.UTC).date()).days}
         tile = parts[0] if parts else None
-        tile_view = self.decimals(Q.part_view(tile.payload)) if tile else None
+        tile_view = self.decimals(Q.part_view(tile.payload, stored_result(tile.payload))) if tile else None
         tile_unit = self.unit(tile.payload if tile else None)
         part_id = live.get("part_id")
         recipe = live.get("recipe") or {}
@@ -333,7 +334,8 @@ class Views:
                 "repeat": bool(tile is not None and part_id and part_id == tile.part_id and mode == "verdict"),
                 "shift": shift.strftime("%H:%M"), "strip": parts, "open_part": open_part, "left": left,
                 "next_release": live.get("release_next"), "blocked": self.blocked(calibration),
-                "calibration": calibration, "last": last, "last_view": Q.part_view(last.payload) if last else None,
+                "calibration": calibration, "last": last,
+                "last_view": Q.part_view(last.payload, stored_result(last.payload)) if last else None,
                 "last_unit": self.unit(last.payload if last else None)}
 
     def blocked(self, calibration: Mapping[str, Any] | None) -> dict[str, str] | None:
@@ -602,22 +604,26 @@ class Views:
 
     async def result(self, request: web.Request) -> web.Response:
         m = self._get(request.match_info["key"])
-        p = m.payload or {}
-        steps = [s for s in p.get("steps") or () if s.get("chosen")]
+        ctx = self._result_context(m)
+        r = ctx["r"]
+        steps = [s for s in r.steps if s.chosen] if r is not None else []
         return self._page(request, "result.html", title=f"Result {m.seq}", steps=steps,
-                          flags=flag_words(m.flags), baseline=p.get("baseline") or {},
-                          has_trace=self.app.config.store_trace, **self._result_context(m))
+                          flags=flag_words(m.flags), baseline=r.baseline if r is not None else None,
+                          has_trace=self.app.config.store_trace, **ctx)
 
     def _result_context(self, m: "Measurement") -> dict[str, Any]:
+        """What the result and report pages share: the stored measurement ``m``, its payload ``p`` (the envelope's
+        part keys) and its result ``r``, typed (None: a failed measurement, or a row of an older result schema)."""
         p = m.payload or {}
+        r = stored_result(p)
         unit = self.unit(p)
-        view = self.decimals(Q.part_view(p))
+        view = self.decimals(Q.part_view(p, r))
         if view["kind"] == "release" and m.part_uuid and self.app.store is not None:
             # an earlier release of a part that has been judged since: where its verdict is
             later = self.app.store.list(limit=50, part_id=m.part_id, recipe=m.recipe, parts_only=True)
             done = next((r for r in later if r.part_uuid == m.part_uuid), None)
             view["part_done"] = {"uuid": done.uuid, "seq": done.seq, "verdict": done.part_verdict} if done else None
-        return {"m": m, "p": p, "unit": unit, "v": view, "band": Q.band(view["recipe"], view.get("value"),
+        return {"m": m, "p": p, "r": r, "unit": unit, "v": view, "band": Q.band(view["recipe"], view.get("value"),
                                                                            view.get("U"), unit),
                 "places": Q.places(view["recipe"], unit, view.get("U") or view.get("std")),
                 "why": Q.judgement(view, unit) if view["kind"] == "part" else None}
@@ -637,7 +643,7 @@ class Views:
         """The quality record of one result: a page that prints on A4 (the PDF has the same content)."""
         m = self._get(request.match_info["key"])
         ctx = self._result_context(m)
-        releases = Q.release_rows(ctx["v"], m.payload, self._store().get)
+        releases = Q.release_rows(ctx["v"], m.payload, ctx["r"], self._store().get)
         seen = sorted({f for r in releases for f in r["flags"] or ()} | set(m.flags))
         return self._page(request, "report.html", title=f"Report {m.seq}", releases=releases,
                           flags=flag_words(seen), **ctx)
@@ -647,7 +653,7 @@ class Views:
         fut = self.server.plot_future(m.uuid)
         if fut is not None:  # the evidence plot is being drawn: the report has it
             await asyncio.wrap_future(fut)
-        decimals = self.decimals(Q.part_view(m.payload))["recipe"] or {}
+        decimals = self.decimals(Q.part_view(m.payload))["recipe"] or {}  # the recipe's: no result read
         body = await self._in_child(report_file, str(self.app.config.state_dir), m.uuid,
                                     self.server.settings.display_unit, self.server.settings.time_format,
                                     decimals.get("display_decimals"))
