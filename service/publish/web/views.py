@@ -332,25 +332,23 @@ class Views:
                 "mode": mode, "part_id": part_id, "recipe": live.get("recipe"),
                 "repeat": bool(tile is not None and part_id and part_id == tile.part_id and mode == "verdict"),
                 "shift": shift.strftime("%H:%M"), "strip": parts, "open_part": open_part, "left": left,
-                "next_release": live.get("release_next"), "blocked": self.blocked(calibration),
+                "next_release": live.get("release_next"), "blocked": self.blocked(),
                 "calibration": calibration, "last": last, "last_view": Q.part_view(last.payload) if last else None,
                 "last_unit": self.unit(last.payload if last else None)}
 
-    def blocked(self, calibration: Mapping[str, Any] | None) -> dict[str, str] | None:
+    def blocked(self) -> dict[str, str] | None:
         """Why the page refuses Measure, what to do and whom to call (a due calibration or a failed check
-        standard: every part would be INVALID, and measuring again cannot change that); None when it may."""
-        if not calibration or not calibration.get("due"):
+        standard: every part would be INVALID, and measuring again cannot change that); None when it may. The
+        rule is the daemon's, every door's (``measure_block``); the words are the page's, with its local time."""
+        block = self.app.measure_block()
+        if block is None:
             return None
-        recipe = getattr(getattr(self.app, "parts", None), "recipe", None)
-        if recipe is not None and recipe.check_standard is not None:
-            return None  # the check standard is what clears a failed one: it is always measured
+        calibration = block["calibration"]
         contact = self.server.settings.contact
         check = calibration.get("check_standard") or {}
-        until = calibration.get("valid_until")
-        expired = isinstance(until, str) and dt.date.fromisoformat(until) < dt.datetime.now(dt.UTC).date()
         what, do = [], []
-        if expired or not check or check.get("passed"):
-            what.append(f"The rig's calibration expired on {until or '–'}.")
+        if block["expired"]:
+            what.append(f"The rig's calibration expired on {calibration.get('valid_until') or '–'}.")
             do.append("calibrate the rig")
         if check and not check.get("passed"):
             what.append(f"The check standard {check.get('name') or ''} failed (E_n = "
@@ -504,7 +502,7 @@ class Views:
         source = await self._authorise(request, form, "acknowledge" if name == V.ABORT and state == "FAULT" else name)
         seq = self.app.sequencer
         if name == V.TRIGGER:
-            blocked = self.blocked(self.app.calibration_state())
+            blocked = self.blocked()  # said at once; the daemon refuses it too, as at every door
             if blocked is not None:
                 raise Refused(409, f"{blocked['what']} {blocked['do']}")
         if name == V.TRIGGER and seq is not None and seq.busy:
@@ -863,7 +861,7 @@ class Views:
         checks, check_chart = self._checks({}, unit)
         return self._page(request, "calibration.html", title="Calibration", rows=rows, unit=unit,
                           checks=checks[-20:][::-1], check_chart=check_chart, state=self.app.calibration_state(),
-                          blocked=self.blocked(self.app.calibration_state()))
+                          blocked=self.blocked())
 
     # --- recipes and calibration ---------------------------------------------------------------------------
     async def recipes(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
