@@ -37,6 +37,7 @@ from service.parts.recipes import (
     recipe_values,
 )
 from service.publish.dfq import ENCODING
+from service.sources.calibrations import read_history, recorded_at
 from service.states import vocabulary
 
 from . import quality as Q
@@ -840,28 +841,50 @@ class Views:
         return checks, check_chart
 
     async def calibration(self, request: web.Request) -> web.Response:
-        """Each rig's calibration (date, due date, stiffness, the references it rests on) and the check
-        standard's history with its control chart."""
-        cfg = self.app.config
-        book = getattr(self.app, "parts", None)
-        rigs: list[tuple[str, Any, list[str]]] = [("the set-up's rig", cfg.rig, [])]
-        for r in book.book.recipes if book is not None else ():
-            if r.rig is not None:
-                rigs.append((Path(r.rig_path).name if r.rig_path else r.name, r.rig, [r.name]))
+        """Each rig's calibration (date, due date, stiffness, the references it rests on), its history (every
+        `moi calibrate`, newest first: ``service.sources.calibrations``) and the check standard's history with its
+        control chart."""
         today = dt.datetime.now(dt.UTC).date()
         rows = []
-        for name, rig, used_by in rigs:
+        for name, rig, used_by, path in self._rigs():
             cal = rig.calibration
             until = cal.valid_until if cal is not None else None
             rows.append({"name": name, "used_by": used_by, "cal": cal, "until": until,
                          "days_left": (until - today).days if until is not None else None,
                          "due": cal is not None and cal.due(today), "stiffness": rig.stiffness,
-                         "stiffness_std": rig.stiffness_std})
+                         "stiffness_std": rig.stiffness_std, **self._history(path)})
         unit = self.server.settings.display_unit
         checks, check_chart = self._checks({}, unit)
         return self._page(request, "calibration.html", title="Calibration", rows=rows, unit=unit,
                           checks=checks[-20:][::-1], check_chart=check_chart, state=self.app.calibration_state(),
                           blocked=self.blocked())
+
+    def _rigs(self) -> list[tuple[str, Any, list[str], str | None]]:
+        """The set-up's rig and each recipe's own, once per rig file: (name, rig, recipes using it, its file)."""
+        cfg = self.app.config
+        book = getattr(self.app, "parts", None)
+        rigs: list[tuple[str, Any, list[str], str | None]] = [("the set-up's rig", cfg.rig, [], cfg.rig_path)]
+        seen = {Path(cfg.rig_path).resolve(): rigs[0]} if cfg.rig_path else {}
+        for r in book.book.recipes if book is not None else ():
+            if r.rig is None:
+                continue
+            key = Path(r.rig_path).resolve() if r.rig_path else None
+            if key is not None and key in seen:
+                seen[key][2].append(r.name)  # one rig file, several part types: one section
+                continue
+            rigs.append((Path(r.rig_path).name if r.rig_path else r.name, r.rig, [r.name], r.rig_path))
+            if key is not None:
+                seen[key] = rigs[-1]
+        return rigs
+
+    def _history(self, rig_path: str | None) -> dict[str, Any]:
+        """A rig file's calibration history as the page shows it: newest first, each line's time of writing in the
+        page's local time, the damaged lines said."""
+        if rig_path is None:
+            return {"history": None, "history_file": None, "history_damaged": []}
+        h = read_history(rig_path)
+        return {"history": [e | {"recorded": self.when(recorded_at(e))} for e in h.newest_first],
+                "history_file": h.path.name, "history_damaged": h.damaged}
 
     # --- recipes and calibration ---------------------------------------------------------------------------
     async def recipes(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
