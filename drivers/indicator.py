@@ -3,8 +3,10 @@
 ``show(state)`` maps the sequencer's state names to a pattern, so the
 operator sees (or hears) ready / busy / fault without a screen:
 
-    LED:    IDLE steady on (ready) · busy slow blink · FAULT fast blink
-    buzzer: one short beep on PUBLISHING (result ready) · three long beeps on FAULT · silent while busy
+    LED:    IDLE steady on (ready) · busy slow blink · FAULT fast blink ·
+            BLOCKED a short flash every 2 s (IDLE, but the calibration refuses Measure)
+    buzzer: one short beep on PUBLISHING (result ready) · three long beeps on FAULT · silent while busy ·
+            two long beeps on BLOCKED (shown again at each refused press)
 """
 
 from __future__ import annotations
@@ -55,6 +57,8 @@ class Indicator(GpioDevice):
                     d.blink(on_time=0.5, off_time=0.5)
                 elif state == "FAULT":
                     d.blink(on_time=0.1, off_time=0.1)
+                elif state == "BLOCKED":
+                    d.blink(on_time=0.1, off_time=1.9)
                 else:
                     d.off()
             else:
@@ -62,6 +66,8 @@ class Indicator(GpioDevice):
                     d.blink(on_time=0.1, off_time=0.1, n=1)
                 elif state == "FAULT":
                     d.blink(on_time=0.4, off_time=0.2, n=3)
+                elif state == "BLOCKED":
+                    d.blink(on_time=0.6, off_time=0.3, n=2)
                 elif state in _BUSY:
                     d.off()
                 # IDLE right after PUBLISHING leaves the beep to finish

@@ -74,6 +74,8 @@ class Reference:
     added_inertia: known inertia on the fixture, kg·m² (0 for the empty fixture), and its 1σ
     ``added_inertia_std`` (the certificate; None: not stated).
     omega_n: small-amplitude natural angular frequency, rad/s, and its 1σ (optional).
+    certificate: the identifier of the certificate the known inertia comes from (optional), kept with the
+    calibration as the record of what it rests on.
     """
 
     name: str
@@ -81,6 +83,7 @@ class Reference:
     omega_n: float
     omega_n_std: float | None = None
     added_inertia_std: float | None = None
+    certificate: str | None = None
 
     @classmethod
     def from_damped(cls, name: str, added_inertia: float, omega_m: float, zeta: float,
@@ -130,6 +133,7 @@ class Calibration:
             "basis": self.basis, "birge_ratio": self.birge_ratio, "notes": list(self.notes),
             "references": [
                 {"name": r.name, "added_inertia": r.added_inertia, "added_inertia_std": r.added_inertia_std,
+                 **({"certificate": r.certificate} if r.certificate is not None else {}),
                  "omega_n": r.omega_n, "omega_n_std": r.omega_n_std, "inertia_residual": res}
                 for r, res in zip(self.references, self.residuals)
             ],

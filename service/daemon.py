@@ -52,7 +52,7 @@ from service.persistence.store import Store
 from service.publish import registry
 from service.publish.payload import iso_utc, result_payload
 from service.publish.port import ApplianceView, Publisher
-from service.publish.replies import CommandReply, ReplyTo
+from service.publish.replies import CONTACT, CommandReply, ReplyTo, calibration_words
 
 from . import __version__
 from .contention import CaptureWatch
@@ -132,8 +132,9 @@ class Appliance:
         self._ignored_logged_at = -float("inf")
         self._refused_logged_at = -float("inf")
         self._armed_at: float | None = None  # sequencer clock time of the last ARMED, s (None: not armed)
-        # (monotonic s, recipe, due) of the last look at the rig's calibration (the live status' calibration_due)
-        self._calibration_checked: tuple[float, Recipe | None, bool] = (-float("inf"), None, False)
+        # (monotonic s, recipe, due, refused) of the last look at the rig's calibration (the live status'
+        # calibration_due and measure_refused)
+        self._calibration_checked: tuple[float, Recipe | None, bool, bool] = (-float("inf"), None, False, False)
 
     # --- commands (any thread; never blocks) ----------------------------------------------------
     def command(self, name: str, source: str, data: Mapping[str, Any] | None = None,
@@ -370,11 +371,13 @@ class Appliance:
         assert seq is not None
         unwritable = self._store_unwritable()
         if unwritable is not None:
-            now = time.monotonic()
-            if now - self._refused_logged_at >= IGNORED_LOG_INTERVAL:
-                log.error("trigger from %s refused: %s", source, unwritable)
-                self._refused_logged_at = now
+            self._log_refused(logging.ERROR, source, unwritable)
             return CommandReply(name, "refused", "store_unwritable", unwritable)
+        block = self.measure_block() if seq.state is State.IDLE else None
+        if block is not None:
+            self._log_refused(logging.WARNING, source, block["detail"])
+            self._show_block(True, again=True)
+            return CommandReply(name, "refused", "calibration_due", block["detail"])
         if seq.request_measurement(source):
             self._accepted_source = source
             self._accepted_reply = reply
@@ -415,6 +418,13 @@ class Appliance:
         if now - self._ignored_logged_at >= IGNORED_LOG_INTERVAL:
             log.info("%s; %d command(s) ignored or refused since the last such line", what, self._ignored_triggers)
             self._ignored_logged_at, self._ignored_triggers = now, 0
+
+    def _log_refused(self, level: int, source: str, why: str) -> None:
+        """A refused trigger in the log, at most one line per IGNORED_LOG_INTERVAL (a stuck button repeats it)."""
+        now = time.monotonic()
+        if now - self._refused_logged_at >= IGNORED_LOG_INTERVAL:
+            log.log(level, "trigger from %s refused: %s", source, why)
+            self._refused_logged_at = now
 
     def _store_unwritable(self) -> str | None:
         """Why no measurement may start (its result could not be kept), or None. After a failed write
@@ -724,6 +734,7 @@ class Appliance:
                                                  finished_at=finished)
             except StoreError:
                 log.exception("could not store the check standard of measurement %s", m.id)
+            self._calibration_checked = (-float("inf"), None, False, False)  # it may clear or raise the block
         if tensor_set is not None:
             log.info("tensor set %s: %s", tensor_set.uuid, tensor_set.instruction())
             if tensor_set.done:
@@ -760,6 +771,46 @@ class Appliance:
         if check is not None:
             state["check_standard"] = {k: check.get(k) for k in ("name", "E_n", "passed", "finished_at")}
         return state
+
+    def measure_block(self) -> dict[str, Any] | None:
+        """Why no measurement may start now, for every door (button, Modbus, MQTT, Sparkplug, web), or None.
+
+        The calibration of the rig the active recipe measures with is past its validity period, or the newest
+        check standard since it failed (``calibration_state``): every result would carry calibration_due and be
+        INVALID, and measuring again cannot change that. A check-standard recipe is still measured while only
+        a failed check standard blocks, since its passing is what clears the block; an expired calibration
+        refuses it too (a check cannot renew a calibration: ``moi calibrate`` does). Returns the calibration
+        state, ``expired`` and ``detail``: the words every door says, with whom to call ([web] contact)."""
+        recipe = self.parts.recipe
+        rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
+        now = self.wall_clock()
+        state = self.calibration_state(rig, now)
+        if not state or not state["due"]:
+            return None
+        cal = rig.calibration
+        expired = cal is not None and cal.due(_dt.datetime.fromtimestamp(now, _dt.UTC).date())
+        if not expired and recipe is not None and recipe.check_standard is not None:
+            return None
+        check = state.get("check_standard")
+        failed = check if check is not None and not check.get("passed") else None
+        contact = getattr(self.config.publishers.get("web"), "contact", None) or CONTACT
+        return {"calibration": state, "expired": expired,
+                "detail": calibration_words(state["valid_until"] if expired else None, failed, contact)}
+
+    def _show_block(self, refused: bool, again: bool = False) -> None:
+        """The status lamp or buzzer says the calibration refuses Measure while the appliance is IDLE (it is
+        not ready), and again at each refused trigger (``again``: a buzzer beeps it once more)."""
+        indicator = self.devices.indicator if self.devices is not None else None
+        if indicator is None or self.sequencer is None or self.sequencer.state is not State.IDLE:
+            return
+        shown = getattr(indicator, "shown", None)
+        try:
+            if refused and (again or shown != "BLOCKED"):
+                indicator.show("BLOCKED")
+            elif not refused and shown == "BLOCKED":
+                indicator.show("IDLE")
+        except Exception:  # a status lamp must never stop the appliance
+            log.exception("indicator failed to show the calibration's block")
 
     def _store_failure(self, event: Event) -> None:
         assert self.store is not None and event.measurement_id is not None
@@ -805,29 +856,35 @@ class Appliance:
         for p in self.publishers:
             fields |= p.live_fields()
         fields |= self._set_registers()
+        due, refused = self._calibration_due()
         return LiveStatus(
             state="STOPPING" if self._stopping else state, busy=bool(seq and seq.busy), fault=state == "FAULT",
             simulated=self.config.simulated, started=self._started_runs,
             recipe=self.parts.recipe.number if self.parts.recipe else 0,
             releases_done=(self.parts.open_part or {}).get("done", 0),
-            calibration_due=self._calibration_due(),
+            calibration_due=due, measure_refused=refused,
             store_unwritable=self.store is not None and self.store.write_failure is not None,
             **fields,
         )
 
-    def _calibration_due(self) -> bool:
-        """The active rig's calibration is past its validity period (today, by the wall clock; looked at once
-        per CALIBRATION_CHECK_INTERVAL and at a change of recipe, not at every iteration of the main loop)."""
+    def _calibration_due(self) -> tuple[bool, bool]:
+        """Whether the active rig's calibration is due (past its validity period by the wall clock, or its check
+        standard failed) and whether it refuses a trigger (``measure_block``); looked at once per
+        CALIBRATION_CHECK_INTERVAL, at a change of recipe and after a check standard, not at every iteration."""
         recipe = self.parts.recipe
         now = time.monotonic()
-        checked_at, checked_for, due = self._calibration_checked
+        checked_at, checked_for, due, refused = self._calibration_checked
         if checked_for is recipe and now - checked_at < CALIBRATION_CHECK_INTERVAL:
-            return due
-        rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
-        state = self.calibration_state(rig, self.wall_clock())
-        due = bool(state and state["due"])
-        self._calibration_checked = (now, recipe, due)
-        return due
+            return due, refused
+        refused = self.measure_block() is not None
+        if refused:
+            due = True
+        else:
+            rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
+            state = self.calibration_state(rig, self.wall_clock())
+            due = bool(state and state["due"])
+        self._calibration_checked = (now, recipe, due, refused)
+        return due, refused
 
     def _set_registers(self) -> dict[str, int]:
         p = self.tensor_set.progress() if self.tensor_set is not None else None
@@ -837,8 +894,10 @@ class Appliance:
         return {"set_step": p["step"], "set_steps": p["steps"], "set_orientation": o["index"] if o else 0}
 
     def _refresh_live(self) -> None:
+        live = self.live_status()
+        self._show_block(live.measure_refused)
         if self.publishers:
-            self._to_publishers("on_live", self.live_status())
+            self._to_publishers("on_live", live)
 
     def _status_text(self) -> str:
         seq = self.sequencer

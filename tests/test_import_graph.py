@@ -161,8 +161,9 @@ LAYERS: dict[str, set[str]] = {
                     "parts", "persistence", "publish", "service", "sources", "states"},
     "daemon": {"config", "contention", "core", "devices", "errors", "firmware_host", "measurement", "notify", "parts",
                "persistence", "publish", "service"},
+    # ``service``: the installed version (the calibration history names the software that wrote a line)
     "commands": {"config", "core", "daemon", "devices", "drivers", "errors", "firmware_host", "logs", "measurement",
-                 "parts", "persistence", "publish", "publish.modbus", "publish.web", "sources"},
+                 "parts", "persistence", "publish", "publish.modbus", "publish.web", "service", "sources"},
     "cli": {"errors", "measurement", "service"},
 }
 

@@ -9,6 +9,7 @@ modulation ζ as a monocular-vision torsion pendulum reports them:
     trace = "empty.csv"            # path relative to CAL.toml
     added_inertia = 0.0            # kg·m²
     added_inertia_std = 0.0        # 1σ of the known inertia, kg·m² (its certificate)
+    certificate = "none: nothing added"   # the certificate's identifier (optional, kept with the calibration)
 
     [[reference]]
     name = "two cylinders, L = 50 mm"
@@ -27,29 +28,38 @@ shrink k's σ below what the certificates allow.
 With ``--out`` the rig file gets the calibrated k and I0 with their 1σ and a
 ``[calibration]`` table: the date (``--date``, default today, UTC), the
 validity period (``--valid-days``, default 365), the calibration file and
-every reference used with its known inertia, its uncertainty, the measured
-ω_n ± 1σ and the fit's misfit, and the covariance of k and I0
-(``stiffness_tare_covariance``). Results measured after date + valid_days
-carry the flag ``calibration_due``; k, I0 and their covariance enter every
-J's uncertainty budget (docs/uncertainty.md).
+every reference used with its known inertia, its uncertainty, its
+certificate, the measured ω_n ± 1σ and the fit's misfit, and the covariance
+of k and I0 (``stiffness_tare_covariance``). Results measured after date +
+valid_days carry the flag ``calibration_due`` and the appliance refuses to
+measure parts; k, I0 and their covariance enter every J's uncertainty budget
+(docs/uncertainty.md). Each calibration written is also appended to the
+rig's history beside RIG_OUT.toml, RIG_OUT.calibrations.jsonl (who ran it:
+``--by``, else the login name), which the web page's Calibration lists;
+calibrate in place (``--out`` the file ``--rig`` names) to keep one history
+per rig. The daemon reads the rig file when it starts: restart it after.
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime as dt
+import getpass
 import json
 import math
+import socket
 from dataclasses import replace
 from pathlib import Path
 
 from measurement.calibration import Cylinder, Reference, calibrate_torsion, cylinder_inertia_std
 from measurement.errors import CalibrationError
 from measurement.rig import CalibrationRecord
+from service.errors import InputFileError
+from service.sources import calibrations
 from service.sources.files import read_rig, read_toml, read_trace, write_rig
 
 _REF_KEYS = {"name", "trace", "added_inertia", "added_inertia_std", "cylinders", "omega", "zeta", "omega_n",
-             "omega_n_std"}
+             "omega_n_std", "certificate"}
 _CYL_VALUE_KEYS = {"mass", "diameter", "distance", "own_inertia"}
 _CYL_STD_KEYS = {"mass_std", "diameter_std", "distance_std"}
 _CYL_KEYS = _CYL_VALUE_KEYS | _CYL_STD_KEYS
@@ -66,6 +76,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--date", metavar="YYYY-MM-DD", help="date of the calibration (default: today, UTC)")
     p.add_argument("--valid-days", type=int, default=365, metavar="DAYS",
                    help="validity period of the calibration, days (default 365); later results carry calibration_due")
+    p.add_argument("--by", metavar="NAME",
+                   help="who calibrated, for the rig's calibration history (default: the login name)")
 
 
 def _number(ref_name: str, key: str, value, allow_zero: bool = True) -> float:
@@ -78,6 +90,33 @@ def _std(ref_name: str, key: str, value, unit: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
         raise CalibrationError(f"reference {ref_name!r}: {key} must be a standard uncertainty >= 0 {unit}, got {value!r}")
     return float(value)
+
+
+def _known_inertia(name: str, r: dict) -> tuple[float, float | None]:
+    """A reference's known added inertia and its 1σ (kg·m²; None: not stated), from added_inertia or cylinders."""
+    if ("added_inertia" in r) == ("cylinders" in r):
+        raise CalibrationError(f"reference {name!r}: give exactly one of added_inertia (kg·m²) or cylinders")
+    if "cylinders" in r:
+        cyls = r["cylinders"]
+        if not isinstance(cyls, list) or not all(isinstance(c, dict) and set(c) <= _CYL_KEYS and {"mass", "diameter", "distance"} <= set(c) for c in cyls):
+            raise CalibrationError(f"reference {name!r}: cylinders must be tables with mass (kg), diameter (m), distance (m)")
+        added, var = 0.0, 0.0
+        for c in cyls:
+            cyl = Cylinder(**{k: v for k, v in c.items() if k in _CYL_VALUE_KEYS})
+            added += cyl.inertia
+            stds = {k: _std(name, f"cylinder {k}", v, "(kg or m)") for k, v in c.items() if k in _CYL_STD_KEYS}
+            var += cylinder_inertia_std(cyl, **stds) ** 2
+        # a cylinder's tolerances given: its part of the reference's σ (the rest from added_inertia_std)
+        tol = math.sqrt(var) if any(set(c) & _CYL_STD_KEYS for c in cyls) else None
+    else:
+        added = _number(name, "added_inertia", r["added_inertia"])
+        tol = None
+    u_added = None
+    if "added_inertia_std" in r:
+        u_added = _std(name, "added_inertia_std", r["added_inertia_std"], "kg·m²")
+    if tol is not None:
+        u_added = math.hypot(u_added or 0.0, tol)
+    return added, u_added
 
 
 def load_references(path: str, rig) -> list[Reference]:
@@ -97,28 +136,7 @@ def load_references(path: str, rig) -> list[Reference]:
         unknown = set(r) - _REF_KEYS
         if unknown:
             raise CalibrationError(f"reference {name!r}: unknown key(s) {sorted(unknown)}; expected {sorted(_REF_KEYS)}")
-        if ("added_inertia" in r) == ("cylinders" in r):
-            raise CalibrationError(f"reference {name!r}: give exactly one of added_inertia (kg·m²) or cylinders")
-        if "cylinders" in r:
-            cyls = r["cylinders"]
-            if not isinstance(cyls, list) or not all(isinstance(c, dict) and set(c) <= _CYL_KEYS and {"mass", "diameter", "distance"} <= set(c) for c in cyls):
-                raise CalibrationError(f"reference {name!r}: cylinders must be tables with mass (kg), diameter (m), distance (m)")
-            added, var = 0.0, 0.0
-            for c in cyls:
-                cyl = Cylinder(**{k: v for k, v in c.items() if k in _CYL_VALUE_KEYS})
-                added += cyl.inertia
-                stds = {k: _std(name, f"cylinder {k}", v, "(kg or m)") for k, v in c.items() if k in _CYL_STD_KEYS}
-                var += cylinder_inertia_std(cyl, **stds) ** 2
-            # a cylinder's tolerances given: its part of the reference's σ (the rest from added_inertia_std)
-            tol = math.sqrt(var) if any(set(c) & _CYL_STD_KEYS for c in cyls) else None
-        else:
-            added = _number(name, "added_inertia", r["added_inertia"])
-            tol = None
-        u_added = None
-        if "added_inertia_std" in r:
-            u_added = _std(name, "added_inertia_std", r["added_inertia_std"], "kg·m²")
-        if tol is not None:
-            u_added = math.hypot(u_added or 0.0, tol)
+        added, u_added = _known_inertia(name, r)
         u_omega = _std(name, "omega_n_std", r["omega_n_std"], "rad/s") if "omega_n_std" in r else None
         if "trace" in r:
             trace = read_trace(base / str(r["trace"]))
@@ -134,6 +152,10 @@ def load_references(path: str, rig) -> list[Reference]:
             out.append(Reference(name, added, _number(name, "omega_n", r["omega_n"]), u_omega, u_added))
         else:
             raise CalibrationError(f"reference {name!r}: needs a trace, or omega and zeta, or omega_n")
+        if "certificate" in r:
+            if not isinstance(r["certificate"], str) or not r["certificate"].strip():
+                raise CalibrationError(f"reference {name!r}: certificate must be the certificate's identifier (text)")
+            out[-1] = replace(out[-1], certificate=r["certificate"].strip())
     return out
 
 
@@ -157,6 +179,10 @@ def run(args: argparse.Namespace) -> int:
                       tare_inertia=cal.tare_inertia, tare_inertia_std=cal.tare_inertia_std,
                       stiffness_tare_covariance=cal.covariance, calibration=record)
         write_rig(new, args.out, comment=f"calibrated by moi calibrate from {args.calibration}", keep_from=args.rig)
+        try:
+            history = calibrations.append(args.out, _history_entry(args, cal, record, references))
+        except InputFileError as exc:
+            raise InputFileError(f"rig written to {args.out}, but its calibration is not in the history: {exc}") from None
     if args.json:
         print(json.dumps(cal.to_dict() | {"date": date.isoformat(), "valid_days": args.valid_days,
                                           "valid_until": until.isoformat()}))
@@ -164,5 +190,26 @@ def run(args: argparse.Namespace) -> int:
         print(cal.report())
         print(f"    calibrated on {date.isoformat()}, valid until {until.isoformat()}")
         if args.out:
-            print(f"rig written to {args.out}")
+            print(f"rig written to {args.out}; calibration appended to {history}")
     return 0
+
+
+def _history_entry(args: argparse.Namespace, cal, record: CalibrationRecord,
+                   references: list[dict]) -> dict:
+    """One line of the rig's calibration history (``service.sources.calibrations``)."""
+    from service import __version__
+
+    by = args.by
+    if not by:
+        try:
+            by = getpass.getuser()
+        except (OSError, KeyError):
+            by = "unknown"
+    return {"date": record.date.isoformat(), "valid_days": record.valid_days,
+            "valid_until": record.valid_until.isoformat() if record.valid_until else None,
+            "recorded_at": dt.datetime.now(dt.UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),
+            "by": by, "host": socket.gethostname(), "software": f"moi {__version__}",
+            "stiffness": cal.stiffness, "stiffness_std": cal.stiffness_std, "tare_inertia": cal.tare_inertia,
+            "tare_inertia_std": cal.tare_inertia_std, "stiffness_tare_covariance": cal.covariance,
+            "references": references, "calibration_file": str(Path(args.calibration).resolve()),
+            "rig_file": str(Path(args.out).resolve()), "from_rig": str(Path(args.rig).resolve())}

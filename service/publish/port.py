@@ -177,3 +177,8 @@ class ApplianceView:
         recipe = self._app.parts.recipe
         rig = recipe.rig_for(self._app.config.rig) if recipe is not None else self._app.config.rig
         return self._app.calibration_state(rig, self._app.wall_clock())
+
+    def measure_block(self) -> dict[str, Any] | None:
+        """Why the calibration refuses a measurement now (``Appliance.measure_block``: the one rule every door
+        uses; calibration, expired, detail), or None."""
+        return self._app.measure_block()

@@ -11,7 +11,7 @@ OPC UA server takes no commands: its methods read and acknowledge results.)
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,30 @@ REASONS: dict[str, Reason] = {
     "unknown_command": Reason(9, "the command is not one the appliance knows"),
     "measurement_failed": Reason(10, "the measurement ended in FAULT or was aborted: no result"),
     "duplicate": Reason(11, "a command with this id was received already (QoS 1 may deliver twice): done once"),
+    "calibration_due": Reason(12, "the rig's calibration expired, or its newest check standard failed: every "
+                                  "result would be INVALID, so no measurement starts (the detail says what to do "
+                                  "and whom to call)"),
 }
+
+#: whom an operator calls when the calibration refuses a measurement, unless ``[web] contact`` names someone
+CONTACT = "the quality engineer on shift"
+
+
+def calibration_words(expired_on: str | None, check: Mapping[str, Any] | None, contact: str) -> str:
+    """What every door says when the calibration refuses a measurement (``Appliance.measure_block``): the
+    calibration expired on ``expired_on`` (YYYY-MM-DD; None: it did not), and/or the check standard ``check``
+    (name, E_n) failed; what to do, and whom to call."""
+    what, do = [], []
+    if expired_on is not None:
+        what.append(f"calibration expired on {expired_on}")
+        do.append("recalibrate (moi calibrate)")
+    if check is not None:
+        e_n = check.get("E_n")
+        what.append(f"check standard {check.get('name') or ''} failed"
+                    + (f" (E_n = {e_n:.2f})" if isinstance(e_n, (int, float)) else ""))
+        if expired_on is None:
+            do.append("find the cause and measure the check standard again")
+    return f"{' and '.join(what)}: {' and '.join(do)} or call {contact}"
 
 #: the statuses of a reply, in the order a trigger goes through them
 STATUSES = ("accepted", "refused", "done", "failed")

@@ -7,6 +7,7 @@ artifact (in $MOI_ARTIFACTS when set, else in the test's temporary folder)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
@@ -58,8 +59,14 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
                                       'tolerance_percent = 1.0\ndisplay_unit = "kg*mm^2"\n')
     (recipes / "bad.toml").write_text('[recipe]\nname = "rotor-bad"\nnumber = 14\nnominal = 0.0125\nreleases = 2\n'
                                       'tolerance_percent = 1.0\n[quality]\nmax_J_std = 1.0e-15\n')
-    (tmp_path / "cal-rig.toml").write_text('[rig]\nkind = "torsion"\nstiffness = 0.3651\n[calibration]\n'
-                                          'date = 2020-01-15\nvalid_days = 365\n')
+    # the recipe's rig calibrated twice, the newer one expired on 2021-01-14: its history on the Calibration page
+    (tmp_path / "cal-rig.toml").write_text('[rig]\nkind = "torsion"\nstiffness = 0.3651\n')
+    from service.cli import main
+    shutil.copy(REPO / "examples" / "calibration.toml", tmp_path / "calibration.toml")
+    with contextlib.chdir(tmp_path):  # the files named as a user names them, relative
+        for date, by in (("2019-01-15", "A. Meyer"), ("2020-01-15", "B. Kraus")):
+            assert main(["calibrate", "calibration.toml", "--rig", "cal-rig.toml", "--out", "cal-rig.toml",
+                         "--date", date, "--valid-days", "365", "--by", by]) == 0
     (recipes / "cal.toml").write_text('[recipe]\nname = "rotor-cal"\nnumber = 15\nnominal = 0.0125\n'
                                       'tolerance_percent = 1.0\nrig = "../cal-rig.toml"\n')
     doc = appliance_doc(tmp_path / "state", time_scale=5.0, web={"enabled": True, "contact": "the lab, ext. 2345"},
@@ -310,6 +317,12 @@ def _check_page(browser, name: str, width: int, verdict: str | None, artifacts: 
         text = " ".join(pg.extract_text() for pg in printed.pages)
         assert "part INVALID" in text and "SN-0044" in text and "Tensor set" not in text
         assert len(printed.pages) <= 3
+    if name == "calibration":  # the recipe rig's two calibrations, newest first, within the window
+        rows = browser.find_elements(By.CSS_SELECTOR, "tr.cal-row")
+        assert [r.text.split()[0] for r in rows] == ["2020-01-15", "2019-01-15"] and "B. Kraus" in rows[0].text
+        if width == 1280:  # the whole row on a desktop: no sideways scrolling to who and when
+            box = browser.find_element(By.CSS_SELECTOR, "table.cal-history").find_element(By.XPATH, "..")
+            assert browser.execute_script("return arguments[0].scrollWidth <= arguments[0].clientWidth", box)
     if name == "history":
         table = browser.find_element(By.ID, "history")
         assert "part verdict" in table.text and "NOK" in table.text

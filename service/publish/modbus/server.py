@@ -432,7 +432,8 @@ class ModbusServer(Publisher):
         echo, status, reason, count = self._command
         handshake = R.Handshake(
             plc_status=R.plc_status_bits(
-                ready=self._live.state == "IDLE" and not self._live.busy, busy=self._live.busy,
+                ready=self._live.state == "IDLE" and not self._live.busy and not self._live.measure_refused,
+                busy=self._live.busy,
                 result_valid=self._result_valid, result_buffer_overrun=self._overrun, error=error != 0,
                 calibration_due=self._live.calibration_due, not_decidable=not_decidable(self._shown),
                 trigger_ack=self._trigger_ack, plc_heartbeat_lost=self._plc_heartbeat_lost),

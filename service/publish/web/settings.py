@@ -9,6 +9,7 @@ from typing import Any, Callable
 from measurement.units import ASCII_NAMES, INERTIA_UNITS, inertia_unit
 from service.config.schema import PublisherTable
 from service.errors import ConfigError
+from service.publish.replies import CONTACT
 
 #: the name of the plot kept with each measurement in the store
 PLOT_NAME = "plot.png"
@@ -40,7 +41,7 @@ class WebSettings:
     max_streams_per_client: int = 4
     stream_lifetime: float = 600.0
     time_format: str = "%Y-%m-%d %H:%M:%S"
-    contact: str = "the quality engineer on shift"
+    contact: str = CONTACT
 
 
 #: each key of the configuration's ``[web]`` table: what it means, its unit and its limits (the table is
@@ -69,7 +70,8 @@ KEYS: dict[str, dict] = {
     "time_format": dict(doc="how the pages write a time a person reads: strftime codes, the appliance's local "
                         "time (exports and the JSON API keep ISO 8601 with the UTC offset)"),
     "contact": dict(doc="whom the operator calls when the calibration is due or a check standard failed, "
-                    "e.g. \"quality lab, ext. 2345\" (said on the banner that refuses Measure)"),
+                    "e.g. \"quality lab, ext. 2345\" (said on the banner that refuses Measure, and in the refusal the "
+                    "push button, the PLC and MQTT get)"),
 }
 
 

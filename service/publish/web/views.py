@@ -38,6 +38,7 @@ from service.parts.recipes import (
 )
 from service.publish.dfq import ENCODING
 from service.publish.payload import stored_result
+from service.sources.calibrations import read_history, recorded_at
 from service.states import vocabulary
 
 from . import quality as Q
@@ -333,26 +334,24 @@ class Views:
                 "mode": mode, "part_id": part_id, "recipe": live.get("recipe"),
                 "repeat": bool(tile is not None and part_id and part_id == tile.part_id and mode == "verdict"),
                 "shift": shift.strftime("%H:%M"), "strip": parts, "open_part": open_part, "left": left,
-                "next_release": live.get("release_next"), "blocked": self.blocked(calibration),
+                "next_release": live.get("release_next"), "blocked": self.blocked(),
                 "calibration": calibration, "last": last,
                 "last_view": Q.part_view(last.payload, stored_result(last.payload)) if last else None,
                 "last_unit": self.unit(last.payload if last else None)}
 
-    def blocked(self, calibration: Mapping[str, Any] | None) -> dict[str, str] | None:
+    def blocked(self) -> dict[str, str] | None:
         """Why the page refuses Measure, what to do and whom to call (a due calibration or a failed check
-        standard: every part would be INVALID, and measuring again cannot change that); None when it may."""
-        if not calibration or not calibration.get("due"):
+        standard: every part would be INVALID, and measuring again cannot change that); None when it may. The
+        rule is the daemon's, every door's (``measure_block``); the words are the page's, with its local time."""
+        block = self.app.measure_block()
+        if block is None:
             return None
-        recipe = getattr(getattr(self.app, "parts", None), "recipe", None)
-        if recipe is not None and recipe.check_standard is not None:
-            return None  # the check standard is what clears a failed one: it is always measured
+        calibration = block["calibration"]
         contact = self.server.settings.contact
         check = calibration.get("check_standard") or {}
-        until = calibration.get("valid_until")
-        expired = isinstance(until, str) and dt.date.fromisoformat(until) < dt.datetime.now(dt.UTC).date()
         what, do = [], []
-        if expired or not check or check.get("passed"):
-            what.append(f"The rig's calibration expired on {until or '–'}.")
+        if block["expired"]:
+            what.append(f"The rig's calibration expired on {calibration.get('valid_until') or '–'}.")
             do.append("calibrate the rig")
         if check and not check.get("passed"):
             what.append(f"The check standard {check.get('name') or ''} failed (E_n = "
@@ -506,7 +505,7 @@ class Views:
         source = await self._authorise(request, form, "acknowledge" if name == V.ABORT and state == "FAULT" else name)
         seq = self.app.sequencer
         if name == V.TRIGGER:
-            blocked = self.blocked(self.app.calibration_state())
+            blocked = self.blocked()  # said at once; the daemon refuses it too, as at every door
             if blocked is not None:
                 raise Refused(409, f"{blocked['what']} {blocked['do']}")
         if name == V.TRIGGER and seq is not None and seq.busy:
@@ -848,28 +847,50 @@ class Views:
         return checks, check_chart
 
     async def calibration(self, request: web.Request) -> web.Response:
-        """Each rig's calibration (date, due date, stiffness, the references it rests on) and the check
-        standard's history with its control chart."""
-        cfg = self.app.config
-        book = getattr(self.app, "parts", None)
-        rigs: list[tuple[str, Any, list[str]]] = [("the set-up's rig", cfg.rig, [])]
-        for r in book.book.recipes if book is not None else ():
-            if r.rig is not None:
-                rigs.append((Path(r.rig_path).name if r.rig_path else r.name, r.rig, [r.name]))
+        """Each rig's calibration (date, due date, stiffness, the references it rests on), its history (every
+        `moi calibrate`, newest first: ``service.sources.calibrations``) and the check standard's history with its
+        control chart."""
         today = dt.datetime.now(dt.UTC).date()
         rows = []
-        for name, rig, used_by in rigs:
+        for name, rig, used_by, path in self._rigs():
             cal = rig.calibration
             until = cal.valid_until if cal is not None else None
             rows.append({"name": name, "used_by": used_by, "cal": cal, "until": until,
                          "days_left": (until - today).days if until is not None else None,
                          "due": cal is not None and cal.due(today), "stiffness": rig.stiffness,
-                         "stiffness_std": rig.stiffness_std})
+                         "stiffness_std": rig.stiffness_std, **self._history(path)})
         unit = self.server.settings.display_unit
         checks, check_chart = self._checks({}, unit)
         return self._page(request, "calibration.html", title="Calibration", rows=rows, unit=unit,
                           checks=checks[-20:][::-1], check_chart=check_chart, state=self.app.calibration_state(),
-                          blocked=self.blocked(self.app.calibration_state()))
+                          blocked=self.blocked())
+
+    def _rigs(self) -> list[tuple[str, Any, list[str], str | None]]:
+        """The set-up's rig and each recipe's own, once per rig file: (name, rig, recipes using it, its file)."""
+        cfg = self.app.config
+        book = getattr(self.app, "parts", None)
+        rigs: list[tuple[str, Any, list[str], str | None]] = [("the set-up's rig", cfg.rig, [], cfg.rig_path)]
+        seen = {Path(cfg.rig_path).resolve(): rigs[0]} if cfg.rig_path else {}
+        for r in book.book.recipes if book is not None else ():
+            if r.rig is None:
+                continue
+            key = Path(r.rig_path).resolve() if r.rig_path else None
+            if key is not None and key in seen:
+                seen[key][2].append(r.name)  # one rig file, several part types: one section
+                continue
+            rigs.append((Path(r.rig_path).name if r.rig_path else r.name, r.rig, [r.name], r.rig_path))
+            if key is not None:
+                seen[key] = rigs[-1]
+        return rigs
+
+    def _history(self, rig_path: str | None) -> dict[str, Any]:
+        """A rig file's calibration history as the page shows it: newest first, each line's time of writing in the
+        page's local time, the damaged lines said."""
+        if rig_path is None:
+            return {"history": None, "history_file": None, "history_damaged": []}
+        h = read_history(rig_path)
+        return {"history": [e | {"recorded": self.when(recorded_at(e))} for e in h.newest_first],
+                "history_file": h.path.name, "history_damaged": h.damaged}
 
     # --- recipes and calibration ---------------------------------------------------------------------------
     async def recipes(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:

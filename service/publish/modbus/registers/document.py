@@ -134,7 +134,8 @@ def _handshake_markdown() -> list[str]:
     L.append("      END_IF;")
     L.append("  40: (* latch Result.verdict: 1 OK, 2 NOK, 3 INVALID; not_decidable = measure again *)")
     L.append("      Step := 10;")
-    L.append("  900: (* show Reason; busy: wait and retry; fault: acknowledge with command 3 *)")
+    L.append("  900: (* show Reason; busy: wait and retry; fault: acknowledge with command 3; "
+             "calibration_due: call the quality engineer *)")
     L.append("END_CASE;")
     L.append(f"IF Img.plc_status.{PLC_STATUS_BITS['result_buffer_overrun']} THEN Alarm(Img.overrun_count); END_IF;")
     L.append("IF Img.heartbeat = LastHeartbeat FOR 3 s THEN Alarm('appliance hangs'); END_IF;")

@@ -85,15 +85,17 @@ STATUS_BITS: dict[str, int] = {
 #: bits of register `plc_status`, the handshake's status word (the bits integrators know from vision sensors):
 #: name → (bit, set while)
 PLC_STATUS: dict[str, tuple[int, str]] = {
-    "ready": (0, "the appliance is IDLE: a trigger is accepted now"),
+    "ready": (0, "the appliance is IDLE: a trigger is accepted now (not while the calibration refuses it: "
+                 "`calibration_due` set, a trigger answered with reason 12 calibration_due)"),
     "busy": (1, "a measurement runs (from ARMED until the result is published)"),
     "result_valid": (2, "the result block shows a result the PLC has not acknowledged (mode `latest`: any result "
                         "until acknowledged)"),
     "result_buffer_overrun": (3, "a result found the queue full (mode `ack`); `overrun_count` says how many; "
                                  "cleared by command 3 (acknowledge fault)"),
     "error": (4, "`error_code` is not 0"),
-    "calibration_due": (5, "the rig's calibration is past its validity period (the result flag calibration_due "
-                           "is set on every result meanwhile)"),
+    "calibration_due": (5, "the rig's calibration is past its validity period, or its newest check standard "
+                           "failed: a trigger is refused (reason 12), but for a check-standard recipe while the "
+                           "calibration itself has not expired"),
     "not_decidable": (6, "the shown result's verdict cannot decide: INVALID, or inside the guard band's uncertainty "
                          "range (ISO 14253-1)"),
     "trigger_ack": (7, "a trigger written to `command` was accepted; cleared when the PLC writes `command` again "
@@ -173,8 +175,9 @@ WRITABLE_END = max(a + n for a, n in WRITABLE.values())  # exclusive
 #: a 1 queues, ``service.core.vocabulary``) → (address, what writing 1 means)
 COIL_TABLE: dict[str, tuple[int, str]] = {
     V.TRIGGER: (0,
-                "start one measurement (ignored while one runs, exactly as a button press); the coil reads back 0. "
-                "`measurements_started` increments when the measurement starts"),
+                "start one measurement (ignored while one runs, exactly as a button press, and refused while the "
+                "calibration refuses it: `ready` clear, `calibration_due` set; command 1 says the reason); the coil "
+                "reads back 0. `measurements_started` increments when the measurement starts"),
     V.ABORT: (1,
               "abort the running measurement (solenoid off, no result), or acknowledge a FAULT (FAULT is latched "
               "until then; a trigger in FAULT is ignored); reads back 0"),
