@@ -17,7 +17,7 @@ from service.publish.replies import REASONS
 from service.states import STATES
 
 #: bumped whenever an address or an encoding of the map changes; what each version changed is in CHANGELOG.md
-MAP_VERSION = 12
+MAP_VERSION = 13
 
 
 # --- enumerations ------------------------------------------------------------
