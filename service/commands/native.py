@@ -11,7 +11,9 @@ The module is built once per effect library, Python and cache folder, in a proce
 priority (``python -m service.commands.native KIND...``), which the first command that finds it missing
 starts in the background and does not wait for: that command and any run before the build ends use the
 in-process kernel, as before. The build needs numba, setuptools and a C compiler; without them, or on a
-module that does not load (a numpy whose ABI changed), the command goes on with the in-process kernel.
+module that does not load (a numpy whose ABI changed, a cache folder mounted noexec), the command goes on
+with the in-process kernel, and the failure is written beside the module (``*.failed``, its error inside):
+no command starts that build again until the effect library changes or the file is deleted.
 
 The native kernel holds the interpreter lock while it runs (pycc has no ``nogil``): candidate fits on
 threads take turns. It is for one-shot commands only; the daemon keeps the in-process kernel, which lets a
@@ -20,6 +22,7 @@ capture run beside a fit.
 
 from __future__ import annotations
 
+import contextlib
 import importlib.machinery
 import importlib.util
 import os
@@ -63,10 +66,18 @@ def _load(kind: str) -> ModuleType | None:
     try:
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
-    except ImportError:  # built against another numpy or Python: rebuilt by the next build_later
+    except ImportError as exc:
+        # another numpy's ABI, or a cache folder mounted noexec: written down as a failed build, so that
+        # commands do not rebuild what would not load either
+        _write_failure(kind, exc)
         path.unlink(missing_ok=True)
         return None
     return mod
+
+
+def _write_failure(kind: str, exc: BaseException) -> None:
+    with contextlib.suppress(OSError):  # a read-only cache: nothing to remember it in
+        _failed(kind).write_text(f"{type(exc).__name__}: {exc}\n")
 
 
 class NativeKernels:
@@ -102,6 +113,7 @@ def build_later(kinds: tuple[str, ...]) -> None:
 
     The lock is a ``flock`` the builder inherits: the kernel lets it go when the builder ends, however it ends.
     """
+    _BUILDERS[:] = [p for p in _BUILDERS if p.poll() is None]  # the ended ones reaped
     missing = [k for k in kinds if not module_file(k).exists() and not _failed(k).exists()]
     if not missing:
         return
@@ -160,7 +172,7 @@ def main(kinds: list[str]) -> int:
         try:
             build(kind)
         except Exception as exc:  # no compiler, no setuptools, no pycc: the in-process kernel it stays
-            _failed(kind).write_text(f"{type(exc).__name__}: {exc}\n")
+            _write_failure(kind, exc)
             print(f"native kernel {kind}: {type(exc).__name__}: {exc}", file=sys.stderr)
             status = 1
     return status

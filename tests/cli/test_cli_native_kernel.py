@@ -132,3 +132,13 @@ def test_a_failed_build_is_written_down_and_not_started_again(tmp_path, monkeypa
     holder.end()
     assert holder.started == []
     assert native.load(("torsion",)) is None
+
+
+def test_a_module_that_does_not_load_is_let_go_and_written_down(tmp_path, monkeypatch):
+    monkeypatch.setenv("MOI_CACHE_DIR", str(tmp_path))
+    broken = native.module_file("torsion")
+    broken.write_bytes(b"not a shared object")  # as a module of another ABI, or on a noexec mount, fails
+    assert native.load(("torsion",)) is None
+    assert not broken.exists()
+    failed = list(tmp_path.glob("*_native*.failed"))
+    assert len(failed) == 1 and "ImportError" in failed[0].read_text()
