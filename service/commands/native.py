@@ -148,6 +148,7 @@ def build(kind: str) -> Path:
 
     target = module_file(kind)
     work = Path(tempfile.mkdtemp(prefix=".native-", dir=target.parent))
+    previous = tempfile.tempdir
     try:
         tempfile.tempdir = str(work)  # pycc's own build folder, removed with ours whatever happens
         with warnings.catch_warnings():
@@ -160,7 +161,7 @@ def build(kind: str) -> Path:
         built = next(work.glob(f"{target.name.split('.', 1)[0]}*{importlib.machinery.EXTENSION_SUFFIXES[0]}"))
         os.replace(built, target)  # whole or not at all: a command never loads half a file
     finally:
-        tempfile.tempdir = None
+        tempfile.tempdir = previous
         shutil.rmtree(work, ignore_errors=True)
     return target
 
