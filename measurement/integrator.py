@@ -304,9 +304,14 @@ def _kernel_path(kind: str, src: str) -> Path:
     return folder / f"moi_kernel_{kind}_{digest}.py"
 
 
+def kernel_file(kind: str) -> Path:
+    """The generated source file of the ``kind`` kernel (it need not exist yet): its name is its hash."""
+    return _kernel_path(kind, kernel_source(kind))
+
+
 def is_compiled(kind: str) -> bool:
     """Whether the ``kind`` kernel's machine code is in the on-disk cache (a process only loads it)."""
-    path = _kernel_path(kind, kernel_source(kind))
+    path = kernel_file(kind)
     return any((path.parent / "__pycache__").glob(f"{path.stem}.run-*.nbi"))
 
 

@@ -38,17 +38,19 @@ def run(args: argparse.Namespace) -> int:
         if len(args.source) > 1:
             raise InputFileError("--plot draws one release; give one SOURCE with --plot")
     rig = read_rig(args.rig)
-    # the kernels load in a helper process (numba) while this one loads the fit (scipy): the two largest
-    # imports of the command, on two cores
-    from service.commands import kernels
-    helper = kernels.start((rig.kind,))
+    # numba is the command's largest import: the kernels built ahead of time need none; until they are built,
+    # they load in a helper process (numba) while this one loads the fit (scipy), on two cores
+    from service.commands import kernels, native
+    helper = native.load((rig.kind,)) or kernels.start((rig.kind,))
     try:
-        return _identify(args, rig, fmt, helper)
+        status = _identify(args, rig, fmt, helper)
     finally:
         if helper is not None:
             from measurement.integrator import use_kernels
             use_kernels(None)
             helper.close()
+    native.build_later((rig.kind,))  # for the next run, in the background
+    return status
 
 
 def _identify(args: argparse.Namespace, rig, fmt: str, helper) -> int:

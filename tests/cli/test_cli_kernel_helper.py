@@ -12,7 +12,7 @@ from measurement import Pendulum, Rig, simulate_trace
 from measurement.effects import resolve_effects
 from measurement.integrator import Dynamics, use_kernels, warm_up
 from service.cli import main
-from service.commands import kernels
+from service.commands import kernels, native
 
 
 @pytest.fixture
@@ -54,6 +54,7 @@ def test_without_its_helper_the_command_integrates_in_process(helper):
 
 def test_identify_gives_the_same_result_with_and_without_the_helper(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(kernels, "spare_core", lambda: True)  # the machine may be busy: the helper anyway
+    monkeypatch.setattr(native, "load", lambda kinds: None)  # and the kernel built ahead of time is not used
     rig = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
     warm_up("torsion")
     tr = simulate_trace(Pendulum(rig, 0.0125, {"viscous": {"c": 1e-4}, "coulomb": {"Tc": 1e-4}}), theta0=0.25,
