@@ -90,8 +90,8 @@ def moi_measure_sim(*args: str) -> tuple[dict, str]:
 
 
 def test_routine_simulated_measurements_raise_no_quality_flag_and_a_glitch_still_does():
-    for seed in (1, 2, 3):
-        d, err = moi_measure_sim("--duration", "8", "--seed", str(seed))
+    for seed in (1, 2):
+        d, err = moi_measure_sim("--duration", "6", "--seed", str(seed))
         # Structure in the residual is allowed only where the model-form check has judged the record and
         # says so: on a loaded host, replies dated late could make the halves disagree and the rule that
         # an effect moving ω_n must hold across the record withdrew the true Coulomb friction (J stays
@@ -107,7 +107,7 @@ def test_routine_simulated_measurements_raise_no_quality_flag_and_a_glitch_still
         enc = d["acquisition"]["encoder"]
         assert enc["samples"] + enc["late_replies"] + enc["errors"] == enc["requests"]  # every request accounted for
         assert f"{enc['late_replies']} late replies" in err  # dropped samples are reported, not silent
-    d, _ = moi_measure_sim("--duration", "8", "--seed", "4", "--glitch-rate", "0.003")
+    d, _ = moi_measure_sim("--duration", "6", "--seed", "4", "--glitch-rate", "0.004")
     assert {"outliers_removed", "outliers_downweighted"} & set(d["flags"]), d["flags"]
     assert abs(d["J"] / d["truth"]["J"] - 1) < 1e-3
 

@@ -43,7 +43,7 @@ def test_button_measurement_arrives_on_mqtt_and_in_modbus_with_the_same_values(t
     c = consumer_factory(broker.port, ["moi/test-rig/#"])
     c.wait_subscribed()
     # the whole simulated appliance: mock pins, SimRig, a Modbus RTU encoder server read by the real client
-    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port, time_scale=10.0,
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port, time_scale=2.0,
                                           simulation={"sensor": "encoder"}))
     c.wait(lambda c: c.on("/status")[-1:] == [b"online"], 10, "online status")
     app.press()

@@ -404,6 +404,8 @@ class Views:
     async def _stream(self, request: web.Request) -> web.StreamResponse:
         resp = web.StreamResponse(headers={"Content-Type": "text/event-stream", "Cache-Control": "no-cache",
                                            "X-Accel-Buffering": "no"})
+        # the connection closes with the stream: an ended stream never holds its descriptor for a keep-alive
+        resp.force_close()
         await resp.prepare(request)
         q = self.server.listen()
         cursor: dict[str, Any] = {}
