@@ -118,7 +118,7 @@ def test_a_large_patch_is_aligned_shrunk_and_follows_the_angle():
     from measurement.vision.target import TargetSpec
 
     spec = TargetSpec(kind="patch", view="along-axis", roi=(200, 120, 440, 360))  # 240 px square, on the plate
-    assert 240 * 240 > MAX_PATCH_PIXELS
+    assert MAX_PATCH_PIXELS < 240 * 240
     r = PlaneRenderer(640, 480, spec, PlaneScene.for_view(640, 480, spec), imaging=Imaging(blur=1.0, noise=2.0),
                       seed=3)
     truth = 0.2 * np.cos(5.4 * np.arange(40) / 60.0)
