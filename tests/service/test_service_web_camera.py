@@ -3,6 +3,8 @@ of interest, and a quality engineer sets it in a form, checked, written to the c
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from service.publish.web.auth import User, hash_password, save_users
@@ -88,3 +90,18 @@ def test_a_quality_engineer_sets_the_region_of_interest_an_operator_cannot(appli
     status, _, body = quinn.request("/setup/roi", {"x": "", "y": "", "w": "", "h": "", "csrf": qcsrf})
     assert status == 200 and "roi" not in cam.read_text().split("[target]")[1].split("#")[0]
     assert app.devices.sensor.config.target.roi is None
+
+
+def test_the_demo_camera_has_no_file_to_set_a_region_in(appliance_factory, tmp_path):
+    running = appliance_factory(appliance_doc(tmp_path / "state", time_scale=1.0, web={"enabled": True},
+                                              simulation={"sensor": "camera"}))
+    app = running.app
+    token = Path(app.web.token_file).read_text().strip()
+    c = Client(app.web.url)
+    status, _, page = c.request("/login", {"token": token, "next": "/setup", "csrf": c.csrf()})
+    html = page.decode()
+    assert status == 200 and "the demo camera: no camera file" in html and 'id="roi-form"' not in html
+    csrf = html.split('name="csrf-token" content="')[1].split('"')[0]
+    status, _, body = c.request("/setup/roi", {"x": "0", "y": "0", "w": "64", "h": "64", "csrf": csrf})
+    assert status == 409 and b"the demo camera has no camera file" in body
+    assert not (app.config.state_dir / "camera-audit.log").exists()

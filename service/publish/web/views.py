@@ -1039,7 +1039,8 @@ class Views:
         if config is None:
             return {}
         return {"roi": config.target.roi, "frame_size": (config.camera.width, config.camera.height),
-                "camera_file": self._camera_file(), "may_set_roi": self._may(request, "camera")}
+                "camera_file": self._camera_file(),
+                "may_set_roi": self._may(request, "camera") and self._camera_file() is not None}
 
     async def camera_roi(self, request: web.Request) -> web.StreamResponse:
         """Set the camera's region of interest (x, y, w, h px; all empty: the whole frame; quality role): checked
