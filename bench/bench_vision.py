@@ -106,6 +106,8 @@ def target_speeds(repeats: int = 3) -> dict[str, float]:
         "blob (colour)": TargetSpec(kind="blob", colour=(200, 30, 40)),
         "blobs (dark)": TargetSpec(kind="blobs", view="along-axis"),
         "patch (ECC)": TargetSpec(kind="patch", view="along-axis", roi=(250, 170, 390, 310)),
+        # a region of more than MAX_PATCH_PIXELS is aligned on the frame shrunk by a whole factor
+        "patch 240 px": TargetSpec(kind="patch", view="along-axis", roi=(200, 120, 440, 360)),
     }
     sw = swing()
     out = {}

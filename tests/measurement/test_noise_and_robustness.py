@@ -158,3 +158,32 @@ def test_samples_a_busy_host_dated_late_do_not_hide_friction(seed):
     assert not {"model_ambiguous", "unmodeled_residual", "correlated_residual"} & set(r.flags), r.flags
     assert "outliers_removed" in r.flags and r.window["n_outliers"] >= 0.5 * late.sum()
     assert pytest.approx(J, rel=1e-4) == r.J
+
+
+def bursty_gaps(rng, n: int, share: float = 0.3, burst: int = 30) -> np.ndarray:
+    """A mask keeping the samples left after dropping bursts of ``burst`` samples at random until ``share`` is gone
+    (a camera losing its target for half a second at a time)."""
+    keep = np.ones(n, bool)
+    while (~keep).mean() < share:
+        start = int(rng.integers(0, n - burst))
+        keep[start:start + burst] = False
+    return keep
+
+
+def test_J_std_grows_with_bursty_gaps_and_stays_honest():
+    # 30 % of a 60 frames/s record lost in half-second bursts (half a period of the swing at a time): the fit sees
+    # only the samples kept, so J's σ grows by about √(1/0.7) and still covers the error (rms z ≈ 1; over 6
+    # seeds a right σ gives rms z within 0.5–1.6 at 95 %); a σ kept as if every frame were there would not grow
+    rig = Rig(kind="torsion", stiffness=K, declared=("viscous",))
+    p = Pendulum(rig, J, {"viscous": {"c": 1.5e-4}})
+    z, growth = [], []
+    for seed in range(6):
+        tr = simulate_trace(p, theta0=0.2, duration=10, rate=60, noise_std=2e-4, seed=seed)
+        keep = bursty_gaps(np.random.default_rng(100 + seed), tr.t.size)
+        full = identify(tr, rig)
+        gappy = identify(Trace(tr.t[keep], tr.angle[keep], source="bursty gaps"), rig)
+        assert gappy.J is not None and gappy.J_std is not None and full.J_std is not None
+        z.append((gappy.J - J) / gappy.J_std)
+        growth.append(gappy.J_std / full.J_std)
+    assert 0.5 < math.sqrt(np.mean(np.square(z))) < 1.6
+    assert np.median(growth) > 1.1

@@ -93,3 +93,42 @@ def test_a_small_marker_swing_is_taken_as_seen_not_refused():
     wide = view_trace(MarkerTrack(t=t, a=a, b=b, source="wide"))
     assert wide.meta["view"]["axis_ratio"] == pytest.approx(0.9, abs=0.01)
     assert np.max(np.abs(wide.angle - theta)) < math.radians(0.05)
+
+
+def test_a_shrunk_patch_warp_maps_the_same_pixels_as_the_full_one():
+    from measurement.vision.locators import _from_level, _to_level
+
+    a = 0.3
+    warp = np.array([[math.cos(a), -math.sin(a), 12.5], [math.sin(a), math.cos(a), -7.25]], dtype=np.float32)
+    for s in (1, 2, 3):
+        level = _to_level(warp, s)
+        c = (s - 1) / 2
+        for x_l in ([0.0, 0.0], [5.0, 9.0]):
+            full = warp @ np.array([s * x_l[0] + c, s * x_l[1] + c, 1.0])  # the level pixel's centre, full px
+            assert s * (level @ np.array([*x_l, 1.0])) + c == pytest.approx(full, abs=1e-4)
+        np.testing.assert_allclose(_from_level(level, s), warp, atol=1e-5)
+
+
+def test_a_large_patch_is_aligned_shrunk_and_follows_the_angle():
+    import cv2
+
+    from measurement.vision.locators import MAX_PATCH_PIXELS, make_locator
+    from measurement.vision.render import Imaging
+    from measurement.vision.render_plane import PlaneRenderer, PlaneScene
+    from measurement.vision.target import TargetSpec
+
+    spec = TargetSpec(kind="patch", view="along-axis", roi=(200, 120, 440, 360))  # 240 px square, on the plate
+    assert MAX_PATCH_PIXELS < 240 * 240
+    r = PlaneRenderer(640, 480, spec, PlaneScene.for_view(640, 480, spec), imaging=Imaging(blur=1.0, noise=2.0),
+                      seed=3)
+    truth = 0.2 * np.cos(5.4 * np.arange(40) / 60.0)
+    loc = make_locator(spec, 640, 480)
+    seen = []
+    for theta in truth:
+        obs = loc.locate(cv2.cvtColor(r.render(float(theta)), cv2.COLOR_BGR2GRAY))
+        assert obs.found and obs.a is not None and obs.b is not None
+        seen.append(math.atan2(obs.b[0] - obs.a[0], obs.b[1] - obs.a[1]))
+    assert loc._scale == 2  # type: ignore[attr-defined]
+    turn = np.unwrap(seen) - seen[0]
+    sign = np.sign(np.dot(turn, truth - truth[0]))  # the image's angle may turn the other way than θ
+    assert np.degrees(np.max(np.abs(sign * turn - (truth - truth[0])))) < 0.02

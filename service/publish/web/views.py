@@ -21,6 +21,7 @@ from urllib.parse import urlencode, urlsplit
 import jinja2
 from aiohttp import web
 
+from measurement.errors import VisionError
 from measurement.flags import FLAGS
 from service import __version__
 from service.core import vocabulary as V
@@ -216,6 +217,7 @@ class Views:
         r.add_get("/api/health", self.api_health)
         r.add_get("/api/angle", self.api_angle)
         r.add_get("/setup/snapshot.png", self.snapshot)
+        r.add_post("/setup/roi", self.camera_roi)
         r.add_static("/static/", HERE / "static")
         return app
 
@@ -495,7 +497,8 @@ class Views:
             raise Refused(*why)
         name, role = self.server.guard.who(cookie=request.cookies.get(COOKIE), bearer=bearer)
         if action is not None and not allowed(role, action):
-            need = {"recipe": "change the recipe", "acknowledge": "acknowledge a fault"}.get(action, action)
+            need = {"recipe": "change the recipe", "acknowledge": "acknowledge a fault",
+                    "camera": "set the camera's region of interest"}.get(action, action)
             raise Refused(403, f"{name or 'this login'} ({role}) may not {need}: log in as a quality engineer "
                                "or an admin")
         return f"web:{name}" if name else "web"
@@ -1040,15 +1043,64 @@ class Views:
     async def api_health(self, request: web.Request) -> web.Response:
         return web.json_response(self.health())
 
-    async def setup(self, request: web.Request) -> web.Response:
+    async def setup(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
         cfg = self.app.config
         sensor = self._sensor().LABEL
         devices = self.app.devices
         readable = devices is not None and getattr(devices.sensor, "read_position", None) is not None
         logged_in = self.server.guard.session(request.cookies.get(COOKIE)) is not None
-        return self._page(request, "setup.html", title="Set-up", health=self.health(),
+        return self._page(request, "setup.html", status=status, title="Set-up", health=self.health(),
                           config=setup_words(mask(cfg.to_dict()), shown_paths=logged_in), sensor=sensor,
-                          readable=readable, web=self.server.stats())
+                          readable=readable, web=self.server.stats(), **self._camera_setup(request), **ctx)
+
+    # --- the camera's region of interest (set-up page) ---------------------------------------------------
+    def _camera_file(self) -> str | None:
+        """The camera file the running camera was read from (None: the demo camera, or no camera)."""
+        cfg = self.app.config
+        if cfg.simulated:
+            return cfg.simulation.camera
+        hw = cfg.hardware
+        return hw.camera.file if hw is not None and hw.camera is not None else None
+
+    def _camera_setup(self, request: web.Request) -> dict[str, Any]:
+        """What the set-up page shows of the camera's region of interest, and whether this login may set it."""
+        config = self._camera()
+        if config is None:
+            return {}
+        return {"roi": config.target.roi, "frame_size": (config.camera.width, config.camera.height),
+                "camera_file": self._camera_file(),
+                "may_set_roi": self._may(request, "camera") and self._camera_file() is not None}
+
+    async def camera_roi(self, request: web.Request) -> web.StreamResponse:
+        """Set the camera's region of interest (x, y, w, h px; all empty: the whole frame; quality role): checked
+        as a camera file is, written to the camera file in one step, used from the next capture, and one line
+        appended to the camera audit log. Refused while a measurement runs; a wrong value is said on the page
+        with what was typed."""
+        from service.config.camera import CAMERA_AUDIT_FILE, audit_camera, roi_from_typed, set_roi
+
+        form = await _form(request)
+        source = await self._authorise(request, form, "camera")
+        config, path = self._camera(), self._camera_file()
+        if config is None:
+            raise Refused(404, "this appliance has no camera")
+        if path is None:
+            raise Refused(409, "the demo camera has no camera file: name one ([simulation] camera or "
+                               "[hardware.camera] file) to set its region of interest")
+        seq = self.app.sequencer
+        if seq is not None and seq.busy:
+            raise Refused(409, "a measurement is running: set the region when it is idle")
+        typed = {k: str(form.get(k) or "")[:12] for k in ("x", "y", "w", "h")}
+        loop = asyncio.get_running_loop()
+        try:
+            roi = roi_from_typed(typed, config.camera.width, config.camera.height)
+            new, before = await loop.run_in_executor(None, set_roi, path, roi)
+        except (VisionError, InputFileError) as exc:
+            return await self.setup(request, status=400, roi_error=str(exc), roi_typed=typed)
+        await asyncio.wrap_future(self.app.call_soon(lambda: self.app.use_camera(new)))
+        line = await loop.run_in_executor(None, audit_camera, self.app.config.state_dir / CAMERA_AUDIT_FILE, source,
+                                          path, before, roi, dt.datetime.now(dt.UTC).isoformat(timespec="seconds"))
+        log.info("web: camera region of interest set: %s", line.strip())
+        raise web.HTTPSeeOther("/setup#camera")
 
     def _sensor(self) -> Any:
         """The kind of angle sensor the appliance reads (``service.devices.sensors``)."""
@@ -1081,7 +1133,8 @@ class Views:
         return web.json_response({"angle_rad": angle, "angle_deg": math.degrees(angle), "source": self._sensor().LABEL})
 
     async def snapshot(self, request: web.Request) -> web.Response:
-        """One camera frame with the search window and the fitted edge (what `moi camera-check` draws)."""
+        """One camera frame with the region of interest, the target found, the pivot and the angle axis (what
+        `moi camera-check` draws: ``service.sources.marker_check``)."""
         config = self._camera()
         if config is None:
             raise Refused(404, "this appliance has no camera")
