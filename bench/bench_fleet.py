@@ -144,7 +144,7 @@ def main() -> None:
     from tests.service.conftest import MOSQUITTO, Broker, appliance_doc, free_port, wait_until, write_toml
 
     try:
-        from tests.service.sparkplug_host import SparkplugHost
+        from tests.service.publish.sparkplug.sparkplug_host import SparkplugHost
     except BaseException as exc:  # pytest's importorskip raises its Skipped, not an ImportError
         print(f"skipped: the Sparkplug host needs pysparkplug (`make install`): {exc}")
         return

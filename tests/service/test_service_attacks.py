@@ -14,8 +14,7 @@ import pytest
 from service.persistence.store import Store
 from service.publish.modbus import registers as R
 from service.publish.mqtt.client import MqttService, MqttSettings
-
-from .conftest import appliance_doc, free_port, wait_until
+from tests.service.conftest import appliance_doc, free_port, wait_until
 
 pytestmark = pytest.mark.broker
 
@@ -225,7 +224,7 @@ def test_a_flood_of_idle_connections_does_not_lock_the_plc_or_mqtt_out(tmp_path,
     import resource
     import time
 
-    from .conftest import moi_subprocess, port_open, write_toml
+    from tests.service.conftest import moi_subprocess, port_open, write_toml
 
     mb_port = free_port()
     cfg = write_toml(tmp_path / "appliance.toml", appliance_doc(tmp_path / "state", mqtt_port=broker.port,
@@ -352,7 +351,7 @@ def test_the_capture_is_bounded_by_sample_time_at_the_largest_time_scale(tmp_pat
 # --- two daemons on one state directory -------------------------------------------------------------------------
 
 def test_a_second_daemon_on_the_same_state_directory_stops_with_one_line(tmp_path):
-    from .conftest import moi_subprocess, port_open, write_toml
+    from tests.service.conftest import moi_subprocess, port_open, write_toml
 
     first_port, second_port = free_port(), free_port()
     state = tmp_path / "state"

@@ -13,10 +13,9 @@ from pymodbus.client import ModbusTcpClient
 
 from service.publish.modbus import registers as R
 from service.publish.replies import REASONS
-
-from .conftest import appliance_doc, wait_until
-from .test_service_mqtt_replies import V5Client
-from .test_service_plc_handshake import bit, image, write
+from tests.service.conftest import appliance_doc, wait_until
+from tests.service.publish.modbus.test_service_plc_handshake import bit, image, write
+from tests.service.publish.mqtt.test_service_mqtt_replies import V5Client
 
 BASE = "moi/test-rig"
 EXPIRED = "calibration expired on 2021-01-14: recalibrate (moi calibrate) or call the quality engineer on shift"

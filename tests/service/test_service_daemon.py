@@ -12,8 +12,7 @@ from pymodbus.client import ModbusTcpClient
 
 from service.persistence.store import Store
 from service.publish.modbus import registers as R
-
-from .conftest import appliance_doc, wait_until
+from tests.service.conftest import appliance_doc, wait_until
 
 pytestmark = pytest.mark.broker
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import appliance_doc, wait_until
+from tests.service.conftest import appliance_doc, wait_until
 
 # --- a measurement once captured is always stored ---------------------------------------------------------------
 
@@ -37,7 +37,7 @@ def test_a_failure_while_the_part_is_judged_still_stores_the_measurement_with_it
 def test_an_mqtt_response_topic_outside_the_reply_namespace_is_not_honoured(tmp_path, broker, appliance_factory):
     """A client that may only set part IDs names cmd/measure (this appliance's, then another's) as its response
     topic, with 4 kB of correlation data: the reply goes to the reply topic without it; nothing fires."""
-    from .test_service_mqtt_replies import BASE, V5Client
+    from tests.service.publish.mqtt.test_service_mqtt_replies import BASE, V5Client
 
     app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
     assert app.app.mqtt.subscribed_event.wait(10)
@@ -198,8 +198,7 @@ def test_a_damaged_acknowledgement_file_is_quarantined_and_owed_results_stay_owe
     from service.publish.modbus.settings import ModbusSettings
     from service.publish.opcua.server import ACKED_FILE, OpcUaServer
     from service.publish.opcua.settings import OpcUaSettings
-
-    from .test_service_registers import payload
+    from tests.service.publish.modbus.test_service_registers import payload
 
     state = tmp_path / "state"
     state.mkdir()
@@ -233,8 +232,7 @@ def test_a_tensor_set_cut_short_by_a_stop_or_a_kill_is_recorded_as_interrupted(t
     release. The file a kill -9 would have left behind (taken before the stop) makes the next start store
     that set as interrupted and say so; the new set begins at the first orientation."""
     from service.parts.tensor_set import OPEN_SET_FILE
-
-    from .test_service_tensor_set import measure_step, progress, tensor_doc
+    from tests.service.parts.test_service_tensor_set import measure_step, progress, tensor_doc
 
     doc = tensor_doc(tmp_path)
     app = appliance_factory(doc)
@@ -309,8 +307,7 @@ def test_what_a_client_repeats_is_logged_once_a_minute_with_a_count(tmp_path, br
     import logging
 
     from service.logs import RepeatFilter
-
-    from .test_service_mqtt_replies import BASE, V5Client
+    from tests.service.publish.mqtt.test_service_mqtt_replies import BASE, V5Client
 
     app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
     assert app.app.mqtt.subscribed_event.wait(10)

@@ -15,9 +15,8 @@ import numpy as np
 import pytest
 
 from service.publish.modbus import registers as R
-
-from .conftest import appliance_doc, free_port, moi_subprocess, port_open, wait_until, write_toml
-from .test_service_attacks import _closed_by_peer, _tcp_exchange
+from tests.service.conftest import appliance_doc, free_port, moi_subprocess, port_open, wait_until, write_toml
+from tests.service.test_service_attacks import _closed_by_peer, _tcp_exchange
 
 #: the descriptor limit the daemon runs with in these tests (the unit's is 1024): small, so an attack reaches it
 SMALL_FILE_LIMIT = 256
@@ -202,7 +201,7 @@ def test_a_full_disk_with_an_unsent_result_degrades_instead_of_looping(tmp_path,
 def test_mask_write_and_read_write_multiple_are_refused_not_acknowledged_and_dropped(tmp_path, appliance_factory):
     """FC 22 and FC 23 to the part ID and recipe registers: exception 01, and the part ID stays what FC 16 wrote
     (they were answered as done, while nothing was applied)."""
-    from .test_service_attacks import _tcp_exchange
+    from tests.service.test_service_attacks import _tcp_exchange
 
     app = appliance_factory(appliance_doc(tmp_path / "state"))
     part, _ = R.WRITABLE["part_id"]
@@ -351,8 +350,7 @@ def test_pipelined_modbus_tcp_requests_each_get_their_answer():
     """Three requests in one segment, then one split over two: four answers, each with its transaction id
     (pymodbus read the first of a segment and kept the rest until the client sent more)."""
     from service.publish.modbus.server import ModbusServer, ModbusSettings
-
-    from .test_service_attacks import _mbap, _recv_exact
+    from tests.service.test_service_attacks import _mbap, _recv_exact
 
     srv = ModbusServer(ModbusSettings(host="127.0.0.1", port=0))
     srv.start()

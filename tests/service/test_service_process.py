@@ -12,8 +12,7 @@ from pymodbus.client import ModbusTcpClient
 
 from service.persistence.store import Store
 from service.publish.modbus import registers as R
-
-from .conftest import appliance_doc, free_port, moi_subprocess, port_open, wait_until, write_toml
+from tests.service.conftest import appliance_doc, free_port, moi_subprocess, port_open, wait_until, write_toml
 
 
 def start_daemon(config_path, env_extra=None) -> subprocess.Popen:

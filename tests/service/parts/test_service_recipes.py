@@ -14,8 +14,7 @@ from measurement.verdict import Specification, decide
 from service.errors import ConfigError
 from service.parts.recipes import RecipeBook, RecipeError, load_recipe
 from service.publish.modbus import registers as R
-
-from .conftest import appliance_doc, wait_until
+from tests.service.conftest import appliance_doc, wait_until
 
 J_TRUE = 0.0125  # the simulated part (appliance_doc's default [simulation] inertia)
 

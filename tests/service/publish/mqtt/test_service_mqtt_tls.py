@@ -10,8 +10,7 @@ import pytest
 from service.config.appliance import parse_config
 from service.persistence.store import Store
 from service.publish.mqtt.client import MqttService
-
-from .conftest import MOSQUITTO, Broker, wait_until
+from tests.service.conftest import MOSQUITTO, Broker, wait_until
 
 pytestmark = pytest.mark.broker
 

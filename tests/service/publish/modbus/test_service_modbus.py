@@ -13,8 +13,7 @@ from pymodbus.framer import FramerType
 from service.core.live import LiveStatus
 from service.publish.modbus import registers as R
 from service.publish.modbus.server import ModbusServer, ModbusSettings
-
-from .conftest import free_port
+from tests.service.conftest import free_port
 
 ILLEGAL_ADDRESS = 2
 

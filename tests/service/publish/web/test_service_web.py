@@ -16,8 +16,7 @@ from pathlib import Path
 import pytest
 
 from service.errors import StartupError
-
-from .conftest import appliance_doc, wait_until
+from tests.service.conftest import appliance_doc, wait_until
 
 ON = {"enabled": True}
 

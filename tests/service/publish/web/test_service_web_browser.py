@@ -15,12 +15,12 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import appliance_doc, wait_until
-from .test_service_web import E_NOTATION, ISO_TIME, UUID
+from tests.service.conftest import appliance_doc, wait_until
+from tests.service.publish.web.test_service_web import E_NOTATION, ISO_TIME, UUID
 
 pytestmark = pytest.mark.browser
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[4]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMEDRIVER = shutil.which("chromedriver") or ("/usr/bin/chromedriver" if os.path.exists("/usr/bin/chromedriver") else None)
 

@@ -10,9 +10,8 @@ import shutil
 
 from service.cli import main
 from service.sources.calibrations import history_path, read_history
-
-from .conftest import REPO, appliance_doc
-from .test_service_web import E_NOTATION, ISO_TIME, Client
+from tests.service.conftest import REPO, appliance_doc
+from tests.service.publish.web.test_service_web import E_NOTATION, ISO_TIME, Client
 
 
 def _calibrate(tmp_path, date: str, by: str) -> None:

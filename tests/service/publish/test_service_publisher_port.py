@@ -14,8 +14,7 @@ from service.errors import ConfigError
 from service.publish import registry
 from service.publish.port import ApplianceView, Publisher
 from service.publish.registry import PublisherEntry
-
-from .conftest import appliance_doc
+from tests.service.conftest import appliance_doc
 
 
 @dataclasses.dataclass(frozen=True)

@@ -15,8 +15,7 @@ from measurement.simulate import BRACKET
 from service.commands.demo_tensor import TENSOR_RECIPE, recipe_text
 from service.parts.recipes import RecipeError, load_recipe
 from service.publish.modbus import registers as R
-
-from .conftest import appliance_doc
+from tests.service.conftest import appliance_doc
 
 
 def tensor_doc(tmp_path, **kwargs):
@@ -197,7 +196,7 @@ def test_moi_demo_tensor_runs_a_whole_set_and_prints_the_error_against_the_truth
     from pathlib import Path
 
     r = subprocess.run([sys.executable, "-m", "service.cli", "demo", "--tensor"], capture_output=True, text=True,
-                       timeout=300, cwd=Path(__file__).resolve().parents[2])
+                       timeout=300, cwd=Path(__file__).resolve().parents[3])
     assert r.returncode == 0, r.stderr
     assert r.stdout.count("mount orientation") == 6 and "complete, stored with its 6 releases" in r.stdout
     rows = [line.split() for line in r.stdout.splitlines() if line.split()[:1] and line.split()[0] in TS.COMPONENTS]

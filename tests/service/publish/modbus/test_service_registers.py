@@ -13,7 +13,7 @@ import pytest
 from service.commands import modbus_map
 from service.publish.modbus import registers as R
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[4]
 
 
 def payload(seq: int = 5, **over) -> dict:

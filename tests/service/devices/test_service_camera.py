@@ -30,10 +30,9 @@ from service.config.appliance import load_config, parse_config
 from service.devices.hardware import build_devices
 from service.errors import StartupError
 from service.publish.modbus import registers as R
+from tests.service.conftest import appliance_doc, write_toml
 
-from .conftest import appliance_doc, write_toml
-
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 RIG = """
 [rig]

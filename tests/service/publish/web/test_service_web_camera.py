@@ -8,9 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from service.publish.web.auth import User, hash_password, save_users
-
-from .conftest import appliance_doc
-from .test_service_web import Client
+from tests.service.conftest import appliance_doc
+from tests.service.publish.web.test_service_web import Client
 
 CAMERA_FILE = """# the bench's camera: a tag on the pendulum (kept comment)
 [camera]

@@ -10,8 +10,7 @@ import pytest
 
 from service.cli import main
 from service.persistence.store import DB_NAME, Store
-
-from .conftest import appliance_doc
+from tests.service.conftest import appliance_doc
 
 PAGE = 4096
 

@@ -11,7 +11,7 @@ import struct
 import pytest
 from asyncua import Client, ua
 
-from .conftest import RunningAppliance, appliance_doc, wait_until
+from tests.service.conftest import RunningAppliance, appliance_doc, wait_until
 
 # --- OPC UA before and after a login --------------------------------------------------------------------------
 
@@ -104,9 +104,8 @@ def test_1100_idle_opcua_connections_neither_lock_the_plc_out_nor_lose_the_measu
     import resource
 
     from service.publish.modbus import registers as R
-
-    from .conftest import free_port, moi_subprocess, port_open, write_toml
-    from .test_service_hardening import _plc_image, _plc_trigger
+    from tests.service.conftest import free_port, moi_subprocess, port_open, write_toml
+    from tests.service.test_service_hardening import _plc_image, _plc_trigger
 
     mb_port, ua_port = free_port(), free_port()
     pw = tmp_path / "opcua-password"

@@ -147,7 +147,7 @@ def test_a_sensor_table_is_unknown_until_its_sensor_is_registered(tmp_path: Path
 
 
 def test_the_systemd_unit_grants_every_hardware_sensor_its_devices():
-    from .test_service_systemd import unit
+    from tests.service.config.test_service_systemd import unit
 
     u = unit()
     groups = set(u["SupplementaryGroups"][0].split())

@@ -13,8 +13,7 @@ from service.core.live import LiveStatus
 from service.publish.modbus import registers as R
 from service.publish.modbus.server import ModbusServer, ModbusSettings
 from service.publish.replies import CommandReply
-
-from .test_service_modbus import synthetic
+from tests.service.publish.modbus.test_service_modbus import synthetic
 
 ILLEGAL_VALUE = 3
 DEPTH = 4
@@ -196,7 +195,7 @@ def test_modbus_map_read_prints_strict_json_with_raw_and_decoded_apart(plc, caps
 
 def test_the_daemon_answers_the_command_register_and_a_restart_queues_what_the_plc_did_not_acknowledge(
         tmp_path, appliance_factory):
-    from .conftest import appliance_doc, wait_until
+    from tests.service.conftest import appliance_doc, wait_until
 
     doc = appliance_doc(tmp_path / "state", modbus={"result_handshake": "ack", "queue_depth": DEPTH})
     app = appliance_factory(doc)

@@ -13,9 +13,8 @@ from service.publish.replies import CommandReply
 from service.publish.sparkplug import metrics as M
 from service.publish.sparkplug.node import BDSEQ_FILE, SparkplugNode
 from service.publish.sparkplug.settings import SparkplugSettings
-
-from .conftest import wait_until
-from .sparkplug_host import SparkplugHost, ps
+from tests.service.conftest import wait_until
+from tests.service.publish.sparkplug.sparkplug_host import SparkplugHost, ps
 
 pytestmark = pytest.mark.broker
 
@@ -228,8 +227,8 @@ def test_a_daemon_delivers_every_result_once_across_a_sigkill_a_broker_restart_a
                                                                                              persistent_broker):
     """`moi run` with [sparkplug]: a measurement asked for by DCMD, one measured while the primary host is
     away, the daemon then killed (SIGKILL) and the broker restarted: the host gets both, once each, in order."""
-    from .conftest import appliance_doc, free_port, port_open, write_toml
-    from .test_service_process import start_daemon, trigger_and_wait
+    from tests.service.conftest import appliance_doc, free_port, port_open, write_toml
+    from tests.service.test_service_process import start_daemon, trigger_and_wait
 
     state, mb_port = tmp_path / "state", free_port()
     cfg = write_toml(tmp_path / "appliance.toml", appliance_doc(state, modbus_port=mb_port, sparkplug={

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-UNIT = Path(__file__).resolve().parents[2] / "systemd" / "moi.service"
+UNIT = Path(__file__).resolve().parents[3] / "systemd" / "moi.service"
 
 
 def unit() -> dict[str, list[str]]:

@@ -17,8 +17,7 @@ from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from service.publish.opcua.server import NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT, RESULT_EVALUATION
-
-from .conftest import RunningAppliance, appliance_doc
+from tests.service.conftest import RunningAppliance, appliance_doc
 
 USER, PASSWORD = "line-7", "s3cret"
 

@@ -9,7 +9,7 @@ import pytest
 from service.cli import main
 from service.config.appliance import DEFAULT_SIM_RIG, load_config, parse_config
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 HARDWARE = """
 [device]

@@ -12,7 +12,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
-from .conftest import appliance_doc
+from tests.service.conftest import appliance_doc
 
 BASE = "moi/test-rig"
 
