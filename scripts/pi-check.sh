@@ -124,7 +124,7 @@ say "moi measure --sim (arm64, emulated)"
 arm sh -c "cd /opt/moi && /opt/moi/.venv/bin/moi measure --sim --json --seed 3" >"$OUT/measure-arm64.json" \
     2>"$OUT/measure-arm64.log" || { tail -20 "$OUT/measure-arm64.log"; die "moi measure --sim on arm64"; }
 
-"$REPO/.venv/bin/python" - "$OUT" "$TRACE" <<'EOF'
+"$(dirname "$HOST_MOI")/python" - "$OUT" "$TRACE" <<'EOF'
 import json, sys
 out, trace = sys.argv[1], sys.argv[2]
 def load(name):
