@@ -12,7 +12,11 @@ that into an uncertainty of the model's form, beside the fit's statistical σ:
   errors put it. The scatter of the halves about the whole, beyond what
   their σ explain, is a variance component of the model's form (a
   method-of-moments estimate, as DerSimonian and Laird estimate the
-  between-study variance in "Meta-analysis in clinical trials", 1986).
+  between-study variance in "Meta-analysis in clinical trials", 1986). It
+  rests on one comparison: a transient of the release in the first half
+  (a hand still touching, a sensor settling) can move that half's ω_n onto
+  the second's and hide a model that does not hold, so the first half is
+  fitted again without its first half-swing and the larger term is kept.
 * **Competing explanations.** Where the discovery loop found models within
   its BIC margin of the one it kept (another effect that explains the same
   residual, or an effect not quite worth adding), the data do not
@@ -112,7 +116,9 @@ def check_segments(fit: ModelFit, sigma: float) -> SegmentCheck | None:
     (a bifilar suspension's is not m·g·S·sin θ) makes the frequency depend
     on the amplitude, and ω_n, the small-swing limit that J is computed from,
     then lies beyond both halves, not between them; a model that holds
-    gives the same ω_n in both and the term vanishes.
+    gives the same ω_n in both and the term vanishes. The first half is
+    asked again without its first half-swing (``free_of_release``): u is
+    the larger of the two, and the check records that half's ω_n.
 
     Kept on the fit (``fit.extra``): the identification asks it of the same final fit twice (whether
     an effect holds across the record, then the model-form uncertainty), and each asking fits two halves.
@@ -125,24 +131,36 @@ def check_segments(fit: ModelFit, sigma: float) -> SegmentCheck | None:
     return check
 
 
-def _check_segments(fit: ModelFit, sigma: float) -> SegmentCheck | None:
-    fitted = segment_fits(fit, sigma)
-    if fitted is None:
+def free_of_release(fit: ModelFit, first: slice) -> slice | None:
+    """The first half of the record without its first half-swing, or None when the rest is too short to fit alone.
+
+    A record's first samples are where the release is: a hand or a latch
+    still touching the pendulum, a sensor settling, none of it a free swing.
+    The half-swing ends at the first turning point of the fitted swing a
+    quarter period or more after the first sample (a record that begins at a
+    turning point, as a release from rest does, otherwise ends it at once).
+    """
+    t, v = fit.t[first], fit.extra["omega"][first]
+    turns = np.flatnonzero(np.signbit(v[1:]) != np.signbit(v[:-1])) + 1
+    turns = turns[t[turns] >= t[0] + 0.5 * math.pi / fit.value("omega_n")]
+    if not turns.size:
         return None
-    t_split, segs = fitted
+    part = slice(first.start + int(turns[0]), first.stop)
+    if _swings_in(fit.extra["theta"][part]) < MIN_SEGMENT_SWINGS or part.stop - part.start < 30:
+        return None
+    return part
+
+
+def _u_form(fit: ModelFit, parts: Sequence[slice], ws: Sequence[float], ss: Sequence[float]) -> float:
+    """The model-form u (rad/s) from two parts' ω_n and σ: the larger of their scatter about the whole
+    record's value and the whole's distance to ω_n extrapolated to zero amplitude through them."""
     w, s = fit.value("omega_n"), fit.stdev("omega_n")
-    ws = [f.value("omega_n") for f in segs]
-    ss = [f.stdev("omega_n") for f in segs]
-    sd = math.hypot(ss[0], ss[1])
-    z = abs(ws[0] - ws[1]) / sd if sd > 0 else math.inf
-    p = float(erfc(z / math.sqrt(2.0)))
     # a half's estimate differs from the whole's by its own information's share: variance σ_h² − σ²
     excess = [(wi - w) ** 2 - max(si**2 - s**2, 0.0) for wi, si in zip(ws, ss)]
     u_scatter = math.sqrt(max(float(np.mean(excess)), 0.0))
     # ω(m) = a + b·m through the halves, m the mean square true angle of each: a at m = 0
-    parts = halves(fit)
     theta = fit.extra["theta"]
-    m1, m2 = (float(np.mean(theta[part] ** 2)) for part in parts) if parts is not None else (0.0, 0.0)
+    m1, m2 = (float(np.mean(theta[part] ** 2)) for part in parts)
     u_amp = 0.0
     if m1 > m2 > 0:
         # leverage of the extrapolation, bounded where the amplitude barely changes between the
@@ -151,7 +169,33 @@ def _check_segments(fit: ModelFit, sigma: float) -> SegmentCheck | None:
         a = ws[1] + lev * (ws[1] - ws[0])
         var_a = ((1 + lev) * ss[1]) ** 2 + (lev * ss[0]) ** 2
         u_amp = math.sqrt(max((a - w) ** 2 - max(var_a - s**2, 0.0), 0.0))
-    return SegmentCheck(t_split, tuple(ws), tuple(ss), z, p, max(u_scatter, u_amp))
+    return max(u_scatter, u_amp)
+
+
+def _check_segments(fit: ModelFit, sigma: float) -> SegmentCheck | None:
+    fitted = segment_fits(fit, sigma)
+    parts = halves(fit)
+    if fitted is None or parts is None:
+        return None
+    t_split, segs = fitted
+    ws = [f.value("omega_n") for f in segs]
+    ss = [f.stdev("omega_n") for f in segs]
+    sd = math.hypot(ss[0], ss[1])
+    z = abs(ws[0] - ws[1]) / sd if sd > 0 else math.inf
+    p = float(erfc(z / math.sqrt(2.0)))
+    u = _u_form(fit, parts, ws, ss)
+    # a transient of the release in the first half can move its ω_n onto the second's and hide a
+    # model that does not hold: the first half is asked again without it, and the larger u is kept
+    free, first_free = free_of_release(fit, parts[0]), None
+    if free is not None:
+        try:
+            g = refit_segment(fit, free, sigma)
+        except IdentificationError:
+            g = None
+        if g is not None:
+            first_free = (float(fit.t[free.start]), g.value("omega_n"), g.stdev("omega_n"))
+            u = max(u, _u_form(fit, (free, parts[1]), (first_free[1], ws[1]), (first_free[2], ss[1])))
+    return SegmentCheck(t_split, tuple(ws), tuple(ss), z, p, u, *(first_free or (None, None, None)))
 
 
 def effect_holds(fit: ModelFit, effect: str, sigma: float) -> tuple[bool, str, int]:

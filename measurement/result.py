@@ -28,7 +28,7 @@ from .uncertainty import Budget
 from .wire import read_number
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 
 
 def _num(v: Any) -> Any:
@@ -63,7 +63,10 @@ class SegmentCheck:
     omega_n / omega_n_std: per half, rad/s. z: |ω₁ − ω₂| over their combined
     σ; p: its two-sided p-value. u: the model-form standard uncertainty of
     ω_n (rad/s) from the halves' scatter about the whole record's value
-    beyond their own σ (0 when they scatter no more than that).
+    beyond their own σ (0 when they scatter no more than that), the larger
+    of the halves' and of the second half's with the first refitted from
+    t_free (s), its first half-swing (the release) left out: ω_n_free ±
+    omega_n_std_free there (None: too short to be fitted without it).
     """
 
     t_split: float
@@ -72,6 +75,9 @@ class SegmentCheck:
     z: float
     p: float
     u: float
+    t_free: float | None = None
+    omega_n_free: float | None = None
+    omega_n_std_free: float | None = None
 
     @property
     def disagree(self) -> bool:
@@ -80,14 +86,16 @@ class SegmentCheck:
     def to_dict(self) -> dict[str, Any]:
         return {"t_split": _num(self.t_split), "omega_n": [_num(w) for w in self.omega_n],
                 "omega_n_std": [_num(s) for s in self.omega_n_std], "z": _num(self.z), "p": _num(self.p),
-                "u": _num(self.u), "disagree": self.disagree}
+                "u": _num(self.u), "disagree": self.disagree, "t_free": _num(self.t_free),
+                "omega_n_free": _num(self.omega_n_free), "omega_n_std_free": _num(self.omega_n_std_free)}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> SegmentCheck:
         """Read back ``to_dict`` (``disagree`` is the property that computes it)."""
         return cls(read_number(d["t_split"]), tuple(read_number(w) for w in d["omega_n"]),
                    tuple(read_number(s) for s in d["omega_n_std"]), read_number(d["z"]), read_number(d["p"]),
-                   read_number(d["u"]))
+                   read_number(d["u"]), *(None if d.get(k) is None else read_number(d[k])
+                                          for k in ("t_free", "omega_n_free", "omega_n_std_free")))
 
 
 @dataclass(frozen=True)

@@ -26,8 +26,13 @@ def _halves(segments: SegmentCheck | None) -> str:
     verdict = ("they disagree: the model lacks something that changes with the amplitude or the time "
                f"(flag halves_disagree); ±{segments.u:.2g} rad/s of model form enters omega_n_u"
                if segments.disagree else "they agree")
-    return (f"the final model fitted to each half of the record (split at {segments.t_split:.3g} s) gives "
+    said = (f"the final model fitted to each half of the record (split at {segments.t_split:.3g} s) gives "
             f"ω_n {w1:.6g} ± {s1:.2g} and {w2:.6g} ± {s2:.2g} rad/s ({segments.z:.1f} σ apart): {verdict}")
+    if segments.omega_n_free is None:
+        return said
+    return (f"{said}; the first half without its first half-swing (from {segments.t_free:.3g} s: the release "
+            f"may not be a free swing) gives {segments.omega_n_free:.6g} ± {segments.omega_n_std_free:.2g} rad/s, "
+            f"and ±{segments.u:.2g} rad/s of model form from the halves enters omega_n_u")
 
 
 def _guards(found: Findings) -> list[str]:

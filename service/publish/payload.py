@@ -88,6 +88,7 @@ def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id:
 #: schema adds its line here (``tests/service/publish/web/test_service_quality.py`` holds it to ``SCHEMA_VERSION``).
 _NEXT_SCHEMA = {
     4: {"measures": "angle"},  # schema 5: what the sensor read; before it, always the angle
+    5: {},  # schema 6: keys added inside model_form.segments only (t_free, ...), which from_dict defaults
 }
 
 

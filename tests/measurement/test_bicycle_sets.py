@@ -83,14 +83,17 @@ def test_releases_apart_beyond_their_stated_u_are_flagged_with_the_two_named(par
     if z > OWN_PAIR_Z:
         report = j.report()
         assert f"{a} and {b} are {z:.1f} u apart" in report or f"{b} and {a} are {z:.1f} u apart" in report
-    # the wheel hung from its rim: its releases are 0.35 % apart, and the set says so
-    assert (F.RELEASES_DISAGREE in j.flags) == (part == "fwheel_compound")
+    # the wheel hung from its rim: its releases are 0.35 % apart, and its rates say so; its integrated angles
+    # hold less well across their records (the 2nd's first half moves by 0.006 rad/s without its first
+    # half-swing), and within the u that states they do not disagree
+    assert (F.RELEASES_DISAGREE in j.flags) == ((part, reading) == ("fwheel_compound", "rate"))
 
 
-#: the releases whose rate and angle records are more than OWN_PAIR_Z stated u apart, and why: the compound
-#: wheel's 2nd reads 4.41840 ± 0.00028 rad/s as a rate, 4.42040 ± 0.00071 as an angle; the rate's model-form u
-#: (from its record's halves) is 0.00025 rad/s over the whole record, 0.0017-0.0028 with its first 0.2-1 s left out
-APART = {("fwheel_compound", 2): "the rate's model-form u over its whole record is too small"}
+#: the releases whose rate and angle records are more than OWN_PAIR_Z stated u apart, and why (none now: the
+#: compound wheel's 2nd was, 4.41840 ± 0.00028 rad/s as a rate against 4.42040 ± 0.00071 as an angle, while the
+#: release's transient in the rate's first 0.15 s pulled its first half onto its second; the halves are now also
+#: asked without the first half-swing: ± 0.0026 and ± 0.011)
+APART: dict[tuple[str, int], str] = {}
 
 
 @pytest.mark.parametrize(("part", "release"), [(part, i) for part, n in OBJECTS.items() for i in range(1, n + 1)])
