@@ -779,7 +779,8 @@ class Appliance:
         check standard since it failed (``calibration_state``): every result would carry calibration_due and be
         INVALID, and measuring again cannot change that. A check-standard recipe is still measured while only
         a failed check standard blocks, since its passing is what clears the block; an expired calibration
-        refuses it too (a check cannot renew a calibration: ``moi calibrate`` does). Returns the calibration
+        refuses it too (a check cannot renew a calibration: ``moi calibrate`` does). A recipe whose
+        ``invalid_flags`` leave out ``calibration_due`` is measured too: its parts are judged, flagged. Returns the calibration
         state, ``expired`` and ``detail``: the words every door says, with whom to call ([web] contact)."""
         recipe = self.parts.recipe
         rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
@@ -791,6 +792,9 @@ class Appliance:
         expired = cal is not None and cal.due(_dt.datetime.fromtimestamp(now, _dt.UTC).date())
         if not expired and recipe is not None and recipe.check_standard is not None:
             return None
+        if (recipe is not None and recipe.check_standard is None
+                and "calibration_due" not in recipe.quality.invalid_flags):
+            return None  # its quality rules judge a part with the calibration due (flagged, not INVALID): its call
         check = state.get("check_standard")
         failed = check if check is not None and not check.get("passed") else None
         contact = getattr(self.config.publishers.get("web"), "contact", None) or CONTACT

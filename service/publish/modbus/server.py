@@ -453,6 +453,8 @@ class ModbusServer(Publisher):
                 self._command = (code, R.COMMAND_STATUS[r.status], r.reason_code, count)
                 if R.COMMANDS[code] == V.TRIGGER and r.status == "accepted":
                     self._trigger_ack = True
+                elif R.COMMANDS[code] == V.TRIGGER:
+                    self._hold_until = 0.0  # refused: no part is being measured, the PLC may change it at once
                 if R.COMMANDS[code] == V.ACKNOWLEDGE_FAULT and r.status in ("done", "refused"):
                     self._overrun = False  # the overrun is acknowledged with the fault (its count stays)
                 self._rebuild()

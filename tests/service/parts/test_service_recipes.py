@@ -14,7 +14,10 @@ from measurement.verdict import Specification, decide
 from service.errors import ConfigError
 from service.parts.recipes import RecipeBook, RecipeError, load_recipe
 from service.publish.modbus import registers as R
+from service.publish.replies import REASONS
 from tests.service.conftest import appliance_doc, wait_until
+from tests.service.publish.modbus.test_service_plc_handshake import bit, image
+from tests.service.publish.modbus.test_service_plc_handshake import write as write_register
 
 J_TRUE = 0.0125  # the simulated part (appliance_doc's default [simulation] inertia)
 
@@ -63,6 +66,19 @@ def recipe_dir(tmp_path) -> Path:
           + f"[check_standard]\nreference = {J_TRUE * 1.01!r}\nreference_U = 2e-5\nname = \"disc CS-1\"\n")
     write(d / "after.toml", recipe("rotor-after", 13, J_TRUE, tolerance_percent=5.0, releases=1))
     return d
+
+
+def refused_trigger(c: ModbusTcpClient) -> dict:
+    """A trigger through the command register while the calibration blocks: the registers once it is answered
+    (refused, nothing started)."""
+    v = wait_until(lambda: (v := image(c)) and not bit(v, "ready") and bit(v, "calibration_due") and v, 10,
+                   what="not ready, calibration due")
+    count = v["command_count"]
+    assert not write_register(c, "command", R.COMMAND_CODES["trigger"], 0).isError()
+    v = wait_until(lambda: (v := image(c))["command_count"] > count and v, 10, what="the trigger answered")
+    assert v["command_status"] == R.COMMAND_STATUS["refused"] and not bit(v, "trigger_ack")
+    assert not write_register(c, "command", 0).isError()
+    return v
 
 
 def plc(app) -> ModbusTcpClient:
@@ -136,7 +152,7 @@ def test_a_plc_selects_a_recipe_writes_a_part_id_and_reads_the_verdict_of_three_
 def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recipe_dir, appliance_factory):
     app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=10.0, recipes={"directory": str(recipe_dir)}))
     c = plc(app)
-    verdicts = {}
+    verdicts, refused = {}, {}
     try:
         # outside the refused block: the result image and the gap before the part ID block
         for address in (R.SNAPSHOT_START, R.WRITABLE_START - 1, R.WRITABLE_END):
@@ -144,10 +160,15 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
             assert rr.isError() and rr.exception_code == 0x02, address
         rr = c.write_register(R.WRITABLE["recipe_select"][0], 99, device_id=1)  # no such recipe
         assert rr.isError() and rr.exception_code == 0x03
-        for n, number in enumerate((8, 9, 10, 11, 12, 13), start=1):
+        n = 0
+        for number in (8, 9, 10, 11, 12, 13):
             select(c, number)
             assert not write_part_id(c, f"P-{number}").isError()
+            if number in (10, 13):  # a part every result of which would be INVALID: refused before it starts
+                refused[number] = refused_trigger(c)
+                continue
             assert not c.write_coil(R.COILS["trigger"], True, device_id=1).isError()
+            n += 1
             app.wait_done(n)
             s = snapshot(c)
             payload = app.app.store.get(s["uuid"]).payload
@@ -155,6 +176,7 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
             verdicts[number] = (s["verdict"], payload)
     finally:
         c.close()
+    assert app.app.store.count() == 4
     code = R.VERDICT_CODES
     verdict, p = verdicts[8]
     assert verdict == code["NOK"] and p["part"]["zone"] == "nonconformance", (p["flags"], p["part"])
@@ -170,9 +192,9 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
     # the expired calibration: flagged in the payload and the Modbus flags; this recipe ignores it
     assert "calibration_due" in p["flags"] and p["calibration"]["due"] is True
     assert p["flag_bits"] & (1 << R.FLAG_BITS["calibration_due"])
-    # ... the next one makes it INVALID
-    verdict, p = verdicts[10]
-    assert verdict == code["INVALID"] and p["part"]["reasons"][-1] == "release 1: invalid: flag calibration_due", (p["flags"], p["part"])
+    # ... the next one, whose quality rules make a due calibration INVALID, is refused at the trigger: measuring
+    # again could not change its verdict (the PLC reads why: not ready, reason calibration_due)
+    assert refused[10]["command_reason"] == REASONS["calibration_due"].code
     verdict, p = verdicts[11]
     assert verdict == code["INVALID"] and "above the limit" in p["part"]["excluded"][0]["reason"], (p["flags"], p["part"])
     # the check standard measured at the station: E_n stored with the history; the next part is INVALID
@@ -180,9 +202,8 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
     check = p["part"]["check_standard"]
     assert check["name"] == "disc CS-1" and check["E_n"] > 1 and not check["passed"]
     assert app.app.store.check_standards(limit=1)[0]["E_n"] == check["E_n"]
-    verdict, p = verdicts[13]
-    assert p["calibration"]["due"] and p["calibration"]["check_standard"]["passed"] is False
-    assert verdict == code["INVALID"] and "calibration_due" in p["flags"]
+    assert refused[13]["command_reason"] == REASONS["calibration_due"].code
+    assert app.app.measure_block()["calibration"]["check_standard"]["passed"] is False
     # the check standard is not refused for the calibration_due its own failure raised: a passing one clears it
     assert "calibration_due" not in load_recipe(recipe_dir / "check.toml").quality.invalid_flags
 
