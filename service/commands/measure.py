@@ -30,7 +30,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from measurement.errors import InvalidInput
-from service.devices.defaults import DEMO_EFFECTS, DEMO_RIG, SIM_ENCODER_NOISE, demo_camera
+from service.devices.defaults import DEMO_EFFECTS, DEMO_RIG, SIM_ENCODER_NOISE
 from service.devices.sensors import registry as sensors
 from service.sources.files import read_rig
 
@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
     tokens = args.effects if args.effects is not None else ([] if args.rig else DEFAULT_EFFECTS)
     effects = parse_effects(tokens, rig.kind)
     truth = Pendulum(rig, args.inertia, effects)
-    camera_config = _camera_config(args) if args.sensor == "camera" else None
+    sensor_values = _sensor_values(args)
     # each lost encoder reply already costs a time-out; pymodbus would log every one as an error
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     simulation = SimulationSettings(
         inertia=args.inertia, effects=effects, theta0=args.theta0, noise=args.noise, bits=args.bits,
         time_scale=args.time_scale, seed=args.seed, sensor=args.sensor, latency=args.latency, camera=args.camera,
-        camera_yaw_deg=args.camera_yaw, camera_config=camera_config, drop_rate=args.drop_rate, crc_rate=args.crc_rate,
+        camera_yaw_deg=args.camera_yaw, camera_config=sensor_values.get("camera_config"), drop_rate=args.drop_rate, crc_rate=args.crc_rate,
         glitch_rate=args.glitch_rate)  # checks the time scale (InvalidInput names the limit)
     desc = ", ".join(f"{k}({', '.join(f'{p}={v:g}' for p, v in ps.items())})" for k, ps in effects.items()) or "no damping"
     out = sys.stderr if args.json else sys.stdout
@@ -342,9 +342,16 @@ def _print_result(results: list, seq, last, as_json: bool, truth: dict | None = 
     return 0
 
 
-def _camera_config(args: argparse.Namespace):
-    """The simulated camera's file (--camera, else the demo camera), checked before anything is opened."""
-    from service.config.camera import read_camera
+def _sensor_values(args: argparse.Namespace) -> dict:
+    """The simulated sensor's settings, completed by its own module before anything is opened (the camera reads
+    its camera file, --camera, else the demo camera's): a bad one is one line naming the option."""
+    from service.errors import ConfigError
     if not (abs(args.camera_yaw) < 20 and args.camera_yaw == args.camera_yaw):
         raise InvalidInput(f"--camera-yaw must be within ±20°, got {args.camera_yaw:g}")
-    return read_camera(args.camera) if args.camera else demo_camera()
+    values = {"camera": args.camera}
+
+    def fail(key: str | None, message: str) -> ConfigError:
+        return ConfigError(f"--{key or args.sensor}: {message}")
+
+    sensors.sensor(args.sensor).simulation_values(values, fail)
+    return values
