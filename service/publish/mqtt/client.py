@@ -37,7 +37,6 @@ underscores (Home Assistant's rule), every numeric sensor has its unit.
 from __future__ import annotations
 
 import contextlib
-import functools
 import json
 import logging
 import os
@@ -59,6 +58,7 @@ from service.errors import ConfigError
 from service.logs import Throttle
 from service.persistence.outbox import OutboxSender
 from service.persistence.store import Store
+from service.publish.callbacks import never_raises
 from service.publish.modbus.registers import FLAG_BITS
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
@@ -97,20 +97,7 @@ MAX_TOPIC = 256
 MAX_CORRELATION = 128
 
 
-def _never_raises(callback: Callable[..., None]) -> Callable[..., None]:
-    """Wrap a paho callback: an exception that escaped it would end paho's network thread
-    (no more commands, acknowledgements or reconnects), so it is logged and counted instead."""
-
-    @functools.wraps(callback)
-    def guarded(self: "MqttService", *args: Any) -> None:
-        try:
-            callback(self, *args)
-        except Exception as exc:  # a callback must never end the network thread
-            self.callback_errors += 1
-            self.last_error = f"{callback.__name__}: {type(exc).__name__}: {exc}"
-            log.exception("MQTT: %s failed (ignored; the connection goes on)", callback.__name__)
-
-    return guarded
+_never_raises = never_raises(log, "MQTT")
 
 
 class Topics:

@@ -43,6 +43,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 
 from service.persistence.outbox import OutboxSender
 from service.persistence.store import Store
+from service.publish.callbacks import never_raises
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
 
@@ -58,14 +59,7 @@ BDSEQ_FILE = "sparkplug-bdseq"
 MAX_COMMAND_BYTES = 4096
 
 
-def _never_raises(callback: Callable[..., None]) -> Callable[..., None]:
-    def guarded(self: "SparkplugNode", *args: Any) -> None:
-        try:
-            callback(self, *args)
-        except Exception:  # a callback must never end paho's network thread
-            self.callback_errors += 1
-            log.exception("Sparkplug: %s failed (ignored)", callback.__name__)
-    return guarded
+_never_raises = never_raises(log, "Sparkplug")
 
 
 class SparkplugNode(Publisher):
