@@ -55,18 +55,15 @@ demo: $(STAMP)
 # marked `clock` (servers, threads and a simulated rig in wall-clock time; see tests/conftest.py), so the
 # suite's own workers never compete with them. Both always run, under coverage (pytest-cov; the second run
 # appends to the first), and the product's coverage is held to the floor (fail_under in pyproject.toml).
-# Either run failing, or the coverage below its floor, fails the target.
-test: $(STAMP) broker browser ffmpeg
+# Either run failing, or the coverage below its floor, fails the target. `make test-fast`: the same two runs
+# without the coverage tracer, for a quick local check.
+test: COVERAGE_FIRST = --cov --cov-report= --cov-fail-under=0
+test: COVERAGE_NEXT = --cov --cov-append --cov-report=
+test test-fast: $(STAMP) broker browser ffmpeg
 	@rm -f .coverage .coverage.*
-	@$(PY) -m pytest -q -n 2 --dist loadfile -m "not clock" --cov --cov-report= --cov-fail-under=0; computations=$$?; \
-	$(PY) -m pytest -q -m clock --cov --cov-append --cov-report=; clock=$$?; \
-	echo "coverage of the product: $$($(PY) -m coverage report --format=total --fail-under=0) % (floor: fail_under in pyproject.toml; per file: make coverage)"; \
-	test $$computations = 0 -a $$clock = 0
-
-# the same runs without the coverage tracer, for a quick local check
-test-fast: $(STAMP) broker browser ffmpeg
-	@$(PY) -m pytest -q -n 2 --dist loadfile -m "not clock"; computations=$$?; \
-	$(PY) -m pytest -q -m clock; clock=$$?; \
+	@$(PY) -m pytest -q -n 2 --dist loadfile -m "not clock" $(COVERAGE_FIRST); computations=$$?; \
+	$(PY) -m pytest -q -m clock $(COVERAGE_NEXT); clock=$$?; \
+	if [ -n "$(COVERAGE_NEXT)" ]; then echo "coverage of the product: $$($(PY) -m coverage report --format=total --fail-under=0) % (floor: fail_under in pyproject.toml; per file: make coverage)"; fi; \
 	test $$computations = 0 -a $$clock = 0
 
 # the coverage of the last `make test`, file by file
