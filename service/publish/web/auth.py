@@ -30,6 +30,7 @@ import base64
 import hashlib
 import hmac
 import logging
+import math
 import os
 import secrets
 import stat
@@ -40,6 +41,7 @@ from pathlib import Path
 
 from service.errors import StartupError
 from service.names import NAMES, name_problem
+from service.publish.lockout import Lockouts
 
 log = logging.getLogger("moi.web")
 
@@ -58,9 +60,21 @@ MIN_TOKEN_LENGTH = 16
 GUESS_DELAY = 0.5
 #: at most one "wrong tokens" line per this many seconds, s
 GUESS_LOG_INTERVAL = 60.0
-#: a user given this many wrong passwords within LOCKOUT_WINDOW s is locked out for LOCKOUT_TIME s (its right
-#: password refused too; an admin's "enable" lifts it): short, so that a guesser cannot keep an operator out
+#: a user name given this many wrong passwords from one address within LOCKOUT_WINDOW s is locked out for
+#: LOCKOUT_TIME s from that address only (its right password refused there too, and the user told so; an
+#: admin's "enable" lifts it): a guesser elsewhere never keeps the user out at their own device
 LOCKOUT_WRONG, LOCKOUT_WINDOW, LOCKOUT_TIME = 5, 900.0, 900.0
+#: an address that gave this many wrong passwords within LOCKOUT_WINDOW, whatever the names, has its named
+#: logins locked out for LOCKOUT_TIME (a guesser going through the names); the token's login never is
+SOURCE_WRONG = 20
+
+
+def throttled_words(seconds: float, source: str) -> str:
+    """What a login refused by a lockout is told (not "wrong password": the password was not even tried)."""
+    minutes = max(1, math.ceil(seconds / 60))
+    return (f"too many wrong passwords: logins with this name from your address ({source}) are paused for "
+            f"{minutes} more min, the right password too (it was not tried). Log in from another device, ask an "
+            "admin to enable your user, or log in with the appliance's token (first line of its web token file)")
 
 
 def read_token(path: str | os.PathLike, *, create: bool) -> str:
@@ -220,8 +234,10 @@ class Guard:
         self._guessing: asyncio.Lock | None = None  # made on the web loop, at the first wrong token
         self.wrong_tokens = 0
         self.wrong_logins: dict[str, int] = {}  # wrong passwords per user name, since the start
-        self._recent_wrong: dict[str, list[float]] = {}  # their times within LOCKOUT_WINDOW
-        self._locked_until: dict[str, float] = {}
+        # by (address, name typed) and by address: a name that is no user is counted as one (names are not
+        # told apart); no account is ever locked out for every address
+        self.lockouts: Lockouts[tuple[str, str]] = Lockouts(LOCKOUT_WRONG, LOCKOUT_WINDOW, LOCKOUT_TIME, clock)
+        self.source_lockouts: Lockouts[str] = Lockouts(SOURCE_WRONG, LOCKOUT_WINDOW, LOCKOUT_TIME, clock)
         self._wrong_since_log = 0
         self._guess_logged_at = -float("inf")
 
@@ -243,18 +259,23 @@ class Guard:
     def token_ok(self, candidate: str | None) -> bool:
         return candidate is not None and candidate != "" and hmac.compare_digest(candidate.encode(), self._token.encode())
 
-    def login(self, candidate: str | None, user: str | None = None) -> tuple[str, Session] | None:
+    def login(self, candidate: str | None, user: str | None = None,
+              source: str = "?") -> tuple[str, Session] | None:
         """A new session (id, session) when ``candidate`` is the token (no ``user``) or ``user``'s password,
-        else None."""
+        else None. A named login from ``source`` (the client's address) while ``throttled`` is refused unchecked."""
         if user:
+            user = user[:MAX_USER_NAME + 1]  # a longer name is no user's either: the lockouts keep no more of it
+            if self.throttled(user, source) > 0:
+                return None
             u = self.users.get(user)
             if u is None:
                 check_password(candidate or "", self._dummy)  # as long as for a user: names are not told apart
+                self._wrong_password(user, source)
                 return None
             if not check_password(candidate or "", u.password):
-                self._wrong_password(u.name)
+                self._wrong_password(u.name, source)
                 return None
-            if u.disabled or self.locked_for(u.name) > 0:
+            if u.disabled:
                 return None
             who: tuple[str | None, str] = (u.name, u.role)
         elif self.token_ok(candidate):
@@ -271,24 +292,28 @@ class Guard:
             self._sessions[sid] = s
         return sid, s
 
-    def _wrong_password(self, name: str) -> None:
-        now = self._clock()
-        self.wrong_logins[name] = self.wrong_logins.get(name, 0) + 1
-        recent = [t for t in self._recent_wrong.get(name, []) if now - t < LOCKOUT_WINDOW] + [now]
-        self._recent_wrong[name] = recent
-        if len(recent) >= LOCKOUT_WRONG and self.locked_for(name) == 0:
-            self._locked_until[name] = now + LOCKOUT_TIME
-            log.warning("web: user %s locked out for %.0f s after %d wrong passwords within %.0f s", name,
-                        LOCKOUT_TIME, len(recent), LOCKOUT_WINDOW)
+    def _wrong_password(self, name: str, source: str) -> None:
+        if name in self.users:
+            self.wrong_logins[name] = self.wrong_logins.get(name, 0) + 1
+        if self.lockouts.failed((source, name)):
+            log.warning("web: logins as %r from %s locked out for %.0f s after %d wrong passwords within %.0f s",
+                        name, source, LOCKOUT_TIME, LOCKOUT_WRONG, LOCKOUT_WINDOW)
+        if self.source_lockouts.failed(source):
+            log.warning("web: named logins from %s locked out for %.0f s after %d wrong passwords within %.0f s",
+                        source, LOCKOUT_TIME, SOURCE_WRONG, LOCKOUT_WINDOW)
+
+    def throttled(self, name: str, source: str) -> float:
+        """How much longer logins as ``name`` from ``source`` are locked out, s (0: not locked)."""
+        return max(self.lockouts.locked_for((source, name)), self.source_lockouts.locked_for(source))
 
     def locked_for(self, name: str) -> float:
-        """How much longer ``name`` is locked out, s (0: not locked)."""
-        return max(0.0, self._locked_until.get(name, 0.0) - self._clock())
+        """How much longer ``name`` is locked out from some address, s (0: from none)."""
+        return max((left for (_, n), left in self.lockouts.locked().items() if n == name), default=0.0)
 
     def unlock(self, name: str) -> None:
-        """Lift ``name``'s lockout and forget its recent wrong passwords (an admin enabled the user)."""
-        self._locked_until.pop(name, None)
-        self._recent_wrong.pop(name, None)
+        """Lift ``name``'s lockouts from every address and forget its recent wrong passwords (an admin enabled
+        the user)."""
+        self.lockouts.lift(lambda key: key[1] == name)
 
     def logout(self, sid: str | None) -> None:
         with self._lock:

@@ -55,11 +55,13 @@ from .auth import (
     MIN_PASSWORD,
     ROLES,
     SESSION_LIFETIME,
+    SOURCE_WRONG,
     User,
     allowed,
     check_user,
     hash_password,
     save_users,
+    throttled_words,
 )
 from .child import ChildBusy, export_file, replot, report_file, trace_file
 from .live import Live, extras
@@ -453,21 +455,27 @@ class Views:
         csrf, expected = str(form.get("csrf") or ""), request.cookies.get(LOGIN_COOKIE) or ""
         if not csrf or not expected or not hmac.compare_digest(csrf.encode(), expected.encode()):
             raise Refused(403, "missing or wrong CSRF token: reload the page and log in again")
-        user = str(form.get("user") or "").strip()
-        made = self.server.guard.login(str(form.get("token") or ""), user or None)
-        if made is None:
-            await self.server.guard.wrong_token(request.remote)  # a guess costs time
-            why = ("wrong user name or password" if user else
-                   "wrong token: it is the first line of the appliance's web token file")
-            if _wants_json(request):
-                raise Refused(401, why)
-            # the form again, with what was typed (not the password) and the error beside it
-            return self._page(request, "login.html", status=401, title="Log in", login_error=why,
-                              login_user=user[:64], login_next=self._next(request, str(form.get("next") or "")))
-        sid, _ = made
-        resp = web.HTTPSeeOther(self._next(request, str(form.get("next") or "")))
-        resp.set_cookie(COOKIE, sid, max_age=int(SESSION_LIFETIME), httponly=True, samesite="Strict", path="/")
-        raise resp
+        user, source = str(form.get("user") or "").strip(), request.remote or "?"
+        guard = self.server.guard
+        if user and (wait := guard.throttled(user, source)) > 0:
+            status, why = 429, throttled_words(wait, source)
+        elif (made := guard.login(str(form.get("token") or ""), user or None, source)) is None:
+            await guard.wrong_token(source)  # a guess costs time
+            status, why = 401, ("wrong user name or password" if user else
+                                "wrong token: it is the first line of the appliance's web token file")
+        else:
+            sid, _ = made
+            resp = web.HTTPSeeOther(self._next(request, str(form.get("next") or "")))
+            resp.set_cookie(COOKIE, sid, max_age=int(SESSION_LIFETIME), httponly=True, samesite="Strict", path="/")
+            raise resp
+        if _wants_json(request):
+            raise Refused(status, why)
+        # the form again, with what was typed (not the password) and the error beside it
+        page = self._page(request, "login.html", status=status, title="Log in", login_error=why,
+                          login_user=user[:64], login_next=self._next(request, str(form.get("next") or "")))
+        if status == 429:
+            page.headers["Retry-After"] = str(math.ceil(wait))
+        return page
 
     async def logout(self, request: web.Request) -> web.StreamResponse:
         self._same_origin(request)
@@ -960,14 +968,16 @@ class Views:
     async def users(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
         """The named users and their roles, with forms to add one, reset a password or change a role, disable or
         enable one, and remove one; how many wrong logins there were, in all and per user (each costs
-        GUESS_DELAY, one at a time), and who is locked out and for how long (LOCKOUT_WRONG within
-        LOCKOUT_WINDOW)."""
+        GUESS_DELAY, one at a time), and which user is locked out from which address and for how long
+        (LOCKOUT_WRONG within LOCKOUT_WINDOW; an address past SOURCE_WRONG for every name)."""
         self._admin(request)
         guard = self.server.guard
         return self._page(request, "users.html", status=status, title="Users", users=list(guard.users.values()),
                           roles=ROLES, users_file=self.server.settings.users_file, wrong=guard.wrong_tokens, wrong_logins=guard.wrong_logins,
                           locked={n: guard.locked_for(n) for n in guard.users},
-                          lockout_wrong=LOCKOUT_WRONG, lockout_window=LOCKOUT_WINDOW, lockout_time=LOCKOUT_TIME,
+                          lockouts={k: left for k, left in guard.lockouts.locked().items() if k[1] in guard.users}
+                          | {(a, ""): left for a, left in guard.source_lockouts.locked().items()},
+                          source_wrong=SOURCE_WRONG, lockout_wrong=LOCKOUT_WRONG, lockout_window=LOCKOUT_WINDOW, lockout_time=LOCKOUT_TIME,
                           delay=GUESS_DELAY, max_name=MAX_USER_NAME, min_password=MIN_PASSWORD, **ctx)
 
     async def users_change(self, request: web.Request) -> web.StreamResponse:

@@ -613,25 +613,87 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401
 
 
-def test_a_user_given_too_many_wrong_passwords_is_locked_out_for_a_while_and_an_admin_lifts_it():
+def test_wrong_passwords_lock_a_name_out_from_their_address_only_for_a_while_and_an_admin_lifts_it():
+    """LOCKOUT_WRONG wrong passwords for a name from one address within the window lock that name out from that
+    address (its right password refused there unchecked); the same name logs in from any other address, so
+    nobody on the network can lock a user (the admin included) out alone. Time is moved by hand."""
     from service.publish.web.auth import LOCKOUT_TIME, LOCKOUT_WINDOW, LOCKOUT_WRONG, Guard, User, hash_password
 
     now = [0.0]
     olga = User("olga", "operator", hash_password("olga-password-1"))
-    guard = Guard("t" * 24, clock=lambda: now[0], users={"olga": olga})
+    root = User("root", "admin", hash_password("root-password-1"))
+    guard = Guard("t" * 24, clock=lambda: now[0], users={"olga": olga, "root": root})
+    guesser, desk = "192.0.2.66", "192.0.2.10"
     # wrong passwords spread wider than the window lock nobody out
     for _ in range(LOCKOUT_WRONG):
-        assert guard.login("wrong", "olga") is None
+        assert guard.login("wrong", "olga", guesser) is None
         now[0] += LOCKOUT_WINDOW / (LOCKOUT_WRONG - 1)
-    assert guard.locked_for("olga") == 0 and guard.login("olga-password-1", "olga") is not None
-    for _ in range(LOCKOUT_WRONG):  # within the window: locked, the right password refused too
-        assert guard.login("wrong", "olga") is None
-    assert guard.locked_for("olga") == LOCKOUT_TIME and guard.login("olga-password-1", "olga") is None
-    assert guard.wrong_logins["olga"] == 2 * LOCKOUT_WRONG
+    assert guard.throttled("olga", guesser) == 0 and guard.login("olga-password-1", "olga", guesser) is not None
+    now[0] += LOCKOUT_WINDOW
+    for name in ("olga", "root"):  # within the window: locked out, from the guesser's address only
+        for _ in range(LOCKOUT_WRONG):
+            assert guard.login("wrong", name, guesser) is None
+        assert guard.throttled(name, guesser) == LOCKOUT_TIME
+        assert guard.login(f"{name}-password-1", name, guesser) is None
+        assert guard.login(f"{name}-password-1", name, desk) is not None  # at their own desk: in at once
+    assert guard.throttled("root", desk) == 0 and guard.locked_for("olga") == LOCKOUT_TIME
+    assert guard.wrong_logins["olga"] == 2 * LOCKOUT_WRONG  # the refused right password is not counted
     now[0] += LOCKOUT_TIME / 2
     guard.unlock("olga")  # the admin's "enable"
-    assert guard.locked_for("olga") == 0 and guard.login("olga-password-1", "olga") is not None
+    assert guard.locked_for("olga") == 0 and guard.login("olga-password-1", "olga", guesser) is not None
+    assert guard.throttled("root", guesser) > 0  # another user's lockout stays
     for _ in range(LOCKOUT_WRONG):
-        guard.login("wrong", "olga")
+        guard.login("wrong", "olga", guesser)
     now[0] += LOCKOUT_TIME  # and the lockout ends by itself
-    assert guard.login("olga-password-1", "olga") is not None
+    assert guard.login("olga-password-1", "olga", guesser) is not None
+    assert guard.login("t" * 24, None, guesser) is not None  # the token is never locked out
+
+
+def test_an_address_guessing_through_the_names_is_locked_out_of_every_name_but_not_of_the_token():
+    """SOURCE_WRONG wrong passwords from one address, a few per name (names that are no user's count the same:
+    they are not told apart), lock every named login from that address out; other addresses are untouched."""
+    from service.publish.web.auth import LOCKOUT_TIME, LOCKOUT_WRONG, SOURCE_WRONG, Guard, User, hash_password
+
+    now = [0.0]
+    root = User("root", "admin", hash_password("root-password-1"))
+    guard = Guard("t" * 24, clock=lambda: now[0], users={"root": root})
+    names = [f"name-{i}" for i in range(SOURCE_WRONG)]
+    for i in range(SOURCE_WRONG):
+        assert guard.throttled("root", "192.0.2.66") == 0
+        guard.login("wrong", names[i // (LOCKOUT_WRONG - 1)], "192.0.2.66")
+    assert guard.throttled("root", "192.0.2.66") == LOCKOUT_TIME  # never guessed, locked out from there
+    assert guard.login("root-password-1", "root", "192.0.2.66") is None
+    assert guard.login("root-password-1", "root", "192.0.2.10") is not None
+    assert guard.login("t" * 24, None, "192.0.2.66") is not None
+    assert guard.wrong_logins == {}  # only users' names are counted for the page
+
+
+def test_a_locked_out_login_is_told_it_is_paused_not_that_its_password_is_wrong(appliance_factory, tmp_path,
+                                                                                 monkeypatch):
+    """Over HTTP: after LOCKOUT_WRONG wrong passwords the right one is answered 429 with Retry-After and words
+    saying the logins are paused (the password was not tried); the admin's page lists the lockout with its
+    address; the token still logs in from that address."""
+    from service.publish.web import auth
+    from service.publish.web.auth import LOCKOUT_WRONG, User, hash_password, save_users
+
+    monkeypatch.setattr(auth, "GUESS_DELAY", 0.01)
+    users = tmp_path / "users.toml"
+    save_users(users, {"root": User("root", "admin", hash_password("root-password-1"))})
+    app = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True, "users_file": str(users)})).app
+    c = Client(app.web.url)
+    for _ in range(LOCKOUT_WRONG):
+        status, _, body = c.request("/login", {"user": "root", "token": "wrong-password", "csrf": c.csrf()})
+        assert status == 401 and "wrong user name or password" in body.decode()
+    status, headers, body = c.request("/login", {"user": "root", "token": "root-password-1", "csrf": c.csrf()})
+    page = body.decode()
+    assert status == 429 and int(headers["Retry-After"]) > 0, (status, headers)
+    assert "too many wrong passwords" in page and "(127.0.0.1) are paused for 15 more min" in page
+    assert "it was not tried" in page and "wrong user name or password" not in page
+    status, doc = c.json("/login", data=urllib.parse.urlencode({"user": "root", "token": "root-password-1",
+                                                                "csrf": c.csrf()}).encode())
+    assert status == 429 and "paused" in doc["error"]
+    token = Path(app.web.token_file).read_text().strip()
+    status, _, body = c.request("/login", {"token": token, "csrf": c.csrf()})
+    assert status == 200 and 'id="lockouts"' in c.request("/users")[2].decode()
+    row = c.request("/users")[2].decode().split('id="lockouts"')[1]
+    assert "<td>root</td><td>127.0.0.1</td><td>15</td>" in row
