@@ -13,8 +13,11 @@ subscriptions. A guard in front where it has none:
   server's thread more than the header check saves);
 * requests name at most ``max_nodes_per_request`` nodes (Read, Write, Browse, Call, monitored items...);
 * wrong logins: each later message of that peer host before a session is activated waits ``GUESS_DELAY``,
-  one at a time for the whole server; ``LOCKOUT_AFTER`` wrong ones within ``LOCKOUT_WINDOW`` shut the host
-  out for ``LOCKOUT_SECONDS``; said in the log with the peer's address, once a minute at most;
+  one at a time for the whole server; ``LOCKOUT_AFTER`` wrong ones within ``LOCKOUT_WINDOW`` throttle the
+  host for ``LOCKOUT_SECONDS``: its messages before a login wait ``THROTTLE_DELAY`` each, one at a time for
+  that host. Its logins are still tried: a client there with the right password gets in (a lockout refused it
+  along with the guesser beside it), a guesser gets one try per ``THROTTLE_DELAY`` at most; said in the log
+  with the peer's address, once a minute at most;
 * while the sensor is read, requests are served one at a time and in at most ``CAPTURE_SHARE`` of the
   server thread's time (the web page's rule): a client is slowed, never refused.
 """
@@ -36,6 +39,8 @@ from asyncua.common.utils import ServiceError
 from asyncua.crypto import uacrypto
 from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
 
+from service.publish.lockout import MOST_KEYS, Lockouts
+
 log = logging.getLogger("moi.opcua")
 
 #: the largest chunk a peer may send, bytes (asyncua's default receive buffer, and the specification's least)
@@ -45,8 +50,11 @@ MAX_MESSAGE = 4 * 1024 * 1024
 #: each wrong login makes the peer's next message before a login wait this long, one at a time for the
 #: whole server, s (the web page's token costs the same)
 GUESS_DELAY = 0.5
-#: this many wrong logins from one host within LOCKOUT_WINDOW shut it out for LOCKOUT_SECONDS
+#: this many wrong logins from one host within LOCKOUT_WINDOW throttle it for LOCKOUT_SECONDS
 LOCKOUT_AFTER, LOCKOUT_WINDOW, LOCKOUT_SECONDS = 10, 60.0, 300.0
+#: a throttled host's messages before a login each wait this long, one at a time for that host, s; at most
+#: an eighth of the login timeout, so that a client's few messages up to its login fit in it
+THROTTLE_DELAY = 2.0
 #: at most one line per this many seconds for each kind of refusal, s
 LOG_INTERVAL = 60.0
 #: new connections a host may open per second, and at once
@@ -102,15 +110,16 @@ class Guard:
         self.limits = limits
         self.capturing = capturing
         self._clock = clock
-        self._wrong: dict[str, list[float]] = {}  # host → times of its recent wrong logins
-        self._locked: dict[str, float] = {}  # host → until when it is shut out
+        self.logins: Lockouts[str] = Lockouts(LOCKOUT_AFTER, LOCKOUT_WINDOW, LOCKOUT_SECONDS, clock)  # by host
         self._guessing: asyncio.Lock | None = None
+        self._throttles: dict[str, asyncio.Lock] = {}  # throttled host → its line
         self._gate: asyncio.Lock | None = None
         self.oversized = _Refusals("oversized chunk(s) refused", clock)
         self.evicted = _Refusals("connection(s) without a session closed to make room", clock)
         self.too_many = _Refusals("request(s) naming too many nodes refused", clock)
         self.wrong_logins = _Refusals("wrong login(s)", clock)
-        self.locked_out = _Refusals("login(s) refused: the host is locked out", clock)
+        self.throttled = _Refusals("message(s) before a login throttled: their host gave too many wrong logins",
+                                   clock)
         self.gated = 0  # requests served through the capture's gate
         self._buckets: dict[str, list[float]] = {}  # host → [tokens, when counted]
         self.too_fast = _Refusals("connection(s) closed: their host opened them too fast", clock)
@@ -176,38 +185,31 @@ class Guard:
         return bounded
 
     # --- logins -----------------------------------------------------------------------------------------------
-    def _recent(self, host: str) -> list[float]:
-        now = self._clock()
-        times = [t for t in self._wrong.get(host, ()) if now - t < LOCKOUT_WINDOW]
-        if times:
-            self._wrong[host] = times
-        else:
-            self._wrong.pop(host, None)
-        return times
-
-    def locked(self, host: str) -> bool:
-        until = self._locked.get(host)
-        if until is not None and until <= self._clock():
-            del self._locked[host]
-            return False
-        return until is not None
-
     def login_failed(self, host: str) -> None:
-        times = self._recent(host)
-        times.append(self._clock())
-        self._wrong[host] = times
         self.wrong_logins(host)
-        if len(times) >= LOCKOUT_AFTER and host not in self._locked:
-            self._locked[host] = self._clock() + LOCKOUT_SECONDS
-            log.warning("OPC UA: %s locked out for %.0f s after %d wrong logins within %.0f s", host,
-                        LOCKOUT_SECONDS, len(times), LOCKOUT_WINDOW)
+        if self.logins.failed(host):
+            log.warning("OPC UA: %s throttled for %.0f s after %d wrong logins within %.0f s (a message before a "
+                        "login every %.1f s; the right password still gets in)", host, LOCKOUT_SECONDS,
+                        LOCKOUT_AFTER, LOCKOUT_WINDOW, self.throttle_delay())
 
-    def login_refused(self, host: str) -> None:
-        self.locked_out(host)
+    def throttle_delay(self) -> float:
+        return min(THROTTLE_DELAY, self.limits.login_timeout / 8)
 
     async def before_login(self, host: str) -> None:
-        """A message of a connection without an activated session: it waits if its host guessed wrong lately."""
-        if not self._recent(host) and host not in self._locked:
+        """A message of a connection without an activated session: it waits if its host guessed wrong lately,
+        in its host's line when the host is throttled."""
+        if self.logins.locked_for(host) > 0:
+            if host not in self._throttles and len(self._throttles) >= MOST_KEYS:  # hosts that never came back
+                for h in [h for h, line in self._throttles.items() if not line.locked()]:
+                    del self._throttles[h]
+            line = self._throttles.setdefault(host, asyncio.Lock())
+            async with line:
+                self.throttled(host)
+                await asyncio.sleep(self.throttle_delay())
+            return
+        if (waiting := self._throttles.get(host)) is not None and not waiting.locked():
+            del self._throttles[host]
+        if not self.logins.recent(host):
             return
         if self._guessing is None:
             self._guessing = asyncio.Lock()
@@ -233,7 +235,7 @@ class Guard:
     def health(self) -> dict[str, int]:
         return {"oversized_chunks": self.oversized.count, "evicted_connections": self.evicted.count,
                 "too_many_nodes": self.too_many.count, "wrong_logins": self.wrong_logins.count,
-                "locked_out": self.locked_out.count, "too_fast": self.too_fast.count, "delayed_before_login": self.delayed,
+                "throttled": self.throttled.count, "too_fast": self.too_fast.count, "delayed_before_login": self.delayed,
                 "gated_requests": self.gated}
 
 

@@ -165,15 +165,18 @@ def test_opcua_requests_during_a_capture_wait_their_turn(opc):
     assert g.gated > before
 
 
-def test_opcua_password_guessing_is_slowed_then_locked_out_with_the_peer_address(opc, monkeypatch, caplog):
-    """Wrong logins from one host: each later message of that host before a login waits its turn, and after
-    LOCKOUT_AFTER of them even the right password is refused for a while; the log names the peer."""
+def test_opcua_password_guessing_is_slowed_then_throttled_and_the_right_password_still_gets_in(opc, monkeypatch,
+                                                                                               caplog):
+    """Wrong logins from one host: each later message of that host before a login waits its turn; after
+    LOCKOUT_AFTER of them the host is throttled (its messages wait in its own line), yet a client there with the
+    right password still logs in (a lockout refused it with the guesser); the log names the peer."""
     from service.publish.opcua import guard as G
 
     app = opc
     g = app.app.opcua.guard
-    monkeypatch.setattr(G, "LOCKOUT_AFTER", 3)
+    monkeypatch.setattr(g.logins, "after", 3)
     monkeypatch.setattr(G, "GUESS_DELAY", 0.01)
+    monkeypatch.setattr(G, "THROTTLE_DELAY", 0.01)
     before = g.health()
 
     async def attempt(password: str) -> bool:
@@ -187,13 +190,32 @@ def test_opcua_password_guessing_is_slowed_then_locked_out_with_the_peer_address
     try:
         with caplog.at_level("WARNING", logger="moi.opcua"):
             assert [asyncio.run(attempt(f"guess-{i}")) for i in range(3)] == [False] * 3
-            assert not asyncio.run(attempt(OPC_PASSWORD))  # locked out: the right password too
+            assert g.logins.locked_for("127.0.0.1") > 0
+            assert asyncio.run(attempt(OPC_PASSWORD))  # throttled, not refused: the right password gets in
+            assert not asyncio.run(attempt("guess-3"))
         after = g.health()
-        assert after["wrong_logins"] - before["wrong_logins"] == 3
-        assert after["locked_out"] > before["locked_out"]
+        assert after["wrong_logins"] - before["wrong_logins"] == 4
+        assert after["throttled"] > before["throttled"]
         assert after["delayed_before_login"] > before["delayed_before_login"]
-        assert any("127.0.0.1 locked out" in r.getMessage() for r in caplog.records), caplog.text
+        assert any("127.0.0.1 throttled" in r.getMessage() for r in caplog.records), caplog.text
     finally:
-        g._locked.clear()
-        g._wrong.clear()
-    assert asyncio.run(attempt(OPC_PASSWORD))
+        g.logins.lift(lambda host: True)
+
+
+def test_an_opcua_host_is_throttled_for_a_while_only_on_wrong_logins_close_together():
+    """The guard's clock moved by hand: wrong logins spread wider than LOCKOUT_WINDOW throttle nobody; LOCKOUT_AFTER
+    within it throttle that host alone, for LOCKOUT_SECONDS, and never for longer than a login may take."""
+    from service.publish.opcua.guard import LOCKOUT_AFTER, LOCKOUT_SECONDS, LOCKOUT_WINDOW, Guard, Limits
+
+    now = [0.0]
+    g = Guard(Limits(login_timeout=4.0), clock=lambda: now[0])
+    for _ in range(LOCKOUT_AFTER):
+        g.login_failed("192.0.2.66")
+        now[0] += LOCKOUT_WINDOW / (LOCKOUT_AFTER - 2)
+    assert g.logins.locked_for("192.0.2.66") == 0
+    for _ in range(LOCKOUT_AFTER):
+        g.login_failed("192.0.2.66")
+    assert g.logins.locked_for("192.0.2.66") == LOCKOUT_SECONDS and g.logins.locked_for("192.0.2.10") == 0
+    assert g.throttle_delay() == 0.5  # an eighth of the login timeout
+    now[0] += LOCKOUT_SECONDS
+    assert g.logins.locked_for("192.0.2.66") == 0
