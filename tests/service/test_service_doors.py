@@ -146,6 +146,104 @@ def test_live_streams_never_lock_the_page_out_and_end_after_their_lifetime(tmp_p
             s.close()
 
 
+def test_four_addresses_with_four_streams_each_no_longer_deny_a_fifth_viewer_or_a_logged_in_user():
+    """16 slots, 4 per address, all taken by 4 addresses: a fifth address's viewer gets a slot (the oldest
+    stream of an address holding the most yields it), the yielded address asking again is refused (it holds its
+    share), a logged-in user gets a slot from any address (the oldest anonymous stream yields), and an anonymous
+    newcomer never makes a logged-in user's stream yield."""
+    from service.publish.web.streams import Stream, StreamSlots
+
+    slots = StreamSlots(16, 4)
+    ended: list[Stream] = []
+
+    def take(client: str, logged_in: bool = False) -> Stream | str:
+        holder: list[Stream] = []
+        got = slots.take(client, logged_in, end=lambda: ended.append(holder[0]))
+        if isinstance(got, Stream):
+            holder.append(got)
+        return got
+
+    crowd = [take(f"192.0.2.{a}") for a in range(1, 5) for _ in range(4)]
+    assert all(isinstance(s, Stream) for s in crowd) and slots.open == 16
+    viewer = take("198.51.100.7")
+    assert isinstance(viewer, Stream) and ended == [crowd[0]] and slots.open == 16 and slots.yielded == 1
+    slots.give_back(crowd[0])  # the yielded stream's handler ends: its slot is not given twice
+    assert slots.open == 16
+    again = take("192.0.2.1")  # the browser asks again at once: its address holds its share now
+    assert isinstance(again, str) and "none yields" in again and slots.refused == 1
+    user = take("203.0.113.9", logged_in=True)  # below its share: the address holding the most yields
+    assert isinstance(user, Stream) and ended == [crowd[0], crowd[4]]
+    users = [take("192.0.2.2", logged_in=True) for _ in range(4)]  # a login at a crowded address
+    assert all(isinstance(u, Stream) for u in users)
+    assert ended[2:] == [crowd[1], crowd[5], crowd[6], crowd[7]]  # the oldest anonymous, anywhere then its own
+    assert isinstance(take("192.0.2.2", logged_in=True), str)  # logged-in tabs never take turns
+    assert isinstance(take("192.0.2.2"), str)
+    refused = slots.refused
+    for a in range(20, 40):  # many more addresses: each gets a slot only from an address holding two or more
+        take(f"198.51.100.{a}")
+    assert len(ended) == 6 + 7 and slots.refused == refused + 13 and slots.open == 16
+    assert not any(e.logged_in for e in ended) and viewer not in ended and user not in ended
+    assert sum(isinstance(take(f"198.51.100.{a}"), str) for a in range(40, 50)) == 10
+
+
+def test_a_stream_that_yields_its_slot_ends_and_the_newcomer_is_served(tmp_path, appliance_factory):
+    """Over loopback, from several source addresses of 127.0.0.0/8: two addresses fill the four slots, a third
+    address's stream is served and the oldest stream ends at once (the server closes it)."""
+    app = appliance_factory(appliance_doc(tmp_path / "state", web={
+        "enabled": True, "max_streams": 4, "max_streams_per_client": 2, "stream_lifetime": 600.0}))
+    web = app.app.web
+    port = web.bound_port
+    streams = []
+
+    def open_from(source: str, cookie: str = "") -> bytes:
+        s = socket.socket()
+        s.settimeout(30)
+        s.bind((source, 0))
+        s.connect(("127.0.0.1", port))
+        s.sendall(f"GET /events HTTP/1.1\r\nHost: 127.0.0.1\r\nCookie: {cookie}\r\n\r\n".encode())
+        streams.append(s)
+        head = b""
+        while b"retry: 1000" not in head and not head.startswith(b"HTTP/1.1 503"):
+            head += s.recv(4096)
+        return head
+
+    try:
+        for source in ("127.0.0.2", "127.0.0.2", "127.0.0.3", "127.0.0.3"):
+            assert open_from(source).startswith(b"HTTP/1.1 200")
+        assert open_from("127.0.0.4").startswith(b"HTTP/1.1 200")  # refused (503) before
+        while streams[0].recv(65536):  # the oldest stream ends: the server closes its connection
+            pass
+        assert open_from("127.0.0.2").startswith(b"HTTP/1.1 503")  # and asking again, it holds its share
+        assert web.stats()["streams_yielded"] == 1 and web.stats()["streams"] == 4
+        assert open_from("127.0.0.2", _login_cookie(port, "127.0.0.2", Path(web.token_file).read_text().strip())
+                         ).startswith(b"HTTP/1.1 200")  # a logged-in user's stream: the oldest anonymous one yields
+        while streams[1].recv(65536):
+            pass
+        assert web.stats()["streams_yielded"] == 2 and web.stats()["streams"] == 4
+    finally:
+        for s in streams:
+            s.close()
+
+
+def _login_cookie(port: int, source: str, token: str) -> str:
+    """The session cookie of a login with the token, made from ``source``."""
+    import http.client
+    import urllib.parse
+
+    def ask(method: str, path: str, body: str = "", cookie: str = "") -> http.client.HTTPResponse:
+        c = http.client.HTTPConnection("127.0.0.1", port, timeout=30, source_address=(source, 0))
+        c.request(method, path, body=body, headers={"Cookie": cookie,
+                                                    "Content-Type": "application/x-www-form-urlencoded"})
+        return c.getresponse()
+
+    r = ask("GET", "/")
+    csrf = r.read().decode().split('name="csrf-token" content="')[1].split('"')[0]
+    cookie = r.getheader("Set-Cookie", "").split(";")[0]
+    r = ask("POST", "/login", urllib.parse.urlencode({"token": token, "csrf": csrf}), cookie)
+    assert r.status == 303, r.status
+    return r.getheader("Set-Cookie", "").split(";")[0]
+
+
 # --- moi run --check ------------------------------------------------------------------------------------------
 
 def test_check_refuses_what_the_start_refuses_and_warns_of_open_opcua_doors(tmp_path, capsys):

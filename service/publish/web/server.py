@@ -286,7 +286,7 @@ class WebServer(Publisher):
         return {"url": self.url, "listeners": len(self._listeners), "token_file": self.token_file,
                 "connections": len(server.connections) if server is not None else 0,
                 "connections_refused": self.connections_refused, "streams": self.streams.open,
-                "streams_refused": self.streams.refused}
+                "streams_refused": self.streams.refused, "streams_yielded": self.streams.yielded}
 
 
 PUBLISHER = WebServer

@@ -394,24 +394,29 @@ class Views:
 
     async def events(self, request: web.Request) -> web.StreamResponse:
         """Server-sent events: ``state`` on every transition, ``tick`` every 0.25 s (progress, new samples); in a
-        slot of its own (``streams``), for ``stream_lifetime`` at most."""
+        slot of its own (``streams``), for ``stream_lifetime`` at most, or until it yields its slot to another
+        address's viewer or to a logged-in user's stream."""
         client = request.remote or "?"
-        if (why := self.server.streams.take(client)) is not None:
-            refused = web.Response(status=503, text=f"no live stream now: {why}", headers={"Retry-After": "10"})
+        logged_in = self.server.guard.session(request.cookies.get(COOKIE)) is not None
+        q = self.server.listen()
+        slot = self.server.streams.take(client, logged_in, end=lambda: q.put_nowait(None))
+        if isinstance(slot, str):
+            self.server.unlisten(q)
+            refused = web.Response(status=503, text=f"no live stream now: {slot}", headers={"Retry-After": "10"})
             refused.force_close()  # a refused stream keeps no connection of the pages'
             return refused
         try:
-            return await self._stream(request)
+            return await self._stream(request, q)
         finally:
-            self.server.streams.give_back(client)
+            self.server.streams.give_back(slot)
+            self.server.unlisten(q)
 
-    async def _stream(self, request: web.Request) -> web.StreamResponse:
+    async def _stream(self, request: web.Request, q: asyncio.Queue) -> web.StreamResponse:
         resp = web.StreamResponse(headers={"Content-Type": "text/event-stream", "Cache-Control": "no-cache",
                                            "X-Accel-Buffering": "no"})
         # the connection closes with the stream: an ended stream never holds its descriptor for a keep-alive
         resp.force_close()
         await resp.prepare(request)
-        q = self.server.listen()
         cursor: dict[str, Any] = {}
         loop = asyncio.get_running_loop()
         try:
@@ -433,8 +438,6 @@ class Views:
                                  .encode())
         except (ConnectionResetError, asyncio.CancelledError):
             pass
-        finally:
-            self.server.unlisten(q)
         return resp
 
     # --- login and actions ---------------------------------------------------------------------
