@@ -62,8 +62,10 @@ KEYS: dict[str, dict] = {
     "shift_starts": dict(doc="shift start times HH:MM, local time (Home counts the parts of the current shift)"),
     "users_file": dict(doc="named users with roles (operator, quality, admin) and password hashes, made by "
                        "`moi user add` (default: none; the token is the one login)", kind="path"),
-    "max_streams": dict(doc="live streams (/events) at once, counted apart from max_connections; one more is "
-                        "refused (503)", min=1, max=256),
+    "max_streams": dict(doc="live streams (/events) at once, counted apart from max_connections; when all are "
+                        "taken, an address holding fewer than its share (max_streams over the addresses) gets one "
+                        "and the oldest stream of the address holding the most ends, a logged-in user's stream "
+                        "ends the oldest anonymous one, else the newcomer is refused (503)", min=1, max=256),
     "max_streams_per_client": dict(doc="live streams at once from one address", min=1, max=256),
     "stream_lifetime": dict(doc="a live stream ends after this long (the browser opens a new one by itself), s",
                             min=1.0, max=86400.0),
