@@ -167,7 +167,7 @@ def test_four_addresses_with_four_streams_each_no_longer_deny_a_fifth_viewer_or_
     assert all(isinstance(s, Stream) for s in crowd) and slots.open == 16
     viewer = take("198.51.100.7")
     assert isinstance(viewer, Stream) and ended == [crowd[0]] and slots.open == 16 and slots.yielded == 1
-    slots.give_back(crowd[0])  # the yielded stream's handler ends: its slot is not given twice
+    slots.give_back(ended[0])  # the yielded stream's handler ends: its slot is not given twice
     assert slots.open == 16
     again = take("192.0.2.1")  # the browser asks again at once: its address holds its share now
     assert isinstance(again, str) and "none yields" in again and slots.refused == 1
