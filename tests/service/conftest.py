@@ -33,6 +33,24 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def login_from(source: str, port: int, **form: str) -> Any:
+    """The web page's answer (an ``http.client.HTTPResponse``) to a login with ``form`` (``token``, and
+    ``user`` for a named one) made from the loopback address ``source`` (127.0.0.2 ...: another client)."""
+    import http.client
+    import urllib.parse
+
+    def ask(method: str, path: str, body: str = "", cookie: str = "") -> Any:
+        c = http.client.HTTPConnection("127.0.0.1", port, timeout=30, source_address=(source, 0))
+        c.request(method, path, body=body, headers={"Cookie": cookie,
+                                                    "Content-Type": "application/x-www-form-urlencoded"})
+        return c.getresponse()
+
+    r = ask("GET", "/")
+    csrf = r.read().decode().split('name="csrf-token" content="')[1].split('"')[0]
+    return ask("POST", "/login", urllib.parse.urlencode({**form, "csrf": csrf}),
+               r.getheader("Set-Cookie", "").split(";")[0])
+
+
 def wait_until(predicate: Callable[[], Any], timeout: float, interval: float = 0.02, what: str = "condition") -> Any:
     """Poll ``predicate`` (a state owned by another process: a port, a register) until true or fail."""
     deadline = time.monotonic() + timeout

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.service.conftest import appliance_doc, wait_until
+from tests.service.conftest import appliance_doc, login_from, wait_until
 
 # --- a measurement once captured is always stored ---------------------------------------------------------------
 
@@ -215,33 +215,16 @@ def test_a_stream_that_yields_its_slot_ends_and_the_newcomer_is_served(tmp_path,
             pass
         assert open_from("127.0.0.2").startswith(b"HTTP/1.1 503")  # and asking again, it holds its share
         assert web.stats()["streams_yielded"] == 1 and web.stats()["streams"] == 4
-        assert open_from("127.0.0.2", _login_cookie(port, "127.0.0.2", Path(web.token_file).read_text().strip())
-                         ).startswith(b"HTTP/1.1 200")  # a logged-in user's stream: the oldest anonymous one yields
+        login = login_from("127.0.0.2", port, token=Path(web.token_file).read_text().strip())
+        assert login.status == 303
+        cookie = login.getheader("Set-Cookie").split(";")[0]
+        assert open_from("127.0.0.2", cookie).startswith(b"HTTP/1.1 200")  # the oldest anonymous stream yields
         while streams[1].recv(65536):
             pass
         assert web.stats()["streams_yielded"] == 2 and web.stats()["streams"] == 4
     finally:
         for s in streams:
             s.close()
-
-
-def _login_cookie(port: int, source: str, token: str) -> str:
-    """The session cookie of a login with the token, made from ``source``."""
-    import http.client
-    import urllib.parse
-
-    def ask(method: str, path: str, body: str = "", cookie: str = "") -> http.client.HTTPResponse:
-        c = http.client.HTTPConnection("127.0.0.1", port, timeout=30, source_address=(source, 0))
-        c.request(method, path, body=body, headers={"Cookie": cookie,
-                                                    "Content-Type": "application/x-www-form-urlencoded"})
-        return c.getresponse()
-
-    r = ask("GET", "/")
-    csrf = r.read().decode().split('name="csrf-token" content="')[1].split('"')[0]
-    cookie = r.getheader("Set-Cookie", "").split(";")[0]
-    r = ask("POST", "/login", urllib.parse.urlencode({"token": token, "csrf": csrf}), cookie)
-    assert r.status == 303, r.status
-    return r.getheader("Set-Cookie", "").split(";")[0]
 
 
 # --- moi run --check ------------------------------------------------------------------------------------------

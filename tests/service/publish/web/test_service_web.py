@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from service.errors import StartupError
-from tests.service.conftest import appliance_doc, wait_until
+from tests.service.conftest import appliance_doc, login_from, wait_until
 
 ON = {"enabled": True}
 
@@ -692,8 +692,10 @@ def test_a_locked_out_login_is_told_it_is_paused_not_that_its_password_is_wrong(
     status, doc = c.json("/login", data=urllib.parse.urlencode({"user": "root", "token": "root-password-1",
                                                                 "csrf": c.csrf()}).encode())
     assert status == 429 and "paused" in doc["error"]
+    assert login_from("127.0.0.2", app.web.bound_port, user="root", token="root-password-1").status == 303  # in
     token = Path(app.web.token_file).read_text().strip()
     status, _, body = c.request("/login", {"token": token, "csrf": c.csrf()})
     assert status == 200 and 'id="lockouts"' in c.request("/users")[2].decode()
     row = c.request("/users")[2].decode().split('id="lockouts"')[1]
     assert "<td>root</td><td>127.0.0.1</td><td>15</td>" in row
+
