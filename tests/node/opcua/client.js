@@ -159,6 +159,7 @@ async function main() {
             InertiaResultDataType: await encodings(session, `ns=${ns.moi};s=InertiaResultDataType`),
         };
         out.eventResultTypeDefinition = await typeDefinition(session, `ns=${ns.result};i=6032`);
+        out.itemStates = await browse(session, `ns=${ns.machinery};i=1002`);  // MachineryItemState_StateMachineType
 
         const method = async (name) => path(session, rm, [`${ns.result}:${name}`]);
         const resultId = out.event.result.resultMetaData.resultId;

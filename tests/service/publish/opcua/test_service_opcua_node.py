@@ -151,6 +151,8 @@ def test_node_opcua_finds_the_specifications_types(decoded):
     assert doc["encodings"] == {"ResultDataType": {"Default Binary": data_type_encoding_type},
                                 "InertiaResultDataType": {"Default Binary": data_type_encoding_type}}
     m = doc["namespaces"]["machinery"]
+    states = {s["name"]: s["typeDefinition"] for s in doc["itemStates"] if s["name"] != "CurrentState"}
+    assert states == dict.fromkeys(("NotAvailable", "OutOfService", "NotExecuting", "Executing"), "ns=0;i=2307")
     assert {b["name"]: b["typeDefinition"] for b in doc["buildingBlocks"]} == {
         "Identification": f"ns={m};i=1012", "MachineryItemState": f"ns={m};i=1002",
         "MachineryOperationMode": f"ns={m};i=1008", "ResultManagement": f"ns={r};i=1004"}
