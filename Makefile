@@ -50,8 +50,7 @@ ffmpeg:
 
 # The OPC UA tests read the server with node-opcua, a stack independent of the server's: Node.js from Debian,
 # node-opcua from the npm registry at the versions of tests/node/opcua/package-lock.json (`npm ci`, again when
-# the lock file changes; 2.181 is the newest whose packages run on Debian's Node.js 20, from 2.183 they ask
-# for 22.13). Under CI (CI=true) a failure to install fails the run; elsewhere its tests are skipped.
+# the lock file changes; 2.181 runs on Debian's Node.js 20, the packages of 2.183 and later ask for 22.13). Under CI (CI=true) a failure to install fails the run; elsewhere its tests are skipped.
 NODE_OPCUA := tests/node/opcua/node_modules/.package-lock.json
 node: $(NODE_OPCUA)
 $(NODE_OPCUA): tests/node/opcua/package-lock.json
