@@ -271,7 +271,8 @@ class ResultDataType:
     """ResultDataType encoded as OPC 10000-6 (5.2.7) encodes a StructureWithSubtypedValues: ResultMetaData, a
     field that allows subtypes, travels as an ExtensionObject (the NodeId of its encoding, then its body), and
     no optional-field mask precedes the fields. asyncua 2.1's class made from the definition writes
-    ResultMetaData inline (it drops the field's AllowSubtypes), which no other stack decodes."""
+    ResultMetaData inline (it drops the field's AllowSubtypes), which a stack that follows the definition
+    cannot decode (node-opcua: "decodeNodeId: unknown encoding_byte")."""
 
     data_type: ClassVar[ua.NodeId]
     ResultMetaData: ua.ExtensionObject = field(default_factory=ua.ExtensionObject)  # a ResultMetaDataType
