@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint lint-fix coverage bench install broker browser ffmpeg clean pi-check
+.PHONY: demo test test-fast lint lint-fix coverage bench install broker browser ffmpeg node clean pi-check
 
 # pip shows its progress: the first install downloads numpy, scipy, OpenCV and friends
 $(STAMP): pyproject.toml
@@ -48,6 +48,19 @@ ffmpeg:
 	    echo "note: could not install ffmpeg; the H.264 video tests will be skipped"; \
 	  else echo "note: ffmpeg missing and not root; the H.264 video tests will be skipped"; fi; }
 
+# The OPC UA tests read the server with node-opcua, a stack independent of the server's: Node.js from Debian,
+# node-opcua from the npm registry at the versions of tests/node/opcua/package-lock.json (`npm ci`, again when
+# the lock file changes; 2.181 runs on Debian's Node.js 20, the packages of 2.183 and later ask for 22.13). Under CI (CI=true) a failure to install fails the run; elsewhere its tests are skipped.
+NODE_OPCUA := tests/node/opcua/node_modules/.package-lock.json
+node: $(NODE_OPCUA)
+$(NODE_OPCUA): tests/node/opcua/package-lock.json
+	@command -v npm >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && \
+	  (apt-get install -y -qq nodejs npm >/dev/null 2>&1 || \
+	   (apt-get update -qq >/dev/null && apt-get install -y -qq nodejs npm >/dev/null)); } || true
+	@cd tests/node/opcua && npm ci --no-audit --no-fund --loglevel=error >/dev/null || { \
+	  if [ "$$CI" = true ]; then echo "error: could not install node-opcua (npm ci in tests/node/opcua)"; exit 1; fi; \
+	  echo "note: could not install node-opcua; the node-opcua OPC UA tests will be skipped"; }
+
 demo: $(STAMP)
 	$(VENV)/bin/moi demo
 
@@ -59,7 +72,7 @@ demo: $(STAMP)
 # without the coverage tracer, for a quick local check.
 test: COVERAGE_FIRST = --cov --cov-report= --cov-fail-under=0
 test: COVERAGE_NEXT = --cov --cov-append --cov-report=
-test test-fast: $(STAMP) broker browser ffmpeg
+test test-fast: $(STAMP) broker browser ffmpeg node
 	@rm -f .coverage .coverage.*
 	@$(PY) -m pytest -q -n 2 --dist loadfile -m "not clock" $(COVERAGE_FIRST); computations=$$?; \
 	$(PY) -m pytest -q -m clock $(COVERAGE_NEXT); clock=$$?; \

@@ -21,10 +21,10 @@ specifications assign.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from asyncua import Node, Server, ua
-from asyncua.common.manage_nodes import create_data_type, create_encoding
+from asyncua.common.manage_nodes import create_data_type
 from asyncua.common.structures104 import new_enum
 
 NS_DI = "http://opcfoundation.org/UA/DI/"
@@ -75,20 +75,44 @@ META_COMPONENTS: dict[str, tuple[int, ua.VariantType]] = {
     "CreationTime": (6025, ua.VariantType.DateTime), "ResultEvaluation": (6028, ua.VariantType.Int32),
 }
 
-#: InertiaResultDataType, a result's content (urn:moi:opcua): name, DataType, array; and its meaning
-CONTENT_FIELDS: tuple[tuple[str, int, bool, str], ...] = (
-    ("SequenceNumber", ua.ObjectIds.UInt32, False, "the result's sequence number (MQTT seq, Modbus seq)"),
-    ("J", ua.ObjectIds.Double, False, "the moment of inertia, kg·m²"),
+#: the units of the physical values, by symbol: the UNECE Recommendation 20 common code (which OPC 10000-8 makes the
+#: EUInformation's UnitId) and the unit's name
+UNITS: dict[str, tuple[str, str]] = {
+    "kg·m²": ("B32", "kilogram metre squared"),
+    "rad/s": ("2A", "radian per second"),
+    "1": ("C62", "one"),
+}
+#: the namespace of the UNECE codes in EUInformation (OPC 10000-8)
+UNECE_URI = "http://www.opcfoundation.org/UA/units/un/cefact"
+
+#: InertiaResultDataType, a result's content (urn:moi:opcua): name, DataType, array, its meaning, and the unit
+#: of a physical value (a key of UNITS; None for the others)
+CONTENT_FIELDS: tuple[tuple[str, int, bool, str, str | None], ...] = (
+    ("SequenceNumber", ua.ObjectIds.UInt32, False, "the result's sequence number (MQTT seq, Modbus seq)", None),
+    ("J", ua.ObjectIds.Double, False, "the moment of inertia, kg·m²", "kg·m²"),
     ("J_U", ua.ObjectIds.Double, False, "the expanded uncertainty of J where the result carries one, kg·m² "
-                                         "(NaN otherwise)"),
+                                         "(NaN otherwise)", "kg·m²"),
     ("J_u", ua.ObjectIds.Double, False, "the combined standard uncertainty of J (fit ⊕ calibration ⊕ model "
-                                         "form), kg·m²"),
-    ("U", ua.ObjectIds.Double, False, "the verdict's expanded uncertainty (with a recipe), kg·m²; NaN without"),
-    ("omega_n", ua.ObjectIds.Double, False, "the undamped natural angular frequency ω_n, rad/s"),
-    ("damping_ratio", ua.ObjectIds.Double, False, "the damping ratio ζ (1)"),
-    ("Flags", ua.ObjectIds.String, True, "the result's quality flags"),
-    ("Verdict", ua.ObjectIds.String, False, "OK, NOK, INVALID or empty (no recipe)"),
+                                         "form), kg·m²", "kg·m²"),
+    ("U", ua.ObjectIds.Double, False, "the verdict's expanded uncertainty (with a recipe), kg·m²; NaN without",
+     "kg·m²"),
+    ("omega_n", ua.ObjectIds.Double, False, "the undamped natural angular frequency ω_n, rad/s", "rad/s"),
+    ("damping_ratio", ua.ObjectIds.Double, False, "the damping ratio ζ (1)", "1"),
+    ("Flags", ua.ObjectIds.String, True, "the result's quality flags", None),
+    ("Verdict", ua.ObjectIds.String, False, "OK, NOK, INVALID or empty (no recipe)", None),
 )
+
+
+def eu_information(symbol: str) -> ua.EUInformation:
+    """The EngineeringUnits of a value in the unit ``symbol`` (a key of UNITS): its UNECE code as UnitId, one
+    byte per character (OPC 10000-8), the symbol as DisplayName."""
+    code, name = UNITS[symbol]
+    unit_id = 0
+    for char in code:
+        unit_id = unit_id << 8 | ord(char)
+    return ua.EUInformation(NamespaceUri=UNECE_URI, UnitId=unit_id, DisplayName=ua.LocalizedText(symbol),
+                            Description=ua.LocalizedText(name))
+
 
 #: the methods of ResultManagementType the appliance implements: NodeId (Result), inputs, outputs
 #: (name, DataType, array, description)
@@ -144,13 +168,6 @@ def _qn(name: str, ns: int) -> ua.QualifiedName:
     return ua.QualifiedName(name, ns)
 
 
-async def retype(node: Node, old: int | ua.NodeId, new: ua.NodeId, reference: int = ua.ObjectIds.HasTypeDefinition
-                  ) -> None:
-    """Point ``reference`` of ``node`` at ``new`` instead of ``old`` (asyncua adds nodes with base types)."""
-    await node.delete_reference(old, reference, forward=True, bidirectional=False)
-    await node.add_reference(new, reference, forward=True, bidirectional=False)
-
-
 async def rereference(parent: Node, child: Node, new: int) -> None:
     """Link ``child`` to ``parent`` by reference type ``new`` instead of the one asyncua chose (HasComponent,
     Organizes under a folder); the specifications use HasAddIn and HasStructuredComponent, subtypes of
@@ -168,12 +185,55 @@ async def _object_type(parent: Node, nodeid: ua.NodeId, name: str, abstract: boo
     return t
 
 
+async def _add(parent: Node, nodeid: ua.NodeId, qname: ua.QualifiedName, nodeclass: ua.NodeClass, reference: int,
+               typedef: ua.NodeId, attrs: Any) -> Node:
+    """A node added with its type definition (asyncua's helpers give an encoding none and a variable
+    BaseDataVariableType, and a later retype leaves the parent's browse result naming the old type)."""
+    item = ua.AddNodesItem()
+    item.RequestedNewNodeId = nodeid
+    item.BrowseName = qname
+    item.NodeClass = nodeclass
+    item.ParentNodeId = parent.nodeid
+    item.ReferenceTypeId = node_id(reference)
+    item.TypeDefinition = typedef
+    attrs.DisplayName = ua.LocalizedText(qname.Name)
+    attrs.Description = ua.LocalizedText(qname.Name)
+    item.NodeAttributes = attrs
+    result = (await parent.session.add_nodes([item]))[0]
+    result.StatusCode.check()
+    return Node(parent.session, result.AddedNodeId)
+
+
+async def variable(parent: Node, nodeid: ua.NodeId, qname: ua.QualifiedName, value: ua.Variant, datatype: ua.NodeId,
+                   typedef: ua.NodeId | int = ua.ObjectIds.BaseDataVariableType, *, array: bool = False,
+                   reference: int = ua.ObjectIds.HasComponent) -> Node:
+    """A read-only variable of the VariableType ``typedef``."""
+    attrs = ua.VariableAttributes()
+    attrs.DataType = datatype
+    attrs.Value = value
+    attrs.ValueRank = ua.ValueRank.OneDimension if array else ua.ValueRank.Scalar
+    attrs.ArrayDimensions = [0] if array else []
+    attrs.AccessLevel = attrs.UserAccessLevel = ua.AccessLevel.CurrentRead.mask
+    attrs.WriteMask = attrs.UserWriteMask = 0
+    return await _add(parent, nodeid, qname, ua.NodeClass.Variable, reference,
+                      typedef if isinstance(typedef, ua.NodeId) else node_id(typedef), attrs)
+
+
+async def with_unit(parent: Node, nodeid: ua.NodeId, qname: ua.QualifiedName, value: ua.Variant, symbol: str) -> Node:
+    """A Double variable of AnalogUnitType with its EngineeringUnits (OPC 10000-8), in the unit ``symbol``."""
+    v = await variable(parent, nodeid, qname, value, node_id(ua.ObjectIds.Double), ua.ObjectIds.AnalogUnitType)
+    await variable(v, ua.NodeId(ua.String(str(nodeid.Identifier) + ".EngineeringUnits"), nodeid.NamespaceIndex),
+                   _qn("EngineeringUnits", 0), ua.Variant(eu_information(symbol), ua.VariantType.ExtensionObject),
+                   node_id(ua.ObjectIds.EUInformation), ua.ObjectIds.PropertyType, reference=ua.ObjectIds.HasProperty)
+    return v
+
+
 async def _states(server: Server, model: Model, machine_type: Node, table: dict[str, tuple[int, int]]) -> None:
     """The states of a state machine type: objects of StateType with their StateNumber (no modelling rule:
     they belong to the type, as in the specification)."""
     for name, (nid, number) in table.items():
-        s = await machine_type.add_object(node_id(nid, model.machinery), _qn(name, model.machinery))
-        await retype(s, ua.ObjectIds.BaseObjectType, node_id(ua.ObjectIds.StateType))
+        s = await _add(machine_type, node_id(nid, model.machinery), _qn(name, model.machinery), ua.NodeClass.Object,
+                       ua.ObjectIds.HasComponent, node_id(ua.ObjectIds.StateType), ua.ObjectAttributes())
         await s.add_property(node_id(f"types.{name}.StateNumber", model.moi), _qn("StateNumber", 0),
                              ua.Variant(number, ua.VariantType.UInt32))
 
@@ -195,7 +255,8 @@ async def _structure(server: Server, nodeid: ua.NodeId, encoding: ua.NodeId, nam
     """A structured DataType with the given NodeId and Default Binary encoding NodeId (asyncua's ``new_struct``
     picks its own encoding NodeId; a client that knows the specification decodes by the encoding's)."""
     dtype = await create_data_type(server.nodes.base_structure_type, nodeid, _qn(name, nodeid.NamespaceIndex))
-    enc = await create_encoding(dtype, encoding, ua.QualifiedName("Default Binary", 0))
+    enc = await _add(dtype, encoding, ua.QualifiedName("Default Binary", 0), ua.NodeClass.Object,
+                     ua.ObjectIds.HasEncoding, node_id(ua.ObjectIds.DataTypeEncodingType), ua.ObjectAttributes())
     sdef = ua.StructureDefinition()
     sdef.BaseDataType = server.nodes.base_structure_type.nodeid
     sdef.StructureType = kind
@@ -203,6 +264,30 @@ async def _structure(server: Server, nodeid: ua.NodeId, encoding: ua.NodeId, nam
     sdef.DefaultEncodingId = enc.nodeid
     await dtype.write_data_type_definition(sdef)
     return dtype
+
+
+@dataclass
+class ResultDataType:
+    """ResultDataType encoded as OPC 10000-6 (5.2.7) encodes a StructureWithSubtypedValues: ResultMetaData, a
+    field that allows subtypes, travels as an ExtensionObject (the NodeId of its encoding, then its body), and
+    no optional-field mask precedes the fields. asyncua 2.1's class made from the definition writes
+    ResultMetaData inline (it drops the field's AllowSubtypes), which a stack that follows the definition
+    cannot decode (node-opcua: "decodeNodeId: unknown encoding_byte")."""
+
+    data_type: ClassVar[ua.NodeId]
+    ResultMetaData: ua.ExtensionObject = field(default_factory=ua.ExtensionObject)  # a ResultMetaDataType
+    ResultContent: list[ua.Variant] = field(default_factory=list)
+
+
+def register_result_data_type(model: Model) -> type[ResultDataType]:
+    """Make ``ResultDataType`` asyncua's class of the ResultDataType (for encoding and decoding; after
+    ``load_data_type_definitions``, which made the other)."""
+    data_type, encoding = node_id(3008, model.result), node_id(5008, model.result)
+    ResultDataType.data_type = data_type
+    ua.register_extension_object("ResultDataType", encoding, ResultDataType, data_type)
+    # register_extension_object leaves ua's attribute to the first class of the name
+    ua.ResultDataType = ResultDataType  # type: ignore[attr-defined]
+    return ResultDataType
 
 
 def argument(name: str, datatype: ua.NodeId, array: bool, description: str) -> ua.Argument:
@@ -269,7 +354,7 @@ async def install(server: Server) -> Model:
     content_dt = await _structure(server, node_id("InertiaResultDataType", moi),
                                   node_id("InertiaResultDataType.DefaultBinary", moi), "InertiaResultDataType",
                                   [_field(name, node_id(dt), array, description=doc)
-                                   for name, dt, array, doc in CONTENT_FIELDS], ua.StructureType.Structure)
+                                   for name, dt, array, doc, _ in CONTENT_FIELDS], ua.StructureType.Structure)
     named["ResultDataType"] = result_dt.nodeid
     n.update(ResultEvaluationEnum=evaluation.nodeid, ResultMetaDataType=meta.nodeid, ResultDataType=result_dt.nodeid,
              InertiaResultDataType=content_dt.nodeid, ProcessingTimesDataType=times.nodeid)
@@ -309,9 +394,8 @@ async def install(server: Server) -> Model:
 
     ready = await _object_type(server.get_node(ua.ObjectIds.BaseEventType), node_id(1002, res),
                                "ResultReadyEventType", abstract=True)
-    ev_result = await ready.add_variable(node_id(6032, res), _qn("Result", res),
-                                         ua.Variant(None, ua.VariantType.Null), datatype=result_dt.nodeid)
-    await retype(ev_result, ua.ObjectIds.BaseDataVariableType, result_type.nodeid)
+    ev_result = await variable(ready, node_id(6032, res), _qn("Result", res), ua.Variant(None, ua.VariantType.Null),
+                               result_dt.nodeid, result_type.nodeid)
     await ev_result.set_modelling_rule(True)
     await rm_type.add_reference(ready.nodeid, ua.ObjectIds.GeneratesEvent, forward=True, bidirectional=False)
     inertia_ready = await _object_type(ready, node_id("InertiaResultReadyEventType", moi),

@@ -65,8 +65,10 @@ from .model import (  # noqa: F401
     Model,
     install,
     node_id,
+    register_result_data_type,
     rereference,
-    retype,
+    variable,
+    with_unit,
 )
 from .settings import OpcUaSettings
 
@@ -357,6 +359,7 @@ class OpcUaServer(Publisher):
         t0 = time.monotonic()
         model = self._model = await install(server)
         await server.load_data_type_definitions()  # the Python classes of the structures (ua.ResultDataType ...)
+        register_result_data_type(model)  # ResultDataType as the specification encodes it
         self.types_seconds = time.monotonic() - t0
         self._types = {name: getattr(ua, name) for name in ("ResultDataType", "ResultMetaDataType",
                                                              "ProcessingTimesDataType", "InertiaResultDataType",
@@ -411,33 +414,29 @@ class OpcUaServer(Publisher):
             ua.Variant(len(self._unacknowledged), ua.VariantType.UInt32))
         # a variable of ResultType, made by hand: asyncua's instantiation of a VariableType copies attributes
         # a type has not (and logs each)
-        latest = await results.add_variable(nid("Results.LatestResult"), ua.QualifiedName("LatestResult", res),
-                                            ua.Variant(None, ua.VariantType.Null), datatype=t["ResultDataType"])
-        await retype(latest, ua.ObjectIds.BaseDataVariableType, t["ResultType"])
-        meta = await latest.add_variable(nid("Results.LatestResult.ResultMetaData"),
-                                         ua.QualifiedName("ResultMetaData", res), ua.Variant(None, ua.VariantType.Null),
-                                         datatype=t["ResultMetaDataType"])
-        content = await latest.add_variable(nid("Results.LatestResult.ResultContent"),
-                                            ua.QualifiedName("ResultContent", res),
-                                            ua.Variant([], ua.VariantType.Variant),
-                                            datatype=node_id(ua.ObjectIds.BaseDataType))
-        await content.write_value_rank(1)
-        for child in (meta, content):
-            await rereference(latest, child, ua.ObjectIds.HasStructuredComponent)
+        latest = await variable(results, nid("Results.LatestResult"), ua.QualifiedName("LatestResult", res),
+                                ua.Variant(None, ua.VariantType.Null), t["ResultDataType"], t["ResultType"])
+        structured = ua.ObjectIds.HasStructuredComponent
+        meta = await variable(latest, nid("Results.LatestResult.ResultMetaData"), ua.QualifiedName("ResultMetaData", res),
+                              ua.Variant(None, ua.VariantType.Null), t["ResultMetaDataType"], reference=structured)
+        content = await variable(latest, nid("Results.LatestResult.ResultContent"),
+                                 ua.QualifiedName("ResultContent", res), ua.Variant([], ua.VariantType.ExtensionObject),
+                                 node_id(ua.ObjectIds.BaseDataType), array=True, reference=structured)
         self._nodes.update({"latest": latest, "latest.meta": meta, "latest.content": content})
         # the structures' fields the appliance fills, also as variables of their own (for clients that read
-        # scalars): ResultMetaData's structured components [Result], ResultContent's InertiaResultDataType [moi]
+        # scalars): ResultMetaData's structured components [Result], ResultContent's InertiaResultDataType [moi],
+        # the physical values of AnalogUnitType with their EngineeringUnits
         for name, (_, vtype) in META_COMPONENTS.items():
-            v = await meta.add_variable(nid(f"Results.LatestResult.ResultMetaData.{name}"),
-                                        ua.QualifiedName(name, res), ua.Variant(_EMPTY[vtype], vtype))
-            await rereference(meta, v, ua.ObjectIds.HasStructuredComponent)
-            self._nodes[f"meta.{name}"] = v
-        for name, dt, array, _ in CONTENT_FIELDS:
+            self._nodes[f"meta.{name}"] = await variable(
+                meta, nid(f"Results.LatestResult.ResultMetaData.{name}"), ua.QualifiedName(name, res),
+                ua.Variant(_EMPTY[vtype], vtype), node_id(vtype.value), reference=structured)
+        for name, dt, array, _, unit in CONTENT_FIELDS:
             vtype = _VTYPES[dt]
-            v = await content.add_variable(nid(f"Results.LatestResult.ResultContent.{name}"),
-                                           ua.QualifiedName(name, idx),
-                                           ua.Variant([] if array else _EMPTY[vtype], vtype))
-            self._nodes[f"content.{name}"] = v
+            qname, cid = ua.QualifiedName(name, idx), nid(f"Results.LatestResult.ResultContent.{name}")
+            empty = ua.Variant([] if array else _EMPTY[vtype], vtype)
+            self._nodes[f"content.{name}"] = await (
+                with_unit(content, cid, qname, empty, unit) if unit is not None
+                else variable(content, cid, qname, empty, node_id(dt), array=array))
         if self._latest is not None:
             await self._write_latest(self._structure(self._latest))
         self._event = await server.get_event_generator(t["InertiaResultReadyEventType"], rm.nodeid)
@@ -608,12 +607,14 @@ class OpcUaServer(Publisher):
         meta, content = value.ResultMetaData, value.ResultContent[0].Value
         await self._nodes["latest"].write_value(ua.Variant(value))
         await self._nodes["latest.meta"].write_value(ua.Variant(meta))
-        await self._nodes["latest.content"].write_value(ua.Variant([ua.Variant(content)], ua.VariantType.Variant))
+        # ExtensionObject[], not the structure's Variant[]: both are BaseDataType[], and a client decodes the first
+        # as it decodes any structure (node-opcua leaves an ExtensionObject inside a Variant array undecoded)
+        await self._nodes["latest.content"].write_value(ua.Variant([content], ua.VariantType.ExtensionObject))
         for name, (_, vtype) in META_COMPONENTS.items():
             v = getattr(meta, name)
             v = _EMPTY[vtype] if v is None else int(v) if name == "ResultEvaluation" else v
             await self._nodes[f"meta.{name}"].write_value(ua.Variant(v, vtype))
-        for name, dt, _, _ in CONTENT_FIELDS:
+        for name, dt, _, _, _ in CONTENT_FIELDS:
             await self._nodes[f"content.{name}"].write_value(ua.Variant(getattr(content, name), _VTYPES[dt]))
 
     async def _publish(self, doc: dict[str, Any]) -> None:

@@ -7,6 +7,11 @@ One appliance (and one server) for the module: an encrypted session costs RSA wo
 from __future__ import annotations
 
 import asyncio
+import json
+import re
+import subprocess
+import sys
+import textwrap
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -17,7 +22,7 @@ from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from service.publish.opcua.server import NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT, RESULT_EVALUATION
-from tests.service.conftest import RunningAppliance, appliance_doc
+from tests.service.conftest import REPO, RunningAppliance, appliance_doc
 
 USER, PASSWORD = "line-7", "s3cret"
 
@@ -222,6 +227,50 @@ def test_a_measurement_raises_result_ready_and_the_methods_give_and_acknowledge_
 
     asyncio.run(run())
     app.wait_done(1)
+
+
+#: an asyncua client in a process of its own: its classes made from the server's DataTypeDefinitions (in this
+#: process they are the server's), then the class docs/opcua.md gives asyncua 2.1 clients (SNIPPET)
+_OWN_CLIENT = """
+import asyncio, json, sys
+from asyncua import Client, ua as _ua  # the snippet imports ua itself
+from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+
+async def main(endpoint, cert, key, user, password):
+    client = Client(endpoint, timeout=10)
+    client.application_uri = "urn:moi-test:client"
+    await client.set_security(SecurityPolicyBasic256Sha256, cert, key, mode=_ua.MessageSecurityMode.SignAndEncrypt)
+    client.set_user(user)
+    client.set_password(password)
+    async with client:
+        await client.load_data_type_definitions()
+SNIPPET
+        moi = await client.get_namespace_index("urn:moi:opcua")
+        value = await client.get_node(ua.NodeId("test-rig.Results.LatestResult", moi)).read_value()
+        content = value.ResultContent[0].Value
+        print(json.dumps({"class": type(value).__name__, "ResultId": value.ResultMetaData.ResultId,
+                          "meta": type(value.ResultMetaData).__name__, "J": content.J}))
+
+asyncio.run(main(*sys.argv[1:]))
+"""
+
+
+def test_an_asyncua_client_of_its_own_decodes_the_result_with_the_documented_class(opc):
+    app, key, cert = opc
+    if not app.app.stored:  # alone: the module's measurement has not run
+        app.press()
+        app.wait_done(1)
+    doc = (REPO / "docs" / "opcua.md").read_text(encoding="utf-8")
+    snippet = re.search(r"asyncua 2.1 as a client.*?```python\n(.*?)```", doc, flags=re.S)
+    assert snippet is not None, "docs/opcua.md gives asyncua clients no class"
+    script = _OWN_CLIENT.replace("SNIPPET", textwrap.indent(snippet.group(1), " " * 8))
+    run = subprocess.run([sys.executable, "-c", script, app.app.opcua.endpoint, str(cert), str(key), USER, PASSWORD],
+                         capture_output=True, text=True, timeout=120, check=False)
+    assert run.returncode == 0, run.stderr[-2000:]
+    got = json.loads(run.stdout.splitlines()[-1])
+    stored = app.app.store.get(app.app.stored[-1])
+    assert got == {"class": "ResultDataType", "ResultId": stored.uuid, "meta": "ResultMetaDataType",
+                   "J": pytest.approx(stored.payload["J"], rel=1e-12)}
 
 
 @pytest.mark.parametrize(("user", "password"), [(None, None), (USER, "wrong"), ("nobody", PASSWORD)])
