@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import logging
 import time
 from datetime import UTC, datetime
 
@@ -266,3 +267,47 @@ def test_a_daemon_delivers_every_result_once_across_a_sigkill_a_broker_restart_a
         daemon.kill()
         daemon.communicate(timeout=10)
         host.close()
+
+
+def test_no_state_payload_stops_the_births_or_leaves_a_traceback(broker, host, node_factory, caplog):
+    """Any broker client can publish the primary host's STATE: a spoofed one stamped far ahead (1e30, an hour),
+    Infinity, NaN or garbage is refused and logged; the node stays born and follows the genuine host after it."""
+    caplog.set_level(logging.INFO, logger="moi.sparkplug")
+    node = node_factory(broker.port, primary_host="scada")
+    host.wait(_births, 10, "births while the host is online")
+    ahead = int(time.time() * 1000) + 3_600_000
+    spoofs = [b'{"online": false, "timestamp": 1e30}', b'{"online": true, "timestamp": 1e30}',
+              b'{"online": false, "timestamp": Infinity}', b'{"online": false, "timestamp": NaN}',
+              f'{{"online": false, "timestamp": {ahead}}}'.encode(), b"\xff garbage", b"[false, 1]", b'"OFFLINE"',
+              b'{"online": false, "timestamp": 1' + b"0" * 400 + b"}"]
+    for raw in spoofs:
+        host.client.publish(host.state_topic, raw, qos=1).wait_for_publish(5)
+    wait_until(lambda: node.states_refused == len(spoofs), 10, what="every spoofed STATE refused")
+    assert node.born_event.is_set() and host.count("NDEATH") == 0 and host.count("NBIRTH") == 1
+    host.online(False)  # the genuine host, stamped now: acted on
+    host.wait(lambda h: h.of("NDEATH"), 10, "NDEATH when the genuine host went offline")
+    host.online(True)
+    host.wait(lambda h: _births(h, 2), 10, "the births when the genuine host came back")
+    assert node.callback_errors == 0 and node.last_error is None
+    assert not any(r.exc_info for r in caplog.records) and "Traceback" not in caplog.text
+    refused = [r.getMessage() for r in caplog.records if "STATE of scada refused" in r.getMessage()]
+    assert len(refused) == 1 and "centuries ahead of this clock" in refused[0]  # logged once (a minute), not 9 times
+
+
+def test_a_flood_of_rebirth_requests_gives_one_birth_per_interval_and_answers_the_last(broker, host, node_factory):
+    interval = 1.0
+    node = node_factory(broker.port, rebirth_interval=interval)
+    host.wait(_births, 10, "the first births")
+    n, start = 300, time.monotonic()
+    rebirth = [("Node Control/Rebirth", DT.BOOLEAN, True)]
+    for _ in range(n):
+        host.command("rig1", None, rebirth)
+    wait_until(lambda: node._limit.requests == n and node._limit.due_in() is None, 30,
+               what="every request read and its birth sent")
+    elapsed = time.monotonic() - start
+    host.wait(lambda h: h.count("NBIRTH") == node.births, 10, "the births sent")
+    extra = node.births - 1
+    assert 1 <= extra <= 2 + elapsed / interval, (extra, elapsed)  # answered; one per interval at most, not 300
+    assert node._limit.deferred >= n - extra
+    seqs = [r.decoded.seq for r in host.received if r.kind in ("NBIRTH", "DBIRTH")]
+    assert seqs == [0, 1] * node.births and host.errors == []
