@@ -111,6 +111,14 @@ class Broker:
         return self.proc is not None and self.proc.poll() is None
 
 
+def unavailable(reason: str) -> None:
+    """A component the suite needs is missing: the test is skipped with the reason, and under CI (CI=true) it
+    fails instead, so that CI is never green without the component."""
+    if os.environ.get("CI") == "true":
+        pytest.fail(f"{reason} (CI=true: a missing component fails the run)")
+    pytest.skip(reason)
+
+
 def _need_mosquitto() -> None:
     if MOSQUITTO is None:
         pytest.skip("mosquitto binary not found (install the Debian package 'mosquitto'; `make test` tries to)")
