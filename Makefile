@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint lint-fix coverage bench install broker browser ffmpeg clean pi-check
+.PHONY: demo test test-fast lint lint-fix coverage bench install broker browser ffmpeg node clean pi-check
 
 # pip shows its progress: the first install downloads numpy, scipy, OpenCV and friends
 $(STAMP): pyproject.toml
@@ -20,15 +20,28 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-# The MQTT tests start their own Mosquitto on a free loopback port; install
-# the Debian package when the binary is missing and we are allowed to.
+# The MQTT tests start their own Mosquitto on a free loopback port, and read it with mosquitto's own clients
+# (mosquitto_sub/_pub); install the Debian packages when a binary is missing and we are allowed to.
 broker:
-	@command -v mosquitto >/dev/null 2>&1 || test -x /usr/sbin/mosquitto || { \
+	@{ command -v mosquitto >/dev/null 2>&1 || test -x /usr/sbin/mosquitto; } && command -v mosquitto_sub >/dev/null 2>&1 || { \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
-	    (apt-get install -y -qq mosquitto >/dev/null 2>&1 || \
-	     (apt-get update -qq >/dev/null && apt-get install -y -qq mosquitto >/dev/null)) || \
-	    echo "note: could not install mosquitto; MQTT tests will be skipped"; \
-	  else echo "note: mosquitto missing and not root; MQTT tests will be skipped"; fi; }
+	    (apt-get install -y -qq mosquitto mosquitto-clients >/dev/null 2>&1 || \
+	     (apt-get update -qq >/dev/null && apt-get install -y -qq mosquitto mosquitto-clients >/dev/null)) || \
+	    echo "note: could not install mosquitto / mosquitto-clients; MQTT tests will be skipped"; \
+	  else echo "note: mosquitto or mosquitto-clients missing and not root; MQTT tests will be skipped"; fi; }
+
+# Independent protocol clients from the npm registry, run by Debian's Node.js: each tests/node/<client>/ holds a
+# package.json and its package-lock.json (Eclipse Tahu's Sparkplug B codec in sparkplug/). Installed again when
+# the lock file changes; the tests that need one are skipped without it, and fail under CI=true.
+NODE_LOCKS := $(wildcard tests/node/*/package-lock.json)
+NODE_STAMPS := $(NODE_LOCKS:package-lock.json=node_modules/.installed)
+node: $(NODE_STAMPS)
+tests/node/%/node_modules/.installed: tests/node/%/package-lock.json
+	@command -v npm >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && \
+	  (apt-get install -y -qq nodejs npm >/dev/null 2>&1 || \
+	   (apt-get update -qq >/dev/null && apt-get install -y -qq nodejs npm >/dev/null)); } || true
+	@cd tests/node/$* && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error && touch node_modules/.installed || \
+	  { echo "note: npm could not install tests/node/$*; its tests will be skipped"; test "$$CI" != true; }
 
 # The browser test drives Debian's headless Chromium with its chromedriver; install them the same way.
 browser:
@@ -59,7 +72,7 @@ demo: $(STAMP)
 # without the coverage tracer, for a quick local check.
 test: COVERAGE_FIRST = --cov --cov-report= --cov-fail-under=0
 test: COVERAGE_NEXT = --cov --cov-append --cov-report=
-test test-fast: $(STAMP) broker browser ffmpeg
+test test-fast: $(STAMP) broker browser ffmpeg node
 	@rm -f .coverage .coverage.*
 	@$(PY) -m pytest -q -n 2 --dist loadfile -m "not clock" $(COVERAGE_FIRST); computations=$$?; \
 	$(PY) -m pytest -q -m clock $(COVERAGE_NEXT); clock=$$?; \

@@ -8,7 +8,7 @@ Session (Sparkplug B 3.0):
   node publishes NBIRTH (seq 0, bdSeq, ``Node Control/Rebirth``) and DBIRTH (every device metric with
   its alias, data type and ``engUnit``; ``service.publish.sparkplug.metrics``); every later message of
   the node carries the next ``seq`` (0–255);
-* each result is one DDATA (metrics by alias), delivered from the durable outbox (consumer
+* each result is one DDATA (metrics by alias, each with its data type), delivered from the durable outbox (consumer
   ``sparkplug``): published with QoS 1 and dropped from the outbox on the broker's PUBACK, so a result
   survives a broker restart, a power cut or a host that is away; a result held back while no birth was
   valid is flagged historical. A result may arrive twice (a PUBACK lost): hosts dedupe by
@@ -253,7 +253,9 @@ class SparkplugNode(Publisher):
                 return None
             p = Payload(timestamp=now_ms(), seq=self._next_seq())
             for m, value in values:
-                add_metric(p, None, m.datatype, value, alias=M.ALIAS[m.name], typed=False, timestamp=timestamp,
+                # with its data type, which the specification makes optional after the birth: Tahu's JavaScript
+                # codec (what Node.js hosts decode with) reads no value without it
+                add_metric(p, None, m.datatype, value, alias=M.ALIAS[m.name], timestamp=timestamp,
                            historical=historical)
             return self.client.publish(self.topic("DDATA", device=True), p.SerializeToString(), qos=qos).mid
 

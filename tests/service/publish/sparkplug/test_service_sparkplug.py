@@ -16,6 +16,7 @@ from service.publish.sparkplug.node import BDSEQ_FILE, SparkplugNode
 from service.publish.sparkplug.settings import SparkplugSettings
 from tests.service.conftest import wait_until
 from tests.service.publish.sparkplug.sparkplug_host import SparkplugHost, ps
+from tests.service.publish.sparkplug.tahu import require_tahu, tahu_decode
 
 pytestmark = pytest.mark.broker
 
@@ -311,3 +312,46 @@ def test_a_flood_of_rebirth_requests_gives_one_birth_per_interval_and_answers_th
     assert node._limit.deferred >= n - extra
     seqs = [r.decoded.seq for r in host.received if r.kind in ("NBIRTH", "DBIRTH")]
     assert seqs == [0, 1] * node.births and host.errors == []
+
+
+def test_tahus_javascript_codec_reads_every_metric_of_the_births_and_of_a_result(broker, host, node_factory):
+    """What a Node.js host decodes (Eclipse Tahu's sparkplug-payload): every birth metric with its type, alias and
+    unit, and every value of a result's DDATA, the 32 flag bits among them, read by the birth's aliases."""
+    require_tahu()
+    node = node_factory(broker.port)
+    host.wait(_births, 10, "births")
+    now, bits = time.time(), (1 << 31) | (1 << 13) | 4
+    store = node.sender.store
+    uuid = store.record(status="ok", trigger="test", device_id="rig1", software_version="0", started_at=1.0,
+                        finished_at=2.0, result={"J": 0.0125},
+                        build_payload=lambda uuid, seq: result_payload(uuid, seq, i=0, finished=now) | {"flag_bits": bits},
+                        enqueue={"sparkplug": ("result",)}).uuid
+    node.wake()
+    host.wait(lambda h: h.results(), 10, "the result")
+    wanted = [host.of("NBIRTH")[0], host.of("DBIRTH")[0], *host.of("DDATA")]
+    nbirth, dbirth, *data = tahu_decode([(r.topic, r.raw) for r in wanted])
+    assert all("error" not in d for d in (nbirth, dbirth, *data)), (nbirth, dbirth, data)
+
+    assert (nbirth["seq"], dbirth["seq"]) == ("0", "1")
+    node_metrics = {m["name"]: m for m in nbirth["metrics"]}
+    assert (node_metrics["bdSeq"]["type"], int(node_metrics["bdSeq"]["value"])) == ("Int64", node._bdseq)
+    assert (node_metrics[M.REBIRTH]["type"], node_metrics[M.REBIRTH]["value"]) == ("Boolean", False)
+    assert node_metrics[M.SOFTWARE_VERSION]["value"] == "9.9"
+    births = {m["name"]: m for m in dbirth["metrics"]}
+    assert set(births) == {m.name for m in M.DEVICE}
+    for spec in M.DEVICE:
+        b = births[spec.name]
+        assert b["type"] == spec.datatype.name and int(b["alias"]) == M.ALIAS[spec.name], b
+        assert (b.get("properties") or {}).get("engUnit", {}).get("value") == spec.unit, b
+
+    by_alias = {int(m["alias"]): m["name"] for m in dbirth["metrics"]}
+    [result] = [d for d in data if any(by_alias[int(m["alias"])] == "Result/UUID" for m in d["metrics"])]
+    values = {by_alias[int(m["alias"])]: m for m in result["metrics"]}
+    assert set(values) == {m.name for m in M.RESULT}
+    assert all(m["type"] == births[name]["type"] for name, m in values.items())  # typed in the data message too
+    assert values["Result/UUID"]["value"] == uuid and values["Result/J"]["value"] == pytest.approx(0.01)
+    assert int(values["Result/Flag Bits"]["value"]) == bits  # all 32 bits, where Tahu's codec reads them
+    assert int(values["Result/Finished"]["value"]) == round(now * 1000)
+    assert values["Result/Flags"]["value"] == "drift_corrected" and values["Result/Part ID"]["value"] == "SN-0"
+    assert (values["Result/omega_n"]["value"], values["Result/damping_ratio"]["value"]) == (5.4, 0.003)
+    assert int(values["Result/Sequence"]["value"]) == store.get(uuid).seq
