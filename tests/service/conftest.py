@@ -17,7 +17,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NoReturn
 
 import paho.mqtt.client as mqtt
 import pytest
@@ -111,7 +111,7 @@ class Broker:
         return self.proc is not None and self.proc.poll() is None
 
 
-def unavailable(reason: str) -> None:
+def unavailable(reason: str) -> NoReturn:
     """A component the suite needs is missing: the test is skipped with the reason, and under CI (CI=true) it
     fails instead, so that CI is never green without the component."""
     if os.environ.get("CI") == "true":

@@ -55,15 +55,15 @@ def test_the_flows_functions_run_on_a_real_result_once_per_uuid():
     result = result_payload({"J": 0.0125, "J_U": 2.3e-5, "J_std": 7.7e-9, "flags": ["drift_corrected"]},
                             uuid="ef6ecdb1-d4bf-4e81-816e-55598355be01", seq=1, device_id="sim-01", trigger="mqtt",
                             started_at=1.0, finished_at=3.0, software_version="0")
-    script = """
-const funcs = %s, result = %s, store = {};
+    script = f"const funcs = {json.dumps(funcs)}, result = {json.dumps(result)};" + """
+const store = {};
 const context = {get: (k) => store[k], set: (k, v) => { store[k] = v; }};
 const run = (name, msg) => new Function("msg", "context", "node", funcs[name])(msg, context, {});
 const first = run("once per uuid: J ± U", {payload: result});
 const again = run("once per uuid: J ± U", {payload: JSON.parse(JSON.stringify(result))});
 const command = run("command with an id", {payload: 1});
 process.stdout.write(JSON.stringify({first: first.payload, again, command: command.payload}));
-""" % (json.dumps(funcs), json.dumps(result))
+"""
     done = subprocess.run([node, "-e", script], capture_output=True, text=True, timeout=30)
     assert done.returncode == 0, done.stderr[-2000:]
     out = json.loads(done.stdout)
