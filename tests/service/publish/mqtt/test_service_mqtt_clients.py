@@ -70,13 +70,15 @@ def test_every_state_message_has_the_documented_keys_and_a_result_its_envelope(t
     assert [(r["id"], r["status"]) for r in s.payloads("/reply")] == [("m-1", "accepted"), ("m-1", "done")]
 
 
+@pytest.mark.parametrize("protocol", ["5", "3.1.1"])
 def test_a_retained_command_runs_once_when_it_is_published_and_never_again_from_the_brokers_copy(
-        tmp_path, broker, appliance_factory, sub):
+        tmp_path, broker, appliance_factory, sub, protocol):
     """The broker hands a retained command published while the daemon is connected on as a plain message (MQTT
     3.1.1 and 5 alike): it runs, once, as Node-RED's or Home Assistant's button with retain set means it to. The
     copy the broker keeps comes with the retain flag at each later subscription and never runs."""
-    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port))
+    app = appliance_factory(appliance_doc(tmp_path / "state", mqtt_port=broker.port, mqtt={"protocol": protocol}))
     mqtt = app.app.mqtt
+    assert mqtt.v5 == (protocol == "5")
     assert mqtt.subscribed_event.wait(10)
     s = sub("reply")
     mosquitto_pub(broker.port, f"{BASE}/cmd/measure", json.dumps({"id": "kept"}), retain=True)
