@@ -427,7 +427,8 @@ class SparkplugNode(Publisher):
     def health(self) -> dict[str, Any]:
         return {"broker": f"{self.settings.host}:{self.settings.port}", "connected": self.connected_event.is_set(),
                 "born": self.born_event.is_set(), "primary_host_online": self._host_online,
-                "bdSeq": self._bdseq, "outbox_backlog": self.sender.pending}
+                "bdSeq": self._bdseq, "outbox_backlog": self.sender.pending, "births": self.births,
+                "rebirth_requests": self._limit.requests, "states_refused": self.states_refused}
 
     def status(self) -> list[str]:
         if self.born_event.is_set():

@@ -289,7 +289,7 @@ def test_no_state_payload_stops_the_births_or_leaves_a_traceback(broker, host, n
     host.wait(lambda h: h.of("NDEATH"), 10, "NDEATH when the genuine host went offline")
     host.online(True)
     host.wait(lambda h: _births(h, 2), 10, "the births when the genuine host came back")
-    assert node.callback_errors == 0 and node.last_error is None
+    assert node.callback_errors == 0 and node.last_error is None and node.health()["states_refused"] == len(spoofs)
     assert not any(r.exc_info for r in caplog.records) and "Traceback" not in caplog.text
     refused = [r.getMessage() for r in caplog.records if "STATE of scada refused" in r.getMessage()]
     assert len(refused) == 1 and "centuries ahead of this clock" in refused[0]  # logged once (a minute), not 9 times
@@ -310,6 +310,7 @@ def test_a_flood_of_rebirth_requests_gives_one_birth_per_interval_and_answers_th
     extra = node.births - 1
     assert 1 <= extra <= 2 + elapsed / interval, (extra, elapsed)  # answered; one per interval at most, not 300
     assert node._limit.deferred >= n - extra
+    assert (node.health()["births"], node.health()["rebirth_requests"]) == (node.births, n)
     seqs = [r.decoded.seq for r in host.received if r.kind in ("NBIRTH", "DBIRTH")]
     assert seqs == [0, 1] * node.births and host.errors == []
 
