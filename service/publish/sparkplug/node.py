@@ -202,15 +202,11 @@ class SparkplugNode(Publisher):
 
     # --- births ------------------------------------------------------------------------------------
     def _rebirth(self, what: str) -> None:
-        with self._lock:
+        with self._lock:  # one step for a thread that reads the limit under the lock: the birth and its answer
+            if (what == "rebirth due" or self._limit.request()) and self._born:
+                self._birth()  # its ``born()`` answers every request so far
             if what == "rebirth due":
-                self._limit.forget()
-                now = True
-            else:
-                now = self._limit.request()
-            if not (now and self._born):
-                return  # deferred; or no session to birth again: the next birth (connection, host online) answers it
-        self._birth()
+                self._limit.forget()  # answered; or no session to birth again: the next birth answers it
 
     def _next_seq(self) -> int:
         seq = self._seq
@@ -239,8 +235,8 @@ class SparkplugNode(Publisher):
             self.client.publish(self.topic("DBIRTH", device=True), db.SerializeToString(), qos=0)
             self._born = True
             self._birth_ms = ts
-            self._limit.born()
             self.births += 1
+            self._limit.born()
             self.born_event.set()
         log.info("Sparkplug: NBIRTH/DBIRTH %s/%s/%s (bdSeq %d)", self.group, self.edge, self.device, self._bdseq)
         self.sender.connected()

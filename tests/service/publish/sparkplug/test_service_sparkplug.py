@@ -303,10 +303,14 @@ def test_a_flood_of_rebirth_requests_gives_one_birth_per_interval_and_answers_th
     rebirth = [("Node Control/Rebirth", DT.BOOLEAN, True)]
     for _ in range(n):
         host.command("rig1", None, rebirth)
-    wait_until(lambda: node._limit.requests == n and node._limit.due_in() is None, 30,
-               what="every request read and its birth sent")
+
+    def settled() -> bool:
+        with node._lock:
+            return node._limit.requests == n and node._limit.due_in() is None
+
+    wait_until(settled, 30, what="every request read and its birth sent")
     elapsed = time.monotonic() - start
-    host.wait(lambda h: h.count("NBIRTH") == node.births, 10, "the births sent")
+    host.wait(lambda h: h.count("NBIRTH") == h.count("DBIRTH") == node.births, 10, "the births sent")
     extra = node.births - 1
     assert 1 <= extra <= 2 + elapsed / interval, (extra, elapsed)  # answered; one per interval at most, not 300
     assert node._limit.deferred >= n - extra
