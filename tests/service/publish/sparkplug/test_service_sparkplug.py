@@ -360,3 +360,8 @@ def test_tahus_javascript_codec_reads_every_metric_of_the_births_and_of_a_result
     assert values["Result/Flags"]["value"] == "drift_corrected" and values["Result/Part ID"]["value"] == "SN-0"
     assert (values["Result/omega_n"]["value"], values["Result/damping_ratio"]["value"]) == (5.4, 0.003)
     assert int(values["Result/Sequence"]["value"]) == store.get(uuid).seq
+
+    node.stop()  # a clean stop publishes NDEATH with the session's bdSeq
+    [death] = host.wait(lambda h: h.of("NDEATH"), 10, "NDEATH")
+    [ndeath] = tahu_decode([(death.topic, death.raw)])
+    assert [(m["name"], m["type"], int(m["value"])) for m in ndeath["metrics"]] == [("bdSeq", "Int64", node._bdseq)]
