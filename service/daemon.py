@@ -602,7 +602,10 @@ class Appliance:
 
     def _state_message(self, state: str, previous: str, reason: str, measurement_id: str | None,
                        event: Event | None = None) -> dict[str, Any]:
+        # before the sequencer's first transition: its count so far (0, so the next is 1 and no loss shows) and
+        # its clock, so that every state message has the same keys
         msg: dict[str, Any] = self.public_event(event) if event is not None else {
+            "transition": 0, "time": self.devices.clock.now() if self.devices is not None else None,
             "state": state, "previous": previous, "reason": reason, "measurement_id": measurement_id}
         now = self.wall_clock()
         msg.update({"device_id": self.config.device_id, "timestamp": now, "at": iso_utc(now)})

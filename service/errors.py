@@ -38,3 +38,8 @@ class StoreError(ServiceError):
 
 class StoreDamaged(StoreError):
     """The result store's file is damaged (SQLite reports corruption, or a stored blob does not decode)."""
+
+
+class HostStateRefused(ServiceError):
+    """A Sparkplug host application's STATE message the edge node does not act on (not the specification's
+    JSON, or stamped later than this clock allows); the message says which and what was expected."""

@@ -155,6 +155,9 @@ LAYERS: dict[str, set[str]] = {
     # the Home Assistant discovery lists the flags in the Modbus map's bit order
     "publish.mqtt": {"config", "core", "errors", "logs", "measurement", "parts", "persistence", "publish",
                      "publish.modbus"},
+    # the Sparkplug node throttles the log lines a broker client can make it repeat (``logs.Throttle``), as MQTT does
+    "publish.sparkplug": {"config", "core", "drivers", "errors", "logs", "measurement", "parts", "persistence",
+                          "publish"},
     "publish.opcua": {"config", "drivers", "errors", "names", "persistence", "publish", "states"},
     # the web page shows the angle sensor's set-up view (``devices.sensors``)
     "publish.web": {"config", "core", "devices", "drivers", "errors", "firmware_host", "measurement", "names",

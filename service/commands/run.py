@@ -23,6 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--log-level", choices=("debug", "info", "warning", "error"), help="overrides [device] log_level")
     p.add_argument("--config-reference", action="store_true",
                    help="print every table and key of the configuration file (Markdown) and exit")
+    p.add_argument("--payload-reference", action="store_true",
+                   help="print the keys of the published result's envelope (Markdown) and exit")
 
 
 def setup_logging(level: str) -> None:
@@ -41,6 +43,10 @@ def run(args: argparse.Namespace) -> int:
     if args.config_reference:
         from service.config.appliance import reference_markdown
         sys.stdout.write(reference_markdown())
+        return 0
+    if args.payload_reference:
+        from service.publish.payload import envelope_markdown
+        sys.stdout.write(envelope_markdown())
         return 0
     from service.config.appliance import load_config  # the drivers' and servers' settings: not for `moi --help`
 

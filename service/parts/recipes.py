@@ -438,7 +438,7 @@ class RecipeBook:
                                                                               and r.number == int(key)):
                 return r
         known = ", ".join(f"{r.number} {r.name}" for r in self.recipes) or "none"
-        raise RecipeError(f"no recipe {key!r} in {self.directory or 'the configuration'} (known: {known})")
+        raise RecipeError(f"no recipe {key!r} (known: {known})")
 
     @property
     def numbers(self) -> frozenset[int]:

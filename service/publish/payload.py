@@ -29,6 +29,42 @@ ENVELOPE_KEYS = (
     "residual_rms_before", "residual_rms_after", "flag_bits", "timing",
 ) + ("part_id", "recipe", "release", "part", "verdict", "calibration", "tensor_set")
 
+#: the envelope's keys as docs/service.md lists them (generated: ``moi run --payload-reference``): (keys, meaning)
+ENVELOPE_DOC: tuple[tuple[tuple[str, ...], str], ...] = (
+    (("uuid",), "the measurement's UUID: **dedupe by it** (QoS 1 may deliver twice)"),
+    (("seq",), "the appliance's measurement sequence number (failed ones count too)"),
+    (("device_id", "software_version", "trigger"), "who measured, with what, started by whom (button / modbus / mqtt)"),
+    (("status",), "`ok`"),
+    (("started_at", "finished_at", "timestamp", "duration"),
+     "ISO 8601 UTC with ms; `timestamp` = finished_at as Unix time, s; `duration`, s"),
+    (("residual_rms_before", "residual_rms_after"), "residual RMS of the declared model and of the final one, rad"),
+    (("flag_bits",), "the quality flags as the Modbus bit field"),
+    (("timing",), "released after request, capture length, capture end reason, samples"),
+    (("payload_schema",), f"version of this envelope ({PAYLOAD_SCHEMA}; what each version changed: CHANGELOG.md)"),
+    (("part_id",), "the part's serial number (PLC registers 100–109, MQTT `part_id`), null when none was given"),
+    (("recipe",), "the recipe the release was judged with: `name`, `number`, `version` (SHA-256 of the file, 16 hex "
+     "digits), `quantity`, `nominal`, `lower`, `upper`, `rule`, `uncertain`, `coverage_factor`, `releases`, "
+     "`quality`; null without a recipe"),
+    (("release",), "this release: `index` of `of`, `part_uuid`, `quantity`, `verdict`, `value`, `u_c`, `U`, "
+     "`deviation`, `zone`, `reasons`, `abandoned` (an unfinished earlier part, if this release started a new one)"),
+    (("part",), "on the release that completes the part: `uuid`, `part_id`, `measurements` (their UUIDs), `values`, "
+     "`used`, `excluded` (index and reason), `mean`, `std`, `u_typeA`, `u_fit`, `u_systematic`, `z`, `verdict`, "
+     "`u_c`, `U`, `deviation`, `zone`, `reasons`; else null"),
+    (("verdict",), "the part's verdict (`OK`, `NOK`, `INVALID`) on the release that completes it, else null"),
+    (("calibration",), "the rig's calibration: `date`, `valid_until`, `due`, `stiffness`, `stiffness_std`; null when "
+     "the rig file has no `[calibration]`"),
+    (("tensor_set",), "for a tensor recipe: the orientation this release counted for and the set's progress after "
+     "it (docs/tensor.md); else null"),
+)
+
+
+def envelope_markdown() -> str:
+    """The envelope's table in docs/service.md (``moi run --payload-reference``)."""
+    rows = ["| key | meaning |", "|---|---|"]
+    rows += [f"| {', '.join(f'`{k}`' for k in keys)} | {meaning} |" for keys, meaning in ENVELOPE_DOC]
+    return "\n".join(rows) + "\n"
+
+
 #: the part keys of the envelope (``service.parts.recipes.PartTracker.release``, the rig's calibration state and,
 #: for a tensor recipe, the orientation the release counted for: ``service.parts.tensor_set.TensorSet.release``)
 PART_KEYS = ENVELOPE_KEYS[-7:]

@@ -10,8 +10,18 @@ OPC UA server takes no commands: its methods read and acknowledge results.)
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
+
+#: an absolute path in a reply's words (not a URL's: no ':' or '/' before it); its last part is what a reply keeps
+_PATH = re.compile(r"(?<![\w.:/~])/(?:[^\s/'\"(),;:]+/)*([^\s/'\"(),;:]*)")
+
+
+def without_paths(text: str) -> str:
+    """``text`` with each absolute file-system path cut to its last part: a reply goes to every client of a
+    broker or a server, the appliance's folders are not theirs to know (the log keeps the whole path)."""
+    return _PATH.sub(lambda m: m.group(1) or "…", text)
 
 
 @dataclass(frozen=True)
@@ -89,7 +99,8 @@ class CommandReply:
 
     def to_dict(self) -> dict[str, Any]:
         return {"command": self.command, "status": self.status, "reason": self.reason,
-                "detail": self.detail or (REASONS[self.reason].words if self.reason else ""), **self.data}
+                "detail": without_paths(self.detail) or (REASONS[self.reason].words if self.reason else ""),
+                **self.data}
 
 
 #: what a command's source hands the daemon to hear the outcome (called on the main loop thread; must not block)

@@ -17,7 +17,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NoReturn
 
 import paho.mqtt.client as mqtt
 import pytest
@@ -127,6 +127,14 @@ class Broker:
     @property
     def running(self) -> bool:
         return self.proc is not None and self.proc.poll() is None
+
+
+def unavailable(reason: str) -> NoReturn:
+    """A component the suite needs is missing: the test is skipped with the reason, and under CI (CI=true) it
+    fails instead, so that CI is never green without the component."""
+    if os.environ.get("CI") == "true":
+        pytest.fail(f"{reason} (CI=true: a missing component fails the run)")
+    pytest.skip(reason)
 
 
 def _need_mosquitto() -> None:

@@ -7,8 +7,10 @@ Topics under ``<prefix>/<device_id>/`` (prefix default "moi"):
 * ``status``      ``online`` / ``offline``, retained; ``offline`` is also the last will.
 * ``state``       sequencer events as JSON, retained (the latest state), QoS 0.
 * ``cmd/measure`` a message here starts one measurement (like the push button);
-  ``cmd/abort`` aborts the running one. Retained messages are ignored (a stale
-  retained command must not fire at every reconnect); a JSON payload with an
+  ``cmd/abort`` aborts the running one. A message with the retain flag is the
+  broker's stored copy, handed over at a subscription: never a command (a stale
+  retained command must not fire at every reconnect; one published with retain
+  reaches the subscribed daemon as a plain message and runs once); a JSON payload with an
   ``"id"`` is acted on once per id (QoS 1 may deliver twice). A JSON measure
   command may carry ``"part_id"`` (the part's serial number) and ``"recipe"``.
 * ``cmd/recipe``  makes a recipe active: its name or number as the payload, or
@@ -187,6 +189,8 @@ class MqttService(Publisher):
         self.recipes: tuple[str, ...] = ()  # recipe names for Home Assistant's select (set by build)
         self._recipe_doc: dict[str, Any] = {"name": "none", "number": 0}
         self._part_doc: dict[str, Any] = {"part_id": ""}
+        self._last_state: str | None = None  # the latest state message, published again at each connection
+        self._state_lock = threading.Lock()  # the latest one is the last one published
         self.client.on_connect_error = self._on_connect_error
         self._last_logged_error: str | None = None
         self._configure_auth()
@@ -267,8 +271,11 @@ class MqttService(Publisher):
         return info.mid
 
     def publish_state(self, event: dict[str, Any]) -> None:
-        """A sequencer event (retained: a new subscriber sees the current state)."""
-        self.client.publish(self.topics.state, json.dumps(event, default=str), qos=0, retain=True)
+        """A sequencer event (retained: a new subscriber sees the current state). The latest is published again at
+        each connection: one made while the broker was away (the daemon's first, at its start) is not lost."""
+        with self._state_lock:
+            self._last_state = json.dumps(event, default=str)
+            self.client.publish(self.topics.state, self._last_state, qos=0, retain=True)
 
     def wake(self) -> None:
         """New outbox rows were stored."""
@@ -293,6 +300,9 @@ class MqttService(Publisher):
                           (self.topics.cmd_set, 1), (self.topics.cmd_part_id, 1)])
         client.publish(self.topics.recipe, json.dumps(self._recipe_doc), qos=1, retain=True)
         client.publish(self.topics.part_id, json.dumps(self._part_doc), qos=1, retain=True)
+        with self._state_lock:
+            if self._last_state is not None:
+                client.publish(self.topics.state, self._last_state, qos=0, retain=True)
         if self.settings.home_assistant:
             for topic, config in discovery_messages(self.settings, self.topics, self.device_id, self.software_version,
                                                     self.recipes):
@@ -377,6 +387,8 @@ class MqttService(Publisher):
                 return refuse("malformed", f"{len(message.payload)} bytes (at most {MAX_COMMAND_PAYLOAD})")
             if not isinstance(doc, dict):  # a bare name, number or ID
                 data = {name: message.payload.decode("utf-8", errors="replace").strip()}
+                if data[name].startswith(("{", "[")):  # JSON meant, and broken (or not an object): no name
+                    return refuse("malformed", f'not JSON {{"{name}": ...}} (nor a {name.replace("_", " ")})')
             if name not in data:
                 return refuse("malformed", f'expected the {name.replace("_", " ")} or JSON {{"{name}": ...}}')
         if cmd_id is not None:

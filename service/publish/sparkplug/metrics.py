@@ -52,7 +52,9 @@ RESULT: tuple[DeviceMetric, ...] = (
     DeviceMetric("Result/omega_n", DataType.Double, "rad/s", _key("omega_n")),
     DeviceMetric("Result/damping_ratio", DataType.Double, "1", _key("damping_ratio")),
     DeviceMetric("Result/Flags", DataType.String, read=lambda p: ",".join(p.get("flags") or ())),
-    DeviceMetric("Result/Flag Bits", DataType.UInt32, read=_key("flag_bits")),
+    # Int64, not UInt32: the Sparkplug 3.0 proto carries a UInt32 in int_value, Tahu's JavaScript codec and Ignition
+    # before 2022 read it from long_value; an Int64 is long_value in every codec (the 32 bits fit without a sign)
+    DeviceMetric("Result/Flag Bits", DataType.Int64, read=_key("flag_bits")),
     DeviceMetric("Result/Verdict", DataType.String, read=lambda p: decision(p)[0] or ""),
     DeviceMetric("Result/Part ID", DataType.String, read=lambda p: p.get("part_id") or ""),
     DeviceMetric("Result/Trigger", DataType.String, read=_key("trigger")),

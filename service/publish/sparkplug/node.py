@@ -8,17 +8,20 @@ Session (Sparkplug B 3.0):
   node publishes NBIRTH (seq 0, bdSeq, ``Node Control/Rebirth``) and DBIRTH (every device metric with
   its alias, data type and ``engUnit``; ``service.publish.sparkplug.metrics``); every later message of
   the node carries the next ``seq`` (0–255);
-* each result is one DDATA (metrics by alias), delivered from the durable outbox (consumer
+* each result is one DDATA (metrics by alias, each with its data type), delivered from the durable outbox (consumer
   ``sparkplug``): published with QoS 1 and dropped from the outbox on the broker's PUBACK, so a result
   survives a broker restart, a power cut or a host that is away; a result held back while no birth was
   valid is flagged historical. A result may arrive twice (a PUBACK lost): hosts dedupe by
   ``Result/UUID``. (The specification asks QoS 0 for DDATA; a result that may not be lost needs the
   acknowledgement.)
 * the live state (``Status/*``) is a DDATA when it changes;
-* NCMD ``Node Control/Rebirth`` = true: NBIRTH and DBIRTH again; DCMD ``Command/Measure``,
+* NCMD ``Node Control/Rebirth`` = true: NBIRTH and DBIRTH again, at most one pair per ``rebirth_interval``
+  (``service.publish.sparkplug.rebirth``: requests within it get one birth at its end); DCMD ``Command/Measure``,
   ``Command/Abort``, ``Command/Recipe``, ``Command/Part ID`` are the MQTT commands, answered the same
   way (``Command/Reply`` carries the JSON an MQTT reply carries); a malformed NCMD or DCMD is answered
   (a reply, or a log line for the node) and otherwise ignored;
+* the primary host's STATE is untrusted input (``service.publish.sparkplug.host_state``): one that is not the
+  specification's JSON, or stamped beyond this clock plus ``state_tolerance``, is refused and logged;
 * when the primary host's STATE turns offline, the node stops sending, publishes NDEATH, disconnects
   and connects again with the next bdSeq, then waits for the host to be online.
 
@@ -41,6 +44,8 @@ import paho.mqtt.client as mqtt
 from google.protobuf.message import DecodeError
 from paho.mqtt.enums import CallbackAPIVersion
 
+from service.errors import HostStateRefused
+from service.logs import Throttle
 from service.persistence.outbox import OutboxSender
 from service.persistence.store import Store
 from service.publish.callbacks import never_raises
@@ -48,7 +53,9 @@ from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
 
 from . import metrics as M
+from .host_state import read_state
 from .payload import VALUE_FIELD, DataType, Payload, add_metric, get_value, now_ms, state_topic, topic
+from .rebirth import BirthLimit
 from .settings import SparkplugSettings
 
 log = logging.getLogger("moi.sparkplug")
@@ -84,10 +91,13 @@ class SparkplugNode(Publisher):
         self._birth_ms = 0
         self.births = 0  # NBIRTHs published since start
         self._host_online = settings.primary_host is None
-        self._host_stamp = -1  # the timestamp of the newest STATE seen
+        self._host_stamp = -1  # the timestamp of the newest STATE acted on
+        self._limit = BirthLimit(settings.rebirth_interval)  # read and changed under _lock
+        self._say = Throttle(log)  # the lines a broker client can make the node repeat
         self._live: tuple[Any, ...] | None = None
         self._last_result: dict[str, Any] = {}
         self.callback_errors = 0
+        self.states_refused = 0  # STATE messages of the primary host not acted on (malformed, stamped ahead)
         self.last_error: str | None = None
         self.connected_event = threading.Event()
         self.born_event = threading.Event()
@@ -167,12 +177,20 @@ class SparkplugNode(Publisher):
             info.wait_for_publish(timeout=timeout)
 
     def _control_loop(self) -> None:
-        """Work that may not run in paho's thread: leaving the session when the primary host goes away."""
+        """Work that may not run in paho's thread: leaving the session when the primary host goes away; the
+        births that Rebirth requests ask for, at most one per ``rebirth_interval``."""
         while True:
-            what = self._control.get()
+            with self._lock:
+                due = self._limit.due_in()
+            try:
+                what = self._control.get(timeout=due)
+            except queue.Empty:
+                what = "rebirth due"
             if what == "stop":
                 return
-            if what == "host offline" and not self._stopping.is_set():
+            if what in ("rebirth", "rebirth due"):
+                self._rebirth(what)
+            elif what == "host offline" and not self._stopping.is_set():
                 log.info("Sparkplug: primary host %s offline: NDEATH, reconnecting to wait for it",
                          self.settings.primary_host)
                 self.sender.disconnected()
@@ -183,6 +201,13 @@ class SparkplugNode(Publisher):
                     self._connect()
 
     # --- births ------------------------------------------------------------------------------------
+    def _rebirth(self, what: str) -> None:
+        with self._lock:  # one step for a thread that reads the limit under the lock: the birth and its answer
+            if (what == "rebirth due" or self._limit.request()) and self._born:
+                self._birth()  # its ``born()`` answers every request so far
+            if what == "rebirth due":
+                self._limit.forget()  # answered; or no session to birth again: the next birth answers it
+
     def _next_seq(self) -> int:
         seq = self._seq
         self._seq = (self._seq + 1) % 256
@@ -211,6 +236,7 @@ class SparkplugNode(Publisher):
             self._born = True
             self._birth_ms = ts
             self.births += 1
+            self._limit.born()
             self.born_event.set()
         log.info("Sparkplug: NBIRTH/DBIRTH %s/%s/%s (bdSeq %d)", self.group, self.edge, self.device, self._bdseq)
         self.sender.connected()
@@ -223,7 +249,9 @@ class SparkplugNode(Publisher):
                 return None
             p = Payload(timestamp=now_ms(), seq=self._next_seq())
             for m, value in values:
-                add_metric(p, None, m.datatype, value, alias=M.ALIAS[m.name], typed=False, timestamp=timestamp,
+                # with its data type, which the specification makes optional after the birth: Tahu's JavaScript
+                # codec (what Node.js hosts decode with) reads no value without it
+                add_metric(p, None, m.datatype, value, alias=M.ALIAS[m.name], timestamp=timestamp,
                            historical=historical)
             return self.client.publish(self.topic("DDATA", device=True), p.SerializeToString(), qos=qos).mid
 
@@ -294,14 +322,12 @@ class SparkplugNode(Publisher):
     # --- the primary host -------------------------------------------------------------------------------
     def _on_state(self, raw: bytes) -> None:
         try:
-            doc = json.loads(raw)
-            online, stamp = doc["online"], int(doc.get("timestamp", 0))
-            if not isinstance(online, bool):
-                raise TypeError("online is not a boolean")
-        except (ValueError, TypeError, KeyError, RecursionError) as exc:
-            log.warning("Sparkplug: malformed STATE of %s ignored (%s): expected JSON {\"online\": true|false, "
-                        "\"timestamp\": ms}", self.settings.primary_host, exc)
+            state = read_state(raw, now_ms(), int(self.settings.state_tolerance * 1000))
+        except HostStateRefused as exc:
+            self.states_refused += 1
+            self._say(logging.WARNING, "Sparkplug: STATE of %s refused: %s", self.settings.primary_host, exc)
             return
+        online, stamp = state.online, state.timestamp
         if stamp < self._host_stamp:
             return  # an older session's STATE, delivered late
         self._host_stamp = stamp
@@ -330,8 +356,8 @@ class SparkplugNode(Publisher):
             name = metric.name or M.BY_ALIAS.get(metric.alias, "")
             if name == M.REBIRTH:
                 if get_value(metric, DataType.Boolean) is True:
-                    log.info("Sparkplug: rebirth requested")
-                    self._birth()
+                    self._say(logging.INFO, "Sparkplug: rebirth requested")
+                    self._control.put("rebirth")
                 else:
                     log.warning("Sparkplug: NCMD %s without the boolean true ignored", M.REBIRTH)
             else:
@@ -397,7 +423,8 @@ class SparkplugNode(Publisher):
     def health(self) -> dict[str, Any]:
         return {"broker": f"{self.settings.host}:{self.settings.port}", "connected": self.connected_event.is_set(),
                 "born": self.born_event.is_set(), "primary_host_online": self._host_online,
-                "bdSeq": self._bdseq, "outbox_backlog": self.sender.pending}
+                "bdSeq": self._bdseq, "outbox_backlog": self.sender.pending, "births": self.births,
+                "rebirth_requests": self._limit.requests, "states_refused": self.states_refused}
 
     def status(self) -> list[str]:
         if self.born_event.is_set():

@@ -142,8 +142,7 @@ def get_value(metric: Any, datatype: DataType) -> Any:
 
 
 def add_metric(payload: Any, name: str | None, datatype: DataType, value: Any, *, alias: int | None = None,
-               timestamp: int | None = None, unit: str | None = None, typed: bool = True,
-               historical: bool = False) -> Any:
+               timestamp: int | None = None, unit: str | None = None, historical: bool = False) -> Any:
     """Append a metric to ``payload``; ``unit`` becomes the ``engUnit`` property (as SCADA reads it)."""
     m = payload.metrics.add()
     if name is not None:
@@ -152,8 +151,7 @@ def add_metric(payload: Any, name: str | None, datatype: DataType, value: Any, *
         m.alias = alias
     if timestamp is not None:
         m.timestamp = timestamp
-    if typed:
-        m.datatype = int(datatype)
+    m.datatype = int(datatype)
     if historical:
         m.is_historical = True
     if unit is not None:

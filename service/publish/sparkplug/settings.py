@@ -24,6 +24,8 @@ class SparkplugSettings:
     reconnect_max: float = 30.0
     resend_after: float = 30.0
     window: int = 10
+    state_tolerance: float = 300.0
+    rebirth_interval: float = 2.0
 
 
 KEYS: dict[str, dict] = {
@@ -41,6 +43,10 @@ KEYS: dict[str, dict] = {
     "reconnect_max": dict(doc="longest reconnect delay, s", min=0, min_open=True),
     "resend_after": dict(doc="re-send a result not acknowledged after this, s", min=0, min_open=True),
     "window": dict(doc="results in flight (published, not yet acknowledged) at most", min=1, max=1000),
+    "state_tolerance": dict(doc="a primary host's STATE stamped later than this clock's now plus this is refused "
+                            "(logged): the clocks disagree, or it is not the host's, s", min=0, max=86400),
+    "rebirth_interval": dict(doc="at most one birth per this interval on Rebirth requests: requests within it are "
+                             "answered by one birth at its end, s", min=0, max=3600),
 }
 
 #: characters no Sparkplug id may hold (topic level separators and wildcards)

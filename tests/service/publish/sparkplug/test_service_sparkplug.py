@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import logging
 import time
 from datetime import UTC, datetime
 
@@ -15,6 +16,7 @@ from service.publish.sparkplug.node import BDSEQ_FILE, SparkplugNode
 from service.publish.sparkplug.settings import SparkplugSettings
 from tests.service.conftest import wait_until
 from tests.service.publish.sparkplug.sparkplug_host import SparkplugHost, ps
+from tests.service.publish.sparkplug.tahu import require_tahu, tahu_decode
 
 pytestmark = pytest.mark.broker
 
@@ -266,3 +268,100 @@ def test_a_daemon_delivers_every_result_once_across_a_sigkill_a_broker_restart_a
         daemon.kill()
         daemon.communicate(timeout=10)
         host.close()
+
+
+def test_no_state_payload_stops_the_births_or_leaves_a_traceback(broker, host, node_factory, caplog):
+    """Any broker client can publish the primary host's STATE: a spoofed one stamped far ahead (1e30, an hour),
+    Infinity, NaN or garbage is refused and logged; the node stays born and follows the genuine host after it."""
+    caplog.set_level(logging.INFO, logger="moi.sparkplug")
+    node = node_factory(broker.port, primary_host="scada")
+    host.wait(_births, 10, "births while the host is online")
+    ahead = int(time.time() * 1000) + 3_600_000
+    spoofs = [b'{"online": false, "timestamp": 1e30}', b'{"online": true, "timestamp": 1e30}',
+              b'{"online": false, "timestamp": Infinity}', b'{"online": false, "timestamp": NaN}',
+              f'{{"online": false, "timestamp": {ahead}}}'.encode(), b"\xff garbage", b"[false, 1]", b'"OFFLINE"',
+              b'{"online": false, "timestamp": 1' + b"0" * 400 + b"}"]
+    for raw in spoofs:
+        host.client.publish(host.state_topic, raw, qos=1).wait_for_publish(5)
+    wait_until(lambda: node.states_refused == len(spoofs), 10, what="every spoofed STATE refused")
+    assert node.born_event.is_set() and host.count("NDEATH") == 0 and host.count("NBIRTH") == 1
+    host.online(False)  # the genuine host, stamped now: acted on
+    host.wait(lambda h: h.of("NDEATH"), 10, "NDEATH when the genuine host went offline")
+    host.online(True)
+    host.wait(lambda h: _births(h, 2), 10, "the births when the genuine host came back")
+    assert node.callback_errors == 0 and node.last_error is None and node.health()["states_refused"] == len(spoofs)
+    assert not any(r.exc_info for r in caplog.records) and "Traceback" not in caplog.text
+    refused = [r.getMessage() for r in caplog.records if "STATE of scada refused" in r.getMessage()]
+    assert len(refused) == 1 and "centuries ahead of this clock" in refused[0]  # logged once (a minute), not 9 times
+
+
+def test_a_flood_of_rebirth_requests_gives_one_birth_per_interval_and_answers_the_last(broker, host, node_factory):
+    interval = 1.0
+    node = node_factory(broker.port, rebirth_interval=interval)
+    host.wait(_births, 10, "the first births")
+    n, start = 300, time.monotonic()
+    rebirth = [("Node Control/Rebirth", DT.BOOLEAN, True)]
+    for _ in range(n):
+        host.command("rig1", None, rebirth)
+
+    def settled() -> bool:
+        with node._lock:
+            return node._limit.requests == n and node._limit.due_in() is None
+
+    wait_until(settled, 30, what="every request read and its birth sent")
+    elapsed = time.monotonic() - start
+    host.wait(lambda h: h.count("NBIRTH") == h.count("DBIRTH") == node.births, 10, "the births sent")
+    extra = node.births - 1
+    assert 1 <= extra <= 2 + elapsed / interval, (extra, elapsed)  # answered; one per interval at most, not 300
+    assert node._limit.deferred >= n - extra
+    assert (node.health()["births"], node.health()["rebirth_requests"]) == (node.births, n)
+    seqs = [r.decoded.seq for r in host.received if r.kind in ("NBIRTH", "DBIRTH")]
+    assert seqs == [0, 1] * node.births and host.errors == []
+
+
+def test_tahus_javascript_codec_reads_every_metric_of_the_births_and_of_a_result(broker, host, node_factory):
+    """What a Node.js host decodes (Eclipse Tahu's sparkplug-payload): every birth metric with its type, alias and
+    unit, and every value of a result's DDATA, the 32 flag bits among them, read by the birth's aliases."""
+    require_tahu()
+    node = node_factory(broker.port)
+    host.wait(_births, 10, "births")
+    now, bits = time.time(), (1 << 31) | (1 << 13) | 4
+    store = node.sender.store
+    uuid = store.record(status="ok", trigger="test", device_id="rig1", software_version="0", started_at=1.0,
+                        finished_at=2.0, result={"J": 0.0125},
+                        build_payload=lambda uuid, seq: result_payload(uuid, seq, i=0, finished=now) | {"flag_bits": bits},
+                        enqueue={"sparkplug": ("result",)}).uuid
+    node.wake()
+    host.wait(lambda h: h.results(), 10, "the result")
+    wanted = [host.of("NBIRTH")[0], host.of("DBIRTH")[0], *host.of("DDATA")]
+    nbirth, dbirth, *data = tahu_decode([(r.topic, r.raw) for r in wanted])
+    assert all("error" not in d for d in (nbirth, dbirth, *data)), (nbirth, dbirth, data)
+
+    assert (nbirth["seq"], dbirth["seq"]) == ("0", "1")
+    node_metrics = {m["name"]: m for m in nbirth["metrics"]}
+    assert (node_metrics["bdSeq"]["type"], int(node_metrics["bdSeq"]["value"])) == ("Int64", node._bdseq)
+    assert (node_metrics[M.REBIRTH]["type"], node_metrics[M.REBIRTH]["value"]) == ("Boolean", False)
+    assert node_metrics[M.SOFTWARE_VERSION]["value"] == "9.9"
+    births = {m["name"]: m for m in dbirth["metrics"]}
+    assert set(births) == {m.name for m in M.DEVICE}
+    for spec in M.DEVICE:
+        b = births[spec.name]
+        assert b["type"] == spec.datatype.name and int(b["alias"]) == M.ALIAS[spec.name], b
+        assert (b.get("properties") or {}).get("engUnit", {}).get("value") == spec.unit, b
+
+    by_alias = {int(m["alias"]): m["name"] for m in dbirth["metrics"]}
+    [result] = [d for d in data if any(by_alias[int(m["alias"])] == "Result/UUID" for m in d["metrics"])]
+    values = {by_alias[int(m["alias"])]: m for m in result["metrics"]}
+    assert set(values) == {m.name for m in M.RESULT}
+    assert all(m["type"] == births[name]["type"] for name, m in values.items())  # typed in the data message too
+    assert values["Result/UUID"]["value"] == uuid and values["Result/J"]["value"] == pytest.approx(0.01)
+    assert int(values["Result/Flag Bits"]["value"]) == bits  # all 32 bits, where Tahu's codec reads them
+    assert int(values["Result/Finished"]["value"]) == round(now * 1000)
+    assert values["Result/Flags"]["value"] == "drift_corrected" and values["Result/Part ID"]["value"] == "SN-0"
+    assert (values["Result/omega_n"]["value"], values["Result/damping_ratio"]["value"]) == (5.4, 0.003)
+    assert int(values["Result/Sequence"]["value"]) == store.get(uuid).seq
+
+    node.stop()  # a clean stop publishes NDEATH with the session's bdSeq
+    [death] = host.wait(lambda h: h.of("NDEATH"), 10, "NDEATH")
+    [ndeath] = tahu_decode([(death.topic, death.raw)])
+    assert [(m["name"], m["type"], int(m["value"])) for m in ndeath["metrics"]] == [("bdSeq", "Int64", node._bdseq)]
