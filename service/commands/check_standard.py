@@ -28,6 +28,7 @@ import time
 from measurement.verdict import QUANTITIES
 from service.commands._common import add_store_arguments, find_store_dir
 from service.errors import InputFileError
+from service.names import name_problem
 
 #: exit status of a check that failed (E_n > 1): not bad input (2), not a bug (1)
 EXIT_FAILED = 3
@@ -52,6 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if (problem := name_problem("check_standard", args.name)) is not None:
+        raise InputFileError(f"--name: {problem}")
     if args.history:
         return _history(args)
     if args.source is None or args.rig is None or args.reference is None or args.reference_U is None:
