@@ -23,6 +23,8 @@ import paho.mqtt.client as mqtt
 import pytest
 from paho.mqtt.enums import CallbackAPIVersion
 
+from tests.components import missing
+
 MOSQUITTO = shutil.which("mosquitto") or ("/usr/sbin/mosquitto" if os.access("/usr/sbin/mosquitto", os.X_OK) else None)
 REPO = Path(__file__).resolve().parents[2]
 
@@ -113,7 +115,7 @@ class Broker:
 
 def _need_mosquitto() -> None:
     if MOSQUITTO is None:
-        pytest.skip("mosquitto binary not found (install the Debian package 'mosquitto'; `make test` tries to)")
+        missing("mosquitto binary not found (install the Debian package 'mosquitto'; `make test` tries to)")
 
 
 @pytest.fixture
