@@ -7,7 +7,8 @@ appended (and flushed to the disk before `moi calibrate` reports success), never
 of one calibration, and nothing else holds it. A line that cannot be read (cut short by a power loss, edited by
 hand, a name with a control character in it) is said by the byte it starts at; the others stay readable.
 
-The file is read from its end, a page at a time (the newest lines, then the ones before the oldest shown): however long the history has grown, a page costs the page's lines, not the file.
+The file is read from its end, a page at a time (the newest lines, then the ones before the oldest shown):
+however long the history has grown, a page costs the page's lines, not the file.
 
 Each line: ``date`` (the calibration's, YYYY-MM-DD), ``valid_days`` and ``valid_until``, ``recorded_at`` (when
 it was written, ISO 8601 UTC), ``by`` (who ran it: ``--by``, else the login name), ``host``, ``software``,
