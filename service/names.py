@@ -76,6 +76,12 @@ def check_name(kind: str, text: object) -> str:
     return text
 
 
+def shown(kind: str, text: object) -> str:
+    """``text`` as a terminal or a page may show it: itself when it is a good name of this kind, else escaped
+    (``repr``: a name stored before the rule held, or by another program, never reaches a terminal raw)."""
+    return text if isinstance(text, str) and name_problem(kind, text) is None else ascii(text)
+
+
 def content_disposition(filename: str) -> str:
     """An attachment's ``Content-Disposition`` for any file name (RFC 6266): a printable-ASCII fallback in
     ``filename`` and the name itself, percent-encoded UTF-8, in ``filename*``."""

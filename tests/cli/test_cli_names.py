@@ -88,3 +88,16 @@ def test_a_history_line_with_an_escape_in_a_name_is_said_damaged_not_shown(bench
 def test_check_standard_refuses_an_artifact_name_with_control_characters(tmp_path, capsys, name):
     code = main(["check-standard", "--history", "--name", name, "--state-dir", str(tmp_path)])
     _refused(capsys, code, "--name: check standard name must be printable characters")
+
+
+def test_a_stored_check_standard_name_with_an_escape_is_shown_escaped(tmp_path, capsys):
+    """A name stored before the rule held (or written by another program) never reaches the terminal raw."""
+    from service.persistence.store import Store
+
+    with Store(tmp_path) as store:
+        store.record_check_standard({"name": "disc\x1b]0;owned\x07", "quantity": "J_object", "value": 0.0125,
+                                     "U": 2e-5, "reference": 0.0125, "reference_U": 2e-5, "E_n": 0.1,
+                                     "passed": True, "deviation": 1e-7}, finished_at=1.8e9)
+    assert main(["check-standard", "--history", "--state-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "\x1b" not in out and "\x07" not in out and "'disc\\x1b]0;own" in out
