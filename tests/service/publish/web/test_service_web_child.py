@@ -40,6 +40,7 @@ def _ended(pid: int, timeout: float) -> bool:
 def test_the_child_and_the_resource_tracker_end_when_the_daemon_is_killed():
     daemon = subprocess.Popen([sys.executable, "-c", DAEMON], cwd=REPO, stdin=subprocess.PIPE,
                               stdout=subprocess.PIPE, text=True)
+    assert daemon.stdin is not None and daemon.stdout is not None
     try:
         pids = json.loads(daemon.stdout.readline())
         assert pids["worker"] != daemon.pid and pids["tracker"] not in (None, daemon.pid)
