@@ -20,15 +20,13 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-# The MQTT tests start their own Mosquitto on a free loopback port, and read it with mosquitto's own clients
-# (mosquitto_sub/_pub); install the Debian packages when a binary is missing and we are allowed to.
+# Components of the suite from Debian, each installed when missing and we are root (scripts/component.sh):
+# otherwise their tests skip with a note, and under CI=true the step fails. The MQTT tests start their own
+# Mosquitto on a free loopback port and read it with mosquitto's own clients (the TLS test makes its CA with
+# openssl and its passwords with mosquitto_passwd); the browser test drives headless Chromium with its chromedriver; the vision tests encode
+# rendered videos to H.264 with FFmpeg (real codec artefacts).
 broker:
-	@{ command -v mosquitto >/dev/null 2>&1 || test -x /usr/sbin/mosquitto; } && command -v mosquitto_sub >/dev/null 2>&1 || { \
-	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
-	    (apt-get install -y -qq mosquitto mosquitto-clients >/dev/null 2>&1 || \
-	     (apt-get update -qq >/dev/null && apt-get install -y -qq mosquitto mosquitto-clients >/dev/null)) || \
-	    echo "note: could not install mosquitto / mosquitto-clients; MQTT tests will be skipped"; \
-	  else echo "note: mosquitto or mosquitto-clients missing and not root; MQTT tests will be skipped"; fi; }
+	@$(SHELL) scripts/component.sh "MQTT tests" "mosquitto mosquitto-clients openssl" mosquitto mosquitto_passwd mosquitto_sub mosquitto_pub openssl
 
 # Independent protocol clients from the npm registry, run by Debian's Node.js: each tests/node/<client>/ holds a
 # package.json and its package-lock.json (node-opcua in opcua/, Eclipse Tahu's Sparkplug B codec in sparkplug/). Installed again when
@@ -43,23 +41,11 @@ tests/node/%/node_modules/.installed: tests/node/%/package-lock.json
 	@cd tests/node/$* && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error && touch node_modules/.installed || \
 	  { echo "note: npm could not install tests/node/$*; its tests will be skipped (with CI=true this fails the run)"; test "$$CI" != true; }
 
-# The browser test drives Debian's headless Chromium with its chromedriver; install them the same way.
 browser:
-	@{ command -v chromium >/dev/null 2>&1 && command -v chromedriver >/dev/null 2>&1; } || { \
-	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
-	    (apt-get install -y -qq chromium chromium-driver >/dev/null 2>&1 || \
-	     (apt-get update -qq >/dev/null && apt-get install -y -qq chromium chromium-driver >/dev/null)) || \
-	    echo "note: could not install chromium/chromium-driver; the browser test will be skipped"; \
-	  else echo "note: chromium or chromedriver missing and not root; the browser test will be skipped"; fi; }
+	@$(SHELL) scripts/component.sh "browser test" "chromium chromium-driver" chromium chromedriver
 
-# The vision tests encode rendered videos to H.264 with Debian's FFmpeg (real codec artefacts).
 ffmpeg:
-	@command -v ffmpeg >/dev/null 2>&1 || { \
-	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
-	    (apt-get install -y -qq ffmpeg >/dev/null 2>&1 || \
-	     (apt-get update -qq >/dev/null && apt-get install -y -qq ffmpeg >/dev/null)) || \
-	    echo "note: could not install ffmpeg; the H.264 video tests will be skipped"; \
-	  else echo "note: ffmpeg missing and not root; the H.264 video tests will be skipped"; fi; }
+	@$(SHELL) scripts/component.sh "H.264 video tests" ffmpeg ffmpeg
 
 demo: $(STAMP)
 	$(VENV)/bin/moi demo

@@ -24,6 +24,14 @@ class StartupError(ServiceError):
     """The daemon cannot start (port in use, unusable state directory, ...); not an input error."""
 
 
+class AddressInUse(StartupError):
+    """A server cannot listen on its port: another program holds it (``port``: the one asked for)."""
+
+    def __init__(self, message: str, port: int) -> None:
+        super().__init__(message)
+        self.port = port
+
+
 class ModbusServerError(StartupError):
     """The Modbus server cannot listen on its port or serial line."""
 

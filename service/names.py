@@ -1,11 +1,12 @@
 """Names are data, not syntax: the one table of the names that reach an MQTT topic, an HTTP header, a file name,
-a Modbus block, an OPC UA string or an export, and what each may hold.
+a Modbus block, an OPC UA string, an export, a terminal or a page, and what each may hold.
 
 Whatever the door a name comes in by (the configuration, a recipe file, the users file, an MQTT or Modbus
-command, the web page, OPC UA), it is checked here: printable characters only (no line break, bell or escape:
-a control character in a recipe name made the broker drop the appliance's connection at the retained
-``spc/<name>`` publish, and broke the download's ``Content-Disposition``), a length limit, and no character
-that is syntax where the name goes (``/``, ``#``, ``+`` in an MQTT topic level).
+command, the web page, OPC UA, a command's option, a calibration file, a rig file), it is checked here:
+printable characters only (no line break, bell or escape: a control character in a recipe name made the broker
+drop the appliance's connection at the retained ``spc/<name>`` publish, and broke the download's
+``Content-Disposition``; an escape sequence in a name printed by a command is run by the terminal), a length
+limit, and no character that is syntax where the name goes (``/``, ``#``, ``+`` in an MQTT topic level).
 """
 
 from __future__ import annotations
@@ -50,6 +51,14 @@ NAMES: dict[str, NameRule] = {
     "device_id": NameRule("device id", 64, "/#+ ", reaches="every MQTT topic, Home Assistant's ids, OPC UA and "
                           "export file names"),
     "user": NameRule("user name", 64, "$", reaches="the web page, the stored trigger web:<name> and OPC UA"),
+    "person": NameRule("the name of who calibrated", 64, reaches="the terminal, the rig's calibration history and "
+                       "the web page"),
+    "reference": NameRule("reference name", 80, reaches="the terminal, the rig file, its calibration history and "
+                          "the web page"),
+    "certificate": NameRule("certificate", 80, reaches="the terminal, the rig file, its calibration history and "
+                            "the web page"),
+    "check_standard": NameRule("check standard name", 64, reaches="the terminal, the result store, its export and "
+                               "the web page"),
 }
 
 
@@ -65,6 +74,12 @@ def check_name(kind: str, text: object) -> str:
         raise InvalidInput(problem)
     assert isinstance(text, str)
     return text
+
+
+def shown(kind: str, text: object) -> str:
+    """``text`` as a terminal or a page may show it: itself when it is a good name of this kind, else escaped
+    (``repr``: a name stored before the rule held, or by another program, never reaches a terminal raw)."""
+    return text if isinstance(text, str) and name_problem(kind, text) is None else ascii(text)
 
 
 def content_disposition(filename: str) -> str:

@@ -132,12 +132,13 @@ LAYERS: dict[str, set[str]] = {
     "states": set(),
     "notify": set(),
     "core": set(),
-    # the rule for every name that reaches a topic, a header, a file name or an export; the log's repeat filter;
+    # the rule for every name that reaches a topic, a header, a file name, an export, a terminal or a page (the
+    # calibration history's and the commands' names too); the log's repeat filter;
     # the capture's contention watch
     "names": {"measurement"},
     "logs": set(),
     "contention": set(),
-    "sources": {"config", "drivers", "errors", "measurement"},
+    "sources": {"config", "drivers", "errors", "measurement", "names"},
     "config": {"devices", "drivers", "errors", "firmware_host", "measurement", "names", "parts", "sources",
                # the publishers' settings tables (``registry``; ``check`` reads Modbus's network exposure, and the
                # web page's token and users files as its start does)
@@ -166,7 +167,7 @@ LAYERS: dict[str, set[str]] = {
                "persistence", "publish", "service"},
     # ``service``: the installed version (the calibration history names the software that wrote a line)
     "commands": {"config", "core", "daemon", "devices", "drivers", "errors", "firmware_host", "logs", "measurement",
-                 "parts", "persistence", "publish", "publish.modbus", "publish.web", "service", "sources"},
+                 "names", "parts", "persistence", "publish", "publish.modbus", "publish.web", "service", "sources"},
     "cli": {"errors", "measurement", "service"},
 }
 

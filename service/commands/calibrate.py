@@ -55,6 +55,7 @@ from measurement.calibration import Cylinder, Reference, calibrate_torsion, cyli
 from measurement.errors import CalibrationError
 from measurement.rig import CalibrationRecord
 from service.errors import InputFileError
+from service.names import name_problem
 from service.sources import calibrations
 from service.sources.files import read_rig, read_toml, read_trace, write_rig
 
@@ -132,7 +133,9 @@ def load_references(path: str, rig) -> list[Reference]:
     for i, r in enumerate(refs, start=1):
         if not isinstance(r, dict):
             raise CalibrationError(f"{path}: reference {i} is {r!r}; expected a [[reference]] table")
-        name = str(r.get("name", f"reference {i}"))
+        name = r.get("name", f"reference {i}")
+        if (problem := name_problem("reference", name)) is not None:
+            raise CalibrationError(f"{path}: reference {i}: {problem}")
         unknown = set(r) - _REF_KEYS
         if unknown:
             raise CalibrationError(f"reference {name!r}: unknown key(s) {sorted(unknown)}; expected {sorted(_REF_KEYS)}")
@@ -153,9 +156,10 @@ def load_references(path: str, rig) -> list[Reference]:
         else:
             raise CalibrationError(f"reference {name!r}: needs a trace, or omega and zeta, or omega_n")
         if "certificate" in r:
-            if not isinstance(r["certificate"], str) or not r["certificate"].strip():
-                raise CalibrationError(f"reference {name!r}: certificate must be the certificate's identifier (text)")
-            out[-1] = replace(out[-1], certificate=r["certificate"].strip())
+            certificate = r["certificate"].strip() if isinstance(r["certificate"], str) else r["certificate"]
+            if (problem := name_problem("certificate", certificate)) is not None:
+                raise CalibrationError(f"reference {name!r}: {problem}; expected the certificate's identifier")
+            out[-1] = replace(out[-1], certificate=certificate)
     return out
 
 
@@ -165,6 +169,7 @@ def run(args: argparse.Namespace) -> int:
         raise CalibrationError(f"{args.rig}: calibration fits k and I0 of a torsion rig; this rig is {rig.kind}")
     if args.valid_days <= 0:
         raise CalibrationError(f"--valid-days must be > 0, got {args.valid_days}")
+    by = _who(args.by)
     try:
         date = dt.date.fromisoformat(args.date) if args.date else dt.datetime.now(dt.UTC).date()
     except ValueError:
@@ -180,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
                       stiffness_tare_covariance=cal.covariance, calibration=record)
         write_rig(new, args.out, comment=f"calibrated by moi calibrate from {args.calibration}", keep_from=args.rig)
         try:
-            history = calibrations.append(args.out, _history_entry(args, cal, record, references))
+            history = calibrations.append(args.out, _history_entry(args, by, cal, record, references))
         except InputFileError as exc:
             raise InputFileError(f"rig written to {args.out}, but its calibration is not in the history: {exc}") from None
     if args.json:
@@ -194,17 +199,27 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _history_entry(args: argparse.Namespace, cal, record: CalibrationRecord,
+def _who(by: str | None) -> str:
+    """Who calibrates: ``--by``, else the login name (checked as every name is: it reaches the terminal, the
+    history and the page)."""
+    if by is not None:
+        if (problem := name_problem("person", by)) is not None:
+            raise CalibrationError(f"--by: {problem}")
+        return by
+    try:
+        login = getpass.getuser()
+    except (OSError, KeyError):
+        return "unknown"
+    if (problem := name_problem("person", login)) is not None:
+        raise CalibrationError(f"the login name is not a good name ({problem}); give --by NAME")
+    return login
+
+
+def _history_entry(args: argparse.Namespace, by: str, cal, record: CalibrationRecord,
                    references: list[dict]) -> dict:
     """One line of the rig's calibration history (``service.sources.calibrations``)."""
     from service import __version__
 
-    by = args.by
-    if not by:
-        try:
-            by = getpass.getuser()
-        except (OSError, KeyError):
-            by = "unknown"
     return {"date": record.date.isoformat(), "valid_days": record.valid_days,
             "valid_until": record.valid_until.isoformat() if record.valid_until else None,
             "recorded_at": dt.datetime.now(dt.UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),

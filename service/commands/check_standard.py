@@ -28,6 +28,7 @@ import time
 from measurement.verdict import QUANTITIES
 from service.commands._common import add_store_arguments, find_store_dir
 from service.errors import InputFileError
+from service.names import name_problem, shown
 
 #: exit status of a check that failed (E_n > 1): not bad input (2), not a bug (1)
 EXIT_FAILED = 3
@@ -52,6 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if (problem := name_problem("check_standard", args.name)) is not None:
+        raise InputFileError(f"--name: {problem}")
     if args.history:
         return _history(args)
     if args.source is None or args.rig is None or args.reference is None or args.reference_U is None:
@@ -119,7 +122,7 @@ def _history(args: argparse.Namespace) -> int:
     print(f"{'when (UTC)':<20} {'name':<20} {'deviation':>11} {'E_n':>6}  result")
     for r in rows:
         when = time.strftime("%Y-%m-%d %H:%M", time.gmtime(r["finished_at"]))
-        print(f"{when:<20} {r['name'][:20]:<20} {r['deviation']:>+11.3g} {r['E_n']:>6.2f}  "
+        print(f"{when:<20} {shown('check_standard', r['name'])[:20]:<20} {r['deviation']:>+11.3g} {r['E_n']:>6.2f}  "
               f"{'pass' if r['passed'] else 'FAIL'}")
     if chart is not None:
         print("the deviation J − J_ref, check by check:")

@@ -27,7 +27,7 @@ from typing import Iterator
 
 from service.core import vocabulary as V
 from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
-from service.errors import InputFileError
+from service.errors import AddressInUse, InputFileError
 
 EXIT_FAULT = 3
 
@@ -124,10 +124,16 @@ def run(args: argparse.Namespace) -> int:
     with state_directory(args, "moi-demo-") as state_dir:
         _write_recipe(args, state_dir)
         config = parse_config(_doc(args, state_dir), source="moi demo")
-        if args.web_port and not _port_free(args.web_port):
+        app = Appliance(config, stop_grace=5.0)
+        try:
+            app.start()  # binding the port is the check: another program may take it at any moment before
+        except AddressInUse as exc:
+            if not args.web_port or exc.port != args.web_port:
+                raise
             print(f"port {args.web_port} is taken: the web page goes on a free port")
-            config = config.with_publisher("web", dataclasses.replace(config.web, port=0))
-        return _run(Appliance(config, stop_grace=5.0), args)
+            app = Appliance(config.with_publisher("web", dataclasses.replace(config.web, port=0)), stop_grace=5.0)
+            app.start()
+        return _run(app, args)
 
 
 def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
@@ -137,7 +143,6 @@ def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
 
     cfg = app.config
     out = sys.stdout
-    app.start()
     done = threading.Event()
     published: list = []
     t0 = app.devices.clock.now()
@@ -272,17 +277,6 @@ def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
 
 def _g(v, fmt: str = ".2g") -> str:
     return "-" if v is None else format(v, fmt)
-
-
-def _port_free(port: int) -> bool:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        try:
-            sock.bind(("127.0.0.1", port))
-        except OSError:
-            return False
-    return True
 
 
 class _consumer:

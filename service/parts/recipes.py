@@ -323,6 +323,8 @@ def load_recipe(path: str | Path) -> Recipe:  # noqa: C901
         if tensor is not None:
             raise c.fail("check_standard", None, "a tensor recipe cannot be a check standard")
         cs = c.table("check_standard", doc["check_standard"], schemas["check_standard"])
+        if cs["name"] is not None and (problem := name_problem("check_standard", cs["name"])) is not None:
+            raise c.fail("check_standard", "name", problem)
         check = {"name": cs["name"] or name, "reference": cs["reference"] if cs["reference"] is not None else nominal,
                  "reference_U": cs["reference_U"]}
     return Recipe(name=name, number=rec["number"], description=rec["description"], path=str(p),

@@ -14,6 +14,7 @@ from measurement.errors import RigError
 from measurement.rig import Rig
 from measurement.trace import Trace, csv_content, csv_header, parse_trace_csv
 from service.errors import InputFileError
+from service.sources.calibrations import names_problem
 
 if TYPE_CHECKING:  # the vision package only when a marker track is read
     from measurement.vision.marker_pair import MarkerTrack
@@ -102,8 +103,12 @@ def read_toml_as(path: str | os.PathLike, what: str, parse: Callable[[dict], T],
 
 
 def read_rig(path: str | os.PathLike) -> Rig:
-    """The rig file (TOML: [rig] kind and constants, [model] declared effects; see README.md)."""
-    return read_toml_as(path, "rig file", Rig.from_dict, RigError)
+    """The rig file (TOML: [rig] kind and constants, [model] declared effects; see README.md); the names of its
+    calibration's references and certificates checked as every name is (they reach the terminal and the page)."""
+    rig = read_toml_as(path, "rig file", Rig.from_dict, RigError)
+    if rig.calibration is not None and (problem := names_problem({"references": list(rig.calibration.references)})):
+        raise RigError(f"{path}: [calibration] references: {problem}")
+    return rig
 
 
 def write_rig(rig: Rig, path: str | os.PathLike, comment: str | None = None,

@@ -17,11 +17,13 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable, NoReturn
+from typing import Any, Callable
 
 import paho.mqtt.client as mqtt
 import pytest
 from paho.mqtt.enums import CallbackAPIVersion
+
+from tests.components import missing
 
 MOSQUITTO = shutil.which("mosquitto") or ("/usr/sbin/mosquitto" if os.access("/usr/sbin/mosquitto", os.X_OK) else None)
 REPO = Path(__file__).resolve().parents[2]
@@ -129,17 +131,9 @@ class Broker:
         return self.proc is not None and self.proc.poll() is None
 
 
-def unavailable(reason: str) -> NoReturn:
-    """A component the suite needs is missing: the test is skipped with the reason, and under CI (CI=true) it
-    fails instead, so that CI is never green without the component."""
-    if os.environ.get("CI") == "true":
-        pytest.fail(f"{reason} (CI=true: a missing component fails the run)")
-    pytest.skip(reason)
-
-
 def _need_mosquitto() -> None:
     if MOSQUITTO is None:
-        pytest.skip("mosquitto binary not found (install the Debian package 'mosquitto'; `make test` tries to)")
+        missing("mosquitto binary not found (install the Debian package 'mosquitto'; `make test` tries to)")
 
 
 @pytest.fixture

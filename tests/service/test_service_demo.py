@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import socket
+
 import pytest
 
 from service.cli import main
+from service.commands.demo import EXIT_FAULT
 
 FAST = ["--duration", "6", "--time-scale", "20", "--web-port", "0", "--releases", "1"]
 
@@ -28,3 +31,36 @@ def test_demo_with_a_broker_receives_its_result_back(broker, capsys):
     out = capsys.readouterr().out
     assert f"MQTT: broker 127.0.0.1:{broker.port}" in out
     assert "received back from the broker" in out
+
+
+def test_demo_goes_to_a_free_port_when_its_port_is_taken_at_the_moment_it_binds(capsys, monkeypatch):
+    """Another program takes the web port after any check could have seen it free: the demo binds a free port
+    instead of stopping."""
+    from service.publish.web.server import WebServer
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        wanted = probe.getsockname()[1]
+    intruders: list[socket.socket] = []
+    start = WebServer.start
+
+    def taken_first(self, *args, **kw):
+        if self.settings.port == wanted and not intruders:
+            intruder = socket.socket()
+            intruder.bind(("127.0.0.1", wanted))
+            intruder.listen()
+            intruders.append(intruder)
+        return start(self, *args, **kw)
+
+    monkeypatch.setattr(WebServer, "start", taken_first)
+    try:
+        # the last --web-port counts; the swing's own outcome on a loaded host is the other tests' subject
+        status = main(["demo", *FAST, "--web-port", str(wanted)])
+    finally:
+        for s in intruders:
+            s.close()
+    out = capsys.readouterr().out
+    assert len(intruders) == 1 and f"port {wanted} is taken: the web page goes on a free port" in out
+    shown = int(out.split("web page: http://127.0.0.1:")[1].split("/")[0])
+    assert shown not in (wanted, 0) and "pressing the push button" in out
+    assert status in (0, EXIT_FAULT), status  # EXIT_FAULT: the swing itself failed (too few samples, a busy host)

@@ -17,10 +17,16 @@ from measurement.vision import CameraModel, CameraPose, Imaging, MarkerGeometry,
 from measurement.vision.render_plane import PlaneRenderer, PlaneScene
 from measurement.vision.target import TargetSpec
 from service.cli import main
+from tests.components import missing
 
 from .conftest import J_TRUE, RIG, truth_swing, write_toml
 
-pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="Debian's ffmpeg is not installed (make ffmpeg)")
+
+@pytest.fixture(autouse=True, scope="module")
+def _ffmpeg() -> None:
+    if shutil.which("ffmpeg") is None:
+        missing("Debian's ffmpeg is not installed (make ffmpeg)")
+
 
 W, H, FPS = 320, 240, 30.0
 DURATION = 10.0

@@ -19,7 +19,9 @@ import contextlib
 import logging
 import multiprocessing
 import os
+import select
 import threading
+import time
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Mapping
 
@@ -52,7 +54,8 @@ class ChildWork:
             if self._pool is None:
                 # spawn, not fork: the daemon's threads hold locks a forked child would inherit held
                 self._pool = concurrent.futures.ProcessPoolExecutor(
-                    max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_lower_priority)
+                    max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_in_child,
+                    initargs=(os.getpid(),))
             pool = self._pool
             self._waiting += 1
             self.jobs += 1
@@ -87,9 +90,29 @@ class ChildWork:
             pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _lower_priority() -> None:
+def _in_child(daemon: int) -> None:
+    """The child's set-up: a lower priority, and its end when the daemon ends."""
     with contextlib.suppress(OSError):  # not allowed here: the job still runs, at the daemon's priority
         os.nice(CHILD_NICENESS)
+    threading.Thread(target=_end_with, args=(daemon,), name="moi-child-lifeline", daemon=True).start()
+
+
+def _end_with(daemon: int) -> None:
+    """End this process when the process ``daemon`` ends, however it ends. Killed (kill -9, the OOM killer), the
+    daemon closes nothing: the child would wait for jobs for ever, and multiprocessing's resource tracker, which
+    ends when no process holds its pipe any more, with it. Not a parent-death signal (prctl): that follows the
+    thread that started the child, and the web loop's thread is not the daemon."""
+    try:
+        watch: int | None = os.pidfd_open(daemon)  # readable once the process has ended (Linux 5.3)
+    except ProcessLookupError:
+        watch = None  # already gone
+    except OSError:  # an older kernel: the parent's id, which becomes the reaper's when the daemon ends
+        while os.getppid() == daemon:
+            time.sleep(1.0)
+        watch = None
+    if watch is not None:
+        select.select([watch], [], [])
+    os._exit(0)
 
 
 # --- the jobs (run in the child: module-level functions of plain arguments) -------------------------------------

@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import errno
 import logging
 import threading
 import time
@@ -22,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from drivers.aioloop import LoopThread
-from service.errors import StartupError
+from service.errors import AddressInUse, StartupError
 from service.publish.port import ApplianceView, Publisher
 
 from .auth import Guard, read_token, read_users
@@ -102,8 +103,10 @@ class WebServer(Publisher):
             self.stop()
             s = self.settings
             why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-            raise StartupError(f"cannot serve the web page on {s.host}:{s.port}: {why} "
-                               f"(address in use, or no permission)") from None
+            message = f"cannot serve the web page on {s.host}:{s.port}: {why}"
+            if isinstance(exc, OSError) and exc.errno == errno.EADDRINUSE:
+                raise AddressInUse(f"{message} (another program listens there)", s.port) from None
+            raise StartupError(f"{message} (address in use, or no permission)") from None
         log.info("web page on %s (actions need the token in %s)", self.url, self.token_file)
 
     async def _serve(self) -> None:

@@ -864,17 +864,27 @@ class Views:
 
     async def calibration(self, request: web.Request) -> web.Response:
         """Each rig's calibration (date, due date, stiffness, the references it rests on), its history (every
-        `moi calibrate`, newest first: ``service.sources.calibrations``) and the check standard's history with its
-        control chart."""
+        `moi calibrate`, newest first, a page at a time: ``service.sources.calibrations``) and the check
+        standard's history with its control chart. ``?rig=N&before=BYTE``: rig N's older calibrations."""
         today = dt.datetime.now(dt.UTC).date()
+        try:
+            paged = int(request.query.get("rig", "-1"))
+            before = int(request.query["before"]) if "before" in request.query else None
+        except ValueError:
+            raise Refused(400, "rig and before: expected whole numbers (the links of the history's pages)") from None
+        if before is not None and before < 0:
+            raise Refused(400, f"before={before}: expected a byte offset >= 0")
         rows = []
-        for name, rig, used_by, path in self._rigs():
+        for i, (name, rig, used_by, path) in enumerate(self._rigs()):
             cal = rig.calibration
             until = cal.valid_until if cal is not None else None
-            rows.append({"name": name, "used_by": used_by, "cal": cal, "until": until,
+            # the file is read off the loop: a long history must not hold every other page up
+            history = await asyncio.get_running_loop().run_in_executor(
+                None, self._history, path, before if i == paged else None)
+            rows.append({"name": name, "used_by": used_by, "cal": cal, "until": until, "index": i,
                          "days_left": (until - today).days if until is not None else None,
                          "due": cal is not None and cal.due(today), "stiffness": rig.stiffness,
-                         "stiffness_std": rig.stiffness_std, **self._history(path)})
+                         "stiffness_std": rig.stiffness_std, "paged": i == paged and before is not None, **history})
         unit = self.server.settings.display_unit
         checks, check_chart = self._checks({}, unit)
         return self._page(request, "calibration.html", title="Calibration", rows=rows, unit=unit,
@@ -899,14 +909,14 @@ class Views:
                 seen[key] = rigs[-1]
         return rigs
 
-    def _history(self, rig_path: str | None) -> dict[str, Any]:
-        """A rig file's calibration history as the page shows it: newest first, each line's time of writing in the
-        page's local time, the damaged lines said."""
+    def _history(self, rig_path: str | None, before: int | None) -> dict[str, Any]:
+        """A page of a rig file's calibration history as the page shows it: newest first, each line's time of
+        writing in the page's local time, the damaged lines said, the offset of the older page."""
         if rig_path is None:
-            return {"history": None, "history_file": None, "history_damaged": []}
-        h = read_history(rig_path)
-        return {"history": [e | {"recorded": self.when(recorded_at(e))} for e in h.newest_first],
-                "history_file": h.path.name, "history_damaged": h.damaged}
+            return {"history": None, "history_file": None, "history_damaged": [], "history_older": None}
+        h = read_history(rig_path, self.server.settings.page_size, before)
+        return {"history": [e | {"recorded": self.when(recorded_at(e))} for e in h.entries],
+                "history_file": h.path.name, "history_damaged": h.damaged, "history_older": h.older}
 
     # --- recipes and calibration ---------------------------------------------------------------------------
     async def recipes(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:

@@ -264,6 +264,9 @@ def test_recipe_files_are_checked_with_one_line_errors(tmp_path):
                     "[check_standard] reference_U"),
         "check-neg": (recipe("a", 1, 0.01, tolerance=1e-4) + '[check_standard]\nreference_U = "2e-5"\n',
                       "[check_standard] reference_U: expected a number > 0"),
+        "check-name": (recipe("a", 1, 0.01, tolerance=1e-4)
+                       + '[check_standard]\nreference_U = 2e-5\nname = "disc \\u001b[2J"\n',
+                       "[check_standard] name: check standard name must be printable characters"),
     }
     for name, (text, message) in cases.items():
         path = write(tmp_path / f"{name}.toml", text)

@@ -10,14 +10,14 @@ import threading
 import time
 from typing import Any, Callable
 
-from tests.service.conftest import unavailable
+from tests.components import missing
 
 SUB, PUB = shutil.which("mosquitto_sub"), shutil.which("mosquitto_pub")
 
 
 def require_clients() -> None:
     if SUB is None or PUB is None:
-        unavailable("mosquitto_sub / mosquitto_pub not found (Debian package mosquitto-clients; `make test` installs it)")
+        missing("mosquitto_sub / mosquitto_pub not found (Debian package mosquitto-clients; `make test` installs it)")
 
 
 def mosquitto_pub(port: int, topic: str, message: str | None, *, retain: bool = False, version: str = "mqttv5") -> None:

@@ -10,6 +10,7 @@ import pytest
 from service.config.appliance import parse_config
 from service.persistence.store import Store
 from service.publish.mqtt.client import MqttService
+from tests.components import missing
 from tests.service.conftest import MOSQUITTO, Broker, wait_until
 
 pytestmark = pytest.mark.broker
@@ -22,9 +23,9 @@ def _openssl(*args: str, cwd) -> None:
 @pytest.fixture
 def tls_broker(tmp_path):
     if MOSQUITTO is None:
-        pytest.skip("mosquitto binary not found")
+        missing("mosquitto binary not found (the Debian package 'mosquitto'; `make test` tries to install it)")
     if shutil.which("openssl") is None or shutil.which("mosquitto_passwd") is None:
-        pytest.skip("openssl or mosquitto_passwd not found (needed to make a test CA and password file)")
+        missing("openssl or mosquitto_passwd not found (needed to make a test CA and password file)")
     d = tmp_path / "tls"
     d.mkdir()
     _openssl("req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes", "-days", "2",

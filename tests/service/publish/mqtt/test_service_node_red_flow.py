@@ -11,7 +11,8 @@ import tomllib
 
 from service.publish.mqtt.client import Topics
 from service.publish.payload import result_payload
-from tests.service.conftest import REPO, unavailable
+from tests.components import missing
+from tests.service.conftest import REPO
 
 FLOW = REPO / "examples" / "node-red" / "moi-results-flow.json"
 
@@ -50,7 +51,7 @@ def test_the_flows_topics_are_in_the_appliances_topic_table():
 def test_the_flows_functions_run_on_a_real_result_once_per_uuid():
     node = shutil.which("node") or shutil.which("nodejs")
     if node is None:
-        unavailable("Node.js not found (Debian package nodejs)")
+        missing("Node.js not found (Debian package nodejs)")
     funcs = {n["name"]: n["func"] for n in flow() if n["type"] == "function"}
     result = result_payload({"J": 0.0125, "J_U": 2.3e-5, "J_std": 7.7e-9, "flags": ["drift_corrected"]},
                             uuid="ef6ecdb1-d4bf-4e81-816e-55598355be01", seq=1, device_id="sim-01", trigger="mqtt",

@@ -18,7 +18,8 @@ from typing import Any
 import pytest
 
 from service.publish.opcua.model import CONTENT_FIELDS, UNECE_URI, UNITS
-from tests.service.conftest import REPO, RunningAppliance, appliance_doc, unavailable
+from tests.components import missing
+from tests.service.conftest import REPO, RunningAppliance, appliance_doc
 
 USER, PASSWORD = "line-7", "s3cret"
 CLIENT_DIR = REPO / "tests" / "node" / "opcua"
@@ -29,12 +30,12 @@ DEADLINE_S = 150.0
 
 def _need_node_opcua() -> str:
     if NODE is None:
-        missing = "Node.js (the Debian package nodejs)"
+        what = "Node.js (the Debian package nodejs)"
     elif not (CLIENT_DIR / "node_modules" / "node-opcua-client").is_dir():
-        missing = "node-opcua (`make node`: npm ci in tests/node/opcua)"
+        what = "node-opcua (`make node`: npm ci in tests/node/opcua)"
     else:
         return NODE
-    unavailable(f"{missing} is not installed")
+    missing(f"{what} is not installed")
 
 
 class _NodeClient:

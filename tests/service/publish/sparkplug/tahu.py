@@ -10,7 +10,8 @@ import shutil
 import subprocess
 from typing import Any
 
-from tests.service.conftest import REPO, unavailable
+from tests.components import missing
+from tests.service.conftest import REPO
 
 NODE = shutil.which("node") or shutil.which("nodejs")
 HERE = REPO / "tests" / "node" / "sparkplug"
@@ -18,7 +19,7 @@ HERE = REPO / "tests" / "node" / "sparkplug"
 
 def require_tahu() -> None:
     if NODE is None or not (HERE / "node_modules" / "sparkplug-payload").is_dir():
-        unavailable("Node.js or Tahu's sparkplug-payload missing (`make node` installs it into tests/node/sparkplug/)")
+        missing("Node.js or Tahu's sparkplug-payload missing (`make node` installs it into tests/node/sparkplug/)")
 
 
 def tahu_decode(messages: list[tuple[str, bytes]]) -> list[dict[str, Any]]:

@@ -4,9 +4,12 @@ and without e-notation; a damaged line is said, not a traceback."""
 
 from __future__ import annotations
 
+import html
 import json
 import re
 import shutil
+import threading
+import tracemalloc
 
 from service.cli import main
 from service.sources.calibrations import history_path, read_history
@@ -26,12 +29,12 @@ def test_two_calibrations_give_two_history_rows_and_a_damaged_line_is_said(tmp_p
     _calibrate(tmp_path, "2026-06-01", "B. Kraus")
     assert "calibration appended to" in capsys.readouterr().out
 
-    # the history beside the rig file: one line a calibration, oldest first, with who ran it and the certificate
-    history = read_history(tmp_path / "rig.toml")
-    assert history.path == tmp_path / "rig.calibrations.jsonl" and history.damaged == []
+    # the history beside the rig file: one line a calibration, read newest first, with who ran it and the certificate
+    history = read_history(tmp_path / "rig.toml", None)
+    assert history.path == tmp_path / "rig.calibrations.jsonl" and history.damaged == [] and history.older is None
     assert [(e["date"], e["by"], e["valid_until"]) for e in history.entries] == [
-        ("2026-01-10", "A. Meyer", "2027-01-10"), ("2026-06-01", "B. Kraus", "2027-06-01")]
-    first = history.entries[0]
+        ("2026-06-01", "B. Kraus", "2027-06-01"), ("2026-01-10", "A. Meyer", "2027-01-10")]
+    first = history.entries[1]
     assert first["rig_file"] == str((tmp_path / "rig.toml").resolve()) and first["stiffness_std"] > 0
     assert {"name": "disc 5 g·m²", "certificate": "LAB-2025-0412"}.items() <= first["references"][1].items()
 
@@ -48,11 +51,91 @@ def test_two_calibrations_give_two_history_rows_and_a_damaged_line_is_said(tmp_p
     assert E_NOTATION.search(shown) is None and ISO_TIME.search(shown) is None, shown  # local time, no exponents
 
     # a line cut short (a power loss while writing) and one that is not a calibration: said, the others listed
-    with open(history_path(tmp_path / "rig.toml"), "a", encoding="utf-8") as f:
-        f.write('{"date": "2026-07-0\n' + json.dumps({"date": "2026-08-01"}) + "\n")
+    path = history_path(tmp_path / "rig.toml")
+    cut, short = path.stat().st_size, '{"date": "2026-07-0\n'
+    with open(path, "a", encoding="utf-8") as f:
+        f.write(short + json.dumps({"date": "2026-08-01"}) + "\n")
     status, _, body = c.request("/calibration")
     page = body.decode()
     assert status == 200 and "Traceback" not in page
     assert len(re.findall(r'<tr class="cal-row">', page)) == 2
-    assert "line 3 of rig.calibrations.jsonl is damaged (not JSON" in page
-    assert "line 4 of rig.calibrations.jsonl is damaged (no recorded_at, stiffness)" in page
+    assert f"the line at byte {cut} of rig.calibrations.jsonl is damaged (not JSON" in page
+    assert (f"the line at byte {cut + len(short)} of rig.calibrations.jsonl is damaged (no recorded_at, stiffness)"
+            in page)
+
+
+def _line(i: int) -> str:
+    return json.dumps({"date": "2026-01-10", "recorded_at": f"2026-01-10T00:{i // 60:02d}:{i % 60:02d}Z",
+                       "stiffness": 0.365 + i * 1e-6, "by": f"tech {i}", "references": [{"name": "disc"}]}) + "\n"
+
+
+def _huge_history(rig, calibrations: int, size: int) -> None:
+    """A history of ``size`` bytes: one line too long to be a calibration (a hole of the file, read as zeros),
+    then ``calibrations`` calibrations, oldest first."""
+    with open(history_path(rig), "wb") as f:
+        f.truncate(size - 1)
+        f.seek(size - 1)
+        f.write(b"\n" + "".join(_line(i) for i in range(calibrations)).encode())
+
+
+def test_a_huge_history_is_read_a_page_at_a_time_from_its_end(tmp_path):
+    rig = tmp_path / "rig.toml"
+    _huge_history(rig, 45, 64 * 2**20)
+    tracemalloc.start()
+    try:
+        page = read_history(rig, 20)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2 * 2**20, peak  # the page's lines and a block, not the file's 64 MiB
+    assert [e["by"] for e in page.entries] == [f"tech {i}" for i in range(44, 24, -1)] and page.damaged == []
+    # the older pages, each read before the oldest line shown, down to the first line
+    seen, before, damaged = [e["by"] for e in page.entries], page.older, []
+    while before is not None:
+        page = read_history(rig, 20, before)
+        seen += [e["by"] for e in page.entries]
+        damaged += page.damaged
+        before = page.older
+    assert seen == [f"tech {i}" for i in range(44, -1, -1)]
+    assert damaged == ["the line at byte 0 of rig.calibrations.jsonl is damaged (longer than 64 KiB); left out"]
+
+
+def test_the_page_lists_the_history_a_page_at_a_time_and_reads_it_off_the_web_loop(tmp_path, appliance_factory,
+                                                                                   monkeypatch):
+    shutil.copy(REPO / "examples" / "torsion_rig.toml", tmp_path / "rig.toml")
+    _huge_history(tmp_path / "rig.toml", 12, 64 * 2**20)
+    running = appliance_factory(appliance_doc(tmp_path / "state", device={"rig": str(tmp_path / "rig.toml")},
+                                              web={"enabled": True, "page_size": 5}))
+    c = Client(running.app.web.url)
+    pages, path = [], "/calibration"
+    while path:
+        status, _, body = c.request(path)
+        assert status == 200
+        page = body.decode()
+        pages.append(re.findall(r'<tr class="cal-row">.*?<td>(tech \d+)</td>', page))
+        older = re.search(r'<a class="older" href="([^"#]+)', page)
+        path = html.unescape(older.group(1)) if older else ""
+        assert len(pages) <= 5
+    assert pages == [[f"tech {i}" for i in range(j, max(j - 5, -1), -1)] for j in (11, 6, 1)]
+    assert "the line at byte 0 of rig.calibrations.jsonl is damaged (longer than 64 KiB)" in page
+    assert c.request("/calibration?rig=0&before=x")[0] == 400
+
+    # while one request reads a history, the page answers another: the file is read off the web loop
+    from service.publish.web import views
+
+    reading, release = threading.Event(), threading.Event()
+
+    def slow_read(*args, **kw):
+        reading.set()
+        assert release.wait(30)
+        return read_history(*args, **kw)
+
+    monkeypatch.setattr(views, "read_history", slow_read)
+    slow = threading.Thread(target=c.request, args=("/calibration",))
+    slow.start()
+    try:
+        assert reading.wait(30)
+        assert Client(running.app.web.url).request("/", timeout=10)[0] == 200
+    finally:
+        release.set()
+        slow.join(30)

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.components import missing
 from tests.service.conftest import appliance_doc, wait_until
 from tests.service.publish.web.test_service_web import E_NOTATION, ISO_TIME, UUID
 
@@ -27,9 +28,12 @@ CHROMEDRIVER = shutil.which("chromedriver") or ("/usr/bin/chromedriver" if os.pa
 
 @pytest.fixture(scope="module")
 def browser():
-    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install -e '.[test]')")
+    try:
+        from selenium import webdriver
+    except ImportError:
+        missing("selenium is not installed (pip install -e '.[test]')")
     if CHROMIUM is None or CHROMEDRIVER is None:
-        pytest.skip("headless Chromium is not installed: `make test` installs Debian's chromium and chromium-driver "
+        missing("headless Chromium is not installed: `make test` installs Debian's chromium and chromium-driver "
                     "when run as root; otherwise apt-get install chromium chromium-driver")
     from selenium.webdriver.chrome.service import Service
 
