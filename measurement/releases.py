@@ -97,7 +97,7 @@ def _detrended(t: np.ndarray, y: np.ndarray, period: float) -> np.ndarray:
     """y − its median over one period about each sample: the swing without a drifting zero."""
     from scipy.ndimage import median_filter
 
-    return y - median_filter(y, size=_width(t, period), mode="nearest")
+    return y - median_filter(y, size=_width(t, period), mode="mirror")
 
 
 def _envelope(t: np.ndarray, y: np.ndarray, period: float) -> np.ndarray:
@@ -127,6 +127,15 @@ def _cuts(t: np.ndarray, y: np.ndarray, breaks: tuple[tuple[float, str], ...], n
     return sorted(cuts.items())
 
 
+def _leaves_zero(t: np.ndarray, z: np.ndarray, peak_t: float, noise: float) -> float:
+    """The last time before ``peak_t`` that the rate ``z`` was at zero (within the noise) or on the other side:
+    where a swing that begins with this lobe was let go."""
+    i = int(np.searchsorted(t, peak_t))
+    sign = np.sign(z[i])
+    at_zero = np.flatnonzero((np.abs(z[:i]) < 3.0 * noise) | (np.sign(z[:i]) == -sign))
+    return float(t[at_zero[-1]]) if at_zero.size else float(t[0])
+
+
 def free_swing_start(t: np.ndarray, y: np.ndarray, noise: float, quantity: str,
                      period: float = math.nan) -> tuple[int, str | None]:
     """Index where the free swing of one section starts, and None, or 0 and why there is no swing.
@@ -146,7 +155,7 @@ def free_swing_start(t: np.ndarray, y: np.ndarray, noise: float, quantity: str,
     size = np.abs(sw.peak_values)
     k = int(np.flatnonzero(size >= RELEASE_SHARE * size.max())[0])
     if quantity == "rate":
-        start_t = float(sw.crossings[k - 1]) if k >= 1 else float(t[0])
+        start_t = float(sw.crossings[k - 1]) if k >= 1 else _leaves_zero(t, z, float(sw.peak_times[0]), noise)
     else:
         start_t = float(sw.peak_times[k])
     after = sw.crossings[sw.crossings > start_t]

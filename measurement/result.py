@@ -23,12 +23,13 @@ from typing import Any, Mapping
 import numpy as np
 
 from .errors import ResultSchemaError
+from .periods import Periods
 from .residual import Diagnostics
 from .uncertainty import Budget
 from .wire import read_number
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 
 
 def _num(v: Any) -> Any:
@@ -343,6 +344,8 @@ class IdentificationResult:
     uncertainty_budget: dict[str, Budget] = field(default_factory=dict)
     #: what the sensor read: "angle" (rad) or "rate" (rad/s, a gyro: offset and the arrays' "angle" are then rates)
     measures: str = "angle"
+    #: the small-swing period, the period at the record's amplitude and as counted, g (None: not computed)
+    periods: Periods | None = None
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -407,6 +410,7 @@ class IdentificationResult:
             "acquisition": _jsonable(self.acquisition),
             "sensor_calibrated": self.sensor_calibrated,
             "measures": self.measures,
+            "periods": None if self.periods is None else self.periods.to_dict(),
         }
         if include_arrays:
             d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
@@ -437,6 +441,7 @@ class IdentificationResult:
             diagnostics=Diagnostics.from_dict(d["diagnostics"]), structure=tuple(d["structure"]),
             window=dict(d["window"]), acquisition=dict(d["acquisition"]), sensor_calibrated=d["sensor_calibrated"],
             measures=d["measures"],
+            periods=None if d.get("periods") is None else Periods.from_dict(d["periods"]),
             model_form=ModelForm.from_dict(d["model_form"]),
             uncertainty_budget={k: Budget.from_dict(b) for k, b in d["uncertainty_budget"].items()},
             arrays={k: np.asarray(v, dtype=float) for k, v in (d.get("arrays") or {}).items()},
@@ -473,6 +478,8 @@ class IdentificationResult:
                if self.omega_n_std_calibration else "")
         L.append(f"    omega_n      = {Quantity(self.omega_n, self.omega_n_std, 'rad/s')}"
                  f"  (f_n = {self.omega_n / (2 * math.pi):.6g} Hz{cal})")
+        if self.periods is not None:
+            L.extend(self.periods.lines())
         if self.omega_n_std_model:
             ju = f"; J ± {self.J_u:.2g} kg·m²" if self.J_u is not None else ""
             L.append(f"    model form   = ±{self.omega_n_std_model:.2g} rad/s (halves of the record, rival models)"

@@ -37,21 +37,28 @@ def _is_number(cell: str) -> bool:
 
 
 def sniff_dialect(lines: list[str]) -> Dialect:
-    """The delimiter (csv.Sniffer among comma, semicolon, tab and space) and whether decimals use a comma."""
-    sample = "\n".join(lines[-SNIFF_LINES:])
+    """The delimiter (csv.Sniffer's among comma, semicolon, tab and space, or the first of them that splits the
+    last lines into rows of numbers of one width) and whether decimals use a comma."""
+    tail = lines[-SNIFF_LINES:]
     try:
-        delimiter = csv.Sniffer().sniff(sample, delimiters=",;\t").delimiter
+        sniffed = [csv.Sniffer().sniff("\n".join(tail), delimiters=",;\t").delimiter]
     except csv.Error:
-        delimiter = "\t" if "\t" in sample else ";" if ";" in sample else "," if "," in sample else " "
-    rows = [_cells(line, delimiter) for line in lines[-SNIFF_LINES:]]
-    cells = [c for r in rows for c in r if c.strip()]
+        sniffed = []
+    for delimiter in dict.fromkeys(sniffed + [";", "\t", ",", " "]):
+        rows = [_cells(line, delimiter) for line in tail]
+        widths = {len(r) for r in rows if _numeric_row(r, delimiter != ",")}
+        if len(widths) == 1 and widths.pop() >= 2:
+            break
+    else:
+        delimiter = sniffed[0] if sniffed else ","
+    cells = [c for line in tail for c in _cells(line, delimiter) if c.strip()]
     decimal_comma = delimiter != "," and any(_DECIMAL_COMMA.match(c) for c in cells)
     return Dialect(delimiter, decimal_comma)
 
 
-def _numeric_row(cells: list[str]) -> bool:
+def _numeric_row(cells: list[str], comma: bool = True) -> bool:
     filled = [c for c in cells if c.strip()]
-    return bool(filled) and all(_is_number(c) for c in filled)
+    return bool(filled) and all(_is_number(c) and (comma or "," not in c) for c in filled)
 
 
 def _header_index(rows: list[list[str]]) -> int | None:
