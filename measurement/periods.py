@@ -73,13 +73,16 @@ def amplitude_factor(kind: str, amplitude: float) -> float:
 
 
 def counted_period(t: np.ndarray, swing: np.ndarray) -> float | None:
-    """The mean period of ``swing`` (an angle about its zero, or a rate) from its zero crossings, s."""
+    """The mean period of ``swing`` (an angle about its zero, or a rate) from its zero crossings, s: the
+    crossings of the swing while it stands above a tenth of its largest (the decayed tail and a drifting
+    zero do not count, as they would not for a user counting swings)."""
+    from .signal import find_swings
+
     s = np.asarray(swing, dtype=float)
-    i = np.flatnonzero(np.signbit(s[:-1]) != np.signbit(s[1:]))
-    if i.size < 3:
+    crossings = find_swings(t, s, centre=0.0, hysteresis=0.1 * float(np.max(np.abs(s)))).crossings
+    if crossings.size < 3:
         return None
-    tc = t[i] - s[i] * (t[i + 1] - t[i]) / (s[i + 1] - s[i])
-    return float(2.0 * (tc[-1] - tc[0]) / (tc.size - 1))
+    return float(2.0 * (crossings[-1] - crossings[0]) / (crossings.size - 1))
 
 
 def periods(kind: str, omega_n: float, omega_n_u: float, omega_at: float, amplitude: float, zeta: float,

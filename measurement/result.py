@@ -25,6 +25,7 @@ import numpy as np
 from .errors import ResultSchemaError
 from .periods import Periods
 from .residual import Diagnostics
+from .trace import READING_UNITS
 from .uncertainty import Budget
 from .wire import read_number
 
@@ -508,9 +509,10 @@ class IdentificationResult:
         L.append(f"    {'':14}{'declared':>16}{'final':>16}")
         L.append(f"    {'J [kg·m²]':14}{jb:>16}{ja:>16}")
         L.append(f"    {'omega_n [rad/s]':14}{b.omega_n:>15.7g}{self.omega_n:>16.7g}")
-        L.append(f"    {'residual [rad]':14}{b.residual_rms:>16.4g}{self.residual_rms:>16.4g}")
+        unit = READING_UNITS.get(self.measures, "rad")
+        L.append(f"    {f'residual [{unit}]':14}{b.residual_rms:>16.4g}{self.residual_rms:>16.4g}")
         L.append(f"    {'BIC':14}{b.bic:>16.1f}{s.get('bic', float('nan')):>16.1f}")
-        L.append(f"    noise floor {self.noise_floor:.3g} rad; residual/noise {self.residual_rms / self.noise_floor if self.noise_floor else float('nan'):.3g};"
+        L.append(f"    noise floor {self.noise_floor:.3g} {unit}; residual/noise {self.residual_rms / self.noise_floor if self.noise_floor else float('nan'):.3g};"
                  f" error reduction {100 * (self.error_reduction or 0):.1f} %")
         if self.steps:
             L.append("[[Discovery]]")

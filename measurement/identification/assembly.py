@@ -11,8 +11,15 @@ from ..fit import swing_amplitude
 from ..periods import Periods, periods
 from ..result import IdentificationResult, Quantity
 from .findings import Findings
-from .quantities import (RATE_UNITS, budgets, damping_ratio, effect_quantities, model_summary, omega_at_amplitude,
-                         omega_n_per_scale)
+from .quantities import (
+    RATE_UNITS,
+    budgets,
+    damping_ratio,
+    effect_quantities,
+    model_summary,
+    omega_at_amplitude,
+    omega_n_per_scale,
+)
 
 
 def _statistics(found: Findings) -> dict[str, Any]:

@@ -42,9 +42,10 @@ def _is_image_folder(p: Path) -> bool:
 
 
 def load_releases(path: str | os.PathLike, camera: str | os.PathLike | None = None, rig: Rig | None = None,
-                  columns: ColumnChoice = ColumnChoice()) -> list[Trace]:
+                  columns: ColumnChoice | None = None) -> list[Trace]:
     """The releases in SOURCE, each a trace: one for moi's CSV and a video, as many as a log holds otherwise."""
     p = Path(path)
+    columns = columns or ColumnChoice()
     if _is_image_folder(p) or p.suffix.lower() in VIDEO_SUFFIXES:
         if camera is None:
             raise InputFileError(f"{str(p)!r} is a video source; expected --camera CAM.toml with the camera and marker geometry")

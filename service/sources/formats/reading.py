@@ -115,8 +115,9 @@ def _check_named_axis(log: Log, r: Reading, among: list[int], t: np.ndarray, bre
             "own direction from the three axes")
 
 
-def log_traces(log: Log, choice: ColumnChoice = ColumnChoice()) -> list[Trace]:
+def log_traces(log: Log, choice: ColumnChoice | None = None) -> list[Trace]:
     """The traces of the releases in ``log``, in time order (InputFileError: none found)."""
+    choice = choice or ColumnChoice()
     traces: list[Trace] = []
     skipped: list[str] = []
     for among in _groups(log):
