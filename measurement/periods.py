@@ -46,9 +46,12 @@ class Periods:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Periods:
-        return cls(**{k: None if d[k] is None else read_number(d[k]) for k in (
-            "small_swing", "small_swing_u", "amplitude", "at_amplitude", "at_amplitude_u", "counted", "counted_u",
-            "g", "g_u")})
+        def opt(key: str) -> float | None:
+            return None if d[key] is None else read_number(d[key])
+
+        return cls(read_number(d["small_swing"]), read_number(d["small_swing_u"]), read_number(d["amplitude"]),
+                   read_number(d["at_amplitude"]), read_number(d["at_amplitude_u"]), opt("counted"),
+                   opt("counted_u"), opt("g"), opt("g_u"))
 
     def lines(self) -> list[str]:
         """The report's lines."""
