@@ -90,6 +90,17 @@ def is_angle(c: Column) -> bool:
     return c.unit.lower() in ANGLE_UNITS or bool(_ANGLE.search(c.name))
 
 
+def _is_acceleration(c: Column) -> bool:
+    return bool(_ACCEL.search(c.name)) or c.unit in ACCELERATION_UNITS
+
+
+def _accelerometer(log: Log, cols: list[int], what: str) -> str:
+    return (f"{log.source}: an accelerometer ({', '.join(log.columns[i].label for i in cols)}) {what}: on a swinging "
+            "body an accelerometer reads the swing's own accelerations (centripetal and tangential) besides gravity, "
+            "so its tilt is not the swing angle; record the gyroscope's rate (phyphox: Gyroscope rotation rate), a "
+            "video track or an angle sensor")
+
+
 def _auto(log: Log, t: int, among: list[int]) -> Reading:
     rest = [i for i in among if i != t and not _NORM.search(log.columns[i].name)]
     rates = [i for i in rest if is_rate(log.columns[i]) and not _ACCEL.search(log.columns[i].name)]
@@ -105,13 +116,9 @@ def _auto(log: Log, t: int, among: list[int]) -> Reading:
     ys = [i for i in rest if (m := _POSITION.match(log.columns[i].name)) and m.group(2).lower() == "y"]
     if xs and ys:
         return Reading(t, "xy", (xs[0], ys[0]))
-    accel = [i for i in rest if _ACCEL.search(log.columns[i].name) or log.columns[i].unit in ACCELERATION_UNITS]
+    accel = [i for i in rest if _is_acceleration(log.columns[i])]
     if accel:
-        raise InputFileError(
-            f"{log.source}: an accelerometer ({', '.join(log.columns[i].label for i in accel)}) and no angle or rate: on "
-            "a swinging body an accelerometer reads the swing's own accelerations (centripetal and tangential) "
-            "besides gravity, so its tilt is not the swing angle; record the gyroscope's rate (phyphox: Gyroscope "
-            "rotation rate), a video track or an angle sensor")
+        raise InputFileError(_accelerometer(log, accel, "and no angle or rate"))
     if not log.has_header:
         raise InputFileError(_no_header(log))
     raise InputFileError(f"{log.source}: no angle, rate or x/y position column among "
@@ -122,10 +129,12 @@ def _auto(log: Log, t: int, among: list[int]) -> Reading:
 def choose(log: Log, among: list[int], choice: ColumnChoice) -> Reading:
     """The time and reading columns of the columns ``among`` (one data set or run of ``log``)."""
     t = _time_column(log, among, choice)
-    if choice.angle is not None:
-        return Reading(t, "angle", (find_column(log, choice.angle, "--angle-col", among),), True)
-    if choice.rate is not None:
-        return Reading(t, "rate", (find_column(log, choice.rate, "--rate-col", among),), True)
+    for spec, kind, option in ((choice.angle, "angle", "--angle-col"), (choice.rate, "rate", "--rate-col")):
+        if spec is not None:
+            i = find_column(log, spec, option, among)
+            if _is_acceleration(log.columns[i]):
+                raise InputFileError(_accelerometer(log, [i], f"named as the {kind}"))
+            return Reading(t, kind, (i,), True)
     if choice.xy is not None:
         parts = choice.xy.split(",")
         if len(parts) != 2:

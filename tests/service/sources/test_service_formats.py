@@ -90,7 +90,7 @@ def test_a_wrong_gyro_axis_is_named_not_taken_for_a_scale_to_calibrate(tmp_path)
     with pytest.raises(InputFileError) as e:
         load_releases(tmp_path / "p", columns=ColumnChoice(rate="Gyroscope x (rad/s)"))
     msg = str(e.value)
-    assert "'Gyroscope y (rad/s)'" in msg and "wrong axis" in msg and "calibrate" in msg.replace("not a scale to calibrate", "")[:0] + msg
+    assert "the swing is about 'Gyroscope y (rad/s)'" in msg and "the wrong axis, not a scale to calibrate" in msg
     assert load_releases(tmp_path / "p", columns=ColumnChoice(rate="Gyroscope y (rad/s)"))[0].quantity == "rate"
 
 
@@ -169,6 +169,8 @@ def test_an_accelerometer_alone_is_refused_naming_why_its_tilt_is_not_the_angle(
                  + "".join(f"{a},{9.8 * math.sin(b)},{9.8 * math.cos(b)}\n" for a, b in zip(t, angle)))
     with pytest.raises(InputFileError, match="accelerometer.*tilt is not the swing angle"):
         load_releases(f)
+    with pytest.raises(InputFileError, match="named as the angle.*tilt is not the swing angle"):
+        load_releases(f, columns=ColumnChoice(angle="2"))
 
 
 def test_xy_pixels_about_a_given_pivot(tmp_path):
@@ -181,9 +183,11 @@ def test_xy_pixels_about_a_given_pivot(tmp_path):
     assert min(np.std(tr.angle - angle), np.std(tr.angle + angle)) < 1e-5 and tr.meta["position"]["pivot"] == "given"
 
 
-def test_moi_s_own_trace_csv_is_read_as_before(tmp_path):
-    t, angle, _ = swing(12.0)
+def test_moi_s_own_trace_csv_is_read_as_before_and_searched_for_releases_when_its_columns_are_named(tmp_path):
+    t, _, rate = swing(14.0, hold=3.0)
     f = tmp_path / "swing.csv"
-    f.write_text("t,angle\n" + "".join(f"{a},{b}\n" for a, b in zip(t, angle)))
+    f.write_text("t,rate\n" + "".join(f"{a},{b}\n" for a, b in zip(t, rate)))
     (tr,) = load_releases(f)
     assert tr.meta == {} and len(tr) == t.size
+    (tr,) = load_releases(f, columns=ColumnChoice(rate="rate"))
+    assert tr.meta["release"]["free_swing_from"] == pytest.approx(3.0, abs=0.05)
