@@ -13,7 +13,7 @@ from service.cli import main
 from service.sources.formats.registry import describe
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "service" / "sources"))
-from test_service_formats import phyphox_log  # noqa: E402  (the synthetic phyphox export)
+from test_service_formats import phyphox_log
 
 ROOT = Path(__file__).resolve().parents[2]
 
