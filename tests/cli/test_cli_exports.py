@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import pytest
@@ -12,8 +11,7 @@ from measurement.result import SCHEMA_VERSION
 from service.cli import main
 from service.sources.formats.registry import describe
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "service" / "sources"))
-from test_service_formats import phyphox_log
+from ..service.sources.test_service_formats import phyphox_log
 
 ROOT = Path(__file__).resolve().parents[2]
 
