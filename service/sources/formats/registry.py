@@ -86,6 +86,8 @@ def read_log(path: str | Path) -> Log:
     p = Path(path)
     if not p.exists():
         raise InputFileError(f"{str(p)!r} not found")
+    if not (p.is_dir() or p.is_file()):
+        raise InputFileError(f"{str(p)!r} is not a regular file (a device, FIFO or socket); expected a file or a folder")
     try:
         probe = Probe.of(p)
     except (OSError, zipfile.BadZipFile) as exc:
