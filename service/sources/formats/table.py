@@ -7,12 +7,14 @@ from __future__ import annotations
 import csv
 import re
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 from service.errors import InputFileError
 
 from .log import Column, Log
+from .registry import Probe, whole_text
 
 _NUMBER = re.compile(r"^\s*[-+]?(\d+([.,]\d*)?|[.,]\d+)([eE][-+]?\d+)?\s*$")
 _DECIMAL_COMMA = re.compile(r"^\s*[-+]?\d*,\d+([eE][-+]?\d+)?\s*$")
@@ -109,3 +111,17 @@ def parse_table(text: str, source: str, fmt: str) -> Log:
         notes.append("decimal comma")
     return Log(source, fmt, tuple(Column.parse(lb) for lb in labels), data, has_header=head is not None,
                notes=tuple(notes))
+
+
+def first_cells(head: str) -> list[str]:
+    """The non-empty cells of a file's first non-empty line (tab- or comma-separated): its header, if any."""
+    first = next((ln for ln in head.splitlines() if ln.strip()), "")
+    return [c.strip() for c in next(csv.reader([first], delimiter="\t" if "\t" in first else ","), []) if c.strip()]
+
+
+def table_reader(fmt: str, what: str) -> Callable[[Probe], Log]:
+    """A format's ``read``: the file as one table (``parse_table``), named ``fmt``."""
+    def read(probe: Probe) -> Log:
+        return parse_table(whole_text(probe, what), str(probe.path), fmt)
+
+    return read

@@ -6,8 +6,8 @@ from __future__ import annotations
 from service.errors import InputFileError
 
 from .log import Log
-from .registry import Format, Probe, whole_text
-from .table import parse_table
+from .registry import Format, Probe
+from .table import table_reader
 
 
 def _header(probe: Probe) -> list[str]:
@@ -30,8 +30,7 @@ def read(probe: Probe) -> Log:
     if probe.head.lstrip().startswith("<?xml"):
         raise InputFileError(f"{str(probe.path)!r} is a Tracker project (.trk) whose tracks are stored as image "
                              "positions; expected its data table: in Tracker, File > Export > Data (tab-separated)")
-    log = parse_table(whole_text(probe, "Tracker export"), str(probe.path), "tracker")
-    return Log(log.source, "tracker", log.columns, log.data, (), log.has_header, log.notes)
+    return table_reader("tracker", "Tracker export")(probe)
 
 
 FORMAT = Format(
