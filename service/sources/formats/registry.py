@@ -95,7 +95,8 @@ def read_log(path: str | Path) -> Log:
     for fmt in formats():
         if fmt.sniff(probe):
             return fmt.read(probe)
-    raise InputFileError(f"{str(p)!r} is not a format moi reads; expected one of "
+    binary = " (a binary file or an archive, as a spreadsheet's .xls or .xlsx is: save it as CSV)" if not probe.head else ""
+    raise InputFileError(f"{str(p)!r} is not a format moi reads{binary}; expected one of "
                          f"{', '.join(f.name for f in formats())} (see moi identify --help)")
 
 

@@ -191,3 +191,11 @@ def test_moi_s_own_trace_csv_is_read_as_before_and_searched_for_releases_when_it
     assert tr.meta == {} and len(tr) == t.size
     (tr,) = load_releases(f, columns=ColumnChoice(rate="rate"))
     assert tr.meta["release"]["free_swing_from"] == pytest.approx(3.0, abs=0.05)
+
+
+def test_a_spreadsheet_is_refused_in_one_line_asking_for_csv(tmp_path):
+    f = tmp_path / "log.xlsx"
+    with zipfile.ZipFile(f, "w") as z:
+        z.writestr("xl/workbook.xml", "<workbook/>")
+    with pytest.raises(InputFileError, match="save it as CSV"):
+        load_releases(f)
