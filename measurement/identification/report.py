@@ -111,9 +111,12 @@ def _sensor(found: Findings) -> list[str]:
     w, ws = found.omega_n, found.omega_n_std
     if found.nominal is not None:
         names, w_nom = found.nominal
-        out.append(f"the angle's scale was fitted from the swing ({', '.join(names)}): with the sensor at its "
-                   f"nominal scale ω_n would read {w_nom:.6g} rad/s ({(w_nom - w) / ws:+.1f} σ, "
-                   f"{100 * (w_nom - w) / w:+.2f} %); calibrate the sensor's scale (flag sensor_scale_fitted)")
+        advice = ("a gyro read about an axis at φ to the swing's reads cos φ of its rate: read the gyro's axes together "
+                  "(moi then takes the swing's own direction) before calibrating its scale"
+                  if found.rig.measures == "rate" else "calibrate the sensor's scale")
+        out.append(f"the {found.rig.measures}'s scale was fitted from the swing ({', '.join(names)}): with the sensor at "
+                   f"its nominal scale ω_n would read {w_nom:.6g} rad/s ({(w_nom - w) / ws:+.1f} σ, "
+                   f"{100 * (w_nom - w) / w:+.2f} %); {advice} (flag sensor_scale_fitted)")
     if F.CAMERA_PERSPECTIVE in found.trace.flags:
         pattern = float((found.view or {}).get("distance_pattern", float("nan")))
         out.append(f"the camera's view was more than oblique: the two markers' distance changed with the angle "

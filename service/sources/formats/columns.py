@@ -40,7 +40,7 @@ class ColumnChoice:
 @dataclass(frozen=True)
 class Reading:
     """The columns chosen: time's, and the reading's kind ("angle", "rate", "rates": several axes of one
-    gyro, "xy": a position) with its columns; scale: to rad or rad/s (None: degrees); named: given by the user."""
+    gyro, "xy": a position) with its columns; named: given by the user."""
 
     time: int
     kind: str

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from measurement.axes import SwingAxis, swing_axis
-from measurement.releases import Releases, find_releases
+from measurement.releases import Release, Releases, find_releases
 from measurement.trace import Trace
 from service.errors import InputFileError
 
@@ -97,7 +97,8 @@ def _axis_facts(log: Log, r: Reading, axis: SwingAxis) -> dict:
                      "sensor_axes": ", ".join(names)}}
 
 
-def _check_named_axis(log: Log, r: Reading, among: list[int], t: np.ndarray, breaks) -> None:
+def _check_named_axis(log: Log, r: Reading, among: list[int], t: np.ndarray,
+                      breaks: tuple[tuple[float, str], ...]) -> None:
     """A rate column named among a gyro's axes must carry the swing (advice naming the right axis)."""
     axes = [i for i in among if i != r.time and is_rate(log.columns[i]) and i not in r.columns
             and not log.columns[i].name.lower().startswith("abs")]
@@ -147,8 +148,9 @@ def log_traces(log: Log, choice: ColumnChoice | None = None) -> list[Trace]:
     return traces
 
 
-def _release_trace(log: Log, t: np.ndarray, y: np.ndarray, quantity: str, facts: dict, f, group: str,
+def _release_trace(log: Log, t: np.ndarray, y: np.ndarray, quantity: str, facts: dict, f: Release, group: str,
                    number: int) -> Trace:
+    """The trace of release ``f``, its meta saying what was read, where the free swing starts and what was cut."""
     name = f"{log.source} #{number}" + (f" ({group})" if group else "")
     meta = {"log": {"format": log.format, "columns": {k: v for k, v in facts.items() if isinstance(v, str)}}
             | ({"notes": "; ".join(log.notes)} if log.notes else {}),
