@@ -18,7 +18,8 @@ _ANGLE = re.compile(r"angle|theta|θ|winkel|phi\b", re.IGNORECASE)
 _RATE = re.compile(r"gyro|rate|angular velocity|ω|omega|^w[xyz]?\b", re.IGNORECASE)
 _NORM = re.compile(r"absolute|\babs\b|magnitude|norm|total|resultant", re.IGNORECASE)
 _ACCEL = re.compile(r"acc", re.IGNORECASE)
-_POSITION = re.compile(r"^(position\s*)?([xy])(\b|_|$)", re.IGNORECASE)
+_POSITION = re.compile(r"^(position\s*)?([xyz])(\b|_|$)", re.IGNORECASE)
+_NOT_POSITION = re.compile(r"veloc|speed|acc|rate|gyro", re.IGNORECASE)
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,12 @@ def is_angle(c: Column) -> bool:
     return c.unit.lower() in ANGLE_UNITS or bool(_ANGLE.search(c.name))
 
 
+def _axis_columns(log: Log, among: list[int], axis: str) -> list[int]:
+    """The columns named as the ``axis`` (x, y or z) coordinate of a position (not its velocity)."""
+    return [i for i in among if (m := _POSITION.match(log.columns[i].name)) and m.group(2).lower() == axis
+            and not _NOT_POSITION.search(log.columns[i].name) and log.columns[i].unit.lower() not in RATE_UNITS]
+
+
 def _is_acceleration(c: Column) -> bool:
     return bool(_ACCEL.search(c.name)) or c.unit in ACCELERATION_UNITS
 
@@ -112,8 +119,13 @@ def _auto(log: Log, t: int, among: list[int]) -> Reading:
                              "name one with --angle-col")
     if rates:
         return Reading(t, "rate" if len(rates) == 1 else "rates", tuple(rates))
-    xs = [i for i in rest if (m := _POSITION.match(log.columns[i].name)) and m.group(2).lower() == "x"]
-    ys = [i for i in rest if (m := _POSITION.match(log.columns[i].name)) and m.group(2).lower() == "y"]
+    xs, ys, zs = (_axis_columns(log, rest, a) for a in "xyz")
+    if xs and ys and zs:
+        raise InputFileError(
+            f"{log.source}: columns {log.columns[xs[0]].label!r}, {log.columns[ys[0]].label!r}, "
+            f"{log.columns[zs[0]].label!r} without a unit that says what they read: a three-axis sensor's (an "
+            "accelerometer's tilt is not the swing angle) or a point's position? name them: --rate-col for a "
+            "gyro's axis, --xy X,Y for a tracked point")
     if xs and ys:
         return Reading(t, "xy", (xs[0], ys[0]))
     accel = [i for i in rest if _is_acceleration(log.columns[i])]

@@ -199,3 +199,12 @@ def test_a_spreadsheet_is_refused_in_one_line_asking_for_csv(tmp_path):
         z.writestr("xl/workbook.xml", "<workbook/>")
     with pytest.raises(InputFileError, match="save it as CSV"):
         load_releases(f)
+
+
+def test_three_unlabelled_axes_are_not_taken_for_a_position(tmp_path):
+    t, angle, _ = swing(12.0)
+    f = tmp_path / "microbit.csv"
+    f.write_text("Time (seconds),x,y,z\n" + "".join(f"{a},{-1000 * math.sin(b)},{-1000 * math.cos(b)},12\n"
+                                                     for a, b in zip(t, angle)))
+    with pytest.raises(InputFileError, match="three-axis sensor.*--rate-col.*--xy"):
+        load_releases(f)
