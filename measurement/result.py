@@ -23,6 +23,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .errors import ResultSchemaError
+from .flags import FIT_NOT_CONVERGED
 from .periods import Periods
 from .residual import Diagnostics
 from .trace import READING_UNITS
@@ -458,7 +459,9 @@ class IdentificationResult:
         s = self.statistics
         L.append(f"[[Identification]] {self.source}  ({self.rig_kind} rig)")
         L.append(f"    samples {s.get('n')}, window {self.window.get('t_start', 0):.3f}–{self.window.get('t_stop', 0):.3f} s,"
-                 f" {s.get('nfev')} simulations, converged: {s.get('success')}")
+                 f" {s.get('nfev')} simulations, converged: "
+                 + ("no (flag fit_not_converged: do not use this J)"
+                    if FIT_NOT_CONVERGED in self.flags else f"{s.get('success')}"))
         L.append("[[Result]]")
         def expanded(measurand: str) -> str:
             b = self.uncertainty_budget.get(measurand)
