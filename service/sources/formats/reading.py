@@ -10,7 +10,7 @@ import numpy as np
 
 from measurement.axes import SwingAxis, swing_axis
 from measurement.releases import Release, Releases, find_releases
-from measurement.trace import Trace
+from measurement.trace import READING_UNITS, Trace
 from service.errors import InputFileError
 
 from .columns import ColumnChoice, Reading, choose, degrees, is_rate
@@ -155,7 +155,7 @@ def _release_trace(log: Log, t: np.ndarray, y: np.ndarray, quantity: str, facts:
     meta = {"log": {"format": log.format, "columns": {k: v for k, v in facts.items() if isinstance(v, str)}}
             | ({"notes": "; ".join(log.notes)} if log.notes else {}),
             "release": {"number": number, "free_swing_from": f.start, "until": f.stop, "cut_before": f.cut,
-                        "section_begins": f.begins, "amplitude": f.amplitude}}
+                        "section_begins": f.begins, "amplitude": f.amplitude, "unit": READING_UNITS[quantity]}}
     meta |= {k: v for k, v in facts.items() if isinstance(v, dict)}
     if "pivot_x" in facts:
         meta["position"] = {k: facts[k] for k in ("pivot_x", "pivot_y", "radius")} | {
