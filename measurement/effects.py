@@ -532,7 +532,8 @@ class Drift(Effect):
     def evidence(self, diag):
         why = []
         if abs(diag.centre_t) >= 4:
-            why.append(f"the swing centre moves at {diag.centre_slope:+.2g} rad/s (t = {diag.centre_t:.1f})")
+            unit = "rad/s²" if self.rig.measures == "rate" else "rad/s"
+            why.append(f"the swing centre moves at {diag.centre_slope:+.2g} {unit} (t = {diag.centre_t:.1f})")
         if diag.low_frequency_fraction >= 0.3:
             why.append(f"{100 * diag.low_frequency_fraction:.0f} % of the residual power is slower than the swing")
         return "; ".join(why)

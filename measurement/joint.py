@@ -136,11 +136,14 @@ class JointResult:
         L = [f"[[Joint identification]] {len(self.releases)} releases of one object ({self.rig_kind} rig)",
              f"    shared effects: {', '.join(self.effects) or '(none)'}; per release: initial state, zero offset, sensor terms",
              "[[Releases]]  each alone: its own model (ω_n ± combined u), and the shared model (ω_n ± u, z against the joint)",
-             f"    {'source':<34}{'amplitude':>10}{'own ω_n':>12}{'u':>9}{'shared ω_n':>12}{'u':>9}{'z':>7}  own effects / flags"]
+             f"    {'source':<34}{'from–to [s]':>16}{'amplitude':>10}{'T there [s]':>12}{'own ω_n':>12}{'u':>9}{'shared ω_n':>12}{'u':>9}"
+             f"{'z':>7}  own effects / flags"]
         for r, w, u, z in zip(self.releases, c["omega_n"], c["u"], c["z"]):
             uo = r.omega_n_u if r.omega_n_u is not None else r.omega_n_std
             name = r.source if len(r.source) <= 33 else "…" + r.source[-32:]
-            L.append(f"    {name:<34}{r.reference_amplitude:>10.3g}{r.omega_n:>12.7g}{uo:>9.2g}{w:>12.7g}{u:>9.2g}{z:>+7.1f}  "
+            span = f"{r.window.get('t_start', math.nan):.2f}–{r.window.get('t_stop', math.nan):.2f}"
+            period = r.periods.at_amplitude if r.periods is not None else math.nan
+            L.append(f"    {name:<34}{span:>16}{r.reference_amplitude:>10.3g}{period:>12.6g}{r.omega_n:>12.7g}{uo:>9.2g}{w:>12.7g}{u:>9.2g}{z:>+7.1f}  "
                      f"{', '.join(r.effects)}" + (f" / {', '.join(r.flags)}" if r.flags else ""))
         L.append("[[Result]]")
         if self.J is not None:
@@ -154,6 +157,8 @@ class JointResult:
         L.append(f"    omega_n      = {self.omega_n:.7g} rad/s, σ {self.omega_n_std:.2g}, combined u {self.omega_n_u:.2g} rad/s"
                  " (the releases weighted by their whole uncertainty)")
         jf = c["joint_fit"]
+        L.append(f"    period       = {2 * math.pi / self.omega_n:.6g} ± {2 * math.pi * self.omega_n_u / self.omega_n**2:.2g} s "
+                 "small-swing (2π/ω_n; T there: each release's at its largest swing)")
         L.append(f"    joint fit    : ω_n {jf['omega_n']:.7g} ± {jf['omega_n_std']:.2g} rad/s (all samples, the laws below shared)")
         if jf.get("apart"):
             L.append(f"    the joint fit and the releases' value are {jf['z']:.1f} σ apart: the shared laws do not hold over "

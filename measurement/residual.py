@@ -66,7 +66,7 @@ class Diagnostics:
         """The residual holds deterministic structure beyond its noise model: something is unmodelled."""
         return self.structure_bic < -STRUCTURE_MARGIN
 
-    def named_structure(self) -> list[str]:
+    def named_structure(self, unit: str = "rad") -> list[str]:
         """The shapes in the residual that can be named, each large enough to matter, in words.
 
         An envelope that decays otherwise than the model's (a damping law
@@ -91,7 +91,7 @@ class Diagnostics:
         if self.low_frequency_fraction >= 0.5:
             out.append(f"a trend slower than the swing holds {100 * self.low_frequency_fraction:.0f} % of the residual power")
         if abs(self.asymmetry_t) >= 6 and abs(self.asymmetry) >= 3 * self.noise_floor:
-            out.append(f"the half-swings differ by {self.asymmetry:+.3g} rad (t = {self.asymmetry_t:.1f})")
+            out.append(f"the half-swings differ by {self.asymmetry:+.3g} {unit} (t = {self.asymmetry_t:.1f})")
         return out
 
     def as_dict(self) -> dict[str, Any]:
@@ -124,9 +124,9 @@ class Diagnostics:
                 kw[f.name] = d[f.name] if "None" in str(f.type) else read_number(d[f.name])
         return cls(**kw)
 
-    def describe(self) -> list[str]:
-        """Plain sentences on the residual's size and shape."""
-        out = [f"RMS {self.residual_rms:.3g} rad = {self.rms_ratio:.3g} × the noise floor ({self.noise_floor:.3g} rad, estimated from the data)"]
+    def describe(self, unit: str = "rad") -> list[str]:
+        """Plain sentences on the residual's size and shape; unit: the reading's (rad, or rad/s for a gyro)."""
+        out = [f"RMS {self.residual_rms:.3g} {unit} = {self.rms_ratio:.3g} × the noise floor ({self.noise_floor:.3g} {unit}, estimated from the data)"]
         if self.white:
             out.append(f"white (lag-1 autocorrelation {self.lag1:+.2f}, Ljung–Box p = {self.whiteness_p:.2g})")
         else:
@@ -140,9 +140,9 @@ class Diagnostics:
         if abs(self.freq_amp_t) >= 4:
             out.append(f"frequency depends on amplitude beyond the model: dω/d(A²) = {self.freq_amp_slope:+.3g} rad/s per rad² (t = {self.freq_amp_t:.1f})")
         if abs(self.centre_t) >= 4:
-            out.append(f"the swing centre moves by {self.centre_slope:+.3g} rad/s against the model (t = {self.centre_t:.1f})")
+            out.append(f"the swing centre moves by {self.centre_slope:+.3g} {unit}/s against the model (t = {self.centre_t:.1f})")
         if abs(self.asymmetry_t) >= 4:
-            out.append(f"positive and negative half-swings differ by {self.asymmetry:+.3g} rad in amplitude (t = {self.asymmetry_t:.1f})")
+            out.append(f"positive and negative half-swings differ by {self.asymmetry:+.3g} {unit} in amplitude (t = {self.asymmetry_t:.1f})")
         terms = [f"{name} part (t = {t:.1f})" for name, t in zip(("a constant", "a linear", "a quadratic"), self.decrement_t) if t >= 3]
         if terms:
             out.append("the amplitude lost per swing has " + ", ".join(terms) + " in the amplitude")

@@ -23,12 +23,15 @@ from typing import Any, Mapping
 import numpy as np
 
 from .errors import ResultSchemaError
+from .flags import FIT_NOT_CONVERGED
+from .periods import Periods
 from .residual import Diagnostics
+from .trace import READING_UNITS
 from .uncertainty import Budget
 from .wire import read_number
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 
 
 def _num(v: Any) -> Any:
@@ -343,6 +346,8 @@ class IdentificationResult:
     uncertainty_budget: dict[str, Budget] = field(default_factory=dict)
     #: what the sensor read: "angle" (rad) or "rate" (rad/s, a gyro: offset and the arrays' "angle" are then rates)
     measures: str = "angle"
+    #: the small-swing period, the period at the record's amplitude and as counted, g (None: not computed)
+    periods: Periods | None = None
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -407,6 +412,7 @@ class IdentificationResult:
             "acquisition": _jsonable(self.acquisition),
             "sensor_calibrated": self.sensor_calibrated,
             "measures": self.measures,
+            "periods": None if self.periods is None else self.periods.to_dict(),
         }
         if include_arrays:
             d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
@@ -437,6 +443,7 @@ class IdentificationResult:
             diagnostics=Diagnostics.from_dict(d["diagnostics"]), structure=tuple(d["structure"]),
             window=dict(d["window"]), acquisition=dict(d["acquisition"]), sensor_calibrated=d["sensor_calibrated"],
             measures=d["measures"],
+            periods=None if d.get("periods") is None else Periods.from_dict(d["periods"]),
             model_form=ModelForm.from_dict(d["model_form"]),
             uncertainty_budget={k: Budget.from_dict(b) for k, b in d["uncertainty_budget"].items()},
             arrays={k: np.asarray(v, dtype=float) for k, v in (d.get("arrays") or {}).items()},
@@ -452,7 +459,9 @@ class IdentificationResult:
         s = self.statistics
         L.append(f"[[Identification]] {self.source}  ({self.rig_kind} rig)")
         L.append(f"    samples {s.get('n')}, window {self.window.get('t_start', 0):.3f}–{self.window.get('t_stop', 0):.3f} s,"
-                 f" {s.get('nfev')} simulations, converged: {s.get('success')}")
+                 f" {s.get('nfev')} simulations, converged: "
+                 + ("no (flag fit_not_converged: do not use this J)"
+                    if FIT_NOT_CONVERGED in self.flags else f"{s.get('success')}"))
         L.append("[[Result]]")
         def expanded(measurand: str) -> str:
             b = self.uncertainty_budget.get(measurand)
@@ -473,6 +482,8 @@ class IdentificationResult:
                if self.omega_n_std_calibration else "")
         L.append(f"    omega_n      = {Quantity(self.omega_n, self.omega_n_std, 'rad/s')}"
                  f"  (f_n = {self.omega_n / (2 * math.pi):.6g} Hz{cal})")
+        if self.periods is not None:
+            L.extend(self.periods.lines())
         if self.omega_n_std_model:
             ju = f"; J ± {self.J_u:.2g} kg·m²" if self.J_u is not None else ""
             L.append(f"    model form   = ±{self.omega_n_std_model:.2g} rad/s (halves of the record, rival models)"
@@ -501,9 +512,10 @@ class IdentificationResult:
         L.append(f"    {'':14}{'declared':>16}{'final':>16}")
         L.append(f"    {'J [kg·m²]':14}{jb:>16}{ja:>16}")
         L.append(f"    {'omega_n [rad/s]':14}{b.omega_n:>15.7g}{self.omega_n:>16.7g}")
-        L.append(f"    {'residual [rad]':14}{b.residual_rms:>16.4g}{self.residual_rms:>16.4g}")
+        unit = READING_UNITS.get(self.measures, "rad")
+        L.append(f"    {f'residual [{unit}]':14}{b.residual_rms:>16.4g}{self.residual_rms:>16.4g}")
         L.append(f"    {'BIC':14}{b.bic:>16.1f}{s.get('bic', float('nan')):>16.1f}")
-        L.append(f"    noise floor {self.noise_floor:.3g} rad; residual/noise {self.residual_rms / self.noise_floor if self.noise_floor else float('nan'):.3g};"
+        L.append(f"    noise floor {self.noise_floor:.3g} {unit}; residual/noise {self.residual_rms / self.noise_floor if self.noise_floor else float('nan'):.3g};"
                  f" error reduction {100 * (self.error_reduction or 0):.1f} %")
         if self.steps:
             L.append("[[Discovery]]")

@@ -29,6 +29,7 @@ RIG_KINDS = ("torsion", "compound")
 _RIG_KEYS = {
     "kind", "stiffness", "stiffness_std", "tare_inertia", "tare_inertia_std",
     "mass", "com_distance", "g", "stiffness_tare_covariance", "mass_std", "com_distance_std", "g_std",
+    "length", "length_std",
 }
 _OBJECT_KEYS = {"mass", "axis_offset"}
 _OBJECT_STD_KEYS = {"mass_std", "axis_offset_std"}
@@ -133,6 +134,8 @@ class Rig:
         (``moi calibrate`` writes all three: k and I0 come out of one regression).
     mass, com_distance: m (kg) and S (m) of the swinging body (compound); mass_std, com_distance_std their 1σ.
     g: local gravity, m/s²; g_std its 1σ (None: not stated; standard gravity may be 0.3 % off the local g).
+    length, length_std: the equivalent pendulum length L = J/(m·S) and its 1σ, m (compound; a small bob on a
+        string: the pivot to the bob's centre): the result gives g = ω_n²·L (None: not stated).
     clock_accuracy_ppm: 1σ of the sample clock's frequency, ppm (``[sensor]``; None: not stated).
     angle_scale_std: 1σ of a calibrated angle sensor's scale, relative (``[sensor]``; None: not stated).
     declared: effect names the user declares (from ``[model] declared``).
@@ -163,6 +166,8 @@ class Rig:
     clock_accuracy_ppm: float | None = None
     angle_scale_std: float | None = None
     measures: str = "angle"
+    length: float | None = None
+    length_std: float | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in RIG_KINDS:
@@ -173,6 +178,8 @@ class Rig:
             # m and S do not enter a torsion rig's equation; accepting them silently
             # would let a user believe they were used.
             raise RigError("rig: mass/com_distance belong to a compound rig; kind is 'torsion'")
+        if self.kind == "torsion" and self.length is not None:
+            raise RigError("rig: length (the equivalent pendulum length, for g) belongs to a compound rig; kind is 'torsion'")
         if self.kind == "compound" and self.stiffness is not None:
             raise RigError("rig: stiffness belongs to a torsion rig; kind is 'compound'")
         if self.angle_scale_std is not None and not self.sensor_calibrated:
@@ -299,13 +306,15 @@ class Rig:
             g_std=opt("g_std", "m/s²", allow_zero=True),
             clock_accuracy_ppm=sensor_std("clock_accuracy_ppm", "ppm"),
             angle_scale_std=sensor_std("angle_scale_std", "1 (relative)"),
+            length=opt("length", "m"),
+            length_std=opt("length_std", "m", allow_zero=True),
         )
 
     def to_dict(self) -> dict[str, Any]:
         """The rig TOML document (None values left out)."""
         rig: dict[str, Any] = {"kind": self.kind}
         for key in ("stiffness", "stiffness_std", "tare_inertia", "tare_inertia_std", "stiffness_tare_covariance",
-                    "mass", "mass_std", "com_distance", "com_distance_std"):
+                    "mass", "mass_std", "com_distance", "com_distance_std", "length", "length_std"):
             value = getattr(self, key)
             if value is not None:
                 rig[key] = value

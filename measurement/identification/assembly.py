@@ -7,9 +7,19 @@ from typing import Any
 
 import numpy as np
 
+from ..fit import swing_amplitude
+from ..periods import Periods, periods
 from ..result import IdentificationResult, Quantity
 from .findings import Findings
-from .quantities import RATE_UNITS, budgets, damping_ratio, effect_quantities, model_summary, omega_n_per_scale
+from .quantities import (
+    RATE_UNITS,
+    budgets,
+    damping_ratio,
+    effect_quantities,
+    model_summary,
+    omega_at_amplitude,
+    omega_n_per_scale,
+)
 
 
 def _statistics(found: Findings) -> dict[str, Any]:
@@ -43,6 +53,17 @@ def _arrays(found: Findings) -> dict[str, np.ndarray]:
     }
 
 
+def _periods(found: Findings, w_u: float, zeta: float) -> Periods | None:
+    final, rig, w = found.final, found.rig, found.omega_n
+    if not (math.isfinite(w) and w > 0):
+        return None
+    amplitude = swing_amplitude(final)
+    at = omega_at_amplitude(final, amplitude)
+    swing = final.fitted - final.value("offset")
+    return periods(rig.kind, w, w_u, w if at is None else at[0], amplitude, zeta, final.t, swing,
+                   rig.length, rig.length_std)
+
+
 def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]) -> IdentificationResult:
     """The result of one record: its quantities, uncertainty budgets, flags and sentences (``report``)."""
     final, rig, trace, form = found.final, found.rig, found.trace, found.form
@@ -70,4 +91,5 @@ def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]
         baseline=model_summary(found.base, rig), steps=found.steps, diagnostics=found.diag,
         structure=structure, window=_window(found), acquisition={k: v for k, v in trace.meta.items() if k != "truth"},
         sensor_calibrated=rig.sensor_calibrated, measures=rig.measures, arrays=_arrays(found),
+        periods=_periods(found, w_u, zeta),
     )

@@ -27,6 +27,7 @@ from ..noise import fit_noise
 from ..residual import Diagnostics
 from ..result import DiscoveryStep
 from ..rig import Rig
+from ..trace import READING_UNITS
 from .options import Options
 from .preparation import Prepared
 from .threads import parallel_map
@@ -247,7 +248,7 @@ def _added(number: int, current: ModelFit, best: str, rnd: _Round, not_held: lis
     d_bic = bf.bic - current.bic
     evidence = EFFECTS[best](rig).evidence(diagnosis(current))
     reason = (f"BIC {d_bic:+.1f} (noise model AR({bf.noise.order})), residual RMS "
-              f"{current.residual_rms:.3g} → {bf.residual_rms:.3g} rad")
+              f"{current.residual_rms:.3g} → {bf.residual_rms:.3g} {READING_UNITS[rig.measures]}")
     if not_held:
         reason += "; " + "; ".join(not_held)
     return DiscoveryStep(number, current.residual_rms, current.bic, rnd.table, best, bf.residual_rms, bf.bic,

@@ -17,6 +17,7 @@ import numpy as np
 
 from .. import flags as F
 from ..fit import ModelFit
+from ..trace import READING_UNITS
 from .discovery import SCREEN_TRUST
 from .findings import Findings
 
@@ -54,7 +55,7 @@ def leftover(found: Findings) -> Leftover:
     """What the final residual of ``found`` holds, and whether it is flagged."""
     segments, diag, final, noise = found.segments, found.diag, found.final, found.prep.noise
     changes_answer = segments is not None and segments.disagree and segments.u > found.omega_n_std
-    named = diag.named_structure()
+    named = diag.named_structure(READING_UNITS[found.rig.measures])
     # far above the noise (where the loop's screen is not trusted either) a structured residual
     # is a model that misses the swing itself, whatever ω_n does
     far = noise > 0 and final.residual_rms > SCREEN_TRUST * noise

@@ -12,6 +12,7 @@ import math
 from .. import flags as F
 from ..fit import swing_amplitude
 from ..result import SegmentCheck
+from ..trace import READING_UNITS
 from .discovery import SCREEN_TRUST
 from .findings import Findings
 from .flags import FOLLOW_LIMIT, Leftover
@@ -39,18 +40,19 @@ def _guards(found: Findings) -> list[str]:
     """A final fit that had left the optimum, and one that does not follow the swing."""
     out = []
     final, beaten_by, slipped_from = found.final, found.beaten_by, found.slipped_from
+    unit = READING_UNITS[found.rig.measures]
     if beaten_by is not None:
         kept = ("refitted from that model's values" if final is not beaten_by else
                 f"that model is kept ({', '.join(final.model.effect_names) or 'no effect'}): a refit from its values "
                 "did not reach it")
         out.append(
             f"the model {', '.join(slipped_from.model.effect_names)} ended with residual RMS "
-            f"{slipped_from.residual_rms:.3g} rad, worse than the model it contains "
-            f"({', '.join(beaten_by.model.effect_names) or 'no effect'}, {beaten_by.residual_rms:.3g} rad) on the same "
+            f"{slipped_from.residual_rms:.3g} {unit}, worse than the model it contains "
+            f"({', '.join(beaten_by.model.effect_names) or 'no effect'}, {beaten_by.residual_rms:.3g} {unit}) on the same "
             f"samples: its fit had left the optimum; {kept}")
     if not found.follows:
         out.append(
-            f"the fit does not follow the swing: its residual RMS {final.residual_rms:.3g} rad is "
+            f"the fit does not follow the swing: its residual RMS {final.residual_rms:.3g} {unit} is "
             f"{100 * found.follow_ratio:.0f} % of the fitted swing's RMS (limit {100 * FOLLOW_LIMIT:.0f} %) and "
             f"{final.residual_rms / found.prep.noise:.0f} × the noise floor; do not use this J (flag fit_not_converged)")
     return out
@@ -109,9 +111,12 @@ def _sensor(found: Findings) -> list[str]:
     w, ws = found.omega_n, found.omega_n_std
     if found.nominal is not None:
         names, w_nom = found.nominal
-        out.append(f"the angle's scale was fitted from the swing ({', '.join(names)}): with the sensor at its "
-                   f"nominal scale ω_n would read {w_nom:.6g} rad/s ({(w_nom - w) / ws:+.1f} σ, "
-                   f"{100 * (w_nom - w) / w:+.2f} %); calibrate the sensor's scale (flag sensor_scale_fitted)")
+        advice = ("a gyro read about an axis at φ to the swing's reads cos φ of its rate: read the gyro's axes together "
+                  "(moi then takes the swing's own direction) before calibrating its scale"
+                  if found.rig.measures == "rate" else "calibrate the sensor's scale")
+        out.append(f"the {found.rig.measures}'s scale was fitted from the swing ({', '.join(names)}): with the sensor at "
+                   f"its nominal scale ω_n would read {w_nom:.6g} rad/s ({(w_nom - w) / ws:+.1f} σ, "
+                   f"{100 * (w_nom - w) / w:+.2f} %); {advice} (flag sensor_scale_fitted)")
     if F.CAMERA_PERSPECTIVE in found.trace.flags:
         pattern = float((found.view or {}).get("distance_pattern", float("nan")))
         out.append(f"the camera's view was more than oblique: the two markers' distance changed with the angle "
@@ -136,5 +141,5 @@ def _measurand(found: Findings) -> list[str]:
 
 def describe(found: Findings, left: Leftover) -> tuple[str, ...]:
     """The report's sentences on the residual and every check, in the order a reader needs them."""
-    return tuple(found.diag.describe() + [_halves(found.segments)] + _guards(found) + _rivals(found) + _left(left)
+    return tuple(found.diag.describe(READING_UNITS[found.rig.measures]) + [_halves(found.segments)] + _guards(found) + _rivals(found) + _left(left)
                  + _sensor(found) + _measurand(found))

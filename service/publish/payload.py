@@ -122,9 +122,10 @@ def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id:
 #: result schema → what makes a result JSON of it one of the next schema: the keys added then, with the value every
 #: result had before them (CHANGELOG.md). A row the previous release stored reads as this schema's; a new result
 #: schema adds its line here (``tests/service/publish/web/test_service_quality.py`` holds it to ``SCHEMA_VERSION``).
-_NEXT_SCHEMA = {
+_NEXT_SCHEMA: dict[int, dict[str, Any]] = {
     4: {"measures": "angle"},  # schema 5: what the sensor read; before it, always the angle
     5: {},  # schema 6: keys added inside model_form.segments only (t_free, ...), which from_dict defaults
+    6: {"periods": None},  # schema 7: the periods and g; before it, none computed
 }
 
 

@@ -1,10 +1,12 @@
-"""SOURCE of `moi identify`: a trace CSV, a marker track CSV, a video file or an image folder, as a ``Trace``.
+"""SOURCE of `moi identify`: a trace CSV, a marker track CSV, an export of another tool, a video file or an
+image folder, as the ``Trace`` of each release it holds.
 
-The dispatcher above the low-level readers: a CSV is read by ``service.sources.files``
-(a marker track becomes the angle of its two markers, the camera's oblique view
-measured from their distance and removed when the swing is wide enough to show it: ``measurement.vision.marker_pair``),
-a video or an image folder goes through the vision path (``service.sources.video``,
-imported only then: it loads OpenCV).
+The dispatcher above the low-level readers: moi's own CSV (t with angle or rate; a marker track) is read by
+``service.sources.files`` (a marker track becomes the angle of its two markers, the camera's oblique view
+measured from their distance and removed when the swing is wide enough to show it:
+``measurement.vision.marker_pair``); any other table or export by the first format of
+``service.sources.formats.registry`` that recognises its content, split into its releases; a video or an
+image folder goes through the vision path (``service.sources.video``, imported only then: it loads OpenCV).
 """
 
 from __future__ import annotations
@@ -13,25 +15,61 @@ import os
 from pathlib import Path
 
 from measurement.rig import Rig
-from measurement.trace import Trace
+from measurement.trace import Trace, csv_content, csv_header
 from service.errors import InputFileError
 
 from .files import read_samples
+from .formats.columns import ColumnChoice
 
 VIDEO_SUFFIXES = {".avi", ".mp4", ".mkv", ".mov", ".m4v", ".webm", ".mjpg", ".mjpeg", ".ogv"}
 
 
-def load_source(path: str | os.PathLike, camera: str | os.PathLike | None = None, rig: Rig | None = None) -> Trace:
-    """SOURCE of `moi identify`: a trace CSV, a marker track CSV, a video file or an image-sequence folder."""
+def _is_moi_csv(p: Path) -> bool:
+    """A file whose header is moi's trace (t and angle or rate) or marker track columns."""
+    from measurement.vision.marker_pair import MARKER_COLUMNS
+
+    if p.is_dir() or not p.is_file():
+        return False
+    with open(p, "rb") as f:
+        head = f.read(8192).decode("utf-8-sig", errors="replace")
+    lines = head.splitlines()[:-1] or head.splitlines()
+    cells = set(csv_header(csv_content(lines)))
+    return "t" in cells and bool({"angle", "rate"} & cells or set(MARKER_COLUMNS) <= cells)
+
+
+def _is_image_folder(p: Path) -> bool:
+    return p.is_dir() and not any(p.rglob("time.csv"))
+
+
+def load_releases(path: str | os.PathLike, camera: str | os.PathLike | None = None, rig: Rig | None = None,
+                  columns: ColumnChoice | None = None) -> list[Trace]:
+    """The releases in SOURCE, each a trace: one for moi's CSV and a video, as many as a log holds otherwise."""
     p = Path(path)
-    if p.is_dir() or p.suffix.lower() in VIDEO_SUFFIXES:
+    columns = columns or ColumnChoice()
+    if _is_image_folder(p) or p.suffix.lower() in VIDEO_SUFFIXES:
         if camera is None:
             raise InputFileError(f"{str(p)!r} is a video source; expected --camera CAM.toml with the camera and marker geometry")
         from .video import video_trace  # the vision path: OpenCV, only for a video
-        return video_trace(p, camera)
-    samples = read_samples(p)
-    if isinstance(samples, Trace):
-        return samples
-    from measurement.vision.marker_pair import view_trace
+        return [video_trace(p, camera)]
+    if not p.exists():
+        raise InputFileError(f"trace {str(p)!r} not found")
+    if not columns.given and _is_moi_csv(p):
+        samples = read_samples(p)
+        if isinstance(samples, Trace):
+            return [samples]
+        from measurement.vision.marker_pair import view_trace
 
-    return view_trace(samples)
+        return [view_trace(samples)]
+    from .formats.reading import log_traces
+    from .formats.registry import read_log
+
+    return log_traces(read_log(p), columns)
+
+
+def load_source(path: str | os.PathLike, camera: str | os.PathLike | None = None, rig: Rig | None = None) -> Trace:
+    """SOURCE holding one release (InputFileError naming how many it holds otherwise)."""
+    traces = load_releases(path, camera, rig)
+    if len(traces) > 1:
+        raise InputFileError(f"{str(path)!r} holds {len(traces)} releases; expected one (moi identify takes them "
+                             "all, or one with --release N)")
+    return traces[0]

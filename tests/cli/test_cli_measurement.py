@@ -131,7 +131,8 @@ def _rows(n=400, dt=0.005):
 
 BAD_TRACES = {
     "missing": (None, "not found"),
-    "no_angle_column": ("t,theta\n" + _rows(), "missing column(s) angle"),
+    # a column named theta is an angle (read as a table); one named otherwise is none
+    "no_angle_column": ("t,foo\n" + _rows(), "no angle, rate or x/y position column among 'foo'"),
     "non_numeric": (GOOD_HEADER + _rows(10) + "0.5,abc\n" + _rows(10), "non-numeric"),
     "non_monotonic": (GOOD_HEADER + "0.0,0.1\n0.2,0.1\n0.1,0.1\n", "not strictly increasing"),
     "empty": (GOOD_HEADER, "empty"),

@@ -115,6 +115,8 @@ def test_a_fit_that_does_not_follow_the_swing_is_flagged_and_invalid(monkeypatch
     assert "fit_not_converged" in r.flags, (r.flags, r.report())
     assert "unmodeled_residual" not in r.flags
     assert any("does not follow the swing" in s for s in r.structure), r.structure
+    # the report's first lines do not say "converged: True" over it
+    assert "converged: no (flag fit_not_converged: do not use this J)" in r.report().splitlines()[1]
     spec = Specification.symmetric("J", INERTIA, 0.01 * INERTIA)
     d = judge_release(Reading.from_result(r.to_dict(), "J"), spec, QualityRules())
     assert d.verdict == INVALID and any("fit_not_converged" in why for why in d.reasons), d
