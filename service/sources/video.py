@@ -51,8 +51,6 @@ def source_meta(source: FrameSource) -> dict:
             meta["frames_not_shown"] = source.listed - source.decoded - source.failed
     if source.truncated:
         meta["stream_ended_early"] = source.truncated
-    if source.rotation:
-        meta["rotation_deg"] = source.rotation
     return meta
 
 
