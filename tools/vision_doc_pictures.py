@@ -12,7 +12,7 @@
 
 from __future__ import annotations
 
-import math
+import io
 import sys
 from pathlib import Path
 
@@ -58,14 +58,15 @@ def blobs_choice() -> np.ndarray:
                             (later, o2, "later: each followed in its window")):
         out = img.copy()
         assert obs.found and obs.a is not None and obs.b is not None
-        for name, p in (("a", obs.a), ("b", obs.b)):
+        ends: list[tuple[str, tuple[float, float]]] = [("a", obs.a), ("b", obs.b)]
+        for name, p in ends:
             cv2.drawMarker(out, (int(round(p[0])), int(round(p[1]))), (0, 160, 0), cv2.MARKER_CROSS, 16, 2)
             _label(out, name, (int(p[0]) + 10, int(p[1]) - 10), 0.6, (0, 120, 0))
         if img is later:
             half = 1.5 * size + 4
-            for p in (o1.a, o1.b):
-                assert p is not None
-                cv2.rectangle(out, (int(p[0] - half), int(p[1] - half)), (int(p[0] + half), int(p[1] + half)),
+            for was in (o1.a, o1.b):
+                assert was is not None
+                cv2.rectangle(out, (int(was[0] - half), int(was[1] - half)), (int(was[0] + half), int(was[1] + half)),
                               (0, 200, 255), 1)
             _label(out, "larger, but outside the windows: not taken", (95, 285), 0.45)
         else:
@@ -139,10 +140,12 @@ def pivot_error() -> np.ndarray:
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.canvas.draw()
-    rgba = np.asarray(fig.canvas.buffer_rgba())
+    png = io.BytesIO()
+    fig.savefig(png, format="png")
     plt.close(fig)
-    return cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGR)
+    img = cv2.imdecode(np.frombuffer(png.getvalue(), np.uint8), cv2.IMREAD_COLOR)
+    assert img is not None, "matplotlib wrote a PNG"
+    return img
 
 
 def main(argv: list[str]) -> None:
