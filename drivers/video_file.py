@@ -78,8 +78,10 @@ class FrameSource:
     After iteration: ``count`` frames offered, ``failed`` undecodable ones, ``timing`` how times
     were obtained, ``dropped`` frames missing from the stream; for a video also ``listed`` (frames the
     container lists), ``decoded``, ``codec``, ``intra_only`` (every frame coded alone, as MJPEG: rows
-    repeated bit for bit are then the decoder concealing damage) and ``truncated`` (why the stream
-    ended early, '' if it did not).
+    repeated bit for bit are then the decoder concealing damage), ``truncated`` (why the stream
+    ended early, '' if it did not) and ``rotation`` (degrees counterclockwise the frames were turned to
+    come upright, from the display matrix; 0: none). ``close()`` (or ``with``) stops decoding when a loop
+    leaves early.
     """
 
     def __init__(self, path: str | os.PathLike, config: CameraConfig, colour: bool = False):
@@ -255,9 +257,12 @@ class FrameSource:
         cam = self.config.camera
         if img.shape[:2] == (cam.height, cam.width):
             return
-        turned = f" as shown (stored turned, shown turned {self.rotation}° counterclockwise)" if self.rotation else ""
-        raise VisionError(f"video {str(self.path)!r} is {img.shape[1]}×{img.shape[0]} px{turned}; the camera "
-                          f"file says {cam.width}×{cam.height}")
+        h, w = img.shape[:2]
+        stored = (h, w) if self.rotation in (90, 270) else (w, h)
+        turned = (f" as shown (its display matrix turns the stored {stored[0]}×{stored[1]} picture by {self.rotation}°)"
+                  if self.rotation else "")
+        raise VisionError(f"video {str(self.path)!r} is {w}×{h} px{turned}; the camera file says "
+                          f"{cam.width}×{cam.height}")
 
     def frame_times(self, pts: list[float | None]) -> list[float | None]:
         """Times (s) of the frames yielded, from their raw times (None: undecodable frame).

@@ -113,7 +113,7 @@ def test_rotated_phone_video_checked_upright_and_a_stored_size_camera_file_refus
     code = main(["camera-check", str(video), "--camera", str(camera(tmp_path, H, W)), "--out", str(out)])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1
-    assert "240×320 px as shown (stored turned, shown turned 90° counterclockwise)" in err[0]
+    assert "240×320 px as shown (its display matrix turns the stored 320×240 picture by 90°)" in err[0]
     assert "camera file says 320×240" in err[0]
 
 
