@@ -67,6 +67,22 @@ def _why(e: BaseException) -> str:
     return str(text).split(":")[0].strip() or type(e).__name__
 
 
+def _flush(container) -> None:
+    """Each decoder finishes the frames its threads hold and lets them go (frames in flight when a loop left)."""
+    for stream in container.streams.video:
+        if stream.codec_context is not None and stream.codec_context.is_open:
+            stream.codec_context.flush_buffers()
+
+
+def _stop(container) -> None:
+    """Close a video in dependency order: the decoders idle (``_flush``), then the container, which drops its
+    streams (their decoders, referenced nowhere else by then, are freed first) and then frees the demuxer and
+    the file. PyAV frees the demuxer's streams even while a wrapper of theirs is still referenced elsewhere, so
+    nothing may hold a stream past this."""
+    _flush(container)
+    container.close()
+
+
 def _natural_key(name: str) -> list:
     return [int(s) if s.isdigit() else s.lower() for s in re.split(r"(\d+)", name)]
 
@@ -182,26 +198,32 @@ class FrameSource:
         try:
             if not container.streams.video:
                 raise VideoFileError(f"{str(self.path)!r} holds no video stream")
-            stream = container.streams.video[0]
-            codec = stream.codec_context
-            self.codec = codec.name
-            # an intra-only codec (MJPEG) codes every frame alone: rows repeated bit for bit are the decoder
-            # concealing damage; an inter-frame codec (H.264, HEVC) repeats unchanged regions by design
-            self.intra_only = bool(codec.codec.intra_only)
-            self.listed = int(stream.frames or 0)
-            rate = stream.average_rate or stream.guessed_rate
-            fps = float(rate) if rate else 0.0
-            self._fps = fps if math.isfinite(fps) and 0 < fps < 10000 else self.config.camera.fps
-            stream.thread_type = "AUTO"
-            time_base = float(stream.time_base) if stream.time_base else 0.0
-            yield from self._decode(container, stream, time_base)
+            self._describe(container.streams.video[0])
+            # the stream is held by _decode alone: when a loop leaves early, _decode's frame is gone before
+            # _stop, and the decoder is freed before the file
+            yield from self._decode(container)
         finally:
-            container.close()
+            _stop(container)
         if self.decoded == 0:
             raise VideoFileError(f"video {str(self.path)!r}: no frame could be decoded ({self.listed} listed, "
                                  f"{self.failed} undecodable)")
 
-    def _decode(self, container, stream, time_base: float) -> Iterator[tuple[float | None, np.ndarray | None]]:
+    def _describe(self, stream) -> None:
+        """What the stream says of itself: codec, frames listed, frame rate; its decoder set to FFmpeg's threads."""
+        codec = stream.codec_context
+        self.codec = codec.name
+        # an intra-only codec (MJPEG) codes every frame alone: rows repeated bit for bit are the decoder
+        # concealing damage; an inter-frame codec (H.264, HEVC) repeats unchanged regions by design
+        self.intra_only = bool(codec.codec.intra_only)
+        self.listed = int(stream.frames or 0)
+        rate = stream.average_rate or stream.guessed_rate
+        fps = float(rate) if rate else 0.0
+        self._fps = fps if math.isfinite(fps) and 0 < fps < 10000 else self.config.camera.fps
+        stream.thread_type = "AUTO"
+
+    def _decode(self, container) -> Iterator[tuple[float | None, np.ndarray | None]]:
+        stream = container.streams.video[0]
+        time_base = float(stream.time_base) if stream.time_base else 0.0
         packets = 0
         t0: float | None = None
         first = True
