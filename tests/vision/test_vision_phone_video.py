@@ -89,7 +89,7 @@ def test_rotation_tag_frames_come_upright_as_ffmpeg_shows_them(tmp_path, turn):
     subprocess.run(["ffmpeg", "-loglevel", "error", "-y", "-i", str(video), "-frames:v", "1", str(shown)],
                    check=True, timeout=60)
     reference = cv2.imread(str(shown))
-    assert reference.shape == (H, W, 3)  # the reference is upright: the tag is in the file
+    assert reference is not None and reference.shape == (H, W, 3)  # the reference is upright: the tag is in the file
     with FrameSource(video, read_camera(camera(tmp_path)), colour=True) as source:
         first = next(iter(source))[1]
     assert first is not None and first.shape == (H, W, 3) and source.rotation == turn
@@ -108,7 +108,8 @@ def test_rotated_phone_video_checked_upright_and_a_stored_size_camera_file_refus
     report = json.loads(captured.out)
     b = PlaneRenderer(W, H, BLOB, SCENE).target_points(angles[0])[1]
     assert report["b_px"] == pytest.approx(list(b), abs=1.0)  # where the upright picture has the bob
-    assert cv2.imread(str(out)).shape == (H, W, 3)
+    drawn = cv2.imread(str(out))
+    assert drawn is not None and drawn.shape == (H, W, 3)
     # a camera file written for the stored picture (320 wide, 240 tall) names both sizes
     code = main(["camera-check", str(video), "--camera", str(camera(tmp_path, H, W)), "--out", str(out)])
     err = capsys.readouterr().err.strip().splitlines()
