@@ -237,7 +237,9 @@ def run(args: argparse.Namespace) -> int:
         facts.update(motion_facts)
         if still:
             extra.append("target does NOT move: not the swinging body?")
-        refusal = refusal or still
+        # a single blob's angle needs the arc's centre: a track with no arc is refused by identify too
+        no_arc = f"the target's track is not a swing's arc ({facts['pivot_note']})" if "pivot_note" in facts else ""
+        refusal = refusal or still or no_arc
     pivot = (float(facts["pivot_px"][0]), float(facts["pivot_px"][1])) if "pivot_px" in facts else None
     annotated, found, lines = check_image(img, config, pivot, extra)
     report: dict = {"source": where, "png": args.out, **found, **facts}

@@ -226,6 +226,23 @@ def test_a_target_that_does_not_move_is_not_found(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["moves"] is True
 
 
+def test_a_blob_whose_track_is_no_arc_is_refused(tmp_path, capsys):
+    """The colour matched something that moves, but not on a pendulum's arc (a spot sliding along a straight
+    line): no pivot, and no angle, can come of it: refused, as identify refuses it."""
+    folder = tmp_path / "sliding"
+    folder.mkdir()
+    for k in range(20):
+        img = np.full((H, W, 3), 190, np.uint8)
+        cv2.circle(img, (40 + 8 * k, 150), 14, (40, 30, 200), -1)
+        cv2.imwrite(str(folder / f"{k:02d}.png"), img)
+    code = main(["camera-check", str(folder), "--camera", str(camera(tmp_path, fps=FPS)), "--seconds", "2",
+                 "--out", str(tmp_path / "c.png"), "--json"])
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)
+    assert code == 2 and report["moves"] is True and report["tracked_share"] == 1.0
+    assert "not a swing's arc" in report["refusal"] and "pivot" in captured.err
+
+
 def _text_box(png: np.ndarray) -> tuple[int, int]:
     """Width and height (px) of the black box behind the text, from the top-left corner."""
     black = np.all(png == 0, axis=2)
