@@ -119,6 +119,7 @@ class V4L2Camera(Camera):
             raise DriverConfigError(f"camera: buffer_size must be 1..32 buffers, got {buffer_size!r}")
         if isinstance(device, str) and device.startswith("/dev/") and not os.path.exists(device):
             raise DriverConfigError(f"camera: device {device} does not exist (is the camera plugged in? `v4l2-ctl --list-devices`)")
+        rate = model.frame_rate("a V4L2 camera")
         self.model = model
         self.device = device
         self.colour = colour
@@ -132,7 +133,7 @@ class V4L2Camera(Camera):
         self._cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter.fourcc(*"MJPG"))
         self._cap.set(cv2.CAP_PROP_FRAME_WIDTH, model.width)
         self._cap.set(cv2.CAP_PROP_FRAME_HEIGHT, model.height)
-        self._cap.set(cv2.CAP_PROP_FPS, model.fps)
+        self._cap.set(cv2.CAP_PROP_FPS, rate)
         self._cap.set(cv2.CAP_PROP_BUFFERSIZE, buffer_size)
         w, h = int(self._cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
         if (w, h) != (model.width, model.height):
@@ -140,9 +141,9 @@ class V4L2Camera(Camera):
             raise DriverConfigError(f"camera: {device} delivers {w}×{h} px, the camera file says "
                                     f"{model.width}×{model.height} (a mode the camera supports is needed)")
         fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
-        if fps > 0 and abs(fps - model.fps) > 0.01 * model.fps:
-            log.warning("camera %s runs at %g frames/s, the camera file says %g", device, fps, model.fps)
-        self._drops = DropCounter(fps if fps > 0 else model.fps)
+        if fps > 0 and abs(fps - rate) > 0.01 * rate:
+            log.warning("camera %s runs at %g frames/s, the camera file says %g", device, fps, rate)
+        self._drops = DropCounter(fps if fps > 0 else rate)
         self._index = -1
         self._frames = 0
         self._failures = 0
@@ -239,7 +240,7 @@ class MockCamera(Camera):
         self._rng = np.random.default_rng(None if seed is None else seed + 1)
         self._drop_p = float(drop_probability)
         self._buffer = buffer_size
-        self._period = 1.0 / config.camera.fps
+        self._period = 1.0 / config.camera.frame_rate("the mock camera")
         self._t0 = float(self._now())
         self._next = 0
         self._frames = 0

@@ -90,7 +90,7 @@ class CameraAngleSensor:
         self.clock = clock or MonotonicClock()
         self.tracker_settings = tracker
         self.vision = vision or VisionSettings.from_config(config)
-        self.fps = float(config.camera.fps)
+        self.fps = config.camera.frame_rate("a live camera")
         self.max_lost_frames = max(5, int(math.ceil(max_lost_time * self.fps)))
         self._stop_timeout = float(stop_timeout)
         # the camera counts from opening: only the frames of the current capture are this capture's

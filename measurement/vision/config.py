@@ -4,7 +4,7 @@
 [camera]
 width = 640            # px
 height = 480           # px
-fps = 60.0             # frames/s (timestamps when the container has none)
+fps = 60.0             # frames/s: a live camera's, an image folder's; a video's container has its own
 fx = 600.0             # focal length, px
 fy = 600.0
 cx = 319.5             # principal point, px (pixel centres are integers)
@@ -22,8 +22,10 @@ kind = "tag"           # tag | blob | blobs | patch | edge (default edge, which 
 
 Only the edge on a cylinder needs the calibration (fx … distortion) and
 ``[marker]``; the other targets are measured in the image plane, where the
-image size and frame rate are all that is needed (fx … default to a centred,
-undistorted camera).
+image size is all that is needed (fx … default to a centred, undistorted
+camera). The frame rate is needed where the frames have no times of their
+own: a live or simulated camera, an image folder without timestamps; a
+video's times come from its container.
 
 Every error says which key is wrong and what was expected; they are
 ``VisionError`` (an ``InvalidInput``: one line on stderr, exit status 2).
@@ -94,7 +96,8 @@ def _table(doc: Mapping[str, Any], name: str, keys: tuple[str, ...], required: b
 class CameraModel:
     """Pinhole intrinsics with OpenCV's lens distortion.
 
-    width, height: image size, px. fps: nominal frame rate, frames/s.
+    width, height: image size, px. fps: nominal frame rate, frames/s (None: not given; a video's container
+    has its own, a live camera needs it: ``frame_rate``).
     fx, fy: focal lengths, px. cx, cy: principal point, px (the centre of
     pixel (i, j) is at u = j, v = i, OpenCV's convention).
     distortion: (k1, k2, p1, p2, k3), OpenCV's radial/tangential model.
@@ -102,12 +105,18 @@ class CameraModel:
 
     width: int
     height: int
-    fps: float
+    fps: float | None
     fx: float
     fy: float
     cx: float
     cy: float
     distortion: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def frame_rate(self, needed_by: str) -> float:
+        """The frame rate (frames/s), which ``needed_by`` cannot do without; VisionError when not given."""
+        if self.fps is None:
+            raise VisionError(f"camera file: [camera] fps is missing; {needed_by} needs the frame rate (frames/s)")
+        return self.fps
 
     @property
     def matrix(self) -> np.ndarray:
@@ -149,7 +158,8 @@ class CameraModel:
         return self.fx * xd + self.cx, self.fy * yd + self.cy
 
     def to_dict(self) -> dict[str, Any]:
-        return {"width": self.width, "height": self.height, "fps": self.fps, "fx": self.fx, "fy": self.fy,
+        rate = {} if self.fps is None else {"fps": self.fps}
+        return {"width": self.width, "height": self.height, **rate, "fx": self.fx, "fy": self.fy,
                 "cx": self.cx, "cy": self.cy, "distortion": list(self.distortion)}
 
 
@@ -216,8 +226,8 @@ class CameraConfig:
                               "and [marker] for an edge target, [pose]")
         c = _table(doc, "camera", _CAMERA_KEYS, False)
         if c is None:
-            raise VisionError("camera file: missing [camera] table; expected at least width, height and fps")
-        for k in ("width", "height", "fps"):
+            raise VisionError("camera file: missing [camera] table; expected at least width and height")
+        for k in ("width", "height"):
             if k not in c:
                 raise VisionError(f"camera file: [camera] is missing {k}")
         width = _integer("camera", "width", c["width"], "px")
@@ -245,7 +255,7 @@ class CameraConfig:
         k1, k2, p1, p2, k3 = (_number("camera", f"distortion[{i}]", d, "", positive=False) for i, d in enumerate(dist))
         focal = float(max(width, height))
         camera = CameraModel(
-            width=width, height=height, fps=_number("camera", "fps", c["fps"], "frames/s"),
+            width=width, height=height, fps=_number("camera", "fps", c["fps"], "frames/s") if "fps" in c else None,
             fx=_number("camera", "fx", c.get("fx", focal), "px"), fy=_number("camera", "fy", c.get("fy", focal), "px"),
             cx=cx, cy=cy, distortion=(k1, k2, p1, p2, k3),
         )

@@ -225,7 +225,7 @@ class VisionSettings:
 def _flags_and_counts(tracking: Tracking, config: CameraConfig, dropped: int | None) -> tuple[list[str], dict]:
     if dropped is None:
         # an undecodable frame still took its slot in the stream: it is not a dropped one
-        dropped = max(count_dropped(np.unique(tracking.seen_times), config.camera.fps) - tracking.untimed, 0)
+        dropped = max(count_dropped(np.unique(tracking.seen_times), config.camera.fps or 0.0) - tracking.untimed, 0)
     flags: list[str] = []
     if tracking.lost:
         flags.append(LOST)

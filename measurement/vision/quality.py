@@ -38,6 +38,8 @@ MAX_JUMPS = 0.02
 #: a swing within this many jitter σ (or under STILL_RANGE rad) is a target that does not move
 STILL_SIGMAS = 10.0
 STILL_RANGE = 1e-3
+#: ... and a target whose image point moves less than this (px), when its position is what is judged
+STILL_PX = 0.5
 #: the neighbours of a sample judged for a jump lie within this many frame periods
 SPAN_PERIODS = 6.0
 # the residual of the cubic through samples i−2, i−1, i+1, i+2 at i is a combination of 5 samples
@@ -95,6 +97,32 @@ def _jump_residual(t: np.ndarray, theta: np.ndarray) -> np.ndarray:
     return r
 
 
+@dataclass(frozen=True)
+class Motion:
+    """How far a tracked quantity went (span: its range) against its jitter (σ of one sample about the smooth
+    path), in the quantity's unit (rad for an angle, px for an image position); moves: the span is more than
+    ``STILL_SIGMAS`` jitter σ and more than the floor for the unit."""
+
+    span: float
+    jitter: float
+    floor: float
+
+    @property
+    def moves(self) -> bool:
+        return self.span > max(STILL_SIGMAS * (self.jitter if math.isfinite(self.jitter) else 0.0), self.floor)
+
+
+def motion(t: np.ndarray, values: np.ndarray, floor: float = STILL_RANGE) -> Motion:
+    """The motion of ``values`` (one per tracked time t, s); floor: ``STILL_RANGE`` for an angle (rad),
+    ``STILL_PX`` for a position (px)."""
+    t = np.asarray(t, dtype=float)
+    values = np.asarray(values, dtype=float)
+    r = _jump_residual(t, values)
+    inner = r[2:-2][r[2:-2] != 0] if r.size >= 5 else r
+    jitter = 1.4826 * float(np.median(np.abs(inner))) / _RESIDUAL_GAIN if inner.size else math.nan
+    return Motion(span=float(np.ptp(values)) if values.size else 0.0, jitter=jitter, floor=floor)
+
+
 def _gaps(t_tracked: np.ndarray, t_all: np.ndarray) -> tuple[float, float]:
     """The longest stretch of the record without a tracked frame (s) and where it starts (s)."""
     if t_all.size == 0:
@@ -127,10 +155,9 @@ def assess(t_all: np.ndarray, t: np.ndarray, theta: np.ndarray, *, source: str =
                           f"{100 * MIN_SHARE:.0f} % (set the target and its region of interest in the camera "
                           "file; check with `moi camera-check`)")
     r = _jump_residual(t, theta)
-    inner = r[2:-2][r[2:-2] != 0] if r.size >= 5 else r
-    jitter = 1.4826 * float(np.median(np.abs(inner))) / _RESIDUAL_GAIN if inner.size else math.nan
-    swing = float(np.ptp(theta)) if theta.size else 0.0
-    if not swing > max(STILL_SIGMAS * (jitter if math.isfinite(jitter) else 0.0), STILL_RANGE):
+    moved = motion(t, theta)
+    jitter, swing = moved.jitter, moved.span
+    if not moved.moves:
         raise VisionError(f"{source}: the target does not move (its track spans {swing:.2g} over "
                           f"{t.size} frames, jitter {jitter:.2g}); expected the swinging body: is the "
                           "target on it (check with `moi camera-check`)?")

@@ -36,6 +36,7 @@ if TYPE_CHECKING:  # the vision modules load OpenCV: imported where used, not fo
 
     from measurement.vision.config import CameraConfig
     from measurement.vision.pipeline import Tracking
+    from measurement.vision.quality import Motion
 
 
 #: frames grabbed from a live camera before the one measured (exposure and gain settle)
@@ -121,12 +122,13 @@ def _from_video(path: Path, args: argparse.Namespace, config: CameraConfig) -> t
     if not args.seconds > 0:
         raise InputFileError(f"--seconds must be > 0, got {args.seconds}")
     drawn = None
-    for n, (_, img) in enumerate(FrameSource(path, config, colour=config.target.needs_colour)):
-        if n == args.frame:
-            if img is None:
-                raise InputFileError(f"{path}: frame {n} cannot be decoded")
-            drawn = img
-            break
+    with FrameSource(path, config, colour=config.target.needs_colour) as frames:
+        for n, (_, img) in enumerate(frames):
+            if n == args.frame:
+                if img is None:
+                    raise InputFileError(f"{path}: frame {n} cannot be decoded")
+                drawn = img
+                break
     if drawn is None:
         raise InputFileError(f"{path}: has no frame {args.frame}")
     tracking, _ = track_source(path, config, seconds=args.seconds)
@@ -180,6 +182,47 @@ def _share(tracking: Tracking, config: CameraConfig, seconds: float) -> tuple[di
     return facts, lines, refusal
 
 
+def _motion(tracking: Tracking, config: CameraConfig) -> Motion | None:
+    """How far the target went in the tracked frames (``quality.motion``): the edge's and a single blob's
+    image position (px), a two-point target's body-vector angle (rad); None with fewer than 5 positions."""
+    import numpy as np
+
+    from measurement.vision.quality import STILL_PX, motion
+
+    t = np.asarray(tracking.t, dtype=float)
+    if t.size < 5:
+        return None
+    if config.edge:
+        return motion(t, np.asarray(tracking.x, dtype=float) * config.camera.fx, STILL_PX)
+    b = np.asarray(tracking.b, dtype=float)
+    if tracking.a[0] is not None:
+        a = np.asarray(tracking.a, dtype=float)
+        return motion(t, np.unwrap(np.arctan2(b[:, 0] - a[:, 0], b[:, 1] - a[:, 1])))
+    across, down = motion(t, b[:, 0], STILL_PX), motion(t, b[:, 1], STILL_PX)
+    return across if across.moves or across.span >= down.span else down
+
+
+def _moving(tracking: Tracking, config: CameraConfig, seconds: float) -> tuple[dict, str]:
+    """Whether the target found is one that swings: (facts, refusal or ''). A colour or an edge that matched
+    a wall, a ceiling or a table is found in every frame and never moves; only the swinging body is wanted."""
+    moved = _motion(tracking, config)
+    if moved is None:
+        if tracking.frames and tracking.repeated >= tracking.frames // 2:
+            return {"moves": False}, (f"the target does not move in the first {seconds:g} s: {tracking.repeated} of "
+                                      f"{tracking.frames} frames repeat the previous picture")
+        return {}, ""
+    unit = "px" if config.edge or tracking.a[0] is None else "rad"
+    jitter = f"{moved.jitter:.2g}" if math.isfinite(moved.jitter) else "n/a"
+    facts = {"moves": moved.moves, "motion": {"span": float(f"{moved.span:.4g}"), "unit": unit,
+                                              "jitter": float(f"{moved.jitter:.3g}") if math.isfinite(moved.jitter) else None}}
+    if moved.moves:
+        return facts, ""
+    what = "its position" if unit == "px" else "its angle"
+    return facts, (f"the target does not move in the first {seconds:g} s ({what} spans {moved.span:.2g} {unit}, "
+                   f"jitter {jitter} {unit}): it is not the swinging body (something else of its colour or "
+                   "contrast? set [target] roi or the colour) or the swing starts later (--seconds)")
+
+
 def run(args: argparse.Namespace) -> int:
     import cv2
 
@@ -190,6 +233,13 @@ def run(args: argparse.Namespace) -> int:
     refusal = ""
     if tracking is not None:
         facts, extra, refusal = _share(tracking, config, args.seconds)
+        motion_facts, still = _moving(tracking, config, args.seconds)
+        facts.update(motion_facts)
+        if still:
+            extra.append("target does NOT move: not the swinging body?")
+        # a single blob's angle needs the arc's centre: a track with no arc is refused by identify too
+        no_arc = f"the target's track is not a swing's arc ({facts['pivot_note']})" if "pivot_note" in facts else ""
+        refusal = refusal or still or no_arc
     pivot = (float(facts["pivot_px"][0]), float(facts["pivot_px"][1])) if "pivot_px" in facts else None
     annotated, found, lines = check_image(img, config, pivot, extra)
     report: dict = {"source": where, "png": args.out, **found, **facts}

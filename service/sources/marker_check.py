@@ -21,8 +21,52 @@ if TYPE_CHECKING:  # the vision modules load OpenCV: imported where used
     from measurement.vision.locators import PointObservation
 
 
+#: the drawing's proportions on a 640×480 frame; other frames scale them with their size
+BASE_WIDTH, BASE_HEIGHT = 640, 480
+FONT_SCALE = 0.5          # OpenCV's Hershey simplex: about 11 px tall capitals at 640×480
+LINE_STEP = 18            # px from one text line to the next at 640×480
+#: least font scale: smaller Hershey text cannot be read on a small frame
+MIN_FONT_SCALE = 0.35
+#: lines of text drawn on the frame (the rest are in the printed report)
+MAX_LINES = 5
+
+
 def _point(p: tuple[float, float]) -> tuple[int, int]:
     return int(round(p[0])), int(round(p[1]))
+
+
+def drawing_scale(width: int, height: int) -> float:
+    """How much larger than on a 640×480 frame the marks and text are drawn on a width×height frame: a
+    1280×720 phone frame's text is as large a part of the picture, and as readable once shown on a screen."""
+    return min(width / BASE_WIDTH, height / BASE_HEIGHT)
+
+
+def _text(out: np.ndarray, lines: list[str]) -> None:
+    """The lines in white on a dark box (readable on any scene), scaled with the frame and shrunk to its width,
+    never below a legible size (a line too long for a small frame is cut at its edge)."""
+    import cv2
+
+    lines = lines[:MAX_LINES]
+    if not lines:
+        return
+    h, w = out.shape[:2]
+    scale = max(MIN_FONT_SCALE, FONT_SCALE * drawing_scale(w, h))
+    k = scale / FONT_SCALE
+    thick = max(1, int(round(k)))
+    widest = max(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)[0][0] for t in lines)
+    margin = int(round(8 * k))
+    if widest > w - 2 * margin:
+        # a narrow (portrait) frame: the lines shrink to fit its width, down to what can still be read
+        scale = max(MIN_FONT_SCALE, scale * (w - 2 * margin) / widest)
+        k = scale / FONT_SCALE
+        thick = max(1, int(round(k)))
+        widest = max(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)[0][0] for t in lines)
+        margin = int(round(8 * k))
+    step = int(round(LINE_STEP * k))
+    cv2.rectangle(out, (2, 2), (min(w - 1, 2 * margin - 2 + widest), margin + step * len(lines)), (0, 0, 0), -1)
+    for i, text in enumerate(lines):
+        cv2.putText(out, text, (margin, margin + int(round(10 * k)) + step * i), cv2.FONT_HERSHEY_SIMPLEX, scale,
+                    (255, 255, 255), thick, cv2.LINE_AA)
 
 
 def _annotate(img: np.ndarray, obs: MarkerObservation | PointObservation, config: CameraConfig, lines: list[str],
@@ -34,32 +78,35 @@ def _annotate(img: np.ndarray, obs: MarkerObservation | PointObservation, config
 
     out = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR) if img.ndim == 2 else img.copy()
     cam = config.camera
+    k = drawing_scale(out.shape[1], out.shape[0])
+    thin, bold = max(1, int(round(k))), max(2, int(round(2 * k)))
+    cross, diamond = int(round(25 * k)), int(round(12 * k))
     roi = config.target.roi
     if roi is not None:
-        cv2.rectangle(out, (roi[0], roi[1]), (roi[2] - 1, roi[3] - 1), (0, 255, 255), 1)
+        cv2.rectangle(out, (roi[0], roi[1]), (roi[2] - 1, roi[3] - 1), (0, 255, 255), thin)
     if isinstance(obs, PointObservation):
         if obs.corners is not None:
-            cv2.polylines(out, [np.round(obs.corners).astype(np.int32).reshape(-1, 1, 2)], True, (0, 0, 255), 1)
+            cv2.polylines(out, [np.round(obs.corners).astype(np.int32).reshape(-1, 1, 2)], True, (0, 0, 255), thin)
         start = obs.a if obs.a is not None else pivot
         if pivot is not None:
-            cv2.drawMarker(out, _point(pivot), (255, 255, 0), cv2.MARKER_CROSS, 25, 2)
+            cv2.drawMarker(out, _point(pivot), (255, 255, 0), cv2.MARKER_CROSS, cross, bold)
         if obs.found and obs.b is not None:
-            cv2.drawMarker(out, _point(obs.b), (0, 0, 255), cv2.MARKER_DIAMOND, 12, 2)
+            cv2.drawMarker(out, _point(obs.b), (0, 0, 255), cv2.MARKER_DIAMOND, diamond, bold)
             if obs.a is not None:
-                cv2.drawMarker(out, _point(obs.a), (0, 0, 255), cv2.MARKER_DIAMOND, 12, 2)
+                cv2.drawMarker(out, _point(obs.a), (0, 0, 255), cv2.MARKER_DIAMOND, diamond, bold)
             if start is not None:
                 # the angle axis: the body vector, drawn long enough to see its direction
                 du, dv = obs.b[0] - start[0], obs.b[1] - start[1]
-                k = max(1.0, 60.0 / max(math.hypot(du, dv), 1e-9))
-                length = k * math.hypot(du, dv)
-                cv2.arrowedLine(out, _point(start), _point((start[0] + k * du, start[1] + k * dv)), (0, 255, 0), 2,
-                                tipLength=min(0.3, 15.0 / max(length, 1.0)))
+                stretch = max(1.0, 60.0 * k / max(math.hypot(du, dv), 1e-9))
+                length = stretch * math.hypot(du, dv)
+                cv2.arrowedLine(out, _point(start), _point((start[0] + stretch * du, start[1] + stretch * dv)),
+                                (0, 255, 0), bold, tipLength=min(0.3, 15.0 * k / max(length, 1.0)))
     else:
         c = (int(round(cam.cx)), int(round(cam.cy)))
-        cv2.drawMarker(out, c, (255, 255, 0), cv2.MARKER_CROSS, 25, 1)
+        cv2.drawMarker(out, c, (255, 255, 0), cv2.MARKER_CROSS, cross, thin)
         if obs.roi is not None:
             r0, r1, c0, c1 = obs.roi
-            cv2.rectangle(out, (c0, r0), (c1 - 1, r1 - 1), (0, 255, 255), 1)
+            cv2.rectangle(out, (c0, r0), (c1 - 1, r1 - 1), (0, 255, 255), thin)
         if obs.found:
             if obs.points is not None:
                 for u, v in zip(*obs.points):
@@ -72,14 +119,9 @@ def _annotate(img: np.ndarray, obs: MarkerObservation | PointObservation, config
                 ys = np.full(2, obs.y_ref)
             us, vs = cam.distort(obs.x + obs.slope * (ys - obs.y_ref), ys)
             pts = np.stack([us, vs], axis=1).round().astype(np.int32).reshape(-1, 1, 2)
-            cv2.polylines(out, [pts], False, (0, 0, 255), 1)
-            cv2.drawMarker(out, (int(round(obs.u)), int(round(obs.v))), (0, 0, 255), cv2.MARKER_DIAMOND, 12, 1)
-    if lines:
-        # a dark box keeps the text readable on any scene
-        width = max(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)[0][0] for t in lines[:5])
-        cv2.rectangle(out, (2, 2), (14 + width, 8 + 18 * len(lines[:5])), (0, 0, 0), -1)
-    for i, text in enumerate(lines[:5]):
-        cv2.putText(out, text, (8, 18 + 18 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+            cv2.polylines(out, [pts], False, (0, 0, 255), thin)
+            cv2.drawMarker(out, (int(round(obs.u)), int(round(obs.v))), (0, 0, 255), cv2.MARKER_DIAMOND, diamond, thin)
+    _text(out, lines)
     return out
 
 

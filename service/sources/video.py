@@ -24,17 +24,17 @@ def track_source(path: str | os.PathLike, config: CameraConfig, settings: Tracke
 
     seconds: stop after the frames of the first ``seconds`` of the record (``moi camera-check``).
     """
-    source = FrameSource(path, config, colour=config.target.needs_colour)
     tracker = None
     seen = []
-    for t, frame in source:
-        if seconds is not None and t is not None and t > seconds:
-            break
-        if tracker is None:
-            # known once the stream is open: an intra-only codec's repeated rows are damage, an inter-frame
-            # codec's are an unchanged region
-            tracker = tracker_for(config, settings, repeated_rows_are_damage=source.intra_only)
-        seen.append((t, tracker.locate(frame)))
+    with FrameSource(path, config, colour=config.target.needs_colour) as source:
+        for t, frame in source:
+            if seconds is not None and t is not None and t > seconds:
+                break
+            if tracker is None:
+                # known once the stream is open: an intra-only codec's repeated rows are damage, an inter-frame
+                # codec's are an unchanged region
+                tracker = tracker_for(config, settings, repeated_rows_are_damage=source.intra_only)
+            seen.append((t, tracker.locate(frame)))
     times = source.frame_times([t for t, _ in seen])
     tracking = Tracking()
     for t, (_, obs) in zip(times, seen):

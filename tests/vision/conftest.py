@@ -20,7 +20,8 @@ from measurement.vision import CameraConfig, CameraModel, CameraPose, Imaging, M
 
 # 640×480, fx = 600 px (a 56° horizontal field), marker on a 0.1 m radius, camera 0.25 m away:
 # 240 px per rad at rest, so 0.01° is 0.042 px.
-CAMERA = CameraModel(width=640, height=480, fps=60.0, fx=600.0, fy=600.0, cx=319.5, cy=239.5)
+FPS = 60.0
+CAMERA = CameraModel(width=640, height=480, fps=FPS, fx=600.0, fy=600.0, cx=319.5, cy=239.5)
 MARKER = MarkerGeometry(radius=0.10, distance=0.25)
 CONFIG = CameraConfig(camera=CAMERA, marker=MARKER)
 # the imaging the vision path's accuracy is specified for: a little blur, 2 grey levels of noise
@@ -71,7 +72,7 @@ class RenderedSwing:
 def _render_swing(tmp: Path, yaw_deg: float, duration: float = 20.0, seed: int = 11) -> RenderedSwing:
     swing = truth_swing(duration + 1.0)
     renderer = MarkerRenderer(CAMERA, MARKER, pose=CameraPose(yaw=math.radians(yaw_deg)), imaging=IMAGING, seed=seed)
-    t = np.arange(int(round(duration * CAMERA.fps))) / CAMERA.fps
+    t = np.arange(int(round(duration * FPS))) / FPS
     video = write_video(tmp / f"swing_yaw{yaw_deg:g}.avi", (renderer.render(swing.angle(ti)) for ti in t))
     cam = write_toml(tmp / "camera.toml", camera_toml())
     rig = write_toml(tmp / "rig.toml", RIG.to_dict())

@@ -13,7 +13,7 @@ from service.cli import main
 from service.sources.files import read_rig
 from service.sources.video import video_trace
 
-from .conftest import CAMERA, CONFIG, IMAGING, J_TRUE, MARKER, RIG, camera_toml, truth_swing, write_toml, write_video
+from .conftest import CAMERA, CONFIG, FPS, IMAGING, J_TRUE, MARKER, RIG, camera_toml, truth_swing, write_toml, write_video
 
 
 def identify_json(capsys, video, rig, cam):
@@ -74,7 +74,7 @@ def short_swing_frames(n, seed, lost=(), renderer=None):
     swing = truth_swing(8.0)
     r = renderer or MarkerRenderer(CAMERA, MARKER, imaging=IMAGING, seed=seed)
     for k in range(n):
-        img = r.render(swing.angle(k / CAMERA.fps))
+        img = r.render(swing.angle(k / FPS))
         yield occlude(img) if k in lost else img
 
 
@@ -123,7 +123,7 @@ def test_image_folder_with_timestamps_a_broken_file_and_dropped_frames(tmp_path)
     for k in keep:
         name = f"img{k}.png"  # natural order: img2 before img10
         cv2.imwrite(str(folder / name), frames[k])
-        lines.append(f"{name},{k / CAMERA.fps + 3.0:.9f}")
+        lines.append(f"{name},{k / FPS + 3.0:.9f}")
     (folder / "img120.png").write_bytes((folder / "img120.png").read_bytes()[:300])  # truncated file
     (folder / "timestamps.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
     trace = video_trace(folder, CONFIG)

@@ -124,7 +124,7 @@ class Camera(SensorKind):
             # more frames fall due between two polls than the mock's 8-frame buffer holds: the rest are dropped
             log.warning("simulated camera at time_scale %g: %g frames/s of swing to render per real second; "
                         "expect dropped_frames (use time_scale = 1 with the camera)", sim.time_scale,
-                        cfg.camera.fps * sim.time_scale)
+                        cfg.camera.frame_rate("the simulated camera") * sim.time_scale)
         camera = open_camera(cfg, angle_source=pendulum.angle, clock=clock,
                              pose=CameraPose(yaw=math.radians(sim.camera_yaw_deg)), drop_probability=sim.drop_rate,
                              seed=sim.seed)
