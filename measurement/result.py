@@ -52,6 +52,9 @@ def _jsonable(v: Any) -> Any:
     return _num(v)
 
 
+#: combined u of ω_n over the fit's σ beyond which the report states ω_n with u on a line of its own
+WIDER = 2.0
+
 #: two-sided p-value below which the halves' ω_n disagree (the model does not hold across the record)
 DISAGREE_P = 0.01
 
@@ -473,6 +476,10 @@ class IdentificationResult:
                if self.omega_n_std_calibration else "")
         L.append(f"    omega_n      = {Quantity(self.omega_n, self.omega_n_std, 'rad/s')}"
                  f"  (f_n = {self.omega_n / (2 * math.pi):.6g} Hz{cal})")
+        if self.omega_n_u is not None and self.omega_n_u > WIDER * self.omega_n_std:
+            # the fit's σ alone would read as a confident number where the model's form is not settled
+            L.append(f"    ω_n ± u      = {Quantity(self.omega_n, self.omega_n_u, 'rad/s')} (combined u: the fit's σ "
+                     f"is {self.omega_n_u / self.omega_n_std:.3g} times narrower than what the record supports)")
         if self.omega_n_std_model:
             ju = f"; J ± {self.J_u:.2g} kg·m²" if self.J_u is not None else ""
             L.append(f"    model form   = ±{self.omega_n_std_model:.2g} rad/s (halves of the record, rival models)"
