@@ -111,6 +111,7 @@ class JointResult:
             "baseline": {"effects": list(declared), "omega_n": [_num(r.baseline.omega_n) for r in self.releases]},
             "consistency": _jsonable(self.consistency),
             "flags": list(self.flags),
+            "warnings": list(F.warnings(self.flags)),
             "releases": [r.to_dict() for r in self.releases],
         }
 
@@ -187,7 +188,7 @@ class JointResult:
             a, b = c["own_pairwise_releases"]
             L.append(f"    as each release reports it alone, {a} and {b} are {c['own_pairwise_max']:.1f} u apart "
                      f"(more than {OWN_PAIR_Z:g}: flag releases_disagree)")
-        L.append(f"[[Flags]] {', '.join(self.flags) if self.flags else 'none'}")
+        L.append(F.report_line(self.flags))
         return "\n".join(L)
 
 

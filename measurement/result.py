@@ -22,13 +22,14 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from . import flags as F
 from .errors import ResultSchemaError
 from .residual import Diagnostics
 from .uncertainty import Budget
 from .wire import read_number
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 
 
 def _num(v: Any) -> Any:
@@ -402,6 +403,7 @@ class IdentificationResult:
             "error_reduction": _num(self.error_reduction),
             "statistics": {k: _num(v) for k, v in self.statistics.items()},
             "flags": list(self.flags),
+            "warnings": list(F.warnings(self.flags)),
             "baseline": self.baseline.to_dict(),
             "steps": [s.to_dict() for s in self.steps],
             "diagnostics": {k: _num(v) for k, v in self.diagnostics.as_dict().items()},
@@ -420,7 +422,7 @@ class IdentificationResult:
         """Read back ``to_dict`` of this schema (``SCHEMA_VERSION``; with ``arrays`` when it holds them).
 
         The keys ``to_dict`` derives (J_U, coverage_factor, J_object_u and _U, J_object_axis_u and _U,
-        error_reduction) are the properties that compute them; keys beyond the result's (a payload's
+        error_reduction, warnings) are the properties that compute them; keys beyond the result's (a payload's
         envelope) are not read. Raises ResultSchemaError for a result of another schema.
         """
         if d.get("schema") != SCHEMA_VERSION:
@@ -540,5 +542,5 @@ class IdentificationResult:
                     L.append(f"    {prefix} = {value}")
 
             walk("", self.acquisition)
-        L.append(f"[[Flags]] {', '.join(self.flags) if self.flags else 'none'}")
+        L.append(F.report_line(self.flags))
         return "\n".join(L)

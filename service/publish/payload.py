@@ -89,6 +89,7 @@ def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id:
 _NEXT_SCHEMA = {
     4: {"measures": "angle"},  # schema 5: what the sensor read; before it, always the angle
     5: {},  # schema 6: keys added inside model_form.segments only (t_free, ...), which from_dict defaults
+    6: {},  # schema 7: warnings, derived from the flags (from_dict computes it again)
 }
 
 
