@@ -347,6 +347,10 @@ class IdentificationResult:
     uncertainty_budget: dict[str, Budget] = field(default_factory=dict)
     #: what the sensor read: "angle" (rad) or "rate" (rad/s, a gyro: offset and the arrays' "angle" are then rates)
     measures: str = "angle"
+    #: the model ω_n (and J) is read from: "discovered" (the final model, ``effects``) or "declared" (the
+    #: declared model, where its ω_n is the more accurate: ``identification.focus``), and its effects
+    omega_n_from: str = "discovered"
+    omega_n_effects: tuple[str, ...] = ()
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -412,6 +416,8 @@ class IdentificationResult:
             "acquisition": _jsonable(self.acquisition),
             "sensor_calibrated": self.sensor_calibrated,
             "measures": self.measures,
+            "omega_n_from": self.omega_n_from,
+            "omega_n_effects": list(self.omega_n_effects or self.effects),
         }
         if include_arrays:
             d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
@@ -442,6 +448,8 @@ class IdentificationResult:
             diagnostics=Diagnostics.from_dict(d["diagnostics"]), structure=tuple(d["structure"]),
             window=dict(d["window"]), acquisition=dict(d["acquisition"]), sensor_calibrated=d["sensor_calibrated"],
             measures=d["measures"],
+            omega_n_from=d.get("omega_n_from", "discovered"),
+            omega_n_effects=tuple(d.get("omega_n_effects") or d["effects"]),
             model_form=ModelForm.from_dict(d["model_form"]),
             uncertainty_budget={k: Budget.from_dict(b) for k, b in d["uncertainty_budget"].items()},
             arrays={k: np.asarray(v, dtype=float) for k, v in (d.get("arrays") or {}).items()},
@@ -478,6 +486,9 @@ class IdentificationResult:
                if self.omega_n_std_calibration else "")
         L.append(f"    omega_n      = {Quantity(self.omega_n, self.omega_n_std, 'rad/s')}"
                  f"  (f_n = {self.omega_n / (2 * math.pi):.6g} Hz{cal})")
+        if self.omega_n_from != "discovered":
+            L.append(f"    ω_n from     = the {self.omega_n_from} model ({', '.join(self.omega_n_effects)}): its ω_n is "
+                     "the more accurate (the discovered model's is a rival in u)")
         if self.omega_n_u is not None and self.omega_n_u > WIDER * self.omega_n_std:
             # the fit's σ alone would read as a confident number where the model's form is not settled
             L.append(f"    ω_n ± u      = {Quantity(self.omega_n, self.omega_n_u, 'rad/s')} (combined u: the fit's σ "

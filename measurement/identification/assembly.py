@@ -45,11 +45,12 @@ def _arrays(found: Findings) -> dict[str, np.ndarray]:
 
 def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]) -> IdentificationResult:
     """The result of one record: its quantities, uncertainty budgets, flags and sentences (``report``)."""
-    final, rig, trace, form = found.final, found.rig, found.trace, found.form
-    w, ws, w_cal, j = found.omega_n, found.omega_n_std, found.omega_n_view, found.inertias
+    final, rig, trace, head = found.final, found.rig, found.trace, found.headline
+    form = head.form
+    w, ws, w_cal, j = head.omega_n, head.omega_n_std, found.omega_n_view, found.inertias
     w_u = math.sqrt(ws**2 + (w_cal or 0.0) ** 2 + form.u**2)
-    budget = budgets(rig, w, ws, dof=float(final.dof), model=form.u, view=w_cal,
-                     scale_response=omega_n_per_scale(final) if rig.sensor_calibrated else None)
+    budget = budgets(rig, w, ws, dof=float(head.fit.dof), model=form.u, view=w_cal,
+                     scale_response=omega_n_per_scale(head.fit) if rig.sensor_calibrated else None)
     J_u = budget["J"].u if "J" in budget else None
     zeta, zeta_std, amp_ref = damping_ratio(final)
     return IdentificationResult(
@@ -70,4 +71,5 @@ def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]
         baseline=model_summary(found.base, rig), steps=found.steps, diagnostics=found.diag,
         structure=structure, window=_window(found), acquisition={k: v for k, v in trace.meta.items() if k != "truth"},
         sensor_calibrated=rig.sensor_calibrated, measures=rig.measures, arrays=_arrays(found),
+        omega_n_from=head.chosen, omega_n_effects=head.effects,
     )
