@@ -497,6 +497,9 @@ class IdentificationResult:
             ju = f"; J ± {self.J_u:.2g} kg·m²" if self.J_u is not None else ""
             L.append(f"    model form   = ±{self.omega_n_std_model:.2g} rad/s (halves of the record, rival models)"
                      f" → combined u: ω_n ± {self.omega_n_u:.2g} rad/s{ju}")
+        # one record cannot see what changes between releases; its u does not hold it
+        L.append("    reproducibility: not known from one release (remounting, the pivot settling, a hand-held "
+                 "sensor): not in u; measure ≥ 3 releases, whose joint identification carries their scatter")
         for measurand, budget in self.uncertainty_budget.items():
             L.append(f"[[Uncertainty budget]] {measurand} (GUM; J_std above is the fit's 1σ alone)")
             L.extend(budget_table(budget))
