@@ -215,7 +215,9 @@ def _shared_effects(results: Sequence[IdentificationResult], rig: Rig) -> tuple[
 
 def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options | None = None) -> JointResult:
     """Identify several releases of one object on ``rig`` jointly (see the module doc); options: ``Options()``."""
-    options = Options() if options is None else options
+    # each release enters with its discovered model: the joint fit weighs the laws the releases found, and a
+    # release's headline read from its declared model (identification.focus) is for that release alone
+    options = replace(Options() if options is None else options, focused=False)
     if len(traces) < 2:
         raise InvalidInput(f"a joint identification needs at least 2 releases, got {len(traces)}")
     results, _ = laws_of_the_object([identify(tr, rig, options) for tr in traces], traces, rig, options)

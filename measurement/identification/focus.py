@@ -25,6 +25,14 @@ discovered model's ω_n is then its rival, named in the model form and carried
 into u through the bias term; the discovered model stays what the report
 shows (its effects, damping, residual before and after). Discovery is
 unchanged: only where ω_n is read from.
+
+Both must estimate one quantity. Where the discovered model holds a
+restoring law the rig does not declare (a cubic spring), its ω_n is the law's
+small-swing limit and the declared model's the frequency at the record's
+own swing: two measurands, not two estimates of one, and the choice is not
+made (on the front wheel of the bicycle set, read from one release's
+declared model and its sisters' cubic springs, the releases ended 4–5 u
+apart where each had been within 2 u).
 """
 
 from __future__ import annotations
@@ -33,6 +41,7 @@ import math
 from dataclasses import dataclass
 
 from ..consistency import check_segments
+from ..effects import EFFECTS
 from ..fit import ModelFit
 from ..result import Competitor, ModelForm
 from .rivals import covering
@@ -95,6 +104,8 @@ def focus(final: ModelFit, base: ModelFit, form: ModelForm, noise: float, aliase
     kept = Focus(final, form, DISCOVERED)
     if base.model.effect_names == final.model.effect_names or not base.success or not base_follows:
         return kept
+    if any(EFFECTS[n].role == "stiffness" for n in final.model.effect_names if n not in base.model.effect_names):
+        return kept  # another measurand (module doc)
     judged = declared_mse(base, final, form, noise, aliases)
     if judged is None:
         return kept
