@@ -49,3 +49,13 @@ def test_a_release_whose_discovered_omega_n_is_less_accurate_reads_the_declared_
     assert "ω_n from     = the declared model" in focused.report()
     back = IdentificationResult.from_dict(focused.to_dict())
     assert back.omega_n_from == "declared" and back.omega_n_effects == focused.omega_n_effects
+
+
+def test_a_restoring_law_makes_another_measurand_and_no_choice_is_made():
+    # a cubic spring's ω_n is its small-swing limit, the declared model's the frequency at the swing:
+    # weighed against each other, releases of one wheel read one or the other and ended 4-5 u apart
+    trace = load_source(ROOT / "data/bicycle_fwheel_torsional_first_3.csv")
+    r = identify(trace, read_rig(ROOT / "data/bicycle_fwheel_torsional_first_3_rig.toml"))
+    assert "cubic_stiffness" in r.added_effects
+    assert r.omega_n_from == "discovered" and r.omega_n_effects == r.effects
+    assert not any("root mean squared error" in s for s in r.structure)
