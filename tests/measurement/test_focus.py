@@ -28,7 +28,7 @@ def test_an_effect_that_moves_omega_n_far_beyond_its_variance_gives_the_headline
     r = identify(simulate_trace(truth, theta0=0.6, duration=20, rate=100, noise_std=1e-4, seed=2), TORSION)
     assert "quadratic" in r.effects and r.omega_n_from == "discovered"
     w_true = math.sqrt(0.3651 / 0.0125)
-    assert abs(r.omega_n - w_true) < 2 * r.omega_n_u
+    assert r.omega_n_u is not None and abs(r.omega_n - w_true) < 2 * r.omega_n_u
     assert any("would be the less accurate" in s for s in r.structure)
 
 
@@ -41,6 +41,7 @@ def test_a_release_whose_discovered_omega_n_is_less_accurate_reads_the_declared_
     assert focused.effects == plain.effects and focused.added_effects  # discovery unchanged
     assert focused.omega_n_from == "declared" and focused.omega_n_effects == focused.declared_effects
     assert focused.omega_n == focused.baseline.omega_n
+    assert focused.omega_n_u is not None and plain.omega_n_u is not None
     assert focused.omega_n_u < plain.omega_n_u
     rival = focused.model_form.competitors[0]
     assert rival.effects == plain.effects and rival.omega_n == plain.omega_n
