@@ -125,6 +125,9 @@ def test_a_result_reads_back_as_typed_fields_and_writes_the_same_json(runs, cali
         assert back.model_form == r.model_form and back.diagnostics == r.diagnostics and back.steps == r.steps
         assert back.uncertainty_budget.keys() == r.uncertainty_budget.keys()
         assert back.report() == r.report()
+        # the warnings among the flags, graded by the flag table (a perspective the view does not explain,
+        # a sensor scale fitted from the swing); the rest is information
+        assert json.loads(text)["warnings"] == [f for f in r.flags if f in ("camera_perspective", "sensor_scale_fitted")]
     older = json.loads(text) | {"schema": 3}
     with pytest.raises(ResultSchemaError, match=f"schema 3; expected schema {SCHEMA_VERSION}"):
         IdentificationResult.from_dict(older)
