@@ -4,13 +4,22 @@ Honesty (releases agree within the u moi states) is not enough: the spread
 between releases of one object must be no wider than that of the plainest fit
 that would do, a damped sinusoid y = c + e^(−σt)·(A·cos ω_d t + B·sin ω_d t)
 fitted to the whole record (ω_n = √(ω_d² + σ²)). For every set in data/,
-each release is identified by moi (default: the releases together, as
-``moi identify A B C`` does, which weighs the laws a release adds across
-its sisters), by ``moi --no-discover`` (each release alone, the declared
-model only) and by that damped sinusoid; per object the table
-gives the spread (max − min)/mean of ω_n and the worst pairwise
-|Δω_n|/√(u_i² + u_j²) (for the damped sinusoid its fit σ under white noise,
-which is what such a fit would state).
+each release is identified by moi alone (``moi identify FILE``: what a
+one-release recipe and a file given to the command line get), by moi
+jointly (the releases together, as ``moi identify A B C`` does, which weighs
+the laws a release adds across its sisters), by ``moi --no-discover`` (each
+release alone, the declared model only) and by that damped sinusoid; per
+object the table gives the spread (max − min)/mean of ω_n and the worst
+pairwise |Δω_n|/√(u_i² + u_j²) (for the damped sinusoid its fit σ under
+white noise, which is what such a fit would state).
+
+Coverage of one release: the share of the pairs of releases of one object,
+each identified alone, whose difference lies within 2 combined u
+(|Δω_n| ≤ 2·√(u_i² + u_j²)): what a user who measures a part once and then
+again sees. Besides data/, the phone-gyro recording of a racquet hung as a
+physical pendulum (../shared/real/userdata/phyphox_racquet_x_14-02-08, as
+phyphox exported it), cut at its authors' own windows (meta/segments.csv; of
+two windows that overlap, the first), when that folder is there.
 
     .venv/bin/python bench/bench_precision.py            # every set (several minutes)
     .venv/bin/python bench/bench_precision.py bicycle    # the sets whose name holds "bicycle"
@@ -18,6 +27,7 @@ which is what such a fit would state).
 
 from __future__ import annotations
 
+import csv
 import itertools
 import math
 import statistics
@@ -34,10 +44,11 @@ sys.path.insert(0, str(ROOT))  # the plain fit is the tests' reference
 from measurement.errors import MeasurementError  # noqa: E402
 from measurement.identification import Options, identify  # noqa: E402
 from measurement.joint import identify_releases  # noqa: E402
+from measurement.rig import Rig  # noqa: E402
+from measurement.trace import Trace  # noqa: E402
 from service.sources.dispatch import load_source  # noqa: E402
 from service.sources.files import read_rig  # noqa: E402
 from tests.measurement.reference import damped_sinusoid as plain_fit  # noqa: E402
-from tests.measurement.reference import reading_columns  # noqa: E402
 
 
 def _bicycle(part: str, n: int, rate: bool) -> list[tuple[str, str]]:
@@ -59,7 +70,42 @@ SETS: list[tuple[str, list[tuple[str, str]]]] = [
     ("front wheel, compound, rate", _bicycle("fwheel_compound", 3, True)),
 ]
 
-METHODS = ("damped sinusoid", "moi --no-discover", "moi")
+#: a phone's gyro (phyphox's CSV export) on a racquet hung by its butt: the authors' masses and pivot distance
+RACQUET = ROOT.parent / "shared" / "real" / "userdata" / "phyphox_racquet_x_14-02-08"
+RACQUET_RIG = Rig(kind="compound", mass=0.285 + 0.17228, com_distance=0.413, g=9.81, declared=("viscous",))
+
+
+def racquet_windows() -> list[tuple[float, float]]:
+    """The authors' windows (s of the recording's clock), the later of two that overlap left out."""
+    with open(RACQUET / "meta" / "segments.csv", encoding="utf-8") as fh:
+        rows = [(float(r["start"]), float(r["end"])) for r in csv.DictReader(fh, skipinitialspace=True)]
+    kept: list[tuple[float, float]] = []
+    for a, b in sorted(rows):
+        if not kept or a >= kept[-1][1]:
+            kept.append((a, b))
+    return kept
+
+
+if RACQUET.is_dir():
+    SETS.append(("racquet, phone gyro (phyphox)", [(f"racquet:{a}:{b}", "racquet") for a, b in racquet_windows()]))
+
+
+def load_trace(ref: str) -> Trace:
+    """A release: a file in the repo, or ``racquet:START:END``, the racquet's gyro x rate cut to that window."""
+    if not ref.startswith("racquet:"):
+        return load_source(ROOT / ref)
+    _, a, b = ref.split(":")
+    with open(RACQUET / "Raw Data.csv", encoding="utf-8") as fh:
+        rows = np.array([[float(r[0]), float(r[1])] for r in list(csv.reader(fh))[1:]])
+    cut = rows[(rows[:, 0] >= float(a)) & (rows[:, 0] <= float(b))]
+    return Trace(cut[:, 0] - cut[0, 0], cut[:, 1], source=f"racquet {a}–{b} s", quantity="rate")
+
+
+def load_rig(ref: str) -> Rig:
+    return RACQUET_RIG if ref == "racquet" else read_rig(ROOT / ref)
+
+
+METHODS = ("damped sinusoid", "moi --no-discover", "moi, one release", "moi, joint")
 
 
 @dataclass(frozen=True)
@@ -80,10 +126,10 @@ def _failed(exc: Exception) -> Estimate:
     return Estimate(float("nan"), float("nan"), f"error: {str(exc).split(': ', 1)[-1][:50]}")
 
 
-def moi_alone(trace_file: Path, rig_file: Path) -> Estimate:
-    """``moi identify FILE --no-discover``."""
+def moi_alone(trace_file: str, rig_file: str, discover: bool = True) -> Estimate:
+    """``moi identify FILE`` (``--no-discover`` without ``discover``)."""
     try:
-        res = identify(load_source(trace_file), read_rig(rig_file), Options(discover=False))
+        res = identify(load_trace(trace_file), load_rig(rig_file), Options(discover=discover))
     except MeasurementError as exc:
         return _failed(exc)
     return Estimate(res.omega_n, res.omega_n_u or res.omega_n_std, ", ".join(res.added_effects) or "-")
@@ -92,7 +138,7 @@ def moi_alone(trace_file: Path, rig_file: Path) -> Estimate:
 def moi_together(releases: list[tuple[str, str]]) -> tuple[list[Estimate], str]:
     """``moi identify A B C``: each release's own ω_n ± u, and the set's flags."""
     try:
-        j = identify_releases([load_source(ROOT / f) for f, _ in releases], read_rig(ROOT / releases[0][1]))
+        j = identify_releases([load_trace(f) for f, _ in releases], load_rig(releases[0][1]))
     except MeasurementError as exc:
         return [_failed(exc)] * len(releases), ""
     return [Estimate(r.omega_n, r.omega_n_u or r.omega_n_std, ", ".join(r.added_effects) or "-") for r in j.releases], \
@@ -114,16 +160,18 @@ def measure(sets: list[tuple[str, list[tuple[str, str]]]]) -> list[tuple[str, di
     for name, releases in sets:
         per: dict[str, list[Estimate]] = {m: [] for m in METHODS}
         for trace_file, rig_file in releases:
-            per["damped sinusoid"].append(damped_sinusoid(*reading_columns(ROOT / trace_file)))
-            per["moi --no-discover"].append(moi_alone(ROOT / trace_file, ROOT / rig_file))
-        per["moi"], flags = moi_together(releases)
+            trace = load_trace(trace_file)
+            per["damped sinusoid"].append(damped_sinusoid(trace.t, trace.angle))
+            per["moi --no-discover"].append(moi_alone(trace_file, rig_file, discover=False))
+            per["moi, one release"].append(moi_alone(trace_file, rig_file))
+        per["moi, joint"], flags = moi_together(releases)
         out.append((name, per, flags))
     return out
 
 
 def table(rows: list[tuple[str, dict[str, list[Estimate]], str]]) -> str:
     head = ("| object (releases) | " + " | ".join(f"{m}: spread, worst z" for m in METHODS)
-            + " | moi / sinusoid | moi's added effects; the set's flags |")
+            + " | moi / sinusoid (one release / joint) | moi's added effects (joint); the set's flags |")
     lines = [head, "|" + "---|" * (len(METHODS) + 3)]
     ratios: dict[str, list[float]] = {m: [] for m in METHODS}
     for name, per, flags in rows:
@@ -132,10 +180,11 @@ def table(rows: list[tuple[str, dict[str, list[Estimate]], str]]) -> str:
             s, z = spread(per[m])
             ratios[m].append(s)
             cells.append("–" if not math.isfinite(s) else f"{s:.3f} %, {z:.2f}")
-        s_moi, s_sin = spread(per["moi"])[0], spread(per["damped sinusoid"])[0]
-        ratio = f"{s_moi / s_sin:.2f}" if math.isfinite(s_moi) and s_sin > 0 else "–"
-        notes = "; ".join(e.note for e in per["moi"]) + (f"; **{flags}**" if flags else "")
-        lines.append(f"| {name} ({len(per['moi'])}) | " + " | ".join(cells) + f" | {ratio} | {notes} |")
+        s_sin = spread(per["damped sinusoid"])[0]
+        ratio = " / ".join(f"{s / s_sin:.2f}" if math.isfinite(s) and s_sin > 0 else "–"
+                           for s in (spread(per[m])[0] for m in ("moi, one release", "moi, joint")))
+        notes = "; ".join(e.note for e in per["moi, joint"]) + (f"; **{flags}**" if flags else "")
+        lines.append(f"| {name} ({len(per['moi, joint'])}) | " + " | ".join(cells) + f" | {ratio} | {notes} |")
     med = []
     for m in METHODS:
         finite = [s for s in ratios[m] if math.isfinite(s)]
@@ -144,13 +193,37 @@ def table(rows: list[tuple[str, dict[str, list[Estimate]], str]]) -> str:
     return "\n".join(lines)
 
 
+def coverage(rows: list[tuple[str, dict[str, list[Estimate]], str]], method: str) -> tuple[int, int, float]:
+    """(pairs of releases of one object within 2 combined u, pairs, the worst |Δω_n|/√(u_i² + u_j²))."""
+    within = total = 0
+    worst = 0.0
+    for _, per, _ in rows:
+        for a, b in itertools.combinations(per[method], 2):
+            z = abs(a.omega_n - b.omega_n) / math.hypot(a.u, b.u)
+            if not math.isfinite(z):
+                continue
+            total += 1
+            within += z <= 2.0
+            worst = max(worst, z)
+    return within, total, worst
+
+
+def coverage_lines(rows: list[tuple[str, dict[str, list[Estimate]], str]]) -> str:
+    lines = ["coverage: pairs of releases of one object within 2 combined u (|Δω_n| ≤ 2·√(u_i² + u_j²))"]
+    for m in METHODS:
+        within, total, worst = coverage(rows, m)
+        share = f"{100 * within / total:.0f} %" if total else "–"
+        lines.append(f"  {m:<20} {within}/{total} = {share}; worst pair {worst:.2f} combined u")
+    return "\n".join(lines)
+
+
 def detail(rows: list[tuple[str, dict[str, list[Estimate]], str]]) -> str:
     lines = []
     for name, per, _ in rows:
         lines.append(f"{name}")
-        for i in range(len(per["moi"])):
+        for i in range(len(per["moi, joint"])):
             cells = "  ".join(f"{per[m][i].omega_n:9.5f} ± {per[m][i].u:<8.2g}" for m in METHODS)
-            lines.append(f"  release {i + 1}: {cells}  {per['moi'][i].note}")
+            lines.append(f"  release {i + 1}: {cells}  {per['moi, one release'][i].note} / {per['moi, joint'][i].note}")
     return "\n".join(lines)
 
 
@@ -164,6 +237,8 @@ def main(argv: list[str] | None = None) -> None:
     print(detail(rows))
     print()
     print(table(rows))
+    print()
+    print(coverage_lines(rows))
 
 
 if __name__ == "__main__":

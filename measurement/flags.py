@@ -4,6 +4,20 @@ A flag is a short lower-case name in ``IdentificationResult.flags`` (and so in
 the JSON, the MQTT payload and, as a bit, in the Modbus register ``flags``).
 Whoever raises a flag uses the constant below; the Modbus map gives every
 flag of this table a bit (a test fails when one is missing).
+
+Each flag is graded by what its condition does to the answer (``GRADES``):
+
+* **warning**: the condition may move ω_n or J by more than the uncertainty
+  the result states (the fit did not follow the swing, the calibration is
+  stale, the angle's scale rests on the swing itself, the releases of one
+  object lie beyond each other's u). A recipe may treat it as INVALID.
+* **information**: the condition describes the record or its residual, and
+  whatever it does to ω_n is already in the stated u (the record's halves
+  and rival models are in the model-form term, a coloured residual in the
+  noise model, glitches left out or down-weighted). It is kept in the result
+  and the report, and is never a reason to invalidate a part by default: a
+  flag that fires on most real records and invalidates them teaches the
+  operator to ignore flags.
 """
 
 from __future__ import annotations
@@ -90,6 +104,61 @@ FLAGS: dict[str, str] = {
 }
 
 
+#: what a flag's condition does to the answer (module doc)
+WARNING, INFORMATION = "warning", "information"
+
+#: flag → its grade: WARNING where the condition may move ω_n or J beyond the stated u
+GRADES: dict[str, str] = {
+    UNMODELED_RESIDUAL: INFORMATION,  # what it does to ω_n is the halves' and the rivals' term of u
+    OUTLIERS_REMOVED: INFORMATION,
+    PARAMETER_AT_BOUND: INFORMATION,
+    FIT_NOT_CONVERGED: WARNING,
+    CORRELATED_RESIDUAL: INFORMATION,  # σ and BIC use the fitted noise model
+    OUTLIERS_DOWNWEIGHTED: INFORMATION,
+    WINDOW_CUT_AT_GAP: INFORMATION,
+    ANGLE_UNWRAPPED: INFORMATION,
+    SENSOR_SCALE_FITTED: WARNING,  # ω_n at the nominal scale differs, and that difference is not in u
+    HALVES_DISAGREE: INFORMATION,  # their scatter is in u
+    MODEL_AMBIGUOUS: INFORMATION,  # the rivals lie within the expanded u
+    RELEASES_DISAGREE: WARNING,  # one release's u does not reach the others
+    ENCODER_ERRORS: INFORMATION,
+    CAMERA_POSE: INFORMATION,  # the angles were corrected
+    MARKER_LOST: INFORMATION,
+    DROPPED_FRAMES: INFORMATION,
+    CORRUPT_FRAME: INFORMATION,
+    CAMERA_PERSPECTIVE: WARNING,  # the angle keeps a scale error that changes with the angle, not in u
+    CAPTURE_SLOWED: INFORMATION,
+    NEGATIVE_INERTIA: WARNING,
+    CALIBRATION_DUE: WARNING,
+    TENSOR_INCONSISTENT: WARNING,
+    TENSOR_UNPHYSICAL: WARNING,
+    ORIENTATION_EXCLUDED: INFORMATION,  # the tensor rests on the others, with their uncertainty
+}
+
+#: the flags graded WARNING, in the table's order
+WARNINGS: tuple[str, ...] = tuple(f for f in FLAGS if GRADES[f] == WARNING)
+
+
 def describe(flag: str) -> str:
     """The meaning of ``flag`` ("" for a flag outside the table)."""
     return FLAGS.get(flag, "")
+
+
+def grade(flag: str) -> str:
+    """``flag``'s grade (WARNING or INFORMATION; a flag outside the table is a WARNING: nothing says it is not)."""
+    return GRADES.get(flag, WARNING)
+
+
+def warnings(flags: tuple[str, ...] | list[str]) -> tuple[str, ...]:
+    """The warnings among ``flags``, in their order."""
+    return tuple(f for f in flags if grade(f) == WARNING)
+
+
+def report_line(flags: tuple[str, ...] | list[str]) -> str:
+    """The report's flag line: the warnings first, then what is information."""
+    if not flags:
+        return "[[Flags]] none"
+    warned = warnings(flags)
+    told = [f for f in flags if f not in warned]
+    return (f"[[Flags]] warnings: {', '.join(warned) or 'none'}"
+            + (f"; information: {', '.join(told)}" if told else ""))

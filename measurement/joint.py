@@ -111,6 +111,7 @@ class JointResult:
             "baseline": {"effects": list(declared), "omega_n": [_num(r.baseline.omega_n) for r in self.releases]},
             "consistency": _jsonable(self.consistency),
             "flags": list(self.flags),
+            "warnings": list(F.warnings(self.flags)),
             "releases": [r.to_dict() for r in self.releases],
         }
 
@@ -192,7 +193,7 @@ class JointResult:
             a, b = c["own_pairwise_releases"]
             L.append(f"    as each release reports it alone, {a} and {b} are {c['own_pairwise_max']:.1f} u apart "
                      f"(more than {OWN_PAIR_Z:g}: flag releases_disagree)")
-        L.append(f"[[Flags]] {', '.join(self.flags) if self.flags else 'none'}")
+        L.append(F.report_line(self.flags))
         return "\n".join(L)
 
 
@@ -219,7 +220,9 @@ def _shared_effects(results: Sequence[IdentificationResult], rig: Rig) -> tuple[
 
 def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options | None = None) -> JointResult:
     """Identify several releases of one object on ``rig`` jointly (see the module doc); options: ``Options()``."""
-    options = Options() if options is None else options
+    # each release enters with its discovered model: the joint fit weighs the laws the releases found, and a
+    # release's headline read from its declared model (identification.focus) is for that release alone
+    options = replace(Options() if options is None else options, focused=False)
     if len(traces) < 2:
         raise InvalidInput(f"a joint identification needs at least 2 releases, got {len(traces)}")
     results, _ = laws_of_the_object([identify(tr, rig, options) for tr in traces], traces, rig, options)

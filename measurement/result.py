@@ -22,6 +22,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from . import flags as F
 from .errors import ResultSchemaError
 from .flags import FIT_NOT_CONVERGED
 from .periods import Periods
@@ -54,6 +55,9 @@ def _jsonable(v: Any) -> Any:
         return [_jsonable(x) for x in v.tolist()]
     return _num(v)
 
+
+#: combined u of ω_n over the fit's σ beyond which the report states ω_n with u on a line of its own
+WIDER = 2.0
 
 #: two-sided p-value below which the halves' ω_n disagree (the model does not hold across the record)
 DISAGREE_P = 0.01
@@ -348,6 +352,10 @@ class IdentificationResult:
     measures: str = "angle"
     #: the small-swing period, the period at the record's amplitude and as counted, g (None: not computed)
     periods: Periods | None = None
+    #: the model ω_n (and J) is read from: "discovered" (the final model, ``effects``) or "declared" (the
+    #: declared model, where its ω_n is the more accurate: ``identification.focus``), and its effects
+    omega_n_from: str = "discovered"
+    omega_n_effects: tuple[str, ...] = ()
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -404,6 +412,7 @@ class IdentificationResult:
             "error_reduction": _num(self.error_reduction),
             "statistics": {k: _num(v) for k, v in self.statistics.items()},
             "flags": list(self.flags),
+            "warnings": list(F.warnings(self.flags)),
             "baseline": self.baseline.to_dict(),
             "steps": [s.to_dict() for s in self.steps],
             "diagnostics": {k: _num(v) for k, v in self.diagnostics.as_dict().items()},
@@ -413,6 +422,8 @@ class IdentificationResult:
             "sensor_calibrated": self.sensor_calibrated,
             "measures": self.measures,
             "periods": None if self.periods is None else self.periods.to_dict(),
+            "omega_n_from": self.omega_n_from,
+            "omega_n_effects": list(self.omega_n_effects or self.effects),
         }
         if include_arrays:
             d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
@@ -423,7 +434,7 @@ class IdentificationResult:
         """Read back ``to_dict`` of this schema (``SCHEMA_VERSION``; with ``arrays`` when it holds them).
 
         The keys ``to_dict`` derives (J_U, coverage_factor, J_object_u and _U, J_object_axis_u and _U,
-        error_reduction) are the properties that compute them; keys beyond the result's (a payload's
+        error_reduction, warnings) are the properties that compute them; keys beyond the result's (a payload's
         envelope) are not read. Raises ResultSchemaError for a result of another schema.
         """
         if d.get("schema") != SCHEMA_VERSION:
@@ -444,6 +455,8 @@ class IdentificationResult:
             window=dict(d["window"]), acquisition=dict(d["acquisition"]), sensor_calibrated=d["sensor_calibrated"],
             measures=d["measures"],
             periods=None if d.get("periods") is None else Periods.from_dict(d["periods"]),
+            omega_n_from=d.get("omega_n_from", "discovered"),
+            omega_n_effects=tuple(d.get("omega_n_effects") or d["effects"]),
             model_form=ModelForm.from_dict(d["model_form"]),
             uncertainty_budget={k: Budget.from_dict(b) for k, b in d["uncertainty_budget"].items()},
             arrays={k: np.asarray(v, dtype=float) for k, v in (d.get("arrays") or {}).items()},
@@ -484,10 +497,20 @@ class IdentificationResult:
                  f"  (f_n = {self.omega_n / (2 * math.pi):.6g} Hz{cal})")
         if self.periods is not None:
             L.extend(self.periods.lines())
+        if self.omega_n_from != "discovered":
+            L.append(f"    ω_n from     = the {self.omega_n_from} model ({', '.join(self.omega_n_effects)}): its ω_n is "
+                     "the more accurate (the discovered model's is a rival in u)")
+        if self.omega_n_u is not None and self.omega_n_u > WIDER * self.omega_n_std:
+            # the fit's σ alone would read as a confident number where the model's form is not settled
+            L.append(f"    ω_n ± u      = {Quantity(self.omega_n, self.omega_n_u, 'rad/s')} (combined u: the fit's σ "
+                     f"is {self.omega_n_u / self.omega_n_std:.3g} times narrower than what the record supports)")
         if self.omega_n_std_model:
             ju = f"; J ± {self.J_u:.2g} kg·m²" if self.J_u is not None else ""
             L.append(f"    model form   = ±{self.omega_n_std_model:.2g} rad/s (halves of the record, rival models)"
                      f" → combined u: ω_n ± {self.omega_n_u:.2g} rad/s{ju}")
+        # one record cannot see what changes between releases; its u does not hold it
+        L.append("    reproducibility: not known from one release (remounting, the pivot settling, a hand-held "
+                 "sensor): not in u; measure ≥ 3 releases, whose joint identification carries their scatter")
         for measurand, budget in self.uncertainty_budget.items():
             L.append(f"[[Uncertainty budget]] {measurand} (GUM; J_std above is the fit's 1σ alone)")
             L.extend(budget_table(budget))
@@ -545,5 +568,5 @@ class IdentificationResult:
                     L.append(f"    {prefix} = {value}")
 
             walk("", self.acquisition)
-        L.append(f"[[Flags]] {', '.join(self.flags) if self.flags else 'none'}")
+        L.append(F.report_line(self.flags))
         return "\n".join(L)

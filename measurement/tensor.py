@@ -524,7 +524,7 @@ class TensorResult:
         else:
             L.append(f"    6 orientations determine the 6 components exactly: nothing checks them (a plan of more axes "
                      f"does); plan condition number {self.condition_number:.3g}")
-        L.append(f"[[Flags]] {', '.join(self.flags) if self.flags else 'none'}")
+        L.append(F.report_line(self.flags))
         for f, why in self.reasons.items():
             L.append(f"    {f}: {why}")
         return "\n".join(L)

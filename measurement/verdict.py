@@ -26,7 +26,8 @@ rig's m, g, S, the clock, the sensor's scale...).
 * ``simple``: OK when LSL ≤ x ≤ USL (shared risk; U is reported, not used).
 
 A result is INVALID before any comparison when it cannot be trusted: a flag
-the recipe names (e.g. ``unmodeled_residual``, ``calibration_due``), no value
+the recipe names (a warning, ``measurement.flags``: e.g. ``fit_not_converged``,
+``calibration_due``; by default none that only describes the residual), no value
 (a rig without k), its standard uncertainty above the recipe's limit, fewer
 swings than the recipe asks for, or an expanded uncertainty U above the
 recipe's ``max_uncertainty_ratio`` of the half-tolerance (the test uncertainty
@@ -81,8 +82,9 @@ RULES = ("guard_band", "simple")
 #: what a result's ``J_*`` key means (the recipe's ``quantity``)
 QUANTITIES = ("J", "J_object", "J_object_axis")
 
-#: flags that make a result INVALID unless a recipe says otherwise
-DEFAULT_INVALID_FLAGS = (F.UNMODELED_RESIDUAL, F.FIT_NOT_CONVERGED, F.CALIBRATION_DUE, F.NEGATIVE_INERTIA)
+#: flags that make a result INVALID unless a recipe says otherwise: warnings only (``flags.GRADES``), never a
+#: flag that describes the residual while its effect on ω_n is in the stated u
+DEFAULT_INVALID_FLAGS = (F.FIT_NOT_CONVERGED, F.CALIBRATION_DUE, F.NEGATIVE_INERTIA)
 
 
 class VerdictError(InvalidInput):

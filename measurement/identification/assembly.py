@@ -53,12 +53,16 @@ def _arrays(found: Findings) -> dict[str, np.ndarray]:
     }
 
 
-def _periods(found: Findings, w_u: float, zeta: float) -> Periods | None:
-    final, rig, w = found.final, found.rig, found.omega_n
+def _periods(found: Findings, w: float, w_u: float, zeta: float) -> Periods | None:
+    final, rig = found.final, found.rig
     if not (math.isfinite(w) and w > 0):
         return None
     amplitude = swing_amplitude(final)
     at = omega_at_amplitude(final, amplitude)
+    if at is not None:
+        # the final model's amplitude law, carried to the headline ω_n (the declared model's where it is the
+        # more accurate: its law of amplitude is then the same, no restoring law having been added)
+        at = (at[0] * w / found.omega_n, *at[1:])
     swing = final.fitted - final.value("offset")
     return periods(rig.kind, w, w_u, w if at is None else at[0], amplitude, zeta, final.t, swing,
                    rig.length, rig.length_std)
@@ -66,11 +70,12 @@ def _periods(found: Findings, w_u: float, zeta: float) -> Periods | None:
 
 def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]) -> IdentificationResult:
     """The result of one record: its quantities, uncertainty budgets, flags and sentences (``report``)."""
-    final, rig, trace, form = found.final, found.rig, found.trace, found.form
-    w, ws, w_cal, j = found.omega_n, found.omega_n_std, found.omega_n_view, found.inertias
+    final, rig, trace, head = found.final, found.rig, found.trace, found.headline
+    form = head.form
+    w, ws, w_cal, j = head.omega_n, head.omega_n_std, found.omega_n_view, found.inertias
     w_u = math.sqrt(ws**2 + (w_cal or 0.0) ** 2 + form.u**2)
-    budget = budgets(rig, w, ws, dof=float(final.dof), model=form.u, view=w_cal,
-                     scale_response=omega_n_per_scale(final) if rig.sensor_calibrated else None)
+    budget = budgets(rig, w, ws, dof=float(head.fit.dof), model=form.u, view=w_cal,
+                     scale_response=omega_n_per_scale(head.fit) if rig.sensor_calibrated else None)
     J_u = budget["J"].u if "J" in budget else None
     zeta, zeta_std, amp_ref = damping_ratio(final)
     return IdentificationResult(
@@ -91,5 +96,6 @@ def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]
         baseline=model_summary(found.base, rig), steps=found.steps, diagnostics=found.diag,
         structure=structure, window=_window(found), acquisition={k: v for k, v in trace.meta.items() if k != "truth"},
         sensor_calibrated=rig.sensor_calibrated, measures=rig.measures, arrays=_arrays(found),
-        periods=_periods(found, w_u, zeta),
+        periods=_periods(found, w, w_u, zeta),
+        omega_n_from=head.chosen, omega_n_effects=head.effects,
     )

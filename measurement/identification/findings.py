@@ -13,6 +13,7 @@ from ..residual import Diagnostics
 from ..result import DiscoveryStep, ModelForm, SegmentCheck
 from ..rig import Rig
 from ..trace import Trace
+from .focus import Focus
 from .preparation import Prepared
 from .quantities import Inertias
 from .rivals import LawRival, Withdrawn
@@ -55,6 +56,13 @@ class Findings:
     nfev: int
     bic_margin: float
     rival_laws: tuple[tuple[str, float, tuple[str, ...], str], ...] = ()
+    #: the model the headline ω_n is read from (``focus``); None: the final model
+    focus: Focus | None = None
+
+    @property
+    def headline(self) -> Focus:
+        """The model of the headline ω_n and J, and its model form."""
+        return self.focus if self.focus is not None else Focus(self.final, self.form, "discovered")
 
     @property
     def omega_n(self) -> float:

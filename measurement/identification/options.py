@@ -24,6 +24,8 @@ class Options:
     (``measurement.object_laws``): (law, the release's ω_n with it in rad/s, that
     model's effects, why in words); each is neither offered nor kept, and its
     ω_n is a rival carried whole into ω_n's uncertainty.
+    focused: read the headline ω_n from the declared model where its ω_n is the more accurate
+    (``identification.focus``; False: always from the discovered model).
     """
 
     discover: bool = True
@@ -35,3 +37,4 @@ class Options:
     gap_periods: float = 1.5
     max_rounds: int = 5
     rival_laws: tuple[tuple[str, float, tuple[str, ...], str], ...] = ()
+    focused: bool = True

@@ -21,6 +21,7 @@ from .assembly import assemble
 from .discovery import Move, discover
 from .findings import Findings
 from .flags import follows_swing, leftover, raise_flags
+from .focus import DISCOVERED, Focus, focus
 from .options import Options
 from .outliers import departures, remove_outliers, without_wild
 from .preparation import Prepared, prepare
@@ -200,21 +201,24 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     g = guard(run, options, diagnosis)
     final = g.final
     follows, follow_ratio = follows_swing(final, prep.noise)
-    w, ws = final.value("omega_n"), final.stdev("omega_n")
-    # a sensor calibrated from the record itself carries its own uncertainty into ω_n, beside the fit's
-    w_cal = omega_n_std_view(final, view) if view is not None else None
     # the model's form: does it hold across the record, and do rival models the data cannot
     # tell apart give another ω_n (consistency.py, rivals.py)
     segments = check_segments(final, prep.noise)
     law, spent = law_rival(final, run.moves, prep, rig, run.f_scale) if run.withdrawn is None else (None, 0)
     form = model_form(final, segments, run.steps, run.aliases, run.withdrawn, law, options.bic_margin,
                       options.rival_laws)
+    # the headline ω_n from the model whose ω_n is the more accurate (focus.py)
+    head = (focus(final, g.base, form, prep.noise, run.aliases, follows_swing(g.base, prep.noise)[0])
+            if options.focused else Focus(final, form, DISCOVERED))
+    w, ws = head.omega_n, head.omega_n_std
+    # a sensor calibrated from the record itself carries its own uncertainty into ω_n, beside the fit's
+    w_cal = omega_n_std_view(head.fit, view) if view is not None else None
     found = Findings(
         trace=trace, rig=rig, prep=prep, declared=declared, base=g.base, final=final, steps=tuple(run.steps),
         withdrawn=run.withdrawn, law=law, segments=segments, form=form, diag=g.diag, n_outliers=g.n_outliers,
         slipped_from=g.slipped_from, beaten_by=g.beaten_by, follows=follows, follow_ratio=follow_ratio,
-        view=view, omega_n_view=w_cal, inertias=inertias(rig, w, ws, w_cal, form.u),
+        view=view, omega_n_view=w_cal, inertias=inertias(rig, w, ws, w_cal, head.form.u),
         nominal=omega_n_at_nominal_scale(final), nfev=run.nfev + g.nfev + spent, bic_margin=options.bic_margin,
-        rival_laws=options.rival_laws)
+        rival_laws=options.rival_laws, focus=head)
     left = leftover(found)
     return assemble(found, raise_flags(found, left), describe(found, left))

@@ -16,6 +16,7 @@ from ..trace import READING_UNITS
 from .discovery import SCREEN_TRUST
 from .findings import Findings
 from .flags import FOLLOW_LIMIT, Leftover
+from .focus import DECLARED
 from .quantities import omega_at_amplitude
 from .rivals import LAW_SIGMA
 
@@ -126,8 +127,26 @@ def _sensor(found: Findings) -> list[str]:
     return out
 
 
+def _focus(found: Findings) -> list[str]:
+    """Which model the headline ω_n is read from, where the declared and the discovered one were weighed."""
+    head = found.headline
+    if head.mse is None:
+        return []
+    mse_d, mse_f = (math.sqrt(m) for m in head.mse)
+    w_d, w_f = found.base.value("omega_n"), found.final.value("omega_n")
+    if head.chosen == DECLARED:
+        return [f"ω_n is read from the declared model ({', '.join(head.effects)}), {w_d:.6g} rad/s: its ω_n is the more "
+                f"accurate (estimated root mean squared error {mse_d:.2g} rad/s, its halves and its distance to the "
+                f"discovered model's included, against {mse_f:.2g}); the discovered model's ω_n {w_f:.6g} rad/s "
+                f"({w_f - w_d:+.2g}) is its rival in omega_n_u"]
+    return [f"the declared model's ω_n {w_d:.6g} rad/s would be the less accurate (estimated root mean squared "
+            f"error {mse_d:.2g} rad/s against the discovered model's {mse_f:.2g}): ω_n is the discovered model's"]
+
+
 def _measurand(found: Findings) -> list[str]:
     """Where a restoring law is kept: ω_n is its small-swing limit; the swing's own frequency beside it."""
+    if found.headline.chosen == DECLARED:
+        return []
     amplitude = swing_amplitude(found.final)
     at = omega_at_amplitude(found.final, amplitude)
     if at is None:
@@ -142,4 +161,4 @@ def _measurand(found: Findings) -> list[str]:
 def describe(found: Findings, left: Leftover) -> tuple[str, ...]:
     """The report's sentences on the residual and every check, in the order a reader needs them."""
     return tuple(found.diag.describe(READING_UNITS[found.rig.measures]) + [_halves(found.segments)] + _guards(found) + _rivals(found) + _left(left)
-                 + _sensor(found) + _measurand(found))
+                 + _sensor(found) + _focus(found) + _measurand(found))

@@ -232,4 +232,22 @@ def model_form(final: ModelFit, segments: SegmentCheck | None, steps: Sequence[D
         rivals += (Competitor(f"{name} kept (not a law of the object: its releases do not agree on it)",
                               0.0, 1.0, w_law, w_law - w, effects),)
         u_rivals = math.hypot(u_rivals, w_law - w)
-    return ModelForm(segments, rivals, u_rivals)
+    return ModelForm(segments, rivals, covering(u_rivals, rivals, final.stdev("omega_n")))
+
+
+#: coverage factor within whose expanded uncertainty every rival of an ambiguous ω_n lies
+COVER_K = 2.0
+
+
+def covering(u_rivals: float, rivals: Sequence[Competitor], omega_n_std: float) -> float:
+    """The rivals' term of u (rad/s), widened where they make ω_n ambiguous so that each lies within COVER_K u.
+
+    A rival's BIC weight spreads ω_n by √w·|Δ| (Burnham and Anderson's model-averaged variance). Where
+    that spread is beyond the fit's σ (``ModelForm.ambiguous``: the data do not decide between the
+    models), a rival of small weight far away is still a model the data allow: its ω_n is a value the
+    answer may be, so the answer's expanded uncertainty must reach it, not a confident number many of
+    its u away from a model it names.
+    """
+    if u_rivals <= omega_n_std or not rivals:
+        return u_rivals
+    return max(u_rivals, max(abs(c.delta) for c in rivals) / COVER_K)

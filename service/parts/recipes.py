@@ -24,7 +24,7 @@ directory (``[recipes] directory``)::
     coverage_factor = 2.0         # U = k·u_c
 
     [quality]                     # optional: when a result is INVALID (for a tensor set: which releases count)
-    invalid_flags = ["unmodeled_residual", "fit_not_converged", "calibration_due", "negative_inertia"]
+    invalid_flags = ["fit_not_converged", "calibration_due", "negative_inertia"]
     max_J_std = 5.0e-6            # largest 1σ of the quantity, kg·m²   (or max_J_std_percent)
     min_swings = 3.0              # fewest full swings in the fitted window
     consistency_limit = 3.0       # |z| above which releases disagree

@@ -125,7 +125,8 @@ def result_payload(result: Mapping[str, Any], *, uuid: str, seq: int, device_id:
 _NEXT_SCHEMA: dict[int, dict[str, Any]] = {
     4: {"measures": "angle"},  # schema 5: what the sensor read; before it, always the angle
     5: {},  # schema 6: keys added inside model_form.segments only (t_free, ...), which from_dict defaults
-    6: {"periods": None},  # schema 7: the periods and g; before it, none computed
+    6: {"periods": None},  # schema 7: the periods and g, none computed before; warnings, omega_n_from and
+    #                         omega_n_effects, which from_dict derives from the flags and effects
 }
 
 

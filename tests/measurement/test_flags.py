@@ -13,6 +13,25 @@ def test_every_flag_has_a_description_and_a_bit():
     assert len(bits) == len(set(bits)) and R.FLAG_OTHER_BIT not in bits
 
 
+def test_every_flag_is_graded_and_the_default_and_example_rules_invalidate_by_warnings_only():
+    import tomllib
+    from pathlib import Path
+
+    from measurement.verdict import DEFAULT_INVALID_FLAGS
+
+    assert set(F.GRADES) == set(F.FLAGS) and set(F.GRADES.values()) == {F.WARNING, F.INFORMATION}
+    # what the residual holds is information: its effect on ω_n is in u (the halves, the rivals)
+    for described in (F.UNMODELED_RESIDUAL, F.CORRELATED_RESIDUAL, F.HALVES_DISAGREE, F.MODEL_AMBIGUOUS,
+                      F.PARAMETER_AT_BOUND, F.OUTLIERS_REMOVED):
+        assert F.grade(described) == F.INFORMATION
+    assert F.grade(F.FIT_NOT_CONVERGED) == F.WARNING and F.grade("a flag no table knows") == F.WARNING
+    assert set(DEFAULT_INVALID_FLAGS) <= set(F.WARNINGS)
+    for recipe in (Path(__file__).resolve().parents[2] / "examples" / "recipes").glob("*.toml"):
+        named = tomllib.loads(recipe.read_text(encoding="utf-8")).get("quality", {}).get("invalid_flags", [])
+        assert set(named) <= set(F.WARNINGS), (recipe.name, named)
+    assert F.warnings(["correlated_residual", "sensor_scale_fitted", "halves_disagree"]) == ("sensor_scale_fitted",)
+
+
 def test_every_library_effect_has_a_bit():
     assert set(EFFECTS) <= set(R.EFFECT_BITS)
     bits = list(R.EFFECT_BITS.values())

@@ -170,3 +170,19 @@ def test_a_transient_of_the_release_does_not_hide_a_model_that_does_not_hold(tra
     # the first half refitted from its first turning point after a quarter period: the release left out
     assert seg is not None and seg.t_free is not None and 0.6 < seg.t_free < 0.8
     assert any("without its first half-swing" in s for s in r.structure)
+
+
+def test_an_ambiguous_omega_n_reaches_every_rival_within_its_expanded_uncertainty():
+    from measurement.identification.rivals import COVER_K, covering
+    from measurement.result import Competitor
+
+    far = Competitor("dahl added", 3.0, 0.02, 5.80, -0.030)
+    near = Competitor("drift added", -1.0, 0.6, 5.829, -0.001)
+    # weighted, the far rival adds √0.02·0.030 = 0.0042: beyond the fit's σ, so ω_n is ambiguous and
+    # the far rival, a model the data allow, must lie within k·u
+    weighted = math.sqrt(0.02 * 0.030**2 + 0.6 * 0.001**2)
+    u = covering(weighted, (far, near), omega_n_std=0.002)
+    assert u == pytest.approx(0.030 / COVER_K) and u > weighted
+    # rivals whose spread the fit's σ already holds leave the term as it is (no flag, no widening)
+    assert covering(0.001, (far,), omega_n_std=0.002) == 0.001
+    assert covering(0.0, (), omega_n_std=0.002) == 0.0

@@ -51,8 +51,13 @@ def test_specification_errors_say_what_was_expected():
 def test_a_release_is_invalid_for_a_recipe_flag_a_large_std_or_too_few_swings():
     rules = QualityRules(max_std=5e-6, min_swings=3)
     assert judge_release(Reading(0.0125, 1e-6, 0.0, (), 20.0), SPEC, rules).verdict == OK
-    d = judge_release(Reading(0.0125, 1e-6, 0.0, ("unmodeled_residual", "outliers_removed"), 20.0), SPEC, rules)
-    assert d.verdict == INVALID and d.reasons == ("flag unmodeled_residual",)
+    d = judge_release(Reading(0.0125, 1e-6, 0.0, ("fit_not_converged", "outliers_removed"), 20.0), SPEC, rules)
+    assert d.verdict == INVALID and d.reasons == ("flag fit_not_converged",)
+    # a flag that describes the residual invalidates nothing by default; a recipe may name it
+    described = Reading(0.0125, 1e-6, 0.0, ("unmodeled_residual", "halves_disagree", "model_ambiguous"), 20.0)
+    assert judge_release(described, SPEC, rules).verdict == OK
+    strict = QualityRules(invalid_flags=("unmodeled_residual",))
+    assert judge_release(described, SPEC, strict).reasons == ("flag unmodeled_residual",)
     d = judge_release(Reading(0.0125, 6e-6, 0.0, (), 20.0), SPEC, rules)
     assert d.verdict == INVALID and "above the limit" in d.reasons[0]
     d = judge_release(Reading(0.0125, 1e-6, 0.0, (), 2.5), SPEC, rules)
@@ -96,14 +101,14 @@ def test_two_disagreeing_releases_make_the_part_invalid():
 
 
 def test_invalid_releases_are_excluded_and_too_few_usable_make_the_part_invalid():
-    readings = [Reading(0.0125, 1e-6, flags=("unmodeled_residual",)), Reading(0.012501, 1e-6),
+    readings = [Reading(0.0125, 1e-6, flags=("fit_not_converged",)), Reading(0.012501, 1e-6),
                 Reading(0.012499, 1e-6)]
     part = combine(readings, SPEC, QualityRules(min_valid_releases=2))
     assert part.verdict == OK and part.used == (1, 2)
-    assert part.excluded == ({"index": 0, "reason": "invalid: flag unmodeled_residual"},)
+    assert part.excluded == ({"index": 0, "reason": "invalid: flag fit_not_converged"},)
     part = combine(readings, SPEC, QualityRules(min_valid_releases=3))
     assert part.verdict == INVALID and "2 usable of 3 releases" in part.decision.reasons[0]
-    every = [Reading(0.0125, 1e-6, flags=("unmodeled_residual",))] * 3
+    every = [Reading(0.0125, 1e-6, flags=("fit_not_converged",))] * 3
     assert combine(every, SPEC, QualityRules()).verdict == INVALID
 
 
@@ -120,7 +125,7 @@ def test_a_release_whose_model_does_not_hold_counts_for_less():
 
 
 def test_the_part_value_is_the_joint_identification_of_its_usable_releases():
-    readings = [Reading(0.012500, 1e-6), Reading(0.012502, 1e-6, flags=("unmodeled_residual",)), Reading(0.012501, 1e-6)]
+    readings = [Reading(0.012500, 1e-6), Reading(0.012502, 1e-6, flags=("fit_not_converged",)), Reading(0.012501, 1e-6)]
     asked = []
 
     def joint_of(used):

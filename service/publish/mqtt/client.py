@@ -54,7 +54,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
-from measurement.verdict import DEFAULT_INVALID_FLAGS
+from measurement import flags as F
 from service.core import vocabulary as V
 from service.errors import ConfigError
 from service.logs import Throttle
@@ -577,9 +577,9 @@ def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
             ("verdict", "Part verdict", "{{ value_json.verdict or ('pending' if value_json.recipe else 'none') }}")):
         entity("sensor", key, name=name, state_topic=topics.last_result, value_template=template)
     for flag in FLAG_BITS:
-        # "problem" only for the flags that make a result invalid; the others are information
+        # "problem" only for the warnings (the condition may move J beyond its u); the others are information
         entity("binary_sensor", f"flag_{flag}", flag, name=f"Flag {flag.replace('_', ' ')}",
-               device_class="problem" if flag in DEFAULT_INVALID_FLAGS else None, state_topic=topics.last_result,
+               device_class="problem" if F.grade(flag) == F.WARNING else None, state_topic=topics.last_result,
                value_template="{{ 'ON' if '" + flag + "' in value_json.flags else 'OFF' }}")
     entity("button", "measure", name="Measure", command_topic=topics.cmd_measure, payload_press="{}")
     entity("button", "abort", name="Abort / acknowledge fault", command_topic=topics.cmd_abort, payload_press="{}")

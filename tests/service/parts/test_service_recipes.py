@@ -65,6 +65,9 @@ def recipe_dir(tmp_path) -> Path:
     write(d / "check.toml", recipe("check-disc", 12, J_TRUE, tolerance_percent=5.0, releases=1)
           + f"[check_standard]\nreference = {J_TRUE * 1.01!r}\nreference_U = 2e-5\nname = \"disc CS-1\"\n")
     write(d / "after.toml", recipe("rotor-after", 13, J_TRUE, tolerance_percent=5.0, releases=1))
+    # information flags invalidate nothing by default; a recipe may still name one
+    write(d / "rub.toml", recipe("rotor-rub", 14, 0.0130, tolerance_percent=1.0, releases=1)
+          + '[quality]\ninvalid_flags = ["unmodeled_residual"]\n')
     return d
 
 
@@ -350,10 +353,10 @@ def test_a_release_under_a_tensor_recipe_is_not_judged_and_ends_the_open_part(tm
     assert out["recipe"]["name"] == tensor.name and tracker.open_part is None
 
 
-def test_a_part_whose_swing_carries_an_unmodelled_effect_is_invalid(tmp_path, recipe_dir, appliance_factory):
+def test_a_recipe_that_names_an_information_flag_invalidates_by_it(tmp_path, recipe_dir, appliance_factory):
     # the part rubs (Coulomb friction) but the model may not learn it: the residual keeps the structure
     doc = appliance_doc(tmp_path / "state", time_scale=10.0,
-                        recipes={"directory": str(recipe_dir), "active": "rotor-big"},
+                        recipes={"directory": str(recipe_dir), "active": "rotor-rub"},
                         identification={"discover": False},
                         simulation={"effects": {"viscous": {"c": 1.5e-4}, "coulomb": {"Tc": 4e-4}}})
     app = appliance_factory(doc)
@@ -372,7 +375,7 @@ def test_a_part_needs_all_its_releases_unless_the_recipe_says_otherwise(tmp_path
     two = load_recipe(write(tmp_path / "two.toml", recipe("two", 1, J_TRUE, tolerance_percent=1.0, releases=2)))
     assert two.quality.min_valid_releases == 2 and two.spec is not None
     good = Reading(J_TRUE, 1e-7)
-    bad = Reading(J_TRUE, 1e-7, flags=("unmodeled_residual",))
+    bad = Reading(J_TRUE, 1e-7, flags=("fit_not_converged",))
     part = combine([good, bad], two.spec, two.quality)
     assert part.verdict == "INVALID" and part.excluded[0]["index"] == 1  # one INVALID release: no pass, said
     lenient = load_recipe(write(tmp_path / "one.toml", recipe("one", 2, J_TRUE, tolerance_percent=1.0, releases=2)

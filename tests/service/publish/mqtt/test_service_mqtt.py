@@ -126,8 +126,9 @@ def test_home_assistant_discovery_is_retained_and_names_the_result_topic(tmp_pat
         configs = {t: json.loads(p) for t, p, _ in late.messages}
         assert "homeassistant/sensor/d1/J_object/config" in configs
         assert configs["homeassistant/button/d1/abort/config"]["command_topic"] == "moi/d1/cmd/abort"
-        assert configs["homeassistant/binary_sensor/d1/unmodeled_residual/config"]["device_class"] == "problem"
-        assert "device_class" not in configs["homeassistant/binary_sensor/d1/outliers_removed/config"]
+        assert configs["homeassistant/binary_sensor/d1/fit_not_converged/config"]["device_class"] == "problem"
+        for information in ("outliers_removed", "unmodeled_residual"):
+            assert "device_class" not in configs[f"homeassistant/binary_sensor/d1/{information}/config"]
         flags = [t for t, _, _ in late.messages if t.startswith("homeassistant/binary_sensor/")]
         assert "homeassistant/binary_sensor/d1/unmodeled_residual/config" in flags
         verdict = json.loads({t: p for t, p, _ in late.messages}["homeassistant/sensor/d1/verdict/config"])
