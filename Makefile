@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint lint-fix coverage bench install broker browser ffmpeg node clean pi-check
+.PHONY: demo test test-fast lint lint-fix coverage bench install broker browser ffmpeg systemd node clean pi-check
 
 # pip shows its progress: the first install downloads numpy, scipy, OpenCV and friends
 $(STAMP): pyproject.toml
@@ -47,6 +47,10 @@ browser:
 ffmpeg:
 	@$(SHELL) scripts/component.sh "H.264 video tests" ffmpeg ffmpeg
 
+# the unit file's test runs systemd-analyze verify on it
+systemd:
+	@$(SHELL) scripts/component.sh "unit file check" systemd systemd-analyze
+
 demo: $(STAMP)
 	$(VENV)/bin/moi demo
 
@@ -58,7 +62,7 @@ demo: $(STAMP)
 # without the coverage tracer, for a quick local check.
 test: COVERAGE_FIRST = --cov --cov-report= --cov-fail-under=0
 test: COVERAGE_NEXT = --cov --cov-append --cov-report=
-test test-fast: $(STAMP) broker browser ffmpeg node
+test test-fast: $(STAMP) broker browser ffmpeg systemd node
 	@rm -f .coverage .coverage.*
 	@$(PY) -m pytest -q -n 2 --dist loadfile -m "not clock" $(COVERAGE_FIRST); computations=$$?; \
 	$(PY) -m pytest -q -m clock $(COVERAGE_NEXT); clock=$$?; \

@@ -34,7 +34,7 @@ def test_the_broker_fixture_fails_under_ci_without_mosquitto(monkeypatch):
         conftest._need_mosquitto()
 
 
-@pytest.mark.parametrize("target", ["broker", "browser", "ffmpeg"])
+@pytest.mark.parametrize("target", ["broker", "browser", "ffmpeg", "systemd"])
 def test_the_make_step_of_a_missing_component_fails_under_ci(tmp_path, target):
     make = shutil.which("make")
     assert make is not None, "make is what runs the suite"

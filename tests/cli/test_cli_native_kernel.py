@@ -15,6 +15,7 @@ from measurement.effects import resolve_effects
 from measurement.integrator import Dynamics, use_kernels
 from service.cli import main
 from service.commands import native
+from tests.components import missing
 
 
 @pytest.fixture(scope="module")
@@ -24,7 +25,7 @@ def torsion_native():
         try:
             native.build("torsion")
         except Exception as exc:  # no C compiler or setuptools on this machine: the fallback is all it has
-            pytest.skip(f"no native kernel can be built here: {type(exc).__name__}: {exc}")
+            missing(f"no native kernel can be built here (a C compiler and setuptools): {type(exc).__name__}: {exc}")
     kernels = native.load(("torsion",))
     assert kernels is not None, "the native kernel built loads"
     return kernels
