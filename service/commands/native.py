@@ -32,12 +32,12 @@ import contextlib
 import hashlib
 import importlib.machinery
 import importlib.util
+import json
 import os
 import shutil
 import subprocess
 import sys
 import tempfile
-import json
 import warnings
 from pathlib import Path
 from types import ModuleType
