@@ -73,3 +73,29 @@ def test_uncorrected_yaw_leaves_structure_the_correction_removes():
     assert naive.residual_rms > 10 * fixed.residual_rms
     assert pytest.approx(J_TRUE, rel=1e-4) == fixed.J
     assert fixed.damping["viscous"]["c"].value == pytest.approx(1.5e-4, rel=0.01)
+
+
+def _peak_bytes(minutes: float) -> int:
+    """Peak memory (numpy's allocations, as tracemalloc counts them) of the yaw estimate of a swing this long."""
+    import tracemalloc
+
+    t = np.arange(0.0, 60.0 * minutes, 1 / 60)
+    theta, _ = Pendulum(RIG, J_TRUE, {"viscous": {"c": 2e-5}}).motion(t, 0.2)  # swings to the end of the record
+    x = normalised_from_angle(theta, MARKER, math.radians(3.0)) + np.random.default_rng(3).normal(
+        0.0, PIXEL_NOISE / CAMERA.fx, t.size)
+    tracemalloc.start()
+    try:
+        pose = estimate_yaw(t, x, MARKER)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert pose.estimated and pose.yaw_deg == pytest.approx(3.0, abs=0.05)
+    return peak
+
+
+def test_memory_grows_with_the_samples_not_samples_times_knots():
+    """A record four times as long holds four times the samples and four times the knots: a dense design
+    matrix would take sixteen times the memory (at 8 minutes, 29,000 × 1,400 × 8 bytes: 320 MB, twice)."""
+    short, long = _peak_bytes(2.0), _peak_bytes(8.0)
+    assert long < 6 * short, (short, long)
+    assert long < 60e6, long  # about 1 kB a sample
