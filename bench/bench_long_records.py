@@ -6,15 +6,18 @@ an encoder logged for as long, is identified in bounded memory (goal: peak ≤ 5
 The video: a lightly damped torsion pendulum (viscous, c = 2e-5 N·m·s/rad: it still swings ±0.05 rad after
 30 minutes, so the camera-yaw fit spans all of it, thousands of knots) seen by the edge camera at 320×240
 and 60 frames/s, rendered with the repository's marker renderer (blur σ 1 px, noise σ 2 grey levels) and
-encoded by FFmpeg (libx264, CRF 18). The trace: a real-like record that is mostly rest: a swing stopped dead
-by dry friction after about 70 s, then 26 minutes of the pendulum at rest, sampled at 60 Hz with white noise
-(σ 2e-4 rad) and timestamp jitter (5 % of the interval), as a CSV (t, angle).
+encoded by FFmpeg (libx264, CRF 18). Two traces of 100,000 rows (CSV, t and angle): the angle the same
+video's tracker reads (at yaw 0, the camera's true one), which is what a user exports; and a real-like
+record that is mostly rest: a swing stopped dead by dry friction after about 70 s, then 26 minutes of the
+pendulum at rest, sampled at 60 Hz with white noise (σ 2e-4 rad) and timestamp jitter (5 % of the
+interval).
 
 Each `moi identify` runs in a child process; its peak resident memory is the child's ``ru_maxrss``
 (``resource.getrusage(RUSAGE_CHILDREN)`` of a fresh process that waits for it alone), its time the wall
-clock, median of ``--repeats`` runs pinned to core 0.
+clock, median of ``--repeats`` runs (default 1: the video's alone takes minutes) pinned to core 0.
 
-    .venv/bin/python bench/bench_long_records.py [--minutes 30] [--rows 100000] [--repeats 3] [--keep DIR]
+    .venv/bin/python bench/bench_long_records.py [--minutes 30] [--rows 100000] [--repeats 1] [--keep DIR]
+        [--only video|trace]
 """
 
 from __future__ import annotations
@@ -102,6 +105,17 @@ def real_like_trace(path: pathlib.Path, rows: int) -> pathlib.Path:
     return path
 
 
+def tracked_trace(video: pathlib.Path, camera: pathlib.Path, path: pathlib.Path, rows: int) -> pathlib.Path:
+    """The video's tracked angle, its first ``rows`` samples, as a trace CSV (t, angle)."""
+    from measurement.vision.pipeline import VisionSettings
+    from service.sources.video import video_trace
+
+    trace = video_trace(video, camera, vision=VisionSettings(estimate_yaw=False))
+    np.savetxt(path, np.column_stack([trace.t[:rows] - trace.t[0], trace.angle[:rows]]), delimiter=",",
+               header="t,angle", comments="", fmt="%.7f")
+    return path
+
+
 def identify(args: list[str], repeats: int) -> dict:
     """``moi identify`` in a child pinned to core 0: median time, the largest peak memory, the JSON answer."""
     moi = [sys.executable, "-c", "import sys; from service.cli import main; sys.exit(main(sys.argv[1:]))"]
@@ -132,9 +146,9 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--minutes", type=float, default=30.0)
     p.add_argument("--rows", type=int, default=100_000)
-    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--repeats", type=int, default=1, help="runs of each (the video's takes minutes)")
     p.add_argument("--keep", type=pathlib.Path, help="folder to keep (and reuse) the video and the trace in")
-    p.add_argument("--only", choices=("video", "trace"), help="measure one of the two records")
+    p.add_argument("--only", choices=("video", "trace"), help="the video and its track, or the mostly-at-rest trace")
     a = p.parse_args(argv if argv is not None else [])
     if shutil.which("ffmpeg") is None:
         print("no ffmpeg on PATH: the long video cannot be encoded (make ffmpeg)")
@@ -144,16 +158,21 @@ def main(argv: list[str] | None = None) -> None:
         folder.mkdir(parents=True, exist_ok=True)
         (folder / "rig.toml").write_text(RIG_TOML)
         (folder / "cam.toml").write_text(camera_toml())
+        video = folder / f"long_{a.minutes:g}min.mp4"
+        if a.only != "trace" and not video.exists():
+            t0 = time.perf_counter()
+            render_video(video, a.minutes)
+            print(f"rendered and encoded {a.minutes:g} min ({int(a.minutes * 60 * FPS)} frames, "
+                  f"{video.stat().st_size / 1e6:.1f} MB) in {time.perf_counter() - t0:.0f} s")
         if a.only != "trace":
-            video = folder / f"long_{a.minutes:g}min.mp4"
-            if not video.exists():
-                t0 = time.perf_counter()
-                render_video(video, a.minutes)
-                print(f"rendered and encoded {a.minutes:g} min ({int(a.minutes * 60 * FPS)} frames, "
-                      f"{video.stat().st_size / 1e6:.1f} MB) in {time.perf_counter() - t0:.0f} s")
             report(f"{a.minutes:g}-minute video ({math.floor(a.minutes * 60 * FPS)} frames)",
                    identify([str(video), "--rig", str(folder / "rig.toml"), "--camera", str(folder / "cam.toml")],
                             a.repeats))
+            tracked = folder / f"tracked_{a.rows}rows.csv"
+            if not tracked.exists():
+                tracked_trace(video, folder / "cam.toml", tracked, a.rows)
+            report(f"the video's track, {a.rows}-row trace CSV",
+                   identify([str(tracked), "--rig", str(folder / "rig.toml")], a.repeats))
         if a.only != "video":
             trace = folder / f"long_{a.rows}rows.csv"
             if not trace.exists():
