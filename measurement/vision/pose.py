@@ -121,20 +121,23 @@ class _LeastSquares:
     The normal equations MᵀM (banded: columns of nearby knots alone overlap) factorised once, then one step
     of iterative refinement on the residual computed from M itself (the corrected semi-normal equations of
     Björck, "Stability analysis of the method of seminormal equations for linear least squares problems"):
-    the accuracy of an orthogonal factorisation without its dense Q. A column no sample reaches (a gap in
-    the track) is pinned at zero by a ridge far below any column's own weight.
+    the accuracy of an orthogonal factorisation without its dense Q. Should a column no sample reaches (a
+    gap in the track) make them singular, it is pinned at zero by a ridge far below any column's weight.
     """
 
     def __init__(self, M: sparse.csr_array):
         self.M = M
         self.Mt = sparse.csr_array(M.T)
         gram = sparse.csc_array(self.Mt @ M)
-        ridge = 1e-13 * max(float(gram.diagonal().max()), 1e-300)
         try:
-            self._lu = splu(sparse.csc_array(gram + ridge * sparse.eye_array(gram.shape[0], format="csc")),
-                            permc_spec="MMD_AT_PLUS_A")
-        except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
-            raise np.linalg.LinAlgError(str(exc)) from exc
+            self._lu = splu(gram, permc_spec="MMD_AT_PLUS_A")
+        except RuntimeError:  # SuperLU: "Factor is exactly singular"
+            ridge = 1e-13 * max(float(gram.diagonal().max()), 1e-300)
+            try:
+                self._lu = splu(sparse.csc_array(gram + ridge * sparse.eye_array(gram.shape[0], format="csc")),
+                                permc_spec="MMD_AT_PLUS_A")
+            except RuntimeError as exc:
+                raise np.linalg.LinAlgError(str(exc)) from exc
 
     def coefficients(self, y: np.ndarray) -> np.ndarray:
         c = self._lu.solve(self.Mt @ y)
