@@ -21,6 +21,10 @@ few iterations. Only even-order structure can move ψ, and nothing in the
 pendulum produces it, so damping of any kind, cubic stiffness and slow zero
 drift do not bias the estimate.
 
+The design matrix is sparse (each cubic B-spline lives on four knot intervals), and so is the least-squares
+problem it poses: memory and time grow with the samples, never with samples × knots, whatever the length of
+the record (a camera left running for half an hour gives thousands of knots).
+
 The marker's rest angle φ0 (the swing's centre seen from the camera) is
 estimated on the way: with D (camera to marker at rest) it fixes the
 camera–axis distance L (D² = L² + R² − 2·L·R·cos φ0).
@@ -32,7 +36,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 from scipy.interpolate import BSpline
+from scipy.sparse.linalg import splu
 
 from .config import MarkerGeometry
 from .geometry import angle_from_normalised, axis_distance, d_angle_d_yaw
@@ -100,13 +106,45 @@ def _crossings(t: np.ndarray, y: np.ndarray, level: float, hysteresis: float) ->
     return np.asarray(out)
 
 
-def _bspline_basis(t: np.ndarray, t0: float, t1: float, spacing: float) -> np.ndarray:
-    """Cubic B-spline design matrix on [t0, t1] with knots about ``spacing`` s apart."""
+def _bspline_basis(t: np.ndarray, t0: float, t1: float, spacing: float) -> sparse.csr_array:
+    """Cubic B-spline design matrix on [t0, t1] with knots about ``spacing`` s apart (sparse: four per row)."""
     n_int = max(int(math.ceil((t1 - t0) / spacing)), 1)
     inner = np.linspace(t0, t1, n_int + 1)
     knots = np.concatenate([[t0] * 3, inner, [t1] * 3])
     tt = np.clip(t, t0, t1)
-    return BSpline.design_matrix(tt, knots, 3).toarray()
+    return sparse.csr_array(BSpline.design_matrix(tt, knots, 3))
+
+
+class _LeastSquares:
+    """Least squares on the columns of a sparse design matrix M: coefficients and residuals.
+
+    The normal equations MᵀM (banded: columns of nearby knots alone overlap) factorised once, then one step
+    of iterative refinement on the residual computed from M itself (the corrected semi-normal equations of
+    Björck, "Stability analysis of the method of seminormal equations for linear least squares problems"):
+    the accuracy of an orthogonal factorisation without its dense Q. Should a column no sample reaches (a
+    gap in the track) make them singular, it is pinned at zero by a ridge far below any column's weight.
+    """
+
+    def __init__(self, M: sparse.csr_array):
+        self.M = M
+        self.Mt = sparse.csr_array(M.T)
+        gram = sparse.csc_array(self.Mt @ M)
+        try:
+            self._lu = splu(gram, permc_spec="MMD_AT_PLUS_A")
+        except RuntimeError:  # SuperLU: "Factor is exactly singular"
+            ridge = 1e-13 * max(float(gram.diagonal().max()), 1e-300)
+            try:
+                self._lu = splu(sparse.csc_array(gram + ridge * sparse.eye_array(gram.shape[0], format="csc")),
+                                permc_spec="MMD_AT_PLUS_A")
+            except RuntimeError as exc:
+                raise np.linalg.LinAlgError(str(exc)) from exc
+
+    def coefficients(self, y: np.ndarray) -> np.ndarray:
+        c = self._lu.solve(self.Mt @ y)
+        return c + self._lu.solve(self.Mt @ (y - self.M @ c))
+
+    def residual(self, y: np.ndarray) -> np.ndarray:
+        return y - self.M @ self.coefficients(y)
 
 
 def estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, *, harmonics: tuple[int, ...] = (1, 3, 5),
@@ -159,13 +197,13 @@ def _estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, harmonic
     dc_basis = _bspline_basis(tu, t0, t1, 3.0 * period)
     cols = [dc_basis]
     for h in harmonics:
-        cols.append(amp_basis * np.cos(h * phi_t)[:, None])
-        cols.append(amp_basis * np.sin(h * phi_t)[:, None])
-    M = np.hstack(cols)
+        cols.append(amp_basis.multiply(np.cos(h * phi_t)[:, None]))
+        cols.append(amp_basis.multiply(np.sin(h * phi_t)[:, None]))
+    M = sparse.csr_array(sparse.hstack(cols, format="csr"))
     # Variable projection: the symmetric-swing coefficients are linear, so they are projected out
-    # (QR of M once per set of samples) and only the yaw is iterated.
+    # (factorised once per set of samples) and only the yaw is iterated.
     keep = np.ones(tu.size, dtype=bool)
-    Q, Rm = np.linalg.qr(M)
+    fit = _LeastSquares(M)
     iterations = 0
     residual = np.zeros(tu.size)
     curvature = math.nan
@@ -176,8 +214,8 @@ def _estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, harmonic
             jac = d_angle_d_yaw(xu, marker, yaw, rest)[keep]
             if not (np.isfinite(th).all() and np.isfinite(jac).all()):
                 return PoseEstimate(False, reason="the yaw fit left the cylinder's visible side (diverged)")
-            th_r = th - Q @ (Q.T @ th)
-            jac_r = jac - Q @ (Q.T @ jac)
+            th_r = fit.residual(th)
+            jac_r = fit.residual(jac)
             curvature = float(jac_r @ jac_r)
             if not curvature > 0:
                 return PoseEstimate(False, reason="the swing shows no sign of the camera yaw (amplitude too small)")
@@ -193,13 +231,13 @@ def _estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, harmonic
                     good = np.abs(residual - np.median(residual)) <= outlier_sigma * sigma
                     if not good.all():
                         keep[np.flatnonzero(keep)[~good]] = False
-                        Q, Rm = np.linalg.qr(M[keep])
+                        fit = _LeastSquares(M[keep])
                         continue
             if abs(step) < 1e-10:
                 break
         # the zero level of the symmetric fit is the marker's surface angle at rest (relative to the current one)
         th = angle_from_normalised(xu, marker, yaw, rest)[keep]
-        coef = np.linalg.solve(Rm, Q.T @ th)
+        coef = fit.coefficients(th)
         dc = dc_basis[keep] @ coef[:dc_basis.shape[1]]
         shift = float(np.median(dc))
         rest += shift

@@ -15,6 +15,12 @@ module that does not load (a numpy whose ABI changed, a cache folder mounted noe
 with the in-process kernel, and the failure is written beside the module (``*.failed``, its error inside):
 no command starts that build again until the effect library changes or the file is deleted.
 
+A module is loaded only when it is the one that was built: the build writes its size and SHA-256 beside it
+(``*.sha256``) once the compiler has finished, before the module takes its place. A module that differs (cut
+short by a power failure while it was written, a bad SD card), or has no such record, is never mapped: the
+dynamic loader would fault (SIGBUS) on pages the file no longer has, killing the command without a word. It
+is deleted instead, the command uses the in-process kernel, and the next background build replaces it.
+
 The native kernel holds the interpreter lock while it runs (pycc has no ``nogil``): candidate fits on
 threads take turns. It is for one-shot commands only; the daemon keeps the in-process kernel, which lets a
 capture run beside a fit.
@@ -23,8 +29,10 @@ capture run beside a fit.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import importlib.machinery
 import importlib.util
+import json
 import os
 import shutil
 import subprocess
@@ -55,9 +63,47 @@ def _failed(kind: str) -> Path:
     return module_file(kind).with_suffix(".failed")
 
 
+def _stamp(kind: str) -> Path:
+    """The size and SHA-256 of the ``kind`` native kernel as its build wrote it."""
+    return module_file(kind).with_suffix(".sha256")
+
+
+def _fingerprint(path: Path) -> dict[str, Any]:
+    # read, never mapped: reading a file cut short ends early, mapping it faults
+    digest = hashlib.sha256()
+    size = 0
+    with path.open("rb") as f:
+        while chunk := f.read(1 << 20):
+            digest.update(chunk)
+            size += len(chunk)
+    return {"size": size, "sha256": digest.hexdigest()}
+
+
+def intact(kind: str) -> bool:
+    """Whether the ``kind`` native kernel on disk is, byte for byte, the module its build wrote down."""
+    path = module_file(kind)
+    try:
+        stamp = json.loads(_stamp(kind).read_text())
+        if path.stat().st_size != stamp.get("size"):  # a cut-short file is told before reading it
+            return False
+        return _fingerprint(path) == {"size": stamp["size"], "sha256": stamp.get("sha256")}
+    except (OSError, ValueError, AttributeError, KeyError):  # no record, an unreadable or a damaged one
+        return False
+
+
+def _discard(kind: str) -> None:
+    """Delete a damaged native kernel and its record: the next ``build_later`` builds it again."""
+    for path in (module_file(kind), _stamp(kind)):
+        with contextlib.suppress(OSError):  # a read-only cache: the module stays unloaded all the same
+            path.unlink(missing_ok=True)
+
+
 def _load(kind: str) -> ModuleType | None:
     path = module_file(kind)
     if not path.exists():
+        return None
+    if not intact(kind):
+        _discard(kind)
         return None
     name = path.name.split(".", 1)[0]  # the extension's init function is named after it
     spec = importlib.util.spec_from_file_location(name, path)
@@ -70,7 +116,7 @@ def _load(kind: str) -> ModuleType | None:
         # another numpy's ABI, or a cache folder mounted noexec: written down as a failed build, so that
         # commands do not rebuild what would not load either
         _write_failure(kind, exc)
-        path.unlink(missing_ok=True)
+        _discard(kind)
         return None
     return mod
 
@@ -159,11 +205,27 @@ def build(kind: str) -> Path:
         cc.export("run", SIGNATURE)(run)
         cc.compile()
         built = next(work.glob(f"{target.name.split('.', 1)[0]}*{importlib.machinery.EXTENSION_SUFFIXES[0]}"))
+        _durable(built)
+        # the record first, then the module: a module in place always has its record, and a power cut between
+        # the two leaves a record without a module, which is built again
+        record = work / "stamp"
+        record.write_text(json.dumps(_fingerprint(built)))
+        _durable(record)
+        os.replace(record, _stamp(kind))
         os.replace(built, target)  # whole or not at all: a command never loads half a file
     finally:
         tempfile.tempdir = previous
         shutil.rmtree(work, ignore_errors=True)
     return target
+
+
+def _durable(path: Path) -> None:
+    """On the disk, not only in the page cache, before a rename makes it visible."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def main(kinds: list[str]) -> int:

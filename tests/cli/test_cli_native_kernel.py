@@ -4,8 +4,11 @@ in the command, and one background build at a time, written down when it fails."
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -139,7 +142,75 @@ def test_a_module_that_does_not_load_is_let_go_and_written_down(tmp_path, monkey
     monkeypatch.setenv("MOI_CACHE_DIR", str(tmp_path))
     broken = native.module_file("torsion")
     broken.write_bytes(b"not a shared object")  # as a module of another ABI, or on a noexec mount, fails
+    broken.with_suffix(".sha256").write_text(json.dumps(native._fingerprint(broken)))  # whole, as built
     assert native.load(("torsion",)) is None
     assert not broken.exists()
     failed = list(tmp_path.glob("*_native*.failed"))
     assert len(failed) == 1 and "ImportError" in failed[0].read_text()
+
+
+DAMAGED_PROBE = """
+import json, sys
+from service.cli import main
+from service.commands import native
+rebuilds = []
+native.build_later = rebuilds.append  # the test looks at the cache as the command left it
+status = main(sys.argv[1:])
+sys.stderr.write("REBUILD:" + json.dumps(rebuilds) + "\\n")
+sys.exit(status)
+"""
+
+
+def _cache_with_the_torsion_kernel(folder: Path) -> Path:
+    """A cache folder of its own holding copies of the built torsion kernel, its record and the in-process
+    kernel's source and machine code (times kept, so that numba finds its cache valid): damage stays here."""
+    shared = native.module_file("torsion")
+    for path in (shared, shared.with_suffix(".sha256"), shared.parent / f"{shared.name.split('_native')[0]}.py"):
+        shutil.copy2(path, folder / path.name)
+    if (shared.parent / "__pycache__").is_dir():
+        shutil.copytree(shared.parent / "__pycache__", folder / "__pycache__", copy_function=shutil.copy2)
+    return folder / shared.name
+
+
+def test_a_truncated_module_is_deleted_and_the_command_still_answers(torsion_native, trace_and_rig, tmp_path,
+                                                                     monkeypatch):
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    module = _cache_with_the_torsion_kernel(cache)
+    monkeypatch.setenv("MOI_CACHE_DIR", str(cache))
+    assert native.intact("torsion")
+    # a power cut while the module was written: its headers whole, most of its code never reached the disk
+    # (mapped as it is, the loader faults on the missing pages: SIGBUS, the command dead without a word)
+    with module.open("r+b") as f:
+        f.truncate(module.stat().st_size * 3 // 10)
+    assert not native.intact("torsion")
+    done = subprocess.run([sys.executable, "-c", DAMAGED_PROBE, *trace_and_rig], capture_output=True, text=True,
+                          timeout=600, env={**os.environ, "MOI_CACHE_DIR": str(cache)})
+    assert done.returncode == 0, (done.returncode, done.stderr[-2000:])  # not -7: SIGBUS
+    assert json.loads(done.stdout)["added_effects"] == ["coulomb"]
+    assert not module.exists() and not module.with_suffix(".sha256").exists(), "the damaged module is gone"
+    rebuilds = next(line for line in done.stderr.splitlines() if line.startswith("REBUILD:"))
+    assert json.loads(rebuilds[len("REBUILD:"):]) == [["torsion"]], "and is built again in the background"
+    assert not list(cache.glob("*.failed")), "damage is not a failed build: the next build is not held back"
+
+
+def test_a_module_without_its_build_record_is_not_loaded(torsion_native, tmp_path, monkeypatch):
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    module = _cache_with_the_torsion_kernel(cache)
+    monkeypatch.setenv("MOI_CACHE_DIR", str(cache))
+    module.with_suffix(".sha256").unlink()  # a power cut before the build wrote its record
+    assert native.load(("torsion",)) is None
+    assert not module.exists()
+
+
+def test_a_module_of_the_right_size_but_other_bytes_is_not_loaded(torsion_native, tmp_path, monkeypatch):
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    module = _cache_with_the_torsion_kernel(cache)
+    monkeypatch.setenv("MOI_CACHE_DIR", str(cache))
+    data = bytearray(module.read_bytes())
+    data[len(data) // 2] ^= 0xFF  # a flipped bit on the card
+    module.write_bytes(bytes(data))
+    assert native.load(("torsion",)) is None
+    assert not module.exists()

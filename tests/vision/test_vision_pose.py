@@ -73,3 +73,56 @@ def test_uncorrected_yaw_leaves_structure_the_correction_removes():
     assert naive.residual_rms > 10 * fixed.residual_rms
     assert pytest.approx(J_TRUE, rel=1e-4) == fixed.J
     assert fixed.damping["viscous"]["c"].value == pytest.approx(1.5e-4, rel=0.01)
+
+
+def _peak_bytes(minutes: float) -> int:
+    """Peak memory (numpy's allocations, as tracemalloc counts them) of the yaw estimate of a swing this long."""
+    import tracemalloc
+
+    t = np.arange(0.0, 60.0 * minutes, 1 / 60)
+    theta, _ = Pendulum(RIG, J_TRUE, {"viscous": {"c": 2e-5}}).motion(t, 0.2)  # swings to the end of the record
+    x = normalised_from_angle(theta, MARKER, math.radians(3.0)) + np.random.default_rng(3).normal(
+        0.0, PIXEL_NOISE / CAMERA.fx, t.size)
+    tracemalloc.start()
+    try:
+        pose = estimate_yaw(t, x, MARKER)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert pose.estimated and pose.yaw_deg == pytest.approx(3.0, abs=0.05)
+    return peak
+
+
+def test_memory_grows_with_the_samples_not_samples_times_knots():
+    """A record four times as long holds four times the samples and four times the knots: a dense design
+    matrix would take sixteen times the memory (at 8 minutes, 29,000 × 1,400 × 8 bytes: 320 MB, twice)."""
+    short, long = _peak_bytes(2.0), _peak_bytes(8.0)
+    assert long < 6 * short, (short, long)
+    assert long < 60e6, long  # about 1 kB a sample
+
+
+def test_a_gap_longer_than_a_knot_span_still_gives_the_yaw():
+    """Ten seconds without a sample (the marker lost): the yaw of the dense QR fit the design matrix gave."""
+    t = np.arange(0.0, 60.0, 1 / 60)
+    theta, _ = Pendulum(RIG, J_TRUE, {"viscous": {"c": 1.5e-4}}).motion(t, 0.2)
+    x = normalised_from_angle(theta, MARKER, math.radians(3.0)) + np.random.default_rng(1).normal(
+        0.0, PIXEL_NOISE / CAMERA.fx, t.size)
+    seen = (t < 10.0) | (t > 20.0)
+    pose = estimate_yaw(t[seen], x[seen], MARKER)
+    assert pose.estimated and pose.yaw_deg == pytest.approx(2.977812, abs=1e-6)  # the dense QR's, to 1e-11 σ
+
+
+def test_a_column_no_sample_reaches_is_pinned_and_the_others_fitted():
+    from scipy import sparse
+
+    from measurement.vision.pose import _LeastSquares
+
+    rng = np.random.default_rng(2)
+    dense = rng.normal(size=(50, 4))
+    dense[:, 2] = 0.0  # a B-spline whose knot span the samples never reach
+    y = rng.normal(size=50)
+    fit = _LeastSquares(sparse.csr_array(dense))
+    kept = np.delete(dense, 2, axis=1)
+    expected = np.linalg.lstsq(kept, y, rcond=None)[0]
+    np.testing.assert_allclose(np.delete(fit.coefficients(y), 2), expected, rtol=1e-10)
+    np.testing.assert_allclose(fit.residual(y), y - kept @ expected, atol=1e-12)
