@@ -193,5 +193,5 @@ def _log(panel: ET.Element, source: str) -> Log:
 FORMAT = Format(
     "tracker-trk", "a Tracker project (.trk) with marked point-mass tracks: positions turned into the file's "
                    "coordinate system (origin, angle, scale per frame), times from its clip (start time, frame "
-                   "duration); the angle from the pivot; several tracks: --xy x_{NAME},y_{NAME}",
+                   "duration); the angle from the pivot; several marked tracks: --xy NAME",
     "moi identify pendulum.trk --rig string.toml", sniff, read)
