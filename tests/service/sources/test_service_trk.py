@@ -118,8 +118,8 @@ def test_a_tracker_project_s_marks_are_turned_into_its_coordinate_system_frame_b
     assert [c.label for c in log.columns] == ["t (s)", "x_{bob} (m)", "y_{bob} (m)"]
     frames = np.arange(COUNT) * STEP + START
     assert log.column(0) == pytest.approx(T0 + (frames - START) * DT / 1000, abs=1e-12)
-    x = PIVOT[0] + LENGTH * np.sin([angle_at(n) for n in frames])
-    y = PIVOT[1] - LENGTH * np.cos([angle_at(n) for n in frames])
+    angles = np.array([angle_at(int(n)) for n in frames])
+    x, y = PIVOT[0] + LENGTH * np.sin(angles), PIVOT[1] - LENGTH * np.cos(angles)
     assert np.max(np.abs(log.column(1) - x)) < 1e-9 and np.max(np.abs(log.column(2) - y)) < 1e-9
     assert "1 mark(s) of 'bob' on frames that are not steps of the clip left out" in log.notes
     assert "'model A' (DynamicParticle)" in log.notes[0]
