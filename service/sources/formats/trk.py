@@ -91,8 +91,9 @@ def _clip(panel: ET.Element) -> Clip:
     dt = _number(control, "delta_t")
     if not (math.isfinite(dt) and dt > 0):
         raise InputFileError(f"a Tracker clip with a frame duration of {dt} ms; expected a positive time")
+    t0 = _number(clip, "starttime", 0.0)  # NaN: Tracker's default, 0
     return Clip(start, max(1, int(_number(clip, "stepsize", 1.0))), int(_number(clip, "stepcount")),
-                _number(clip, "starttime", 0.0) / 1000.0, dt / 1000.0)
+                t0 / 1000.0 if math.isfinite(t0) else 0.0, dt / 1000.0)
 
 
 def _coords(panel: ET.Element, frames: int) -> np.ndarray:
@@ -139,7 +140,10 @@ def _tracks(panel: ET.Element) -> tuple[list[tuple[str, dict[int, tuple[float, f
 
 def _panel(root: ET.Element, source: str) -> ET.Element:
     panels = [root] if root.get("class") == PANEL else [o for o in root.iter("object") if o.get("class") == PANEL]
-    if len(panels) != 1:
+    if not panels:
+        raise InputFileError(f"{source}: a Tracker tab set (it names the tabs' own files, {root.get('class')!r}); "
+                             "expected the .trk of the tab that holds the swing")
+    if len(panels) > 1:
         raise InputFileError(f"{source}: a Tracker file with {len(panels)} tabs; expected one (save the tab that "
                              "holds the swing as its own .trk)")
     return panels[0]

@@ -155,3 +155,13 @@ def test_a_tracker_project_without_marks_inside_is_refused_in_one_line(tmp_path)
     msg = str(e.value)
     assert "without marked positions inside (tracks: 'axes' (CoordAxes), 'model A' (DynamicParticle))" in msg
     assert "File > Export > Data" in msg and "\n" not in msg
+
+
+def test_a_tracker_tab_set_is_refused_asking_for_the_tab_s_own_project(tmp_path):
+    f = tmp_path / "tabs.trk"
+    f.write_text('<?xml version="1.0" encoding="UTF-8"?>\n' + obj(
+        TRACKER + "TFrame", '<property name="tabs" type="array" class="[[Ljava.lang.String;">'
+        '<property name="[0]" type="array" class="[Ljava.lang.String;"><property name="[0]" type="string">'
+        "/home/a/pendulum.trk</property></property></property>"))
+    with pytest.raises(InputFileError, match="a Tracker tab set .* expected the .trk of the tab that holds the swing"):
+        read_log(f)
