@@ -1,4 +1,5 @@
-"""A Tracker project (``.trk``): the XML Tracker saves, read for its point-mass tracks' positions.
+"""A Tracker project (``.trk``, or the zip ``.trz`` holding it): the XML Tracker saves, read for its
+point-mass tracks' positions.
 
 Tracker keeps a point mass's marks in image pixels, one per video frame (``framedata``, indexed by frame
 number), and the coordinate system beside them (``coords``: per frame the image position of the world
@@ -25,13 +26,20 @@ import numpy as np
 from service.errors import InputFileError
 
 from .log import Column, Log
-from .registry import Format, Probe, whole_text
+from .registry import Format, Probe, member_text, whole_text
 
 PANEL = "org.opensourcephysics.cabrillo.tracker.TrackerPanel"
 MARK = "org.opensourcephysics.cabrillo.tracker.PointMass$FrameData"
 
 
+def _zipped(probe: Probe) -> list[str]:
+    """The projects inside a Tracker project zip (``.trz``: the .trk with its video and notes)."""
+    return [m for m in probe.members if m.lower().endswith(".trk")]
+
+
 def sniff(probe: Probe) -> bool:
+    if probe.path.is_file() and _zipped(probe):
+        return True
     return probe.head.lstrip().startswith("<?xml") and "org.opensourcephysics.cabrillo.tracker" in probe.head
 
 
@@ -151,8 +159,13 @@ def _panel(root: ET.Element, source: str) -> ET.Element:
 
 def read(probe: Probe) -> Log:
     source = str(probe.path)
+    inside = _zipped(probe)
+    if len(inside) > 1:
+        raise InputFileError(f"{source}: a Tracker zip holding {len(inside)} projects ({', '.join(inside)}); expected "
+                             "one (export the zip from the tab that holds the swing)")
     try:
-        root = ET.fromstring(whole_text(probe, "Tracker project"))
+        text = member_text(probe, inside[0], "Tracker project") if inside else whole_text(probe, "Tracker project")
+        root = ET.fromstring(text)
     except ET.ParseError as exc:
         raise InputFileError(f"{source!r} is not valid XML: {exc}") from None
     try:
@@ -195,7 +208,7 @@ def _log(panel: ET.Element, source: str) -> Log:
 
 
 FORMAT = Format(
-    "tracker-trk", "a Tracker project (.trk) with marked point-mass tracks: positions turned into the file's "
+    "tracker-trk", "a Tracker project (.trk, or its zip .trz) with marked point-mass tracks: positions turned into the file's "
                    "coordinate system (origin, angle, scale per frame), times from its clip (start time, frame "
                    "duration); the angle from the pivot; several marked tracks: --xy NAME",
     "moi identify pendulum.trk --rig string.toml", sniff, read)

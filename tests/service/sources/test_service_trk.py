@@ -10,6 +10,7 @@ system saved at frame 0 and at its key frames) around a damped swing whose angle
 from __future__ import annotations
 
 import math
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -165,3 +166,14 @@ def test_a_tracker_tab_set_is_refused_asking_for_the_tab_s_own_project(tmp_path)
         "/home/a/pendulum.trk</property></property></property>"))
     with pytest.raises(InputFileError, match="a Tracker tab set .* expected the .trk of the tab that holds the swing"):
         read_log(f)
+
+
+def test_a_tracker_project_zip_reads_as_the_project_inside_it(tmp_path):
+    f = project(tmp_path / "pendulum.trk", AXES, bob())
+    trz = tmp_path / "pendulum.trz"
+    with zipfile.ZipFile(trz, "w") as z:
+        z.write(f, "pendulum/pendulum.trk")
+        z.writestr("pendulum/pendulum.mp4", b"\x00\x00\x00\x18ftypmp42")
+        z.writestr("pendulum/pendulum_info.html", "<html></html>")
+    log = read_log(trz)
+    assert log.format == "tracker-trk" and np.array_equal(log.data, read_log(f).data)
