@@ -30,7 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--rate-col", metavar="COL", help="the angular rate column of a gyro (rad/s; °/s by its unit or --deg); "
                    "without it a three-axis gyro is read about the swing's own axis")
     g.add_argument("--xy", metavar="X,Y", help="two position columns of a tracked point (any length unit or pixels): the "
-                   "angle about --pivot, or about the centre of the circle the track lies on")
+                   "angle about --pivot, or about the centre of the circle the track lies on; a single NAME takes "
+                   "x_{NAME}, y_{NAME} (a Tracker project's track by its name)")
     g.add_argument("--pivot", metavar="PX,PY", help="the pivot's position in the units of --xy")
     g.add_argument("--deg", action="store_true", help="the angle or rate column is in degrees (or °/s)")
     p.add_argument("--release", type=int, metavar="N", help="identify only the N-th release found in the SOURCEs "

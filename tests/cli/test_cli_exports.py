@@ -12,6 +12,7 @@ from service.cli import main
 from service.sources.formats.registry import describe
 
 from ..service.sources.test_service_formats import phyphox_log
+from ..service.sources.test_service_trk import AXES, MODEL, bob, mark, point_mass, project
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -62,3 +63,21 @@ def test_a_release_beyond_those_found_is_refused_in_one_line(tmp_path, rig, caps
     phyphox_log(tmp_path / "log", n=2)
     assert main(["identify", str(tmp_path / "log"), "--release", "3", "--rig", rig]) == 2
     assert "hold 2 release(s); expected 1 to 2" in capsys.readouterr().err
+
+
+def test_a_tracker_project_s_track_named_by_xy_is_identified(tmp_path, rig, capsys):
+    still = point_mass("pivot mark", {12 + 2 * k: mark(12 + 2 * k, angle=0.0) for k in range(0, 900, 5)})
+    f = project(tmp_path / "pendulum.trk", AXES, bob(), still)
+    assert main(["identify", str(f), "--xy", "bob", "--rig", rig, "--json", "--no-discover"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["measures"] == "angle" and d["acquisition"]["log"]["format"] == "tracker-trk"
+    assert d["acquisition"]["position"]["radius"] == pytest.approx(0.9, rel=1e-6)
+    # the marks follow a swing at 4.4 rad/s sampled at the clip's 30 steps per second
+    assert d["periods"]["counted"] == pytest.approx(2 * 3.141592653589793 / 4.4, rel=2e-3)
+
+
+def test_a_tracker_project_without_marks_exits_2_in_one_line(tmp_path, rig, capsys):
+    f = project(tmp_path / "model.trk", AXES, MODEL)
+    assert main(["identify", str(f), "--rig", rig]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "without marked positions inside" in err and len(err.splitlines()) == 1

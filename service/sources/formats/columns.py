@@ -126,6 +126,9 @@ def _auto(log: Log, t: int, among: list[int]) -> Reading:
             f"{log.columns[zs[0]].label!r} without a unit that says what they read: a three-axis sensor's (an "
             "accelerometer's tilt is not the swing angle) or a point's position? name them: --rate-col for a "
             "gyro's axis, --xy X,Y for a tracked point")
+    if len(xs) > 1 or len(ys) > 1:
+        raise InputFileError(f"{log.source}: several positions ({', '.join(repr(log.columns[i].label) for i in xs + ys)}); "
+                             "name the tracked point's with --xy X,Y (or --xy NAME for x_{NAME}, y_{NAME})")
     if xs and ys:
         return Reading(t, "xy", (xs[0], ys[0]))
     accel = [i for i in rest if _is_acceleration(log.columns[i])]
@@ -149,8 +152,10 @@ def choose(log: Log, among: list[int], choice: ColumnChoice) -> Reading:
             return Reading(t, kind, (i,), True)
     if choice.xy is not None:
         parts = choice.xy.split(",")
+        if len(parts) == 1:  # a track by its name, its columns named x_{NAME}, y_{NAME} (Tracker's subscripts)
+            parts = [f"{a}_{{{choice.xy.strip()}}}" for a in "xy"]
         if len(parts) != 2:
-            raise InputFileError(f"--xy {choice.xy!r}: expected two columns X,Y (labels or numbers)")
+            raise InputFileError(f"--xy {choice.xy!r}: expected two columns X,Y (labels or numbers) or a track's name")
         return Reading(t, "xy", tuple(find_column(log, p, "--xy", among) for p in parts), True)
     return _auto(log, t, among)
 

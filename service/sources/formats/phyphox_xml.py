@@ -1,5 +1,9 @@
-"""A ``.phyphox`` file with its data (phyphox's "save experiment state"): XML whose data containers hold
-the samples in their ``init`` attribute and whose ``<export>`` sets name the columns."""
+"""A ``.phyphox`` file with its data (phyphox's "save experiment state"): the experiment's own XML with
+each data container's samples written into its ``init`` attribute (comma-separated), the ``<export>``
+sets naming the columns, and an ``<events>`` block of ``<start>`` and ``<pause>`` elements whose
+``experimentTime`` (s, the clock stopping while paused) and ``systemTime`` (ms since 1970) mark where the
+recording was started and paused. Files saved before the events block existed (phyphox 1.1.8) have none:
+the log is then one section."""
 
 from __future__ import annotations
 
@@ -12,6 +16,9 @@ from service.errors import InputFileError
 from .log import Column, Log
 from .registry import Format, Probe, whole_text
 
+#: the events a saved state records (an event of another name, as a later phyphox may add, is left out)
+EVENTS = ("start", "pause")
+
 
 def _tag(el: ET.Element) -> str:
     return el.tag.rsplit("}", 1)[-1]
@@ -22,23 +29,30 @@ def sniff(probe: Probe) -> bool:
     return head.startswith("<") and "<phyphox" in head[:2000]
 
 
-def _values(text: str | None) -> np.ndarray:
-    cells = [c for c in (text or "").replace(";", ",").split(",") if c.strip()]
+def _values(text: str | None, buffer: str) -> np.ndarray:
+    cells = [c.strip() for c in (text or "").split(",") if c.strip()]
     try:
         return np.array([float(c) for c in cells])
     except ValueError:
-        raise InputFileError(f"a data container's values are not numbers: {cells[:3]!r}") from None
+        raise InputFileError(f"data container {buffer!r}: values that are not numbers ({cells[:3]!r}); expected "
+                             "the comma-separated samples phyphox saves") from None
 
 
-def _events(root: ET.Element) -> tuple[tuple[str, float], ...]:
-    """Start and pause events where the file keeps them (elements with an experiment time)."""
+def _events(root: ET.Element, source: str) -> tuple[tuple[str, float], ...]:
+    """(START or PAUSE, experiment time in s) of the ``<events>`` block directly under ``<phyphox>``."""
     out = []
-    for el in root.iter():
-        when = el.get("experimentTime") or el.get("experiment-time")
-        what = (el.get("type") or el.get("event") or _tag(el)).upper()
-        if when is not None and what in ("START", "PAUSE"):
-            out.append((what, float(when)))
-    return tuple(sorted(out, key=lambda e: e[1]))
+    for block in (el for el in root if _tag(el) == "events"):
+        for ev in block:
+            what = _tag(ev).lower()
+            if what not in EVENTS:
+                continue
+            when = ev.get("experimentTime")
+            try:
+                out.append((what.upper(), float(when if when is not None else "")))
+            except ValueError:
+                raise InputFileError(f"{source}: a <{what}> event with experimentTime {when!r}; expected the "
+                                     "experiment time in s") from None
+    return tuple(out)
 
 
 def read(probe: Probe) -> Log:
@@ -46,19 +60,21 @@ def read(probe: Probe) -> Log:
         root = ET.fromstring(whole_text(probe, ".phyphox file"))
     except ET.ParseError as exc:
         raise InputFileError(f"{str(probe.path)!r} is not valid XML: {exc}") from None
-    containers = {(el.text or "").strip(): el.get("init") for el in root.iter() if _tag(el) == "container"}
-    for s in (el for el in root.iter() if _tag(el) == "set"):
+    containers = {(el.text or "").strip(): el.get("init") for block in root if _tag(block) == "data-containers"
+                  for el in block if _tag(el) == "container"}
+    for s in (el for block in root if _tag(block) == "export" for el in block if _tag(el) == "set"):
         cols = [(d.get("name") or "", (d.text or "").strip()) for d in s if _tag(d) == "data"]
-        arrays = [_values(containers.get(buffer)) for _, buffer in cols]
+        arrays = [_values(containers.get(buffer), buffer) for _, buffer in cols]
         if len(arrays) >= 2 and arrays[0].size >= 30:
             n = min(a.size for a in arrays)
             data = np.column_stack([a[:n] for a in arrays])
             return Log(str(probe.path), "phyphox-xml", tuple(Column.parse(name) for name, _ in cols), data,
-                       _events(root), notes=(f"export set {s.get('name')!r}",))
+                       _events(root, str(probe.path)), notes=(f"export set {s.get('name')!r}",))
     raise InputFileError(f"{str(probe.path)!r}: a phyphox experiment without recorded data (no export set whose "
                          "containers hold samples); save the experiment's state after recording, or export CSV")
 
 
 FORMAT = Format(
-    "phyphox-xml", "a .phyphox file saved with its data (XML, read by the standard library's parser)",
-    "moi identify pendulum.phyphox --rig rig.toml", sniff, read)
+    "phyphox-xml", "a .phyphox file saved with its data (phyphox's saved experiment state: XML read by the "
+                   "standard library's parser; its <events> START/PAUSE split the log)",
+    "moi identify 'Gyroscope rotation rate.phyphox' --rig rig.toml", sniff, read)

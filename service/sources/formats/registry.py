@@ -70,6 +70,7 @@ class FormatEntry:
 FORMATS: tuple[FormatEntry, ...] = (
     FormatEntry("phyphox", "service.sources.formats.phyphox"),
     FormatEntry("phyphox-xml", "service.sources.formats.phyphox_xml"),
+    FormatEntry("tracker-trk", "service.sources.formats.trk"),
     FormatEntry("tracker", "service.sources.formats.tracker"),
     FormatEntry("logger-pro", "service.sources.formats.vernier"),
     FormatEntry("capstone", "service.sources.formats.pasco"),

@@ -3,9 +3,6 @@
 
 from __future__ import annotations
 
-from service.errors import InputFileError
-
-from .log import Log
 from .registry import Format, Probe
 from .table import table_reader
 
@@ -20,17 +17,11 @@ def _header(probe: Probe) -> list[str]:
 
 
 def sniff(probe: Probe) -> bool:
-    if probe.head.lstrip().startswith("<?xml") and "cabrillo.tracker" in probe.head:
-        return True
     cells = _header(probe)
     return bool(cells) and cells[0].split("_")[0] == "t" and any(c.split("_")[0] in ("x", "y") for c in cells)
 
 
-def read(probe: Probe) -> Log:
-    if probe.head.lstrip().startswith("<?xml"):
-        raise InputFileError(f"{str(probe.path)!r} is a Tracker project (.trk) whose tracks are stored as image "
-                             "positions; expected its data table: in Tracker, File > Export > Data (tab-separated)")
-    return table_reader("tracker", "Tracker export")(probe)
+read = table_reader("tracker", "Tracker export")
 
 
 FORMAT = Format(

@@ -35,9 +35,9 @@ def swing(duration: float, amplitude: float = 0.4, hold: float = 0.0, zeta: floa
     return t, angle + rng.normal(0, 2e-4, t.size), rate + rng.normal(0, 2e-3, t.size)
 
 
-def phyphox_log(folder: Path, n: int = 3, direction=(0.8, 0.6, 0.0)) -> list[float]:
-    """A phyphox export of ``n`` releases (hand-held 2 s before each), paused between them; the clock
-    stops while paused. Returns the release times."""
+def phyphox_sections(n: int = 3, direction=(0.8, 0.6, 0.0)):
+    """``n`` releases of a phone's three-axis gyro (hand-held 2 s before each), paused between them; the
+    clock stops while paused. Returns the rows (t, x, y, z, |ω|), the (event, time) list and the release times."""
     rows, events, releases, clock = [], [], [], 0.0
     for k in range(n):
         t, _, rate = swing(14.0, hold=2.0, seed=k)
@@ -47,6 +47,12 @@ def phyphox_log(folder: Path, n: int = 3, direction=(0.8, 0.6, 0.0)) -> list[flo
         releases.append(clock + 2.0)
         rows += [(clock + ti, *v, np.linalg.norm(v)) for ti, v in zip(t, vec)]
         clock += t[-1] + 0.01
+    return rows, events, releases
+
+
+def phyphox_log(folder: Path, n: int = 3, direction=(0.8, 0.6, 0.0)) -> list[float]:
+    """phyphox's CSV export of ``phyphox_sections``. Returns the release times."""
+    rows, events, releases = phyphox_sections(n, direction)
     (folder / "meta").mkdir(parents=True)
     (folder / "meta" / "time.csv").write_text(
         '"event","experiment time","system time","system time text"\n'
@@ -105,6 +111,69 @@ def test_a_phyphox_file_with_its_data_is_read_with_an_xml_parser(tmp_path):
         '<data name="Gyroscope x (rad/s)">gyrX</data></set></export></phyphox>')
     (tr,) = load_releases(f)
     assert tr.meta["log"]["format"] == "phyphox-xml" and tr.quantity == "rate" and len(tr) == t.size
+
+
+def java_number(v: float) -> str:
+    """A sample as phyphox's Android app writes it into a saved state (Java's DecimalFormat "0.#########E0")."""
+    mantissa, exponent = f"{v:.9E}".split("E")
+    return f"{mantissa.rstrip('0').rstrip('.')}E{int(exponent)}"
+
+
+def phyphox_saved_state(path: Path, rows, events) -> None:
+    """A .phyphox file as phyphox writes it on "save experiment state": the "Gyroscope (rotation rate)"
+    experiment's own definition (data containers, sensor input, a view, the "Raw Data" export set) with each
+    container's samples in its init attribute, then <state-title>, <color> and the <events> block."""
+    cols = np.array(rows).T
+    init = {name: ",".join(java_number(v) for v in col)
+            for name, col in zip(("gyr_time", "gyrX", "gyrY", "gyrZ", "gyr"), cols)}
+    containers = "".join(f'<container size="0" init="{init[b]}">{b}</container>' for b in ("gyrX", "gyrY", "gyrZ", "gyr",
+                                                                                         "gyr_time"))
+    outputs = "".join(f'<output component="{c}">{b}</output>' for c, b in
+                      (("x", "gyrX"), ("y", "gyrY"), ("z", "gyrZ"), ("t", "gyr_time"), ("abs", "gyr")))
+    data = "".join(f'<data name="{n}">{b}</data>' for n, b in
+                   (("Time (s)", "gyr_time"), ("Gyroscope x (rad/s)", "gyrX"), ("Gyroscope y (rad/s)", "gyrY"),
+                    ("Gyroscope z (rad/s)", "gyrZ"), ("Absolute (rad/s)", "gyr")))
+    system_ms = 1741384636161
+    marks = "".join(f'<{e.lower()} experimentTime="{float(when)!r}" systemTime="{system_ms + int(1000 * when) + 5000 * k}"/>'
+                    for k, (e, when) in enumerate(events))
+    path.write_text(
+        '<?xml version="1.0" encoding="UTF-8" standalone="no"?><phyphox locale="en" version="1.14">\n'
+        "  <title>Gyroscope (rotation rate)</title>\n  <category>Raw Sensors</category>\n"
+        f"  <data-containers>{containers}</data-containers>\n"
+        f'  <input><sensor type="gyroscope">{outputs}</sensor></input>\n'
+        '  <views><view label="Graph"><graph label="Gyroscope x" timeOnX="true"><input axis="x">gyr_time</input>'
+        '<input axis="y">gyrX</input></graph></view></views>\n'
+        f'  <export><set name="Raw Data">{data}</set></export>\n'
+        "<state-title>racquet</state-title><color>blue</color>"
+        f"<events>{marks}</events></phyphox>", encoding="utf-8")
+
+
+def test_a_saved_phyphox_state_is_split_at_its_start_and_pause_events(tmp_path):
+    rows, events, releases = phyphox_sections(3)
+    f = tmp_path / "Gyroscope rotation rate.phyphox"
+    phyphox_saved_state(f, rows, events)
+    log = read_log(f)
+    assert log.format == "phyphox-xml" and log.events == tuple(events)
+    assert [c.label for c in log.columns][:2] == ["Time (s)", "Gyroscope x (rad/s)"]
+    assert log.data.shape == (len(rows), 5)
+    traces = load_releases(f)
+    assert len(traces) == 3
+    for tr, t0 in zip(traces, releases):
+        assert abs(tr.meta["release"]["free_swing_from"] - t0) < 0.05
+        assert tr.meta["axis"]["swing_about"] == "Gyroscope x (rad/s)"
+    # the same log exported as CSV reads to the same releases
+    phyphox_log(tmp_path / "csv", n=3)
+    assert [tr.meta["release"]["free_swing_from"] for tr in load_releases(tmp_path / "csv")] == \
+        pytest.approx([tr.meta["release"]["free_swing_from"] for tr in traces], abs=1e-6)
+
+
+def test_a_phyphox_event_without_its_time_is_refused_in_one_line(tmp_path):
+    rows, events, _ = phyphox_sections(1)
+    f = tmp_path / "p.phyphox"
+    phyphox_saved_state(f, rows, events)
+    f.write_text(f.read_text().replace('<pause experimentTime="', '<pause experimentTim="'))
+    with pytest.raises(InputFileError, match="a <pause> event with experimentTime None; expected the experiment"):
+        read_log(f)
 
 
 def test_a_tracker_export_with_a_mass_line_crlf_and_tabs_gives_the_angle_about_the_pivot(tmp_path):
