@@ -87,14 +87,18 @@ def declared_mse(base: ModelFit, final: ModelFit, form: ModelForm, noise: float,
     if segments is None:
         return None
     w_d, s_d, w_f, s_f = base.value("omega_n"), base.stdev("omega_n"), final.value("omega_n"), final.stdev("omega_n")
-    var_d = s_d**2 + segments.u**2 + aliases.u**2
+    moved = tuple(Competitor(c.change, c.d_bic, c.weight, c.omega_n, c.omega_n - w_d, c.effects)
+                  for c in form.competitors if c not in aliases.rivals)
+    # a rival the discovered model carried whole (weight 1: a law the record does not determine, one the
+    # releases withdrew) is a value ω_n may have whichever model is read: carried whole from the declared ω_n too
+    u_whole = math.sqrt(sum(c.delta**2 for c in moved if c.weight >= 1.0))
+    var_d = s_d**2 + segments.u**2 + aliases.u**2 + u_whole**2
     mse_f = s_f**2 + form.u**2
     bias2 = max((w_d - w_f) ** 2 - abs(mse_f - var_d), 0.0)
     rival = Competitor(f"the discovered model ({', '.join(final.model.effect_names)}): its ω_n is the less accurate",
                        final.bic - base.bic, 1.0, w_f, w_f - w_d, final.model.effect_names)
-    rivals = (rival,) + tuple(Competitor(c.change, c.d_bic, c.weight, c.omega_n, c.omega_n - w_d, c.effects)
-                              for c in form.competitors) + aliases.rivals
-    u_rivals = covering(math.hypot(math.sqrt(bias2), aliases.u), rivals, s_d)
+    rivals = (rival, *moved, *aliases.rivals)
+    u_rivals = covering(math.sqrt(bias2 + aliases.u**2 + u_whole**2), rivals, s_d)
     return var_d + bias2, mse_f, ModelForm(segments, rivals, u_rivals)
 
 
