@@ -17,6 +17,7 @@ a tie keeps the shipped value.
 
     .venv/bin/python bench/bench_leave_one_out.py            # every rule of RULES (tens of minutes)
     .venv/bin/python bench/bench_leave_one_out.py --quick    # two rules, two values beside the shipped one
+    .venv/bin/python bench/bench_leave_one_out.py --rules LAW_SIGMA EFFECT_P   # some rules only
 """
 
 from __future__ import annotations
@@ -135,6 +136,9 @@ def report(rule: Rule, table: dict[float, dict[str, float]], names: list[str]) -
         lines.append(f"| {h} | {v:g} | {table[v][h]:.3f} | {table[rule.shipped][h]:.3f} | {alone:g} ({table[alone][h]:.3f}) |")
         if table[v][h] > table[rule.shipped][h] + 1e-9:
             worse.append(h)
+    by_value = ", ".join(f"{v:g}: {sum(per.values()):.3f}" for v, per in table.items())
+    lines += ["", f"loss summed over the sets, by value: {by_value}; a set's loss by value: "
+              + "; ".join(f"{h} " + "/".join(f"{table[v][h]:.2f}" for v in table) for h in names)]
     held = sum(table[chosen(table, [n for n in names if n != h], rule.shipped)][h] for h in names)
     lines += ["", f"held-out loss, summed over the sets: {held:.3f} (the shipped value on every set: "
               f"{sum(table[rule.shipped][h] for h in names):.3f}); left out and worse than the shipped value: "
@@ -146,6 +150,7 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="two rules, the quick grids")
     p.add_argument("--sets", nargs="*", default=[], help="only the sets whose name holds one of these")
+    p.add_argument("--rules", nargs="*", default=[], help="only these rules (names of RULES)")
     a = p.parse_args(argv)
     sets = [s for s in SETS if not a.sets or any(x in s[0] for x in a.sets)]
     names = [n for n, _ in sets]
@@ -158,7 +163,7 @@ def main(argv: list[str] | None = None) -> None:
     out = []
     for rule in RULES:
         values = rule.quick if a.quick else rule.grid
-        if not values:
+        if not values or (a.rules and rule.name not in a.rules):
             continue
         out += report(rule, losses(rule, values, sets, plain, cache), names)
         print(f"{rule.name}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
