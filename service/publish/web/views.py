@@ -38,10 +38,10 @@ from service.parts.recipes import (
     edit_recipe,
     recipe_values,
 )
-from service.persistence.repeats import rig_reproducibility
 from service.publish.dfq import ENCODING
 from service.publish.payload import stored_result
 from service.sources.calibrations import read_history, recorded_at
+from service.sources.repeats import rig_reproducibility
 from service.states import vocabulary
 
 from . import quality as Q

@@ -10,12 +10,27 @@ since the rig's calibration counts: a new calibration is a new rig.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Protocol, Sequence
 
 from measurement.reproducibility import Reproducibility, pooled
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .store import Store, StoredMeasurement
+
+class Release(Protocol):
+    """What is read of a stored release (``service.persistence.store.StoredMeasurement``)."""
+
+    status: str
+    omega_n: float | None
+    part_id: str | None
+    part_uuid: str | None
+
+
+class Releases(Protocol):
+    """What is read of the result store (``service.persistence.store.Store``)."""
+
+    def list(self, limit: int | None = ..., *, since: float | None = ..., status: str | None = ...) -> Any: ...
+
+    def check_standards(self, limit: int | None = ...) -> Sequence[Mapping[str, Any]]: ...
+
 
 #: the newest releases read (a page's worth of work, however long the store has grown)
 READ_LIMIT = 5000
@@ -25,7 +40,7 @@ def _positive(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
 
 
-def repeat_groups(releases: Iterable[StoredMeasurement], checks: Iterable[Mapping[str, Any]]) -> list[list[float]]:
+def repeat_groups(releases: Iterable[Release], checks: Iterable[Mapping[str, Any]]) -> list[list[float]]:
     """ω_n (or a check's J^(−1/2), on ω's scale) of each object's repeat releases, one list per object."""
     groups: dict[tuple[str, str], list[float]] = {}
     for m in releases:
@@ -38,7 +53,7 @@ def repeat_groups(releases: Iterable[StoredMeasurement], checks: Iterable[Mappin
     return list(groups.values())
 
 
-def rig_reproducibility(store: Store, since: float | None = None) -> Reproducibility:
+def rig_reproducibility(store: Releases, since: float | None = None) -> Reproducibility:
     """The store's repeat releases since ``since`` (s, epoch; None: all) pooled (``Reproducibility``)."""
     releases = store.list(limit=READ_LIMIT, since=since, status="ok")
     checks = [c for c in store.check_standards(limit=READ_LIMIT) if since is None or c["finished_at"] >= since]

@@ -7,8 +7,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from service.persistence.repeats import repeat_groups, rig_reproducibility
 from service.persistence.store import Store
+from service.sources.repeats import repeat_groups, rig_reproducibility
 
 
 def _release(omega_n, part_id=None, part_uuid=None, status="ok"):
