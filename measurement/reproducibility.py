@@ -6,7 +6,7 @@ repeat releases: groups of releases of one object (a check standard measured aga
 part released several times), each group's own standard deviation pooled over the groups as
 ISO 5725-2:2019 ("Accuracy (trueness and precision) of measurement methods and results — Part 2:
 Basic method for the determination of repeatability and reproducibility of a standard measurement
-method", 7.4.4) pools the cells of one level:
+method", its repeatability variance) pools the cells of one level:
 
     s² = Σ (n_i − 1)·s_i² / Σ (n_i − 1),   ν = Σ (n_i − 1)
 
@@ -96,7 +96,7 @@ def _group(values: Sequence[float]) -> list[float]:
 
 
 def pooled(groups: Iterable[Sequence[float]], *, power: float = 1.0) -> Reproducibility:
-    """The pooled relative within-group standard deviation of repeat releases (ISO 5725-2 7.4.4).
+    """The pooled relative within-group standard deviation of repeat releases (ISO 5725-2).
 
     groups: the values of each object's releases (ω_n in rad/s, or J in kg·m² with ``power`` = −2,
     J = C/ω²: a relative deviation of J is −2 times ω_n's). A group of fewer than ``MIN_GROUP`` releases
