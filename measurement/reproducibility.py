@@ -79,12 +79,13 @@ class Reproducibility:
                    int(d["releases"]), d["source"], bool(d["counted"]))
 
 
-#: The documented default (Type B, ν = ∞) for one release without a history: 0.2 % of ω_n (0.4 % of J).
-#: Its source: the between-release standard deviation of ω_n that a plain damped sinusoid shows on the
-#: real torsion-rod records of docs/measured-data.md (a bicycle rod 0.204 %, a front wheel on the rod
-#: 0.245 %; hand-built rigs, the part remounted): the scatter a record's own fit cannot see. Rigs differ
-#: by a factor of ten either way, so it is stated beside one release's budget, not counted in its u.
-DEFAULT = Reproducibility(0.002, math.inf, 0, 0, DEFAULT_SOURCE, False)
+#: The documented default (Type B, ν = ∞) for one release without a history: 0.1 % of ω_n (0.2 % of J).
+#: Its source: the range (max − min)/mean of ω_n that a plain damped sinusoid shows between the releases of
+#: the real torsion-rod records of docs/measured-data.md (a bicycle rod 0.204 % over 5 releases, a front
+#: wheel on the rod 0.245 % over 3; hand-built rigs), as a standard deviation range/d₂ (d₂ = 2.326 and
+#: 1.693: 0.088 % and 0.145 %), rounded: the scatter a record's own fit cannot see. Rigs differ by a factor
+#: of ten either way, so it is stated beside one release's budget, not counted in its u.
+DEFAULT = Reproducibility(0.001, math.inf, 0, 0, DEFAULT_SOURCE, False)
 
 
 def _group(values: Sequence[float]) -> list[float]:

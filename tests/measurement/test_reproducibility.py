@@ -66,7 +66,7 @@ def test_the_default_is_stated_beside_the_budget_not_counted():
     assert b.u == without.u and b.U == without.U
     line = next(ln for ln in b.lines if ln.symbol == "omega_n_repro")
     assert not line.stated and line.contribution == 0.0 and "measure ≥ 3 releases" in line.note
-    assert "0.2 %" in line.note
+    assert "0.1 % of ω_n" in line.note and "0.2 % of J" in line.note
 
 
 def _release():
