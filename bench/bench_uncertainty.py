@@ -9,6 +9,12 @@ error and U = k·u the median U over the RMS error is k when u is right (2 for k
 and its ratio to k (1 when honest; goal ≤ 1.5: at most 50 % wider than it needs to be).
 
 Run: `.venv/bin/python bench/bench_uncertainty.py [REPEATS]` (default 200; at least 40), or `make bench`.
+
+Reproducibility between releases: `.venv/bin/python bench/bench_uncertainty.py --remount REL [REPEATS]` gives
+every release a scatter the record cannot see (the pivot settling: k off by a relative 2·REL, normal, drawn
+anew for each release, so ω_n scatters by REL), measures a check standard (the 0.0125 kg·m² disc) HISTORY
+times to pool it (``measurement.reproducibility.pooled``), and prints the part's coverage with the rig's
+history in u and without it (one release: the default stated, not counted).
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import numpy as np
 from measurement import Options, Pendulum, Rig, identify, simulate_trace
 from measurement.calibration import Reference, calibrate_torsion
 from measurement.identification.quantities import budgets
+from measurement.reproducibility import pooled
 
 K, I0 = 0.3651, 4.5043e-3
 LOADS = (0.0, 0.005, 0.0125)          # true added inertias, kg·m²
@@ -61,6 +68,39 @@ def repeat(i: int) -> tuple[float, float, float, float]:
     return b.value - PART, b.U, b.coverage_factor, old_b.U
 
 
+#: check-standard releases pooled into the rig's history in the remount runs
+HISTORY = 5
+
+
+def remount_repeat(i: int, rel: float) -> tuple[float, float, float]:
+    """(error of J_object, its U with the rig's pooled history in u, its U without) of one release on a rig
+    whose releases scatter by ``rel`` in ω_n, on a calibration from the true inertias (kg·m²)."""
+    rng = np.random.default_rng(5000 + i)
+
+    def settled() -> Rig:  # a release's own stiffness: the pivot settled anew
+        return Rig(kind="torsion", stiffness=K * (1 + 2 * rel * rng.normal()), declared=("viscous",))
+
+    rig = Rig(kind="torsion", stiffness=K, stiffness_std=K * 1e-4, tare_inertia=I0, tare_inertia_std=1e-7,
+              declared=("viscous",))
+    checks = [identify(swing(settled(), I0 + LOADS[2], 100 * i + j), rig, Options()).J for j in range(HISTORY)]
+    history = pooled([[float(J) for J in checks if J is not None]], power=-2)
+    trace = swing(settled(), I0 + PART, 100 * i + 99)
+    alone = identify(trace, rig, Options()).uncertainty_budget["J_object"]
+    counted = identify(trace, rig, Options(reproducibility=history)).uncertainty_budget["J_object"]
+    return alone.value - PART, counted.U, alone.U
+
+
+def main_remount(repeats: int, rel: float) -> None:
+    t0 = time.perf_counter()
+    rows = np.array([remount_repeat(i, rel) for i in range(repeats)])
+    err = np.abs(rows[:, 0])
+    print(f"{repeats} releases on a rig whose releases scatter {100 * rel:.2g} % in ω_n, history of {HISTORY} "
+          f"check-standard releases, {time.perf_counter() - t0:.0f} s")
+    for name, col in (("the rig's history in u", 1), ("one release, the default not counted", 2)):
+        print(f"  {name}: coverage {int(np.sum(err <= rows[:, col]))}/{repeats} = {100 * np.mean(err <= rows[:, col]):.1f} %,"
+              f" median U {statistics.median(rows[:, col]):.3g} kg·m²")
+
+
 def main(repeats: int = 200) -> None:
     t0 = time.perf_counter()
     rows = [repeat(i) for i in range(repeats)]
@@ -87,4 +127,7 @@ def main(repeats: int = 200) -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 200)
+    if len(sys.argv) > 2 and sys.argv[1] == "--remount":
+        main_remount(int(sys.argv[3]) if len(sys.argv) > 3 else 40, float(sys.argv[2]))
+    else:
+        main(int(sys.argv[1]) if len(sys.argv) > 1 else 200)

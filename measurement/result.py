@@ -26,6 +26,7 @@ from . import flags as F
 from .errors import ResultSchemaError
 from .flags import FIT_NOT_CONVERGED
 from .periods import Periods
+from .reproducibility import Reproducibility
 from .residual import Diagnostics
 from .trace import READING_UNITS
 from .uncertainty import Budget
@@ -286,6 +287,17 @@ class DiscoveryStep:
                    d["bic_after"], d["evidence"], d["reason"], d["omega_n_before"])
 
 
+def reproducibility_line(r: Reproducibility | None) -> str:
+    """The report's line on the scatter between releases, which one record cannot see."""
+    if r is None or not r.known:
+        default = "" if r is None or r.relative is None else (
+            f" (a typical rig: ±{100 * r.relative:.2g} % of ω_n, Type B: stated, not counted)")
+        return ("    reproducibility: not known from one release (remounting, the pivot settling, a hand-held "
+                f"sensor): not in u{default}; measure ≥ 3 releases, whose joint identification carries their scatter")
+    assert r.relative is not None
+    return (f"    reproducibility: ±{100 * r.relative:.2g} % of ω_n between releases ({r.note()}, ν = {r.dof:.0f}): in u")
+
+
 @dataclass(frozen=True, eq=False)
 class IdentificationResult:
     """Everything a measurement says. SI units; *_std are 1σ standard uncertainties.
@@ -356,6 +368,9 @@ class IdentificationResult:
     #: declared model, where its ω_n is the more accurate: ``identification.focus``), and its effects
     omega_n_from: str = "discovered"
     omega_n_effects: tuple[str, ...] = ()
+    #: the scatter of ω_n between releases, which one record cannot see (``measurement.reproducibility``):
+    #: a rig's history pooled (in u), or the documented default (stated, not in u); None: not said
+    reproducibility: Reproducibility | None = None
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -424,6 +439,7 @@ class IdentificationResult:
             "periods": None if self.periods is None else self.periods.to_dict(),
             "omega_n_from": self.omega_n_from,
             "omega_n_effects": list(self.omega_n_effects or self.effects),
+            "reproducibility": None if self.reproducibility is None else self.reproducibility.to_dict(),
         }
         if include_arrays:
             d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
@@ -458,6 +474,7 @@ class IdentificationResult:
             omega_n_from=d.get("omega_n_from", "discovered"),
             omega_n_effects=tuple(d.get("omega_n_effects") or d["effects"]),
             model_form=ModelForm.from_dict(d["model_form"]),
+            reproducibility=None if d.get("reproducibility") is None else Reproducibility.from_dict(d["reproducibility"]),
             uncertainty_budget={k: Budget.from_dict(b) for k, b in d["uncertainty_budget"].items()},
             arrays={k: np.asarray(v, dtype=float) for k, v in (d.get("arrays") or {}).items()},
         )
@@ -508,9 +525,7 @@ class IdentificationResult:
             ju = f"; J ± {self.J_u:.2g} kg·m²" if self.J_u is not None else ""
             L.append(f"    model form   = ±{self.omega_n_std_model:.2g} rad/s (halves of the record, rival models)"
                      f" → combined u: ω_n ± {self.omega_n_u:.2g} rad/s{ju}")
-        # one record cannot see what changes between releases; its u does not hold it
-        L.append("    reproducibility: not known from one release (remounting, the pivot settling, a hand-held "
-                 "sensor): not in u; measure ≥ 3 releases, whose joint identification carries their scatter")
+        L.append(reproducibility_line(self.reproducibility))
         for measurand, budget in self.uncertainty_budget.items():
             L.append(f"[[Uncertainty budget]] {measurand} (GUM; J_std above is the fit's 1σ alone)")
             L.extend(budget_table(budget))

@@ -27,14 +27,15 @@ rather than leaving it out silently.
 
 The measurement model of a pendulum (SI units):
 
-    ω = (ω_n + δω_fit + δω_model + δω_view + r_s·δs)·(1 + ε_clock)
+    ω = (ω_n + δω_fit + δω_model + δω_view + r_s·δs)·(1 + ε_R)·(1 + ε_clock)
     J = C / ω²,  C = k (torsion) or m·g·S (compound)
     J_object = J − I0,  J_object_axis = J_object − m_o·L²
 
 with δω_fit the fit's statistical error of ω_n, δω_model the model form (the
 record's halves, rival models), δω_view the camera view's calibration, δs the
 angle sensor's relative scale error (r_s = ∂ω_n/∂s from the fit's linear
-response) and ε_clock the sample clock's relative frequency error.
+response), ε_R the relative scatter between releases (reproducibility, ``measurement.reproducibility``)
+and ε_clock the sample clock's relative frequency error.
 """
 
 from __future__ import annotations
@@ -218,7 +219,7 @@ def evaluate(measurand: str, unit: str, f: Callable[[Mapping[str, float]], float
         xm[i.symbol] -= h
         cs[i.symbol] = (f(xp) - f(xm)) / (2 * h)
     used = [i for i in inputs if cs[i.symbol] != 0.0]  # an input f does not read has c = 0 exactly
-    contrib = {i.symbol: cs[i.symbol] * (i.std or 0.0) for i in used}
+    contrib = {i.symbol: cs[i.symbol] * (i.std or 0.0) + 0.0 for i in used}  # + 0.0: no −0 for a line not stated
     var_lines = sum(c**2 for c in contrib.values())
     cross = 0.0
     corr_out: list[dict[str, Any]] = []
@@ -279,6 +280,9 @@ class PendulumInputs:
     object_mass_std: float | None = None
     axis_offset: float | None = None
     axis_offset_std: float | None = None
+    #: between-release scatter of ω_n (``measurement.reproducibility``): (relative 1σ or None, ν, counted,
+    #: note); None: no line (several releases carry their own scatter)
+    reproducibility: tuple[float | None, float, bool, str] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     def inputs(self) -> list[Input]:
@@ -288,6 +292,10 @@ class PendulumInputs:
         if self.omega_n_model:
             out.append(Input("omega_n_model", "ω_n: model form", 0.0, self.omega_n_model, "rad/s", RANDOM,
                              note="halves of the record, rival models"))
+        if self.reproducibility is not None:
+            rel, dof, counted, note = self.reproducibility
+            out.append(Input("omega_n_repro", "ω_n: reproducibility (relative)", 0.0, rel if counted else None, "1",
+                             RANDOM, dof, note))
         if self.omega_n_view:
             out.append(Input("omega_n_view", "ω_n: camera view calibration", 0.0, self.omega_n_view, "rad/s"))
         out.append(Input("clock", "sample clock (relative)", 0.0,
@@ -327,7 +335,7 @@ class PendulumInputs:
         w = x["omega_n_fit"] + x.get("omega_n_model", 0.0) + x.get("omega_n_view", 0.0)
         if self.angle_scale is not None:
             w += self.angle_scale[0] * x["angle_scale"]
-        return w * (1.0 + x["clock"])
+        return w * (1.0 + x.get("omega_n_repro", 0.0)) * (1.0 + x["clock"])
 
     def J(self, x: Mapping[str, float]) -> float:
         c = self.restoring(x)

@@ -75,7 +75,8 @@ def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]
     w, ws, w_cal, j = head.omega_n, head.omega_n_std, found.omega_n_view, found.inertias
     w_u = math.sqrt(ws**2 + (w_cal or 0.0) ** 2 + form.u**2)
     budget = budgets(rig, w, ws, dof=float(head.fit.dof), model=form.u, view=w_cal,
-                     scale_response=omega_n_per_scale(head.fit) if rig.sensor_calibrated else None)
+                     scale_response=omega_n_per_scale(head.fit) if rig.sensor_calibrated else None,
+                     reproducibility=found.reproducibility)
     J_u = budget["J"].u if "J" in budget else None
     zeta, zeta_std, amp_ref = damping_ratio(final)
     return IdentificationResult(
@@ -97,5 +98,5 @@ def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]
         structure=structure, window=_window(found), acquisition={k: v for k, v in trace.meta.items() if k != "truth"},
         sensor_calibrated=rig.sensor_calibrated, measures=rig.measures, arrays=_arrays(found),
         periods=_periods(found, w, w_u, zeta),
-        omega_n_from=head.chosen, omega_n_effects=head.effects,
+        omega_n_from=head.chosen, omega_n_effects=head.effects, reproducibility=found.reproducibility,
     )

@@ -9,6 +9,8 @@ from typing import Any
 
 from ..fit import ModelFit
 from ..model import Model
+from ..reproducibility import DEFAULT as DEFAULT_REPRODUCIBILITY
+from ..reproducibility import Reproducibility
 from ..residual import Diagnostics
 from ..result import DiscoveryStep, ModelForm, SegmentCheck
 from ..rig import Rig
@@ -58,6 +60,8 @@ class Findings:
     rival_laws: tuple[tuple[str, float, tuple[str, ...], str], ...] = ()
     #: the model the headline ω_n is read from (``focus``); None: the final model
     focus: Focus | None = None
+    #: the scatter between releases this record cannot see (``Options.reproducibility``; the default: stated only)
+    reproducibility: Reproducibility = DEFAULT_REPRODUCIBILITY
 
     @property
     def headline(self) -> Focus:

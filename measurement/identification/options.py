@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..reproducibility import Reproducibility
+
 
 @dataclass(frozen=True)
 class Options:
@@ -26,6 +28,9 @@ class Options:
     ω_n is a rival carried whole into ω_n's uncertainty.
     focused: read the headline ω_n from the declared model where its ω_n is the more accurate
     (``identification.focus``; False: always from the discovered model).
+    reproducibility: the rig's scatter of ω_n between releases (``measurement.reproducibility.pooled``
+    over its history): a line of the budget, in u. None: not
+    known; the budget states the documented default without counting it.
     """
 
     discover: bool = True
@@ -38,3 +43,4 @@ class Options:
     max_rounds: int = 5
     rival_laws: tuple[tuple[str, float, tuple[str, ...], str], ...] = ()
     focused: bool = True
+    reproducibility: Reproducibility | None = None

@@ -13,6 +13,7 @@ from ..effects import EFFECTS
 from ..errors import RigError, UnknownEffectError
 from ..fit import ModelFit, fit_model
 from ..model import Model
+from ..reproducibility import DEFAULT as DEFAULT_REPRODUCIBILITY
 from ..residual import Diagnostics
 from ..result import DiscoveryStep, IdentificationResult
 from ..rig import Rig
@@ -219,6 +220,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         slipped_from=g.slipped_from, beaten_by=g.beaten_by, follows=follows, follow_ratio=follow_ratio,
         view=view, omega_n_view=w_cal, inertias=inertias(rig, w, ws, w_cal, head.form.u),
         nominal=omega_n_at_nominal_scale(final), nfev=run.nfev + g.nfev + spent, bic_margin=options.bic_margin,
-        rival_laws=options.rival_laws, focus=head)
+        rival_laws=options.rival_laws, focus=head,
+        reproducibility=options.reproducibility or DEFAULT_REPRODUCIBILITY)
     left = leftover(found)
     return assemble(found, raise_flags(found, left), describe(found, left))

@@ -14,6 +14,7 @@ import numpy as np
 from ..effects import Effect
 from ..fit import ModelFit, swing_amplitude
 from ..model import Model
+from ..reproducibility import Reproducibility
 from ..result import ModelSummary, Quantity
 from ..rig import Rig
 from ..uncertainty import Budget, PendulumInputs
@@ -155,14 +156,18 @@ def omega_n_per_scale(fit: ModelFit) -> float:
 
 
 def budgets(rig: Rig, omega_n: float, omega_n_std: float, *, dof: float = math.inf, model: float = 0.0,
-            view: float | None = None, scale_response: float | None = None) -> dict[str, Budget]:
+            view: float | None = None, scale_response: float | None = None,
+            reproducibility: Reproducibility | None = None) -> dict[str, Budget]:
     """The uncertainty budgets (measurand → ``Budget``) of a swing identified at ω_n ± σ on ``rig``.
 
     model, view: the model-form and camera-view 1σ of ω_n (rad/s); scale_response: ∂ω_n/∂s of the
-    fit, for a sensor declared calibrated (its ``angle_scale_std`` then enters).
+    fit, for a sensor declared calibrated (its ``angle_scale_std`` then enters); reproducibility: the
+    scatter between releases one release cannot see (None: no line, the releases carry their own).
     """
     obj = rig.object
     return PendulumInputs(
+        reproducibility=None if reproducibility is None else (
+            reproducibility.relative, reproducibility.dof, reproducibility.counted, reproducibility.note()),
         omega_n=omega_n, omega_n_std=omega_n_std, omega_n_dof=dof, omega_n_model=model, omega_n_view=view,
         clock_ppm=rig.clock_accuracy_ppm,
         angle_scale=None if scale_response is None else (scale_response, rig.angle_scale_std),

@@ -23,6 +23,7 @@ from aiohttp import web
 
 from measurement.errors import VisionError
 from measurement.flags import FLAGS
+from measurement.reproducibility import Reproducibility
 from service import __version__
 from service.core import vocabulary as V
 from service.errors import InputFileError, StoreDamaged
@@ -40,6 +41,7 @@ from service.parts.recipes import (
 from service.publish.dfq import ENCODING
 from service.publish.payload import stored_result
 from service.sources.calibrations import read_history, recorded_at
+from service.sources.repeats import rig_reproducibility
 from service.states import vocabulary
 
 from . import quality as Q
@@ -881,7 +883,10 @@ class Views:
             # the file is read off the loop: a long history must not hold every other page up
             history = await asyncio.get_running_loop().run_in_executor(
                 None, self._history, path, before if i == paged else None)
-            rows.append({"name": name, "used_by": used_by, "cal": cal, "until": until, "index": i,
+            # the store is the set-up's: its repeat releases tell the set-up's rig's scatter between releases
+            repro = (await asyncio.get_running_loop().run_in_executor(None, self._reproducibility, cal)
+                     if i == 0 else None)
+            rows.append({"name": name, "used_by": used_by, "cal": cal, "until": until, "index": i, "repro": repro,
                          "days_left": (until - today).days if until is not None else None,
                          "due": cal is not None and cal.due(today), "stiffness": rig.stiffness,
                          "stiffness_std": rig.stiffness_std, "paged": i == paged and before is not None, **history})
@@ -890,6 +895,15 @@ class Views:
         return self._page(request, "calibration.html", title="Calibration", rows=rows, unit=unit,
                           checks=checks[-20:][::-1], check_chart=check_chart, state=self.app.calibration_state(),
                           blocked=self.blocked())
+
+    def _reproducibility(self, cal: Any) -> Reproducibility | None:
+        """The set-up's rig's scatter of ω_n between releases, pooled from the store's repeat releases since its
+        calibration (None without a store)."""
+        store = self.app.store
+        if store is None:
+            return None
+        since = (dt.datetime.combine(cal.date, dt.time(), dt.UTC).timestamp() if cal is not None else None)
+        return rig_reproducibility(store, since)
 
     def _rigs(self) -> list[tuple[str, Any, list[str], str | None]]:
         """The set-up's rig and each recipe's own, once per rig file: (name, rig, recipes using it, its file)."""

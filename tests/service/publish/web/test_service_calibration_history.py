@@ -139,3 +139,28 @@ def test_the_page_lists_the_history_a_page_at_a_time_and_reads_it_off_the_web_lo
     finally:
         release.set()
         slow.join(30)
+
+
+def test_the_page_shows_the_rigs_reproducibility_pooled_from_its_check_standards(tmp_path, appliance_factory):
+    shutil.copy(REPO / "examples" / "torsion_rig.toml", tmp_path / "rig.toml")
+    shutil.copy(REPO / "examples" / "calibration.toml", tmp_path / "calibration.toml")
+    _calibrate(tmp_path, "2026-06-01", "A. Meyer")
+    running = appliance_factory(appliance_doc(tmp_path / "state", device={"rig": str(tmp_path / "rig.toml")},
+                                              web={"enabled": True}))
+    c = Client(running.app.web.url)
+    status, _, body = c.request("/calibration")
+    repro = re.search(r'<dd class="cal-repro">(.*?)</dd>', body.decode(), re.S)
+    assert status == 200 and repro is not None and "not known: no object released twice" in repro.group(1)
+    store = running.app.store
+    # one check standard three times after the calibration (J ± 0.16 %: ω_n ± 0.08 %), one the day before it
+    day = 1_780_272_000.0  # 2026-06-01 00:00 UTC
+    for at, v in ((day - 3600, 0.0200), (day + 10, 0.01250), (day + 20, 0.01252), (day + 30, 0.01248)):
+        store.record_check_standard({"name": "disc", "quantity": "J_object", "value": v, "U": 2e-5,
+                                     "reference": 0.0125, "reference_U": 2e-5, "E_n": 0.1, "passed": True},
+                                    finished_at=at)
+    status, _, body = c.request("/calibration")
+    repro = re.search(r'<dd class="cal-repro">(.*?)</dd>', body.decode(), re.S)
+    assert status == 200 and repro is not None
+    shown = html.unescape(re.sub(r"<[^>]+>", "", repro.group(1)))
+    assert "± 0.08 % of ω_n (± 0.16 % of J)" in shown and "3 repeat releases of 1 object since" in shown, shown
+    assert "ν = 2" in shown
