@@ -152,7 +152,7 @@ class Model:
         return 0.05 / (max(self.value(x, "omega_n"), 1e-9) * self.frequency_factor(x, amplitude))
 
     def dynamics(self, x: Vector) -> Dynamics:
-        return Dynamics(self.rig.kind, self.dynamic, [self.values(x, e.name) for e in self.dynamic])
+        return Dynamics(self.rig.kind, self.dynamic, [self.values(x, e.name) for e in self.dynamic], self.rig.geometry)
 
     @property
     def measures(self) -> str:
