@@ -368,7 +368,12 @@ class Rig:
             angle_scale_std=sensor_std("angle_scale_std", "1 (relative)"),
             length=opt("length", "m"),
             length_std=opt("length_std", "m", allow_zero=True),
-            **{key: opt(key, "m", allow_zero=key.endswith("_std")) for key in _WIRE_RIG_KEYS},
+            wire_length=opt("wire_length", "m"),
+            wire_length_std=opt("wire_length_std", "m", allow_zero=True),
+            spacing=opt("spacing", "m"),
+            spacing_std=opt("spacing_std", "m", allow_zero=True),
+            radius=opt("radius", "m"),
+            radius_std=opt("radius_std", "m", allow_zero=True),
         )
 
     def to_dict(self) -> dict[str, Any]:

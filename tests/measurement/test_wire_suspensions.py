@@ -91,7 +91,7 @@ def test_large_twist_gives_j_without_a_cubic_spring(kind, degrees):
     trace = simulate_trace(Pendulum(rig, INERTIA, {"viscous": {"c": DAMPING}}), theta0=math.radians(degrees),
                            duration=40.0, rate=100.0, noise_std=1e-3, seed=degrees)
     r = identify(trace, rig, Options())
-    assert r.J == pytest.approx(INERTIA, rel=2e-3)
+    assert r.J is not None and abs(r.J / INERTIA - 1) < 2e-3
     assert "cubic_stiffness" not in r.effects
     assert not warnings(r.flags)
     # the period at the record's swing is the geometry's, beside the small-swing one
