@@ -128,3 +128,19 @@ def test_a_bad_rig_file_is_one_line(tmp_path, capsys, rig, expected):
     assert main(["identify", str(swing), "--rig", str(path)]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and expected in lines[0]
+
+
+def test_the_budget_takes_the_geometry_and_a_rig_without_mass_gives_omega_n():
+    rig = Rig.from_dict({"rig": dict(RIGS["bifilar"], mass_std=0.001, spacing_std=0.0005)})
+    trace = simulate_trace(Pendulum(rig, INERTIA, {"viscous": {"c": DAMPING}}), theta0=math.radians(60),
+                           duration=30.0, rate=100.0, noise_std=1e-3, seed=5)
+    r = identify(trace, rig, Options())
+    budget = r.uncertainty_budget["J"]
+    lines = {line.symbol: line for line in budget.lines}
+    # J = m·g·R²/(L·ω²): ∂J/∂R = 2J/R, R = D/2 with σ_D/2
+    assert lines["R"].sensitivity == pytest.approx(2 * INERTIA / 0.2, rel=1e-3)
+    assert lines["R"].std == pytest.approx(0.00025)
+    bare = Rig.from_dict({"rig": {k: v for k, v in RIGS["bifilar"].items() if k != "mass"}})
+    r_bare = identify(trace, bare, Options())
+    assert r_bare.J is None and r_bare.omega_n == pytest.approx(r.omega_n, rel=1e-9)
+    assert "mass (bifilar, trifilar)" in r_bare.report()
