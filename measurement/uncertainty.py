@@ -28,7 +28,7 @@ rather than leaving it out silently.
 The measurement model of a pendulum (SI units):
 
     ω = (ω_n + δω_fit + δω_model + δω_view + r_s·δs)·(1 + ε_clock)
-    J = C / ω²,  C = k (torsion) or m·g·S (compound)
+    J = C / ω²,  C = k (torsion), m·g·S (compound) or m·g·R²/L (bifilar, trifilar)
     J_object = J − I0,  J_object_axis = J_object − m_o·L²
 
 with δω_fit the fit's statistical error of ω_n, δω_model the model form (the
