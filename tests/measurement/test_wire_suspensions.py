@@ -67,6 +67,7 @@ def test_small_swing_constant_is_the_textbook_one():
     assert rig.restoring_constant == pytest.approx(m * g * D**2 / (4 * L), rel=1e-12)
     tri = rig_of("trifilar")
     assert tri.restoring_constant == pytest.approx(m * g * 0.15**2 / 0.8, rel=1e-12)
+    assert Rig.from_dict(rig.to_dict()) == rig and Rig.from_dict(tri.to_dict()) == tri  # `moi calibrate --out` writes it
 
 
 @pytest.mark.parametrize("kind", sorted(RIGS))
