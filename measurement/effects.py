@@ -4,7 +4,7 @@ Equation of motion, normalised by the inertia J:
 
     θ'' = −ω_n²·r(θ) − Σ_effects Σ_j p_j·φ_j(θ, θ', s)
 
-with r(θ) = θ (torsion) or sin θ (compound) and s = ±1 the direction of the
+with r(θ) = θ (torsion), sin θ (compound) or a wire suspension's law (``measurement.restoring``) and s = ±1 the direction of the
 current half-swing. Every dynamic effect is linear in its normalised
 parameters p_j (torque / J), which is what makes the equation-error start and
 the discovery loop's diagnostics cheap. A sensor effect adds to the measured
@@ -80,7 +80,7 @@ class Effect:
     role: ClassVar[str]
     parameters: ClassVar[tuple[Parameter, ...]]
     #: rig kinds the effect exists on (may be declared, is integrated)
-    rigs: ClassVar[tuple[str, ...]] = ("torsion", "compound")
+    rigs: ClassVar[tuple[str, ...]] = ("torsion", "compound", "bifilar", "trifilar")
     #: rig kinds the discovery loop offers it on as a candidate (None: all of ``rigs``)
     offered: ClassVar[tuple[str, ...] | None] = None
     #: what a sensor must read for the effect to exist in it ("angle", "rate"; ``Rig.measures``)

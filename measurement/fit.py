@@ -29,6 +29,7 @@ from scipy.optimize import least_squares, lsq_linear
 from .errors import IdentificationError
 from .model import STATE_PARAMS, Model
 from .noise import NoiseModel, autocorrelation, fit_noise
+from .restoring import restoring_column
 from .signal import Swings, find_swings, periodogram, resample_uniform, savitzky_golay
 
 __all__ = ["ModelFit", "Smoothed", "fit_model", "initial_guess", "smooth", "autocorrelation"]
@@ -243,7 +244,7 @@ def initial_guess(model: Model, t: np.ndarray, y: np.ndarray, sigma: float,
         regress = kept.size >= 2 * window + len(model.dynamic) + 3
         rows = kept if regress else rows
     xs, vs, acc = angle[rows], rate[rows], accel[rows]
-    restoring = np.sin(xs) if model.rig.kind == "compound" else xs
+    restoring = restoring_column(model.rig.kind, xs, vs, acc, model.rig.geometry)
     columns = [restoring[:, None]] + [e.basis(xs, vs) for e in model.dynamic]
     A = np.hstack(columns)
     lo_b, hi_b = model.bounds()

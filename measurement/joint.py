@@ -154,7 +154,8 @@ class JointResult:
                 L.append(f"[[Uncertainty budget]] {measurand} (GUM: the joint ω_n and the rig's constants)")
                 L.extend(budget_table(b))
         else:
-            L.append("    J            = n/a: the rig gives no stiffness (torsion) or mass·com_distance (compound)")
+            L.append("    J            = n/a: the rig gives no stiffness (torsion), mass·com_distance (compound) or mass "
+                     "(bifilar, trifilar)")
         L.append(f"    omega_n      = {self.omega_n:.7g} rad/s, σ {self.omega_n_std:.2g}, combined u {self.omega_n_u:.2g} rad/s"
                  " (the releases weighted by their whole uncertainty)")
         jf = c["joint_fit"]

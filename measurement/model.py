@@ -152,7 +152,7 @@ class Model:
         return 0.05 / (max(self.value(x, "omega_n"), 1e-9) * self.frequency_factor(x, amplitude))
 
     def dynamics(self, x: Vector) -> Dynamics:
-        return Dynamics(self.rig.kind, self.dynamic, [self.values(x, e.name) for e in self.dynamic])
+        return Dynamics(self.rig.kind, self.dynamic, [self.values(x, e.name) for e in self.dynamic], self.rig.geometry)
 
     @property
     def measures(self) -> str:
@@ -200,7 +200,8 @@ def omega_n_of(rig: Rig, inertia: float) -> float:
     """ω_n = sqrt(C/J), rad/s, for a rig whose restoring constant is known."""
     c = rig.restoring_constant
     if c is None:
-        raise InvalidInput(f"{rig.kind} rig lacks {'stiffness' if rig.kind == 'torsion' else 'mass and com_distance'}: cannot turn J into ω_n")
+        needs = {"torsion": "stiffness", "compound": "mass and com_distance"}.get(rig.kind, "mass")
+        raise InvalidInput(f"{rig.kind} rig lacks {needs}: cannot turn J into ω_n")
     if not inertia > 0:
         raise InvalidInput(f"inertia must be > 0 kg·m², got {inertia!r}")
     return math.sqrt(c / inertia)

@@ -1,7 +1,8 @@
 """The swing's period as people measure it, and g where the rig gives the pendulum's length.
 
 moi reports ω_n, the small-swing limit; a stopwatch, phyphox or Tracker gives the period of the swing as
-it was, at its amplitude (on a compound rig longer than 2π/ω_n by about A²/16: 2K(sin(A/2))/π exactly)
+it was, at its amplitude (on a compound rig longer than 2π/ω_n by about A²/16: 2K(sin(A/2))/π exactly; on a
+wire suspension by its geometry's law, ``restoring.amplitude_factor``)
 and damped (by 1/√(1 − ζ²)). Beside ω_n the result gives: the small-swing period 2π/ω_n, the period
 at the record's largest amplitude by the fitted laws, and the period counted as a user counts it, from
 the fitted swing's zero crossings over the record (its mean over the amplitudes the record went through).
@@ -15,6 +16,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from .restoring import amplitude_factor
 from .wire import read_number
 
 
@@ -66,15 +68,6 @@ class Periods:
         return out
 
 
-def amplitude_factor(kind: str, amplitude: float) -> float:
-    """The period at ``amplitude`` (rad) over the small-swing period by the rig's own restoring law."""
-    if kind != "compound" or amplitude <= 0:
-        return 1.0
-    from scipy.special import ellipk
-
-    return float(2.0 * ellipk(math.sin(min(amplitude, 3.1) / 2.0) ** 2) / math.pi)
-
-
 def counted_period(t: np.ndarray, swing: np.ndarray) -> float | None:
     """The mean period of ``swing`` (an angle about its zero, or a rate) from its zero crossings, s: the
     crossings of the swing while it stands above a tenth of its largest (the decayed tail and a drifting
@@ -90,13 +83,13 @@ def counted_period(t: np.ndarray, swing: np.ndarray) -> float | None:
 
 def periods(kind: str, omega_n: float, omega_n_u: float, omega_at: float, amplitude: float, zeta: float,
             t: np.ndarray, swing: np.ndarray, length: float | None = None,
-            length_std: float | None = None) -> Periods:
+            length_std: float | None = None, geometry: tuple[float, ...] = ()) -> Periods:
     """The periods of a fitted swing: omega_at the linear laws' ω at ``amplitude`` (ω_n without such a law),
-    zeta the damping ratio, (t, swing) the fitted swing over the record."""
+    zeta the damping ratio, (t, swing) the fitted swing over the record, geometry a wire suspension's (e, b)."""
     rel = omega_n_u / omega_n if omega_n > 0 else math.nan
     small = 2.0 * math.pi / omega_n
     damped = 1.0 / math.sqrt(max(1.0 - min(zeta, 0.99) ** 2, 1e-6))
-    at = 2.0 * math.pi / omega_at * amplitude_factor(kind, amplitude) * damped
+    at = 2.0 * math.pi / omega_at * amplitude_factor(kind, amplitude, omega_n, geometry) * damped
     counted = counted_period(t, swing)
     g = g_u = None
     if length is not None:

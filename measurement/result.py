@@ -501,7 +501,8 @@ class IdentificationResult:
             extra = f" (calibration adds ±{self.J_std_calibration:.2g})" if self.J_std_calibration else ""
             L.append(f"    J            = {Quantity(self.J, self.J_std, 'kg·m²')}{extra}{expanded('J')}")
         else:
-            L.append("    J            = n/a: the rig gives no stiffness (torsion) or mass·com_distance (compound)")
+            L.append("    J            = n/a: the rig gives no stiffness (torsion), mass·com_distance (compound) or mass "
+                     "(bifilar, trifilar)")
         if self.J_object is not None:
             L.append(f"    J_object     = {Quantity(self.J_object, self.J_object_std, 'kg·m²')}  (J − tare)"
                      f"{expanded('J_object')}")

@@ -1,10 +1,13 @@
 """The rig: what swings and what restores it.
 
-Two kinds:
+Four kinds:
 
 * ``torsion``: restoring torque k·θ; J = k / ω_n².
 * ``compound``: restoring torque m·g·S·sin θ (exact, not small-angle);
   J = m·g·S / ω_n².
+* ``bifilar`` / ``trifilar``: the part hung on two wires D apart (each R = D/2 from the axis) or three
+  on a circle of radius R, of length L; the wires' exact law of the twist (``measurement.restoring``);
+  J = m·g·R² / (L·ω_n²) (m·g·D²/(4L·ω_n²) for a bifilar).
 
 A rig without its constant (no k, or no m and S) is valid: ω_n and the
 damping normalised by J are still identified, J is then unknown (None).
@@ -19,18 +22,25 @@ from typing import Any, Mapping
 
 from .effects import resolve_effects
 from .errors import RigError
+from .restoring import RIG_KINDS, WIRE_SUSPENSIONS, wire_geometry
 from .trace import READINGS
 from .uncertainty import check_covariance
 
 STANDARD_GRAVITY = 9.80665  # m/s²
 
-RIG_KINDS = ("torsion", "compound")
-
 _RIG_KEYS = {
     "kind", "stiffness", "stiffness_std", "tare_inertia", "tare_inertia_std",
     "mass", "com_distance", "g", "stiffness_tare_covariance", "mass_std", "com_distance_std", "g_std",
-    "length", "length_std",
+    "length", "length_std", "wire_length", "wire_length_std", "spacing", "spacing_std", "radius", "radius_std",
 }
+#: the keys only one kind takes, and what they are
+_KIND_KEYS = {
+    "torsion": {"stiffness": "k"},
+    "compound": {"com_distance": "S", "length": "the equivalent pendulum length"},
+    "bifilar": {"spacing": "the wires' spacing D"},
+    "trifilar": {"radius": "the wires' circle radius R"},
+}
+_WIRE_RIG_KEYS = ("wire_length", "wire_length_std", "spacing", "spacing_std", "radius", "radius_std")
 _OBJECT_KEYS = {"mass", "axis_offset"}
 _OBJECT_STD_KEYS = {"mass_std", "axis_offset_std"}
 _MODEL_KEYS = {"declared"}
@@ -126,7 +136,7 @@ class CalibrationRecord:
 class Rig:
     """A pendulum rig. SI units throughout.
 
-    kind: "torsion" | "compound".
+    kind: "torsion" | "compound" | "bifilar" | "trifilar".
     stiffness: k, N·m/rad (torsion); None when not calibrated.
     stiffness_std: 1σ of k from calibration, N·m/rad (optional).
     tare_inertia: J of the empty fixture, kg·m² (optional): J_object = J − tare.
@@ -136,6 +146,9 @@ class Rig:
     g: local gravity, m/s²; g_std its 1σ (None: not stated; standard gravity may be 0.3 % off the local g).
     length, length_std: the equivalent pendulum length L = J/(m·S) and its 1σ, m (compound; a small bob on a
         string: the pivot to the bob's centre): the result gives g = ω_n²·L (None: not stated).
+    wire_length, wire_length_std: L of a wire suspension's wires (bifilar, trifilar), m; spacing, spacing_std: D
+        between a bifilar's two wires, m; radius, radius_std: R of a trifilar's wires' circle (at the part and at
+        the top), m. mass (kg) is then the whole hanging mass, the part's and its platform's.
     clock_accuracy_ppm: 1σ of the sample clock's frequency, ppm (``[sensor]``; None: not stated).
     angle_scale_std: 1σ of a calibrated angle sensor's scale, relative (``[sensor]``; None: not stated).
     declared: effect names the user declares (from ``[model] declared``).
@@ -168,20 +181,19 @@ class Rig:
     measures: str = "angle"
     length: float | None = None
     length_std: float | None = None
+    wire_length: float | None = None
+    wire_length_std: float | None = None
+    spacing: float | None = None
+    spacing_std: float | None = None
+    radius: float | None = None
+    radius_std: float | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in RIG_KINDS:
             raise RigError(f"rig: unknown kind {self.kind!r}; expected one of {', '.join(RIG_KINDS)}")
         if self.measures not in READINGS:
             raise RigError(f"rig: the sensor measures {self.measures!r}; expected one of {', '.join(READINGS)}")
-        if self.kind == "torsion" and (self.mass is not None or self.com_distance is not None):
-            # m and S do not enter a torsion rig's equation; accepting them silently
-            # would let a user believe they were used.
-            raise RigError("rig: mass/com_distance belong to a compound rig; kind is 'torsion'")
-        if self.kind == "torsion" and self.length is not None:
-            raise RigError("rig: length (the equivalent pendulum length, for g) belongs to a compound rig; kind is 'torsion'")
-        if self.kind == "compound" and self.stiffness is not None:
-            raise RigError("rig: stiffness belongs to a torsion rig; kind is 'compound'")
+        self._check_kind_keys()
         if self.angle_scale_std is not None and not self.sensor_calibrated:
             # an uncalibrated sensor's scale is fitted from the swing (gain, view) or does not enter ω_n:
             # a σ for it would be counted for nothing
@@ -199,27 +211,75 @@ class Rig:
                 raise RigError(f"rig: the sensor is calibrated ([sensor] calibrated = true) but [model] declares "
                                f"{', '.join(scaling)}, which fit the angle's scale; drop one or the other")
 
+    def _check_kind_keys(self) -> None:
+        """A key of another kind is refused: it would not enter this rig's equation, and accepting it
+        silently would let a user believe it was used."""
+        for kind, keys in _KIND_KEYS.items():
+            for key, what in keys.items():
+                if kind != self.kind and getattr(self, key) is not None:
+                    raise RigError(f"rig: {key} ({what}) belongs to a {kind} rig; kind is {self.kind!r}")
+        if self.kind == "torsion" and self.mass is not None:
+            raise RigError("rig: mass belongs to a compound or wire-suspension rig; kind is 'torsion'")
+        if self.kind not in WIRE_SUSPENSIONS:
+            if self.wire_length is not None:
+                raise RigError(f"rig: wire_length belongs to a bifilar or trifilar rig; kind is {self.kind!r}")
+            return
+        size = "spacing" if self.kind == "bifilar" else "radius"
+        if self.wire_length is None or getattr(self, size) is None:
+            raise RigError(f"rig: a {self.kind} rig needs wire_length (m) and {size} (m): its law is its geometry")
+        assert self.wire_radius is not None and self.wire_length is not None
+        if self.wire_radius >= self.wire_length:
+            # beyond it the part could not hang below the wires' upper ends at every twist
+            raise RigError(f"rig: a {self.kind} rig's wires must be longer than their distance from the axis "
+                           f"(wire_length {self.wire_length:g} m, distance {self.wire_radius:g} m)")
+
     # -- derived constants ---------------------------------------------------
     @property
+    def wire_radius(self) -> float | None:
+        """R, the wires' distance from the axis (m): D/2 on a bifilar, the circle's radius on a trifilar."""
+        if self.kind == "bifilar" and self.spacing is not None:
+            return self.spacing / 2.0
+        return self.radius if self.kind == "trifilar" else None
+
+    @property
+    def wire_radius_std(self) -> float | None:
+        if self.kind == "bifilar" and self.spacing_std is not None:
+            return self.spacing_std / 2.0
+        return self.radius_std if self.kind == "trifilar" else None
+
+    @property
+    def geometry(self) -> tuple[float, ...]:
+        """A wire suspension's (e, b) for its law (``restoring.wire_geometry``); empty for the other kinds."""
+        if self.kind not in WIRE_SUSPENSIONS or self.wire_radius is None or self.wire_length is None:
+            return ()
+        return wire_geometry(self.wire_radius, self.wire_length, self.g)
+
+    @property
     def restoring_constant(self) -> float | None:
-        """C such that J = C / ω_n²: k (N·m/rad) or m·g·S (N·m); None if unknown."""
+        """C such that J = C / ω_n²: k (N·m/rad), m·g·S (N·m) or m·g·R²/L (N·m); None if unknown."""
         if self.kind == "torsion":
             return self.stiffness
-        if self.mass is not None and self.com_distance is not None:
-            return self.mass * self.g * self.com_distance
-        return None
+        if self.mass is None:
+            return None
+        if self.kind in WIRE_SUSPENSIONS:
+            assert self.wire_radius is not None and self.wire_length is not None
+            return self.mass * self.g * self.wire_radius**2 / self.wire_length
+        return None if self.com_distance is None else self.mass * self.g * self.com_distance
 
     @property
     def restoring_constant_std(self) -> float | None:
-        """1σ of the restoring constant from calibration (k) or from m, g, S, when any is stated."""
+        """1σ of the restoring constant from calibration (k) or from m, g and the lengths, when any is stated."""
         if self.kind == "torsion":
             return self.stiffness_std
         c = self.restoring_constant
-        if c is None or (self.mass_std is None and self.com_distance_std is None and self.g_std is None):
+        if self.kind in WIRE_SUSPENSIONS:
+            lengths = [(2.0, self.wire_radius_std, self.wire_radius), (1.0, self.wire_length_std, self.wire_length)]
+        else:
+            lengths = [(1.0, self.com_distance_std, self.com_distance)]
+        parts = [(1.0, self.mass_std, self.mass), (1.0, self.g_std, self.g)] + lengths
+        if c is None or all(std is None for _, std, _ in parts):
             return None
-        assert self.mass is not None and self.com_distance is not None
-        return c * math.sqrt(((self.mass_std or 0.0) / self.mass) ** 2 + ((self.g_std or 0.0) / self.g) ** 2
-                             + ((self.com_distance_std or 0.0) / self.com_distance) ** 2)
+        return c * math.sqrt(sum((power * (std or 0.0) / (value or 1.0)) ** 2 for power, std, value in parts))
 
     def with_declared(self, declared: tuple[str, ...] | list[str]) -> "Rig":
         return replace(self, declared=tuple(declared))
@@ -239,7 +299,7 @@ class Rig:
         if unknown:
             raise RigError(f"rig file: unknown key(s) in [rig]: {sorted(unknown)}; expected {sorted(_RIG_KEYS)}")
         if "kind" not in rig:
-            raise RigError("rig file: [rig] kind is missing; expected \"torsion\" or \"compound\"")
+            raise RigError(f"rig file: [rig] kind is missing; expected one of {', '.join(RIG_KINDS)}")
         kind = rig["kind"]
         if kind not in RIG_KINDS:
             raise RigError(f"rig file: unknown kind {kind!r}; expected one of {', '.join(RIG_KINDS)}")
@@ -308,13 +368,19 @@ class Rig:
             angle_scale_std=sensor_std("angle_scale_std", "1 (relative)"),
             length=opt("length", "m"),
             length_std=opt("length_std", "m", allow_zero=True),
+            wire_length=opt("wire_length", "m"),
+            wire_length_std=opt("wire_length_std", "m", allow_zero=True),
+            spacing=opt("spacing", "m"),
+            spacing_std=opt("spacing_std", "m", allow_zero=True),
+            radius=opt("radius", "m"),
+            radius_std=opt("radius_std", "m", allow_zero=True),
         )
 
     def to_dict(self) -> dict[str, Any]:
         """The rig TOML document (None values left out)."""
         rig: dict[str, Any] = {"kind": self.kind}
         for key in ("stiffness", "stiffness_std", "tare_inertia", "tare_inertia_std", "stiffness_tare_covariance",
-                    "mass", "mass_std", "com_distance", "com_distance_std", "length", "length_std"):
+                    "mass", "mass_std", "com_distance", "com_distance_std", "length", "length_std") + _WIRE_RIG_KEYS:
             value = getattr(self, key)
             if value is not None:
                 rig[key] = value

@@ -28,7 +28,7 @@ rather than leaving it out silently.
 The measurement model of a pendulum (SI units):
 
     ω = (ω_n + δω_fit + δω_model + δω_view + r_s·δs)·(1 + ε_R)·(1 + ε_clock)
-    J = C / ω²,  C = k (torsion) or m·g·S (compound)
+    J = C / ω²,  C = k (torsion), m·g·S (compound) or m·g·R²/L (bifilar, trifilar)
     J_object = J − I0,  J_object_axis = J_object − m_o·L²
 
 with δω_fit the fit's statistical error of ω_n, δω_model the model form (the
@@ -252,8 +252,8 @@ class PendulumInputs:
     omega_n_model: model form 1σ (rad/s); omega_n_view: camera view calibration 1σ (rad/s).
     clock_ppm: the sample clock's standard uncertainty, ppm (None: not stated).
     angle_scale: (∂ω_n/∂s in rad/s per unit relative scale, 1σ of s) for a calibrated sensor, or None.
-    rig_kind: "torsion" | "compound"; stiffness (N·m/rad) or mass (kg), com_distance (m), g (m/s²),
-    each with its std; tare (kg·m²) and std; cov_k_tare: covariance of k and I0 (N·m/rad·kg·m²).
+    rig_kind: "torsion" | "compound" | "bifilar" | "trifilar"; stiffness (N·m/rad) or mass (kg), com_distance
+    (m) or wire_radius and wire_length (m, a wire suspension's R and L), g (m/s²), each with its std; tare (kg·m²) and std; cov_k_tare: covariance of k and I0 (N·m/rad·kg·m²).
     object_mass (kg), axis_offset (m) with stds for the parallel-axis transfer.
     """
 
@@ -273,6 +273,10 @@ class PendulumInputs:
     com_distance_std: float | None = None
     g: float | None = None
     g_std: float | None = None
+    wire_radius: float | None = None
+    wire_radius_std: float | None = None
+    wire_length: float | None = None
+    wire_length_std: float | None = None
     tare: float | None = None
     tare_std: float | None = None
     cov_k_tare: float | None = None
@@ -305,6 +309,12 @@ class PendulumInputs:
         if self.rig_kind == "torsion":
             if self.stiffness is not None:
                 out.append(Input("k", "stiffness k (calibration)", self.stiffness, self.stiffness_std, "N·m/rad"))
+        elif self.wire_radius is not None and self.wire_length is not None:
+            if self.mass is not None:
+                out.append(Input("m", "hanging mass m", self.mass, self.mass_std, "kg"))
+                out.append(Input("R", "wires' distance from the axis R", self.wire_radius, self.wire_radius_std, "m"))
+                out.append(Input("Lw", "wire length L", self.wire_length, self.wire_length_std, "m"))
+                out.append(Input("g", "local gravity g", self.g or 0.0, self.g_std, "m/s²"))
         else:
             if self.mass is not None and self.com_distance is not None:
                 out.append(Input("m", "swinging mass m", self.mass, self.mass_std, "kg"))
@@ -326,6 +336,8 @@ class PendulumInputs:
         """C of J = C/ω² (N·m/rad or N·m), from the inputs."""
         if self.rig_kind == "torsion":
             return x.get("k", None)
+        if "Lw" in x:
+            return x["m"] * x["g"] * x["R"] ** 2 / x["Lw"]
         if "m" in x:
             return x["m"] * x["g"] * x["S"]
         return None

@@ -65,7 +65,7 @@ def _periods(found: Findings, w: float, w_u: float, zeta: float) -> Periods | No
         at = (at[0] * w / found.omega_n, *at[1:])
     swing = final.fitted - final.value("offset")
     return periods(rig.kind, w, w_u, w if at is None else at[0], amplitude, zeta, final.t, swing,
-                   rig.length, rig.length_std)
+                   rig.length, rig.length_std, rig.geometry)
 
 
 def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]) -> IdentificationResult:

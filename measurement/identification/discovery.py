@@ -25,6 +25,7 @@ from ..fit import ModelFit, fit_model, swing_amplitude
 from ..model import Model
 from ..noise import fit_noise
 from ..residual import Diagnostics
+from ..restoring import restoring as restoring_law
 from ..result import DiscoveryStep
 from ..rig import Rig
 from ..trace import READING_UNITS
@@ -82,7 +83,7 @@ def score_effect(current: ModelFit, effect: Effect, q: np.ndarray | None = None)
     else:
         # a step whose torque is 1e-6 of the restoring one: linear, and far above round-off
         w = current.value("omega_n")
-        restoring = np.sin(theta) if rig.kind == "compound" else theta
+        restoring = restoring_law(rig.kind, theta, rig.geometry)
         col = np.sqrt(np.mean(effect.basis(theta, omega) ** 2, axis=0))
         h = 1e-6 * w**2 * float(np.sqrt(np.mean(restoring**2))) / np.where(col > 0, col, 1.0)
         # a parameter the effect is not linear in is screened by a secant of its typical size

@@ -156,7 +156,8 @@ def test_bad_trace_gives_one_line_and_exit_2(case, tmp_path):
 
 
 BAD_RIGS = {
-    "unknown_kind": ('[rig]\nkind = "bifilar"\n', "unknown kind"),
+    "unknown_kind": ('[rig]\nkind = "quadrifilar"\n', "unknown kind"),
+    "bifilar_without_wires": ('[rig]\nkind = "bifilar"\n', "a bifilar rig needs wire_length (m) and spacing (m)"),
     "unknown_effect": ('[rig]\nkind = "torsion"\nstiffness = 1.0\n[model]\ndeclared = ["magic"]\n', "unknown effect"),
     "zero_stiffness": ('[rig]\nkind = "torsion"\nstiffness = 0.0\n', "stiffness must be > 0"),
     "negative_mass": ('[rig]\nkind = "compound"\nmass = -5.0\ncom_distance = 1.0\n', "mass must be > 0"),
