@@ -29,22 +29,29 @@ import numpy as np
 RAMP = 20.0  # rad/s
 
 
-def run(label: str, seconds: float, **server_kwargs) -> dict:
+def ramp_capture(seconds: float, ramp: float, server: dict, encoder: dict) -> tuple[np.ndarray, np.ndarray, dict]:
+    """(host time stamps, angles, the client's stats) of the encoder client reading a simulated encoder whose
+    angle is a ramp of ``ramp`` rad/s for ``seconds`` of wall clock (scale 1): the position tells the latch time.
+    ``server``: ``SimEncoderConfig`` keywords; ``encoder``: ``encoder_config`` keywords."""
     from drivers.clock import ScaledClock
     from drivers.encoder import ModbusEncoder
     from drivers.sim_encoder import SimEncoderConfig, SimEncoderServer
 
     clock = ScaledClock(1.0)
-    cfg = SimEncoderConfig(baudrate=115200, latency=0.0003, **server_kwargs)
-    with SimEncoderServer(lambda t: RAMP * t, clock, cfg) as server, \
-            ModbusEncoder(server.encoder_config(timeout=0.02, max_consecutive_errors=100), clock) as enc:
+    with SimEncoderServer(lambda t: ramp * t, clock, SimEncoderConfig(**server)) as srv, \
+            ModbusEncoder(srv.encoder_config(**encoder), clock) as enc:
         enc.start()
         t_end = time.perf_counter() + seconds
         while time.perf_counter() < t_end:  # a bench may wait on the wall clock: that is what it measures
             time.sleep(0.05)
         enc.stop()
         t, angle = enc.read()
-        stats = enc.stats()
+        return t, angle, enc.stats()
+
+
+def run(label: str, seconds: float, **server_kwargs) -> dict:
+    t, angle, stats = ramp_capture(seconds, RAMP, {"baudrate": 115200, "latency": 0.0003, **server_kwargs},
+                                   {"timeout": 0.02, "max_consecutive_errors": 100})
     # the ramp makes the latch time readable from the position (unwrapped by the client)
     t_latch = angle / RAMP
     err = t - t_latch

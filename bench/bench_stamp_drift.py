@@ -24,7 +24,6 @@ from __future__ import annotations
 import logging
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -39,22 +38,13 @@ PRE, SWING = 0.5, 30.0
 
 def record(seconds: float) -> tuple[np.ndarray, np.ndarray]:
     """(host time stamps from the first, their errors against the latch times), s, of one capture."""
-    from drivers.clock import ScaledClock
-    from drivers.encoder import ModbusEncoder
-    from drivers.sim_encoder import SimEncoderConfig, SimEncoderServer
+    from bench_encoder import ramp_capture
+
     from service.devices.sensors.encoder import SIM_ENCODER_TIMEOUT
 
-    clock = ScaledClock(1.0)
-    cfg = SimEncoderConfig(counts_per_turn=1 << 17, registers=2, latency=0.0002)
-    with SimEncoderServer(lambda t: RAMP * t, clock, cfg) as server, \
-            ModbusEncoder(server.encoder_config(timeout=SIM_ENCODER_TIMEOUT, min_interval=1.0 / RATE,
-                                                max_consecutive_errors=1000), clock) as enc:
-        enc.start()
-        t_end = time.perf_counter() + seconds
-        while time.perf_counter() < t_end:  # a bench may wait on the wall clock: that is what it measures
-            time.sleep(0.05)
-        enc.stop()
-        t, angle = enc.read()
+    t, angle, _ = ramp_capture(seconds, RAMP, {"counts_per_turn": 1 << 17, "registers": 2, "latency": 0.0002},
+                               {"timeout": SIM_ENCODER_TIMEOUT, "min_interval": 1.0 / RATE,
+                                "max_consecutive_errors": 1000})
     turn = 2.0 * math.pi / RAMP  # a longer gap unwraps a whole turn off: folded back
     err = t - angle / RAMP
     err = (err - np.median(err) + turn / 2) % turn - turn / 2
