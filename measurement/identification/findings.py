@@ -15,7 +15,7 @@ from ..residual import Diagnostics
 from ..result import DiscoveryStep, ModelForm, SegmentCheck
 from ..rig import Rig
 from ..trace import Trace
-from .focus import Focus
+from .focus import DISCOVERED, Focus
 from .preparation import Prepared
 from .quantities import Inertias
 from .rivals import LawRival, Withdrawn
@@ -66,7 +66,7 @@ class Findings:
     @property
     def headline(self) -> Focus:
         """The model of the headline ω_n and J, and its model form."""
-        return self.focus if self.focus is not None else Focus(self.final, self.form, "discovered")
+        return self.focus if self.focus is not None else Focus(self.final, self.form, DISCOVERED)
 
     @property
     def omega_n(self) -> float:
