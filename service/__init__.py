@@ -1,4 +1,5 @@
-"""moi service: the daemon and the user's front (CLI, config, store, MQTT, Modbus)."""
+"""moi service: the daemon and what surrounds the measurement: the command line, the configuration, the devices,
+the inputs read from files, recipes and parts, the result store, and the publishers (``service.publish``)."""
 
 from typing import Any
 

@@ -1,1 +1,2 @@
-"""Publishers: what the appliance tells the plant (Modbus registers, MQTT, the web page) and the payload they share."""
+"""Publishers: what the appliance tells the plant, one subpackage each (listed in ``registry.py``), and what they share:
+the publisher port, the result payload, replies, exports and reports."""
