@@ -2,7 +2,7 @@
 image folder, as the ``Trace`` of each release it holds.
 
 The dispatcher above the low-level readers: moi's own CSV (t with angle or rate; a marker track) is read by
-``service.sources.files`` (a marker track becomes the angle of its two markers, the camera's oblique view
+``service.sources.files`` (split into its releases when it holds several; a marker track becomes the angle of its two markers, the camera's oblique view
 measured from their distance and removed when the swing is wide enough to show it:
 ``measurement.vision.marker_pair``); any other table or export by the first format of
 ``service.sources.formats.registry`` that recognises its content, split into its releases; a video or an
@@ -14,8 +14,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
+
+from measurement.releases import find_releases
 from measurement.rig import Rig
-from measurement.trace import Trace, csv_content, csv_header
+from measurement.trace import READING_UNITS, Trace, csv_content, csv_header
 from service.errors import InputFileError
 
 from .files import read_samples
@@ -41,6 +44,21 @@ def _is_image_folder(p: Path) -> bool:
     return p.is_dir() and not any(p.rglob("time.csv"))
 
 
+def _own_trace_releases(trace: Trace) -> list[Trace]:
+    """moi's own trace whole, as the sequencer captured it (its pre-trigger hold is the identification's to
+    handle), unless it holds several releases: then each of them, read as a log's are (the hold before each
+    and the hand's transient cut), so that several swings saved in one file are never fitted as one."""
+    if len(find_releases(trace.t, trace.angle, trace.quantity).found) < 2:
+        return [trace]
+    from .formats.log import Column, Log
+    from .formats.reading import log_traces
+
+    q = trace.quantity
+    log = Log(trace.source, "moi trace", (Column("t", "t", "s"), Column(q, q, READING_UNITS[q])),
+              np.column_stack([trace.t, trace.angle]))
+    return log_traces(log, ColumnChoice(time="t", angle=q if q == "angle" else None, rate=q if q == "rate" else None))
+
+
 def load_releases(path: str | os.PathLike, camera: str | os.PathLike | None = None, rig: Rig | None = None,
                   columns: ColumnChoice | None = None) -> list[Trace]:
     """The releases in SOURCE, each a trace: one for moi's CSV and a video, as many as a log holds otherwise."""
@@ -56,7 +74,7 @@ def load_releases(path: str | os.PathLike, camera: str | os.PathLike | None = No
     if not columns.given and _is_moi_csv(p):
         samples = read_samples(p)
         if isinstance(samples, Trace):
-            return [samples]
+            return _own_trace_releases(samples)
         from measurement.vision.marker_pair import view_trace
 
         return [view_trace(samples)]

@@ -262,6 +262,23 @@ def test_moi_s_own_trace_csv_is_read_as_before_and_searched_for_releases_when_it
     assert tr.meta["release"]["free_swing_from"] == pytest.approx(3.0, abs=0.05)
 
 
+def test_moi_s_own_trace_csv_holding_two_releases_gives_each_of_them(tmp_path):
+    """Two swings saved in one file of moi's own columns (the second held 2 s, then let go, after a pause
+    in the clock) are two releases, never one fit across the gap."""
+    t1, a1, _ = swing(12.0, amplitude=0.4, seed=1)
+    t2, a2, _ = swing(14.0, amplitude=0.3, hold=2.0, seed=2)
+    t = np.concatenate([t1, t1[-1] + 5.0 + t2])
+    f = tmp_path / "two.csv"
+    f.write_text("t,angle\n" + "".join(f"{a},{b}\n" for a, b in zip(t, np.concatenate([a1, a2]))))
+    first, second = load_releases(f)
+    assert first.t[0] == pytest.approx(0.0, abs=0.05) and first.t[-1] < t1[-1] + 1e-9
+    # the free swing starts at a turning point after the hold (the held plateau itself, or the first one
+    # after it: an angle record's hold has no excursion before it to tell a turning point by)
+    let_go, period = t1[-1] + 7.0, 2 * math.pi / W
+    assert let_go - 0.05 <= second.meta["release"]["free_swing_from"] <= let_go + 0.5 * period + 0.05
+    assert second.meta["release"]["amplitude"] == pytest.approx(0.3, abs=0.01)
+
+
 def test_a_spreadsheet_is_refused_in_one_line_asking_for_csv(tmp_path):
     f = tmp_path / "log.xlsx"
     with zipfile.ZipFile(f, "w") as z:
