@@ -38,15 +38,20 @@ distribution of the sample variance with ν = N − 1, Cpk by Bissell's normal
 approximation, Cpk ± z·√(1/(9N) + Cpk²/(2(N − 1))) (Montgomery, ch. 8.3; N: the
 values the σ rests on). Below ``SMALL_SAMPLE`` values they are too wide to
 decide on, and are said to be.
+
+The capability indices see the gauge's scatter with the process's; ``with_gauge`` attaches the gauge
+studies' objections to them (``measurement.gauge.capability_warnings``: %GRR above 30 %, ndc below 5,
+Cg or Cgk below 1.33 at the specification's tolerance).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
 from .errors import InvalidInput
+from .gauge import GaugeRR, GaugeWarning, Type1Study, capability_warnings
 
 #: control chart constants d2 and d3 for subgroup size n (Montgomery, Appendix Table VI)
 D2 = {2: 1.128, 3: 1.693, 4: 2.059, 5: 2.326, 6: 2.534, 7: 2.704, 8: 2.847, 9: 2.970, 10: 3.078}
@@ -88,6 +93,7 @@ class SpcSummary:
     chart: "I-MR" | "Xbar-R". points: the plotted values (individuals or
     subgroup means); ranges: moving ranges (len − 1) or subgroup ranges.
     subgroup: n of X̄–R (1 for I-MR). cp, cpk, pp, ppk: None without limits or σ = 0.
+    gauge_warnings: why the gauge makes cp … ppk meaningless (``with_gauge``; empty: none known).
     """
 
     chart: str
@@ -111,6 +117,7 @@ class SpcSummary:
     ppk: float | None
     outside: tuple[int, ...]
     violations: tuple[Violation, ...] = field(default=())
+    gauge_warnings: tuple[GaugeWarning, ...] = field(default=())
 
     @property
     def in_control(self) -> bool:
@@ -123,6 +130,8 @@ class SpcSummary:
              "range_lcl": self.range_lcl, "lsl": self.lsl, "usl": self.usl, "cp": self.cp, "cpk": self.cpk,
              "pp": self.pp, "ppk": self.ppk, "outside": list(self.outside), "in_control": self.in_control,
              "violations": [v.to_dict() for v in self.violations]}
+        if self.gauge_warnings:
+            d["gauge_warnings"] = [w.to_dict() for w in self.gauge_warnings]
         if include_points:
             d["points"] = list(self.points)
             d["ranges"] = list(self.ranges)
@@ -146,7 +155,16 @@ class SpcSummary:
             L.append("  run rules: " + "; ".join(f"{v.rule} at point {v.index + 1}" for v in self.violations))
         else:
             L.append("  run rules: none violated")
+        L.extend(f"  gauge: {w.message}" for w in self.gauge_warnings)
         return "\n".join(L)
+
+
+def with_gauge(summary: SpcSummary, *, grr: GaugeRR | None = None, type1: Type1Study | None = None) -> SpcSummary:
+    """``summary`` with the gauge studies' objections to its capability indices, judged at its own
+    tolerance USL − LSL (unchanged without limits: there are no indices to object to)."""
+    if summary.lsl is None or summary.usl is None or not summary.usl > summary.lsl:
+        return summary
+    return replace(summary, gauge_warnings=capability_warnings(grr=grr, type1=type1, tolerance=summary.usl - summary.lsl))
 
 
 def c4(n: int) -> float:
