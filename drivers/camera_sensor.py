@@ -104,6 +104,18 @@ class CameraAngleSensor:
         self._tracker = tracker_for(config, tracker)
         self._reset(math.inf)
 
+    def use_camera_file(self, config: CameraConfig) -> None:
+        """The camera file read again (a new region of interest): the next capture's tracker is built from it.
+        Between captures; the frame size stays the camera's (DriverConfigError otherwise)."""
+        if not isinstance(config, CameraConfig):
+            raise DriverConfigError(f"camera sensor: config must be a CameraConfig (the camera file), got {config!r}")
+        model = self.camera.model
+        if (model.width, model.height) != (config.camera.width, config.camera.height):
+            raise DriverConfigError(f"camera sensor: the camera delivers {model.width}×{model.height} px, the camera "
+                                    f"file now says {config.camera.width}×{config.camera.height}")
+        with self._lock:
+            self.config = config
+
     # -- AngleSensor ---------------------------------------------------------------
     def start(self) -> None:
         """Begin a capture: counters reset, a fresh tracker lock, frames from now on."""

@@ -168,20 +168,14 @@ class ApplianceView:
         return self._app.call_soon(fn)
 
     def use_camera(self, camera: Any) -> None:
-        """A re-read camera file (``CameraConfig``) in the running configuration and in the camera sensor, which
-        builds its tracker from it when the next capture starts (main loop thread: ask through ``call_soon``)."""
-        import dataclasses
+        """A camera file read again (``CameraConfig``) put to use by the sensor kind that reads it
+        (``SensorKind.use_camera``): in the running sensor from its next capture and in the running configuration
+        (main loop thread: ask through ``call_soon``)."""
+        from service.devices.sensors import registry as sensors
 
-        cfg = self._app.config
-        if cfg.simulated:
-            self._app.config = dataclasses.replace(cfg, simulation=dataclasses.replace(cfg.simulation,
-                                                                                       camera_config=camera))
-        elif cfg.hardware is not None and cfg.hardware.camera is not None:
-            hw = dataclasses.replace(cfg.hardware, camera=dataclasses.replace(cfg.hardware.camera, config=camera))
-            self._app.config = dataclasses.replace(cfg, hardware=hw)
-        sensor = getattr(self._app.devices, "sensor", None)
-        if sensor is not None and hasattr(sensor, "config"):
-            sensor.config = camera
+        devices = self._app.devices
+        kind = sensors.running(self._app.config)
+        self._app.config = kind.use_camera(self._app.config, devices.sensor if devices is not None else None, camera)
 
     def set_progress(self) -> dict[str, Any] | None:
         """The tensor set's progress (main loop thread: ask through ``call_soon``)."""

@@ -323,3 +323,22 @@ def test_a_tag_target_is_tracked_live_with_the_rules_of_a_video():
         sensor.stop()
         with pytest.raises(VisionError, match="tracked in"):
             sensor.finish(Trace(t - t[0], a, source="camera", meta={"camera": sensor.stats()}))
+
+
+def test_a_camera_file_read_again_is_used_from_the_next_capture_and_must_keep_the_frame_size():
+    import dataclasses
+
+    clock = ManualClock()
+    _rig, sensor = make(clock)
+    with sensor:
+        roi = (40, 140, 600, 480)
+        new = dataclasses.replace(CONFIG, target=dataclasses.replace(CONFIG.target, roi=roi))
+        sensor.use_camera_file(new)
+        sensor.start()
+        assert sensor.config is new and sensor._tracker.settings.roi == roi  # the capture tracks in it
+        sensor.stop()
+        smaller = dataclasses.replace(CONFIG, camera=dataclasses.replace(CAMERA, width=320, height=240, cx=159.5,
+                                                                         cy=119.5))
+        with pytest.raises(DriverConfigError, match="delivers 640×480 px, the camera file now says 320×240"):
+            sensor.use_camera_file(smaller)
+        assert sensor.config is new

@@ -1,10 +1,16 @@
 """The camera (``[hardware.camera]``: a V4L2 device and its camera file, read by
 ``drivers.camera_sensor.CameraAngleSensor``), and its simulated twin: ``drivers.camera.MockCamera`` rendering the
 marker at the simulated rig's angle (yawed by ``camera_yaw_deg``), read by the same camera sensor, which fits
-the yaw in its ``finish`` hook."""
+the yaw in its ``finish`` hook.
+
+The camera file sits in ``[hardware.camera] file`` (``[simulation] camera`` when simulated; none: the demo camera),
+parsed with the configuration (``camera_config``). The set-up page writes a new region of interest to it
+(``camera_file``) and puts the file read again to use (``use_camera``): the running sensor tracks with it from its
+next capture, the running configuration holds it."""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -158,12 +164,38 @@ class Camera(SensorKind):
         path = Path(f"/dev/video{dev}") if isinstance(dev, int) else Path(str(dev))
         return [("camera", path.exists(), f"{path}" + (" present" if path.exists() else " does not exist"))]
 
+    # --- the camera file: where it sits in the configuration, and how a file read again takes effect ---------
     @classmethod
     def camera_config(cls, config: Config) -> Any:
         if config.simulated:
             return config.simulation.camera_config
         settings = cls._settings(config)
         return None if settings is None else settings.config
+
+    @classmethod
+    def camera_file(cls, config: Config) -> str | None:
+        """``[simulation] camera`` when simulated (None: the demo camera), else ``[hardware.camera] file``."""
+        if config.simulated:
+            return config.simulation.camera
+        settings = cls._settings(config)
+        return None if settings is None else settings.file
+
+    @classmethod
+    def use_camera(cls, config: Config, sensor: Any, camera: Any) -> Config:
+        """The camera sensor (``CameraAngleSensor``, its frame size checked) builds its next capture's tracker
+        from ``camera``; the configuration returned holds it where ``camera_config`` reads it."""
+        if sensor is not None:
+            sensor.use_camera_file(camera)
+        if config.simulated:
+            return dataclasses.replace(config, simulation=dataclasses.replace(config.simulation, camera_config=camera))
+        settings = cls._settings(config)
+        assert config.hardware is not None and settings is not None, "guarded by camera_file: a camera file to use"
+        sensors = {**config.hardware.sensors, cls.NAME: dataclasses.replace(settings, config=camera)}
+        return dataclasses.replace(config, hardware=dataclasses.replace(config.hardware, sensors=sensors))
+
+    @classmethod
+    def frame(cls, sensor: Any) -> Any:
+        return sensor.camera.grab().image
 
 
 SENSOR = Camera

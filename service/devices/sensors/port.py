@@ -2,11 +2,11 @@
 
 A sensor kind (the Modbus encoder, the camera, the in-process simulated sensor) is one class with ``NAME`` (its
 name in ``[hardware] sensor`` / ``[simulation] sensor``) and the class methods below: the driver built from its
-settings, its settings table ``[hardware.<name>]`` (``service.config.schema.SensorTable``: its keys, their docs and defaults, the
-parse of the table), its simulated twin on the simulated rig, the health lines of `moi check` and, for a camera,
-the camera file its frames are read with. ``service.devices.sensors.registry`` lists them: adding one is one module
-and one line there. The configuration, the device builder, `moi check` and the web page hold a sensor kind and
-never name one.
+settings, its settings table ``[hardware.<name>]`` (``service.config.schema.SensorTable``: its keys, their docs and
+defaults, the parse of the table), its simulated twin on the simulated rig, the health lines of `moi check` and,
+for a camera, the camera file its frames are read with, where that file sits, how the file read again takes effect
+and a frame now. ``service.devices.sensors.registry`` lists them: adding one is one module and one line there. The
+configuration, the device builder, `moi check` and the web page hold a sensor kind and never name one.
 """
 
 from __future__ import annotations
@@ -69,4 +69,23 @@ class SensorKind:
     @classmethod
     def camera_config(cls, config: Config) -> Any:
         """The camera file its frames are read with (``CameraConfig``), None when it gives no frames."""
+        return None
+
+    @classmethod
+    def camera_file(cls, config: Config) -> str | None:
+        """Where that camera file is (the file a new region of interest is written to); None when there is none
+        to write (the demo camera, or a sensor without frames)."""
+        return None
+
+    @classmethod
+    def use_camera(cls, config: Config, sensor: AngleSensor | None, camera: Any) -> Config:
+        """A camera file read again (``CameraConfig``: a new region of interest) put to use: the running
+        ``sensor`` (None: no devices yet) tracks with it from its next capture, and the configuration returned
+        holds it. Main loop thread: the sensor is idle between captures there."""
+        raise NotImplementedError(f"the {cls.NAME} sensor reads no camera file")
+
+    @classmethod
+    def frame(cls, sensor: AngleSensor) -> Any:
+        """One frame of the running ``sensor`` now (an image; None: a sensor without frames). Main loop thread,
+        never during a capture."""
         return None

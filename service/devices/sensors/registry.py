@@ -48,3 +48,8 @@ def sensor(name: str) -> Any:
         if e.name == name:
             return e.load()
     raise ValueError(f"no angle sensor {name!r}; expected one of {', '.join(names())}")
+
+
+def running(config: Any) -> Any:
+    """The sensor kind ``config`` reads: ``[simulation] sensor`` when simulated, else ``[hardware] sensor``."""
+    return sensor(config.simulation.sensor if config.simulated or config.hardware is None else config.hardware.sensor)

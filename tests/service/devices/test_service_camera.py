@@ -281,3 +281,24 @@ def test_the_camera_example_loads_for_the_device_and_for_the_simulation():
     from service.devices.defaults import DEMO_CAMERA as DEFAULT_CAMERA
     assert demo.simulation.camera is None and demo.simulation.camera_config.to_dict()["camera"]["fx"] == \
         DEFAULT_CAMERA["camera"]["fx"]
+
+
+def test_the_camera_file_is_where_the_configuration_names_it_and_a_file_read_again_is_used_there(tmp_path):
+    # the set-up page writes a region of interest to the file ``camera_file`` names; ``use_camera`` puts the file
+    # read again in the running configuration, for the device and for the simulation alike
+    from service.config.camera import set_roi
+    from service.devices.sensors.camera import Camera
+
+    cfg = load_config(write_hardware(tmp_path, '[hardware.camera]\ndevice = "0"\nfile = "cam.toml"\n'))
+    path = Camera.camera_file(cfg)
+    assert path == str(tmp_path / "cam.toml")
+    new, before = set_roi(path, (40, 140, 600, 480))
+    used = Camera.use_camera(cfg, None, new)
+    assert before is None and Camera.camera_config(used).target.roi == (40, 140, 600, 480)
+    assert used.hardware is not None and used.hardware.sensors["camera"].config is new
+    assert used.hardware.sensors["camera"].device == 0 and used.hardware.sensors["camera"].file == path
+    assert Camera.camera_config(cfg).target.roi is None  # a new configuration: the one read is left as it was
+
+    sim = parse_config({"simulation": {"sensor": "camera", "camera": path}})
+    assert Camera.camera_file(sim) == path and Camera.camera_file(parse_config({"simulation": {"sensor": "camera"}})) is None
+    assert Camera.camera_config(Camera.use_camera(sim, None, new)).target.roi == (40, 140, 600, 480)

@@ -121,7 +121,7 @@ def test_the_page_lists_the_history_a_page_at_a_time_and_reads_it_off_the_web_lo
     assert c.request("/calibration?rig=0&before=x")[0] == 400
 
     # while one request reads a history, the page answers another: the file is read off the web loop
-    from service.publish.web import views
+    from service.publish.web import calibration
 
     reading, release = threading.Event(), threading.Event()
 
@@ -130,7 +130,7 @@ def test_the_page_lists_the_history_a_page_at_a_time_and_reads_it_off_the_web_lo
         assert release.wait(30)
         return read_history(*args, **kw)
 
-    monkeypatch.setattr(views, "read_history", slow_read)
+    monkeypatch.setattr(calibration, "read_history", slow_read)
     slow = threading.Thread(target=c.request, args=("/calibration",))
     slow.start()
     try:

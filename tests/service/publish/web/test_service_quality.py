@@ -230,7 +230,7 @@ def test_a_long_report_goes_on_to_more_pages_and_leaves_nothing_out(identified):
 def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_result_has_one(identified):
     import jinja2
 
-    from service.publish.web.views import HERE
+    from service.publish.web.pages import HERE
 
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")), autoescape=True)
     env.filters.update(fmt=Q.number, inertia=Q.inertia, iso=Q.iso, name=lambda v: v, plain=Q.plain_text)
@@ -263,7 +263,7 @@ def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_re
 
 
 def test_each_of_the_six_orientations_of_a_tensor_set_is_drawn_differently_along_its_axis():
-    from service.publish.web.views import axes_drawing, project
+    from service.publish.web.drawing import axes_drawing, project
 
     r = 0.5 ** 0.5
     six = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1), "xy": (r, r, 0), "xz": (r, 0, r), "yz": (0, r, r)}

@@ -246,7 +246,8 @@ def test_a_snapshot_asked_before_the_sequencer_exists_is_refused_plainly():
     import concurrent.futures
     from types import SimpleNamespace
 
-    from service.publish.web.views import Refused, Views
+    from service.publish.web.pages import Refused
+    from service.publish.web.set_up import SetUpPages
 
     def call_soon(fn):
         fut: concurrent.futures.Future = concurrent.futures.Future()
@@ -256,12 +257,12 @@ def test_a_snapshot_asked_before_the_sequencer_exists_is_refused_plainly():
             fut.set_exception(exc)
         return fut
 
-    views = Views.__new__(Views)
-    views.app = SimpleNamespace(  # type: ignore[assignment]
+    setup = SetUpPages.__new__(SetUpPages)
+    setup.app = SimpleNamespace(  # type: ignore[assignment]
         config=SimpleNamespace(simulated=True, simulation=SimpleNamespace(sensor="camera", camera_config=object())),
         devices=SimpleNamespace(sensor=SimpleNamespace(camera=object())), sequencer=None, call_soon=call_soon)
     with pytest.raises(Refused) as got:
-        asyncio.run(views.snapshot(None))  # type: ignore[arg-type]
+        asyncio.run(setup.snapshot(None))  # type: ignore[arg-type]
     assert got.value.status_code == 503 and got.value.message == "the appliance is not running its devices yet"
 
 

@@ -76,8 +76,10 @@ def test_a_quality_engineer_sets_the_region_of_interest_an_operator_cannot(appli
     assert "roi = [40, 140, 600, 480]" in text and "(kept comment)" in text and "# the printed tag" in text
     audit = (app.config.state_dir / "camera-audit.log").read_text().splitlines()
     assert len(audit) == 1 and "\tweb:quinn\t" in audit[0] and audit[0].endswith("roi: whole frame → [40, 140, 600, 480]")
-    # the running camera uses it at once: the snapshot draws the new region (yellow) around the tag it found
-    assert app.devices.sensor.config.target.roi == (40, 140, 600, 480)
+    # the running camera uses it at once: the snapshot draws the new region (yellow) around the tag it found; the
+    # simulated rig's wrapper forwards to the camera sensor, which tracks the next capture in it
+    assert app.devices.sensor._inner.config.target.roi == (40, 140, 600, 480)
+    assert app.config.simulation.camera_config.target.roi == (40, 140, 600, 480)
     status, headers, png = quinn.request("/setup/snapshot.png")
     assert status == 200 and headers["Content-Type"] == "image/png"
     img = decoded(png)
@@ -88,7 +90,7 @@ def test_a_quality_engineer_sets_the_region_of_interest_an_operator_cannot(appli
     # all four empty: the whole frame again
     status, _, body = quinn.request("/setup/roi", {"x": "", "y": "", "w": "", "h": "", "csrf": qcsrf})
     assert status == 200 and "roi" not in cam.read_text().split("[target]")[1].split("#")[0]
-    assert app.devices.sensor.config.target.roi is None
+    assert app.devices.sensor._inner.config.target.roi is None
 
 
 def test_the_demo_camera_has_no_file_to_set_a_region_in(appliance_factory, tmp_path):

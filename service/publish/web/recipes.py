@@ -1,0 +1,80 @@
+"""The recipes page: every recipe as a quality engineer reads it, and the quality role's form to edit one."""
+
+from __future__ import annotations
+
+import asyncio
+import datetime as dt
+import logging
+from pathlib import Path
+from typing import Any
+
+from aiohttp import web
+
+from service.errors import InputFileError
+from service.parts.recipes import (
+    EDITABLE,
+    RECIPE_AUDIT_FILE,
+    RecipeBook,
+    RecipeError,
+    audit_recipe,
+    edit_recipe,
+    recipe_values,
+)
+
+from . import quality as Q
+from .pages import Family, Refused, read_form
+
+log = logging.getLogger("moi.web")
+
+
+class RecipePages(Family):
+    """``/recipes``, shown and edited."""
+
+    async def recipes(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
+        """Every recipe as a quality engineer reads it before measuring: nominal, tolerance, limits, releases,
+        decision rule and quality rules, in the recipe's unit and decimals; for the quality role, a form per
+        recipe to edit them."""
+        book = getattr(self.app, "parts", None)
+        rows = []
+        active = getattr(book, "recipe", None)
+        for r in book.book.recipes if book is not None else ():
+            d = {**r.to_dict(), "display_decimals": r.display_decimals}
+            unit = Q.display_unit({"recipe": d}, self.server.settings.display_unit)
+            rows.append({"r": d, "unit": unit, "places": Q.places(d, unit), "active": active is not None
+                         and active.name == r.name, "rig": Path(r.rig_path).name if r.rig_path else None,
+                         "file": recipe_values(r)})
+        return self.pages.page(request, "recipes.html", status=status, title="Recipes", rows=rows,
+                               editable=EDITABLE, may_edit=self.pages.may(request, "recipe"), **ctx)
+
+    async def recipes_change(self, request: web.Request) -> web.StreamResponse:
+        """Edit one recipe's [recipe] keys (quality role): checked as a recipe file is, written back in one
+        step, the running recipes re-read, and one line per edit appended to the recipe audit log. A refusal is
+        said on the page beside the recipe, with what was typed."""
+        form = await read_form(request)
+        source = await self.pages.authorise(request, form, "recipe")
+        parts = getattr(self.app, "parts", None)
+        if parts is None or parts.book.directory is None:
+            raise Refused(409, "no recipe directory ([recipes] directory): there is no recipe to edit")
+        try:
+            recipe = parts.book.find(str(form.get("recipe") or ""))
+        except RecipeError as exc:
+            raise Refused(404, str(exc)) from None
+        typed = {k: str(form[k]) for k in EDITABLE if k in form}
+        loop = asyncio.get_running_loop()
+        try:
+            new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed)
+        except (RecipeError, InputFileError) as exc:
+            return await self.recipes(request, status=400, edit_error={"recipe": recipe.name, "error": str(exc),
+                                                                       "typed": typed})
+        if changes:
+            # the book swapped whole, the other recipes as they were read: a part already open keeps its recipe
+            book = RecipeBook(parts.book.directory, tuple(new if r.name == new.name else r
+                                                          for r in parts.book.recipes))
+            parts.book = book
+            if parts.recipe is not None and parts.recipe.name == new.name:
+                parts.recipe = book.find(new.name)
+            line = await loop.run_in_executor(None, audit_recipe, self.app.config.state_dir / RECIPE_AUDIT_FILE,
+                                              source, new, changes, dt.datetime.now(dt.UTC).isoformat(
+                                                  timespec="seconds"))
+            log.info("web: recipe edited: %s", line.strip())
+        raise web.HTTPSeeOther(f"/recipes#recipe-{new.number}")
