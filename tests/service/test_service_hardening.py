@@ -107,8 +107,9 @@ def test_a_page_flood_neither_slows_the_encoder_capture_nor_moves_j(tmp_path, ap
     import threading
     import urllib.request
 
+    # 6 s: four swings and more, so that a loaded host's missed polls still leave the three the fit needs
     app = appliance_factory(appliance_doc(tmp_path / "state", time_scale=1.0, web={"enabled": True},
-                                          sequencer={"pre_trigger": 0.2, "capture_duration": 4.0},
+                                          sequencer={"pre_trigger": 0.2, "capture_duration": 6.0},
                                           simulation={"sensor": "encoder"}, device={"store_trace": False}))
     app.press()
     app.wait_done(1, timeout=60)
