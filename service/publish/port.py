@@ -20,13 +20,13 @@ from typing import TYPE_CHECKING, Any, Callable, ClassVar, Mapping
 
 if TYPE_CHECKING:  # pragma: no cover
     from firmware_host import Event, Measurement, Sequencer
-    from service.config.appliance import Config
     from service.core.live import LiveStatus
     from service.devices.hardware import Devices
     from service.notify import Notifier
     from service.parts.recipes import PartTracker, Recipe
     from service.persistence.store import Store, StoredMeasurement
     from service.publish.replies import ReplyTo
+    from service.settings.config import Config
 
 
 class Publisher:
@@ -177,7 +177,8 @@ class ApplianceView:
             self._app.config = dataclasses.replace(cfg, simulation=dataclasses.replace(cfg.simulation,
                                                                                        camera_config=camera))
         elif cfg.hardware is not None and cfg.hardware.camera is not None:
-            hw = dataclasses.replace(cfg.hardware, camera=dataclasses.replace(cfg.hardware.camera, config=camera))
+            hw = dataclasses.replace(cfg.hardware, sensors={
+                **cfg.hardware.sensors, "camera": dataclasses.replace(cfg.hardware.camera, config=camera)})
             self._app.config = dataclasses.replace(cfg, hardware=hw)
         sensor = getattr(self._app.devices, "sensor", None)
         if sensor is not None and hasattr(sensor, "config"):

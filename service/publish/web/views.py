@@ -1113,7 +1113,7 @@ class Views:
         as a camera file is, written to the camera file in one step, used from the next capture, and one line
         appended to the camera audit log. Refused while a measurement runs; a wrong value is said on the page
         with what was typed."""
-        from service.config.camera import CAMERA_AUDIT_FILE, audit_camera, roi_from_typed, set_roi
+        from service.sources.camera import CAMERA_AUDIT_FILE, audit_camera, roi_from_typed, set_roi
 
         form = await _form(request)
         source = await self._authorise(request, form, "camera")
@@ -1141,7 +1141,7 @@ class Views:
 
     def _sensor(self) -> Any:
         """The kind of angle sensor the appliance reads (``service.devices.sensors``)."""
-        from service.devices.sensors import registry as sensors
+        from service.settings import sensor_registry as sensors
 
         cfg = self.app.config
         return sensors.sensor(cfg.simulation.sensor if cfg.simulated or cfg.hardware is None else cfg.hardware.sensor)
