@@ -51,7 +51,7 @@ class DummySensor(SensorKind):
 
     @classmethod
     def build(cls, config, clock):
-        cls.built.append(f"device on {config.hardware.sensors["dummy"].bus}")
+        cls.built.append(f"device on {config.hardware.sensors['dummy'].bus}")
         return SimulatedAngleSensor(lambda t: 0.1, clock, rate=100.0, source="inclinometer")
 
     @classmethod
@@ -63,7 +63,7 @@ class DummySensor(SensorKind):
 
     @classmethod
     def health(cls, config):
-        return [("inclinometer bus", False, f"{config.hardware.sensors["dummy"].bus} does not exist")]
+        return [("inclinometer bus", False, f"{config.hardware.sensors['dummy'].bus} does not exist")]
 
 
 SENSOR = DummySensor

@@ -134,7 +134,7 @@ def test_a_dummy_publisher_registered_in_one_place_gets_states_and_results(tmp_p
     DummyPublisher.made.clear()
     app = appliance_factory(appliance_doc(tmp_path / "state", dummy={"topic": "rotors"}))
     [dummy] = DummyPublisher.made
-    assert dummy.running and app.app.dummy is dummy
+    assert dummy.running and app.app.publisher("dummy") is dummy
     assert app.app.publisher_health()["dummy"] == {"topic": "rotors"}
     assert dummy.appliance.config.device_id == "test-rig"
     app.press()
