@@ -2,8 +2,9 @@
 
 A flag is a short lower-case name in ``IdentificationResult.flags`` (and so in
 the JSON, the MQTT payload and, as a bit, in the Modbus register ``flags``).
-Whoever raises a flag uses the constant below; the Modbus map gives every
-flag of this table a bit (a test fails when one is missing).
+Whoever raises a flag uses the constant below; ``FLAG_BITS`` gives every
+flag of this table its bit in the published bit field (the payload's
+``flag_bits``, the Modbus registers; a test fails when one is missing).
 
 Each flag is graded by what its condition does to the answer (``GRADES``):
 
