@@ -1,8 +1,9 @@
 """The appliance configuration: one TOML file, validated with one-line errors.
 
-Every table and key is declared once: the appliance's own tables below, each
-publisher's table in its settings module (``TABLE``), found through the
-publishers' registry (``service.publish.registry``); ``SCHEMA`` holds them all.
+Every table and key is declared once: the appliance's own tables below (their settings dataclasses and
+``Config``, which the devices and the publishers read, in ``service.settings.config``), each publisher's table
+in its settings module (``TABLE``), found through the publishers' registry (``service.publish.registry``);
+``SCHEMA`` holds them all.
 An unknown key, a wrong type, a value out of range or a missing hardware
 setting raises ``ConfigError`` naming the file, the table, the key and what
 was expected.
@@ -30,11 +31,12 @@ from typing import Any, Mapping, overload
 from drivers.errors import DriverConfigError
 from drivers.settings import ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSettings, IndicatorSettings, SolenoidSettings
 from firmware_host import SequencerConfig
-from measurement import Options
+from measurement import Options, Pendulum, Rig
 from measurement.effects import EFFECTS
 from measurement.errors import InvalidInput
 from service.errors import ConfigError
 from service.names import name_problem
+from service.parts.recipes import RecipeBook
 from service.publish import registry
 from service.settings import sensor_registry
 from service.settings.config import (
@@ -261,72 +263,91 @@ def _check_top_tables(doc: Mapping[str, Any], source: str) -> None:
 
 def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path | None = None, sim: bool = False,
                  state_dir: str | None = None, environ: Mapping[str, str] | None = None) -> Config:
+    """The configuration of the file's tables ``doc`` (paths relative to ``base``), each table checked in the
+    file's reading order: the first problem is the one said."""
     c = Checker(source)
     base = base or Path.cwd()
     _check_top_tables(doc, source)
-
-    dev = c.table("device", doc.get("device", {}), SCHEMA["device"])
-    if (problem := name_problem("device_id", dev["id"])) is not None:
-        raise c.fail("device", "id", problem)
-    seq_doc = c.table("sequencer", doc.get("sequencer", {}), SCHEMA["sequencer"])
-    try:
-        seq_cfg = SequencerConfig(**seq_doc, identify_in_worker=True)
-    except InvalidInput as exc:
-        raise ConfigError(f"{source}: [sequencer]: {exc}") from None
-    ident = c.table("identification", doc.get("identification", {}), SCHEMA["identification"])
-    if ident["candidates"] is not None:
-        for name in ident["candidates"]:
-            if name not in EFFECTS:
-                raise c.fail("identification", "candidates", f"unknown effect {name!r}; expected names from {', '.join(EFFECTS)}")
-    options = Options(**ident)
-
+    dev = _device_table_values(c, doc)
+    sequencer, options = _sequencer(c, doc), _identification(c, doc)
     hardware = _hardware_settings(c, base, doc["hardware"]) if "hardware" in doc else None
-
     simulation = _simulation_settings(c, base, doc.get("simulation", {}))
     simulated = sim or hardware is None
-
     rig_path = _resolve(base, dev["rig"])
-    if rig_path is not None:
-        try:
-            rig = read_rig(rig_path)
-        except InvalidInput as exc:
-            raise ConfigError(f"{source}: [device] rig: {exc}") from None
-    elif not simulated:
-        raise c.fail("device", "rig", "missing: a rig file (kind, stiffness or mass/com_distance, declared effects) "
-                      "is required with [hardware]")
-    else:
-        rig = DEMO_RIG
+    rig = _rig(c, rig_path, simulated)
     if simulated:
-        try:
-            from measurement import Pendulum
-            # resolves the effects on this rig and checks their parameter names
-            Pendulum(rig, simulation.inertia, simulation.effects).parameter_vector(simulation.theta0)
-        except InvalidInput as exc:
-            raise ConfigError(f"{source}: [simulation]: {exc}") from None
-
-    from service.parts.recipes import RecipeBook
+        _check_simulated_rig(c, rig, simulation)
     rc = c.table("recipes", doc.get("recipes", {}), SCHEMA["recipes"])
-    book = RecipeBook.load(_resolve(base, rc["directory"]))  # RecipeError: one line naming the recipe file
-    if rc["active"] is not None:
-        try:
-            book.find(rc["active"])
-        except ConfigError as exc:
-            raise c.fail("recipes", "active", str(exc)) from None
-    for r in book.recipes:
-        r.check_rig(rig)  # the quantity must be one the rig it measures with can give
-
-    publishers = {name: _publisher(c, base, name, table, doc)
-                  for name, table in publisher_tables().items()}
-
+    book = _recipes(c, _resolve(base, rc["directory"]), rc["active"], rig)
+    publishers = {name: _publisher(c, base, name, table, doc) for name, table in publisher_tables().items()}
     sd = state_dir or _resolve(base, dev["state_dir"])
     return Config(
         source=source, device_id=dev["id"],
         state_dir=Path(sd) if sd else default_state_dir(environ),
         log_level=dev["log_level"], store_trace=dev["store_trace"],
         rig=rig, rig_path=rig_path, simulated=simulated, simulation=simulation, hardware=hardware,
-        sequencer=seq_cfg, identification=options, publishers=publishers,
+        sequencer=sequencer, identification=options, publishers=publishers,
         recipes=book, active_recipe=rc["active"],
     )
+
+
+def _device_table_values(c: Checker, doc: Mapping[str, Any]) -> dict[str, Any]:
+    """[device], its id a name every surface can carry."""
+    dev = c.table("device", doc.get("device", {}), SCHEMA["device"])
+    if (problem := name_problem("device_id", dev["id"])) is not None:
+        raise c.fail("device", "id", problem)
+    return dev
+
+
+def _sequencer(c: Checker, doc: Mapping[str, Any]) -> SequencerConfig:
+    values = c.table("sequencer", doc.get("sequencer", {}), SCHEMA["sequencer"])
+    try:
+        return SequencerConfig(**values, identify_in_worker=True)
+    except InvalidInput as exc:
+        raise ConfigError(f"{c.source}: [sequencer]: {exc}") from None
+
+
+def _identification(c: Checker, doc: Mapping[str, Any]) -> Options:
+    ident = c.table("identification", doc.get("identification", {}), SCHEMA["identification"])
+    for name in ident["candidates"] or ():
+        if name not in EFFECTS:
+            raise c.fail("identification", "candidates", f"unknown effect {name!r}; expected names from {', '.join(EFFECTS)}")
+    return Options(**ident)
+
+
+def _rig(c: Checker, rig_path: str | None, simulated: bool) -> Rig:
+    """The rig file of [device] rig; the demo rig when simulated without one."""
+    if rig_path is not None:
+        try:
+            return read_rig(rig_path)
+        except InvalidInput as exc:
+            raise ConfigError(f"{c.source}: [device] rig: {exc}") from None
+    if not simulated:
+        raise c.fail("device", "rig", "missing: a rig file (kind, stiffness or mass/com_distance, declared effects) "
+                     "is required with [hardware]")
+    return DEMO_RIG
+
+
+def _check_simulated_rig(c: Checker, rig: Rig, simulation: SimulationSettings) -> None:
+    """The simulated part's effects resolved on this rig, their parameter names checked."""
+    try:
+        Pendulum(rig, simulation.inertia, simulation.effects).parameter_vector(simulation.theta0)
+    except InvalidInput as exc:
+        raise ConfigError(f"{c.source}: [simulation]: {exc}") from None
+
+
+def _recipes(c: Checker, directory: str | None, active: str | None, rig: Rig) -> RecipeBook:
+    """Every recipe of [recipes] directory (``RecipeBook``; a RecipeError is one line naming the recipe file), the
+    active one among them, each measuring a quantity the rig can give."""
+    book = RecipeBook.load(directory)
+    if active is not None:
+        try:
+            book.find(active)
+        except ConfigError as exc:
+            raise c.fail("recipes", "active", str(exc)) from None
+    for r in book.recipes:
+        r.check_rig(rig)
+    return book
 
 
 def _publisher(c: Checker, base: Path, name: str, table: PublisherTable, doc: Mapping[str, Any]) -> Any:
