@@ -152,7 +152,7 @@ class Config:
 
     @property
     def opcua(self) -> Any:
-        """``[opcua]`` (``OpcuaSettings``), None when off."""
+        """``[opcua]`` (``OpcUaSettings``), None when off."""
         return self.publishers.get("opcua")
 
     @property
