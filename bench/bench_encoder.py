@@ -93,9 +93,9 @@ def main() -> None:
 def per_time_scale(seconds: float = 2.0) -> list[dict]:
     """Samples per simulated second of the simulated appliance's encoder at each allowed time scale."""
     from firmware_host import SequencerConfig
-    from service.config.appliance import MAX_ENCODER_TIME_SCALE, SimulationSettings
-    from service.devices.defaults import DEMO_RIG, SIM_ENCODER_NOISE
     from service.devices.hardware import build_simulated
+    from service.settings.config import SimulationSettings
+    from service.settings.defaults import DEMO_RIG, MAX_ENCODER_TIME_SCALE, SIM_ENCODER_NOISE
 
     logging.getLogger("moi.hardware").setLevel(logging.ERROR)  # the faster-than-real-time warning, once per scale
     rows = []

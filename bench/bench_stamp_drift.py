@@ -64,7 +64,7 @@ def replay(t: np.ndarray, err: np.ndarray, seed: int) -> dict[str, tuple[float, 
     from measurement import Options, Pendulum, identify
     from measurement.simulate import quantise
     from measurement.trace import Trace
-    from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, SIM_ENCODER_NOISE
+    from service.settings.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, SIM_ENCODER_NOISE
 
     keep = t <= PRE + SWING
     stamped, latch = t[keep], t[keep] - err[keep]
@@ -85,7 +85,7 @@ def replay(t: np.ndarray, err: np.ndarray, seed: int) -> dict[str, tuple[float, 
 
 
 def main(captures: int = 7, seconds: float = 31.0) -> None:
-    from service.devices.defaults import DEMO_RIG
+    from service.settings.defaults import DEMO_RIG
 
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     print(f"the simulated appliance's encoder, {captures} captures of {seconds:g} s (requests at {RATE:g} Hz); "

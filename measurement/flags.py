@@ -2,8 +2,9 @@
 
 A flag is a short lower-case name in ``IdentificationResult.flags`` (and so in
 the JSON, the MQTT payload and, as a bit, in the Modbus register ``flags``).
-Whoever raises a flag uses the constant below; the Modbus map gives every
-flag of this table a bit (a test fails when one is missing).
+Whoever raises a flag uses the constant below; ``FLAG_BITS`` gives every
+flag of this table its bit in the published bit field (the payload's
+``flag_bits``, the Modbus registers; a test fails when one is missing).
 
 Each flag is graded by what its condition does to the answer (``GRADES``):
 
@@ -21,6 +22,8 @@ Each flag is graded by what its condition does to the answer (``GRADES``):
 """
 
 from __future__ import annotations
+
+from typing import Iterable
 
 # -- identification ---------------------------------------------------------------
 UNMODELED_RESIDUAL = "unmodeled_residual"
@@ -138,6 +141,54 @@ GRADES: dict[str, str] = {
 #: the flags graded WARNING, in the table's order
 WARNINGS: tuple[str, ...] = tuple(f for f in FLAGS if GRADES[f] == WARNING)
 
+
+#: flag → its bit in the published bit field: the payload's ``flag_bits``, the Modbus registers ``flags`` (bits
+#: 0–15) and ``flags_high`` (16–31), the order MQTT's discovery lists them in (the Modbus map's version, in
+#: CHANGELOG.md, says when each bit was given). A flag not in this table sets FLAG_OTHER_BIT, so a new flag is
+#: never silently lost.
+FLAG_BITS: dict[str, int] = {
+    UNMODELED_RESIDUAL: 0,
+    OUTLIERS_REMOVED: 1,
+    PARAMETER_AT_BOUND: 2,
+    FIT_NOT_CONVERGED: 3,
+    CORRELATED_RESIDUAL: 4,
+    ENCODER_ERRORS: 5,
+    CAMERA_POSE: 6,
+    MARKER_LOST: 7,
+    DROPPED_FRAMES: 8,
+    CORRUPT_FRAME: 9,   # map version 2; in version 1 it set bit 15 (other)
+    OUTLIERS_DOWNWEIGHTED: 10,  # map version 3
+    WINDOW_CUT_AT_GAP: 11,
+    ANGLE_UNWRAPPED: 12,
+    CALIBRATION_DUE: 13,  # map version 4: the rig's calibration is past its validity period
+    NEGATIVE_INERTIA: 14,  # map version 4
+    SENSOR_SCALE_FITTED: 16,  # map version 5: register flags_high, bit 0
+    CAMERA_PERSPECTIVE: 17,  # map version 6: register flags_high, bit 1
+    TENSOR_INCONSISTENT: 18,  # map version 7: a tensor set's flags (register flags_high / tensor_flags)
+    TENSOR_UNPHYSICAL: 19,
+    ORIENTATION_EXCLUDED: 20,
+    HALVES_DISAGREE: 21,  # map version 8: the model's form (register flags_high, bits 5-7)
+    MODEL_AMBIGUOUS: 22,
+    RELEASES_DISAGREE: 23,
+    CAPTURE_SLOWED: 24,  # map version 12: register flags_high, bit 8
+}
+FLAG_OTHER_BIT = 15
+
+
+def flag_bits(flags: Iterable[str]) -> int:
+    """Bit field of quality flags; unknown flags set bit FLAG_OTHER_BIT."""
+    bits = 0
+    for f in flags:
+        bits |= 1 << FLAG_BITS.get(f, FLAG_OTHER_BIT)
+    return bits
+
+
+def flags_from_bits(bits: int) -> list[str]:
+    """Flag names of a bit field (``flags`` | ``flags_high`` << 16); "other" for bit FLAG_OTHER_BIT."""
+    names = [name for name, b in FLAG_BITS.items() if bits & (1 << b)]
+    if bits & (1 << FLAG_OTHER_BIT):
+        names.append("other")
+    return names
 
 def describe(flag: str) -> str:
     """The meaning of ``flag`` ("" for a flag outside the table)."""

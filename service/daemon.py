@@ -41,7 +41,7 @@ from measurement import IdentificationResult, Rig, Trace, identify
 from measurement import flags as F
 from measurement.errors import InvalidInput
 from measurement.integrator import is_compiled
-from service.config.appliance import Config
+from service.config.appliance import whom_to_call
 from service.core import vocabulary as V
 from service.core.live import LiveStatus
 from service.devices.hardware import Devices, build_devices
@@ -53,6 +53,7 @@ from service.publish import registry
 from service.publish.payload import iso_utc, result_payload
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CONTACT, CommandReply, ReplyTo, calibration_words
+from service.settings.config import Config
 
 from . import __version__
 from .contention import CaptureWatch
@@ -225,11 +226,27 @@ class Appliance:
         """The running publisher of configuration table ``name``, or None."""
         return next((p for p in self.publishers if name == p.NAME), None)
 
-    def __getattr__(self, name: str) -> Any:
-        # app.modbus, app.mqtt, app.web...: a publisher by its table's name (None when off), for tests and tools
-        if any(entry.name == name for entry in registry.PUBLISHERS):
-            return next((p for p in self.__dict__.get("publishers", ()) if name == p.NAME), None)
-        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+    # one property per publisher of the registry (a test holds the two together), for tests and tools: the running
+    # publisher, None when off (typed Any: the daemon imports no publisher's module)
+    @property
+    def modbus(self) -> Any:
+        return self.publisher("modbus")
+
+    @property
+    def web(self) -> Any:
+        return self.publisher("web")
+
+    @property
+    def mqtt(self) -> Any:
+        return self.publisher("mqtt")
+
+    @property
+    def opcua(self) -> Any:
+        return self.publisher("opcua")
+
+    @property
+    def sparkplug(self) -> Any:
+        return self.publisher("sparkplug")
 
     def publisher_health(self) -> dict[str, dict[str, Any] | None]:
         """Each publisher's health under its name (None when it is off), for the health page."""
@@ -800,7 +817,7 @@ class Appliance:
             return None  # its quality rules judge a part with the calibration due (flagged, not INVALID): its call
         check = state.get("check_standard")
         failed = check if check is not None and not check.get("passed") else None
-        contact = getattr(self.config.publishers.get("web"), "contact", None) or CONTACT
+        contact = whom_to_call(self.config) or CONTACT
         return {"calibration": state, "expired": expired,
                 "detail": calibration_words(state["valid_until"] if expired else None, failed, contact)}
 

@@ -26,9 +26,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from measurement.errors import VisionError
-from service.config.camera import read_camera
-from service.devices.defaults import demo_camera
 from service.errors import InputFileError
+from service.settings.defaults import demo_camera
+from service.sources.camera import read_camera
 from service.sources.marker_check import check_image
 
 if TYPE_CHECKING:  # the vision modules load OpenCV: imported where used, not for `moi --help`

@@ -26,15 +26,15 @@ from pathlib import Path
 from typing import Iterator
 
 from service.core import vocabulary as V
-from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
 from service.errors import AddressInUse, InputFileError
+from service.settings.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
 
 EXIT_FAULT = 3
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from service.config.schema import default_of
     from service.publish.web.settings import WebSettings
+    from service.settings.schema import default_of
 
     p.add_argument("--mqtt", metavar="HOST[:PORT]", help="also publish to this MQTT broker and show the result it delivers "
                                                        "(default: MQTT skipped)")
@@ -139,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
 def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
     from pymodbus.client import ModbusTcpClient
 
+    from measurement import flags as F
     from service.publish.modbus import registers as R
 
     cfg = app.config
@@ -220,7 +221,7 @@ def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
             a = R.BY_NAME[reg].address
             print(f"  {a:>3}–{a + 1:<3} {reg:<14} {snap[reg]:.8g}   (JSON {payload[key]!r})")
         print(f"  {R.BY_NAME['flags'].address:>3}     flags          0x{snap['flags']:04x} "
-              f"{R.flags_from_bits(snap['flags'] | snap['flags_high'] << 16) or '(none)'}")
+              f"{F.flags_from_bits(snap['flags'] | snap['flags_high'] << 16) or '(none)'}")
         codes = {v: k for k, v in R.VERDICT_CODES.items()}
         for reg in ("verdict", "release_index", "releases", "part_id", "part_value", "part_U"):
             a = R.BY_NAME[reg].address

@@ -30,8 +30,8 @@ import sys
 from typing import TYPE_CHECKING
 
 from measurement.errors import InvalidInput
-from service.devices.defaults import DEMO_EFFECTS, DEMO_RIG, SIM_ENCODER_NOISE
-from service.devices.sensors import registry as sensors
+from service.settings import sensor_registry as sensors
+from service.settings.defaults import DEMO_EFFECTS, DEMO_RIG, SIM_ENCODER_NOISE
 from service.sources.files import read_rig
 
 from .simulate import EFFECT_SYNTAX, parse_effects
@@ -55,8 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     # the defaults are the settings classes' own (imported here, when this command is chosen: `moi --help`
     # loads no command)
     from firmware_host import SequencerConfig
-    from service.config.appliance import SimulationSettings
-    from service.config.schema import default_of
+    from service.settings.config import SimulationSettings
+    from service.settings.schema import default_of
 
     def seq(name: str) -> object:
         return default_of(SequencerConfig, name)
@@ -125,8 +125,8 @@ def run(args: argparse.Namespace) -> int:
     # imported here: `moi --help` must not pay for gpiozero/pymodbus
     from firmware_host import Sequencer, SequencerConfig
     from measurement import Options, Pendulum
-    from service.config.appliance import SimulationSettings
     from service.devices.hardware import build_simulated
+    from service.settings.config import SimulationSettings
 
     rig = read_rig(args.rig) if args.rig else DEFAULT_RIG
     tokens = args.effects if args.effects is not None else ([] if args.rig else DEFAULT_EFFECTS)

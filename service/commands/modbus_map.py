@@ -12,6 +12,7 @@ import math
 import sys
 from typing import Sequence
 
+from measurement import flags as F
 from service.publish.modbus import registers as R
 from service.sources.files import read_text, write_text_atomic
 
@@ -67,7 +68,7 @@ def read_document(words: Sequence[int], word_order: str) -> dict:
     names and units; NaN as null, so the output is strict JSON; bit fields as lists of names)."""
     values = R.decode_image(words, word_order)
     values = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in values.items()}
-    values["flags"] = R.flags_from_bits(values["flags"] | values.pop("flags_high") << 16)
+    values["flags"] = F.flags_from_bits(values["flags"] | values.pop("flags_high") << 16)
     values["state"] = next((k for k, v in R.STATE_CODES.items() if v == values["state"]), values["state"])
     values["status"] = [n for n, b in R.STATUS_BITS.items() if values["status"] >> b & 1]
     values["plc_status"] = [n for n, b in R.PLC_STATUS_BITS.items() if values["plc_status"] >> b & 1]

@@ -1,1 +1,2 @@
-"""Configuration: the appliance file, the camera file, and the checks made before the daemon starts."""
+"""The configuration's assembler: the appliance file read into a ``Config`` from every registered table (the
+appliance's own, each sensor's, each publisher's), and the checks made before the daemon starts."""

@@ -1,8 +1,9 @@
 """The appliance configuration: one TOML file, validated with one-line errors.
 
-Every table and key is declared once: the appliance's own tables below, each
-publisher's table in its settings module (``TABLE``), found through the
-publishers' registry (``service.publish.registry``); ``SCHEMA`` holds them all.
+Every table and key is declared once: the appliance's own tables below (their settings dataclasses and
+``Config``, which the devices and the publishers read, in ``service.settings.config``), each publisher's table
+in its settings module (``TABLE``), found through the publishers' registry (``service.publish.registry``);
+``SCHEMA`` holds them all.
 An unknown key, a wrong type, a value out of range or a missing hardware
 setting raises ``ConfigError`` naming the file, the table, the key and what
 was expected.
@@ -14,124 +15,46 @@ simulated rig described by ``[simulation]``.
 
 The angle sensor (``[hardware] sensor``) brings its own table, ``[hardware.<sensor>]``: its keys, docs and parse
 are its sensor module's (``SensorKind.TABLE``, found through the sensors' registry,
-``service.devices.sensors.registry``), so this module names no sensor. Files a sensor's table names (the camera
+``service.settings.sensor_registry``), so this module names no sensor. Files a sensor's table names (the camera
 file) are read and checked here, so a missing or malformed one is a configuration error naming both files.
 """
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import difflib
 import functools
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, overload
 
 from drivers.errors import DriverConfigError
 from drivers.settings import ABSOLUTE_MAX_ON_TIME, INDICATOR_KINDS, ButtonSettings, IndicatorSettings, SolenoidSettings
 from firmware_host import SequencerConfig
-from measurement import Options, Rig
+from measurement import Options, Pendulum, Rig
 from measurement.effects import EFFECTS
 from measurement.errors import InvalidInput
-from service.config.schema import REQUIRED, Key, PublisherTable, SensorTable
-from service.config.schema import Checker as _Checker
-from service.config.schema import doc as _doc
-from service.config.schema import schema as _schema
-from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, DEMO_RIG, DEMO_THETA0, MAX_ENCODER_TIME_SCALE
-from service.devices.sensors import registry as sensor_registry
 from service.errors import ConfigError
 from service.names import name_problem
+from service.parts.recipes import RecipeBook
 from service.publish import registry
+from service.settings import sensor_registry
+from service.settings.config import (
+    MAX_TIME_SCALE,
+    Config,
+    DeviceSettings,
+    HardwareSettings,
+    RecipeSettings,
+    SimulationSettings,
+)
+from service.settings.defaults import DEMO_RIG, MAX_ENCODER_TIME_SCALE
+from service.settings.schema import REQUIRED, Checker, Key, PublisherTable, SensorTable
+from service.settings.schema import doc as _doc
+from service.settings.schema import schema as _schema
 from service.sources.files import read_rig, read_toml
 
 #: the rig simulated when ``[device] rig`` is not given (the demo rig of `moi demo`)
 DEFAULT_SIM_RIG = DEMO_RIG
-
-
-# --- the settings: each table of the file is one dataclass; its fields are the table's keys and defaults ----
-@dataclass(frozen=True)
-class DeviceSettings:
-    """``[device]``: the device id (an MQTT topic level), the store, the rig file, logging."""
-
-    id: str = "moi"
-    state_dir: str | None = None
-    rig: str | None = None
-    log_level: str = "info"
-    store_trace: bool = True
-
-
-@dataclass(frozen=True)
-class SimulationSettings:
-    """``[simulation]``: the simulated rig (SI units; see ``SCHEMA["simulation"]`` for each key)."""
-
-    inertia: float = DEMO_INERTIA
-    effects: Mapping[str, Mapping[str, float]] = field(default_factory=lambda: copy.deepcopy(DEMO_EFFECTS))
-    theta0: float = DEMO_THETA0
-    rate: float = 200.0
-    noise: float = 1e-4
-    bits: int = 17
-    time_scale: float = 1.0
-    seed: int | None = None
-    sensor: str = "encoder"
-    latency: float = 0.0002
-    camera: str | None = None        # camera file (resolved), None: the demo camera
-    camera_yaw_deg: float = 0.0
-    camera_config: Any = None        # the parsed camera file (CameraConfig) with sensor = "camera"
-    drop_rate: float = 0.0
-    crc_rate: float = 0.0
-    glitch_rate: float = 0.0
-
-    def __post_init__(self) -> None:
-        ts = self.time_scale
-        if not (isinstance(ts, (int, float)) and not isinstance(ts, bool) and 0 < ts <= MAX_TIME_SCALE):
-            raise InvalidInput(f"time_scale must be in (0, {MAX_TIME_SCALE:g}] simulated s per wall-clock s, got {ts!r}")
-        kind = sensor_registry.sensor(self.sensor) if self.sensor in sensor_registry.names() else None
-        if kind is not None and kind.MAX_TIME_SCALE is not None and ts > kind.MAX_TIME_SCALE:
-            raise InvalidInput(f"time_scale {ts:g} is above {kind.MAX_TIME_SCALE:g}, {kind.TIME_SCALE_REASON} "
-                               f"(use time_scale <= {kind.MAX_TIME_SCALE:g})")
-
-
-#: largest [simulation] time_scale: simulated seconds per wall-clock second
-MAX_TIME_SCALE = 1000.0
-
-
-
-@dataclass(frozen=True)
-class RecipeSettings:
-    """``[recipes]``: the recipe directory (one TOML file per part type) and the recipe active at start."""
-
-    directory: str | None = None
-    active: str | None = None
-
-
-@dataclass(frozen=True, kw_only=True)
-class HardwareSettings:
-    """``[hardware]``: the GPIO backend, the angle sensor and the device tables (checked by the drivers' settings).
-
-    sensors: the chosen sensor's settings by its name, parsed from its table ``[hardware.<sensor>]`` by its
-    sensor module (``SensorKind.TABLE``); ``hardware.<name>`` reads them (None for another sensor).
-    """
-
-    gpio_backend: str | None = None
-    sensor: str = "encoder"
-    solenoid: Mapping[str, Any]
-    button: Mapping[str, Any] | None = None
-    indicator: Mapping[str, Any] | None = None
-    sensors: Mapping[str, Any] = field(default_factory=dict)
-
-    def __getattr__(self, name: str) -> Any:
-        # hardware.encoder, hardware.camera...: a hardware sensor's settings by its table's name
-        if not name.startswith("_") and name in sensor_registry.names(hardware=True):
-            return self.__dict__.get("sensors", {}).get(name)
-        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: the tables as the file has them, one key per hardware sensor (null: not the chosen one)."""
-        d = dataclasses.asdict(self)
-        chosen = d.pop("sensors")
-        return {**d, **{name: chosen.get(name) for name in sensor_registry.names(hardware=True)}}
 
 
 def _sequencer_keys() -> dict[str, dict[str, Any]]:
@@ -236,6 +159,16 @@ def _publisher_tables(entries: tuple[registry.PublisherEntry, ...]) -> dict[str,
     return {e.name: e.table() for e in entries}
 
 
+def whom_to_call(config: Config) -> str | None:
+    """Whom the appliance's doors say to call (a calibration that refuses Measure): the first enabled publisher
+    that names someone (its table's ``contact``), None when none does."""
+    for name, table in publisher_tables().items():
+        settings = config.publishers.get(name)
+        if table.contact is not None and settings is not None and (who := table.contact(settings)):
+            return who
+    return None
+
+
 def sensor_tables() -> dict[str, SensorTable]:
     """The hardware sensors' tables ``[hardware.<name>]``, by name, in the registry's order."""
     return _sensor_tables(sensor_registry.SENSORS)
@@ -276,62 +209,6 @@ def top_tables() -> tuple[str, ...]:
 
 #: every table of the file and its keys (the publishers registered when the configuration is imported)
 SCHEMA: dict[str, dict[str, Key]] = tables()
-
-
-# --- the validated configuration ----------------------------------------------------------------
-@dataclass(frozen=True)
-class Config:
-    """The whole validated configuration (SI units)."""
-
-    source: str                      # the file it came from ("<defaults>" when none)
-    device_id: str
-    state_dir: Path
-    log_level: str
-    store_trace: bool
-    rig: Rig
-    rig_path: str | None
-    simulated: bool
-    simulation: SimulationSettings
-    hardware: HardwareSettings | None
-    sequencer: SequencerConfig
-    identification: Options
-    #: each registered publisher's settings by its table's name (``config.mqtt``...); None: that publisher is off
-    publishers: Mapping[str, Any] = field(default_factory=dict)
-    recipes: Any = None              # service.parts.recipes.RecipeBook (every recipe of [recipes] directory, checked)
-    active_recipe: str | None = None  # [recipes] active
-
-    def __getattr__(self, name: str) -> Any:
-        # config.modbus, config.mqtt, config.web...: a publisher's settings by its table's name (None when off)
-        if not name.startswith("_") and name != "publishers" and name in self.__dict__.get("publishers", {}):
-            return self.__dict__["publishers"][name]
-        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-
-    def with_publisher(self, name: str, settings: Any) -> Config:
-        """This configuration with the settings of publisher ``name`` replaced (None: off)."""
-        return dataclasses.replace(self, publishers={**self.publishers, name: settings})
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary of what the daemon runs with (passwords left out)."""
-        def clean(obj: Any) -> Any:
-            if obj is None:
-                return None
-            d = dataclasses.asdict(obj)
-            for secret in ("password",):
-                if d.get(secret):
-                    d[secret] = "***"
-            return d
-        return {
-            "source": self.source, "device_id": self.device_id, "state_dir": str(self.state_dir),
-            "rig_path": self.rig_path, "rig": self.rig.to_dict(), "simulated": self.simulated,
-            "simulation": clean(self.simulation) if self.simulated else None,
-            "hardware": None if self.hardware is None else self.hardware.to_dict(), "sequencer": clean(self.sequencer),
-            "identification": clean(self.identification),
-            "recipes": None if self.recipes is None else {
-                "directory": self.recipes.directory, "active": self.active_recipe,
-                "recipes": [{"name": r.name, "number": r.number, "version": r.version, "path": r.path}
-                            for r in self.recipes.recipes]},
-            **{name: clean(settings) for name, settings in self.publishers.items()},
-        }
 
 
 @overload
@@ -386,75 +263,94 @@ def _check_top_tables(doc: Mapping[str, Any], source: str) -> None:
 
 def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path | None = None, sim: bool = False,
                  state_dir: str | None = None, environ: Mapping[str, str] | None = None) -> Config:
-    c = _Checker(source)
+    """The configuration of the file's tables ``doc`` (paths relative to ``base``), each table checked in the
+    file's reading order: the first problem is the one said."""
+    c = Checker(source)
     base = base or Path.cwd()
     _check_top_tables(doc, source)
-
-    dev = c.table("device", doc.get("device", {}), SCHEMA["device"])
-    if (problem := name_problem("device_id", dev["id"])) is not None:
-        raise c.fail("device", "id", problem)
-    seq_doc = c.table("sequencer", doc.get("sequencer", {}), SCHEMA["sequencer"])
-    try:
-        seq_cfg = SequencerConfig(**seq_doc, identify_in_worker=True)
-    except InvalidInput as exc:
-        raise ConfigError(f"{source}: [sequencer]: {exc}") from None
-    ident = c.table("identification", doc.get("identification", {}), SCHEMA["identification"])
-    if ident["candidates"] is not None:
-        for name in ident["candidates"]:
-            if name not in EFFECTS:
-                raise c.fail("identification", "candidates", f"unknown effect {name!r}; expected names from {', '.join(EFFECTS)}")
-    options = Options(**ident)
-
+    dev = _device_table_values(c, doc)
+    sequencer, options = _sequencer(c, doc), _identification(c, doc)
     hardware = _hardware_settings(c, base, doc["hardware"]) if "hardware" in doc else None
-
     simulation = _simulation_settings(c, base, doc.get("simulation", {}))
     simulated = sim or hardware is None
-
     rig_path = _resolve(base, dev["rig"])
-    if rig_path is not None:
-        try:
-            rig = read_rig(rig_path)
-        except InvalidInput as exc:
-            raise ConfigError(f"{source}: [device] rig: {exc}") from None
-    elif not simulated:
-        raise c.fail("device", "rig", "missing: a rig file (kind, stiffness or mass/com_distance, declared effects) "
-                      "is required with [hardware]")
-    else:
-        rig = DEMO_RIG
+    rig = _rig(c, rig_path, simulated)
     if simulated:
-        try:
-            from measurement import Pendulum
-            # resolves the effects on this rig and checks their parameter names
-            Pendulum(rig, simulation.inertia, simulation.effects).parameter_vector(simulation.theta0)
-        except InvalidInput as exc:
-            raise ConfigError(f"{source}: [simulation]: {exc}") from None
-
-    from service.parts.recipes import RecipeBook
+        _check_simulated_rig(c, rig, simulation)
     rc = c.table("recipes", doc.get("recipes", {}), SCHEMA["recipes"])
-    book = RecipeBook.load(_resolve(base, rc["directory"]))  # RecipeError: one line naming the recipe file
-    if rc["active"] is not None:
-        try:
-            book.find(rc["active"])
-        except ConfigError as exc:
-            raise c.fail("recipes", "active", str(exc)) from None
-    for r in book.recipes:
-        r.check_rig(rig)  # the quantity must be one the rig it measures with can give
-
-    publishers = {name: _publisher(c, base, name, table, doc)
-                  for name, table in publisher_tables().items()}
-
+    book = _recipes(c, _resolve(base, rc["directory"]), rc["active"], rig)
+    publishers = {name: _publisher(c, base, name, table, doc) for name, table in publisher_tables().items()}
     sd = state_dir or _resolve(base, dev["state_dir"])
     return Config(
         source=source, device_id=dev["id"],
         state_dir=Path(sd) if sd else default_state_dir(environ),
         log_level=dev["log_level"], store_trace=dev["store_trace"],
         rig=rig, rig_path=rig_path, simulated=simulated, simulation=simulation, hardware=hardware,
-        sequencer=seq_cfg, identification=options, publishers=publishers,
+        sequencer=sequencer, identification=options, publishers=publishers,
         recipes=book, active_recipe=rc["active"],
     )
 
 
-def _publisher(c: _Checker, base: Path, name: str, table: PublisherTable, doc: Mapping[str, Any]) -> Any:
+def _device_table_values(c: Checker, doc: Mapping[str, Any]) -> dict[str, Any]:
+    """[device], its id a name every surface can carry."""
+    dev = c.table("device", doc.get("device", {}), SCHEMA["device"])
+    if (problem := name_problem("device_id", dev["id"])) is not None:
+        raise c.fail("device", "id", problem)
+    return dev
+
+
+def _sequencer(c: Checker, doc: Mapping[str, Any]) -> SequencerConfig:
+    values = c.table("sequencer", doc.get("sequencer", {}), SCHEMA["sequencer"])
+    try:
+        return SequencerConfig(**values, identify_in_worker=True)
+    except InvalidInput as exc:
+        raise ConfigError(f"{c.source}: [sequencer]: {exc}") from None
+
+
+def _identification(c: Checker, doc: Mapping[str, Any]) -> Options:
+    ident = c.table("identification", doc.get("identification", {}), SCHEMA["identification"])
+    for name in ident["candidates"] or ():
+        if name not in EFFECTS:
+            raise c.fail("identification", "candidates", f"unknown effect {name!r}; expected names from {', '.join(EFFECTS)}")
+    return Options(**ident)
+
+
+def _rig(c: Checker, rig_path: str | None, simulated: bool) -> Rig:
+    """The rig file of [device] rig; the demo rig when simulated without one."""
+    if rig_path is not None:
+        try:
+            return read_rig(rig_path)
+        except InvalidInput as exc:
+            raise ConfigError(f"{c.source}: [device] rig: {exc}") from None
+    if not simulated:
+        raise c.fail("device", "rig", "missing: a rig file (kind, stiffness or mass/com_distance, declared effects) "
+                     "is required with [hardware]")
+    return DEMO_RIG
+
+
+def _check_simulated_rig(c: Checker, rig: Rig, simulation: SimulationSettings) -> None:
+    """The simulated part's effects resolved on this rig, their parameter names checked."""
+    try:
+        Pendulum(rig, simulation.inertia, simulation.effects).parameter_vector(simulation.theta0)
+    except InvalidInput as exc:
+        raise ConfigError(f"{c.source}: [simulation]: {exc}") from None
+
+
+def _recipes(c: Checker, directory: str | None, active: str | None, rig: Rig) -> RecipeBook:
+    """Every recipe of [recipes] directory (``RecipeBook``; a RecipeError is one line naming the recipe file), the
+    active one among them, each measuring a quantity the rig can give."""
+    book = RecipeBook.load(directory)
+    if active is not None:
+        try:
+            book.find(active)
+        except ConfigError as exc:
+            raise c.fail("recipes", "active", str(exc)) from None
+    for r in book.recipes:
+        r.check_rig(rig)
+    return book
+
+
+def _publisher(c: Checker, base: Path, name: str, table: PublisherTable, doc: Mapping[str, Any]) -> Any:
     """A publisher's settings from its table (None: off), checked by the publisher's own checks."""
     if name not in doc and not table.on_without_table:
         return None
@@ -470,7 +366,7 @@ def _publisher(c: _Checker, base: Path, name: str, table: PublisherTable, doc: M
     return table.settings(**values)
 
 
-def _device_table(c: _Checker, table: str, doc: Any, settings: type) -> dict[str, Any] | None:
+def _device_table(c: Checker, table: str, doc: Any, settings: type) -> dict[str, Any] | None:
     """A GPIO device table (None when absent), its values checked by the driver's settings dataclass."""
     if doc is None:
         return None
@@ -482,7 +378,7 @@ def _device_table(c: _Checker, table: str, doc: Any, settings: type) -> dict[str
     return values
 
 
-def _simulation_settings(c: _Checker, base: Path, doc: Any) -> SimulationSettings:
+def _simulation_settings(c: Checker, base: Path, doc: Any) -> SimulationSettings:
     """[simulation], completed by its sensor (the simulated camera reads its camera file)."""
     values = c.table("simulation", doc, SCHEMA["simulation"])
     values["camera"] = _resolve(base, values["camera"])
@@ -495,7 +391,7 @@ def _simulation_settings(c: _Checker, base: Path, doc: Any) -> SimulationSetting
         raise ConfigError(f"{c.source}: [simulation]: {exc}") from None
 
 
-def _hardware_settings(c: _Checker, base: Path, doc: Any) -> HardwareSettings:
+def _hardware_settings(c: Checker, base: Path, doc: Any) -> HardwareSettings:
     """[hardware] and its device tables; the chosen sensor's table parsed by its sensor module."""
     schema = tables()
     hw = c.table("hardware", doc, schema["hardware"])

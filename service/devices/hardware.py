@@ -37,10 +37,9 @@ from drivers.simrig import SimRig
 from drivers.solenoid import Solenoid
 from firmware_host import SequencerConfig
 from measurement import Pendulum, Rig
-from service.config.appliance import Config, HardwareSettings, SimulationSettings
-
-from .defaults import SIM_BUTTON_PIN, SIM_SOLENOID_PIN
-from .sensors import registry as sensors
+from service.settings import sensor_registry as sensors
+from service.settings.config import Config, HardwareSettings, SimulationSettings
+from service.settings.defaults import SIM_BUTTON_PIN, SIM_SOLENOID_PIN
 
 log = logging.getLogger("moi.hardware")
 

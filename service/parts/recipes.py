@@ -178,9 +178,9 @@ class Recipe:
 def _schemas() -> dict[str, dict[str, Any]]:
     """The keys of a recipe file: [recipe] here, [decision] and [quality] from the settings they fill
     (``Specification``, ``QualityRules``: their defaults are the recipe's)."""
-    from service.config.schema import REQUIRED, Key
-    from service.config.schema import doc as _doc
-    from service.config.schema import schema as _schema
+    from service.settings.schema import REQUIRED, Key
+    from service.settings.schema import doc as _doc
+    from service.settings.schema import schema as _schema
 
     return {
         "recipe": {
@@ -224,7 +224,7 @@ def _schemas() -> dict[str, dict[str, Any]]:
 def load_recipe(path: str | Path) -> Recipe:  # noqa: C901
     """Read and check one recipe file (``RecipeError`` naming the file, table and key)."""
     from measurement.effects import EFFECTS
-    from service.config.schema import Checker as _Checker
+    from service.settings.schema import Checker as _Checker
     from service.sources.files import read_toml
 
     class Checker(_Checker):

@@ -531,7 +531,7 @@ class Store:
         per consumer and kind, each acknowledged by its consumer alone. part: values of
         the schema-2 part columns (``COLUMNS`` with ``since=2``: part ID, recipe, verdicts...), missing keys are NULL.
         """
-        from service.publish.payload import dumps
+        from service.persistence.canonical import dumps
 
         uid = uuid or str(uuidlib.uuid4())
         now = time.time()

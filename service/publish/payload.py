@@ -11,13 +11,12 @@ loaded, and its fields from there; the envelope's part keys stay plain dicts.
 
 from __future__ import annotations
 
-import json
 from datetime import UTC, datetime
 from typing import Any, Mapping
 
 from measurement.errors import ResultSchemaError
+from measurement.flags import flag_bits
 from measurement.result import IdentificationResult
-from service.publish.modbus.registers import flag_bits
 
 #: the version of the published envelope and topics; what each version changed is in CHANGELOG.md
 PAYLOAD_SCHEMA = 6
@@ -158,8 +157,3 @@ def not_decidable(payload: Mapping[str, Any] | None) -> bool:
         return False
     verdict, made = decision(payload)
     return verdict == "INVALID" or made.get("zone") == "uncertainty"
-
-
-def dumps(payload: Mapping[str, Any]) -> str:
-    """Canonical JSON text of a payload (what MQTT carries and the store keeps)."""
-    return json.dumps(payload, ensure_ascii=False, allow_nan=False, separators=(",", ":"))

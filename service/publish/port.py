@@ -20,13 +20,13 @@ from typing import TYPE_CHECKING, Any, Callable, ClassVar, Mapping
 
 if TYPE_CHECKING:  # pragma: no cover
     from firmware_host import Event, Measurement, Sequencer
-    from service.config.appliance import Config
     from service.core.live import LiveStatus
     from service.devices.hardware import Devices
     from service.notify import Notifier
     from service.parts.recipes import PartTracker, Recipe
     from service.persistence.store import Store, StoredMeasurement
     from service.publish.replies import ReplyTo
+    from service.settings.config import Config
 
 
 class Publisher:
@@ -171,7 +171,7 @@ class ApplianceView:
         """A camera file read again (``CameraConfig``) put to use by the sensor kind that reads it
         (``SensorKind.use_camera``): in the running sensor from its next capture and in the running configuration
         (main loop thread: ask through ``call_soon``)."""
-        from service.devices.sensors import registry as sensors
+        from service.settings import sensor_registry as sensors
 
         devices = self._app.devices
         kind = sensors.running(self._app.config)

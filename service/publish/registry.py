@@ -18,7 +18,7 @@ from typing import Any
 class PublisherEntry:
     """One publisher: its configuration table (``Config.<name>``, None when off), the module whose ``PUBLISHER``
     class serves it (imported only when the table enables it) and the module whose ``TABLE``
-    (``service.config.schema.PublisherTable``) describes the table."""
+    (``service.settings.schema.PublisherTable``) describes the table."""
 
     name: str
     module: str
@@ -31,7 +31,7 @@ class PublisherEntry:
         return importlib.import_module(self.module).PUBLISHER
 
     def table(self) -> Any:
-        """Its configuration table (``service.config.schema.PublisherTable``)."""
+        """Its configuration table (``service.settings.schema.PublisherTable``)."""
         return importlib.import_module(self.settings).TABLE
 
 

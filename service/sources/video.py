@@ -15,7 +15,7 @@ from measurement.trace import Trace
 from measurement.vision.config import CameraConfig
 from measurement.vision.locate import TrackerSettings
 from measurement.vision.pipeline import Tracking, VisionSettings, trace_from_tracking, tracker_for
-from service.config.camera import camera_config
+from service.sources.camera import camera_config
 
 
 def track_source(path: str | os.PathLike, config: CameraConfig, settings: TrackerSettings | None = None,

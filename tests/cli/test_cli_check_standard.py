@@ -18,8 +18,8 @@ from measurement.result import SCHEMA_VERSION
 from measurement.rig import CalibrationRecord
 from service.cli import main
 from service.daemon import Appliance
-from service.devices.defaults import DEMO_RIG
 from service.persistence.store import Store
+from service.settings.defaults import DEMO_RIG
 from service.sources.files import read_rig
 
 ARTIFACT = 0.0125  # kg·m², the artifact's own inertia (J_object)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from firmware_host import SequencerConfig
 from service.cli import build_parser
-from service.config.appliance import SimulationSettings
 from service.publish.web.settings import WebSettings
+from service.settings.config import SimulationSettings
 
 
 def test_moi_measure_defaults_are_the_settings_defaults():

@@ -135,8 +135,10 @@ def test_measure_without_a_terminal_or_progress_flag_prints_no_progress(capsys):
 
 def test_time_scale_beyond_what_the_simulated_encoder_keeps_up_with_is_refused(capsys):
     from measurement.errors import InvalidInput
-    from service.config.appliance import MAX_ENCODER_TIME_SCALE, SimulationSettings, parse_config
+    from service.config.appliance import parse_config
     from service.errors import ConfigError
+    from service.settings.config import SimulationSettings
+    from service.settings.defaults import MAX_ENCODER_TIME_SCALE
 
     assert main(["measure", "--sim", "--time-scale", "25"]) == 2
     err = capsys.readouterr().err

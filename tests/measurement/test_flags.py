@@ -6,11 +6,11 @@ from service.publish.modbus import registers as R
 
 
 def test_every_flag_has_a_description_and_a_bit():
-    assert set(F.FLAGS) == set(R.FLAG_BITS), "a flag without a bit, or a bit without a described flag"
+    assert set(F.FLAGS) == set(F.FLAG_BITS), "a flag without a bit, or a bit without a described flag"
     for name, meaning in F.FLAGS.items():
         assert meaning.strip(), name
-    bits = list(R.FLAG_BITS.values())
-    assert len(bits) == len(set(bits)) and R.FLAG_OTHER_BIT not in bits
+    bits = list(F.FLAG_BITS.values())
+    assert len(bits) == len(set(bits)) and F.FLAG_OTHER_BIT not in bits
 
 
 def test_every_flag_is_graded_and_the_default_and_example_rules_invalidate_by_warnings_only():

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from pymodbus.client import ModbusTcpClient
 
+from measurement import flags as F
 from service.persistence.store import Store
 from service.publish.modbus import registers as R
 from tests.service.conftest import appliance_doc, wait_until
@@ -73,7 +74,7 @@ def test_button_measurement_arrives_on_mqtt_and_in_modbus_with_the_same_values(t
                      ("residual_rms_before", "residual_rms_before"), ("noise_floor", "noise_floor"),
                      ("J_object", "J_object")):
         assert same(values[reg], f32(msg[key])), reg
-    assert values["flags"] | values["flags_high"] << 16 == msg["flag_bits"] == R.flag_bits(msg["flags"])
+    assert values["flags"] | values["flags_high"] << 16 == msg["flag_bits"] == F.flag_bits(msg["flags"])
     assert values["timestamp"] == int(msg["timestamp"])
     assert values["measurements_started"] == 1
     # the sequencer's transitions were published on the state topic, in order

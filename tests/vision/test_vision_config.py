@@ -9,7 +9,7 @@ import pytest
 from measurement.errors import InvalidInput, VisionError
 from measurement.vision import CameraConfig
 from service.cli import main
-from service.config.camera import read_camera
+from service.sources.camera import read_camera
 
 from .conftest import RIG, camera_toml, write_toml
 

@@ -24,7 +24,7 @@ from measurement.vision.render import Imaging
 from measurement.vision.render_plane import PlaneRenderer, PlaneScene
 from measurement.vision.target import TargetSpec
 from service.cli import main
-from service.config.camera import read_camera
+from service.sources.camera import read_camera
 from service.sources.marker_check import FONT_SCALE, MIN_FONT_SCALE, check_image, drawing_scale
 from service.sources.video import track_source
 
@@ -175,7 +175,7 @@ import sys
 from pathlib import Path
 from drivers.video_file import FrameSource
 from service.cli import main
-from service.config.camera import read_camera
+from service.sources.camera import read_camera
 video, cam, png = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
 config = read_camera(cam)
 for k in range(60):

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from service.cli import main
-from service.config.camera import read_camera
+from service.sources.camera import read_camera
 from service.sources.video import track_source
 
 VIDEOS = Path(__file__).resolve().parents[2] / "data" / "video"

@@ -19,15 +19,15 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from drivers.errors import DriverConfigError
 from measurement.errors import InvalidInput
-from service.config.schema import SensorFail, SensorTable, doc
 from service.errors import ConfigError, StartupError
+from service.settings.schema import SensorFail, SensorTable, doc
 
 from .port import SensorKind
 
 if TYPE_CHECKING:  # pragma: no cover
     from drivers.clock import Clock
     from drivers.simrig import SimRig
-    from service.config.appliance import Config, SimulationSettings
+    from service.settings.config import Config, SimulationSettings
 
 log = logging.getLogger("moi.hardware")
 
@@ -45,8 +45,8 @@ class CameraSettings:
 def read_camera_file(path: str | None, key: str, fail: SensorFail) -> Any:
     """The camera file at ``path`` (None: the demo camera) as a ``CameraConfig``; a missing or malformed file is
     a one-line error naming the configuration file, the key and the camera file."""
-    from service.config.camera import read_camera
-    from service.devices.defaults import demo_camera
+    from service.settings.defaults import demo_camera
+    from service.sources.camera import read_camera
 
     if path is None:
         return demo_camera()
@@ -150,8 +150,8 @@ class Camera(SensorKind):
     def _simulated_config(sim: SimulationSettings) -> Any:
         cfg = sim.camera_config
         if cfg is None:  # SimulationSettings built by hand rather than by parse_config, which reads the file
-            from service.config.camera import read_camera
-            from service.devices.defaults import demo_camera
+            from service.settings.defaults import demo_camera
+            from service.sources.camera import read_camera
             cfg = read_camera(sim.camera) if sim.camera else demo_camera()
         return cfg
 

@@ -11,7 +11,7 @@ from .port import SensorKind
 if TYPE_CHECKING:  # pragma: no cover
     from drivers.clock import Clock
     from drivers.simrig import SimRig
-    from service.config.appliance import SimulationSettings
+    from service.settings.config import SimulationSettings
 
 
 class Direct(SensorKind):

@@ -8,16 +8,16 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from drivers.errors import DriverConfigError
-from service.config.schema import SensorFail, SensorTable
-from service.devices.defaults import MAX_ENCODER_TIME_SCALE, SIM_ENCODER_TIME_SCALE
 from service.errors import ConfigError
+from service.settings.defaults import MAX_ENCODER_TIME_SCALE, SIM_ENCODER_TIME_SCALE
+from service.settings.schema import SensorFail, SensorTable
 
 from .port import SensorKind
 
 if TYPE_CHECKING:  # pragma: no cover
     from drivers.clock import Clock
     from drivers.simrig import SimRig
-    from service.config.appliance import Config, SimulationSettings
+    from service.settings.config import Config, SimulationSettings
 
 log = logging.getLogger("moi.hardware")
 

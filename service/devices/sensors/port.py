@@ -2,24 +2,24 @@
 
 A sensor kind (the Modbus encoder, the camera, the in-process simulated sensor) is one class with ``NAME`` (its
 name in ``[hardware] sensor`` / ``[simulation] sensor``) and the class methods below: the driver built from its
-settings, its settings table ``[hardware.<name>]`` (``service.config.schema.SensorTable``: its keys, their docs and
-defaults, the parse of the table), its simulated twin on the simulated rig, the health lines of `moi check` and,
-for a camera, the camera file its frames are read with, where that file sits, how the file read again takes effect
-and a frame now. ``service.devices.sensors.registry`` lists them: adding one is one module and one line there. The
-configuration, the device builder, `moi check` and the web page hold a sensor kind and never name one.
+settings, its settings table ``[hardware.<name>]`` (``service.settings.schema.SensorTable``: its keys, their docs
+and defaults, the parse of the table), its simulated twin on the simulated rig, the health lines of `moi check`
+and, for a camera, the camera file its frames are read with, where that file sits, how the file read again takes
+effect and a frame now. ``service.settings.sensor_registry`` lists them: adding one is one module and one line
+there. The configuration, the device builder, `moi check` and the web page hold a sensor kind and never name one.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Callable, ClassVar
 
-from service.config.schema import SensorFail, SensorTable
+from service.settings.schema import SensorFail, SensorTable
 
 if TYPE_CHECKING:  # pragma: no cover
     from drivers.clock import Clock
     from drivers.sensor import AngleSensor
     from drivers.simrig import SimRig
-    from service.config.appliance import Config, SimulationSettings
+    from service.settings.config import Config, SimulationSettings
 
 
 class SensorKind:

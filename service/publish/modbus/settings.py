@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import ipaddress
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable
 
 from drivers.modbus_words import WORD_ORDERS
-from service.config.schema import PublisherTable
 from service.errors import ConfigError
+from service.settings.checks import Check, bindable
+from service.settings.schema import PublisherTable
 
 #: clients on this machine are always allowed (local tools: ``moi modbus-map --read``, the web page)
 _THIS_MACHINE = (ipaddress.ip_network("127.0.0.1/32"), ipaddress.ip_network("::1/128"))
@@ -110,5 +112,25 @@ def _check(mb: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
         raise fail("allow_from", str(exc)) from None
 
 
+def _start_checks(mb: ModbusSettings) -> list[Check]:
+    """The TCP port free and who can reach it; or the RTU serial device present."""
+    if mb.mode == "tcp":
+        checks = [bindable(mb.host, mb.port, "Modbus TCP port")]
+        exposure = network_exposure(mb)
+        if exposure is not None:
+            checks.append(Check("Modbus exposure", True, exposure + ("" if mb.allow_from else
+                                "; name the PLCs in [modbus] allow_from"), warning=not mb.allow_from))
+        return checks
+    if mb.serial_port and "://" not in mb.serial_port:
+        ok = Path(mb.serial_port).exists()
+        return [Check("Modbus RTU port", ok, mb.serial_port + (" present" if ok else " does not exist"))]
+    return []
+
+
+def _descriptors(mb: ModbusSettings) -> dict[str, int]:
+    return {"Modbus": mb.max_connections} if mb.mode == "tcp" else {}
+
+
 #: the configuration's ``[modbus]`` table: on (with its defaults) without the table
-TABLE = PublisherTable(ModbusSettings, KEYS, enabled="serve the registers", on_without_table=True, check=_check)
+TABLE = PublisherTable(ModbusSettings, KEYS, enabled="serve the registers", on_without_table=True, check=_check,
+                       start_checks=_start_checks, descriptors=_descriptors)

@@ -61,7 +61,6 @@ from service.logs import Throttle
 from service.persistence.outbox import OutboxSender
 from service.persistence.store import Store
 from service.publish.callbacks import never_raises
-from service.publish.modbus.registers import FLAG_BITS
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
 
@@ -576,7 +575,7 @@ def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
             ("part_id", "Part ID", "{{ value_json.part_id or '' }}"),
             ("verdict", "Part verdict", "{{ value_json.verdict or ('pending' if value_json.recipe else 'none') }}")):
         entity("sensor", key, name=name, state_topic=topics.last_result, value_template=template)
-    for flag in FLAG_BITS:
+    for flag in F.FLAG_BITS:
         # "problem" only for the warnings (the condition may move J beyond its u); the others are information
         entity("binary_sensor", f"flag_{flag}", flag, name=f"Flag {flag.replace('_', ' ')}",
                device_class="problem" if F.grade(flag) == F.WARNING else None, state_topic=topics.last_result,

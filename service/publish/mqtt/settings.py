@@ -5,8 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from service.config.schema import PublisherTable
 from service.errors import ConfigError
+from service.settings.checks import Check, readable_files
+from service.settings.schema import PublisherTable
 
 
 @dataclass(frozen=True)
@@ -84,6 +85,12 @@ def _check(m: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
         raise fail("prefix", f"expected topic levels without '#' or '+', got {m['prefix']!r}")
 
 
+def _start_checks(m: MqttSettings) -> list[Check]:
+    """The password and TLS files it names, readable."""
+    return readable_files(((m.password_file, "MQTT password_file"), (m.ca_file, "MQTT ca_file"),
+                           (m.cert_file, "MQTT cert_file"), (m.key_file, "MQTT key_file")))
+
+
 #: the configuration's ``[mqtt]`` table: off unless the file has it
 TABLE = PublisherTable(MqttSettings, KEYS, enabled="publish over MQTT (the table's presence enables it)",
-                       check=_check)
+                       check=_check, start_checks=_start_checks)

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable
 
-from service.config.schema import PublisherTable
 from service.errors import ConfigError
 from service.names import name_problem
+from service.settings.checks import Check, bindable, readable_files
+from service.settings.schema import PublisherTable
 
 
 @dataclass(frozen=True)
@@ -82,5 +84,29 @@ def _check(o: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
         raise fail("password_file", "missing: the user needs a password")
 
 
+def _doors(ua: OpcUaSettings) -> list[Check]:
+    """The server's trusted clients (a directory, as the start needs) and who may come in unencrypted or
+    without a user."""
+    checks = []
+    if ua.trusted_clients is not None:
+        ok = Path(ua.trusted_clients).is_dir()
+        checks.append(Check("OPC UA trusted_clients", ok, ua.trusted_clients + ("" if ok else " is not a directory")))
+    if ua.anonymous or ua.allow_unencrypted:
+        doors = [d for d, on in (("clients without a user (anonymous = true)", ua.anonymous),
+                                 ("unencrypted sessions (allow_unencrypted = true)", ua.allow_unencrypted)) if on]
+        checks.append(Check("OPC UA exposure", True, f"{' and '.join(doors)} on {ua.host}:{ua.port}", warning=True))
+    return checks
+
+
+def _start_checks(ua: OpcUaSettings) -> list[Check]:
+    """Its port free, its files readable, its doors."""
+    # a certificate or key not there yet is made at the first start: checked only when it exists
+    made = tuple((p, w) for p, w in ((ua.certificate, "OPC UA certificate"), (ua.private_key, "OPC UA private_key"))
+                 if p and Path(p).exists())
+    return [bindable(ua.host, ua.port, "OPC UA port"),
+            *readable_files(((ua.password_file, "OPC UA password_file"), *made)), *_doors(ua)]
+
+
 #: the configuration's ``[opcua]`` table: off unless the file has it
-TABLE = PublisherTable(OpcUaSettings, KEYS, enabled="serve OPC UA (the table's presence enables it)", check=_check)
+TABLE = PublisherTable(OpcUaSettings, KEYS, enabled="serve OPC UA (the table's presence enables it)", check=_check,
+                       start_checks=_start_checks, descriptors=lambda ua: {"OPC UA": ua.max_connections})

@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from service.config.schema import PublisherTable
 from service.errors import ConfigError
+from service.settings.schema import PublisherTable
 
 
 @dataclass(frozen=True)

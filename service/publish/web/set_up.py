@@ -16,8 +16,8 @@ from aiohttp import web
 
 from measurement.errors import VisionError
 from service import __version__
-from service.devices.sensors import registry as sensors
 from service.errors import InputFileError
+from service.settings import sensor_registry as sensors
 
 from . import quality as Q
 from .pages import Family, Refused, read_form
@@ -157,7 +157,7 @@ class SetUpPages(Family):
         as a camera file is, written to the camera file in one step, used from the next capture, and one line
         appended to the camera audit log. Refused while a measurement runs; a wrong value is said on the page
         with what was typed."""
-        from service.config.camera import CAMERA_AUDIT_FILE, audit_camera, roi_from_typed, set_roi
+        from service.sources.camera import CAMERA_AUDIT_FILE, audit_camera, roi_from_typed, set_roi
 
         form = await read_form(request)
         source = await self.pages.authorise(request, form, "camera")

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable
 
 from measurement.units import ASCII_NAMES, INERTIA_UNITS, inertia_unit
-from service.config.schema import PublisherTable
-from service.errors import ConfigError
+from service.errors import ConfigError, StartupError
 from service.publish.replies import CONTACT
+from service.settings.checks import Check, bindable
+from service.settings.schema import PublisherTable
+
+from .auth import read_token, read_users
 
 #: the name of the plot kept with each measurement in the store
 PLOT_NAME = "plot.png"
@@ -90,6 +94,33 @@ def _check(w: dict[str, Any], fail: Callable[[str, str], ConfigError]) -> None:
         raise fail("time_format", f"expected strftime codes such as \"%d.%m.%Y %H:%M\", got {w['time_format']!r}")
 
 
+def _secrets(web: WebSettings) -> list[Check]:
+    """The token file and the users file, read as the web page reads them at start (a token file not there yet
+    is made at the first start unless it is named)."""
+    checks = []
+    if web.token_file is not None:
+        try:
+            read_token(web.token_file, create=False)
+            mode = Path(web.token_file).stat().st_mode & 0o077
+            checks.append(Check("web token_file", True, web.token_file + (
+                f": readable by other users (mode {mode:o}); chmod 600 it" if mode else ""), warning=bool(mode)))
+        except StartupError as exc:
+            checks.append(Check("web token_file", False, str(exc)))
+    if web.users_file is not None:
+        try:
+            checks.append(Check("web users_file", True, f"{web.users_file}: {len(read_users(web.users_file))} user(s)"))
+        except StartupError as exc:
+            checks.append(Check("web users_file", False, str(exc)))
+    return checks
+
+
+def _descriptors(web: WebSettings) -> dict[str, int]:
+    # aiohttp accepts up to a backlog's worth beyond the cap before it closes any
+    return {"web": 2 * web.max_connections + web.max_streams}
+
+
 #: the configuration's ``[web]`` table: on (with its defaults) without the table
 TABLE = PublisherTable(WebSettings, KEYS, enabled="serve the appliance's web page", on_without_table=True,
-                       check=_check)
+                       check=_check, start_checks=lambda web: [bindable(web.host, web.port, "web page port"),
+                                                               *_secrets(web)],
+                       descriptors=_descriptors, contact=lambda web: web.contact)

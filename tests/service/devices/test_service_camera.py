@@ -25,6 +25,7 @@ from pymodbus.client import ModbusTcpClient
 
 from drivers.camera_sensor import CameraAngleSensor
 from drivers.errors import SensorFault
+from measurement import flags as F
 from service.cli import main
 from service.config.appliance import load_config, parse_config
 from service.devices.hardware import build_devices
@@ -78,8 +79,8 @@ def test_the_daemon_measures_J_with_the_simulated_camera_triggered_by_the_plc(tm
     assert "camera_pose" in msg["flags"]
     # the PLC reads the same result, the camera's flag on its own bit
     assert registers["uuid"] == msg["uuid"] and registers["J"] == float(np.float32(msg["J"]))
-    assert registers["flags"] | registers["flags_high"] << 16 == msg["flag_bits"] == R.flag_bits(msg["flags"])
-    assert registers["flags"] & (1 << R.FLAG_BITS["camera_pose"])
+    assert registers["flags"] | registers["flags_high"] << 16 == msg["flag_bits"] == F.flag_bits(msg["flags"])
+    assert registers["flags"] & (1 << F.FLAG_BITS["camera_pose"])
     # the raw trace is the camera's (yaw-corrected), the configuration used is recorded with it
     with_trace = app.app.store.get(stored.uuid, trace=True)
     assert with_trace.trace_meta["sensor"] == "camera" and with_trace.trace_meta["camera"]["yaw_deg"] == cam["yaw_deg"]
@@ -98,11 +99,11 @@ def test_the_encoder_wrapper_adds_no_finish_hook_on_the_simulated_rig(tmp_path):
 
 
 def test_corrupt_frame_has_its_own_flag_bit():
-    bit = R.FLAG_BITS["corrupt_frame"]
-    assert bit != R.FLAG_OTHER_BIT and R.flag_bits(["corrupt_frame"]) == 1 << bit
-    assert R.flags_from_bits(R.flag_bits(["corrupt_frame", "marker_lost"])) == ["marker_lost", "corrupt_frame"]
+    bit = F.FLAG_BITS["corrupt_frame"]
+    assert bit != F.FLAG_OTHER_BIT and F.flag_bits(["corrupt_frame"]) == 1 << bit
+    assert F.flags_from_bits(F.flag_bits(["corrupt_frame", "marker_lost"])) == ["marker_lost", "corrupt_frame"]
     for flag in ("marker_lost", "corrupt_frame", "dropped_frames", "camera_pose"):  # every camera flag is named
-        assert flag in R.FLAG_BITS
+        assert flag in F.FLAG_BITS
 
 
 # --- the hardware path ------------------------------------------------------------------------------------
@@ -278,7 +279,7 @@ def test_the_camera_example_loads_for_the_device_and_for_the_simulation():
     assert sim.simulated and sim.simulation.sensor == "camera" and sim.simulation.camera_config == cam.config
     # without a camera file the simulation films with the demo camera of `moi measure --sensor camera`
     demo = parse_config({"simulation": {"sensor": "camera"}})
-    from service.devices.defaults import DEMO_CAMERA as DEFAULT_CAMERA
+    from service.settings.defaults import DEMO_CAMERA as DEFAULT_CAMERA
     assert demo.simulation.camera is None and demo.simulation.camera_config.to_dict()["camera"]["fx"] == \
         DEFAULT_CAMERA["camera"]["fx"]
 
@@ -286,8 +287,8 @@ def test_the_camera_example_loads_for_the_device_and_for_the_simulation():
 def test_the_camera_file_is_where_the_configuration_names_it_and_a_file_read_again_is_used_there(tmp_path):
     # the set-up page writes a region of interest to the file ``camera_file`` names; ``use_camera`` puts the file
     # read again in the running configuration, for the device and for the simulation alike
-    from service.config.camera import set_roi
     from service.devices.sensors.camera import Camera
+    from service.sources.camera import set_roi
 
     cfg = load_config(write_hardware(tmp_path, '[hardware.camera]\ndevice = "0"\nfile = "cam.toml"\n'))
     path = Camera.camera_file(cfg)

@@ -11,14 +11,15 @@ import pytest
 from drivers.sensor import SimulatedAngleSensor
 from firmware_host import SequencerConfig
 from measurement.errors import InvalidInput
-from service.config.appliance import SimulationSettings, load_config, parse_config, reference_markdown
+from service.config.appliance import load_config, parse_config, reference_markdown
 from service.config.check import check_config
-from service.config.schema import SensorTable
 from service.devices.hardware import build_devices, build_simulated
-from service.devices.sensors import registry
 from service.devices.sensors.port import SensorKind
-from service.devices.sensors.registry import SensorEntry
 from service.errors import ConfigError
+from service.settings import sensor_registry as registry
+from service.settings.config import SimulationSettings
+from service.settings.schema import SensorTable
+from service.settings.sensor_registry import SensorEntry
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,7 +51,7 @@ class DummySensor(SensorKind):
 
     @classmethod
     def build(cls, config, clock):
-        cls.built.append(f"device on {config.hardware.dummy.bus}")
+        cls.built.append(f"device on {config.hardware.sensors['dummy'].bus}")
         return SimulatedAngleSensor(lambda t: 0.1, clock, rate=100.0, source="inclinometer")
 
     @classmethod
@@ -62,7 +63,7 @@ class DummySensor(SensorKind):
 
     @classmethod
     def health(cls, config):
-        return [("inclinometer bus", False, f"{config.hardware.dummy.bus} does not exist")]
+        return [("inclinometer bus", False, f"{config.hardware.sensors['dummy'].bus} does not exist")]
 
 
 SENSOR = DummySensor
@@ -82,6 +83,16 @@ def test_the_registered_sensors_are_modules_of_the_port():
     assert registry.names(hardware=True) == ("encoder", "camera")
     with pytest.raises(ValueError, match="no angle sensor 'imu'; expected one of encoder, direct, camera"):
         registry.sensor("imu")
+
+
+def test_every_hardware_sensor_of_the_registry_is_named_by_the_hardware_settings():
+    """``HardwareSettings.<name>`` is written out (readers and mypy see it): one per hardware sensor."""
+    from service.settings.config import HardwareSettings
+
+    for name in registry.names(hardware=True):
+        assert isinstance(getattr(HardwareSettings, name, None), property), f"HardwareSettings.{name}"
+    hw = HardwareSettings(solenoid={"pin": 17}, sensors={"encoder": {"port": "/dev/ttyUSB0"}})
+    assert hw.encoder == {"port": "/dev/ttyUSB0"} and hw.camera is None
 
 
 def test_a_dummy_sensor_registered_in_one_place_is_the_simulated_rigs_sensor(registered):
@@ -110,7 +121,7 @@ def _dummy_config(tmp_path: Path, dummy: str | None = 'bus = "/dev/i2c-3"\n') ->
 def test_a_dummy_sensor_registered_in_one_place_is_the_devices_sensor_and_in_moi_check(tmp_path: Path, registered):
     config = load_config(_dummy_config(tmp_path))
     assert config.hardware is not None and config.hardware.sensor == "dummy"
-    assert config.hardware.dummy == DummySettings(bus="/dev/i2c-3")
+    assert config.hardware.sensors["dummy"] == DummySettings(bus="/dev/i2c-3")
     assert config.hardware.encoder is None, "another sensor's table is not the chosen sensor's settings"
     assert config.to_dict()["hardware"]["dummy"] == {"bus": "/dev/i2c-3", "address": 0x68}
     devices = build_devices(config)

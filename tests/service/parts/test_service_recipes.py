@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from pymodbus.client import ModbusTcpClient
 
+from measurement import flags as F
 from measurement.verdict import Specification, decide
 from service.errors import ConfigError
 from service.parts.recipes import RecipeBook, RecipeError, load_recipe
@@ -194,7 +195,7 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
     assert part["U"] == pytest.approx(2 * math.hypot(p["J_std_calibration"], max(part["u_fit"], 0)), rel=1e-6)
     # the expired calibration: flagged in the payload and the Modbus flags; this recipe ignores it
     assert "calibration_due" in p["flags"] and p["calibration"]["due"] is True
-    assert p["flag_bits"] & (1 << R.FLAG_BITS["calibration_due"])
+    assert p["flag_bits"] & (1 << F.FLAG_BITS["calibration_due"])
     # ... the next one, whose quality rules make a due calibration INVALID, is refused at the trigger: measuring
     # again could not change its verdict (the PLC reads why: not ready, reason calibration_due)
     assert refused[10]["command_reason"] == REASONS["calibration_due"].code

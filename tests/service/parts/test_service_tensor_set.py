@@ -122,7 +122,7 @@ def test_a_complete_set_publishes_its_tensor_on_modbus_and_mqtt(tmp_path, broker
         assert block[comp] == pytest.approx(t["components"][comp], rel=1e-6)
         assert block[f"{comp}_U"] == pytest.approx(t["tensor_U"][comp], rel=1e-6)
     assert block["I3"] == pytest.approx(t["principal_moments"][2], rel=1e-6)
-    assert R.flags_from_bits(block["tensor_flags"] << 16) == [f for f in t["flags"] if f in R.FLAG_BITS]
+    assert F.flags_from_bits(block["tensor_flags"] << 16) == [f for f in t["flags"] if f in F.FLAG_BITS]
 
 
 def test_abort_keeps_the_measured_releases(tmp_path, appliance_factory):
@@ -166,7 +166,7 @@ def test_a_tensor_recipe_is_checked(tmp_path):
     bad.write_text(recipe_text(1).replace("releases = 1", "releases = 1\nnominal = 0.01"))
     with pytest.raises(RecipeError, match="do not apply"):
         load_recipe(bad)
-    assert F.ORIENTATION_EXCLUDED in R.FLAG_BITS
+    assert F.ORIENTATION_EXCLUDED in F.FLAG_BITS
 
 
 def test_the_web_page_shows_the_orientation_to_mount_and_takes_the_actions(tmp_path, appliance_factory):

@@ -12,8 +12,9 @@ import pytest
 
 from measurement import Pendulum, Rig, identify, simulate_trace
 from service.cli import main
+from service.persistence.canonical import dumps
 from service.persistence.store import Store
-from service.publish.payload import dumps, result_payload
+from service.publish.payload import result_payload
 
 
 @pytest.fixture(scope="module")

@@ -9,11 +9,11 @@ from typing import Any
 import pytest
 
 from service.config.appliance import parse_config, reference_markdown
-from service.config.schema import PublisherTable
 from service.errors import ConfigError
 from service.publish import registry
 from service.publish.port import ApplianceView, Publisher
 from service.publish.registry import PublisherEntry
+from service.settings.schema import PublisherTable
 from tests.service.conftest import appliance_doc
 
 
@@ -84,11 +84,11 @@ def registered(monkeypatch):
 
 
 def test_a_registered_publisher_has_its_configuration_table(registered):
-    assert parse_config({}).dummy is None, "off without its table"
+    assert parse_config({}).publishers["dummy"] is None, "off without its table"
     config = parse_config({"dummy": {"topic": "rotors"}})
-    assert config.dummy == DummySettings(topic="rotors", window=4)
+    assert config.publishers["dummy"] == DummySettings(topic="rotors", window=4)
     assert config.to_dict()["dummy"] == {"topic": "rotors", "window": 4}
-    assert parse_config({"dummy": {"enabled": False}}).dummy is None
+    assert parse_config({"dummy": {"enabled": False}}).publishers["dummy"] is None
     with pytest.raises(ConfigError, match=r"\[dummy\] window: expected an integer >= 1, got 0"):
         parse_config({"dummy": {"window": 0}})
     with pytest.raises(ConfigError, match=r"\[dummy\] topic: expected a topic with lower-case letters"):
@@ -96,6 +96,33 @@ def test_a_registered_publisher_has_its_configuration_table(registered):
     with pytest.raises(ConfigError, match=r"unknown key 'topc' \(did you mean 'topic'\?\)"):
         parse_config({"dummy": {"topc": "x"}})
     assert "**[dummy]**" in reference_markdown() and "| `topic` | str | `\"parts\"` | where the parts go |" in reference_markdown()
+
+
+def test_every_registered_publisher_is_named_by_the_configuration_and_the_appliance():
+    """``Config.<name>`` and ``Appliance.<name>`` are written out (readers and mypy see them): one per entry."""
+    from service.daemon import Appliance
+    from service.settings.config import Config
+
+    for entry in registry.PUBLISHERS:
+        assert isinstance(getattr(Config, entry.name, None), property), f"Config.{entry.name}"
+        assert isinstance(getattr(Appliance, entry.name, None), property), f"Appliance.{entry.name}"
+    config = parse_config({"mqtt": {"host": "broker.local"}})
+    assert config.mqtt is config.publishers["mqtt"] and config.mqtt.host == "broker.local"
+    assert config.opcua is None and config.modbus is not None
+
+
+def test_the_publishers_bring_their_own_start_checks_descriptors_and_contact():
+    from service.config.appliance import whom_to_call
+    from service.config.check import check_config, descriptor_budget
+
+    config = parse_config({"modbus": {"port": 0, "max_connections": 7}, "web": {"port": 0, "contact": "Ines, 4711"},
+                           "mqtt": {"host": "broker.local", "tls": True, "ca_file": "/nonexistent/ca.pem"}})
+    found = {c.what: c for c in check_config(config)}
+    assert found["Modbus TCP port"].ok and found["web page port"].ok
+    assert not found["MQTT ca_file"].ok and "does not exist" in found["MQTT ca_file"].detail
+    assert "Modbus 7, web " in descriptor_budget(config, limit=1024).detail
+    assert whom_to_call(config) == "Ines, 4711"
+    assert whom_to_call(parse_config({"web": {"enabled": False}})) is None
 
 
 def test_an_unregistered_table_is_unknown():
@@ -107,7 +134,7 @@ def test_a_dummy_publisher_registered_in_one_place_gets_states_and_results(tmp_p
     DummyPublisher.made.clear()
     app = appliance_factory(appliance_doc(tmp_path / "state", dummy={"topic": "rotors"}))
     [dummy] = DummyPublisher.made
-    assert dummy.running and app.app.dummy is dummy
+    assert dummy.running and app.app.publisher("dummy") is dummy
     assert app.app.publisher_health()["dummy"] == {"topic": "rotors"}
     assert dummy.appliance.config.device_id == "test-rig"
     app.press()

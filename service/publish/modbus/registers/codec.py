@@ -18,14 +18,13 @@ from dataclasses import dataclass
 from typing import Any, Iterable, Mapping, Sequence
 
 from drivers.modbus_words import check_word_order, from_registers, to_registers
+from measurement.flags import flag_bits
 from service.core.live import LiveStatus
 
 from .map import (
     EFFECT_BITS,
     EFFECT_OTHER_BIT,
     ERROR_CODE_BY_NAME,
-    FLAG_BITS,
-    FLAG_OTHER_BIT,
     HANDSHAKE_END,
     HANDSHAKE_START,
     LIVE_START,
@@ -43,22 +42,6 @@ from .map import (
     TENSOR_START,
     VERDICT_CODES,
 )
-
-
-def flag_bits(flags: Iterable[str]) -> int:
-    """Bit field of quality flags; unknown flags set bit FLAG_OTHER_BIT."""
-    bits = 0
-    for f in flags:
-        bits |= 1 << FLAG_BITS.get(f, FLAG_OTHER_BIT)
-    return bits
-
-
-def flags_from_bits(bits: int) -> list[str]:
-    """Flag names of a bit field (``flags`` | ``flags_high`` << 16); "other" for bit FLAG_OTHER_BIT."""
-    names = [name for name, b in FLAG_BITS.items() if bits & (1 << b)]
-    if bits & (1 << FLAG_OTHER_BIT):
-        names.append("other")
-    return names
 
 
 def effect_bits(effects: Iterable[str]) -> int:

@@ -12,8 +12,6 @@ from .map import (
     COMMAND_STATUS,
     COMMAND_TABLE,
     ERROR_CODES,
-    FLAG_BITS,
-    FLAG_OTHER_BIT,
     HANDSHAKE_END,
     HANDSHAKE_START,
     HEARTBEAT_PERIOD,
@@ -260,9 +258,9 @@ def markdown() -> str:
     L.append("")
     L.append("| bit | flag | grade | meaning |")
     L.append("|---:|---|---|---|")
-    for name, b in FLAG_BITS.items():
+    for name, b in F.FLAG_BITS.items():
         L.append(f"| {b} | `{name}` | {F.grade(name)} | {F.describe(name)} |")
-    L.append(f"| {FLAG_OTHER_BIT} | any other flag | warning | see the MQTT result's `flags` list for its name |")
+    L.append(f"| {F.FLAG_OTHER_BIT} | any other flag | warning | see the MQTT result's `flags` list for its name |")
     L.append("")
     L += _handshake_markdown()
     L.append("## Consistent-snapshot protocol")

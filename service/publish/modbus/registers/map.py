@@ -26,36 +26,6 @@ MAP_VERSION = 13
 STATE_CODES: dict[str, int] = {name: s.code for name, s in STATES.items()}
 STATE_OTHER = 255
 
-#: quality flag (``measurement.flags.FLAGS``, which says what each means) → bit in register `flags`.
-#: A flag not in this table sets FLAG_OTHER_BIT, so a new flag is never silently lost.
-FLAG_BITS: dict[str, int] = {
-    F.UNMODELED_RESIDUAL: 0,
-    F.OUTLIERS_REMOVED: 1,
-    F.PARAMETER_AT_BOUND: 2,
-    F.FIT_NOT_CONVERGED: 3,
-    F.CORRELATED_RESIDUAL: 4,
-    F.ENCODER_ERRORS: 5,
-    F.CAMERA_POSE: 6,
-    F.MARKER_LOST: 7,
-    F.DROPPED_FRAMES: 8,
-    F.CORRUPT_FRAME: 9,   # map version 2; in version 1 it set bit 15 (other)
-    F.OUTLIERS_DOWNWEIGHTED: 10,  # map version 3
-    F.WINDOW_CUT_AT_GAP: 11,
-    F.ANGLE_UNWRAPPED: 12,
-    F.CALIBRATION_DUE: 13,  # map version 4: the rig's calibration is past its validity period
-    F.NEGATIVE_INERTIA: 14,  # map version 4
-    F.SENSOR_SCALE_FITTED: 16,  # map version 5: register flags_high, bit 0
-    F.CAMERA_PERSPECTIVE: 17,  # map version 6: register flags_high, bit 1
-    F.TENSOR_INCONSISTENT: 18,  # map version 7: a tensor set's flags (register flags_high / tensor_flags)
-    F.TENSOR_UNPHYSICAL: 19,
-    F.ORIENTATION_EXCLUDED: 20,
-    F.HALVES_DISAGREE: 21,  # map version 8: the model's form (register flags_high, bits 5-7)
-    F.MODEL_AMBIGUOUS: 22,
-    F.RELEASES_DISAGREE: 23,
-    F.CAPTURE_SLOWED: 24,  # map version 12: register flags_high, bit 8
-}
-FLAG_OTHER_BIT = 15
-
 #: effect of the final model → bit in register `effects`
 EFFECT_BITS: dict[str, int] = {
     "viscous": 0,
@@ -267,8 +237,8 @@ def _table() -> tuple[Register, ...]:
     add("snapshot", 29, "noise_floor", "float32", "rad", "noise_floor", "angle noise floor estimated from the data")
     add("snapshot", 31, "J_object", "float32", "kg·m²", "J_object", "J − tare inertia (NaN without a tare)")
     add("snapshot", 33, "flags", "bits16", "bits", "flags",
-        "quality flags: " + ", ".join(f"bit {b} {n}" for n, b in FLAG_BITS.items() if b < 16)
-        + f", bit {FLAG_OTHER_BIT} other")
+        "quality flags: " + ", ".join(f"bit {b} {n}" for n, b in F.FLAG_BITS.items() if b < 16)
+        + f", bit {F.FLAG_OTHER_BIT} other")
     add("snapshot", 34, "effects", "bits16", "bits", "effects",
         "effects of the final model: " + ", ".join(f"bit {b} {n}" for n, b in EFFECT_BITS.items()) + f", bit {EFFECT_OTHER_BIT} other")
     add("snapshot", 35, "uuid", "uuid", "", "uuid", "result UUID (the MQTT `uuid`), 16 bytes big-endian, 2 bytes per register")
@@ -284,7 +254,7 @@ def _table() -> tuple[Register, ...]:
     add("snapshot", 50, "part_U", "float32", "kg·m²", "part_U", "expanded uncertainty U of part_value (NaN until complete)")
     add("snapshot", 52, "part_id", "ascii20", "", "part_id", "the part ID the release was measured for (echo of registers 100–109)")
     add("snapshot", 62, "flags_high", "bits16", "bits", "flags_high",
-        "more quality flags: " + ", ".join(f"bit {b - 16} {n}" for n, b in FLAG_BITS.items() if b >= 16))
+        "more quality flags: " + ", ".join(f"bit {b - 16} {n}" for n, b in F.FLAG_BITS.items() if b >= 16))
     add("snapshot", 63, "J_U", "float32", "kg·m²", "J_U",
         "expanded uncertainty U of J from its uncertainty budget (coverage factor in the result, k = 2 unless "
         "few degrees of freedom call for more; NaN when J is unknown)")
@@ -331,7 +301,7 @@ def _table() -> tuple[Register, ...]:
             f"expanded uncertainty U of principal moment {i + 1} (k = 2)")
     add("tensor", a + 37, "tensor_flags", "bits16", "bits", "tensor_flags",
         "the tensor's flags, the bits of `flags_high`: " + ", ".join(
-            f"bit {b - 16} {n}" for n, b in FLAG_BITS.items() if n in TENSOR_FLAGS))
+            f"bit {b - 16} {n}" for n, b in F.FLAG_BITS.items() if n in TENSOR_FLAGS))
     add("tensor", a + 38, "tensor_seq_end", "uint16", "count", "tensor_seq", "copy of `tensor_seq`, the block's last register")
     return tuple(rows)
 

@@ -10,6 +10,7 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 from pymodbus.framer import FramerType
 
+from measurement import flags as F
 from service.core.live import LiveStatus
 from service.publish.modbus import registers as R
 from service.publish.modbus.server import ModbusServer, ModbusSettings
@@ -26,7 +27,7 @@ def synthetic(seq: int) -> dict:
         "J": 0.01 + f * 1e-6, "J_std": f * 1e-9, "omega_n": 5.0 + f * 1e-3, "omega_n_std": f * 1e-7,
         "damping_ratio": f * 1e-5, "damping_ratio_std": f * 1e-8, "residual_rms_after": f * 1e-6,
         "residual_rms_before": f * 2e-6, "noise_floor": f * 3e-6, "J_object": f,
-        "flags": [name for name, bit in R.FLAG_BITS.items() if seq >> bit & 1], "effects": ["viscous"],
+        "flags": [name for name, bit in F.FLAG_BITS.items() if seq >> bit & 1], "effects": ["viscous"],
     }
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from measurement import flags as F
 from service.commands import modbus_map
 from service.publish.modbus import registers as R
 
@@ -42,7 +43,7 @@ def test_snapshot_round_trip_is_exact_to_float32(order):
     assert d["seq"] == d["seq_end"] == 5
     assert d["timestamp"] == 1_700_000_000
     assert d["uuid"] == p["uuid"]
-    assert R.flags_from_bits(d["flags"]) == ["outliers_removed", "other"]
+    assert F.flags_from_bits(d["flags"]) == ["outliers_removed", "other"]
     assert d["effects"] == 0b11
 
 
@@ -63,11 +64,11 @@ def test_sequence_number_wraps_past_zero():
 
 
 def test_every_known_flag_has_its_own_bit():
-    assert len(set(R.FLAG_BITS.values())) == len(R.FLAG_BITS)
-    assert R.FLAG_OTHER_BIT not in R.FLAG_BITS.values()
-    for name, bit in R.FLAG_BITS.items():
-        assert R.flag_bits([name]) == 1 << bit
-    assert R.flag_bits(["not_a_flag"]) == 1 << R.FLAG_OTHER_BIT
+    assert len(set(F.FLAG_BITS.values())) == len(F.FLAG_BITS)
+    assert F.FLAG_OTHER_BIT not in F.FLAG_BITS.values()
+    for name, bit in F.FLAG_BITS.items():
+        assert F.flag_bits([name]) == 1 << bit
+    assert F.flag_bits(["not_a_flag"]) == 1 << F.FLAG_OTHER_BIT
 
 
 def test_the_whole_image_fits_one_request_and_registers_do_not_overlap():

@@ -3,6 +3,9 @@
 Each entry names the sensor's configuration name and the module of its ``SENSOR`` class (the port,
 ``service.devices.sensors.port``), imported when the configuration reads the sensors' settings tables
 (``SensorKind.TABLE``, no driver imported there) and when a sensor is built, checked or shown.
+
+It stands on the configuration's floor because the configuration's types read it (a simulated sensor's
+time-scale limit, the hardware sensors' names): it names the sensor modules and imports one only when asked.
 """
 
 from __future__ import annotations

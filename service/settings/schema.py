@@ -3,6 +3,7 @@ checker that validates a TOML table against it with one-line errors.
 
 Shared by the appliance configuration (``service.config.appliance``) and the recipe files
 (``service.parts.recipes``); the tables a publisher (``PublisherTable``) and a sensor (``SensorTable``) declare.
+It imports no settings module: every one imports it.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any, Callable, Mapping, Union
 
 from measurement.effects import EFFECTS
 from service.errors import ConfigError
+from service.settings.checks import Check
 
 #: the default of a key that must be given
 REQUIRED = object()
@@ -111,7 +113,8 @@ TableCheck = Callable[[dict[str, Any], Callable[[str, str], ConfigError]], None]
 class PublisherTable:
     """A publisher's configuration table, declared in its settings module (``TABLE``) and found through the
     publishers' registry (``service.publish.registry``): the settings dataclass, each key's doc and limits, the
-    doc of its ``enabled`` key, whether it is on without the table, and its own checks.
+    doc of its ``enabled`` key, whether it is on without the table, its own checks (of the values as the file is
+    read, and of the environment before the daemon starts), the descriptors its clients hold and whom to call.
 
     Keys of kind "path" are resolved relative to the configuration file before ``check`` sees them.
     """
@@ -123,6 +126,13 @@ class PublisherTable:
     #: on with its defaults when the file has no such table (else off unless the table is given)
     on_without_table: bool = False
     check: TableCheck | None = None
+    #: what `moi run --check` finds of its settings before the daemon starts (ports, files, exposure)
+    start_checks: Callable[[Any], list[Check]] | None = None
+    #: the descriptors its clients may hold at once, by the name `moi run --check` gives it (``{"Modbus": 16}``;
+    #: none: it serves no connections)
+    descriptors: Callable[[Any], dict[str, int]] | None = None
+    #: whom the appliance's doors say to call (a calibration that refuses Measure), None: not said here
+    contact: Callable[[Any], str | None] | None = None
 
     def schema(self) -> dict[str, Key]:
         return schema(self.settings, self.keys, extra={"enabled": Key("bool", True, self.enabled)})
@@ -149,7 +159,7 @@ class SensorTable:
     doc: str
     #: what the table must give, said when ``sensor = "<name>"`` has no table ("port, device id, ...")
     needs: str
-    #: the settings dataclass and each key's doc and limits, as a publisher's table (``service.config.schema.schema``;
+    #: the settings dataclass and each key's doc and limits, as a publisher's table (``service.settings.schema.schema``;
     #: keys of kind "path" are resolved relative to the configuration file before ``parse`` sees them);
     #: None: the keys are the driver's own, handed to ``parse`` as written for the driver to check
     settings: type | None = None
@@ -167,6 +177,42 @@ class SensorTable:
             return self.parse(values, fail)
         assert self.settings is not None, "a table without a settings dataclass parses its own values"
         return self.settings(**values)
+
+
+#: what a kind's reader returns for a value of the wrong type
+_BAD = object()
+
+
+def _number(v: Any) -> bool:
+    return not isinstance(v, bool) and isinstance(v, (int, float))
+
+
+def _video_device(v: Any) -> Any:
+    if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0) or v == "":
+        return _BAD
+    return int(v) if isinstance(v, str) and v.isdigit() else v  # "0": the index, not a file named 0
+
+
+#: each kind's reader (but "effects", which says what is wrong in it): the value as the settings hold it, or _BAD
+_KINDS: dict[str, Callable[[Any], Any]] = {
+    "str": lambda v: v if isinstance(v, str) else _BAD,
+    "path": lambda v: v if isinstance(v, str) and v else _BAD,
+    # checked with the rest of its table by the driver's settings (drivers.settings.check_pin)
+    "pinlike": lambda v: v,
+    "videodevice": _video_device,
+    "bool": lambda v: v if isinstance(v, bool) else _BAD,
+    "int": lambda v: v if isinstance(v, int) and not isinstance(v, bool) else _BAD,
+    "float": lambda v: float(v) if _number(v) and math.isfinite(v) else _BAD,
+    "strlist": lambda v: tuple(v) if isinstance(v, list) and all(isinstance(x, str) for x in v) else _BAD,
+    "table": lambda v: dict(v) if isinstance(v, Mapping) else _BAD,
+}
+
+
+def _within(v: float, spec: Key) -> bool:
+    """Whether the number ``v`` lies within the key's limits."""
+    if spec.min is not None and (v < spec.min or (spec.min_open and v == spec.min)):
+        return False
+    return spec.max is None or v <= spec.max
 
 
 class Checker:
@@ -199,46 +245,18 @@ class Checker:
             out[key] = self.value(name, key, doc[key], spec)
         return out
 
-    def value(self, table: str, key: str, v: Any, spec: Key) -> Any:  # noqa: C901
+    def value(self, table: str, key: str, v: Any, spec: Key) -> Any:
         bad = self.fail(table, key, f"expected {spec.expected()}, got {v!r}")
-        k = spec.kind
-        if k in ("str", "path"):
-            if not isinstance(v, str) or (k == "path" and not v):
-                raise bad
-        elif k == "pinlike":
-            pass  # checked with the rest of its table by the driver's settings (drivers.settings.check_pin)
-        elif k == "videodevice":
-            if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0) or v == "":
-                raise bad
-            if isinstance(v, str) and v.isdigit():
-                v = int(v)  # "0": the index, not a file named 0
-        elif k == "bool":
-            if not isinstance(v, bool):
-                raise bad
-        elif k == "int":
-            if isinstance(v, bool) or not isinstance(v, int):
-                raise bad
-        elif k == "float":
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise bad
-            v = float(v)
-        elif k == "strlist":
-            if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
-                raise bad
-            v = tuple(v)
-        elif k == "table":
-            if not isinstance(v, Mapping):
-                raise bad
-            v = dict(v)
-        elif k == "effects":
+        if spec.kind == "effects":
             v = self.effects(table, key, v)
+        else:
+            v = _KINDS[spec.kind](v)
+            if v is _BAD:
+                raise bad
         if spec.choices is not None and v not in spec.choices:
             raise bad
-        if k in ("int", "float"):
-            if spec.min is not None and (v < spec.min or (spec.min_open and v == spec.min)):
-                raise bad
-            if spec.max is not None and v > spec.max:
-                raise bad
+        if spec.kind in ("int", "float") and not _within(v, spec):
+            raise bad
         return v
 
     def effects(self, table: str, key: str, v: Any) -> dict[str, dict[str, float]]:
