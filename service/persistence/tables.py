@@ -22,7 +22,6 @@ SCHEMA_VERSION = 3  # 2: part, recipe and verdict columns (added in place to a v
                     # 3: the outbox row names its consumer (the publisher delivering it; rows of an older store: mqtt)
 
 
-
 @dataclass(frozen=True)
 class Column:
     """One column of ``measurements``: its name (the ``StoredMeasurement`` field it reads back as), its SQL type
