@@ -92,7 +92,7 @@ def main() -> None:
 
     from service.config.appliance import parse_config
     from service.daemon import Appliance
-    from service.publish.opcua.server import NS_MACHINERY, NS_MOI, NS_RESULT
+    from service.publish.opcua.model import NS_MACHINERY, NS_MOI, NS_RESULT
 
     logging.basicConfig(level=logging.WARNING)
     for name in ("asyncua", "pymodbus"):

@@ -106,8 +106,10 @@ from .errors import (
                      SequencerError,
                      SequencerFault,
 )
-from .sequencer import Identifier, Measurement, ResultSink, Sequencer, SequencerConfig
-from .states import BUSY, TRANSITIONS, Event, State
+from .ports import Identifier, ResultSink
+from .sequencer import Sequencer
+from .states import BUSY, TRANSITIONS, Event, Measurement, State
+from .timing import SequencerConfig
 
 __all__ = [
     "Clock", "ManualClock", "MonotonicClock", "ScaledClock",

@@ -23,15 +23,10 @@ the daemon relies on. Design notes (why, not what):
 
 from __future__ import annotations
 
-import bisect
 import logging
-import math
 import threading
 import uuid
-from dataclasses import dataclass, field
-from typing import Any, Callable, Protocol
-
-import numpy as np
+from typing import Any, Callable
 
 from drivers.clock import Clock
 from drivers.errors import DeviceFault, SensorFault
@@ -39,6 +34,7 @@ from drivers.sensor import AngleSensor
 from measurement import IdentificationResult, Options, Rig, Trace, identify
 from measurement.errors import MeasurementError
 
+from .capture import Job, Run, capture_end, captured_trace, collect, trim_pre_trigger
 from .errors import (
     CaptureTimeout,
     CaptureTooShort,
@@ -46,161 +42,14 @@ from .errors import (
     IdentificationTimeout,
     IllegalTransition,
     PublishFailed,
-    SequencerConfigError,
     SequencerFault,
 )
+from .ports import Identifier, PressSource, ReleaseActuator, ResultSink, StatusIndicator
 from .states import BUSY, TRANSITIONS, Event, Measurement, State
+from .timing import SequencerConfig
 
 log = logging.getLogger("moi.sequencer")
 
-
-# -- what the sequencer needs from its drivers ----------------------------------
-class ReleaseActuator(Protocol):
-    """The release solenoid as the sequencer uses it (``drivers.solenoid.Solenoid``)."""
-
-    max_on_time: float
-
-    def pulse(self, duration: float) -> float:
-        """Energise for ``duration`` s, clamped to ``max_on_time``; returns the granted s; never blocks."""
-
-    def off(self) -> None:
-        """De-energise now (safe state)."""
-
-    @property
-    def is_active(self) -> bool: ...
-
-
-class PressSource(Protocol):
-    """A push button (``drivers.button.PushButton``): the sequencer sets ``when_pressed``."""
-
-    when_pressed: Callable[[], None] | None
-
-
-class StatusIndicator(Protocol):
-    """An optional LED/buzzer (``drivers.indicator.Indicator``)."""
-
-    def show(self, state: str) -> None: ...
-
-
-#: the result sink: called once per successful measurement, on the polling thread, in PUBLISHING;
-#: it must return quickly (queue or store; do not talk to the network here). Raising → FAULT.
-ResultSink = Callable[["Measurement"], None]
-
-#: identification seam (tests inject failures); default: measurement.identify(trace, rig, options)
-Identifier = Callable[[Trace, Rig], IdentificationResult]
-
-
-#: longest pre-trigger and capture, s: a record of an hour is far beyond any swing, and a longer one
-#: (a typo of 1e12) would only fill the memory sample by sample
-MAX_CAPTURE = 3600.0
-
-
-@dataclass(frozen=True)
-class SequencerConfig:
-    """Timing of one measurement (angles in rad).
-
-    The physics times (pre_trigger, release_pulse, capture_duration, decay_window,
-    min_capture) are s on the sequencer's clock. The two computer time-outs
-    (sample_timeout: sensor I/O; identify_timeout: processor time) are real
-    seconds: on a ``ScaledClock`` the sequencer divides clock time by its
-    ``scale``, so a simulation running 5× faster does not starve the bus or the fit.
-
-    pre_trigger: capture recorded before the release (at rest at the release angle): the last
-        pre_trigger seconds before it, however late the release came.
-    release_pulse: how long the solenoid is asked to stay on (the solenoid clamps
-        it to its own hard maximum).
-    capture_duration: the capture ends this long after the release at the latest.
-    decay_threshold: the capture ends earlier when the half peak-to-peak angle over
-        the last ``decay_window`` falls below this (rad); 0 disables.
-    min_capture: the decay test starts only this long after the release.
-    sample_timeout: no new sample for this long while capturing → FAULT (capture time-out);
-        real s. The release also waits for the first pre-trigger sample (never release blind).
-    identify_timeout: identification longer than this → FAULT; real s.
-    min_samples: fewer samples in the capture → FAULT instead of a meaningless fit.
-    identify_in_worker: run identification in a worker thread (True for the daemon:
-        ``poll`` stays responsive); False runs it inside ``poll`` (tests on a ManualClock).
-    """
-
-    pre_trigger: float = 0.5
-    release_pulse: float = 0.15
-    capture_duration: float = 30.0
-    decay_threshold: float = 0.0
-    decay_window: float = 2.0
-    min_capture: float = 5.0
-    sample_timeout: float = 1.0
-    identify_timeout: float = 60.0
-    min_samples: int = 50
-    identify_in_worker: bool = True
-
-    def __post_init__(self) -> None:
-        def check(name: str, ok: bool, expected: str) -> None:
-            if not ok:
-                raise SequencerConfigError(f"sequencer: {name} = {getattr(self, name)!r}; expected {expected}")
-
-        def finite(v: Any) -> bool:
-            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-        check("pre_trigger", finite(self.pre_trigger) and 0 <= self.pre_trigger <= MAX_CAPTURE,
-              f"a time >= 0 s and at most {MAX_CAPTURE:g} s")
-        check("release_pulse", finite(self.release_pulse) and self.release_pulse > 0, "a time > 0 s")
-        check("capture_duration", finite(self.capture_duration) and 0 < self.capture_duration <= MAX_CAPTURE,
-              f"a time > 0 s and at most {MAX_CAPTURE:g} s")
-        check("decay_threshold", finite(self.decay_threshold) and self.decay_threshold >= 0, "an angle >= 0 rad (0 disables)")
-        check("decay_window", finite(self.decay_window) and self.decay_window > 0, "a time > 0 s")
-        check("min_capture", finite(self.min_capture) and self.min_capture >= 0, "a time >= 0 s")
-        check("sample_timeout", finite(self.sample_timeout) and self.sample_timeout > 0, "a time > 0 s")
-        check("identify_timeout", finite(self.identify_timeout) and self.identify_timeout > 0, "a time > 0 s")
-        check("min_samples", isinstance(self.min_samples, int) and self.min_samples >= 2, "an integer >= 2")
-
-
-class _Job:
-    """One identification, inline or in a worker thread; the result is read once ``done`` is set.
-
-    ``result`` is (the trace identified, its result): a sensor's ``finish`` may have replaced the trace.
-    """
-
-    def __init__(self, fn: Callable[[], tuple[Trace, IdentificationResult]]):
-        self._fn = fn
-        self.done = threading.Event()
-        self.result: tuple[Trace, IdentificationResult] | None = None
-        self.error: BaseException | None = None
-
-    def run(self) -> None:
-        try:
-            self.result = self._fn()
-        except BaseException as exc:  # handed to the sequencer, which turns it into FAULT with the reason
-            self.error = exc
-        finally:
-            self.done.set()
-
-
-@dataclass
-class _Run:
-    """Book-keeping of the measurement in progress."""
-
-    id: str
-    requested_by: str
-    requested_at: float
-    armed_at: float
-    released_at: float | None = None
-    granted_pulse: float = 0.0
-    capture_ended_at: float | None = None
-    capture_end: str = ""
-    t: list[float] = field(default_factory=list)
-    angle: list[float] = field(default_factory=list)
-    last_sample_at: float | None = None  # clock time a new sample last arrived
-    dropped_out_of_order: int = 0
-    beyond_window: int = 0  # samples later than release + capture_duration (not kept)
-    outside_window: int = 0  # samples not kept: before release − pre_trigger or after release + capture_duration
-    trace: Trace | None = None
-    job: _Job | None = None
-    identify_started_at: float | None = None
-    measurement: "Measurement | None" = None
-
-    def release_time(self) -> float:
-        """``released_at`` (clock time, s), for the states from RELEASING on, where it is always set."""
-        assert self.released_at is not None, "the release time is read before the release"
-        return self.released_at
 
 
 class Sequencer:
@@ -246,7 +95,7 @@ class Sequencer:
         self._since = clock.now()
         # clock seconds per real second (ScaledClock.scale): the computer time-outs are real seconds
         self._scale = float(getattr(clock, "scale", 1.0) or 1.0)
-        self._run: _Run | None = None
+        self._run: Run | None = None
         self._closed = False
         self._pending_request: tuple[str, float] | None = None
         self._pending_abort: str | None = None
@@ -553,7 +402,7 @@ class Sequencer:
     def _start(self, now: float, source: str, requested_at: float) -> None:
         # interlock: nothing may be energised when a measurement starts
         self.solenoid.off()
-        self._run = _Run(id=str(uuid.uuid4()), requested_by=source, requested_at=requested_at, armed_at=now)
+        self._run = Run(id=str(uuid.uuid4()), requested_by=source, requested_at=requested_at, armed_at=now)
         self.sensor.start()
         self._transition(now, State.ARMED, f"requested by {source}; pre-trigger capture {self.config.pre_trigger:g} s")
 
@@ -572,14 +421,14 @@ class Sequencer:
                     raise DeviceFault("solenoid already energised before the release")
                 run.granted_pulse = self.solenoid.pulse(self.config.release_pulse)
                 run.released_at = now
-                self._trim_pre_trigger(run)
+                trim_pre_trigger(run, self.config.pre_trigger)
                 self._transition(now, State.RELEASING, f"solenoid pulse {run.granted_pulse:g} s")
         elif state is State.RELEASING:
             if now - run.release_time() >= run.granted_pulse:
                 self.solenoid.off()
                 self._transition(now, State.CAPTURING, "released; solenoid off, swinging freely")
         elif state is State.CAPTURING:
-            end = self._capture_end(run, now)
+            end = capture_end(run, now, self.config)
             if end is not None:
                 self._finish_capture(run, now, end)
         elif state is State.IDENTIFYING:
@@ -587,45 +436,11 @@ class Sequencer:
         elif state is State.PUBLISHING:
             self._finish_publishing(run, now)
 
-    def _collect(self, run: _Run, now: float) -> None:
+    def _collect(self, run: Run, now: float) -> None:
         t, angle = self.sensor.read()  # SensorFault propagates to poll → FAULT
-        t = np.asarray(t, float).ravel()
-        angle = np.asarray(angle, float).ravel()
-        if len(t) == 0:
-            return
-        finite = np.isfinite(t) & np.isfinite(angle)
-        t, angle = t[finite], angle[finite]
-        if run.released_at is not None:
-            # the capture is bounded by sample time, not by when poll() gets round to it: a sample
-            # loop that fell behind must not stretch the record (or the work) beyond the window
-            inside = t <= run.released_at + self.config.capture_duration
-            beyond = int(len(t) - np.count_nonzero(inside))
-            run.beyond_window += beyond
-            run.outside_window += beyond
-            t, angle = t[inside], angle[inside]
-        if len(t) == 0:
-            return
-        last = run.t[-1] if run.t else -math.inf
-        # Trace needs strictly increasing time: a sample is kept when it is later than every one before it
-        before = np.maximum.accumulate(np.concatenate(([last], t)))[:-1]
-        keep = t > before
-        run.dropped_out_of_order += int(len(t) - np.count_nonzero(keep))
-        if keep.any():
-            run.t.extend(t[keep].tolist())
-            run.angle.extend(angle[keep].tolist())
-            run.last_sample_at = now
+        collect(run, t, angle, now, self.config.capture_duration)
 
-    def _trim_pre_trigger(self, run: _Run) -> None:
-        # the record before the release is the last pre_trigger seconds, however late the poll came that
-        # released: on a fast simulated clock (or a stalled loop) the wait can be many pre-triggers long,
-        # and that rest would lengthen the record and the work; the samples left out are counted
-        # (the latest sample before it always stays: the rest the swing starts from, and the order guard's anchor)
-        first = min(bisect.bisect_left(run.t, run.release_time() - self.config.pre_trigger), len(run.t) - 1)
-        if first > 0:
-            del run.t[:first], run.angle[:first]
-            run.outside_window += first
-
-    def _check_sample_timeout(self, run: _Run, now: float) -> None:
+    def _check_sample_timeout(self, run: Run, now: float) -> None:
         since = run.last_sample_at if run.last_sample_at is not None else run.armed_at
         silent = (now - since) / self._scale
         if silent > self.config.sample_timeout:
@@ -634,27 +449,7 @@ class Sequencer:
                 f"capture time-out: no sample from the {self.sensor.source} for {silent:.3g} s {what} "
                 f"(limit {self.config.sample_timeout:g} s)")
 
-    def _capture_end(self, run: _Run, now: float) -> str | None:
-        cfg = self.config
-        released_at = run.release_time()
-        elapsed = now - released_at
-        if elapsed >= cfg.capture_duration or (run.t and run.t[-1] >= released_at + cfg.capture_duration) \
-                or run.beyond_window:
-            return f"capture complete: {cfg.capture_duration:g} s after the release"
-        if cfg.decay_threshold > 0 and elapsed >= cfg.min_capture and run.t:
-            t_end = run.t[-1]
-            i = bisect.bisect_left(run.t, t_end - cfg.decay_window)
-            if run.t[i] <= released_at and i > 0:
-                return None
-            window = run.angle[i:]
-            if t_end - run.t[i] >= 0.9 * cfg.decay_window and len(window) >= 4:
-                half_pp = 0.5 * (max(window) - min(window))
-                if half_pp < cfg.decay_threshold:
-                    return (f"swing decayed: amplitude {half_pp:.3g} rad < {cfg.decay_threshold:g} rad "
-                            f"after {elapsed:.3g} s")
-        return None
-
-    def _finish_capture(self, run: _Run, now: float, why: str) -> None:
+    def _finish_capture(self, run: Run, now: float, why: str) -> None:
         self._collect(run, now)
         self.sensor.stop()
         self._collect(run, now)  # what the sensor buffered up to the stop
@@ -664,28 +459,9 @@ class Sequencer:
             raise CaptureTooShort(
                 f"capture too short: {len(run.t)} samples from the {self.sensor.source}; "
                 f"expected at least {self.config.min_samples}")
-        t = np.asarray(run.t)
-        t0 = t[0]
-        stats = dict(self.sensor.stats())
-        if run.dropped_out_of_order:
-            stats["dropped_out_of_order"] = run.dropped_out_of_order
-        if run.outside_window:
-            stats["outside_window"] = run.outside_window
-        meta = {
-            self.sensor.source: stats,
-            "sequencer": {
-                "measurement_id": run.id,
-                "requested_by": run.requested_by,
-                "t0": float(t0),  # clock time of the first sample, s: the trace's time origin
-                "release_t": float(run.release_time() - t0),
-                "release_pulse_s": run.granted_pulse,
-                "capture_end": why,
-            },
-        }
-        run.trace = Trace(t - t0, np.asarray(run.angle), source=self.sensor.source,
-                          flags=tuple(self.sensor.flags()), meta=meta)
+        run.trace = captured_trace(run, self.sensor, why)
         trace, rig = run.trace, self.rig
-        run.job = _Job(lambda: self._finish_and_identify(trace, rig))
+        run.job = Job(lambda: self._finish_and_identify(trace, rig))
         run.identify_started_at = now
         self._transition(now, State.IDENTIFYING, f"{why}; {len(trace)} samples over {trace.duration:.3g} s")
         if self.config.identify_in_worker:
@@ -707,7 +483,7 @@ class Sequencer:
                 raise SensorFault(f"{self.sensor.source}: finish() returned {type(trace).__name__}; expected a Trace")
         return trace, self._identifier(trace, rig)
 
-    def _check_identification(self, run: _Run, now: float) -> None:
+    def _check_identification(self, run: Run, now: float) -> None:
         job, started_at = run.job, run.identify_started_at
         assert job is not None and started_at is not None, "IDENTIFYING without an identification started"
         if not job.done.is_set():
@@ -743,7 +519,7 @@ class Sequencer:
         run.measurement = measurement
         # IDLE follows at the next poll, so PUBLISHING is observable (and abortable) like every other state
 
-    def _finish_publishing(self, run: _Run, now: float) -> None:
+    def _finish_publishing(self, run: Run, now: float) -> None:
         measurement = run.measurement
         assert measurement is not None, "PUBLISHING without the measurement that entered it"
         self._transition(now, State.IDLE, f"published measurement {measurement.id}", measurement)

@@ -136,116 +136,47 @@ def run(args: argparse.Namespace) -> int:
         return _run(app, args)
 
 
-def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
-    from pymodbus.client import ModbusTcpClient
+class _Watch:
+    """Prints the sequencer's transitions as they come and collects the measurements it publishes."""
 
-    from measurement import flags as F
-    from service.publish.modbus import registers as R
+    def __init__(self, app) -> None:
+        self.done = threading.Event()
+        self.published: list = []
+        self.t0 = app.devices.clock.now()
+        self.wall0 = time.monotonic()
+        self.scale = app.config.simulation.time_scale
+        app.sequencer.subscribe(self.on_event)
 
-    cfg = app.config
-    out = sys.stdout
-    done = threading.Event()
-    published: list = []
-    t0 = app.devices.clock.now()
-    wall0 = time.monotonic()
-    scale = cfg.simulation.time_scale
-
-    def on_event(e) -> None:
+    def on_event(self, e) -> None:
         # wall-clock seconds first: a simulated clock running faster would make identifying look slow
-        sim = f"  (simulated clock {e.time - t0:.2f} s)" if scale != 1.0 else ""
-        out.write(f"[{time.monotonic() - wall0:7.2f} s] {e.state.value:<12} {e.reason}{sim}\n")
-        out.flush()
+        sim = f"  (simulated clock {e.time - self.t0:.2f} s)" if self.scale != 1.0 else ""
+        sys.stdout.write(f"[{time.monotonic() - self.wall0:7.2f} s] {e.state.value:<12} {e.reason}{sim}\n")
+        sys.stdout.flush()
         if e.publishes:
-            published.append(e.measurement)
+            self.published.append(e.measurement)
         if e.ends_measurement:
-            done.set()
+            self.done.set()
 
-    app.sequencer.subscribe(on_event)
+
+def _run(app, args: argparse.Namespace) -> int:
+    cfg = app.config
+    watch = _Watch(app)
     consumer = _consumer(cfg, app) if cfg.mqtt is not None else None
     main = threading.Thread(target=app.run, name="moi-demo-main", daemon=True)
     main.start()
     status = 0
     try:
-        sim = app.devices.sim
-        print(f"simulated {cfg.rig.kind} rig: true J = {sim.inertia:g} kg·m², ω_n = {sim.pendulum.omega_n:.6g} rad/s, "
-              f"effects {dict(sim.pendulum.effects)} (declared: {', '.join(cfg.rig.declared)}); "
-              f"time × {cfg.simulation.time_scale:g}")
-        print(f"Modbus TCP server on 127.0.0.1:{app.modbus.bound_port} (unit id {cfg.modbus.unit_id})")
-        if cfg.mqtt is None:
-            print("MQTT: skipped, no broker configured (try `moi demo --mqtt localhost`, or [mqtt] in the config of `moi run`)")
-        else:
-            print(f"MQTT: broker {cfg.mqtt.host}:{cfg.mqtt.port}, topics moi/{cfg.device_id}/...")
-        print(f"result store: {app.config.state_dir}/results.db")
-        token = Path(app.web.token_file).read_text(encoding="utf-8").strip()
-        print(f"web page: {app.web.url}  (open it now; actions need the token {token}, kept in {app.web.token_file})")
-        recipe = app.parts.recipe
-        print(f"recipe {recipe.name} (version {recipe.version}): {recipe.spec.quantity} = {recipe.spec.nominal:g} "
-              f"± {recipe.spec.upper - recipe.spec.nominal:.3g} kg·m², {recipe.releases} release(s) per part, "
-              f"decision rule {recipe.spec.rule} (U = {recipe.spec.coverage_factor:g}·u_c)")
+        _print_setup(app)
         app.command(V.PART_ID, "cli", {"part_id": DEMO_PART_ID})  # as the PLC writes it before the trigger
-        pin = app.devices.button.pin
-        limit = 60.0 + (cfg.sequencer.pre_trigger + cfg.sequencer.capture_duration) / cfg.simulation.time_scale
-        for i in range(1, recipe.releases + 1):
-            done.clear()
-            print(f"part {DEMO_PART_ID}, release {i} of {recipe.releases}: pressing the push button (gpiozero mock pin)")
-            pin.drive_low()
-            pin.drive_high()
-            if not done.wait(limit):
-                print(f"moi demo: no result within {limit:.0f} s", file=sys.stderr)
-                return EXIT_FAULT
-            if len(published) < i:
-                print(f"moi demo: the measurement failed: {app.sequencer.last_fault}", file=sys.stderr)
-                return EXIT_FAULT
-            rel = app.store.get(published[-1].id).payload["release"]
-            print(f"  release {i}: {rel['quantity']} = {_g(rel['value'], '.7g')} kg·m², u_c {_g(rel['u_c'])}, "
-                  f"U {_g(rel['U'])} → {rel['verdict']}" + (f" ({'; '.join(rel['reasons'])})" if rel["reasons"] else ""))
-        m = published[-1]
-        print()
-        print(m.result.report())
-        if m.result.J is not None:
-            print(f"true J {sim.inertia:g} kg·m² → error {100 * (m.result.J / sim.inertia - 1):+.4f} %")
+        if not _measure_part(app, watch):
+            return EXIT_FAULT
+        m = watch.published[-1]
         stored = app.store.get(m.id)
         assert stored is not None and stored.payload is not None  # an ok result, stored with its payload
         payload = stored.payload
-        print()
-        client = ModbusTcpClient("127.0.0.1", port=app.modbus.bound_port, timeout=3)
-        client.connect()
-        try:
-            snap = R.read_snapshot(lambda a, n: client.read_input_registers(a, count=n, device_id=cfg.modbus.unit_id).registers)
-        finally:
-            client.close()
-        assert snap is not None, "no consistent Modbus snapshot"  # nothing changes it while the demo reads
-        print(f"Modbus registers read back over TCP (seq {snap['seq']}, uuid {snap['uuid']}):")
-        for reg, key in (("J", "J"), ("J_std", "J_std"), ("omega_n", "omega_n"), ("damping_ratio", "damping_ratio"),
-                         ("residual_rms", "residual_rms_after")):
-            a = R.BY_NAME[reg].address
-            print(f"  {a:>3}–{a + 1:<3} {reg:<14} {snap[reg]:.8g}   (JSON {payload[key]!r})")
-        print(f"  {R.BY_NAME['flags'].address:>3}     flags          0x{snap['flags']:04x} "
-              f"{F.flags_from_bits(snap['flags'] | snap['flags_high'] << 16) or '(none)'}")
-        codes = {v: k for k, v in R.VERDICT_CODES.items()}
-        for reg in ("verdict", "release_index", "releases", "part_id", "part_value", "part_U"):
-            a = R.BY_NAME[reg].address
-            value = codes.get(snap[reg], snap[reg]) if reg == "verdict" else snap[reg]
-            print(f"  {a:>3}     {reg:<14} {value}")
-        part = payload.get("part")
-        if part is not None:
-            print()
-            joint = part.get("joint")
-            how = "identified jointly" if joint else "weighted mean"
-            fit_u = "joint u" if joint else "fit u"
-            print(f"part {payload['part_id']}: {part['quantity']} = {_g(part['mean'], '.7g')} kg·m² (releases "
-                  f"{[i + 1 for i in part['used']]} {how}), s = {_g(part['std'])}, Type A u = {_g(part['u_typeA'])}, "
-                  f"{fit_u} = {_g(part['u_fit'])}, systematic u = {_g(part['u_systematic'])}, U = {_g(part['U'])} kg·m²")
-            if joint:
-                c = joint["consistency"]
-                print(f"  the releases against the joint ω_n {joint['omega_n']:.7g} rad/s: χ² {c['chi2']:.2f} on "
-                      f"{c['dof']} (p = {c['p']:.2g}), largest deviation {c['largest_z']:+.1f} σ")
-            for e in part["excluded"]:
-                print(f"  excluded release {e['index'] + 1}: {e['reason']}")
-            spec = payload["recipe"]
-            print(f"  tolerance [{spec['lower']:.7g}, {spec['upper']:.7g}], deviation {_g(part['deviation'], '+.3g')}, "
-                  f"zone {part['zone']} → VERDICT {part['verdict']}"
-                  + (f" ({'; '.join(part['reasons'])})" if part["reasons"] else ""))
+        _print_result(app, m)
+        _print_registers(app, payload)
+        _print_part(payload)
         if consumer is not None:
             got = consumer.wait(payload["uuid"], 15)
             print(f"MQTT: result {payload['uuid']} " + ("received back from the broker" if got else
@@ -253,20 +184,9 @@ def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
         if args.json:
             print(json.dumps(payload, ensure_ascii=False))
         print(f"the result page: {app.web.url}results/{payload['uuid']}")
-        quantity = recipe.spec.quantity if recipe.spec is not None else "J"
-        budget = m.result.uncertainty_budget.get(quantity)
-        if budget is not None:
-            top = sorted(budget.lines, key=lambda ln: -ln.share)[:3]
-            print(f"uncertainty budget of {quantity} (one release): U = {_g(budget.U)} kg·m² "
-                  f"(k = {budget.coverage_factor:.3g}); largest terms: "
-                  + ", ".join(f"{ln.source} {100 * ln.share:.3g} %" for ln in top))
+        _print_budget(app, m)
         if args.serve:
-            print("serving until Ctrl-C")
-            try:
-                while main.is_alive():
-                    main.join(0.5)
-            except KeyboardInterrupt:
-                pass
+            _serve(main)
         status = 0
     finally:
         app.request_stop()
@@ -274,6 +194,133 @@ def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
         if consumer is not None:
             consumer.close()
     return status if app.exit_status == 0 else app.exit_status
+
+
+def _print_setup(app) -> None:
+    """The simulated rig, where each door of the appliance is, and the demo recipe."""
+    cfg = app.config
+    sim = app.devices.sim
+    print(f"simulated {cfg.rig.kind} rig: true J = {sim.inertia:g} kg·m², ω_n = {sim.pendulum.omega_n:.6g} rad/s, "
+          f"effects {dict(sim.pendulum.effects)} (declared: {', '.join(cfg.rig.declared)}); "
+          f"time × {cfg.simulation.time_scale:g}")
+    print(f"Modbus TCP server on 127.0.0.1:{app.modbus.bound_port} (unit id {cfg.modbus.unit_id})")
+    if cfg.mqtt is None:
+        print("MQTT: skipped, no broker configured (try `moi demo --mqtt localhost`, or [mqtt] in the config of `moi run`)")
+    else:
+        print(f"MQTT: broker {cfg.mqtt.host}:{cfg.mqtt.port}, topics moi/{cfg.device_id}/...")
+    print(f"result store: {app.config.state_dir}/results.db")
+    token = Path(app.web.token_file).read_text(encoding="utf-8").strip()
+    print(f"web page: {app.web.url}  (open it now; actions need the token {token}, kept in {app.web.token_file})")
+    recipe = app.parts.recipe
+    print(f"recipe {recipe.name} (version {recipe.version}): {recipe.spec.quantity} = {recipe.spec.nominal:g} "
+          f"± {recipe.spec.upper - recipe.spec.nominal:.3g} kg·m², {recipe.releases} release(s) per part, "
+          f"decision rule {recipe.spec.rule} (U = {recipe.spec.coverage_factor:g}·u_c)")
+
+
+def _measure_part(app, watch: _Watch) -> bool:
+    """Release the demo part as often as its recipe asks, pressing the push button's mock pin; each release's
+    verdict printed. False (said on stderr) when a release brings no result."""
+    cfg, recipe = app.config, app.parts.recipe
+    pin = app.devices.button.pin
+    limit = 60.0 + (cfg.sequencer.pre_trigger + cfg.sequencer.capture_duration) / cfg.simulation.time_scale
+    for i in range(1, recipe.releases + 1):
+        watch.done.clear()
+        print(f"part {DEMO_PART_ID}, release {i} of {recipe.releases}: pressing the push button (gpiozero mock pin)")
+        pin.drive_low()
+        pin.drive_high()
+        if not watch.done.wait(limit):
+            print(f"moi demo: no result within {limit:.0f} s", file=sys.stderr)
+            return False
+        if len(watch.published) < i:
+            print(f"moi demo: the measurement failed: {app.sequencer.last_fault}", file=sys.stderr)
+            return False
+        rel = app.store.get(watch.published[-1].id).payload["release"]
+        print(f"  release {i}: {rel['quantity']} = {_g(rel['value'], '.7g')} kg·m², u_c {_g(rel['u_c'])}, "
+              f"U {_g(rel['U'])} → {rel['verdict']}" + (f" ({'; '.join(rel['reasons'])})" if rel["reasons"] else ""))
+    return True
+
+
+def _print_result(app, m) -> None:
+    """The last release's report and its error against the simulated truth."""
+    sim = app.devices.sim
+    print()
+    print(m.result.report())
+    if m.result.J is not None:
+        print(f"true J {sim.inertia:g} kg·m² → error {100 * (m.result.J / sim.inertia - 1):+.4f} %")
+    print()
+
+
+def _print_registers(app, payload: dict) -> None:
+    """The result read back over Modbus TCP with a real client, beside its JSON values."""
+    from pymodbus.client import ModbusTcpClient
+
+    from measurement import flags as F
+    from service.publish.modbus import registers as R
+
+    unit = app.config.modbus.unit_id
+    client = ModbusTcpClient("127.0.0.1", port=app.modbus.bound_port, timeout=3)
+    client.connect()
+    try:
+        snap = R.read_snapshot(lambda a, n: client.read_input_registers(a, count=n, device_id=unit).registers)
+    finally:
+        client.close()
+    assert snap is not None, "no consistent Modbus snapshot"  # nothing changes it while the demo reads
+    print(f"Modbus registers read back over TCP (seq {snap['seq']}, uuid {snap['uuid']}):")
+    for reg, key in (("J", "J"), ("J_std", "J_std"), ("omega_n", "omega_n"), ("damping_ratio", "damping_ratio"),
+                     ("residual_rms", "residual_rms_after")):
+        a = R.BY_NAME[reg].address
+        print(f"  {a:>3}–{a + 1:<3} {reg:<14} {snap[reg]:.8g}   (JSON {payload[key]!r})")
+    print(f"  {R.BY_NAME['flags'].address:>3}     flags          0x{snap['flags']:04x} "
+          f"{F.flags_from_bits(snap['flags'] | snap['flags_high'] << 16) or '(none)'}")
+    codes = {v: k for k, v in R.VERDICT_CODES.items()}
+    for reg in ("verdict", "release_index", "releases", "part_id", "part_value", "part_U"):
+        a = R.BY_NAME[reg].address
+        value = codes.get(snap[reg], snap[reg]) if reg == "verdict" else snap[reg]
+        print(f"  {a:>3}     {reg:<14} {value}")
+
+
+def _print_part(payload: dict) -> None:
+    """The part's value, its uncertainty and its verdict (once a release completed it)."""
+    part = payload.get("part")
+    if part is not None:
+        print()
+        joint = part.get("joint")
+        how = "identified jointly" if joint else "weighted mean"
+        fit_u = "joint u" if joint else "fit u"
+        print(f"part {payload['part_id']}: {part['quantity']} = {_g(part['mean'], '.7g')} kg·m² (releases "
+              f"{[i + 1 for i in part['used']]} {how}), s = {_g(part['std'])}, Type A u = {_g(part['u_typeA'])}, "
+              f"{fit_u} = {_g(part['u_fit'])}, systematic u = {_g(part['u_systematic'])}, U = {_g(part['U'])} kg·m²")
+        if joint:
+            c = joint["consistency"]
+            print(f"  the releases against the joint ω_n {joint['omega_n']:.7g} rad/s: χ² {c['chi2']:.2f} on "
+                  f"{c['dof']} (p = {c['p']:.2g}), largest deviation {c['largest_z']:+.1f} σ")
+        for e in part["excluded"]:
+            print(f"  excluded release {e['index'] + 1}: {e['reason']}")
+        spec = payload["recipe"]
+        print(f"  tolerance [{spec['lower']:.7g}, {spec['upper']:.7g}], deviation {_g(part['deviation'], '+.3g')}, "
+              f"zone {part['zone']} → VERDICT {part['verdict']}"
+              + (f" ({'; '.join(part['reasons'])})" if part["reasons"] else ""))
+
+
+def _print_budget(app, m) -> None:
+    """The largest terms of the recipe quantity's uncertainty budget (one release)."""
+    recipe = app.parts.recipe
+    quantity = recipe.spec.quantity if recipe.spec is not None else "J"
+    budget = m.result.uncertainty_budget.get(quantity)
+    if budget is not None:
+        top = sorted(budget.lines, key=lambda ln: -ln.share)[:3]
+        print(f"uncertainty budget of {quantity} (one release): U = {_g(budget.U)} kg·m² "
+              f"(k = {budget.coverage_factor:.3g}); largest terms: "
+              + ", ".join(f"{ln.source} {100 * ln.share:.3g} %" for ln in top))
+
+
+def _serve(main: threading.Thread) -> None:
+    print("serving until Ctrl-C")
+    try:
+        while main.is_alive():
+            main.join(0.5)
+    except KeyboardInterrupt:
+        pass
 
 
 def _g(v, fmt: str = ".2g") -> str:

@@ -18,17 +18,11 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping
 
 from service.errors import StoreError
+from service.persistence.connection import read_only_connection
 from service.persistence.pages import leaf_records
-from service.persistence.store import (
-    ARRAY_COLUMNS,
-    DB_NAME,
-    JSON_COLUMNS,
-    LEGACY_CONSUMER,
-    Store,
-    read_only_connection,
-    read_seq_floor,
-    unpack,
-)
+from service.persistence.sequence import read_seq_floor
+from service.persistence.store import DB_NAME, Store
+from service.persistence.tables import ARRAY_COLUMNS, JSON_COLUMNS, LEGACY_CONSUMER, unpack
 
 #: tables read back by check and salvage, in the order rows are copied (foreign keys point backwards)
 _TABLES = ("measurements", "outbox", "attachments")

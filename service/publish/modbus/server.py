@@ -35,23 +35,16 @@ from __future__ import annotations
 
 import asyncio
 import collections
-import ipaddress
 import logging
-import struct
 import threading
 import time
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from pymodbus.constants import ExcCodes
-from pymodbus.exceptions import NoSuchIdException
 from pymodbus.framer import FramerType
-from pymodbus.pdu import ExceptionResponse
-from pymodbus.pdu.bit_message import WriteSingleCoilRequest, WriteSingleCoilResponse
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
-from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
-from pymodbus.simulator.simcore import SimCore
 
 from drivers.aioloop import LoopThread
 from service.core import vocabulary as V
@@ -65,7 +58,8 @@ from service.publish.replies import CommandReply
 from . import registers as R
 
 # the settings are read by the configuration without pymodbus; here for the server's users too
-from .settings import _THIS_MACHINE, ModbusSettings, allowed_networks, network_exposure
+from .settings import ModbusSettings, network_exposure
+from .transport import BoundedTcpServer, OneUnitCore, WriteSingleCoil
 
 log = logging.getLogger("moi.modbus")
 
@@ -82,169 +76,30 @@ ACKED_FILE = "modbus-acked-seq"
 TRIGGER_HOLD = 0.5
 
 
-class _OneUnitCore(SimCore):
-    """SimCore that treats an unknown unit id as missing instead of raising KeyError.
+class _InputWrite:
+    """One write to the writable holding registers: the registers it touches, and the block before it and as
+    it would be after it."""
 
-    pymodbus 3.16's SimCore falls back to device id 0 and raises KeyError when it
-    is absent, which the request handler turns into a logged "device failure"
-    reply; a request for another unit must instead be ignored (RTU, shared line)
-    or answered with "gateway target failed to respond" (TCP).
-    """
+    def __init__(self, address: int, values: list, inputs: list[int]) -> None:
+        self.touched = set(range(address, address + len(values)))
+        self.old = inputs
+        self.new = list(inputs)
+        self.new[address - R.WRITABLE_START: address - R.WRITABLE_START + len(values)] = [int(v) & 0xFFFF
+                                                                                           for v in values]
 
-    async def async_getValues(self, device_id: int, func_code: int, address: int, count: int = 1):
-        if device_id not in self.devices:
-            raise NoSuchIdException(f"unit id {device_id} is not served")
-        return await super().async_getValues(device_id, func_code, address, count)
+    def written(self, name: str) -> bool:
+        a, n = R.WRITABLE[name]
+        return bool(self.touched & set(range(a, a + n)))
 
-    async def async_setValues(self, device_id: int, func_code: int, address: int, values):
-        self.require_device(device_id)
-        return await super().async_setValues(device_id, func_code, address, values)
+    def word(self, name: str) -> int:
+        return self.new[R.WRITABLE[name][0] - R.WRITABLE_START]
 
-    def require_device(self, device_id: int) -> None:
-        if device_id not in self.devices:
-            raise NoSuchIdException(f"unit id {device_id} is not served")
+    def old_word(self, name: str) -> int:
+        return self.old[R.WRITABLE[name][0] - R.WRITABLE_START]
 
-
-class _WriteSingleCoil(WriteSingleCoilRequest):
-    """Function 5 as the Modbus Application Protocol specification has it (section 6.5): the value
-    is 0xFF00 or 0x0000, anything else is exception 03 (ILLEGAL DATA VALUE); the normal
-    response is an echo of the request. pymodbus 3.16 reads any non-zero value as "on" and
-    answers with the coil's read-back value."""
-
-    value = 0x0000  # the value field as received
-
-    def decode(self, data: bytes) -> None:
-        self.address, self.value = struct.unpack(">HH", data[:4])
-        self.bits = [self.value == 0xFF00]
-
-    async def datastore_update(self, context, device_id: int):
-        if isinstance(context, _OneUnitCore):
-            context.require_device(device_id)  # another unit's request is not ours to refuse
-        if self.value not in (0x0000, 0xFF00):
-            return ExceptionResponse(self.function_code, ExcCodes.ILLEGAL_VALUE)
-        echo = list(self.bits)  # the access hook clears the written values (pulse coils)
-        response = await super().datastore_update(context, device_id)
-        if isinstance(response, WriteSingleCoilResponse):
-            response.bits = echo
-        return response
-
-
-def _is_allowed(peer: str, networks: tuple) -> bool:
-    try:
-        addr = ipaddress.ip_address(peer.split("%", 1)[0])
-    except ValueError:
-        return False
-    if isinstance(addr, ipaddress.IPv6Address) and addr.ipv4_mapped is not None:
-        addr = addr.ipv4_mapped
-    return any(addr in net for net in _THIS_MACHINE + networks)
-
-
-class _TrackedHandler(ServerRequestHandler):
-    """A client connection that remembers when it last sent something (monotonic s)."""
-
-    def __init__(self, *args: Any) -> None:
-        super().__init__(*args)
-        self.last_activity = time.monotonic()
-        self._requests: collections.deque = collections.deque()
-
-    def connection_made(self, transport: Any) -> None:
-        super().connection_made(transport)
-        if self.is_closing:
-            # closed for the cap between its accept and now (asyncio makes connections one loop turn after
-            # accepting them): pymodbus had no transport to close then, so the socket would stay open
-            transport.close()
-            self.transport = None  # type: ignore[assignment]  # pymodbus types it without None; it means "closed"
-            return
-        server = self.server
-        if not isinstance(server, _BoundedTcpServer):
-            return
-        if server.allowed is not None:
-            peer = (transport.get_extra_info("peername") or ("",))[0]
-            if not _is_allowed(str(peer), server.allowed):
-                server.refuse(self, str(peer))  # before the cap: a refused client never displaces an allowed one
-                return
-        server.make_room(self)
-
-    def callback_data(self, data: bytes, addr: tuple | None = None) -> int:
-        """Every complete request in ``data``: a client may send several in one segment (pipelining, as
-        Modbus/TCP allows), and pymodbus reads one and leaves the others until more bytes come."""
-        self.last_activity = time.monotonic()
-        used = 0
-        while used < len(data):
-            n = super().callback_data(data[used:], addr)  # one request; its answer is scheduled
-            if n <= 0:
-                break  # an incomplete request: the transport keeps it for the next bytes
-            used += n
-            if self.last_pdu is not None:  # None: answered already (malformed) or not for this unit
-                self._requests.append((self.last_pdu, self.last_addr))
-        return used
-
-    def send(self, data: bytes, addr: tuple | None = None) -> None:
-        # pymodbus empties its receive buffer when it answers: a request already received in part would be lost
-        kept = self.recv_buffer
-        super().send(data, addr)
-        self.recv_buffer = kept
-
-    async def handle_request(self) -> None:
-        # one scheduled answer per request read above, in order
-        if not self._requests:
-            return
-        self.last_pdu, self.last_addr = self._requests.popleft()
-        await super().handle_request()
-
-
-class _BoundedTcpServer(ModbusTcpServer):
-    """ModbusTcpServer with a connection cap and an idle time-out: without them a client that
-    opens connections and never closes them runs the process out of file descriptors (no new
-    PLC connection, no MQTT reconnect). Beyond ``max_connections`` the connection idle the
-    longest is closed to make room, so a PLC reconnecting always gets in."""
-
-    def __init__(self, *args: Any, max_connections: int, idle_timeout: float, allow_from: tuple[str, ...] = (),
-                 **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self.max_connections = max(1, max_connections)
-        self.idle_timeout = idle_timeout
-        self.dropped = 0  # connections closed for the cap or the idle time-out
-        self.refused = 0  # connections from addresses outside allow_from
-        self._last_warning = -float("inf")
-        self._last_refusal_log = -float("inf")
-        self.allowed = allowed_networks(allow_from) if allow_from else None
-
-    def refuse(self, conn: Any, peer: str) -> None:
-        self.refused += 1
-        now = time.monotonic()
-        if now - self._last_refusal_log >= 10.0:
-            self._last_refusal_log = now
-            log.warning("Modbus: refused a connection from %s (not in allow_from; %d refused so far)", peer,
-                        self.refused)
-        conn.close()
-
-    def callback_new_connection(self) -> _TrackedHandler:
-        return _TrackedHandler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
-
-    def make_room(self, new: Any) -> None:
-        """Close the connections idle the longest until ``new`` fits under the cap."""
-        others = [c for c in self.active_connections.values() if c is not new]
-        while len(others) >= self.max_connections:
-            oldest = min(others, key=lambda c: getattr(c, "last_activity", 0.0))
-            others.remove(oldest)
-            self._drop(oldest, f"more than {self.max_connections} connections")
-
-    def close_idle(self) -> None:
-        if self.idle_timeout <= 0:
-            return
-        now = time.monotonic()
-        for conn in list(self.active_connections.values()):
-            if now - getattr(conn, "last_activity", now) > self.idle_timeout:
-                self._drop(conn, f"idle for more than {self.idle_timeout:g} s")
-
-    def _drop(self, conn: Any, why: str) -> None:
-        self.dropped += 1
-        now = time.monotonic()
-        if now - self._last_warning >= 10.0:  # one line per 10 s, however hard a client tries
-            self._last_warning = now
-            log.warning("Modbus: closed a client connection (%s; %d closed so far)", why, self.dropped)
-        conn.close()
+    def part_words(self) -> list[int]:
+        a, n = R.WRITABLE["part_id"]
+        return self.new[a - R.WRITABLE_START: a - R.WRITABLE_START + n]
 
 
 class ModbusServer(Publisher):
@@ -495,60 +350,54 @@ class ModbusServer(Publisher):
         # be answered as done and not applied: the PLC is told instead that it is not served
         return ExcCodes.ILLEGAL_FUNCTION
 
-    def _write_inputs(self, address: int, values: list) -> ExcCodes | None:  # noqa: C901
+    def _write_inputs(self, address: int, values: list) -> ExcCodes | None:
         """FC 6 / FC 16 to the writable holding registers (pymodbus refused every other address). Everything
         written is checked first: a refused write changes nothing."""
         if address < R.WRITABLE_START or address + len(values) > R.WRITABLE_END:
             return ExcCodes.ILLEGAL_ADDRESS
-        touched = set(range(address, address + len(values)))
+        write = _InputWrite(address, values, self._inputs)
+        refused = self._refusal(write)
+        if refused is None:
+            self._apply(write)
+        return refused
 
-        def written(name: str) -> bool:
-            a, n = R.WRITABLE[name]
-            return bool(touched & set(range(a, a + n)))
-
-        def word(words: list[int], name: str) -> int:
-            return words[R.WRITABLE[name][0] - R.WRITABLE_START]
-
-        if any(written(n) for n in R.PART_INPUTS) and (self._live.busy or self._clock() < self._hold_until):
+    def _refusal(self, w: _InputWrite) -> ExcCodes | None:
+        """Why the write is refused (the first check it fails, in the order docs/modbus.md gives), or None."""
+        if any(w.written(n) for n in R.PART_INPUTS) and (self._live.busy or self._clock() < self._hold_until):
             return ExcCodes.DEVICE_BUSY  # the part being measured cannot change
-        new = list(self._inputs)
-        new[address - R.WRITABLE_START: address - R.WRITABLE_START + len(values)] = [int(v) & 0xFFFF for v in values]
-        a, n = R.WRITABLE["part_id"]
-        part_words = new[a - R.WRITABLE_START: a - R.WRITABLE_START + n]
-        raw = b"".join(w.to_bytes(2, "big") for w in part_words).replace(b"\0", b"")
+        raw = b"".join(word.to_bytes(2, "big") for word in w.part_words()).replace(b"\0", b"")
         if any(not 32 <= ch < 127 for ch in raw):
             return ExcCodes.ILLEGAL_VALUE
-        recipe = word(new, "recipe_select")
-        if written("recipe_select") and recipe != 0 and recipe not in self.recipe_numbers:
+        recipe = w.word("recipe_select")
+        if w.written("recipe_select") and recipe != 0 and recipe not in self.recipe_numbers:
             return ExcCodes.ILLEGAL_VALUE
-        command, parameter = word(new, "command"), word(new, "command_parameter")
-        if written("command") and command != 0:
-            if command not in R.COMMANDS:
-                return ExcCodes.ILLEGAL_VALUE
-            if R.COMMANDS[command] == "select_recipe" and parameter != 0 and parameter not in self.recipe_numbers:
-                return ExcCodes.ILLEGAL_VALUE
-        if written("result_ack"):
-            ack = word(new, "result_ack")
+        command, parameter = w.word("command"), w.word("command_parameter")
+        if w.written("command") and command != 0 and (command not in R.COMMANDS or (
+                R.COMMANDS[command] == "select_recipe" and parameter != 0 and parameter not in self.recipe_numbers)):
+            return ExcCodes.ILLEGAL_VALUE
+        if w.written("result_ack"):
             with self._lock:
-                if not self._queue or self._queue[0][0] != ack:
+                if not self._queue or self._queue[0][0] != w.word("result_ack"):
                     return ExcCodes.ILLEGAL_VALUE  # not the result shown: nothing is acknowledged
-        # every check passed: apply
-        if written("plc_heartbeat") and word(new, "plc_heartbeat") != word(self._inputs, "plc_heartbeat"):
+        return None
+
+    def _apply(self, w: _InputWrite) -> None:
+        """A write that passed every check: the registers take it, and what it asks for is handed on."""
+        if w.written("plc_heartbeat") and w.word("plc_heartbeat") != w.old_word("plc_heartbeat"):
             self._plc_heartbeat_at = self._clock()
-        self._inputs = new
-        if written("result_ack"):
-            self.acknowledge(word(new, "result_ack"))
-        if any(a <= t < a + n for t in touched):
-            self._on_command(V.PART_ID, "modbus", {"part_id": R.decode_ascii(part_words)})
-        if written("recipe_select"):
-            self._on_command(V.RECIPE, "modbus", {"recipe": recipe})
-        if written("command"):
+        self._inputs = w.new
+        if w.written("result_ack"):
+            self.acknowledge(w.word("result_ack"))
+        if w.written("part_id"):
+            self._on_command(V.PART_ID, "modbus", {"part_id": R.decode_ascii(w.part_words())})
+        if w.written("recipe_select"):
+            self._on_command(V.RECIPE, "modbus", {"recipe": w.word("recipe_select")})
+        if w.written("command"):
             with self._lock:
                 self._trigger_ack = False  # the PLC took its hand off the trigger (or gives a new command)
                 self._rebuild()
-            if command != 0:
-                self._dispatch(command, parameter)
-        return None
+            if w.word("command") != 0:
+                self._dispatch(w.word("command"), w.word("command_parameter"))
 
     def _dispatch(self, code: int, parameter: int) -> None:
         name = R.COMMANDS[code]
@@ -595,20 +444,20 @@ class ModbusServer(Publisher):
     async def _main(self) -> None:
         s = self.settings
         device = self._device()
-        server: _BoundedTcpServer | ModbusSerialServer
+        server: BoundedTcpServer | ModbusSerialServer
         if s.mode == "tcp":
-            server = _BoundedTcpServer(device, address=(s.host, s.port), ignore_missing_devices=False,
-                                       custom_pdu=[_WriteSingleCoil], max_connections=s.max_connections,
+            server = BoundedTcpServer(device, address=(s.host, s.port), ignore_missing_devices=False,
+                                       custom_pdu=[WriteSingleCoil], max_connections=s.max_connections,
                                        idle_timeout=s.idle_timeout, allow_from=tuple(s.allow_from))
             where = f"TCP {s.host}:{s.port}"
         elif s.mode == "rtu":
             server = ModbusSerialServer(device, framer=FramerType.RTU, port=s.serial_port or "", baudrate=s.baudrate,
                                         parity=s.parity, stopbits=s.stopbits, bytesize=s.bytesize,
-                                        ignore_missing_devices=True, custom_pdu=[_WriteSingleCoil])
+                                        ignore_missing_devices=True, custom_pdu=[WriteSingleCoil])
             where = f"RTU {s.serial_port} {s.baudrate} {s.bytesize}{s.parity}{s.stopbits}"
         else:
             raise ModbusServerError(f"unknown Modbus mode {s.mode!r}; expected tcp or rtu")
-        server.context = _OneUnitCore(device)
+        server.context = OneUnitCore(device)
         self._server = server
         try:
             await server.serve_forever(background=True)
@@ -621,12 +470,12 @@ class ModbusServer(Publisher):
                  f"TCP {s.host}:{self.bound_port}", s.unit_id)
         if (exposure := network_exposure(s)) is not None:
             log.warning("%s", exposure)
-        if isinstance(server, _BoundedTcpServer) and s.idle_timeout > 0:
+        if isinstance(server, BoundedTcpServer) and s.idle_timeout > 0:
             # a reference is kept: the loop holds tasks only weakly
             self._idle_task = asyncio.get_running_loop().create_task(self._close_idle(server, s.idle_timeout))
 
     @staticmethod
-    async def _close_idle(server: "_BoundedTcpServer", idle_timeout: float) -> None:
+    async def _close_idle(server: "BoundedTcpServer", idle_timeout: float) -> None:
         while not server.serving.done():
             await asyncio.wait([server.serving], timeout=min(1.0, idle_timeout / 4))
             server.close_idle()
@@ -641,13 +490,13 @@ class ModbusServer(Publisher):
     def connections_refused(self) -> int:
         """TCP connections refused since start (client address not in ``allow_from``)."""
         server = self._server
-        return server.refused if isinstance(server, _BoundedTcpServer) else 0
+        return server.refused if isinstance(server, BoundedTcpServer) else 0
 
     @property
     def connections_dropped(self) -> int:
         """TCP client connections closed for the cap or the idle time-out since start."""
         server = self._server
-        return server.dropped if isinstance(server, _BoundedTcpServer) else 0
+        return server.dropped if isinstance(server, BoundedTcpServer) else 0
 
     def alive(self) -> bool:
         """True while the server serves (after a successful ``start``)."""

@@ -54,7 +54,6 @@ from paho.mqtt.enums import CallbackAPIVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
-from measurement import flags as F
 from service.core import vocabulary as V
 from service.errors import ConfigError
 from service.logs import Throttle
@@ -65,7 +64,9 @@ from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CommandReply
 
 # the settings are read by the configuration without paho; here for the client's users too
+from .discovery import discovery_messages
 from .settings import MqttSettings
+from .topics import Topics
 
 log = logging.getLogger("moi.mqtt")
 
@@ -101,35 +102,34 @@ MAX_CORRELATION = 128
 _never_raises = never_raises(log, "MQTT")
 
 
-class Topics:
-    def __init__(self, prefix: str, device_id: str) -> None:
-        base = f"{prefix.strip('/')}/{device_id}" if prefix.strip("/") else device_id
-        self.base = base
-        self.result = f"{base}/result"
-        self.last_result = f"{base}/result/last"  # retained copy of the latest delivered result
-        self.status = f"{base}/status"
-        self.state = f"{base}/state"
-        self.cmd_measure = f"{base}/cmd/measure"
-        self.cmd_abort = f"{base}/cmd/abort"
-        self.cmd_recipe = f"{base}/cmd/recipe"
-        self.cmd_set = f"{base}/cmd/set"  # a tensor set: {"action": "redo" | "skip" | "abort", "orientation": name}
-        self.cmd_part_id = f"{base}/cmd/part_id"
-        #: command topic → the daemon's command (``service.core.vocabulary``)
-        self.commands = {f"{base}/cmd/{topic}": name for topic, name in V.BY_TOPIC.items()}
-        self.reply = f"{base}/reply"      # commands' outcomes (unless an MQTT 5 response topic was given)
-        self.recipe = f"{base}/recipe"    # retained: the active recipe {"name", "number"} (name "none": none)
-        self.part_id = f"{base}/part_id"  # retained: the next part's ID {"part_id"}
-        self.set_state = f"{base}/set"    # retained: the tensor set's progress (the orientation to mount next)
-        self.tensor = f"{base}/tensor"    # retained: the latest tensor set's record with its tensor
+def _command_document(payload: bytes) -> tuple[Any, str | None]:
+    """A command's payload read as JSON (None when it is not, or too long to read) and its "id" (for dedupe)."""
+    if len(payload) > MAX_COMMAND_PAYLOAD:
+        return None, None
+    try:
+        doc = json.loads(payload)
+    except (ValueError, UnicodeDecodeError, RecursionError):
+        return None, None  # any payload is a valid command; only a JSON "id" is used for dedupe
+    return doc, (str(doc["id"])[:128] if isinstance(doc, dict) and doc.get("id") is not None else None)
 
-    def spc(self, recipe: str) -> str:
-        """The retained SPC summary topic of a recipe."""
-        return f"{self.base}/spc/{recipe}"
 
-    def for_kind(self, kind: str) -> str:
-        if kind == "result":
-            return self.result
-        raise ValueError(f"unknown outbox kind {kind!r}")
+def _command_data(name: str, payload: bytes, doc: Any) -> tuple[dict[str, Any], str | None]:
+    """The data a command carries (the keys its command takes, or a part command's bare name, number or ID),
+    and why it is malformed (None: it is not)."""
+    keys = V.COMMANDS[name].data or V.PART_DATA  # an abort's are passed on and ignored
+    data: dict[str, Any] = {k: doc[k] for k in keys if k in doc} if isinstance(doc, dict) else {}
+    if name == V.SET and not isinstance(data.get("action"), str):
+        return data, 'expected JSON {"action": "redo" | "skip" | "abort"}'
+    if V.COMMANDS[name].act == "part":
+        if len(payload) > MAX_COMMAND_PAYLOAD:  # no recipe or part has such a name
+            return data, f"{len(payload)} bytes (at most {MAX_COMMAND_PAYLOAD})"
+        if not isinstance(doc, dict):  # a bare name, number or ID
+            data = {name: payload.decode("utf-8", errors="replace").strip()}
+            if data[name].startswith(("{", "[")):  # JSON meant, and broken (or not an object): no name
+                return data, f'not JSON {{"{name}": ...}} (nor a {name.replace("_", " ")})'
+        if name not in data:
+            return data, f'expected the {name.replace("_", " ")} or JSON {{"{name}": ...}}'
+    return data, None
 
 
 class _Client(mqtt.Client):
@@ -348,56 +348,46 @@ class MqttService(Publisher):
         self.sender.acked(mid)
 
     @_never_raises
-    def _on_message(self, client, userdata, message) -> None:  # noqa: C901
-        if message.retain:
-            self._say(logging.WARNING, "MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
-            return
-        name = self.topics.commands.get(message.topic)
+    def _on_message(self, client, userdata, message) -> None:
+        name = self._command_name(message)
         if name is None:
             return
+        doc, cmd_id = _command_document(message.payload)
+        reply = self._replier(message, cmd_id)
+        data, malformed = _command_data(name, message.payload, doc)
+        if malformed is not None:
+            self._say(logging.WARNING, "MQTT: %s refused: %s", message.topic, malformed)
+            reply(CommandReply(name, "refused", "malformed", malformed))
+            return
+        if cmd_id is not None and self._seen_before(name, cmd_id):
+            self._say(logging.INFO, "MQTT: duplicate %s command id %s ignored", name, cmd_id)
+            reply(CommandReply(name, "refused", "duplicate"))
+            return
+        self._on_command(name, "mqtt", data or None, reply)
+
+    def _command_name(self, message: Any) -> str | None:
+        """The command a message on a command topic asks for; None for another topic, a retained message or
+        an empty one (all said in the log but another topic's)."""
+        if message.retain:
+            self._say(logging.WARNING, "MQTT: ignoring retained command on %s (clear it with an empty retained message)", message.topic)
+            return None
+        name = self.topics.commands.get(message.topic)
+        if name is None:
+            return None
         if not message.payload:
             # how a retained command is cleared (the broker hands the empty message on to the subscribers
             # as a plain one): never a command itself
             self._say(logging.INFO, "MQTT: empty message on %s ignored (the clearing of a retained command)", message.topic)
-            return
-        cmd_id = None
-        data: dict[str, Any] = {}
-        doc: Any = None
-        if message.payload and len(message.payload) <= MAX_COMMAND_PAYLOAD:
-            try:
-                doc = json.loads(message.payload)
-                if isinstance(doc, dict) and doc.get("id") is not None:
-                    cmd_id = str(doc["id"])[:128]
-            except (ValueError, UnicodeDecodeError, RecursionError):
-                pass  # any payload is a valid command; only a JSON "id" is used for dedupe
-        reply = self._replier(message, cmd_id)
+            return None
+        return name
 
-        def refuse(reason: str, detail: str) -> None:
-            self._say(logging.WARNING, "MQTT: %s refused: %s", message.topic, detail)
-            reply(CommandReply(name, "refused", reason, detail))
-
-        keys = V.COMMANDS[name].data or V.PART_DATA  # an abort's are passed on and ignored
-        if isinstance(doc, dict):
-            data = {k: doc[k] for k in keys if k in doc}
-        if name == V.SET and not isinstance(data.get("action"), str):
-            return refuse("malformed", 'expected JSON {"action": "redo" | "skip" | "abort"}')
-        if V.COMMANDS[name].act == "part":
-            if len(message.payload) > MAX_COMMAND_PAYLOAD:  # no recipe or part has such a name
-                return refuse("malformed", f"{len(message.payload)} bytes (at most {MAX_COMMAND_PAYLOAD})")
-            if not isinstance(doc, dict):  # a bare name, number or ID
-                data = {name: message.payload.decode("utf-8", errors="replace").strip()}
-                if data[name].startswith(("{", "[")):  # JSON meant, and broken (or not an object): no name
-                    return refuse("malformed", f'not JSON {{"{name}": ...}} (nor a {name.replace("_", " ")})')
-            if name not in data:
-                return refuse("malformed", f'expected the {name.replace("_", " ")} or JSON {{"{name}": ...}}')
-        if cmd_id is not None:
-            with self._seen_lock:
-                if (name, cmd_id) in self._seen_ids:
-                    self._say(logging.INFO, "MQTT: duplicate %s command id %s ignored", name, cmd_id)
-                    reply(CommandReply(name, "refused", "duplicate"))
-                    return
-                self._seen_ids.append((name, cmd_id))
-        self._on_command(name, "mqtt", data or None, reply)
+    def _seen_before(self, name: str, cmd_id: str) -> bool:
+        """Whether a command of this name and id came already (else it is remembered)."""
+        with self._seen_lock:
+            if (name, cmd_id) in self._seen_ids:
+                return True
+            self._seen_ids.append((name, cmd_id))
+            return False
 
     def _replier(self, message: Any, cmd_id: str | None) -> Callable[[CommandReply], None]:
         """The reply of a command message: to its MQTT 5 response topic with its correlation data, else to
@@ -519,77 +509,6 @@ class MqttService(Publisher):
         the broker is away paho keeps it queued and sends it on reconnection (a test holds this); a
         restart of the daemon in between loses it until the next one is published."""
         self.client.publish(topic, json.dumps(doc, allow_nan=False, default=str), qos=1, retain=True)
-
-
-def entity_slug(text: str) -> str:
-    """``text`` as Home Assistant allows in an entity id: lower case letters, digits and single underscores."""
-    out = "".join(c if c.isascii() and c.isalnum() else "_" for c in text.lower())
-    return "_".join(part for part in out.split("_") if part) or "x"
-
-
-def discovery_messages(settings: MqttSettings, topics: Topics, device_id: str,
-                       software_version: str, recipes: tuple[str, ...] = ()) -> list[tuple[str, dict[str, Any]]]:
-    """Home Assistant MQTT discovery config messages (topic, config). ``recipes``: the recipe names (a select
-    entity offers them, with "none")."""
-    from service.parts.recipes import PART_ID_LENGTH
-
-    dp = settings.discovery_prefix.strip("/")
-    node = "".join(c if c.isalnum() or c in "_-" else "_" for c in device_id)
-    slug = entity_slug(device_id)
-    device = {"identifiers": [f"moi_{node}"], "name": f"moi {device_id}", "manufacturer": "moi",
-              "model": "pendulum inertia appliance", "sw_version": software_version}
-    common = {"availability_topic": topics.status, "payload_available": "online",
-              "payload_not_available": "offline", "device": device}
-    origin = {"name": "moi", "sw_version": software_version}
-    out: list[tuple[str, dict[str, Any]]] = []
-
-    def entity(domain: str, key: str, topic_key: str | None = None, **cfg: Any) -> None:
-        oid = f"moi_{slug}_{entity_slug(key)}"
-        # object_id is deprecated in favour of default_entity_id; both until Home Assistant drops object_id
-        doc = {"unique_id": f"moi_{node}_{key}", "object_id": oid, "default_entity_id": f"{domain}.{oid}", **cfg,
-               "origin": origin, **common}
-        out.append((f"{dp}/{domain}/{node}/{topic_key or key}/config", {k: v for k, v in doc.items() if v is not None}))
-
-    # the result sensors read the retained copy of the latest result: known again right after a
-    # Home Assistant restart, not "unknown" until the next measurement. Every one has its unit (SI; "1":
-    # a ratio), so Home Assistant keeps long-term statistics of it.
-    sensors = [
-        ("J", "Moment of inertia", "kg·m²", "{{ value_json.J }}"),
-        ("J_std", "Moment of inertia uncertainty", "kg·m²", "{{ value_json.J_std }}"),
-        ("J_object", "Moment of inertia of the part (J − tare)", "kg·m²", "{{ value_json.J_object }}"),
-        ("omega_n", "Natural angular frequency", "rad/s", "{{ value_json.omega_n }}"),
-        ("damping_ratio", "Damping ratio", "1", "{{ value_json.damping_ratio }}"),
-        ("residual_rms", "Fit residual RMS", "rad", "{{ value_json.residual_rms_after }}"),
-    ]
-    for key, name, unit, template in sensors:
-        entity("sensor", key, name=name, state_topic=topics.last_result, value_template=template,
-               state_class="measurement", unit_of_measurement=unit,
-               json_attributes_topic=topics.last_result if key == "J" else None,
-               json_attributes_template=("{{ {'uuid': value_json.uuid, 'seq': value_json.seq, "
-                                         "'finished_at': value_json.finished_at, 'flags': value_json.flags} | tojson }}")
-               if key == "J" else None)
-    # text sensors (no unit: they are words)
-    entity("sensor", "state", name="Sequencer state", state_topic=topics.state, value_template="{{ value_json.state }}")
-    # the part: its ID and its verdict (OK / NOK / INVALID once complete, "pending" before, "none" without a recipe)
-    for key, name, template in (
-            ("part_id", "Part ID", "{{ value_json.part_id or '' }}"),
-            ("verdict", "Part verdict", "{{ value_json.verdict or ('pending' if value_json.recipe else 'none') }}")):
-        entity("sensor", key, name=name, state_topic=topics.last_result, value_template=template)
-    for flag in F.FLAG_BITS:
-        # "problem" only for the warnings (the condition may move J beyond its u); the others are information
-        entity("binary_sensor", f"flag_{flag}", flag, name=f"Flag {flag.replace('_', ' ')}",
-               device_class="problem" if F.grade(flag) == F.WARNING else None, state_topic=topics.last_result,
-               value_template="{{ 'ON' if '" + flag + "' in value_json.flags else 'OFF' }}")
-    entity("button", "measure", name="Measure", command_topic=topics.cmd_measure, payload_press="{}")
-    entity("button", "abort", name="Abort / acknowledge fault", command_topic=topics.cmd_abort, payload_press="{}")
-    if recipes:
-        entity("select", "recipe", name="Recipe", options=["none", *recipes], command_topic=topics.cmd_recipe,
-               command_template="{{ {'recipe': (0 if value == 'none' else value)} | tojson }}",
-               state_topic=topics.recipe, value_template="{{ value_json.name }}")
-    entity("text", "next_part_id", name="Next part ID", command_topic=topics.cmd_part_id,
-           command_template="{{ {'part_id': value} | tojson }}", state_topic=topics.part_id,
-           value_template="{{ value_json.part_id }}", min=0, max=PART_ID_LENGTH, pattern="[ -~]*")
-    return out
 
 
 PUBLISHER = MqttService

@@ -304,10 +304,18 @@ async def install(server: Server) -> Model:
     """Register the namespaces and add the types (before the server starts; a few ms)."""
     model = Model(di=await server.register_namespace(NS_DI), machinery=await server.register_namespace(NS_MACHINERY),
                   result=await server.register_namespace(NS_RESULT), moi=await server.register_namespace(NS_MOI))
-    di, mach, res, moi = model.di, model.machinery, model.result, model.moi
-    n = model.nodes
+    await _identification_types(server, model)
+    await _state_machine_types(server, model)
+    named = await _result_data_types(server, model)
+    await _result_type(server, model)
+    rm_type = await _result_management_type(server, model, named)
+    await _result_ready_event_types(server, model, rm_type)
+    return model
 
-    # --- DI and Machinery: identification --------------------------------------------------------------
+
+async def _identification_types(server: Server, model: Model) -> None:
+    """DI and Machinery: the machine's identification."""
+    di, mach = model.di, model.machinery
     functional_group = await _object_type(server.get_node(ua.ObjectIds.FolderType), node_id(1005, di),
                                           "FunctionalGroupType")
     item_ident = await _object_type(functional_group, node_id(1004, mach), "MachineryItemIdentificationType",
@@ -323,18 +331,25 @@ async def install(server: Server) -> Model:
     machine_ident = await _object_type(item_ident, node_id(1012, mach), "MachineIdentificationType")
     p = await machine_ident.add_property(node_id(6015, mach), _qn("ProductInstanceUri", di), "")
     await p.set_modelling_rule(True)
-    n["MachineIdentificationType"] = machine_ident.nodeid
+    model.nodes["MachineIdentificationType"] = machine_ident.nodeid
 
-    # --- Machinery: the two state machines ---------------------------------------------------------------
+
+async def _state_machine_types(server: Server, model: Model) -> None:
+    """Machinery: the two state machines."""
+    mach = model.machinery
     fsm = server.get_node(ua.ObjectIds.FiniteStateMachineType)
     item_sm = await _object_type(fsm, node_id(1002, mach), "MachineryItemState_StateMachineType")
     await _states(server, model, item_sm, ITEM_STATE_NODES)
     mode_sm = await _object_type(fsm, node_id(1008, mach), "MachineryOperationModeStateMachineType")
     await _states(server, model, mode_sm, OPERATION_MODE_NODES)
-    n["MachineryItemState_StateMachineType"] = item_sm.nodeid
-    n["MachineryOperationModeStateMachineType"] = mode_sm.nodeid
+    model.nodes["MachineryItemState_StateMachineType"] = item_sm.nodeid
+    model.nodes["MachineryOperationModeStateMachineType"] = mode_sm.nodeid
 
-    # --- Result Transfer: data types ---------------------------------------------------------------------
+
+async def _result_data_types(server: Server, model: Model) -> dict[str, ua.NodeId]:
+    """Result Transfer's data types and the appliance's InertiaResultDataType; returns the NodeIds of those
+    the method arguments name."""
+    res, moi = model.result, model.moi
     evaluation = await new_enum(server, node_id(3002, res), _qn("ResultEvaluationEnum", res),
                                 list(RESULT_EVALUATION))
     times = await _structure(server, node_id(3006, res), node_id(5003, res), "ProcessingTimesDataType", [
@@ -356,14 +371,19 @@ async def install(server: Server) -> Model:
                                   [_field(name, node_id(dt), array, description=doc)
                                    for name, dt, array, doc, _ in CONTENT_FIELDS], ua.StructureType.Structure)
     named["ResultDataType"] = result_dt.nodeid
-    n.update(ResultEvaluationEnum=evaluation.nodeid, ResultMetaDataType=meta.nodeid, ResultDataType=result_dt.nodeid,
-             InertiaResultDataType=content_dt.nodeid, ProcessingTimesDataType=times.nodeid)
+    model.nodes.update(ResultEvaluationEnum=evaluation.nodeid, ResultMetaDataType=meta.nodeid,
+                       ResultDataType=result_dt.nodeid, InertiaResultDataType=content_dt.nodeid,
+                       ProcessingTimesDataType=times.nodeid)
+    return named
 
-    # --- Result Transfer: ResultType ---------------------------------------------------------------------
+
+async def _result_type(server: Server, model: Model) -> None:
+    """Result Transfer: ResultType, the variable type of a result."""
+    res, n = model.result, model.nodes
     result_type = await server.get_node(ua.ObjectIds.BaseDataVariableType).add_variable_type(
-        node_id(2001, res), _qn("ResultType", res), result_dt.nodeid)
+        node_id(2001, res), _qn("ResultType", res), n["ResultDataType"])
     rm_meta = await result_type.add_variable(node_id(6009, res), _qn("ResultMetaData", res),
-                                             ua.Variant(None, ua.VariantType.Null), datatype=meta.nodeid)
+                                             ua.Variant(None, ua.VariantType.Null), datatype=n["ResultMetaDataType"])
     rm_content = await result_type.add_variable(node_id(6010, res), _qn("ResultContent", res),
                                                 ua.Variant([], ua.VariantType.Variant),
                                                 datatype=node_id(ua.ObjectIds.BaseDataType))
@@ -373,7 +393,11 @@ async def install(server: Server) -> Model:
         await rereference(result_type, child, ua.ObjectIds.HasStructuredComponent)
     n["ResultType"] = result_type.nodeid
 
-    # --- Result Transfer: ResultManagementType and ResultReadyEventType ----------------------------------
+
+async def _result_management_type(server: Server, model: Model, named: dict[str, ua.NodeId]) -> Node:
+    """Result Transfer: ResultManagementType with its methods (their arguments typed by ``named``) and its
+    Results folder."""
+    res, moi = model.result, model.moi
     rm_type = await _object_type(server.nodes.base_object_type, node_id(1004, res), "ResultManagementType")
     for name, (nid, inputs, outputs) in METHODS.items():
         def args(table: tuple[_Arg, ...]) -> list[ua.Argument]:
@@ -390,15 +414,19 @@ async def install(server: Server) -> Model:
             await prop.set_modelling_rule(True)
     results = await rm_type.add_folder(node_id(5011, res), _qn("Results", res))
     await results.set_modelling_rule(False)
-    n["ResultManagementType"] = rm_type.nodeid
+    model.nodes["ResultManagementType"] = rm_type.nodeid
+    return rm_type
 
+
+async def _result_ready_event_types(server: Server, model: Model, rm_type: Node) -> None:
+    """Result Transfer's ResultReadyEventType, generated by ``rm_type``, and the appliance's subtype."""
+    res, moi, n = model.result, model.moi, model.nodes
     ready = await _object_type(server.get_node(ua.ObjectIds.BaseEventType), node_id(1002, res),
                                "ResultReadyEventType", abstract=True)
     ev_result = await variable(ready, node_id(6032, res), _qn("Result", res), ua.Variant(None, ua.VariantType.Null),
-                               result_dt.nodeid, result_type.nodeid)
+                               n["ResultDataType"], n["ResultType"])
     await ev_result.set_modelling_rule(True)
     await rm_type.add_reference(ready.nodeid, ua.ObjectIds.GeneratesEvent, forward=True, bidirectional=False)
     inertia_ready = await _object_type(ready, node_id("InertiaResultReadyEventType", moi),
                                        "InertiaResultReadyEventType")
     n.update(ResultReadyEventType=ready.nodeid, InertiaResultReadyEventType=inertia_ready.nodeid)
-    return model

@@ -27,24 +27,16 @@ import asyncio
 import contextlib
 import dbm
 import gc
-import hmac
 import importlib
 import logging
 import math
-import socket
 import time
 from collections import OrderedDict
-from datetime import UTC, datetime
+from datetime import datetime
 from pathlib import Path
 from typing import Any, Mapping
 
 from asyncua import Node, Server, ua
-from asyncua.common.instantiate_util import instantiate
-from asyncua.crypto.cert_gen import setup_self_signed_certificate
-from asyncua.crypto.permission_rules import User, UserRole
-from asyncua.crypto.truststore import TrustStore
-from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
-from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from drivers.aioloop import LoopThread
 from service.errors import ConfigError, OpcUaServerError
@@ -53,23 +45,10 @@ from service.publish.payload import decision, not_decidable
 from service.publish.port import ApplianceView, Publisher
 from service.states import STATES
 
-from .guard import PEER, Guard, GuardedServer, Limits
-from .model import (  # noqa: F401
-    CONTENT_FIELDS,
-    META_COMPONENTS,
-    NS_DI,
-    NS_MACHINERY,
-    NS_MOI,
-    NS_RESULT,
-    RESULT_EVALUATION,
-    Model,
-    install,
-    node_id,
-    register_result_data_type,
-    rereference,
-    variable,
-    with_unit,
-)
+from .guard import Guard, GuardedServer, Limits
+from .machine import EMPTY, VTYPES, add_machine
+from .model import CONTENT_FIELDS, META_COMPONENTS, RESULT_EVALUATION, Model, install, register_result_data_type
+from .security import Users, secure
 from .settings import OpcUaSettings
 
 log = logging.getLogger("moi.opcua")
@@ -175,27 +154,6 @@ def result_document(payload: Mapping[str, Any]) -> dict[str, Any]:
     return {"ResultMetaData": meta, "ResultContent": content}
 
 
-class _Users:
-    """asyncua's user manager: the one configured user (and anonymous clients when allowed); wrong logins and
-    throttled hosts are the guard's (``guard.Guard``): every login is tried, a throttled host's more slowly."""
-
-    def __init__(self, username: str | None, password: str | None, anonymous: bool, guard: Guard | None = None) -> None:
-        self.username, self.password, self.anonymous = username, password, anonymous
-        self.guard = guard
-
-    def get_user(self, iserver: Any, username: str | None = None, password: str | None = None,
-                 certificate: Any = None) -> User | None:
-        if username is None:
-            return User(role=UserRole.User) if self.anonymous else None
-        host = PEER.get()
-        ok = self.username is not None and self.password is not None and bool(
-            hmac.compare_digest(username.encode(), self.username.encode()) & hmac.compare_digest(
-                (password or "").encode(), self.password.encode()))
-        if not ok and self.guard is not None:
-            self.guard.login_failed(host)
-        return User(role=UserRole.User, name=username) if ok else None
-
-
 class OpcUaServer(Publisher):
     """The OPC UA server; ``start()`` returns once it listens."""
 
@@ -276,7 +234,7 @@ class OpcUaServer(Publisher):
         for p in (cache, cert, key):
             if p is not None:
                 p.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # the key is never readable by others
-        server = GuardedServer(self.guard, user_manager=_Users(s.username, self.password, s.anonymous, self.guard))
+        server = GuardedServer(self.guard, user_manager=Users(s.username, self.password, s.anonymous, self.guard))
         await server.init(cache)
         # asyncua's standard address space is some 0.5 M Python objects that live as long as the server: out of
         # the collector's generations (unfrozen at stop), no full collection walks them again (one took a third
@@ -284,30 +242,7 @@ class OpcUaServer(Publisher):
         gc.freeze()
         server.set_endpoint(f"opc.tcp://{s.host}:{s.port}/moi/")
         server.set_server_name(f"moi {self.device_id}")
-        uri = f"urn:moi:{self.device_id}"
-        await server.set_application_uri(uri)
-        await setup_self_signed_certificate(key, cert, uri, socket.gethostname(), [ExtendedKeyUsageOID.SERVER_AUTH],
-                                            {"countryName": "DE", "organizationName": "moi",
-                                             "commonName": f"moi {self.device_id}"})
-        key.chmod(0o600)
-        await server.load_certificate(str(cert))
-        await server.load_private_key(str(key))
-        policies = [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt]
-        if s.allow_unencrypted:
-            policies.append(ua.SecurityPolicyType.NoSecurity)
-        server.set_security_policy(policies)
-        if s.trusted_clients is not None:
-            trusted = Path(s.trusted_clients)
-            if not trusted.is_dir():
-                raise OpcUaServerError(f"[opcua] trusted_clients {s.trusted_clients!r} is not a directory")
-            store = TrustStore([trusted], [])
-            await store.load()
-            server.set_certificate_validator(CertificateValidator(
-                CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT, store))
-        tokens: list[type] = [ua.UserNameIdentityToken]
-        if s.anonymous:
-            tokens.append(ua.AnonymousIdentityToken)
-        server.set_identity_tokens(tokens)
+        await secure(server, s, self.device_id, cert, key)
         self._ack_lock = asyncio.Lock()
         await asyncio.to_thread(self._restore)
         await self._build(server)
@@ -355,7 +290,6 @@ class OpcUaServer(Publisher):
             log.warning("OPC UA: cannot keep the acknowledged results in %s: %s", self._acks.path, exc)
 
     async def _build(self, server: Server) -> None:
-        s = self.settings
         t0 = time.monotonic()
         model = self._model = await install(server)
         await server.load_data_type_definitions()  # the Python classes of the structures (ua.ResultDataType ...)
@@ -364,82 +298,21 @@ class OpcUaServer(Publisher):
         self._types = {name: getattr(ua, name) for name in ("ResultDataType", "ResultMetaDataType",
                                                              "ProcessingTimesDataType", "InertiaResultDataType",
                                                              "ResultEvaluationEnum")}
-        di, mach, res, idx = model.di, model.machinery, model.result, model.moi
-        t = model.nodes
-
-        def nid(name: str) -> ua.NodeId:
-            return ua.NodeId(ua.String(f"{self.device_id}.{name}"), ua.Int16(idx))
-
-        async def typed(parent: Node, name: str, bname: ua.QualifiedName, typedef: ua.NodeId,
-                        optional: bool = True) -> Node:
-            """An instance of an ObjectType with the children its modelling rules ask for."""
-            return (await instantiate(parent, server.get_node(typedef), nid(name), bname,
-                                      instantiate_optional=optional))[0]
-
-        machines = await server.nodes.objects.add_folder(node_id(1001, mach), ua.QualifiedName("Machines", mach))
-        machine = await machines.add_object(nid("Machine"), ua.QualifiedName(self.device_id, idx))
-        ident = await typed(machine, "Identification", ua.QualifiedName("Identification", di),
-                            t["MachineIdentificationType"])
-        await rereference(machine, ident, ua.ObjectIds.HasAddIn)
-        for name, value in (("Manufacturer", ua.LocalizedText(s.manufacturer)), ("Model", ua.LocalizedText(s.model)),
-                            ("SerialNumber", s.serial_number or self.device_id),
-                            ("SoftwareRevision", self.software_version),
-                            ("ProductInstanceUri", f"urn:moi:{s.manufacturer}:{s.serial_number or self.device_id}")):
-            node = await ident.get_child(f"{di}:{name}")
-            await node.write_value(value)
-            self._nodes[name] = node
-        blocks = await machine.add_folder(nid("MachineryBuildingBlocks"),
-                                          ua.QualifiedName("MachineryBuildingBlocks", mach))
-        await blocks.add_reference(ident, ua.ObjectIds.HasAddIn, forward=True, bidirectional=False)
-        for key, bname, typedef in (("item", "MachineryItemState", "MachineryItemState_StateMachineType"),
-                                    ("mode", "MachineryOperationMode", "MachineryOperationModeStateMachineType")):
-            sm = await typed(blocks, bname, ua.QualifiedName(bname, mach), t[typedef], optional=False)
-            await rereference(blocks, sm, ua.ObjectIds.HasAddIn)
-            self._nodes[f"{key}.state"] = await sm.get_child("0:CurrentState")
-            self._nodes[f"{key}.id"] = await sm.get_child(["0:CurrentState", "0:Id"])
+        s = self.settings
+        serial = s.serial_number or self.device_id
+        identity = {"Manufacturer": ua.LocalizedText(s.manufacturer), "Model": ua.LocalizedText(s.model),
+                    "SerialNumber": serial, "SoftwareRevision": self.software_version,
+                    "ProductInstanceUri": f"urn:moi:{s.manufacturer}:{serial}"}
+        methods = {"GetResultById": self._get_by_id, "GetLatestResult": self._get_latest,
+                   "AcknowledgeResults": self._acknowledge}
+        self._nodes.update(await add_machine(server, model, self.device_id, identity, methods,
+                                             unacknowledged=len(self._unacknowledged)))
         await self._write_state("item", ITEM_STATES[self._state])
         await self._write_state("mode", self._mode)
-
-        rm = await typed(blocks, "ResultManagement", ua.QualifiedName("ResultManagement", res),
-                         t["ResultManagementType"])
-        await rereference(blocks, rm, ua.ObjectIds.HasAddIn)
-        await rm.write_attribute(ua.AttributeIds.EventNotifier, ua.DataValue(ua.Variant(1, ua.VariantType.Byte)))
-        for name, callback in (("GetResultById", self._get_by_id), ("GetLatestResult", self._get_latest),
-                               ("AcknowledgeResults", self._acknowledge)):
-            server.link_method(await rm.get_child(f"{res}:{name}"), callback)
-        self._nodes["result_management"] = rm
-        results = await rm.get_child(f"{res}:Results")
-        self._nodes["unacknowledged"] = await results.add_variable(
-            nid("Results.UnacknowledgedCount"), ua.QualifiedName("UnacknowledgedCount", idx),
-            ua.Variant(len(self._unacknowledged), ua.VariantType.UInt32))
-        # a variable of ResultType, made by hand: asyncua's instantiation of a VariableType copies attributes
-        # a type has not (and logs each)
-        latest = await variable(results, nid("Results.LatestResult"), ua.QualifiedName("LatestResult", res),
-                                ua.Variant(None, ua.VariantType.Null), t["ResultDataType"], t["ResultType"])
-        structured = ua.ObjectIds.HasStructuredComponent
-        meta = await variable(latest, nid("Results.LatestResult.ResultMetaData"), ua.QualifiedName("ResultMetaData", res),
-                              ua.Variant(None, ua.VariantType.Null), t["ResultMetaDataType"], reference=structured)
-        content = await variable(latest, nid("Results.LatestResult.ResultContent"),
-                                 ua.QualifiedName("ResultContent", res), ua.Variant([], ua.VariantType.ExtensionObject),
-                                 node_id(ua.ObjectIds.BaseDataType), array=True, reference=structured)
-        self._nodes.update({"latest": latest, "latest.meta": meta, "latest.content": content})
-        # the structures' fields the appliance fills, also as variables of their own (for clients that read
-        # scalars): ResultMetaData's structured components [Result], ResultContent's InertiaResultDataType [moi],
-        # the physical values of AnalogUnitType with their EngineeringUnits
-        for name, (_, vtype) in META_COMPONENTS.items():
-            self._nodes[f"meta.{name}"] = await variable(
-                meta, nid(f"Results.LatestResult.ResultMetaData.{name}"), ua.QualifiedName(name, res),
-                ua.Variant(_EMPTY[vtype], vtype), node_id(vtype.value), reference=structured)
-        for name, dt, array, _, unit in CONTENT_FIELDS:
-            vtype = _VTYPES[dt]
-            qname, cid = ua.QualifiedName(name, idx), nid(f"Results.LatestResult.ResultContent.{name}")
-            empty = ua.Variant([] if array else _EMPTY[vtype], vtype)
-            self._nodes[f"content.{name}"] = await (
-                with_unit(content, cid, qname, empty, unit) if unit is not None
-                else variable(content, cid, qname, empty, node_id(dt), array=array))
         if self._latest is not None:
             await self._write_latest(self._structure(self._latest))
-        self._event = await server.get_event_generator(t["InertiaResultReadyEventType"], rm.nodeid)
+        self._event = await server.get_event_generator(model.nodes["InertiaResultReadyEventType"],
+                                                       self._nodes["result_management"].nodeid)
 
     def stop(self, timeout: float = 5.0) -> None:
         if not self._io.running:
@@ -612,10 +485,10 @@ class OpcUaServer(Publisher):
         await self._nodes["latest.content"].write_value(ua.Variant([content], ua.VariantType.ExtensionObject))
         for name, (_, vtype) in META_COMPONENTS.items():
             v = getattr(meta, name)
-            v = _EMPTY[vtype] if v is None else int(v) if name == "ResultEvaluation" else v
+            v = EMPTY[vtype] if v is None else int(v) if name == "ResultEvaluation" else v
             await self._nodes[f"meta.{name}"].write_value(ua.Variant(v, vtype))
         for name, dt, _, _, _ in CONTENT_FIELDS:
-            await self._nodes[f"content.{name}"].write_value(ua.Variant(getattr(content, name), _VTYPES[dt]))
+            await self._nodes[f"content.{name}"].write_value(ua.Variant(getattr(content, name), VTYPES[dt]))
 
     async def _publish(self, doc: dict[str, Any]) -> None:
         meta = doc["ResultMetaData"]
@@ -647,16 +520,6 @@ class OpcUaServer(Publisher):
                      store=appliance.store, simulated=bool(cfg.simulated))
         server.on_recipe(appliance.parts.recipe)
         return server
-
-
-#: the value of a variable before the first result (OPC UA has no null scalar of these types)
-_EMPTY: dict[ua.VariantType, Any] = {ua.VariantType.String: "", ua.VariantType.Int32: 0, ua.VariantType.UInt32: 0,
-                                     ua.VariantType.Boolean: False, ua.VariantType.Double: math.nan,
-                                     ua.VariantType.DateTime: datetime(1970, 1, 1, tzinfo=UTC)}
-#: the variant type of a ns=0 DataType of CONTENT_FIELDS
-_VTYPES: dict[int, ua.VariantType] = {ua.ObjectIds.UInt32: ua.VariantType.UInt32,
-                                      ua.ObjectIds.Double: ua.VariantType.Double,
-                                      ua.ObjectIds.String: ua.VariantType.String}
 
 
 def _bad(code: int) -> ua.StatusCode:

@@ -11,7 +11,7 @@ from service.core import vocabulary as V
 from service.core.live import LiveStatus
 from service.daemon import Appliance
 from service.publish.modbus import registers as R
-from service.publish.mqtt.client import Topics
+from service.publish.mqtt.topics import Topics
 
 
 def test_the_daemon_acts_on_every_act_of_the_table_and_on_no_other():

@@ -166,7 +166,7 @@ INSERT INTO measurements (uuid, seq, status, trigger, device_id, software_versio
 
 
 def test_a_version_1_store_gains_the_part_columns_and_keeps_its_rows(tmp_path, result):
-    from service.persistence.store import COLUMNS, SCHEMA_VERSION
+    from service.persistence.tables import COLUMNS, SCHEMA_VERSION
 
     db = sqlite3.connect(tmp_path / "results.db")
     db.executescript(_VERSION_1)
@@ -231,7 +231,7 @@ def test_a_version_2_store_keeps_its_pending_rows_pending_for_mqtt(tmp_path, res
 
 
 def test_a_new_store_has_the_columns_of_the_table_in_its_order(tmp_path, result):
-    from service.persistence.store import COLUMNS
+    from service.persistence.tables import COLUMNS
 
     with Store(tmp_path) as store:
         m = store_one(store, result)

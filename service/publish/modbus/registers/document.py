@@ -34,15 +34,27 @@ from .map import (
 )
 
 
-def _handshake_markdown() -> list[str]:
-    """The PLC handshake: status word, error codes, commands, the result queue, ST pseudo-code for both modes."""
-    a = {name: addr for name, (addr, _) in WRITABLE.items()}
-    b = BY_NAME
-    L: list[str] = [f"## PLC handshake (registers {HANDSHAKE_START}–{HANDSHAKE_END - 1}, holding registers "
-                    f"{a['command']}–{a['plc_heartbeat']})", ""]
+def _addresses() -> dict[str, int]:
+    """The writable holding registers' addresses by name."""
+    return {name: addr for name, (addr, _) in WRITABLE.items()}
+
+
+def _handshake_intro() -> list[str]:
+    """The handshake's registers, read with the image."""
+    a = _addresses()
+    L: list[str] = []
+    L.append(f"## PLC handshake (registers {HANDSHAKE_START}–{HANDSHAKE_END - 1}, holding registers "
+             f"{a['command']}–{a['plc_heartbeat']})")
+    L.append("")
     L.append(f"Registers {HANDSHAKE_START}–{HANDSHAKE_END - 1} are live, like 0–9, at a fixed address past the "
              f"snapshot, so that one request for registers 0–{IMAGE_SIZE - 1} reads everything.")
     L.append("")
+    return L
+
+
+def _status_word() -> list[str]:
+    """The status word's bits."""
+    L: list[str] = []
     L.append("### Status word (register `plc_status`)")
     L.append("")
     L.append("| bit | name | set while |")
@@ -50,6 +62,12 @@ def _handshake_markdown() -> list[str]:
     for name, (bit, meaning) in PLC_STATUS.items():
         L.append(f"| {bit} | `{name}` | {meaning} |")
     L.append("")
+    return L
+
+
+def _error_codes() -> list[str]:
+    """The error codes."""
+    L: list[str] = []
     L.append("### Error codes (register `error_code`)")
     L.append("")
     L.append("| code | name | meaning |")
@@ -59,6 +77,14 @@ def _handshake_markdown() -> list[str]:
     L.append("")
     L.append("When several causes are present the lowest code above 0 is shown.")
     L.append("")
+    return L
+
+
+def _heartbeats() -> list[str]:
+    """The appliance's heartbeat and the PLC's."""
+    a = _addresses()
+    b = BY_NAME
+    L: list[str] = []
     L.append("### Heartbeats")
     L.append("")
     L.append(f"`heartbeat` (register {b['heartbeat'].address}) is incremented every {HEARTBEAT_PERIOD:g} s by the "
@@ -69,6 +95,12 @@ def _handshake_markdown() -> list[str]:
              "bit 8, error code 3), the log line, the systemd status and the health page say so, and it clears "
              "itself when the value changes again.")
     L.append("")
+    return L
+
+
+def _commands() -> list[str]:
+    """The commands and their outcome, with the reasons of a refusal."""
+    L: list[str] = []
     L.append("### Commands (holding registers `command`, `command_parameter`)")
     L.append("")
     L.append("| code | command | does |")
@@ -90,6 +122,14 @@ def _handshake_markdown() -> list[str]:
     L.append("")
     L.append("The same reasons, by name, are in the MQTT command replies (docs/service.md).")
     L.append("")
+    return L
+
+
+def _result_queue() -> list[str]:
+    """The two result handshakes (`[modbus] result_handshake`)."""
+    a = _addresses()
+    b = BY_NAME
+    L: list[str] = []
     L.append("### The result queue (`[modbus] result_handshake`)")
     L.append("")
     L.append(f"`\"latest\"` (default, the map of versions before 10): the block {SNAPSHOT_START}–{SNAPSHOT_END - 1} "
@@ -105,6 +145,13 @@ def _handshake_markdown() -> list[str]:
              "results stored since are queued again (the newest `queue_depth` of them; the PLC recognises a "
              "result it has seen by its `seq` and `uuid`).")
     L.append("")
+    return L
+
+
+def _plc_program_ack() -> list[str]:
+    """The PLC program of mode ack, in structured text."""
+    a = _addresses()
+    L: list[str] = []
     L.append("### PLC program, mode ack (IEC 61131-3 structured text, pseudo-code)")
     L.append("")
     L.append("```iecst")
@@ -140,6 +187,13 @@ def _handshake_markdown() -> list[str]:
     L.append(f"WriteReg(addr := {a['plc_heartbeat']}, value := MyCounter);         (* every second, if the watchdog is on *)")
     L.append("```")
     L.append("")
+    return L
+
+
+def _plc_program_latest() -> list[str]:
+    """The PLC program of mode latest, in structured text."""
+    b = BY_NAME
+    L: list[str] = []
     L.append("### PLC program, mode latest (no acknowledgement)")
     L.append("")
     L.append("```iecst")
@@ -158,8 +212,14 @@ def _handshake_markdown() -> list[str]:
     return L
 
 
-def markdown() -> str:
-    """docs/modbus.md, generated from the map's tables (`moi modbus-map`)."""
+def _handshake_markdown() -> list[str]:
+    """The PLC handshake: status word, error codes, commands, the result queue, ST pseudo-code for both modes."""
+    return [line for section in (_handshake_intro, _status_word, _error_codes, _heartbeats,
+                                 _commands, _result_queue, _plc_program_ack, _plc_program_latest) for line in section()]
+
+
+def _preamble() -> list[str]:
+    """The title, the map version, the server's unit id and how addresses and words are counted."""
     L: list[str] = []
     L.append("# Modbus register map (PLC interface)")
     L.append("")
@@ -176,6 +236,12 @@ def markdown() -> str:
              "first, ABCD) or `\"little\"` (low word first, CDAB). NaN marks an unknown value (e.g. J on a rig "
              "without k or m·S).")
     L.append("")
+    return L
+
+
+def _input_registers() -> list[str]:
+    """The register image (FC 4 and FC 3)."""
+    L: list[str] = []
     L.append("## Input registers (FC 4), also readable as holding registers (FC 3)")
     L.append("")
     L.append("The same image is served by FC 4 and FC 3, so PLCs that only read holding registers work too. "
@@ -195,6 +261,12 @@ def markdown() -> str:
              "with a [tensor] plan, docs/tensor.md), read as one block (one request) or with the snapshot "
              "protocol below on `tensor_seq` / `tensor_seq_end`. Addresses between the blocks get exception 0x02.")
     L.append("")
+    return L
+
+
+def _writable_registers() -> list[str]:
+    """The writable holding registers."""
+    L: list[str] = []
     L.append("## Writable holding registers (FC 6 / FC 16 write, FC 3 read back)")
     L.append("")
     L.append("| address | registers | name | meaning |")
@@ -210,6 +282,12 @@ def markdown() -> str:
              "them, FC 22 (mask write) and FC 23 (read/write multiple registers), get exception 0x01 (illegal "
              "function): a write is applied or refused, never acknowledged and dropped.")
     L.append("")
+    return L
+
+
+def _verdicts() -> list[str]:
+    """The verdict codes and how a part's releases are counted."""
+    L: list[str] = []
     L.append("## Verdicts (registers `verdict`, `release_verdict`; status bits 6–8)")
     L.append("")
     L.append("| code | verdict | meaning |")
@@ -229,6 +307,12 @@ def markdown() -> str:
              "of the usable releases) and `part_U`; the status bits `part_ok`, `part_nok`, `part_invalid` (also "
              "discrete inputs 6–8) repeat it until the next result.")
     L.append("")
+    return L
+
+
+def _coils() -> list[str]:
+    """The command coils."""
+    L: list[str] = []
     L.append("## Coils (FC 1 read, FC 5 / FC 15 write)")
     L.append("")
     L.append("| address | name | write 1 means |")
@@ -241,6 +325,12 @@ def markdown() -> str:
              "A single-coil write (FC 5) carries 0xFF00 or 0x0000, any other value gets exception 0x03 (illegal "
              "data value); the reply echoes the request.")
     L.append("")
+    return L
+
+
+def _discrete_inputs() -> list[str]:
+    """The discrete inputs."""
+    L: list[str] = []
     L.append("## Discrete inputs (FC 2)")
     L.append("")
     L.append("| address | name |")
@@ -250,6 +340,12 @@ def markdown() -> str:
     L.append("")
     L.append("They repeat the bits of the `status` register.")
     L.append("")
+    return L
+
+
+def _quality_flags() -> list[str]:
+    """The quality flags' bits."""
+    L: list[str] = []
     L.append("## Quality flags (register `flags`)")
     L.append("")
     L.append("A **warning** is a condition that may move J beyond the uncertainty the result states (a recipe may")
@@ -262,7 +358,12 @@ def markdown() -> str:
         L.append(f"| {b} | `{name}` | {F.grade(name)} | {F.describe(name)} |")
     L.append(f"| {F.FLAG_OTHER_BIT} | any other flag | warning | see the MQTT result's `flags` list for its name |")
     L.append("")
-    L += _handshake_markdown()
+    return L
+
+
+def _snapshot_protocol() -> list[str]:
+    """The consistent-snapshot protocol."""
+    L: list[str] = []
     L.append("## Consistent-snapshot protocol")
     L.append("")
     L.append(f"The result snapshot (registers {SNAPSHOT_START}–{SNAPSHOT_END - 1}) is replaced as one unit: the "
@@ -284,6 +385,12 @@ def markdown() -> str:
              "too, so it can jump by more than 1); a change of `seq` is the PLC's \"new result\" event. The same counter is `seq` in the MQTT result, and `uuid` "
              f"(registers {BY_NAME['uuid'].address}–{BY_NAME['uuid'].address + 7}) equals the MQTT `uuid`, so a PLC record can be joined with the broker's.")
     L.append("")
+    return L
+
+
+def _typical_sequence() -> list[str]:
+    """A PLC's sequence, step by step."""
+    L: list[str] = []
     L.append("## Typical PLC sequence")
     L.append("")
     L.append("1. once per part type: write the recipe number to `recipe_select` (register "
@@ -297,4 +404,11 @@ def markdown() -> str:
     L.append("7. latch `verdict` (or the status bits `part_ok` / `part_nok` / `part_invalid`); without a recipe, "
              "check `flags` = 0 (or decide which flags are acceptable) before using J.")
     L.append("")
-    return "\n".join(L)
+    return L
+
+
+def markdown() -> str:
+    """docs/modbus.md, generated from the map's tables (`moi modbus-map`)."""
+    sections = (_preamble, _input_registers, _writable_registers, _verdicts, _coils, _discrete_inputs, _quality_flags,
+                _handshake_markdown, _snapshot_protocol, _typical_sequence)
+    return "\n".join(line for section in sections for line in section())

@@ -8,6 +8,7 @@ that count from 1 (4x0001 / 3x0001 style) add 1.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 from measurement import flags as F
 from measurement.tensor import COMPONENTS
@@ -192,12 +193,22 @@ class Register:
         return _KIND_COUNT[self.kind]
 
 
+#: adds one register: area, address, name, kind, unit, source, description
+_Add = Callable[[str, int, str, str, str, str, str], None]
+
+
 def _table() -> tuple[Register, ...]:
     rows: list[Register] = []
 
     def add(area: str, address: int, name: str, kind: str, unit: str, source: str, description: str) -> None:
         rows.append(Register(name, address, kind, unit, description, source, area))
 
+    for block in (_live_registers, _snapshot_registers, _handshake_registers, _tensor_registers):
+        block(add)
+    return tuple(rows)
+
+
+def _live_registers(add: _Add) -> None:
     # Live status: changes at any time, not part of the result snapshot.
     add("live", 0, "map_version", "uint16", "", "constant", f"version of this register map ({MAP_VERSION})")
     add("live", 1, "state", "uint16", "enum", "state",
@@ -218,6 +229,8 @@ def _table() -> tuple[Register, ...]:
         "tensor set: the orientation to mount now, its number in the recipe's plan (1-based; 0: none). The "
         "recipe's [[tensor.orientation]] tables, in order, say which axis each number is")
 
+
+def _snapshot_registers(add: _Add) -> None:
     # Result snapshot: written as one unit (see the snapshot protocol).
     add("snapshot", 10, "seq", "uint16", "count", "seq",
         "measurement sequence counter of the result below (the MQTT `seq` modulo 65535: 1…65535 then 1 again); "
@@ -262,6 +275,8 @@ def _table() -> tuple[Register, ...]:
         "expanded uncertainty U of J_object, the k–I0 correlation of the calibration kept (NaN without a tare)")
     add("snapshot", 67, "seq_end", "uint16", "count", "seq", "copy of `seq`, the last register of the snapshot")
 
+
+def _handshake_registers(add: _Add) -> None:
     # The PLC handshake: live, at a fixed address past the snapshot (which may grow up to it), so that
     # registers 0…88 are one request.
     add("handshake", HANDSHAKE_START + 0, "plc_status", "bits16", "bits", "plc_status",
@@ -283,6 +298,8 @@ def _table() -> tuple[Register, ...]:
     add("handshake", HANDSHAKE_START + 8, "command_count", "uint16", "count", "command_count",
         "incremented with every change of the command status (wraps at 65536): the PLC waits for it to change")
 
+
+def _tensor_registers(add: _Add) -> None:
     # The tensor of the latest tensor set: a block of its own, with its own snapshot protocol.
     a = TENSOR_START
     add("tensor", a, "tensor_seq", "uint16", "count", "tensor_seq",
@@ -303,7 +320,6 @@ def _table() -> tuple[Register, ...]:
         "the tensor's flags, the bits of `flags_high`: " + ", ".join(
             f"bit {b - 16} {n}" for n, b in F.FLAG_BITS.items() if n in TENSOR_FLAGS))
     add("tensor", a + 38, "tensor_seq_end", "uint16", "count", "tensor_seq", "copy of `tensor_seq`, the block's last register")
-    return tuple(rows)
 
 
 #: the handshake block's first address (the snapshot ends before it)

@@ -9,7 +9,9 @@ import threading
 import pytest
 
 from service.persistence.store import Store
-from service.publish.mqtt.client import MqttService, MqttSettings, Topics, discovery_messages
+from service.publish.mqtt.client import MqttService, MqttSettings
+from service.publish.mqtt.discovery import discovery_messages
+from service.publish.mqtt.topics import Topics
 
 pytestmark = pytest.mark.broker
 

@@ -9,7 +9,7 @@ import shutil
 import subprocess
 import tomllib
 
-from service.publish.mqtt.client import Topics
+from service.publish.mqtt.topics import Topics
 from service.publish.payload import result_payload
 from tests.components import missing
 from tests.service.conftest import REPO

@@ -21,7 +21,7 @@ from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-from service.publish.opcua.server import NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT, RESULT_EVALUATION
+from service.publish.opcua.model import NS_DI, NS_MACHINERY, NS_MOI, NS_RESULT, RESULT_EVALUATION
 from tests.service.conftest import REPO, RunningAppliance, appliance_doc
 
 USER, PASSWORD = "line-7", "s3cret"
