@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import concurrent.futures
 import dataclasses
-import datetime as _dt
 import logging
 import queue
 import subprocess
@@ -45,6 +44,8 @@ from service.config.appliance import Config
 from service.core import vocabulary as V
 from service.core.live import LiveStatus
 from service.devices.hardware import Devices, build_devices
+from service.parts import calibration as calibration_rule
+from service.parts.outcome import PartOutcome
 from service.parts.recipes import PartTracker, Recipe, RecipeBook, RecipeError
 from service.parts.tensor_set import COMPLETE, OpenSetFile, TensorSet, interrupted
 from service.persistence.salvage import quarantine_store
@@ -52,7 +53,7 @@ from service.persistence.store import Store
 from service.publish import registry
 from service.publish.payload import iso_utc, result_payload
 from service.publish.port import ApplianceView, Publisher
-from service.publish.replies import CONTACT, CommandReply, ReplyTo, calibration_words
+from service.publish.replies import CONTACT, CommandReply, ReplyTo
 
 from . import __version__
 from .contention import CaptureWatch
@@ -638,10 +639,19 @@ class Appliance:
                 self._store_lost(m, exc)
             raise
 
+    def _record(self, uuid: str, status: str, trigger: str, started: float, finished: float,
+                outcome: PartOutcome, rig: Rig | None = None, **rest: Any) -> Any:
+        """Store one measurement (``Store.record``) with what every row carries: who measured, with what, when,
+        on which rig and configuration, for which part; ``rest``: the result, its trace, its payload."""
+        assert self.store is not None
+        return self.store.record(uuid=uuid, status=status, trigger=trigger, device_id=self.config.device_id,
+                                 software_version=__version__, started_at=started, finished_at=finished,
+                                 rig=(rig or self.config.rig).to_dict(), config=self.config.to_dict(),
+                                 part=outcome.store_columns(), **rest)
+
     def _store_lost(self, m: Measurement, exc: BaseException) -> None:
         """A captured measurement whose result could not be stored: a failed row with its trace (always, it is
         the evidence) and what went wrong."""
-        assert self.store is not None
         finished = self.wall_clock()
         self._run_started.pop(m.id, None)
         part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
@@ -653,13 +663,9 @@ class Appliance:
         except Exception:
             result = None
         try:
-            self.store.record(uuid=m.id, status="failed", trigger=m.requested_by, device_id=self.config.device_id,
-                              software_version=__version__, finished_at=finished, error=error, result=result,
-                              started_at=finished - (m.finished_at - m.requested_at) / self._clock_scale(),
-                              rig=self.config.rig.to_dict(), config=self.config.to_dict(), trace_t=m.trace.t,
-                              trace_angle=m.trace.angle, trace_meta=dict(m.trace.meta),
-                              part={"part_id": part_id, "recipe": recipe.name if recipe else None,
-                                    "recipe_version": recipe.version if recipe else None})
+            self._record(m.id, "failed", m.requested_by, finished - (m.finished_at - m.requested_at) / self._clock_scale(),
+                         finished, _unjudged(part_id, recipe), error=error, result=result, trace_t=m.trace.t,
+                         trace_angle=m.trace.angle, trace_meta=dict(m.trace.meta))
         except BaseException:
             log.exception("could not store the failed measurement %s either", m.id)
             return
@@ -667,47 +673,36 @@ class Appliance:
         self._note_stored(m.id)
 
     def _store_result(self, m: Measurement) -> None:
+        """Judge a result for its part (or its tensor set), store it with its payload, then hand it on."""
         assert self.store is not None
         finished = self.wall_clock()
         armed = self._run_started.pop(m.id, (None, ""))[0]
         took = time.monotonic() - armed if armed is not None else (m.finished_at - m.requested_at) / self._clock_scale()
         started = finished - took
-        cfg = self.config
-        timing = m.to_dict().get("timing", {})
         part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
-        rig = recipe.rig_for(cfg.rig) if recipe is not None else cfg.rig
-        calibration = self.calibration_state(rig, finished)
-        # the station's own flags, raised on the typed result before anything reads it
-        raised = ((calibration is not None and calibration["due"], F.CALIBRATION_DUE),
-                  (self._capture_watch.slowed(m.result.acquisition), F.CAPTURE_SLOWED))
-        flags = m.result.flags + tuple(f for up, f in raised if up and f not in m.result.flags)
-        typed = dataclasses.replace(m.result, flags=flags) if flags != m.result.flags else m.result
+        rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
+        calibration = calibration_rule.calibration_state(rig, self._checks(), finished)
+        typed = self._station_flags(m, calibration)
         result = typed.to_dict()
-        tensor_set = self.tensor_set if recipe is not None and recipe.tensor is not None else None
-        if tensor_set is not None and (tensor_set.done or tensor_set.recipe is not recipe):
-            tensor_set = None  # the set ended (aborted) while this release ran: it counts for nothing
+        tensor_set = self._set_of(recipe)
         if tensor_set is not None:
-            assert recipe is not None
-            part = {"part_id": part_id, "recipe": recipe.to_dict(), "release": None, "part": None, "verdict": None,
-                    "calibration": calibration, "tensor_set": tensor_set.release(result, m.id)}
+            outcome = PartOutcome(part_id, recipe.to_dict() if recipe else None, calibration=calibration,
+                                  tensor_set=tensor_set.release(result, m.id))
         else:
-            part = self.parts.release(result, m.id, part_id, recipe, m.result, rig) | {"calibration": calibration}
+            outcome = dataclasses.replace(self.parts.release(result, m.id, part_id, recipe, m.result, rig),
+                                          calibration=calibration)
+        timing, cfg, trace = m.to_dict().get("timing", {}), self.config, m.trace
 
         def build(uuid: str, seq: int) -> dict[str, Any]:
             return result_payload(result, uuid=uuid, seq=seq, device_id=cfg.device_id, trigger=m.requested_by,
                                   started_at=started, finished_at=finished, software_version=__version__,
-                                  timing=timing, part=part)
+                                  timing=timing, part=outcome.to_dict())
 
-        trace = m.trace
         try:
-            stored = self.store.record(
-                uuid=m.id, status="ok", trigger=m.requested_by, device_id=cfg.device_id,
-                software_version=__version__, started_at=started, finished_at=finished, result=result,
-                build_payload=build, rig=rig.to_dict(), config=cfg.to_dict(),
-                trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
-                trace_meta=dict(trace.meta), enqueue={p.NAME: p.OUTBOX for p in self.publishers if p.OUTBOX},
-                part=_part_columns(part),
-            )
+            stored = self._record(m.id, "ok", m.requested_by, started, finished, outcome, rig, result=result,
+                                  build_payload=build, trace_t=trace.t if cfg.store_trace else None,
+                                  trace_angle=trace.angle if cfg.store_trace else None, trace_meta=dict(trace.meta),
+                                  enqueue={p.NAME: p.OUTBOX for p in self.publishers if p.OUTBOX})
         except BaseException:
             if tensor_set is not None:
                 tensor_set.forget_last()
@@ -721,88 +716,72 @@ class Appliance:
             reply(CommandReply(V.TRIGGER, "done", data={"uuid": m.id, "seq": stored.seq}))
         log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, typed.J,
                  ", ".join(typed.flags) or "none")
-        if part["verdict"] is not None and recipe is not None:
-            log.info("part %s (%s): %s", part_id or "(no ID)", recipe.name, part["verdict"])
-            self._to_publishers("on_part_done", recipe)
-        whole = part.get("part")
-        check = whole.get("check_standard") if isinstance(whole, dict) else None
-        if check is not None:
-            # a check standard measured at the station: kept with the history `moi check-standard` reads;
-            # a failed one makes the next results calibration_due (``calibration_state``)
-            log.log(logging.INFO if check["passed"] else logging.WARNING, "check standard %s: E_n = %.2f (%s)",
-                    check["name"], check["E_n"], "pass" if check["passed"] else "FAIL")
-            try:
-                self.store.record_check_standard(check | {"part_id": part_id, "measurement": m.id,
-                                                          "flags": list(typed.flags)},
-                                                 finished_at=finished)
-            except StoreError:
-                log.exception("could not store the check standard of measurement %s", m.id)
-            self._calibration_checked = (-float("inf"), None, False, False)  # it may clear or raise the block
+        self._part_done(outcome, recipe, m.id, typed.flags, finished)
         if tensor_set is not None:
             log.info("tensor set %s: %s", tensor_set.uuid, tensor_set.instruction())
             if tensor_set.done:
                 self._finish_set(tensor_set)
             self._publish_set()
 
-    def calibration_state(self, rig: Rig, now: float) -> dict[str, Any] | None:
-        """The rig's calibration as of ``now`` (Unix s): date, validity, whether it is due.
+    def _station_flags(self, m: Measurement, calibration: Mapping[str, Any] | None) -> IdentificationResult:
+        """The result with the station's own flags raised (calibration due, capture slowed), before anything reads
+        it."""
+        raised = ((calibration is not None and calibration["due"], F.CALIBRATION_DUE),
+                  (self._capture_watch.slowed(m.result.acquisition), F.CAPTURE_SLOWED))
+        flags = m.result.flags + tuple(f for up, f in raised if up and f not in m.result.flags)
+        return dataclasses.replace(m.result, flags=flags) if flags != m.result.flags else m.result
 
-        Due also while the newest check standard (`moi check-standard`) measured since the calibration
-        failed (E_n > 1): the budget no longer covers what the rig does.
-        """
-        cal = rig.calibration
+    def _set_of(self, recipe: Recipe | None) -> TensorSet | None:
+        """The running tensor set a release of ``recipe`` counts for (None: a part's release, or the set ended,
+        aborted, while it ran: it counts for nothing)."""
+        s = self.tensor_set if recipe is not None and recipe.tensor is not None else None
+        return None if s is None or s.done or s.recipe is not recipe else s
+
+    def _part_done(self, outcome: PartOutcome, recipe: Recipe | None, measurement: str, flags: tuple[str, ...],
+                   finished: float) -> None:
+        """A part complete with this release: said, and a check standard's comparison kept with the history
+        `moi check-standard` reads (a failed one makes the next results calibration_due)."""
+        if outcome.verdict is None or recipe is None:
+            return
+        log.info("part %s (%s): %s", outcome.part_id or "(no ID)", recipe.name, outcome.verdict)
+        self._to_publishers("on_part_done", recipe)
+        check = outcome.part.check_standard if outcome.part is not None else None
+        if check is None:
+            return
+        log.log(logging.INFO if check["passed"] else logging.WARNING, "check standard %s: E_n = %.2f (%s)",
+                check["name"], check["E_n"], "pass" if check["passed"] else "FAIL")
         try:
-            checks = self.store.check_standards(limit=1) if self.store is not None else []
+            assert self.store is not None
+            self.store.record_check_standard(dict(check) | {"part_id": outcome.part_id, "measurement": measurement,
+                                                            "flags": list(flags)}, finished_at=finished)
+        except StoreError:
+            log.exception("could not store the check standard of measurement %s", measurement)
+        self._calibration_checked = (-float("inf"), None, False, False)  # it may clear or raise the block
+
+    # --- the calibration rule's inputs (the rule: service.parts.calibration) ----------------------------------
+    def _checks(self) -> list[dict[str, Any]]:
+        """The newest stored check standard ([] without one, or when the store cannot be read: said in the log)."""
+        try:
+            return self.store.check_standards(limit=1) if self.store is not None else []
         except StoreError:
             log.exception("could not read the check standards; the calibration state leaves them out")
-            checks = []
-        check = checks[0] if checks else None
-        if check is not None and cal is not None:
-            calibrated = _dt.datetime.combine(cal.date, _dt.time(), _dt.UTC).timestamp()
-            if check["finished_at"] < calibrated:
-                check = None  # a check before the calibration says nothing about it
-        failed = check is not None and not check["passed"]
-        if cal is None and not failed:
-            return None
-        today = _dt.datetime.fromtimestamp(now, _dt.UTC).date()
-        until = cal.valid_until if cal is not None else None
-        state: dict[str, Any] = {
-            "date": cal.date.isoformat() if cal is not None else None,
-            "valid_until": until.isoformat() if until else None,
-            "due": (cal is not None and cal.due(today)) or failed, "stiffness": rig.stiffness,
-            "stiffness_std": rig.stiffness_std}
-        if check is not None:
-            state["check_standard"] = {k: check.get(k) for k in ("name", "E_n", "passed", "finished_at")}
-        return state
+            return []
+
+    def _active_rig(self) -> Rig:
+        recipe = self.parts.recipe
+        return recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
+
+    def calibration_state(self) -> dict[str, Any] | None:
+        """The calibration of the rig the active recipe measures with, as the next result will be judged
+        (``service.parts.calibration.calibration_state``)."""
+        return calibration_rule.calibration_state(self._active_rig(), self._checks(), self.wall_clock())
 
     def measure_block(self) -> dict[str, Any] | None:
-        """Why no measurement may start now, for every door (button, Modbus, MQTT, Sparkplug, web), or None.
-
-        The calibration of the rig the active recipe measures with is past its validity period, or the newest
-        check standard since it failed (``calibration_state``): every result would carry calibration_due and be
-        INVALID, and measuring again cannot change that. A check-standard recipe is still measured while only
-        a failed check standard blocks, since its passing is what clears the block; an expired calibration
-        refuses it too (a check cannot renew a calibration: ``moi calibrate`` does). A recipe whose
-        ``invalid_flags`` leave out ``calibration_due`` is measured too: its parts are judged, flagged. Returns the calibration
-        state, ``expired`` and ``detail``: the words every door says, with whom to call ([web] contact)."""
-        recipe = self.parts.recipe
-        rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
-        now = self.wall_clock()
-        state = self.calibration_state(rig, now)
-        if not state or not state["due"]:
-            return None
-        cal = rig.calibration
-        expired = cal is not None and cal.due(_dt.datetime.fromtimestamp(now, _dt.UTC).date())
-        if not expired and recipe is not None and recipe.check_standard is not None:
-            return None
-        if (recipe is not None and recipe.check_standard is None
-                and "calibration_due" not in recipe.quality.invalid_flags):
-            return None  # its quality rules judge a part with the calibration due (flagged, not INVALID): its call
-        check = state.get("check_standard")
-        failed = check if check is not None and not check.get("passed") else None
+        """Why no measurement may start now, for every door (``service.parts.calibration.measure_block``), with
+        whom to call ([web] contact), or None."""
         contact = getattr(self.config.publishers.get("web"), "contact", None) or CONTACT
-        return {"calibration": state, "expired": expired,
-                "detail": calibration_words(state["valid_until"] if expired else None, failed, contact)}
+        return calibration_rule.measure_block(self._active_rig(), self.parts.recipe, self._checks(), self.wall_clock(),
+                                              contact)
 
     def _show_block(self, refused: bool, again: bool = False) -> None:
         """The status lamp or buzzer says the calibration refuses Measure while the appliance is IDLE (it is
@@ -820,7 +799,7 @@ class Appliance:
             log.exception("indicator failed to show the calibration's block")
 
     def _store_failure(self, event: Event) -> None:
-        assert self.store is not None and event.measurement_id is not None
+        assert event.measurement_id is not None
         armed, trigger = self._run_started.pop(event.measurement_id)
         finished = self.wall_clock()
         part_id, recipe = self._run_part.pop(event.measurement_id, (None, None))
@@ -829,12 +808,8 @@ class Appliance:
             reply(CommandReply(V.TRIGGER, "failed", "measurement_failed", event.reason or status,
                                {"uuid": event.measurement_id}))
         try:
-            self.store.record(uuid=event.measurement_id, status=status, trigger=trigger,
-                              device_id=self.config.device_id, software_version=__version__,
-                              started_at=finished - (time.monotonic() - armed), finished_at=finished, error=event.reason, rig=self.config.rig.to_dict(),
-                              config=self.config.to_dict(),
-                              part={"part_id": part_id, "recipe": recipe.name if recipe else None,
-                                    "recipe_version": recipe.version if recipe else None})
+            self._record(event.measurement_id, status, trigger, finished - (time.monotonic() - armed), finished,
+                         _unjudged(part_id, recipe), error=event.reason)
             self._note_stored(event.measurement_id)
         except ServiceError:
             log.exception("could not store the %s measurement %s", status, event.measurement_id)
@@ -887,8 +862,7 @@ class Appliance:
         if refused:
             due = True
         else:
-            rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
-            state = self.calibration_state(rig, self.wall_clock())
+            state = self.calibration_state()
             due = bool(state and state["due"])
         self._calibration_checked = (now, recipe, due, refused)
         return due, refused
@@ -970,13 +944,9 @@ class Appliance:
         self.notifier.close()
 
 
-def _part_columns(part: Mapping[str, Any]) -> dict[str, Any]:
-    """The store's part columns from the payload's part keys."""
-    recipe, release, whole = part.get("recipe") or {}, part.get("release") or {}, part.get("part") or {}
-    return {"part_id": part.get("part_id"), "part_uuid": release.get("part_uuid"), "recipe": recipe.get("name"),
-            "recipe_version": recipe.get("version"), "release_index": release.get("index"),
-            "releases": release.get("of"), "verdict": release.get("verdict"), "part_verdict": part.get("verdict"),
-            "part_value": whole.get("mean"), "part_U": whole.get("U")}
+def _unjudged(part_id: str | None, recipe: Recipe | None) -> PartOutcome:
+    """The part keys of a run without a result: the part and the recipe it was measured for."""
+    return PartOutcome(part_id, {"name": recipe.name, "version": recipe.version} if recipe is not None else None)
 
 
 def lock_state_dir(state: Path) -> int:

@@ -28,6 +28,7 @@ from typing import Iterator
 from service.core import vocabulary as V
 from service.devices.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
 from service.errors import AddressInUse, InputFileError
+from service.parts.outcome import PartOutcome
 
 EXIT_FAULT = 3
 
@@ -195,9 +196,11 @@ def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
             if len(published) < i:
                 print(f"moi demo: the measurement failed: {app.sequencer.last_fault}", file=sys.stderr)
                 return EXIT_FAULT
-            rel = app.store.get(published[-1].id).payload["release"]
-            print(f"  release {i}: {rel['quantity']} = {_g(rel['value'], '.7g')} kg·m², u_c {_g(rel['u_c'])}, "
-                  f"U {_g(rel['U'])} → {rel['verdict']}" + (f" ({'; '.join(rel['reasons'])})" if rel["reasons"] else ""))
+            rel = PartOutcome.from_dict(app.store.get(published[-1].id).payload).release
+            assert rel is not None  # a recipe is active: every release is judged
+            d = rel.decision
+            print(f"  release {i}: {rel.quantity} = {_g(d.value, '.7g')} kg·m², u_c {_g(d.u_c)}, "
+                  f"U {_g(d.U)} → {d.verdict}" + (f" ({'; '.join(d.reasons)})" if d.reasons else ""))
         m = published[-1]
         print()
         print(m.result.report())
@@ -226,25 +229,26 @@ def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
             a = R.BY_NAME[reg].address
             value = codes.get(snap[reg], snap[reg]) if reg == "verdict" else snap[reg]
             print(f"  {a:>3}     {reg:<14} {value}")
-        part = payload.get("part")
+        outcome = PartOutcome.from_dict(payload)
+        part = outcome.part
         if part is not None:
             print()
-            joint = part.get("joint")
+            joint = part.joint
             how = "identified jointly" if joint else "weighted mean"
             fit_u = "joint u" if joint else "fit u"
-            print(f"part {payload['part_id']}: {part['quantity']} = {_g(part['mean'], '.7g')} kg·m² (releases "
-                  f"{[i + 1 for i in part['used']]} {how}), s = {_g(part['std'])}, Type A u = {_g(part['u_typeA'])}, "
-                  f"{fit_u} = {_g(part['u_fit'])}, systematic u = {_g(part['u_systematic'])}, U = {_g(part['U'])} kg·m²")
+            print(f"part {outcome.part_id}: {part.quantity} = {_g(part.value, '.7g')} kg·m² (releases "
+                  f"{[i + 1 for i in part.used]} {how}), s = {_g(part.std)}, Type A u = {_g(part.u_typeA)}, "
+                  f"{fit_u} = {_g(part.u_fit)}, systematic u = {_g(part.u_systematic)}, U = {_g(part.U)} kg·m²")
             if joint:
                 c = joint["consistency"]
                 print(f"  the releases against the joint ω_n {joint['omega_n']:.7g} rad/s: χ² {c['chi2']:.2f} on "
                       f"{c['dof']} (p = {c['p']:.2g}), largest deviation {c['largest_z']:+.1f} σ")
-            for e in part["excluded"]:
+            for e in part.excluded:
                 print(f"  excluded release {e['index'] + 1}: {e['reason']}")
-            spec = payload["recipe"]
-            print(f"  tolerance [{spec['lower']:.7g}, {spec['upper']:.7g}], deviation {_g(part['deviation'], '+.3g')}, "
-                  f"zone {part['zone']} → VERDICT {part['verdict']}"
-                  + (f" ({'; '.join(part['reasons'])})" if part["reasons"] else ""))
+            spec = outcome.recipe or {}
+            d = part.decision
+            print(f"  tolerance [{spec['lower']:.7g}, {spec['upper']:.7g}], deviation {_g(d.deviation, '+.3g')}, "
+                  f"zone {d.zone} → VERDICT {d.verdict}" + (f" ({'; '.join(d.reasons)})" if d.reasons else ""))
         if consumer is not None:
             got = consumer.wait(payload["uuid"], 15)
             print(f"MQTT: result {payload['uuid']} " + ("received back from the broker" if got else

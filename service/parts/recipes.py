@@ -81,6 +81,7 @@ is reported as abandoned in the log and in the next payload's
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import logging
 import math
@@ -97,6 +98,7 @@ from measurement.units import inertia_unit
 from measurement.verdict import QUANTITIES, RULES, QualityRules, Reading, Specification, combine, judge_release
 from service.errors import ConfigError
 from service.names import NAMES, name_problem
+from service.parts.outcome import PartOutcome, PartSummary, ReleaseOutcome
 from service.sources.files import read_rig, read_text
 
 log = logging.getLogger("moi.recipes")
@@ -465,8 +467,8 @@ class PartTracker:
     The part ID and the active recipe are set by the PLC, MQTT or the config;
     ``release(result, measurement_id, part_id, recipe)`` is called once per
     successful measurement with what was current when it was triggered and
-    returns the keys the payload adds (``part_id``, ``recipe``, ``release``,
-    ``part``, ``verdict``).
+    returns what the payload adds (``PartOutcome``: part ID, recipe, release,
+    part, verdict).
     """
 
     def __init__(self, book: RecipeBook, active: str | None = None) -> None:
@@ -496,14 +498,13 @@ class PartTracker:
                 "of": o.recipe.releases}
 
     def release(self, result: Mapping[str, Any], measurement_id: str, part_id: str | None,
-                recipe: Recipe | None, identified: Any = None, rig: Rig | None = None) -> dict[str, Any]:
-        """Count one release; returns the payload keys (the part's verdict once it is complete).
+                recipe: Recipe | None, identified: Any = None, rig: Rig | None = None) -> PartOutcome:
+        """Count one release; returns what its payload adds (the part's verdict once it is complete).
 
         identified, rig: the release's ``IdentificationResult`` and the rig it was identified on: with
         them for every release, the part's value is the releases' joint identification.
         """
-        out: dict[str, Any] = {"part_id": part_id, "recipe": recipe.to_dict() if recipe else None,
-                               "release": None, "part": None, "verdict": None}
+        out = PartOutcome(part_id, recipe.to_dict() if recipe else None)
         o = self._open
         self._undo = (o, len(o.readings) if o is not None else 0)
         if recipe is None:
@@ -523,35 +524,40 @@ class PartTracker:
         o.readings.append(reading)
         o.measurements.append(measurement_id)
         o.identified.append(identified)
-        decision = judge_release(reading, spec, recipe.quality)
-        out["release"] = {"index": len(o.readings), "of": recipe.releases, "part_uuid": o.uuid,
-                          "quantity": spec.quantity, **decision.to_dict(), "abandoned": abandoned}
+        release = ReleaseOutcome(len(o.readings), recipe.releases, o.uuid, spec.quantity,
+                                 judge_release(reading, spec, recipe.quality), abandoned)
+        out = dataclasses.replace(out, release=release)
         if len(o.readings) >= recipe.releases:
-            joint_of = None
-            if rig is not None and all(r is not None for r in o.identified):
-                found, quantity = o.identified, spec.quantity
-
-                def joint_of(used, quantity=quantity, found=found, rig=rig):
-                    from measurement.joint import joint_value  # scipy: only when a part completes
-                    try:
-                        return joint_value([found[i] for i in used], rig, quantity)
-                    except MeasurementError as exc:
-                        log.warning("part %s: the joint identification failed (%s); the weighted mean is used",
-                                    part_id or o.uuid, exc)
-                        return None
-            part = combine(o.readings, spec, recipe.quality, joint_of)
-            out["part"] = {"uuid": o.uuid, "part_id": part_id, "measurements": list(o.measurements),
-                           "quantity": spec.quantity, **part.to_dict()}
-            cs = recipe.check_standard
-            if cs is not None and part.decision.value is not None and part.decision.U is not None:
-                check = check_standard(cs["name"], spec.quantity, part.decision.value, part.decision.U,
-                                       cs["reference"], cs["reference_U"])
-                out["part"]["check_standard"] = check.to_dict()
-            out["verdict"] = part.verdict
-            for e in part.excluded:
-                log.warning("part %s: release %d excluded: %s", part_id or o.uuid, e["index"] + 1, e["reason"])
-            self._open = None
+            part = self._complete(o, part_id, recipe, rig)
+            out = dataclasses.replace(out, part=part, verdict=part.verdict)
         return out
+
+    def _complete(self, o: _OpenPart, part_id: str | None, recipe: Recipe, rig: Rig | None) -> PartSummary:
+        """The verdict of the open part, complete with this release (and a check standard's comparison)."""
+        spec = recipe.spec
+        assert spec is not None
+        joint_of = None
+        if rig is not None and all(r is not None for r in o.identified):
+            found, quantity = o.identified, spec.quantity
+
+            def joint_of(used, quantity=quantity, found=found, rig=rig):
+                from measurement.joint import joint_value  # scipy: only when a part completes
+                try:
+                    return joint_value([found[i] for i in used], rig, quantity)
+                except MeasurementError as exc:
+                    log.warning("part %s: the joint identification failed (%s); the weighted mean is used",
+                                part_id or o.uuid, exc)
+                    return None
+        combined = combine(o.readings, spec, recipe.quality, joint_of)
+        part = PartSummary.of(combined, o.uuid, part_id, tuple(o.measurements), spec.quantity)
+        cs = recipe.check_standard
+        if cs is not None and part.value is not None and part.U is not None:
+            check = check_standard(cs["name"], spec.quantity, part.value, part.U, cs["reference"], cs["reference_U"])
+            part = dataclasses.replace(part, check_standard=check.to_dict())
+        for e in combined.excluded:
+            log.warning("part %s: release %d excluded: %s", part_id or o.uuid, e["index"] + 1, e["reason"])
+        self._open = None
+        return part
 
     def undo_last(self) -> None:
         """Forget the last ``release`` (its measurement could not be stored)."""
@@ -612,13 +618,14 @@ def recipe_spc(store: Any, recipe: str, *, since: float | None = None, until: fl
     from measurement.spc import D2, individuals, xbar_r, xbar_s
 
     rows = list(reversed(store.list(limit=limit, recipe=recipe, parts_only=True, since=since, until=until, full=True)))
-    usable = [m for m in rows if m.part_verdict != "INVALID" and m.payload and (m.payload.get("part") or {}).get("mean")
-              is not None]
-    if len(usable) < 2:
+    read = [(m, PartOutcome.from_dict(m.payload)) for m in rows if m.part_verdict != "INVALID" and m.payload]
+    done = [(m, o) for m, o in read if o.part is not None and o.part.value is not None]
+    if len(done) < 2:
         return None
-    spec = usable[-1].payload["recipe"]
+    usable = [m for m, _ in done]
+    spec = done[-1][1].recipe or {}
     lsl, usl = spec["lower"], spec["upper"]
-    groups = [[p["values"][i] for i in p["used"]] for p in (m.payload["part"] for m in usable)]
+    groups = [[part.values[i] for i in part.used] for part in (o.part for _, o in done) if part is not None]
     sizes = {len(g) for g in groups}
     use_xbar = chart == "Xbar-R" or (chart == "auto" and len(sizes) == 1 and next(iter(sizes)) in D2)
     if chart == "Xbar-S":

@@ -44,7 +44,8 @@ from service.sources.calibrations import read_history, recorded_at
 from service.sources.repeats import rig_reproducibility
 from service.states import vocabulary
 
-from . import quality as Q
+from .. import quality as Q
+from ..words import STATE_WORDS, flag_words
 from .auth import (
     COOKIE,
     CSRF_HEADER,
@@ -69,7 +70,6 @@ from .child import ChildBusy, export_file, replot, report_file, trace_file
 from .live import Live, extras
 from .priority import CaptureFirst, sensor_is_read
 from .settings import PLOT_NAME
-from .words import STATE_WORDS, flag_words
 
 if TYPE_CHECKING:  # pragma: no cover
     import concurrent.futures
