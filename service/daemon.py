@@ -46,8 +46,9 @@ from service.core.live import LiveStatus
 from service.devices.hardware import Devices, build_devices
 from service.parts import calibration as calibration_rule
 from service.parts.outcome import PartOutcome
-from service.parts.recipes import PartTracker, Recipe, RecipeBook, RecipeError
+from service.parts.recipes import Recipe, RecipeBook, RecipeError
 from service.parts.tensor_set import COMPLETE, OpenSetFile, TensorSet, interrupted
+from service.parts.tracker import PartTracker
 from service.persistence.salvage import quarantine_store
 from service.persistence.store import Store
 from service.publish import registry

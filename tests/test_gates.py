@@ -28,7 +28,6 @@ ALLOWED_OVER_LIMIT: dict[str, set[str]] = {
     "service/commands/demo.py": {"_run"},
     "service/config/check.py": {"check_config"},
     "service/config/schema.py": {"value"},
-    "service/parts/recipes.py": {"load_recipe"},
     "service/publish/modbus/server.py": {"_write_inputs"},
     "service/publish/mqtt/client.py": {"_on_message"},
 }

@@ -24,7 +24,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from service.core.live import LiveStatus
     from service.devices.hardware import Devices
     from service.notify import Notifier
-    from service.parts.recipes import PartTracker, Recipe
+    from service.parts.recipes import Recipe
+    from service.parts.tracker import PartTracker
     from service.persistence.store import Store, StoredMeasurement
     from service.publish.replies import ReplyTo
 

@@ -28,8 +28,8 @@ from service import __version__
 from service.core import vocabulary as V
 from service.errors import InputFileError, StoreDamaged
 from service.names import content_disposition
+from service.parts.recipe_keys import EDITABLE
 from service.parts.recipes import (
-    EDITABLE,
     PART_ID_LENGTH,
     RECIPE_AUDIT_FILE,
     RecipeBook,
@@ -967,7 +967,7 @@ class Views:
             recipe = parts.book.find(str(form.get("recipe") or ""))
         except RecipeError as exc:
             raise Refused(404, str(exc)) from None
-        typed = {k: str(form[k]) for k in EDITABLE if k in form}
+        typed = {k.name: str(form[k.name]) for k in EDITABLE if k.name in form}
         loop = asyncio.get_running_loop()
         try:
             new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed)

@@ -313,7 +313,7 @@ def test_moi_run_check_validates_every_recipe(tmp_path, capsys):
 
 def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_an_unstored_release(tmp_path):
     from service.parts.outcome import PartOutcome
-    from service.parts.recipes import PartTracker
+    from service.parts.tracker import PartTracker
 
     d = tmp_path / "recipes"
     write(d / "r.toml", recipe("r", 1, J_TRUE, tolerance_percent=1.0, releases=2))
@@ -343,7 +343,7 @@ def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_
 def test_a_release_under_a_tensor_recipe_is_not_judged_and_ends_the_open_part(tmp_path):
     # a tensor recipe has no single quantity (spec None): its release outside a set gets no verdict
     from service.commands.demo_tensor import recipe_text
-    from service.parts.recipes import PartTracker
+    from service.parts.tracker import PartTracker
 
     d = tmp_path / "recipes"
     write(d / "r.toml", recipe("r", 1, J_TRUE, tolerance_percent=1.0, releases=2))
