@@ -32,7 +32,6 @@ import sys
 import threading
 import time
 from collections import deque
-from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from firmware_host import Event, Measurement, Sequencer, State
@@ -49,7 +48,7 @@ from service.parts.outcome import PartOutcome
 from service.parts.recipes import Recipe, RecipeBook, RecipeError
 from service.parts.tensor_set import COMPLETE, OpenSetFile, TensorSet, interrupted
 from service.parts.tracker import PartTracker
-from service.persistence.salvage import quarantine_store
+from service.persistence.state_dir import lock_state_dir, open_store, unlock_state_dir
 from service.persistence.store import Store
 from service.publish import registry
 from service.publish.payload import iso_utc, result_payload
@@ -58,7 +57,7 @@ from service.publish.replies import CONTACT, CommandReply, ReplyTo
 
 from . import __version__
 from .contention import CaptureWatch
-from .errors import ServiceError, StartupError, StoreDamaged, StoreError
+from .errors import ServiceError, StoreError
 from .notify import Notifier
 
 log = logging.getLogger("moi.daemon")
@@ -69,9 +68,6 @@ EXIT_RUNTIME_FAILURE = 3
 
 #: at most one "trigger ignored" line per this many seconds, s
 IGNORED_LOG_INTERVAL = 10.0
-
-#: the lock file in the state directory that makes a second daemon on it stop at start
-LOCK_NAME = "moi.lock"
 
 #: how often the live status looks again whether the rig's calibration is due, s
 CALIBRATION_CHECK_INTERVAL = 60.0
@@ -166,7 +162,7 @@ class Appliance:
         cfg = self.config
         try:
             self._lock_state_dir()
-            self.store = self._open_store()
+            self.store = open_store(self.config.state_dir, self.wall_clock)
             view = ApplianceView(self)
             enabled = [(entry.load(), settings) for entry in registry.PUBLISHERS
                        if (settings := cfg.publishers.get(entry.name)) is not None]
@@ -247,31 +243,8 @@ class Appliance:
 
     def _unlock_state_dir(self) -> None:
         if self._lock_fd is not None:
-            import os
-            os.close(self._lock_fd)  # closing the descriptor releases the lock
+            unlock_state_dir(self._lock_fd)
             self._lock_fd = None
-
-    def _open_store(self) -> Store:
-        """The store, after the reads a start does; a damaged one is moved aside and what can be
-        read is salvaged into a new one (a restart loop on a damaged file would stop the appliance
-        for good, and deleting it would lose results)."""
-        state_dir = self.config.state_dir
-        try:
-            store = Store(state_dir)
-            try:
-                store.outbox_count()
-                store.latest("ok")
-                store.outbox_pending(limit=10)
-            except BaseException:
-                store.close()
-                raise
-            return store
-        except StoreDamaged as exc:
-            log.error("%s", exc)
-        aside, health = quarantine_store(state_dir, self.wall_clock)
-        log.error("the damaged result store was moved to %s; a new store holds what could be read (%s)", aside,
-                  health.summary())
-        return Store(state_dir)
 
     # --- the main loop ---------------------------------------------------------------------------------
     def run(self, until: Callable[[], bool] | None = None) -> int:
@@ -948,30 +921,6 @@ class Appliance:
 def _unjudged(part_id: str | None, recipe: Recipe | None) -> PartOutcome:
     """The part keys of a run without a result: the part and the recipe it was measured for."""
     return PartOutcome(part_id, {"name": recipe.name, "version": recipe.version} if recipe is not None else None)
-
-
-def lock_state_dir(state: Path) -> int:
-    """Take the state directory's lock (the descriptor holds it; closing it releases it). One daemon
-    per state directory: a second one would take over the MQTT client id and deliver every result
-    twice. The lock is the kernel's (flock): it goes with the process."""
-    import fcntl
-    import os
-
-    try:
-        state.mkdir(parents=True, exist_ok=True)
-        fd = os.open(state / LOCK_NAME, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o640)
-    except OSError as exc:
-        raise StartupError(f"cannot create the lock file in {str(state)!r}: {exc.strerror}") from None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        other = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
-        os.close(fd)
-        raise StartupError(f"another moi daemon (pid {other}) runs on the state directory {str(state)!r}; "
-                           "stop it first, or give this one its own state_dir") from None
-    os.ftruncate(fd, 0)
-    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-    return fd
 
 
 class _Fatal(ServiceError):
