@@ -46,7 +46,8 @@ from service.devices.hardware import Devices, build_devices
 from service.parts import calibration as calibration_rule
 from service.parts.outcome import PartOutcome
 from service.parts.recipes import Recipe, RecipeBook, RecipeError
-from service.parts.tensor_set import COMPLETE, OpenSetFile, TensorSet, interrupted
+from service.parts.set_desk import SetDesk
+from service.parts.tensor_set import TensorSet
 from service.parts.tracker import PartTracker
 from service.persistence.state_dir import lock_state_dir, open_store, unlock_state_dir
 from service.persistence.store import Store
@@ -116,7 +117,8 @@ class Appliance:
         self._accepted_part: tuple[str | None, Recipe | None] = (None, None)
         self._run_part: dict[str, tuple[str | None, Recipe | None]] = {}
         self._current_recipe: Recipe | None = None
-        self.tensor_set: TensorSet | None = None  # the guided set of a tensor recipe (open or just finished)
+        self.sets = SetDesk(config.state_dir, config.device_id, lambda: self.store, self._to_publishers,
+                            self._refresh_live, wall_clock)
         self._last_status = ""
         self.loop_iterations = 0
         self.last_loop_error: str | None = None
@@ -191,7 +193,7 @@ class Appliance:
         except BaseException:
             self._shutdown_components()
             raise
-        self._recover_set()
+        self.sets.recover()
         self._open_set()  # a tensor recipe active from the configuration: its set waits for the first release
         self._refresh_live()
         self._to_publishers("on_state", self._state_message("IDLE", "IDLE", "daemon started", None), None)
@@ -381,7 +383,9 @@ class Appliance:
                  reply: ReplyTo | None) -> CommandReply:
         """An operator action of the tensor set: the coil's own (``set_action``) or the data's ``action``."""
         action = command.set_action or str((data or {}).get("action"))
-        return self._set_action(action, (data or {}).get("orientation"), source, name)
+        assert self.sequencer is not None
+        status, reason, detail = self.sets.act(action, (data or {}).get("orientation"), source, self.sequencer.busy)
+        return CommandReply(name, status, reason, detail)
 
     #: how the daemon acts on each ``Command.act`` but "part" (whose data is applied in ``_execute``)
     _ACTS: dict[str, Callable[..., CommandReply]] = {"measure": _act_measure, "stop": _act_stop, "set": _act_set}
@@ -421,99 +425,18 @@ class Appliance:
             self._to_publishers("on_part_id", self.parts.part_id)
         self._open_set()
 
-    # --- the guided tensor set (main loop thread) ------------------------------------------------------
+    # --- the guided tensor set (main loop thread; ``SetDesk``) ------------------------------------------------
+    @property
+    def tensor_set(self) -> TensorSet | None:
+        """The guided set of a tensor recipe (open or just finished)."""
+        return self.sets.current
+
     def _open_set(self) -> None:
-        """Open a tensor set when the active recipe declares a tensor plan and none runs for it and this part
-        (a finished set is shown until the next trigger or selection, which starts the next one); a running
-        set of another recipe or part is aborted (its releases stay stored)."""
-        recipe, part_id = self.parts.recipe, self.parts.part_id
-        current = self.tensor_set
-        if current is not None and not current.done:
-            if recipe is current.recipe and part_id == current.part_id:
-                return
-            current.act("abort")
-            current.error = "a different recipe or part ID was selected"
-            self._finish_set(current)
-        if recipe is None or recipe.tensor is None:
-            return
-        self.tensor_set = TensorSet(recipe, recipe.rig_for(self.config.rig), part_id, self.wall_clock())
-        log.info("tensor set %s started (%s, part %s): %s", self.tensor_set.uuid, recipe.name, part_id or "-",
-                 self.tensor_set.instruction())
-        self._publish_set()
-
-    def _set_action(self, action: str, orientation: Any, source: str, name: str = "set") -> CommandReply:
-        s = self.tensor_set
-        if s is None or s.done:
-            log.warning("set %s from %s: no tensor set is running", action, source)
-            return CommandReply(name, "refused", "no_tensor_set")
-        assert self.sequencer is not None
-        if self.sequencer.busy and action != "abort":
-            log.warning("set %s from %s refused: a measurement runs", action, source)
-            return CommandReply(name, "refused", "busy")
-        try:
-            s.act(action, None if orientation is None else str(orientation))
-        except InvalidInput as exc:
-            log.warning("set %s from %s refused: %s", action, source, exc)
-            return CommandReply(name, "refused", "malformed", str(exc))
-        log.info("tensor set %s: %s by %s; %s", s.uuid, action, source, s.instruction())
-        if s.done:  # act() may have ended the set (mypy keeps the narrowing of s.done above across the call)
-            self._finish_set(s)  # type: ignore[unreachable]
-        self._publish_set()
-        return CommandReply(name, "done")
-
-    def _finish_set(self, s: TensorSet, record: dict[str, Any] | None = None) -> None:
-        """Store a finished set (complete, failed, aborted or interrupted) and hand it to the publishers."""
-        assert self.store is not None
-        record = record or s.to_dict()
-        try:
-            self.store.record_tensor_set(record, started_at=s.started_at, finished_at=self.wall_clock())
-        except ServiceError:
-            log.exception("could not store the tensor set %s", s.uuid)
-            return
-        OpenSetFile(self.config.state_dir).drop()
-        if s.status == COMPLETE and s.result is not None:
-            r = s.result
-            log.info("tensor set %s complete: principal moments %s kg·m², flags %s", s.uuid,
-                     ", ".join(f"{v:.6g}" for v in r.principal_moments), ", ".join(r.flags) or "none")
-        self._to_publishers("on_tensor_set", record | {"device_id": self.config.device_id,
-                                                      "timestamp": self.wall_clock()})
-
-    def _interrupt_set(self, why: str) -> None:
-        """A running set with releases, cut short: stored as interrupted (a new set begins at the next start)."""
-        s = self.tensor_set
-        if s is not None and not s.done and any(s.releases().values()) and self.store is not None:
-            log.warning("tensor set %s interrupted at %s: %s", s.uuid, s.instruction(), why)
-            self._finish_set(s, interrupted(s.to_dict(), why))
-
-    def _recover_set(self) -> None:
-        """The set a kill cut short (its file is left): stored as interrupted, and said; a new set starts."""
-        left = OpenSetFile(self.config.state_dir).left()
-        if left is None or self.store is None:
-            return
-        record = interrupted(left, "the daemon was stopped during the set without storing it")
-        try:
-            self.store.record_tensor_set(record, started_at=left.get("started_at"), finished_at=self.wall_clock())
-        except ServiceError:
-            log.exception("could not store the interrupted tensor set %s", left["uuid"])
-            return
-        OpenSetFile(self.config.state_dir).drop()
-        log.warning("tensor set %s (%s, part %s) was interrupted: %s; a new set starts at the first orientation",
-                    left["uuid"], left.get("recipe"), left.get("part_id") or "-", record["error"])
-
-    def _publish_set(self) -> None:
-        if self.tensor_set is not None and not self.tensor_set.done:
-            OpenSetFile(self.config.state_dir).keep(self.tensor_set)
-        progress = self.set_progress()
-        if progress is not None:
-            self._to_publishers("on_set", progress)
-        self._refresh_live()
+        self.sets.open(self.parts.recipe, self.config.rig, self.parts.part_id)
 
     def set_progress(self) -> dict[str, Any] | None:
         """The tensor set's progress with the operator's instruction (None: no set)."""
-        s = self.tensor_set
-        if s is None:
-            return None
-        return s.progress() | {"instruction": s.instruction(), "device_id": self.config.device_id}
+        return self.sets.progress()
 
     def _run_calls(self) -> None:
         while True:
@@ -658,7 +581,7 @@ class Appliance:
         calibration = calibration_rule.calibration_state(rig, self._checks(), finished)
         typed = self._station_flags(m, calibration)
         result = typed.to_dict()
-        tensor_set = self._set_of(recipe)
+        tensor_set = self.sets.of(recipe)
         if tensor_set is not None:
             outcome = PartOutcome(part_id, recipe.to_dict() if recipe else None, calibration=calibration,
                                   tensor_set=tensor_set.release(result, m.id))
@@ -692,10 +615,7 @@ class Appliance:
                  ", ".join(typed.flags) or "none")
         self._part_done(outcome, recipe, m.id, typed.flags, finished)
         if tensor_set is not None:
-            log.info("tensor set %s: %s", tensor_set.uuid, tensor_set.instruction())
-            if tensor_set.done:
-                self._finish_set(tensor_set)
-            self._publish_set()
+            self.sets.released(tensor_set)
 
     def _station_flags(self, m: Measurement, calibration: Mapping[str, Any] | None) -> IdentificationResult:
         """The result with the station's own flags raised (calibration due, capture slowed), before anything reads
@@ -704,12 +624,6 @@ class Appliance:
                   (self._capture_watch.slowed(m.result.acquisition), F.CAPTURE_SLOWED))
         flags = m.result.flags + tuple(f for up, f in raised if up and f not in m.result.flags)
         return dataclasses.replace(m.result, flags=flags) if flags != m.result.flags else m.result
-
-    def _set_of(self, recipe: Recipe | None) -> TensorSet | None:
-        """The running tensor set a release of ``recipe`` counts for (None: a part's release, or the set ended,
-        aborted, while it ran: it counts for nothing)."""
-        s = self.tensor_set if recipe is not None and recipe.tensor is not None else None
-        return None if s is None or s.done or s.recipe is not recipe else s
 
     def _part_done(self, outcome: PartOutcome, recipe: Recipe | None, measurement: str, flags: tuple[str, ...],
                    finished: float) -> None:
@@ -811,7 +725,7 @@ class Appliance:
         fields: dict[str, Any] = {}
         for p in self.publishers:
             fields |= p.live_fields()
-        fields |= self._set_registers()
+        fields |= self.sets.registers()
         due, refused = self._calibration_due()
         return LiveStatus(
             state="STOPPING" if self._stopping else state, busy=bool(seq and seq.busy), fault=state == "FAULT",
@@ -840,13 +754,6 @@ class Appliance:
             due = bool(state and state["due"])
         self._calibration_checked = (now, recipe, due, refused)
         return due, refused
-
-    def _set_registers(self) -> dict[str, int]:
-        p = self.tensor_set.progress() if self.tensor_set is not None else None
-        if p is None:
-            return {}
-        o = p["orientation"]
-        return {"set_step": p["step"], "set_steps": p["steps"], "set_orientation": o["index"] if o else 0}
 
     def _refresh_live(self) -> None:
         live = self.live_status()
@@ -888,7 +795,7 @@ class Appliance:
                 log.exception("error while finishing the measurement at stop")
             finally:
                 seq.close()
-        self._interrupt_set("the daemon stopped")
+        self.sets.interrupt("the daemon stopped")
         self._shutdown_components()
 
     def _shutdown_components(self) -> None:

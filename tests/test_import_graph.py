@@ -147,10 +147,10 @@ LAYERS: dict[str, set[str]] = {
     "parts": {"config", "errors", "measurement", "names", "sources"},
     # the store writes the payload's JSON as the publishers do (``payload.dumps``)
     "persistence": {"errors", "publish", "sources"},
-    # the port, payload, report, plot and export: what every publisher shares (the payload's flag bits are the
-    # Modbus map's; the PDF report draws the web page's quality words)
+    # the port, payload, quality words, report, plot and export: what every publisher shares (the payload's flag
+    # bits are the Modbus map's)
     "publish": {"config", "core", "devices", "errors", "firmware_host", "measurement", "notify", "parts",
-                "persistence", "publish.modbus", "publish.web", "service"},
+                "persistence", "publish.modbus", "service"},
     "publish.modbus": {"config", "core", "drivers", "errors", "measurement", "parts", "persistence", "publish",
                        "states"},
     # the Home Assistant discovery lists the flags in the Modbus map's bit order
@@ -159,7 +159,7 @@ LAYERS: dict[str, set[str]] = {
     # the Sparkplug node throttles the log lines a broker client can make it repeat (``logs.Throttle``), as MQTT does
     "publish.sparkplug": {"config", "core", "drivers", "errors", "logs", "measurement", "parts", "persistence",
                           "publish"},
-    "publish.opcua": {"config", "drivers", "errors", "names", "persistence", "publish", "states"},
+    "publish.opcua": {"config", "drivers", "errors", "names", "parts", "persistence", "publish", "states"},
     # the web page shows the angle sensor's set-up view (``devices.sensors``)
     "publish.web": {"config", "core", "devices", "drivers", "errors", "firmware_host", "measurement", "names",
                     "parts", "persistence", "publish", "service", "sources", "states"},
