@@ -150,7 +150,7 @@ LAYERS: dict[str, set[str]] = {
     # the port, payload, quality words, report, plot and export: what every publisher shares (the payload's flag
     # bits are the Modbus map's)
     "publish": {"config", "core", "devices", "errors", "firmware_host", "measurement", "notify", "parts",
-                "persistence", "publish.modbus", "service"},
+                "persistence", "publish.modbus", "service", "states"},
     "publish.modbus": {"config", "core", "drivers", "errors", "measurement", "parts", "persistence", "publish",
                        "states"},
     # the Home Assistant discovery lists the flags in the Modbus map's bit order
