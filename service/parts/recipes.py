@@ -208,7 +208,7 @@ def _checker(source: str) -> Any:
     from service.config.schema import Checker
 
     class RecipeChecker(Checker):
-        def fail(self, table: str | None, key: str | None, message: str) -> RecipeError:  # type: ignore[override]
+        def fail(self, table: str | None, key: str | None, message: str) -> RecipeError:
             where = (f"[{table}]" if table else "") + (f" {key}" if key else "")
             return RecipeError(f"{self.source}: {where + ': ' if where else ''}{message}")
 
@@ -501,7 +501,9 @@ def recipe_spc(store: Any, recipe: str, *, since: float | None = None, until: fl
     usable = [m for m, _ in done]
     spec = done[-1][1].recipe or {}
     lsl, usl = spec["lower"], spec["upper"]
-    groups = [[part.values[i] for i in part.used] for part in (o.part for _, o in done) if part is not None]
+    # a used release always has its value
+    groups = [[v for i in part.used if (v := part.values[i]) is not None] for part in (o.part for _, o in done)
+              if part is not None]
     sizes = {len(g) for g in groups}
     use_xbar = chart == "Xbar-R" or (chart == "auto" and len(sizes) == 1 and next(iter(sizes)) in D2)
     if chart == "Xbar-S":

@@ -176,7 +176,8 @@ def part_view(payload: Mapping[str, Any] | None, result: IdentificationResult | 
     """
     o = PartOutcome.from_dict(payload)
     recipe, part, release = o.recipe, o.part, o.release
-    quantity = (part or release).quantity if (part or release) is not None else (recipe or {}).get("quantity") or "J"
+    made = part or release
+    quantity = made.quantity if made is not None else (recipe or {}).get("quantity") or "J"
     out: dict[str, Any] = {"recipe": recipe, "part": part, "release": release, "excluded": [], "reasons": [],
                            "budget": budget_rows(result.uncertainty_budget.get(quantity) if result is not None else None)}
     k = (recipe or {}).get("coverage_factor") or (result.coverage_factor if result is not None else None)
