@@ -24,19 +24,16 @@ that died ends the daemon with status 3 so that systemd restarts it.
 from __future__ import annotations
 
 import concurrent.futures
-import dataclasses
 import logging
 import queue
 import subprocess
 import sys
 import threading
 import time
-from collections import deque
 from typing import Any, Callable, Mapping
 
-from firmware_host import Event, Measurement, Sequencer, State
+from firmware_host import Event, Sequencer, State
 from measurement import IdentificationResult, Rig, Trace, identify
-from measurement import flags as F
 from measurement.errors import InvalidInput
 from measurement.integrator import is_compiled
 from service.config.appliance import Config
@@ -44,7 +41,6 @@ from service.core import vocabulary as V
 from service.core.live import LiveStatus
 from service.devices.hardware import Devices, build_devices
 from service.parts import calibration as calibration_rule
-from service.parts.outcome import PartOutcome
 from service.parts.recipes import Recipe, RecipeBook, RecipeError
 from service.parts.set_desk import SetDesk
 from service.parts.tensor_set import TensorSet
@@ -52,7 +48,7 @@ from service.parts.tracker import PartTracker
 from service.persistence.state_dir import lock_state_dir, open_store, unlock_state_dir
 from service.persistence.store import Store
 from service.publish import registry
-from service.publish.payload import iso_utc, result_payload
+from service.publish.payload import iso_utc
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CONTACT, CommandReply, ReplyTo
 
@@ -60,6 +56,7 @@ from . import __version__
 from .contention import CaptureWatch
 from .errors import ServiceError, StoreError
 from .notify import Notifier
+from .recording import Recorder
 
 log = logging.getLogger("moi.daemon")
 
@@ -105,26 +102,19 @@ class Appliance:
         self._stop = threading.Event()
         self._compiling: subprocess.Popen | None = None  # the integrator compiled on a first run
         self._started_runs = 0
-        self._capture_watch = CaptureWatch(lambda: sum(p.capture_requests() for p in self.publishers))
-        # measurement id → (monotonic time of ARMED, trigger source): a run's start is the wall clock at its end
-        # less the monotonic time it took, so a step of the wall clock never gives a negative duration
-        self._run_started: dict[str, tuple[float, str]] = {}
+        self.capture_watch = CaptureWatch(lambda: sum(p.capture_requests() for p in self.publishers))
         self._accepted_source = "unknown"  # source of the last accepted trigger (paired with the next ARMED)
         self._accepted_reply: ReplyTo | None = None  # who hears the outcome of the last accepted trigger
-        self._run_reply: dict[str, ReplyTo] = {}  # measurement id → who hears its outcome
-        # the part ID and recipe of the last accepted trigger, and of each run (measurement id → them)
+        # the part ID and recipe of the last accepted trigger
         self.parts = PartTracker(config.recipes or RecipeBook(None), config.active_recipe)
         self._accepted_part: tuple[str | None, Recipe | None] = (None, None)
-        self._run_part: dict[str, tuple[str | None, Recipe | None]] = {}
         self._current_recipe: Recipe | None = None
-        self.sets = SetDesk(config.state_dir, config.device_id, lambda: self.store, self._to_publishers,
+        self.sets = SetDesk(config.state_dir, config.device_id, lambda: self.store, self.to_publishers,
                             self._refresh_live, wall_clock)
         self._last_status = ""
         self.loop_iterations = 0
         self.last_loop_error: str | None = None
-        self.stored: list[str] = []  # UUIDs stored since start (ok, failed, aborted), in order
-        self._durable_results: deque[str] = deque(maxlen=16)  # UUIDs of the latest results the store holds
-        self._stored_cond = threading.Condition()
+        self.recorder = Recorder(self)
         self.exit_status = EXIT_OK
         self._stopping = False
         self._lock_fd: int | None = None
@@ -174,7 +164,7 @@ class Appliance:
             # the button is wired through the command queue like the other sources, so every
             # trigger is logged and executed the same way on the main loop
             self.sequencer = Sequencer(clock=d.clock, solenoid=d.solenoid, sensor=d.sensor, rig=cfg.rig,
-                                       sink=self._store_measurement, config=cfg.sequencer,
+                                       sink=self.recorder.sink, config=cfg.sequencer,
                                        options=cfg.identification, button=None, indicator=d.indicator,
                                        identifier=self._identify)
             if d.button is not None:
@@ -196,7 +186,7 @@ class Appliance:
         self.sets.recover()
         self._open_set()  # a tensor recipe active from the configuration: its set waits for the first release
         self._refresh_live()
-        self._to_publishers("on_state", self._state_message("IDLE", "IDLE", "daemon started", None), None)
+        self.to_publishers("on_state", self._state_message("IDLE", "IDLE", "daemon started", None), None)
         where = [w for p in self.publishers if (w := p.where())] or ["no publisher"]
         log.info("moi %s ready (%s rig; %s; store %s)", __version__, "simulated" if cfg.simulated else "hardware",
                  ", ".join(where), self.store.path)
@@ -216,7 +206,7 @@ class Appliance:
                 log.exception("%s stop failed", p.NAME)
             self.publishers.remove(p)
 
-    def _to_publishers(self, hook: str, *args: Any) -> None:
+    def to_publishers(self, hook: str, *args: Any) -> None:
         """Call ``hook`` of every publisher (main loop thread; hooks never block)."""
         for p in self.publishers:
             getattr(p, hook)(*args)
@@ -285,7 +275,7 @@ class Appliance:
         if seq is None or armed is None or seq.state is not State.ARMED or self.devices is None:
             return self.poll_interval
         due = armed + self.config.sequencer.pre_trigger - self.devices.clock.now()
-        return min(self.poll_interval, max(0.0, due / self._clock_scale()))
+        return min(self.poll_interval, max(0.0, due / self.clock_scale()))
 
     def _iteration(self) -> None:
         assert self.sequencer is not None
@@ -419,10 +409,10 @@ class Appliance:
         if data.get("recipe") is not None:
             r = self.parts.select(data["recipe"])
             log.info("recipe %s", f"{r.number} {r.name!r} (version {r.version}) active" if r else "deselected")
-            self._to_publishers("on_recipe", r)
+            self.to_publishers("on_recipe", r)
         if "part_id" in data:
             self.parts.set_part_id(data["part_id"])
-            self._to_publishers("on_part_id", self.parts.part_id)
+            self.to_publishers("on_part_id", self.parts.part_id)
         self._open_set()
 
     # --- the guided tensor set (main loop thread; ``SetDesk``) ------------------------------------------------
@@ -483,18 +473,15 @@ class Appliance:
         self._armed_at = event.time if event.state is State.ARMED else None
         if event.state is State.ARMED:
             self._started_runs += 1
-            self._capture_watch.armed()
+            self.capture_watch.armed()
             if event.measurement_id:
-                self._run_started[event.measurement_id] = (time.monotonic(), self._accepted_source)
-                if self._accepted_reply is not None:
-                    self._run_reply[event.measurement_id] = self._accepted_reply
-                    self._accepted_reply = None
-                self._run_part[event.measurement_id] = self._accepted_part
+                self.recorder.armed(event.measurement_id, self._accepted_source, self._accepted_reply,
+                                    self._accepted_part)
+                self._accepted_reply = None
                 self._current_recipe = self._accepted_part[1]
-        if event.state in (State.FAULT, State.ABORTED) and event.measurement_id \
-                and event.measurement_id in self._run_started:
-            self._store_failure(event)
-        self._to_publishers("on_state", self._state_message(event.state.value, event.previous.value, event.reason,
+        if event.state in (State.FAULT, State.ABORTED) and self.recorder.running(event.measurement_id):
+            self.recorder.failed(event)
+        self.to_publishers("on_state", self._state_message(event.state.value, event.previous.value, event.reason,
                                                             event.measurement_id, event), event)
         self._refresh_live()
 
@@ -516,138 +503,18 @@ class Appliance:
         msg = event.to_dict()
         # the sequencer's count of transitions, named apart from a result's seq (which counts measurements)
         msg["transition"] = msg.pop("seq", None)
-        if event.measurement is not None and event.measurement_id not in self._durable_results:
+        if event.measurement is not None and not self.recorder.durable(event.measurement_id):
             for key in ("J", "J_std", "omega_n"):
                 msg.pop(key, None)
             msg["reason"] = "the result could not be stored"
         return msg
 
-    def _clock_scale(self) -> float:
+    def clock_scale(self) -> float:
+        """Simulated seconds per real second (1 on hardware)."""
         return self.config.simulation.time_scale if self.config.simulated else 1.0
 
-    def _store_measurement(self, m: Measurement) -> None:
-        """The sequencer's result sink: store (with the outbox row), then Modbus, then wake MQTT. Whatever fails
-        before the row is written (judging, a lazy import, no descriptor left), a failed row keeps the trace and
-        the failure; the error goes on to the sequencer, whose FAULT the PLC and MQTT see."""
-        try:
-            self._store_result(m)
-        except BaseException as exc:
-            if m.id not in self._durable_results:
-                self._store_lost(m, exc)
-            raise
-
-    def _record(self, uuid: str, status: str, trigger: str, started: float, finished: float,
-                outcome: PartOutcome, rig: Rig | None = None, **rest: Any) -> Any:
-        """Store one measurement (``Store.record``) with what every row carries: who measured, with what, when,
-        on which rig and configuration, for which part; ``rest``: the result, its trace, its payload."""
-        assert self.store is not None
-        return self.store.record(uuid=uuid, status=status, trigger=trigger, device_id=self.config.device_id,
-                                 software_version=__version__, started_at=started, finished_at=finished,
-                                 rig=(rig or self.config.rig).to_dict(), config=self.config.to_dict(),
-                                 part=outcome.store_columns(), **rest)
-
-    def _store_lost(self, m: Measurement, exc: BaseException) -> None:
-        """A captured measurement whose result could not be stored: a failed row with its trace (always, it is
-        the evidence) and what went wrong."""
-        finished = self.wall_clock()
-        self._run_started.pop(m.id, None)
-        part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
-        error = f"captured, but not stored as a result: {type(exc).__name__}: {exc}"
-        if (reply := self._run_reply.pop(m.id, None)) is not None:
-            reply(CommandReply("trigger", "failed", "measurement_failed", error, {"uuid": m.id}))
-        try:
-            result = m.result.to_dict()
-        except Exception:
-            result = None
-        try:
-            self._record(m.id, "failed", m.requested_by, finished - (m.finished_at - m.requested_at) / self._clock_scale(),
-                         finished, _unjudged(part_id, recipe), error=error, result=result, trace_t=m.trace.t,
-                         trace_angle=m.trace.angle, trace_meta=dict(m.trace.meta))
-        except BaseException:
-            log.exception("could not store the failed measurement %s either", m.id)
-            return
-        log.error("measurement %s stored as failed: %s", m.id, error)
-        self._note_stored(m.id)
-
-    def _store_result(self, m: Measurement) -> None:
-        """Judge a result for its part (or its tensor set), store it with its payload, then hand it on."""
-        assert self.store is not None
-        finished = self.wall_clock()
-        armed = self._run_started.pop(m.id, (None, ""))[0]
-        took = time.monotonic() - armed if armed is not None else (m.finished_at - m.requested_at) / self._clock_scale()
-        started = finished - took
-        part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
-        rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
-        calibration = calibration_rule.calibration_state(rig, self._checks(), finished)
-        typed = self._station_flags(m, calibration)
-        result = typed.to_dict()
-        tensor_set = self.sets.of(recipe)
-        if tensor_set is not None:
-            outcome = PartOutcome(part_id, recipe.to_dict() if recipe else None, calibration=calibration,
-                                  tensor_set=tensor_set.release(result, m.id))
-        else:
-            outcome = dataclasses.replace(self.parts.release(result, m.id, part_id, recipe, m.result, rig),
-                                          calibration=calibration)
-        timing, cfg, trace = m.to_dict().get("timing", {}), self.config, m.trace
-
-        def build(uuid: str, seq: int) -> dict[str, Any]:
-            return result_payload(result, uuid=uuid, seq=seq, device_id=cfg.device_id, trigger=m.requested_by,
-                                  started_at=started, finished_at=finished, software_version=__version__,
-                                  timing=timing, part=outcome.to_dict())
-
-        try:
-            stored = self._record(m.id, "ok", m.requested_by, started, finished, outcome, rig, result=result,
-                                  build_payload=build, trace_t=trace.t if cfg.store_trace else None,
-                                  trace_angle=trace.angle if cfg.store_trace else None, trace_meta=dict(trace.meta),
-                                  enqueue={p.NAME: p.OUTBOX for p in self.publishers if p.OUTBOX})
-        except BaseException:
-            if tensor_set is not None:
-                tensor_set.forget_last()
-            else:
-                self.parts.undo_last()  # not stored: the release does not count for the part
-            raise
-        self._durable_results.append(m.id)
-        self._to_publishers("on_result", stored, m)
-        self._note_stored(m.id)
-        if (reply := self._run_reply.pop(m.id, None)) is not None:
-            reply(CommandReply(V.TRIGGER, "done", data={"uuid": m.id, "seq": stored.seq}))
-        log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, typed.J,
-                 ", ".join(typed.flags) or "none")
-        self._part_done(outcome, recipe, m.id, typed.flags, finished)
-        if tensor_set is not None:
-            self.sets.released(tensor_set)
-
-    def _station_flags(self, m: Measurement, calibration: Mapping[str, Any] | None) -> IdentificationResult:
-        """The result with the station's own flags raised (calibration due, capture slowed), before anything reads
-        it."""
-        raised = ((calibration is not None and calibration["due"], F.CALIBRATION_DUE),
-                  (self._capture_watch.slowed(m.result.acquisition), F.CAPTURE_SLOWED))
-        flags = m.result.flags + tuple(f for up, f in raised if up and f not in m.result.flags)
-        return dataclasses.replace(m.result, flags=flags) if flags != m.result.flags else m.result
-
-    def _part_done(self, outcome: PartOutcome, recipe: Recipe | None, measurement: str, flags: tuple[str, ...],
-                   finished: float) -> None:
-        """A part complete with this release: said, and a check standard's comparison kept with the history
-        `moi check-standard` reads (a failed one makes the next results calibration_due)."""
-        if outcome.verdict is None or recipe is None:
-            return
-        log.info("part %s (%s): %s", outcome.part_id or "(no ID)", recipe.name, outcome.verdict)
-        self._to_publishers("on_part_done", recipe)
-        check = outcome.part.check_standard if outcome.part is not None else None
-        if check is None:
-            return
-        log.log(logging.INFO if check["passed"] else logging.WARNING, "check standard %s: E_n = %.2f (%s)",
-                check["name"], check["E_n"], "pass" if check["passed"] else "FAIL")
-        try:
-            assert self.store is not None
-            self.store.record_check_standard(dict(check) | {"part_id": outcome.part_id, "measurement": measurement,
-                                                            "flags": list(flags)}, finished_at=finished)
-        except StoreError:
-            log.exception("could not store the check standard of measurement %s", measurement)
-        self._calibration_checked = (-float("inf"), None, False, False)  # it may clear or raise the block
-
     # --- the calibration rule's inputs (the rule: service.parts.calibration) ----------------------------------
-    def _checks(self) -> list[dict[str, Any]]:
+    def newest_checks(self) -> list[dict[str, Any]]:
         """The newest stored check standard ([] without one, or when the store cannot be read: said in the log)."""
         try:
             return self.store.check_standards(limit=1) if self.store is not None else []
@@ -662,13 +529,13 @@ class Appliance:
     def calibration_state(self) -> dict[str, Any] | None:
         """The calibration of the rig the active recipe measures with, as the next result will be judged
         (``service.parts.calibration.calibration_state``)."""
-        return calibration_rule.calibration_state(self._active_rig(), self._checks(), self.wall_clock())
+        return calibration_rule.calibration_state(self._active_rig(), self.newest_checks(), self.wall_clock())
 
     def measure_block(self) -> dict[str, Any] | None:
         """Why no measurement may start now, for every door (``service.parts.calibration.measure_block``), with
         whom to call ([web] contact), or None."""
         contact = getattr(self.config.publishers.get("web"), "contact", None) or CONTACT
-        return calibration_rule.measure_block(self._active_rig(), self.parts.recipe, self._checks(), self.wall_clock(),
+        return calibration_rule.measure_block(self._active_rig(), self.parts.recipe, self.newest_checks(), self.wall_clock(),
                                               contact)
 
     def _show_block(self, refused: bool, again: bool = False) -> None:
@@ -686,37 +553,18 @@ class Appliance:
         except Exception:  # a status lamp must never stop the appliance
             log.exception("indicator failed to show the calibration's block")
 
-    def _store_failure(self, event: Event) -> None:
-        assert event.measurement_id is not None
-        armed, trigger = self._run_started.pop(event.measurement_id)
-        finished = self.wall_clock()
-        part_id, recipe = self._run_part.pop(event.measurement_id, (None, None))
-        status = "failed" if event.state is State.FAULT else "aborted"
-        if (reply := self._run_reply.pop(event.measurement_id, None)) is not None:
-            reply(CommandReply(V.TRIGGER, "failed", "measurement_failed", event.reason or status,
-                               {"uuid": event.measurement_id}))
-        try:
-            self._record(event.measurement_id, status, trigger, finished - (time.monotonic() - armed), finished,
-                         _unjudged(part_id, recipe), error=event.reason)
-            self._note_stored(event.measurement_id)
-        except ServiceError:
-            log.exception("could not store the %s measurement %s", status, event.measurement_id)
-
-    def _note_stored(self, uuid: str) -> None:
-        with self._stored_cond:
-            self.stored.append(uuid)
-            self._stored_cond.notify_all()
+    @property
+    def stored(self) -> list[str]:
+        """UUIDs stored since start (ok, failed, aborted), in order."""
+        return self.recorder.stored
 
     def wait_stored(self, n: int, timeout: float) -> bool:
         """Wait until ``n`` measurements were stored since start (tests, demo). True if so."""
-        deadline = time.monotonic() + timeout
-        with self._stored_cond:
-            while len(self.stored) < n:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self._stored_cond.wait(left)
-        return True
+        return self.recorder.wait_stored(n, timeout)
+
+    def calibration_changed(self) -> None:
+        """A check standard was stored: the live status looks at the calibration again at once."""
+        self._calibration_checked = (-float("inf"), None, False, False)
 
     # --- live status --------------------------------------------------------------------------------------------
     def live_status(self) -> LiveStatus:
@@ -759,7 +607,7 @@ class Appliance:
         live = self.live_status()
         self._show_block(live.measure_refused)
         if self.publishers:
-            self._to_publishers("on_live", live)
+            self.to_publishers("on_live", live)
 
     def _status_text(self) -> str:
         seq = self.sequencer
@@ -823,11 +671,6 @@ class Appliance:
             self.store = None
         self._unlock_state_dir()
         self.notifier.close()
-
-
-def _unjudged(part_id: str | None, recipe: Recipe | None) -> PartOutcome:
-    """The part keys of a run without a result: the part and the recipe it was measured for."""
-    return PartOutcome(part_id, {"name": recipe.name, "version": recipe.version} if recipe is not None else None)
 
 
 class _Fatal(ServiceError):
