@@ -34,14 +34,13 @@ from typing import Any, Callable, Mapping
 
 from firmware_host import Event, Sequencer, State
 from measurement import IdentificationResult, Rig, Trace, identify
-from measurement.errors import InvalidInput
 from measurement.integrator import is_compiled
 from service.config.appliance import Config
 from service.core import vocabulary as V
 from service.core.live import LiveStatus
 from service.devices.hardware import Devices, build_devices
 from service.parts import calibration as calibration_rule
-from service.parts.recipes import Recipe, RecipeBook, RecipeError
+from service.parts.recipes import Recipe, RecipeBook
 from service.parts.set_desk import SetDesk
 from service.parts.tensor_set import TensorSet
 from service.parts.tracker import PartTracker
@@ -50,10 +49,11 @@ from service.persistence.store import Store
 from service.publish import registry
 from service.publish.payload import iso_utc
 from service.publish.port import ApplianceView, Publisher
-from service.publish.replies import CONTACT, CommandReply, ReplyTo
+from service.publish.replies import CONTACT, ReplyTo
 
 from . import __version__
 from .contention import CaptureWatch
+from .dispatch import Dispatcher
 from .errors import ServiceError, StoreError
 from .notify import Notifier
 from .recording import Recorder
@@ -63,9 +63,6 @@ log = logging.getLogger("moi.daemon")
 #: exit statuses of ``run``
 EXIT_OK = 0
 EXIT_RUNTIME_FAILURE = 3
-
-#: at most one "trigger ignored" line per this many seconds, s
-IGNORED_LOG_INTERVAL = 10.0
 
 #: how often the live status looks again whether the rig's calibration is due, s
 CALIBRATION_CHECK_INTERVAL = 60.0
@@ -103,11 +100,7 @@ class Appliance:
         self._compiling: subprocess.Popen | None = None  # the integrator compiled on a first run
         self._started_runs = 0
         self.capture_watch = CaptureWatch(lambda: sum(p.capture_requests() for p in self.publishers))
-        self._accepted_source = "unknown"  # source of the last accepted trigger (paired with the next ARMED)
-        self._accepted_reply: ReplyTo | None = None  # who hears the outcome of the last accepted trigger
-        # the part ID and recipe of the last accepted trigger
         self.parts = PartTracker(config.recipes or RecipeBook(None), config.active_recipe)
-        self._accepted_part: tuple[str | None, Recipe | None] = (None, None)
         self._current_recipe: Recipe | None = None
         self.sets = SetDesk(config.state_dir, config.device_id, lambda: self.store, self.to_publishers,
                             self._refresh_live, wall_clock)
@@ -115,12 +108,10 @@ class Appliance:
         self.loop_iterations = 0
         self.last_loop_error: str | None = None
         self.recorder = Recorder(self)
+        self.dispatcher = Dispatcher(self)
         self.exit_status = EXIT_OK
         self._stopping = False
         self._lock_fd: int | None = None
-        self._ignored_triggers = 0
-        self._ignored_logged_at = -float("inf")
-        self._refused_logged_at = -float("inf")
         self._armed_at: float | None = None  # sequencer clock time of the last ARMED, s (None: not armed)
         # (monotonic s, recipe, due, refused) of the last look at the rig's calibration (the live status'
         # calibration_due and measure_refused)
@@ -184,7 +175,7 @@ class Appliance:
             self._shutdown_components()
             raise
         self.sets.recover()
-        self._open_set()  # a tensor recipe active from the configuration: its set waits for the first release
+        self.open_set()  # a tensor recipe active from the configuration: its set waits for the first release
         self._refresh_live()
         self.to_publishers("on_state", self._state_message("IDLE", "IDLE", "daemon started", None), None)
         where = [w for p in self.publishers if (w := p.where())] or ["no publisher"]
@@ -300,120 +291,9 @@ class Appliance:
                 name, source, data, reply = self._commands.get_nowait()
             except queue.Empty:
                 return
-            outcome = self._execute(name, source, data, reply)
+            outcome = self.dispatcher.execute(name, source, data, reply)
             if reply is not None:
                 reply(outcome)
-
-    def _execute(self, name: str, source: str, data: Mapping[str, Any] | None,
-                 reply: ReplyTo | None) -> CommandReply:
-        """Act on one command; the outcome its source hears."""
-        seq = self.sequencer
-        assert seq is not None
-
-        def refused(reason: str, detail: str = "") -> CommandReply:
-            return CommandReply(name, "refused", reason, detail)
-
-        command = V.COMMANDS.get(name)
-        if command is None:
-            log.warning("unknown command %r from %s", name, source)
-            return refused("unknown_command", f"{name!r}")
-        if command.sets_part and (data or command.act == "part"):
-            if seq.busy:
-                self._log_ignored(f"{name} from {source} refused: a measurement runs (the part cannot change "
-                                  "during it)")
-                return refused("busy")
-            try:
-                self._apply_part_data(data or {})
-            except InvalidInput as exc:
-                log.warning("%s from %s refused: %s", name, source, exc)
-                return refused("unknown_recipe" if isinstance(exc, RecipeError) else "malformed", str(exc))
-            if command.act == "part":
-                return CommandReply(name, "done")
-        return self._ACTS[command.act](self, name, command, source, data, reply)
-
-    def _act_measure(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,
-                     reply: ReplyTo | None) -> CommandReply:
-        """A trigger (its part data applied already): a measurement starts, or the reason it cannot."""
-        seq = self.sequencer
-        assert seq is not None
-        unwritable = self._store_unwritable()
-        if unwritable is not None:
-            self._log_refused(logging.ERROR, source, unwritable)
-            return CommandReply(name, "refused", "store_unwritable", unwritable)
-        block = self.measure_block() if seq.state is State.IDLE else None
-        if block is not None:
-            self._log_refused(logging.WARNING, source, block["detail"])
-            self._show_block(True, again=True)
-            return CommandReply(name, "refused", "calibration_due", block["detail"])
-        if seq.request_measurement(source):
-            self._accepted_source = source
-            self._accepted_reply = reply
-            self._accepted_part = (self.parts.part_id, self.parts.recipe)
-            self._open_set()
-            return CommandReply(name, "accepted")
-        self._log_ignored(f"trigger from {source} ignored (state {seq.state.value})")
-        state = seq.state
-        return CommandReply(name, "refused", "fault" if state is State.FAULT else "busy" if seq.busy else "not_ready",
-                            f"state {state.value}")
-
-    def _act_stop(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,
-                  reply: ReplyTo | None) -> CommandReply:
-        """Abort the running measurement, or acknowledge a FAULT (an abort does both)."""
-        seq = self.sequencer
-        assert seq is not None
-        if seq.state is State.FAULT:
-            seq.abort(f"fault acknowledged by {source}")
-            return CommandReply(name, "done")
-        if name == V.ABORT and seq.abort(f"aborted by {source}"):
-            return CommandReply(name, "done")
-        log.info("%s from %s: nothing to %s", name, source, "abort" if name == V.ABORT else "acknowledge")
-        return CommandReply(name, "refused", "nothing_to_abort")
-
-    def _act_set(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,
-                 reply: ReplyTo | None) -> CommandReply:
-        """An operator action of the tensor set: the coil's own (``set_action``) or the data's ``action``."""
-        action = command.set_action or str((data or {}).get("action"))
-        assert self.sequencer is not None
-        status, reason, detail = self.sets.act(action, (data or {}).get("orientation"), source, self.sequencer.busy)
-        return CommandReply(name, status, reason, detail)
-
-    #: how the daemon acts on each ``Command.act`` but "part" (whose data is applied in ``_execute``)
-    _ACTS: dict[str, Callable[..., CommandReply]] = {"measure": _act_measure, "stop": _act_stop, "set": _act_set}
-
-    def _log_ignored(self, what: str) -> None:
-        """One line per IGNORED_LOG_INTERVAL for the commands a stuck button or a looping client repeats."""
-        self._ignored_triggers += 1
-        now = time.monotonic()
-        if now - self._ignored_logged_at >= IGNORED_LOG_INTERVAL:
-            log.info("%s; %d command(s) ignored or refused since the last such line", what, self._ignored_triggers)
-            self._ignored_logged_at, self._ignored_triggers = now, 0
-
-    def _log_refused(self, level: int, source: str, why: str) -> None:
-        """A refused trigger in the log, at most one line per IGNORED_LOG_INTERVAL (a stuck button repeats it)."""
-        now = time.monotonic()
-        if now - self._refused_logged_at >= IGNORED_LOG_INTERVAL:
-            log.log(level, "trigger from %s refused: %s", source, why)
-            self._refused_logged_at = now
-
-    def _store_unwritable(self) -> str | None:
-        """Why no measurement may start (its result could not be kept), or None. After a failed write
-        a write is tried again here, so measuring resumes as soon as space is freed."""
-        store = self.store
-        if store is None or store.write_failure is None or store.writable():
-            return None
-        return (f"the result store cannot be written ({store.write_failure}); free space in "
-                f"{str(self.config.state_dir)!r}: the results kept so far are safe and still delivered")
-
-    def _apply_part_data(self, data: Mapping[str, Any]) -> None:
-        """Select a recipe and/or set the part ID (InvalidInput when unknown or malformed)."""
-        if data.get("recipe") is not None:
-            r = self.parts.select(data["recipe"])
-            log.info("recipe %s", f"{r.number} {r.name!r} (version {r.version}) active" if r else "deselected")
-            self.to_publishers("on_recipe", r)
-        if "part_id" in data:
-            self.parts.set_part_id(data["part_id"])
-            self.to_publishers("on_part_id", self.parts.part_id)
-        self._open_set()
 
     # --- the guided tensor set (main loop thread; ``SetDesk``) ------------------------------------------------
     @property
@@ -421,7 +301,8 @@ class Appliance:
         """The guided set of a tensor recipe (open or just finished)."""
         return self.sets.current
 
-    def _open_set(self) -> None:
+    def open_set(self) -> None:
+        """A tensor set for the active recipe and part, when it declares one (``SetDesk.open``)."""
         self.sets.open(self.parts.recipe, self.config.rig, self.parts.part_id)
 
     def set_progress(self) -> dict[str, Any] | None:
@@ -475,10 +356,10 @@ class Appliance:
             self._started_runs += 1
             self.capture_watch.armed()
             if event.measurement_id:
-                self.recorder.armed(event.measurement_id, self._accepted_source, self._accepted_reply,
-                                    self._accepted_part)
-                self._accepted_reply = None
-                self._current_recipe = self._accepted_part[1]
+                source, reply, part = self.dispatcher.accepted
+                self.recorder.armed(event.measurement_id, source, reply, part)
+                self.dispatcher.accepted = (source, None, part)  # one run hears the reply
+                self._current_recipe = part[1]
         if event.state in (State.FAULT, State.ABORTED) and self.recorder.running(event.measurement_id):
             self.recorder.failed(event)
         self.to_publishers("on_state", self._state_message(event.state.value, event.previous.value, event.reason,
@@ -538,7 +419,7 @@ class Appliance:
         return calibration_rule.measure_block(self._active_rig(), self.parts.recipe, self.newest_checks(), self.wall_clock(),
                                               contact)
 
-    def _show_block(self, refused: bool, again: bool = False) -> None:
+    def show_block(self, refused: bool, again: bool = False) -> None:
         """The status lamp or buzzer says the calibration refuses Measure while the appliance is IDLE (it is
         not ready), and again at each refused trigger (``again``: a buzzer beeps it once more)."""
         indicator = self.devices.indicator if self.devices is not None else None
@@ -605,7 +486,7 @@ class Appliance:
 
     def _refresh_live(self) -> None:
         live = self.live_status()
-        self._show_block(live.measure_refused)
+        self.show_block(live.measure_refused)
         if self.publishers:
             self.to_publishers("on_live", live)
 

@@ -163,10 +163,12 @@ LAYERS: dict[str, set[str]] = {
     # the web page shows the angle sensor's set-up view (``devices.sensors``)
     "publish.web": {"config", "core", "devices", "drivers", "errors", "firmware_host", "measurement", "names",
                     "parts", "persistence", "publish", "service", "sources", "states"},
+    # the commands the daemon's main loop acts on
+    "dispatch": {"core", "firmware_host", "measurement", "parts", "publish"},
     # the daemon's results: each run stored once, judged for its part, then handed to the publishers
     "recording": {"core", "errors", "firmware_host", "measurement", "parts", "publish", "service"},
-    "daemon": {"config", "contention", "core", "devices", "errors", "firmware_host", "measurement", "notify", "parts",
-               "persistence", "publish", "recording", "service"},
+    "daemon": {"config", "contention", "core", "devices", "dispatch", "errors", "firmware_host", "measurement", "notify",
+               "parts", "persistence", "publish", "recording", "service"},
     # ``service``: the installed version (the calibration history names the software that wrote a line)
     "commands": {"config", "core", "daemon", "devices", "drivers", "errors", "firmware_host", "logs", "measurement",
                  "names", "parts", "persistence", "publish", "publish.modbus", "publish.web", "service", "sources"},
