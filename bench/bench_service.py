@@ -78,6 +78,7 @@ def main() -> None:
     from service.config.appliance import parse_config
     from service.daemon import Appliance
     from service.publish.modbus import registers as R
+    from service.recording import Recorder
 
     work = Path(tempfile.mkdtemp(prefix="moi-bench-service-"))
     broker, mqtt_port = _start_broker(work)
@@ -92,7 +93,7 @@ def main() -> None:
 
     t_stored: dict[int, float] = {}
 
-    class StampedAppliance(Appliance):
+    class StampedRecorder(Recorder):
         """Stamps the moment the store committed (bench instrumentation only)."""
 
         def _note_stored(self, uuid: str) -> None:
@@ -102,7 +103,8 @@ def main() -> None:
     config = parse_config(doc, source="bench")
     stamped = StampedIdentifier(config.identification)
     t_ident = stamped.stamps
-    app = StampedAppliance(config, identifier=stamped, poll_interval=0.02)
+    app = Appliance(config, identifier=stamped, poll_interval=0.02)
+    app.recorder = StampedRecorder(app)
     app.start()
     main_loop = threading.Thread(target=app.run, daemon=True)
     main_loop.start()

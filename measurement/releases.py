@@ -25,6 +25,8 @@ REST_SIGMA = 6.0
 REST_PERIODS = 2.0
 #: a swing counts from this many noise σ (as the identification's window does)
 SWING_SIGMA = 10.0
+#: what a section begins with when the swing rested before it
+REST = "a rest"
 #: a release has at least this many half-swings above SWING_SIGMA after its start
 MIN_HALF_SWINGS = 6
 #: the half-periods of a free swing scatter less than this, relative (handling scatters far more)
@@ -123,7 +125,7 @@ def _cuts(t: np.ndarray, y: np.ndarray, breaks: tuple[tuple[float, str], ...], n
         edges = np.flatnonzero(np.diff(np.concatenate(([0], quiet.astype(int), [0]))))
         for a, b in zip(edges[::2], edges[1::2]):
             if t[b - 1] - t[a] >= REST_PERIODS * period and b < t.size:
-                cuts.setdefault(int(b) - 1, "a rest")
+                cuts.setdefault(int(b) - 1, REST)
     return sorted(cuts.items())
 
 

@@ -24,53 +24,46 @@ that died ends the daemon with status 3 so that systemd restarts it.
 from __future__ import annotations
 
 import concurrent.futures
-import dataclasses
-import datetime as _dt
 import logging
 import queue
 import subprocess
 import sys
 import threading
 import time
-from collections import deque
-from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from firmware_host import Event, Measurement, Sequencer, State
+from firmware_host import Event, Sequencer, State
 from measurement import IdentificationResult, Rig, Trace, identify
-from measurement import flags as F
-from measurement.errors import InvalidInput
 from measurement.integrator import is_compiled
 from service.config.appliance import whom_to_call
 from service.core import vocabulary as V
 from service.core.live import LiveStatus
 from service.devices.hardware import Devices, build_devices
-from service.parts.recipes import PartTracker, Recipe, RecipeBook, RecipeError
-from service.parts.tensor_set import COMPLETE, OpenSetFile, TensorSet, interrupted
-from service.persistence.salvage import quarantine_store
+from service.parts import calibration as calibration_rule
+from service.parts.recipes import Recipe, RecipeBook
+from service.parts.set_desk import SetDesk
+from service.parts.tensor_set import TensorSet
+from service.parts.tracker import PartTracker
+from service.persistence.state_dir import lock_state_dir, open_store, unlock_state_dir
 from service.persistence.store import Store
 from service.publish import registry
-from service.publish.payload import iso_utc, result_payload
+from service.publish.payload import iso_utc
 from service.publish.port import ApplianceView, Publisher
-from service.publish.replies import CONTACT, CommandReply, ReplyTo, calibration_words
+from service.publish.replies import CONTACT, ReplyTo
 from service.settings.config import Config
 
 from . import __version__
 from .contention import CaptureWatch
-from .errors import ServiceError, StartupError, StoreDamaged, StoreError
+from .dispatch import Dispatcher
+from .errors import ServiceError, StoreError
 from .notify import Notifier
+from .recording import Recorder
 
 log = logging.getLogger("moi.daemon")
 
 #: exit statuses of ``run``
 EXIT_OK = 0
 EXIT_RUNTIME_FAILURE = 3
-
-#: at most one "trigger ignored" line per this many seconds, s
-IGNORED_LOG_INTERVAL = 10.0
-
-#: the lock file in the state directory that makes a second daemon on it stop at start
-LOCK_NAME = "moi.lock"
 
 #: how often the live status looks again whether the rig's calibration is due, s
 CALIBRATION_CHECK_INTERVAL = 60.0
@@ -107,31 +100,19 @@ class Appliance:
         self._stop = threading.Event()
         self._compiling: subprocess.Popen | None = None  # the integrator compiled on a first run
         self._started_runs = 0
-        self._capture_watch = CaptureWatch(lambda: sum(p.capture_requests() for p in self.publishers))
-        # measurement id → (monotonic time of ARMED, trigger source): a run's start is the wall clock at its end
-        # less the monotonic time it took, so a step of the wall clock never gives a negative duration
-        self._run_started: dict[str, tuple[float, str]] = {}
-        self._accepted_source = "unknown"  # source of the last accepted trigger (paired with the next ARMED)
-        self._accepted_reply: ReplyTo | None = None  # who hears the outcome of the last accepted trigger
-        self._run_reply: dict[str, ReplyTo] = {}  # measurement id → who hears its outcome
-        # the part ID and recipe of the last accepted trigger, and of each run (measurement id → them)
+        self.capture_watch = CaptureWatch(lambda: sum(p.capture_requests() for p in self.publishers))
         self.parts = PartTracker(config.recipes or RecipeBook(None), config.active_recipe)
-        self._accepted_part: tuple[str | None, Recipe | None] = (None, None)
-        self._run_part: dict[str, tuple[str | None, Recipe | None]] = {}
         self._current_recipe: Recipe | None = None
-        self.tensor_set: TensorSet | None = None  # the guided set of a tensor recipe (open or just finished)
+        self.sets = SetDesk(config.state_dir, config.device_id, lambda: self.store, self.to_publishers,
+                            self._refresh_live, wall_clock)
         self._last_status = ""
         self.loop_iterations = 0
         self.last_loop_error: str | None = None
-        self.stored: list[str] = []  # UUIDs stored since start (ok, failed, aborted), in order
-        self._durable_results: deque[str] = deque(maxlen=16)  # UUIDs of the latest results the store holds
-        self._stored_cond = threading.Condition()
+        self.recorder = Recorder(self)
+        self.dispatcher = Dispatcher(self)
         self.exit_status = EXIT_OK
         self._stopping = False
         self._lock_fd: int | None = None
-        self._ignored_triggers = 0
-        self._ignored_logged_at = -float("inf")
-        self._refused_logged_at = -float("inf")
         self._armed_at: float | None = None  # sequencer clock time of the last ARMED, s (None: not armed)
         # (monotonic s, recipe, due, refused) of the last look at the rig's calibration (the live status'
         # calibration_due and measure_refused)
@@ -165,7 +146,7 @@ class Appliance:
         cfg = self.config
         try:
             self._lock_state_dir()
-            self.store = self._open_store()
+            self.store = open_store(self.config.state_dir, self.wall_clock)
             view = ApplianceView(self)
             enabled = [(entry.load(), settings) for entry in registry.PUBLISHERS
                        if (settings := cfg.publishers.get(entry.name)) is not None]
@@ -175,7 +156,7 @@ class Appliance:
             # the button is wired through the command queue like the other sources, so every
             # trigger is logged and executed the same way on the main loop
             self.sequencer = Sequencer(clock=d.clock, solenoid=d.solenoid, sensor=d.sensor, rig=cfg.rig,
-                                       sink=self._store_measurement, config=cfg.sequencer,
+                                       sink=self.recorder.sink, config=cfg.sequencer,
                                        options=cfg.identification, button=None, indicator=d.indicator,
                                        identifier=self._identify)
             if d.button is not None:
@@ -194,10 +175,10 @@ class Appliance:
         except BaseException:
             self._shutdown_components()
             raise
-        self._recover_set()
-        self._open_set()  # a tensor recipe active from the configuration: its set waits for the first release
+        self.sets.recover()
+        self.open_set()  # a tensor recipe active from the configuration: its set waits for the first release
         self._refresh_live()
-        self._to_publishers("on_state", self._state_message("IDLE", "IDLE", "daemon started", None), None)
+        self.to_publishers("on_state", self._state_message("IDLE", "IDLE", "daemon started", None), None)
         where = [w for p in self.publishers if (w := p.where())] or ["no publisher"]
         log.info("moi %s ready (%s rig; %s; store %s)", __version__, "simulated" if cfg.simulated else "hardware",
                  ", ".join(where), self.store.path)
@@ -217,7 +198,7 @@ class Appliance:
                 log.exception("%s stop failed", p.NAME)
             self.publishers.remove(p)
 
-    def _to_publishers(self, hook: str, *args: Any) -> None:
+    def to_publishers(self, hook: str, *args: Any) -> None:
         """Call ``hook`` of every publisher (main loop thread; hooks never block)."""
         for p in self.publishers:
             getattr(p, hook)(*args)
@@ -262,31 +243,8 @@ class Appliance:
 
     def _unlock_state_dir(self) -> None:
         if self._lock_fd is not None:
-            import os
-            os.close(self._lock_fd)  # closing the descriptor releases the lock
+            unlock_state_dir(self._lock_fd)
             self._lock_fd = None
-
-    def _open_store(self) -> Store:
-        """The store, after the reads a start does; a damaged one is moved aside and what can be
-        read is salvaged into a new one (a restart loop on a damaged file would stop the appliance
-        for good, and deleting it would lose results)."""
-        state_dir = self.config.state_dir
-        try:
-            store = Store(state_dir)
-            try:
-                store.outbox_count()
-                store.latest("ok")
-                store.outbox_pending(limit=10)
-            except BaseException:
-                store.close()
-                raise
-            return store
-        except StoreDamaged as exc:
-            log.error("%s", exc)
-        aside, health = quarantine_store(state_dir, self.wall_clock)
-        log.error("the damaged result store was moved to %s; a new store holds what could be read (%s)", aside,
-                  health.summary())
-        return Store(state_dir)
 
     # --- the main loop ---------------------------------------------------------------------------------
     def run(self, until: Callable[[], bool] | None = None) -> int:
@@ -325,7 +283,7 @@ class Appliance:
         if seq is None or armed is None or seq.state is not State.ARMED or self.devices is None:
             return self.poll_interval
         due = armed + self.config.sequencer.pre_trigger - self.devices.clock.now()
-        return min(self.poll_interval, max(0.0, due / self._clock_scale()))
+        return min(self.poll_interval, max(0.0, due / self.clock_scale()))
 
     def _iteration(self) -> None:
         assert self.sequencer is not None
@@ -350,212 +308,23 @@ class Appliance:
                 name, source, data, reply = self._commands.get_nowait()
             except queue.Empty:
                 return
-            outcome = self._execute(name, source, data, reply)
+            outcome = self.dispatcher.execute(name, source, data, reply)
             if reply is not None:
                 reply(outcome)
 
-    def _execute(self, name: str, source: str, data: Mapping[str, Any] | None,
-                 reply: ReplyTo | None) -> CommandReply:
-        """Act on one command; the outcome its source hears."""
-        seq = self.sequencer
-        assert seq is not None
+    # --- the guided tensor set (main loop thread; ``SetDesk``) ------------------------------------------------
+    @property
+    def tensor_set(self) -> TensorSet | None:
+        """The guided set of a tensor recipe (open or just finished)."""
+        return self.sets.current
 
-        def refused(reason: str, detail: str = "") -> CommandReply:
-            return CommandReply(name, "refused", reason, detail)
-
-        command = V.COMMANDS.get(name)
-        if command is None:
-            log.warning("unknown command %r from %s", name, source)
-            return refused("unknown_command", f"{name!r}")
-        if command.sets_part and (data or command.act == "part"):
-            if seq.busy:
-                self._log_ignored(f"{name} from {source} refused: a measurement runs (the part cannot change "
-                                  "during it)")
-                return refused("busy")
-            try:
-                self._apply_part_data(data or {})
-            except InvalidInput as exc:
-                log.warning("%s from %s refused: %s", name, source, exc)
-                return refused("unknown_recipe" if isinstance(exc, RecipeError) else "malformed", str(exc))
-            if command.act == "part":
-                return CommandReply(name, "done")
-        return self._ACTS[command.act](self, name, command, source, data, reply)
-
-    def _act_measure(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,
-                     reply: ReplyTo | None) -> CommandReply:
-        """A trigger (its part data applied already): a measurement starts, or the reason it cannot."""
-        seq = self.sequencer
-        assert seq is not None
-        unwritable = self._store_unwritable()
-        if unwritable is not None:
-            self._log_refused(logging.ERROR, source, unwritable)
-            return CommandReply(name, "refused", "store_unwritable", unwritable)
-        block = self.measure_block() if seq.state is State.IDLE else None
-        if block is not None:
-            self._log_refused(logging.WARNING, source, block["detail"])
-            self._show_block(True, again=True)
-            return CommandReply(name, "refused", "calibration_due", block["detail"])
-        if seq.request_measurement(source):
-            self._accepted_source = source
-            self._accepted_reply = reply
-            self._accepted_part = (self.parts.part_id, self.parts.recipe)
-            self._open_set()
-            return CommandReply(name, "accepted")
-        self._log_ignored(f"trigger from {source} ignored (state {seq.state.value})")
-        state = seq.state
-        return CommandReply(name, "refused", "fault" if state is State.FAULT else "busy" if seq.busy else "not_ready",
-                            f"state {state.value}")
-
-    def _act_stop(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,
-                  reply: ReplyTo | None) -> CommandReply:
-        """Abort the running measurement, or acknowledge a FAULT (an abort does both)."""
-        seq = self.sequencer
-        assert seq is not None
-        if seq.state is State.FAULT:
-            seq.abort(f"fault acknowledged by {source}")
-            return CommandReply(name, "done")
-        if name == V.ABORT and seq.abort(f"aborted by {source}"):
-            return CommandReply(name, "done")
-        log.info("%s from %s: nothing to %s", name, source, "abort" if name == V.ABORT else "acknowledge")
-        return CommandReply(name, "refused", "nothing_to_abort")
-
-    def _act_set(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,
-                 reply: ReplyTo | None) -> CommandReply:
-        """An operator action of the tensor set: the coil's own (``set_action``) or the data's ``action``."""
-        action = command.set_action or str((data or {}).get("action"))
-        return self._set_action(action, (data or {}).get("orientation"), source, name)
-
-    #: how the daemon acts on each ``Command.act`` but "part" (whose data is applied in ``_execute``)
-    _ACTS: dict[str, Callable[..., CommandReply]] = {"measure": _act_measure, "stop": _act_stop, "set": _act_set}
-
-    def _log_ignored(self, what: str) -> None:
-        """One line per IGNORED_LOG_INTERVAL for the commands a stuck button or a looping client repeats."""
-        self._ignored_triggers += 1
-        now = time.monotonic()
-        if now - self._ignored_logged_at >= IGNORED_LOG_INTERVAL:
-            log.info("%s; %d command(s) ignored or refused since the last such line", what, self._ignored_triggers)
-            self._ignored_logged_at, self._ignored_triggers = now, 0
-
-    def _log_refused(self, level: int, source: str, why: str) -> None:
-        """A refused trigger in the log, at most one line per IGNORED_LOG_INTERVAL (a stuck button repeats it)."""
-        now = time.monotonic()
-        if now - self._refused_logged_at >= IGNORED_LOG_INTERVAL:
-            log.log(level, "trigger from %s refused: %s", source, why)
-            self._refused_logged_at = now
-
-    def _store_unwritable(self) -> str | None:
-        """Why no measurement may start (its result could not be kept), or None. After a failed write
-        a write is tried again here, so measuring resumes as soon as space is freed."""
-        store = self.store
-        if store is None or store.write_failure is None or store.writable():
-            return None
-        return (f"the result store cannot be written ({store.write_failure}); free space in "
-                f"{str(self.config.state_dir)!r}: the results kept so far are safe and still delivered")
-
-    def _apply_part_data(self, data: Mapping[str, Any]) -> None:
-        """Select a recipe and/or set the part ID (InvalidInput when unknown or malformed)."""
-        if data.get("recipe") is not None:
-            r = self.parts.select(data["recipe"])
-            log.info("recipe %s", f"{r.number} {r.name!r} (version {r.version}) active" if r else "deselected")
-            self._to_publishers("on_recipe", r)
-        if "part_id" in data:
-            self.parts.set_part_id(data["part_id"])
-            self._to_publishers("on_part_id", self.parts.part_id)
-        self._open_set()
-
-    # --- the guided tensor set (main loop thread) ------------------------------------------------------
-    def _open_set(self) -> None:
-        """Open a tensor set when the active recipe declares a tensor plan and none runs for it and this part
-        (a finished set is shown until the next trigger or selection, which starts the next one); a running
-        set of another recipe or part is aborted (its releases stay stored)."""
-        recipe, part_id = self.parts.recipe, self.parts.part_id
-        current = self.tensor_set
-        if current is not None and not current.done:
-            if recipe is current.recipe and part_id == current.part_id:
-                return
-            current.act("abort")
-            current.error = "a different recipe or part ID was selected"
-            self._finish_set(current)
-        if recipe is None or recipe.tensor is None:
-            return
-        self.tensor_set = TensorSet(recipe, recipe.rig_for(self.config.rig), part_id, self.wall_clock())
-        log.info("tensor set %s started (%s, part %s): %s", self.tensor_set.uuid, recipe.name, part_id or "-",
-                 self.tensor_set.instruction())
-        self._publish_set()
-
-    def _set_action(self, action: str, orientation: Any, source: str, name: str = "set") -> CommandReply:
-        s = self.tensor_set
-        if s is None or s.done:
-            log.warning("set %s from %s: no tensor set is running", action, source)
-            return CommandReply(name, "refused", "no_tensor_set")
-        assert self.sequencer is not None
-        if self.sequencer.busy and action != "abort":
-            log.warning("set %s from %s refused: a measurement runs", action, source)
-            return CommandReply(name, "refused", "busy")
-        try:
-            s.act(action, None if orientation is None else str(orientation))
-        except InvalidInput as exc:
-            log.warning("set %s from %s refused: %s", action, source, exc)
-            return CommandReply(name, "refused", "malformed", str(exc))
-        log.info("tensor set %s: %s by %s; %s", s.uuid, action, source, s.instruction())
-        if s.done:  # act() may have ended the set (mypy keeps the narrowing of s.done above across the call)
-            self._finish_set(s)  # type: ignore[unreachable]
-        self._publish_set()
-        return CommandReply(name, "done")
-
-    def _finish_set(self, s: TensorSet, record: dict[str, Any] | None = None) -> None:
-        """Store a finished set (complete, failed, aborted or interrupted) and hand it to the publishers."""
-        assert self.store is not None
-        record = record or s.to_dict()
-        try:
-            self.store.record_tensor_set(record, started_at=s.started_at, finished_at=self.wall_clock())
-        except ServiceError:
-            log.exception("could not store the tensor set %s", s.uuid)
-            return
-        OpenSetFile(self.config.state_dir).drop()
-        if s.status == COMPLETE and s.result is not None:
-            r = s.result
-            log.info("tensor set %s complete: principal moments %s kg·m², flags %s", s.uuid,
-                     ", ".join(f"{v:.6g}" for v in r.principal_moments), ", ".join(r.flags) or "none")
-        self._to_publishers("on_tensor_set", record | {"device_id": self.config.device_id,
-                                                      "timestamp": self.wall_clock()})
-
-    def _interrupt_set(self, why: str) -> None:
-        """A running set with releases, cut short: stored as interrupted (a new set begins at the next start)."""
-        s = self.tensor_set
-        if s is not None and not s.done and any(s.releases().values()) and self.store is not None:
-            log.warning("tensor set %s interrupted at %s: %s", s.uuid, s.instruction(), why)
-            self._finish_set(s, interrupted(s.to_dict(), why))
-
-    def _recover_set(self) -> None:
-        """The set a kill cut short (its file is left): stored as interrupted, and said; a new set starts."""
-        left = OpenSetFile(self.config.state_dir).left()
-        if left is None or self.store is None:
-            return
-        record = interrupted(left, "the daemon was stopped during the set without storing it")
-        try:
-            self.store.record_tensor_set(record, started_at=left.get("started_at"), finished_at=self.wall_clock())
-        except ServiceError:
-            log.exception("could not store the interrupted tensor set %s", left["uuid"])
-            return
-        OpenSetFile(self.config.state_dir).drop()
-        log.warning("tensor set %s (%s, part %s) was interrupted: %s; a new set starts at the first orientation",
-                    left["uuid"], left.get("recipe"), left.get("part_id") or "-", record["error"])
-
-    def _publish_set(self) -> None:
-        if self.tensor_set is not None and not self.tensor_set.done:
-            OpenSetFile(self.config.state_dir).keep(self.tensor_set)
-        progress = self.set_progress()
-        if progress is not None:
-            self._to_publishers("on_set", progress)
-        self._refresh_live()
+    def open_set(self) -> None:
+        """A tensor set for the active recipe and part, when it declares one (``SetDesk.open``)."""
+        self.sets.open(self.parts.recipe, self.config.rig, self.parts.part_id)
 
     def set_progress(self) -> dict[str, Any] | None:
         """The tensor set's progress with the operator's instruction (None: no set)."""
-        s = self.tensor_set
-        if s is None:
-            return None
-        return s.progress() | {"instruction": s.instruction(), "device_id": self.config.device_id}
+        return self.sets.progress()
 
     def _run_calls(self) -> None:
         while True:
@@ -602,18 +371,15 @@ class Appliance:
         self._armed_at = event.time if event.state is State.ARMED else None
         if event.state is State.ARMED:
             self._started_runs += 1
-            self._capture_watch.armed()
+            self.capture_watch.armed()
             if event.measurement_id:
-                self._run_started[event.measurement_id] = (time.monotonic(), self._accepted_source)
-                if self._accepted_reply is not None:
-                    self._run_reply[event.measurement_id] = self._accepted_reply
-                    self._accepted_reply = None
-                self._run_part[event.measurement_id] = self._accepted_part
-                self._current_recipe = self._accepted_part[1]
-        if event.state in (State.FAULT, State.ABORTED) and event.measurement_id \
-                and event.measurement_id in self._run_started:
-            self._store_failure(event)
-        self._to_publishers("on_state", self._state_message(event.state.value, event.previous.value, event.reason,
+                source, reply, part = self.dispatcher.accepted
+                self.recorder.armed(event.measurement_id, source, reply, part)
+                self.dispatcher.accepted = (source, None, part)  # one run hears the reply
+                self._current_recipe = part[1]
+        if event.state in (State.FAULT, State.ABORTED) and self.recorder.running(event.measurement_id):
+            self.recorder.failed(event)
+        self.to_publishers("on_state", self._state_message(event.state.value, event.previous.value, event.reason,
                                                             event.measurement_id, event), event)
         self._refresh_live()
 
@@ -635,193 +401,42 @@ class Appliance:
         msg = event.to_dict()
         # the sequencer's count of transitions, named apart from a result's seq (which counts measurements)
         msg["transition"] = msg.pop("seq", None)
-        if event.measurement is not None and event.measurement_id not in self._durable_results:
+        if event.measurement is not None and not self.recorder.durable(event.measurement_id):
             for key in ("J", "J_std", "omega_n"):
                 msg.pop(key, None)
             msg["reason"] = "the result could not be stored"
         return msg
 
-    def _clock_scale(self) -> float:
+    def clock_scale(self) -> float:
+        """Simulated seconds per real second (1 on hardware)."""
         return self.config.simulation.time_scale if self.config.simulated else 1.0
 
-    def _store_measurement(self, m: Measurement) -> None:
-        """The sequencer's result sink: store (with the outbox row), then Modbus, then wake MQTT. Whatever fails
-        before the row is written (judging, a lazy import, no descriptor left), a failed row keeps the trace and
-        the failure; the error goes on to the sequencer, whose FAULT the PLC and MQTT see."""
+    # --- the calibration rule's inputs (the rule: service.parts.calibration) ----------------------------------
+    def newest_checks(self) -> list[dict[str, Any]]:
+        """The newest stored check standard ([] without one, or when the store cannot be read: said in the log)."""
         try:
-            self._store_result(m)
-        except BaseException as exc:
-            if m.id not in self._durable_results:
-                self._store_lost(m, exc)
-            raise
-
-    def _store_lost(self, m: Measurement, exc: BaseException) -> None:
-        """A captured measurement whose result could not be stored: a failed row with its trace (always, it is
-        the evidence) and what went wrong."""
-        assert self.store is not None
-        finished = self.wall_clock()
-        self._run_started.pop(m.id, None)
-        part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
-        error = f"captured, but not stored as a result: {type(exc).__name__}: {exc}"
-        if (reply := self._run_reply.pop(m.id, None)) is not None:
-            reply(CommandReply("trigger", "failed", "measurement_failed", error, {"uuid": m.id}))
-        try:
-            result = m.result.to_dict()
-        except Exception:
-            result = None
-        try:
-            self.store.record(uuid=m.id, status="failed", trigger=m.requested_by, device_id=self.config.device_id,
-                              software_version=__version__, finished_at=finished, error=error, result=result,
-                              started_at=finished - (m.finished_at - m.requested_at) / self._clock_scale(),
-                              rig=self.config.rig.to_dict(), config=self.config.to_dict(), trace_t=m.trace.t,
-                              trace_angle=m.trace.angle, trace_meta=dict(m.trace.meta),
-                              part={"part_id": part_id, "recipe": recipe.name if recipe else None,
-                                    "recipe_version": recipe.version if recipe else None})
-        except BaseException:
-            log.exception("could not store the failed measurement %s either", m.id)
-            return
-        log.error("measurement %s stored as failed: %s", m.id, error)
-        self._note_stored(m.id)
-
-    def _store_result(self, m: Measurement) -> None:
-        assert self.store is not None
-        finished = self.wall_clock()
-        armed = self._run_started.pop(m.id, (None, ""))[0]
-        took = time.monotonic() - armed if armed is not None else (m.finished_at - m.requested_at) / self._clock_scale()
-        started = finished - took
-        cfg = self.config
-        timing = m.to_dict().get("timing", {})
-        part_id, recipe = self._run_part.pop(m.id, (self.parts.part_id, self.parts.recipe))
-        rig = recipe.rig_for(cfg.rig) if recipe is not None else cfg.rig
-        calibration = self.calibration_state(rig, finished)
-        # the station's own flags, raised on the typed result before anything reads it
-        raised = ((calibration is not None and calibration["due"], F.CALIBRATION_DUE),
-                  (self._capture_watch.slowed(m.result.acquisition), F.CAPTURE_SLOWED))
-        flags = m.result.flags + tuple(f for up, f in raised if up and f not in m.result.flags)
-        typed = dataclasses.replace(m.result, flags=flags) if flags != m.result.flags else m.result
-        result = typed.to_dict()
-        tensor_set = self.tensor_set if recipe is not None and recipe.tensor is not None else None
-        if tensor_set is not None and (tensor_set.done or tensor_set.recipe is not recipe):
-            tensor_set = None  # the set ended (aborted) while this release ran: it counts for nothing
-        if tensor_set is not None:
-            assert recipe is not None
-            part = {"part_id": part_id, "recipe": recipe.to_dict(), "release": None, "part": None, "verdict": None,
-                    "calibration": calibration, "tensor_set": tensor_set.release(result, m.id)}
-        else:
-            part = self.parts.release(result, m.id, part_id, recipe, m.result, rig) | {"calibration": calibration}
-
-        def build(uuid: str, seq: int) -> dict[str, Any]:
-            return result_payload(result, uuid=uuid, seq=seq, device_id=cfg.device_id, trigger=m.requested_by,
-                                  started_at=started, finished_at=finished, software_version=__version__,
-                                  timing=timing, part=part)
-
-        trace = m.trace
-        try:
-            stored = self.store.record(
-                uuid=m.id, status="ok", trigger=m.requested_by, device_id=cfg.device_id,
-                software_version=__version__, started_at=started, finished_at=finished, result=result,
-                build_payload=build, rig=rig.to_dict(), config=cfg.to_dict(),
-                trace_t=trace.t if cfg.store_trace else None, trace_angle=trace.angle if cfg.store_trace else None,
-                trace_meta=dict(trace.meta), enqueue={p.NAME: p.OUTBOX for p in self.publishers if p.OUTBOX},
-                part=_part_columns(part),
-            )
-        except BaseException:
-            if tensor_set is not None:
-                tensor_set.forget_last()
-            else:
-                self.parts.undo_last()  # not stored: the release does not count for the part
-            raise
-        self._durable_results.append(m.id)
-        self._to_publishers("on_result", stored, m)
-        self._note_stored(m.id)
-        if (reply := self._run_reply.pop(m.id, None)) is not None:
-            reply(CommandReply(V.TRIGGER, "done", data={"uuid": m.id, "seq": stored.seq}))
-        log.info("measurement %s (seq %d) stored: J = %s kg·m², flags %s", m.id, stored.seq, typed.J,
-                 ", ".join(typed.flags) or "none")
-        if part["verdict"] is not None and recipe is not None:
-            log.info("part %s (%s): %s", part_id or "(no ID)", recipe.name, part["verdict"])
-            self._to_publishers("on_part_done", recipe)
-        whole = part.get("part")
-        check = whole.get("check_standard") if isinstance(whole, dict) else None
-        if check is not None:
-            # a check standard measured at the station: kept with the history `moi check-standard` reads;
-            # a failed one makes the next results calibration_due (``calibration_state``)
-            log.log(logging.INFO if check["passed"] else logging.WARNING, "check standard %s: E_n = %.2f (%s)",
-                    check["name"], check["E_n"], "pass" if check["passed"] else "FAIL")
-            try:
-                self.store.record_check_standard(check | {"part_id": part_id, "measurement": m.id,
-                                                          "flags": list(typed.flags)},
-                                                 finished_at=finished)
-            except StoreError:
-                log.exception("could not store the check standard of measurement %s", m.id)
-            self._calibration_checked = (-float("inf"), None, False, False)  # it may clear or raise the block
-        if tensor_set is not None:
-            log.info("tensor set %s: %s", tensor_set.uuid, tensor_set.instruction())
-            if tensor_set.done:
-                self._finish_set(tensor_set)
-            self._publish_set()
-
-    def calibration_state(self, rig: Rig, now: float) -> dict[str, Any] | None:
-        """The rig's calibration as of ``now`` (Unix s): date, validity, whether it is due.
-
-        Due also while the newest check standard (`moi check-standard`) measured since the calibration
-        failed (E_n > 1): the budget no longer covers what the rig does.
-        """
-        cal = rig.calibration
-        try:
-            checks = self.store.check_standards(limit=1) if self.store is not None else []
+            return self.store.check_standards(limit=1) if self.store is not None else []
         except StoreError:
             log.exception("could not read the check standards; the calibration state leaves them out")
-            checks = []
-        check = checks[0] if checks else None
-        if check is not None and cal is not None:
-            calibrated = _dt.datetime.combine(cal.date, _dt.time(), _dt.UTC).timestamp()
-            if check["finished_at"] < calibrated:
-                check = None  # a check before the calibration says nothing about it
-        failed = check is not None and not check["passed"]
-        if cal is None and not failed:
-            return None
-        today = _dt.datetime.fromtimestamp(now, _dt.UTC).date()
-        until = cal.valid_until if cal is not None else None
-        state: dict[str, Any] = {
-            "date": cal.date.isoformat() if cal is not None else None,
-            "valid_until": until.isoformat() if until else None,
-            "due": (cal is not None and cal.due(today)) or failed, "stiffness": rig.stiffness,
-            "stiffness_std": rig.stiffness_std}
-        if check is not None:
-            state["check_standard"] = {k: check.get(k) for k in ("name", "E_n", "passed", "finished_at")}
-        return state
+            return []
+
+    def _active_rig(self) -> Rig:
+        recipe = self.parts.recipe
+        return recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
+
+    def calibration_state(self) -> dict[str, Any] | None:
+        """The calibration of the rig the active recipe measures with, as the next result will be judged
+        (``service.parts.calibration.calibration_state``)."""
+        return calibration_rule.calibration_state(self._active_rig(), self.newest_checks(), self.wall_clock())
 
     def measure_block(self) -> dict[str, Any] | None:
-        """Why no measurement may start now, for every door (button, Modbus, MQTT, Sparkplug, web), or None.
-
-        The calibration of the rig the active recipe measures with is past its validity period, or the newest
-        check standard since it failed (``calibration_state``): every result would carry calibration_due and be
-        INVALID, and measuring again cannot change that. A check-standard recipe is still measured while only
-        a failed check standard blocks, since its passing is what clears the block; an expired calibration
-        refuses it too (a check cannot renew a calibration: ``moi calibrate`` does). A recipe whose
-        ``invalid_flags`` leave out ``calibration_due`` is measured too: its parts are judged, flagged. Returns the calibration
-        state, ``expired`` and ``detail``: the words every door says, with whom to call ([web] contact)."""
-        recipe = self.parts.recipe
-        rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
-        now = self.wall_clock()
-        state = self.calibration_state(rig, now)
-        if not state or not state["due"]:
-            return None
-        cal = rig.calibration
-        expired = cal is not None and cal.due(_dt.datetime.fromtimestamp(now, _dt.UTC).date())
-        if not expired and recipe is not None and recipe.check_standard is not None:
-            return None
-        if (recipe is not None and recipe.check_standard is None
-                and "calibration_due" not in recipe.quality.invalid_flags):
-            return None  # its quality rules judge a part with the calibration due (flagged, not INVALID): its call
-        check = state.get("check_standard")
-        failed = check if check is not None and not check.get("passed") else None
+        """Why no measurement may start now, for every door (``service.parts.calibration.measure_block``), with
+        whom to call ([web] contact), or None."""
         contact = whom_to_call(self.config) or CONTACT
-        return {"calibration": state, "expired": expired,
-                "detail": calibration_words(state["valid_until"] if expired else None, failed, contact)}
+        return calibration_rule.measure_block(self._active_rig(), self.parts.recipe, self.newest_checks(), self.wall_clock(),
+                                              contact)
 
-    def _show_block(self, refused: bool, again: bool = False) -> None:
+    def show_block(self, refused: bool, again: bool = False) -> None:
         """The status lamp or buzzer says the calibration refuses Measure while the appliance is IDLE (it is
         not ready), and again at each refused trigger (``again``: a buzzer beeps it once more)."""
         indicator = self.devices.indicator if self.devices is not None else None
@@ -836,41 +451,18 @@ class Appliance:
         except Exception:  # a status lamp must never stop the appliance
             log.exception("indicator failed to show the calibration's block")
 
-    def _store_failure(self, event: Event) -> None:
-        assert self.store is not None and event.measurement_id is not None
-        armed, trigger = self._run_started.pop(event.measurement_id)
-        finished = self.wall_clock()
-        part_id, recipe = self._run_part.pop(event.measurement_id, (None, None))
-        status = "failed" if event.state is State.FAULT else "aborted"
-        if (reply := self._run_reply.pop(event.measurement_id, None)) is not None:
-            reply(CommandReply(V.TRIGGER, "failed", "measurement_failed", event.reason or status,
-                               {"uuid": event.measurement_id}))
-        try:
-            self.store.record(uuid=event.measurement_id, status=status, trigger=trigger,
-                              device_id=self.config.device_id, software_version=__version__,
-                              started_at=finished - (time.monotonic() - armed), finished_at=finished, error=event.reason, rig=self.config.rig.to_dict(),
-                              config=self.config.to_dict(),
-                              part={"part_id": part_id, "recipe": recipe.name if recipe else None,
-                                    "recipe_version": recipe.version if recipe else None})
-            self._note_stored(event.measurement_id)
-        except ServiceError:
-            log.exception("could not store the %s measurement %s", status, event.measurement_id)
-
-    def _note_stored(self, uuid: str) -> None:
-        with self._stored_cond:
-            self.stored.append(uuid)
-            self._stored_cond.notify_all()
+    @property
+    def stored(self) -> list[str]:
+        """UUIDs stored since start (ok, failed, aborted), in order."""
+        return self.recorder.stored
 
     def wait_stored(self, n: int, timeout: float) -> bool:
         """Wait until ``n`` measurements were stored since start (tests, demo). True if so."""
-        deadline = time.monotonic() + timeout
-        with self._stored_cond:
-            while len(self.stored) < n:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self._stored_cond.wait(left)
-        return True
+        return self.recorder.wait_stored(n, timeout)
+
+    def calibration_changed(self) -> None:
+        """A check standard was stored: the live status looks at the calibration again at once."""
+        self._calibration_checked = (-float("inf"), None, False, False)
 
     # --- live status --------------------------------------------------------------------------------------------
     def live_status(self) -> LiveStatus:
@@ -879,7 +471,7 @@ class Appliance:
         fields: dict[str, Any] = {}
         for p in self.publishers:
             fields |= p.live_fields()
-        fields |= self._set_registers()
+        fields |= self.sets.registers()
         due, refused = self._calibration_due()
         return LiveStatus(
             state="STOPPING" if self._stopping else state, busy=bool(seq and seq.busy), fault=state == "FAULT",
@@ -904,24 +496,16 @@ class Appliance:
         if refused:
             due = True
         else:
-            rig = recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
-            state = self.calibration_state(rig, self.wall_clock())
+            state = self.calibration_state()
             due = bool(state and state["due"])
         self._calibration_checked = (now, recipe, due, refused)
         return due, refused
 
-    def _set_registers(self) -> dict[str, int]:
-        p = self.tensor_set.progress() if self.tensor_set is not None else None
-        if p is None:
-            return {}
-        o = p["orientation"]
-        return {"set_step": p["step"], "set_steps": p["steps"], "set_orientation": o["index"] if o else 0}
-
     def _refresh_live(self) -> None:
         live = self.live_status()
-        self._show_block(live.measure_refused)
+        self.show_block(live.measure_refused)
         if self.publishers:
-            self._to_publishers("on_live", live)
+            self.to_publishers("on_live", live)
 
     def _status_text(self) -> str:
         seq = self.sequencer
@@ -957,7 +541,7 @@ class Appliance:
                 log.exception("error while finishing the measurement at stop")
             finally:
                 seq.close()
-        self._interrupt_set("the daemon stopped")
+        self.sets.interrupt("the daemon stopped")
         self._shutdown_components()
 
     def _shutdown_components(self) -> None:
@@ -985,39 +569,6 @@ class Appliance:
             self.store = None
         self._unlock_state_dir()
         self.notifier.close()
-
-
-def _part_columns(part: Mapping[str, Any]) -> dict[str, Any]:
-    """The store's part columns from the payload's part keys."""
-    recipe, release, whole = part.get("recipe") or {}, part.get("release") or {}, part.get("part") or {}
-    return {"part_id": part.get("part_id"), "part_uuid": release.get("part_uuid"), "recipe": recipe.get("name"),
-            "recipe_version": recipe.get("version"), "release_index": release.get("index"),
-            "releases": release.get("of"), "verdict": release.get("verdict"), "part_verdict": part.get("verdict"),
-            "part_value": whole.get("mean"), "part_U": whole.get("U")}
-
-
-def lock_state_dir(state: Path) -> int:
-    """Take the state directory's lock (the descriptor holds it; closing it releases it). One daemon
-    per state directory: a second one would take over the MQTT client id and deliver every result
-    twice. The lock is the kernel's (flock): it goes with the process."""
-    import fcntl
-    import os
-
-    try:
-        state.mkdir(parents=True, exist_ok=True)
-        fd = os.open(state / LOCK_NAME, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o640)
-    except OSError as exc:
-        raise StartupError(f"cannot create the lock file in {str(state)!r}: {exc.strerror}") from None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        other = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
-        os.close(fd)
-        raise StartupError(f"another moi daemon (pid {other}) runs on the state directory {str(state)!r}; "
-                           "stop it first, or give this one its own state_dir") from None
-    os.ftruncate(fd, 0)
-    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-    return fd
 
 
 class _Fatal(ServiceError):

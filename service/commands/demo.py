@@ -27,6 +27,7 @@ from typing import Iterator
 
 from service.core import vocabulary as V
 from service.errors import AddressInUse, InputFileError
+from service.parts.outcome import PartOutcome
 from service.settings.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
 
 EXIT_FAULT = 3
@@ -234,9 +235,11 @@ def _measure_part(app, watch: _Watch) -> bool:
         if len(watch.published) < i:
             print(f"moi demo: the measurement failed: {app.sequencer.last_fault}", file=sys.stderr)
             return False
-        rel = app.store.get(watch.published[-1].id).payload["release"]
-        print(f"  release {i}: {rel['quantity']} = {_g(rel['value'], '.7g')} kg·m², u_c {_g(rel['u_c'])}, "
-              f"U {_g(rel['U'])} → {rel['verdict']}" + (f" ({'; '.join(rel['reasons'])})" if rel["reasons"] else ""))
+        rel = PartOutcome.from_dict(app.store.get(watch.published[-1].id).payload).release
+        assert rel is not None  # a recipe is active: every release is judged
+        d = rel.decision
+        print(f"  release {i}: {rel.quantity} = {_g(d.value, '.7g')} kg·m², u_c {_g(d.u_c)}, "
+              f"U {_g(d.U)} → {d.verdict}" + (f" ({'; '.join(d.reasons)})" if d.reasons else ""))
     return True
 
 
@@ -281,25 +284,27 @@ def _print_registers(app, payload: dict) -> None:
 
 def _print_part(payload: dict) -> None:
     """The part's value, its uncertainty and its verdict (once a release completed it)."""
-    part = payload.get("part")
-    if part is not None:
-        print()
-        joint = part.get("joint")
-        how = "identified jointly" if joint else "weighted mean"
-        fit_u = "joint u" if joint else "fit u"
-        print(f"part {payload['part_id']}: {part['quantity']} = {_g(part['mean'], '.7g')} kg·m² (releases "
-              f"{[i + 1 for i in part['used']]} {how}), s = {_g(part['std'])}, Type A u = {_g(part['u_typeA'])}, "
-              f"{fit_u} = {_g(part['u_fit'])}, systematic u = {_g(part['u_systematic'])}, U = {_g(part['U'])} kg·m²")
-        if joint:
-            c = joint["consistency"]
-            print(f"  the releases against the joint ω_n {joint['omega_n']:.7g} rad/s: χ² {c['chi2']:.2f} on "
-                  f"{c['dof']} (p = {c['p']:.2g}), largest deviation {c['largest_z']:+.1f} σ")
-        for e in part["excluded"]:
-            print(f"  excluded release {e['index'] + 1}: {e['reason']}")
-        spec = payload["recipe"]
-        print(f"  tolerance [{spec['lower']:.7g}, {spec['upper']:.7g}], deviation {_g(part['deviation'], '+.3g')}, "
-              f"zone {part['zone']} → VERDICT {part['verdict']}"
-              + (f" ({'; '.join(part['reasons'])})" if part["reasons"] else ""))
+    outcome = PartOutcome.from_dict(payload)
+    part = outcome.part
+    if part is None:
+        return
+    print()
+    joint = part.joint
+    how = "identified jointly" if joint else "weighted mean"
+    fit_u = "joint u" if joint else "fit u"
+    print(f"part {outcome.part_id}: {part.quantity} = {_g(part.value, '.7g')} kg·m² (releases "
+          f"{[i + 1 for i in part.used]} {how}), s = {_g(part.std)}, Type A u = {_g(part.u_typeA)}, "
+          f"{fit_u} = {_g(part.u_fit)}, systematic u = {_g(part.u_systematic)}, U = {_g(part.U)} kg·m²")
+    if joint:
+        c = joint["consistency"]
+        print(f"  the releases against the joint ω_n {joint['omega_n']:.7g} rad/s: χ² {c['chi2']:.2f} on "
+              f"{c['dof']} (p = {c['p']:.2g}), largest deviation {c['largest_z']:+.1f} σ")
+    for e in part.excluded:
+        print(f"  excluded release {e['index'] + 1}: {e['reason']}")
+    spec = outcome.recipe or {}
+    d = part.decision
+    print(f"  tolerance [{spec['lower']:.7g}, {spec['upper']:.7g}], deviation {_g(d.deviation, '+.3g')}, "
+          f"zone {d.zone} → VERDICT {d.verdict}" + (f" ({'; '.join(d.reasons)})" if d.reasons else ""))
 
 
 def _print_budget(app, m) -> None:

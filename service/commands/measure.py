@@ -186,9 +186,9 @@ def _measure_configured(args: argparse.Namespace) -> int:
     from firmware_host import Sequencer
     from service.config.appliance import load_config
     from service.config.check import pin_problems
-    from service.daemon import lock_state_dir
     from service.devices.hardware import build_devices
     from service.errors import ConfigError, StartupError
+    from service.persistence.state_dir import lock_state_dir
 
     config = load_config(args.config)
     if pin_problems(config):

@@ -22,8 +22,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from service.publish.quality import display_unit
     from service.publish.report import report_pdf
-    from service.publish.web.quality import display_unit
     from service.publish.web.settings import PLOT_NAME
 
     if not args.pdf.lower().endswith(".pdf"):

@@ -9,6 +9,7 @@ import math
 from typing import TYPE_CHECKING, Any, Mapping
 
 from service.errors import InputFileError
+from service.parts.outcome import PartOutcome
 from service.publish.payload import fmt_time, stored_result
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -50,24 +51,24 @@ def _part(store, serial: str, as_json: bool) -> int:
         first = ms[0]
         print(f"\n  part run {part_uuid[:8]}  recipe {first.recipe or '-'} (version {first.recipe_version or '-'})")
         for m in ms:
-            p = m.payload or {}
-            rel = p.get("release") or {}
-            cal = p.get("calibration") or {}
-            value = rel.get("value")
+            o = PartOutcome.from_dict(m.payload)
+            cal = o.calibration or {}
+            d = o.release.decision if o.release is not None else None
             print(f"    seq {m.seq:>5}  {fmt_time(m.finished_at)} UTC  release {m.release_index or '-'}/"
-                  f"{m.releases or '-'}  {m.status:7}  {rel.get('quantity', 'J')} = {_num(value, '.7g')} "
-                  f"± {_num(rel.get('u_c'), '.2g')}  {m.verdict or '-':7}  calibration "
-                  f"{cal.get('date', '-')}{' (due)' if cal.get('due') else ''}"
-                  + (f"  {'; '.join(rel.get('reasons') or [])}" if rel.get("reasons") else "")
+                  f"{m.releases or '-'}  {m.status:7}  {o.release.quantity if o.release else 'J'} = "
+                  f"{_num(d.value if d else None, '.7g')} ± {_num(d.u_c if d else None, '.2g')}  {m.verdict or '-':7}  "
+                  f"calibration {cal.get('date', '-')}{' (due)' if cal.get('due') else ''}"
+                  + (f"  {'; '.join(d.reasons)}" if d and d.reasons else "")
                   + (f"  error: {m.error}" if m.error else ""))
         last = ms[-1]
-        part = (last.payload or {}).get("part")
-        if part:
-            print(f"    part verdict {last.part_verdict}: {part['quantity']} = {_num(part.get('mean'), '.7g')} "
-                  f"± U {_num(part.get('U'), '.2g')} (k = {((last.payload or {}).get('recipe') or {}).get('coverage_factor')}), "
-                  f"releases used {[i + 1 for i in part['used']]}"
-                  + "".join(f"\n      excluded release {e['index'] + 1}: {e['reason']}" for e in part["excluded"])
-                  + "".join(f"\n      {r}" for r in part.get("reasons") or []))
+        outcome = PartOutcome.from_dict(last.payload)
+        part = outcome.part
+        if part is not None:
+            print(f"    part verdict {last.part_verdict}: {part.quantity} = {_num(part.value, '.7g')} "
+                  f"± U {_num(part.U, '.2g')} (k = {(outcome.recipe or {}).get('coverage_factor')}), "
+                  f"releases used {[i + 1 for i in part.used]}"
+                  + "".join(f"\n      excluded release {e['index'] + 1}: {e['reason']}" for e in part.excluded)
+                  + "".join(f"\n      {r}" for r in part.decision.reasons))
         else:
             print(f"    incomplete: {len(ms)} of {first.releases or '?'} releases")
     return 0
@@ -84,11 +85,12 @@ def _show_result(r: IdentificationResult, p: Mapping[str, Any]) -> None:
     print(f"  residual RMS  : {_num(r.baseline.residual_rms, '.3g')} rad declared model → "
           f"{_num(r.residual_rms, '.3g')} rad final; noise floor {_num(r.noise_floor, '.3g')} rad")
     print(f"  flags         : {', '.join(r.flags) or 'none'}")
-    if p.get("recipe"):
-        rel = p.get("release") or {}
-        print(f"  part          : {p.get('part_id') or '-'}, recipe {p['recipe']['name']} (version "
-              f"{p['recipe']['version']}), release {rel.get('index')}/{rel.get('of')} {rel.get('verdict')}"
-              + (f", part verdict {p['verdict']}" if p.get("verdict") else ""))
+    o = PartOutcome.from_dict(p)
+    if o.recipe:
+        rel = o.release
+        print(f"  part          : {o.part_id or '-'}, recipe {o.recipe['name']} (version "
+              f"{o.recipe['version']}), release {rel.index if rel else None}/{rel.of if rel else None} "
+              f"{rel.verdict if rel else None}" + (f", part verdict {o.verdict}" if o.verdict else ""))
 
 
 def run(args: argparse.Namespace) -> int:

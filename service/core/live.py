@@ -26,5 +26,5 @@ class LiveStatus:
     set_steps: int = 0       # tensor set: orientations in the plan
     set_orientation: int = 0  # tensor set: number of the orientation to mount now (1-based; 0: none)
     calibration_due: bool = False   # the rig's calibration is past its validity period
-    measure_refused: bool = False   # the calibration refuses a trigger now (``Appliance.measure_block``)
+    measure_refused: bool = False   # the calibration refuses a trigger now (``service.parts.calibration.measure_block``)
     store_unwritable: bool = False  # the result store cannot be written: measurements are refused

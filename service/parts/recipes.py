@@ -70,33 +70,29 @@ The decision rule and the combination of releases are
 SHA-256 of the file's bytes as read (first 16 hex digits): every stored
 measurement carries it, so a verdict can be traced to the exact recipe.
 
-A part is identified by its serial number (``part_id``, up to
-``PART_ID_LENGTH`` ASCII characters), written by the PLC or carried by the
-MQTT measure command. ``PartTracker`` counts the releases of the open part:
-the same part ID and recipe continue the part until it has ``releases``
-releases; a different part ID or recipe starts a new part (an unfinished part
-is reported as abandoned in the log and in the next payload's
-``release.abandoned``).
+The ``[recipe]`` keys are declared once, in ``service.parts.recipe_keys`` (read by this
+loader, the editor and the recipes page); the parts measured with a recipe are counted by
+``service.parts.tracker.PartTracker``.
 """
 
 from __future__ import annotations
 
 import hashlib
 import logging
-import math
-import uuid as uuidlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
 from measurement import Rig
-from measurement.errors import InvalidInput, MeasurementError
+from measurement.errors import InvalidInput
 from measurement.tensor import RigShared, TensorPlan
-from measurement.uncertainty import check_standard
 from measurement.units import inertia_unit
-from measurement.verdict import QUANTITIES, RULES, QualityRules, Reading, Specification, combine, judge_release
+from measurement.verdict import RULES, QualityRules, Specification
 from service.errors import ConfigError
 from service.names import NAMES, name_problem
+from service.parts import recipe_keys
+from service.parts.outcome import PartOutcome
+from service.parts.recipe_keys import EDITABLE
 from service.sources.files import read_rig, read_text
 
 log = logging.getLogger("moi.recipes")
@@ -176,28 +172,14 @@ class Recipe:
 
 # --- reading and checking recipe files -------------------------------------------------------------------------
 def _schemas() -> dict[str, dict[str, Any]]:
-    """The keys of a recipe file: [recipe] here, [decision] and [quality] from the settings they fill
-    (``Specification``, ``QualityRules``: their defaults are the recipe's)."""
+    """The keys of a recipe file: [recipe] from their declarations (``recipe_keys``), [decision] and [quality]
+    from the settings they fill (``Specification``, ``QualityRules``: their defaults are the recipe's)."""
     from service.settings.schema import REQUIRED, Key
     from service.settings.schema import doc as _doc
     from service.settings.schema import schema as _schema
 
     return {
-        "recipe": {
-            "name": Key("str", REQUIRED, "unique; names the SPC topic and chart"),
-            "number": Key("int", REQUIRED, "what the PLC writes to recipe_select", min=1, max=0xFFFF),
-            "description": Key("str", "", ""),
-            "quantity": Key("str", "J", "", choices=QUANTITIES),
-            "nominal": Key("float", None, "kg·m² (required unless the recipe declares [tensor])", min=0, min_open=True),
-            "tolerance": Key("float", None, "± kg·m²", min=0, min_open=True),
-            "tolerance_percent": Key("float", None, "± % of the nominal", min=0, min_open=True),
-            "releases": Key("int", 1, "releases per part", min=1, max=20),
-            "rig": Key("path", None, "rig file of this part type, relative to the recipe file"),
-            "declared": Key("strlist", None, "declared model"),
-            "display_unit": Key("str", None, "unit the pages and reports show (values stay kg·m²)"),
-            "display_decimals": Key("int", None, "decimals pages and reports show values and U with (default: those "
-                                    "that resolve a hundredth of the tolerance)", min=0, max=12),
-        },
+        "recipe": recipe_keys.schema(),
         "decision": _schema(Specification, {
             "rule": _doc("", choices=RULES), "uncertain": _doc("", choices=("NOK", "INVALID")),
             "coverage_factor": _doc("k of U = k·u_c", min=1.0)}),
@@ -221,16 +203,21 @@ def _schemas() -> dict[str, dict[str, Any]]:
     }
 
 
-def load_recipe(path: str | Path) -> Recipe:  # noqa: C901
-    """Read and check one recipe file (``RecipeError`` naming the file, table and key)."""
-    from measurement.effects import EFFECTS
-    from service.settings.schema import Checker as _Checker
-    from service.sources.files import read_toml
+def _checker(source: str) -> Any:
+    """The configuration checker with recipe errors (``RecipeError`` naming the file, table and key)."""
+    from service.settings.schema import Checker
 
-    class Checker(_Checker):
+    class RecipeChecker(Checker):
         def fail(self, table: str | None, key: str | None, message: str) -> RecipeError:
             where = (f"[{table}]" if table else "") + (f" {key}" if key else "")
             return RecipeError(f"{self.source}: {where + ': ' if where else ''}{message}")
+
+    return RecipeChecker(source)
+
+
+def load_recipe(path: str | Path) -> Recipe:
+    """Read and check one recipe file (``RecipeError`` naming the file, table and key)."""
+    from service.sources.files import read_toml
 
     p = Path(path)
     raw = read_text(p, "recipe file").encode("utf-8")
@@ -238,7 +225,7 @@ def load_recipe(path: str | Path) -> Recipe:  # noqa: C901
         doc = read_toml(p, "recipe file")
     except InvalidInput as exc:
         raise RecipeError(str(exc)) from None
-    c = Checker(str(p))
+    c = _checker(str(p))
     schemas = _schemas()
     for t in doc:
         if t not in schemas and t != "tensor":
@@ -247,56 +234,93 @@ def load_recipe(path: str | Path) -> Recipe:  # noqa: C901
     if "recipe" not in doc:
         raise c.fail(None, None, "missing [recipe] table (name, number, quantity, nominal, tolerance, releases)")
     rec = c.table("recipe", doc["recipe"], schemas["recipe"])
-    dec = c.table("decision", doc.get("decision", {}), schemas["decision"])
-    qual = c.table("quality", doc.get("quality", {}), schemas["quality"])
-    name = rec["name"]
-    if (problem := name_problem("recipe", name)) is not None:
+    if (problem := name_problem("recipe", rec["name"])) is not None:
         raise c.fail("recipe", "name", problem)
-    tensor = None
-    if "tensor" in doc:
-        if not isinstance(doc["tensor"], dict):
-            raise c.fail("tensor", None, "expected a table: [tensor.part] and [[tensor.orientation]]")
-        try:
-            tensor = TensorPlan.from_dict(doc["tensor"])
-        except InvalidInput as exc:
-            raise c.fail("tensor", None, str(exc)) from None
-        if any(rec[k] is not None for k in ("nominal", "tolerance", "tolerance_percent")) or "decision" in doc:
-            raise c.fail("recipe", "nominal", "a tensor recipe's result is the tensor: nominal, tolerance and "
-                         "[decision] do not apply")
-    elif rec["nominal"] is None:
-        raise c.fail("recipe", "nominal", "missing (kg·m²)")
-    if tensor is None and (rec["tolerance"] is None) == (rec["tolerance_percent"] is None):
+    tensor = _tensor(c, doc, rec)
+    rig, rig_path = _rig(c, p, rec)
+    declared = _declared(c, rec, rig)
+    quality = _quality(c, doc, c.table("quality", doc.get("quality", {}), schemas["quality"]), rec["releases"])
+    spec = None if tensor is not None else \
+        _spec(c, rec, c.table("decision", doc.get("decision", {}), schemas["decision"]))
+    return Recipe(name=rec["name"], number=rec["number"], description=rec["description"], path=str(p),
+                  version=hashlib.sha256(raw).hexdigest()[:16], releases=rec["releases"], spec=spec,
+                  quality=quality, rig=rig, rig_path=rig_path, declared=declared, tensor=tensor,
+                  display_unit=_display_unit(c, rec), display_decimals=rec["display_decimals"],
+                  check_standard=_check_standard(c, doc, rec, tensor))
+
+
+def _tensor(c: Any, doc: Mapping[str, Any], rec: Mapping[str, Any]) -> TensorPlan | None:
+    """The tensor plan of a tensor recipe (None: the recipe judges one quantity, which needs its nominal)."""
+    if "tensor" not in doc:
+        if rec["nominal"] is None:
+            raise c.fail("recipe", "nominal", "missing (kg·m²)")
+        return None
+    if not isinstance(doc["tensor"], dict):
+        raise c.fail("tensor", None, "expected a table: [tensor.part] and [[tensor.orientation]]")
+    try:
+        tensor = TensorPlan.from_dict(doc["tensor"])
+    except InvalidInput as exc:
+        raise c.fail("tensor", None, str(exc)) from None
+    if any(rec[k] is not None for k in ("nominal", "tolerance", "tolerance_percent")) or "decision" in doc:
+        raise c.fail("recipe", "nominal", "a tensor recipe's result is the tensor: nominal, tolerance and "
+                     "[decision] do not apply")
+    return tensor
+
+
+def _spec(c: Any, rec: Mapping[str, Any], dec: Mapping[str, Any]) -> Specification:
+    """The specification of a recipe that judges one quantity: nominal ± tolerance (absolute or in %)."""
+    if (rec["tolerance"] is None) == (rec["tolerance_percent"] is None):
         raise c.fail("recipe", "tolerance", "give exactly one of tolerance (± kg·m²) or tolerance_percent "
                      "(± % of nominal)")
     nominal = rec["nominal"]
-    tol = 0.0
-    if tensor is None:
-        tol = rec["tolerance"] if rec["tolerance"] is not None else nominal * rec["tolerance_percent"] / 100.0
-        if tol >= nominal:
-            raise c.fail("recipe", "tolerance", f"expected less than the nominal {nominal:g} kg·m², got {tol:g}")
-    releases = rec["releases"]
-    rig = rig_path = None
-    if rec["rig"] is not None:
-        rig_path = str((p.parent / rec["rig"]).resolve())
-        try:
-            rig = read_rig(rig_path)
-        except InvalidInput as exc:
-            raise c.fail("recipe", "rig", str(exc)) from None
+    tol = rec["tolerance"] if rec["tolerance"] is not None else nominal * rec["tolerance_percent"] / 100.0
+    if tol >= nominal:
+        raise c.fail("recipe", "tolerance", f"expected less than the nominal {nominal:g} kg·m², got {tol:g}")
+    try:
+        return Specification.symmetric(rec["quantity"], nominal, tol, **dec)
+    except InvalidInput as exc:
+        raise c.fail("recipe", None, str(exc)) from None
+
+
+def _rig(c: Any, p: Path, rec: Mapping[str, Any]) -> tuple[Rig | None, str | None]:
+    """The recipe's own rig file, read (None: the set-up's rig)."""
+    if rec["rig"] is None:
+        return None, None
+    rig_path = str((p.parent / rec["rig"]).resolve())
+    try:
+        return read_rig(rig_path), rig_path
+    except InvalidInput as exc:
+        raise c.fail("recipe", "rig", str(exc)) from None
+
+
+def _declared(c: Any, rec: Mapping[str, Any], rig: Rig | None) -> tuple[str, ...] | None:
+    """The declared model: known effects that resolve on the rig they are used with."""
+    from measurement.effects import EFFECTS
+
     declared = rec["declared"]
-    unit = None
-    if rec["display_unit"] is not None:
-        try:
-            unit = inertia_unit(rec["display_unit"])
-        except InvalidInput as exc:
-            raise c.fail("recipe", "display_unit", str(exc)) from None
-    for e in declared or ():
+    if declared is None:
+        return None
+    for e in declared:
         if e not in EFFECTS:
             raise c.fail("recipe", "declared", f"unknown effect {e!r}; expected names from {', '.join(EFFECTS)}")
-    if declared is not None:
-        try:  # the declared model must resolve on the rig it is used with
-            (rig or Rig(kind="torsion")).with_declared(declared)
-        except InvalidInput as exc:
-            raise c.fail("recipe", "declared", str(exc)) from None
+    try:
+        (rig or Rig(kind="torsion")).with_declared(declared)
+    except InvalidInput as exc:
+        raise c.fail("recipe", "declared", str(exc)) from None
+    return tuple(declared)
+
+
+def _display_unit(c: Any, rec: Mapping[str, Any]) -> str | None:
+    if rec["display_unit"] is None:
+        return None
+    try:
+        return inertia_unit(rec["display_unit"])
+    except InvalidInput as exc:
+        raise c.fail("recipe", "display_unit", str(exc)) from None
+
+
+def _quality(c: Any, doc: Mapping[str, Any], qual: Mapping[str, Any], releases: int) -> QualityRules:
+    """When a release or a part is INVALID."""
     if qual["max_J_std"] is not None and qual["max_J_std_percent"] is not None:
         raise c.fail("quality", "max_J_std", "give max_J_std (kg·m²) or max_J_std_percent, not both")
     # a part passes only on all its releases unless the recipe says how many may be excluded
@@ -308,70 +332,60 @@ def load_recipe(path: str | Path) -> Recipe:  # noqa: C901
     if "check_standard" in doc and "invalid_flags" not in doc.get("quality", {}):
         # the check standard is what clears a calibration_due its failure raised: it must not be refused for it
         invalid_flags = tuple(f for f in invalid_flags if f != "calibration_due")
-    quality = QualityRules(invalid_flags=invalid_flags, max_std=qual["max_J_std"],
-                           max_std_relative=None if pct is None else pct / 100.0, min_swings=qual["min_swings"],
-                           consistency_limit=qual["consistency_limit"], min_valid_releases=min_valid,
-                           max_uncertainty_ratio=qual["max_uncertainty_ratio"])
-    spec = None
-    if tensor is None:
-        try:
-            spec = Specification.symmetric(rec["quantity"], nominal, tol, **dec)
-        except InvalidInput as exc:
-            raise c.fail("recipe", None, str(exc)) from None
-    check = None
-    if "check_standard" in doc:
-        if tensor is not None:
-            raise c.fail("check_standard", None, "a tensor recipe cannot be a check standard")
-        cs = c.table("check_standard", doc["check_standard"], schemas["check_standard"])
-        if cs["name"] is not None and (problem := name_problem("check_standard", cs["name"])) is not None:
-            raise c.fail("check_standard", "name", problem)
-        check = {"name": cs["name"] or name, "reference": cs["reference"] if cs["reference"] is not None else nominal,
-                 "reference_U": cs["reference_U"]}
-    return Recipe(name=name, number=rec["number"], description=rec["description"], path=str(p),
-                  version=hashlib.sha256(raw).hexdigest()[:16], releases=releases, spec=spec, quality=quality,
-                  rig=rig, rig_path=rig_path, declared=None if declared is None else tuple(declared), tensor=tensor,
-                  display_unit=unit, display_decimals=rec["display_decimals"], check_standard=check)
+    return QualityRules(invalid_flags=invalid_flags, max_std=qual["max_J_std"],
+                        max_std_relative=None if pct is None else pct / 100.0, min_swings=qual["min_swings"],
+                        consistency_limit=qual["consistency_limit"], min_valid_releases=min_valid,
+                        max_uncertainty_ratio=qual["max_uncertainty_ratio"])
 
 
-#: the [recipe] keys a quality engineer edits on the recipes page (what a part type's decision rests on)
+def _check_standard(c: Any, doc: Mapping[str, Any], rec: Mapping[str, Any],
+                    tensor: TensorPlan | None) -> dict[str, Any] | None:
+    """A check standard's certificate: {name, reference, reference_U} (None: a part type)."""
+    if "check_standard" not in doc:
+        return None
+    if tensor is not None:
+        raise c.fail("check_standard", None, "a tensor recipe cannot be a check standard")
+    cs = c.table("check_standard", doc["check_standard"], _schemas()["check_standard"])
+    if cs["name"] is not None and (problem := name_problem("check_standard", cs["name"])) is not None:
+        raise c.fail("check_standard", "name", problem)
+    return {"name": cs["name"] or rec["name"],
+            "reference": cs["reference"] if cs["reference"] is not None else rec["nominal"],
+            "reference_U": cs["reference_U"]}
+
+
 #: the append-only log of recipe edits, in the state directory
 RECIPE_AUDIT_FILE = "recipe-audit.log"
-EDITABLE = ("nominal", "tolerance", "tolerance_percent", "releases", "display_unit", "display_decimals")
 
 
 def edit_recipe(recipe: Recipe, typed: Mapping[str, str]) -> tuple[Recipe, dict[str, tuple[Any, Any]]]:
-    """Set the [recipe] keys of ``typed`` (text as typed; empty removes an optional key) in ``recipe``'s file,
-    keeping its comments and layout; the new file goes through ``load_recipe`` before it replaces the old one
-    in one step (RecipeError naming the key, the file unchanged). Returns the re-read recipe and
-    {key: (before, after)} of what changed."""
+    """Set the editable [recipe] keys (``recipe_keys.EDITABLE``) of ``typed`` (text as typed; empty removes an
+    optional key) in ``recipe``'s file, keeping its comments and layout; the new file goes through
+    ``load_recipe`` before it replaces the old one in one step (RecipeError naming the key, the file unchanged).
+    Returns the re-read recipe and {key: (before, after)} of what changed."""
     import tomlkit
 
     from service.sources.files import write_atomic
 
-    schema = _schemas()["recipe"]
     path = Path(recipe.path)
     doc = tomlkit.parse(read_text(path, "recipe file"))
     table = doc["recipe"]
     changes: dict[str, tuple[Any, Any]] = {}
     for key in EDITABLE:
-        if key not in typed:
+        if key.name not in typed:
             continue
-        text, before = str(typed[key]).strip(), table.get(key)
+        before = table.get(key.name)
         before = before.unwrap() if hasattr(before, "unwrap") else before
         try:
-            after: Any = None if text == "" else int(text) if schema[key].kind == "int" else                 float(text) if schema[key].kind == "float" else text
-        except ValueError:
-            raise RecipeError(f"{path}: [recipe] {key}: expected a {'whole ' if schema[key].kind == 'int' else ''}"
-                              f"number, got {text!r}") from None
-        if isinstance(after, float) and not math.isfinite(after):
-            raise RecipeError(f"{path}: [recipe] {key}: expected a finite number, got {text!r}")
+            after = key.parse(str(typed[key.name]))
+        except ValueError as exc:
+            raise RecipeError(f"{path}: [recipe] {key.name}: {exc}") from None
         if after == before:
             continue
-        changes[key] = (before, after)
+        changes[key.name] = (before, after)
         if after is None:
-            table.pop(key, None)
+            table.pop(key.name, None)
         else:
-            table[key] = after
+            table[key.name] = after
     if not changes:
         return recipe, changes
     text = tomlkit.dumps(doc)
@@ -387,15 +401,12 @@ def edit_recipe(recipe: Recipe, typed: Mapping[str, str]) -> tuple[Recipe, dict[
     return load_recipe(path), changes
 
 
-def recipe_values(recipe: Recipe) -> dict[str, Any]:
-    """The EDITABLE keys as ``recipe``'s file holds them, as text a person types (numbers without e-notation;
-    None: not in the file)."""
+def recipe_values(recipe: Recipe) -> dict[str, str | None]:
+    """The editable keys as ``recipe``'s file holds them, as text a person types (None: not in the file)."""
     import tomllib
-    from decimal import Decimal
 
     rec = tomllib.loads(read_text(Path(recipe.path), "recipe file")).get("recipe") or {}
-    return {k: None if rec.get(k) is None else f"{Decimal(repr(rec[k])):f}" if isinstance(rec[k], float)
-            else str(rec[k]) for k in EDITABLE}
+    return {k.name: k.typed(rec.get(k.name)) for k in EDITABLE}
 
 
 def audit_recipe(log_path: str | Path, who: str, recipe: Recipe, changes: Mapping[str, tuple[Any, Any]],
@@ -447,135 +458,6 @@ class RecipeBook:
         return frozenset(r.number for r in self.recipes)
 
 
-# --- the parts being measured -------------------------------------------------------------------------------------
-@dataclass
-class _OpenPart:
-    uuid: str
-    part_id: str | None
-    recipe: Recipe
-    readings: list[Reading] = field(default_factory=list)
-    measurements: list[str] = field(default_factory=list)
-    #: each release's identification (with its samples), for the part's joint identification
-    identified: list[Any] = field(default_factory=list)
-
-
-class PartTracker:
-    """Counts the releases of the part being measured and makes its verdict (daemon's main loop thread only).
-
-    The part ID and the active recipe are set by the PLC, MQTT or the config;
-    ``release(result, measurement_id, part_id, recipe)`` is called once per
-    successful measurement with what was current when it was triggered and
-    returns the keys the payload adds (``part_id``, ``recipe``, ``release``,
-    ``part``, ``verdict``).
-    """
-
-    def __init__(self, book: RecipeBook, active: str | None = None) -> None:
-        self.book = book
-        self.recipe: Recipe | None = book.find(active) if active is not None else None
-        self.part_id: str | None = None
-        self._open: _OpenPart | None = None
-        self._undo: tuple[_OpenPart | None, int] | None = None
-
-    def select(self, key: str | int) -> Recipe:
-        """Make a recipe active (RecipeError if it does not exist); 0 or "" deselects."""
-        if key in (0, "", "0"):
-            self.recipe = None
-            return None  # type: ignore[return-value]
-        self.recipe = self.book.find(key)
-        return self.recipe
-
-    def set_part_id(self, part_id: str | None) -> None:
-        self.part_id = check_part_id(part_id) or None if part_id is not None else None
-
-    @property
-    def open_part(self) -> dict[str, Any] | None:
-        o = self._open
-        if o is None:
-            return None
-        return {"uuid": o.uuid, "part_id": o.part_id, "recipe": o.recipe.name, "done": len(o.readings),
-                "of": o.recipe.releases}
-
-    def release(self, result: Mapping[str, Any], measurement_id: str, part_id: str | None,
-                recipe: Recipe | None, identified: Any = None, rig: Rig | None = None) -> dict[str, Any]:
-        """Count one release; returns the payload keys (the part's verdict once it is complete).
-
-        identified, rig: the release's ``IdentificationResult`` and the rig it was identified on: with
-        them for every release, the part's value is the releases' joint identification.
-        """
-        out: dict[str, Any] = {"part_id": part_id, "recipe": recipe.to_dict() if recipe else None,
-                               "release": None, "part": None, "verdict": None}
-        o = self._open
-        self._undo = (o, len(o.readings) if o is not None else 0)
-        if recipe is None:
-            self._abandon("no recipe is active")
-            return out
-        spec = recipe.spec
-        if spec is None:  # a tensor recipe's release outside its set (the set ended while it ran): not judged
-            self._abandon("a tensor recipe is active")
-            return out
-        abandoned = None
-        if o is not None and (o.part_id != part_id or o.recipe.version != recipe.version):
-            abandoned = self._abandon("a different part ID or recipe")
-            o = None
-        if o is None:
-            o = self._open = _OpenPart(str(uuidlib.uuid4()), part_id, recipe)
-        reading = Reading.from_result(result, spec.quantity)
-        o.readings.append(reading)
-        o.measurements.append(measurement_id)
-        o.identified.append(identified)
-        decision = judge_release(reading, spec, recipe.quality)
-        out["release"] = {"index": len(o.readings), "of": recipe.releases, "part_uuid": o.uuid,
-                          "quantity": spec.quantity, **decision.to_dict(), "abandoned": abandoned}
-        if len(o.readings) >= recipe.releases:
-            joint_of = None
-            if rig is not None and all(r is not None for r in o.identified):
-                found, quantity = o.identified, spec.quantity
-
-                def joint_of(used, quantity=quantity, found=found, rig=rig):
-                    from measurement.joint import joint_value  # scipy: only when a part completes
-                    try:
-                        return joint_value([found[i] for i in used], rig, quantity)
-                    except MeasurementError as exc:
-                        log.warning("part %s: the joint identification failed (%s); the weighted mean is used",
-                                    part_id or o.uuid, exc)
-                        return None
-            part = combine(o.readings, spec, recipe.quality, joint_of)
-            out["part"] = {"uuid": o.uuid, "part_id": part_id, "measurements": list(o.measurements),
-                           "quantity": spec.quantity, **part.to_dict()}
-            cs = recipe.check_standard
-            if cs is not None and part.decision.value is not None and part.decision.U is not None:
-                check = check_standard(cs["name"], spec.quantity, part.decision.value, part.decision.U,
-                                       cs["reference"], cs["reference_U"])
-                out["part"]["check_standard"] = check.to_dict()
-            out["verdict"] = part.verdict
-            for e in part.excluded:
-                log.warning("part %s: release %d excluded: %s", part_id or o.uuid, e["index"] + 1, e["reason"])
-            self._open = None
-        return out
-
-    def undo_last(self) -> None:
-        """Forget the last ``release`` (its measurement could not be stored)."""
-        if self._undo is None:
-            return
-        o, n = self._undo
-        if o is not None:
-            del o.readings[n:]
-            del o.measurements[n:]
-            del o.identified[n:]
-        self._open = o
-        self._undo = None
-
-    def _abandon(self, why: str) -> dict[str, Any] | None:
-        o = self._open
-        if o is None:
-            return None
-        log.warning("part %s (%s) abandoned after %d of %d releases: %s", o.part_id or "(no ID)", o.recipe.name,
-                    len(o.readings), o.recipe.releases, why)
-        self._open = None
-        return {"part_uuid": o.uuid, "part_id": o.part_id, "recipe": o.recipe.name, "done": len(o.readings),
-                "of": o.recipe.releases, "reason": why}
-
-
 # --- SPC of a recipe's parts ---------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class RecipeSpc:
@@ -612,13 +494,16 @@ def recipe_spc(store: Any, recipe: str, *, since: float | None = None, until: fl
     from measurement.spc import D2, individuals, xbar_r, xbar_s
 
     rows = list(reversed(store.list(limit=limit, recipe=recipe, parts_only=True, since=since, until=until, full=True)))
-    usable = [m for m in rows if m.part_verdict != "INVALID" and m.payload and (m.payload.get("part") or {}).get("mean")
-              is not None]
-    if len(usable) < 2:
+    read = [(m, PartOutcome.from_dict(m.payload)) for m in rows if m.part_verdict != "INVALID" and m.payload]
+    done = [(m, o) for m, o in read if o.part is not None and o.part.value is not None]
+    if len(done) < 2:
         return None
-    spec = usable[-1].payload["recipe"]
+    usable = [m for m, _ in done]
+    spec = done[-1][1].recipe or {}
     lsl, usl = spec["lower"], spec["upper"]
-    groups = [[p["values"][i] for i in p["used"]] for p in (m.payload["part"] for m in usable)]
+    # a used release always has its value
+    groups = [[v for i in part.used if (v := part.values[i]) is not None] for part in (o.part for _, o in done)
+              if part is not None]
     sizes = {len(g) for g in groups}
     use_xbar = chart == "Xbar-R" or (chart == "auto" and len(sizes) == 1 and next(iter(sizes)) in D2)
     if chart == "Xbar-S":

@@ -23,6 +23,7 @@ import math
 from typing import Any, Iterable, Mapping
 
 from measurement.units import SI, from_si
+from service.parts.outcome import PartOutcome, PartSummary
 
 #: the field separator of a value line (AQDEF: DC4)
 FIELD = "\x14"
@@ -42,13 +43,13 @@ def _decimals(tolerance: float) -> int:
     return max(3, min(15, int(math.ceil(-math.log10(tolerance / 1e4))) if tolerance > 0 else 8))
 
 
-def _recorded_value(m: Any) -> float | None:
+def _recorded_value(m: Any, part: PartSummary | None) -> float | None:
     """The part's value (kg·m²); of an INVALID part without one, the mean of its releases' values (what was
     measured, marked not for SPC); None when no release gave a value."""
     value = m.part_value
     if value is not None and math.isfinite(value):
         return float(value)
-    values = [float(v) for v in (((m.payload or {}).get("part") or {}).get("values") or ())
+    values = [float(v) for v in (part.values if part is not None else ())
               if isinstance(v, (int, float)) and math.isfinite(v)]
     return sum(values) / len(values) if values else None
 
@@ -72,12 +73,13 @@ def dfq_text(recipe: Mapping[str, Any], parts: Iterable[Any], unit: str = SI) ->
              f"K2111/1 {upper:.{places}f}",
              f"K2142/1 {unit}"]
     for m in parts:
-        value = _recorded_value(m)
+        part = PartOutcome.from_dict(m.payload).part
+        value = _recorded_value(m, part)
         when = dt.datetime.fromtimestamp(m.finished_at, dt.UTC).strftime("%d.%m.%Y/%H:%M:%S")
         invalid = m.part_verdict == "INVALID" or value is None
         attribute = ATTRIBUTE_INVALID if invalid else 0
         # an INVALID part is recorded too, marked not for SPC, with why (its first reason)
-        why = next(iter(((m.payload or {}).get("part") or {}).get("reasons") or ()), "") if invalid else ""
+        why = next(iter(part.decision.reasons if part is not None else ()), "") if invalid else ""
         fields = [f"{value * f:.{places}f}" if value is not None else "", str(attribute), when, "", "", "",
                   _clean(m.trigger), _clean(f"verdict {m.part_verdict}" + (f": {why}" if why else ""))[:255],
                   _clean(m.device_id)]

@@ -6,7 +6,7 @@ version) plus the two residual RMS values under explicit before/after names.
 The result store keeps this exact dict; the outbox sends it as JSON; the
 Modbus image is encoded from it (``service.publish.modbus.registers.encode_snapshot``).
 A reader of a stored or received payload reads its result typed (``stored_result``), once, where the row is
-loaded, and its fields from there; the envelope's part keys stay plain dicts.
+loaded, and its fields from there; so is its part outcome (``service.parts.outcome.PartOutcome.from_dict``).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from typing import Any, Mapping
 from measurement.errors import ResultSchemaError
 from measurement.flags import flag_bits
 from measurement.result import IdentificationResult
+from service.parts.outcome import PartOutcome
 
 #: the version of the published envelope and topics; what each version changed is in CHANGELOG.md
 PAYLOAD_SCHEMA = 6
@@ -64,8 +65,8 @@ def envelope_markdown() -> str:
     return "\n".join(rows) + "\n"
 
 
-#: the part keys of the envelope (``service.parts.recipes.PartTracker.release``, the rig's calibration state and,
-#: for a tensor recipe, the orientation the release counted for: ``service.parts.tensor_set.TensorSet.release``)
+#: the part keys of the envelope (``service.parts.outcome.PartOutcome.to_dict``: what ``PartTracker.release`` made,
+#: the rig's calibration state and, for a tensor recipe, the orientation the release counted for)
 PART_KEYS = ENVELOPE_KEYS[-7:]
 
 
@@ -144,16 +145,6 @@ def stored_result(payload: Mapping[str, Any] | None) -> IdentificationResult | N
         return None
 
 
-def decision(payload: Mapping[str, Any]) -> tuple[str | None, Mapping[str, Any]]:
-    """(the verdict, the decision it comes from) of a result: the part's decision once the release completes
-    it, else the release's; (None, {}) without a recipe."""
-    made = payload.get("part") or payload.get("release") or {}
-    return payload.get("verdict") or made.get("verdict"), made
-
-
 def not_decidable(payload: Mapping[str, Any] | None) -> bool:
-    """True when a result's verdict cannot decide: INVALID, or in the guard band's uncertainty range."""
-    if payload is None:
-        return False
-    verdict, made = decision(payload)
-    return verdict == "INVALID" or made.get("zone") == "uncertainty"
+    """True when a result's verdict cannot decide (``PartOutcome.not_decidable``); False without a payload."""
+    return payload is not None and PartOutcome.from_dict(payload).not_decidable

@@ -39,7 +39,7 @@ def figure(result: IdentificationResult, *, unit: str = "kg·m²", source: str |
 
     from measurement.units import from_si
 
-    from .web.quality import inertia, number
+    from .quality import inertia, number
 
     reading, ru = reading_label(result)
     a = result.arrays

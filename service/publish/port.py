@@ -23,7 +23,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from service.core.live import LiveStatus
     from service.devices.hardware import Devices
     from service.notify import Notifier
-    from service.parts.recipes import PartTracker, Recipe
+    from service.parts.recipes import Recipe
+    from service.parts.tracker import PartTracker
     from service.persistence.store import Store, StoredMeasurement
     from service.publish.replies import ReplyTo
     from service.settings.config import Config
@@ -183,12 +184,11 @@ class ApplianceView:
 
     def calibration_state(self) -> dict[str, Any] | None:
         """The calibration of the rig the active recipe measures with, as the next result will be judged:
-        date, valid_until, due (also after a failed check standard), check_standard; None without one."""
-        recipe = self._app.parts.recipe
-        rig = recipe.rig_for(self._app.config.rig) if recipe is not None else self._app.config.rig
-        return self._app.calibration_state(rig, self._app.wall_clock())
+        date, valid_until, due (also after a failed check standard), check_standard; None without one
+        (``service.parts.calibration``: the rule)."""
+        return self._app.calibration_state()
 
     def measure_block(self) -> dict[str, Any] | None:
-        """Why the calibration refuses a measurement now (``Appliance.measure_block``: the one rule every door
-        uses; calibration, expired, detail), or None."""
+        """Why the calibration refuses a measurement now (``service.parts.calibration.measure_block``: the one rule
+        every door uses; calibration, expired, detail), or None."""
         return self._app.measure_block()

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Callable
 
 #: an absolute path in a reply's words (not a URL's: no ':' or '/' before it); its last part is what a reply keeps
 _PATH = re.compile(r"(?<![\w.:/~])/(?:[^\s/'\"(),;:]+/)*([^\s/'\"(),;:]*)")
@@ -54,22 +54,6 @@ REASONS: dict[str, Reason] = {
 #: whom an operator calls when the calibration refuses a measurement, unless ``[web] contact`` names someone
 CONTACT = "the quality engineer on shift"
 
-
-def calibration_words(expired_on: str | None, check: Mapping[str, Any] | None, contact: str) -> str:
-    """What every door says when the calibration refuses a measurement (``Appliance.measure_block``): the
-    calibration expired on ``expired_on`` (YYYY-MM-DD; None: it did not), and/or the check standard ``check``
-    (name, E_n) failed; what to do, and whom to call."""
-    what, do = [], []
-    if expired_on is not None:
-        what.append(f"calibration expired on {expired_on}")
-        do.append("recalibrate (moi calibrate)")
-    if check is not None:
-        e_n = check.get("E_n")
-        what.append(f"check standard {check.get('name') or ''} failed"
-                    + (f" (E_n = {e_n:.2f})" if isinstance(e_n, (int, float)) else ""))
-        if expired_on is None:
-            do.append("find the cause and measure the check standard again")
-    return f"{' and '.join(what)}: {' and '.join(do)} or call {contact}"
 
 #: the statuses of a reply, in the order a trigger goes through them
 STATUSES = ("accepted", "refused", "done", "failed")

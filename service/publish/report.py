@@ -9,9 +9,9 @@ from typing import Any
 
 from measurement.units import SI
 
+from . import quality as Q
 from .payload import stored_result
-from .web import quality as Q
-from .web.words import flag_words
+from .words import flag_words
 
 #: A4 portrait, inches
 A4 = (8.27, 11.69)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from measurement.releases import find_releases
+from measurement.releases import REST, find_releases
 from measurement.rig import Rig
 from measurement.trace import READING_UNITS, Trace, csv_content, csv_header
 from service.errors import InputFileError
@@ -48,7 +48,9 @@ def _own_trace_releases(trace: Trace) -> list[Trace]:
     """moi's own trace whole, as the sequencer captured it (its pre-trigger hold is the identification's to
     handle), unless it holds several releases: then each of them, read as a log's are (the hold before each
     and the hand's transient cut), so that several swings saved in one file are never fitted as one."""
-    if len(find_releases(trace.t, trace.angle, trace.quantity).found) < 2:
+    # a gap in moi's own record is a sensor's dropout within one swing (the identification cuts its window
+    # there and says so); a rest before a swing is a new release
+    if not any(r.begins == REST for r in find_releases(trace.t, trace.angle, trace.quantity).found[1:]):
         return [trace]
     from .formats.log import Column, Log
     from .formats.reading import log_traces

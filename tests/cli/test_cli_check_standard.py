@@ -7,8 +7,6 @@ import datetime as dt
 import json
 import time
 from pathlib import Path
-from types import SimpleNamespace
-from typing import Any
 
 import numpy as np
 import pytest
@@ -17,7 +15,7 @@ from measurement import Pendulum, simulate_trace
 from measurement.result import SCHEMA_VERSION
 from measurement.rig import CalibrationRecord
 from service.cli import main
-from service.daemon import Appliance
+from service.parts.calibration import calibration_state
 from service.persistence.store import Store
 from service.settings.defaults import DEMO_RIG
 from service.sources.files import read_rig
@@ -59,13 +57,13 @@ def test_check_standard_passes_fails_is_stored_and_charted(swing, rig_file, tmp_
     assert (tmp_path / "cs.png").read_bytes()[:4] == b"\x89PNG"
     # the appliance: its results are calibration_due while the newest check since the calibration failed
     with Store(state) as store:
-        app: Any = SimpleNamespace(store=store)
+        checks = store.check_standards(limit=1)
         now = time.time()
-        state_now = Appliance.calibration_state(app, DEMO_RIG, now)
+        state_now = calibration_state(DEMO_RIG, checks, now)
         assert state_now is not None and state_now["due"] and state_now["check_standard"]["passed"] is False
         recalibrated = DEMO_RIG.__class__(**{**DEMO_RIG.__dict__, "calibration": CalibrationRecord(
             dt.datetime.now(dt.UTC).date() + dt.timedelta(days=1), 365)})
-        state_later = Appliance.calibration_state(app, recalibrated, now)
+        state_later = calibration_state(recalibrated, checks, now)
         assert state_later is not None and not state_later["due"]
 
 

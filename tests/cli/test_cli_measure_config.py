@@ -52,7 +52,7 @@ def test_measure_config_refuses_bad_pins_and_a_running_daemon(tmp_path, capsys):
     assert main(["measure", "--config", str(bad)]) == 2
     assert "'BANANA' is not a GPIO pin" in capsys.readouterr().err
 
-    from service.daemon import lock_state_dir
+    from service.persistence.state_dir import lock_state_dir
     fd = lock_state_dir(tmp_path / "state")  # the daemon holds the state directory
     try:
         assert main(["measure", "--config", str(config(tmp_path))]) == 3

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from firmware_host.states import BUSY, State
 from service.publish.modbus import registers as R
-from service.publish.web.words import STATE_WORDS
+from service.publish.words import STATE_WORDS
 from service.states import STATES
 
 

@@ -451,7 +451,7 @@ def test_cli_tracebacks_are_one_line(tmp_path):
              (["results", "--json", *state], "/dev/full"), (["export", *state], "/dev/full"),
              (["identify", str(tmp_path / "wide.csv"), "--rig", str(repo / "examples" / "torsion_rig.toml")], None)]
     # a demo on a state directory another daemon holds (its lock taken here)
-    from service.daemon import lock_state_dir
+    from service.persistence.state_dir import lock_state_dir
 
     cases.append((["demo", "--state-dir", str(tmp_path / "held"), "--web-port", "0"], None))
     held = lock_state_dir(tmp_path / "held")

@@ -40,8 +40,8 @@ from asyncua import Node, Server, ua
 
 from drivers.aioloop import LoopThread
 from service.errors import ConfigError, OpcUaServerError
+from service.parts.outcome import PartOutcome
 from service.persistence.acks import AckFile, AckState
-from service.publish.payload import decision, not_decidable
 from service.publish.port import ApplianceView, Publisher
 from service.states import STATES
 
@@ -100,12 +100,12 @@ def fast_dbm() -> bool:
     return False
 
 
-def result_evaluation(payload: Mapping[str, Any]) -> str:
+def result_evaluation(outcome: PartOutcome) -> str:
     """The verdict as ResultEvaluation: OK → OK, NOK → NotOK, INVALID or inside the guard band's uncertainty
     range → NotDecidable; no verdict (no recipe, part incomplete) → Undefined. The part's decision once the
     release completes it, else the release's."""
-    verdict, _ = decision(payload)
-    if verdict is not None and not_decidable(payload):
+    verdict = outcome.shown_verdict
+    if verdict is not None and outcome.not_decidable:
         return "NotDecidable"
     return {"OK": "OK", "NOK": "NotOK"}.get(verdict or "", "Undefined")
 
@@ -124,8 +124,9 @@ def _time(text: Any) -> datetime | None:
 def result_document(payload: Mapping[str, Any]) -> dict[str, Any]:
     """A result's ResultMetaData and ResultContent as plain values (unknown numbers None), from which the
     ResultDataType is made (``OpcUaServer._structure``)."""
-    recipe = payload.get("recipe") or {}
-    verdict, made = decision(payload)
+    outcome = PartOutcome.from_dict(payload)
+    recipe = outcome.recipe or {}
+    made = outcome.decision
     timing = payload.get("timing") or {}
     meta = {
         "ResultId": payload.get("uuid"),
@@ -134,9 +135,9 @@ def result_document(payload: Mapping[str, Any]) -> dict[str, Any]:
         "AcquisitionDuration": _num(timing.get("capture_s")),
         "ProcessingDuration": _num(timing.get("capture_to_result_s")),
         "ProductId": recipe.get("name"),
-        "PartId": payload.get("part_id"),
+        "PartId": outcome.part_id,
         "ExternalRecipeId": recipe.get("name"),
-        "ResultEvaluation": result_evaluation(payload),
+        "ResultEvaluation": result_evaluation(outcome),
         "SequenceNumber": payload.get("seq"),
     }
     content = {
@@ -145,11 +146,11 @@ def result_document(payload: Mapping[str, Any]) -> dict[str, Any]:
         # (fit ⊕ calibration ⊕ model form), always; U: the verdict's expanded uncertainty (with a recipe)
         "J_U": _num(payload.get("J_U")),
         "J_u": _num(payload.get("J_u")),
-        "U": _num(made.get("U")),
+        "U": _num(made.U if made is not None else None),
         "omega_n": _num(payload.get("omega_n")),
         "damping_ratio": _num(payload.get("damping_ratio")),
         "flags": list(payload.get("flags") or ()),
-        "verdict": verdict,
+        "verdict": outcome.shown_verdict,
     }
     return {"ResultMetaData": meta, "ResultContent": content}
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping
 
-from service.publish.payload import decision
+from service.parts.outcome import PartOutcome
 
 from .payload import DataType
 
@@ -55,7 +55,7 @@ RESULT: tuple[DeviceMetric, ...] = (
     # Int64, not UInt32: the Sparkplug 3.0 proto carries a UInt32 in int_value, Tahu's JavaScript codec and Ignition
     # before 2022 read it from long_value; an Int64 is long_value in every codec (the 32 bits fit without a sign)
     DeviceMetric("Result/Flag Bits", DataType.Int64, read=_key("flag_bits")),
-    DeviceMetric("Result/Verdict", DataType.String, read=lambda p: decision(p)[0] or ""),
+    DeviceMetric("Result/Verdict", DataType.String, read=lambda p: PartOutcome.from_dict(p).shown_verdict or ""),
     DeviceMetric("Result/Part ID", DataType.String, read=lambda p: p.get("part_id") or ""),
     DeviceMetric("Result/Trigger", DataType.String, read=_key("trigger")),
 )

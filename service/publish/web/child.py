@@ -152,7 +152,7 @@ def replot(state_dir: str, uuid: str, default_rig: Mapping[str, Any], options: A
     from service.publish.payload import stored_result
     from service.publish.plot import render_png
 
-    from .quality import plot_labels
+    from ..quality import plot_labels
 
     with Store(state_dir, read_only=True) as store:
         m = store.get(uuid, trace=True)
@@ -168,7 +168,7 @@ def report_file(state_dir: str, uuid: str, default_unit: str, time_format: str |
     from service.persistence.store import Store
     from service.publish.report import report_pdf
 
-    from .quality import display_unit
+    from ..quality import display_unit
     from .settings import PLOT_NAME
 
     with Store(state_dir, read_only=True) as store:

@@ -14,7 +14,7 @@ from aiohttp import web
 from service.core import vocabulary as V
 from service.publish.payload import stored_result
 
-from . import quality as Q
+from .. import quality as Q
 from .drawing import axes_drawing
 from .live import extras
 from .pages import Family, Refused, action_form, read_form

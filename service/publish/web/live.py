@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING, Any
 
-from .words import STATE_WORDS
+from ..words import STATE_WORDS
 
 if TYPE_CHECKING:  # pragma: no cover
     from firmware_host import Event

@@ -20,11 +20,11 @@ from service import __version__
 from service.parts.recipes import PART_ID_LENGTH
 from service.states import vocabulary
 
-from . import quality as Q
+from .. import quality as Q
+from ..words import STATE_WORDS
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, allowed
 from .child import ChildBusy
 from .live import Live
-from .words import STATE_WORDS
 
 if TYPE_CHECKING:  # pragma: no cover
     import asyncio

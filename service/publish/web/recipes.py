@@ -11,8 +11,8 @@ from typing import Any
 from aiohttp import web
 
 from service.errors import InputFileError
+from service.parts.recipe_keys import EDITABLE
 from service.parts.recipes import (
-    EDITABLE,
     RECIPE_AUDIT_FILE,
     RecipeBook,
     RecipeError,
@@ -21,7 +21,7 @@ from service.parts.recipes import (
     recipe_values,
 )
 
-from . import quality as Q
+from .. import quality as Q
 from .pages import Family, Refused, read_form
 
 log = logging.getLogger("moi.web")
@@ -59,7 +59,7 @@ class RecipePages(Family):
             recipe = parts.book.find(str(form.get("recipe") or ""))
         except RecipeError as exc:
             raise Refused(404, str(exc)) from None
-        typed = {k: str(form[k]) for k in EDITABLE if k in form}
+        typed = {k.name: str(form[k.name]) for k in EDITABLE if k.name in form}
         loop = asyncio.get_running_loop()
         try:
             new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed)

@@ -17,11 +17,11 @@ from service.names import content_disposition
 from service.publish.dfq import ENCODING
 from service.publish.payload import stored_result
 
-from . import quality as Q
+from .. import quality as Q
+from ..words import flag_words
 from .child import export_file, replot, report_file, trace_file
 from .pages import Family, Refused, history_filters, query_args
 from .settings import PLOT_NAME
-from .words import flag_words
 
 if TYPE_CHECKING:  # pragma: no cover
     from service.persistence.store import StoredMeasurement as Measurement

@@ -207,7 +207,7 @@ class WebServer(Publisher):
             # it cannot delay the sensor's reader of the next capture
             from service.publish.plot import render_png
 
-            from .quality import plot_labels
+            from ..quality import plot_labels
             unit, source = plot_labels(stored, m.result, self.appliance.config.simulated,
                                        self.settings.display_unit)
             return self.child.call(render_png, m.result, unit, source)

@@ -19,7 +19,7 @@ from service import __version__
 from service.errors import InputFileError
 from service.settings import sensor_registry as sensors
 
-from . import quality as Q
+from .. import quality as Q
 from .pages import Family, Refused, read_form
 
 log = logging.getLogger("moi.web")

@@ -10,7 +10,7 @@ from typing import Any, Mapping
 
 from aiohttp import web
 
-from . import quality as Q
+from .. import quality as Q
 from .pages import Family, Pages, Refused, history_filters
 
 #: the latest parts an SPC page charts at most

@@ -9,13 +9,13 @@ import pytest
 
 from service.core import vocabulary as V
 from service.core.live import LiveStatus
-from service.daemon import Appliance
+from service.dispatch import Dispatcher
 from service.publish.modbus import registers as R
 from service.publish.mqtt.topics import Topics
 
 
 def test_the_daemon_acts_on_every_act_of_the_table_and_on_no_other():
-    assert set(Appliance._ACTS) | {"part"} == set(V.ACTS)
+    assert set(Dispatcher._ACTS) | {"part"} == set(V.ACTS)
     assert {c.act for c in V.COMMANDS.values()} == set(V.ACTS)
 
 

@@ -313,7 +313,8 @@ def test_moi_run_check_validates_every_recipe(tmp_path, capsys):
 
 
 def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_an_unstored_release(tmp_path):
-    from service.parts.recipes import PartTracker
+    from service.parts.outcome import PartOutcome
+    from service.parts.tracker import PartTracker
 
     d = tmp_path / "recipes"
     write(d / "r.toml", recipe("r", 1, J_TRUE, tolerance_percent=1.0, releases=2))
@@ -321,16 +322,21 @@ def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_
     result = {"J": J_TRUE, "J_std": 1e-7, "flags": [], "omega_n": 5.4, "window": {"t_start": 0.0, "t_stop": 10.0}}
     r = tracker.recipe
     first = tracker.release(result, "m1", "A", r)
-    assert first["release"]["index"] == 1 and first["verdict"] is None and (tracker.open_part or {}).get("done") == 1
+    assert first.release is not None and first.release.index == 1 and first.verdict is None and (tracker.open_part or {}).get("done") == 1
     tracker.undo_last()  # m1 could not be stored
     assert tracker.open_part is None
     tracker.release(result, "m1b", "A", r)
     other = tracker.release(result, "m2", "B", r)  # a new part ID before A was complete
-    abandoned = other["release"]["abandoned"]
+    assert other.release is not None
+    abandoned = other.release.abandoned
+    assert abandoned is not None
     assert abandoned["part_id"] == "A" and abandoned["done"] == 1 and abandoned["of"] == 2
-    assert abandoned["part_uuid"] != other["release"]["part_uuid"] and "different part ID" in abandoned["reason"]
+    assert abandoned["part_uuid"] != other.release.part_uuid and "different part ID" in abandoned["reason"]
     done = tracker.release(result, "m3", "B", r)
-    assert done["verdict"] == "OK" and done["part"]["measurements"] == ["m2", "m3"]
+    assert done.verdict == "OK" and done.part is not None and done.part.measurements == ("m2", "m3")
+    # the dict form is the payload's: the part's value under both of its wire names
+    wire = done.to_dict()["part"]
+    assert wire["mean"] == wire["value"] == done.part.value and PartOutcome.from_dict(done.to_dict()) == done
     with pytest.raises(RecipeError, match="no recipe 'x'"):
         tracker.select("x")
 
@@ -338,7 +344,7 @@ def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_
 def test_a_release_under_a_tensor_recipe_is_not_judged_and_ends_the_open_part(tmp_path):
     # a tensor recipe has no single quantity (spec None): its release outside a set gets no verdict
     from service.commands.demo_tensor import recipe_text
-    from service.parts.recipes import PartTracker
+    from service.parts.tracker import PartTracker
 
     d = tmp_path / "recipes"
     write(d / "r.toml", recipe("r", 1, J_TRUE, tolerance_percent=1.0, releases=2))
@@ -350,8 +356,8 @@ def test_a_release_under_a_tensor_recipe_is_not_judged_and_ends_the_open_part(tm
     assert (tracker.open_part or {}).get("done") == 1
     tensor = next(r for r in book.recipes if r.spec is None)
     out = tracker.release(result, "m2", "A", tensor)
-    assert out["release"] is None and out["part"] is None and out["verdict"] is None
-    assert out["recipe"]["name"] == tensor.name and tracker.open_part is None
+    assert out.release is None and out.part is None and out.verdict is None
+    assert (out.recipe or {})["name"] == tensor.name and tracker.open_part is None
 
 
 def test_a_recipe_that_names_an_information_flag_invalidates_by_it(tmp_path, recipe_dir, appliance_factory):

@@ -263,20 +263,27 @@ def test_moi_s_own_trace_csv_is_read_as_before_and_searched_for_releases_when_it
 
 
 def test_moi_s_own_trace_csv_holding_two_releases_gives_each_of_them(tmp_path):
-    """Two swings saved in one file of moi's own columns (the second held 2 s, then let go, after a pause
-    in the clock) are two releases, never one fit across the gap."""
+    """Two swings saved in one file of moi's own columns (the pendulum at rest for 4 s between them, the
+    second held 2 s, then let go) are two releases, never one fit across both; a gap in the clock alone is a
+    sensor's dropout within one swing, which the identification's window handles."""
     t1, a1, _ = swing(12.0, amplitude=0.4, seed=1)
+    rest = np.random.default_rng(3).normal(0, 2e-4, 400)
     t2, a2, _ = swing(14.0, amplitude=0.3, hold=2.0, seed=2)
-    t = np.concatenate([t1, t1[-1] + 5.0 + t2])
+    t = np.arange(t1.size + rest.size + t2.size) / RATE
     f = tmp_path / "two.csv"
-    f.write_text("t,angle\n" + "".join(f"{a},{b}\n" for a, b in zip(t, np.concatenate([a1, a2]))))
+    f.write_text("t,angle\n" + "".join(f"{a},{b}\n" for a, b in zip(t, np.concatenate([a1, rest, a2]))))
     first, second = load_releases(f)
-    assert first.t[0] == pytest.approx(0.0, abs=0.05) and first.t[-1] < t1[-1] + 1e-9
+    assert first.t[0] == pytest.approx(0.0, abs=0.05) and first.t[-1] < 18.0  # to the hold before the second
     # the free swing starts at a turning point after the hold (the held plateau itself, or the first one
     # after it: an angle record's hold has no excursion before it to tell a turning point by)
-    let_go, period = t1[-1] + 7.0, 2 * math.pi / W
+    let_go, period = 18.0, 2 * math.pi / W
     assert let_go - 0.05 <= second.meta["release"]["free_swing_from"] <= let_go + 0.5 * period + 0.05
     assert second.meta["release"]["amplitude"] == pytest.approx(0.3, abs=0.01)
+    gapped = tmp_path / "gap.csv"
+    t_gap = np.concatenate([t1[:600], t1[600:] + 3.0])
+    gapped.write_text("t,angle\n" + "".join(f"{a},{b}\n" for a, b in zip(t_gap, a1)))
+    (whole,) = load_releases(gapped)
+    assert len(whole) == t1.size and whole.meta == {}
 
 
 def test_a_spreadsheet_is_refused_in_one_line_asking_for_csv(tmp_path):

@@ -20,6 +20,7 @@ from typing import Any, Iterable, Mapping, Sequence
 from drivers.modbus_words import check_word_order, from_registers, to_registers
 from measurement.flags import flag_bits
 from service.core.live import LiveStatus
+from service.parts.outcome import PartOutcome
 
 from .map import (
     EFFECT_BITS,
@@ -130,17 +131,16 @@ def _snapshot_values(payload: Mapping[str, Any] | None) -> dict[str, Any]:
 
 
 def _part_values(payload: Mapping[str, Any]) -> dict[str, Any]:
-    """The part/verdict registers from the payload's part keys (service.publish.payload.PART_KEYS)."""
-    release = payload.get("release") or {}
-    part = payload.get("part") or {}
-    recipe = payload.get("recipe") or {}
+    """The part/verdict registers from the payload's part keys (``PartOutcome``)."""
+    o = PartOutcome.from_dict(payload)
+    rel, part = o.release, o.part
     return {
-        "verdict": VERDICT_CODES.get(payload.get("verdict") or "", 0),
-        "release_verdict": VERDICT_CODES.get(release.get("verdict") or "", 0),
-        "release_index": release.get("index") or 0, "releases": release.get("of") or 0,
-        "recipe_number": recipe.get("number") or 0,
-        "part_value": part.get("mean"), "part_U": part.get("U"),
-        "part_id": payload.get("part_id") or "",
+        "verdict": VERDICT_CODES.get(o.verdict or "", 0),
+        "release_verdict": VERDICT_CODES.get((rel.verdict if rel is not None else None) or "", 0),
+        "release_index": rel.index if rel is not None else 0, "releases": rel.of if rel is not None else 0,
+        "recipe_number": (o.recipe or {}).get("number") or 0,
+        "part_value": part.value if part is not None else None, "part_U": part.U if part is not None else None,
+        "part_id": o.part_id or "",
     }
 
 def status_bits(live: LiveStatus, result_valid: bool, verdict: str | None = None) -> int:

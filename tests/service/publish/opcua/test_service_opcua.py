@@ -299,17 +299,21 @@ def test_no_unencrypted_endpoint_is_offered_and_the_certificate_was_made(opc):
 
 
 def test_every_appliance_state_has_a_machinery_item_state_and_every_verdict_an_evaluation():
+    from service.parts.outcome import PartOutcome
     from service.publish.opcua.server import ITEM_STATES, result_evaluation
     from service.states import STATES
 
+    def evaluation(payload):
+        return result_evaluation(PartOutcome.from_dict(payload))
+
     assert set(ITEM_STATES) == set(STATES)
     assert set(ITEM_STATES.values()) == {"NotAvailable", "OutOfService", "NotExecuting", "Executing"}
-    assert result_evaluation({"verdict": "OK", "part": {"verdict": "OK", "zone": "conformance"}}) == "OK"
-    assert result_evaluation({"verdict": "NOK", "part": {"verdict": "NOK", "zone": "nonconformance"}}) == "NotOK"
-    assert result_evaluation({"verdict": "NOK", "part": {"verdict": "NOK", "zone": "uncertainty"}}) == "NotDecidable"
-    assert result_evaluation({"verdict": "INVALID", "part": {"verdict": "INVALID"}}) == "NotDecidable"
-    assert result_evaluation({"verdict": None, "release": {"verdict": "OK", "zone": "conformance"}}) == "OK"
-    assert result_evaluation({}) == "Undefined"
+    assert evaluation({"verdict": "OK", "part": {"verdict": "OK", "zone": "conformance"}}) == "OK"
+    assert evaluation({"verdict": "NOK", "part": {"verdict": "NOK", "zone": "nonconformance"}}) == "NotOK"
+    assert evaluation({"verdict": "NOK", "part": {"verdict": "NOK", "zone": "uncertainty"}}) == "NotDecidable"
+    assert evaluation({"verdict": "INVALID", "part": {"verdict": "INVALID"}}) == "NotDecidable"
+    assert evaluation({"verdict": None, "release": {"verdict": "OK", "zone": "conformance"}}) == "OK"
+    assert evaluation({}) == "Undefined"
 
 
 def test_the_operation_mode_follows_the_appliance():

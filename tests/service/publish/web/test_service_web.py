@@ -113,7 +113,7 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
     assert "stiffness k (calibration)" in budget and "<meter" in budget and "U = " in budget
     # the model before and after, and the noise floor: the stored result's fields
     from service.publish.payload import stored_result
-    from service.publish.web.quality import number
+    from service.publish.quality import number
 
     r = stored_result(m.payload)
     assert r is not None

@@ -140,7 +140,7 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
     steps = [st for st in app.store.latest().payload["steps"] if st["chosen"]]
     shown = [li.text for li in browser.find_elements(By.CSS_SELECTOR, ".steps li")]
     assert [t.split(" ")[0] for t in shown] == [st["chosen"] for st in steps], (steps, shown)
-    from service.publish.web.quality import plain_text  # (their numbers written out, without exponents)
+    from service.publish.quality import plain_text  # (their numbers written out, without exponents)
     assert all(plain_text(st["reason"]) in t and plain_text(st["evidence"]) in t for st, t in zip(steps, shown)), (steps, shown)
     wait.until(lambda d: d.execute_script(
         "var i = document.getElementById('plot'); return i.complete && i.naturalWidth > 400;"))

@@ -2,7 +2,7 @@
 tolerance band with the guard band and the result's interval, the shift's counters, control charts as SVG.
 
 Pure functions of stored payloads and their typed results (``service.publish.payload.stored_result``: the result's
-fields; the envelope's part keys, recipe, release and part, are plain dicts) and numbers: the views, the report page
+fields; ``service.parts.outcome.PartOutcome``: the part's; the recipe stays its dict form) and numbers: the views, the report page
 and the PDF share them. Every number is written with its unit; a missing value is written as "–", never as None or
 nan.
 """
@@ -15,6 +15,7 @@ import re
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 from measurement.units import SI, UnitError, from_si, inertia_unit
+from service.parts.outcome import PartOutcome
 
 if TYPE_CHECKING:  # pragma: no cover
     from measurement.result import IdentificationResult
@@ -166,32 +167,31 @@ def plot_labels(stored: Any, result: IdentificationResult | None, simulated: boo
 
 
 def part_view(payload: Mapping[str, Any] | None, result: IdentificationResult | None = None) -> dict[str, Any]:
-    """What the result page leads with, from a stored payload (its envelope) and its typed result.
+    """What the result page leads with, from a stored payload (its envelope, read as a ``PartOutcome``) and its
+    typed result.
 
     kind: "part" (the part is complete: its verdict), "release" (a release of a part in progress: no part
     verdict yet), "plain" (no recipe: a value without a verdict). value, U (kg·m²), k: the number the
-    decision rests on and its expanded uncertainty; std: a 1σ when no U exists.
+    decision rests on and its expanded uncertainty; std: a 1σ when no U exists. part, release: the outcome's.
     """
-    p = payload or {}
-    recipe = p.get("recipe") or None
-    part = p.get("part") or None
-    release = p.get("release") or None
-    quantity = (part or release or {}).get("quantity") or (recipe or {}).get("quantity") or "J"
+    o = PartOutcome.from_dict(payload)
+    recipe, part, release = o.recipe, o.part, o.release
+    made = part or release
+    quantity = made.quantity if made is not None else (recipe or {}).get("quantity") or "J"
     out: dict[str, Any] = {"recipe": recipe, "part": part, "release": release, "excluded": [], "reasons": [],
                            "budget": budget_rows(result.uncertainty_budget.get(quantity) if result is not None else None)}
     k = (recipe or {}).get("coverage_factor") or (result.coverage_factor if result is not None else None)
     if part is not None:
-        out.update(kind="part", verdict=part.get("verdict"), value=part.get("value"), U=part.get("U"), k=k,
-                   quantity=part.get("quantity") or (recipe or {}).get("quantity"),
-                   used=len(part.get("used") or ()), releases=part.get("releases"),
+        out.update(kind="part", verdict=part.verdict, value=part.value, U=part.U, k=k, quantity=part.quantity,
+                   used=len(part.used), releases=part.releases,
                    excluded=[{"release": int(e.get("index", 0)) + 1, "reason": plain_text(e.get("reason") or "")}
-                             for e in part.get("excluded") or ()],
+                             for e in part.excluded],
                    # the exclusions are listed once (the part's reasons repeat them after "release N:")
-                   reasons=[plain_text(r) for r in part.get("reasons") or () if not str(r).startswith("release ")],
-                   zone=part.get("zone"))
+                   reasons=[plain_text(r) for r in part.decision.reasons if not str(r).startswith("release ")],
+                   zone=part.decision.zone)
     elif release is not None:
-        out.update(kind="release", verdict=None, value=release.get("value"), U=release.get("U"), k=k,
-                   quantity=release.get("quantity"), index=release.get("index"), of=release.get("of"))
+        out.update(kind="release", verdict=None, value=release.value, U=release.decision.U, k=k,
+                   quantity=release.quantity, index=release.index, of=release.of)
     else:
         U = result.J_U if result is not None else None
         out.update(kind="plain", verdict=None, value=result.J if result is not None else None, U=U,
@@ -203,26 +203,26 @@ def part_view(payload: Mapping[str, Any] | None, result: IdentificationResult | 
 def release_rows(view: Mapping[str, Any], payload: Mapping[str, Any] | None, result: IdentificationResult | None,
                  lookup: Callable[[str], Any] | None = None) -> list[dict[str, Any]]:
     """Each release of the part (index, of, value kg·m², status, flags, seq, uuid): every release of a complete
-    part (``lookup(uuid)``: its stored measurement, for its flags), else the one release of the payload (its
-    typed ``result``: J and flags)."""
+    part (``view["part"]``; ``lookup(uuid)``: its stored measurement, for its flags), else the one release of the
+    payload (``view["release"]``; its typed ``result``: J and flags)."""
     p = payload or {}
     part = view.get("part")
-    if part:
+    if part is not None:
         excluded = {e["release"]: e["reason"] for e in view.get("excluded") or ()}
-        ids = list(part.get("measurements") or ())
+        ids = list(part.measurements)
         out = []
-        for i, value in enumerate(part.get("values") or (), start=1):
+        for i, value in enumerate(part.values, start=1):
             m = lookup(ids[i - 1]) if lookup is not None and i <= len(ids) else None
-            out.append({"index": i, "of": part.get("releases"), "value": value,
+            out.append({"index": i, "of": part.releases, "value": value,
                         "status": f"excluded: {excluded[i]}" if i in excluded else "used",
                         "flags": list(m.flags) if m is not None else None,
                         "seq": m.seq if m is not None else None, "uuid": ids[i - 1] if i <= len(ids) else None})
         return out
-    rel = p.get("release") or {}
-    value = rel.get("value") if rel else (result.J if result is not None else None)
-    return [{"index": rel.get("index", 1), "of": rel.get("of", 1), "value": value,
-             "status": f"check {rel['verdict']}; the part's verdict is on its last release" if rel.get("verdict")
-             else "no recipe",
+    rel = view.get("release")
+    value = rel.value if rel is not None else (result.J if result is not None else None)
+    return [{"index": rel.index if rel is not None else 1, "of": rel.of if rel is not None else 1, "value": value,
+             "status": f"check {rel.verdict}; the part's verdict is on its last release" if rel is not None
+             and rel.verdict else "no recipe",
              "flags": list(result.flags) if result is not None else [], "seq": p.get("seq"), "uuid": p.get("uuid")}]
 
 

@@ -12,8 +12,8 @@ import pytest
 
 from measurement.spc import individuals
 from measurement.units import INERTIA_UNITS, UnitError, from_si, inertia_unit
+from service.publish import quality as Q
 from service.publish.payload import stored_result
-from service.publish.web import quality as Q
 
 
 @pytest.fixture(scope="module")
