@@ -79,6 +79,8 @@ RULES = (
          (1.5, 2.0, 3.0), _module_constant(rivals, "COVER_K")),
     Rule("LAW_SIGMA", "rivals.LAW_SIGMA: a restoring law kept only this many σ from 0", 3.0, (2.0, 3.0, 4.0),
          (), _module_constant(rivals, "LAW_SIGMA")),
+    Rule("EXPLAINED_SHARE", "rivals.EXPLAINED_SHARE: a restoring law explains the halves where it brings their z "
+         "down to this share", 0.25, (0.15, 0.25, 0.4), (), _module_constant(rivals, "EXPLAINED_SHARE")),
     Rule("EFFECT_P", "consistency.EFFECT_P: halves' parameters disagree below this p", 1e-3, (1e-4, 1e-3, 1e-2),
          (), _module_constant(consistency, "EFFECT_P")),
 )

@@ -11,7 +11,13 @@ the laws a release adds across its sisters), by ``moi --no-discover`` (each
 release alone, the declared model only) and by that damped sinusoid; per
 object the table gives the spread (max − min)/mean of ω_n and the worst
 pairwise |Δω_n|/√(u_i² + u_j²) (for the damped sinusoid its fit σ under
-white noise, which is what such a fit would state).
+white noise, which is what such a fit would state). Beside moi's one-release
+ω_n, the frequency at the record's own swing that the same identification
+counts (2π over the fitted swing's mean period): where a release keeps a
+restoring law and its sisters do not, or the law's small-swing limit is read
+far below the amplitudes the record holds, the headline ω_n scatters between
+releases while this one does not; the detail names the model each release's
+ω_n came from.
 
 Coverage of one release: the share of the pairs of releases of one object,
 each identified alone, whose difference lies within 2 combined u
@@ -105,7 +111,7 @@ def load_rig(ref: str) -> Rig:
     return RACQUET_RIG if ref == "racquet" else read_rig(ROOT / ref)
 
 
-METHODS = ("damped sinusoid", "moi --no-discover", "moi, one release", "moi, joint")
+METHODS = ("damped sinusoid", "moi --no-discover", "moi, one release", "moi, at its swing", "moi, joint")
 
 
 @dataclass(frozen=True)
@@ -126,13 +132,24 @@ def _failed(exc: Exception) -> Estimate:
     return Estimate(float("nan"), float("nan"), f"error: {str(exc).split(': ', 1)[-1][:50]}")
 
 
-def moi_alone(trace_file: str, rig_file: str, discover: bool = True) -> Estimate:
-    """``moi identify FILE`` (``--no-discover`` without ``discover``)."""
+def moi_alone(trace_file: str, rig_file: str, discover: bool = True) -> tuple[Estimate, Estimate]:
+    """``moi identify FILE`` (``--no-discover`` without ``discover``): (ω_n, the frequency at the record's swing).
+
+    The latter is 2π over the fitted swing's period counted between its zero crossings (``Periods.counted``),
+    with ω_n's relative u: what a stopwatch on the same record reads, whatever law the headline took ω_n from.
+    """
     try:
         res = identify(load_trace(trace_file), load_rig(rig_file), Options(discover=discover))
     except MeasurementError as exc:
-        return _failed(exc)
-    return Estimate(res.omega_n, res.omega_n_u or res.omega_n_std, ", ".join(res.added_effects) or "-")
+        return _failed(exc), _failed(exc)
+    u = res.omega_n_u or res.omega_n_std
+    note = f"{', '.join(res.added_effects) or '-'} [ω_n from {res.omega_n_from}]"
+    head = Estimate(res.omega_n, u, note)
+    counted = res.periods.counted if res.periods is not None else None
+    if counted is None:
+        return head, Estimate(float("nan"), float("nan"), "fewer than three swings")
+    at = 2 * math.pi / counted
+    return head, Estimate(at, u * at / res.omega_n, note)
 
 
 def moi_together(releases: list[tuple[str, str]]) -> tuple[list[Estimate], str]:
@@ -162,8 +179,10 @@ def measure(sets: list[tuple[str, list[tuple[str, str]]]]) -> list[tuple[str, di
         for trace_file, rig_file in releases:
             trace = load_trace(trace_file)
             per["damped sinusoid"].append(damped_sinusoid(trace.t, trace.angle))
-            per["moi --no-discover"].append(moi_alone(trace_file, rig_file, discover=False))
-            per["moi, one release"].append(moi_alone(trace_file, rig_file))
+            per["moi --no-discover"].append(moi_alone(trace_file, rig_file, discover=False)[0])
+            head, at = moi_alone(trace_file, rig_file)
+            per["moi, one release"].append(head)
+            per["moi, at its swing"].append(at)
         per["moi, joint"], flags = moi_together(releases)
         out.append((name, per, flags))
     return out
@@ -171,7 +190,7 @@ def measure(sets: list[tuple[str, list[tuple[str, str]]]]) -> list[tuple[str, di
 
 def table(rows: list[tuple[str, dict[str, list[Estimate]], str]]) -> str:
     head = ("| object (releases) | " + " | ".join(f"{m}: spread, worst z" for m in METHODS)
-            + " | moi / sinusoid (one release / joint) | moi's added effects (joint); the set's flags |")
+            + " | moi / sinusoid (one release / at its swing / joint) | moi's added effects (joint); the set's flags |")
     lines = [head, "|" + "---|" * (len(METHODS) + 3)]
     ratios: dict[str, list[float]] = {m: [] for m in METHODS}
     for name, per, flags in rows:
@@ -182,7 +201,7 @@ def table(rows: list[tuple[str, dict[str, list[Estimate]], str]]) -> str:
             cells.append("–" if not math.isfinite(s) else f"{s:.3f} %, {z:.2f}")
         s_sin = spread(per["damped sinusoid"])[0]
         ratio = " / ".join(f"{s / s_sin:.2f}" if math.isfinite(s) and s_sin > 0 else "–"
-                           for s in (spread(per[m])[0] for m in ("moi, one release", "moi, joint")))
+                           for s in (spread(per[m])[0] for m in ("moi, one release", "moi, at its swing", "moi, joint")))
         notes = "; ".join(e.note for e in per["moi, joint"]) + (f"; **{flags}**" if flags else "")
         lines.append(f"| {name} ({len(per['moi, joint'])}) | " + " | ".join(cells) + f" | {ratio} | {notes} |")
     med = []

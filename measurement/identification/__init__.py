@@ -16,7 +16,9 @@ Each step is a module; ``pipeline.identify`` runs them in this order:
                   than the margin                               ``discover``
     rivals      → an effect that moved ω_n by more than its σ is withdrawn when
                   the model it ends in gives another ω_n in each half of the
-                  record (``hold_across``); a law the rig does not offer is
+                  record (``hold_across``); a restoring law the loop offers is
+                  added where the kept model's halves disagree and the law
+                  makes them agree (``demanded_law``); a law the rig does not offer is
                   fitted in place of an effect that mimics it (``law_rival``);
                   with the halves and the near rivals, the model's form
                   (``model_form``) enters ω_n's uncertainty

@@ -28,7 +28,7 @@ from .outliers import departures, remove_outliers, without_wild
 from .preparation import Prepared, prepare
 from .quantities import inertias, omega_n_at_nominal_scale, omega_n_std_view
 from .report import describe
-from .rivals import Withdrawn, hold_across, law_rival, model_form
+from .rivals import Withdrawn, demanded_law, hold_across, law_rival, model_form
 from .starts import Aliases, keep_nested_order, rival_frequencies
 from .threads import one_blas_thread
 
@@ -137,6 +137,14 @@ def run_passes(trace: Trace, rig: Rig, declared: Model, prep: Prepared, options:
             run.final, run.withdrawn, spent = hold_across(found.final, run.base, found.moves, prep, rig, run.f_scale)
             run.steps, run.moves = found.steps, found.moves
             nfev += spent
+            # a law the record does not determine, or one whose ω_n the halves contradict, is not added back
+            if run.withdrawn is None or not any(EFFECTS[n].role == "stiffness" for n in run.withdrawn.effects):
+                run.final, demanded, spent = demanded_law(run.final, prep, rig, run.f_scale, options.candidates)
+                nfev += spent
+                if demanded is not None:
+                    step, move = demanded
+                    run.steps.append(replace(step, round=len(run.steps) + 1))
+                    run.moves.append(move)
         if last_pass or run.f_scale is None:
             break
         cleaner = without_wild(run.final, prep, trace, options)

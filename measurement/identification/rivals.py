@@ -5,6 +5,9 @@
             (and no closer one than without it), or when it is a restoring
             law the record does not determine (``hold_across``); its ω_n
             stays a rival in the uncertainty
+    halves → a restoring law the loop offers but did not add is added where
+            the kept model's halves disagree and the law makes them agree
+            and is determined by the record (``demanded_law``)
     law   → an effect that mimics a restoring law the rig does not offer
             (Dahl's pre-sliding spring, a sensor's fitted scale) is fitted with
             the law in its place (``law_rival``); its BIC weight says whether
@@ -22,9 +25,9 @@ from typing import Sequence
 import numpy as np
 
 from ..consistency import bic_weights, check_segments, competitors
-from ..effects import EFFECTS, resolve_effects
+from ..effects import EFFECTS, candidate_effects, resolve_effects, with_effect
 from ..errors import IdentificationError
-from ..fit import ModelFit, fit_model
+from ..fit import ModelFit, fit_model, swing_amplitude
 from ..model import Model
 from ..result import Competitor, DiscoveryStep, ModelForm, SegmentCheck
 from ..rig import Rig
@@ -142,6 +145,55 @@ def hold_across(final: ModelFit, base: ModelFit, moves: Sequence[Move], prep: Pr
             return final, None, nfev
     return previous, Withdrawn(tuple(taken), w, final.stdev("omega_n"), final.bic - previous.bic, seg,
                                final.model.effect_names, undetermined), nfev
+
+
+def demanded_law(final: ModelFit, prep: Prepared, rig: Rig, f_scale: float | None,
+                 allowed: Sequence[str] | None = None) -> tuple[ModelFit, tuple[DiscoveryStep, Move] | None, int]:
+    """``final``, or ``final`` with the restoring law its halves demand where BIC did not add it.
+
+    The converse of the rule that keeps a law in ``hold_across``: where the
+    kept model's halves disagree (its ω_n does not hold across the record)
+    and a restoring law the loop offers on this rig brings their z down to
+    ``EXPLAINED_SHARE`` of it or less, determined by the record (each
+    parameter ``LAW_SIGMA`` σ from 0), the law is added. BIC may not have
+    added it: each model's BIC is read under its own AR noise model, and the
+    kept model's, fitted to a residual that is the smooth error of a missing
+    law, predicts that error and scores it as noise (a torsion rod read as an
+    angle: the residual 8.4e-4 rad, 1700 times the noise floor, its AR(12)
+    innovations 7.4e-6 rad; with the rod's softening spring the residual
+    falls to 3.4e-4 rad, its halves from z 23 to 2.5, and BIC still rises).
+    Releases of one object then read one measurand, the law's small-swing
+    limit, not the law in one release and the frequency at the swing in the
+    next. allowed: the candidates the loop may add (None: all). Returns (the
+    fit, (the round's record, the move) or None, simulations spent).
+    """
+    seg = check_segments(final, prep.noise)
+    if seg is None or not seg.disagree:
+        return final, None, 0
+    amplitude = swing_amplitude(final)
+    laws = [e for e in candidate_effects(rig, final.model.effect_names)
+            if e.role == "stiffness" and (allowed is None or e.name in allowed) and e.identifiable(amplitude)]
+    nfev = 0
+    for law in laws:
+        model = Model(rig, tuple(resolve_effects(with_effect(final.model.effect_names, law), rig)))
+        try:
+            fit = fit_model(model, final.t, final.y, prep.noise, previous=final, f_scale=f_scale)
+        except IdentificationError:
+            continue
+        nfev += fit.nfev
+        with_law = check_segments(fit, prep.noise)
+        if (with_law is None or with_law.z > EXPLAINED_SHARE * seg.z or fit.rss >= final.rss
+                or undetermined_law(fit, [law.name]) is not None):
+            continue
+        w, w_fit = final.value("omega_n"), fit.value("omega_n")
+        step = DiscoveryStep(
+            0, final.residual_rms, final.bic,
+            {law.name: {"bic": fit.bic, "residual_rms": fit.residual_rms, "omega_n": w_fit}}, law.name,
+            fit.residual_rms, fit.bic, "",
+            f"the record's halves demand it: without it their ω_n disagree (z {seg.z:.1f}), with it z "
+            f"{with_law.z:.1f}; BIC {fit.bic - final.bic:+.1f}, each model under its own AR noise model", w)
+        return fit, (step, Move(law.name, w_fit - w, fit.stdev("omega_n"), final)), nfev
+    return final, None, nfev
 
 
 @dataclass(frozen=True)

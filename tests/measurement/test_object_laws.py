@@ -3,7 +3,7 @@
 Within one record: a law that moves ω_n must be determined by the record
 (a slow sensor line buys a cubic spring barely told from zero), and a law
 whose model's halves disagree is still kept where they disagree far more
-without it. Across the releases of one object: its value keeps one sign
+without it, and a law the loop did not add is added where the halves demand it. Across the releases of one object: its value keeps one sign
 and a consistent size, or it is withdrawn from every release that kept it.
 """
 
@@ -133,3 +133,42 @@ def test_a_restoring_law_is_kept_where_its_halves_disagree_four_times_less_than_
         assert withdrawn.effects == ("cubic_stiffness",) and withdrawn.undetermined is None
         assert withdrawn.omega_n == final.value("omega_n")
         assert withdrawn.segments is not None and withdrawn.segments.z == z_with
+
+
+@pytest.mark.parametrize(("z_without", "added"), [(40.0, True), (39.6, False)])
+def test_a_restoring_law_the_halves_demand_is_added_where_bic_did_not(monkeypatch, z_without, added):
+    # the converse rule: the kept model's halves disagree, and the law brings their z down to
+    # EXPLAINED_SHARE of it or less; the halves' z is set, the fits are real
+    rig, prep, base, final, _ = _spring_fits()
+    monkeypatch.setattr(rivals, "check_segments", lambda fit, sigma: _halves(
+        10.0 if "cubic_stiffness" in fit.model.effect_names else z_without))
+    fit, demanded, _ = rivals.demanded_law(base, prep, rig, None)
+    if added:
+        assert demanded is not None and fit.model.effect_names == ("viscous", "cubic_stiffness")
+        step, move = demanded
+        assert step.chosen == move.effect == "cubic_stiffness" and "halves demand" in step.reason
+        assert move.start is base and abs(fit.value("omega_n") - final.value("omega_n")) < final.stdev("omega_n")
+    else:
+        assert demanded is None and fit is base
+    # never a law the caller did not allow
+    assert rivals.demanded_law(base, prep, rig, None, allowed=("quadratic",))[1] is None
+
+
+def test_the_rod_read_as_angle_keeps_the_softening_spring_its_rate_record_keeps():
+    # its declared model's halves disagree (z 23); with the rod's softening spring they agree (z 2.5)
+    # while BIC, each model under its own AR noise model, rises: the halves add it
+    from pathlib import Path
+
+    from service.sources.dispatch import load_source
+    from service.sources.files import read_rig
+
+    data = Path(__file__).resolve().parents[2] / "data"
+    rig = read_rig(data / "bicycle_rod_torsional_first_3_rig.toml")
+    angle = identify(load_source(data / "bicycle_rod_torsional_first_3.csv"), rig)
+    rate = identify(load_source(data / "bicycle_rod_torsional_first_3_rate.csv"), rig)
+    assert "cubic_stiffness" in angle.added_effects and "cubic_stiffness" in rate.added_effects
+    assert any("halves demand" in st.reason for st in angle.steps)
+    k3 = angle.stiffness["cubic_stiffness"]["k3"]
+    assert k3.value is not None and k3.value < 0  # softening, as in every release of the rod
+    assert angle.omega_n_u is not None and rate.omega_n_u is not None
+    assert abs(angle.omega_n - rate.omega_n) <= 2 * math.hypot(angle.omega_n_u, rate.omega_n_u)
