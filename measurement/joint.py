@@ -46,7 +46,7 @@ from .identification.threads import one_blas_thread
 from .model import STATE_PARAMS, Model
 from .noise import fit_noise
 from .object_laws import laws_of_the_object
-from .result import IdentificationResult, Quantity, _jsonable, _num, budget_table, quantities_from_dict
+from .result import IdentificationResult, Quantity, _jsonable, _num, quantities_from_dict
 from .rig import Rig
 from .trace import Trace
 from .uncertainty import Budget
@@ -131,71 +131,6 @@ class JointResult:
     def to_json(self) -> str:
         import json
         return json.dumps(self.to_dict(), ensure_ascii=False, allow_nan=False)
-
-    def report(self) -> str:
-        c = self.consistency
-        L = [f"[[Joint identification]] {len(self.releases)} releases of one object ({self.rig_kind} rig)",
-             f"    shared effects: {', '.join(self.effects) or '(none)'}; per release: initial state, zero offset, sensor terms",
-             "[[Releases]]  each alone: its own model (ω_n ± combined u), and the shared model (ω_n ± u, z against the joint)",
-             f"    {'source':<34}{'from–to [s]':>16}{'amplitude':>10}{'T there [s]':>12}{'own ω_n':>12}{'u':>9}{'shared ω_n':>12}{'u':>9}"
-             f"{'z':>7}  own effects / flags"]
-        for r, w, u, z in zip(self.releases, c["omega_n"], c["u"], c["z"]):
-            uo = r.omega_n_u if r.omega_n_u is not None else r.omega_n_std
-            name = r.source if len(r.source) <= 33 else "…" + r.source[-32:]
-            span = f"{r.window.get('t_start', math.nan):.2f}–{r.window.get('t_stop', math.nan):.2f}"
-            period = r.periods.at_amplitude if r.periods is not None else math.nan
-            L.append(f"    {name:<34}{span:>16}{r.reference_amplitude:>10.3g}{period:>12.6g}{r.omega_n:>12.7g}{uo:>9.2g}{w:>12.7g}{u:>9.2g}{z:>+7.1f}  "
-                     f"{', '.join(r.effects)}" + (f" / {', '.join(r.flags)}" if r.flags else ""))
-        L.append("[[Result]]")
-        if self.J is not None:
-            L.append(f"    J            = {self.J:.7g} kg·m², σ {self.J_std:.2g}, combined u {self.J_u:.2g} kg·m²"
-                     " (the releases' ω_n alone)")
-            for measurand, b in self.uncertainty_budget.items():
-                L.append(f"[[Uncertainty budget]] {measurand} (GUM: the joint ω_n and the rig's constants)")
-                L.extend(budget_table(b))
-        else:
-            L.append("    J            = n/a: the rig gives no stiffness (torsion), mass·com_distance (compound) or mass "
-                     "(bifilar, trifilar)")
-        L.append(f"    omega_n      = {self.omega_n:.7g} rad/s, σ {self.omega_n_std:.2g}, combined u {self.omega_n_u:.2g} rad/s"
-                 " (the releases weighted by their whole uncertainty)")
-        jf = c["joint_fit"]
-        L.append(f"    period       = {2 * math.pi / self.omega_n:.6g} ± {2 * math.pi * self.omega_n_u / self.omega_n**2:.2g} s "
-                 "small-swing (2π/ω_n; T there: each release's at its largest swing)")
-        L.append(f"    joint fit    : ω_n {jf['omega_n']:.7g} ± {jf['omega_n_std']:.2g} rad/s (all samples, the laws below shared)")
-        if jf.get("apart"):
-            L.append(f"    the joint fit and the releases' value are {jf['z']:.1f} σ apart: the shared laws do not hold over "
-                     f"the releases' amplitudes; the distance enters u (flag model_ambiguous)")
-        if len(c.get("models", ())) > 1:
-            L.append("    shared laws weighed by all the releases together (joint BIC under each release's noise model):")
-            for m in c["models"]:
-                what = ", ".join(m["effects"]) or "(none)"
-                what += f" (no {', '.join(m['without'])})" if m["without"] else ""
-                L.append(f"      {what:<40} ΔBIC {m['d_bic']:+9.1f}  weight {m['weight']:.2f}  "
-                         f"joint-fit ω_n {m['omega_n']:.7g} ± {m['omega_n_std']:.2g}" + ("  (kept)" if m["chosen"] else ""))
-            if c.get("not_held"):
-                L.append(f"    the laws of least BIC do not hold across {', '.join(c['not_held'])} as the releases' own "
-                         "models did (the halves disagree more): the first set is kept, and the distance of the two "
-                         "readings enters u")
-            if c["u_models"] > self.omega_n_std:
-                L.append(f"    the releases do not separate these laws: their spread {c['u_models']:.2g} rad/s enters u "
-                         "(flag model_ambiguous)")
-        for group in (self.damping, self.stiffness):
-            for eff, params in group.items():
-                for name, q in params.items():
-                    if q.value is not None:
-                        L.append(f"    {eff}.{name:<10} = {q}")
-        L.append("[[Consistency]]")
-        L.append(f"    χ² {c['chi2']:.2f} on {c['dof']} (p = {c['p']:.2g}); largest deviation {c['largest_z']:+.1f} σ "
-                 f"({c['largest_release']}); largest pairwise difference {c['pairwise_max']:.1f} σ")
-        L.append("    " + ("the releases agree with one ω_n within their uncertainties" if c["p"] >= CONSISTENT_P else
-                          f"the releases disagree beyond their uncertainties (flag releases_disagree): the joint σ is "
-                          f"scaled by the Birge ratio {c['birge_ratio']:.2f}; {c['largest_release']} departs most"))
-        if c["own_pairwise_max"] > OWN_PAIR_Z:
-            a, b = c["own_pairwise_releases"]
-            L.append(f"    as each release reports it alone, {a} and {b} are {c['own_pairwise_max']:.1f} u apart "
-                     f"(more than {OWN_PAIR_Z:g}: flag releases_disagree)")
-        L.append(F.report_line(self.flags))
-        return "\n".join(L)
 
 
 def _own_pair(results: Sequence[IdentificationResult]) -> tuple[float, int, int]:

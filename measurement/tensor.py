@@ -65,7 +65,7 @@ import numpy as np
 
 from . import flags as F
 from .errors import TensorError
-from .result import _jsonable, _num
+from .result import IdentificationResult, _jsonable, _num
 from .rig import Rig
 from .verdict import QualityRules, Reading, Specification, combine
 
@@ -391,26 +391,21 @@ class RigShared:
         return cls(scale, rig.tare_inertia, rig.tare_inertia_std or 0.0, corr)
 
 
-def _release_reading(result: Mapping[str, Any], shared: RigShared) -> Reading:
+def _release_reading(result: IdentificationResult, shared: RigShared) -> Reading:
     """One release as the part verdict reads it, its systematic part made of what is this record's own
     and what the set shares (the shared part goes into the set's covariance instead)."""
     reading = Reading.from_result(result, shared.quantity)
     if reading.value is None or reading.u_random is None:
         return reading
-    J = result.get("J")
-    U = result.get(f"{shared.quantity}_U")
-    k = result.get("coverage_factor")
     u_total = math.hypot(reading.u_random, reading.u_systematic)
-    if U is not None and k:
-        u_total = max(float(U) / float(k), reading.u_random)  # an expanded U, where the result carries one
-    common = math.sqrt(max(float(shared.common_covariance(np.array([float(J or 0.0)]))[0, 0]), 0.0))
+    common = math.sqrt(max(float(shared.common_covariance(np.array([float(result.J or 0.0)]))[0, 0]), 0.0))
     own_systematic = math.sqrt(max(u_total**2 - reading.u_random**2 - common**2, 0.0))
     return Reading(reading.value, reading.u_random, own_systematic, reading.flags, reading.swings)
 
 
-def axis_reading(results: Sequence[Mapping[str, Any]], shared: RigShared,
+def axis_reading(results: Sequence[IdentificationResult], shared: RigShared,
                  rules: QualityRules = QualityRules()) -> AxisReading:
-    """One orientation's inertia from its releases' results (``IdentificationResult.to_dict()``).
+    """One orientation's inertia from its releases' results.
 
     The releases are pooled as the part verdict pools a part's releases (``verdict.combine``: INVALID
     releases and one that disagrees with the others excluded with their reasons; the mean, its
@@ -427,7 +422,7 @@ def axis_reading(results: Sequence[Mapping[str, Any]], shared: RigShared,
         return AxisReading(None, None, None, len(results), pooled.used, pooled.excluded, reasons)
     u_random = max(pooled.u_typeA or 0.0, pooled.u_fit or 0.0)
     own = max(readings[i].u_systematic for i in pooled.used)
-    rig_J = [float(j) for i in pooled.used if (j := results[i].get("J")) is not None]
+    rig_J = [float(j) for i in pooled.used if (j := results[i].J) is not None]
     rig_inertia = float(np.mean(rig_J)) if len(rig_J) == len(pooled.used) else None  # only when every release has it
     return AxisReading(pooled.mean, math.hypot(u_random, own), rig_inertia, len(results), pooled.used, pooled.excluded)
 
@@ -492,42 +487,6 @@ class TensorResult:
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), ensure_ascii=False, allow_nan=False)
-
-    def report(self) -> str:
-        """A plain-text report for the technician."""
-        L = [f"[[Inertia tensor]] {self.part}  (about the centre of mass, part frame; products of inertia "
-             f"{self.poi_convention}: Ixy = {'−' if self.poi_convention == 'negative' else '+'}∫xy dm)"]
-        k = self.coverage_factor
-        for c in COMPONENTS:
-            L.append(f"    {c} = {self.components[c]:.7g} ± {self.U[c]:.2g} kg·m²  (U, k = {k:g})")
-        L.append("    matrix T (nᵀ·T·n = inertia about n), kg·m²:")
-        for row in self.tensor:
-            L.append("        [" + "  ".join(f"{v:+.6e}" for v in row) + "]")
-        L.append("[[Principal]]")
-        for lam, U, ax, ang in zip(self.principal_moments, self.principal_moments_U, self.principal_axes,
-                                   self.principal_axes_U_deg):
-            L.append(f"    I = {lam:.7g} ± {U:.2g} kg·m²  axis [{ax[0]:+.4f}, {ax[1]:+.4f}, {ax[2]:+.4f}] "
-                     f"± {ang:.2g}°")
-        L.append("[[Orientations]]")
-        L.append(f"    {'name':8}{'axis':>26}{'J axis':>14}{'−m·d⊥²':>12}{'J cm':>14}{'± u':>10}{'nᵀTn':>14}{'z':>7}")
-        for o in self.orientations:
-            axis = "[" + ", ".join(f"{v:+.3f}" for v in o["axis"]) + "]"
-            if o.get("excluded"):
-                L.append(f"    {o['name']:8}{axis:>26}   excluded: {o['excluded']}")
-                continue
-            z = o.get("normalised_residual")
-            L.append(f"    {o['name']:8}{axis:>26}{o['J_axis']:>14.6g}{-o['parallel_axis'] or 0.0:>12.3g}{o['J']:>14.6g}"
-                     f"{o['u']:>10.2g}{o['fitted']:>14.6g}{'' if z is None else f'{z:+.2f}':>7}")
-        if self.dof:
-            L.append(f"    χ² = {self.chi2:.3g} for {self.dof} dof (99 % point {self.chi2_limit:.3g}); plan condition "
-                     f"number {self.condition_number:.3g}")
-        else:
-            L.append(f"    6 orientations determine the 6 components exactly: nothing checks them (a plan of more axes "
-                     f"does); plan condition number {self.condition_number:.3g}")
-        L.append(F.report_line(self.flags))
-        for f, why in self.reasons.items():
-            L.append(f"    {f}: {why}")
-        return "\n".join(L)
 
 
 def _principal(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -677,8 +636,8 @@ def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigS
     )
 
 
-def solve_results(plan: TensorPlan, results: Sequence[Sequence[Mapping[str, Any]]], rig: Rig,
+def solve_results(plan: TensorPlan, results: Sequence[Sequence[IdentificationResult]], rig: Rig,
                   rules: QualityRules = QualityRules(), **kwargs: Any) -> TensorResult:
-    """The tensor from each orientation's releases' results (``IdentificationResult.to_dict()``) on ``rig``."""
+    """The tensor from each orientation's releases' results on ``rig``."""
     shared = RigShared.of(rig)
     return solve(plan, [axis_reading(r, shared, rules) for r in results], shared, **kwargs)

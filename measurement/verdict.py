@@ -67,12 +67,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from . import flags as F
 from .errors import InvalidInput
 from .uncertainty import coverage_factor as _coverage_factor
 from .uncertainty import welch_satterthwaite
+
+if TYPE_CHECKING:
+    from .result import IdentificationResult
 
 OK, NOK, INVALID = "OK", "NOK", "INVALID"
 
@@ -182,35 +185,22 @@ class Reading:
     coverage_factor: float | None = None
 
     @classmethod
-    def from_result(cls, result: Mapping[str, Any], quantity: str) -> "Reading":
-        """From ``IdentificationResult.to_dict()`` (or a payload that contains it)."""
+    def from_result(cls, result: IdentificationResult, quantity: str) -> "Reading":
+        """One release's ``quantity`` with the uncertainty of its GUM budget (``result.uncertainty_budget``):
+        its random lines (fit, model form) and the rest with their correlations (calibration, tare, rig,
+        clock). A value without a budget has no stated uncertainty (u_random None: not usable)."""
         if quantity not in QUANTITIES:
             raise VerdictError(f"quantity must be one of {', '.join(QUANTITIES)}, got {quantity!r}")
-        J_std = result.get("J_std")
-        cal = result.get("J_std_calibration") or 0.0
-        value = result.get(quantity)
-        tare = 0.0
-        if quantity != "J" and result.get("J_object") is not None:
-            # J_object_std = √(J_std² + u_tare²): the tare's part is systematic (same fixture every release)
-            jo_std = result.get("J_object_std") or 0.0
-            tare = math.sqrt(max(jo_std**2 - (J_std or 0.0) ** 2, 0.0))
-        omega = result.get("omega_n")
-        window = result.get("window") or {}
+        value = getattr(result, quantity)
+        t_start, t_stop = result.window.get("t_start"), result.window.get("t_stop")
         swings = None
-        if omega and window.get("t_start") is not None and window.get("t_stop") is not None:
-            swings = float(omega) * (float(window["t_stop"]) - float(window["t_start"])) / (2 * math.pi)
-        flags = tuple(result.get("flags") or ())
-        budget = (result.get("uncertainty_budget") or {}).get(quantity)
-        if budget and value is not None:
-            # the GUM budget: its random lines (fit, model form) and the rest with their correlations
-            return cls(float(value), float(budget["u_random"]), float(budget["u_systematic"]), flags, swings,
-                       float(budget["coverage_factor"]))
-        # the release's own model form (its record's halves, rival models) is random from release to
-        # release: it belongs with the fit's σ, not with the calibration
-        model = result.get("J_std_model") or 0.0
-        u_random = None if J_std is None else math.hypot(float(J_std), float(model))
-        return cls(None if value is None else float(value), u_random,
-                   math.hypot(cal, tare), flags, swings)
+        if result.omega_n and t_start is not None and t_stop is not None:
+            swings = float(result.omega_n) * (float(t_stop) - float(t_start)) / (2 * math.pi)
+        budget = result.uncertainty_budget.get(quantity)
+        if value is None or budget is None:
+            return cls(None if value is None else float(value), None, 0.0, result.flags, swings)
+        return cls(float(value), float(budget.u_random), float(budget.u_systematic), result.flags, swings,
+                   float(budget.coverage_factor))
 
     @property
     def u_combined(self) -> float | None:

@@ -689,9 +689,9 @@ class Appliance:
         if tensor_set is not None:
             assert recipe is not None
             part = {"part_id": part_id, "recipe": recipe.to_dict(), "release": None, "part": None, "verdict": None,
-                    "calibration": calibration, "tensor_set": tensor_set.release(result, m.id)}
+                    "calibration": calibration, "tensor_set": tensor_set.release(typed, m.id)}
         else:
-            part = self.parts.release(result, m.id, part_id, recipe, m.result, rig) | {"calibration": calibration}
+            part = self.parts.release(typed, m.id, part_id, recipe, m.result, rig) | {"calibration": calibration}
 
         def build(uuid: str, seq: int) -> dict[str, Any]:
             return result_payload(result, uuid=uuid, seq=seq, device_id=cfg.device_id, trigger=m.requested_by,

@@ -199,8 +199,10 @@ def _run(app, args: argparse.Namespace) -> int:  # noqa: C901
             print(f"  release {i}: {rel['quantity']} = {_g(rel['value'], '.7g')} kg·m², u_c {_g(rel['u_c'])}, "
                   f"U {_g(rel['U'])} → {rel['verdict']}" + (f" ({'; '.join(rel['reasons'])})" if rel["reasons"] else ""))
         m = published[-1]
+        from measurement.reports import result_report
+
         print()
-        print(m.result.report())
+        print(result_report(m.result))
         if m.result.J is not None:
             print(f"true J {sim.inertia:g} kg·m² → error {100 * (m.result.J / sim.inertia - 1):+.4f} %")
         stored = app.store.get(m.id)

@@ -91,6 +91,7 @@ from typing import Any, Mapping
 
 from measurement import Rig
 from measurement.errors import InvalidInput, MeasurementError
+from measurement.result import IdentificationResult
 from measurement.tensor import RigShared, TensorPlan
 from measurement.uncertainty import check_standard
 from measurement.units import inertia_unit
@@ -495,9 +496,10 @@ class PartTracker:
         return {"uuid": o.uuid, "part_id": o.part_id, "recipe": o.recipe.name, "done": len(o.readings),
                 "of": o.recipe.releases}
 
-    def release(self, result: Mapping[str, Any], measurement_id: str, part_id: str | None,
+    def release(self, result: IdentificationResult, measurement_id: str, part_id: str | None,
                 recipe: Recipe | None, identified: Any = None, rig: Rig | None = None) -> dict[str, Any]:
-        """Count one release; returns the payload keys (the part's verdict once it is complete).
+        """Count one release (``result``, the station's flags raised on it); returns the payload keys (the part's
+        verdict once it is complete).
 
         identified, rig: the release's ``IdentificationResult`` and the rig it was identified on: with
         them for every release, the part's value is the releases' joint identification.
