@@ -27,6 +27,5 @@ def judged(values: dict[str, float], u_random: float, u_systematic: float = 0.0,
     u = math.hypot(u_random, u_systematic)
     budgets = {q: Budget(q, v, "kg·m²", (), (), 0.0, u, u_random, u_systematic, math.inf, coverage_factor,
                          coverage_factor * u) for q, v in values.items()}
-    return dataclasses.replace(_swing(), J=values.get("J"), J_object=values.get("J_object"),
-                               J_object_axis=values.get("J_object_axis"), flags=tuple(flags),
-                               uncertainty_budget=budgets, **fields)
+    measurands = {q: values.get(q) for q in ("J", "J_object", "J_object_axis")}
+    return dataclasses.replace(_swing(), **(measurands | fields), flags=tuple(flags), uncertainty_budget=budgets)

@@ -34,7 +34,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def read_plan_file(path: str | Path) -> tuple[Any, Any, list[list[Path]]]:
     """The plan, the rig and each orientation's trace paths, all checked (nothing identified yet)."""
-    from measurement.tensor import RigShared, TensorPlan
+    from measurement.tensor import TensorPlan
+    from measurement.tensor_inputs import RigShared
 
     path = Path(path)
     doc = read_toml(path, "tensor plan")

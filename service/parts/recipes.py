@@ -92,7 +92,8 @@ from typing import Any, Mapping
 from measurement import Rig
 from measurement.errors import InvalidInput, MeasurementError
 from measurement.result import IdentificationResult
-from measurement.tensor import RigShared, TensorPlan
+from measurement.tensor import TensorPlan
+from measurement.tensor_inputs import RigShared
 from measurement.uncertainty import check_standard
 from measurement.units import inertia_unit
 from measurement.verdict import QUANTITIES, RULES, QualityRules, Reading, Specification, combine, judge_release

@@ -23,7 +23,8 @@ from typing import Any, Mapping
 from measurement.errors import InvalidInput
 from measurement.result import IdentificationResult
 from measurement.rig import Rig
-from measurement.tensor import AxisReading, RigShared, TensorResult, axis_reading, solve
+from measurement.tensor import TensorResult, solve
+from measurement.tensor_inputs import AxisReading, RigShared, axis_reading
 from service.errors import ServiceError
 
 log = logging.getLogger("moi.tensor_set")

@@ -14,7 +14,8 @@ from measurement.errors import TensorError
 from measurement.reports import tensor_report
 from measurement.rig import Rig
 from measurement.simulate import BRACKET, RigidBody, simulate_set
-from measurement.tensor import AxisReading, Orientation, RigShared, TensorPlan
+from measurement.tensor import Orientation, TensorPlan
+from measurement.tensor_inputs import AxisReading, RigShared, axis_reading
 from tests.judged import judged
 
 #: the truth: the example bracket (products of inertia of both signs, principal moments well apart)
@@ -167,9 +168,9 @@ def test_an_invalid_release_is_excluded_by_the_release_pooling():
     shared = RigShared(tare=4.5e-3)
     good = judged({"J": 0.0165, "J_object": 0.012}, 1e-6)
     bad = judged({"J": 0.0165, "J_object": 0.013}, 1e-6, flags=(F.FIT_NOT_CONVERGED,))
-    r = TS.axis_reading([good, bad, good], shared)
+    r = axis_reading([good, bad, good], shared)
     assert r.value == pytest.approx(0.012) and r.used == (0, 2) and r.excluded[0]["index"] == 1
-    r = TS.axis_reading([bad], shared)
+    r = axis_reading([bad], shared)
     assert r.invalid and "fit_not_converged" in r.invalid
 
 
@@ -177,8 +178,8 @@ def test_a_release_counts_with_the_whole_u_of_its_budget():
     shared = RigShared(tare=4.5e-3)
     plain = judged({"J": 0.0165, "J_object": 0.012}, 1e-6)
     with_systematic = judged({"J": 0.0165, "J_object": 0.012}, 1e-6, math.sqrt(15) * 1e-6)
-    assert TS.axis_reading([plain], shared).u == pytest.approx(1e-6)
-    assert TS.axis_reading([with_systematic], shared).u == pytest.approx(4e-6)
+    assert axis_reading([plain], shared).u == pytest.approx(1e-6)
+    assert axis_reading([with_systematic], shared).u == pytest.approx(4e-6)
 
 
 def test_an_unphysical_tensor_is_flagged():

@@ -205,7 +205,7 @@ def test_clock_accuracy_must_be_a_number_of_ppm():
 
 
 def test_a_tensor_set_shares_k_and_the_tare_with_their_correlation():
-    from measurement.tensor import RigShared
+    from measurement.tensor_inputs import RigShared
 
     rig = Rig(kind="torsion", stiffness=0.3651, stiffness_std=3.373e-4, tare_inertia=4.5043e-3,
               tare_inertia_std=4.177e-6, stiffness_tare_covariance=1.4076e-9)
