@@ -35,7 +35,7 @@ from scipy.special import gammaincc
 
 from . import flags as F
 from .consistency import bic_weights, check_segments
-from .effects import EFFECTS, resolve_effects
+from .effects import EFFECTS, resolve_effects, unweighed_law
 from .errors import IdentificationError, InvalidInput
 from .fit import ModelFit, block_covariance, fit_model
 from .identification.options import Options
@@ -352,7 +352,7 @@ def _candidate_sets(results: Sequence[IdentificationResult], rig: Rig) -> list[t
     bases = list(dict.fromkeys(bases + [_dynamic(list(union) + e, rig) for e in rivals]))
     used = list(dict.fromkeys([n for b in bases for n in b] + [n for r in results for n in r.effects]
                               + [n for e in rivals for n in e]))
-    for law in dict.fromkeys(m for n in used if (m := EFFECTS[n].unweighed_law(rig.kind)) is not None):
+    for law in dict.fromkeys(m for n in used if (m := unweighed_law(EFFECTS[n], rig.kind)) is not None):
         drop = frozenset(n for n in used if EFFECTS[n].mimics == law and EFFECTS[n].role == "sensor")
         for base in bases:
             if law in base:

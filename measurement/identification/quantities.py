@@ -11,7 +11,7 @@ from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
-from ..effects import Effect
+from ..effect_base import Effect
 from ..fit import ModelFit, swing_amplitude
 from ..model import Model
 from ..reproducibility import Reproducibility
