@@ -93,7 +93,7 @@ def _release_reading(result: IdentificationResult, shared: RigShared) -> Reading
     reading = Reading.from_result(result, shared.quantity)
     if reading.value is None or reading.u_random is None:
         return reading
-    u_total = math.hypot(reading.u_random, reading.u_systematic)
+    u_total = result.uncertainty_budget[shared.quantity].u  # a value read with u_random has its budget
     common = math.sqrt(max(float(shared.common_covariance(np.array([float(result.J or 0.0)]))[0, 0]), 0.0))
     own_systematic = math.sqrt(max(u_total**2 - reading.u_random**2 - common**2, 0.0))
     return Reading(reading.value, reading.u_random, own_systematic, reading.flags, reading.swings)
