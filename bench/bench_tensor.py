@@ -39,7 +39,7 @@ def one_set(plan, seed):
         for o in plan.orientations))
     body = RigidBody(BRACKET.tensor, BRACKET.mass + rng.normal(0.0, plan.mass_std))
     sets = simulate_set(body, RIG, true_plan, seed=seed)
-    results = [[identify(t, RIG).to_dict() for t in traces] for traces in sets]
+    results = [[identify(t, RIG) for t in traces] for traces in sets]
     return sets, results
 
 
@@ -76,7 +76,7 @@ def main():
         for run in range(5):
             last = simulate_set(BRACKET, RIG, plan, seed=100 + run, duration=duration, rate=rate)[-1][-1]
             t0 = time.perf_counter()
-            results[-1] = [identify(last, RIG).to_dict()]
+            results[-1] = [identify(last, RIG)]
             t1 = time.perf_counter()
             TS.solve_results(plan, results, RIG)
             t2 = time.perf_counter()

@@ -17,7 +17,7 @@ from ._lazy import lazy_exports
 #: ``import measurement.errors`` or ``measurement.rig`` does not load scipy: commands that do
 #: not identify (``moi --help``, ``moi results``...) start without it.
 _WHERE = {
-    "EFFECTS": "effects", "Effect": "effects", "Parameter": "effects",
+    "EFFECTS": "effects", "Effect": "effect_base", "Parameter": "effect_base",
     "InvalidInput": "errors", "MeasurementError": "errors",
     "Options": "identification", "identify": "identification",
     "IdentificationResult": "result", "Quantity": "result",
@@ -31,7 +31,8 @@ __getattr__, __dir__ = lazy_exports(__name__, globals(), _WHERE)
 
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .effects import EFFECTS, Effect, Parameter
+    from .effect_base import Effect, Parameter
+    from .effects import EFFECTS
     from .errors import InvalidInput, MeasurementError
     from .identification import Options, identify
     from .result import IdentificationResult, Quantity

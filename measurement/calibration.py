@@ -165,8 +165,46 @@ class Calibration:
 CONSISTENCY_LEVEL = 0.95
 
 
-def calibrate_torsion(references: Sequence[Reference]) -> Calibration:  # noqa: C901
+def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
     """Fit k and I0 from references (at least two distinct added inertias); see the module doc."""
+    refs = _checked(references)
+    I = np.array([r.added_inertia for r in refs], dtype=float)
+    x = 1.0 / np.array([r.omega_n for r in refs], dtype=float) ** 2
+    sx = np.array([2.0 * (r.omega_n_std or 0.0) / r.omega_n**3 for r in refs])
+    sI = np.array([r.added_inertia_std or 0.0 for r in refs])
+    A = np.vstack([np.ones_like(I), I]).T
+    stated = bool(np.any(sx > 0) or np.any(sI > 0))
+    notes: list[str] = []
+    coef = np.linalg.lstsq(A, x, rcond=None)[0]
+    s_eff = np.ones_like(x)
+    if stated:
+        coef, s_eff = _effective_variance(A, x, sx, sI, coef)
+        unstated = [r.name for r, a, b in zip(refs, sx, sI) if a == 0 and b == 0]
+        if unstated:
+            notes.append(f"no uncertainty stated for {', '.join(unstated)}: treated as 1/1000 of the smallest "
+                         "stated one (state added_inertia_std and omega_n_std)")
+    a, b = coef
+    if b <= 0:
+        raise CalibrationError("calibration: the period does not grow with the added inertia; check the references")
+    residual_x = x - A @ coef
+    cov, birge = _covariance(A, s_eff, residual_x, stated, notes)
+    k_std = I0_std = corr = kI_cov = None
+    if cov is not None:
+        # k = 1/b, I0 = a/b: gradients with respect to (a, b)
+        gk = np.array([0.0, -1.0 / b**2])
+        gI = np.array([1.0 / b, -a / b**2])
+        k_std = float(math.sqrt(gk @ cov @ gk))
+        I0_std = float(math.sqrt(gI @ cov @ gI))
+        kI_cov = float(gk @ cov @ gI)
+        corr = kI_cov / (k_std * I0_std) if k_std > 0 and I0_std > 0 else None
+    k = 1.0 / b
+    residual_I = tuple(float(v) for v in residual_x * k)
+    return Calibration(k, k_std, a / b, I0_std, corr, refs, residual_I, kI_cov, "stated" if stated else "misfit",
+                       birge, tuple(notes))
+
+
+def _checked(references: Sequence[Reference]) -> tuple[Reference, ...]:
+    """The references, refused unless at least two distinct added inertias ≥ 0, ω_n > 0 and σ ≥ 0."""
     refs = tuple(references)
     if len(refs) < 2:
         raise CalibrationError(f"calibration needs at least 2 references (empty fixture and a known load); got {len(refs)}")
@@ -182,66 +220,51 @@ def calibrate_torsion(references: Sequence[Reference]) -> Calibration:  # noqa: 
         for name, v in (("omega_n_std", r.omega_n_std), ("added_inertia_std", r.added_inertia_std)):
             if v is not None and not (math.isfinite(v) and v >= 0):
                 raise CalibrationError(f"reference {r.name!r}: {name} must be a standard uncertainty >= 0, got {v!r}")
-    x = 1.0 / w**2
-    sx = np.array([2.0 * (r.omega_n_std or 0.0) / r.omega_n**3 for r in refs])
-    sI = np.array([r.added_inertia_std or 0.0 for r in refs])
-    A = np.vstack([np.ones_like(I), I]).T
-    stated = bool(np.any(sx > 0) or np.any(sI > 0))
-    notes: list[str] = []
-    coef = np.linalg.lstsq(A, x, rcond=None)[0]
-    s_eff = np.ones_like(x)
-    if stated:
-        for _ in range(50):  # effective variance: the slope enters the weights; a fixed point in a few steps
-            s_eff = np.sqrt(sx**2 + (coef[1] * sI) ** 2)
-            zero = s_eff <= 0
-            if np.any(zero):
-                # a reference with no stated σ would be an exact constraint; it gets a tiny one, and it is said
-                s_eff[zero] = 1e-3 * float(np.min(s_eff[~zero]))
-            new = np.linalg.lstsq(A / s_eff[:, None], x / s_eff, rcond=None)[0]
-            done = abs(new[1] - coef[1]) <= 1e-12 * abs(coef[1])
-            coef = new
-            if done:
-                break
-        unstated = [r.name for r, a, b in zip(refs, sx, sI) if a == 0 and b == 0]
-        if unstated:
-            notes.append(f"no uncertainty stated for {', '.join(unstated)}: treated as 1/1000 of the smallest "
-                         "stated one (state added_inertia_std and omega_n_std)")
-    a, b = coef
-    if b <= 0:
-        raise CalibrationError("calibration: the period does not grow with the added inertia; check the references")
-    k = 1.0 / b
-    I0 = a / b
-    residual_x = x - A @ coef
-    dof = len(refs) - 2
-    Aw = A / s_eff[:, None]
-    birge = None
-    cov = None
-    if stated:
-        cov = np.linalg.inv(Aw.T @ Aw)
-        if dof > 0:
-            chi2 = float(np.sum((residual_x / s_eff) ** 2))
-            birge = math.sqrt(chi2 / dof)
-            from scipy.special import chdtri  # only here: the calibration module loads without scipy
+    return refs
 
-            if chi2 > chdtri(dof, 1.0 - CONSISTENCY_LEVEL):
-                # the references scatter beyond their stated σ: those are understated, by this much
-                cov = cov * birge**2
-                notes.append(f"the references scatter {birge:.2g} × beyond their stated uncertainties: "
-                             "k and I0's σ scaled up by that (Birge ratio)")
-    elif dof > 0:
-        s2 = float(np.sum(residual_x**2)) / dof
-        cov = s2 * np.linalg.inv(A.T @ A)
+
+def _effective_variance(A: np.ndarray, x: np.ndarray, sx: np.ndarray, sI: np.ndarray,
+                        coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the line's coefficients, each reference's effective σ of x): the slope enters the weights, a fixed
+    point in a few steps."""
+    s_eff = np.ones_like(x)
+    for _ in range(50):
+        s_eff = np.sqrt(sx**2 + (coef[1] * sI) ** 2)
+        zero = s_eff <= 0
+        if np.any(zero):
+            # a reference with no stated σ would be an exact constraint; it gets a tiny one, and it is said
+            s_eff[zero] = 1e-3 * float(np.min(s_eff[~zero]))
+        new = np.linalg.lstsq(A / s_eff[:, None], x / s_eff, rcond=None)[0]
+        done = abs(new[1] - coef[1]) <= 1e-12 * abs(coef[1])
+        coef = new
+        if done:
+            break
+    return coef, s_eff
+
+
+def _covariance(A: np.ndarray, s_eff: np.ndarray, residual_x: np.ndarray, stated: bool,
+                notes: list[str]) -> tuple[np.ndarray | None, float | None]:
+    """(the coefficients' covariance, the Birge ratio): from the stated σ, scaled up when the references scatter
+    beyond them; from the misfit alone when none is stated (None: no degree of freedom for it). Says so in
+    ``notes``."""
+    dof = len(residual_x) - 2
+    if not stated:
+        if dof <= 0:
+            return None, None
         notes.append(f"no reference states an uncertainty: σ from the misfit alone ({dof} degree(s) of freedom), "
                      "which may be far too small by chance; state added_inertia_std (the certificate)")
-    k_std = I0_std = corr = kI_cov = None
-    if cov is not None:
-        # k = 1/b, I0 = a/b: gradients with respect to (a, b)
-        gk = np.array([0.0, -1.0 / b**2])
-        gI = np.array([1.0 / b, -a / b**2])
-        k_std = float(math.sqrt(gk @ cov @ gk))
-        I0_std = float(math.sqrt(gI @ cov @ gI))
-        kI_cov = float(gk @ cov @ gI)
-        corr = kI_cov / (k_std * I0_std) if k_std > 0 and I0_std > 0 else None
-    residual_I = tuple(float(v) for v in residual_x * k)
-    return Calibration(k, k_std, I0, I0_std, corr, refs, residual_I, kI_cov, "stated" if stated else "misfit",
-                       birge, tuple(notes))
+        return float(np.sum(residual_x**2)) / dof * np.linalg.inv(A.T @ A), None
+    Aw = A / s_eff[:, None]
+    cov = np.linalg.inv(Aw.T @ Aw)
+    if dof <= 0:
+        return cov, None
+    chi2 = float(np.sum((residual_x / s_eff) ** 2))
+    birge = math.sqrt(chi2 / dof)
+    from scipy.special import chdtri  # only here: the calibration module loads without scipy
+
+    if chi2 > chdtri(dof, 1.0 - CONSISTENCY_LEVEL):
+        # the references scatter beyond their stated σ: those are understated, by this much
+        notes.append(f"the references scatter {birge:.2g} × beyond their stated uncertainties: "
+                     "k and I0's σ scaled up by that (Birge ratio)")
+        return cov * birge**2, birge
+    return cov, birge

@@ -35,7 +35,7 @@ from scipy.special import gammaincc
 
 from . import flags as F
 from .consistency import bic_weights, check_segments
-from .effects import EFFECTS, resolve_effects
+from .effects import EFFECTS, resolve_effects, unweighed_law
 from .errors import IdentificationError, InvalidInput
 from .fit import ModelFit, block_covariance, fit_model
 from .identification.options import Options
@@ -46,7 +46,7 @@ from .identification.threads import one_blas_thread
 from .model import STATE_PARAMS, Model
 from .noise import fit_noise
 from .object_laws import laws_of_the_object
-from .result import IdentificationResult, Quantity, _jsonable, _num, budget_table, quantities_from_dict
+from .result import IdentificationResult, Quantity, _jsonable, _num, quantities_from_dict
 from .rig import Rig
 from .trace import Trace
 from .uncertainty import Budget
@@ -132,71 +132,6 @@ class JointResult:
         import json
         return json.dumps(self.to_dict(), ensure_ascii=False, allow_nan=False)
 
-    def report(self) -> str:
-        c = self.consistency
-        L = [f"[[Joint identification]] {len(self.releases)} releases of one object ({self.rig_kind} rig)",
-             f"    shared effects: {', '.join(self.effects) or '(none)'}; per release: initial state, zero offset, sensor terms",
-             "[[Releases]]  each alone: its own model (ω_n ± combined u), and the shared model (ω_n ± u, z against the joint)",
-             f"    {'source':<34}{'from–to [s]':>16}{'amplitude':>10}{'T there [s]':>12}{'own ω_n':>12}{'u':>9}{'shared ω_n':>12}{'u':>9}"
-             f"{'z':>7}  own effects / flags"]
-        for r, w, u, z in zip(self.releases, c["omega_n"], c["u"], c["z"]):
-            uo = r.omega_n_u if r.omega_n_u is not None else r.omega_n_std
-            name = r.source if len(r.source) <= 33 else "…" + r.source[-32:]
-            span = f"{r.window.get('t_start', math.nan):.2f}–{r.window.get('t_stop', math.nan):.2f}"
-            period = r.periods.at_amplitude if r.periods is not None else math.nan
-            L.append(f"    {name:<34}{span:>16}{r.reference_amplitude:>10.3g}{period:>12.6g}{r.omega_n:>12.7g}{uo:>9.2g}{w:>12.7g}{u:>9.2g}{z:>+7.1f}  "
-                     f"{', '.join(r.effects)}" + (f" / {', '.join(r.flags)}" if r.flags else ""))
-        L.append("[[Result]]")
-        if self.J is not None:
-            L.append(f"    J            = {self.J:.7g} kg·m², σ {self.J_std:.2g}, combined u {self.J_u:.2g} kg·m²"
-                     " (the releases' ω_n alone)")
-            for measurand, b in self.uncertainty_budget.items():
-                L.append(f"[[Uncertainty budget]] {measurand} (GUM: the joint ω_n and the rig's constants)")
-                L.extend(budget_table(b))
-        else:
-            L.append("    J            = n/a: the rig gives no stiffness (torsion), mass·com_distance (compound) or mass "
-                     "(bifilar, trifilar)")
-        L.append(f"    omega_n      = {self.omega_n:.7g} rad/s, σ {self.omega_n_std:.2g}, combined u {self.omega_n_u:.2g} rad/s"
-                 " (the releases weighted by their whole uncertainty)")
-        jf = c["joint_fit"]
-        L.append(f"    period       = {2 * math.pi / self.omega_n:.6g} ± {2 * math.pi * self.omega_n_u / self.omega_n**2:.2g} s "
-                 "small-swing (2π/ω_n; T there: each release's at its largest swing)")
-        L.append(f"    joint fit    : ω_n {jf['omega_n']:.7g} ± {jf['omega_n_std']:.2g} rad/s (all samples, the laws below shared)")
-        if jf.get("apart"):
-            L.append(f"    the joint fit and the releases' value are {jf['z']:.1f} σ apart: the shared laws do not hold over "
-                     f"the releases' amplitudes; the distance enters u (flag model_ambiguous)")
-        if len(c.get("models", ())) > 1:
-            L.append("    shared laws weighed by all the releases together (joint BIC under each release's noise model):")
-            for m in c["models"]:
-                what = ", ".join(m["effects"]) or "(none)"
-                what += f" (no {', '.join(m['without'])})" if m["without"] else ""
-                L.append(f"      {what:<40} ΔBIC {m['d_bic']:+9.1f}  weight {m['weight']:.2f}  "
-                         f"joint-fit ω_n {m['omega_n']:.7g} ± {m['omega_n_std']:.2g}" + ("  (kept)" if m["chosen"] else ""))
-            if c.get("not_held"):
-                L.append(f"    the laws of least BIC do not hold across {', '.join(c['not_held'])} as the releases' own "
-                         "models did (the halves disagree more): the first set is kept, and the distance of the two "
-                         "readings enters u")
-            if c["u_models"] > self.omega_n_std:
-                L.append(f"    the releases do not separate these laws: their spread {c['u_models']:.2g} rad/s enters u "
-                         "(flag model_ambiguous)")
-        for group in (self.damping, self.stiffness):
-            for eff, params in group.items():
-                for name, q in params.items():
-                    if q.value is not None:
-                        L.append(f"    {eff}.{name:<10} = {q}")
-        L.append("[[Consistency]]")
-        L.append(f"    χ² {c['chi2']:.2f} on {c['dof']} (p = {c['p']:.2g}); largest deviation {c['largest_z']:+.1f} σ "
-                 f"({c['largest_release']}); largest pairwise difference {c['pairwise_max']:.1f} σ")
-        L.append("    " + ("the releases agree with one ω_n within their uncertainties" if c["p"] >= CONSISTENT_P else
-                          f"the releases disagree beyond their uncertainties (flag releases_disagree): the joint σ is "
-                          f"scaled by the Birge ratio {c['birge_ratio']:.2f}; {c['largest_release']} departs most"))
-        if c["own_pairwise_max"] > OWN_PAIR_Z:
-            a, b = c["own_pairwise_releases"]
-            L.append(f"    as each release reports it alone, {a} and {b} are {c['own_pairwise_max']:.1f} u apart "
-                     f"(more than {OWN_PAIR_Z:g}: flag releases_disagree)")
-        L.append(F.report_line(self.flags))
-        return "\n".join(L)
-
 
 def _own_pair(results: Sequence[IdentificationResult]) -> tuple[float, int, int]:
     """The two releases whose own readings of ω_n (each with its stated u) are furthest apart: (|Δω_n|/u, i, j)."""
@@ -279,54 +214,66 @@ def _release_x(model: Model, block: tuple[int, int], z: np.ndarray) -> np.ndarra
     return x
 
 
-def _fit_shared(results: Sequence[IdentificationResult], rig: Rig, shared: tuple[str, ...],
-                drop: frozenset[str] = frozenset()) -> _SharedModelFit:
-    """The releases fitted jointly with the dynamic effects ``shared`` and each release's own sensor
-    terms but those in ``drop``."""
+def _own_fits(results: Sequence[IdentificationResult], rig: Rig, shared: tuple[str, ...],
+              drop: frozenset[str]) -> tuple[list[Model], list[ModelFit]]:
+    """Each release's model (the shared dynamic effects, its own sensor terms but those in ``drop``) and its fit
+    alone with it: the start of the joint fit."""
     models: list[Model] = []
     fits: list[ModelFit] = []
     for r in results:
         sensor = tuple(n for n in r.effects if EFFECTS[n].role == "sensor" and n not in drop)
         # each release's own sensor: an angle, or a gyro's rate
         model = Model.from_names(replace(rig, measures=r.measures), shared + sensor)
-        t, y = r.arrays["t"], r.arrays["angle"]
-        # each release alone with the shared model: the start of the joint fit
-        fits.append(fit_model(model, t, y, r.noise_floor))
+        fits.append(fit_model(model, r.arrays["t"], r.arrays["angle"], r.noise_floor))
         models.append(model)
+    return models, fits
+
+
+@dataclass(frozen=True, eq=False)
+class _Start:
+    """The joint parameter vector's start z0 (ω_n, the shared laws, then each release's own: ``blocks``), its
+    bounds and scales; n_shared: how many lead it."""
+
+    z0: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    scales: np.ndarray
+    blocks: list[tuple[int, int]]
+    n_shared: int
+
+
+def _start(models: list[Model], fits: list[ModelFit]) -> _Start:
     dyn = list(models[0].names[len(STATE_PARAMS):models[0].n_dynamic])
-    n_shared = 1 + len(dyn)
-    weights = np.array([1.0 / max(f.residual_rms, 1e-12) for f in fits])
     # start: ω_n and the laws averaged over the releases, each by its information
     var_w = np.array([max(f.stdev("omega_n"), 1e-12) ** 2 for f in fits])
     start: list[float] = [float(np.sum([f.value("omega_n") for f in fits] / var_w) / np.sum(1 / var_w))]
-    for name in dyn:
-        vals = np.array([f.value(name) for f in fits])
-        start.append(float(np.median(vals)))
+    start += [float(np.median(np.array([f.value(name) for f in fits]))) for name in dyn]
     blocks: list[tuple[int, int]] = []  # each release's own parameters in z
     for m, f in zip(models, fits):
         first = len(start)
         start += [f.value("theta0"), f.value("omega0")] + list(f.x[m.n_dynamic:])
         blocks.append((first, len(start)))
-    z0 = np.asarray(start)
-    lo: list[float] = [0.0]
-    hi: list[float] = [np.inf]
     lo_m, hi_m = models[0].bounds()
-    lo += list(lo_m[len(STATE_PARAMS):models[0].n_dynamic])
-    hi += list(hi_m[len(STATE_PARAMS):models[0].n_dynamic])
+    lo: list[float] = [0.0] + list(lo_m[len(STATE_PARAMS):models[0].n_dynamic])
+    hi: list[float] = [np.inf] + list(hi_m[len(STATE_PARAMS):models[0].n_dynamic])
     for m in models:
         lo_r, hi_r = m.bounds()
         lo += [-np.inf, -np.inf] + list(lo_r[m.n_dynamic:])
         hi += [np.inf, np.inf] + list(hi_r[m.n_dynamic:])
-    lo_all, hi_all = np.asarray(lo), np.asarray(hi)
-    z0 = np.clip(z0, lo_all, hi_all)
     scale_list = [fits[0].scales[2]] + list(np.median([f.scales[3:m.n_dynamic] for f, m in zip(fits, models)], axis=0)) \
         if dyn else [fits[0].scales[2]]
     for m, f in zip(models, fits):
         scale_list += [f.scales[0], f.scales[1]] + list(f.scales[m.n_dynamic:])
-    scales = np.asarray(scale_list)
+    lo_all, hi_all = np.asarray(lo), np.asarray(hi)
+    return _Start(np.clip(np.asarray(start), lo_all, hi_all), lo_all, hi_all, np.asarray(scale_list), blocks,
+                  1 + len(dyn))
 
+
+def _solve_jointly(models: list[Model], fits: list[ModelFit], st: _Start, weights: np.ndarray) -> Any:
+    """scipy's least squares over every release's samples, the Jacobian by forward differences of the
+    releases each parameter moves (all for the shared ones, its own for the others)."""
     def release_residual(z: np.ndarray, i: int) -> np.ndarray:
-        x = _release_x(models[i], blocks[i], z)
+        x = _release_x(models[i], st.blocks[i], z)
         t = fits[i].t
         th, om = models[i].true_angle(x, t, fits[i].max_step)
         return (models[i].measured(x, t - t[0], th, om) - fits[i].y) * weights[i]
@@ -334,35 +281,42 @@ def _fit_shared(results: Sequence[IdentificationResult], rig: Rig, shared: tuple
     def fun(z: np.ndarray) -> np.ndarray:
         return np.concatenate([release_residual(z, i) for i in range(len(models))])
 
-    sizes = [f.n for f in fits]
-    offsets = np.concatenate([[0], np.cumsum(sizes)])
-    # the releases a parameter moves: all for the shared ones, its own for the others
-    owners = [list(range(len(models)))] * n_shared + [[i] for i, (a, b) in enumerate(blocks) for _ in range(a, b)]
+    offsets = np.concatenate([[0], np.cumsum([f.n for f in fits])])
+    owners = [list(range(len(models)))] * st.n_shared + [[i] for i, (a, b) in enumerate(st.blocks) for _ in range(a, b)]
 
     def jac(z: np.ndarray) -> np.ndarray:
         base = [release_residual(z, i) for i in range(len(models))]
         J = np.zeros((offsets[-1], z.size))
         for j in range(z.size):
-            h = 1e-7 * scales[j]
+            h = 1e-7 * st.scales[j]
             zp = z.copy()
-            zp[j] += h if zp[j] + h <= hi_all[j] else -h
+            zp[j] += h if zp[j] + h <= st.hi[j] else -h
             step = zp[j] - z[j]
             for i in owners[j]:
                 J[offsets[i]:offsets[i + 1], j] = (release_residual(zp, i) - base[i]) / step
         return J
 
     try:
-        sol = least_squares(fun, z0, jac=jac, bounds=(lo_all, hi_all), x_scale=scales, method="trf",
-                            ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=60)
+        return least_squares(fun, st.z0, jac=jac, bounds=(st.lo, st.hi), x_scale=st.scales, method="trf",
+                             ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=60)
     except (ValueError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
         raise IdentificationError(f"the joint fit failed: {exc}") from exc
-    z = sol.x
-    Jm = sol.jac
-    r = sol.fun
+
+
+def _fit_shared(results: Sequence[IdentificationResult], rig: Rig, shared: tuple[str, ...],
+                drop: frozenset[str] = frozenset()) -> _SharedModelFit:
+    """The releases fitted jointly with the dynamic effects ``shared`` and each release's own sensor
+    terms but those in ``drop``."""
+    models, fits = _own_fits(results, rig, shared, drop)
+    st = _start(models, fits)
+    weights = np.array([1.0 / max(f.residual_rms, 1e-12) for f in fits])
+    sol = _solve_jointly(models, fits, st, weights)
+    z, r = sol.x, sol.fun
     # covariance: the sandwich with each release's own AR noise model (its residual's colour)
+    offsets = np.concatenate([[0], np.cumsum([f.n for f in fits])])
     parts = [slice(offsets[i], offsets[i + 1]) for i in range(len(models))]
     noises = [fit_noise(r[sl]) for sl in parts]
-    cov = block_covariance(Jm, scales, [(sl, nm, z.size / len(models)) for sl, nm in zip(parts, noises)])
+    cov = block_covariance(sol.jac, st.scales, [(sl, nm, z.size / len(models)) for sl, nm in zip(parts, noises)])
     # the joint BIC: each release's residual under its own AR noise model (in rad², the weight taken
     # out of its innovation variance), as ModelFit.bic
     residuals = [r[sl] / weights[i] for i, sl in enumerate(parts)]
@@ -370,7 +324,7 @@ def _fit_shared(results: Sequence[IdentificationResult], rig: Rig, shared: tuple
     bic = float(sum(res.size * math.log(max(nm.innovation_var / w**2, 1e-300))
                     for res, nm, w in zip(residuals, noises, weights))
                 + (z.size + sum(nm.order for nm in noises)) * math.log(n_all))
-    return _SharedModelFit(shared, drop, models, fits, z, cov, residuals, blocks, bic)
+    return _SharedModelFit(shared, drop, models, fits, z, cov, residuals, st.blocks, bic)
 
 
 #: most shared models fitted jointly (each costs about one identification of every release)
@@ -398,7 +352,7 @@ def _candidate_sets(results: Sequence[IdentificationResult], rig: Rig) -> list[t
     bases = list(dict.fromkeys(bases + [_dynamic(list(union) + e, rig) for e in rivals]))
     used = list(dict.fromkeys([n for b in bases for n in b] + [n for r in results for n in r.effects]
                               + [n for e in rivals for n in e]))
-    for law in dict.fromkeys(m for n in used if (m := EFFECTS[n].unweighed_law(rig.kind)) is not None):
+    for law in dict.fromkeys(m for n in used if (m := unweighed_law(EFFECTS[n], rig.kind)) is not None):
         drop = frozenset(n for n in used if EFFECTS[n].mimics == law and EFFECTS[n].role == "sensor")
         for base in bases:
             if law in base:
@@ -423,7 +377,19 @@ def _not_held(chosen: _SharedModelFit, results: Sequence[IdentificationResult]) 
     return out
 
 
-def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -> JointResult:
+@dataclass(frozen=True, eq=False)
+class _Choice:
+    """The shared model kept among the candidates the joint BIC weighed: the one of least BIC unless its laws do
+    not hold across releases (``not_held``: then the union); u_models: the spread of the candidates within the
+    margin's joint ω_n about the kept one's, rad/s; table: every candidate, for the report."""
+
+    chosen: _SharedModelFit
+    not_held: list[str]
+    u_models: float
+    table: list[dict[str, Any]]
+
+
+def _choose(results: list[IdentificationResult], rig: Rig, margin: float) -> _Choice:
     # every candidate set of shared effects fitted jointly; the joint BIC chooses, and the sets within
     # ``margin`` of it are rivals whose joint ω_n enters u by their BIC weight
     candidates: list[_SharedModelFit] = []
@@ -445,15 +411,16 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
     wts_m = bic_weights(bics[near])
     u_models = float(math.sqrt(sum(w * (candidates[i].omega_n - chosen.omega_n) ** 2 for w, i in zip(wts_m, near))))
     weight = dict(zip(near, wts_m))
-    models_table = [{"effects": list(c.shared), "without": sorted(c.dropped), "bic": c.bic, "d_bic": c.bic - best.bic,
-                     "weight": float(weight.get(i, 0.0)), "omega_n": c.omega_n, "omega_n_std": c.omega_n_std,
-                     "chosen": c is chosen} for i, c in enumerate(candidates)]
-    shared, models, fits, cov = chosen.shared, chosen.models, chosen.fits, chosen.cov
-    w_fit, s_fit = chosen.omega_n, chosen.omega_n_std
+    table = [{"effects": list(c.shared), "without": sorted(c.dropped), "bic": c.bic, "d_bic": c.bic - best.bic,
+              "weight": float(weight.get(i, 0.0)), "omega_n": c.omega_n, "omega_n_std": c.omega_n_std,
+              "chosen": c is chosen} for i, c in enumerate(candidates)]
+    return _Choice(chosen, not_held, u_models, table)
 
-    # the releases against the joint value, each fitted alone with the shared effects (the same
-    # model, so that a difference is the releases', not the models'), with its own fit σ and the
-    # model-form and calibration terms of its own identification
+
+def _releases_apart(fits: list[ModelFit], results: list[IdentificationResult]) -> tuple[np.ndarray, np.ndarray, float]:
+    """Each release's ω_n fitted alone with the shared effects (the same model, so that a difference is the
+    releases', not the models'), its u (its fit σ with the model-form and calibration terms of its own
+    identification), and what the releases share of it (not averaged away), rad/s."""
     w_i = np.array([f.value("omega_n") for f in fits])
     # A release that its own identification gave another model reads another ω_n under the shared
     # one; which of the two is right its record did not decide (the other releases chose the shared
@@ -461,6 +428,16 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
     form_i = np.array([math.hypot(res.omega_n_std_model, w - res.omega_n) for w, res in zip(w_i, results)])
     u_i = np.array([math.sqrt(f.stdev("omega_n") ** 2 + m**2 + (res.omega_n_std_calibration or 0.0) ** 2)
                     for f, m, res in zip(fits, form_i, results)])
+    wts = 1.0 / u_i**2
+    common = float(np.sum(wts * np.array([math.hypot(m, res.omega_n_std_calibration or 0.0)
+                                          for m, res in zip(form_i, results)])) / np.sum(wts))
+    return w_i, u_i, common
+
+
+def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -> JointResult:
+    choice = _choose(results, rig, margin)
+    chosen = choice.chosen
+    w_i, u_i, common = _releases_apart(chosen.fits, results)
     # The joint ω_n weighs each release by its whole uncertainty, which the least squares over the
     # samples cannot know: a release whose model does not hold across it (its model-form term)
     # counts for less. The joint fit's own ω_n is reported beside it (joint_fit).
@@ -475,55 +452,57 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
     pair = max(((abs(w_i[a] - w_i[b]) / math.hypot(u_i[a], u_i[b]), a, b)
                 for a in range(len(results)) for b in range(a + 1, len(results))), key=lambda v: v[0])
     birge = math.sqrt(max(chi2 / dof, 1.0))
-    # what the releases share is not averaged away: their model-form and calibration terms
-    common = float(np.sum(wts * np.array([math.hypot(m, res.omega_n_std_calibration or 0.0)
-                                          for m, res in zip(form_i, results)])) / np.sum(wts))
-    u_joint = max(s_joint * birge, common)
     own = _own_pair(results)
     flags = [F.RELEASES_DISAGREE] if p < CONSISTENT_P or own[0] > OWN_PAIR_Z else []
     # The joint fit (the laws shared by all samples) and the releases' weighted value estimate the same
     # ω_n: apart beyond their uncertainties, the shared laws do not hold over the releases' amplitudes
     # (a law the model lacks), and which value to believe is not decided by the data: the distance
     # enters u and the result says so.
-    u_joint, fit_z = with_joint_fit(w_joint, u_joint, w_fit, s_fit)
+    u_joint, fit_z = with_joint_fit(w_joint, max(s_joint * birge, common), chosen.omega_n, chosen.omega_n_std)
     if fit_z > FIT_APART_Z:
         flags.append(F.MODEL_AMBIGUOUS)
     # shared laws the releases together do not decisively separate: their spread is model form
-    u_joint = math.hypot(u_joint, u_models)
-    if u_models > s_joint:
+    u_joint = math.hypot(u_joint, choice.u_models)
+    if choice.u_models > s_joint:
         flags.append(F.MODEL_AMBIGUOUS)
-    flags = list(dict.fromkeys(flags + [fl for res in results for fl in res.flags]))
     consistency = {
         "chi2": chi2, "dof": dof, "p": p, "birge_ratio": birge, "z": [float(v) for v in zs],
         "omega_n": [float(v) for v in w_i], "u": [float(v) for v in u_i],
         "largest_z": float(zs[k]), "largest_release": results[k].source,
         "pairwise_max": float(pair[0]), "pairwise_releases": [results[pair[1]].source, results[pair[2]].source],
         "own_pairwise_max": own[0], "own_pairwise_releases": [results[own[1]].source, results[own[2]].source],
-        "joint_fit": {"omega_n": w_fit, "omega_n_std": s_fit, "z": fit_z, "apart": fit_z > FIT_APART_Z},
-        "models": models_table, "u_models": u_models, "not_held": not_held,
+        "joint_fit": {"omega_n": chosen.omega_n, "omega_n_std": chosen.omega_n_std, "z": fit_z,
+                      "apart": fit_z > FIT_APART_Z},
+        "models": choice.table, "u_models": choice.u_models, "not_held": choice.not_held,
     }
-    # the shared laws, read through the first release's model (the same effects for all)
+    # the joint ω_n's u already holds the releases' model form and camera view (``common``); the rig's
+    # constants come in here. Its degrees of freedom: the releases' when their scatter sets it
+    scatter_sets_u = s_joint * birge > common and birge > 1
+    return _joint_result(results, rig, chosen, w_joint, s_joint, u_joint, float(dof) if scatter_sets_u else math.inf,
+                         consistency, flags)
+
+
+def _joint_result(results: list[IdentificationResult], rig: Rig, chosen: _SharedModelFit, w_joint: float,
+                  s_joint: float, u_joint: float, dof: float, consistency: dict[str, Any],
+                  flags: list[str]) -> JointResult:
+    """The joint result: J and its budget from the joint ω_n, the shared laws read through the first
+    release's model (the same effects for all)."""
     x0 = chosen.release_x(0)
-    m0 = models[0]
+    m0 = chosen.models[0]
     idx = list(range(m0.n_dynamic - len(STATE_PARAMS) + 1))
     cov0 = np.zeros((m0.size, m0.size))
     pos = [2] + list(range(3, m0.n_dynamic))
-    cov0[np.ix_(pos, pos)] = cov[np.ix_(idx, idx)]
+    cov0[np.ix_(pos, pos)] = chosen.cov[np.ix_(idx, idx)]
     shim = _SharedFit(m0, x0, cov0)
     J = inertia(rig, w_joint)
-    J_std = None if J is None else 2 * J * s_joint / w_joint
-    J_u = None if J is None else 2 * J * u_joint / w_joint
-    # the joint ω_n's u already holds the releases' model form and camera view (``common``); the rig's
-    # constants come in here. Its degrees of freedom: the releases' when their scatter sets it
-    budget = budgets(rig, w_joint, u_joint, dof=float(dof) if s_joint * birge > common and birge > 1 else math.inf,
-                     scale_response=None)
     rms = float(math.sqrt(np.mean(np.concatenate(chosen.residuals) ** 2)))
     return JointResult(
-        rig_kind=rig.kind, effects=shared, omega_n=w_joint, omega_n_std=s_joint, omega_n_u=u_joint,
-        J=J, J_std=J_std, J_u=J_u,
+        rig_kind=rig.kind, effects=chosen.shared, omega_n=w_joint, omega_n_std=s_joint, omega_n_u=u_joint,
+        J=J, J_std=None if J is None else 2 * J * s_joint / w_joint, J_u=None if J is None else 2 * J * u_joint / w_joint,
         damping=effect_quantities(shim, rig, ("damping",)), stiffness=effect_quantities(shim, rig, ("stiffness",)),
-        residual_rms=rms, consistency=consistency, flags=tuple(flags), releases=tuple(results),
-        uncertainty_budget=budget,
+        residual_rms=rms, consistency=consistency,
+        flags=tuple(dict.fromkeys(flags + [fl for res in results for fl in res.flags])), releases=tuple(results),
+        uncertainty_budget=budgets(rig, w_joint, u_joint, dof=dof, scale_response=None),
     )
 
 

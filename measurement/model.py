@@ -22,7 +22,8 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .effects import Effect, resolve_effects
+from .effect_base import Effect
+from .effects import resolve_effects
 from .errors import InvalidInput
 from .integrator import Dynamics
 from .rig import Rig

@@ -24,16 +24,14 @@ import numpy as np
 
 from . import flags as F
 from .errors import ResultSchemaError
-from .flags import FIT_NOT_CONVERGED
 from .periods import Periods
 from .reproducibility import Reproducibility
 from .residual import Diagnostics
-from .trace import READING_UNITS
 from .uncertainty import Budget
 from .wire import read_number
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
-SCHEMA_VERSION = 7
+SCHEMA_VERSION = 8
 
 
 def _num(v: Any) -> Any:
@@ -56,9 +54,6 @@ def _jsonable(v: Any) -> Any:
         return [_jsonable(x) for x in v.tolist()]
     return _num(v)
 
-
-#: combined u of ω_n over the fit's σ beyond which the report states ω_n with u on a line of its own
-WIDER = 2.0
 
 #: two-sided p-value below which the halves' ω_n disagree (the model does not hold across the record)
 DISAGREE_P = 0.01
@@ -168,24 +163,6 @@ class ModelForm:
         return cls(segments, tuple(Competitor.from_dict(c) for c in d["competitors"]), read_number(d["u_competitors"]))
 
 
-def budget_table(b: Budget) -> list[str]:
-    """A budget (``measurement.uncertainty.Budget``) as the report's table."""
-    out = [f"    {'source':<32}{'value':>12}{'u':>10}  {'unit':<8}{'c':>10}{'c·u':>10}{'share':>8}"]
-    for ln in b.lines:
-        note = f"  ({ln.note})" if ln.note else ""
-        value = ln.value if _num(ln.value) is not None else float("nan")
-        c = ln.sensitivity if _num(ln.sensitivity) is not None else float("nan")
-        out.append(f"    {ln.source[:32]:<32}{value:>12.6g}{ln.std:>10.2g}  {ln.unit:<8}{c:>10.3g}"
-                   f"{ln.contribution:>10.2g}{100 * ln.share:>7.1f}%{note}")
-    for r in b.correlations:
-        out.append(f"    correlation r({r['a']}, {r['b']}) = {r['r']:+.4f}: {100 * b.correlation_share:+.1f} % of u²")
-    dof = "∞" if _num(b.dof) is None or b.dof >= 1e6 else f"{b.dof:.0f}"
-    rel = f" ({100 * b.U / abs(b.value):.3g} %)" if b.value else ""
-    out.append(f"    u = {b.u:.3g} {b.unit}, ν_eff = {dof}, k = {b.coverage_factor:.2f}, "
-               f"U = {b.U:.3g} {b.unit}{rel}")
-    return out
-
-
 @dataclass(frozen=True)
 class Quantity:
     """A value with its 1σ standard uncertainty and SI unit (value None = unknown)."""
@@ -287,25 +264,18 @@ class DiscoveryStep:
                    d["bic_after"], d["evidence"], d["reason"], d["omega_n_before"])
 
 
-def reproducibility_line(r: Reproducibility | None) -> str:
-    """The report's line on the scatter between releases, which one record cannot see."""
-    if r is None or not r.known:
-        default = "" if r is None or r.relative is None else (
-            f" (a typical rig: ±{100 * r.relative:.2g} % of ω_n, Type B: stated, not counted)")
-        return ("    reproducibility: not known from one release (remounting, the pivot settling, a hand-held "
-                f"sensor): not in u{default}; measure ≥ 3 releases, whose joint identification carries their scatter")
-    assert r.relative is not None
-    return (f"    reproducibility: ±{100 * r.relative:.2g} % of ω_n between releases ({r.note()}, ν = {r.dof:.0f}): in u")
-
-
 @dataclass(frozen=True, eq=False)
 class IdentificationResult:
     """Everything a measurement says. SI units; *_std are 1σ standard uncertainties.
 
-    J: total inertia about the pivot, kg·m² (None when the rig lacks k or m·S).
-    J_object: J − tare_inertia (None without a tare); J_object_std: the fit's σ ⊕ the tare's, as before
-    (kept for old readers); J_object_u / J_object_U (``to_dict``): the budget's, the k–I0 correlation kept.
-    J_object_axis: the parallel-axis transfer J_object − m·L² about the object's own axis.
+    J: total inertia about the pivot, kg·m² (None when the rig lacks k or m·S); J_std: the fit's 1σ alone.
+    J_object: J − tare_inertia (None without a tare); J_object_std: the fit's σ ⊕ the tare's, a display
+    figure without the k–I0 correlation. J_object_axis: the parallel-axis transfer J_object − m·L² about
+    the object's own axis.
+    uncertainty_budget: measurand → its GUM budget, the one uncertainty of J, J_object and J_object_axis a
+    decision uses (``measurement.verdict.Reading.from_result``): its u split into random and systematic,
+    its coverage factor and U. J_u, J_U, coverage_factor and, in ``to_dict``, J_object_u / _U and
+    J_object_axis_u / _U are read from it.
     omega_n: small-amplitude natural angular frequency, rad/s.
     damping_ratio: equivalent viscous damping ratio at ``reference_amplitude``.
     residual_rms / noise_floor: rad; baseline: the declared model's summary.
@@ -315,7 +285,6 @@ class IdentificationResult:
     rig_kind: str
     J: float | None
     J_std: float | None
-    J_std_calibration: float | None
     J_object: float | None
     J_object_std: float | None
     J_object_axis: float | None
@@ -348,13 +317,11 @@ class IdentificationResult:
     acquisition: dict[str, Any] = field(default_factory=dict)
     #: the rig declared the angle sensor calibrated: no effect fitted the angle's scale
     sensor_calibrated: bool = False
-    #: 1σ of ω_n (rad/s) and J (kg·m²) from the model's form: the record's halves scattering beyond
-    #: their σ, and rival models the data do not decisively separate (``model_form`` says which)
+    #: 1σ of ω_n (rad/s) from the model's form: the record's halves scattering beyond their σ, and rival
+    #: models the data do not decisively separate (``model_form`` says which)
     omega_n_std_model: float = 0.0
-    J_std_model: float | None = None
-    #: combined standard uncertainty of ω_n (rad/s) and J (kg·m²): fit ⊕ calibration ⊕ model form
+    #: combined standard uncertainty of ω_n (rad/s): fit ⊕ camera view calibration ⊕ model form
     omega_n_u: float | None = None
-    J_u: float | None = None
     #: the halves of the record and the rival models
     model_form: ModelForm = field(default_factory=lambda: ModelForm(None, (), 0.0))
     #: measurand ("J", "J_object", "J_object_axis") → its GUM budget (``measurement.uncertainty.Budget``):
@@ -385,6 +352,11 @@ class IdentificationResult:
         return None if b is None else _num(getattr(b, key))
 
     @property
+    def J_u(self) -> float | None:
+        """Combined standard uncertainty of J, kg·m² (the budget's: fit ⊕ model form ⊕ calibration ⊕ rig)."""
+        return self._budget("J", "u")
+
+    @property
     def J_U(self) -> float | None:
         """Expanded uncertainty of J, kg·m² (coverage factor in the budget)."""
         return self._budget("J", "U")
@@ -400,14 +372,12 @@ class IdentificationResult:
             "source": self.source,
             "rig_kind": self.rig_kind,
             "J": _num(self.J), "J_std": _num(self.J_std),
-            "J_std_calibration": _num(self.J_std_calibration),
             "J_object": _num(self.J_object), "J_object_std": _num(self.J_object_std),
             "J_object_axis": _num(self.J_object_axis), "J_object_axis_std": _num(self.J_object_axis_std),
             "omega_n": _num(self.omega_n), "omega_n_std": _num(self.omega_n_std),
             "omega_n_std_calibration": _num(self.omega_n_std_calibration),
             "omega_n_std_model": _num(self.omega_n_std_model), "omega_n_u": _num(self.omega_n_u),
-            "J_std_model": _num(self.J_std_model), "J_u": _num(self.J_u),
-            "J_U": self.J_U, "coverage_factor": self.coverage_factor,
+            "J_u": self.J_u, "J_U": self.J_U, "coverage_factor": self.coverage_factor,
             "J_object_u": self._budget("J_object", "u"), "J_object_U": self._budget("J_object", "U"),
             "J_object_axis_u": self._budget("J_object_axis", "u"),
             "J_object_axis_U": self._budget("J_object_axis", "U"),
@@ -449,14 +419,14 @@ class IdentificationResult:
     def from_dict(cls, d: Mapping[str, Any]) -> IdentificationResult:
         """Read back ``to_dict`` of this schema (``SCHEMA_VERSION``; with ``arrays`` when it holds them).
 
-        The keys ``to_dict`` derives (J_U, coverage_factor, J_object_u and _U, J_object_axis_u and _U,
+        The keys ``to_dict`` derives (J_u, J_U, coverage_factor, J_object_u and _U, J_object_axis_u and _U,
         error_reduction, warnings) are the properties that compute them; keys beyond the result's (a payload's
         envelope) are not read. Raises ResultSchemaError for a result of another schema.
         """
         if d.get("schema") != SCHEMA_VERSION:
             raise ResultSchemaError(f"a result of schema {d.get('schema')!r}; expected schema {SCHEMA_VERSION}")
-        optional = ("J", "J_std", "J_std_calibration", "J_object", "J_object_std", "J_object_axis",
-                    "J_object_axis_std", "omega_n_std_calibration", "J_std_model", "omega_n_u", "J_u")
+        optional = ("J", "J_std", "J_object", "J_object_std", "J_object_axis", "J_object_axis_std",
+                    "omega_n_std_calibration", "omega_n_u")
         numbers = ("omega_n", "omega_n_std", "damping_ratio", "damping_ratio_std", "reference_amplitude",
                    "residual_rms", "noise_floor", "omega_n_std_model")
         return cls(
@@ -481,108 +451,3 @@ class IdentificationResult:
 
     def to_json(self, **kwargs: Any) -> str:
         return json.dumps(self.to_dict(**kwargs), ensure_ascii=False, allow_nan=False)
-
-    # -- readable report -------------------------------------------------------
-    def report(self) -> str:  # noqa: C901
-        """A plain-text report for the technician (lmfit ``fit_report`` style)."""
-        L: list[str] = []
-        s = self.statistics
-        L.append(f"[[Identification]] {self.source}  ({self.rig_kind} rig)")
-        L.append(f"    samples {s.get('n')}, window {self.window.get('t_start', 0):.3f}–{self.window.get('t_stop', 0):.3f} s,"
-                 f" {s.get('nfev')} simulations, converged: "
-                 + ("no (flag fit_not_converged: do not use this J)"
-                    if FIT_NOT_CONVERGED in self.flags else f"{s.get('success')}"))
-        L.append("[[Result]]")
-        def expanded(measurand: str) -> str:
-            b = self.uncertainty_budget.get(measurand)
-            return "" if b is None else f"; U = {b.U:.2g} kg·m² (k = {b.coverage_factor:.3g}, budget below)"
-
-        if self.J is not None:
-            extra = f" (calibration adds ±{self.J_std_calibration:.2g})" if self.J_std_calibration else ""
-            L.append(f"    J            = {Quantity(self.J, self.J_std, 'kg·m²')}{extra}{expanded('J')}")
-        else:
-            L.append("    J            = n/a: the rig gives no stiffness (torsion), mass·com_distance (compound) or mass "
-                     "(bifilar, trifilar)")
-        if self.J_object is not None:
-            L.append(f"    J_object     = {Quantity(self.J_object, self.J_object_std, 'kg·m²')}  (J − tare)"
-                     f"{expanded('J_object')}")
-        if self.J_object_axis is not None:
-            L.append(f"    J_object_axis= {Quantity(self.J_object_axis, self.J_object_axis_std, 'kg·m²')}  (own axis, J_D − m·L²)"
-                     f"{expanded('J_object_axis')}")
-        cal = (f"; the camera view's calibration adds ±{self.omega_n_std_calibration:.2g}"
-               if self.omega_n_std_calibration else "")
-        L.append(f"    omega_n      = {Quantity(self.omega_n, self.omega_n_std, 'rad/s')}"
-                 f"  (f_n = {self.omega_n / (2 * math.pi):.6g} Hz{cal})")
-        if self.periods is not None:
-            L.extend(self.periods.lines())
-        if self.omega_n_from != "discovered":
-            L.append(f"    ω_n from     = the {self.omega_n_from} model ({', '.join(self.omega_n_effects)}): its ω_n is "
-                     "the more accurate (the discovered model's is a rival in u)")
-        if self.omega_n_u is not None and self.omega_n_u > WIDER * self.omega_n_std:
-            # the fit's σ alone would read as a confident number where the model's form is not settled
-            L.append(f"    ω_n ± u      = {Quantity(self.omega_n, self.omega_n_u, 'rad/s')} (combined u: the fit's σ "
-                     f"is {self.omega_n_u / self.omega_n_std:.3g} times narrower than what the record supports)")
-        if self.omega_n_std_model:
-            ju = f"; J ± {self.J_u:.2g} kg·m²" if self.J_u is not None else ""
-            L.append(f"    model form   = ±{self.omega_n_std_model:.2g} rad/s (halves of the record, rival models)"
-                     f" → combined u: ω_n ± {self.omega_n_u:.2g} rad/s{ju}")
-        L.append(reproducibility_line(self.reproducibility))
-        for measurand, budget in self.uncertainty_budget.items():
-            L.append(f"[[Uncertainty budget]] {measurand} (GUM; J_std above is the fit's 1σ alone)")
-            L.extend(budget_table(budget))
-        L.append(f"    damping ratio= {Quantity(self.damping_ratio, self.damping_ratio_std, '')}"
-                 f" (equivalent viscous, at {self.reference_amplitude:.4g} rad)")
-        for group in (self.damping, self.stiffness, self.sensor):
-            for eff, params in group.items():
-                for name, q in params.items():
-                    if q.value is not None:
-                        L.append(f"    {eff}.{name:<10} = {q}")
-        L.append(f"    offset       = {self.offset}")
-        L.append("[[Model]]")
-        L.append(f"    declared : {', '.join(self.declared_effects) or '(none)'}")
-        L.append(f"    final    : {', '.join(self.effects) or '(none)'}")
-        L.append(f"    added    : {', '.join(self.added_effects) or '(none)'}")
-        if self.sensor_calibrated:
-            L.append("    sensor   : calibrated (its scale is known: effects that fit it, gain and view, not offered)")
-        L.append("[[Before / after]]")
-        b = self.baseline
-        jb = f"{b.J:.7g}" if b.J is not None else "n/a"
-        ja = f"{self.J:.7g}" if self.J is not None else "n/a"
-        L.append(f"    {'':14}{'declared':>16}{'final':>16}")
-        L.append(f"    {'J [kg·m²]':14}{jb:>16}{ja:>16}")
-        L.append(f"    {'omega_n [rad/s]':14}{b.omega_n:>15.7g}{self.omega_n:>16.7g}")
-        unit = READING_UNITS.get(self.measures, "rad")
-        L.append(f"    {f'residual [{unit}]':14}{b.residual_rms:>16.4g}{self.residual_rms:>16.4g}")
-        L.append(f"    {'BIC':14}{b.bic:>16.1f}{s.get('bic', float('nan')):>16.1f}")
-        L.append(f"    noise floor {self.noise_floor:.3g} {unit}; residual/noise {self.residual_rms / self.noise_floor if self.noise_floor else float('nan'):.3g};"
-                 f" error reduction {100 * (self.error_reduction or 0):.1f} %")
-        if self.steps:
-            L.append("[[Discovery]]")
-            for st in self.steps:
-                tried = ", ".join(f"{k} ΔBIC {v['bic'] - st.bic_before:+.1f}" for k, v in st.candidates.items())
-                if st.chosen:
-                    L.append(f"    round {st.round}: added {st.chosen} — {st.reason}")
-                    if st.evidence:
-                        L.append(f"        evidence: {st.evidence}")
-                else:
-                    L.append(f"    round {st.round}: nothing added — {st.reason}")
-                if tried:
-                    L.append(f"        tried: {tried}")
-        L.append("[[Residual]]")
-        for line in self.structure:
-            L.append(f"    {line}")
-        if self.acquisition:
-            L.append("[[Acquisition]]")
-
-            def walk(prefix: str, value: Any) -> None:
-                if isinstance(value, dict):
-                    for k, v in value.items():
-                        walk(f"{prefix}.{k}" if prefix else str(k), v)
-                elif isinstance(value, float):
-                    L.append(f"    {prefix} = {value:.6g}")
-                else:
-                    L.append(f"    {prefix} = {value}")
-
-            walk("", self.acquisition)
-        L.append(F.report_line(self.flags))
-        return "\n".join(L)

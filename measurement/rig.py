@@ -286,94 +286,24 @@ class Rig:
 
     # -- (de)serialisation ---------------------------------------------------
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> "Rig":  # noqa: C901
-        """Build a rig from the parsed rig TOML document ([rig], [object], [model], [calibration])."""
-        unknown_tables = set(doc) - {"rig", "object", "model", "calibration", "sensor"}
-        if unknown_tables:
-            raise RigError(f"rig file: unknown table(s) {sorted(unknown_tables)}; expected [rig], [object], [model], "
-                           "[calibration], [sensor]")
-        rig = doc.get("rig")
-        if not isinstance(rig, Mapping):
-            raise RigError("rig file: missing [rig] table")
-        unknown = set(rig) - _RIG_KEYS
-        if unknown:
-            raise RigError(f"rig file: unknown key(s) in [rig]: {sorted(unknown)}; expected {sorted(_RIG_KEYS)}")
-        if "kind" not in rig:
-            raise RigError(f"rig file: [rig] kind is missing; expected one of {', '.join(RIG_KINDS)}")
-        kind = rig["kind"]
-        if kind not in RIG_KINDS:
-            raise RigError(f"rig file: unknown kind {kind!r}; expected one of {', '.join(RIG_KINDS)}")
-
-        def opt(name: str, unit: str, allow_zero: bool = False) -> float | None:
-            return None if name not in rig else _positive(name, rig[name], unit, allow_zero=allow_zero)
-
-        obj = None
-        if "object" in doc:
-            o = doc["object"]
-            if not isinstance(o, Mapping) or not set(o) >= _OBJECT_KEYS or set(o) - _OBJECT_KEYS - _OBJECT_STD_KEYS:
-                raise RigError("rig file: [object] needs mass (kg) and axis_offset (m), optionally mass_std (kg) "
-                               "and axis_offset_std (m)")
-            obj = ObjectTransfer(
-                mass=_positive("object.mass", o["mass"], "kg"),
-                axis_offset=_positive("object.axis_offset", o["axis_offset"], "m", allow_zero=True),
-                mass_std=None if "mass_std" not in o else _positive("object.mass_std", o["mass_std"], "kg",
-                                                                    allow_zero=True),
-                axis_offset_std=None if "axis_offset_std" not in o else _positive(
-                    "object.axis_offset_std", o["axis_offset_std"], "m", allow_zero=True),
-            )
-        declared: tuple[str, ...] = ("viscous",)
-        if "model" in doc:
-            m = doc["model"]
-            if not isinstance(m, Mapping) or set(m) - _MODEL_KEYS:
-                raise RigError("rig file: [model] takes only declared = [effect names]")
-            d = m.get("declared", [])
-            if not isinstance(d, list) or not all(isinstance(x, str) for x in d):
-                raise RigError("rig file: [model] declared must be a list of effect names")
-            declared = tuple(d)
-        sensor_calibrated = False
-        sensor: Mapping[str, Any] = {}
-        if "sensor" in doc:
-            sensor = doc["sensor"]
-            if not isinstance(sensor, Mapping) or set(sensor) - _SENSOR_KEYS:
-                raise RigError("rig file: [sensor] takes only calibrated = true | false, clock_accuracy_ppm "
-                               "(1σ, ppm) and angle_scale_std (1σ, relative)")
-            sensor_calibrated = sensor.get("calibrated", False)
-            if not isinstance(sensor_calibrated, bool):
-                raise RigError(f"rig file: [sensor] calibrated must be true or false, got {sensor_calibrated!r}")
-
-        def sensor_std(name: str, unit: str) -> float | None:
-            return None if name not in sensor else _positive(f"sensor.{name}", sensor[name], unit, allow_zero=True)
-
+    def from_dict(cls, doc: Mapping[str, Any]) -> "Rig":
+        """Build a rig from the parsed rig TOML document ([rig], [object], [model], [calibration], [sensor])."""
+        rig = _rig_table(doc)
+        obj = _object_transfer(doc["object"]) if "object" in doc else None
+        declared = _declared(doc["model"]) if "model" in doc else ("viscous",)
+        sensor_calibrated, sensor = _sensor(doc["sensor"]) if "sensor" in doc else (False, {})
         covariance = rig.get("stiffness_tare_covariance")
         if covariance is not None and (isinstance(covariance, bool) or not isinstance(covariance, (int, float))):
             raise RigError(f"rig: stiffness_tare_covariance must be a number in N·m/rad·kg·m², got {covariance!r}")
+        numbers: dict[str, Any] = {name: None if name not in rig else _positive(name, rig[name], unit, allow_zero=std)
+                   for name, unit, std in _RIG_NUMBERS}
+        stds: dict[str, Any] = {name: None if name not in sensor else _positive(f"sensor.{name}", sensor[name], unit, allow_zero=True)
+                for name, unit in (("clock_accuracy_ppm", "ppm"), ("angle_scale_std", "1 (relative)"))}
         return cls(
-            kind=kind,
-            stiffness=opt("stiffness", "N·m/rad"),
-            stiffness_std=opt("stiffness_std", "N·m/rad", allow_zero=True),
-            tare_inertia=opt("tare_inertia", "kg·m²", allow_zero=True),
-            tare_inertia_std=opt("tare_inertia_std", "kg·m²", allow_zero=True),
-            mass=opt("mass", "kg"),
-            com_distance=opt("com_distance", "m"),
-            g=opt("g", "m/s²") or STANDARD_GRAVITY,
-            object=obj,
-            declared=declared,
+            kind=rig["kind"], **(numbers | {"g": numbers["g"] or STANDARD_GRAVITY}), **stds, object=obj,
+            declared=declared, sensor_calibrated=sensor_calibrated,
             calibration=CalibrationRecord.from_dict(doc["calibration"]) if "calibration" in doc else None,
-            sensor_calibrated=sensor_calibrated,
             stiffness_tare_covariance=None if covariance is None else float(covariance),
-            mass_std=opt("mass_std", "kg", allow_zero=True),
-            com_distance_std=opt("com_distance_std", "m", allow_zero=True),
-            g_std=opt("g_std", "m/s²", allow_zero=True),
-            clock_accuracy_ppm=sensor_std("clock_accuracy_ppm", "ppm"),
-            angle_scale_std=sensor_std("angle_scale_std", "1 (relative)"),
-            length=opt("length", "m"),
-            length_std=opt("length_std", "m", allow_zero=True),
-            wire_length=opt("wire_length", "m"),
-            wire_length_std=opt("wire_length_std", "m", allow_zero=True),
-            spacing=opt("spacing", "m"),
-            spacing_std=opt("spacing_std", "m", allow_zero=True),
-            radius=opt("radius", "m"),
-            radius_std=opt("radius_std", "m", allow_zero=True),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -404,3 +334,67 @@ class Rig:
         if sensor:
             doc["sensor"] = sensor
         return doc
+
+
+#: the numbers of [rig]: (key, unit, whether 0 is allowed: the standard uncertainties and the tare)
+_RIG_NUMBERS = (
+    ("stiffness", "N·m/rad", False), ("stiffness_std", "N·m/rad", True), ("tare_inertia", "kg·m²", True),
+    ("tare_inertia_std", "kg·m²", True), ("mass", "kg", False), ("com_distance", "m", False), ("g", "m/s²", False),
+    ("mass_std", "kg", True), ("com_distance_std", "m", True), ("g_std", "m/s²", True),
+    ("length", "m", False), ("length_std", "m", True), ("wire_length", "m", False), ("wire_length_std", "m", True),
+    ("spacing", "m", False), ("spacing_std", "m", True), ("radius", "m", False), ("radius_std", "m", True),
+)
+
+
+def _rig_table(doc: Mapping[str, Any]) -> Mapping[str, Any]:
+    """The rig file's [rig] table, its keys and kind known; its tables known."""
+    unknown_tables = set(doc) - {"rig", "object", "model", "calibration", "sensor"}
+    if unknown_tables:
+        raise RigError(f"rig file: unknown table(s) {sorted(unknown_tables)}; expected [rig], [object], [model], "
+                       "[calibration], [sensor]")
+    rig = doc.get("rig")
+    if not isinstance(rig, Mapping):
+        raise RigError("rig file: missing [rig] table")
+    unknown = set(rig) - _RIG_KEYS
+    if unknown:
+        raise RigError(f"rig file: unknown key(s) in [rig]: {sorted(unknown)}; expected {sorted(_RIG_KEYS)}")
+    if "kind" not in rig:
+        raise RigError(f"rig file: [rig] kind is missing; expected one of {', '.join(RIG_KINDS)}")
+    if rig["kind"] not in RIG_KINDS:
+        raise RigError(f"rig file: unknown kind {rig['kind']!r}; expected one of {', '.join(RIG_KINDS)}")
+    return rig
+
+
+def _object_transfer(o: Any) -> ObjectTransfer:
+    """The rig file's [object] table."""
+    if not isinstance(o, Mapping) or not set(o) >= _OBJECT_KEYS or set(o) - _OBJECT_KEYS - _OBJECT_STD_KEYS:
+        raise RigError("rig file: [object] needs mass (kg) and axis_offset (m), optionally mass_std (kg) "
+                       "and axis_offset_std (m)")
+    return ObjectTransfer(
+        mass=_positive("object.mass", o["mass"], "kg"),
+        axis_offset=_positive("object.axis_offset", o["axis_offset"], "m", allow_zero=True),
+        mass_std=None if "mass_std" not in o else _positive("object.mass_std", o["mass_std"], "kg", allow_zero=True),
+        axis_offset_std=None if "axis_offset_std" not in o else _positive(
+            "object.axis_offset_std", o["axis_offset_std"], "m", allow_zero=True),
+    )
+
+
+def _declared(m: Any) -> tuple[str, ...]:
+    """The effects the rig file's [model] table declares."""
+    if not isinstance(m, Mapping) or set(m) - _MODEL_KEYS:
+        raise RigError("rig file: [model] takes only declared = [effect names]")
+    d = m.get("declared", [])
+    if not isinstance(d, list) or not all(isinstance(x, str) for x in d):
+        raise RigError("rig file: [model] declared must be a list of effect names")
+    return tuple(d)
+
+
+def _sensor(sensor: Any) -> tuple[bool, Mapping[str, Any]]:
+    """(whether the sensor is calibrated, the rig file's [sensor] table)."""
+    if not isinstance(sensor, Mapping) or set(sensor) - _SENSOR_KEYS:
+        raise RigError("rig file: [sensor] takes only calibrated = true | false, clock_accuracy_ppm "
+                       "(1σ, ppm) and angle_scale_std (1σ, relative)")
+    calibrated = sensor.get("calibrated", False)
+    if not isinstance(calibrated, bool):
+        raise RigError(f"rig file: [sensor] calibrated must be true or false, got {calibrated!r}")
+    return calibrated, sensor

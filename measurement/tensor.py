@@ -65,9 +65,10 @@ import numpy as np
 
 from . import flags as F
 from .errors import TensorError
-from .result import _jsonable, _num
+from .result import IdentificationResult, _jsonable
 from .rig import Rig
-from .verdict import QualityRules, Reading, Specification, combine
+from .tensor_inputs import AxisReading, RigShared, axis_reading
+from .verdict import QualityRules
 
 #: the six components, in the order of the rows a(n), the covariance and the Modbus block
 COMPONENTS = ("Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
@@ -81,6 +82,8 @@ CHI2_PROBABILITY = 0.99
 COVERAGE_FACTOR = 2.0
 MONTE_CARLO_DRAWS = 4000
 MONTE_CARLO_SEED = 20240601
+#: a rig whose constants add nothing the orientations share (each reading's u is all there is)
+_NOTHING_SHARED = RigShared()
 
 _S = 1.0 / math.sqrt(2.0)
 #: the usual six: the part's x, y, z and the bisectors of the xy, xz and yz planes
@@ -320,118 +323,6 @@ def plan_geometry(axes: Sequence[Sequence[float]]) -> tuple[int, float]:
     return rank, (float(s[0] / s[-1]) if s[-1] > s[0] * 1e-12 else math.inf)
 
 
-# -- one orientation's inertia from its releases ------------------------------------------------
-
-@dataclass(frozen=True)
-class AxisReading:
-    """The part's inertia about one orientation's swing axis, from its releases (kg·m²).
-
-    value: the part about the swing axis (tare removed when the rig has one).
-    u: 1σ of what is this orientation's own (fit, repeatability, a record's own calibration).
-    rig_inertia: J of the whole swinging rig (part + fixture), which the stiffness calibration scales.
-    releases: how many; used: 0-based indices combined; excluded: {index, reason} of the others.
-    invalid: why the orientation cannot be used (None: it can).
-    """
-
-    value: float | None
-    u: float | None
-    rig_inertia: float | None = None
-    releases: int = 1
-    used: tuple[int, ...] = (0,)
-    excluded: tuple[dict[str, Any], ...] = ()
-    invalid: str | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"value": _num(self.value), "u": _num(self.u), "releases": self.releases, "used": list(self.used),
-                "excluded": _jsonable(list(self.excluded)), "invalid": self.invalid}
-
-
-@dataclass(frozen=True)
-class RigShared:
-    """What every orientation of a set shares through the rig.
-
-    scale_rel: relative 1σ of the restoring constant (J ∝ k: scales every J alike).
-    tare, tare_std: the fixture's inertia and its 1σ, kg·m² (None: no tare, J is the part's).
-    scale_tare_corr: the correlation of k and the tare (one calibration regression gives both).
-    """
-
-    scale_rel: float = 0.0
-    tare: float | None = None
-    tare_std: float = 0.0
-    scale_tare_corr: float = 0.0
-
-    def common_covariance(self, rig_J: np.ndarray) -> np.ndarray:
-        """Covariance (kg·m²)² the orientations' J − tare share through k and the tare, each J_i = k/ω_i².
-
-        cov_ij = s_i·s_j + σ_I0² − r·σ_I0·(s_i + s_j), s_i = scale_rel·J_i (J − I0: ∂/∂k = J/k, ∂/∂I0 = −1).
-        """
-        s = self.scale_rel * np.asarray(rig_J, dtype=float)
-        t = self.tare_std
-        return np.outer(s, s) + t**2 - self.scale_tare_corr * t * (s[:, None] + s[None, :])
-
-    @property
-    def quantity(self) -> str:
-        """The result key that holds the part's inertia about the swing axis."""
-        return "J" if self.tare is None else "J_object"
-
-    @classmethod
-    def of(cls, rig: Rig) -> "RigShared":
-        """From the rig every orientation swings on; a rig that cannot serve a tensor set is refused."""
-        if rig.kind != "torsion":
-            raise TensorError("a tensor set swings on a torsion rig: a compound rig's m·g·S changes with every "
-                              "mounting of the part")
-        if rig.object is not None:
-            raise TensorError("the rig has an [object] transfer, but a tensor plan moves each orientation to the "
-                              "centre of mass itself (offset = [x, y, z]); drop [object] from the rig")
-        k, k_std = rig.restoring_constant, rig.restoring_constant_std
-        scale = (k_std or 0.0) / k if k else 0.0
-        corr = 0.0
-        if rig.stiffness_tare_covariance and k_std and rig.tare_inertia_std:
-            corr = rig.stiffness_tare_covariance / (k_std * rig.tare_inertia_std)
-        return cls(scale, rig.tare_inertia, rig.tare_inertia_std or 0.0, corr)
-
-
-def _release_reading(result: Mapping[str, Any], shared: RigShared) -> Reading:
-    """One release as the part verdict reads it, its systematic part made of what is this record's own
-    and what the set shares (the shared part goes into the set's covariance instead)."""
-    reading = Reading.from_result(result, shared.quantity)
-    if reading.value is None or reading.u_random is None:
-        return reading
-    J = result.get("J")
-    U = result.get(f"{shared.quantity}_U")
-    k = result.get("coverage_factor")
-    u_total = math.hypot(reading.u_random, reading.u_systematic)
-    if U is not None and k:
-        u_total = max(float(U) / float(k), reading.u_random)  # an expanded U, where the result carries one
-    common = math.sqrt(max(float(shared.common_covariance(np.array([float(J or 0.0)]))[0, 0]), 0.0))
-    own_systematic = math.sqrt(max(u_total**2 - reading.u_random**2 - common**2, 0.0))
-    return Reading(reading.value, reading.u_random, own_systematic, reading.flags, reading.swings)
-
-
-def axis_reading(results: Sequence[Mapping[str, Any]], shared: RigShared,
-                 rules: QualityRules = QualityRules()) -> AxisReading:
-    """One orientation's inertia from its releases' results (``IdentificationResult.to_dict()``).
-
-    The releases are pooled as the part verdict pools a part's releases (``verdict.combine``: INVALID
-    releases and one that disagrees with the others excluded with their reasons; the mean, its
-    uncertainty the larger of Type A and the propagated fit uncertainties).
-    """
-    if not results:
-        return AxisReading(None, None, None, 0, (), (), "no releases")
-    readings = [_release_reading(r, shared) for r in results]
-    # no specification applies to one axis of a tensor: the pooling alone is wanted, so the zone is all numbers
-    anything = Specification(shared.quantity, 0.0, -1e300, 1e300, rule="simple")
-    pooled = combine(readings, anything, rules)
-    if pooled.verdict == "INVALID" or pooled.mean is None:
-        reasons = "; ".join(pooled.decision.reasons) or "no usable release"
-        return AxisReading(None, None, None, len(results), pooled.used, pooled.excluded, reasons)
-    u_random = max(pooled.u_typeA or 0.0, pooled.u_fit or 0.0)
-    own = max(readings[i].u_systematic for i in pooled.used)
-    rig_J = [float(j) for i in pooled.used if (j := results[i].get("J")) is not None]
-    rig_inertia = float(np.mean(rig_J)) if len(rig_J) == len(pooled.used) else None  # only when every release has it
-    return AxisReading(pooled.mean, math.hypot(u_random, own), rig_inertia, len(results), pooled.used, pooled.excluded)
-
-
 # -- the solve ---------------------------------------------------------------------------------------
 
 @dataclass(frozen=True, eq=False)
@@ -493,42 +384,6 @@ class TensorResult:
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), ensure_ascii=False, allow_nan=False)
 
-    def report(self) -> str:
-        """A plain-text report for the technician."""
-        L = [f"[[Inertia tensor]] {self.part}  (about the centre of mass, part frame; products of inertia "
-             f"{self.poi_convention}: Ixy = {'−' if self.poi_convention == 'negative' else '+'}∫xy dm)"]
-        k = self.coverage_factor
-        for c in COMPONENTS:
-            L.append(f"    {c} = {self.components[c]:.7g} ± {self.U[c]:.2g} kg·m²  (U, k = {k:g})")
-        L.append("    matrix T (nᵀ·T·n = inertia about n), kg·m²:")
-        for row in self.tensor:
-            L.append("        [" + "  ".join(f"{v:+.6e}" for v in row) + "]")
-        L.append("[[Principal]]")
-        for lam, U, ax, ang in zip(self.principal_moments, self.principal_moments_U, self.principal_axes,
-                                   self.principal_axes_U_deg):
-            L.append(f"    I = {lam:.7g} ± {U:.2g} kg·m²  axis [{ax[0]:+.4f}, {ax[1]:+.4f}, {ax[2]:+.4f}] "
-                     f"± {ang:.2g}°")
-        L.append("[[Orientations]]")
-        L.append(f"    {'name':8}{'axis':>26}{'J axis':>14}{'−m·d⊥²':>12}{'J cm':>14}{'± u':>10}{'nᵀTn':>14}{'z':>7}")
-        for o in self.orientations:
-            axis = "[" + ", ".join(f"{v:+.3f}" for v in o["axis"]) + "]"
-            if o.get("excluded"):
-                L.append(f"    {o['name']:8}{axis:>26}   excluded: {o['excluded']}")
-                continue
-            z = o.get("normalised_residual")
-            L.append(f"    {o['name']:8}{axis:>26}{o['J_axis']:>14.6g}{-o['parallel_axis'] or 0.0:>12.3g}{o['J']:>14.6g}"
-                     f"{o['u']:>10.2g}{o['fitted']:>14.6g}{'' if z is None else f'{z:+.2f}':>7}")
-        if self.dof:
-            L.append(f"    χ² = {self.chi2:.3g} for {self.dof} dof (99 % point {self.chi2_limit:.3g}); plan condition "
-                     f"number {self.condition_number:.3g}")
-        else:
-            L.append(f"    6 orientations determine the 6 components exactly: nothing checks them (a plan of more axes "
-                     f"does); plan condition number {self.condition_number:.3g}")
-        L.append(F.report_line(self.flags))
-        for f, why in self.reasons.items():
-            L.append(f"    {f}: {why}")
-        return "\n".join(L)
-
 
 def _principal(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Ascending principal moments and their axes (columns), each axis's largest component positive,
@@ -546,7 +401,152 @@ def _sqrt_psd(C: np.ndarray) -> np.ndarray:
     return Q * np.sqrt(np.clip(w, 0.0, None))
 
 
-def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigShared = RigShared(), *,  # noqa: C901
+@dataclass(frozen=True, eq=False)
+class _Measured:
+    """The orientations a solve uses: their axes' design rows A, the part's inertia about each axis as
+    measured (J_axis), its parallel-axis correction and what is left about the centre of mass (b = A·x), with
+    the covariance V of b (each orientation's own u and offset on the diagonal, the rig and the mass shared)."""
+
+    used: list[int]
+    excluded: dict[int, str]
+    condition_number: float
+    A: np.ndarray
+    J_axis: np.ndarray
+    correction: np.ndarray
+    b: np.ndarray
+    V: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class _Fit:
+    """The generalised least squares of b = A·x: x, its covariance C, χ² on dof and each orientation's
+    normalised residual (None where the fit leaves it no freedom)."""
+
+    x: np.ndarray
+    C: np.ndarray
+    chi2: float
+    dof: int
+    z: list[float | None]
+
+
+def _usable(plan: TensorPlan, readings: Sequence[AxisReading | None]) -> tuple[list[int], dict[int, str], float]:
+    """(the orientations used, the others with why, the plan's condition number over those used)."""
+    if len(readings) != len(plan.orientations):
+        raise TensorError(f"the plan has {len(plan.orientations)} orientations but {len(readings)} readings were given")
+    used: list[int] = []
+    excluded: dict[int, str] = {}
+    for i, r in enumerate(readings):
+        if r is None or r.invalid is not None or r.value is None or r.u is None:
+            excluded[i] = "not measured" if r is None else (r.invalid or "no value")
+        else:
+            used.append(i)
+    rank, cond = plan_geometry([plan.orientations[i].axis for i in used])
+    if rank < 6 or cond > MAX_CONDITION:
+        raise TensorError(f"the orientations left ({len(used)}: {', '.join(plan.orientations[i].name for i in used)}) "
+                          f"cannot determine the tensor (rank {rank} of 6); excluded: "
+                          + "; ".join(f"{plan.orientations[i].name} ({why})" for i, why in excluded.items()))
+    return used, excluded, cond
+
+
+def _measured(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigShared) -> _Measured:
+    used, excluded, cond = _usable(plan, readings)
+    own = [readings[i] for i in used]
+    ors = [plan.orientations[i] for i in used]
+    A = np.array([design_row(o.axis) for o in ors])
+    m = plan.mass or 0.0
+    J_axis = np.array([float(r.value) for r in own if r is not None and r.value is not None])
+    u_own = np.array([float(r.u) for r in own if r is not None and r.u is not None])
+    # of each used orientation, the rig's J (which its stiffness calibration scales): the part's where not given
+    rig_J = np.array([float(r.rig_inertia if r.rig_inertia is not None else r.value) for r in own
+                      if r is not None and r.value is not None])
+    # the parallel-axis step and its sensitivities to the mass (common) and the offset (own)
+    dperp2 = np.array([axis_offset_inertia(1.0, o.axis, plan.offset_vector(o)) for o in ors])
+    correction = m * dperp2
+    grad_d = np.array([2 * m * (np.asarray(plan.offset_vector(o)) - (np.asarray(o.axis) @ plan.offset_vector(o))
+                                * np.asarray(o.axis)) for o in ors])
+    u_offset2 = np.array([o.offset_std**2 for o in ors]) * np.sum(grad_d**2, axis=1)
+    V = np.diag(u_own**2 + u_offset2) + shared.common_covariance(rig_J) + plan.mass_std**2 * np.outer(dperp2, dperp2)
+    if not np.all(np.diag(V) > 0):
+        bad = [o.name for o, v in zip(ors, np.diag(V)) if not v > 0]
+        raise TensorError(f"orientation(s) {', '.join(bad)} have no uncertainty: a tensor's covariance needs each "
+                          "orientation's J with its σ")
+    return _Measured(used, excluded, cond, A, J_axis, correction, J_axis - correction, V)
+
+
+def _least_squares(d: _Measured) -> _Fit:
+    L = np.linalg.cholesky(d.V)
+    At = np.linalg.solve(L, d.A)
+    bt = np.linalg.solve(L, d.b)
+    x, *_ = np.linalg.lstsq(At, bt, rcond=None)
+    C = np.linalg.inv(At.T @ At)
+    C = (C + C.T) / 2
+    resid = d.b - d.A @ x
+    dof = len(d.used) - 6
+    chi2 = float(np.sum((bt - At @ x) ** 2)) if dof else 0.0  # rounding's, not the data's, when exactly determined
+    var_r = np.diag(d.V - d.A @ C @ d.A.T)
+    z = [float(ri / math.sqrt(vr)) if vr > 1e-9 * vii else None for ri, vr, vii in zip(resid, var_r, np.diag(d.V))]
+    return _Fit(x, C, chi2, dof, z)
+
+
+def _axes_U(fit: _Fit, Vec: np.ndarray, coverage: float, draws: int, seed: int) -> np.ndarray:
+    """The principal axes' angular uncertainty (degrees, at ``coverage``): a seeded Monte Carlo over N(x, C)."""
+    rng = np.random.default_rng(seed)
+    xs = fit.x + rng.standard_normal((draws, 6)) @ _sqrt_psd(fit.C).T
+    Ts = np.empty((draws, 3, 3))
+    for (i, j), k in (((0, 0), 0), ((1, 1), 1), ((2, 2), 2), ((0, 1), 3), ((0, 2), 4), ((1, 2), 5)):
+        Ts[:, i, j] = Ts[:, j, i] = xs[:, k]
+    _, Vs = np.linalg.eigh(Ts)
+    cosines = np.abs(np.einsum("nik,ik->nk", Vs, Vec))
+    angles = np.degrees(np.arccos(np.clip(cosines, 0.0, 1.0)))
+    return np.quantile(angles, coverage, axis=0)
+
+
+def _inconsistent(plan: TensorPlan, d: _Measured, fit: _Fit, chi2_limit: float) -> str:
+    """Why χ² is beyond its limit, naming the orientation of the largest normalised residual."""
+    size = {k: abs(zk) for k, zk in enumerate(fit.z) if zk is not None}  # orientation: |normalised residual|
+    worst = max(size, key=size.__getitem__, default=None)
+    who = ""
+    if worst is not None:
+        o = plan.orientations[d.used[worst]]
+        who = (f"; orientation {o.name!r} (axis [{', '.join(f'{v:.4g}' for v in o.axis)}]) has the largest "
+               f"normalised residual {fit.z[worst]:+.2f}: a mis-mounted or mis-typed axis?")
+    return f"χ² = {fit.chi2:.3g} for {fit.dof} dof, beyond its 99 % point {chi2_limit:.3g}{who}"
+
+
+def _unphysical(lam: np.ndarray, lam_U: np.ndarray, grads: np.ndarray, C: np.ndarray, coverage_factor: float) -> str:
+    """Why the principal moments no body can have ("": none)."""
+    out = []
+    if lam[0] + lam_U[0] <= 0:
+        out.append(f"the smallest principal moment {lam[0]:.4g} ± {lam_U[0]:.2g} kg·m² is ≤ 0")
+    g_tri = grads[0] + grads[1] - grads[2]
+    tri, tri_U = float(lam[0] + lam[1] - lam[2]), coverage_factor * math.sqrt(float(g_tri @ C @ g_tri))
+    if tri + tri_U < 0:
+        out.append(f"I1 + I2 − I3 = {tri:.4g} ± {tri_U:.2g} kg·m² < 0 (the triangle inequality)")
+    return "; ".join(out)
+
+
+def _rows(plan: TensorPlan, readings: Sequence[AxisReading | None], d: _Measured, fit: _Fit) -> list[dict[str, Any]]:
+    """Per orientation: what was measured, the parallel-axis correction, the fitted nᵀ·T·n, the residual."""
+    rows: list[dict[str, Any]] = []
+    k_used = {i: k for k, i in enumerate(d.used)}
+    for i, o in enumerate(plan.orientations):
+        row: dict[str, Any] = o.to_dict()
+        rdg = readings[i]
+        if rdg is not None:
+            row["releases"] = rdg.to_dict()
+        if i in d.excluded:
+            row["excluded"] = d.excluded[i]
+            row["fitted"] = float(design_row(o.axis) @ fit.x)
+        else:
+            k = k_used[i]
+            row.update({"J_axis": float(d.J_axis[k]), "parallel_axis": float(d.correction[k]), "J": float(d.b[k]),
+                        "u": float(math.sqrt(d.V[k, k])), "fitted": float(d.A[k] @ fit.x),
+                        "normalised_residual": fit.z[k]})
+        rows.append(row)
+    return rows
+
+
+def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigShared = _NOTHING_SHARED, *,
           coverage_factor: float = COVERAGE_FACTOR, draws: int = MONTE_CARLO_DRAWS,
           seed: int = MONTE_CARLO_SEED) -> TensorResult:
     """The tensor from one reading per orientation of the plan (None or ``invalid``: excluded and named).
@@ -555,130 +555,42 @@ def solve(plan: TensorPlan, readings: Sequence[AxisReading | None], shared: RigS
     """
     from scipy.stats import chi2 as chi2_dist
 
-    if len(readings) != len(plan.orientations):
-        raise TensorError(f"the plan has {len(plan.orientations)} orientations but {len(readings)} readings were given")
-    used: list[int] = []
-    excluded: dict[int, str] = {}
-    own: list[tuple[float, float, float]] = []  # of each used orientation: J about its axis, its σ, the rig's J
-    for i, r in enumerate(readings):
-        if r is None or r.invalid is not None or r.value is None or r.u is None:
-            excluded[i] = "not measured" if r is None else (r.invalid or "no value")
-        else:
-            used.append(i)
-            own.append((float(r.value), float(r.u), float(r.rig_inertia if r.rig_inertia is not None else r.value)))
-    rank, cond = plan_geometry([plan.orientations[i].axis for i in used])
-    if rank < 6 or cond > MAX_CONDITION:
-        raise TensorError(f"the orientations left ({len(used)}: {', '.join(plan.orientations[i].name for i in used)}) "
-                          f"cannot determine the tensor (rank {rank} of 6); excluded: "
-                          + "; ".join(f"{plan.orientations[i].name} ({why})" for i, why in excluded.items()))
-    ors = [plan.orientations[i] for i in used]
-    A = np.array([design_row(o.axis) for o in ors])
-    m = plan.mass or 0.0
-    J_axis = np.array([j for j, _, _ in own])
-    u_own = np.array([u for _, u, _ in own])
-    # the parallel-axis step and its sensitivities to the mass (common) and the offset (own)
-    dperp2 = np.array([axis_offset_inertia(1.0, o.axis, plan.offset_vector(o)) for o in ors])
-    correction = m * dperp2
-    grad_d = np.array([2 * m * (np.asarray(plan.offset_vector(o)) - (np.asarray(o.axis) @ plan.offset_vector(o))
-                                * np.asarray(o.axis)) for o in ors])
-    u_offset2 = np.array([o.offset_std**2 for o in ors]) * np.sum(grad_d**2, axis=1)
-    b = J_axis - correction
-    rig_J = np.array([j for _, _, j in own])
-    V = np.diag(u_own**2 + u_offset2) + shared.common_covariance(rig_J) + plan.mass_std**2 * np.outer(dperp2, dperp2)
-    if not np.all(np.diag(V) > 0):
-        bad = [o.name for o, v in zip(ors, np.diag(V)) if not v > 0]
-        raise TensorError(f"orientation(s) {', '.join(bad)} have no uncertainty: a tensor's covariance needs each "
-                          "orientation's J with its σ")
-    L = np.linalg.cholesky(V)
-    At = np.linalg.solve(L, A)
-    bt = np.linalg.solve(L, b)
-    x, *_ = np.linalg.lstsq(At, bt, rcond=None)
-    C = np.linalg.inv(At.T @ At)
-    C = (C + C.T) / 2
-    resid = b - A @ x
-    dof = len(used) - 6
-    chi2 = float(np.sum((bt - At @ x) ** 2)) if dof else 0.0  # rounding's, not the data's, when exactly determined
-    var_r = np.diag(V - A @ C @ A.T)
-    z = [float(ri / math.sqrt(vr)) if vr > 1e-9 * vii else None for ri, vr, vii in zip(resid, var_r, np.diag(V))]
-
+    d = _measured(plan, readings, shared)
+    fit = _least_squares(d)
     signs = convention_signs(plan.poi_convention)
-    comp = x * signs
-    cov = C * np.outer(signs, signs)
+    cov = fit.C * np.outer(signs, signs)
     U = coverage_factor * np.sqrt(np.diag(cov))
-    T = matrix_of(x)
+    T = matrix_of(fit.x)
     lam, Vec = _principal(T)
     grads = np.array([design_row(Vec[:, k]) for k in range(3)])
-    lam_U = coverage_factor * np.sqrt(np.einsum("ki,ij,kj->k", grads, C, grads))
-
-    # principal axes' angular uncertainty: a seeded Monte Carlo over N(x, C)
-    rng = np.random.default_rng(seed)
-    xs = x + rng.standard_normal((draws, 6)) @ _sqrt_psd(C).T
-    Ts = np.empty((draws, 3, 3))
-    for (i, j), k in (((0, 0), 0), ((1, 1), 1), ((2, 2), 2), ((0, 1), 3), ((0, 2), 4), ((1, 2), 5)):
-        Ts[:, i, j] = Ts[:, j, i] = xs[:, k]
-    _, Vs = np.linalg.eigh(Ts)
-    cosines = np.abs(np.einsum("nik,ik->nk", Vs, Vec))
-    angles = np.degrees(np.arccos(np.clip(cosines, 0.0, 1.0)))
+    lam_U = coverage_factor * np.sqrt(np.einsum("ki,ij,kj->k", grads, fit.C, grads))
     coverage = math.erf(coverage_factor / math.sqrt(2))
-    ang_U = np.quantile(angles, coverage, axis=0)
+    ang_U = _axes_U(fit, Vec, coverage, draws, seed)
 
-    flags: list[str] = []
     reasons: dict[str, str] = {}
-    chi2_limit = float(chi2_dist.ppf(CHI2_PROBABILITY, dof)) if dof > 0 else None
-    if chi2_limit is not None and chi2 > chi2_limit:
-        size = {k: abs(zk) for k, zk in enumerate(z) if zk is not None}  # orientation: |normalised residual|
-        worst = max(size, key=size.__getitem__, default=None)
-        who = ""
-        if worst is not None:
-            o = ors[worst]
-            who = (f"; orientation {o.name!r} (axis [{', '.join(f'{v:.4g}' for v in o.axis)}]) has the largest "
-                   f"normalised residual {z[worst]:+.2f}: a mis-mounted or mis-typed axis?")
-        flags.append(F.TENSOR_INCONSISTENT)
-        reasons[F.TENSOR_INCONSISTENT] = f"χ² = {chi2:.3g} for {dof} dof, beyond its 99 % point {chi2_limit:.3g}{who}"
-    unphysical = []
-    if lam[0] + lam_U[0] <= 0:
-        unphysical.append(f"the smallest principal moment {lam[0]:.4g} ± {lam_U[0]:.2g} kg·m² is ≤ 0")
-    g_tri = grads[0] + grads[1] - grads[2]
-    tri, tri_U = float(lam[0] + lam[1] - lam[2]), coverage_factor * math.sqrt(float(g_tri @ C @ g_tri))
-    if tri + tri_U < 0:
-        unphysical.append(f"I1 + I2 − I3 = {tri:.4g} ± {tri_U:.2g} kg·m² < 0 (the triangle inequality)")
-    if unphysical:
-        flags.append(F.TENSOR_UNPHYSICAL)
-        reasons[F.TENSOR_UNPHYSICAL] = "; ".join(unphysical)
-    if excluded:
-        flags.append(F.ORIENTATION_EXCLUDED)
-        reasons[F.ORIENTATION_EXCLUDED] = "; ".join(f"{plan.orientations[i].name}: {why}" for i, why in excluded.items())
-
-    rows: list[dict[str, Any]] = []
-    k_used = {i: k for k, i in enumerate(used)}
-    for i, o in enumerate(plan.orientations):
-        row: dict[str, Any] = o.to_dict()
-        rdg = readings[i]
-        if rdg is not None:
-            row["releases"] = rdg.to_dict()
-        if i in excluded:
-            row["excluded"] = excluded[i]
-            row["fitted"] = float(design_row(o.axis) @ x)
-        else:
-            k = k_used[i]
-            row.update({"J_axis": float(J_axis[k]), "parallel_axis": float(correction[k]), "J": float(b[k]),
-                        "u": float(math.sqrt(V[k, k])), "fitted": float(A[k] @ x), "normalised_residual": z[k]})
-        rows.append(row)
+    chi2_limit = float(chi2_dist.ppf(CHI2_PROBABILITY, fit.dof)) if fit.dof > 0 else None
+    if chi2_limit is not None and fit.chi2 > chi2_limit:
+        reasons[F.TENSOR_INCONSISTENT] = _inconsistent(plan, d, fit, chi2_limit)
+    if unphysical := _unphysical(lam, lam_U, grads, fit.C, coverage_factor):
+        reasons[F.TENSOR_UNPHYSICAL] = unphysical
+    if d.excluded:
+        reasons[F.ORIENTATION_EXCLUDED] = "; ".join(f"{plan.orientations[i].name}: {why}"
+                                                    for i, why in d.excluded.items())
     return TensorResult(
         part=plan.part, poi_convention=plan.poi_convention, tensor=T,
-        components=dict(zip(COMPONENTS, comp.tolist())), cov=cov, U=dict(zip(COMPONENTS, U.tolist())),
+        components=dict(zip(COMPONENTS, (fit.x * signs).tolist())), cov=cov, U=dict(zip(COMPONENTS, U.tolist())),
         coverage_factor=coverage_factor,
         principal_moments=tuple(lam.tolist()), principal_moments_U=tuple(lam_U.tolist()),
         principal_axes=tuple(tuple(Vec[:, k].tolist()) for k in range(3)),
         principal_axes_U_deg=tuple(ang_U.tolist()),
-        condition_number=cond, chi2=chi2, dof=dof, chi2_limit=chi2_limit, orientations=tuple(rows),
-        flags=tuple(flags), reasons=reasons, mass=plan.mass,
+        condition_number=d.condition_number, chi2=fit.chi2, dof=fit.dof, chi2_limit=chi2_limit,
+        orientations=tuple(_rows(plan, readings, d, fit)), flags=tuple(reasons), reasons=reasons, mass=plan.mass,
         monte_carlo={"draws": draws, "seed": seed, "coverage": coverage},
     )
 
 
-def solve_results(plan: TensorPlan, results: Sequence[Sequence[Mapping[str, Any]]], rig: Rig,
+def solve_results(plan: TensorPlan, results: Sequence[Sequence[IdentificationResult]], rig: Rig,
                   rules: QualityRules = QualityRules(), **kwargs: Any) -> TensorResult:
-    """The tensor from each orientation's releases' results (``IdentificationResult.to_dict()``) on ``rig``."""
+    """The tensor from each orientation's releases' results on ``rig``."""
     shared = RigShared.of(rig)
     return solve(plan, [axis_reading(r, shared, rules) for r in results], shared, **kwargs)

@@ -67,12 +67,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from . import flags as F
 from .errors import InvalidInput
 from .uncertainty import coverage_factor as _coverage_factor
 from .uncertainty import welch_satterthwaite
+
+if TYPE_CHECKING:
+    from .result import IdentificationResult
 
 OK, NOK, INVALID = "OK", "NOK", "INVALID"
 
@@ -182,35 +185,22 @@ class Reading:
     coverage_factor: float | None = None
 
     @classmethod
-    def from_result(cls, result: Mapping[str, Any], quantity: str) -> "Reading":
-        """From ``IdentificationResult.to_dict()`` (or a payload that contains it)."""
+    def from_result(cls, result: IdentificationResult, quantity: str) -> "Reading":
+        """One release's ``quantity`` with the uncertainty of its GUM budget (``result.uncertainty_budget``):
+        its random lines (fit, model form) and the rest with their correlations (calibration, tare, rig,
+        clock). A value without a budget has no stated uncertainty (u_random None: not usable)."""
         if quantity not in QUANTITIES:
             raise VerdictError(f"quantity must be one of {', '.join(QUANTITIES)}, got {quantity!r}")
-        J_std = result.get("J_std")
-        cal = result.get("J_std_calibration") or 0.0
-        value = result.get(quantity)
-        tare = 0.0
-        if quantity != "J" and result.get("J_object") is not None:
-            # J_object_std = √(J_std² + u_tare²): the tare's part is systematic (same fixture every release)
-            jo_std = result.get("J_object_std") or 0.0
-            tare = math.sqrt(max(jo_std**2 - (J_std or 0.0) ** 2, 0.0))
-        omega = result.get("omega_n")
-        window = result.get("window") or {}
+        value = getattr(result, quantity)
+        t_start, t_stop = result.window.get("t_start"), result.window.get("t_stop")
         swings = None
-        if omega and window.get("t_start") is not None and window.get("t_stop") is not None:
-            swings = float(omega) * (float(window["t_stop"]) - float(window["t_start"])) / (2 * math.pi)
-        flags = tuple(result.get("flags") or ())
-        budget = (result.get("uncertainty_budget") or {}).get(quantity)
-        if budget and value is not None:
-            # the GUM budget: its random lines (fit, model form) and the rest with their correlations
-            return cls(float(value), float(budget["u_random"]), float(budget["u_systematic"]), flags, swings,
-                       float(budget["coverage_factor"]))
-        # the release's own model form (its record's halves, rival models) is random from release to
-        # release: it belongs with the fit's σ, not with the calibration
-        model = result.get("J_std_model") or 0.0
-        u_random = None if J_std is None else math.hypot(float(J_std), float(model))
-        return cls(None if value is None else float(value), u_random,
-                   math.hypot(cal, tare), flags, swings)
+        if result.omega_n and t_start is not None and t_stop is not None:
+            swings = float(result.omega_n) * (float(t_stop) - float(t_start)) / (2 * math.pi)
+        budget = result.uncertainty_budget.get(quantity)
+        if value is None or budget is None:
+            return cls(None if value is None else float(value), None, 0.0, result.flags, swings)
+        return cls(float(value), float(budget.u_random), float(budget.u_systematic), result.flags, swings,
+                   float(budget.coverage_factor))
 
     @property
     def u_combined(self) -> float | None:
@@ -372,6 +362,80 @@ def agreement(values: Sequence[float], u: Sequence[float]) -> list[float]:
 JointOf = Callable[[Sequence[int]], "tuple[float, float, dict[str, Any]] | None"]
 
 
+def _screen(readings: Sequence[Reading], rules: QualityRules) -> tuple[list[int], list[dict[str, Any]], list[str]]:
+    """(the usable releases, the excluded ones with why, why the part cannot be judged): the invalid releases
+    out, then the one that disagrees most with the others when at least 3 are left (the rule is in the
+    module docstring)."""
+    excluded: list[dict[str, Any]] = []
+    usable: list[int] = []
+    for i, r in enumerate(readings):
+        bad = invalid_reasons(r, rules)
+        if bad:
+            excluded.append({"index": i, "reason": "invalid: " + "; ".join(bad)})
+        else:
+            usable.append(i)
+    part_reasons: list[str] = []
+    if len(usable) >= 2:
+        zs = agreement([float(readings[i].value) for i in usable],  # type: ignore[arg-type]
+                       [float(readings[i].u_random) for i in usable])  # type: ignore[arg-type]
+        worst = max(range(len(zs)), key=lambda k: abs(zs[k]))
+        if abs(zs[worst]) > rules.consistency_limit:
+            if len(usable) >= 3:
+                excluded.append({"index": usable[worst], "reason": f"disagrees with the other releases: "
+                                 f"z = {zs[worst]:+.2f}, limit ±{rules.consistency_limit:g}"})
+                usable.pop(worst)
+                if max(abs(v) for v in _agreement_of(readings, usable)) > rules.consistency_limit:
+                    part_reasons.append(f"releases disagree beyond ±{rules.consistency_limit:g} even after "
+                                        "excluding the worst one")
+            else:
+                part_reasons.append(f"the 2 releases disagree: z = {abs(zs[worst]):.2f} > {rules.consistency_limit:g}")
+    excluded.sort(key=lambda e: e["index"])
+    n = len(readings)
+    if len(usable) < max(1, rules.min_valid_releases):
+        part_reasons.append(f"{len(usable)} usable of {n} releases, fewer than {max(1, rules.min_valid_releases)}")
+        part_reasons += [f"release {e['index'] + 1}: {e['reason']}" for e in excluded]
+    return usable, excluded, part_reasons
+
+
+def _agreement_of(readings: Sequence[Reading], used: Sequence[int]) -> list[float]:
+    return agreement([float(readings[i].value) for i in used],  # type: ignore[arg-type]
+                     [float(readings[i].u_random) for i in used])  # type: ignore[arg-type]
+
+
+def _value(vals: list[float], us: list[float], joint: tuple[float, float, dict[str, Any]] | None
+           ) -> tuple[float, float, dict[str, Any] | None]:
+    """(the part's value, its random 1σ from the releases' own uncertainties, the joint facts): the joint
+    identification's where there is one, else the releases' mean weighed by their own uncertainty."""
+    if joint is not None:
+        return joint
+    m = len(vals)
+    if all(u > 0 for u in us):
+        # each release weighed by its own uncertainty: a release whose model does not hold across
+        # its record (a larger model-form term) counts for less
+        w = [1.0 / u**2 for u in us]
+        return sum(wi * v for wi, v in zip(w, vals)) / sum(w), 1.0 / math.sqrt(sum(w)), None
+    return sum(vals) / m, math.sqrt(sum(u**2 for u in us)) / m, None
+
+
+def _budget(m: int, u_a: float | None, u_fit: float, u_sys: float, k: float,
+            spec: Specification) -> tuple[float, float, dict[str, Any]]:
+    """(u_c, k, the part's budget): the larger random estimate with the systematic part once; a Type A term
+    that sets it brings its m − 1 degrees of freedom into k (Welch–Satterthwaite)."""
+    u_c = math.hypot(max(u_a or 0.0, u_fit), u_sys)
+    type_a = u_a is not None and u_a > u_fit
+    dof = welch_satterthwaite(u_c, [(u_a, m - 1)]) if type_a and u_a is not None else math.inf
+    if type_a:
+        # the repeatability (Type A, m − 1 degrees of freedom) sets the random part: few releases, a larger k
+        k = max(k, _coverage_factor(dof, spec.coverage_factor))
+    random_line = ({"source": f"repeatability of {m} releases (Type A, s/√n)", "u": u_a, "dof": m - 1}
+                   if type_a else {"source": "the releases' own uncertainty (fit, model form; joint or weighted "
+                                             "mean)", "u": u_fit, "dof": None})
+    budget = {"lines": [random_line, {"source": "systematic, common to the releases (calibration, rig constants, "
+                                                "clock, sensor scale)", "u": u_sys, "dof": None}],
+              "u_c": u_c, "dof": dof if math.isfinite(dof) else None, "coverage_factor": k, "U": k * u_c}
+    return u_c, k, budget
+
+
 def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRules,
             joint_of: JointOf | None = None) -> PartResult:
     """The part verdict from its releases (the rule is in the module docstring).
@@ -384,80 +448,23 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
     if n == 0:
         raise VerdictError("a part needs at least one release")
     values = tuple(r.value for r in readings)
-    excluded: list[dict[str, Any]] = []
-    usable: list[int] = []
-    for i, r in enumerate(readings):
-        bad = invalid_reasons(r, rules)
-        if bad:
-            excluded.append({"index": i, "reason": "invalid: " + "; ".join(bad)})
-        else:
-            usable.append(i)
-    part_reasons: list[str] = []
-    z: list[float | None] = []
-    if len(usable) >= 2:
-        vals = [float(readings[i].value) for i in usable]  # type: ignore[arg-type]
-        us = [float(readings[i].u_random) for i in usable]  # type: ignore[arg-type]
-        zs = agreement(vals, us)
-        worst = max(range(len(zs)), key=lambda k: abs(zs[k]))
-        if abs(zs[worst]) > rules.consistency_limit:
-            if len(usable) >= 3:
-                excluded.append({"index": usable[worst], "reason": f"disagrees with the other releases: "
-                                 f"z = {zs[worst]:+.2f}, limit ±{rules.consistency_limit:g}"})
-                usable.pop(worst)
-                vals.pop(worst)
-                us.pop(worst)
-                zs = agreement(vals, us)
-                if max(abs(v) for v in zs) > rules.consistency_limit:
-                    part_reasons.append(f"releases disagree beyond ±{rules.consistency_limit:g} even after "
-                                        "excluding the worst one")
-            else:
-                part_reasons.append(f"the 2 releases disagree: z = {abs(zs[worst]):.2f} > {rules.consistency_limit:g}")
-        z = [float(v) for v in zs] if len(usable) >= 3 else [None] * len(usable)
-    else:
-        z = [None] * len(usable)
-    excluded.sort(key=lambda e: e["index"])
-    if len(usable) < max(1, rules.min_valid_releases):
-        part_reasons.append(f"{len(usable)} usable of {n} releases, fewer than {max(1, rules.min_valid_releases)}")
-        part_reasons += [f"release {e['index'] + 1}: {e['reason']}" for e in excluded]
+    usable, excluded, part_reasons = _screen(readings, rules)
+    z: list[float | None] = [float(v) for v in _agreement_of(readings, usable)] if len(usable) >= 3 \
+        else [None] * len(usable)
     if not usable:
         dec = Decision(INVALID, None, None, None, None, None, spec.rule, tuple(part_reasons))
         return PartResult(n, values, (), tuple(excluded), None, None, None, None, None, tuple(z), dec)
-
     vals = [float(readings[i].value) for i in usable]  # type: ignore[arg-type]
     us = [float(readings[i].u_random) for i in usable]  # type: ignore[arg-type]
     m = len(vals)
-    joint = joint_of(tuple(usable)) if joint_of is not None and m >= 2 else None
-    joint_facts = None
-    if joint is not None:
-        mean, u_fit, joint_facts = joint
-    elif all(u > 0 for u in us):
-        # each release weighed by its own uncertainty: a release whose model does not hold across
-        # its record (a larger model-form term) counts for less
-        w = [1.0 / u**2 for u in us]
-        mean = sum(wi * v for wi, v in zip(w, vals)) / sum(w)
-        u_fit = 1.0 / math.sqrt(sum(w))
-    else:
-        mean = sum(vals) / m
-        u_fit = math.sqrt(sum(u**2 for u in us)) / m
+    mean, u_fit, joint_facts = _value(vals, us, joint_of(tuple(usable)) if joint_of is not None and m >= 2 else None)
     std = math.sqrt(sum((v - mean) ** 2 for v in vals) / (m - 1)) if m > 1 else None
     u_a = std / math.sqrt(m) if std is not None else None
     u_sys = max(readings[i].u_systematic for i in usable)
-    u_c = math.hypot(max(u_a or 0.0, u_fit), u_sys)
     k = max([spec.coverage_factor] + [readings[i].coverage_factor or 0.0 for i in usable])
-    type_a = u_a is not None and u_a > u_fit
-    dof = welch_satterthwaite(u_c, [(u_a, m - 1)]) if type_a and u_a is not None else math.inf
-    if type_a:
-        # the repeatability (Type A, m − 1 degrees of freedom) sets the random part: few releases, a larger k
-        k = max(k, _coverage_factor(dof, spec.coverage_factor))
-    random_line = ({"source": f"repeatability of {m} releases (Type A, s/√n)", "u": u_a, "dof": m - 1}
-                   if type_a else {"source": "the releases' own uncertainty (fit, model form; joint or weighted "
-                                             "mean)", "u": u_fit, "dof": None})
-    budget = {"lines": [random_line, {"source": "systematic, common to the releases (calibration, rig constants, "
-                                                "clock, sensor scale)", "u": u_sys, "dof": None}],
-              "u_c": u_c, "dof": dof if math.isfinite(dof) else None, "coverage_factor": k, "U": k * u_c}
+    u_c, k, budget = _budget(m, u_a, u_fit, u_sys, k, spec)
     if part_reasons:
-        dec = Decision(INVALID, mean, u_c, k * u_c, mean - spec.nominal, None, spec.rule,
-                       tuple(part_reasons))
+        dec = Decision(INVALID, mean, u_c, k * u_c, mean - spec.nominal, None, spec.rule, tuple(part_reasons))
     else:
         dec = decide(mean, u_c, spec, k, rules)
     return PartResult(n, values, tuple(usable), tuple(excluded), mean, std, u_a, u_fit, u_sys, tuple(z), dec,

@@ -124,9 +124,9 @@ class Recorder:
         tensor_set = self.app.sets.of(recipe)
         if tensor_set is not None:
             outcome = PartOutcome(part_id, recipe.to_dict() if recipe else None, calibration=calibration,
-                                  tensor_set=tensor_set.release(result, m.id))
+                                  tensor_set=tensor_set.release(typed, m.id))
         else:
-            outcome = dataclasses.replace(self.app.parts.release(result, m.id, part_id, recipe, m.result, rig),
+            outcome = dataclasses.replace(self.app.parts.release(typed, m.id, part_id, recipe, m.result, rig),
                                           calibration=calibration)
         timing, cfg, trace = m.to_dict().get("timing", {}), self.app.config, m.trace
 

@@ -77,14 +77,13 @@ def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]
     budget = budgets(rig, w, ws, dof=float(head.fit.dof), model=form.u, view=w_cal,
                      scale_response=omega_n_per_scale(head.fit) if rig.sensor_calibrated else None,
                      reproducibility=found.reproducibility)
-    J_u = budget["J"].u if "J" in budget else None
     zeta, zeta_std, amp_ref = damping_ratio(final)
     return IdentificationResult(
         source=trace.source, rig_kind=rig.kind,
-        J=j.J, J_std=j.J_std, J_std_calibration=j.J_calibration, J_object=j.J_object, J_object_std=j.J_object_std,
+        J=j.J, J_std=j.J_std, J_object=j.J_object, J_object_std=j.J_object_std,
         J_object_axis=j.J_object_axis, J_object_axis_std=j.J_object_axis_std,
         omega_n=w, omega_n_std=ws, omega_n_std_calibration=w_cal, omega_n_std_model=form.u, omega_n_u=w_u,
-        J_std_model=j.J_model, J_u=J_u, model_form=form,
+        model_form=form,
         uncertainty_budget=budget, damping_ratio=zeta,
         damping_ratio_std=zeta_std, reference_amplitude=amp_ref,
         offset=Quantity(final.value("offset"), final.stdev("offset"), RATE_UNITS["rad"] if rig.measures == "rate" else "rad"),

@@ -19,7 +19,8 @@ import numpy as np
 
 from ..consistency import effect_holds
 from ..diagnostics import diagnose
-from ..effects import EFFECTS, Effect, candidate_effects, resolve_effects, with_effect
+from ..effect_base import Effect
+from ..effects import EFFECTS, candidate_effects, resolve_effects, with_effect
 from ..errors import IdentificationError
 from ..fit import ModelFit, fit_model, swing_amplitude
 from ..model import Model

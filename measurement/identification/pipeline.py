@@ -226,7 +226,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         trace=trace, rig=rig, prep=prep, declared=declared, base=g.base, final=final, steps=tuple(run.steps),
         withdrawn=run.withdrawn, law=law, segments=segments, form=form, diag=g.diag, n_outliers=g.n_outliers,
         slipped_from=g.slipped_from, beaten_by=g.beaten_by, follows=follows, follow_ratio=follow_ratio,
-        view=view, omega_n_view=w_cal, inertias=inertias(rig, w, ws, w_cal, head.form.u),
+        view=view, omega_n_view=w_cal, inertias=inertias(rig, w, ws),
         nominal=omega_n_at_nominal_scale(final), nfev=run.nfev + g.nfev + spent, bic_margin=options.bic_margin,
         rival_laws=options.rival_laws, focus=head,
         reproducibility=options.reproducibility or DEFAULT_REPRODUCIBILITY)

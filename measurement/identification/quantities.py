@@ -11,7 +11,7 @@ from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
-from ..effects import Effect
+from ..effect_base import Effect
 from ..fit import ModelFit, swing_amplitude
 from ..model import Model
 from ..reproducibility import Reproducibility
@@ -185,15 +185,13 @@ def budgets(rig: Rig, omega_n: float, omega_n_std: float, *, dof: float = math.i
 class Inertias:
     """J and what follows from it, kg·m² (None where the rig does not give it).
 
-    J_std: the fit's 1σ; J_calibration: the rig's restoring constant and a camera view measured on the
-    record; J_model: the model form's; J_object: J − tare, J_object_axis: its parallel-axis transfer
-    to the object's own axis, each with the σ of the fit and the tare.
+    J_std: the fit's 1σ; J_object: J − tare, J_object_axis: its parallel-axis transfer to the object's own
+    axis, each with the σ of the fit and the tare. The calibration, the model form and the rest of J's
+    uncertainty are its budget's (``budgets``), where the k–tare correlation is kept.
     """
 
     J: float | None
     J_std: float | None
-    J_calibration: float | None
-    J_model: float | None
     J_object: float | None
     J_object_std: float | None
     J_object_axis: float | None
@@ -205,17 +203,11 @@ class Inertias:
         return any(v is not None and v < 0 for v in (self.J_object, self.J_object_axis))
 
 
-def inertias(rig: Rig, omega_n: float, omega_n_std: float, omega_n_view: float | None,
-             omega_n_model: float) -> Inertias:
-    """J and the object's J from ω_n ± its 1σ of the fit, of the camera view and of the model form (rad/s)."""
-    w, ws, w_cal = omega_n, omega_n_std, omega_n_view
+def inertias(rig: Rig, omega_n: float, omega_n_std: float) -> Inertias:
+    """J and the object's J from ω_n ± the fit's 1σ (rad/s)."""
+    w, ws = omega_n, omega_n_std
     J = inertia(rig, w)
     J_std = None if J is None else 2 * J * ws / w
-    J_cal = None
-    c = rig.restoring_constant  # None exactly when J is
-    if J is not None and c is not None and (rig.restoring_constant_std or w_cal):
-        J_cal = J * math.hypot((rig.restoring_constant_std or 0.0) / c, 2 * (w_cal or 0.0) / w)
-    J_model = None if J is None else 2 * J * omega_n_model / w
     J_obj = J_obj_std = J_ax = J_ax_std = None
     if J is not None and rig.tare_inertia is not None:
         J_obj = J - rig.tare_inertia
@@ -224,7 +216,7 @@ def inertias(rig: Rig, omega_n: float, omega_n_std: float, omega_n_view: float |
         base_j = J_obj if J_obj is not None else J
         J_ax = base_j - rig.object.mass * rig.object.axis_offset**2
         J_ax_std = J_obj_std if J_obj is not None else J_std
-    return Inertias(J, J_std, J_cal, J_model, J_obj, J_obj_std, J_ax, J_ax_std)
+    return Inertias(J, J_std, J_obj, J_obj_std, J_ax, J_ax_std)
 
 
 def omega_at_amplitude(fit: ModelFit, amplitude: float) -> tuple[float, float] | None:

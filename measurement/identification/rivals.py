@@ -25,7 +25,7 @@ from typing import Sequence
 import numpy as np
 
 from ..consistency import bic_weights, check_segments, competitors
-from ..effects import EFFECTS, candidate_effects, resolve_effects, with_effect
+from ..effects import EFFECTS, candidate_effects, resolve_effects, unweighed_law, with_effect
 from ..errors import IdentificationError
 from ..fit import ModelFit, fit_model, swing_amplitude
 from ..model import Model
@@ -240,7 +240,7 @@ def law_rival(final: ModelFit, moves: Sequence[Move], prep: Prepared, rig: Rig,
     """
     names = final.model.effect_names
     mimics = [law for m in moves if m.effect in names and m.moved
-              and (law := EFFECTS[m.effect].unweighed_law(rig.kind)) is not None and law not in names]
+              and (law := unweighed_law(EFFECTS[m.effect], rig.kind)) is not None and law not in names]
     if not mimics:
         return None, 0
     law = mimics[-1]

@@ -162,17 +162,43 @@ def estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, *, harmon
                             "marker move?)")
 
 
-def _estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, harmonics: tuple[int, ...],  # noqa: C901
+def _estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, harmonics: tuple[int, ...],
                   max_iterations: int, outlier_sigma: float) -> PoseEstimate:
     t = np.asarray(t, dtype=float)
     x = np.asarray(x, dtype=float)
     if t.size < 40:
         return PoseEstimate(False, reason=f"only {t.size} samples: too few to estimate the camera yaw")
-    yaw, rest = 0.0, 0.0
-    theta = angle_from_normalised(x, marker, yaw, rest)
+    theta = angle_from_normalised(x, marker, 0.0, 0.0)
     if not np.isfinite(theta).all():
         return PoseEstimate(False, reason="the marker leaves the cylinder's visible side: geometry does not fit")
-    # Phase from the crossings of the swing's centre line.
+    cross = _half_swings(t, theta)
+    if cross.size < 7:
+        return PoseEstimate(False, reason=f"only {max(cross.size - 1, 0)} half-swings: at least 6 are needed to "
+                            "estimate the camera yaw")
+    use, M, dc_basis = _symmetric_swing(t, cross, harmonics)
+    # Variable projection: the symmetric-swing coefficients are linear, so they are projected out
+    # (factorised once per set of samples) and only the yaw is iterated.
+    yf = _YawFit(x[use], marker, M)
+    for outer in range(3):  # the rest angle changes L a little: refine it
+        failed = yf.steps(max_iterations, outlier_sigma if outer == 0 else None)
+        if failed:
+            return PoseEstimate(False, reason=failed)
+        # the zero level of the symmetric fit is the marker's surface angle at rest (relative to the current one)
+        th = angle_from_normalised(yf.xu, marker, yf.yaw, yf.rest)[yf.keep]
+        coef = yf.fit.coefficients(th)
+        shift = float(np.median(dc_basis[yf.keep] @ coef[:dc_basis.shape[1]]))
+        yf.rest += shift
+        if abs(shift) < 1e-7:
+            break
+    dof = max(int(yf.keep.sum()) - M.shape[1] - 1, 1)
+    rms = float(np.sqrt(np.sum(yf.residual ** 2) / dof))
+    return PoseEstimate(True, yaw=yf.yaw, yaw_std=rms / math.sqrt(yf.curvature), rest_angle=yf.rest,
+                        axis_distance=axis_distance(marker, yf.rest), swings=int(cross.size - 1), residual_rms=rms,
+                        iterations=yf.iterations)
+
+
+def _half_swings(t: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """The times the swing crosses its centre line (the phase's anchors)."""
     span = float(np.percentile(theta, 99) - np.percentile(theta, 1))
     level = float(np.median(theta))
     cross = _crossings(t, theta, level, 0.05 * span)
@@ -181,17 +207,20 @@ def _estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, harmonic
         sel = (t >= cross[0]) & (t <= cross[-1])
         level = 0.5 * (float(theta[sel].max()) + float(theta[sel].min()))
         cross = _crossings(t, theta, level, 0.05 * span)
-    if cross.size < 7:
-        return PoseEstimate(False, reason=f"only {max(cross.size - 1, 0)} half-swings: at least 6 are needed to "
-                            "estimate the camera yaw")
+    return cross
+
+
+def _symmetric_swing(t: np.ndarray, cross: np.ndarray,
+                     harmonics: tuple[int, ...]) -> tuple[np.ndarray, sparse.csr_array, sparse.csr_array]:
+    """(the samples used, the design matrix of a symmetric swing over them, its slow zero level's columns): the
+    harmonics of the phase through the crossings, with amplitudes and the zero level as B-splines in time."""
     period = 2.0 * float(np.median(np.diff(cross)))
     k = np.arange(cross.size) * math.pi
     tn = (cross - cross[0]) / max(cross[-1] - cross[0], 1e-9)
-    deg = min(3, cross.size - 2)
-    phase_poly = np.polyfit(tn, k, deg)
+    phase_poly = np.polyfit(tn, k, min(3, cross.size - 2))
     t0, t1 = cross[0] - 0.25 * period, cross[-1] + 0.25 * period
     use = (t >= t0) & (t <= t1)
-    tu, xu = t[use], x[use]
+    tu = t[use]
     phi_t = np.polyval(phase_poly, (tu - cross[0]) / max(cross[-1] - cross[0], 1e-9))
     amp_basis = _bspline_basis(tu, t0, t1, 2.0 * period)
     dc_basis = _bspline_basis(tu, t0, t1, 3.0 * period)
@@ -199,53 +228,56 @@ def _estimate_yaw(t: np.ndarray, x: np.ndarray, marker: MarkerGeometry, harmonic
     for h in harmonics:
         cols.append(amp_basis.multiply(np.cos(h * phi_t)[:, None]))
         cols.append(amp_basis.multiply(np.sin(h * phi_t)[:, None]))
-    M = sparse.csr_array(sparse.hstack(cols, format="csr"))
-    # Variable projection: the symmetric-swing coefficients are linear, so they are projected out
-    # (factorised once per set of samples) and only the yaw is iterated.
-    keep = np.ones(tu.size, dtype=bool)
-    fit = _LeastSquares(M)
-    iterations = 0
-    residual = np.zeros(tu.size)
-    curvature = math.nan
-    for outer in range(3):  # the rest angle changes L a little: refine it
+    return use, sparse.csr_array(sparse.hstack(cols, format="csr")), dc_basis
+
+
+class _YawFit:
+    """The yaw's Gauss–Newton steps with the symmetric swing projected out: the yaw and rest angle so far, the
+    samples kept (glitches dropped once), the last residual and the curvature of the yaw's misfit."""
+
+    def __init__(self, xu: np.ndarray, marker: MarkerGeometry, M: sparse.csr_array):
+        self.xu, self.marker, self.M = xu, marker, M
+        self.yaw = self.rest = 0.0
+        self.keep = np.ones(xu.size, dtype=bool)
+        self.fit = _LeastSquares(M)
+        self.residual = np.zeros(xu.size)
+        self.curvature = math.nan
+        self.iterations = 0
+
+    def steps(self, max_iterations: int, outlier_sigma: float | None) -> str | None:
+        """Step the yaw until it settles; outlier_sigma: drop the glitches beyond it on the first residual
+        (None: not this time). Returns why the fit failed, or None."""
         for it in range(max_iterations):
-            iterations += 1
-            th = angle_from_normalised(xu, marker, yaw, rest)[keep]
-            jac = d_angle_d_yaw(xu, marker, yaw, rest)[keep]
+            self.iterations += 1
+            th = angle_from_normalised(self.xu, self.marker, self.yaw, self.rest)[self.keep]
+            jac = d_angle_d_yaw(self.xu, self.marker, self.yaw, self.rest)[self.keep]
             if not (np.isfinite(th).all() and np.isfinite(jac).all()):
-                return PoseEstimate(False, reason="the yaw fit left the cylinder's visible side (diverged)")
-            th_r = fit.residual(th)
-            jac_r = fit.residual(jac)
-            curvature = float(jac_r @ jac_r)
-            if not curvature > 0:
-                return PoseEstimate(False, reason="the swing shows no sign of the camera yaw (amplitude too small)")
-            step = -float(jac_r @ th_r) / curvature
-            yaw += step
-            residual = th_r + step * jac_r
-            if abs(yaw) > 0.5:
-                return PoseEstimate(False, reason="the yaw fit ran away (> 30°): not a yawed camera, or not a swing")
-            if it == 0 and outer == 0:
-                # glitches (a mistracked frame) would pull the fit: drop them once, on the first residual
-                sigma = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
-                if sigma > 0:
-                    good = np.abs(residual - np.median(residual)) <= outlier_sigma * sigma
-                    if not good.all():
-                        keep[np.flatnonzero(keep)[~good]] = False
-                        fit = _LeastSquares(M[keep])
-                        continue
+                return "the yaw fit left the cylinder's visible side (diverged)"
+            th_r = self.fit.residual(th)
+            jac_r = self.fit.residual(jac)
+            self.curvature = float(jac_r @ jac_r)
+            if not self.curvature > 0:
+                return "the swing shows no sign of the camera yaw (amplitude too small)"
+            step = -float(jac_r @ th_r) / self.curvature
+            self.yaw += step
+            self.residual = th_r + step * jac_r
+            if abs(self.yaw) > 0.5:
+                return "the yaw fit ran away (> 30°): not a yawed camera, or not a swing"
+            if it == 0 and outlier_sigma is not None and self._drop_glitches(outlier_sigma):
+                continue
             if abs(step) < 1e-10:
                 break
-        # the zero level of the symmetric fit is the marker's surface angle at rest (relative to the current one)
-        th = angle_from_normalised(xu, marker, yaw, rest)[keep]
-        coef = fit.coefficients(th)
-        dc = dc_basis[keep] @ coef[:dc_basis.shape[1]]
-        shift = float(np.median(dc))
-        rest += shift
-        if abs(shift) < 1e-7:
-            break
-    dof = max(int(keep.sum()) - M.shape[1] - 1, 1)
-    rms = float(np.sqrt(np.sum(residual ** 2) / dof))
-    yaw_std = rms / math.sqrt(curvature)
-    return PoseEstimate(True, yaw=yaw, yaw_std=yaw_std, rest_angle=rest,
-                        axis_distance=axis_distance(marker, rest), swings=int(cross.size - 1), residual_rms=rms,
-                        iterations=iterations)
+        return None
+
+    def _drop_glitches(self, outlier_sigma: float) -> bool:
+        # glitches (a mistracked frame) would pull the fit: dropped once, on the first residual
+        r = self.residual
+        sigma = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+        if not sigma > 0:
+            return False
+        good = np.abs(r - np.median(r)) <= outlier_sigma * sigma
+        if good.all():
+            return False
+        self.keep[np.flatnonzero(self.keep)[~good]] = False
+        self.fit = _LeastSquares(self.M[self.keep])
+        return True

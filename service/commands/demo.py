@@ -245,9 +245,11 @@ def _measure_part(app, watch: _Watch) -> bool:
 
 def _print_result(app, m) -> None:
     """The last release's report and its error against the simulated truth."""
+    from measurement.reports import result_report
+
     sim = app.devices.sim
     print()
-    print(m.result.report())
+    print(result_report(m.result))
     if m.result.J is not None:
         print(f"true J {sim.inertia:g} kg·m² → error {100 * (m.result.J / sim.inertia - 1):+.4f} %")
     print()

@@ -112,11 +112,13 @@ def _identify(args: argparse.Namespace, rig, fmt: str, helper) -> int:
     if args.candidates is not None:
         candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
     options = Options(discover=not args.no_discover, candidates=candidates)
+    from measurement.reports import joint_report, result_report
+
     if len(traces) > 1:
         from measurement.joint import identify_releases
 
         joint = identify_releases(traces, rig, options)
-        print(joint.to_json() if args.json else joint.report())
+        print(joint.to_json() if args.json else joint_report(joint))
         sys.stdout.flush()
         return 0
     result = identify(traces[0], rig, options)
@@ -124,7 +126,7 @@ def _identify(args: argparse.Namespace, rig, fmt: str, helper) -> int:
     if args.json:
         sys.stdout.write(result.to_json() + "\n")
     else:
-        print(result.report())
+        print(result_report(result))
     sys.stdout.flush()
     if args.plot:
         from service.publish.plot import render

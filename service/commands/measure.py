@@ -338,7 +338,9 @@ def _print_result(results: list, seq, last, as_json: bool, truth: dict | None = 
         d = m.to_dict() | ({"truth": truth} if truth is not None else {})
         sys.stdout.write(json.dumps(d, ensure_ascii=False, allow_nan=False) + "\n")
     else:
-        print(m.result.report())
+        from measurement.reports import result_report
+
+        print(result_report(m.result))
     return 0
 
 

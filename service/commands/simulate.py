@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import math
 
-from measurement.effects import EFFECTS, Effect
+from measurement.effect_base import Effect
+from measurement.effects import EFFECTS
 from measurement.errors import InvalidInput, UnknownEffectError
 from service.sources.files import read_rig, write_text_atomic
 

@@ -34,7 +34,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def read_plan_file(path: str | Path) -> tuple[Any, Any, list[list[Path]]]:
     """The plan, the rig and each orientation's trace paths, all checked (nothing identified yet)."""
-    from measurement.tensor import RigShared, TensorPlan
+    from measurement.tensor import TensorPlan
+    from measurement.tensor_inputs import RigShared
 
     path = Path(path)
     doc = read_toml(path, "tensor plan")
@@ -70,10 +71,11 @@ def run(args: argparse.Namespace) -> int:
     plan, rig, traces = read_plan_file(args.plan)
 
     from measurement import identify
+    from measurement.reports import tensor_report
     from measurement.tensor import solve_results
     from service.sources.dispatch import load_source
 
-    results = [[identify(load_source(p, rig=rig), rig).to_dict() for p in paths] for paths in traces]
+    results = [[identify(load_source(p, rig=rig), rig) for p in paths] for paths in traces]
     tensor = solve_results(plan, results, rig)
     if args.json:
         d = tensor.to_dict()
@@ -82,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
         import json
         sys.stdout.write(json.dumps(d, ensure_ascii=False, allow_nan=False) + "\n")
     else:
-        print(tensor.report())
+        print(tensor_report(tensor))
     sys.stdout.flush()
     if args.plot:
         from service.publish.plot import render_tensor_png

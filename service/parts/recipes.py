@@ -85,7 +85,8 @@ from typing import Any, Mapping
 
 from measurement import Rig
 from measurement.errors import InvalidInput
-from measurement.tensor import RigShared, TensorPlan
+from measurement.tensor import TensorPlan
+from measurement.tensor_inputs import RigShared
 from measurement.units import inertia_unit
 from measurement.verdict import RULES, QualityRules, Specification
 from service.errors import ConfigError

@@ -21,8 +21,10 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from measurement.errors import InvalidInput
+from measurement.result import IdentificationResult
 from measurement.rig import Rig
-from measurement.tensor import AxisReading, RigShared, TensorResult, axis_reading, solve
+from measurement.tensor import TensorResult, solve
+from measurement.tensor_inputs import AxisReading, RigShared, axis_reading
 from service.errors import ServiceError
 
 log = logging.getLogger("moi.tensor_set")
@@ -38,7 +40,7 @@ class SetError(ServiceError, InvalidInput):
 
 @dataclass
 class _Step:
-    results: list[dict[str, Any]] = field(default_factory=list)
+    results: list[IdentificationResult] = field(default_factory=list)
     measurements: list[str] = field(default_factory=list)
     skipped: bool = False
     redone: int = 0
@@ -103,7 +105,7 @@ class TensorSet:
                 f"release {len(step.results) + 1} of {self.recipe.releases}")
 
     # -- what happens -----------------------------------------------------------------------------
-    def release(self, result: Mapping[str, Any], measurement_id: str) -> dict[str, Any]:
+    def release(self, result: IdentificationResult, measurement_id: str) -> dict[str, Any]:
         """Count one stored release for the current orientation; returns the payload's ``set`` entry
         (the orientation it counted for, and the progress after it)."""
         if self.done:
@@ -111,7 +113,7 @@ class TensorSet:
         index = self.current
         step = self.steps[index]
         self._undo = (index, self.status, self.result, self.error)
-        step.results.append(dict(result))
+        step.results.append(result)
         step.measurements.append(measurement_id)
         counted = {"orientation": self.plan.orientations[index].name, "index": index + 1,
                    "release": len(step.results), "of": self.recipe.releases}

@@ -16,6 +16,7 @@ from typing import Any, Mapping
 
 from measurement import Rig
 from measurement.errors import MeasurementError
+from measurement.result import IdentificationResult
 from measurement.uncertainty import check_standard
 from measurement.verdict import Reading, combine, judge_release
 from service.parts.outcome import PartOutcome, PartSummary, ReleaseOutcome
@@ -71,7 +72,7 @@ class PartTracker:
         return {"uuid": o.uuid, "part_id": o.part_id, "recipe": o.recipe.name, "done": len(o.readings),
                 "of": o.recipe.releases}
 
-    def release(self, result: Mapping[str, Any], measurement_id: str, part_id: str | None,
+    def release(self, result: IdentificationResult, measurement_id: str, part_id: str | None,
                 recipe: Recipe | None, identified: Any = None, rig: Rig | None = None) -> PartOutcome:
         """Count one release; returns what its payload adds (the part's verdict once it is complete).
 

@@ -127,6 +127,7 @@ _NEXT_SCHEMA: dict[int, dict[str, Any]] = {
     5: {},  # schema 6: keys added inside model_form.segments only (t_free, ...), which from_dict defaults
     6: {"periods": None},  # schema 7: the periods and g, none computed before; warnings, omega_n_from and
     #                         omega_n_effects, which from_dict derives from the flags and effects
+    7: {},  # schema 8: J_std_calibration and J_std_model removed (lines of the budget), which from_dict does not read
 }
 
 

@@ -18,6 +18,7 @@ from drivers.simrig import SimRig
 from drivers.solenoid import Solenoid
 from firmware_host import Sequencer, SequencerConfig, State
 from measurement import Pendulum, Rig
+from measurement.reports import result_report
 
 SCALE = 5.0
 MAX_ON = 0.5
@@ -83,7 +84,7 @@ def test_end_to_end_push_button_measurement_finds_J_within_0_2_percent(rigged):
     assert last is not None and r.path() == ["ARMED", "RELEASING", "CAPTURING", "IDENTIFYING", "PUBLISHING", "IDLE"]
     (m,) = r.results
     assert m.requested_by == "button"
-    assert abs(m.result.J / truth.inertia - 1) < 0.002, m.result.report()
+    assert abs(m.result.J / truth.inertia - 1) < 0.002, result_report(m.result)
     enc = m.result.acquisition["encoder"]
     assert enc["samples"] - enc.get("outside_window", 0) == len(m.trace)
     # nothing lost or garbled on this link: a time-out is only ever a reply a busy host let come late
@@ -99,7 +100,7 @@ def test_lossy_bus_5_percent_dropped_1_percent_crc_still_within_0_2_percent_and_
     r.seq.run_until_settled(timeout=200.0)
     assert r.path()[-1] == "IDLE", r.seq.last_fault
     (m,) = r.results
-    assert abs(m.result.J / truth.inertia - 1) < 0.002, m.result.report()
+    assert abs(m.result.J / truth.inertia - 1) < 0.002, result_report(m.result)
     enc = m.result.acquisition["encoder"]
     wire = r.server.counts
     assert enc["timeouts"] > 0 and enc["crc_errors"] > 0
@@ -110,7 +111,7 @@ def test_lossy_bus_5_percent_dropped_1_percent_crc_still_within_0_2_percent_and_
     assert wire["corrupted"] - stale - 1 <= enc["crc_errors"] <= wire["corrupted"] + 1
     assert 0.02 < (enc["errors"] - stale) / enc["requests"] < 0.12
     assert "encoder_errors" in m.result.flags
-    assert "encoder" in m.result.report() and "crc_errors" in m.result.to_json()
+    assert "encoder" in result_report(m.result) and "crc_errors" in m.result.to_json()
     r.assert_solenoid_safe()
 
 

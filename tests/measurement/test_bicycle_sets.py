@@ -26,6 +26,7 @@ import pytest
 
 from measurement import flags as F
 from measurement.joint import CONSISTENT_P, OWN_PAIR_Z, JointResult, identify_releases
+from measurement.reports import joint_report
 from measurement.result import IdentificationResult
 from service.sources.dispatch import load_source
 from service.sources.files import read_rig
@@ -81,7 +82,7 @@ def test_releases_apart_beyond_their_stated_u_are_flagged_with_the_two_named(par
     assert c["own_pairwise_max"] == pytest.approx(z)
     assert (F.RELEASES_DISAGREE in j.flags) == (z > OWN_PAIR_Z or c["p"] < CONSISTENT_P), (z, c["p"], j.flags)
     if z > OWN_PAIR_Z:
-        report = j.report()
+        report = joint_report(j)
         assert f"{a} and {b} are {z:.1f} u apart" in report or f"{b} and {a} are {z:.1f} u apart" in report
     # the wheel hung from its rim: its releases are 0.35 % apart, and its rates say so; its integrated angles
     # hold less well across their records (the 2nd's first half moves by 0.006 rad/s without its first

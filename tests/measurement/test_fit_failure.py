@@ -20,6 +20,7 @@ from measurement.identification.options import Options
 from measurement.identification.preparation import prepare
 from measurement.identification.starts import contains, keep_nested_order, nested_start
 from measurement.model import Model
+from measurement.reports import result_report
 from measurement.verdict import INVALID, QualityRules, Reading, Specification, judge_release
 
 from .reference import reference_motion
@@ -65,8 +66,8 @@ def test_a_refit_that_slips_a_cycle_after_the_outliers_left_is_not_reported(monk
     monkeypatch.setattr(pipeline, "fit_model", slipping)  # the refit after the glitches left
     monkeypatch.setattr(pipeline, "remove_outliers", one_glitch)
     r = identify(_trace(coulomb=0.05), RIG)
-    assert r.residual_rms < 3 * r.noise_floor, r.report()
-    assert r.J is not None and abs(r.J / INERTIA - 1) < 1e-3, r.report()
+    assert r.residual_rms < 3 * r.noise_floor, result_report(r)
+    assert r.J is not None and abs(r.J / INERTIA - 1) < 1e-3, result_report(r)
     assert "coulomb" in r.effects  # refitted from the declared model's values, the effect is kept
     assert not {"fit_not_converged", "unmodeled_residual"} & set(r.flags), r.flags
     assert any("worse than the model it contains" in s for s in r.structure), r.structure
@@ -111,19 +112,19 @@ def test_a_fit_that_does_not_follow_the_swing_is_flagged_and_invalid(monkeypatch
     monkeypatch.setattr(pipeline, "fit_model", slipping)  # the declared model's first fit
     rig = Rig(kind="torsion", stiffness=STIFFNESS, declared=("viscous", "quadratic"))
     r = identify(_trace(), rig, Options(discover=False))
-    assert r.residual_rms > 0.1 * 0.29, r.report()  # the forced start did slip
-    assert "fit_not_converged" in r.flags, (r.flags, r.report())
+    assert r.residual_rms > 0.1 * 0.29, result_report(r)  # the forced start did slip
+    assert "fit_not_converged" in r.flags, (r.flags, result_report(r))
     assert "unmodeled_residual" not in r.flags
     assert any("does not follow the swing" in s for s in r.structure), r.structure
     # the report's first lines do not say "converged: True" over it
-    assert "converged: no (flag fit_not_converged: do not use this J)" in r.report().splitlines()[1]
+    assert "converged: no (flag fit_not_converged: do not use this J)" in result_report(r).splitlines()[1]
     spec = Specification.symmetric("J", INERTIA, 0.01 * INERTIA)
-    d = judge_release(Reading.from_result(r.to_dict(), "J"), spec, QualityRules())
+    d = judge_release(Reading.from_result(r, "J"), spec, QualityRules())
     assert d.verdict == INVALID and any("fit_not_converged" in why for why in d.reasons), d
 
 
 @pytest.mark.parametrize("coulomb", [0.0, 0.05])
 def test_a_sound_fit_follows_the_swing_and_keeps_its_model(coulomb):
     r = identify(_trace(coulomb=coulomb), RIG)
-    assert "fit_not_converged" not in r.flags and r.J is not None and abs(r.J / INERTIA - 1) < 1e-3, r.report()
+    assert "fit_not_converged" not in r.flags and r.J is not None and abs(r.J / INERTIA - 1) < 1e-3, result_report(r)
     assert not any("worse than the model it contains" in s for s in r.structure)

@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 
 from measurement import Options, Pendulum, Rig, identify, simulate_trace
+from measurement.reports import result_report
 from measurement.result import IdentificationResult
 from service.sources.dispatch import load_source
 from service.sources.files import read_rig
@@ -48,7 +49,7 @@ def test_a_release_whose_discovered_omega_n_is_less_accurate_reads_the_declared_
     assert rival.effects == plain.effects and rival.omega_n == plain.omega_n
     assert abs(plain.omega_n - focused.omega_n) <= focused.omega_n_u
     assert any(s.startswith("ω_n is read from the declared model") for s in focused.structure)
-    assert "ω_n from     = the declared model" in focused.report()
+    assert "ω_n from     = the declared model" in result_report(focused)
     back = IdentificationResult.from_dict(focused.to_dict())
     assert back.omega_n_from == "declared" and back.omega_n_effects == focused.omega_n_effects
 

@@ -7,6 +7,7 @@ import pytest
 
 from measurement import Options, Pendulum, Rig, Trace, identify, simulate_trace
 from measurement.errors import TraceError
+from measurement.reports import result_report
 
 from .reference import reference_motion, sensor
 
@@ -68,7 +69,7 @@ def test_result_object_is_complete_and_serialisable():
     assert d["J_object"] == pytest.approx(d["J"] - 4.5043e-3)
     assert d["damping"]["viscous"]["c"]["unit"] == "N·m·s/rad"
     assert d["damping_ratio"] == pytest.approx(1.5e-4 / 0.0125 / (2 * r.omega_n), rel=1e-3)
-    assert "J" in r.report() and "kg·m²" in r.report()
+    assert "J" in result_report(r) and "kg·m²" in result_report(r)
 
 
 def test_parallel_axis_transfer():

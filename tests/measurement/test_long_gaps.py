@@ -15,6 +15,7 @@ import pytest
 
 from measurement import Rig, identify
 from measurement.model import Model
+from measurement.reports import result_report
 from measurement.signal import MAX_GRID_PER_SAMPLE, resample_uniform
 from measurement.trace import Trace
 
@@ -81,7 +82,7 @@ def test_a_record_of_bursts_between_silences_does_not_start_the_fit_a_cycle_off(
     y[after] = reference_motion("torsion", omega_n, np.concatenate([[release], t[after]]), 0.25,
                                 viscous=c / inertia)[1:]
     r = identify(Trace(t, y + rng.normal(0, 5e-5, t.size)), rig)
-    assert r.J is not None and abs(r.J / inertia - 1) < 0.002, r.report()
+    assert r.J is not None and abs(r.J / inertia - 1) < 0.002, result_report(r)
 
 
 def test_a_trial_model_that_runs_away_gives_nan_instead_of_integrating_forever():
@@ -118,7 +119,7 @@ def test_a_record_mostly_of_silences_finds_the_swing_not_an_alias_of_the_samplin
     rig = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
     trace, inertia = _released_in_bursts(seed, 0.85)
     r = identify(trace, rig)
-    assert r.J is not None and abs(r.J / inertia - 1) < 0.002, r.report()
+    assert r.J is not None and abs(r.J / inertia - 1) < 0.002, result_report(r)
 
 
 def test_rival_frequencies_fits_each_comparable_peak_and_keeps_the_best():
@@ -162,7 +163,7 @@ def test_a_swing_sampled_once_a_period_cannot_be_told_from_its_alias_and_says_so
     f, fs = omega_n / (2 * math.pi), 1.0 / period
     aliases = [2 * math.pi * abs(f + k * fs) for k in (-2, -1, 1)]
     named = [r.omega_n] + [cc.omega_n for cc in r.model_form.competitors]
-    assert "model_ambiguous" in r.flags, r.report()
+    assert "model_ambiguous" in r.flags, result_report(r)
     assert any(abs(w / omega_n - 1) < 1e-3 for w in named)  # the swing is the kept fit or a named rival
     assert sum(any(abs(w / a - 1) < 1e-3 for w in named) for a in aliases) >= 2  # and so are its aliases
-    assert r.omega_n_u is not None and abs(r.omega_n - omega_n) <= 2 * r.omega_n_u, r.report()
+    assert r.omega_n_u is not None and abs(r.omega_n - omega_n) <= 2 * r.omega_n_u, result_report(r)

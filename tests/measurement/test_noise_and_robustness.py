@@ -7,6 +7,7 @@ import pytest
 
 from measurement import Pendulum, Rig, Trace, identify, quantise, simulate_trace
 from measurement.noise import fit_noise, ljung_box
+from measurement.reports import result_report
 
 from .reference import reference_motion, sensor
 
@@ -47,7 +48,7 @@ def test_coloured_quantised_noise_adds_no_effect_and_widens_J_std():
         rng = np.random.default_rng(seed)
         y = quantise(theta + ar1(rng, t.size, 2e-4), 17)
         r = identify(Trace(t, y, source="coloured"), rig)
-        assert r.added_effects == (), r.report()
+        assert r.added_effects == (), result_report(r)
         assert r.statistics["covariance"].startswith("ar(") and r.statistics["noise_model_order"] >= 1
         assert "correlated_residual" in r.flags and "unmodeled_residual" not in r.flags  # colour is not structure
         assert r.J is not None and r.J_std is not None and abs(r.J / J - 1) < 4 * r.J_std / J

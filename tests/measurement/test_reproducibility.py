@@ -8,6 +8,7 @@ import math
 import pytest
 
 from measurement import Options, Pendulum, Rig, identify, simulate_trace
+from measurement.reports import result_report
 from measurement.reproducibility import DEFAULT, HISTORY, ReproducibilityError, pooled
 from measurement.result import IdentificationResult
 from measurement.uncertainty import PendulumInputs
@@ -80,12 +81,12 @@ def test_one_release_says_reproducibility_is_not_known_and_a_history_counts():
     rig, trace = _release()
     alone = identify(trace, rig, Options(discover=False))
     assert alone.reproducibility == DEFAULT
-    assert "reproducibility: not known from one release" in alone.report()
+    assert "reproducibility: not known from one release" in result_report(alone)
     back = IdentificationResult.from_dict(alone.to_dict())
     assert back.reproducibility == DEFAULT
     history = pooled([[0.0170, 0.01702, 0.01698], [0.0125, 0.01251, 0.01249]], power=-2)
     known = identify(trace, rig, Options(discover=False, reproducibility=history))
     assert known.uncertainty_budget["J"].u > alone.uncertainty_budget["J"].u
     assert known.J == alone.J
-    assert "between releases" in known.report() and ": in u" in known.report()
+    assert "between releases" in result_report(known) and ": in u" in result_report(known)
     assert known.to_dict()["reproducibility"]["relative"] == pytest.approx(history.relative)

@@ -11,9 +11,12 @@ from measurement import flags as F
 from measurement import identify
 from measurement import tensor as TS
 from measurement.errors import TensorError
+from measurement.reports import tensor_report
 from measurement.rig import Rig
 from measurement.simulate import BRACKET, RigidBody, simulate_set
-from measurement.tensor import AxisReading, Orientation, RigShared, TensorPlan
+from measurement.tensor import Orientation, TensorPlan
+from measurement.tensor_inputs import AxisReading, RigShared, axis_reading
+from tests.judged import judged
 
 #: the truth: the example bracket (products of inertia of both signs, principal moments well apart)
 TRUTH = np.array(BRACKET.tensor)
@@ -26,7 +29,7 @@ OFFSETS = {"x": (0.0, 0.03, -0.02), "xz": (0.01, 0.025, 0.0), "x-y-z": (0.02, -0
 def simulated_results(plan: TensorPlan, body: RigidBody, seed: int, mounted_axes=None):
     """Each orientation's release identified from a simulated trace of ``body`` on RIG."""
     sets = simulate_set(body, RIG, plan, seed=seed, mounted_axes=mounted_axes)
-    return [[identify(trace, RIG).to_dict() for trace in traces] for traces in sets]
+    return [[identify(trace, RIG) for trace in traces] for traces in sets]
 
 
 def plan_with_offsets(axes, convention="negative"):
@@ -163,20 +166,20 @@ def test_an_invalid_orientation_is_excluded_and_named():
 
 def test_an_invalid_release_is_excluded_by_the_release_pooling():
     shared = RigShared(tare=4.5e-3)
-    good = {"J": 0.0165, "J_std": 1e-6, "J_object": 0.012, "J_object_std": 1e-6, "flags": []}
-    bad = dict(good, J_object=0.013, flags=[F.FIT_NOT_CONVERGED])
-    r = TS.axis_reading([good, bad, good], shared)
+    good = judged({"J": 0.0165, "J_object": 0.012}, 1e-6)
+    bad = judged({"J": 0.0165, "J_object": 0.013}, 1e-6, flags=(F.FIT_NOT_CONVERGED,))
+    r = axis_reading([good, bad, good], shared)
     assert r.value == pytest.approx(0.012) and r.used == (0, 2) and r.excluded[0]["index"] == 1
-    r = TS.axis_reading([bad], shared)
+    r = axis_reading([bad], shared)
     assert r.invalid and "fit_not_converged" in r.invalid
 
 
-def test_the_expanded_U_of_a_result_is_used_when_it_carries_one():
+def test_a_release_counts_with_the_whole_u_of_its_budget():
     shared = RigShared(tare=4.5e-3)
-    plain = {"J": 0.0165, "J_std": 1e-6, "J_object": 0.012, "J_object_std": 1e-6, "flags": []}
-    with_U = dict(plain, J_object_U=8e-6, coverage_factor=2.0)
-    assert TS.axis_reading([plain], shared).u == pytest.approx(1e-6)
-    assert TS.axis_reading([with_U], shared).u == pytest.approx(4e-6)
+    plain = judged({"J": 0.0165, "J_object": 0.012}, 1e-6)
+    with_systematic = judged({"J": 0.0165, "J_object": 0.012}, 1e-6, math.sqrt(15) * 1e-6)
+    assert axis_reading([plain], shared).u == pytest.approx(1e-6)
+    assert axis_reading([with_systematic], shared).u == pytest.approx(4e-6)
 
 
 def test_an_unphysical_tensor_is_flagged():
@@ -232,4 +235,4 @@ def test_the_result_is_plain_json():
         assert key in d, key
     assert len(d["tensor_cov"]) == 6 and set(d["tensor_U"]) == set(TS.COMPONENTS)
     assert {"axis", "J", "u", "fitted", "normalised_residual"} <= set(d["orientations"][0])
-    assert "Ixy" in result.report()
+    assert "Ixy" in tensor_report(result)

@@ -10,9 +10,11 @@ import pytest
 
 from measurement.calibration import Reference, calibrate_torsion
 from measurement.errors import CalibrationError, InvalidInput, RigError
+from measurement.reports import result_report
 from measurement.rig import Rig
 from measurement.uncertainty import Input, PendulumInputs, coverage_factor, evaluate
 from measurement.verdict import INVALID, NOK, OK, QualityRules, Reading, Specification, combine, judge_release
+from tests.judged import judged
 
 DRAWS = 20_000
 
@@ -175,8 +177,7 @@ def test_part_of_three_scattered_releases_gets_students_t_for_two_degrees_of_fre
 
 
 def test_reading_takes_the_budget_of_its_quantity():
-    res = {"J": 0.017, "J_std": 1e-7, "J_object": 0.0125, "flags": [],
-           "uncertainty_budget": {"J_object": {"u_random": 2e-7, "u_systematic": 3e-6, "coverage_factor": 2.1}}}
+    res = judged({"J_object": 0.0125}, 2e-7, 3e-6, coverage_factor=2.1, J=0.017)
     r = Reading.from_result(res, "J_object")
     assert (r.u_random, r.u_systematic, r.coverage_factor) == (2e-7, 3e-6, 2.1)
 
@@ -204,7 +205,7 @@ def test_clock_accuracy_must_be_a_number_of_ppm():
 
 
 def test_a_tensor_set_shares_k_and_the_tare_with_their_correlation():
-    from measurement.tensor import RigShared
+    from measurement.tensor_inputs import RigShared
 
     rig = Rig(kind="torsion", stiffness=0.3651, stiffness_std=3.373e-4, tare_inertia=4.5043e-3,
               tare_inertia_std=4.177e-6, stiffness_tare_covariance=1.4076e-9)
@@ -238,6 +239,6 @@ def test_the_budgets_with_their_correlation_read_back_as_the_json_they_were_writ
     assert r.uncertainty_budget["J_object"].correlations  # the k–I0 term
     text = r.to_json()
     back = IdentificationResult.from_dict(json.loads(text))
-    assert back.to_json() == text and back.report() == r.report()
+    assert back.to_json() == text and result_report(back) == result_report(r)
     assert back.uncertainty_budget["J_object"].U == r.uncertainty_budget["J_object"].U
     assert back.uncertainty_budget["J"].lines == r.uncertainty_budget["J"].lines

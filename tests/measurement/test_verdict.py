@@ -18,6 +18,7 @@ from measurement.verdict import (
     decide,
     judge_release,
 )
+from tests.judged import judged
 
 SPEC = Specification.symmetric("J", 0.0125, 0.0001)  # 0.0124 … 0.0126 kg·m², guard band, k = 2
 
@@ -65,14 +66,18 @@ def test_a_release_is_invalid_for_a_recipe_flag_a_large_std_or_too_few_swings():
     assert judge_release(Reading(None, None), SPEC, rules).verdict == INVALID
 
 
-def test_reading_splits_calibration_and_tare_from_the_fit_uncertainty():
-    result = {"J": 0.0170, "J_std": 3e-6, "J_std_calibration": 4e-6, "J_object": 0.0125, "J_object_std": 5e-6,
-              "omega_n": 4.6, "window": {"t_start": 0.1, "t_stop": 10.1}, "flags": ["calibration_due"]}
+def test_reading_takes_the_random_and_systematic_parts_of_its_quantitys_budget():
+    result = judged({"J": 0.0170, "J_object": 0.0125}, 3e-6, 5e-6, flags=("calibration_due",), coverage_factor=2.2,
+                    omega_n=4.6, window={"t_start": 0.1, "t_stop": 10.1})
     r = Reading.from_result(result, "J_object")
-    assert r.value == 0.0125 and r.u_random == 3e-6
-    assert r.u_systematic == pytest.approx(math.hypot(4e-6, 4e-6))  # tare 1σ = √(5² − 3²) µ = 4 µ
+    assert (r.value, r.u_random, r.u_systematic, r.coverage_factor) == (0.0125, 3e-6, 5e-6, 2.2)
     assert r.swings == pytest.approx(4.6 * 10 / (2 * math.pi)) and r.flags == ("calibration_due",)
-    assert Reading.from_result(result, "J").u_systematic == pytest.approx(4e-6)
+    assert Reading.from_result(result, "J").value == 0.0170
+    # no value (a rig without an [object]), or a value without a budget: nothing a verdict can use
+    assert Reading.from_result(result, "J_object_axis").value is None
+    unbudgeted = Reading.from_result(judged({}, 1e-6, J=0.017), "J")
+    assert unbudgeted.value == 0.017 and unbudgeted.u_random is None
+    assert judge_release(unbudgeted, SPEC, QualityRules()).verdict == INVALID
 
 
 def test_three_agreeing_releases_combine_with_type_a_std_of_the_mean():
@@ -114,8 +119,8 @@ def test_invalid_releases_are_excluded_and_too_few_usable_make_the_part_invalid(
 
 def test_a_release_whose_model_does_not_hold_counts_for_less():
     # the release's model-form term joins its fit σ as random; the part weighs each release by it
-    held = {"J": 0.012500, "J_std": 1e-6, "J_std_model": 0.0, "flags": []}
-    loose = {"J": 0.012508, "J_std": 1e-6, "J_std_model": 8e-6, "flags": ["halves_disagree"]}
+    held = judged({"J": 0.012500}, 1e-6)
+    loose = judged({"J": 0.012508}, math.hypot(1e-6, 8e-6), flags=("halves_disagree",))
     r = Reading.from_result(loose, "J")
     assert r.u_random == pytest.approx(math.hypot(1e-6, 8e-6))
     part = combine([Reading.from_result(held, "J"), r], SPEC, QualityRules())

@@ -13,6 +13,7 @@ from measurement.errors import RigError
 from measurement.flags import warnings
 from measurement.identification.options import Options
 from measurement.identification.pipeline import identify
+from measurement.reports import result_report
 from measurement.restoring import amplitude_factor
 from measurement.rig import Rig
 from measurement.simulate import Pendulum, simulate_trace
@@ -144,4 +145,4 @@ def test_the_budget_takes_the_geometry_and_a_rig_without_mass_gives_omega_n():
     bare = Rig.from_dict({"rig": {k: v for k, v in RIGS["bifilar"].items() if k != "mass"}})
     r_bare = identify(trace, bare, Options())
     assert r_bare.J is None and r_bare.omega_n == pytest.approx(r.omega_n, rel=1e-9)
-    assert "mass (bifilar, trifilar)" in r_bare.report()
+    assert "mass (bifilar, trifilar)" in result_report(r_bare)

@@ -6,6 +6,7 @@ import pytest
 from measurement import identify
 from measurement.effects import candidate_effects
 from measurement.errors import RigError, VisionError
+from measurement.reports import result_report
 from measurement.rig import Rig
 from measurement.simulate import Pendulum, simulate_trace
 from measurement.vision.marker_pair import MarkerTrack, measure_view, pair_angle, pair_trace, parse_marker_csv
@@ -159,7 +160,7 @@ def test_the_views_uncertainty_is_carried_into_omega_n():
     view = measure_view(a, b)
     r = identify(pair_trace(track, view), CALIBRATED)
     assert r.omega_n_std_calibration is not None and r.omega_n_std_calibration > 0
-    assert "the camera view's calibration adds" in r.report()
+    assert "the camera view's calibration adds" in result_report(r)
     assert r.to_dict()["omega_n_std_calibration"] == r.omega_n_std_calibration
     # against refits with the view moved by its 1σ (stretch, then shear)
     s = np.array(view.matrix).reshape(2, 2)

@@ -16,6 +16,7 @@ from service.errors import ConfigError
 from service.parts.recipes import RecipeBook, RecipeError, load_recipe
 from service.publish.modbus import registers as R
 from service.publish.replies import REASONS
+from tests.judged import judged
 from tests.service.conftest import appliance_doc, wait_until
 from tests.service.publish.modbus.test_service_plc_handshake import bit, image
 from tests.service.publish.modbus.test_service_plc_handshake import write as write_register
@@ -192,7 +193,7 @@ def test_nok_guard_band_calibration_due_and_invalid_each_reached(tmp_path, recip
     assert abs(part["mean"] - spec["nominal"]) <= spec["upper"] - spec["nominal"]
     assert decide(part["mean"], part["u_c"], Specification("J", spec["nominal"], spec["lower"], spec["upper"],
                                                            rule="simple")).verdict == "OK"
-    assert part["U"] == pytest.approx(2 * math.hypot(p["J_std_calibration"], max(part["u_fit"], 0)), rel=1e-6)
+    assert part["U"] == pytest.approx(2 * math.hypot(p["uncertainty_budget"]["J"]["u_systematic"], max(part["u_fit"], 0)), rel=1e-6)
     # the expired calibration: flagged in the payload and the Modbus flags; this recipe ignores it
     assert "calibration_due" in p["flags"] and p["calibration"]["due"] is True
     assert p["flag_bits"] & (1 << F.FLAG_BITS["calibration_due"])
@@ -319,7 +320,7 @@ def test_the_part_tracker_counts_releases_reports_an_abandoned_part_and_forgets_
     d = tmp_path / "recipes"
     write(d / "r.toml", recipe("r", 1, J_TRUE, tolerance_percent=1.0, releases=2))
     tracker = PartTracker(RecipeBook.load(d), "r")
-    result = {"J": J_TRUE, "J_std": 1e-7, "flags": [], "omega_n": 5.4, "window": {"t_start": 0.0, "t_stop": 10.0}}
+    result = judged({"J": J_TRUE}, 1e-7, omega_n=5.4, window={"t_start": 0.0, "t_stop": 10.0})
     r = tracker.recipe
     first = tracker.release(result, "m1", "A", r)
     assert first.release is not None and first.release.index == 1 and first.verdict is None and (tracker.open_part or {}).get("done") == 1
@@ -351,7 +352,7 @@ def test_a_release_under_a_tensor_recipe_is_not_judged_and_ends_the_open_part(tm
     write(d / "t.toml", recipe_text(1))
     book = RecipeBook.load(d)
     tracker = PartTracker(book, "r")
-    result = {"J": J_TRUE, "J_std": 1e-7, "flags": [], "omega_n": 5.4, "window": {"t_start": 0.0, "t_stop": 10.0}}
+    result = judged({"J": J_TRUE}, 1e-7, omega_n=5.4, window={"t_start": 0.0, "t_stop": 10.0})
     tracker.release(result, "m1", "A", tracker.recipe)
     assert (tracker.open_part or {}).get("done") == 1
     tensor = next(r for r in book.recipes if r.spec is None)
