@@ -3,18 +3,19 @@
 Threads and who owns what:
 
 * the main loop (``Appliance.run``, the caller's thread) polls the sequencer
-  every ``poll_interval`` s, executes the commands queued by the button, the
-  Modbus coils and MQTT, refreshes the live Modbus registers and pings the
-  systemd watchdog, only after an iteration that completed (a hung loop
-  therefore gets the daemon restarted by systemd);
+  every ``poll_interval`` s, executes the commands queued by the button and
+  every publisher's door (``service.dispatch``), refreshes the live status
+  every publisher gets and pings the systemd watchdog, only after an iteration
+  that completed (a hung loop therefore gets the daemon restarted by systemd);
 * the sequencer calls back on the main loop's thread: state events (handed to
-  every publisher) and the result sink, which stores the measurement and its
-  outbox rows in one SQLite transaction, then hands the stored result to every
-  publisher (the Modbus snapshot swaps, the outbox sender wakes, the web page
-  draws its plot); nothing is published before the store has it;
-* the publishers (``service.publish.port``: Modbus, MQTT, the web page) run in
-  their own threads and only enqueue commands / acknowledgements; the daemon
-  holds them in a list and never names one.
+  every publisher) and the result sink (``service.recording``), which judges
+  the release for its part, stores the measurement and its outbox rows in one
+  SQLite transaction, then hands the stored result to every publisher; nothing
+  is published before the store has it;
+* the publishers (``service.publish.port``; the registry,
+  ``service.publish.registry``, lists them) run in their own threads and only
+  enqueue commands / acknowledgements; the daemon holds them in a list and
+  never names one but to hand a test or a tool the running one by its name.
 
 Only ``run``'s loop catches broadly: an unexpected error becomes a FAULT of
 the sequencer (solenoid off), published like any state; a component thread

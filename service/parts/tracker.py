@@ -12,7 +12,7 @@ import dataclasses
 import logging
 import uuid as uuidlib
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 from measurement import Rig
 from measurement.errors import MeasurementError
