@@ -11,7 +11,8 @@
 3. The residual's noise model (``noise.fit_noise``, AR(p) with the order
    chosen by the data) gives the likelihood (BIC) and the covariance: the
    sandwich with the AR covariance, which reduces to s²·(JᵀJ)⁻¹ when the
-   residual is white. No parameter's variance is taken below what the
+   residual is white. The uncertainty stated (``with_score_floor``, once
+   the models are chosen) takes no parameter's variance below what the
    record's own scores say, summed over stretches of a few swings (batch
    means, ``score_variance``): noise that sits where the information lies
    (time-stamp jitter errs by θ'·δt, largest at the zero crossings that date
@@ -21,7 +22,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
@@ -40,7 +41,7 @@ SCORE_BLOCKS = 16
 #: the largest correlation between neighbouring stretches' influences credited: σ at most 3× the batch means'
 MAX_BLOCK_CORRELATION = 0.8
 
-__all__ = ["ModelFit", "fit_model"]
+__all__ = ["ModelFit", "fit_model", "with_score_floor"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -299,7 +300,7 @@ def _outcome(sim: _Simulation, sol: OptimizeResult, scales: np.ndarray, f_scale:
     J = sim.jac(x)
     effective, weight = robust_residual(residual, f_scale)
     noise = fit_noise(effective)
-    cov, method, inflation = covariance(J * np.sqrt(weight)[:, None], effective, scales, noise, t=sim.t)
+    cov, method, inflation = covariance(J * np.sqrt(weight)[:, None], effective, scales, noise)
     lo, hi = model.bounds()
     tol = 1e-9 * scales
     at_bound = tuple(n for n, v, l, u, s in zip(model.names, x, lo, hi, tol)
@@ -313,6 +314,17 @@ def _outcome(sim: _Simulation, sol: OptimizeResult, scales: np.ndarray, f_scale:
         # the true swing at x (rad, rad/s); what the starting values read from (t, y), for the next model
         extra={"theta": theta, "omega": omega, "smoothed": smoothed},
     )
+
+
+def with_score_floor(fit: ModelFit) -> ModelFit:
+    """``fit`` with no parameter's variance below what its record's own scores say (``score_variance``).
+
+    For the uncertainty stated, once the models are chosen: the choices weigh models by the noise
+    model's σ, which a record's structure left unmodelled would otherwise inflate and so steer.
+    """
+    effective, weight = robust_residual(fit.residual, fit.f_scale)
+    cov, method, inflation = covariance(fit.jac * np.sqrt(weight)[:, None], effective, fit.scales, fit.noise, t=fit.t)
+    return replace(fit, cov=cov, cov_method=method, cov_inflation=inflation)
 
 
 def swing_amplitude(fit: ModelFit) -> float:
