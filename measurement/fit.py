@@ -34,7 +34,7 @@ from .noise import NoiseModel, fit_noise
 from .signal import Swings
 from .starting import Smoothed, initial_guess, smooth
 
-#: equal stretches of the record whose summed influences on the parameters estimate their variance
+#: equal stretches of the record, each left out in turn, whose moves of the estimate give its variance
 #: whatever the noise is like (``score_variance``): enough for a variance good to some 35 %, few
 #: enough that each spans a few swings, longer than the wander of a host's time stamps
 SCORE_BLOCKS = 16
@@ -398,7 +398,7 @@ def covariance(J: np.ndarray, residual: np.ndarray, scales: np.ndarray,
     cov, method = white, "white"
     if noise.order > 0:
         cov, method = inv @ _coloured_gram(Js, [(slice(None), noise, k)]) @ inv, f"ar({noise.order})"
-    floor = None if t is None else score_variance(Js, residual, t, inv)
+    floor = None if t is None else score_variance(Js, residual, t)
     if floor is not None:
         q = np.sqrt(np.maximum(floor / np.maximum(np.diag(cov), 1e-300), 1.0))
         cov = cov * np.outer(q, q)
@@ -408,18 +408,17 @@ def covariance(J: np.ndarray, residual: np.ndarray, scales: np.ndarray,
     return cov * np.outer(scales, scales), method, float(np.max(ratios))
 
 
-def score_variance(Js: np.ndarray, residual: np.ndarray, t: np.ndarray, inv: np.ndarray,
-                   blocks: int = SCORE_BLOCKS) -> np.ndarray | None:
-    """Each parameter's variance (in Js's scaling) read from the record's own scores, by batch means.
+def score_variance(Js: np.ndarray, residual: np.ndarray, t: np.ndarray, blocks: int = SCORE_BLOCKS) -> np.ndarray | None:
+    """Each parameter's variance (in Js's scaling) read from the record's own residual, by leaving out
+    one of ``blocks`` equal stretches of time at a time (the linearised jackknife).
 
-    A sample's error moves the estimate by (JᵀJ)⁻¹·Jᵢ·rᵢ. Summed over each of ``blocks`` equal
-    stretches of time, these influences are nearly independent whatever the noise is like where
-    the information lies: a time stamp off by δt errs by θ'·δt, largest at the zero crossings
-    that date the swing, and the wander of a host's stamps lasts seconds, out of reach of an AR
-    model of the residual. Their sum of squares (Σ ψ_b² · B/(B − 1), the fit having made Σ ψ_b
-    zero) is the variance; the correlation left between neighbouring stretches (a wander as long
-    as a stretch) counts as an AR(1)'s long-run variance, (1 + ρ)/(1 − ρ), ρ at most
-    ``MAX_BLOCK_CORRELATION``. None when the record is too short for the blocks.
+    Leaving out stretch b moves the estimate by ψ_b = (JᵀJ − J_bᵀJ_b)⁻¹·J_bᵀ·r_b. Over stretches
+    of a few swings these moves are nearly independent whatever the noise is like where the
+    information lies: a time stamp off by δt errs by θ'·δt, largest at the zero crossings that
+    date the swing, and the wander of a host's stamps lasts seconds, out of reach of an AR model
+    of the residual. The variance is (B − 1)/B·Σ ψ_b²; the correlation left between neighbouring
+    stretches (a wander as long as a stretch) counts as an AR(1)'s long-run variance,
+    (1 + ρ)/(1 − ρ), ρ at most ``MAX_BLOCK_CORRELATION``. None when the record is too short.
     """
     n, k = Js.shape
     if n < blocks * max(2 * k, 8):
@@ -427,9 +426,14 @@ def score_variance(Js: np.ndarray, residual: np.ndarray, t: np.ndarray, inv: np.
     edges = np.unique(np.searchsorted(t, t[0] + (t[-1] - t[0]) * np.arange(blocks) / blocks))
     if edges.size < blocks // 2:
         return None
-    psi = np.add.reduceat(Js * residual[:, None], edges, axis=0) @ inv
+    gram = Js.T @ Js
+    bounds = np.append(edges, n)
+    psi = np.empty((edges.size, k))
+    for i, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:])):
+        Jb = Js[lo:hi]
+        # a stretch that alone determines a parameter leaves the rest singular: the least-norm move
+        psi[i] = np.linalg.lstsq(gram - Jb.T @ Jb, Jb.T @ residual[lo:hi], rcond=None)[0]
     b = psi.shape[0]
     power = np.sum(psi**2, axis=0)
-    rho = np.sum(psi[1:] * psi[:-1], axis=0) / np.maximum(power, 1e-300)
-    rho = np.clip(rho, 0.0, MAX_BLOCK_CORRELATION)
-    return power * b / (b - 1) * (1.0 + rho) / (1.0 - rho)
+    rho = np.clip(np.sum(psi[1:] * psi[:-1], axis=0) / np.maximum(power, 1e-300), 0.0, MAX_BLOCK_CORRELATION)
+    return power * (b - 1) / b * (1.0 + rho) / (1.0 - rho)
