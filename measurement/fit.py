@@ -12,9 +12,9 @@
    chosen by the data) gives the likelihood (BIC) and the covariance: the
    sandwich with the AR covariance, which reduces to s²·(JᵀJ)⁻¹ when the
    residual is white. The uncertainty stated (``with_score_floor``, once
-   the models are chosen) takes no parameter's variance below what the
-   record's own scores say, summed over stretches of a few swings (batch
-   means, ``score_variance``): noise that sits where the information lies
+   the models are chosen) takes ω_n's variance no lower than what the
+   record's own residual says, one stretch of a few swings left out at a
+   time (the linearised jackknife, ``score_variance``): noise that sits where the information lies
    (time-stamp jitter errs by θ'·δt, largest at the zero crossings that date
    the swing) or wanders for seconds, which no AR model of the residual sees.
 """
@@ -316,14 +316,17 @@ def _outcome(sim: _Simulation, sol: OptimizeResult, scales: np.ndarray, f_scale:
     )
 
 
-def with_score_floor(fit: ModelFit) -> ModelFit:
-    """``fit`` with no parameter's variance below what its record's own scores say (``score_variance``).
+def with_score_floor(fit: ModelFit, names: Sequence[str] = ("omega_n",)) -> ModelFit:
+    """``fit`` with no variance of ``names`` below what its record's own residual says (``score_variance``).
 
     For the uncertainty stated, once the models are chosen: the choices weigh models by the noise
     model's σ, which a record's structure left unmodelled would otherwise inflate and so steer.
+    ω_n alone by default: the laws of an object are judged across its releases by their
+    parameters' σ, which stay as the noise model has them.
     """
     effective, weight = robust_residual(fit.residual, fit.f_scale)
-    cov, method, inflation = covariance(fit.jac * np.sqrt(weight)[:, None], effective, fit.scales, fit.noise, t=fit.t)
+    cov, method, inflation = covariance(fit.jac * np.sqrt(weight)[:, None], effective, fit.scales, fit.noise,
+                                        t=fit.t, floored=[fit.model.index(n) for n in names])
     return replace(fit, cov=cov, cov_method=method, cov_inflation=inflation)
 
 
@@ -378,14 +381,14 @@ def block_covariance(J: np.ndarray, scales: np.ndarray,
     return (inv @ _coloured_gram(Js, blocks) @ inv) * np.outer(scales, scales)
 
 
-def covariance(J: np.ndarray, residual: np.ndarray, scales: np.ndarray,
-               noise: NoiseModel | None = None, t: np.ndarray | None = None) -> tuple[np.ndarray, str, float]:
+def covariance(J: np.ndarray, residual: np.ndarray, scales: np.ndarray, noise: NoiseModel | None = None,
+               t: np.ndarray | None = None, floored: Sequence[int] = ()) -> tuple[np.ndarray, str, float]:
     """Parameter covariance of the least-squares estimate under the AR noise model.
 
     cov = (JᵀJ)⁻¹·JᵀΣJ·(JᵀJ)⁻¹ with Σ = σ_e²·A⁻¹A⁻ᵀ (``noise``); for white
-    noise this is s²·(JᵀJ)⁻¹. t (s): the samples' times; with them no
-    parameter's variance is taken below its ``score_variance`` (the noise
-    where the information lies). Returns (cov, method, inflation): method
+    noise this is s²·(JᵀJ)⁻¹. t (s): the samples' times; with them the
+    variance of each parameter in ``floored`` (indices) is taken no lower
+    than its ``score_variance`` (the noise where the information lies). Returns (cov, method, inflation): method
     "white" or "ar(p)", inflation the largest ratio of a σ to its white-noise value.
     """
     n, k = J.shape
@@ -398,9 +401,10 @@ def covariance(J: np.ndarray, residual: np.ndarray, scales: np.ndarray,
     cov, method = white, "white"
     if noise.order > 0:
         cov, method = inv @ _coloured_gram(Js, [(slice(None), noise, k)]) @ inv, f"ar({noise.order})"
-    floor = None if t is None else score_variance(Js, residual, t)
+    floor = None if t is None or not len(floored) else score_variance(Js, residual, t)
     if floor is not None:
-        q = np.sqrt(np.maximum(floor / np.maximum(np.diag(cov), 1e-300), 1.0))
+        q = np.ones(k)
+        q[floored] = np.sqrt(np.maximum(floor[floored] / np.maximum(np.diag(cov)[floored], 1e-300), 1.0))
         cov = cov * np.outer(q, q)
     d_white, d_cov = np.diag(white), np.diag(cov)
     with np.errstate(divide="ignore", invalid="ignore"):
