@@ -11,7 +11,7 @@ from ..consistency import check_segments
 from ..diagnostics import diagnose
 from ..effects import EFFECTS
 from ..errors import RigError, UnknownEffectError
-from ..fit import ModelFit, fit_model
+from ..fit import ModelFit, fit_model, with_score_floor
 from ..model import Model
 from ..reproducibility import DEFAULT as DEFAULT_REPRODUCIBILITY
 from ..residual import Diagnostics
@@ -219,11 +219,15 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     # the headline ω_n from the model whose ω_n is the more accurate (focus.py)
     head = (focus(final, g.base, form, prep.noise, run.aliases, follows_swing(g.base, prep.noise)[0])
             if options.focused else Focus(final, form, DISCOVERED))
+    # the models chosen, the σ stated is no smaller than the record's own scores say (fit.py)
+    floored = {id(f): with_score_floor(f) for f in (g.base, final, head.fit)}
+    base, final = floored[id(g.base)], floored[id(final)]
+    head = replace(head, fit=floored[id(head.fit)])
     w, ws = head.omega_n, head.omega_n_std
     # a sensor calibrated from the record itself carries its own uncertainty into ω_n, beside the fit's
     w_cal = omega_n_std_view(head.fit, view) if view is not None else None
     found = Findings(
-        trace=trace, rig=rig, prep=prep, declared=declared, base=g.base, final=final, steps=tuple(run.steps),
+        trace=trace, rig=rig, prep=prep, declared=declared, base=base, final=final, steps=tuple(run.steps),
         withdrawn=run.withdrawn, law=law, segments=segments, form=form, diag=g.diag, n_outliers=g.n_outliers,
         slipped_from=g.slipped_from, beaten_by=g.beaten_by, follows=follows, follow_ratio=follow_ratio,
         view=view, omega_n_view=w_cal, inertias=inertias(rig, w, ws),

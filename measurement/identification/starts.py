@@ -18,9 +18,10 @@ import numpy as np
 
 from ..effects import EFFECTS
 from ..errors import IdentificationError
-from ..fit import ModelFit, fit_model, initial_guess
+from ..fit import ModelFit, fit_model
 from ..model import Model
 from ..result import Competitor
+from ..starting import initial_guess
 
 
 def contains(outer: Model, inner: Model) -> bool:

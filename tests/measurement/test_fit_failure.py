@@ -14,13 +14,14 @@ import numpy as np
 import pytest
 
 from measurement import Rig, Trace, identify
-from measurement.fit import fit_model, initial_guess
+from measurement.fit import fit_model
 from measurement.identification import pipeline, starts
 from measurement.identification.options import Options
 from measurement.identification.preparation import prepare
 from measurement.identification.starts import contains, keep_nested_order, nested_start
 from measurement.model import Model
 from measurement.reports import result_report
+from measurement.starting import initial_guess
 from measurement.verdict import INVALID, QualityRules, Reading, Specification, judge_release
 
 from .reference import reference_motion

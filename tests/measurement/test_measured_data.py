@@ -54,9 +54,10 @@ def test_small_swings_of_the_60deg_session_ask_for_presliding_friction_that_does
     assert r.residual_rms < r.baseline.residual_rms
     # the tracked angle keeps the camera's oblique view, which no constant sensor scale explains
     # (a fitted view differs between the halves of the record): the halves disagree on ω_n, and
-    # the result says so and carries their scatter in its uncertainty
+    # the result says so and carries their scatter in its uncertainty (well above the fit's σ, which
+    # takes in some of the same structure: it is never below what the record's own residual says)
     assert "view" not in r.effects and any("view does not hold across the record" in s.reason for s in r.steps)
-    assert "halves_disagree" in r.flags and r.omega_n_std_model > 5 * r.omega_n_std
+    assert "halves_disagree" in r.flags and r.omega_n_std_model > 3 * r.omega_n_std
 
 
 def test_both_sessions_find_dry_friction(runs):

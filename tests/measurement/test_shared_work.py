@@ -5,11 +5,12 @@ import pytest
 
 from measurement import Options, Pendulum, Rig, Trace, simulate_trace
 from measurement.diagnostics import _fit_residual
-from measurement.fit import fit_model, smooth
+from measurement.fit import fit_model
 from measurement.identification.preparation import prepare
 from measurement.model import Model
 from measurement.noise import autocorrelation, lagged_products
 from measurement.signal import deviation_table, loo_deviations, noise_floor, spike_candidates
+from measurement.starting import smooth
 
 RIG = Rig(kind="torsion", stiffness=0.3651, declared=("viscous",))
 
