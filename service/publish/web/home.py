@@ -13,6 +13,7 @@ from aiohttp import web
 
 from service.core import vocabulary as V
 from service.publish.payload import stored_result
+from service.states import STATES
 
 from .. import quality as Q
 from .drawing import axes_drawing
@@ -34,12 +35,13 @@ def _calibration(app: Any) -> dict[str, Any] | None:
     return calibration
 
 
-def _mode(open_part: dict[str, Any] | None, tile: Any, part_id: str | None) -> str:
+def _mode(open_part: dict[str, Any] | None, tile: Any, part_id: str | None, started: float) -> str:
     """What the operator's panel shows big: the set's progress, the verdict, or ready for the next part."""
-    # the verdict is shown big only for the part that owns it: none in progress, and no other part ID set
+    # the verdict is shown big only for the part that owns it: none in progress, no other part ID set, and
+    # finished since the daemon started (a restart forgets the part in hand: an older verdict is another part's)
     if open_part and open_part.get("done"):
         return "progress"
-    if tile is not None and (not part_id or part_id == tile.part_id):
+    if tile is not None and tile.finished_at >= started and (not part_id or part_id == tile.part_id):
         return "verdict"
     return "ready"
 
@@ -66,7 +68,7 @@ class HomePages(Family):
         left = None
         if open_part and (open_part.get("part_id") != part_id or open_part.get("recipe") != recipe.get("name")):
             left, open_part = open_part, None  # another part's: the next release abandons it
-        mode = _mode(open_part, tile, part_id)
+        mode = _mode(open_part, tile, part_id, pages.live.started)
         return {"tile": tile, "tile_view": tile_view, "tile_unit": tile_unit, "counts": counts,
                 "tile_places": Q.places((tile_view or {}).get("recipe"), tile_unit, (tile_view or {}).get("U")),
                 "why": Q.judgement(tile_view, tile_unit) if tile_view else None,
@@ -161,8 +163,11 @@ class HomePages(Family):
             if blocked is not None:
                 raise Refused(409, f"{blocked['what']} {blocked['do']}")
         if name == V.TRIGGER and seq is not None and seq.busy:
-            # said, not queued and silently dropped: the sequencer takes no trigger while it measures
-            raise Refused(409, f"a measurement is already running ({state}): Measure again when it is IDLE")
+            # said, not queued and silently dropped: the sequencer takes no trigger while it measures; the state
+            # read now, beside the refusal (a trigger taken but not yet started still reads IDLE)
+            now = seq.state.value
+            running = f"already running ({now})" if STATES[now].busy else "already requested and starting"
+            raise Refused(409, f"a measurement is {running}: Measure again when it is IDLE")
         self.app.command(name, source)
         log.info("%s: %s requested (state %s)", source, name, state)
         if "text/html" in request.headers.get("Accept", "") and form:

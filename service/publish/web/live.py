@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import uuid
 from typing import TYPE_CHECKING, Any
 
 from ..words import STATE_WORDS
@@ -33,14 +34,22 @@ def extras(app: "ApplianceView") -> dict[str, Any]:
 
 
 class Live:
+    """Every message carries ``boot``: a page that sees it change knows the daemon restarted under it (its part in
+    hand, its session and its verdict are gone), and ``measure_refused``: a calibration block reaches an open page
+    as it starts."""
+
     def __init__(self, app: "ApplianceView") -> None:
         self.app = app
+        # the daemon's life, not the wall clock: two starts within one second still differ
+        self.boot = uuid.uuid4().hex[:12]
+        self.started = time.time()
 
     def event_message(self, event: "Event") -> dict[str, Any]:
         d = self.app.public_event(event)  # a result's values only once it is stored
         d["type"] = "state"
         d["words"] = STATE_WORDS.get(d["state"], "")
         d["wall"] = time.time()
+        d["boot"] = self.boot
         return d
 
     def snapshot(self, cursor: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -50,7 +59,8 @@ class Live:
         seq = app.sequencer
         live = app.live_status()
         out: dict[str, Any] = {"type": "tick", "state": live.state, "words": STATE_WORDS.get(live.state or "", ""),
-                               "fault": None, "measurement_id": None, **extras(app)}
+                               "fault": None, "measurement_id": None, "boot": self.boot,
+                               "measure_refused": live.measure_refused, **extras(app)}
         if seq is None:
             return out
         status = seq.status()

@@ -7,6 +7,10 @@ var moi = (function () {
   // a release came to its end (its result published, or aborted): the page shows what the server now has
   function finished(s) { return s.previous === "PUBLISHING" || s.previous === "ABORTED"; }
   function busy(state) { return !!(STATES[state] && STATES[state].busy); }
+  // the daemon's life the page was served in: a stream message of another means it restarted under the page
+  var BOOT = (function () { var m = document.querySelector('meta[name="moi-boot"]'); return m ? m.content : ""; })();
+  function restartedUnder(s) { return !!(s && s.boot && BOOT && s.boot !== BOOT); }
+  function clock(d) { return d.toTimeString().slice(0, 8); }  // HH:MM:SS, local
   function $(id) { return document.getElementById(id); }
   function say(text, bad) { var m = $("message"); if (m) { m.textContent = text; m.className = "message" + (bad ? " bad" : ""); } }
 
@@ -26,7 +30,10 @@ var moi = (function () {
         else { tell("refused (" + r.status + "): " + r.body.error, true); }
         return r;
       })
-      .catch(function (e) { say("no answer from the appliance: " + e, true); return {ok: false}; });
+      .catch(function () {
+        say("the appliance did not answer (not reachable since " + clock(new Date()) + "): nothing was done", true);
+        return {ok: false};
+      });
   }
 
   // tick values of an axis from lo to hi: 1, 2 or 5 times a power of ten apart
@@ -115,6 +122,12 @@ var moi = (function () {
 
   function home() {
     var swing = new Swing($("swing")), mid = null, measure = $("measure"), lastState = null, seen = null;
+    var es = null, lostAt = null, offlineTimer = null, refused = !!$("blocked"), pressing = false;
+    var told = window.sessionStorage.getItem("moi-restarted");
+    if (told) {
+      window.sessionStorage.removeItem("moi-restarted");
+      say(told, true); $("message").setAttribute("data-restarted", "1");
+    }
     function refresh() {
       return fetch("/home/summary", {credentials: "same-origin"}).then(function (r) { return r.ok ? r.text() : null; })
         .then(function (html) { if (html) { swap(html); syncMeasure(); } });
@@ -145,18 +158,55 @@ var moi = (function () {
       now.appendChild(p); now.appendChild(n);
     }
     measure.addEventListener("click", function () {
+      if (pressing || lostAt) { return; }  // one press at a time; none while the appliance is unreachable
       var b = $("blocked");
       if (measure.getAttribute("aria-disabled") === "true" && b) { say(b.textContent, true); return; }
       var rep = measure.getAttribute("data-repeat");
       if (rep && !window.confirm("Part " + rep + " is complete. Measure it again as a new part with the same ID?")) {
         say("not measured: enter the next part's ID first"); var pb = $("part-box"); if (pb) { pb.open = true; } return;
       }
-      act("/api/measure").then(function (r) { if (r.ok) { measuring(null); } });
+      pressing = true;
+      act("/api/measure").then(function (r) { pressing = false; if (r.ok) { measuring(null); } });
     });
     $("abort").addEventListener("click", function () {
       act("/api/abort");  // "aborted" is said when the sequencer says so (ABORTED), not on the request alone
     });
+    // the daemon restarted under the page: what it held (the part in hand, the session) is gone; said, and the
+    // page served again by the new daemon (never the old one's verdict as the part in hand's)
+    function restarted() {
+      var text = "The appliance restarted (seen at " + clock(new Date()) + ")";
+      var rn = seen && seen.release_next, pid = seen && seen.part_id;
+      if (pid && rn && rn.k > 1) {
+        text += ": the part in hand " + pid + " (release " + (rn.k - 1) + " of " + rn.of + " done) was not finished; measure it again from release 1";
+      } else if (pid) { text += ": the part in hand " + pid + " was not measured"; }
+      if ($("who")) { text += "; log in again"; }
+      window.sessionStorage.setItem("moi-restarted", text + ".");
+      if (es) { es.close(); }
+      window.location.reload();
+    }
+    // no stream for a while: the appliance is unreachable; the page greys, Measure is disabled, the time said
+    function offline() {
+      offlineTimer = null;
+      document.body.setAttribute("data-offline", "1");
+      measure.disabled = true;
+      var el = $("state"); el.textContent = "NO CONNECTION"; el.className = "state state-OFFLINE";
+      var text = "appliance not reachable since " + clock(lostAt) + ": nothing can be measured until it answers";
+      $("words").textContent = ""; var o = $("offline"); o.textContent = text; o.hidden = false;
+    }
+    function online() {
+      if (offlineTimer) { clearTimeout(offlineTimer); offlineTimer = null; }
+      if (!lostAt) { return; }
+      var was = document.body.getAttribute("data-offline") === "1";
+      lostAt = null; document.body.removeAttribute("data-offline"); measure.disabled = false; $("offline").hidden = true;
+      if (was) { refresh(); }  // what changed meanwhile
+    }
     function show(s) {
+      if (restartedUnder(s)) { restarted(); return; }
+      online();
+      if (s.measure_refused !== undefined && !!s.measure_refused !== refused) {
+        refused = !!s.measure_refused;
+        refresh();  // a calibration block came or went: the banner and Measure as the server now has them
+      }
       if (s.release_next !== undefined) { seen = s; }
       var el = $("state");
       el.textContent = s.state; el.className = "state state-" + s.state;
@@ -230,18 +280,25 @@ var moi = (function () {
         });
       });
     }
-    var es = new EventSource("/events");
-    es.addEventListener("state", function (e) { var s = JSON.parse(e.data); logState(s); show(s); });
-    es.addEventListener("tick", function (e) {
-      var s = JSON.parse(e.data);
-      document.body.setAttribute("data-live", "1");  // connected: every transition from now on is shown
-      show(s);
-      if (s.samples) {
-        if (s.reset || s.measurement_id !== mid) { mid = s.measurement_id; swing.reset(s.capture_duration + (s.pre_trigger || 0)); }
-        swing.add(s.samples.t, s.samples.angle);
-      }
-    });
-    es.onerror = function () { $("words").textContent = "connection to the appliance lost; retrying"; };
+    function connect() {
+      es = new EventSource("/events");
+      es.addEventListener("state", function (e) { var s = JSON.parse(e.data); if (!restartedUnder(s)) { logState(s); } show(s); });
+      es.addEventListener("tick", function (e) {
+        var s = JSON.parse(e.data);
+        document.body.setAttribute("data-live", "1");  // connected: every transition from now on is shown
+        show(s);
+        if (s.samples) {
+          if (s.reset || s.measurement_id !== mid) { mid = s.measurement_id; swing.reset(s.capture_duration + (s.pre_trigger || 0)); }
+          swing.add(s.samples.t, s.samples.angle);
+        }
+      });
+      es.onerror = function () {
+        // a stream also ends at its lifetime and is opened again within a second: unreachable only after a grace
+        if (!lostAt) { lostAt = new Date(); offlineTimer = setTimeout(offline, 2500); }
+        if (es.readyState === EventSource.CLOSED) { setTimeout(connect, 2000); }  // refused: the browser gives up
+      };
+    }
+    connect();
   }
 
   function setup() {
@@ -275,6 +332,7 @@ var moi = (function () {
     if (m) { m.addEventListener("click", function () { act("/api/measure"); }); }
     if (a) { a.addEventListener("click", function () { act("/api/abort"); }); }
     var es = new EventSource("/events");
+    es.addEventListener("tick", function (e) { if (restartedUnder(JSON.parse(e.data))) { es.close(); window.location.reload(); } });
     es.addEventListener("state", function (e) {
       var s = JSON.parse(e.data);
       if (busy(s.state)) { say(s.state + ": " + (s.words || "")); }
