@@ -177,8 +177,8 @@ var moi = (function () {
       var text = "The appliance restarted (seen at " + clock(new Date()) + ")";
       var rn = seen && seen.release_next, pid = seen && seen.part_id;
       if (pid && rn && rn.k > 1) {
-        text += ": the part in hand " + pid + " (release " + (rn.k - 1) + " of " + rn.of + " done) was not finished; measure it again from release 1";
-      } else if (pid) { text += ": the part in hand " + pid + " was not measured"; }
+        text += ": the part in hand " + pid + " (release " + (rn.k - 1) + " of " + rn.of + " done) was not finished; set its part ID again and measure it from release 1";
+      } else if (pid) { text += ": the part ID " + pid + " is no longer set"; }
       if ($("who")) { text += "; log in again"; }
       window.sessionStorage.setItem("moi-restarted", text + ".");
       if (es) { es.close(); }
