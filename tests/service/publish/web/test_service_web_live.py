@@ -1,4 +1,4 @@
-"""Home kept open on a phone (390×844) in headless Chromium while the appliance changes under it: a calibration
+"""Home kept open on a phone (390×844) and a desktop (1280×800) in headless Chromium while the appliance changes under it: a calibration
 block pushed to the open page, a double click on Measure, the appliance going down (the page greys, Measure
 disabled, the time said) and coming back restarted (the page says what was lost: the part in hand, the login)."""
 
@@ -16,7 +16,9 @@ from tests.service.publish.web.test_service_web_browser import _post, browser  #
 pytestmark = pytest.mark.browser
 
 
-def test_the_open_home_page_follows_a_block_an_outage_and_a_restart(browser, appliance_factory, tmp_path):  # noqa: F811
+@pytest.mark.parametrize("size", ((390, 844), (1280, 800)), ids=("phone", "desktop"))
+def test_the_open_home_page_follows_a_block_an_outage_and_a_restart(browser, appliance_factory, tmp_path,  # noqa: F811
+                                                                     size):
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
@@ -31,7 +33,7 @@ def test_the_open_home_page_follows_a_block_an_outage_and_a_restart(browser, app
     token = Path(first.app.web.token_file).read_text().strip()
     bearer = {"Authorization": f"Bearer {token}", "Accept": "application/json"}
     wait = WebDriverWait(browser, 30, poll_frequency=0.05)
-    browser.set_window_size(390, 844)
+    browser.set_window_size(*size)
     browser.get(url)
     browser.find_element(By.ID, "token").send_keys(token)
     browser.find_element(By.ID, "login-button").click()
