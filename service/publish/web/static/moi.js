@@ -31,7 +31,7 @@ var moi = (function () {
         return r;
       })
       .catch(function () {
-        say("the appliance did not answer (not reachable since " + clock(new Date()) + "): nothing was done", true);
+        say("no answer from the appliance at " + clock(new Date()) + ": nothing was done", true);
         return {ok: false};
       });
   }
@@ -184,9 +184,18 @@ var moi = (function () {
       if (es) { es.close(); }
       window.location.reload();
     }
-    // no stream for a while: the appliance is unreachable; the page greys, Measure is disabled, the time said
+    // no stream for a while: asked whether the appliance answers at all (a stream refused for want of a slot is
+    // not an outage); a hung request counts as no answer after 2 s
     function offline() {
       offlineTimer = null;
+      var ask = new AbortController(), limit = setTimeout(function () { ask.abort(); }, 2000);
+      fetch("/api/state", {credentials: "same-origin", signal: ask.signal}).then(function (r) {
+        clearTimeout(limit);
+        if (lostAt) { $("words").textContent = "the live view is refused for now (" + r.status + "); asking again"; }
+      }, function () { clearTimeout(limit); if (lostAt) { unreachable(); } });
+    }
+    // the appliance is unreachable: the page greys, Measure is disabled, the time said
+    function unreachable() {
       document.body.setAttribute("data-offline", "1");
       measure.disabled = true;
       var el = $("state"); el.textContent = "NO CONNECTION"; el.className = "state state-OFFLINE";
