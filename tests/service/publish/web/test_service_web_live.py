@@ -16,7 +16,7 @@ from tests.service.publish.web.test_service_web_browser import _post, browser  #
 pytestmark = pytest.mark.browser
 
 
-@pytest.mark.parametrize("size", ((390, 844), (1280, 800)), ids=("phone", "desktop"))
+@pytest.mark.parametrize("size", [(390, 844), (1280, 800)], ids=("phone", "desktop"))
 def test_the_open_home_page_follows_a_block_an_outage_and_a_restart(browser, appliance_factory, tmp_path,  # noqa: F811
                                                                      size):
     from selenium.webdriver.common.action_chains import ActionChains
