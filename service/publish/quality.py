@@ -54,6 +54,28 @@ def plain_text(text: Any) -> str:
     return _E_NUMBER.sub(fixed, str(text)) if text is not None else MISSING
 
 
+#: an inertia inside a sentence of the verdict: "1.2e-05 kg·m²", or the limits "[1.1e-05, 1.3e-05] kg·m²"
+_SI_INERTIA = re.compile(r"(\[)?([+-]?\d+(?:\.\d*)?(?:[eE][+-]?\d+)?)(?:, ([+-]?\d+(?:\.\d*)?(?:[eE][+-]?\d+)?)\])?"
+                         r" kg·m²")
+
+
+def reason(text: Any, unit: str = SI, decimals: int = 6) -> str:
+    """A sentence of the verdict (written in kg·m² with as many digits as a log keeps) with every inertia in it
+    in ``unit`` and ``decimals`` (the part's, as the tile above it), never fewer than two significant digits (a
+    small uncertainty is not written as 0); other numbers as ``plain_text`` writes them."""
+    def shown(x: str) -> str:
+        v = from_si(float(x), unit) or 0.0
+        d = decimals if v == 0 else max(decimals, 1 - int(math.floor(math.log10(abs(v)))))
+        return number(v, min(d, 12))
+
+    def convert(m: re.Match) -> str:
+        if m.group(1) and m.group(3):
+            return f"[{shown(m.group(2))}, {shown(m.group(3))}] {unit}"
+        return f"{m.group(1) or ''}{shown(m.group(2))} {unit}"
+
+    return plain_text(_SI_INERTIA.sub(convert, str(text))) if text is not None else MISSING
+
+
 def number(v: Any, spec: str | int = ".6g") -> str:
     """A number as text, never in e-notation (a "g" spec keeps its significant digits in fixed-point; an int:
     that many decimals); None, NaN, ±inf and non-numbers that are not text become "–"."""

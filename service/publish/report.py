@@ -57,7 +57,8 @@ def report_lines(m: Any, unit: str, lookup: Any = None, time_format: str = Q.TIM
     releases = []
     for r in Q.release_rows(v, p, result, lookup):
         flags = "flags: " + (", ".join(r["flags"]) or "none") if r["flags"] is not None else ""
-        releases.append(f"release {r['index']} of {r['of']}: {Q.inertia(r['value'], unit)} — {r['status']}"
+        releases.append(f"release {r['index']} of {r['of']}: {Q.inertia(r['value'], unit, pl)} — "
+                        f"{Q.reason(r['status'], unit, pl)}"
                         + (f"; {flags}" if flags else ""))
     described = [f"{f}: {words}" for f, words in flag_words(m.flags) if words]
     if described:
@@ -85,7 +86,8 @@ def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = Non
     else:
         head, colour = "no recipe: a value without a verdict", "0.3"
     lines = [(k, t) for k, t in facts] + [("", "")] + [("", r) for r in releases]
-    lines += [("", "why: " + r) for r in v["reasons"]]
+    pl = Q.places(v["recipe"], unit, v.get("U") or v.get("std"))
+    lines += [("", "why: " + Q.reason(r, unit, pl)) for r in v["reasons"]]
     figs: list[Any] = []
     fig = Figure(figsize=A4)
     fig.text(0.06, 0.965, f"Inertia measurement report #{m.seq}", fontsize=15, weight="bold", va="top")

@@ -233,7 +233,8 @@ def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_re
     from service.publish.web.pages import HERE
 
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")), autoescape=True)
-    env.filters.update(fmt=Q.number, inertia=Q.inertia, iso=Q.iso, name=lambda v: v, plain=Q.plain_text)
+    env.filters.update(fmt=Q.number, inertia=Q.inertia, iso=Q.iso, name=lambda v: v, plain=Q.plain_text,
+                       reason=Q.reason)
     env.globals.update(VERDICT_WORDS=Q.VERDICT_WORDS)
     from measurement.uncertainty import Budget
 
