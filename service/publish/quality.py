@@ -16,10 +16,10 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 from measurement.units import SI, UnitError, from_si, inertia_unit
 from service.parts.outcome import PartOutcome
+from service.publish.budget import budget_rows
 
 if TYPE_CHECKING:  # pragma: no cover
     from measurement.result import IdentificationResult
-    from measurement.uncertainty import Budget
 
 #: what the page says for a value it does not have
 MISSING = "–"
@@ -246,15 +246,6 @@ def release_rows(view: Mapping[str, Any], payload: Mapping[str, Any] | None, res
              "status": f"check {rel.verdict}; the part's verdict is on its last release" if rel is not None
              and rel.verdict else "no recipe",
              "flags": list(result.flags) if result is not None else [], "seq": p.get("seq"), "uuid": p.get("uuid")}]
-
-
-def budget_rows(budget: Budget | None) -> list[dict[str, Any]]:
-    """The rows of a measurand's uncertainty budget (``measurement.uncertainty.Budget``): each line's source, its
-    contribution to the measurand's standard uncertainty (kg·m², its size: c·u carries the sign of the
-    sensitivity) and its share of u_c²; [] without a budget."""
-    if budget is None:
-        return []
-    return [{"name": ln.source, "u": abs(ln.contribution), "share": ln.share} for ln in budget.lines]
 
 
 def band(recipe: Mapping[str, Any] | None, value: float | None, U: float | None, unit: str = SI,

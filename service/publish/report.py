@@ -10,6 +10,7 @@ from typing import Any
 from measurement.units import SI
 
 from . import quality as Q
+from .budget import BUDGET_FOOTNOTE, BudgetRow
 from .payload import stored_result
 from .words import flag_words
 
@@ -48,9 +49,9 @@ def report_lines(m: Any, unit: str, lookup: Any = None, time_format: str = Q.TIM
             facts.append(("deviation", f"{why['deviation']} from the nominal, {why['where']}"))
     else:
         facts.append(("J ± u", f"{Q.inertia(v.get('value'), unit, pl)} ± {Q.inertia(v.get('std'), unit, pl)} (1σ)"))
-    for row in v["budget"]:
-        facts.append(("  budget: " + row["name"],
-                      f"{Q.inertia(row['u'], unit, '.2g')} ({Q.number(row['share'], '.3g')} of u_c²)"))
+    facts += [("  budget", _budget_line(row, unit)) for row in v["budget"]]
+    if v["budget"]:
+        facts.append(("", BUDGET_FOOTNOTE))
     facts.append(("calibration", (f"{cal.get('date')}" + (f", due {cal.get('valid_until')}" if cal.get("valid_until")
                                                             else "") + (" (DUE)" if cal.get("due") else ""))
                   if cal else "no calibration record"))
@@ -64,6 +65,16 @@ def report_lines(m: Any, unit: str, lookup: Any = None, time_format: str = Q.TIM
     if described:
         releases.append("this release's flags: " + "; ".join(described))
     return v, facts, releases
+
+
+def _budget_line(row: BudgetRow, unit: str) -> str:
+    """A row of the uncertainty budget as the page writes it: c·u = c × u with their units, the share in %."""
+    text = f"{'· ' if row.member else ''}{row.source}: c·u = {Q.inertia(row.contribution, unit, '.2g')}"
+    ln = row.line
+    if ln is not None:
+        lu = "" if ln.unit in (None, "", "1") else " " + ln.unit
+        text += f" (c = {Q.number(row.sensitivity(unit), '.3g')} {unit}{row.per}, u = {Q.number(ln.std, '.2g')}{lu})"
+    return text + (f"; {Q.number(row.share, '.1f')} % of u²" if row.share is not None else "; share in the row above")
 
 
 def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = None,

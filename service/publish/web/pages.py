@@ -21,6 +21,7 @@ from service.parts.recipes import PART_ID_LENGTH
 from service.states import vocabulary
 
 from .. import quality as Q
+from ..budget import BUDGET_FOOTNOTE, budget_rows
 from ..words import STATE_WORDS
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, allowed
 from .child import ChildBusy
@@ -147,7 +148,8 @@ def _environment(when: Any) -> jinja2.Environment:
     # file names carry a hash of the content: a browser never keeps a stale script after an update
     stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
     env.globals.update(version=__version__, PART_ID_LENGTH=PART_ID_LENGTH, allowed=allowed, STATE_WORDS=STATE_WORDS,
-                       VERDICT_WORDS=Q.VERDICT_WORDS, states_json=json.dumps(vocabulary(), separators=(",", ":")),
+                       VERDICT_WORDS=Q.VERDICT_WORDS, budget_rows=budget_rows, BUDGET_FOOTNOTE=BUDGET_FOOTNOTE,
+                       states_json=json.dumps(vocabulary(), separators=(",", ":")),
                        static_url=lambda name: f"/static/{name}?v={stamps.get(name, '')}")
     return env
 

@@ -68,3 +68,60 @@ def test_the_pdf_says_why_in_the_parts_unit():
     text = " ".join(text.split())
     assert "why: 127123 g·cm² above the upper limit 126000 g·cm²" in text
     assert "0.0127" not in text
+
+
+def _correlated_budget():
+    """J = k/ω² − I0 with the stiffness and the tare fitted together (r = +0.98): alone, their lines' shares
+    were 243.9 % beside a covariance of −176.3 %."""
+    from measurement.uncertainty import Input, evaluate
+
+    inputs = [Input("k", "stiffness (calibration)", 0.3651, 3.4e-4, "N·m/rad"),
+              Input("I0", "tare inertia (calibration)", 0.002, 8e-6, "kg·m²"),
+              Input("w", "ω_n (fit)", 5.0, 2e-4, "rad/s", kind="random")]
+    return evaluate("J", "kg·m²", lambda x: x["k"] / x["w"] ** 2 - x["I0"], inputs, {("k", "I0"): 0.98})
+
+
+def test_the_budgets_shares_are_never_negative_and_sum_to_100_percent():
+    from service.publish.budget import budget_rows
+
+    b = _correlated_budget()
+    assert max(ln.share for ln in b.lines) > 1.0 and b.correlation_share < 0  # the raw GUM shares
+    rows = budget_rows(b)
+    assert [r.source for r in rows] == ["stiffness (calibration) and tare inertia (calibration), correlated "
+                                        "(r = +0.980)", "stiffness (calibration)", "tare inertia (calibration)",
+                                        "ω_n (fit)"]
+    shares = [r.share for r in rows if r.share is not None]
+    assert all(s >= 0 for s in shares) and sum(shares) == pytest.approx(100.0)
+    assert [r.share is None for r in rows] == [False, True, True, False]
+    # a reader checks each line by hand: c × u = c·u, in the page's unit
+    for r in rows:
+        if r.line is not None:
+            assert r.sensitivity("g·cm²") * r.line.std == pytest.approx(r.contribution * 1e7)
+    assert rows[1].per == " per N·m/rad" and rows[2].per == " per kg·m²"
+
+
+def test_the_budget_on_the_page_and_in_the_pdf_gives_units_and_percent():
+    import dataclasses
+
+    from pypdf import PdfReader
+
+    from measurement import Pendulum, Rig, identify, simulate_trace
+    from service.publish.report import report_pdf
+
+    env = _environment(Q.local_time)
+    rig = Rig(kind="torsion", stiffness=0.3651, stiffness_std=3.4e-4, declared=("viscous",))
+    result = identify(simulate_trace(Pendulum(rig, 0.0125, {"viscous": {"c": 1.5e-4}}), theta0=0.25, duration=5,
+                                     rate=100, noise_std=1e-4, seed=3), rig)
+    result = dataclasses.replace(result, uncertainty_budget={"J": _correlated_budget()})
+    html = env.get_template("_budget.html").render(r=result, unit="g·cm²")
+    assert "g·cm² per N·m/rad" in html and "g·cm² per kg·m²" in html and "g·cm² per rad/s" in html
+    percents = [float(x) for x in re.findall(r"</meter> ([\d.]+) %", html)]
+    assert len(percents) == 2 and sum(percents) == pytest.approx(100.0, abs=0.2)
+    assert "−" not in "".join(re.findall(r"</meter> [^<]* %", html)) and "correlated (r = +0.980)" in html
+    payload = {**result.to_dict(), "recipe": None, "part": None, "release": None, "part_id": None}
+    m = SimpleNamespace(seq=8, uuid="u-8", payload=payload, finished_at=1.7e9, trigger="web:olga", device_id="rig",
+                        software_version="9", flags=())
+    text = " ".join(p.extract_text() for p in PdfReader(io.BytesIO(report_pdf(m, None, "g·cm²"))).pages)
+    text = " ".join(text.split())
+    pdf_percents = [float(x) for x in re.findall(r"; ([\d.]+) % of u²", text)]
+    assert pdf_percents == percents and "g·cm² per N·m/rad" in text and "of u_c²" not in text
