@@ -125,3 +125,35 @@ def test_the_budget_on_the_page_and_in_the_pdf_gives_units_and_percent():
     text = " ".join(text.split())
     pdf_percents = [float(x) for x in re.findall(r"; ([\d.]+) % of u²", text)]
     assert pdf_percents == percents and "g·cm² per N·m/rad" in text and "of u_c²" not in text
+
+
+@pytest.fixture
+def berlin(monkeypatch):
+    """The appliance's clock in Berlin (an hour from UTC in winter), set back afterwards."""
+    import time
+
+    monkeypatch.setenv("TZ", "Europe/Berlin")
+    time.tzset()
+    yield
+    monkeypatch.undo()
+    time.tzset()
+
+
+def test_the_dfq_writes_local_time_and_an_invalid_parts_reason_in_its_unit(berlin):
+    from service.publish.dfq import FIELD, dfq_text
+
+    invalid = {**_payload("INVALID", None, ["release 1: " + TOO_WIDE, "standard uncertainty 2.3e-05 kg·m² above the "
+                                             "limit 1e-05 kg·m²"]), "recipe": RECIPE}
+    invalid["part"] = {**invalid["part"], "values": [0.01251, 0.01252, None]}
+    ok = {**_payload("OK", 0.0125, []), "recipe": RECIPE}
+    rows = [SimpleNamespace(payload=p, part_value=p["part"]["value"], finished_at=1.7e9 + 3600 * i,
+                            part_verdict=p["part"]["verdict"], trigger="web:olga", device_id="rig",
+                            part_id=f"SN-{i}", part_uuid=f"u-{i}") for i, p in enumerate((ok, invalid))]
+    text = dfq_text(RECIPE, rows, "g·cm²")
+    values = [ln.split(FIELD) for ln in text.split("\r\n") if FIELD in ln]
+    # 1.7e9 s is 14.11.2023 22:13:20 UTC: the file says what the pages say, Berlin's time
+    assert [v[2] for v in values] == ["14.11.2023/23:13:20", "15.11.2023/00:13:20"]
+    assert Q.local_time(1.7e9, "%d.%m.%Y/%H:%M:%S") == values[0][2]
+    assert values[1][1] == "255"
+    assert values[1][7] == "verdict INVALID: release 1: invalid: standard uncertainty 2.3 g·cm² above the limit 1.0 g·cm²"
+    assert "e-0" not in text and "kg·m²" not in text
