@@ -293,7 +293,7 @@ def shift_start(starts: Sequence[str], now: dt.datetime) -> dt.datetime:
 #: the run rules in words, with the rule's number in the Western Electric handbook (WE) and in Nelson (1984)
 RULE_WORDS = {
     "beyond_limits": "a point beyond the 3σ control limits (WE 1, Nelson 1)",
-    "run_of_8": "8 points in a row on one side of the centre line (Nelson 2)",
+    "run_of_8": "8 points in a row on one side of the centre line (WE 4; Nelson 2 asks for 9)",
     "trend_of_6": "6 points in a row steadily rising or falling (Nelson 3)",
     "2_of_3_beyond_2sigma": "2 of 3 points in a row beyond 2σ on one side (WE 2, Nelson 5)",
     "range_beyond_limits": "a range beyond its control limits: the spread within a part changed",

@@ -157,3 +157,15 @@ def test_the_dfq_writes_local_time_and_an_invalid_parts_reason_in_its_unit(berli
     assert values[1][1] == "255"
     assert values[1][7] == "verdict INVALID: release 1: invalid: standard uncertainty 2.3 g·cm² above the limit 1.0 g·cm²"
     assert "e-0" not in text and "kg·m²" not in text
+
+
+def test_a_run_of_eight_is_named_western_electric_4_not_nelson_2():
+    from measurement.spc import individuals
+
+    s = individuals([10.0, 10.4, 9.6, 10.2, 9.8] + [10.05] * 8 + [9.9, 9.95])
+    assert "run_of_8" in {v.rule for v in s.violations}
+    said = [w for _name, words in Q.control_chart(s, "kg·m²")["rules"] for w in words if w.startswith("8 points")]
+    assert said and all("(WE 4;" in w and "Nelson 2 asks for 9" in w for w in said)
+    # the other rules keep their numbers in both books
+    assert "(WE 1, Nelson 1)" in Q.RULE_WORDS["beyond_limits"] and "(Nelson 3)" in Q.RULE_WORDS["trend_of_6"]
+    assert "(WE 2, Nelson 5)" in Q.RULE_WORDS["2_of_3_beyond_2sigma"]
