@@ -251,7 +251,8 @@ def release_rows(view: Mapping[str, Any], payload: Mapping[str, Any] | None, res
 def band(recipe: Mapping[str, Any] | None, value: float | None, U: float | None, unit: str = SI,
          width: float = 600.0) -> dict[str, Any] | None:
     """The tolerance band drawing (SVG x coordinates in a ``width`` wide box): LSL, nominal, USL, the guard
-    band (ISO 14253-1: the zone shrunk by U at each end) and the result's interval value ± U."""
+    band (ISO 14253-1: the zone shrunk by U at each end) and the result's interval value ± U; the limits
+    labelled in ``unit`` with the recipe's decimals (``places``), as the value above the band."""
     if not recipe or recipe.get("lower") is None or recipe.get("upper") is None:
         return None
     lsl, usl, nominal = float(recipe["lower"]), float(recipe["upper"]), recipe.get("nominal")
@@ -266,9 +267,10 @@ def band(recipe: Mapping[str, Any] | None, value: float | None, U: float | None,
         return round(pad + (v - lo) / (hi - lo) * (width - 2 * pad), 1)
 
     guard = recipe.get("rule", "guard_band") == "guard_band" and 0 < 2 * u < span
+    n = places(recipe, unit, U)
     out: dict[str, Any] = {
         "width": width, "lsl": x(lsl), "usl": x(usl), "nominal": x(nominal) if nominal is not None else None,
-        "labels": [(x(lsl), "LSL " + inertia(lsl, unit, ".6g")), (x(usl), "USL " + inertia(usl, unit, ".6g"))],
+        "labels": [(x(lsl), "LSL " + inertia(lsl, unit, n)), (x(usl), "USL " + inertia(usl, unit, n))],
         "guard": (x(lsl + u), x(usl - u)) if guard else None, "value": None, "interval": None}
     if value is not None and math.isfinite(value):
         out["value"] = x(value)

@@ -169,3 +169,10 @@ def test_a_run_of_eight_is_named_western_electric_4_not_nelson_2():
     # the other rules keep their numbers in both books
     assert "(WE 1, Nelson 1)" in Q.RULE_WORDS["beyond_limits"] and "(Nelson 3)" in Q.RULE_WORDS["trend_of_6"]
     assert "(WE 2, Nelson 5)" in Q.RULE_WORDS["2_of_3_beyond_2sigma"]
+
+
+def test_the_band_labels_its_limits_with_the_parts_decimals():
+    labels = [t for _x, t in Q.band(RECIPE, 0.0125, 2.3e-5, "g·cm²")["labels"]]
+    assert labels == ["LSL 124000 g·cm²", "USL 126000 g·cm²"]
+    four = {**RECIPE, "display_decimals": 4, "display_unit": "kg·m²"}
+    assert [t for _x, t in Q.band(four, 0.0125, 2.3e-5, "kg·m²")["labels"]] == ["LSL 0.0124 kg·m²", "USL 0.0126 kg·m²"]
