@@ -22,7 +22,7 @@ UNPROVEN = ("conformance not proven: 0.01259876 kg·m² with U = 2.3e-05 kg·m²
 TOO_WIDE = "invalid: standard uncertainty 2.3e-07 kg·m² above the limit 1e-07 kg·m²"
 
 
-def _payload(verdict: str, value: float, reasons: list[str], excluded: list[dict] | None = None) -> dict:
+def _payload(verdict: str, value: float | None, reasons: list[str], excluded: list[dict] | None = None) -> dict:
     part = {"verdict": verdict, "value": value, "U": 2.3e-05, "releases": 3, "used": [0, 1, 2], "quantity": "J",
             "values": [value] * 3, "excluded": excluded or [], "reasons": reasons, "zone": "nonconformance"}
     return {"recipe": RECIPE, "part": part, "release": None, "part_id": "SN-1006"}
@@ -95,8 +95,9 @@ def test_the_budgets_shares_are_never_negative_and_sum_to_100_percent():
     assert [r.share is None for r in rows] == [False, True, True, False]
     # a reader checks each line by hand: c × u = c·u, in the page's unit
     for r in rows:
+        c = r.sensitivity("g·cm²")
         if r.line is not None:
-            assert r.sensitivity("g·cm²") * r.line.std == pytest.approx(r.contribution * 1e7)
+            assert c is not None and c * r.line.std == pytest.approx(r.contribution * 1e7)
     assert rows[1].per == " per N·m/rad" and rows[2].per == " per kg·m²"
 
 
@@ -172,7 +173,7 @@ def test_a_run_of_eight_is_named_western_electric_4_not_nelson_2():
 
 
 def test_the_band_labels_its_limits_with_the_parts_decimals():
-    labels = [t for _x, t in Q.band(RECIPE, 0.0125, 2.3e-5, "g·cm²")["labels"]]
-    assert labels == ["LSL 124000 g·cm²", "USL 126000 g·cm²"]
-    four = {**RECIPE, "display_decimals": 4, "display_unit": "kg·m²"}
-    assert [t for _x, t in Q.band(four, 0.0125, 2.3e-5, "kg·m²")["labels"]] == ["LSL 0.0124 kg·m²", "USL 0.0126 kg·m²"]
+    band = Q.band(RECIPE, 0.0125, 2.3e-5, "g·cm²")
+    assert band is not None and [t for _x, t in band["labels"]] == ["LSL 124000 g·cm²", "USL 126000 g·cm²"]
+    four = Q.band({**RECIPE, "display_decimals": 4, "display_unit": "kg·m²"}, 0.0125, 2.3e-5, "kg·m²")
+    assert four is not None and [t for _x, t in four["labels"]] == ["LSL 0.0124 kg·m²", "USL 0.0126 kg·m²"]
