@@ -197,6 +197,12 @@ class Pages:
         """The unit a result is shown in: its recipe's, else the set-up's."""
         return Q.display_unit(payload, self.server.settings.display_unit)
 
+    def places(self, payload: Mapping[str, Any] | None) -> int | str:
+        """The decimals a result's value is written with on its page (its recipe's, in its unit), for a list of
+        results: seven significant digits for a value without a recipe."""
+        recipe = self.decimals({"recipe": (payload or {}).get("recipe")})["recipe"]
+        return Q.places(recipe, self.unit(payload)) if recipe else ".7g"
+
     def decimals(self, view: dict[str, Any]) -> dict[str, Any]:
         """``view`` (a ``Q.part_view``) with its recipe's ``display_decimals`` from the recipe directory (the
         published payload does not carry them: a page setting, not part of the result)."""

@@ -177,3 +177,22 @@ def test_the_band_labels_its_limits_with_the_parts_decimals():
     assert band is not None and [t for _x, t in band["labels"]] == ["LSL 124000 g·cm²", "USL 126000 g·cm²"]
     four = Q.band({**RECIPE, "display_decimals": 4, "display_unit": "kg·m²"}, 0.0125, 2.3e-5, "kg·m²")
     assert four is not None and [t for _x, t in four["labels"]] == ["LSL 0.0124 kg·m²", "USL 0.0126 kg·m²"]
+
+
+def test_the_history_writes_each_value_with_its_recipes_decimals():
+    from service.publish.web.pages import Pages
+
+    pages = object.__new__(Pages)  # the page context without a server: its recipe book and unit setting
+    book = SimpleNamespace(recipes=[SimpleNamespace(name="wheel", display_decimals=1)])
+    pages.app = SimpleNamespace(parts=SimpleNamespace(book=book))  # type: ignore[assignment]
+    pages.server = SimpleNamespace(settings=SimpleNamespace(display_unit="kg·m²"))
+    stored = {"recipe": {k: v for k, v in RECIPE.items() if k != "display_decimals"}}  # the payload has none
+    assert pages.places(stored) == 1 and pages.places({"recipe": None}) == ".7g"
+    env = _environment(Q.local_time)
+    row = SimpleNamespace(uuid="u", seq=1, status="ok", part_verdict="OK", releases=1, release_index=1, verdict="OK",
+                          J=0.01251234, J_std=2e-7, part_id="SN-1", recipe="wheel", finished_at=1.7e9, flags=(),
+                          error=None, payload={**stored})
+    html = env.get_template("history.html").render(rows=[row], total=1, page=1, pages=1, unit="kg·m²",
+                                                   unit_of=pages.unit, places_of=pages.places, q={}, link=str,
+                                                   export="", flag_names=[], recipes=["wheel"])
+    assert "125123.4 g·cm²" in html
