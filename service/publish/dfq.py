@@ -10,8 +10,10 @@ One part type (the recipe) with one characteristic (its measurand: J, J_object o
 * One value line per completed part, fields separated by the DC4 character (0x14) in the AQDEF order
   K0001 value, K0002 attribute (0: valid; 255: the part's verdict is INVALID, the value is not for SPC: the
   mean of its releases, or empty when none gave a value),
-  K0004 date/time (dd.mm.yyyy/HH:MM:SS, UTC), K0005 events, K0006 batch, K0007 nest, K0008 operator,
-  K0009 text (the verdict; an INVALID part's with its first reason), K0010 machine (the device ID); then ``K0014`` the part ident (serial).
+  K0004 date/time (dd.mm.yyyy/HH:MM:SS, the appliance's local time as the pages and the report write it; the
+  time zone is not written), K0005 events, K0006 batch, K0007 nest, K0008 operator,
+  K0009 text (the verdict; an INVALID part's with its first reason, its numbers in the display unit with the
+  decimals the pages write them with), K0010 machine (the device ID); then ``K0014`` the part ident (serial).
 
 The file is written in Windows-1252, the code page DFQ readers expect (it has · and ²).
 """
@@ -24,6 +26,8 @@ from typing import Any, Iterable, Mapping
 
 from measurement.units import SI, from_si
 from service.parts.outcome import PartOutcome, PartSummary
+from service.publish.quality import places as shown_places
+from service.publish.quality import reason
 
 #: the field separator of a value line (AQDEF: DC4)
 FIELD = "\x14"
@@ -75,11 +79,12 @@ def dfq_text(recipe: Mapping[str, Any], parts: Iterable[Any], unit: str = SI) ->
     for m in parts:
         part = PartOutcome.from_dict(m.payload).part
         value = _recorded_value(m, part)
-        when = dt.datetime.fromtimestamp(m.finished_at, dt.UTC).strftime("%d.%m.%Y/%H:%M:%S")
+        when = dt.datetime.fromtimestamp(m.finished_at).astimezone().strftime("%d.%m.%Y/%H:%M:%S")
         invalid = m.part_verdict == "INVALID" or value is None
         attribute = ATTRIBUTE_INVALID if invalid else 0
         # an INVALID part is recorded too, marked not for SPC, with why (its first reason)
         why = next(iter(part.decision.reasons if part is not None else ()), "") if invalid else ""
+        why = reason(why, unit, shown_places(recipe, unit)) if why else ""
         fields = [f"{value * f:.{places}f}" if value is not None else "", str(attribute), when, "", "", "",
                   _clean(m.trigger), _clean(f"verdict {m.part_verdict}" + (f": {why}" if why else ""))[:255],
                   _clean(m.device_id)]

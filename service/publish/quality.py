@@ -16,10 +16,10 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 from measurement.units import SI, UnitError, from_si, inertia_unit
 from service.parts.outcome import PartOutcome
+from service.publish.budget import budget_rows
 
 if TYPE_CHECKING:  # pragma: no cover
     from measurement.result import IdentificationResult
-    from measurement.uncertainty import Budget
 
 #: what the page says for a value it does not have
 MISSING = "–"
@@ -52,6 +52,28 @@ def plain_text(text: Any) -> str:
         return m.group(1) + _plain_g(float(m.group(2) + "e" + m.group(4)), f".{digits}g")
 
     return _E_NUMBER.sub(fixed, str(text)) if text is not None else MISSING
+
+
+#: an inertia inside a sentence of the verdict: "1.2e-05 kg·m²", or the limits "[1.1e-05, 1.3e-05] kg·m²"
+_SI_INERTIA = re.compile(r"(\[)?([+-]?\d+(?:\.\d*)?(?:[eE][+-]?\d+)?)(?:, ([+-]?\d+(?:\.\d*)?(?:[eE][+-]?\d+)?)\])?"
+                         r" kg·m²")
+
+
+def reason(text: Any, unit: str = SI, decimals: int = 6) -> str:
+    """A sentence of the verdict (written in kg·m² with as many digits as a log keeps) with every inertia in it
+    in ``unit`` and ``decimals`` (the part's, as the tile above it), never fewer than two significant digits (a
+    small uncertainty is not written as 0); other numbers as ``plain_text`` writes them."""
+    def shown(x: str) -> str:
+        v = from_si(float(x), unit) or 0.0
+        d = decimals if v == 0 else max(decimals, 1 - int(math.floor(math.log10(abs(v)))))
+        return number(v, min(d, 12))
+
+    def convert(m: re.Match) -> str:
+        if m.group(1) and m.group(3):
+            return f"[{shown(m.group(2))}, {shown(m.group(3))}] {unit}"
+        return f"{m.group(1) or ''}{shown(m.group(2))} {unit}"
+
+    return plain_text(_SI_INERTIA.sub(convert, str(text))) if text is not None else MISSING
 
 
 def number(v: Any, spec: str | int = ".6g") -> str:
@@ -226,19 +248,11 @@ def release_rows(view: Mapping[str, Any], payload: Mapping[str, Any] | None, res
              "flags": list(result.flags) if result is not None else [], "seq": p.get("seq"), "uuid": p.get("uuid")}]
 
 
-def budget_rows(budget: Budget | None) -> list[dict[str, Any]]:
-    """The rows of a measurand's uncertainty budget (``measurement.uncertainty.Budget``): each line's source, its
-    contribution to the measurand's standard uncertainty (kg·m², its size: c·u carries the sign of the
-    sensitivity) and its share of u_c²; [] without a budget."""
-    if budget is None:
-        return []
-    return [{"name": ln.source, "u": abs(ln.contribution), "share": ln.share} for ln in budget.lines]
-
-
 def band(recipe: Mapping[str, Any] | None, value: float | None, U: float | None, unit: str = SI,
          width: float = 600.0) -> dict[str, Any] | None:
     """The tolerance band drawing (SVG x coordinates in a ``width`` wide box): LSL, nominal, USL, the guard
-    band (ISO 14253-1: the zone shrunk by U at each end) and the result's interval value ± U."""
+    band (ISO 14253-1: the zone shrunk by U at each end) and the result's interval value ± U; the limits
+    labelled in ``unit`` with the recipe's decimals (``places``), as the value above the band."""
     if not recipe or recipe.get("lower") is None or recipe.get("upper") is None:
         return None
     lsl, usl, nominal = float(recipe["lower"]), float(recipe["upper"]), recipe.get("nominal")
@@ -253,9 +267,10 @@ def band(recipe: Mapping[str, Any] | None, value: float | None, U: float | None,
         return round(pad + (v - lo) / (hi - lo) * (width - 2 * pad), 1)
 
     guard = recipe.get("rule", "guard_band") == "guard_band" and 0 < 2 * u < span
+    n = places(recipe, unit, U)
     out: dict[str, Any] = {
         "width": width, "lsl": x(lsl), "usl": x(usl), "nominal": x(nominal) if nominal is not None else None,
-        "labels": [(x(lsl), "LSL " + inertia(lsl, unit, ".6g")), (x(usl), "USL " + inertia(usl, unit, ".6g"))],
+        "labels": [(x(lsl), "LSL " + inertia(lsl, unit, n)), (x(usl), "USL " + inertia(usl, unit, n))],
         "guard": (x(lsl + u), x(usl - u)) if guard else None, "value": None, "interval": None}
     if value is not None and math.isfinite(value):
         out["value"] = x(value)
@@ -280,7 +295,7 @@ def shift_start(starts: Sequence[str], now: dt.datetime) -> dt.datetime:
 #: the run rules in words, with the rule's number in the Western Electric handbook (WE) and in Nelson (1984)
 RULE_WORDS = {
     "beyond_limits": "a point beyond the 3σ control limits (WE 1, Nelson 1)",
-    "run_of_8": "8 points in a row on one side of the centre line (Nelson 2)",
+    "run_of_8": "8 points in a row on one side of the centre line (WE 4; Nelson 2 asks for 9)",
     "trend_of_6": "6 points in a row steadily rising or falling (Nelson 3)",
     "2_of_3_beyond_2sigma": "2 of 3 points in a row beyond 2σ on one side (WE 2, Nelson 5)",
     "range_beyond_limits": "a range beyond its control limits: the spread within a part changed",

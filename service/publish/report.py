@@ -10,6 +10,7 @@ from typing import Any
 from measurement.units import SI
 
 from . import quality as Q
+from .budget import BUDGET_FOOTNOTE, BudgetRow
 from .payload import stored_result
 from .words import flag_words
 
@@ -48,21 +49,32 @@ def report_lines(m: Any, unit: str, lookup: Any = None, time_format: str = Q.TIM
             facts.append(("deviation", f"{why['deviation']} from the nominal, {why['where']}"))
     else:
         facts.append(("J ± u", f"{Q.inertia(v.get('value'), unit, pl)} ± {Q.inertia(v.get('std'), unit, pl)} (1σ)"))
-    for row in v["budget"]:
-        facts.append(("  budget: " + row["name"],
-                      f"{Q.inertia(row['u'], unit, '.2g')} ({Q.number(row['share'], '.3g')} of u_c²)"))
+    facts += [("  budget", _budget_line(row, unit)) for row in v["budget"]]
+    if v["budget"]:
+        facts.append(("", BUDGET_FOOTNOTE))
     facts.append(("calibration", (f"{cal.get('date')}" + (f", due {cal.get('valid_until')}" if cal.get("valid_until")
                                                             else "") + (" (DUE)" if cal.get("due") else ""))
                   if cal else "no calibration record"))
     releases = []
     for r in Q.release_rows(v, p, result, lookup):
         flags = "flags: " + (", ".join(r["flags"]) or "none") if r["flags"] is not None else ""
-        releases.append(f"release {r['index']} of {r['of']}: {Q.inertia(r['value'], unit)} — {r['status']}"
+        releases.append(f"release {r['index']} of {r['of']}: {Q.inertia(r['value'], unit, pl)} — "
+                        f"{Q.reason(r['status'], unit, pl)}"
                         + (f"; {flags}" if flags else ""))
     described = [f"{f}: {words}" for f, words in flag_words(m.flags) if words]
     if described:
         releases.append("this release's flags: " + "; ".join(described))
     return v, facts, releases
+
+
+def _budget_line(row: BudgetRow, unit: str) -> str:
+    """A row of the uncertainty budget as the page writes it: c·u = c × u with their units, the share in %."""
+    text = f"{'· ' if row.member else ''}{row.source}: c·u = {Q.inertia(row.contribution, unit, '.2g')}"
+    ln = row.line
+    if ln is not None:
+        lu = "" if ln.unit in (None, "", "1") else " " + ln.unit
+        text += f" (c = {Q.number(row.sensitivity(unit), '.3g')} {unit}{row.per}, u = {Q.number(ln.std, '.2g')}{lu})"
+    return text + (f"; {Q.number(row.share, '.1f')} % of u²" if row.share is not None else "; share in the row above")
 
 
 def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = None,
@@ -85,7 +97,8 @@ def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = Non
     else:
         head, colour = "no recipe: a value without a verdict", "0.3"
     lines = [(k, t) for k, t in facts] + [("", "")] + [("", r) for r in releases]
-    lines += [("", "why: " + r) for r in v["reasons"]]
+    pl = Q.places(v["recipe"], unit, v.get("U") or v.get("std"))
+    lines += [("", "why: " + Q.reason(r, unit, pl)) for r in v["reasons"]]
     figs: list[Any] = []
     fig = Figure(figsize=A4)
     fig.text(0.06, 0.965, f"Inertia measurement report #{m.seq}", fontsize=15, weight="bold", va="top")

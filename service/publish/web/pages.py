@@ -21,6 +21,7 @@ from service.parts.recipes import PART_ID_LENGTH
 from service.states import vocabulary
 
 from .. import quality as Q
+from ..budget import BUDGET_FOOTNOTE, budget_rows
 from ..words import STATE_WORDS
 from .auth import COOKIE, CSRF_HEADER, LOGIN_COOKIE, allowed
 from .child import ChildBusy
@@ -142,11 +143,13 @@ def _name(v: Any) -> Any:
 def _environment(when: Any) -> jinja2.Environment:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")),
                              autoescape=jinja2.select_autoescape(["html"]), trim_blocks=True, lstrip_blocks=True)
-    env.filters.update(fmt=Q.number, name=_name, inertia=Q.inertia, iso=Q.iso, when=when, plain=Q.plain_text)
+    env.filters.update(fmt=Q.number, name=_name, inertia=Q.inertia, iso=Q.iso, when=when, plain=Q.plain_text,
+                       reason=Q.reason)
     # file names carry a hash of the content: a browser never keeps a stale script after an update
     stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
     env.globals.update(version=__version__, PART_ID_LENGTH=PART_ID_LENGTH, allowed=allowed, STATE_WORDS=STATE_WORDS,
-                       VERDICT_WORDS=Q.VERDICT_WORDS, states_json=json.dumps(vocabulary(), separators=(",", ":")),
+                       VERDICT_WORDS=Q.VERDICT_WORDS, budget_rows=budget_rows, BUDGET_FOOTNOTE=BUDGET_FOOTNOTE,
+                       states_json=json.dumps(vocabulary(), separators=(",", ":")),
                        static_url=lambda name: f"/static/{name}?v={stamps.get(name, '')}")
     return env
 
@@ -193,6 +196,12 @@ class Pages:
     def unit(self, payload: Mapping[str, Any] | None = None) -> str:
         """The unit a result is shown in: its recipe's, else the set-up's."""
         return Q.display_unit(payload, self.server.settings.display_unit)
+
+    def places(self, payload: Mapping[str, Any] | None) -> int | str:
+        """The decimals a result's value is written with on its page (its recipe's, in its unit), for a list of
+        results: seven significant digits for a value without a recipe."""
+        recipe = self.decimals({"recipe": (payload or {}).get("recipe")})["recipe"]
+        return Q.places(recipe, self.unit(payload)) if recipe else ".7g"
 
     def decimals(self, view: dict[str, Any]) -> dict[str, Any]:
         """``view`` (a ``Q.part_view``) with its recipe's ``display_decimals`` from the recipe directory (the

@@ -149,7 +149,7 @@ class ResultPages(Family):
         flag_names = [(f, f"{f.replace('_', ' ')}: {w}" if w else f) for f, w in flag_words(sorted(FLAGS))]
         return self.pages.page(request, "history.html", title="History", rows=rows, total=total, page=page,
                                pages=max(1, math.ceil(total / size)), unit=self.server.settings.display_unit,
-                               unit_of=self.pages.unit, q=query_args(request), link=link, export=urlencode(args),
+                               unit_of=self.pages.unit, places_of=self.pages.places, q=query_args(request), link=link, export=urlencode(args),
                                flag_names=flag_names, recipes=self.pages.store().recipes())
 
     async def export(self, request: web.Request) -> web.Response:

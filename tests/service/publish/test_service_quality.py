@@ -13,6 +13,7 @@ import pytest
 from measurement.spc import individuals
 from measurement.units import INERTIA_UNITS, UnitError, from_si, inertia_unit
 from service.publish import quality as Q
+from service.publish.budget import BUDGET_FOOTNOTE, budget_rows
 from service.publish.payload import stored_result
 
 
@@ -101,15 +102,15 @@ def test_the_budget_rows_are_each_lines_contribution_to_the_measurand(identified
     stored = stored_result({**identified.to_dict(), "uuid": "u-1", "recipe": None})  # as a payload carries it
     assert stored is not None
     budget = stored.uncertainty_budget["J"]
-    rows = Q.budget_rows(budget)
-    assert [r["name"] for r in rows] == [ln.source for ln in budget.lines] and len(rows) >= 2
-    # its contribution to J in kg·m² (c·u carries the sign of its sensitivity: its size is what the row says),
-    # never the input's own u in the input's unit
+    rows = budget_rows(budget)
+    assert [r.source for r in rows] == [ln.source for ln in budget.lines] and len(rows) >= 2
+    # its contribution to J in kg·m² (c·u carries the sign of its sensitivity), never the input's own u in the
+    # input's unit
     k = next(r for r, ln in zip(rows, budget.lines) if ln.unit == "N·m/rad")
     line = next(ln for ln in budget.lines if ln.unit == "N·m/rad")
-    assert k["u"] == abs(line.contribution) != line.std and k["share"] == line.share
-    assert sum(r["share"] for r in rows) == pytest.approx(1.0)
-    assert Q.budget_rows(None) == []
+    assert k.contribution == line.contribution != line.std and k.share == pytest.approx(100 * line.share)
+    assert sum(r.share or 0.0 for r in rows) == pytest.approx(100.0)
+    assert budget_rows(None) == []
     # the part view of a plain result (no recipe) leads with J ± U and the budget of J
     v = Q.part_view({"recipe": None, "part": None, "release": None}, stored)
     assert (v["kind"], v["value"], v["U"], v["k"]) == ("plain", stored.J, stored.J_U, stored.coverage_factor)
@@ -233,8 +234,9 @@ def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_re
     from service.publish.web.pages import HERE
 
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")), autoescape=True)
-    env.filters.update(fmt=Q.number, inertia=Q.inertia, iso=Q.iso, name=lambda v: v, plain=Q.plain_text)
-    env.globals.update(VERDICT_WORDS=Q.VERDICT_WORDS)
+    env.filters.update(fmt=Q.number, inertia=Q.inertia, iso=Q.iso, name=lambda v: v, plain=Q.plain_text,
+                       reason=Q.reason)
+    env.globals.update(VERDICT_WORDS=Q.VERDICT_WORDS, budget_rows=budget_rows, BUDGET_FOOTNOTE=BUDGET_FOOTNOTE)
     from measurement.uncertainty import Budget
 
     budget = Budget.from_dict({
@@ -251,7 +253,7 @@ def test_the_verdict_block_shows_u_and_the_budget_partial_the_budget_when_the_re
     html = env.get_template("_budget.html").render(r=plain, unit="g·cm²")
     assert 'class="scroll"><table class="budget-table">' in html and "fit" in html  # scrolls in its card
     # in the page's unit, not kg·m² on a g·cm² page; the share second, where a phone still shows it
-    assert "J = 125000 g·cm², U = 1.2 g·cm²" in html and "contribution [g·cm²]" in html and "kg·m²" not in html
+    assert "J = 125000 g·cm², U = 1.2 g·cm²" in html and "contribution c·u [g·cm²]" in html and "kg·m²" not in html
     assert html.index("share of u²") < html.index("contribution")
     before = dataclasses.replace(plain, uncertainty_budget={})  # a result without U or budget: its 1σ, said to be one
     html = env.get_template("_verdict.html").render(v=Q.part_view(p, before), p=p, unit="kg·m²", band=None,
