@@ -69,11 +69,12 @@ LOCKOUT_WRONG, LOCKOUT_WINDOW, LOCKOUT_TIME = 5, 900.0, 900.0
 SOURCE_WRONG = 20
 
 
-def throttled_words(seconds: float, source: str) -> str:
-    """What a login refused by a lockout is told (not "wrong password": the password was not even tried)."""
+def throttled_words(seconds: float, source: str, until: str) -> str:
+    """What a login refused by a lockout is told (not "wrong password": the password was not even tried);
+    ``until``: when the lockout ends, as the pages write a time."""
     minutes = max(1, math.ceil(seconds / 60))
-    return (f"too many wrong passwords: logins with this name from your address ({source}) are paused for "
-            f"{minutes} more min, the right password too (it was not tried). Log in from another device, ask an "
+    return (f"locked out after too many wrong passwords: logins with this name from your address ({source}) are "
+            f"paused until {until} ({minutes} more min), the right password too (it was not tried). Log in from another device, ask an "
             "admin to enable your user, or log in with the appliance's token (first line of its web token file)")
 
 

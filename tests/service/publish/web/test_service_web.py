@@ -609,7 +609,7 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     assert status == 200 and "<td>ada</td><td>quality</td>" in answer.decode()  # (after the redirect)
     assert "ada" in users.read_text() and "ada-password-3" not in users.read_text()
     login("ada", "ada-password-3")
-    assert admin.request("/users", {"action": "remove", "name": "olga", "csrf": acsrf})[0] == 200
+    assert admin.request("/users", {"action": "remove", "name": "olga", "confirm": "olga", "csrf": acsrf})[0] == 200
     c = Client(app.web.url)
     assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401
 
@@ -688,7 +688,7 @@ def test_a_locked_out_login_is_told_it_is_paused_not_that_its_password_is_wrong(
     status, headers, body = c.request("/login", {"user": "root", "token": "root-password-1", "csrf": c.csrf()})
     page = body.decode()
     assert status == 429 and int(headers["Retry-After"]) > 0, (status, headers)
-    assert "too many wrong passwords" in page and re.search(r"\(127\.0\.0\.1\) are paused for 1[0-5] more min", page)
+    assert "too many wrong passwords" in page and re.search(r"\(127\.0\.0\.1\) are paused until [-0-9]+ [0-9:]+ \(1[0-5] more min\)", page)
     assert "it was not tried" in page and "wrong user name or password" not in page
     status, doc = c.json("/login", data=urllib.parse.urlencode({"user": "root", "token": "root-password-1",
                                                                 "csrf": c.csrf()}).encode())
