@@ -126,3 +126,83 @@ def test_a_login_locked_out_is_told_so_with_the_time_it_ends(users_app):
     assert re.search(r"paused until \d{4}-\d\d-\d\d \d\d:\d\d:\d\d \(1[0-5] more min\)", text)
     status, _, body = c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})
     assert status == 429 and "locked out" in body.decode() and "paused until" in body.decode()
+
+
+@pytest.fixture
+def recipe_app(appliance_factory, tmp_path):
+    from service.publish.web.auth import User, hash_password, save_users
+
+    users = tmp_path / "users.toml"
+    save_users(users, {n: User(n, "quality", hash_password(f"{n}-password-1")) for n in ("quinn", "rita")})
+    d = tmp_path / "recipes"
+    d.mkdir()
+    (d / "g.toml").write_text('[recipe]\nname = "rotor-g"\nnumber = 5\nnominal = 0.0125  # kg·m²\n'
+                              'tolerance = 0.0002\ndisplay_unit = "g·cm²"\n')
+    app = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True, "users_file": str(users)},
+                                          recipes={"directory": str(d)})).app
+    return app, d / "g.toml", tmp_path / "state" / "recipe-audit.log"
+
+
+def _quality(app, name: str) -> tuple[Client, str]:
+    c = Client(app.web.url)
+    c.request("/login", {"user": name, "token": f"{name}-password-1", "csrf": c.csrf()})
+    return c, c.request("/recipes")[2].decode()
+
+
+def _form(page: str) -> dict[str, str]:
+    """The recipe form's fields as the page fills them (text inputs and the selected option)."""
+    form = page.split('id="edit-5"')[1].split("</form>")[0]
+    fields = dict(re.findall(r'<input type="(?:hidden|text)" name="(\w+)"[^>]*?value="([^"]*)"', form))
+    for name, options in re.findall(r'<select name="(\w+)"[^>]*>(.*?)</select>', form, re.S):
+        chosen = re.search(r'<option(?: value="([^"]*)")? selected>([^<]*)<', options)
+        fields[name] = chosen[1] if chosen[1] is not None else chosen[2]
+    return fields
+
+
+def test_a_recipe_is_edited_in_its_own_unit_with_a_decimal_comma_and_every_error_said_by_its_label(recipe_app):
+    app, path, audit = recipe_app
+    quinn, page = _quality(app, "quinn")
+    form = _form(page)
+    # the nominal and the tolerance in the recipe's g·cm², the unit chosen from a list
+    assert form["nominal"] == "125000" and form["tolerance"] == "2000" and form["display_unit"] == "g·cm²"
+    assert "nominal (g·cm²)" in page and "tolerance (g·cm²)" in page and "nominal (kg·m²)" not in page
+    assert re.search(r'<select name="display_unit"[^>]*>.*<option>lb·in²</option>', page, re.S)
+    # every refused value, by its label, without the server's path or the file's key syntax
+    status, _, body = quinn.request("/recipes", {**form, "nominal": "abc", "releases": "0",
+                                                 "display_decimals": "1,5,0"})
+    answer = body.decode()
+    errors = answer.split('id="recipe-error"')[1].split("</ul>")[0]
+    assert status == 400 and errors.count("<li>") == 3, errors
+    assert "<b>nominal (g·cm²)</b>: expected a number" in errors and "<b>releases</b>: expected at least 1" in errors
+    assert "<b>display decimals</b>: expected a number with one decimal separator" in errors
+    assert str(path.parent) not in errors and "[recipe]" not in errors
+    assert "releases" not in path.read_text()
+    # a decimal comma, in g·cm²: the file gets kg·m²; what was not touched is not rewritten
+    status, _, body = quinn.request("/recipes", {**form, "nominal": "130000,5"})
+    text = path.read_text()
+    assert status == 200 and "nominal = 0.01300005  # kg·m²" in text and "tolerance = 0.0002\n" in text
+    assert 'value="130000.5"' in body.decode()
+    assert audit.read_text().splitlines()[-1].split("\t")[1:] == ["web:quinn", "rotor-g", "g.toml",
+                                                                  "nominal: 0.0125 → 0.01300005"]
+    # a cross-key refusal of the loader is said by its label too
+    status, _, body = quinn.request("/recipes", {**_form(quinn.request("/recipes")[2].decode()),
+                                                 "tolerance": "200000"})
+    assert status == 400 and "<b>tolerance (g·cm²)</b>: expected less than the nominal" in body.decode()
+
+
+def test_two_quality_engineers_editing_one_recipe_the_later_is_refused_and_audited(recipe_app):
+    app, path, audit = recipe_app
+    quinn, page_q = _quality(app, "quinn")
+    rita, page_r = _quality(app, "rita")
+    assert quinn.request("/recipes", {**_form(page_q), "releases": "3"})[0] == 200
+    status, _, body = rita.request("/recipes", {**_form(page_r), "nominal": "126000"})
+    answer = body.decode()
+    assert status == 409 and "changed since you opened it" in answer and "nothing was saved" in answer
+    assert "releases = 3" in path.read_text() and "nominal = 0.0125" in path.read_text()
+    assert _form(answer)["releases"] == "3"  # the recipe as it is now
+    lines = [line.split("\t")[1:] for line in audit.read_text().splitlines()]
+    assert lines == [["web:quinn", "rotor-g", "g.toml", "releases: – → 3"],
+                     ["web:rita", "rotor-g", "g.toml",
+                      "refused: the file changed since the form was opened → nothing written"]]
+    assert rita.request("/recipes", {**_form(answer), "nominal": "126000"})[0] == 200
+    assert "nominal = 0.0126" in path.read_text() and "releases = 3" in path.read_text()
