@@ -283,7 +283,7 @@ def test_recipe_and_part_id_set_from_the_page_reach_the_result_and_the_history(a
     c = Client(app.web.url)
     home = c.request("/")[2].decode()
     # a visitor is not offered a recipe menu he may not use; the part ID field takes what the server takes
-    assert 'id="recipe-select"' not in home and 'maxlength="20"' in home
+    assert 'id="recipe-select"' not in home and 'data-max-length="20"' in home
     recipes = c.request("/recipes")[2].decode()  # every recipe readable by all, with its limits
     assert "rotor-a" in recipes and "0.012250 kg·m² … 0.012750 kg·m²" in recipes
     status, doc = c.json("/api/part", data={"recipe": "rotor-b"}, headers=bearer)

@@ -206,3 +206,46 @@ def test_two_quality_engineers_editing_one_recipe_the_later_is_refused_and_audit
                       "refused: the file changed since the form was opened → nothing written"]]
     assert rita.request("/recipes", {**_form(answer), "nominal": "126000"})[0] == 200
     assert "nominal = 0.0126" in path.read_text() and "releases = 3" in path.read_text()
+
+
+def test_a_part_id_too_long_or_with_a_refused_character_is_refused_saying_which_never_cut(appliance_factory,
+                                                                                           tmp_path):
+    d = tmp_path / "recipes"
+    d.mkdir()
+    (d / "a.toml").write_text('[recipe]\nname = "rotor-a"\nnumber = 3\nnominal = 0.0125\ntolerance_percent = 2.0\n')
+    app = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True},
+                                          recipes={"directory": str(d)})).app
+    bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
+    c = Client(app.web.url)
+    home = c.request("/")[2].decode()
+    field = re.search(r'<input[^>]*id="part-id-input"[^>]*>', home)[0]
+    assert "maxlength" not in field and 'data-max-length="20"' in field  # the browser never cuts a scan
+    scanned = "SN-2026-11-28-LINE3-0000123456"
+    status, doc = c.json("/api/part", data={"part_id": scanned + "X"}, headers=bearer)
+    assert status == 400 and "part ID must be at most 20 characters, got 31" in doc["error"]
+    status, doc = c.json("/api/part", data={"part_id": "SN 1004 ü"}, headers=bearer)
+    assert status == 400 and "'ü' (character 9) refused" in doc["error"] and "at most" not in doc["error"]
+    assert c.json("/api/part", data={"part_id": scanned[:20]}, headers=bearer)[0] == 202
+
+
+@pytest.mark.skipif(__import__("shutil").which("node") is None, reason="no node to run the page's script")
+def test_the_page_s_part_id_check_says_the_length_or_the_character_at_fault(tmp_path):
+    """The submit handler's check, run under node on a stub page: the length said for a long scan, the refused
+    character (not the length) for "SN 1004 ü", nothing sent in either case."""
+    import subprocess
+
+    script = (Path(__file__).parents[4] / "service/publish/web/static/moi.js").read_text()
+    body = script.split('pf.addEventListener("submit", function (e) {')[1].split("if (!fd.get(\"recipe\"))")[0]
+    probe = ("var out = [], current = '', e = {preventDefault: function () {}}, pf = {};\n"
+             "function fieldError(t) { out.push(t); }\n"
+             "function FormData() { return {get: function () { return current; }, delete: function () {}}; }\n"
+             "var input = {getAttribute: function () { return '20'; }, focus: function () {}};\n"
+             "function check(pid) { current = pid; (function () {\n" + body + "\n out.push('sent'); })(); }\n"
+             "check('SN-2026-11-28-LINE3-0000123456X'); check('SN 1004 \\u00fc'); check('SN-7');\n"
+             "console.log(JSON.stringify(out));")
+    (tmp_path / "probe.js").write_text(probe, encoding="utf-8")
+    said = __import__("json").loads(subprocess.run(["node", str(tmp_path / "probe.js")], capture_output=True,
+                                                   text=True, check=True).stdout)
+    assert said[0] == "31 characters: a part ID holds at most 20 (nothing was cut: check the scan)"
+    assert said[1] == "\u201cü\u201d (character 9) is refused: a part ID holds printable ASCII only"
+    assert said[2:] == ["sent"]
