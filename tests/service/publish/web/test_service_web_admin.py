@@ -155,6 +155,7 @@ def _form(page: str) -> dict[str, str]:
     fields = dict(re.findall(r'<input type="(?:hidden|text)" name="(\w+)"[^>]*?value="([^"]*)"', form))
     for name, options in re.findall(r'<select name="(\w+)"[^>]*>(.*?)</select>', form, re.S):
         chosen = re.search(r'<option(?: value="([^"]*)")? selected>([^<]*)<', options)
+        assert chosen is not None, options
         fields[name] = chosen[1] if chosen[1] is not None else chosen[2]
     return fields
 
@@ -218,7 +219,9 @@ def test_a_part_id_too_long_or_with_a_refused_character_is_refused_saying_which_
     bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
     c = Client(app.web.url)
     home = c.request("/")[2].decode()
-    field = re.search(r'<input[^>]*id="part-id-input"[^>]*>', home)[0]
+    found = re.search(r'<input[^>]*id="part-id-input"[^>]*>', home)
+    assert found is not None
+    field = found[0]
     assert "maxlength" not in field and 'data-max-length="20"' in field  # the browser never cuts a scan
     scanned = "SN-2026-11-28-LINE3-0000123456"
     status, doc = c.json("/api/part", data={"part_id": scanned + "X"}, headers=bearer)
