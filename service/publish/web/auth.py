@@ -293,6 +293,12 @@ class Guard:
             self._sessions[sid] = s
         return sid, s
 
+    def disabled(self, candidate: str | None, user: str) -> bool:
+        """Whether ``user`` is disabled and ``candidate`` is their password (who knows it is told why they are
+        refused; nobody else learns that the user exists)."""
+        u = self.users.get(user)
+        return u is not None and u.disabled and check_password(candidate or "", u.password)
+
     def _wrong_password(self, name: str, source: str) -> None:
         if name in self.users:
             self.wrong_logins[name] = self.wrong_logins.get(name, 0) + 1

@@ -37,6 +37,8 @@ class SessionPages(Family):
             await guard.wrong_token(source)  # a guess costs time
             status, why = 401, ("wrong user name or password" if user else
                                 "wrong token: it is the first line of the appliance's web token file")
+            if user and guard.disabled(str(form.get("token") or ""), user):
+                status, why = 403, f"the user {user} is disabled: ask an admin to enable it"
             if user and (wait := guard.throttled(user, source)) > 0:  # this wrong password locked the name out
                 why += "; " + throttled_words(wait, source, self.pages.when(time.time() + wait))
         else:

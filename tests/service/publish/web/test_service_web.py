@@ -598,7 +598,8 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     assert "disabled = true" in users.read_text() and olga.request("/users")[0] == 403
     assert olga.json("/api/part", data={"part_id": "SN-8"}, headers={"X-CSRF-Token": csrf})[0] == 401  # session ended
     c = Client(app.web.url)
-    assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401
+    status, _, body = c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})
+    assert status == 403 and "the user olga is disabled" in body.decode()
     page = admin.request("/users")[2].decode()
     assert page.split('id="user-olga"')[1].split('class="login-state">')[1].startswith("disabled<")
     status, _, answer = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",

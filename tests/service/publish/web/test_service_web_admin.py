@@ -105,7 +105,8 @@ def test_two_admins_at_once_the_later_form_is_refused_with_the_users_as_they_are
     assert re.search(r'id="user-olga".*?class="login-state">disabled<', answer, re.S)  # the state now
     assert read_users(users)["olga"] == User("olga", "operator", read_users(users)["olga"].password, True)
     c = Client(app.web.url)
-    assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401
+    assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 403
+    assert c.request("/login", {"user": "olga", "token": "not-her-password", "csrf": c.csrf()})[0] == 401
     # on the page as it is now, the change goes through
     status, _, _ = second.request("/users", {"action": "change", "name": "olga", "role": "quality",
                                              "version": _version(answer), "csrf": _csrf(page_2)})
