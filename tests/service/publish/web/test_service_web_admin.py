@@ -253,3 +253,34 @@ def test_the_page_s_part_id_check_says_the_length_or_the_character_at_fault(tmp_
     assert said[0] == "31 characters: a part ID holds at most 20 (nothing was cut: check the scan)"
     assert said[1] == "\u201cü\u201d (character 9) is refused: a part ID holds printable ASCII only"
     assert said[2:] == ["sent"]
+
+
+def test_a_lockout_outlives_a_restart_until_its_end_and_an_enable_lifts_it_for_good(tmp_path):
+    """The lockouts are kept in the state directory with their wall-clock end: a guard made again (the daemon
+    restarted) still refuses the locked name from that address; the end and an admin's enable both hold."""
+    from service.publish.web.auth import LOCKOUT_TIME, LOCKOUT_WRONG, SOURCE_WRONG, Guard, User, hash_password
+
+    users = {"olga": User("olga", "operator", hash_password("olga-password-1"))}
+    kept = tmp_path / "web-lockouts.json"
+    mono, wall = [100.0], [1_800_000_000.0]
+
+    def guard() -> Guard:
+        return Guard("t" * 24, clock=lambda: mono[0], users=users, lockout_file=kept, wall=lambda: wall[0])
+
+    first = guard()
+    for _ in range(LOCKOUT_WRONG):
+        first.login("wrong", "olga", "192.0.2.66")
+    for i in range(SOURCE_WRONG):  # a guesser going through the names, a few tries each
+        first.login("wrong", f"name-{i // (LOCKOUT_WRONG - 1)}", "192.0.2.77")
+    mono[0], wall[0] = 5.0, wall[0] + 60  # restarted a minute later: a new monotonic clock
+    again = guard()
+    assert again.throttled("olga", "192.0.2.66") == pytest.approx(LOCKOUT_TIME - 60)
+    assert again.throttled("olga", "192.0.2.77") == pytest.approx(LOCKOUT_TIME - 60)  # the address's, too
+    assert again.login("olga-password-1", "olga", "192.0.2.66") is None
+    assert again.login("olga-password-1", "olga", "192.0.2.10") is not None  # elsewhere, in at once
+    again.unlock("olga")
+    assert guard().throttled("olga", "192.0.2.66") == 0  # the enable is kept too
+    wall[0] += LOCKOUT_TIME
+    assert guard().throttled("olga", "192.0.2.77") == 0  # and every lockout ends by itself
+    kept.write_text("{not json")
+    assert guard().throttled("olga", "192.0.2.66") == 0  # a damaged file is said in the log, not a crash
