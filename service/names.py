@@ -40,7 +40,8 @@ class NameRule:
         if bad:
             allowed = "printable ASCII" if self.ascii else "printable characters"
             without = f" without {', '.join(repr(c) for c in self.forbidden)}" if self.forbidden else ""
-            return f"{self.what} must be {allowed}{without} (it reaches {self.reaches}), got {text!r}"
+            refused = ", ".join(f"{ch!r} (character {text.index(ch) + 1})" for ch in dict.fromkeys(bad))
+            return f"{self.what} must be {allowed}{without} (it reaches {self.reaches}), got {text!r}: {refused} refused"
         return None
 
 

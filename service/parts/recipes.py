@@ -79,6 +79,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
@@ -87,7 +88,7 @@ from measurement import Rig
 from measurement.errors import InvalidInput
 from measurement.tensor import TensorPlan
 from measurement.tensor_inputs import RigShared
-from measurement.units import inertia_unit
+from measurement.units import SI, inertia_unit
 from measurement.verdict import RULES, QualityRules, Specification
 from service.errors import ConfigError
 from service.names import NAMES, name_problem
@@ -104,6 +105,15 @@ PART_ID_LENGTH = NAMES["part_id"].length
 
 class RecipeError(ConfigError):
     """A recipe file is unusable, or a recipe that does not exist was asked for."""
+
+
+class RecipeEditError(RecipeError):
+    """An edit of a recipe refused, with every problem: ``problems`` {key name: what is wrong} ("" for one of the
+    file as a whole); the text names the file and the keys, as a loader's error does."""
+
+    def __init__(self, path: str | Path, problems: Mapping[str, str]) -> None:
+        self.problems = dict(problems)
+        super().__init__("; ".join(f"{path}: [recipe]{' ' + k if k else ''}: {m}" for k, m in problems.items()))
 
 
 def check_part_id(text: str) -> str:
@@ -358,11 +368,12 @@ def _check_standard(c: Any, doc: Mapping[str, Any], rec: Mapping[str, Any],
 RECIPE_AUDIT_FILE = "recipe-audit.log"
 
 
-def edit_recipe(recipe: Recipe, typed: Mapping[str, str]) -> tuple[Recipe, dict[str, tuple[Any, Any]]]:
-    """Set the editable [recipe] keys (``recipe_keys.EDITABLE``) of ``typed`` (text as typed; empty removes an
-    optional key) in ``recipe``'s file, keeping its comments and layout; the new file goes through
-    ``load_recipe`` before it replaces the old one in one step (RecipeError naming the key, the file unchanged).
-    Returns the re-read recipe and {key: (before, after)} of what changed."""
+def edit_recipe(recipe: Recipe, typed: Mapping[str, str],
+                unit: str = SI) -> tuple[Recipe, dict[str, tuple[Any, Any]]]:
+    """Set the editable [recipe] keys (``recipe_keys.EDITABLE``) of ``typed`` (text as typed, an inertia in
+    ``unit``; empty removes an optional key) in ``recipe``'s file, keeping its comments and layout; the new file
+    goes through ``load_recipe`` before it replaces the old one in one step (RecipeEditError naming every key
+    refused, the file unchanged). Returns the re-read recipe and {key: (before, after)} of what changed."""
     import tomlkit
 
     from service.sources.files import write_atomic
@@ -371,15 +382,19 @@ def edit_recipe(recipe: Recipe, typed: Mapping[str, str]) -> tuple[Recipe, dict[
     doc = tomlkit.parse(read_text(path, "recipe file"))
     table = doc["recipe"]
     changes: dict[str, tuple[Any, Any]] = {}
+    problems: dict[str, str] = {}
     for key in EDITABLE:
         if key.name not in typed:
             continue
         before = table.get(key.name)
         before = before.unwrap() if hasattr(before, "unwrap") else before
+        if str(typed[key.name]).strip() == (key.typed(before, unit) or ""):
+            continue  # as shown: unchanged, whatever a conversion to the unit and back would round
         try:
-            after = key.parse(str(typed[key.name]))
+            after = key.parse(str(typed[key.name]), unit)
         except ValueError as exc:
-            raise RecipeError(f"{path}: [recipe] {key.name}: {exc}") from None
+            problems[key.name] = str(exc)
+            continue
         if after == before:
             continue
         changes[key.name] = (before, after)
@@ -387,6 +402,8 @@ def edit_recipe(recipe: Recipe, typed: Mapping[str, str]) -> tuple[Recipe, dict[
             table.pop(key.name, None)
         else:
             table[key.name] = after
+    if problems:
+        raise RecipeEditError(path, problems)
     if not changes:
         return recipe, changes
     text = tomlkit.dumps(doc)
@@ -395,19 +412,28 @@ def edit_recipe(recipe: Recipe, typed: Mapping[str, str]) -> tuple[Recipe, dict[
         write_atomic(trial, text, "recipe file")
         load_recipe(trial)  # the edited file must read as a recipe before it replaces the old one
     except RecipeError as exc:
-        raise RecipeError(str(exc).replace(str(trial), str(path))) from None
+        said = str(exc).replace(str(trial), str(path))
+        found = re.match(rf"{re.escape(str(path))}: \[recipe\] (\w+): (.*)", said, re.S)
+        raise RecipeEditError(path, {found[1]: found[2]} if found else {"": said.replace(f"{path}: ", "")}) from None
     finally:
         trial.unlink(missing_ok=True)
     write_atomic(path, text, "recipe file")
     return load_recipe(path), changes
 
 
-def recipe_values(recipe: Recipe) -> dict[str, str | None]:
-    """The editable keys as ``recipe``'s file holds them, as text a person types (None: not in the file)."""
+def recipe_values(recipe: Recipe, unit: str = SI) -> dict[str, str | None]:
+    """The editable keys as ``recipe``'s file holds them, as text a person types, an inertia in ``unit`` (None:
+    not in the file)."""
     import tomllib
 
     rec = tomllib.loads(read_text(Path(recipe.path), "recipe file")).get("recipe") or {}
-    return {k.name: k.typed(rec.get(k.name)) for k in EDITABLE}
+    return {k.name: k.typed(rec.get(k.name), unit) for k in EDITABLE}
+
+
+def recipe_version(recipe: Recipe) -> str:
+    """A short digest of ``recipe``'s file as it is now: an edit opened on another version was opened before a
+    change."""
+    return hashlib.sha256(read_text(Path(recipe.path), "recipe file").encode("utf-8")).hexdigest()[:16]
 
 
 def audit_recipe(log_path: str | Path, who: str, recipe: Recipe, changes: Mapping[str, tuple[Any, Any]],

@@ -64,3 +64,8 @@ class Lockouts(Generic[K]):
         for d in (self._wrong, self._until):
             for k in [k for k in d if which(k)]:
                 del d[k]
+
+    def hold(self, key: K, seconds: float) -> None:
+        """Lock ``key`` out for ``seconds`` more (a lockout kept across a restart)."""
+        if seconds > 0:
+            self._until[key] = self._clock() + seconds

@@ -67,13 +67,16 @@ LOCKOUT_WRONG, LOCKOUT_WINDOW, LOCKOUT_TIME = 5, 900.0, 900.0
 #: an address that gave this many wrong passwords within LOCKOUT_WINDOW, whatever the names, has its named
 #: logins locked out for LOCKOUT_TIME (a guesser going through the names); the token's login never is
 SOURCE_WRONG = 20
+#: the lockouts now with their end (Unix time), in the state directory: a restart does not lift them
+LOCKOUT_FILE_NAME = "web-lockouts.json"
 
 
-def throttled_words(seconds: float, source: str) -> str:
-    """What a login refused by a lockout is told (not "wrong password": the password was not even tried)."""
+def throttled_words(seconds: float, source: str, until: str) -> str:
+    """What a login refused by a lockout is told (not "wrong password": the password was not even tried);
+    ``until``: when the lockout ends, as the pages write a time."""
     minutes = max(1, math.ceil(seconds / 60))
-    return (f"too many wrong passwords: logins with this name from your address ({source}) are paused for "
-            f"{minutes} more min, the right password too (it was not tried). Log in from another device, ask an "
+    return (f"locked out after too many wrong passwords: logins with this name from your address ({source}) are "
+            f"paused until {until} ({minutes} more min), the right password too (it was not tried). Log in from another device, ask an "
             "admin to enable your user, or log in with the appliance's token (first line of its web token file)")
 
 
@@ -224,7 +227,8 @@ class Session:
 class Guard:
     """Sessions and checks for one token."""
 
-    def __init__(self, token: str, clock=time.monotonic, users: dict[str, User] | None = None) -> None:
+    def __init__(self, token: str, clock=time.monotonic, users: dict[str, User] | None = None,
+                 lockout_file: str | os.PathLike | None = None, wall=time.time) -> None:
         self._token = token
         self.users = users or {}
         self._dummy = hash_password(secrets.token_urlsafe(12)) if self.users else ""
@@ -240,6 +244,45 @@ class Guard:
         self.source_lockouts: Lockouts[str] = Lockouts(SOURCE_WRONG, LOCKOUT_WINDOW, LOCKOUT_TIME, clock)
         self._wrong_since_log = 0
         self._guess_logged_at = -float("inf")
+        self._lockout_file = Path(lockout_file) if lockout_file is not None else None
+        self._wall = wall
+        self._restore_lockouts()
+
+    def _restore_lockouts(self) -> None:
+        """The lockouts of before a restart, from the lockout file (a restart must not lift them); a file that
+        cannot be read is said in the log and lifts nothing it did not hold."""
+        if self._lockout_file is None or not self._lockout_file.exists():
+            return
+        import json
+
+        try:
+            doc = json.loads(self._lockout_file.read_text(encoding="utf-8"))
+            now = self._wall()
+            for source, name, until in doc.get("names", ()):
+                self.lockouts.hold((str(source), str(name)), float(until) - now)
+            for source, until in doc.get("sources", ()):
+                self.source_lockouts.hold(str(source), float(until) - now)
+        except (OSError, ValueError, TypeError, AttributeError) as exc:
+            log.warning("web: cannot read the lockouts kept in %s (%s): lockouts of before the start are lost",
+                        self._lockout_file, exc)
+
+    def _save_lockouts(self) -> None:
+        """Write the lockouts now with their wall-clock end (replaced in one step), for the next start."""
+        if self._lockout_file is None:
+            return
+        import json
+
+        now = self._wall()
+        doc = {"names": [[s, n, now + left] for (s, n), left in self.lockouts.locked().items()],
+               "sources": [[s, now + left] for s, left in self.source_lockouts.locked().items()]}
+        tmp = self._lockout_file.with_name(f".{self._lockout_file.name}.tmp")
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(json.dumps(doc) + "\n")
+            os.replace(tmp, self._lockout_file)
+        except OSError as exc:  # the lockout holds in memory whatever the disk says
+            log.warning("web: cannot keep the lockouts in %s: %s", self._lockout_file, exc.strerror or exc)
 
     async def wrong_token(self, peer: str | None) -> None:
         """A wrong token was given: wait ``GUESS_DELAY``, one wrong token at a time for the whole server (a
@@ -292,15 +335,26 @@ class Guard:
             self._sessions[sid] = s
         return sid, s
 
+    def disabled(self, candidate: str | None, user: str) -> bool:
+        """Whether ``user`` is disabled and ``candidate`` is their password (who knows it is told why they are
+        refused; nobody else learns that the user exists)."""
+        u = self.users.get(user)
+        return u is not None and u.disabled and check_password(candidate or "", u.password)
+
     def _wrong_password(self, name: str, source: str) -> None:
         if name in self.users:
             self.wrong_logins[name] = self.wrong_logins.get(name, 0) + 1
+        locked = False
         if self.lockouts.failed((source, name)):
             log.warning("web: logins as %r from %s locked out for %.0f s after %d wrong passwords within %.0f s",
                         name, source, LOCKOUT_TIME, LOCKOUT_WRONG, LOCKOUT_WINDOW)
+            locked = True
         if self.source_lockouts.failed(source):
             log.warning("web: named logins from %s locked out for %.0f s after %d wrong passwords within %.0f s",
                         source, LOCKOUT_TIME, SOURCE_WRONG, LOCKOUT_WINDOW)
+            locked = True
+        if locked:
+            self._save_lockouts()
 
     def throttled(self, name: str, source: str) -> float:
         """How much longer logins as ``name`` from ``source`` are locked out, s (0: not locked)."""
@@ -314,6 +368,7 @@ class Guard:
         """Lift ``name``'s lockouts from every address and forget its recent wrong passwords (an admin enabled
         the user)."""
         self.lockouts.lift(lambda key: key[1] == name)
+        self._save_lockouts()
 
     def logout(self, sid: str | None) -> None:
         with self._lock:

@@ -14,11 +14,14 @@ from service.errors import InputFileError
 from service.parts.recipe_keys import EDITABLE
 from service.parts.recipes import (
     RECIPE_AUDIT_FILE,
+    Recipe,
     RecipeBook,
+    RecipeEditError,
     RecipeError,
     audit_recipe,
     edit_recipe,
     recipe_values,
+    recipe_version,
 )
 
 from .. import quality as Q
@@ -30,10 +33,14 @@ log = logging.getLogger("moi.web")
 class RecipePages(Family):
     """``/recipes``, shown and edited."""
 
+    def __init__(self, *args: Any, **kw: Any) -> None:
+        super().__init__(*args, **kw)
+        self._editing = asyncio.Lock()  # one edit at a time: read, check the version, write, audit
+
     async def recipes(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
         """Every recipe as a quality engineer reads it before measuring: nominal, tolerance, limits, releases,
         decision rule and quality rules, in the recipe's unit and decimals; for the quality role, a form per
-        recipe to edit them."""
+        recipe to edit them, its inertias in the recipe's unit, with the version of the file it was opened on."""
         book = getattr(self.app, "parts", None)
         rows = []
         active = getattr(book, "recipe", None)
@@ -42,9 +49,10 @@ class RecipePages(Family):
             unit = Q.display_unit({"recipe": d}, self.server.settings.display_unit)
             rows.append({"r": d, "unit": unit, "places": Q.places(d, unit), "active": active is not None
                          and active.name == r.name, "rig": Path(r.rig_path).name if r.rig_path else None,
-                         "file": recipe_values(r)})
+                         "file": recipe_values(r, unit), "version": recipe_version(r)})
         return self.pages.page(request, "recipes.html", status=status, title="Recipes", rows=rows,
-                               editable=EDITABLE, may_edit=self.pages.may(request, "recipe"), **ctx)
+                               editable=EDITABLE, may_edit=self.pages.may(request, "recipe"),
+                               default_unit=self.server.settings.display_unit, **ctx)
 
     async def recipes_change(self, request: web.Request) -> web.StreamResponse:
         """Edit one recipe's [recipe] keys (quality role): checked as a recipe file is, written back in one
@@ -60,12 +68,36 @@ class RecipePages(Family):
         except RecipeError as exc:
             raise Refused(404, str(exc)) from None
         typed = {k.name: str(form[k.name]) for k in EDITABLE if k.name in form}
+        async with self._editing:
+            return await self._edit(request, source, form, recipe, typed)
+
+    async def _edit(self, request: web.Request, source: str, form: Any, recipe: Recipe,
+                    typed: dict[str, str]) -> web.StreamResponse:
+        """The edit itself, one at a time: a form opened on another version of the file is refused (409, and
+        audited) with the recipe as it is now; a refused value is said by the field's label, every one."""
+        parts = self.app.parts
         loop = asyncio.get_running_loop()
+        audit = self.app.config.state_dir / RECIPE_AUDIT_FILE
+        now = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+        if "version" in form and str(form["version"]) != recipe_version(recipe):
+            await loop.run_in_executor(None, audit_recipe, audit, source, recipe,
+                                       {"refused": ("the file changed since the form was opened", "nothing written")},
+                                       now)
+            return await self.recipes(request, status=409, edit_error={
+                "recipe": recipe.name, "typed": {}, "errors": [("", "the recipe was changed since you opened it (by "
+                                                                "someone else?): nothing was saved; here it is now, "
+                                                                "edit it again if your change still holds")]})
+        unit = Q.display_unit({"recipe": recipe.to_dict()}, self.server.settings.display_unit)
         try:
-            new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed)
-        except (RecipeError, InputFileError) as exc:
-            return await self.recipes(request, status=400, edit_error={"recipe": recipe.name, "error": str(exc),
+            new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed, unit)
+        except RecipeEditError as exc:
+            labels = {k.name: k.label_in(unit) for k in EDITABLE}
+            errors = [(labels.get(k, "the recipe"), m) for k, m in exc.problems.items()]
+            return await self.recipes(request, status=400, edit_error={"recipe": recipe.name, "errors": errors,
                                                                        "typed": typed})
+        except (RecipeError, InputFileError) as exc:
+            return await self.recipes(request, status=400, edit_error={"recipe": recipe.name, "typed": typed,
+                                                                       "errors": [("the recipe file", str(exc))]})
         if changes:
             # the book swapped whole, the other recipes as they were read: a part already open keeps its recipe
             book = RecipeBook(parts.book.directory, tuple(new if r.name == new.name else r
@@ -73,8 +105,6 @@ class RecipePages(Family):
             parts.book = book
             if parts.recipe is not None and parts.recipe.name == new.name:
                 parts.recipe = book.find(new.name)
-            line = await loop.run_in_executor(None, audit_recipe, self.app.config.state_dir / RECIPE_AUDIT_FILE,
-                                              source, new, changes, dt.datetime.now(dt.UTC).isoformat(
-                                                  timespec="seconds"))
+            line = await loop.run_in_executor(None, audit_recipe, audit, source, new, changes, now)
             log.info("web: recipe edited: %s", line.strip())
         raise web.HTTPSeeOther(f"/recipes#recipe-{new.number}")

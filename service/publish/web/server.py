@@ -26,7 +26,7 @@ from drivers.aioloop import LoopThread
 from service.errors import AddressInUse, StartupError
 from service.publish.port import ApplianceView, Publisher
 
-from .auth import Guard, read_token, read_users
+from .auth import LOCKOUT_FILE_NAME, Guard, read_token, read_users
 from .child import ChildWork
 from .priority import sensor_is_read
 from .settings import DEFAULT_TOKEN_FILE_NAME, PLOT_NAME, WebSettings
@@ -71,7 +71,8 @@ class WebServer(Publisher):
         token_file = settings.token_file or str(appliance.config.state_dir / DEFAULT_TOKEN_FILE_NAME)
         self.token_file = token_file
         users = read_users(settings.users_file) if settings.users_file else None
-        self.guard = Guard(read_token(token_file, create=settings.token_file is None), users=users)
+        self.guard = Guard(read_token(token_file, create=settings.token_file is None), users=users,
+                           lockout_file=appliance.config.state_dir / LOCKOUT_FILE_NAME)
         self.bound_port: int | None = None
         self._io = LoopThread("moi-web")
         self._runner: web.AppRunner | None = None

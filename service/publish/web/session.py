@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hmac
 import math
+import time
 
 from aiohttp import web
 
@@ -31,11 +32,15 @@ class SessionPages(Family):
         user, source = str(form.get("user") or "").strip(), request.remote or "?"
         guard = self.server.guard
         if user and (wait := guard.throttled(user, source)) > 0:
-            status, why = 429, throttled_words(wait, source)
+            status, why = 429, throttled_words(wait, source, self.pages.when(time.time() + wait))
         elif (made := guard.login(str(form.get("token") or ""), user or None, source)) is None:
             await guard.wrong_token(source)  # a guess costs time
             status, why = 401, ("wrong user name or password" if user else
                                 "wrong token: it is the first line of the appliance's web token file")
+            if user and guard.disabled(str(form.get("token") or ""), user):
+                status, why = 403, f"the user {user} is disabled: ask an admin to enable it"
+            if user and (wait := guard.throttled(user, source)) > 0:  # this wrong password locked the name out
+                why += "; " + throttled_words(wait, source, self.pages.when(time.time() + wait))
         else:
             sid, _ = made
             resp = web.HTTPSeeOther(_next(str(form.get("next") or "")))

@@ -1,16 +1,19 @@
 """The users page (admin): the named users and their roles, the wrong logins and lockouts, and the forms that
-add, disable, enable or remove a user."""
+add, change, disable, enable or remove a user. Every change is appended to the users audit log; a form carries
+the version of the users it was opened on, so a change made meanwhile by another admin is never overwritten."""
 
 from __future__ import annotations
 
 import asyncio
+import datetime as dt
+import hashlib
 import logging
+from pathlib import Path
 from typing import Any, Mapping
 
 from aiohttp import web
 
 from .auth import (
-    COOKIE,
     GUESS_DELAY,
     LOCKOUT_TIME,
     LOCKOUT_WINDOW,
@@ -29,8 +32,29 @@ from .pages import Family, Refused, read_form
 
 log = logging.getLogger("moi.web")
 
-#: what each action did, in the log
-DONE = {"add": "saved", "remove": "removed", "disable": "disabled", "enable": "enabled"}
+#: what each action did, in the log and the audit log
+DONE = {"add": "added", "change": "changed", "remove": "removed", "disable": "disabled", "enable": "enabled"}
+#: the append-only log of user changes, in the state directory
+USERS_AUDIT_FILE = "users-audit.log"
+
+
+def users_version(users: Mapping[str, User]) -> str:
+    """A short digest of ``users`` as they are now: a form opened on another version was opened before a change."""
+    text = "\n".join(f"{u.name}\t{u.role}\t{u.password}\t{u.disabled}" for u in users.values())
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+
+
+def audit_users(log_path: str | Path, who: str, action: str, name: str, before: User | None, after: User | None,
+                when: str) -> str:
+    """Append one line to the users audit log (``when`` ISO time, who, action, user, role and state: before →
+    after; a new password is said, never written) and return it; the log is only ever appended to."""
+    def state(u: User | None) -> str:
+        return "–" if u is None else f"{u.role}{' disabled' if u.disabled else ''}"
+    pw = "; new password" if before is not None and after is not None and before.password != after.password else ""
+    line = f"{when}\t{who}\t{action}\t{name}\t{state(before)} → {state(after)}{pw}\n"
+    with open(log_path, "a", encoding="utf-8") as f:
+        f.write(line)
+    return line
 
 
 def _known(users: Mapping[str, User], form: Mapping[str, Any]) -> str:
@@ -40,45 +64,69 @@ def _known(users: Mapping[str, User], form: Mapping[str, Any]) -> str:
     return name
 
 
+def _admins(users: Mapping[str, User]) -> bool:
+    return any(u.role == "admin" and not u.disabled for u in users.values())
+
+
+def _admins_left(before: bool, users: Mapping[str, User]) -> None:
+    if before and not _admins(users):
+        raise ValueError("the last enabled admin cannot be demoted, disabled or removed: make another admin first")
+
+
+def _set(users: dict[str, User], action: str, form: Mapping[str, Any]) -> str:
+    """add a new user, or change an existing one's role (and password, when one is typed)."""
+    password = str(form.get("password") or "")
+    name = check_user(str(form.get("name") or ""), password if action == "add" or password else None)
+    role = str(form.get("role") or "operator")
+    if role not in ROLES:
+        raise ValueError(f"role: expected one of {', '.join(ROLES)}")
+    old = users.get(name)
+    if action == "add" and old is not None:
+        raise ValueError(f"user {name!r} exists: to reset their password or role, use \"change\"")
+    if action == "change" and old is None:
+        raise ValueError(f"no user {name!r}: to make one, use \"add\"")
+    users[name] = User(name, role, hash_password(password) if password else old.password if old else "",
+                       old is not None and old.disabled)  # enable is said, not implied
+    return name
+
+
 def _change(users: dict[str, User], action: str, form: Mapping[str, Any], guard: Guard) -> str:
     """Apply ``action`` to ``users`` in place; the user's name (ValueError: what was wrong)."""
-    admins = [u for u in users.values() if u.role == "admin"]
+    had_admin = _admins(users)
     if action == "remove":
         name = _known(users, form)
-        if users[name].role == "admin" and len(admins) == 1:
-            raise ValueError("the last admin cannot be removed: add another admin first")
+        if str(form.get("confirm") or "") != name:
+            raise ValueError(f"removing {name!r} needs its confirmation: tick \"yes, remove {name}\"")
         del users[name]
     elif action in ("disable", "enable"):
         name = _known(users, form)
         u = users[name]
-        if action == "disable" and u.role == "admin" and sum(not v.disabled for v in admins) == 1 and not u.disabled:
-            raise ValueError("the last admin cannot be disabled: add another admin first")
         users[name] = User(u.name, u.role, u.password, action == "disable")
         if action == "enable":
             guard.unlock(name)
-    elif action == "add":
-        name = check_user(str(form.get("name") or ""), str(form.get("password") or ""))
-        role = str(form.get("role") or "operator")
-        if role not in ROLES:
-            raise ValueError(f"role: expected one of {', '.join(ROLES)}")
-        users[name] = User(name, role, hash_password(str(form["password"])),
-                           name in users and users[name].disabled)  # enable is said, not implied
+    elif action in ("add", "change"):
+        name = _set(users, action, form)
     else:
-        raise ValueError("action: expected add, disable, enable or remove")
+        raise ValueError("action: expected add, change, disable, enable or remove")
+    _admins_left(had_admin, users)
     return name
 
 
 class UserPages(Family):
     """``/users``, shown and changed (admin only)."""
 
+    def __init__(self, *args: Any, **kw: Any) -> None:
+        super().__init__(*args, **kw)
+        self._changing = asyncio.Lock()  # one change at a time: read, check the version, write, audit
+
     def _admin(self, request: web.Request) -> None:
         if not self.pages.may(request, "users"):
             raise Refused(403, "only an admin sees and changes the users: log in as one")
 
     async def users(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
-        """The named users and their roles, with forms to add one, reset a password or change a role, disable or
-        enable one, and remove one; how many wrong logins there were, in all and per user (each costs
-        GUESS_DELAY, one at a time), and which user is locked out from which address and for how long
+        """The named users and their roles, with forms to add one, change one's role or password, disable or
+        enable one, and remove one (confirmed); how many wrong logins there were, in all and per user (each
+        costs GUESS_DELAY, one at a time), and which user is locked out from which address and for how long
         (LOCKOUT_WRONG within LOCKOUT_WINDOW; an address past SOURCE_WRONG for every name)."""
         self._admin(request)
         guard = self.server.guard
@@ -89,27 +137,39 @@ class UserPages(Family):
                                wrong_logins=guard.wrong_logins, locked={n: guard.locked_for(n) for n in guard.users},
                                lockouts=lockouts, source_wrong=SOURCE_WRONG, lockout_wrong=LOCKOUT_WRONG,
                                lockout_window=LOCKOUT_WINDOW, lockout_time=LOCKOUT_TIME, delay=GUESS_DELAY,
-                               max_name=MAX_USER_NAME, min_password=MIN_PASSWORD, **ctx)
+                               max_name=MAX_USER_NAME, min_password=MIN_PASSWORD,
+                               users_version=users_version(guard.users), audit_file=USERS_AUDIT_FILE, **ctx)
 
     async def users_change(self, request: web.Request) -> web.StreamResponse:
-        """add (or reset the password and role of) a user, or remove one; the users file is written and the
-        change holds at once. A refusal is said on the page, with what was typed (not the password)."""
+        """add, change, disable, enable or remove a user; the users file is written, the change holds at once and
+        is appended to the users audit log. A form opened before another change is refused (409) with the users
+        as they are now; a refusal is said on the page, with what was typed (not the password)."""
         form = await read_form(request)
-        await self.pages.authorise(request, form, "users")
+        who = await self.pages.authorise(request, form, "users")
         path = self.server.settings.users_file
         if not path:
             raise Refused(409, "no [web] users_file: the token is the one login (set users_file to name users)")
         guard = self.server.guard
-        users = dict(guard.users)
         action = str(form.get("action") or "")
-        try:
-            name = _change(users, action, form, guard)
-        except ValueError as exc:
-            typed = {"typed_name": str(form.get("name") or "")[:MAX_USER_NAME],
-                     "typed_role": str(form.get("role") or "operator")}
-            return await self.users(request, status=400, users_error=str(exc), **typed)
-        await asyncio.get_running_loop().run_in_executor(None, save_users, path, users)
-        guard.users = users
-        log.info("web: user %s %s by %s", name, DONE[action],
-                 guard.who(cookie=request.cookies.get(COOKIE), bearer=None)[0] or "the token")
+        typed = {"typed_name": str(form.get("name") or "")[:MAX_USER_NAME],
+                 "typed_role": str(form.get("role") or "operator")}
+        async with self._changing:
+            # a script that sends no version read nothing it could have read stale
+            if "version" in form and str(form["version"]) != users_version(guard.users):
+                return await self.users(request, status=409, users_error="the users were changed since you opened "
+                                        "this page (by another admin?): nothing was changed; here they are now, "
+                                        "do it again if it still holds", **typed)
+            users = dict(guard.users)
+            try:
+                name = _change(users, action, form, guard)
+            except ValueError as exc:
+                return await self.users(request, status=400, users_error=str(exc), **typed)
+            loop = asyncio.get_running_loop()
+            await loop.run_in_executor(None, save_users, path, users)
+            before = guard.users.get(name)
+            guard.users = users
+            line = await loop.run_in_executor(None, audit_users, self.app.config.state_dir / USERS_AUDIT_FILE, who,
+                                              DONE[action], name, before, users.get(name),
+                                              dt.datetime.now(dt.UTC).isoformat(timespec="seconds"))
+        log.info("web: user changed: %s", line.strip())
         raise web.HTTPSeeOther("/users")

@@ -276,8 +276,17 @@ var moi = (function () {
         e.preventDefault();
         var fd = new FormData(pf), pid = String(fd.get("part_id") || "");
         if (!pid) { fd.delete("part_id"); }
-        else if (!/^[ -~]*$/.test(pid) || pid.trim().length > Number(input.getAttribute("maxlength"))) {
-          fieldError("at most " + input.getAttribute("maxlength") + " printable ASCII characters"); input.focus(); return;
+        else {
+          // a scan is never cut to fit (a wrong serial in the record): refused, saying what is wrong with it
+          var most = Number(input.getAttribute("data-max-length")), bad = pid.match(/[^ -~]/), n = pid.trim().length;
+          if (bad) {
+            fieldError("\u201c" + bad[0] + "\u201d (character " + (pid.indexOf(bad[0]) + 1) +
+                       ") is refused: a part ID holds printable ASCII only"); input.focus(); return;
+          }
+          if (n > most) {
+            fieldError(n + " characters: a part ID holds at most " + most + " (nothing was cut: check the scan)");
+            input.focus(); return;
+          }
         }
         if (!fd.get("recipe")) { fd.delete("recipe"); }
         act(pf.getAttribute("data-action"), new URLSearchParams(fd), function (text, bad) {

@@ -283,7 +283,7 @@ def test_recipe_and_part_id_set_from_the_page_reach_the_result_and_the_history(a
     c = Client(app.web.url)
     home = c.request("/")[2].decode()
     # a visitor is not offered a recipe menu he may not use; the part ID field takes what the server takes
-    assert 'id="recipe-select"' not in home and 'maxlength="20"' in home
+    assert 'id="recipe-select"' not in home and 'data-max-length="20"' in home
     recipes = c.request("/recipes")[2].decode()  # every recipe readable by all, with its limits
     assert "rotor-a" in recipes and "0.012250 kg·m² … 0.012750 kg·m²" in recipes
     status, doc = c.json("/api/part", data={"recipe": "rotor-b"}, headers=bearer)
@@ -598,7 +598,8 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     assert "disabled = true" in users.read_text() and olga.request("/users")[0] == 403
     assert olga.json("/api/part", data={"part_id": "SN-8"}, headers={"X-CSRF-Token": csrf})[0] == 401  # session ended
     c = Client(app.web.url)
-    assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401
+    status, _, body = c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})
+    assert status == 403 and "the user olga is disabled" in body.decode()
     page = admin.request("/users")[2].decode()
     assert page.split('id="user-olga"')[1].split('class="login-state">')[1].startswith("disabled<")
     status, _, answer = admin.request("/users", {"action": "add", "name": "ada", "role": "quality",
@@ -609,7 +610,7 @@ def test_operators_by_name_roles_and_who_started_a_result(appliance_factory, tmp
     assert status == 200 and "<td>ada</td><td>quality</td>" in answer.decode()  # (after the redirect)
     assert "ada" in users.read_text() and "ada-password-3" not in users.read_text()
     login("ada", "ada-password-3")
-    assert admin.request("/users", {"action": "remove", "name": "olga", "csrf": acsrf})[0] == 200
+    assert admin.request("/users", {"action": "remove", "name": "olga", "confirm": "olga", "csrf": acsrf})[0] == 200
     c = Client(app.web.url)
     assert c.request("/login", {"user": "olga", "token": "olga-password-1", "csrf": c.csrf()})[0] == 401
 
@@ -688,7 +689,7 @@ def test_a_locked_out_login_is_told_it_is_paused_not_that_its_password_is_wrong(
     status, headers, body = c.request("/login", {"user": "root", "token": "root-password-1", "csrf": c.csrf()})
     page = body.decode()
     assert status == 429 and int(headers["Retry-After"]) > 0, (status, headers)
-    assert "too many wrong passwords" in page and re.search(r"\(127\.0\.0\.1\) are paused for 1[0-5] more min", page)
+    assert "too many wrong passwords" in page and re.search(r"\(127\.0\.0\.1\) are paused until [-0-9]+ [0-9:]+ \(1[0-5] more min\)", page)
     assert "it was not tried" in page and "wrong user name or password" not in page
     status, doc = c.json("/login", data=urllib.parse.urlencode({"user": "root", "token": "root-password-1",
                                                                 "csrf": c.csrf()}).encode())
