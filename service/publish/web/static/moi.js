@@ -198,7 +198,7 @@ var moi = (function () {
     function unreachable() {
       document.body.setAttribute("data-offline", "1");
       measure.disabled = true;
-      var el = $("state"); el.textContent = "NO CONNECTION"; el.className = "state state-OFFLINE";
+      var el = $("state"); el.textContent = "NO CONNECTION"; el.className = "state state-unreachable";
       var text = "appliance not reachable since " + clock(lostAt) + ": nothing can be measured until it answers";
       $("words").textContent = ""; var o = $("offline"); o.textContent = text; o.hidden = false;
     }
