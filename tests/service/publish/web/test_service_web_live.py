@@ -32,7 +32,10 @@ def test_the_open_home_page_follows_a_block_an_outage_and_a_restart(browser, app
     url = first.app.web.url
     token = Path(first.app.web.token_file).read_text().strip()
     bearer = {"Authorization": f"Bearer {token}", "Accept": "application/json"}
-    wait = WebDriverWait(browser, 30, poll_frequency=0.05)
+    from selenium.common.exceptions import StaleElementReferenceException
+
+    # the page reloads itself after a restart: an element found just before the reload is gone when read
+    wait = WebDriverWait(browser, 30, poll_frequency=0.05, ignored_exceptions=(StaleElementReferenceException,))
     browser.set_window_size(*size)
     browser.get(url)
     browser.find_element(By.ID, "token").send_keys(token)
@@ -68,8 +71,8 @@ def test_the_open_home_page_follows_a_block_an_outage_and_a_restart(browser, app
     doc["web"]["port"] = int(url.rstrip("/").rsplit(":", 1)[1])
     second = appliance_factory(doc)
     assert second.app.web.url == url
-    told = wait.until(lambda d: d.find_element(By.ID, "message").get_attribute("data-restarted") == "1"
-                      and d.find_element(By.ID, "message")).text
+    told = wait.until(lambda d: (m := d.find_element(By.ID, "message")).get_attribute("data-restarted") == "1"
+                      and m.text)
     assert "The appliance restarted" in told and "SN-1006 (release 1 of 3 done) was not finished" in told, told
     assert "log in again" in told and browser.find_elements(By.ID, "login-button")
     wait.until(lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-live") == "1")
