@@ -71,8 +71,14 @@ def test_the_open_home_page_follows_a_block_an_outage_and_a_restart(browser, app
     doc["web"]["port"] = int(url.rstrip("/").rsplit(":", 1)[1])
     second = appliance_factory(doc)
     assert second.app.web.url == url
-    told = wait.until(lambda d: (m := d.find_element(By.ID, "message")).get_attribute("data-restarted") == "1"
-                      and m.text)
+    # read in one script: the page reloads itself meanwhile, and a node found by one call may be gone by the next
+    # (Chromium's "stale element" or "node does not belong to the document")
+    from selenium.common.exceptions import WebDriverException
+
+    through_reload = WebDriverWait(browser, 30, poll_frequency=0.05, ignored_exceptions=(WebDriverException,))
+    told = through_reload.until(lambda d: d.execute_script(
+        "var m = document.getElementById('message');"
+        " return m && m.getAttribute('data-restarted') === '1' ? m.innerText : null"))
     assert "The appliance restarted" in told and "SN-1006 (release 1 of 3 done) was not finished" in told, told
     assert "log in again" in told and browser.find_elements(By.ID, "login-button")
     wait.until(lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-live") == "1")
