@@ -23,8 +23,22 @@ def _decision(d: Mapping[str, Any], value: Any) -> Decision:
                     reasons=tuple(d.get("reasons") or ()))
 
 
+class _Decided:
+    """What a release and a part both read from their decision: the verdict ('' read as None) and the value."""
+
+    decision: Decision
+
+    @property
+    def verdict(self) -> str | None:
+        return self.decision.verdict or None
+
+    @property
+    def value(self) -> float | None:
+        return self.decision.value
+
+
 @dataclass(frozen=True)
-class ReleaseOutcome:
+class ReleaseOutcome(_Decided):
     """One release of a part: its index of ``of``, the part it counts for, its own decision (kg·m²), and the
     unfinished earlier part it abandoned by starting a new one (None: none)."""
 
@@ -34,14 +48,6 @@ class ReleaseOutcome:
     quantity: str
     decision: Decision
     abandoned: Mapping[str, Any] | None = None
-
-    @property
-    def verdict(self) -> str | None:
-        return self.decision.verdict or None
-
-    @property
-    def value(self) -> float | None:
-        return self.decision.value
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "ReleaseOutcome":
@@ -54,7 +60,7 @@ class ReleaseOutcome:
 
 
 @dataclass(frozen=True)
-class PartSummary:
+class PartSummary(_Decided):
     """A complete part (kg·m²): its releases' values, which were used and which excluded (index, reason), the
     statistics of the used ones, the decision (its ``value`` is the part's value: the joint identification's or
     the weighted mean), and a check standard's comparison with its certificate (None: a part type)."""
@@ -76,14 +82,6 @@ class PartSummary:
     joint: Mapping[str, Any] | None = None
     uncertainty: Mapping[str, Any] | None = None
     check_standard: Mapping[str, Any] | None = None
-
-    @property
-    def verdict(self) -> str | None:
-        return self.decision.verdict or None
-
-    @property
-    def value(self) -> float | None:
-        return self.decision.value
 
     @property
     def U(self) -> float | None:
