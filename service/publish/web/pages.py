@@ -59,7 +59,7 @@ if TYPE_CHECKING:  # pragma: no cover
 HERE = Path(__file__).parent
 #: what a refusal of an action needs, in words
 NEEDS = {"recipe": "change the recipe", "acknowledge": "acknowledge a fault",
-         "camera": "set the camera's region of interest"}
+         "camera": "set the camera's region of interest", "gauge": "start a gauge study"}
 #: the history's filters in the query string (the history, its export and the SPC page read them)
 FILTERS = ("since", "until", "recipe", "part", "flag", "status")
 
