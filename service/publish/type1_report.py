@@ -102,13 +102,22 @@ def run_chart(rec: Type1Record, unit: str, width: float = 720.0, height: float =
 
 def type1_pdf(rec: Type1Record, default_unit: str = SI, time_format: str = Q.TIME_FORMAT) -> bytes:
     """The study as a PDF on one A4 page: the verdict, the facts, the run chart, signature lines."""
+    from matplotlib.backends.backend_pdf import PdfPages
+
+    w = type1_words(rec, default_unit, time_format)
+    buf = io.BytesIO()
+    with PdfPages(buf, metadata={"Title": f"moi Type 1 study {rec.uuid}", "Subject": w.head}) as pdf:
+        pdf.savefig(type1_page(rec, w, time_format))
+    return buf.getvalue()
+
+
+def type1_page(rec: Type1Record, w: Type1Words, time_format: str = Q.TIME_FORMAT) -> Any:
+    """The study's A4 page (a matplotlib ``Figure``): text stays text, so a PDF reader finds the figures."""
     import textwrap
 
-    from matplotlib.backends.backend_pdf import PdfPages
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
-    w = type1_words(rec, default_unit, time_format)
     colour = "0.3" if w.capable is None else CAPABLE if w.capable else NOT_CAPABLE
     fig = Figure(figsize=A4)
     fig.text(0.06, 0.965, "Type 1 gauge study (VDA 5, AIAG MSA bias and repeatability)", fontsize=14,
@@ -134,10 +143,7 @@ def type1_pdf(rec: Type1Record, default_unit: str = SI, time_format: str = Q.TIM
     printed = dt.datetime.now().astimezone().strftime(time_format)
     fig.text(0.06, 0.03, f"moi Type 1 study · {rec.uuid}", fontsize=7.5, color="0.35")
     fig.text(0.94, 0.03, f"page 1 of 1 · printed {printed}", fontsize=7.5, color="0.35", ha="right")
-    buf = io.BytesIO()
-    with PdfPages(buf, metadata={"Title": f"moi Type 1 study {rec.uuid}", "Subject": w.head}) as pdf:
-        pdf.savefig(fig)
-    return buf.getvalue()
+    return fig
 
 
 def _chart(fig: Any, rec: Type1Record, unit: str, top: float) -> None:
@@ -155,8 +161,8 @@ def _chart(fig: Any, rec: Type1Record, unit: str, top: float) -> None:
     ax.set_ylabel(f"{rec.quantity} [{unit}]", fontsize=8)
     ax.ticklabel_format(axis="y", useOffset=False, style="plain")
     ax.tick_params(labelsize=7)
-    ax.legend(fontsize=7, loc="upper right")
-    ax.set_title("run chart", fontsize=9)
+    ax.legend(fontsize=7, loc="lower right", bbox_to_anchor=(1.0, 1.0), ncol=3, frameon=False)
+    ax.set_title("run chart", fontsize=9, loc="left")
 
 
 def type1_report_file(state_dir: str, uuid: str, default_unit: str, time_format: str | None = None) -> bytes:

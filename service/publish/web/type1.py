@@ -126,8 +126,12 @@ class Type1Pages(Family):
         loop = asyncio.get_running_loop()
         answer: asyncio.Future[CommandReply] = loop.create_future()
 
-        def reply(r: CommandReply) -> None:
-            loop.call_soon_threadsafe(lambda: answer.done() or answer.set_result(r))
+        def settle(r: CommandReply) -> None:
+            if not answer.done():  # a late answer after the time-out is dropped
+                answer.set_result(r)
+
+        def reply(r: CommandReply) -> None:  # on the daemon's main loop: handed to the web loop
+            loop.call_soon_threadsafe(settle, r)
         self.app.command(V.TYPE1, source, data, reply)
         try:
             return await asyncio.wait_for(answer, ANSWER_TIMEOUT)
