@@ -107,7 +107,7 @@ class Appliance:
         self._current_recipe: Recipe | None = None
         self.sets = SetDesk(config.state_dir, config.device_id, lambda: self.store, self.to_publishers,
                             self._refresh_live, wall_clock)
-        self.studies = StudyDesk(lambda: self.store, wall_clock)
+        self.studies = StudyDesk(config.state_dir, lambda: self.store, wall_clock)
         self._last_status = ""
         self.loop_iterations = 0
         self.last_loop_error: str | None = None
@@ -179,6 +179,7 @@ class Appliance:
             self._shutdown_components()
             raise
         self.sets.recover()
+        self.studies.recover()
         self.open_set()  # a tensor recipe active from the configuration: its set waits for the first release
         self._refresh_live()
         self.to_publishers("on_state", self._state_message("IDLE", "IDLE", "daemon started", None), None)

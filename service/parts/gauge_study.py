@@ -17,10 +17,13 @@ Everything here is in SI (kg·m²); the pages convert to the recipe's display un
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import logging
 import math
 import uuid as uuidlib
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from measurement.errors import InvalidInput
@@ -36,6 +39,10 @@ TYPE1 = "type1"
 #: what the command's ``action`` may be
 ACTIONS = ("start", "abort")
 RUNNING, COMPLETE, ABORTED, FAILED = "running", "complete", "aborted", "failed"
+
+#: the file in the state directory that holds the running study's record, so that a study cut short by a kill is
+#: stored as aborted at the next start
+OPEN_STUDY_FILE = "type1-study-open.json"
 
 #: (status "done" or "refused", the refusal's reason in ``service.publish.replies.REASONS``, its detail)
 StudyReply = tuple[str, str | None, str]
@@ -206,10 +213,11 @@ class Type1Run:
 
 
 class StudyDesk:
-    """The daemon's Type 1 study (main loop thread). store(): the result store (None before start and after
-    stop); wall_clock: Unix time, s."""
+    """The daemon's Type 1 study (main loop thread). state_dir: where the running study's record is kept
+    (``OPEN_STUDY_FILE``); store(): the result store (None before start and after stop); wall_clock: Unix time, s."""
 
-    def __init__(self, store: Callable[[], Any], wall_clock: Callable[[], float]) -> None:
+    def __init__(self, state_dir: str | Path, store: Callable[[], Any], wall_clock: Callable[[], float]) -> None:
+        self.file = Path(state_dir) / OPEN_STUDY_FILE
         self._store, self._now = store, wall_clock
         self.current: Type1Run | None = None  # running, or just finished (shown until the next one starts)
 
@@ -239,6 +247,7 @@ class StudyDesk:
         except StudyError as exc:
             return "refused", "malformed", str(exc)
         self.current = s
+        self._keep(s)
         log.info("Type 1 study %s started by %s (%s, part %s, x_ref %.9g kg·m², T %.9g kg·m², n %d)", s.uuid,
                  source, recipe.name, part_id or "-", s.plan.reference, s.plan.tolerance, s.plan.count)
         return "done", None, ""
@@ -261,6 +270,8 @@ class StudyDesk:
         log.info("Type 1 study %s: %s", s.uuid, s.instruction())
         if s.done:
             self.finish(s)
+        else:
+            self._keep(s)
 
     def selected(self, recipe: Recipe | None) -> None:
         """Another recipe selected: a running study of another recipe is aborted (its releases stay stored)."""
@@ -284,12 +295,44 @@ class StudyDesk:
         except ServiceError:
             log.exception("could not store the Type 1 study %s", s.uuid)
             return
+        self.file.unlink(missing_ok=True)
         if s.study is not None:
             log.info("Type 1 study %s complete: Cg %.3g, Cgk %.3g, bias %.3g kg·m² (p = %.3g)", s.uuid, s.study.cg,
                      s.study.cgk, s.study.bias.bias, s.study.bias.p)
 
     def progress(self) -> dict[str, Any] | None:
         return self.current.progress() if self.current is not None else None
+
+    def _keep(self, s: Type1Run) -> None:
+        """The running study's record in its file (a kill leaves it for ``recover``)."""
+        from service.sources.files import write_text_atomic
+
+        try:
+            write_text_atomic(self.file, json.dumps(s.record().to_dict(), allow_nan=False))
+        except (OSError, ValueError) as exc:  # the study goes on; only a kill would leave it unrecorded
+            log.warning("cannot keep the running Type 1 study in %s: %s", self.file, exc)
+
+    def recover(self) -> None:
+        """The study a kill cut short (its file is left): stored as aborted, with why; its releases stay stored."""
+        store = self._store()
+        if store is None or not self.file.exists():
+            return
+        try:
+            left = Type1Record.from_dict(json.loads(self.file.read_text(encoding="utf-8")))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            log.warning("the running Type 1 study's file %s is damaged (%s); removed", self.file, exc)
+            self.file.unlink(missing_ok=True)
+            return
+        why = (f"interrupted: the daemon was stopped during the study without storing it; its {len(left.values)} "
+               "release(s) stay stored")
+        record = dataclasses.replace(left, status=ABORTED, error=why, finished_at=self._now())
+        try:
+            store.record_gauge_study(record.to_dict(), started_at=left.started_at, finished_at=record.finished_at)
+        except ServiceError:
+            log.exception("could not store the interrupted Type 1 study %s", left.uuid)
+            return
+        self.file.unlink(missing_ok=True)
+        log.warning("Type 1 study %s (%s) was %s", left.uuid, left.recipe, why)
 
 
 def type1_records(store: Any, recipe: str | None = None, status: str | None = None,

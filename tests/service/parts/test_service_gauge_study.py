@@ -31,7 +31,7 @@ def recipe(tmp_path, name="ref", number=1):
 def desk(tmp_path):
     store = Store(tmp_path / "state")
     clock = iter(range(1_700_000_000, 1_700_100_000))
-    d = StudyDesk(lambda: store, lambda: float(next(clock)))
+    d = StudyDesk(tmp_path / "state", lambda: store, lambda: float(next(clock)))
     yield d, store
     store.close()
 
@@ -143,3 +143,20 @@ def test_a_release_without_a_value_is_not_counted_and_no_scatter_fails_the_study
         release(d, store, r, 2.0**-7, k)  # a resolution too coarse: every value the same (exact in binary)
     [rec] = type1_records(store)
     assert rec.status == "failed" and "no scatter" in str(rec.error) and len(rec.values) == 25
+
+
+def test_a_study_a_kill_cut_short_is_stored_as_aborted_at_the_next_start(tmp_path, desk):
+    d, store = desk
+    r = recipe(tmp_path)
+    start(d, r)
+    kept = [release(d, store, r, J_REF + 1e-6 * k, k) for k in range(2)]
+    assert d.file.exists() and type1_records(store) == []  # killed here: nothing stored but the releases
+    after = StudyDesk(tmp_path / "state", lambda: store, lambda: 1.8e9)
+    after.recover()
+    [rec] = type1_records(store)
+    assert rec.status == "aborted" and rec.releases == tuple(kept) and "interrupted" in str(rec.error)
+    assert not d.file.exists() and after.progress() is None
+    # a daemon that stops stores its running study itself
+    assert start(after, r)[0] == "done" and after.file.exists()
+    after.interrupt("the daemon stopped")
+    assert type1_records(store)[0].error == "interrupted: the daemon stopped" and not after.file.exists()

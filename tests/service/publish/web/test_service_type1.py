@@ -17,8 +17,10 @@ from scipy import stats
 
 from service.publish.web.auth import allowed
 from tests.service.conftest import appliance_doc
+from tests.service.publish.web import test_service_web_browser as in_browser
 from tests.service.publish.web.test_service_web import Client
 
+browser = in_browser.browser  # the headless Chromium session fixture (skipped, or failed under CI, without it)
 G_CM2 = 1e7  # g·cm² per kg·m²
 J_REF, T = 0.0125, 5e-4  # kg·m²: the simulated part, and ± 2 % of it
 
@@ -142,3 +144,34 @@ def test_an_abort_through_the_page_keeps_the_releases(tmp_path, appliance_factor
     assert '<a href="/type1">Type 1</a>' in page and 'id="t1-start-button"' in page
     # the form in the recipe's unit and decimals: T from the recipe, x_ref left to the engineer (no certificate)
     assert 'id="t1-tolerance" value="5000.0"' in page and 'id="t1-reference" value=""' in page
+
+
+def test_a_study_started_and_aborted_in_the_browser(browser, tmp_path, appliance_factory):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    running = appliance_factory(_doc(tmp_path))
+    app = running.app
+    wait = WebDriverWait(browser, 30)
+    browser.get(app.web.url + "type1")
+    assert browser.find_elements(By.ID, "t1-login") and not browser.find_elements(By.LINK_TEXT, "Type 1")
+    browser.find_element(By.ID, "token").send_keys(Path(app.web.token_file).read_text().strip())
+    browser.find_element(By.ID, "login-button").click()
+    wait.until(lambda d: d.find_elements(By.ID, "t1-form"))
+    assert browser.find_element(By.LINK_TEXT, "Type 1").get_attribute("href").endswith("/type1")
+    browser.find_element(By.ID, "t1-reference").send_keys("125000,0")  # a decimal comma, in g·cm²
+    n = browser.find_element(By.ID, "t1-n")
+    n.clear()
+    n.send_keys("25")
+    browser.find_element(By.ID, "t1-start-button").click()
+    wait.until(lambda d: d.find_elements(By.ID, "t1-count"))
+    assert browser.find_element(By.ID, "t1-count").text == "0 of 25"
+    browser.find_element(By.ID, "measure").click()
+    running.wait_done(1)
+    wait.until(lambda d: d.find_element(By.ID, "t1-count").text == "1 of 25")  # the page as the daemon has it
+    browser.find_element(By.ID, "t1-abort").click()
+    wait.until(lambda d: d.find_elements(By.ID, "t1-ended"))
+    assert "aborted by web" in browser.find_element(By.ID, "t1-ended").text
+    rec = app.store.gauge_studies("type1", limit=1)[0]
+    assert rec["status"] == "aborted" and rec["reference"] == pytest.approx(J_REF, rel=1e-12)
+    assert len(rec["releases"]) == 1 and rec["count"] == 25
