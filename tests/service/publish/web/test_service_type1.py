@@ -29,8 +29,12 @@ def _doc(tmp_path):
     fresh = (dt.date.today() - dt.timedelta(days=30)).isoformat()
     rig = tmp_path / "rig.toml"
     rig.write_text(f'[rig]\nkind = "torsion"\nstiffness = 0.3651\n[calibration]\ndate = {fresh}\nvalid_days = 365\n')
+    (tmp_path / "old-rig.toml").write_text('[rig]\nkind = "torsion"\nstiffness = 0.3651\n[calibration]\n'
+                                           'date = 2020-01-15\nvalid_days = 365\n')
     recipes = tmp_path / "recipes"
     recipes.mkdir()
+    (recipes / "old.toml").write_text('[recipe]\nname = "old"\nnumber = 2\nnominal = 0.0125\ntolerance_percent = 2.0\n'
+                                      'rig = "../old-rig.toml"\n')
     (recipes / "ref.toml").write_text('[recipe]\nname = "ref"\nnumber = 1\nnominal = 0.0125\ntolerance_percent = 2.0\n'
                                       'releases = 1\ndisplay_unit = "g·cm²"\ndisplay_decimals = 1\n')
     return appliance_doc(tmp_path / "state", device={"rig": str(rig)}, web={"enabled": True},
@@ -126,6 +130,11 @@ def test_an_abort_through_the_page_keeps_the_releases(tmp_path, appliance_factor
     app = running.app
     c, auth = _client(app)
     assert c.json("/api/type1/abort", method="POST", headers=auth)[0] == 409  # nothing to abort
+    # a recipe whose rig's calibration expired: refused, and said why
+    assert c.json("/api/part", data={"recipe": "old"}, method="POST", headers=auth)[0] == 202
+    status, body = _start(c, auth)
+    assert status == 409 and "calibration expired on 2021-01-14" in body["error"]
+    assert c.json("/api/part", data={"recipe": "ref"}, method="POST", headers=auth)[0] == 202
     assert _start(c, auth)[0] == 200
     for k in range(2):
         running.press()
