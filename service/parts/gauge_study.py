@@ -7,7 +7,8 @@ known value x_ref) with the characteristic's tolerance T and the count n (at lea
 door). A start is refused with the reason when the study cannot be run: no tolerance or reference value, n too
 small, no recipe or a tensor recipe active, the rig's calibration due, a tensor set, another study or a
 measurement running. While it runs, each stored release of its recipe counts for it (not for a part: the
-reference's releases stay out of the recipe's parts and its SPC); the progress says k of n. The engineer may
+reference's releases stay out of the recipe's parts and its SPC, and a check standard's are not compared with its
+certificate); the progress says k of n. The engineer may
 abort it (its releases stay in the store); another recipe selected aborts it too. Once n releases are counted
 the figures are computed and the study is stored (``Store.record_gauge_study``) with the links to its releases;
 a study that ended otherwise is stored as aborted or failed, with why.

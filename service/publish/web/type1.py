@@ -15,7 +15,7 @@ from aiohttp import web
 from measurement.gauge import TYPE1_MIN, TYPE1_RECOMMENDED
 from measurement.units import from_si
 from service.core import vocabulary as V
-from service.parts.gauge_study import RUNNING, Type1Record, type1_records
+from service.parts.gauge_study import RUNNING, TYPE1, Type1Record, type1_records
 from service.publish.replies import CommandReply
 
 from .. import quality as Q
@@ -54,7 +54,7 @@ class Type1Pages(Family):
     def _record(self, uuid: str) -> Type1Record:
         if not uuid or len(uuid) > 64 or not all(c.isalnum() or c == "-" for c in uuid):
             raise Refused(400, f"bad study id {uuid[:64]!r}: expected a UUID")
-        found = self.pages.store().gauge_studies("type1", uuid=uuid, limit=1)
+        found = self.pages.store().gauge_studies(TYPE1, uuid=uuid, limit=1)
         if not found:
             raise Refused(404, f"no Type 1 study {uuid!r}")
         return Type1Record.from_dict(found[0])
