@@ -70,9 +70,21 @@ class Type1Pages(Family):
         return {"rec": rec, "w": words, "chart": run_chart(rec, unit, WIDE), "narrow": run_chart(rec, unit, NARROW),
                 "rows": [(i + 1, u, Q.number(v * f, places)) for i, (u, v) in enumerate(zip(rec.releases, rec.values))]}
 
-    def _form(self) -> dict[str, Any]:
-        """The start form's recipe, unit and defaults (x_ref: a check standard's certified value)."""
-        recipe = self.app.parts.recipe
+    def _recipe(self, name: str) -> Any:
+        """The recipe ``name`` names (a 400 saying why when none), or the active one for an empty name."""
+        from measurement.errors import InvalidInput
+
+        if not name:
+            return self.app.parts.recipe
+        try:
+            return self.app.parts.book.find(name)
+        except InvalidInput as exc:
+            raise Refused(400, str(exc)) from None
+
+    def _form(self, name: str) -> dict[str, Any]:
+        """The start form's recipe (``name``'s, else the active one), its unit and defaults (x_ref: a check
+        standard's certified value), and the recipes a study may be run for (those of one quantity)."""
+        recipe = self._recipe(name)
         unit = self._unit(recipe)
         defaults: dict[str, Any] = {"count": TYPE1_RECOMMENDED, "reference": "", "tolerance": "",
                                     "part_id": self.app.parts.part_id or ""}
@@ -86,7 +98,8 @@ class Type1Pages(Family):
                 defaults["reference"] = Q.number(cs["reference"] * f, places)
                 defaults["part_id"] = defaults["part_id"] or str(cs.get("name") or "")
         return {"recipe": recipe, "unit": unit, "defaults": defaults, "min": TYPE1_MIN,
-                "tensor": recipe is not None and recipe.spec is None}
+                "tensor": recipe is not None and recipe.spec is None, "active": self.app.parts.recipe,
+                "recipes": [r for r in self.app.parts.book.recipes if r.spec is not None]}
 
     async def type1(self, request: web.Request) -> web.Response:
         progress = await self._progress()
@@ -98,7 +111,7 @@ class Type1Pages(Family):
         elif progress is None and recent:
             shown = recent[0]
         return self.pages.page(request, "type1.html", title="Type 1 study", progress=progress,
-                               form=self._form(), may=self.pages.may(request, "gauge"), result=self._result(shown),
+                               form=self._form(request.query.get("recipe", "").strip()), may=self.pages.may(request, "gauge"), result=self._result(shown),
                                recent=recent, blocked=self.pages.blocked())
 
     async def study(self, request: web.Request) -> web.Response:
@@ -146,28 +159,44 @@ class Type1Pages(Family):
         return web.json_response({"accepted": True, "command": V.TYPE1, "status": r.status})
 
     async def start(self, request: web.Request) -> web.Response:
-        """Start a study for the active recipe: x_ref and T in its display unit, n, the reference part's ID."""
+        """Start a study for the recipe named (default: the active one; selected first): x_ref and T in its
+        display unit, n, the reference part's ID (set first)."""
+        from measurement.errors import InvalidInput
+        from service.parts.recipes import check_part_id
+
         form = await action_form(request)
         source = await self.pages.authorise(request, form, "gauge")
-        recipe = self.app.parts.recipe
+        recipe = self._recipe(str(form.get("recipe") or "").strip())
         unit = self._unit(recipe)
         data: dict[str, Any] = {"action": "start", "count": str(form.get("count") or TYPE1_RECOMMENDED).strip(),
                                 "reference": _number(form, "reference", "reference value x_ref", unit),
                                 "tolerance": _number(form, "tolerance", "tolerance T", unit)}
+        part: dict[str, Any] = {}
+        if recipe is not None and recipe is not self.app.parts.recipe:
+            part["recipe"] = recipe.name
         part_id = str(form.get("part_id") or "").strip()
         if part_id != (self.app.parts.part_id or ""):
-            from measurement.errors import InvalidInput
-            from service.parts.recipes import check_part_id
-
             try:
-                check_part_id(part_id)
+                part["part_id"] = check_part_id(part_id) or None
             except InvalidInput as exc:
                 raise Refused(400, str(exc)) from None
-            progress = await self._progress()
-            if progress is not None and progress["status"] == RUNNING:
-                raise Refused(409, "a Type 1 study runs: abort it first")
-            self.app.command(V.PART_ID, source, {"part_id": part_id or None})  # applied before the start, in order
+        if part:  # the recipe and the part ID set first, in the command queue's order, unless that would end a run
+            await self._may_select()
+            self.app.command(V.RECIPE, source, part)
         return self._done(request, form, await self._command(source, data))
+
+    async def _may_select(self) -> None:
+        """A 409 when selecting the study's recipe or part would cut a study, a tensor set or a measurement short."""
+        progress = await self._progress()
+        if progress is not None and progress["status"] == RUNNING:
+            raise Refused(409, f"a Type 1 study of {progress['recipe']} runs ({progress['done']} of "
+                               f"{progress['count']}): abort it first")
+        tensor = await asyncio.wrap_future(self.app.call_soon(self.app.set_progress))
+        if tensor is not None and tensor.get("status") == RUNNING:
+            raise Refused(409, f"a tensor set of {tensor['recipe']} runs: finish or abort it first")
+        seq = self.app.sequencer
+        if seq is not None and seq.busy:
+            raise Refused(409, "a measurement runs: start the study when it is IDLE")
 
     async def abort(self, request: web.Request) -> web.Response:
         form = await action_form(request)

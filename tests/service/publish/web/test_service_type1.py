@@ -151,12 +151,14 @@ def test_an_abort_through_the_page_keeps_the_releases(tmp_path, appliance_factor
     app = running.app
     c, auth = _client(app)
     assert c.json("/api/type1/abort", method="POST", headers=auth)[0] == 409  # nothing to abort
-    # a recipe whose rig's calibration expired: refused, and said why
-    assert c.json("/api/part", data={"recipe": "old"}, method="POST", headers=auth)[0] == 202
-    status, body = _start(c, auth)
+    # the form chooses the recipe: one whose rig's calibration expired is selected, and the study refused with why
+    assert c.request("/type1?recipe=nosuch")[0] == 400
+    status, body = _start(c, auth, recipe="old")
     assert status == 409 and "calibration expired on 2021-01-14" in body["error"]
-    assert c.json("/api/part", data={"recipe": "ref"}, method="POST", headers=auth)[0] == 202
-    assert _start(c, auth)[0] == 200
+    assert app.parts.recipe.name == "old"
+    assert _start(c, auth, recipe="ref")[0] == 200 and app.parts.recipe.name == "ref"
+    status, body = _start(c, auth, recipe="old")  # a running study is not cut short by another recipe's start
+    assert status == 409 and "a Type 1 study of ref runs (0 of 25)" in body["error"] and app.parts.recipe.name == "ref"
     _measure_until(running, _done(2))
     assert c.json("/api/type1/abort", method="POST", headers=auth)[0] == 200
     rec = c.json("/api/type1")[1]["latest"]
@@ -172,6 +174,9 @@ def test_an_abort_through_the_page_keeps_the_releases(tmp_path, appliance_factor
     assert '<a href="/type1">Type 1</a>' in page and 'id="t1-start-button"' in page
     # the form in the recipe's unit and decimals: T from the recipe, x_ref left to the engineer (no certificate)
     assert 'id="t1-tolerance" value="5000.0"' in page and 'id="t1-reference" value=""' in page
+    assert 'id="t1-form-recipe">ref<' in page and "(J; active)" in page
+    chosen = c.request("/type1?recipe=old")[2].decode()
+    assert 'id="t1-form-recipe">old<' in chosen and "selected when the study starts" in chosen
 
 
 def test_a_study_started_and_aborted_in_the_browser(browser, tmp_path, appliance_factory):
