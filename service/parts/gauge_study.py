@@ -168,8 +168,8 @@ class Type1Run:
             return f"Type 1 study of {self.recipe.name}: complete ({self.plan.count} measurements)"
         if self.done:
             return f"Type 1 study of {self.recipe.name}: {self.status}" + (f" ({self.error})" if self.error else "")
-        return (f"measure the reference part{' ' + self.part_id if self.part_id else ''} again: "
-                f"measurement {len(self.values) + 1} of {self.plan.count} (release it the same way each time)")
+        return (f"measure the reference part{' ' + self.part_id if self.part_id else ''}: measurement "
+                f"{len(self.values) + 1} of {self.plan.count} (mount and release it the same way each time)")
 
     def release(self, result: IdentificationResult, measurement_id: str) -> bool:
         """Count one stored release (True), or not: it has no value of the recipe's quantity (False)."""
