@@ -41,6 +41,7 @@ from service.core import vocabulary as V
 from service.core.live import LiveStatus
 from service.devices.hardware import Devices, build_devices
 from service.parts import calibration as calibration_rule
+from service.parts.gauge_study import StudyDesk
 from service.parts.recipes import Recipe, RecipeBook
 from service.parts.set_desk import SetDesk
 from service.parts.tensor_set import TensorSet
@@ -106,6 +107,7 @@ class Appliance:
         self._current_recipe: Recipe | None = None
         self.sets = SetDesk(config.state_dir, config.device_id, lambda: self.store, self.to_publishers,
                             self._refresh_live, wall_clock)
+        self.studies = StudyDesk(config.state_dir, lambda: self.store, wall_clock)
         self._last_status = ""
         self.loop_iterations = 0
         self.last_loop_error: str | None = None
@@ -177,6 +179,7 @@ class Appliance:
             self._shutdown_components()
             raise
         self.sets.recover()
+        self.studies.recover()
         self.open_set()  # a tensor recipe active from the configuration: its set waits for the first release
         self._refresh_live()
         self.to_publishers("on_state", self._state_message("IDLE", "IDLE", "daemon started", None), None)
@@ -322,10 +325,15 @@ class Appliance:
     def open_set(self) -> None:
         """A tensor set for the active recipe and part, when it declares one (``SetDesk.open``)."""
         self.sets.open(self.parts.recipe, self.config.rig, self.parts.part_id)
+        self.studies.selected(self.parts.recipe)  # a Type 1 study ends with its recipe
 
     def set_progress(self) -> dict[str, Any] | None:
         """The tensor set's progress with the operator's instruction (None: no set)."""
         return self.sets.progress()
+
+    def study_progress(self) -> dict[str, Any] | None:
+        """The Type 1 study's progress (``StudyDesk.progress``; None: none since start)."""
+        return self.studies.progress()
 
     def _run_calls(self) -> None:
         while True:
@@ -543,6 +551,7 @@ class Appliance:
             finally:
                 seq.close()
         self.sets.interrupt("the daemon stopped")
+        self.studies.interrupt("the daemon stopped")
         self._shutdown_components()
 
     def _shutdown_components(self) -> None:

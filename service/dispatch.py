@@ -106,8 +106,25 @@ class Dispatcher:
                                                    self.app.sequencer.busy)
         return CommandReply(name, status, reason, detail)
 
+    def _act_study(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,
+                   reply: ReplyTo | None) -> CommandReply:
+        """Start or abort the guided Type 1 study, or the reason it cannot (``StudyDesk.act``)."""
+        app = self.app
+        assert app.sequencer is not None
+        running = app.sets.current
+        other = (f"a tensor set of {running.recipe.name} runs: finish or abort it first"
+                 if running is not None and not running.done else None)
+        block = app.measure_block()
+        status, reason, detail = app.studies.act(data or {}, source, recipe=app.parts.recipe,
+                                                 part_id=app.parts.part_id, busy=app.sequencer.busy, other=other,
+                                                 block=block["detail"] if block is not None else None)
+        if status == "refused":
+            log.warning("%s from %s refused: %s", name, source, detail)
+        return CommandReply(name, status, reason, detail)
+
     #: how it acts on each ``Command.act`` but "part" (whose data is applied in ``_execute``)
-    _ACTS: dict[str, Callable[..., CommandReply]] = {"measure": _act_measure, "stop": _act_stop, "set": _act_set}
+    _ACTS: dict[str, Callable[..., CommandReply]] = {"measure": _act_measure, "stop": _act_stop, "set": _act_set,
+                                                     "study": _act_study}
 
     def _log_ignored(self, what: str) -> None:
         """One line per IGNORED_LOG_INTERVAL for the commands a stuck button or a looping client repeats."""

@@ -122,9 +122,13 @@ class Recorder:
         typed = self._station_flags(m, calibration)
         result = typed.to_dict()
         tensor_set = self.app.sets.of(recipe)
+        study = self.app.studies.of(recipe) if tensor_set is None else None
+        counted = study is not None and study.release(typed, m.id)
         if tensor_set is not None:
             outcome = PartOutcome(part_id, recipe.to_dict() if recipe else None, calibration=calibration,
                                   tensor_set=tensor_set.release(typed, m.id))
+        elif study is not None:  # the reference part of a Type 1 study: not a part of the recipe (nor of its SPC)
+            outcome = PartOutcome(part_id, recipe.to_dict() if recipe else None, calibration=calibration)
         else:
             outcome = dataclasses.replace(self.app.parts.release(typed, m.id, part_id, recipe, m.result, rig),
                                           calibration=calibration)
@@ -143,6 +147,9 @@ class Recorder:
         except BaseException:
             if tensor_set is not None:
                 tensor_set.forget_last()
+            elif study is not None:
+                if counted:
+                    study.forget_last()
             else:
                 self.app.parts.undo_last()  # not stored: the release does not count for the part
             raise
@@ -156,6 +163,8 @@ class Recorder:
         self._part_done(outcome, recipe, m.id, typed.flags, finished)
         if tensor_set is not None:
             self.app.sets.released(tensor_set)
+        if study is not None:
+            self.app.studies.released(study)
 
     def _station_flags(self, m: Measurement, calibration: Mapping[str, Any] | None) -> IdentificationResult:
         """The result with the station's own flags raised (calibration due, capture slowed), before anything reads

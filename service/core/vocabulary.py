@@ -21,11 +21,12 @@ SET = "set"
 SET_REDO = "set_redo"
 SET_SKIP = "set_skip"
 SET_ABORT = "set_abort"
+TYPE1 = "type1"
 
 #: how the daemon acts on a command: ``part`` applies its data (recipe, part ID) and is done; ``measure``
 #: starts a measurement (its data applied first); ``stop`` aborts the measurement or acknowledges a FAULT;
-#: ``set`` is an operator action of the guided tensor set
-ACTS = ("part", "measure", "stop", "set")
+#: ``set`` is an operator action of the guided tensor set; ``study`` starts or aborts a guided gauge study
+ACTS = ("part", "measure", "stop", "set", "study")
 
 #: the keys of a command's data that say which part is measured (refused while a measurement runs)
 PART_DATA = ("part_id", "recipe")
@@ -68,6 +69,9 @@ COMMANDS: dict[str, Command] = {
                       set_action="redo"),
     SET_SKIP: Command("tensor set: skip the current orientation", "set", set_action="skip"),
     SET_ABORT: Command("tensor set: abort the set (its releases stay stored)", "set", set_action="abort"),
+    TYPE1: Command("a Type 1 gauge study of the active recipe's reference part (data action: start | abort; "
+                   "start: reference and tolerance in kg·m², count)", "study",
+                   ("action", "reference", "tolerance", "count")),
 }
 
 #: MQTT topic tail → command name

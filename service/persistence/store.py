@@ -477,6 +477,34 @@ class Store:
                                     (int(limit),) if limit is not None else ()).fetchall()
         return [json.loads(r[0]) | {"finished_at": r[1]} for r in rows]
 
+    # --- gauge studies ------------------------------------------------------------
+    @store_errors("storing a gauge study")
+    def record_gauge_study(self, record: Mapping[str, Any], *, started_at: float | None, finished_at: float) -> None:
+        """Store a finished gauge study (``Type1Record.to_dict()``): complete, aborted or failed."""
+        with self._lock, self._tx() as db:
+            db.execute("INSERT INTO gauge_studies (uuid, kind, status, recipe, started_at, finished_at, releases, "
+                       "record) VALUES (?,?,?,?,?,?,?,?)",
+                       (record["uuid"], record["kind"], record["status"], record.get("recipe"), started_at,
+                        finished_at, json.dumps(record.get("releases") or []), json.dumps(record, allow_nan=False)))
+
+    @store_errors("reading gauge studies")
+    def gauge_studies(self, kind: str, *, recipe: str | None = None, status: str | None = None,
+                      uuid: str | None = None, limit: int | None = 20) -> builtins.list[dict[str, Any]]:
+        """Stored gauge studies of ``kind``, newest first (of ``recipe``, with ``status``, the one ``uuid``
+        when given): their records with ``started_at`` and ``finished_at``."""
+        where, args = ["kind = ?"], [kind]
+        for column, value in (("recipe", recipe), ("status", status), ("uuid", uuid)):
+            if value is not None:
+                where.append(f"{column} = ?")
+                args.append(value)
+        with self._lock:
+            if not self._db.execute("SELECT 1 FROM sqlite_master WHERE name = 'gauge_studies'").fetchone():
+                return []  # a read-only store written before gauge studies existed
+            rows = self._db.execute("SELECT record, started_at, finished_at FROM gauge_studies WHERE "
+                                    + " AND ".join(where) + " ORDER BY id DESC"
+                                    + (f" LIMIT {int(limit)}" if limit is not None else ""), args).fetchall()
+        return [json.loads(r[0]) | {"started_at": r[1], "finished_at": r[2]} for r in rows]
+
     @store_errors("reading an attachment")
     def get_attachment(self, uuid: str, name: str) -> tuple[bytes, str] | None:
         """(data, media type) of an attachment, or None."""

@@ -204,6 +204,23 @@ CREATE TABLE IF NOT EXISTS check_standards (
 """
 
 
+#: gauge studies (a Type 1 study of a reference part: ``service.parts.gauge_study``): one row per study, linked to
+#: the releases that counted (their UUIDs in ``releases``); a table of its own, so an older store gains it unchanged
+_GAUGE_SCHEMA = """
+CREATE TABLE IF NOT EXISTS gauge_studies (
+    id          INTEGER PRIMARY KEY,
+    uuid        TEXT NOT NULL UNIQUE,
+    kind        TEXT NOT NULL,
+    status      TEXT NOT NULL CHECK (status IN ('complete', 'aborted', 'failed')),
+    recipe      TEXT,
+    started_at  REAL,
+    finished_at REAL NOT NULL,
+    releases    TEXT NOT NULL,
+    record      TEXT NOT NULL
+);
+"""
+
+
 #: the consumer of the outbox rows of a store made before rows named theirs (only MQTT delivered from it)
 LEGACY_CONSUMER = "mqtt"
 #: schema 3: which publisher delivers the row (``Publisher.NAME``); each consumer acknowledges its own rows
@@ -227,6 +244,7 @@ def create_tables(db: sqlite3.Connection) -> None:
     db.executescript(_SCHEMA)
     db.executescript(_TENSOR_SCHEMA)
     db.executescript(_CHECK_SCHEMA)
+    db.executescript(_GAUGE_SCHEMA)
     have = {row[1] for row in db.execute("PRAGMA table_info(measurements)")}
     for c in COLUMNS:
         if c.name not in have:

@@ -182,6 +182,10 @@ class ApplianceView:
         """The tensor set's progress (main loop thread: ask through ``call_soon``)."""
         return self._app.set_progress()
 
+    def study_progress(self) -> dict[str, Any] | None:
+        """The Type 1 study's progress (main loop thread: ask through ``call_soon``)."""
+        return self._app.study_progress()
+
     def calibration_state(self) -> dict[str, Any] | None:
         """The calibration of the rig the active recipe measures with, as the next result will be judged:
         date, valid_until, due (also after a failed check standard), check_standard; None without one

@@ -347,6 +347,15 @@ def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: fl
             "off_chart": off_chart, "range_name": range_name}
 
 
+def run_panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], width: float = 720.0,
+              height: float = 300.0, names: Sequence[str] = ()) -> dict[str, Any]:
+    """A run chart's geometry: ``values`` in their order and named horizontal ``lines`` (name, value, kind
+    "centre" | "limit" | "spec"), drawn as a control chart's upper panel; in the unit of the values."""
+    ys = list(values) + [v for _, v, _ in lines]
+    spread = (max(ys) - min(ys)) if ys else 0.0
+    return _panel(values, lines, set(), width, height, spread if spread > 0 else 1.0, names=names)
+
+
 def _plain(v: float, spread: float) -> str:
     """``v`` with the decimals that tell values ``spread``/50 apart from each other."""
     decimals = max(0, min(12, 1 - int(math.floor(math.log10(spread / 50.0))))) if spread > 0 else 6

@@ -1,7 +1,7 @@
 """What every page shares: the refusal (a 4xx with a sentence), the form and query readers, the templates and
 the page they render, the login check of every action, the store reads, the child process, the words of a time,
 a unit and a blocked Measure. Each page family (``home``, ``session``, ``results``, ``spc``, ``calibration``,
-``recipes``, ``users``, ``set_up``) is a small class holding the one ``Pages`` of the server."""
+``recipes``, ``users``, ``set_up``, ``type1``) is a small class holding the one ``Pages`` of the server."""
 
 from __future__ import annotations
 
@@ -59,7 +59,7 @@ if TYPE_CHECKING:  # pragma: no cover
 HERE = Path(__file__).parent
 #: what a refusal of an action needs, in words
 NEEDS = {"recipe": "change the recipe", "acknowledge": "acknowledge a fault",
-         "camera": "set the camera's region of interest"}
+         "camera": "set the camera's region of interest", "gauge": "start a gauge study"}
 #: the history's filters in the query string (the history, its export and the SPC page read them)
 FILTERS = ("since", "until", "recipe", "part", "flag", "status")
 

@@ -12,6 +12,7 @@ from aiohttp import web
 
 from .. import quality as Q
 from .pages import Family, Pages, Refused, history_filters
+from .type1 import spc_gauge
 
 #: the latest parts an SPC page charts at most
 SPC_POINTS = 500
@@ -100,7 +101,8 @@ class SpcPages(Family):
         charts, capability = self._charts(result, unit) if result is not None else (None, None)
         q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
         checks, check_chart = check_standards(self.pages, filters, unit)
+        gauge1 = spc_gauge(store, recipe, result.summary) if result is not None else None  # the last Type 1 study
         return self.pages.page(request, "spc.html", title="SPC", recipes=recipes, recipe=recipe, spc=result,
                                chart=charts[WIDE] if charts else None, narrow=charts[NARROW] if charts else None,
                                note=note, capability=capability, charts=CHARTS, unit=unit, q=q,
-                               checks=checks[-10:][::-1], check_chart=check_chart)
+                               checks=checks[-10:][::-1], check_chart=check_chart, type1=gauge1)

@@ -23,6 +23,7 @@ from .results import ResultPages
 from .session import SessionPages
 from .set_up import SetUpPages
 from .spc import SpcPages
+from .type1 import Type1Pages
 from .users import UserPages
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -61,7 +62,7 @@ class Views:
         p = self.pages
         home, session, results = HomePages(p), SessionPages(p), ResultPages(p)
         spc, calibration, recipes = SpcPages(p), CalibrationPages(p), RecipePages(p)
-        users, setup = UserPages(p), SetUpPages(p)
+        users, setup, type1 = UserPages(p), SetUpPages(p), Type1Pages(p)
         r = app.router
         r.add_get("/", home.home)
         r.add_get("/home/summary", home.home_summary)
@@ -85,6 +86,12 @@ class Views:
         r.add_get("/set", home.tensor_set)
         r.add_get("/api/set", home.api_set)
         r.add_post("/api/set/{action}", home.set_action)
+        r.add_get("/type1", type1.type1)
+        r.add_get("/type1/{uuid}", type1.study)
+        r.add_get("/type1/{uuid}/report.pdf", type1.pdf)
+        r.add_get("/api/type1", type1.api)
+        r.add_post("/api/type1/start", type1.start)
+        r.add_post("/api/type1/abort", type1.abort)
         r.add_get("/setup", setup.setup)
         r.add_get("/recipes", recipes.recipes)
         r.add_post("/recipes", recipes.recipes_change)
