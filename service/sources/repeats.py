@@ -5,14 +5,26 @@ The groups are the releases of one object: a check standard's measurements (by i
 measurement's uuid; their ω_n). They are pooled by ``measurement.reproducibility.pooled`` (ISO 5725-2): the
 pooled relative within-group standard deviation of ω_n and its degrees of freedom. Only what was measured
 since the rig's calibration counts: a new calibration is a new rig.
+
+The appliance's own identifications read it through ``RigHistory``: the store is read once per calibration (some
+0.5 s for 3000 stored releases on a loaded 2-core machine) and the figure is then kept up to date with each release
+and check standard the appliance stores, not read again for every release.
 """
 
 from __future__ import annotations
 
+import datetime as dt
+import logging
 import math
+import threading
 from typing import Any, Iterable, Mapping, Protocol, Sequence
 
+from measurement import Rig
 from measurement.reproducibility import Reproducibility, pooled
+
+from service.errors import StoreError
+
+log = logging.getLogger("moi.daemon")
 
 
 class Release(Protocol):
@@ -40,21 +52,84 @@ def _positive(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
 
 
+Groups = dict[tuple[str, str], list[float]]
+
+
+def _add_release(groups: Groups, m: Release) -> None:
+    key = m.part_id or m.part_uuid
+    if m.status == "ok" and key and _positive(m.omega_n):
+        groups.setdefault(("part", key), []).append(float(m.omega_n))  # type: ignore[arg-type]
+
+
+def _add_check(groups: Groups, c: Mapping[str, Any]) -> None:
+    if _positive(c.get("value")):
+        groups.setdefault(("check", str(c.get("name") or "check")), []).append(float(c["value"]) ** -0.5)
+
+
 def repeat_groups(releases: Iterable[Release], checks: Iterable[Mapping[str, Any]]) -> list[list[float]]:
     """ω_n (or a check's J^(−1/2), on ω's scale) of each object's repeat releases, one list per object."""
-    groups: dict[tuple[str, str], list[float]] = {}
+    return list(_groups(releases, checks).values())
+
+
+def _groups(releases: Iterable[Release], checks: Iterable[Mapping[str, Any]]) -> Groups:
+    groups: Groups = {}
     for m in releases:
-        key = m.part_id or m.part_uuid
-        if m.status == "ok" and key and _positive(m.omega_n):
-            groups.setdefault(("part", key), []).append(float(m.omega_n))  # type: ignore[arg-type]
+        _add_release(groups, m)
     for c in checks:
-        if _positive(c.get("value")):
-            groups.setdefault(("check", str(c.get("name") or "check")), []).append(float(c["value"]) ** -0.5)
-    return list(groups.values())
+        _add_check(groups, c)
+    return groups
+
+
+def _read(store: Releases, since: float | None) -> Groups:
+    releases = store.list(limit=READ_LIMIT, since=since, status="ok")
+    checks = [c for c in store.check_standards(limit=READ_LIMIT) if since is None or c["finished_at"] >= since]
+    return _groups(releases, checks)
 
 
 def rig_reproducibility(store: Releases, since: float | None = None) -> Reproducibility:
     """The store's repeat releases since ``since`` (s, epoch; None: all) pooled (``Reproducibility``)."""
-    releases = store.list(limit=READ_LIMIT, since=since, status="ok")
-    checks = [c for c in store.check_standards(limit=READ_LIMIT) if since is None or c["finished_at"] >= since]
-    return pooled(repeat_groups(releases, checks))
+    return pooled(_read(store, since).values())
+
+
+def calibrated_since(rig: Rig) -> float | None:
+    """Where a rig's history starts (s, epoch): the start (UTC) of its calibration's day; None without one."""
+    cal = rig.calibration
+    return None if cal is None else dt.datetime.combine(cal.date, dt.time(), dt.UTC).timestamp()
+
+
+class RigHistory:
+    """The rig's repeat releases for the appliance's own identifications (any thread).
+
+    Read from the store once per calibration (``calibrated_since``), then kept with what the appliance stores
+    (``stored``, ``checked``): a release's identification does not read the store again.
+    """
+
+    def __init__(self, store: Releases) -> None:
+        self._store = store
+        self._lock = threading.Lock()
+        self._since: float | None = None
+        self._groups: Groups | None = None
+
+    def reproducibility(self, rig: Rig) -> Reproducibility | None:
+        """The history of ``rig`` since its calibration, pooled; None when the store cannot be read (said)."""
+        since = calibrated_since(rig)
+        with self._lock:
+            if self._groups is None or since != self._since:
+                try:
+                    self._groups, self._since = _read(self._store, since), since
+                except StoreError as exc:
+                    log.warning("the rig's history of repeat releases not read (%s): its default is stated", exc)
+                    return None
+            return pooled(self._groups.values())
+
+    def stored(self, m: Release) -> None:
+        """A release the appliance stored (``Store.record``'s row) joins the history read."""
+        with self._lock:
+            if self._groups is not None:
+                _add_release(self._groups, m)
+
+    def checked(self, record: Mapping[str, Any]) -> None:
+        """A check standard's comparison the appliance stored joins the history read."""
+        with self._lock:
+            if self._groups is not None:
+                _add_check(self._groups, record)
