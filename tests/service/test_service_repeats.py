@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import pytest
 
 from service.persistence.store import Store
-from service.sources.repeats import repeat_groups, rig_reproducibility
+from service.sources.repeats import RigHistory, calibrated_since, repeat_groups, rig_reproducibility
 
 
 def _release(omega_n, part_id=None, part_uuid=None, status="ok"):
@@ -50,3 +50,51 @@ def test_an_empty_store_knows_no_reproducibility(tmp_path):
     with Store(tmp_path) as store:
         r = rig_reproducibility(store)
     assert r.relative is None and not r.known
+
+
+class _Counted(Store):
+    """The store, its reads counted."""
+
+    reads = 0
+
+    def list(self, *args, **kwargs):
+        type(self).reads += 1
+        return super().list(*args, **kwargs)
+
+
+def _rig(date):
+    from measurement import Rig
+    from measurement.rig import CalibrationRecord
+
+    return Rig(kind="torsion", stiffness=0.3651, calibration=None if date is None else CalibrationRecord(date=date))
+
+
+def test_the_appliances_history_is_read_once_per_calibration_and_kept_with_what_it_stores(tmp_path):
+    import datetime as dt
+
+    rig = _rig(dt.date(1970, 1, 1) + dt.timedelta(days=1))
+    assert calibrated_since(rig) == 86400.0 and calibrated_since(_rig(None)) is None
+    _Counted.reads = 0
+    with _Counted(tmp_path) as store:
+        history = RigHistory(store)
+        for at, v in ((90000.0, 0.01250), (90001.0, 0.01252)):
+            _check(store, "disc", v, at)
+        first = history.reproducibility(rig)
+        assert (first.dof, first.releases) == (1.0, 2) and _Counted.reads == 1
+        # a check standard and two releases of one part, stored by the appliance: kept, not read again
+        record = {"name": "disc", "quantity": "J", "value": 0.01248, "U": 2e-5, "reference": 0.0125,
+                  "reference_U": 2e-5, "E_n": 0.1, "passed": True}
+        _check(store, "disc", 0.01248, 90002.0)
+        history.checked(record)
+        for w in (4.0, 4.004):
+            row = store.record(status="ok", trigger="cli", device_id="d", software_version="x", started_at=90003.0,
+                               finished_at=90004.0, result={"omega_n": w, "flags": []}, part={"part_id": "A"})
+            history.stored(row)
+        kept = history.reproducibility(rig)
+        assert _Counted.reads == 1
+        read = rig_reproducibility(store, calibrated_since(rig))
+        assert (kept.relative, kept.dof, kept.releases) == (pytest.approx(read.relative, rel=1e-12), 3.0, 5)
+        assert (read.dof, read.releases) == (3.0, 5)
+        # a new calibration is a new rig: read again from its day
+        later = history.reproducibility(_rig(dt.date(1970, 1, 2) + dt.timedelta(days=1)))
+        assert _Counted.reads == 3 and later.relative is None  # the second read was the check's above
