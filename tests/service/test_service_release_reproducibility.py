@@ -5,23 +5,26 @@ any history the documented default is stated and not counted."""
 from __future__ import annotations
 
 import datetime as dt
+import math
 
 import numpy as np
 import pytest
 
 from measurement.reproducibility import DEFAULT
+from measurement.uncertainty import coverage_factor, welch_satterthwaite
 from tests.service.conftest import appliance_doc
 
 
 def _setup(tmp_path):
-    """The device's rig calibrated last month; a check standard (one release a part) and a part type (one release)."""
+    """The device's rig calibrated last month; a check standard (one release a part), a part type of one release and
+    one of three."""
     rig = tmp_path / "rig.toml"
     rig.write_text('[rig]\nkind = "torsion"\nstiffness = 0.3651\n[calibration]\n'
                    f'date = {(dt.date.today() - dt.timedelta(days=30)).isoformat()}\nvalid_days = 365\n')
     recipes = tmp_path / "recipes"
     recipes.mkdir()
     cs = '[check_standard]\nname = "disc CS-1"\nreference = 0.0125\nreference_U = 2.0e-5\n'
-    for n, (name, extra) in enumerate((("rotor", ""), ("cs", cs)), start=1):
+    for n, (name, extra) in enumerate((("rotor", ""), ("cs", cs), ("rotor3", "releases = 3\n")), start=1):
         (recipes / f"{name}.toml").write_text(f'[recipe]\nname = "{name}"\nnumber = {n}\nnominal = 0.0125\n'
                                               f'tolerance_percent = 2.0\n{extra}')
     return rig, recipes
@@ -70,10 +73,25 @@ def test_a_release_carries_the_rigs_pooled_reproducibility_once_a_check_standard
     # in u, with its few degrees of freedom in the budget's (Welch–Satterthwaite)
     budget = part["uncertainty_budget"]["J"]
     assert budget["u"] > abs(line["contribution"]) and budget["dof"] is not None
-    assert budget["u"] > first["uncertainty_budget"]["J"]["u"]
+    assert budget["u_random"] >= abs(line["contribution"])  # a random line: one release's own, not shared
     # the appliance read the store once for this calibration, then kept it with what it stored
     assert running.app.history.reproducibility(running.app.config.rig).relative == pytest.approx(
         _pooled_with(running), rel=1e-12)
+    # a part of three releases: each release's u holds the history, the part keeps its joint value, its joint u
+    # (without the history's line: the releases' own scatter speaks for itself) and its own k
+    releases = [_release(running, n, part_id="R-3", recipe="rotor3").payload for n in (6, 7, 8)]
+    assert all(r["reproducibility"]["source"] == "history" for r in releases)
+    summary = releases[-1]["part"]
+    joint = summary["joint"]
+    assert joint is not None and summary["value"] == pytest.approx(0.3651 / joint["omega_n"] ** 2, rel=1e-9)
+    assert summary["u_fit"] < min(r["uncertainty_budget"]["J"]["u_random"] for r in releases)
+    # its k: the specification's, or its own releases' Type A (Welch–Satterthwaite, m − 1) where that sets u; never
+    # a release's k that its history's line raised
+    u_a, u_fit = summary["u_typeA"], summary["u_fit"]
+    u_c = math.hypot(max(u_a, u_fit), summary["u_systematic"])
+    k = coverage_factor(welch_satterthwaite(u_c, [(u_a, 2)])) if u_a > u_fit else 2.0
+    assert summary["uncertainty"]["coverage_factor"] == pytest.approx(k, rel=1e-9)
+    assert summary["U"] == pytest.approx(k * summary["u_c"], rel=1e-9)
 
 
 def _pooled_with(running):
