@@ -21,7 +21,6 @@ from typing import Any, Iterable, Mapping, Protocol, Sequence
 
 from measurement import Rig
 from measurement.reproducibility import Reproducibility, pooled
-
 from service.errors import StoreError
 
 log = logging.getLogger("moi.daemon")
@@ -30,10 +29,17 @@ log = logging.getLogger("moi.daemon")
 class Release(Protocol):
     """What is read of a stored release (``service.persistence.store.StoredMeasurement``)."""
 
-    status: str
-    omega_n: float | None
-    part_id: str | None
-    part_uuid: str | None
+    @property
+    def status(self) -> str: ...
+
+    @property
+    def omega_n(self) -> float | None: ...
+
+    @property
+    def part_id(self) -> str | None: ...
+
+    @property
+    def part_uuid(self) -> str | None: ...
 
 
 class Releases(Protocol):

@@ -80,7 +80,7 @@ def test_the_appliances_history_is_read_once_per_calibration_and_kept_with_what_
         for at, v in ((90000.0, 0.01250), (90001.0, 0.01252)):
             _check(store, "disc", v, at)
         first = history.reproducibility(rig)
-        assert (first.dof, first.releases) == (1.0, 2) and _Counted.reads == 1
+        assert first is not None and (first.dof, first.releases) == (1.0, 2) and _Counted.reads == 1
         # a check standard and two releases of one part, stored by the appliance: kept, not read again
         record = {"name": "disc", "quantity": "J", "value": 0.01248, "U": 2e-5, "reference": 0.0125,
                   "reference_U": 2e-5, "E_n": 0.1, "passed": True}
@@ -91,10 +91,10 @@ def test_the_appliances_history_is_read_once_per_calibration_and_kept_with_what_
                                finished_at=90004.0, result={"omega_n": w, "flags": []}, part={"part_id": "A"})
             history.stored(row)
         kept = history.reproducibility(rig)
-        assert _Counted.reads == 1
+        assert kept is not None and _Counted.reads == 1
         read = rig_reproducibility(store, calibrated_since(rig))
         assert (kept.relative, kept.dof, kept.releases) == (pytest.approx(read.relative, rel=1e-12), 3.0, 5)
         assert (read.dof, read.releases) == (3.0, 5)
         # a new calibration is a new rig: read again from its day
         later = history.reproducibility(_rig(dt.date(1970, 1, 2) + dt.timedelta(days=1)))
-        assert _Counted.reads == 3 and later.relative is None  # the second read was the check's above
+        assert _Counted.reads == 3 and later is not None and later.relative is None  # the second read was the check's above
