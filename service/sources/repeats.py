@@ -21,6 +21,7 @@ from typing import Any, Iterable, Mapping, Protocol, Sequence
 
 from measurement import Rig
 from measurement.reproducibility import Reproducibility, pooled
+from measurement.rig import CalibrationRecord
 from service.errors import StoreError
 
 log = logging.getLogger("moi.daemon")
@@ -97,9 +98,8 @@ def rig_reproducibility(store: Releases, since: float | None = None) -> Reproduc
     return pooled(_read(store, since).values())
 
 
-def calibrated_since(rig: Rig) -> float | None:
+def calibrated_since(cal: CalibrationRecord | None) -> float | None:
     """Where a rig's history starts (s, epoch): the start (UTC) of its calibration's day; None without one."""
-    cal = rig.calibration
     return None if cal is None else dt.datetime.combine(cal.date, dt.time(), dt.UTC).timestamp()
 
 
@@ -118,7 +118,7 @@ class RigHistory:
 
     def reproducibility(self, rig: Rig) -> Reproducibility | None:
         """The history of ``rig`` since its calibration, pooled; None when the store cannot be read (said)."""
-        since = calibrated_since(rig)
+        since = calibrated_since(rig.calibration)
         with self._lock:
             if self._groups is None or since != self._since:
                 try:

@@ -98,6 +98,6 @@ def _pooled_with(running):
     """The store read anew: what the kept history must equal."""
     from service.sources.repeats import calibrated_since, rig_reproducibility
 
-    r = rig_reproducibility(running.app.store, calibrated_since(running.app.config.rig))
+    r = rig_reproducibility(running.app.store, calibrated_since(running.app.config.rig.calibration))
     assert r.relative is not None
     return r.relative

@@ -73,7 +73,7 @@ def test_the_appliances_history_is_read_once_per_calibration_and_kept_with_what_
     import datetime as dt
 
     rig = _rig(dt.date(1970, 1, 1) + dt.timedelta(days=1))
-    assert calibrated_since(rig) == 86400.0 and calibrated_since(_rig(None)) is None
+    assert calibrated_since(rig.calibration) == 86400.0 and calibrated_since(None) is None
     _Counted.reads = 0
     with _Counted(tmp_path) as store:
         history = RigHistory(store)
@@ -92,7 +92,7 @@ def test_the_appliances_history_is_read_once_per_calibration_and_kept_with_what_
             history.stored(row)
         kept = history.reproducibility(rig)
         assert kept is not None and _Counted.reads == 1
-        read = rig_reproducibility(store, calibrated_since(rig))
+        read = rig_reproducibility(store, calibrated_since(rig.calibration))
         assert (kept.relative, kept.dof, kept.releases) == (pytest.approx(read.relative, rel=1e-12), 3.0, 5)
         assert (read.dof, read.releases) == (3.0, 5)
         # a new calibration is a new rig: read again from its day
