@@ -71,7 +71,8 @@ class Reproducibility:
                     f"(±{2 * rel:.2g} % of J), Type B: docs/uncertainty.md")
         if self.relative is None:
             return "not known: no group of repeat releases in the history"
-        return f"{self.source}: {self.releases} releases of {self.groups} objects pooled (ISO 5725-2)"
+        objects = "1 object" if self.groups == 1 else f"{self.groups} objects"
+        return f"{self.source}: {self.releases} releases of {objects} pooled (ISO 5725-2)"
 
     def to_dict(self) -> dict[str, Any]:
         return {"relative": self.relative, "dof": self.dof if math.isfinite(self.dof) else None,
