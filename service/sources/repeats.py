@@ -6,8 +6,8 @@ measurement's uuid; their ω_n). They are pooled by ``measurement.reproducibilit
 pooled relative within-group standard deviation of ω_n and its degrees of freedom. Only what was measured
 since the rig's calibration counts: a new calibration is a new rig.
 
-The appliance's own identifications read it through ``RigHistory``: the store is read once per calibration (some
-0.5 s for 3000 stored releases on a loaded 2-core machine) and the figure is then kept up to date with each release
+The appliance's own identifications read it through ``RigHistory``: the store is read once per calibration (0.2–0.8 s
+for 3000 stored releases on a loaded 2-core machine) and the figure is then kept up to date with each release
 and check standard the appliance stores, not read again for every release.
 """
 
