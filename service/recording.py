@@ -185,7 +185,7 @@ class Recorder:
             self.app.store.record_check_standard(dict(check) | {"part_id": outcome.part_id, "measurement": measurement,
                                                             "flags": list(flags)}, finished_at=finished)
             if self.app.history is not None:
-                self.app.history.checked(check)
+                self.app.history.checked()
         except StoreError:
             log.exception("could not store the check standard of measurement %s", measurement)
         self.app.calibration_changed()  # a check standard may clear or raise the block

@@ -1,14 +1,15 @@
 """A rig's reproducibility between releases, from the repeat releases its store keeps.
 
-The groups are the releases of one object: a check standard's measurements (by its name; their J, carried to
-ω's scale as J^(−1/2), since J = C/ω²) and the releases of one part (by its part id, else by the part
-measurement's uuid; their ω_n). They are pooled by ``measurement.reproducibility.pooled`` (ISO 5725-2): the
+The groups are the releases of one object: a check standard's measurements (by its name: the ω_n of the releases
+of each of its parts the appliance measured; a comparison stored without its releases, by ``moi check-standard``,
+its J carried to ω's scale as J^(−1/2), since J = C/ω², in a group of its own) and the releases of one part (by its
+part id, else by the part measurement's uuid; their ω_n). They are pooled by ``measurement.reproducibility.pooled`` (ISO 5725-2): the
 pooled relative within-group standard deviation of ω_n and its degrees of freedom. Only what was measured
 since the rig's calibration counts: a new calibration is a new rig.
 
 The appliance's own identifications read it through ``RigHistory``: the store is read once per calibration (0.2–0.8 s
 for 3000 stored releases on a loaded 2-core machine) and the figure is then kept up to date with each release
-and check standard the appliance stores, not read again for every release.
+the appliance stores, not read again for every release (again after a check standard).
 """
 
 from __future__ import annotations
@@ -29,6 +30,9 @@ log = logging.getLogger("moi.daemon")
 
 class Release(Protocol):
     """What is read of a stored release (``service.persistence.store.StoredMeasurement``)."""
+
+    @property
+    def uuid(self) -> str: ...
 
     @property
     def status(self) -> str: ...
@@ -62,15 +66,17 @@ def _positive(v: Any) -> bool:
 Groups = dict[tuple[str, str], list[float]]
 
 
-def _add_release(groups: Groups, m: Release) -> None:
+def _add_release(groups: Groups, m: Release, check: str | None = None) -> None:
+    """One release's ω_n in its object's group: its check standard's (``check``: its name), else its part's."""
     key = m.part_id or m.part_uuid
     if m.status == "ok" and key and _positive(m.omega_n):
-        groups.setdefault(("part", key), []).append(float(m.omega_n))  # type: ignore[arg-type]
+        groups.setdefault(("check", check) if check else ("part", key), []).append(float(m.omega_n))  # type: ignore[arg-type]
 
 
 def _add_check(groups: Groups, c: Mapping[str, Any]) -> None:
+    """A check standard's stored value without its releases: J^(−1/2), on ω's scale, apart from the ω_n's."""
     if _positive(c.get("value")):
-        groups.setdefault(("check", str(c.get("name") or "check")), []).append(float(c["value"]) ** -0.5)
+        groups.setdefault(("check J", str(c.get("name") or "check")), []).append(float(c["value"]) ** -0.5)
 
 
 def repeat_groups(releases: Iterable[Release], checks: Iterable[Mapping[str, Any]]) -> list[list[float]]:
@@ -79,11 +85,20 @@ def repeat_groups(releases: Iterable[Release], checks: Iterable[Mapping[str, Any
 
 
 def _groups(releases: Iterable[Release], checks: Iterable[Mapping[str, Any]]) -> Groups:
+    # a check standard's comparison names the release that completed its part: that part's releases are the check
+    # standard's (their ω_n, whatever quantity the comparison is of: J_object − the tare is not on ω's scale)
+    releases = list(releases)
+    by_uuid = {m.uuid: m for m in releases}
+    checked: dict[str, str] = {}  # part uuid → the check standard's name
     groups: Groups = {}
-    for m in releases:
-        _add_release(groups, m)
     for c in checks:
-        _add_check(groups, c)
+        m = by_uuid.get(str(c.get("measurement")))
+        if m is not None and m.part_uuid:
+            checked[m.part_uuid] = str(c.get("name") or "check")
+        else:
+            _add_check(groups, c)
+    for m in releases:
+        _add_release(groups, m, checked.get(m.part_uuid or ""))
     return groups
 
 
@@ -106,8 +121,9 @@ def calibrated_since(cal: CalibrationRecord | None) -> float | None:
 class RigHistory:
     """The rig's repeat releases for the appliance's own identifications (any thread).
 
-    Read from the store once per calibration (``calibrated_since``), then kept with what the appliance stores
-    (``stored``, ``checked``): a release's identification does not read the store again.
+    Read from the store once per calibration (``calibrated_since``) and after a check standard (``checked``), kept
+    with each release the appliance stores (``stored``) in between: a release's identification does not read the
+    store again.
     """
 
     def __init__(self, store: Releases) -> None:
@@ -134,8 +150,8 @@ class RigHistory:
             if self._groups is not None:
                 _add_release(self._groups, m)
 
-    def checked(self, record: Mapping[str, Any]) -> None:
-        """A check standard's comparison the appliance stored joins the history read."""
+    def checked(self) -> None:
+        """The appliance stored a check standard's comparison: its part's releases, kept as a part's, are the check
+        standard's; read again at the next release (a check standard is measured once a shift or a day)."""
         with self._lock:
-            if self._groups is not None:
-                _add_check(self._groups, record)
+            self._groups = None

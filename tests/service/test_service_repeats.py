@@ -12,7 +12,8 @@ from service.sources.repeats import RigHistory, calibrated_since, repeat_groups,
 
 
 def _release(omega_n, part_id=None, part_uuid=None, status="ok"):
-    return SimpleNamespace(omega_n=omega_n, part_id=part_id, part_uuid=part_uuid, status=status)
+    return SimpleNamespace(uuid=f"m{omega_n}-{part_id}", omega_n=omega_n, part_id=part_id, part_uuid=part_uuid,
+                           status=status)
 
 
 def test_releases_group_by_part_and_checks_by_name_on_the_scale_of_omega():
@@ -69,6 +70,12 @@ def _rig(date):
     return Rig(kind="torsion", stiffness=0.3651, calibration=None if date is None else CalibrationRecord(date=date))
 
 
+def _stored(store, w, part_id=None, part_uuid=None, at=90003.0):
+    return store.record(status="ok", trigger="cli", device_id="d", software_version="x", started_at=at,
+                        finished_at=at + 1, result={"omega_n": w, "flags": []},
+                        part={"part_id": part_id, "part_uuid": part_uuid})
+
+
 def test_the_appliances_history_is_read_once_per_calibration_and_kept_with_what_it_stores(tmp_path):
     import datetime as dt
 
@@ -81,20 +88,37 @@ def test_the_appliances_history_is_read_once_per_calibration_and_kept_with_what_
             _check(store, "disc", v, at)
         first = history.reproducibility(rig)
         assert first is not None and (first.dof, first.releases) == (1.0, 2) and _Counted.reads == 1
-        # a check standard and two releases of one part, stored by the appliance: kept, not read again
-        record = {"name": "disc", "quantity": "J", "value": 0.01248, "U": 2e-5, "reference": 0.0125,
-                  "reference_U": 2e-5, "E_n": 0.1, "passed": True}
-        _check(store, "disc", 0.01248, 90002.0)
-        history.checked(record)
+        # two releases of one part, stored by the appliance: kept, not read again
         for w in (4.0, 4.004):
-            row = store.record(status="ok", trigger="cli", device_id="d", software_version="x", started_at=90003.0,
-                               finished_at=90004.0, result={"omega_n": w, "flags": []}, part={"part_id": "A"})
-            history.stored(row)
+            history.stored(_stored(store, w, "A"))
         kept = history.reproducibility(rig)
         assert kept is not None and _Counted.reads == 1
         read = rig_reproducibility(store, calibrated_since(rig.calibration))
-        assert (kept.relative, kept.dof, kept.releases) == (pytest.approx(read.relative, rel=1e-12), 3.0, 5)
-        assert (read.dof, read.releases) == (3.0, 5)
+        assert (kept.relative, kept.dof, kept.releases) == (pytest.approx(read.relative, rel=1e-12), 2.0, 4)
+        # a check standard's comparison: read again at the next release (its part's releases are the check's)
+        _check(store, "disc", 0.01248, 90010.0)
+        history.checked()
+        again = history.reproducibility(rig)
+        assert again is not None and (again.dof, again.releases) == (3.0, 5) and _Counted.reads == 3
         # a new calibration is a new rig: read again from its day
         later = history.reproducibility(_rig(dt.date(1970, 1, 2) + dt.timedelta(days=1)))
-        assert _Counted.reads == 3 and later is not None and later.relative is None  # the second read was the check's above
+        assert _Counted.reads == 4 and later is not None and later.relative is None
+
+
+def test_a_check_standards_releases_are_pooled_by_its_name_on_their_omega_n_not_on_its_value(tmp_path):
+    # the appliance's check standard (J_object: J less the tare, not on ω's scale) names the release that completed
+    # its part; its parts' releases are one object's, by the check standard's name, once each
+    with Store(tmp_path) as store:
+        rows = [_stored(store, w, part_uuid=f"cs{i}", at=100.0 + i) for i, w in enumerate((5.40, 5.41, 5.39))]
+        for i, row in enumerate(rows):
+            store.record_check_standard({"name": "disc", "quantity": "J_object", "value": 0.008 + 1e-5 * i,
+                                         "U": 2e-5, "reference": 0.008, "reference_U": 2e-5, "E_n": 0.1,
+                                         "passed": True, "measurement": row.uuid}, finished_at=101.0 + i)
+        _check(store, "disc", 0.0125, 200.0)  # `moi check-standard`: no release of its own, a group apart
+        _check(store, "disc", 0.0126, 201.0)
+        r = rig_reproducibility(store)
+    w = [5.40, 5.41, 5.39]
+    j = [0.0125**-0.5, 0.0126**-0.5]
+    hand = math.sqrt((sum((x / (sum(w) / 3) - 1) ** 2 for x in w) + sum((x / (sum(j) / 2) - 1) ** 2 for x in j)) / 3)
+    assert (r.groups, r.releases, r.dof) == (2, 5, 3.0)
+    assert r.relative == pytest.approx(hand, rel=1e-12)
