@@ -3,13 +3,14 @@
 The groups are the releases of one object: a check standard's measurements (by its name: the ω_n of the releases
 of each of its parts the appliance measured; a comparison stored without its releases, by ``moi check-standard``,
 its J carried to ω's scale as J^(−1/2), since J = C/ω², in a group of its own) and the releases of one part (by its
-part id, else by the part measurement's uuid; their ω_n). They are pooled by ``measurement.reproducibility.pooled`` (ISO 5725-2): the
-pooled relative within-group standard deviation of ω_n and its degrees of freedom. Only what was measured
-since the rig's calibration counts: a new calibration is a new rig.
+part id, else by the part measurement's uuid; their ω_n; not a tensor set's orientations). They are pooled by
+``measurement.reproducibility.pooled`` (ISO 5725-2): the pooled relative within-group standard deviation of ω_n
+and its degrees of freedom. Only what was measured since the rig's calibration counts: a new calibration is a new
+rig.
 
-The appliance's own identifications read it through ``RigHistory``: the store is read once per calibration (0.2–0.8 s
-for 3000 stored releases on a loaded 2-core machine) and the figure is then kept up to date with each release
-the appliance stores, not read again for every release (again after a check standard).
+The appliance's own identifications read it through ``RigHistory``: the store is read once per calibration
+(0.2–0.8 s for 3000 stored releases on a loaded 2-core machine) and the figure is then kept up to date with each
+release the appliance stores, not read again for every release (again after a check standard).
 """
 
 from __future__ import annotations
@@ -67,9 +68,10 @@ Groups = dict[tuple[str, str], list[float]]
 
 
 def _add_release(groups: Groups, m: Release, check: str | None = None) -> None:
-    """One release's ω_n in its object's group: its check standard's (``check``: its name), else its part's."""
+    """One release's ω_n in its object's group: its check standard's (``check``: its name), else its part's. Only a
+    part's release counts (its part uuid): a tensor set's six orientations under one part ID are not repeats."""
     key = m.part_id or m.part_uuid
-    if m.status == "ok" and key and _positive(m.omega_n):
+    if m.status == "ok" and m.part_uuid and key and _positive(m.omega_n):
         groups.setdefault(("check", check) if check else ("part", key), []).append(float(m.omega_n))  # type: ignore[arg-type]
 
 

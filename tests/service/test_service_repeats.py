@@ -17,8 +17,11 @@ def _release(omega_n, part_id=None, part_uuid=None, status="ok"):
 
 
 def test_releases_group_by_part_and_checks_by_name_on_the_scale_of_omega():
-    releases = [_release(4.0, "A"), _release(4.004, "A"), _release(6.0, None, "u1"), _release(6.006, None, "u1"),
-                _release(5.0, "B", status="failed"), _release(float("nan"), "A"), _release(None, "C")]
+    releases = [_release(4.0, "A", "a1"), _release(4.004, "A", "a2"), _release(6.0, None, "u1"),
+                _release(6.006, None, "u1"), _release(5.0, "B", "b1", status="failed"), _release(float("nan"), "A", "a3"),
+                _release(None, "C", "c1"),
+                # a tensor set's orientations under one part ID: not a part's releases, not repeats
+                _release(5.0, "T"), _release(7.0, "T")]
     checks = [{"name": "disc", "value": 0.0125}, {"name": "disc", "value": 0.0126}, {"name": "bar", "value": -1.0}]
     groups = repeat_groups(releases, checks)
     assert sorted(map(len, groups)) == [2, 2, 2]
@@ -90,7 +93,7 @@ def test_the_appliances_history_is_read_once_per_calibration_and_kept_with_what_
         assert first is not None and (first.dof, first.releases) == (1.0, 2) and _Counted.reads == 1
         # two releases of one part, stored by the appliance: kept, not read again
         for w in (4.0, 4.004):
-            history.stored(_stored(store, w, "A"))
+            history.stored(_stored(store, w, "A", "a"))
         kept = history.reproducibility(rig)
         assert kept is not None and _Counted.reads == 1
         read = rig_reproducibility(store, calibrated_since(rig.calibration))
