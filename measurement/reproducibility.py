@@ -33,6 +33,10 @@ HISTORY, RIG, DEFAULT_SOURCE = "history", "rig", "default"
 #: a group needs this many releases to say anything about the scatter between them
 MIN_GROUP = 2
 
+#: the fewest degrees of freedom a history needs before it enters one release's u (3 releases of one object, or
+#: two objects released twice): a Type A line of ν = 1 that sets u would set k near 13 (Welch–Satterthwaite)
+MIN_DOF = 2
+
 
 class ReproducibilityError(InvalidInput):
     """Repeat releases that cannot be pooled (a group value that is not a positive finite number)."""
@@ -67,7 +71,8 @@ class Reproducibility:
                     f"(±{2 * rel:.2g} % of J), Type B: docs/uncertainty.md")
         if self.relative is None:
             return "not known: no group of repeat releases in the history"
-        return f"{self.source}: {self.releases} releases of {self.groups} objects pooled (ISO 5725-2)"
+        objects = "1 object" if self.groups == 1 else f"{self.groups} objects"
+        return f"{self.source}: {self.releases} releases of {objects} pooled (ISO 5725-2)"
 
     def to_dict(self) -> dict[str, Any]:
         return {"relative": self.relative, "dof": self.dof if math.isfinite(self.dof) else None,
@@ -118,3 +123,11 @@ def pooled(groups: Iterable[Sequence[float]], *, power: float = 1.0) -> Reproduc
     if dof == 0:
         return Reproducibility(None, 0.0, 0, 0, HISTORY, False)
     return Reproducibility(math.sqrt(ss / dof) / abs(power), float(dof), n_groups, n_releases, HISTORY, True)
+
+
+def for_release(history: Reproducibility | None) -> Reproducibility:
+    """What one release's budget says of the scatter between releases: its rig's ``history`` (``pooled``) where
+    that pools at least ``MIN_DOF`` degrees of freedom, else the documented ``DEFAULT`` (stated, not counted)."""
+    if history is None or not history.known or history.dof < MIN_DOF:
+        return DEFAULT
+    return history

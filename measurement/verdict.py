@@ -461,7 +461,10 @@ def combine(readings: Sequence[Reading], spec: Specification, rules: QualityRule
     std = math.sqrt(sum((v - mean) ** 2 for v in vals) / (m - 1)) if m > 1 else None
     u_a = std / math.sqrt(m) if std is not None else None
     u_sys = max(readings[i].u_systematic for i in usable)
-    k = max([spec.coverage_factor] + [readings[i].coverage_factor or 0.0 for i in usable])
+    # a joint value's u is its own (Birge-scaled where the releases scatter): a release's k may rest on a line that
+    # u does not hold (the rig's reproducibility between releases, with its few degrees of freedom)
+    k = max([spec.coverage_factor] + ([readings[i].coverage_factor or 0.0 for i in usable] if joint_facts is None
+                                      else []))
     u_c, k, budget = _budget(m, u_a, u_fit, u_sys, k, spec)
     if part_reasons:
         dec = Decision(INVALID, mean, u_c, k * u_c, mean - spec.nominal, None, spec.rule, tuple(part_reasons))

@@ -25,6 +25,7 @@ that died ends the daemon with status 3 so that systemd restarts it.
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import logging
 import queue
 import subprocess
@@ -34,8 +35,9 @@ import time
 from typing import Any, Callable, Mapping
 
 from firmware_host import Event, Sequencer, State
-from measurement import IdentificationResult, Rig, Trace, identify
+from measurement import IdentificationResult, Options, Rig, Trace, identify
 from measurement.integrator import is_compiled
+from measurement.reproducibility import for_release
 from service.config.appliance import whom_to_call
 from service.core import vocabulary as V
 from service.core.live import LiveStatus
@@ -53,6 +55,7 @@ from service.publish.payload import iso_utc
 from service.publish.port import ApplianceView, Publisher
 from service.publish.replies import CONTACT, ReplyTo
 from service.settings.config import Config
+from service.sources.repeats import RigHistory
 
 from . import __version__
 from .contention import CaptureWatch
@@ -90,10 +93,11 @@ class Appliance:
         self.wall_clock = wall_clock
         self.poll_interval = poll_interval
         self.stop_grace = stop_grace
-        self._identifier = identifier or (lambda trace, rig: identify(trace, rig, self.config.identification))
+        self._identifier = identifier or (lambda trace, rig: identify(trace, rig, self.identification_options(rig)))
         self._devices = devices
         self.devices: Devices | None = None
         self.store: Store | None = None
+        self.history: RigHistory | None = None  # the rig's repeat releases in the store, once it is open
         self.publishers: list[Publisher] = []  # started, in start order
         self.sequencer: Sequencer | None = None
         self._commands: queue.SimpleQueue[tuple[str, str, Mapping[str, Any] | None, ReplyTo | None]] = queue.SimpleQueue()
@@ -150,6 +154,7 @@ class Appliance:
         try:
             self._lock_state_dir()
             self.store = open_store(self.config.state_dir, self.wall_clock)
+            self.history = RigHistory(self.store)
             view = ApplianceView(self)
             enabled = [(entry.load(), settings) for entry in registry.PUBLISHERS
                        if (settings := cfg.publishers.get(entry.name)) is not None]
@@ -375,6 +380,12 @@ class Appliance:
             return self._identifier(trace, recipe.rig_for(rig) if recipe is not None else rig)
         finally:
             self._wakeup.set()
+
+    def identification_options(self, rig: Rig) -> Options:
+        """The configuration's identification options with ``rig``'s scatter between releases pooled from the store's
+        repeat releases since its calibration (any thread); too thin a history: the documented default, stated."""
+        history = self.history.reproducibility(rig) if self.history is not None else None
+        return dataclasses.replace(self.config.identification, reproducibility=for_release(history))
 
     def _on_event(self, event: Event) -> None:
         self._armed_at = event.time if event.state is State.ARMED else None

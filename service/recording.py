@@ -154,6 +154,8 @@ class Recorder:
                 self.app.parts.undo_last()  # not stored: the release does not count for the part
             raise
         self._durable.append(m.id)
+        if self.app.history is not None:  # the rig's repeat releases: the next release's reproducibility
+            self.app.history.stored(stored)
         self.app.to_publishers("on_result", stored, m)
         self._note_stored(m.id)
         if (reply := self._reply.pop(m.id, None)) is not None:
@@ -191,6 +193,8 @@ class Recorder:
             assert self.app.store is not None
             self.app.store.record_check_standard(dict(check) | {"part_id": outcome.part_id, "measurement": measurement,
                                                             "flags": list(flags)}, finished_at=finished)
+            if self.app.history is not None:
+                self.app.history.checked()
         except StoreError:
             log.exception("could not store the check standard of measurement %s", measurement)
         self.app.calibration_changed()  # a check standard may clear or raise the block

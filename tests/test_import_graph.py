@@ -166,8 +166,9 @@ LAYERS: dict[str, set[str]] = {
     "dispatch": {"core", "firmware_host", "measurement", "parts", "publish", "settings"},
     # the daemon's results: each run stored once, judged for its part, then handed to the publishers
     "recording": {"core", "errors", "firmware_host", "measurement", "parts", "publish", "service", "settings"},
+    # ``sources``: the rig's repeat releases in the store (``sources.repeats``), read into its own identifications
     "daemon": {"config", "contention", "core", "devices", "dispatch", "errors", "firmware_host", "measurement",
-               "notify", "parts", "persistence", "publish", "recording", "service", "settings"},
+               "notify", "parts", "persistence", "publish", "recording", "service", "settings", "sources"},
     # ``service``: the installed version (the calibration history names the software that wrote a line)
     "commands": {"config", "core", "daemon", "devices", "drivers", "errors", "firmware_host", "logs", "measurement",
                  "names", "parts", "persistence", "publish", "publish.modbus", "publish.web", "service", "settings",

@@ -9,7 +9,7 @@ import pytest
 
 from measurement import Options, Pendulum, Rig, identify, simulate_trace
 from measurement.reports import result_report
-from measurement.reproducibility import DEFAULT, HISTORY, ReproducibilityError, pooled
+from measurement.reproducibility import DEFAULT, HISTORY, MIN_DOF, ReproducibilityError, for_release, pooled
 from measurement.result import IdentificationResult
 from measurement.uncertainty import PendulumInputs
 
@@ -90,3 +90,14 @@ def test_one_release_says_reproducibility_is_not_known_and_a_history_counts():
     assert known.J == alone.J
     assert "between releases" in result_report(known) and ": in u" in result_report(known)
     assert known.to_dict()["reproducibility"]["relative"] == pytest.approx(history.relative)
+
+
+def test_a_release_counts_a_history_of_at_least_min_dof_and_states_the_default_otherwise():
+    assert MIN_DOF == 2
+    # one object released twice: ν = 1, too thin (a Type A line of ν = 1 setting u would set k near 13)
+    assert for_release(pooled([[4.0, 4.004]])) is DEFAULT
+    assert for_release(pooled([])) is DEFAULT and for_release(None) is DEFAULT
+    three = pooled([[4.0, 4.004, 3.998]])
+    assert for_release(three) is three and three.counted and three.dof == 2.0
+    two_pairs = pooled([[4.0, 4.004], [6.0, 6.003]])
+    assert for_release(two_pairs) is two_pairs and two_pairs.dof == 2.0

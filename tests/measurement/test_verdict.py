@@ -143,3 +143,13 @@ def test_the_part_value_is_the_joint_identification_of_its_usable_releases():
     assert part.to_dict()["joint"]["consistency"]["p"] == 0.6
     # without it (no identifications at hand) the weighted mean, as before
     assert combine(readings, SPEC, QualityRules(min_valid_releases=2)).joint is None
+
+
+def test_a_joint_part_takes_its_own_k_not_the_one_a_release_owes_to_its_reproducibility_line():
+    # each release's k is 2.86: its budget holds the rig's reproducibility with ν = 4 (Welch–Satterthwaite); the
+    # joint u does not hold that line, so its k is the part's own (the specification's here)
+    readings = [Reading(0.012500 + d, 1e-6, coverage_factor=2.86) for d in (0.0, 1e-7, -1e-7)]
+    joint = combine(readings, SPEC, QualityRules(), lambda used: (0.0125, 5e-7, {"consistency": {"p": 0.9}}))
+    assert joint.decision.u_c is not None and pytest.approx(2.0 * joint.decision.u_c) == joint.decision.U
+    mean = combine(readings, SPEC, QualityRules())
+    assert mean.decision.u_c is not None and pytest.approx(2.86 * mean.decision.u_c) == mean.decision.U

@@ -12,7 +12,7 @@ from aiohttp import web
 
 from measurement.reproducibility import Reproducibility
 from service.sources.calibrations import read_history, recorded_at
-from service.sources.repeats import rig_reproducibility
+from service.sources.repeats import calibrated_since, rig_reproducibility
 
 from .pages import Family, Refused
 from .spc import check_standards
@@ -64,8 +64,7 @@ class CalibrationPages(Family):
         store = self.app.store
         if store is None:
             return None
-        since = (dt.datetime.combine(cal.date, dt.time(), dt.UTC).timestamp() if cal is not None else None)
-        return rig_reproducibility(store, since)
+        return rig_reproducibility(store, calibrated_since(cal))
 
     def _rigs(self) -> list[tuple[str, Any, list[str], str | None]]:
         """The set-up's rig and each recipe's own, once per rig file: (name, rig, recipes using it, its file)."""
