@@ -16,10 +16,12 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from service.core.vocabulary import operator_of
 from service.errors import StoreError
 
-SCHEMA_VERSION = 3  # 2: part, recipe and verdict columns (added in place to a version-1 store);
-                    # 3: the outbox row names its consumer (the publisher delivering it; rows of an older store: mqtt)
+SCHEMA_VERSION = 4  # 2: part, recipe and verdict columns (added in place to a version-1 store);
+                    # 3: the outbox row names its consumer (the publisher delivering it; rows of an older store: mqtt);
+                    # 4: the operator of each run (rows of an older store: read from their trigger)
 
 
 @dataclass(frozen=True)
@@ -82,6 +84,11 @@ def _packed(name: str) -> Callable[[Given], Any]:
     return lambda g: pack(g.args[name])
 
 
+def _operator(g: Given) -> str:
+    """The operator the recorder names, else the one its trigger says (``operator_of``)."""
+    return g.args.get("operator") or operator_of(g.args["trigger"])
+
+
 #: every column of ``measurements``, in the table's order: the one place the store's SQL (the table, the
 #: migration, the INSERT, the SELECTs), the row → ``StoredMeasurement`` decoding and the salvage's checks come from
 COLUMNS: tuple[Column, ...] = (
@@ -121,6 +128,9 @@ COLUMNS: tuple[Column, ...] = (
     Column("part_verdict", "TEXT", since=2, value=_part("part_verdict")),  # the part's, on the release completing it
     Column("part_value", "REAL", since=2, value=_part("part_value")),  # the part's combined value, kg·m²
     Column("part_U", "REAL", since=2, value=_part("part_U")),        # its expanded uncertainty, kg·m²
+    # schema 4: who measured (the appraiser of a Gauge R&R); not in the listing's summary, so the exports and
+    # `moi results --json` keep their keys
+    Column("operator", "TEXT", since=4, summary=False, value=_operator),
 )
 
 _READS = {"list": ("list",), "full": ("list", "full")}
@@ -231,6 +241,12 @@ def create_tables(db: sqlite3.Connection) -> None:
     for c in COLUMNS:
         if c.name not in have:
             db.execute(f"ALTER TABLE measurements ADD COLUMN {c.name} {c.sql}")
+    row = db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
+    if row is not None and int(row[0]) < 4:
+        # the runs of a store older than the operator column: who measured is in their trigger (web:<name>, or
+        # the door); again at the next open if this one stops before the schema version is written
+        db.create_function("operator_of", 1, operator_of, deterministic=True)
+        db.execute("UPDATE measurements SET operator = operator_of(trigger) WHERE operator IS NULL")
     if "consumer" not in {row[1] for row in db.execute("PRAGMA table_info(outbox)")}:
         db.execute(f"ALTER TABLE outbox ADD COLUMN {_OUTBOX_CONSUMER}")
     db.execute("CREATE INDEX IF NOT EXISTS outbox_consumer ON outbox (consumer, id)")

@@ -17,6 +17,7 @@ import jinja2
 from aiohttp import web
 
 from service import __version__
+from service.core import vocabulary as V
 from service.parts.recipes import PART_ID_LENGTH
 from service.states import vocabulary
 
@@ -267,7 +268,7 @@ class Pages:
         if action is not None and not allowed(role, action):
             raise Refused(403, f"{name or 'this login'} ({role}) may not {NEEDS.get(action, action)}: log in as a "
                                "quality engineer or an admin")
-        return f"web:{name}" if name else "web"
+        return V.web_source(name)
 
     # --- the store and the child process ----------------------------------------------------------
     def store(self) -> Store:
