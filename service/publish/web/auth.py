@@ -16,7 +16,8 @@ with their name and password and acts in their role; each measurement they start
 (trigger ``web:<name>``). Roles, each with what the ones before it may do:
 
 * ``operator``: Measure, Abort a running measurement, set the part ID, the tensor set's redo/skip/abort;
-* ``quality``: also change the recipe, acknowledge a fault and set the camera's region of interest (the quality engineer);
+* ``quality``: also change the recipe, acknowledge a fault and set the camera's region of interest (the quality engineer),
+  and find the gauge studies in the page's menu;
 * ``admin``: everything (the appliance's token, for scripts and for the set-up, acts as admin).
 
 Passwords are kept as scrypt hashes (RFC 7914, ``hashlib.scrypt``: memory-hard, salted per user),
@@ -117,7 +118,8 @@ def read_token(path: str | os.PathLike, *, create: bool) -> str:
 #: roles, each allowed what the ones before it are
 ROLES = ("operator", "quality", "admin")
 #: the least role of each action; an action not named here needs an operator
-LEAST_ROLE = {"recipe": "quality", "acknowledge": "quality", "camera": "quality", "users": "admin"}
+LEAST_ROLE = {"recipe": "quality", "acknowledge": "quality", "camera": "quality", "users": "admin",
+              "gauge_study": "quality"}
 #: shortest and longest password accepted, characters
 MIN_PASSWORD, MAX_PASSWORD = 10, 1024
 #: longest user name, characters

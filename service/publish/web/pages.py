@@ -215,6 +215,24 @@ class Pages:
                 view["recipe"] = {**recipe, "display_decimals": found.display_decimals}
         return view
 
+    def recipe_display(self, name: str | None) -> tuple[str, dict[str, Any]]:
+        """The unit a recipe's figures are shown in (its own, else the set-up's) and its ``display_decimals``
+        (``{}`` without: from the tolerance), by its name in the recipe directory (a recipe no longer there:
+        the set-up's unit)."""
+        from measurement.errors import InvalidInput
+
+        unit, shown = self.server.settings.display_unit, {}
+        book = getattr(self.app, "parts", None)
+        if book is not None and name:
+            try:
+                found = book.book.find(name)
+            except InvalidInput:
+                return unit, shown
+            unit = found.display_unit or unit
+            if found.display_decimals is not None:
+                shown = {"display_decimals": found.display_decimals}
+        return unit, shown
+
     def blocked(self) -> dict[str, str] | None:
         """Why the page refuses Measure, what to do and whom to call (a due calibration or a failed check
         standard: every part would be INVALID, and measuring again cannot change that); None when it may. The
