@@ -135,10 +135,12 @@ def recipe_grr(store: Any, recipe: str, *, since: float | None = None, until: fl
     """
     if by not in BY or trial not in TRIALS:
         raise ValueError(f"by {by!r}, trial {trial!r}: expected one of {list(BY)} and of {list(TRIALS)}")
+    # a part's value is a column; a release's is in the payload, read only then
     rows = list(reversed(store.list(limit=limit, recipe=recipe, since=since, until=until, status="ok",
-                                    parts_only=trial == "part", full=True)))
+                                    parts_only=trial == "part", full=trial == "release")))
+    newest = (rows[-1] if trial == "release" else store.get(rows[-1].uuid)) if rows else None
     head = RecipeGrr(recipe, by, trial, read=len(rows), truncated=len(rows) >= limit,
-                     spec=PartOutcome.from_dict(rows[-1].payload).recipe if rows else None,
+                     spec=PartOutcome.from_dict(newest.payload).recipe if newest is not None else None,
                      first=rows[0].finished_at if rows else None, last=rows[-1].finished_at if rows else None)
     made = [(m, _trial(m, by, trial)) for m in rows]
     kept = [t for _, t in made if t is not None]

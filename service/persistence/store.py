@@ -28,6 +28,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from service.core.vocabulary import operator_of
 from service.errors import StoreDamaged, StoreError
 from service.persistence.connection import is_damage, read_only_connection, store_errors
 from service.persistence.sequence import next_seq, write_seq_floor
@@ -350,6 +351,8 @@ class Store:
             elif c.codec == "array":
                 v = unpack(v)
             d[c.name] = v
+        if d.get("operator") is None:  # stored only where the trigger does not say it (``tables._operator``)
+            d["operator"] = operator_of(d["trigger"])
         return StoredMeasurement(**d)
 
     @store_errors("reading a measurement")

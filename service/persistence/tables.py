@@ -21,7 +21,7 @@ from service.errors import StoreError
 
 SCHEMA_VERSION = 4  # 2: part, recipe and verdict columns (added in place to a version-1 store);
                     # 3: the outbox row names its consumer (the publisher delivering it; rows of an older store: mqtt);
-                    # 4: the operator of each run (rows of an older store: read from their trigger)
+                    # 4: the operator of each run (empty where the trigger says it, as on the rows of an older store)
 
 
 @dataclass(frozen=True)
@@ -84,9 +84,12 @@ def _packed(name: str) -> Callable[[Given], Any]:
     return lambda g: pack(g.args[name])
 
 
-def _operator(g: Given) -> str:
-    """The operator the recorder names, else the one its trigger says (``operator_of``)."""
-    return g.args.get("operator") or operator_of(g.args["trigger"])
+def _operator(g: Given) -> str | None:
+    """The operator the recorder names, stored only when its trigger does not say it (``operator_of``): a column
+    added by ALTER TABLE sits after the trace's blobs, on their overflow pages, and an empty one keeps a listing
+    from reading through them (and a damaged trace page from costing the row); read back from the trigger."""
+    given = g.args.get("operator")
+    return given if given and given != operator_of(g.args["trigger"]) else None
 
 
 #: every column of ``measurements``, in the table's order: the one place the store's SQL (the table, the
@@ -128,8 +131,8 @@ COLUMNS: tuple[Column, ...] = (
     Column("part_verdict", "TEXT", since=2, value=_part("part_verdict")),  # the part's, on the release completing it
     Column("part_value", "REAL", since=2, value=_part("part_value")),  # the part's combined value, kg·m²
     Column("part_U", "REAL", since=2, value=_part("part_U")),        # its expanded uncertainty, kg·m²
-    # schema 4: who measured (the appraiser of a Gauge R&R); not in the listing's summary, so the exports and
-    # `moi results --json` keep their keys
+    # schema 4: who measured (the appraiser of a Gauge R&R), NULL where the trigger says it (read back from it);
+    # not in the listing's summary, so the exports and `moi results --json` keep their keys
     Column("operator", "TEXT", since=4, summary=False, value=_operator),
 )
 
@@ -241,12 +244,6 @@ def create_tables(db: sqlite3.Connection) -> None:
     for c in COLUMNS:
         if c.name not in have:
             db.execute(f"ALTER TABLE measurements ADD COLUMN {c.name} {c.sql}")
-    row = db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
-    if row is not None and int(row[0]) < 4:
-        # the runs of a store older than the operator column: who measured is in their trigger (web:<name>, or
-        # the door); again at the next open if this one stops before the schema version is written
-        db.create_function("operator_of", 1, operator_of, deterministic=True)
-        db.execute("UPDATE measurements SET operator = operator_of(trigger) WHERE operator IS NULL")
     if "consumer" not in {row[1] for row in db.execute("PRAGMA table_info(outbox)")}:
         db.execute(f"ALTER TABLE outbox ADD COLUMN {_OUTBOX_CONSUMER}")
     db.execute("CREATE INDEX IF NOT EXISTS outbox_consumer ON outbox (consumer, id)")

@@ -221,7 +221,7 @@ class Pages:
         the set-up's unit)."""
         from measurement.errors import InvalidInput
 
-        unit, shown = self.server.settings.display_unit, {}
+        unit, shown = self.server.settings.display_unit, dict[str, Any]()
         book = getattr(self.app, "parts", None)
         if book is not None and name:
             try:

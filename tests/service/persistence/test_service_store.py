@@ -233,8 +233,8 @@ def test_a_version_2_store_keeps_its_pending_rows_pending_for_mqtt(tmp_path, res
 
 
 def test_a_version_3_store_gains_the_operator_of_each_run_from_its_trigger(tmp_path):
-    """A store of the release before the operator column: every run keeps its row and gains its operator, read
-    from the trigger it was stored with (the named web user, else the door); a new run records its own."""
+    """A store of the release before the operator column: every run keeps its row and reads its operator from
+    the trigger it was stored with (the named web user, else the door); a new run records its own."""
     with Store(tmp_path) as store:
         for trigger in ("web:alice", "button", "web", "modbus", "web:bob"):
             store.record(status="failed", trigger=trigger, device_id="dev", software_version="9.9", started_at=1.0,
@@ -257,6 +257,9 @@ def test_a_version_3_store_gains_the_operator_of_each_run_from_its_trigger(tmp_p
         assert "operator" not in new.summary()  # internal: the exports and `moi results --json` keep their keys
     db = sqlite3.connect(tmp_path / "results.db")
     assert db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone() == (str(SCHEMA_VERSION),) == ("4",)
+    # kept only where the trigger does not say it: the row's tail stays empty, after the trace's blobs
+    assert db.execute("SELECT trigger, operator FROM measurements WHERE operator IS NOT NULL").fetchall() == [
+        ("mqtt", "dave")]
     db.close()
 
 

@@ -26,9 +26,9 @@ ON = {"enabled": True}
 #: g·cm² per kg·m² (the recipes below show their figures in g·cm²)
 G_CM2 = 1e7
 #: a part type with a wide tolerance (a good gauge for it) and one with a narrow one
-DISC = {"name": "disc", "number": 3, "version": "v1", "quantity": "J", "nominal": 0.0125, "lower": 0.0120,
+DISC: dict[str, Any] = {"name": "disc", "number": 3, "version": "v1", "quantity": "J", "nominal": 0.0125, "lower": 0.0120,
         "upper": 0.0130}
-RING = {"name": "ring", "number": 4, "version": "v1", "quantity": "J", "nominal": 0.0125, "lower": 0.01249,
+RING: dict[str, Any] = {"name": "ring", "number": 4, "version": "v1", "quantity": "J", "nominal": 0.0125, "lower": 0.01249,
         "upper": 0.01251}
 
 
