@@ -1,7 +1,7 @@
 """What every page shares: the refusal (a 4xx with a sentence), the form and query readers, the templates and
 the page they render, the login check of every action, the store reads, the child process, the words of a time,
 a unit and a blocked Measure. Each page family (``home``, ``session``, ``results``, ``spc``, ``calibration``,
-``recipes``, ``users``, ``set_up``) is a small class holding the one ``Pages`` of the server."""
+``recipes``, ``users``, ``set_up``, ``grr``) is a small class holding the one ``Pages`` of the server."""
 
 from __future__ import annotations
 

@@ -21,6 +21,7 @@ from service.publish.payload import result_payload
 from service.publish.web.pages import _environment
 from tests.service.conftest import appliance_doc
 from tests.service.publish.web.test_service_web import E_NOTATION, RAW, Client
+from tests.service.publish.web.test_service_web_browser import browser  # noqa: F401  (the fixture)
 
 ON = {"enabled": True}
 #: g·cm² per kg·m² (the recipes below show their figures in g·cm²)
@@ -68,6 +69,27 @@ class Records:
                           part={"part_id": serial, "part_uuid": f"pu-{self.t}", "recipe": recipe["name"],
                                 "recipe_version": "v1", "release_index": 1, "releases": 1, "verdict": verdict,
                                 "part_verdict": verdict, "part_value": value, "part_U": 1e-6})
+
+    def releases(self, recipe: dict, serial: str, values: Sequence[float], trigger: str) -> None:
+        """One part of ``len(values)`` releases: the last one completes it with their mean."""
+        n, mean = len(values), sum(values) / len(values)
+        for i, value in enumerate(values, start=1):
+            self.t += 60.0
+            done = i == n
+            release = {"index": i, "of": n, "verdict": "OK", "value": value, "quantity": "J", "reasons": []}
+            keys = {"part_id": serial, "recipe": recipe, "release": release, "verdict": "OK" if done else None,
+                    "part": {"mean": mean, "verdict": "OK", "quantity": "J"} if done else None}
+            result, t = {"J": value, "flags": []}, self.t
+
+            def build(uuid: str, seq: int, k: dict = keys, r: dict = result, t: float = t) -> dict[str, Any]:
+                return result_payload(r, uuid=uuid, seq=seq, device_id="rig-1", trigger=trigger, started_at=t,
+                                      finished_at=t + 8, software_version="test", part=k)
+
+            self.store.record(status="ok", trigger=trigger, device_id="rig-1", software_version="test", started_at=t,
+                              finished_at=t + 8, result=result, build_payload=build,
+                              part={"part_id": serial, "recipe": recipe["name"], "release_index": i, "releases": n,
+                                    "verdict": "OK", "part_verdict": "OK" if done else None,
+                                    "part_value": mean if done else None})
 
     def study(self, recipe: dict, parts: Sequence[float], appraisers: Sequence[tuple[str, str, float]], trials: int,
               noise: float, seed: int, skip: Sequence[tuple[int, int, int]] = (), prefix: str = "SN") -> None:
@@ -263,6 +285,31 @@ def test_the_appliances_of_a_fleet_as_the_appraisers(tmp_path):
     assert by_device.study.grr * G_CM2 == pytest.approx(want["grr"], rel=1e-6)
 
 
+def test_a_trial_may_be_each_release(tmp_path):
+    """Parts of two releases, each measured once by each appraiser: as parts, one trial each (no study); as
+    releases, two trials each, the releases' values."""
+    from service.parts.gauge_rr import recipe_grr
+
+    rng = np.random.default_rng(11)
+    values: dict[str, dict[str, list[float]]] = {}
+    with Store(tmp_path / "s") as store:
+        rec = Records(store)
+        for who in ("alice", "bob"):
+            for k, truth in enumerate((0.01240, 0.01250, 0.01260)):
+                pair = [truth + rng.normal(0.0, 3e-7) for _ in range(2)]
+                values.setdefault(f"SN-{k}", {})[who] = pair
+                rec.releases(DISC, f"SN-{k}", pair, V.web_source(who))
+        as_parts = recipe_grr(store, "disc")
+        as_releases = recipe_grr(store, "disc", trial="release")
+    assert as_parts.study is None and as_parts.single == 0 and as_parts.trials == 1
+    assert "at least 2 trials" in (as_parts.why or "")
+    s = as_releases.study
+    assert s is not None and (s.parts, s.appraisers, s.trials) == (("SN-0", "SN-1", "SN-2"), ("alice", "bob"), 2)
+    x = np.array([[values[p][a] for a in ("alice", "bob")] for p in ("SN-0", "SN-1", "SN-2")])
+    ss_e = float(((x - x.mean(axis=2, keepdims=True)) ** 2).sum())
+    assert next(r.ss for r in s.anova if r.source == "repeatability") == pytest.approx(ss_e, rel=1e-9)
+
+
 def test_spc_flags_cp_and_cpk_when_the_gauge_cannot_tell_the_parts_apart(running):
     c = Client(running.app.web.url)
     ring = c.request("/spc?recipe=ring")[2].decode()
@@ -293,3 +340,27 @@ def test_the_menu_offers_the_gauge_rr_to_quality_and_admin(role, shown):
     env = _environment(lambda ts: "")
     page = env.get_template("base.html").render(role=role, logged_in=role is not None, csrf="x", path="/")
     assert ('href="/grr"' in page) == shown
+
+
+@pytest.mark.browser
+def test_the_page_fits_a_phone_and_a_desktop(running, browser):  # noqa: F811 (the fixture imported above)
+    """The Gauge R&R page at 390 and 1280 px: its tables scroll inside their card, nothing wider than the window;
+    no e-notation; the verdict on screen. Screenshots in $MOI_ARTIFACTS when set."""
+    import os
+
+    from selenium.webdriver.common.by import By
+
+    url = running.app.web.url.rstrip("/")
+    artifacts = os.environ.get("MOI_ARTIFACTS")
+    for width in (390, 1280):
+        browser.set_window_size(width, 900)
+        for recipe in ("disc", "ring"):
+            browser.get(f"{url}/grr?recipe={recipe}")
+            inner = browser.execute_script("return window.innerWidth")
+            assert browser.execute_script("return document.documentElement.scrollWidth") <= inner, (recipe, width)
+            verdict = browser.find_element(By.ID, "grr-verdict")
+            assert verdict.is_displayed() and verdict.rect["x"] + verdict.rect["width"] <= inner
+            assert E_NOTATION.search(browser.find_element(By.TAG_NAME, "body").text) is None
+            assert len(browser.find_elements(By.TAG_NAME, "h1")) == 1
+            if artifacts:
+                browser.save_screenshot(str(Path(artifacts) / f"grr-{recipe}-{width}.png"))
