@@ -29,7 +29,7 @@ BY = {"operator": "operator", "device": "appliance (device id)"}
 #: what one trial is: a completed measurement of the part, or each release
 TRIALS = {"part": "each completed measurement of a part (its value)", "release": "each release of a part"}
 #: the latest records a study reads at most (a study has tens; a date range narrows a long history)
-MAX_RECORDS = 5000
+MAX_RECORDS = 2000
 
 
 @dataclass(frozen=True)
@@ -115,7 +115,7 @@ def _trial(m: Any, by: str, trial: str) -> _Trial | None:
         value = release.value if release is not None and release.verdict != "INVALID" else None
     if not isinstance(value, (int, float)):
         return None
-    appraiser = (m.operator or m.trigger) if by == "operator" else m.device_id
+    appraiser = m.operator if by == "operator" else m.device_id
     return _Trial(str(m.part_id), str(appraiser), float(value))
 
 

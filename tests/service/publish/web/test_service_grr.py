@@ -248,6 +248,8 @@ def test_an_unbalanced_study_says_what_is_missing_and_production_parts_stay_out(
     page = c.request("/grr?recipe=disc&appraiser=alice&appraiser=bob")[2].decode()
     assert "SN-6: bob: lacks 1 of the 2 trials" in html.unescape(page) and "5 parts × 2 appraisers × 2 trials" in page
     assert c.request("/grr?recipe=disc&by=person")[0] == 400 and c.request("/grr?trials=1")[0] == 400
+    status, _, body = c.request("/grr?recipe=rotor&since=2020-01-01")  # no records: said, no figures
+    assert status == 200 and "no Gauge R&amp;R yet: no measurements of this recipe in the period" in body.decode()
 
 
 def test_the_pdf_says_what_the_page_says(running):
@@ -265,6 +267,8 @@ def test_the_pdf_says_what_the_page_says(running):
     assert f"%GRR of the process variation (100·GRR/TV): {shown}" in text
     assert "4 parts × 2 appraisers × 3 trials" in text and "g·cm²" in text and "kg·m²" not in text
     assert "page 1 of" in text and "accepted by quality" in text
+    status, _, body = c.request("/grr/report.pdf?recipe=rotor")  # no study yet: the PDF says why
+    assert status == 200 and "no measurements of this recipe" in PdfReader(io.BytesIO(body)).pages[0].extract_text()
 
 
 def test_the_appliances_of_a_fleet_as_the_appraisers(tmp_path):
