@@ -66,11 +66,13 @@ class Recorder:
 
     def _record(self, uuid: str, status: str, trigger: str, started: float, finished: float,
                 outcome: PartOutcome, rig: Rig | None = None, **rest: Any) -> Any:
-        """Store one measurement (``Store.record``) with what every row carries: who measured, with what, when,
-        on which rig and configuration, for which part; ``rest``: the result, its trace, its payload."""
+        """Store one measurement (``Store.record``) with what every row carries: who measured (the door that
+        started it and its operator: the web user who pressed Measure, else the door), with what, when, on which
+        rig and configuration, for which part; ``rest``: the result, its trace, its payload."""
         store, cfg = self.app.store, self.app.config
         assert store is not None
-        return store.record(uuid=uuid, status=status, trigger=trigger, device_id=cfg.device_id,
+        return store.record(uuid=uuid, status=status, trigger=trigger, operator=V.operator_of(trigger),
+                            device_id=cfg.device_id,
                             software_version=__version__, started_at=started, finished_at=finished,
                             rig=(rig or cfg.rig).to_dict(), config=cfg.to_dict(), part=outcome.store_columns(),
                             **rest)

@@ -146,7 +146,8 @@ LAYERS: dict[str, set[str]] = {
     # the camera sensor reads its camera file (``sources.camera``)
     "devices": {"drivers", "errors", "firmware_host", "measurement", "settings", "sources"},
     "parts": {"errors", "measurement", "names", "settings", "sources"},
-    "persistence": {"errors", "sources"},
+    # a stored run's operator read from its trigger, by the commands' vocabulary (the migration of older stores)
+    "persistence": {"core", "errors", "sources"},
     # the port, payload, quality words, report, plot and export: what every publisher shares
     "publish": {"core", "devices", "errors", "firmware_host", "measurement", "notify", "parts", "persistence",
                 "service", "settings", "states"},

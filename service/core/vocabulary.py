@@ -31,6 +31,21 @@ ACTS = ("part", "measure", "stop", "set", "study")
 #: the keys of a command's data that say which part is measured (refused while a measurement runs)
 PART_DATA = ("part_id", "recipe")
 
+#: the source of a command from the web page: ``web:<name>`` for a named user, ``web`` for the token's login
+WEB = "web"
+
+
+def web_source(user: str | None) -> str:
+    """The source a web user's commands are recorded with (the stored trigger of the runs they start)."""
+    return f"{WEB}:{user}" if user else WEB
+
+
+def operator_of(source: str) -> str:
+    """Who measured, as a stored run records it (the appraiser of a Gauge R&R): the named web user who pressed
+    Measure, else the door that started it ("button", "modbus", "mqtt", "sparkplug", "cli", "web")."""
+    door, named, user = source.partition(":")
+    return user if door == WEB and named and user else source
+
 
 @dataclass(frozen=True)
 class Command:

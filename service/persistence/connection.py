@@ -39,10 +39,15 @@ def read_only_connection(path: Path) -> sqlite3.Connection:
 _DAMAGED_CODES = {11, 26}
 
 
+#: what Python's sqlite3 says of a text column whose bytes are not UTF-8: the store writes only UTF-8, so a page
+#: overwritten (the tail of a row on a trace's overflow page: the operator, the part ID)
+_UNDECODABLE = "Could not decode to UTF-8"
+
+
 def is_damage(exc: BaseException) -> bool:
     if isinstance(exc, sqlite3.Error):
         code = getattr(exc, "sqlite_errorcode", None)
-        return code is not None and code & 0xFF in _DAMAGED_CODES
+        return (code is not None and code & 0xFF in _DAMAGED_CODES) or _UNDECODABLE in str(exc)
     return isinstance(exc, (zlib.error, json.JSONDecodeError))  # a blob or a JSON text that no longer decodes
 
 

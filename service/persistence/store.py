@@ -28,6 +28,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from service.core.vocabulary import operator_of
 from service.errors import StoreDamaged, StoreError
 from service.persistence.connection import is_damage, read_only_connection, store_errors
 from service.persistence.sequence import next_seq, write_seq_floor
@@ -90,6 +91,7 @@ class StoredMeasurement:
     part_verdict: str | None = None
     part_value: float | None = None
     part_U: float | None = None
+    operator: str | None = None
 
     def summary(self) -> dict[str, Any]:
         """The listing fields (no payload, no trace)."""
@@ -258,6 +260,7 @@ class Store:
         enqueue: Mapping[str, Sequence[str]] | None = None,
         uuid: str | None = None,
         part: Mapping[str, Any] | None = None,
+        operator: str | None = None,
     ) -> StoredMeasurement:
         """Store one measurement and queue its publications, atomically.
 
@@ -266,6 +269,7 @@ class Store:
         that delivers them, e.g. {"mqtt": ("result",)}); the payload is queued as it is stored, one row
         per consumer and kind, each acknowledged by its consumer alone. part: values of
         the schema-2 part columns (``COLUMNS`` with ``since=2``: part ID, recipe, verdicts...), missing keys are NULL.
+        operator: who measured (``service.core.vocabulary.operator_of``); None: the one ``trigger`` says.
         """
         from service.persistence.canonical import dumps
 
@@ -279,7 +283,8 @@ class Store:
                 given = Given(uid, seq, now, payload_text, dict(
                     status=status, trigger=trigger, device_id=device_id, software_version=software_version,
                     started_at=started_at, finished_at=finished_at, result=result, error=error, rig=rig,
-                    config=config, trace_t=trace_t, trace_angle=trace_angle, trace_meta=trace_meta, part=part))
+                    config=config, trace_t=trace_t, trace_angle=trace_angle, trace_meta=trace_meta, part=part,
+                    operator=operator))
                 mid = db.execute(INSERT, [c.value(given) for c in INSERTED if c.value is not None]).lastrowid
                 if payload_text is not None:
                     for consumer, kinds in (enqueue or {}).items():
@@ -346,6 +351,8 @@ class Store:
             elif c.codec == "array":
                 v = unpack(v)
             d[c.name] = v
+        if d.get("operator") is None:  # stored only where the trigger does not say it (``tables._operator``)
+            d["operator"] = operator_of(d["trigger"])
         return StoredMeasurement(**d)
 
     @store_errors("reading a measurement")

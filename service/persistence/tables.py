@@ -16,10 +16,12 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from service.core.vocabulary import operator_of
 from service.errors import StoreError
 
-SCHEMA_VERSION = 3  # 2: part, recipe and verdict columns (added in place to a version-1 store);
-                    # 3: the outbox row names its consumer (the publisher delivering it; rows of an older store: mqtt)
+SCHEMA_VERSION = 4  # 2: part, recipe and verdict columns (added in place to a version-1 store);
+                    # 3: the outbox row names its consumer (the publisher delivering it; rows of an older store: mqtt);
+                    # 4: the operator of each run (empty where the trigger says it, as on the rows of an older store)
 
 
 @dataclass(frozen=True)
@@ -82,6 +84,14 @@ def _packed(name: str) -> Callable[[Given], Any]:
     return lambda g: pack(g.args[name])
 
 
+def _operator(g: Given) -> str | None:
+    """The operator the recorder names, stored only when its trigger does not say it (``operator_of``): a column
+    added by ALTER TABLE sits after the trace's blobs, on their overflow pages, and an empty one keeps a listing
+    from reading through them (and a damaged trace page from costing the row); read back from the trigger."""
+    given = g.args.get("operator")
+    return given if given and given != operator_of(g.args["trigger"]) else None
+
+
 #: every column of ``measurements``, in the table's order: the one place the store's SQL (the table, the
 #: migration, the INSERT, the SELECTs), the row → ``StoredMeasurement`` decoding and the salvage's checks come from
 COLUMNS: tuple[Column, ...] = (
@@ -121,6 +131,9 @@ COLUMNS: tuple[Column, ...] = (
     Column("part_verdict", "TEXT", since=2, value=_part("part_verdict")),  # the part's, on the release completing it
     Column("part_value", "REAL", since=2, value=_part("part_value")),  # the part's combined value, kg·m²
     Column("part_U", "REAL", since=2, value=_part("part_U")),        # its expanded uncertainty, kg·m²
+    # schema 4: who measured (the appraiser of a Gauge R&R), NULL where the trigger says it (read back from it);
+    # not in the listing's summary, so the exports and `moi results --json` keep their keys
+    Column("operator", "TEXT", since=4, summary=False, value=_operator),
 )
 
 _READS = {"list": ("list",), "full": ("list", "full")}

@@ -176,3 +176,17 @@ def report_file(state_dir: str, uuid: str, default_unit: str, time_format: str |
         got = store.get_attachment(uuid, PLOT_NAME)
         return report_pdf(m, got[0] if got else None, display_unit(m.payload, default_unit), store.get,
                           decimals=decimals, **({"time_format": time_format} if time_format else {}))
+
+
+def grr_file(state_dir: str, recipe: str, study: Mapping[str, Any], unit: str, shown: Mapping[str, Any],
+             time_format: str, device_id: str) -> bytes:
+    """The Gauge R&R of ``recipe`` from the store's records as PDF: the page's study (``study``: the keyword
+    arguments of ``recipe_grr``), in ``unit`` with the recipe's decimals (``shown``)."""
+    from service.parts.gauge_rr import recipe_grr
+    from service.persistence.store import Store
+    from service.publish.grr_report import grr_pdf
+    from service.publish.grr_view import grr_view
+
+    with Store(state_dir, read_only=True) as store:
+        g = recipe_grr(store, recipe, **study)
+    return grr_pdf(grr_view(g, unit, shown, time_format), device_id, time_format)

@@ -1,7 +1,7 @@
 """What every page shares: the refusal (a 4xx with a sentence), the form and query readers, the templates and
 the page they render, the login check of every action, the store reads, the child process, the words of a time,
 a unit and a blocked Measure. Each page family (``home``, ``session``, ``results``, ``spc``, ``calibration``,
-``recipes``, ``users``, ``set_up``, ``type1``) is a small class holding the one ``Pages`` of the server."""
+``recipes``, ``users``, ``set_up``, ``type1``, ``grr``) is a small class holding the one ``Pages`` of the server."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ import jinja2
 from aiohttp import web
 
 from service import __version__
+from service.core import vocabulary as V
 from service.parts.recipes import PART_ID_LENGTH
 from service.states import vocabulary
 
@@ -214,6 +215,24 @@ class Pages:
                 view["recipe"] = {**recipe, "display_decimals": found.display_decimals}
         return view
 
+    def recipe_display(self, name: str | None) -> tuple[str, dict[str, Any]]:
+        """The unit a recipe's figures are shown in (its own, else the set-up's) and its ``display_decimals``
+        (``{}`` without: from the tolerance), by its name in the recipe directory (a recipe no longer there:
+        the set-up's unit)."""
+        from measurement.errors import InvalidInput
+
+        unit, shown = self.server.settings.display_unit, dict[str, Any]()
+        book = getattr(self.app, "parts", None)
+        if book is not None and name:
+            try:
+                found = book.book.find(name)
+            except InvalidInput:
+                return unit, shown
+            unit = found.display_unit or unit
+            if found.display_decimals is not None:
+                shown = {"display_decimals": found.display_decimals}
+        return unit, shown
+
     def blocked(self) -> dict[str, str] | None:
         """Why the page refuses Measure, what to do and whom to call (a due calibration or a failed check
         standard: every part would be INVALID, and measuring again cannot change that); None when it may. The
@@ -267,7 +286,7 @@ class Pages:
         if action is not None and not allowed(role, action):
             raise Refused(403, f"{name or 'this login'} ({role}) may not {NEEDS.get(action, action)}: log in as a "
                                "quality engineer or an admin")
-        return f"web:{name}" if name else "web"
+        return V.web_source(name)
 
     # --- the store and the child process ----------------------------------------------------------
     def store(self) -> Store:

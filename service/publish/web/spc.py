@@ -5,7 +5,7 @@ page)."""
 from __future__ import annotations
 
 import asyncio
-import contextlib
+import dataclasses
 from typing import Any, Mapping
 
 from aiohttp import web
@@ -62,15 +62,21 @@ class SpcPages(Family):
                     "usable releases. Shown as I-MR of the part values instead.")
             return await loop.run_in_executor(None, compute, "I-MR"), note
 
-    def _unit(self, recipe: str) -> str:
-        from measurement.errors import InvalidInput
+    async def _with_gauge(self, recipe: str, result: Any) -> tuple[Any, Any]:
+        """``result`` with the gauge's objections to its Cp/Cpk (``measurement.spc.with_gauge``: %GRR above 30 %,
+        ndc below 5) and the recipe's Gauge R&R they come from: the Gauge R&R page's study of all its records
+        (``recipe_grr``; None: the records make none)."""
+        from measurement.spc import with_gauge
+        from service.parts.gauge_rr import recipe_grr
 
-        unit = self.server.settings.display_unit
-        book = getattr(self.app, "parts", None)
-        if book is not None and recipe:
-            with contextlib.suppress(InvalidInput):  # a recipe in the store no longer in the directory: the set-up's unit
-                unit = book.book.find(recipe).display_unit or unit
-        return unit
+        store = self.app.store
+        grr = await asyncio.get_running_loop().run_in_executor(None, lambda: recipe_grr(store, recipe))
+        if grr.study is None:
+            return result, None
+        return dataclasses.replace(result, summary=with_gauge(result.summary, grr=grr.study)), grr
+
+    def _unit(self, recipe: str) -> str:
+        return self.pages.recipe_display(recipe)[0]
 
     def _charts(self, result: Any, unit: str) -> tuple[dict[float, Any], dict[str, Any]]:
         """The control chart at both widths, and the capability's confidence interval."""
@@ -97,6 +103,7 @@ class SpcPages(Family):
         if recipe and recipe not in recipes:
             raise Refused(404, f"no completed parts of recipe {recipe[:64]!r} in the store")
         result, note = await self._compute(recipe, filters, chart) if recipe else (None, None)
+        result, grr = await self._with_gauge(recipe, result) if result is not None else (None, None)
         unit = self._unit(recipe)
         charts, capability = self._charts(result, unit) if result is not None else (None, None)
         q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
@@ -104,5 +111,5 @@ class SpcPages(Family):
         gauge1 = spc_gauge(store, recipe, result.summary) if result is not None else None  # the last Type 1 study
         return self.pages.page(request, "spc.html", title="SPC", recipes=recipes, recipe=recipe, spc=result,
                                chart=charts[WIDE] if charts else None, narrow=charts[NARROW] if charts else None,
-                               note=note, capability=capability, charts=CHARTS, unit=unit, q=q,
+                               note=note, capability=capability, charts=CHARTS, unit=unit, q=q, grr=grr,
                                checks=checks[-10:][::-1], check_chart=check_chart, type1=gauge1)

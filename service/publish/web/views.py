@@ -15,6 +15,7 @@ from aiohttp import web
 from service.errors import StoreDamaged
 
 from .calibration import CalibrationPages
+from .grr import GrrPages
 from .home import HomePages
 from .pages import HERE, Pages, Refused
 from .priority import CaptureFirst, sensor_is_read
@@ -62,7 +63,7 @@ class Views:
         p = self.pages
         home, session, results = HomePages(p), SessionPages(p), ResultPages(p)
         spc, calibration, recipes = SpcPages(p), CalibrationPages(p), RecipePages(p)
-        users, setup, type1 = UserPages(p), SetUpPages(p), Type1Pages(p)
+        users, setup, type1, grr = UserPages(p), SetUpPages(p), Type1Pages(p), GrrPages(p)
         r = app.router
         r.add_get("/", home.home)
         r.add_get("/home/summary", home.home_summary)
@@ -96,6 +97,8 @@ class Views:
         r.add_get("/recipes", recipes.recipes)
         r.add_post("/recipes", recipes.recipes_change)
         r.add_get("/calibration", calibration.calibration)
+        r.add_get("/grr", grr.grr)
+        r.add_get("/grr/report.pdf", grr.grr_pdf)
         r.add_get("/users", users.users)
         r.add_post("/users", users.users_change)
         r.add_get("/api/health", setup.api_health)

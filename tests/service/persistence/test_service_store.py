@@ -14,6 +14,7 @@ from measurement import Pendulum, Rig, identify, simulate_trace
 from service.cli import main
 from service.persistence.canonical import dumps
 from service.persistence.store import Store
+from service.persistence.tables import SCHEMA_VERSION
 from service.publish.payload import result_payload
 
 
@@ -166,7 +167,7 @@ INSERT INTO measurements (uuid, seq, status, trigger, device_id, software_versio
 
 
 def test_a_version_1_store_gains_the_part_columns_and_keeps_its_rows(tmp_path, result):
-    from service.persistence.tables import COLUMNS, SCHEMA_VERSION
+    from service.persistence.tables import COLUMNS
 
     db = sqlite3.connect(tmp_path / "results.db")
     db.executescript(_VERSION_1)
@@ -175,6 +176,7 @@ def test_a_version_1_store_gains_the_part_columns_and_keeps_its_rows(tmp_path, r
         [old] = store.list()
         assert (old.seq, old.status, old.error, old.flags, old.part_id) == (7, "failed", "encoder fault",
                                                                             ("encoder_gaps",), None)
+        assert old.operator == "plc"  # schema 4: read from the trigger it was stored with
         m = store.record(status="ok", trigger="button", device_id="new", software_version="9.9", started_at=1.0,
                          finished_at=2.0, result=result[0].to_dict(),
                          part={"part_id": "SN-1", "recipe": "rotor", "release_index": 1, "releases": 1,
@@ -225,8 +227,39 @@ def test_a_version_2_store_keeps_its_pending_rows_pending_for_mqtt(tmp_path, res
         [first, _] = store.outbox_pending("mqtt")
         assert store.outbox_ack(first.id) and store.get(a.uuid).published_at is not None
     db = sqlite3.connect(tmp_path / "results.db")
-    assert db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone() == ("3",)
+    assert db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone() == (str(SCHEMA_VERSION),)
     assert db.execute("SELECT consumer FROM outbox").fetchall() == [("mqtt",)]
+    db.close()
+
+
+def test_a_version_3_store_gains_the_operator_of_each_run_from_its_trigger(tmp_path):
+    """A store of the release before the operator column: every run keeps its row and reads its operator from
+    the trigger it was stored with (the named web user, else the door); a new run records its own."""
+    with Store(tmp_path) as store:
+        for trigger in ("web:alice", "button", "web", "modbus", "web:bob"):
+            store.record(status="failed", trigger=trigger, device_id="dev", software_version="9.9", started_at=1.0,
+                         finished_at=2.0, error="encoder fault")
+    db = sqlite3.connect(tmp_path / "results.db")  # as version 3 left it: no operator column
+    db.executescript("""
+        ALTER TABLE measurements DROP COLUMN operator;
+        UPDATE meta SET value = '3' WHERE key = 'schema';""")
+    assert "operator" not in [r[1] for r in db.execute("PRAGMA table_info(measurements)")]
+    db.close()
+    with Store(tmp_path) as store:
+        old = sorted(store.list(limit=None), key=lambda m: m.seq)
+        assert [(m.trigger, m.operator) for m in old] == [("web:alice", "alice"), ("button", "button"), ("web", "web"),
+                                                           ("modbus", "modbus"), ("web:bob", "bob")]
+        new = store.record(status="failed", trigger="web:carol", device_id="dev", software_version="9.9",
+                           started_at=3.0, finished_at=4.0, error="encoder fault")
+        named = store.record(status="failed", trigger="mqtt", operator="dave", device_id="dev",
+                             software_version="9.9", started_at=3.0, finished_at=4.0, error="encoder fault")
+        assert (new.operator, named.operator) == ("carol", "dave")
+        assert "operator" not in new.summary()  # internal: the exports and `moi results --json` keep their keys
+    db = sqlite3.connect(tmp_path / "results.db")
+    assert db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone() == (str(SCHEMA_VERSION),) == ("4",)
+    # kept only where the trigger does not say it: the row's tail stays empty, after the trace's blobs
+    assert db.execute("SELECT trigger, operator FROM measurements WHERE operator IS NOT NULL").fetchall() == [
+        ("mqtt", "dave")]
     db.close()
 
 

@@ -143,3 +143,14 @@ def test_reading_commands_work_on_a_read_only_store(read_only_store, tmp_path, c
     assert main(["export", "--state-dir", str(read_only_store), "--format", "json",
                  "--out", str(tmp_path / "all.json")]) == 0
     assert main(["store", "check", "--state-dir", str(read_only_store)]) == 0
+
+
+def test_a_text_that_no_longer_decodes_is_damage():
+    """The store writes only UTF-8: a text column that does not decode (the tail of a row, after its trace's blobs,
+    on an overwritten overflow page) is the file's damage, said with what to do, not an unexplained error."""
+    import sqlite3
+
+    from service.persistence.connection import is_damage
+
+    assert is_damage(sqlite3.OperationalError("Could not decode to UTF-8 column 'part_id' with text '\ufffd\ufffd'"))
+    assert not is_damage(sqlite3.OperationalError("no such column: operator"))
