@@ -159,8 +159,16 @@ def judgement(view: Mapping[str, Any], unit: str = SI) -> dict[str, Any] | None:
         where = "within the limits, but U reaches above USL"
     else:
         where = "within the limits"
-    out.update(deviation=f"{number(100.0 * (value - nominal) / nominal, '+.1f').replace('-', '−')} %", where=where)
+    out.update(deviation=percent(100.0 * (value - nominal) / nominal), where=where)
     return out
+
+
+def percent(v: float) -> str:
+    """A signed deviation in % to one decimal; one that rounds to nothing is "0.0 %", never "−0.0 %" nor "+0.0 %"."""
+    shown = round(v, 1)
+    if shown == 0:
+        return "0.0 %"
+    return f"{number(shown, '+.1f').replace('-', '−')} %"
 
 
 def display_unit(payload: Mapping[str, Any] | None, default: str = SI) -> str:
