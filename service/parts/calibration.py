@@ -7,6 +7,10 @@ check-standard`, or a check-standard recipe measured at the station) measured si
 A trigger is refused (``measure_block``) when every result of the active recipe would be INVALID for it, so
 that measuring again cannot change the verdict; the daemon and every door (button, Modbus, MQTT, Sparkplug,
 web) ask the same rule and say the same words (``calibration_words``).
+
+A rig without a calibration record is not blocked (a demo rig, or one set up by hand, has its k from the rig
+file) but never passes in silence either: every door that shows the calibration says ``UNCALIBRATED``
+(``uncalibrated``), of the rig now and of each result measured so.
 """
 
 from __future__ import annotations
@@ -18,6 +22,17 @@ from measurement import Rig
 
 if TYPE_CHECKING:  # pragma: no cover
     from service.parts.recipes import Recipe
+
+
+#: what every door says of a rig that has no calibration record (its k is the rig file's, checked by nobody)
+UNCALIBRATED = "rig not calibrated: k from the rig file, no calibration record"
+
+
+def uncalibrated(state: Mapping[str, Any] | None) -> str | None:
+    """``UNCALIBRATED`` when a calibration state (``calibration_state``, now or as a result stored it) has no
+    calibration record behind it: None (no record, no failed check) or a state without a calibration date (no
+    record, a failed check standard: blocked besides); None when the rig is calibrated."""
+    return UNCALIBRATED if state is None or state.get("date") is None else None
 
 
 def _today(now: float) -> dt.date:

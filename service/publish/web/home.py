@@ -12,6 +12,7 @@ from typing import Any
 from aiohttp import web
 
 from service.core import vocabulary as V
+from service.parts.calibration import uncalibrated
 from service.publish.payload import stored_result
 from service.states import STATES
 
@@ -69,6 +70,7 @@ class HomePages(Family):
         if open_part and (open_part.get("part_id") != part_id or open_part.get("recipe") != recipe.get("name")):
             left, open_part = open_part, None  # another part's: the next release abandons it
         mode = _mode(open_part, tile, part_id, pages.live.started)
+        calibration = _calibration(self.app)
         return {"tile": tile, "tile_view": tile_view, "tile_unit": tile_unit, "counts": counts,
                 "tile_places": Q.places((tile_view or {}).get("recipe"), tile_unit, (tile_view or {}).get("U")),
                 "why": Q.judgement(tile_view, tile_unit) if tile_view else None,
@@ -78,7 +80,7 @@ class HomePages(Family):
                 "repeat": bool(tile is not None and part_id and part_id == tile.part_id and mode == "verdict"),
                 "shift": shift.strftime("%H:%M"), "strip": parts, "open_part": open_part, "left": left,
                 "next_release": live.get("release_next"), "blocked": pages.blocked(),
-                "calibration": _calibration(self.app), "last": last,
+                "calibration": calibration, "uncalibrated": uncalibrated(calibration), "last": last,
                 "last_view": Q.part_view(last.payload, stored_result(last.payload)) if last else None,
                 "last_unit": pages.unit(last.payload if last else None)}
 
