@@ -244,7 +244,7 @@ def test_an_uncalibrated_rig_a_perfect_part_and_the_low_findings(browser, applia
         # "unload it")
         assert browser.find_element(By.ID, "words").text == "no measurement running"
         body = browser.find_element(By.TAG_NAME, "body").text
-        assert "press Measure" not in body.split("unload it")[0] if "unload it" in body else True
+        assert "unload it" in body and "press Measure" not in body.split("unload it")[0]
         # a perfect part: no sign on a deviation that rounds to nothing
         why = browser.find_element(By.ID, "tile-why").text
         assert "−0.0 %" not in why and "+0.0 %" not in why
