@@ -36,7 +36,7 @@ from typing import Any, Callable, Mapping
 from firmware_host import Event, Sequencer, State
 from measurement import IdentificationResult, Rig, Trace, identify
 from measurement.integrator import is_compiled
-from service.config.appliance import whom_to_call
+from service.config.appliance import SCHEMA, whom_to_call
 from service.core import vocabulary as V
 from service.core.live import LiveStatus
 from service.devices.hardware import Devices, build_devices
@@ -424,6 +424,10 @@ class Appliance:
     def _active_rig(self) -> Rig:
         recipe = self.parts.recipe
         return recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
+
+    def settings_schema(self) -> Mapping[str, Mapping[str, Any]]:
+        """Every table of the configuration file and its keys as declared (what the set-up page words them with)."""
+        return SCHEMA
 
     def calibration_state(self) -> dict[str, Any] | None:
         """The calibration of the rig the active recipe measures with, as the next result will be judged

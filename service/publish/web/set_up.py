@@ -60,6 +60,11 @@ UNIT_WORDS = ("s", "ms", "rad", "rad/s", "kg·m²", "kg", "m", "Hz", "N·m/rad",
               "bits per turn", "V", "%")
 
 
+Rows = list[tuple[str, str]]
+#: the configuration file's tables and their keys as declared (``ApplianceView.settings_schema``)
+Schema = Mapping[str, Mapping[str, Any]]
+
+
 def unit_in_doc(doc: str) -> str | None:
     """The unit a setting's doc says its value is in: its last comma-separated part (parenthesised notes left out)
     that is a unit, or starts with one ("Hz of simulated time"); None when it says none."""
@@ -72,11 +77,10 @@ def unit_in_doc(doc: str) -> str | None:
     return None
 
 
-def _unit(table: str, path: tuple[str, ...]) -> str | None:
+def _unit(schema: Schema, table: str, path: tuple[str, ...]) -> str | None:
     """The unit of the setting at ``path`` in ``table`` (None: a count, a name, a yes/no, or not known)."""
     from measurement.effects import EFFECTS
     from measurement.rig import RIG_UNITS
-    from service.config.appliance import SCHEMA
 
     key = path[-1]
     if table == "rig":
@@ -85,17 +89,15 @@ def _unit(table: str, path: tuple[str, ...]) -> str | None:
         for prm in EFFECTS[path[1]].parameters:
             if key in (prm.physical, prm.name):
                 return prm.physical_unit if key == prm.physical else prm.unit
-    keys = SCHEMA.get(".".join((table, *path[:-1])), {})
+    keys = schema.get(".".join((table, *path[:-1])), {})
     declared = keys[key].doc if key in keys else ""
     return unit_in_doc(declared) or UNITS.get((table, key))
 
 
-def _is_path(table: str, path: tuple[str, ...], v: Any) -> bool:
+def _is_path(schema: Schema, table: str, path: tuple[str, ...], v: Any) -> bool:
     """Whether a setting names a file, a folder or a device of the appliance: declared so, named so, or written
     as one."""
-    from service.config.appliance import SCHEMA
-
-    keys = SCHEMA.get(".".join((table, *path[:-1])) if table else "device", {})
+    keys = schema.get(".".join((table, *path[:-1])) if table else "device", {})
     key = path[-1]
     declared = key in keys and keys[key].kind in ("path", "videodevice")
     return bool(v) and (declared or any(w in PATH_WORDS for w in key.lower().split("_"))
@@ -116,10 +118,9 @@ def _words(v: Any, unit: str | None = None) -> str:
     return str(v)
 
 
-Rows = list[tuple[str, str]]
 
 
-def _rows(table: str, d: Mapping[str, Any], shown_paths: bool, path: tuple[str, ...] = ()) -> Rows:
+def _rows(schema: Schema, table: str, d: Mapping[str, Any], shown_paths: bool, path: tuple[str, ...] = ()) -> Rows:
     """One table's settings as (label, value in words): nested tables flattened to "table › key" (a rig file's own
     [rig] table to its keys), lists of tables numbered."""
     rows: Rows = []
@@ -127,31 +128,32 @@ def _rows(table: str, d: Mapping[str, Any], shown_paths: bool, path: tuple[str, 
         at = (*path, str(k))
         label = " › ".join(p for p in at if not (table == "rig" and p == "rig")).replace("_", " ")
         if isinstance(v, Mapping):
-            rows += _rows(table, v, shown_paths, at)
+            rows += _rows(schema, table, v, shown_paths, at)
         elif isinstance(v, (list, tuple)) and v and all(isinstance(x, Mapping) for x in v):
             for i, x in enumerate(v, 1):
-                rows += [(f"{label} {i} › {sub}", text) for sub, text in _rows(table, x, shown_paths)]
-        elif not shown_paths and _is_path(table, at, v):
+                rows += [(f"{label} {i} › {sub}", text) for sub, text in _rows(schema, table, x, shown_paths)]
+        elif not shown_paths and _is_path(schema, table, at, v):
             rows.append((label, "(shown after logging in)"))
         else:
-            rows.append((label, _words(v, _unit(table, at))))
+            rows.append((label, _words(v, _unit(schema, table, at))))
     return rows
 
 
-def setup_words(config: Mapping[str, Any], *, shown_paths: bool) -> list[tuple[str, Rows, bool]]:
+def setup_words(config: Mapping[str, Any], schema: Schema, *, shown_paths: bool) -> list[tuple[str, Rows, bool]]:
     """The running configuration for the set-up page, grouped: (title, [(setting, value in words with its unit)],
     open at first). The appliance's own keys first, with the tables not in use named there; secrets already masked;
-    without a login, no file, folder or device path."""
+    ``schema``: the file's tables as declared (their units, their paths); without a login, no file, folder or
+    device path."""
     top: Rows = []
     off: list[str] = []
     groups: dict[str, Rows] = {}
     for section, d in config.items():
         if isinstance(d, Mapping):
-            groups[section] = _rows(section, d, shown_paths)
+            groups[section] = _rows(schema, section, d, shown_paths)
         elif section in TITLES and d is None:
             off.append(TITLES[section])
         else:
-            hidden = not shown_paths and _is_path("", (section,), d)
+            hidden = not shown_paths and _is_path(schema, "", (section,), d)
             top.append((TOP_LABELS.get(section, section.replace("_", " ")),
                         "(shown after logging in)" if hidden else _words(d)))
     if off:
@@ -195,7 +197,8 @@ class SetUpPages(Family):
         readable = devices is not None and getattr(devices.sensor, "read_position", None) is not None
         logged_in = self.pages.logged_in(request)
         return self.pages.page(request, "setup.html", status=status, title="Set-up", health=self.health(),
-                               config=setup_words(mask(self.app.config.to_dict()), shown_paths=logged_in),
+                               config=setup_words(mask(self.app.config.to_dict()), self.app.settings_schema(),
+                                                  shown_paths=logged_in),
                                sensor=sensors.running(self.app.config).LABEL, readable=readable,
                                web=self.server.stats(), **self._camera_setup(request), **ctx)
 

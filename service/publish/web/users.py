@@ -8,7 +8,6 @@ import asyncio
 import datetime as dt
 import hashlib
 import logging
-from pathlib import Path
 from typing import Any, Mapping
 
 from aiohttp import web

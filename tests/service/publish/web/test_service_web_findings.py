@@ -29,7 +29,8 @@ def test_a_deviation_that_rounds_to_nothing_has_no_sign():
     assert percent(-0.04) == "0.0 %" and percent(0.049) == "0.0 %" and percent(-0.0) == "0.0 %"
     assert percent(-0.06) == "−0.1 %" and percent(1.25) == "+1.2 %"
     view = {"recipe": {"nominal": 0.0125, "lower": 0.01225, "upper": 0.01275}, "value": 0.0125 * (1 - 2e-6), "U": 0}
-    assert judgement(view)["deviation"] == "0.0 %"
+    said = judgement(view)
+    assert said is not None and said["deviation"] == "0.0 %"
 
 
 def test_a_rig_without_a_calibration_record_is_said_by_one_rule_and_not_blocked():
@@ -51,7 +52,7 @@ def test_a_rig_without_a_calibration_record_is_said_by_one_rule_and_not_blocked(
 
 
 def test_the_set_up_words_group_the_configuration_with_units_and_hide_paths_from_a_visitor(tmp_path):
-    from service.config.appliance import load_config
+    from service.config.appliance import SCHEMA, load_config
     from service.publish.web.set_up import mask, setup_words, unit_in_doc
 
     assert unit_in_doc("capture after the release (at most), s") == "s"
@@ -60,7 +61,7 @@ def test_the_set_up_words_group_the_configuration_with_units_and_hide_paths_from
         == "Hz of simulated time"
     config = load_config(Path(__file__).resolve().parents[4] / "examples" / "appliance.toml")
     for logged_in in (False, True):
-        groups = setup_words(mask(config.to_dict()), shown_paths=logged_in)
+        groups = setup_words(mask(config.to_dict()), SCHEMA, shown_paths=logged_in)
         titles = [g[0] for g in groups]
         assert titles[:3] == ["Appliance", "Rig", "Recipes"] and "Sequencer" in titles and "MQTT" in titles
         rows = {(g, label): text for g, group, _open in groups for label, text in group}
@@ -119,10 +120,10 @@ def test_subgroups_of_unequal_size_are_said_without_a_python_list():
 
 # --- the pages in the browser ---------------------------------------------------------------------------------------
 
-def _contrast(browser, el) -> float:
+def _contrast(driver, el) -> float:
     """The WCAG 2 contrast ratio of an element's text colour against its background: the first opaque background up
     the tree (the page's white when none is), both as the browser computed them."""
-    fg, bg = browser.execute_script(r"""
+    fg, bg = driver.execute_script(r"""
         var fg = getComputedStyle(arguments[0]).color, bg = null;
         for (var n = arguments[0]; n && !bg; n = n.parentElement) {
           var c = getComputedStyle(n).backgroundColor, m = c.match(/rgba?\(([^)]*)\)/);
@@ -140,9 +141,9 @@ def _contrast(browser, el) -> float:
     return (a + 0.05) / (b + 0.05)
 
 
-def _boxes_overlap(browser, svg) -> list[str]:
+def _boxes_overlap(driver, svg) -> list[str]:
     """The tick labels of a chart that overlap its axis title (their boxes as the browser drew them)."""
-    return browser.execute_script("""
+    return driver.execute_script("""
         var t = arguments[0].querySelector('text.axis-label').getBoundingClientRect();
         return Array.from(arguments[0].querySelectorAll('text.tick')).filter(function (e) {
           var r = e.getBoundingClientRect();
@@ -231,6 +232,10 @@ def test_an_uncalibrated_rig_a_perfect_part_and_the_low_findings(browser, applia
         _measure(url, bearer, running, "rotor-exact", f"PLC-20{i}")
     last = app.store.latest()
     value = last.payload["part"]["value"]
+    # the PDF's record says it in the same words
+    from service.publish.report import report_lines
+    facts = dict(report_lines(last, "kg·m²")[1])
+    assert facts["calibration"] == "rig not calibrated: k from the rig file, no calibration record"
     wait = WebDriverWait(browser, 30, poll_frequency=0.05)
     for width, height in SIZES:
         browser.set_window_size(width, height)
@@ -254,6 +259,9 @@ def test_an_uncalibrated_rig_a_perfect_part_and_the_low_findings(browser, applia
         browser.get(f"{url}results/{last.uuid}")
         note = wait.until(lambda d: d.find_element(By.ID, "uncalibrated"))
         assert "rig not calibrated: k from the rig file, no calibration record" in note.text
+        browser.get(f"{url}results/{last.uuid}/report")
+        said = wait.until(lambda d: d.find_element(By.ID, "report-calibration")).text
+        assert said == "rig not calibrated: k from the rig file, no calibration record", said
         # the history on a phone: the part ID in sight without scrolling sideways
         browser.get(url + "history")
         cell = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, "#history td.part-id"))
