@@ -17,6 +17,7 @@ from aiohttp import web
 from measurement.errors import VisionError
 from service import __version__
 from service.errors import InputFileError
+from service.parts.calibration import uncalibrated
 from service.settings import sensor_registry as sensors
 
 from .. import quality as Q
@@ -200,6 +201,7 @@ class SetUpPages(Family):
                                config=setup_words(mask(self.app.config.to_dict()), self.app.settings_schema(),
                                                   shown_paths=logged_in),
                                sensor=sensors.running(self.app.config).LABEL, readable=readable,
+                               uncalibrated=uncalibrated(self.app.calibration_state()),
                                web=self.server.stats(), **self._camera_setup(request), **ctx)
 
     async def api_angle(self, request: web.Request) -> web.Response:

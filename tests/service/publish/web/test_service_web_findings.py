@@ -193,6 +193,9 @@ def test_the_header_login_the_set_up_page_and_a_phone_s_navigation(browser, appl
         groups = [h.get_attribute("textContent") for h in config.find_elements(By.CSS_SELECTOR, "summary h3")]
         assert groups[:3] == ["Appliance", "Rig", "Recipes"] and "Sequencer" in groups
         assert "capture duration8 s" in text.replace("\n", "") and "stiffness0.3651 N·m/rad" in text.replace("\n", "")
+        # the health says the demo rig has no calibration record
+        assert browser.find_element(By.ID, "health-calibration").text.startswith(
+            "rig not calibrated: k from the rig file, no calibration record")
         body = browser.find_element(By.TAG_NAME, "body").get_attribute("textContent")
         assert "test.toml" not in body and str(tmp_path) not in body and "shown after logging in" in body
     # the admin logged in sees where the files are
