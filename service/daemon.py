@@ -439,7 +439,7 @@ class Appliance:
         whom to call ([web] contact), or None."""
         contact = whom_to_call(self.config) or CONTACT
         return calibration_rule.measure_block(self._active_rig(), self.parts.recipe, self.newest_checks(), self.wall_clock(),
-                                              contact)
+                                              contact, self.config.require_calibration)
 
     def show_block(self, refused: bool, again: bool = False) -> None:
         """The status lamp or buzzer says the calibration refuses Measure while the appliance is IDLE (it is

@@ -117,7 +117,8 @@ def _calibrations(config: Config) -> list[Check]:
         state = calibration_state(rig, [], time.time())
         words = uncalibrated(state)
         if words is not None:
-            checks.append(Check(what, True, words, warning=True))
+            checks.append(Check(what, True, words + (": Measure is refused ([device] require_calibration)"
+                                                     if config.require_calibration else ""), warning=True))
         elif state is not None and state["due"]:
             checks.append(Check(what, True, f"calibration expired on {state['valid_until']}: its measurements are "
                                 "refused until `moi calibrate` renews it", warning=True))

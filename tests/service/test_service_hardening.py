@@ -332,7 +332,7 @@ def test_check_warns_of_an_open_modbus_port_and_refuses_what_the_start_refuses(t
     assert main(["run", "--check", "--config", config('[modbus]\nhost = "0.0.0.0"\nport = 0\n'
                                                       'allow_from = ["192.168.10.20"]\n')]) == 0
     out = capsys.readouterr().out
-    assert "Modbus exposure" not in out
+    assert "WARNING  Modbus" not in out
     # the demo rig has k from its file and no calibration record: said, never refused
     assert "WARNING  rig: rig not calibrated: k from the rig file, no calibration record" in out
     huge = config("[modbus]\nport = 0\n[sequencer]\ncapture_duration = 1e12\n")

@@ -49,6 +49,27 @@ def test_a_rig_without_a_calibration_record_is_said_by_one_rule_and_not_blocked(
     # a failed check standard on a rig without a record: blocked, and still said to be uncalibrated
     failed = [{"name": "ref", "E_n": 2.0, "passed": False, "finished_at": 1.7e9}]
     assert uncalibrated(calibration_state(bare, failed, 1.8e9)) == UNCALIBRATED
+    # a set-up that requires a calibration record: the same rule refuses, in the same words, whom to call
+    block = measure_block(bare, None, [], 1.8e9, "the lab", require_record=True)
+    assert block is not None and block["uncalibrated"] and block["detail"] == (
+        "rig not calibrated: k from the rig file, no calibration record: calibrate the rig (moi calibrate) or call "
+        "the lab")
+    assert measure_block(calibrated, None, [], 1.78e9, "the lab", require_record=True) is None
+
+
+def test_a_set_up_that_requires_a_calibration_record_refuses_measure_at_the_page(appliance_factory, tmp_path):
+    from tests.service.publish.web.test_service_web import Client
+
+    running = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True},
+                                              device={"require_calibration": True}))
+    app = running.app
+    token = Path(app.web.token_file).read_text().strip()
+    status, doc = Client(app.web.url).json("/api/measure", method="POST",
+                                           headers={"Authorization": f"Bearer {token}"})
+    assert status == 409 and "Rig not calibrated: k from the rig file, no calibration record" in doc["error"], doc
+    assert app.store.count() == 0 and not app.sequencer.busy
+    home = Client(app.web.url).request("/")[2].decode()
+    assert 'id="blocked"' in home and 'id="uncalibrated"' in home
 
 
 def test_the_set_up_words_group_the_configuration_with_units_and_hide_paths_from_a_visitor(tmp_path):
