@@ -52,7 +52,8 @@ def axes_drawing(axis: Any, offset: Any = None, size: int = 220) -> dict[str, An
     anchor = "end" if top[0] > size / 2 else "start"
     x = top[0] - 6 if anchor == "end" else top[0] + 6
     x = max(LABEL_WIDTH + 2, x) if anchor == "end" else min(size - LABEL_WIDTH - 2, x)
-    y = min(max(top[1] + 4, LABEL_SIZE + 2.0), size - 4.0)
+    # above the end, clear of the line; below it when the end is at the top edge
+    y = top[1] - 8 if top[1] - 8 >= LABEL_SIZE + 2.0 else min(top[1] + LABEL_SIZE + 6, size - 4.0)
     return {"size": size, "origin": at((0.0, 0.0)),
             "frame": [(name, at(end)) for name, end in zip("xyz", frame)],
             "axis": (a, b), "axis_label": (round(x, 1), round(y, 1), anchor)}
