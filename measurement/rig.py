@@ -344,6 +344,11 @@ _RIG_NUMBERS = (
     ("length", "m", False), ("length_std", "m", True), ("wire_length", "m", False), ("wire_length_std", "m", True),
     ("spacing", "m", False), ("spacing_std", "m", True), ("radius", "m", False), ("radius_std", "m", True),
 )
+#: the unit of each number of a rig file (its [rig] table's, the covariance ``moi calibrate`` writes, [sensor]'s and
+#: [object]'s): what a page writes beside them
+RIG_UNITS: dict[str, str] = {**{name: unit for name, unit, _ in _RIG_NUMBERS},
+                             "stiffness_tare_covariance": "N·m/rad·kg·m²", "clock_accuracy_ppm": "ppm",
+                             "axis_offset": "m", "axis_offset_std": "m"}
 
 
 def _rig_table(doc: Mapping[str, Any]) -> Mapping[str, Any]:

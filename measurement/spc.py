@@ -252,7 +252,8 @@ def _subgroups(subgroups: Sequence[Sequence[float]], chart: str) -> tuple[list[l
         raise SpcError(f"an {chart} chart needs at least 2 subgroups, got {len(groups)}")
     sizes = {len(g) for g in groups}
     if len(sizes) != 1:
-        raise SpcError(f"{chart} needs subgroups of one size, got sizes {sorted(sizes)}")
+        raise SpcError(f"{chart} needs subgroups of one size, got sizes "
+                       f"{', '.join(str(n) for n in sorted(sizes))}")
     return groups, sizes.pop()
 
 

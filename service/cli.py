@@ -46,7 +46,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("service.commands.report",
         "the quality record of one measurement as a PDF (verdict, J ± U, releases, evidence, calibration)"),
     "user": ("service.commands.user",
-        "named users of the web page (operator, quality, admin): add, remove, list"),
+        "named users of the web page (operator, quality, admin): add, change, remove, list (audited)"),
     "spc": ("service.commands.spc",
         "SPC per recipe: control chart numbers, capability, run rules and a control-chart PNG"),
     "store": ("service.commands.store",

@@ -38,7 +38,7 @@ from firmware_host import Event, Sequencer, State
 from measurement import IdentificationResult, Options, Rig, Trace, identify
 from measurement.integrator import is_compiled
 from measurement.reproducibility import for_release
-from service.config.appliance import whom_to_call
+from service.config.appliance import SCHEMA, whom_to_call
 from service.core import vocabulary as V
 from service.core.live import LiveStatus
 from service.devices.hardware import Devices, build_devices
@@ -444,6 +444,10 @@ class Appliance:
         recipe = self.parts.recipe
         return recipe.rig_for(self.config.rig) if recipe is not None else self.config.rig
 
+    def settings_schema(self) -> Mapping[str, Mapping[str, Any]]:
+        """Every table of the configuration file and its keys as declared (what the set-up page words them with)."""
+        return SCHEMA
+
     def calibration_state(self) -> dict[str, Any] | None:
         """The calibration of the rig the active recipe measures with, as the next result will be judged
         (``service.parts.calibration.calibration_state``)."""
@@ -454,7 +458,7 @@ class Appliance:
         whom to call ([web] contact), or None."""
         contact = whom_to_call(self.config) or CONTACT
         return calibration_rule.measure_block(self._active_rig(), self.parts.recipe, self.newest_checks(), self.wall_clock(),
-                                              contact)
+                                              contact, self.config.require_calibration)
 
     def show_block(self, refused: bool, again: bool = False) -> None:
         """The status lamp or buzzer says the calibration refuses Measure while the appliance is IDLE (it is

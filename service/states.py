@@ -26,7 +26,7 @@ class StateInfo:
 #: (STARTING, STOPPING): the one table the Modbus registers and the web page read
 STATES: dict[str, StateInfo] = {
     "STARTING": StateInfo(0, "the appliance is starting"),
-    "IDLE": StateInfo(1, "ready: press Measure (or the push button)"),
+    "IDLE": StateInfo(1, "no measurement running"),
     "ARMED": StateInfo(2, "recording the pendulum at rest before the release", busy=True, capturing=True),
     "RELEASING": StateInfo(3, "solenoid pulse: releasing the pendulum", busy=True, capturing=True),
     "CAPTURING": StateInfo(4, "the pendulum swings freely; recording", busy=True, capturing=True),

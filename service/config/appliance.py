@@ -82,6 +82,8 @@ _APPLIANCE: dict[str, dict[str, Key]] = {
         "rig": _doc("rig TOML file (required with [hardware]; relative paths are relative to this file)", kind="path"),
         "log_level": _doc("logging level", choices=("debug", "info", "warning", "error")),
         "store_trace": _doc("keep the raw trace of every measurement in the store"),
+        "require_calibration": _doc("refuse Measure on a rig without a calibration record (default: measure, and "
+                                    "say \"rig not calibrated\" on every page and in moi run --check)"),
     }),
     "sequencer": _schema(SequencerConfig, _sequencer_keys()),
     "identification": _schema(Options, {
@@ -287,7 +289,7 @@ def parse_config(doc: Mapping[str, Any], *, source: str = "<config>", base: Path
         log_level=dev["log_level"], store_trace=dev["store_trace"],
         rig=rig, rig_path=rig_path, simulated=simulated, simulation=simulation, hardware=hardware,
         sequencer=sequencer, identification=options, publishers=publishers,
-        recipes=book, active_recipe=rc["active"],
+        recipes=book, active_recipe=rc["active"], require_calibration=dev["require_calibration"],
     )
 
 

@@ -103,6 +103,31 @@ def _state_directory(config: Config) -> Check:
     return Check("state directory", writable, f"{state}" + ("" if writable else f": {parent} is not writable"))
 
 
+def _calibrations(config: Config) -> list[Check]:
+    """Each rig the appliance measures with (the set-up's, each recipe's own): one without a calibration record is
+    a warning in the words every door says (``service.parts.calibration.uncalibrated``), not a refusal."""
+    import time
+
+    from service.parts.calibration import calibration_state, uncalibrated
+
+    rigs = [("rig", config.rig)] + [(f"rig of recipe {r.name}", r.rig) for r in
+                                    (config.recipes.recipes if config.recipes is not None else []) if r.rig is not None]
+    checks = []
+    for what, rig in rigs:
+        state = calibration_state(rig, [], time.time())
+        words = uncalibrated(state)
+        if words is not None:
+            checks.append(Check(what, True, words + (": Measure is refused ([device] require_calibration)"
+                                                     if config.require_calibration else ""), warning=True))
+        elif state is not None and state["due"]:
+            checks.append(Check(what, True, f"calibration expired on {state['valid_until']}: its measurements are "
+                                "refused until `moi calibrate` renews it", warning=True))
+        elif state is not None:
+            checks.append(Check(what, True, f"calibrated {state['date']}"
+                                + (f", valid until {state['valid_until']}" if state["valid_until"] else "")))
+    return checks
+
+
 def check_config(config: Config) -> list[Check]:
     """Every check of the configuration and of the environment it names: the appliance's own, the angle sensor's
     (its ``health``) and each publisher's (its table's ``start_checks``)."""
@@ -111,4 +136,5 @@ def check_config(config: Config) -> list[Check]:
     checks += _gpio_checks(config)
     if config.hardware is not None and not config.simulated:
         checks += [Check(*line) for line in sensors.sensor(config.hardware.sensor).health(config)]
-    return [*checks, *_publisher_checks(config), descriptor_budget(config), _state_directory(config)]
+    return [*checks, *_calibrations(config), *_publisher_checks(config), descriptor_budget(config),
+            _state_directory(config)]

@@ -7,6 +7,11 @@ check-standard`, or a check-standard recipe measured at the station) measured si
 A trigger is refused (``measure_block``) when every result of the active recipe would be INVALID for it, so
 that measuring again cannot change the verdict; the daemon and every door (button, Modbus, MQTT, Sparkplug,
 web) ask the same rule and say the same words (``calibration_words``).
+
+A rig without a calibration record is not blocked (a demo rig, or one set up by hand, has its k from the rig
+file) but never passes in silence either: every door that shows the calibration says ``UNCALIBRATED``
+(``uncalibrated``), of the rig now and of each result measured so; ``[device] require_calibration`` makes it a
+block like an expired calibration.
 """
 
 from __future__ import annotations
@@ -18,6 +23,17 @@ from measurement import Rig
 
 if TYPE_CHECKING:  # pragma: no cover
     from service.parts.recipes import Recipe
+
+
+#: what every door says of a rig that has no calibration record (its k is the rig file's, checked by nobody)
+UNCALIBRATED = "rig not calibrated: k from the rig file, no calibration record"
+
+
+def uncalibrated(state: Mapping[str, Any] | None) -> str | None:
+    """``UNCALIBRATED`` when a calibration state (``calibration_state``, now or as a result stored it) has no
+    calibration record behind it: None (no record, no failed check) or a state without a calibration date (no
+    record, a failed check standard: blocked besides); None when the rig is calibrated."""
+    return UNCALIBRATED if state is None or state.get("date") is None else None
 
 
 def _today(now: float) -> dt.date:
@@ -49,16 +65,20 @@ def calibration_state(rig: Rig, checks: Sequence[Mapping[str, Any]], now: float)
 
 
 def measure_block(rig: Rig, recipe: Recipe | None, checks: Sequence[Mapping[str, Any]], now: float,
-                  contact: str) -> dict[str, Any] | None:
+                  contact: str, require_record: bool = False) -> dict[str, Any] | None:
     """Why no measurement of ``recipe`` (None: no recipe is active) on ``rig`` may start at ``now``, or None.
 
     The calibration is due (``calibration_state``): every result would carry calibration_due and be INVALID. A
     check-standard recipe is still measured while only a failed check standard blocks, since its passing is what
     clears the block; an expired calibration refuses it too (a check cannot renew a calibration: ``moi
     calibrate`` does). A recipe whose ``invalid_flags`` leave out ``calibration_due`` is measured too: its parts
-    are judged, flagged. Returns the calibration state, ``expired`` and ``detail``: the words every door says,
-    with whom to call (``contact``)."""
+    are judged, flagged. A rig without a calibration record (``uncalibrated``) is refused only when
+    ``require_record`` (``[device] require_calibration``) asks. Returns the calibration state, ``expired``,
+    ``uncalibrated`` and ``detail``: the words every door says, with whom to call (``contact``)."""
     state = calibration_state(rig, checks, now)
+    if require_record and rig.calibration is None:
+        return {"calibration": state or {}, "expired": False, "uncalibrated": True,
+                "detail": f"{UNCALIBRATED}: calibrate the rig (moi calibrate) or call {contact}"}
     if not state or not state["due"]:
         return None
     cal = rig.calibration
@@ -70,7 +90,7 @@ def measure_block(rig: Rig, recipe: Recipe | None, checks: Sequence[Mapping[str,
         return None  # its quality rules judge a part with the calibration due (flagged, not INVALID): its call
     check = state.get("check_standard")
     failed = check if check is not None and not check.get("passed") else None
-    return {"calibration": state, "expired": expired,
+    return {"calibration": state, "expired": expired, "uncalibrated": False,
             "detail": calibration_words(state["valid_until"] if expired else None, failed, contact)}
 
 

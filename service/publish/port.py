@@ -28,6 +28,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from service.persistence.store import Store, StoredMeasurement
     from service.publish.replies import ReplyTo
     from service.settings.config import Config
+    from service.settings.schema import Key
 
 
 class Publisher:
@@ -191,6 +192,12 @@ class ApplianceView:
         date, valid_until, due (also after a failed check standard), check_standard; None without one
         (``service.parts.calibration``: the rule)."""
         return self._app.calibration_state()
+
+    def settings_schema(self) -> Mapping[str, Mapping[str, Key]]:
+        """Every table of the configuration file and its keys as declared (``service.config.appliance.SCHEMA``):
+        their docs say their units and their kinds which ones name a path; the set-up page writes the running
+        configuration with them."""
+        return self._app.settings_schema()
 
     def measure_block(self) -> dict[str, Any] | None:
         """Why the calibration refuses a measurement now (``service.parts.calibration.measure_block``: the one rule

@@ -159,8 +159,16 @@ def judgement(view: Mapping[str, Any], unit: str = SI) -> dict[str, Any] | None:
         where = "within the limits, but U reaches above USL"
     else:
         where = "within the limits"
-    out.update(deviation=f"{number(100.0 * (value - nominal) / nominal, '+.1f').replace('-', '−')} %", where=where)
+    out.update(deviation=percent(100.0 * (value - nominal) / nominal), where=where)
     return out
+
+
+def percent(v: float) -> str:
+    """A signed deviation in % to one decimal; one that rounds to nothing is "0.0 %", never "−0.0 %" nor "+0.0 %"."""
+    shown = round(v, 1)
+    if shown == 0:
+        return "0.0 %"
+    return f"{number(shown, '+.1f').replace('-', '−')} %"
 
 
 def display_unit(payload: Mapping[str, Any] | None, default: str = SI) -> str:
@@ -362,6 +370,10 @@ def _plain(v: float, spread: float) -> str:
     return f"{v:.{decimals}f}" if abs(v) < 1e7 else f"{v:.6g}"
 
 
+#: px: the rotated axis title's band at a chart's left edge, and the width of one character of a tick label
+TITLE_BAND, TICK_CHAR = 20.0, 6.7
+
+
 def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad: set[int], width: float,
            height: float, spread: float, x_offset: int = 0, n_total: int | None = None,
            names: Sequence[str] = (), floor: float | None = None) -> dict[str, Any]:
@@ -376,6 +388,10 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
     lo, hi = lo - margin, hi + margin
     if floor is not None:
         lo = max(lo, floor)  # a range is never below zero: neither is its axis
+    tick_values = [lo + (hi - lo) * i / 4 for i in range(5)]
+    tick_texts = [_plain(v, (hi - lo) * 5) for v in tick_values]
+    # the axis title's band, then the longest tick label (11 px digits, some 6.7 px wide): never over each other
+    left = max(left, TITLE_BAND + TICK_CHAR * max(len(t) for t in tick_texts) + 8.0)
 
     def X(i: int) -> float:
         return round(left + (i + 0.5) / max(n, 1) * (width - left - right), 1)
@@ -398,7 +414,7 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
         for i in range(1, len(ys_l)):
             ys_l[i] = max(ys_l[i], ys_l[i - 1] + 13.0)
     labels = [(y + 4, kind, text) for y, (_n, _y, kind, text) in zip(ys_l, order)]
-    ticks = [(Y(lo + (hi - lo) * i / 4), _plain(lo + (hi - lo) * i / 4, (hi - lo) * 5)) for i in range(5)]
+    ticks = [(Y(v), text) for v, text in zip(tick_values, tick_texts)]
     step = max(1, n // (5 if narrow else 10))
     xticks = [(X(i), str(i + 1)) for i in range(0, n, step)]
     return {"width": width, "height": height, "left": left, "right": width - right, "top": top,

@@ -8,6 +8,7 @@ import io
 from typing import Any
 
 from measurement.units import SI
+from service.parts.calibration import uncalibrated
 
 from . import quality as Q
 from .budget import BUDGET_FOOTNOTE, BudgetRow
@@ -52,9 +53,10 @@ def report_lines(m: Any, unit: str, lookup: Any = None, time_format: str = Q.TIM
     facts += [("  budget", _budget_line(row, unit)) for row in v["budget"]]
     if v["budget"]:
         facts.append(("", BUDGET_FOOTNOTE))
-    facts.append(("calibration", (f"{cal.get('date')}" + (f", due {cal.get('valid_until')}" if cal.get("valid_until")
-                                                            else "") + (" (DUE)" if cal.get("due") else ""))
-                  if cal else "no calibration record"))
+    cal = cal or {}
+    facts.append(("calibration", (uncalibrated(cal or None) or f"{cal.get('date')}"
+                                  + (f", due {cal.get('valid_until')}" if cal.get("valid_until") else ""))
+                  + (" (DUE)" if cal.get("due") else "")))
     releases = []
     for r in Q.release_rows(v, p, result, lookup):
         flags = "flags: " + (", ".join(r["flags"]) or "none") if r["flags"] is not None else ""

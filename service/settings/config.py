@@ -31,6 +31,7 @@ class DeviceSettings:
     rig: str | None = None
     log_level: str = "info"
     store_trace: bool = True
+    require_calibration: bool = False
 
 
 @dataclass(frozen=True)
@@ -132,6 +133,7 @@ class Config:
     publishers: Mapping[str, Any] = field(default_factory=dict)
     recipes: Any = None              # service.parts.recipes.RecipeBook (every recipe of [recipes] directory, checked)
     active_recipe: str | None = None  # [recipes] active
+    require_calibration: bool = False  # [device] require_calibration: a rig without a calibration record refuses
 
     # one property per publisher of the registry (a test holds the two together): its settings, None when off; a
     # publisher added to the registry is read as ``publishers[<name>]`` until it has one
@@ -176,6 +178,7 @@ class Config:
             return d
         return {
             "source": self.source, "device_id": self.device_id, "state_dir": str(self.state_dir),
+            "require_calibration": self.require_calibration,
             "rig_path": self.rig_path, "rig": self.rig.to_dict(), "simulated": self.simulated,
             "simulation": clean(self.simulation) if self.simulated else None,
             "hardware": None if self.hardware is None else self.hardware.to_dict(), "sequencer": clean(self.sequencer),

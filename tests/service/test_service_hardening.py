@@ -331,7 +331,10 @@ def test_check_warns_of_an_open_modbus_port_and_refuses_what_the_start_refuses(t
     assert "WARNING  Modbus exposure: Modbus TCP listens on 0.0.0.0" in out and "allow_from" in out
     assert main(["run", "--check", "--config", config('[modbus]\nhost = "0.0.0.0"\nport = 0\n'
                                                       'allow_from = ["192.168.10.20"]\n')]) == 0
-    assert "WARNING" not in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "WARNING  Modbus" not in out
+    # the demo rig has k from its file and no calibration record: said, never refused
+    assert "WARNING  rig: rig not calibrated: k from the rig file, no calibration record" in out
     huge = config("[modbus]\nport = 0\n[sequencer]\ncapture_duration = 1e12\n")
     assert main(["run", "--check", "--config", huge]) == 2
     checked = capsys.readouterr().err

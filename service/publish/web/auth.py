@@ -72,6 +72,12 @@ SOURCE_WRONG = 20
 LOCKOUT_FILE_NAME = "web-lockouts.json"
 
 
+#: what each change of a user did, in the log and the users audit log (the page's and `moi user`'s)
+DONE = {"add": "added", "change": "changed", "remove": "removed", "disable": "disabled", "enable": "enabled"}
+#: the append-only log of user changes, in the state directory: the users page and `moi user` write it
+USERS_AUDIT_FILE = "users-audit.log"
+
+
 def throttled_words(seconds: float, source: str, until: str) -> str:
     """What a login refused by a lockout is told (not "wrong password": the password was not even tried);
     ``until``: when the lockout ends, as the pages write a time."""
@@ -416,3 +422,16 @@ class Guard:
         if not csrf or not hmac.compare_digest(csrf.encode(), s.csrf.encode()):
             return 403, "missing or wrong CSRF token: reload the page and try again"
         return None
+
+
+def audit_users(log_path: str | Path, who: str, action: str, name: str, before: User | None, after: User | None,
+                when: str) -> str:
+    """Append one line to the users audit log (``when`` ISO time, who, action, user, role and state: before →
+    after; a new password is said, never written) and return it; the log is only ever appended to."""
+    def state(u: User | None) -> str:
+        return "–" if u is None else f"{u.role}{' disabled' if u.disabled else ''}"
+    pw = "; new password" if before is not None and after is not None and before.password != after.password else ""
+    line = f"{when}\t{who}\t{action}\t{name}\t{state(before)} → {state(after)}{pw}\n"
+    with open(log_path, "a", encoding="utf-8") as f:
+        f.write(line)
+    return line

@@ -12,6 +12,7 @@ from typing import Any
 from aiohttp import web
 
 from service.core import vocabulary as V
+from service.parts.calibration import uncalibrated
 from service.publish.payload import stored_result
 from service.states import STATES
 
@@ -35,15 +36,36 @@ def _calibration(app: Any) -> dict[str, Any] | None:
     return calibration
 
 
-def _mode(open_part: dict[str, Any] | None, tile: Any, part_id: str | None, started: float) -> str:
-    """What the operator's panel shows big: the set's progress, the verdict, or ready for the next part."""
+def _mode(open_part: dict[str, Any] | None, tile: Any, part_id: str | None, started: float,
+          done_set: dict[str, Any] | None = None) -> str:
+    """What the operator's panel shows big: the set's progress, the verdict, a finished tensor set, or ready for
+    the next part."""
     # the verdict is shown big only for the part that owns it: none in progress, no other part ID set, and
     # finished since the daemon started (a restart forgets the part in hand: an older verdict is another part's)
     if open_part and open_part.get("done"):
         return "progress"
+    if done_set is not None:  # a tensor set finished last: its part's, not an older part's of another recipe
+        mine = done_set["finished_at"] >= started and (not part_id or part_id == done_set.get("part_id"))
+        return "set_done" if mine else "ready"
     if tile is not None and tile.finished_at >= started and (not part_id or part_id == tile.part_id):
         return "verdict"
     return "ready"
+
+
+def _done_set(store: Any, tile: Any) -> dict[str, Any] | None:
+    """The latest stored tensor set when it finished after the latest part (the last thing finished), else None:
+    its part, recipe, how it ended (complete, failed, aborted) and its flags."""
+    latest = store.tensor_sets(1) if store is not None else []
+    if not latest or latest[0].get("finished_at") is None:
+        return None
+    s = latest[0]
+    if tile is not None and tile.finished_at > s["finished_at"]:
+        return None
+    tensor = s.get("tensor") or {}
+    return {"uuid": s.get("uuid"), "part_id": s.get("part_id"), "recipe": s.get("recipe"),
+            "status": str(s.get("status") or "–"), "flags": list(tensor.get("flags") or ()),
+            "error": s.get("error"), "finished_at": s["finished_at"],
+            "measured": sum(1 for v in (s.get("releases") or {}).values() if v), "skipped": len(s.get("skipped") or ())}
 
 
 class HomePages(Family):
@@ -68,17 +90,19 @@ class HomePages(Family):
         left = None
         if open_part and (open_part.get("part_id") != part_id or open_part.get("recipe") != recipe.get("name")):
             left, open_part = open_part, None  # another part's: the next release abandons it
-        mode = _mode(open_part, tile, part_id, pages.live.started)
+        done_set = _done_set(store, tile)
+        mode = _mode(open_part, tile, part_id, pages.live.started, done_set)
+        calibration = _calibration(self.app)
         return {"tile": tile, "tile_view": tile_view, "tile_unit": tile_unit, "counts": counts,
                 "tile_places": Q.places((tile_view or {}).get("recipe"), tile_unit, (tile_view or {}).get("U")),
                 "why": Q.judgement(tile_view, tile_unit) if tile_view else None,
                 "tile_band": Q.band(tile_view["recipe"], tile_view.get("value"), tile_view.get("U"),
                                     tile_unit) if tile_view else None,
-                "mode": mode, "part_id": part_id, "recipe": live.get("recipe"),
+                "mode": mode, "part_id": part_id, "recipe": live.get("recipe"), "done_set": done_set,
                 "repeat": bool(tile is not None and part_id and part_id == tile.part_id and mode == "verdict"),
                 "shift": shift.strftime("%H:%M"), "strip": parts, "open_part": open_part, "left": left,
                 "next_release": live.get("release_next"), "blocked": pages.blocked(),
-                "calibration": _calibration(self.app), "last": last,
+                "calibration": calibration, "uncalibrated": uncalibrated(calibration), "last": last,
                 "last_view": Q.part_view(last.payload, stored_result(last.payload)) if last else None,
                 "last_unit": pages.unit(last.payload if last else None)}
 

@@ -18,6 +18,7 @@ from aiohttp import web
 
 from service import __version__
 from service.core import vocabulary as V
+from service.parts import calibration as calibration_rule
 from service.parts.recipes import PART_ID_LENGTH
 from service.states import vocabulary
 
@@ -243,6 +244,10 @@ class Pages:
         calibration = block["calibration"]
         check = calibration.get("check_standard") or {}
         what, do = [], []
+        if block.get("uncalibrated"):
+            words = calibration_rule.UNCALIBRATED
+            what.append(f"{words[0].upper()}{words[1:]}, and this appliance's set-up requires one.")
+            do.append("calibrate the rig")
         if block["expired"]:
             what.append(f"The rig's calibration expired on {calibration.get('valid_until') or '–'}.")
             do.append("calibrate the rig")

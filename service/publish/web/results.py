@@ -14,6 +14,7 @@ from aiohttp import web
 from measurement.flags import FLAGS
 from service.errors import InputFileError
 from service.names import content_disposition
+from service.parts.calibration import uncalibrated
 from service.publish.dfq import ENCODING
 from service.publish.payload import stored_result
 
@@ -54,7 +55,9 @@ class ResultPages(Family):
         return {"m": m, "p": p, "r": r, "unit": unit, "v": view, "band": Q.band(view["recipe"], view.get("value"),
                                                                            view.get("U"), unit),
                 "places": Q.places(view["recipe"], unit, view.get("U") or view.get("std")),
-                "why": Q.judgement(view, unit) if view["kind"] == "part" else None}
+                "why": Q.judgement(view, unit) if view["kind"] == "part" else None,
+                # measured on a rig without a calibration record (said by the one rule), of a stored result alone
+                "uncalibrated": uncalibrated(p["calibration"]) if m.status == "ok" and "calibration" in p else None}
 
     async def result(self, request: web.Request) -> web.Response:
         m = self.pages.measurement(request.match_info["key"])

@@ -17,6 +17,7 @@ from aiohttp import web
 from measurement.errors import VisionError
 from service import __version__
 from service.errors import InputFileError
+from service.parts.calibration import uncalibrated
 from service.settings import sensor_registry as sensors
 
 from .. import quality as Q
@@ -38,51 +39,128 @@ def mask(obj: Any) -> Any:
     return obj
 
 
-#: keys whose values name a file or a folder on the appliance: shown only to someone logged in
-PATH_WORDS = ("file", "dir", "path", "port_name", "device")
+#: keys whose values name a file or a folder on the appliance (besides the settings declared as paths): shown only
+#: to someone logged in
+PATH_WORDS = ("file", "dir", "directory", "path", "source")
+#: the tables of the running configuration, in the order and with the titles of the page; the first ones open
+TITLES = {"": "Appliance", "rig": "Rig", "recipes": "Recipes", "simulation": "Simulated rig", "hardware": "Hardware",
+          "sequencer": "Sequencer", "identification": "Identification", "modbus": "Modbus", "web": "Web page",
+          "mqtt": "MQTT", "opcua": "OPC UA", "sparkplug": "Sparkplug B"}
+OPEN = ("", "rig", "recipes")
+#: the appliance's own keys at the top of its configuration, as the page names them
+TOP_LABELS = {"source": "configuration file", "device_id": "device ID", "state_dir": "state directory",
+              "rig_path": "rig file", "simulated": "simulated rig"}
+#: the units the settings' docs do not end with (the one table of them; the others are read from the docs,
+#: the rig file's from ``measurement.rig.RIG_UNITS``, an effect's from its parameters)
+UNITS = {("identification", "min_swings"): "swings", ("identification", "outlier_sigma"): "robust σ",
+         ("identification", "robust_scale"): "robust σ", ("identification", "gap_periods"): "swing periods",
+         ("hardware", "timeout"): "s", ("hardware", "counts_per_turn"): "counts per turn",
+         ("modbus", "baudrate"): "Bd", ("hardware", "baudrate"): "Bd", ("rig", "mass"): "kg"}
+#: what a setting's doc may end with as its unit ("…, s", "…, Hz of simulated time")
+UNIT_WORDS = ("s", "ms", "rad", "rad/s", "kg·m²", "kg", "m", "Hz", "N·m/rad", "m/s²", "ppm", "degrees", "px",
+              "bits per turn", "V", "%")
 
 
-def _words(v: Any) -> str:
-    """A set-up value as a person reads it: yes/no, "not set", numbers without exponents, lists joined."""
+Rows = list[tuple[str, str]]
+#: the configuration file's tables and their keys as declared (``ApplianceView.settings_schema``)
+Schema = Mapping[str, Mapping[str, Any]]
+
+
+def unit_in_doc(doc: str) -> str | None:
+    """The unit a setting's doc says its value is in: its last comma-separated part (parenthesised notes left out)
+    that is a unit, or starts with one ("Hz of simulated time"); None when it says none."""
+    import re
+
+    plain = re.sub(r"\([^()]*\)", "", doc)
+    for part in reversed([p.strip() for p in plain.split(",")]):
+        if part in UNIT_WORDS or part.split(" of ")[0] in UNIT_WORDS and " of " in part:
+            return part.replace("degrees", "°")
+    return None
+
+
+def _unit(schema: Schema, table: str, path: tuple[str, ...]) -> str | None:
+    """The unit of the setting at ``path`` in ``table`` (None: a count, a name, a yes/no, or not known)."""
+    from measurement.effects import EFFECTS
+    from measurement.rig import RIG_UNITS
+
+    key = path[-1]
+    if table == "rig":
+        return RIG_UNITS.get(key)
+    if table == "simulation" and len(path) == 3 and path[0] == "effects" and path[1] in EFFECTS:
+        for prm in EFFECTS[path[1]].parameters:
+            if key in (prm.physical, prm.name):
+                return prm.physical_unit if key == prm.physical else prm.unit
+    keys = schema.get(".".join((table, *path[:-1])), {})
+    declared = keys[key].doc if key in keys else ""
+    return unit_in_doc(declared) or UNITS.get((table, key))
+
+
+def _is_path(schema: Schema, table: str, path: tuple[str, ...], v: Any) -> bool:
+    """Whether a setting names a file, a folder or a device of the appliance: declared so, named so, or written
+    as one."""
+    keys = schema.get(".".join((table, *path[:-1])) if table else "device", {})
+    key = path[-1]
+    declared = key in keys and keys[key].kind in ("path", "videodevice")
+    return bool(v) and (declared or any(w in PATH_WORDS for w in key.lower().split("_"))
+                        or isinstance(v, str) and v.startswith(("/", "~", "./", "../")))
+
+
+def _words(v: Any, unit: str | None = None) -> str:
+    """A set-up value as a person reads it: yes/no, "not set", numbers without exponents and with their unit, lists
+    joined."""
     if v is None:
         return "not set"
     if isinstance(v, bool):
         return "yes" if v else "no"
     if isinstance(v, (int, float)):
-        return Q.number(v, ".7g")
+        return Q.number(v, ".7g") + (f" {unit}" if unit else "")
     if isinstance(v, (list, tuple)):
-        return ", ".join(_words(x) for x in v) or "none"
+        return ", ".join(_words(x, unit) for x in v) or "none"
     return str(v)
 
 
-def setup_words(config: Mapping[str, Any], *, shown_paths: bool) -> list[tuple[str, list[tuple[str, str]]]]:
-    """The running configuration as (section, [(setting, value in words)]) for the set-up page: nested tables
-    flattened to "table › key", secrets already masked; without a login, paths are not shown."""
-    out: list[tuple[str, list[tuple[str, str]]]] = []
 
-    def walk(prefix: str, d: Mapping[str, Any], rows: list[tuple[str, str]]) -> None:
-        for k, v in d.items():
-            label = f"{prefix} › {k}" if prefix else str(k)
-            label = label.replace("_", " ")
-            if isinstance(v, Mapping):
-                walk(label, v, rows)
-            elif isinstance(v, (list, tuple)) and v and all(isinstance(x, Mapping) for x in v):
-                for i, x in enumerate(v, 1):
-                    walk(f"{label} {i}", x, rows)
-            elif not shown_paths and v and any(w in str(k).lower() for w in PATH_WORDS):
-                rows.append((label, "(shown after logging in)"))
-            else:
-                rows.append((label, _words(v)))
 
-    for section, d in config.items():
-        rows: list[tuple[str, str]] = []
-        if isinstance(d, Mapping):
-            walk("", d, rows)
+def _rows(schema: Schema, table: str, d: Mapping[str, Any], shown_paths: bool, path: tuple[str, ...] = ()) -> Rows:
+    """One table's settings as (label, value in words): nested tables flattened to "table › key" (a rig file's own
+    [rig] table to its keys), lists of tables numbered."""
+    rows: Rows = []
+    for k, v in d.items():
+        at = (*path, str(k))
+        label = " › ".join(p for p in at if not (table == "rig" and p == "rig")).replace("_", " ")
+        if isinstance(v, Mapping):
+            rows += _rows(schema, table, v, shown_paths, at)
+        elif isinstance(v, (list, tuple)) and v and all(isinstance(x, Mapping) for x in v):
+            for i, x in enumerate(v, 1):
+                rows += [(f"{label} {i} › {sub}", text) for sub, text in _rows(schema, table, x, shown_paths)]
+        elif not shown_paths and _is_path(schema, table, at, v):
+            rows.append((label, "(shown after logging in)"))
         else:
-            rows.append((str(section), _words(d) if shown_paths or not any(w in str(section) for w in PATH_WORDS)
-                         else "(shown after logging in)"))
-        out.append((str(section).replace("_", " "), rows))
-    return out
+            rows.append((label, _words(v, _unit(schema, table, at))))
+    return rows
+
+
+def setup_words(config: Mapping[str, Any], schema: Schema, *, shown_paths: bool) -> list[tuple[str, Rows, bool]]:
+    """The running configuration for the set-up page, grouped: (title, [(setting, value in words with its unit)],
+    open at first). The appliance's own keys first, with the tables not in use named there; secrets already masked;
+    ``schema``: the file's tables as declared (their units, their paths); without a login, no file, folder or
+    device path."""
+    top: Rows = []
+    off: list[str] = []
+    groups: dict[str, Rows] = {}
+    for section, d in config.items():
+        if isinstance(d, Mapping):
+            groups[section] = _rows(schema, section, d, shown_paths)
+        elif section in TITLES and d is None:
+            off.append(TITLES[section])
+        else:
+            hidden = not shown_paths and _is_path(schema, "", (section,), d)
+            top.append((TOP_LABELS.get(section, section.replace("_", " ")),
+                        "(shown after logging in)" if hidden else _words(d)))
+    if off:
+        top.append(("not in use", ", ".join(off)))
+    order = [t for t in TITLES if t in groups] + [t for t in groups if t not in TITLES]
+    return [(TITLES[""], top, True)] + [(TITLES.get(t, t.replace("_", " ")), groups[t], t in OPEN) for t in order]
 
 
 class SetUpPages(Family):
@@ -110,15 +188,20 @@ class SetUpPages(Family):
         return out
 
     async def api_health(self, request: web.Request) -> web.Response:
-        return web.json_response(self.health())
+        health = self.health()
+        if health["disk"] is not None and not self.pages.logged_in(request):
+            health["disk"].pop("path")  # no folder of the appliance to a visitor, as on the set-up page
+        return web.json_response(health)
 
     async def setup(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
         devices = self.app.devices
         readable = devices is not None and getattr(devices.sensor, "read_position", None) is not None
         logged_in = self.pages.logged_in(request)
         return self.pages.page(request, "setup.html", status=status, title="Set-up", health=self.health(),
-                               config=setup_words(mask(self.app.config.to_dict()), shown_paths=logged_in),
+                               config=setup_words(mask(self.app.config.to_dict()), self.app.settings_schema(),
+                                                  shown_paths=logged_in),
                                sensor=sensors.running(self.app.config).LABEL, readable=readable,
+                               uncalibrated=uncalibrated(self.app.calibration_state()),
                                web=self.server.stats(), **self._camera_setup(request), **ctx)
 
     async def api_angle(self, request: web.Request) -> web.Response:

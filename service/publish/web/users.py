@@ -8,12 +8,12 @@ import asyncio
 import datetime as dt
 import hashlib
 import logging
-from pathlib import Path
 from typing import Any, Mapping
 
 from aiohttp import web
 
 from .auth import (
+    DONE,
     GUESS_DELAY,
     LOCKOUT_TIME,
     LOCKOUT_WINDOW,
@@ -22,8 +22,10 @@ from .auth import (
     MIN_PASSWORD,
     ROLES,
     SOURCE_WRONG,
+    USERS_AUDIT_FILE,
     Guard,
     User,
+    audit_users,
     check_user,
     hash_password,
     save_users,
@@ -32,29 +34,10 @@ from .pages import Family, Refused, read_form
 
 log = logging.getLogger("moi.web")
 
-#: what each action did, in the log and the audit log
-DONE = {"add": "added", "change": "changed", "remove": "removed", "disable": "disabled", "enable": "enabled"}
-#: the append-only log of user changes, in the state directory
-USERS_AUDIT_FILE = "users-audit.log"
-
-
 def users_version(users: Mapping[str, User]) -> str:
     """A short digest of ``users`` as they are now: a form opened on another version was opened before a change."""
     text = "\n".join(f"{u.name}\t{u.role}\t{u.password}\t{u.disabled}" for u in users.values())
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
-
-
-def audit_users(log_path: str | Path, who: str, action: str, name: str, before: User | None, after: User | None,
-                when: str) -> str:
-    """Append one line to the users audit log (``when`` ISO time, who, action, user, role and state: before →
-    after; a new password is said, never written) and return it; the log is only ever appended to."""
-    def state(u: User | None) -> str:
-        return "–" if u is None else f"{u.role}{' disabled' if u.disabled else ''}"
-    pw = "; new password" if before is not None and after is not None and before.password != after.password else ""
-    line = f"{when}\t{who}\t{action}\t{name}\t{state(before)} → {state(after)}{pw}\n"
-    with open(log_path, "a", encoding="utf-8") as f:
-        f.write(line)
-    return line
 
 
 def _known(users: Mapping[str, User], form: Mapping[str, Any]) -> str:
