@@ -107,12 +107,17 @@ class HomePages(Family):
                 "last_unit": pages.unit(last.payload if last else None)}
 
     async def _summary(self) -> dict[str, Any]:
-        """``summary()`` with the running tensor set's orientation to mount (read on the main loop, which owns it)."""
+        """``summary()`` with the running tensor set's orientation to mount, or the running Type 1 study's count (read on
+        the main loop, which owns them)."""
         progress = await asyncio.wrap_future(self.app.call_soon(self.app.set_progress))
+        study = await asyncio.wrap_future(self.app.call_soon(self.app.study_progress))
         s = self.summary()
         if progress is not None and progress.get("status") == "running" and progress.get("orientation"):
             o = progress["orientation"]
             s.update(mode="set", set=progress, drawing=axes_drawing(o["axis"], o.get("offset"), size=150))
+        elif study is not None and study.get("status") == "running":
+            # a study's releases are not parts: Home says whose they are, not the last part's verdict
+            s.update(mode="study", study=study)
         return s
 
     async def home(self, request: web.Request) -> web.Response:

@@ -160,7 +160,11 @@ def test_an_abort_through_the_page_keeps_the_releases(tmp_path, appliance_factor
     status, body = _start(c, auth, recipe="old")  # a running study is not cut short by another recipe's start
     assert status == 409 and "a Type 1 study of ref runs (0 of 25)" in body["error"] and app.parts.recipe.name == "ref"
     _measure_until(running, _done(2))
+    # Home names the study and its count, not a part's verdict: the study's releases are not parts
+    home = c.request("/")[2].decode()
+    assert "TYPE 1 STUDY" in home and _text(home, "study-count") == "3 of 25" and 'id="tile"' not in home
     assert c.json("/api/type1/abort", method="POST", headers=auth)[0] == 200
+    assert "TYPE 1 STUDY" not in c.request("/")[2].decode()
     rec = c.json("/api/type1")[1]["latest"]
     assert rec["status"] == "aborted" and len(rec["releases"]) == 2 and rec["study"] is None
     assert {m.uuid for m in _ok(app.store)} == set(rec["releases"])
