@@ -19,8 +19,10 @@ from service.publish.web.auth import (
     ROLES,
     USERS_AUDIT_FILE,
     User,
+    admins_left,
     audit_users,
     check_user,
+    has_admin,
     hash_password,
     read_users,
     save_users,
@@ -117,10 +119,15 @@ def run(args: argparse.Namespace) -> int:
     folder = audit_dir(args, path)
     before = users.get(name)
     after = _changed(args, users, name, path)
+    had_admin = has_admin(users)
     if after is None:
         del users[name]
     else:
         users[name] = after
+    try:
+        admins_left(had_admin, users)
+    except ValueError as exc:
+        raise InputFileError(f"{exc} (`moi user add NAME --role admin`); nothing changed in {path}") from None
     save_users(path, users)
     try:
         who = f"cli:{getpass.getuser()}"

@@ -1,4 +1,5 @@
-"""`moi user`: "add" never overwrites a user that exists (the users page's rule), "change" does what it says, and
+"""`moi user`: "add" never overwrites a user that exists and the last enabled admin stays one (the users page's
+rules), "change" does what it says, and
 every change is a line of the users audit log the page writes, in the state directory."""
 
 from __future__ import annotations
@@ -26,6 +27,11 @@ def test_add_refuses_an_existing_name_and_change_changes_it_each_audited(tmp_pat
     assert "user 'olga' exists" in err and "moi user change olga" in err
     assert users.read_bytes() == before
     assert read_users(users)["olga"].role == "admin"
+    # the last enabled admin is not demoted nor removed (the page's rule): refused, the file untouched
+    assert _user(monkeypatch, "change", "olga", "--role", "quality", "--keep-password", *common) == 2
+    assert "last enabled admin" in capsys.readouterr().err and users.read_bytes() == before
+    assert _user(monkeypatch, "remove", "olga", *common) == 2 and users.read_bytes() == before
+    assert _user(monkeypatch, "add", "ida", "--role", "admin", *common, password="ida-password-5") == 0
     # change: the role alone, then a new password
     assert _user(monkeypatch, "change", "olga", "--role", "quality", "--keep-password", *common) == 0
     assert read_users(users)["olga"].role == "quality"
@@ -40,7 +46,7 @@ def test_add_refuses_an_existing_name_and_change_changes_it_each_audited(tmp_pat
     lines = (state / USERS_AUDIT_FILE).read_text(encoding="utf-8").splitlines()
     # one line per change, none for a refusal: when, who, what, whom, before → after; a new password said, not written
     assert [line.split("\t")[2:] for line in lines] == [
-        ["added", "olga", "– → admin"], ["changed", "olga", "admin → quality"],
+        ["added", "olga", "– → admin"], ["added", "ida", "– → admin"], ["changed", "olga", "admin → quality"],
         ["changed", "olga", "quality → quality; new password"], ["removed", "olga", "quality → –"]]
     assert all(line.split("\t")[1].startswith("cli") for line in lines)
     assert "password-" not in (state / USERS_AUDIT_FILE).read_text(encoding="utf-8")

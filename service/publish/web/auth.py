@@ -39,6 +39,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Mapping
 
 from service.errors import StartupError
 from service.names import NAMES, name_problem
@@ -178,6 +179,18 @@ def allowed(role: str, action: str) -> bool:
     """Whether ``role`` may do ``action`` (see the module docstring)."""
     need = LEAST_ROLE.get(action, "operator")
     return role in ROLES and ROLES.index(role) >= ROLES.index(need)
+
+
+def has_admin(users: Mapping[str, User]) -> bool:
+    """Whether an enabled admin is among ``users``."""
+    return any(u.role == "admin" and not u.disabled for u in users.values())
+
+
+def admins_left(before: bool, users: Mapping[str, User]) -> None:
+    """The rule the users page and ``moi user`` share: a change never leaves the file without an enabled admin
+    that had one (``before``), so that users can still be managed by name (ValueError says what to do)."""
+    if before and not has_admin(users):
+        raise ValueError("the last enabled admin cannot be demoted, disabled or removed: make another admin first")
 
 
 def read_users(path: str | os.PathLike) -> dict[str, User]:

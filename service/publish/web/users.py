@@ -25,8 +25,10 @@ from .auth import (
     USERS_AUDIT_FILE,
     Guard,
     User,
+    admins_left,
     audit_users,
     check_user,
+    has_admin,
     hash_password,
     save_users,
 )
@@ -45,15 +47,6 @@ def _known(users: Mapping[str, User], form: Mapping[str, Any]) -> str:
     if name not in users:
         raise ValueError(f"no user {name!r}")
     return name
-
-
-def _admins(users: Mapping[str, User]) -> bool:
-    return any(u.role == "admin" and not u.disabled for u in users.values())
-
-
-def _admins_left(before: bool, users: Mapping[str, User]) -> None:
-    if before and not _admins(users):
-        raise ValueError("the last enabled admin cannot be demoted, disabled or removed: make another admin first")
 
 
 def _set(users: dict[str, User], action: str, form: Mapping[str, Any]) -> str:
@@ -75,7 +68,7 @@ def _set(users: dict[str, User], action: str, form: Mapping[str, Any]) -> str:
 
 def _change(users: dict[str, User], action: str, form: Mapping[str, Any], guard: Guard) -> str:
     """Apply ``action`` to ``users`` in place; the user's name (ValueError: what was wrong)."""
-    had_admin = _admins(users)
+    had_admin = has_admin(users)
     if action == "remove":
         name = _known(users, form)
         if str(form.get("confirm") or "") != name:
@@ -91,7 +84,7 @@ def _change(users: dict[str, User], action: str, form: Mapping[str, Any], guard:
         name = _set(users, action, form)
     else:
         raise ValueError("action: expected add, change, disable, enable or remove")
-    _admins_left(had_admin, users)
+    admins_left(had_admin, users)
     return name
 
 
