@@ -89,6 +89,7 @@ class Views:
         r.add_get("/recipes", recipes.recipes)
         r.add_post("/recipes", recipes.recipes_change)
         r.add_get("/calibration", calibration.calibration)
+        r.add_get("/calibration/banner", calibration.banner)
         r.add_get("/users", users.users)
         r.add_post("/users", users.users_change)
         r.add_get("/api/health", setup.api_health)
