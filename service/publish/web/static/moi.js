@@ -207,7 +207,7 @@ var moi = (function () {
       return true;
     }
     function connect() {
-      es = new EventSource("/events");
+      es = new EventSource(hooks.tick ? "/events" : "/events?samples=no");  // the samples only where the swing is drawn
       es.addEventListener("state", function (e) { var s = JSON.parse(e.data); if (shared(s) && hooks.state) { hooks.state(s); } });
       es.addEventListener("tick", function (e) {
         var s = JSON.parse(e.data);
