@@ -220,8 +220,12 @@ var moi = (function () {
         if (es.readyState === EventSource.CLOSED) { setTimeout(connect, 2000); }  // refused: the browser gives up
       };
     }
+    // a page left (or kept by the browser for "back") gives its stream back at once: the appliance's slots for
+    // streams are few, and one held by a page nobody sees refuses the next page its own
+    window.addEventListener("pagehide", function () { if (es) { es.close(); es = null; } });
+    window.addEventListener("pageshow", function (e) { if (e.persisted && !es) { connect(); } });
     connect();
-    return {lost: function () { return lostAt !== null; }};
+    return {unreachable: function () { return document.body.getAttribute("data-offline") === "1"; }};
   }
   // a page with nothing live of its own: the shared part alone
   function page() { live({}); }
@@ -259,7 +263,7 @@ var moi = (function () {
       now.appendChild(p); now.appendChild(n);
     }
     measure.addEventListener("click", function () {
-      if (pressing || view.lost()) { return; }  // one press at a time; none while the appliance is unreachable
+      if (pressing || view.unreachable()) { return; }  // one press at a time; none while the appliance is unreachable
       var b = $("blocked");
       if (measure.getAttribute("aria-disabled") === "true" && b) { say(b.textContent, true); return; }
       var rep = measure.getAttribute("data-repeat");
