@@ -434,3 +434,26 @@ def test_the_reviews_figures_as_the_browser_shows_them(browser, shop):  # noqa: 
     assert lines[-1] == ["web", "rotor-g", "g.toml", "refused: the file changed since the form was opened → nothing "
                                                      "written"], lines
     assert lines[-2][0] == "web:quinn" and len(lines) == 2
+
+
+def test_a_page_left_gives_its_live_stream_back(browser, appliance_factory, tmp_path):  # noqa: F811
+    """Going from page to page, more pages than one address may hold streams: none is refused its stream (the
+    browser keeps a page left for "back", and its stream with it, unless the page gives it back)."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    from tests.service.conftest import wait_until
+
+    running = appliance_factory(appliance_doc(tmp_path / "state", web={"enabled": True}))
+    web = running.app.web
+    wait = WebDriverWait(browser, 60, poll_frequency=0.05)
+    browser.set_window_size(390, 844)
+    per_client = web.settings.max_streams_per_client
+    for i in range(2 * per_client + 1):
+        _open(browser, wait, web.url + ("history", "calibration", "")[i % 3])
+    assert web.streams.refused == 0
+    wait_until(lambda: web.streams.open == 1, 30, what="the open page's stream alone")
+    browser.back()  # the page before, shown again (from the browser's cache): its stream opened again
+    wait.until(lambda d: d.execute_script("return location.pathname") == "/calibration")
+    browser.execute_script("document.body.removeAttribute('data-live')")
+    wait.until(lambda d: _body(d, "data-live") == "1")  # a tick arrived
+    assert web.streams.refused == 0
