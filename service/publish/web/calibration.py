@@ -31,7 +31,7 @@ def _paging(query: Any) -> tuple[int, int | None]:
 
 
 class CalibrationPages(Family):
-    """``/calibration``."""
+    """``/calibration`` and its banner."""
 
     async def calibration(self, request: web.Request) -> web.Response:
         """Each rig's calibration (date, due date, stiffness, the references it rests on), its history (every
@@ -56,7 +56,13 @@ class CalibrationPages(Family):
         checks, check_chart = check_standards(self.pages, {}, unit)
         return self.pages.page(request, "calibration.html", title="Calibration", rows=rows, unit=unit,
                                checks=checks[-20:][::-1], check_chart=check_chart,
-                               state=self.app.calibration_state(), blocked=self.pages.blocked())
+                               state=self.app.calibration_state())
+
+    async def banner(self, request: web.Request) -> web.Response:
+        """The calibration's block as every page but Home shows it (``_banner.html``, empty when Measure may): an
+        open page swaps it in when the live stream says the block came or went."""
+        html = self.pages.env.get_template("_banner.html").render(blocked=self.pages.blocked())
+        return web.Response(text=html, content_type="text/html", headers={"Cache-Control": "no-store"})
 
     def _reproducibility(self, cal: Any) -> Reproducibility | None:
         """The set-up's rig's scatter of ω_n between releases, pooled from the store's repeat releases since its

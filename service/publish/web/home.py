@@ -134,7 +134,8 @@ class HomePages(Family):
 
     # --- the live stream ----------------------------------------------------------------------------
     async def events(self, request: web.Request) -> web.StreamResponse:
-        """Server-sent events: ``state`` on every transition, ``tick`` every 0.25 s (progress, new samples); in a
+        """Server-sent events: ``state`` on every transition, ``tick`` every 0.25 s (progress, new samples: none with
+        ``?samples=no``); in a
         slot of its own (``streams``), for ``stream_lifetime`` at most, or until it yields its slot to another
         address's viewer or to a logged-in user's stream."""
         client = request.remote or "?"
@@ -157,7 +158,9 @@ class HomePages(Family):
         # the connection closes with the stream: an ended stream never holds its descriptor for a keep-alive
         resp.force_close()
         await resp.prepare(request)
-        cursor: dict[str, Any] = {}
+        # a page that draws no swing (every page but Home) is sent no samples: a capture's are not written out
+        # for it four times a second
+        cursor: dict[str, Any] | None = None if request.query.get("samples") == "no" else {}
         loop = asyncio.get_running_loop()
         try:
             await resp.write(b"retry: 1000\n\n")

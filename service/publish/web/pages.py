@@ -177,7 +177,7 @@ class Pages:
             user=session.user if session else None, role=session.role if session else None,
             named_users=bool(self.server.guard.users),
             csrf=session.csrf if session else login_csrf, path=request.path_qs,
-            simulated=self.app.config.simulated, boot=self.live.boot, **ctx)
+            simulated=self.app.config.simulated, boot=self.live.boot, measure_block=self.blocked, **ctx)
         resp = web.Response(text=html, status=status, content_type="text/html",
                             headers={"Cache-Control": "no-store", "X-Content-Type-Options": "nosniff",
                                      "X-Frame-Options": "DENY", "Referrer-Policy": "same-origin"})

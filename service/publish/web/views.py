@@ -99,6 +99,7 @@ class Views:
         r.add_get("/calibration", calibration.calibration)
         r.add_get("/grr", grr.grr)
         r.add_get("/grr/report.pdf", grr.grr_pdf)
+        r.add_get("/calibration/banner", calibration.banner)
         r.add_get("/users", users.users)
         r.add_post("/users", users.users_change)
         r.add_get("/api/health", setup.api_health)

@@ -120,14 +120,119 @@ var moi = (function () {
     t.content.querySelectorAll("[data-part]").forEach(function (el) { var old = $(el.id); if (old) { old.replaceWith(el); } });
   }
 
+  // --- every page: the live stream, the daemon's life, the appliance's reachability and a calibration block --
+  var RESTARTED = "moi-restarted";  // what a restart took, kept over the reload that follows it
+  // said once, on the page the new daemon served after a restart
+  function tellRestart() {
+    var told = window.sessionStorage.getItem(RESTARTED), n = $("restarted");
+    if (!told || !n) { return; }
+    window.sessionStorage.removeItem(RESTARTED);
+    n.textContent = told; n.hidden = false; n.setAttribute("data-restarted", "1");
+  }
+  // the calibration's banner as the server now has it (every page but Home, whose banner is the part in hand's)
+  // and the page's Measure refused with it
+  function banner() {
+    return fetch("/calibration/banner", {credentials: "same-origin"}).then(function (r) { return r.ok ? r.text() : null; })
+      .then(function (html) {
+        if (html === null) { return; }
+        swap(html);
+        var m = $("measure");
+        if (!m) { return; }
+        if ($("blocked")) { m.setAttribute("aria-disabled", "true"); m.setAttribute("aria-describedby", "blocked"); }
+        else { m.removeAttribute("aria-disabled"); m.removeAttribute("aria-describedby"); }
+      });
+  }
+  // the live stream every page keeps open: a message of another daemon's life reloads the page and says what was
+  // lost; no stream for a while and no answer greys the page and disables its actions until the appliance answers
+  // again; a calibration block that comes or goes is shown at once. ``hooks``: the page's own part of it
+  // {state(s), tick(s), unreachable(), reachable(wasUnreachable), refused(refused), streamRefused(status)}
+  function live(hooks) {
+    var es = null, lostAt = null, offlineTimer = null, seen = null, refused = !!$("blocked");
+    tellRestart();
+    // the daemon restarted under the page: what it held (the part in hand, the session) is gone; said, and the
+    // page served again by the new daemon (nothing the old one showed is kept as current)
+    function restarted() {
+      var text = "The appliance restarted (seen at " + clock(new Date()) + ")";
+      var rn = seen && seen.release_next, pid = seen && seen.part_id;
+      if (pid && rn && rn.k > 1) {
+        text += ": the part in hand " + pid + " (release " + (rn.k - 1) + " of " + rn.of + " done) was not finished; set its part ID again and measure it from release 1";
+      } else if (pid) { text += ": the part ID " + pid + " is no longer set"; }
+      if ($("who")) { text += "; you were logged out: log in again"; }
+      window.sessionStorage.setItem(RESTARTED, text + ".");
+      if (es) { es.close(); }
+      window.location.reload();
+    }
+    // no stream for a while: asked whether the appliance answers at all (a stream refused for want of a slot is
+    // not an outage); a hung request counts as no answer after 2 s
+    function offline() {
+      offlineTimer = null;
+      var ask = new AbortController(), limit = setTimeout(function () { ask.abort(); }, 2000);
+      fetch("/api/state", {credentials: "same-origin", signal: ask.signal}).then(function (r) {
+        clearTimeout(limit);
+        if (lostAt && hooks.streamRefused) { hooks.streamRefused(r.status); }
+      }, function () { clearTimeout(limit); if (lostAt) { unreachable(); } });
+    }
+    // the appliance is unreachable: the page greys, every action on it is disabled (each needs the appliance),
+    // the time said
+    function unreachable() {
+      document.body.setAttribute("data-offline", "1");
+      document.querySelectorAll("button, input[type=submit]").forEach(function (b) {
+        if (!b.disabled) { b.disabled = true; b.setAttribute("data-offline-disabled", "1"); }
+      });
+      var o = $("offline");
+      o.textContent = "appliance not reachable since " + clock(lostAt) + ": " + (hooks.lostWords ||
+        "what this page shows is as it was then, and nothing can be done on it until it answers");
+      o.hidden = false;
+      if (hooks.unreachable) { hooks.unreachable(); }
+    }
+    function online() {
+      if (offlineTimer) { clearTimeout(offlineTimer); offlineTimer = null; }
+      if (!lostAt) { return; }
+      var was = document.body.getAttribute("data-offline") === "1";
+      lostAt = null; document.body.removeAttribute("data-offline"); $("offline").hidden = true;
+      document.querySelectorAll("[data-offline-disabled]").forEach(function (b) {
+        b.disabled = false; b.removeAttribute("data-offline-disabled");
+      });
+      if (hooks.reachable) { hooks.reachable(was); }
+    }
+    // what every page does with a message; false: the page is being served again
+    function shared(s) {
+      if (restartedUnder(s)) { restarted(); return false; }
+      online();
+      if (s.release_next !== undefined) { seen = s; }
+      if (s.measure_refused !== undefined && !!s.measure_refused !== refused) {
+        refused = !!s.measure_refused;
+        (hooks.refused || banner)(refused);
+      }
+      return true;
+    }
+    function connect() {
+      es = new EventSource(hooks.tick ? "/events" : "/events?samples=no");  // the samples only where the swing is drawn
+      es.addEventListener("state", function (e) { var s = JSON.parse(e.data); if (shared(s) && hooks.state) { hooks.state(s); } });
+      es.addEventListener("tick", function (e) {
+        var s = JSON.parse(e.data);
+        document.body.setAttribute("data-live", "1");  // connected: every transition from now on is shown
+        if (shared(s) && hooks.tick) { hooks.tick(s); }
+      });
+      es.onerror = function () {
+        // a stream also ends at its lifetime and is opened again within a second: unreachable only after a grace
+        if (!lostAt) { lostAt = new Date(); offlineTimer = setTimeout(offline, 2500); }
+        if (es.readyState === EventSource.CLOSED) { setTimeout(connect, 2000); }  // refused: the browser gives up
+      };
+    }
+    // a page left (or kept by the browser for "back") gives its stream back at once: the appliance's slots for
+    // streams are few, and one held by a page nobody sees refuses the next page its own
+    window.addEventListener("pagehide", function () { if (es) { es.close(); es = null; } });
+    window.addEventListener("pageshow", function (e) { if (e.persisted && !es) { connect(); } });
+    connect();
+    return {unreachable: function () { return document.body.getAttribute("data-offline") === "1"; }};
+  }
+  // a page with nothing live of its own: the shared part alone
+  function page() { live({}); }
+
   function home() {
     var swing = new Swing($("swing")), mid = null, measure = $("measure"), lastState = null, seen = null;
-    var es = null, lostAt = null, offlineTimer = null, refused = !!$("blocked"), pressing = false;
-    var told = window.sessionStorage.getItem("moi-restarted");
-    if (told) {
-      window.sessionStorage.removeItem("moi-restarted");
-      say(told, true); $("message").setAttribute("data-restarted", "1");
-    }
+    var view = null, pressing = false;
     function refresh() {
       return fetch("/home/summary", {credentials: "same-origin"}).then(function (r) { return r.ok ? r.text() : null; })
         .then(function (html) { if (html) { swap(html); syncMeasure(); } });
@@ -158,7 +263,7 @@ var moi = (function () {
       now.appendChild(p); now.appendChild(n);
     }
     measure.addEventListener("click", function () {
-      if (pressing || lostAt) { return; }  // one press at a time; none while the appliance is unreachable
+      if (pressing || view.unreachable()) { return; }  // one press at a time; none while the appliance is unreachable
       var b = $("blocked");
       if (measure.getAttribute("aria-disabled") === "true" && b) { say(b.textContent, true); return; }
       var rep = measure.getAttribute("data-repeat");
@@ -171,51 +276,7 @@ var moi = (function () {
     $("abort").addEventListener("click", function () {
       act("/api/abort");  // "aborted" is said when the sequencer says so (ABORTED), not on the request alone
     });
-    // the daemon restarted under the page: what it held (the part in hand, the session) is gone; said, and the
-    // page served again by the new daemon (never the old one's verdict as the part in hand's)
-    function restarted() {
-      var text = "The appliance restarted (seen at " + clock(new Date()) + ")";
-      var rn = seen && seen.release_next, pid = seen && seen.part_id;
-      if (pid && rn && rn.k > 1) {
-        text += ": the part in hand " + pid + " (release " + (rn.k - 1) + " of " + rn.of + " done) was not finished; set its part ID again and measure it from release 1";
-      } else if (pid) { text += ": the part ID " + pid + " is no longer set"; }
-      if ($("who")) { text += "; log in again"; }
-      window.sessionStorage.setItem("moi-restarted", text + ".");
-      if (es) { es.close(); }
-      window.location.reload();
-    }
-    // no stream for a while: asked whether the appliance answers at all (a stream refused for want of a slot is
-    // not an outage); a hung request counts as no answer after 2 s
-    function offline() {
-      offlineTimer = null;
-      var ask = new AbortController(), limit = setTimeout(function () { ask.abort(); }, 2000);
-      fetch("/api/state", {credentials: "same-origin", signal: ask.signal}).then(function (r) {
-        clearTimeout(limit);
-        if (lostAt) { $("words").textContent = "the live view is refused for now (" + r.status + "); asking again"; }
-      }, function () { clearTimeout(limit); if (lostAt) { unreachable(); } });
-    }
-    // the appliance is unreachable: the page greys, Measure is disabled, the time said
-    function unreachable() {
-      document.body.setAttribute("data-offline", "1");
-      measure.disabled = true;
-      var el = $("state"); el.textContent = "NO CONNECTION"; el.className = "state state-unreachable";
-      var text = "appliance not reachable since " + clock(lostAt) + ": nothing can be measured until it answers";
-      $("words").textContent = ""; var o = $("offline"); o.textContent = text; o.hidden = false;
-    }
-    function online() {
-      if (offlineTimer) { clearTimeout(offlineTimer); offlineTimer = null; }
-      if (!lostAt) { return; }
-      var was = document.body.getAttribute("data-offline") === "1";
-      lostAt = null; document.body.removeAttribute("data-offline"); measure.disabled = false; $("offline").hidden = true;
-      if (was) { refresh(); }  // what changed meanwhile
-    }
     function show(s) {
-      if (restartedUnder(s)) { restarted(); return; }
-      online();
-      if (s.measure_refused !== undefined && !!s.measure_refused !== refused) {
-        refused = !!s.measure_refused;
-        refresh();  // a calibration block came or went: the banner and Measure as the server now has them
-      }
       if (s.release_next !== undefined) { seen = s; }
       var el = $("state");
       el.textContent = s.state; el.className = "state state-" + s.state;
@@ -298,28 +359,27 @@ var moi = (function () {
         });
       });
     }
-    function connect() {
-      es = new EventSource("/events");
-      es.addEventListener("state", function (e) { var s = JSON.parse(e.data); if (!restartedUnder(s)) { logState(s); } show(s); });
-      es.addEventListener("tick", function (e) {
-        var s = JSON.parse(e.data);
-        document.body.setAttribute("data-live", "1");  // connected: every transition from now on is shown
+    view = live({
+      state: function (s) { logState(s); show(s); },
+      tick: function (s) {
         show(s);
         if (s.samples) {
           if (s.reset || s.measurement_id !== mid) { mid = s.measurement_id; swing.reset(s.capture_duration + (s.pre_trigger || 0)); }
           swing.add(s.samples.t, s.samples.angle);
         }
-      });
-      es.onerror = function () {
-        // a stream also ends at its lifetime and is opened again within a second: unreachable only after a grace
-        if (!lostAt) { lostAt = new Date(); offlineTimer = setTimeout(offline, 2500); }
-        if (es.readyState === EventSource.CLOSED) { setTimeout(connect, 2000); }  // refused: the browser gives up
-      };
-    }
-    connect();
+      },
+      lostWords: "nothing can be measured until it answers",
+      unreachable: function () {
+        var el = $("state"); el.textContent = "NO CONNECTION"; el.className = "state state-unreachable"; $("words").textContent = "";
+      },
+      reachable: function (was) { if (was) { refresh(); } },  // what changed meanwhile
+      refused: function () { refresh(); },  // the banner and Measure as the server now has them (the part in hand's)
+      streamRefused: function (status) { $("words").textContent = "the live view is refused for now (" + status + "); asking again"; }
+    });
   }
 
   function setup() {
+    live({});
     var b = $("snapshot-button");
     if (b) {
       b.addEventListener("click", function () {
@@ -347,15 +407,18 @@ var moi = (function () {
   // the tensor set's page: Measure and Abort, and the page as the appliance has it after each release
   function tensorSet() {
     var m = $("measure"), a = $("abort");
-    if (m) { m.addEventListener("click", function () { act("/api/measure"); }); }
+    if (m) {
+      m.addEventListener("click", function () {
+        var b = $("blocked");
+        if (m.getAttribute("aria-disabled") === "true" && b) { say(b.textContent, true); return; }
+        act("/api/measure");
+      });
+    }
     if (a) { a.addEventListener("click", function () { act("/api/abort"); }); }
-    var es = new EventSource("/events");
-    es.addEventListener("tick", function (e) { if (restartedUnder(JSON.parse(e.data))) { es.close(); window.location.reload(); } });
-    es.addEventListener("state", function (e) {
-      var s = JSON.parse(e.data);
+    live({state: function (s) {
       if (busy(s.state)) { say(s.state + ": " + (s.words || "")); }
-      if (s.state === "IDLE" && finished(s)) { es.close(); window.location.reload(); }
-    });
+      if (s.state === "IDLE" && finished(s)) { window.location.reload(); }
+    }});
   }
-  return {home: home, setup: setup, tensorSet: tensorSet, act: act, states: STATES};
+  return {home: home, setup: setup, tensorSet: tensorSet, page: page, act: act, states: STATES};
 })();

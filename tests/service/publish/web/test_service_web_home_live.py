@@ -27,6 +27,24 @@ def _first_tick(url: str) -> dict:
     raise AssertionError("the stream ended without a tick")
 
 
+def _capture_ticks(url: str, n: int) -> list[dict]:
+    """``n`` ticks of the stream at ``url`` taken during a capture, the connection closed after them."""
+    ticks = []
+    with urllib.request.urlopen(url, timeout=30) as r:
+        event = None
+        for raw in r:
+            line = raw.decode().rstrip("\n")
+            if line.startswith("event: "):
+                event = line[7:]
+            elif line.startswith("data: ") and event == "tick":
+                tick = json.loads(line[6:])
+                if tick["state"] == "CAPTURING" and tick.get("elapsed", 0) > 0:
+                    ticks.append(tick)
+                    if len(ticks) == n:
+                        return ticks
+    raise AssertionError(f"the stream ended after {len(ticks)} ticks of the capture")
+
+
 def _boot_of_page(c: Client) -> str:
     return c.request("/")[2].decode().split('name="moi-boot" content="')[1].split('"')[0]
 
@@ -83,5 +101,21 @@ def test_a_second_measure_names_the_state_it_refers_to(appliance_factory, tmp_pa
     assert status == 409, refused
     said = re.search(r"already running \((\w+)\)", refused["error"])
     assert (said is not None and STATES[said.group(1)].busy) or "already requested and starting" in refused["error"]
+    assert c.json("/api/abort", method="POST", headers=bearer)[0] == 202
+    running.wait_done(1, 30)
+
+
+def test_a_page_that_draws_no_swing_is_sent_no_samples(appliance_factory, tmp_path):
+    doc = appliance_doc(tmp_path / "state", web=ON)
+    doc["sequencer"]["capture_duration"] = 300.0
+    running = appliance_factory(doc)
+    bearer = {"Authorization": f"Bearer {Path(running.app.web.token_file).read_text().strip()}"}
+    c = Client(running.app.web.url)
+    assert c.json("/api/measure", method="POST", headers=bearer)[0] == 202
+    events = running.app.web.url + "events"
+    assert any(t.get("samples", {}).get("t") for t in _capture_ticks(events, 8))  # Home's: the swing as it arrives
+    plain = _capture_ticks(events + "?samples=no", 8)  # every other page's: the state alone
+    assert not [t for t in plain if "samples" in t]
+    assert all(t["measure_refused"] is False and t["boot"] and t["remaining"] > 0 for t in plain)
     assert c.json("/api/abort", method="POST", headers=bearer)[0] == 202
     running.wait_done(1, 30)

@@ -77,7 +77,7 @@ def test_the_open_home_page_follows_a_block_an_outage_and_a_restart(browser, app
 
     through_reload = WebDriverWait(browser, 30, poll_frequency=0.05, ignored_exceptions=(WebDriverException,))
     told = through_reload.until(lambda d: d.execute_script(
-        "var m = document.getElementById('message');"
+        "var m = document.getElementById('restarted');"
         " return m && m.getAttribute('data-restarted') === '1' ? m.innerText : null"))
     assert "The appliance restarted" in told and "SN-1006 (release 1 of 3 done) was not finished" in told, told
     assert "log in again" in told and browser.find_elements(By.ID, "login-button")
