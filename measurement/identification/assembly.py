@@ -57,14 +57,16 @@ def _periods(found: Findings, w: float, w_u: float, zeta: float) -> Periods | No
     final, rig = found.final, found.rig
     if not (math.isfinite(w) and w > 0):
         return None
+    # the small-swing period is the law's limit's, where ω_n is read at an amplitude (``measurand``)
+    limit = found.read_at.limit if found.read_at.limit is not None else w
     amplitude = swing_amplitude(final)
     at = omega_at_amplitude(final, amplitude)
     if at is not None:
-        # the final model's amplitude law, carried to the headline ω_n (the declared model's where it is the
-        # more accurate: its law of amplitude is then the same, no restoring law having been added)
-        at = (at[0] * w / found.omega_n, *at[1:])
+        # the final model's amplitude law, carried to the headline's limit (the declared model's where it is
+        # the more accurate: its law of amplitude is then the same, no restoring law having been added)
+        at = (at[0] * limit / found.omega_n, *at[1:])
     swing = final.fitted - final.value("offset")
-    return periods(rig.kind, w, w_u, w if at is None else at[0], amplitude, zeta, final.t, swing,
+    return periods(rig.kind, limit, w_u * limit / w, limit if at is None else at[0], amplitude, zeta, final.t, swing,
                    rig.length, rig.length_std, rig.geometry)
 
 
@@ -98,4 +100,5 @@ def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]
         sensor_calibrated=rig.sensor_calibrated, measures=rig.measures, arrays=_arrays(found),
         periods=_periods(found, w, w_u, zeta),
         omega_n_from=head.chosen, omega_n_effects=head.effects, reproducibility=found.reproducibility,
+        omega_n_read_at=found.read_at,
     )
