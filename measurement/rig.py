@@ -138,7 +138,7 @@ class CalibrationRecord:
         source = doc.get("source")
         amplitude = doc.get("amplitude")
         if amplitude is not None:
-            amplitude = _positive("[calibration] amplitude", amplitude, "rad")
+            amplitude = _positive("[calibration] amplitude", amplitude, "rad", allow_zero=True)
         return cls(date, valid, tuple(dict(r) for r in refs), None if source is None else str(source), amplitude)
 
 
