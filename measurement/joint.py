@@ -38,9 +38,9 @@ from .consistency import bic_weights, check_segments
 from .effects import EFFECTS, resolve_effects, unweighed_law
 from .errors import IdentificationError, InvalidInput
 from .fit import ModelFit, block_covariance, fit_model
+from .identification.measurand import read_at
 from .identification.options import Options
 from .identification.pipeline import identify
-from .identification.measurand import read_at
 from .identification.quantities import budgets, effect_quantities, inertia
 from .identification.rivals import fallback
 from .identification.threads import one_blas_thread

@@ -213,12 +213,12 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     follows, follow_ratio = follows_swing(final, prep.noise)
     # the model's form: does it hold across the record, and do rival models the data cannot
     # tell apart give another ω_n (consistency.py, rivals.py)
+    at, basis = reference_amplitude(rig, final, options)
     segments = check_segments(final, prep.noise)
     law, spent = law_rival(final, run.moves, prep, rig, run.f_scale) if run.withdrawn is None else (None, 0)
     form = model_form(final, segments, run.steps, run.aliases, run.withdrawn, law, options.bic_margin,
                       options.rival_laws)
-    # where ω_n is read (measurand.py), and from the model whose ω_n there is the more accurate (focus.py)
-    at, basis = reference_amplitude(rig, final, options)
+    # from the model whose ω_n is the more accurate where it is read (measurand.py, focus.py)
     head = (focus(final, g.base, form, prep.noise, run.aliases, follows_swing(g.base, prep.noise)[0], at)
             if options.focused else Focus(final, form, DISCOVERED, at=at))
     # the models chosen, the σ stated is no smaller than the record's own scores say (fit.py)

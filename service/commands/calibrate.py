@@ -141,7 +141,7 @@ def read_references(path: str, rig) -> tuple[list[Reference], float | None]:
     base = Path(path).parent
     out = []
     # the references are read with no earlier calibration's amplitude, each at its own first
-    free = replace(rig, stiffness=None, stiffness_std=None, calibration=None)
+    free = replace(rig, stiffness=None, stiffness_std=None, stiffness_tare_covariance=None, calibration=None)
     traced: list[tuple[int, tuple, float]] = []  # (index in out, (trace, stated σ, a law fitted), its amplitude)
     for i, r in enumerate(refs, start=1):
         if not isinstance(r, dict):

@@ -60,7 +60,7 @@ def test_a_fitted_law_read_at_the_records_amplitude_is_one_measurand_with_the_de
     # at the record's own amplitude, where the declared model measures, and the choice is made
     trace = load_source(ROOT / "data/bicycle_fwheel_torsional_first_3.csv")
     r = identify(trace, read_rig(ROOT / "data/bicycle_fwheel_torsional_first_3_rig.toml"))
-    assert "cubic_stiffness" in r.added_effects
+    assert "cubic_stiffness" in r.added_effects and r.periods is not None and r.omega_n_u is not None
     assert r.omega_n_read_at.basis == "record" and 0.02 < r.omega_n_read_at.amplitude < r.periods.amplitude
     assert r.omega_n_from == "declared" and r.omega_n == r.baseline.omega_n
     assert any("root mean squared error" in s for s in r.structure)
