@@ -196,6 +196,8 @@ class ReadAt:
         """The measurand in words, for the report."""
         if self.basis == LIMIT:
             return "ω_n is the small-swing limit of the rig's restoring law"
+        if self.amplitude <= 0:
+            return "ω_n is the small-swing limit: the rig's calibration read its references at zero amplitude"
         where = ("the amplitude the rig's calibration read its references at" if self.basis == CALIBRATION else
                  "the record's own amplitude, where a damped sinusoid fitted to it measures")
         law = ("" if self.limit is None else

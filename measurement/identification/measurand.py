@@ -88,6 +88,6 @@ def measurand(fit: ModelFit, amplitude: float, basis: str) -> tuple[float, float
     """(ω, its 1σ, where it is read) of the headline ``fit``: at ``amplitude`` where a fitted law makes it
     depend on the amplitude, with the law's small-swing limit beside it."""
     w, s = read_at(fit, amplitude)
-    if basis == LIMIT or not has_law(fit):
+    if basis == LIMIT or amplitude <= 0 or not has_law(fit):
         return w, s, ReadAt(amplitude, basis)
     return w, s, ReadAt(amplitude, basis, fit.value("omega_n"), fit.stdev("omega_n"))

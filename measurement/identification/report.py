@@ -156,9 +156,10 @@ def _measurand(found: Findings) -> list[str]:
         return out
     w = read_at(found.final, read.amplitude)[0]
     laws = ", ".join(e.name for e in found.final.model.dynamic if e.role == "stiffness")
-    if read.basis == LIMIT:
+    if read.amplitude <= 0:
         return [f"ω_n is the small-swing limit of the restoring law ({laws} kept): at the record's largest swing, "
-                f"{amplitude:.3g} rad, the law gives ω {at[0]:.6g} ± {at[1]:.2g} rad/s ({100 * (at[0] - w) / w:+.2f} %)"]
+                f"{amplitude:.3g} rad, the law gives ω {at[0]:.6g} ± {at[1]:.2g} rad/s ({100 * (at[0] - w) / w:+.2f} %)"
+                ] + out
     return out + [f"at the record's largest swing, {amplitude:.3g} rad, the law ({laws} kept) gives ω {at[0]:.6g} ± "
                   f"{at[1]:.2g} rad/s ({100 * (at[0] - w) / w:+.2f} %)"]
 
