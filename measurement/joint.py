@@ -47,7 +47,7 @@ from .identification.threads import one_blas_thread
 from .model import STATE_PARAMS, Model
 from .noise import fit_noise
 from .object_laws import laws_of_the_object
-from .result import IdentificationResult, Quantity, _jsonable, _num, quantities_from_dict
+from .result import RECORD, RELEASES, IdentificationResult, Quantity, ReadAt, _jsonable, _num, quantities_from_dict
 from .rig import Rig
 from .trace import Trace
 from .uncertainty import Budget
@@ -162,8 +162,27 @@ def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options | None
     options = replace(Options() if options is None else options, focused=False)
     if len(traces) < 2:
         raise InvalidInput(f"a joint identification needs at least 2 releases, got {len(traces)}")
-    results, _ = laws_of_the_object([identify(tr, rig, options) for tr in traces], traces, rig, options)
+    results, options = one_amplitude([identify(tr, rig, options) for tr in traces], traces, rig, options)
+    results, _ = laws_of_the_object(results, traces, rig, options)
     return _joint(results, rig, options.bic_margin)
+
+
+def one_amplitude(results: list[IdentificationResult], traces: Sequence[Trace], rig: Rig,
+                  options: Options) -> tuple[list[IdentificationResult], Options]:
+    """The releases read at one swing amplitude, and the options that read there (``identification.measurand``).
+
+    One object, one measurand: where each release read ω at its own amplitude (a torsion rig whose calibration
+    states none), a fitted amplitude law reads it at the releases' mean amplitude instead, so that the joint
+    value and the releases' scatter compare one quantity; a release without such a law reads the same ω at
+    every amplitude and is only relabelled.
+    """
+    if any(r.omega_n_read_at.basis != RECORD for r in results):
+        return results, options
+    amplitude = float(np.mean([r.omega_n_read_at.amplitude for r in results]))
+    options = replace(options, reference_amplitude=amplitude, reference_basis=RELEASES)
+    read = ReadAt(amplitude, RELEASES)
+    return [identify(tr, rig, options) if r.stiffness else replace(r, omega_n_read_at=read)
+            for r, tr in zip(results, traces)], options
 
 
 def _joint(results: list[IdentificationResult], rig: Rig, margin: float = Options().bic_margin) -> JointResult:

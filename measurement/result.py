@@ -165,7 +165,7 @@ class ModelForm:
 
 #: where ω_n is read: the small-swing limit of the rig's own law (compound, wire suspensions), or at a swing
 #: amplitude on a torsion rig, the calibration's or the record's own (``identification.measurand``)
-LIMIT, CALIBRATION, RECORD = "small-swing limit", "calibration", "record"
+LIMIT, CALIBRATION, RECORD, RELEASES = "small-swing limit", "calibration", "record", "releases"
 
 
 @dataclass(frozen=True)
@@ -173,8 +173,8 @@ class ReadAt:
     """The swing amplitude ω_n (and J) is read at.
 
     amplitude: rad (0: the small-swing limit); basis: LIMIT, CALIBRATION (the amplitude the rig's calibration
-    read its references at) or RECORD (the record's own: the amplitude a damped sinusoid fitted to it measures
-    at); limit, limit_std: where a fitted amplitude law is read at the amplitude, the law's small-swing limit and
+    read its references at), RECORD (the record's own: the amplitude a damped sinusoid fitted to it measures
+    at) or RELEASES (the releases of one object read together, at their own amplitudes' mean); limit, limit_std: where a fitted amplitude law is read at the amplitude, the law's small-swing limit and
     its 1σ, rad/s (None: no such law, ω_n is the same at every amplitude the model knows).
     """
 
@@ -198,8 +198,9 @@ class ReadAt:
             return "ω_n is the small-swing limit of the rig's restoring law"
         if self.amplitude <= 0:
             return "ω_n is the small-swing limit: the rig's calibration read its references at zero amplitude"
-        where = ("the amplitude the rig's calibration read its references at" if self.basis == CALIBRATION else
-                 "the record's own amplitude, where a damped sinusoid fitted to it measures")
+        where = {CALIBRATION: "the amplitude the rig's calibration read its references at",
+                 RELEASES: "the mean of the object's releases' own amplitudes (one measurand for the releases together)",
+                 }.get(self.basis, "the record's own amplitude, where a damped sinusoid fitted to it measures")
         law = ("" if self.limit is None else
                f"; the fitted amplitude law's small-swing limit, {self.limit:.6g} ± {self.limit_std or 0.0:.2g} rad/s, "
                "is not J's (a free law is not extrapolated to zero amplitude)")

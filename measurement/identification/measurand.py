@@ -63,7 +63,7 @@ def reference_amplitude(rig: Rig, final: ModelFit, options: Options) -> tuple[fl
     if rig.kind != "torsion":
         return 0.0, LIMIT
     if options.reference_amplitude is not None:
-        return float(options.reference_amplitude), CALIBRATION
+        return float(options.reference_amplitude), options.reference_basis
     if rig.calibration is not None and rig.calibration.amplitude is not None:
         return float(rig.calibration.amplitude), CALIBRATION
     return record_amplitude(final), RECORD

@@ -32,8 +32,9 @@ class Options:
     over its history): a line of the budget, in u. None: not
     known; the budget states the documented default without counting it.
     reference_amplitude: on a torsion rig, the swing amplitude (rad) a fitted amplitude law reads ω at
-    (``identification.measurand``). None: the rig's calibration's (``[calibration] amplitude``), else the
-    record's own.
+    (``identification.measurand``), and reference_basis what it is ("calibration": the references' of a
+    calibration; "releases": the releases' of one object, read together). None: the rig's calibration's
+    (``[calibration] amplitude``), else the record's own.
     """
 
     discover: bool = True
@@ -48,3 +49,4 @@ class Options:
     focused: bool = True
     reproducibility: Reproducibility | None = None
     reference_amplitude: float | None = None
+    reference_basis: str = "calibration"
