@@ -17,7 +17,7 @@ from .discovery import SCREEN_TRUST
 from .findings import Findings
 from .flags import FOLLOW_LIMIT, Leftover
 from .focus import DECLARED
-from .measurand import read_at
+from .measurand import has_law, read_at
 from .quantities import omega_at_amplitude
 from .rivals import LAW_SIGMA
 
@@ -147,6 +147,8 @@ def _focus(found: Findings) -> list[str]:
 def _measurand(found: Findings) -> list[str]:
     """Where ω_n is read (``measurand``), and where a restoring law is kept the swing's own frequency beside it."""
     read = found.read_at
+    if not has_law(found.final):
+        return []  # ω is the same at every amplitude the model knows
     out = [read.describe()] if read.basis != LIMIT else []
     if found.headline.chosen == DECLARED:
         return out

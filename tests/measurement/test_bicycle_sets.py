@@ -27,7 +27,7 @@ import pytest
 from measurement import flags as F
 from measurement.identification import identify
 from measurement.joint import CONSISTENT_P, OWN_PAIR_Z, JointResult, identify_releases
-from measurement.reports import joint_report
+from measurement.reports import joint_report, result_report
 from measurement.result import IdentificationResult
 from service.sources.dispatch import load_source
 from service.sources.files import read_rig
@@ -88,10 +88,15 @@ def test_one_release_alone_scatters_no_wider_than_a_plain_damped_sinusoid(part, 
     # rig's measurand where its calibration states none), as wide as the plain fit's
     results = alone(part, reading)
     moi = _spread([r.omega_n for r in results])
+    # the joint identification reads the releases at one amplitude, their own amplitudes' mean
+    together = {(r.omega_n_read_at.basis, r.omega_n_read_at.amplitude) for r in joint(part, reading).releases}
+    assert len(together) == 1 and next(iter(together))[0] == ("releases" if part == "fwheel_torsional"
+                                                             else "small-swing limit")
     plain = _spread([damped_sinusoid(*reading_columns(f))[0] for f in _files(part, reading)])
     assert moi <= SPREAD_RATIO * plain, (moi, plain)
     if part == "fwheel_torsional":
         assert all(r.omega_n_read_at.basis == "record" and r.omega_n_read_at.amplitude > 0 for r in results)
+        assert "ω_n read at  = a swing of" in result_report(results[0])
     else:
         assert all(r.omega_n_read_at.basis == "small-swing limit" for r in results)
 
