@@ -15,6 +15,7 @@ import pytest
 
 from measurement import Options, Pendulum, Rig, identify, simulate_trace
 from measurement.calibration import Reference, calibrate_torsion
+from measurement.errors import RigError
 from measurement.rig import CalibrationRecord
 
 K, K3, TARE = 0.3651, 0.5 * 0.3651, 4.5e-3  # N·m/rad, N·m/rad³ (hardening: +3.4 % of k at 0.3 rad), kg·m²
@@ -64,3 +65,13 @@ def test_without_the_calibrations_amplitude_the_part_is_read_at_its_own_swing(ca
     # the measure a plain fit makes: J from it is off by the stiffening between the two swings
     assert own.J is not None and own.J / PART - 1 > 0.01
     assert math.isfinite(own.omega_n_u or math.nan)
+
+
+def test_the_calibrations_amplitude_is_an_optional_key_of_the_rig_file():
+    doc = {"rig": {"kind": "torsion", "stiffness": K}, "calibration": {"date": "2026-01-05", "amplitude": 0.2}}
+    rig = Rig.from_dict(doc)
+    assert rig.calibration is not None and rig.calibration.amplitude == 0.2
+    assert Rig.from_dict(rig.to_dict()).calibration == rig.calibration
+    assert Rig.from_dict({**doc, "calibration": {"date": "2026-01-05"}}).calibration.amplitude is None
+    with pytest.raises(RigError, match="amplitude must be >= 0 rad"):
+        Rig.from_dict({**doc, "calibration": {"date": "2026-01-05", "amplitude": -0.1}})
