@@ -72,6 +72,7 @@ def test_the_calibrations_amplitude_is_an_optional_key_of_the_rig_file():
     rig = Rig.from_dict(doc)
     assert rig.calibration is not None and rig.calibration.amplitude == 0.2
     assert Rig.from_dict(rig.to_dict()).calibration == rig.calibration
-    assert Rig.from_dict({**doc, "calibration": {"date": "2026-01-05"}}).calibration.amplitude is None
+    unstated = Rig.from_dict({**doc, "calibration": {"date": "2026-01-05"}}).calibration
+    assert unstated is not None and unstated.amplitude is None
     with pytest.raises(RigError, match="amplitude must be >= 0 rad"):
         Rig.from_dict({**doc, "calibration": {"date": "2026-01-05", "amplitude": -0.1}})
