@@ -11,6 +11,7 @@ from ..fit import swing_amplitude
 from ..periods import Periods, periods
 from ..result import IdentificationResult, Quantity
 from .findings import Findings
+from .measurand import read_at
 from .quantities import (
     RATE_UNITS,
     budgets,
@@ -57,8 +58,9 @@ def _periods(found: Findings, w: float, w_u: float, zeta: float) -> Periods | No
     final, rig = found.final, found.rig
     if not (math.isfinite(w) and w > 0):
         return None
-    # the small-swing period is the law's limit's, where ω_n is read at an amplitude (``measurand``)
-    limit = found.read_at.limit if found.read_at.limit is not None else w
+    # the small-swing period is the final model's law's limit, carried to the headline read at an amplitude
+    # (``measurand``; the declared model's where it is the more accurate)
+    limit = w * found.omega_n / read_at(final, found.read_at.amplitude)[0]
     amplitude = swing_amplitude(final)
     at = omega_at_amplitude(final, amplitude)
     if at is not None:
