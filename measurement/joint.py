@@ -38,6 +38,7 @@ from .consistency import bic_weights, check_segments
 from .effects import EFFECTS, resolve_effects, unweighed_law
 from .errors import IdentificationError, InvalidInput
 from .fit import ModelFit, block_covariance, fit_model
+from .identification.measurand import read_at
 from .identification.options import Options
 from .identification.pipeline import identify
 from .identification.quantities import budgets, effect_quantities, inertia
@@ -46,7 +47,7 @@ from .identification.threads import one_blas_thread
 from .model import STATE_PARAMS, Model
 from .noise import fit_noise
 from .object_laws import laws_of_the_object
-from .result import IdentificationResult, Quantity, _jsonable, _num, quantities_from_dict
+from .result import RECORD, RELEASES, IdentificationResult, Quantity, ReadAt, _jsonable, _num, quantities_from_dict
 from .rig import Rig
 from .trace import Trace
 from .uncertainty import Budget
@@ -161,8 +162,27 @@ def identify_releases(traces: Sequence[Trace], rig: Rig, options: Options | None
     options = replace(Options() if options is None else options, focused=False)
     if len(traces) < 2:
         raise InvalidInput(f"a joint identification needs at least 2 releases, got {len(traces)}")
-    results, _ = laws_of_the_object([identify(tr, rig, options) for tr in traces], traces, rig, options)
+    results, options = one_amplitude([identify(tr, rig, options) for tr in traces], traces, rig, options)
+    results, _ = laws_of_the_object(results, traces, rig, options)
     return _joint(results, rig, options.bic_margin)
+
+
+def one_amplitude(results: list[IdentificationResult], traces: Sequence[Trace], rig: Rig,
+                  options: Options) -> tuple[list[IdentificationResult], Options]:
+    """The releases read at one swing amplitude, and the options that read there (``identification.measurand``).
+
+    One object, one measurand: where each release read ω at its own amplitude (a torsion rig whose calibration
+    states none), a fitted amplitude law reads it at the releases' mean amplitude instead, so that the joint
+    value and the releases' scatter compare one quantity; a release without such a law reads the same ω at
+    every amplitude and is only relabelled.
+    """
+    if any(r.omega_n_read_at.basis != RECORD for r in results):
+        return results, options
+    amplitude = float(np.mean([r.omega_n_read_at.amplitude for r in results]))
+    options = replace(options, reference_amplitude=amplitude, reference_basis=RELEASES)
+    read = ReadAt(amplitude, RELEASES)
+    return [identify(tr, rig, options) if r.stiffness else replace(r, omega_n_read_at=read)
+            for r, tr in zip(results, traces)], options
 
 
 def _joint(results: list[IdentificationResult], rig: Rig, margin: float = Options().bic_margin) -> JointResult:
@@ -202,6 +222,20 @@ class _SharedModelFit:
     def release_x(self, i: int) -> np.ndarray:
         """Release i's parameter vector in its own model's order."""
         return _release_x(self.models[i], self.blocks[i], self.z)
+
+    def laws(self) -> _SharedFit:
+        """The shared laws as a fit of the first release's model (the same effects for all)."""
+        x0 = self.release_x(0)
+        m0 = self.models[0]
+        idx = list(range(m0.n_dynamic - len(STATE_PARAMS) + 1))
+        cov0 = np.zeros((m0.size, m0.size))
+        pos = [2] + list(range(3, m0.n_dynamic))
+        cov0[np.ix_(pos, pos)] = self.cov[np.ix_(idx, idx)]
+        return _SharedFit(m0, x0, cov0)
+
+    def omega_at(self, amplitude: float) -> tuple[float, float]:
+        """(the joint fit's ω at the swing ``amplitude`` (rad; 0: its ω_n), its 1σ), rad/s (``measurand``)."""
+        return read_at(self.laws(), amplitude)
 
 
 def _release_x(model: Model, block: tuple[int, int], z: np.ndarray) -> np.ndarray:
@@ -389,6 +423,12 @@ class _Choice:
     table: list[dict[str, Any]]
 
 
+def read_amplitude(results: Sequence[IdentificationResult]) -> float:
+    """The swing amplitude (rad) the joint fit's ω is read at: the releases' own (``IdentificationResult.omega_n_read_at``)
+    averaged; 0 (the small-swing limit) where they read ω_n there."""
+    return float(np.mean([r.omega_n_read_at.amplitude for r in results]))
+
+
 def _choose(results: list[IdentificationResult], rig: Rig, margin: float) -> _Choice:
     # every candidate set of shared effects fitted jointly; the joint BIC chooses, and the sets within
     # ``margin`` of it are rivals whose joint ω_n enters u by their BIC weight
@@ -409,10 +449,13 @@ def _choose(results: list[IdentificationResult], rig: Rig, margin: float) -> _Ch
     bics = np.array([c.bic for c in candidates])
     near = [i for i, c in enumerate(candidates) if c.bic - best.bic < margin]
     wts_m = bic_weights(bics[near])
-    u_models = float(math.sqrt(sum(w * (candidates[i].omega_n - chosen.omega_n) ** 2 for w, i in zip(wts_m, near))))
+    # each candidate's ω where the releases read theirs (``measurand``)
+    at = [c.omega_at(read_amplitude(results)) for c in candidates]
+    w_chosen = at[candidates.index(chosen)][0]
+    u_models = float(math.sqrt(sum(w * (at[i][0] - w_chosen) ** 2 for w, i in zip(wts_m, near))))
     weight = dict(zip(near, wts_m))
     table = [{"effects": list(c.shared), "without": sorted(c.dropped), "bic": c.bic, "d_bic": c.bic - best.bic,
-              "weight": float(weight.get(i, 0.0)), "omega_n": c.omega_n, "omega_n_std": c.omega_n_std,
+              "weight": float(weight.get(i, 0.0)), "omega_n": at[i][0], "omega_n_std": at[i][1],
               "chosen": c is chosen} for i, c in enumerate(candidates)]
     return _Choice(chosen, not_held, u_models, table)
 
@@ -420,14 +463,16 @@ def _choose(results: list[IdentificationResult], rig: Rig, margin: float) -> _Ch
 def _releases_apart(fits: list[ModelFit], results: list[IdentificationResult]) -> tuple[np.ndarray, np.ndarray, float]:
     """Each release's ω_n fitted alone with the shared effects (the same model, so that a difference is the
     releases', not the models'), its u (its fit σ with the model-form and calibration terms of its own
-    identification), and what the releases share of it (not averaged away), rad/s."""
-    w_i = np.array([f.value("omega_n") for f in fits])
+    identification), and what the releases share of it (not averaged away), rad/s. Each reads ω where its own
+    identification did (``IdentificationResult.omega_n_read_at``: one measurand)."""
+    read = [read_at(f, res.omega_n_read_at.amplitude) for f, res in zip(fits, results)]
+    w_i = np.array([w for w, _ in read])
     # A release that its own identification gave another model reads another ω_n under the shared
     # one; which of the two is right its record did not decide (the other releases chose the shared
     # effects): their distance is model form of that release
     form_i = np.array([math.hypot(res.omega_n_std_model, w - res.omega_n) for w, res in zip(w_i, results)])
-    u_i = np.array([math.sqrt(f.stdev("omega_n") ** 2 + m**2 + (res.omega_n_std_calibration or 0.0) ** 2)
-                    for f, m, res in zip(fits, form_i, results)])
+    u_i = np.array([math.sqrt(s**2 + m**2 + (res.omega_n_std_calibration or 0.0) ** 2)
+                    for (_, s), m, res in zip(read, form_i, results)])
     wts = 1.0 / u_i**2
     common = float(np.sum(wts * np.array([math.hypot(m, res.omega_n_std_calibration or 0.0)
                                           for m, res in zip(form_i, results)])) / np.sum(wts))
@@ -458,7 +503,8 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
     # ω_n: apart beyond their uncertainties, the shared laws do not hold over the releases' amplitudes
     # (a law the model lacks), and which value to believe is not decided by the data: the distance
     # enters u and the result says so.
-    u_joint, fit_z = with_joint_fit(w_joint, max(s_joint * birge, common), chosen.omega_n, chosen.omega_n_std)
+    w_fit, s_fit = chosen.omega_at(read_amplitude(results))
+    u_joint, fit_z = with_joint_fit(w_joint, max(s_joint * birge, common), w_fit, s_fit)
     if fit_z > FIT_APART_Z:
         flags.append(F.MODEL_AMBIGUOUS)
     # shared laws the releases together do not decisively separate: their spread is model form
@@ -471,7 +517,7 @@ def _fit_jointly(results: list[IdentificationResult], rig: Rig, margin: float) -
         "largest_z": float(zs[k]), "largest_release": results[k].source,
         "pairwise_max": float(pair[0]), "pairwise_releases": [results[pair[1]].source, results[pair[2]].source],
         "own_pairwise_max": own[0], "own_pairwise_releases": [results[own[1]].source, results[own[2]].source],
-        "joint_fit": {"omega_n": chosen.omega_n, "omega_n_std": chosen.omega_n_std, "z": fit_z,
+        "joint_fit": {"omega_n": w_fit, "omega_n_std": s_fit, "z": fit_z,
                       "apart": fit_z > FIT_APART_Z},
         "models": choice.table, "u_models": choice.u_models, "not_held": choice.not_held,
     }
@@ -487,13 +533,7 @@ def _joint_result(results: list[IdentificationResult], rig: Rig, chosen: _Shared
                   flags: list[str]) -> JointResult:
     """The joint result: J and its budget from the joint ω_n, the shared laws read through the first
     release's model (the same effects for all)."""
-    x0 = chosen.release_x(0)
-    m0 = chosen.models[0]
-    idx = list(range(m0.n_dynamic - len(STATE_PARAMS) + 1))
-    cov0 = np.zeros((m0.size, m0.size))
-    pos = [2] + list(range(3, m0.n_dynamic))
-    cov0[np.ix_(pos, pos)] = chosen.cov[np.ix_(idx, idx)]
-    shim = _SharedFit(m0, x0, cov0)
+    shim = chosen.laws()
     J = inertia(rig, w_joint)
     rms = float(math.sqrt(np.mean(np.concatenate(chosen.residuals) ** 2)))
     return JointResult(

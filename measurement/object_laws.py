@@ -13,7 +13,9 @@ model's, and the distance to the law's ω_n enters its uncertainty, named
 Where it does, and every release determines it, it is the object's law in
 every release: one that did not add it alone (its swing too small for the
 loop to pay for it) is reported with the law fitted, so that every release
-reads ω_n at zero amplitude, not some at their own amplitude.
+reads ω_n by the same law where it is read (its small-swing limit on a
+compound rig; on a torsion rig at one reference amplitude,
+``identification.measurand``), not some by the law and some at their own amplitude.
 """
 
 from __future__ import annotations

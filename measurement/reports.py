@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 from . import flags as F
 from .flags import FIT_NOT_CONVERGED
 from .joint import CONSISTENT_P, OWN_PAIR_Z, JointResult
-from .result import IdentificationResult, Quantity, _num
+from .result import LIMIT, IdentificationResult, Quantity, _num
 from .tensor import COMPONENTS, TensorResult
 from .trace import READING_UNITS
 from .uncertainty import Budget
@@ -96,6 +96,9 @@ def _frequency(r: IdentificationResult) -> list[str]:
          f"  (f_n = {r.omega_n / (2 * math.pi):.6g} Hz{cal})"]
     if r.periods is not None:
         L.extend(r.periods.lines())
+    if r.omega_n_read_at.basis != LIMIT and r.stiffness:  # a fitted law: ω depends on where it is read
+        L.append(f"    ω_n read at  = a swing of {r.omega_n_read_at.amplitude:.3g} rad ({r.omega_n_read_at.basis}; "
+                 "on a torsion rig J = k/ω² takes ω where k was calibrated)")
     if r.omega_n_from != "discovered":
         L.append(f"    ω_n from     = the {r.omega_n_from} model ({', '.join(r.omega_n_effects)}): its ω_n is "
                  "the more accurate (the discovered model's is a rival in u)")

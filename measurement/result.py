@@ -31,7 +31,7 @@ from .uncertainty import Budget
 from .wire import read_number
 
 #: the version of the keys of ``IdentificationResult.to_dict()``; what each version changed is in CHANGELOG.md
-SCHEMA_VERSION = 8
+SCHEMA_VERSION = 9
 
 
 def _num(v: Any) -> Any:
@@ -161,6 +161,50 @@ class ModelForm:
         """Read back ``to_dict`` (``u`` and ``u_segments`` are the properties that compute them)."""
         segments = None if d["segments"] is None else SegmentCheck.from_dict(d["segments"])
         return cls(segments, tuple(Competitor.from_dict(c) for c in d["competitors"]), read_number(d["u_competitors"]))
+
+
+#: where ω_n is read: the small-swing limit of the rig's own law (compound, wire suspensions), or at a swing
+#: amplitude on a torsion rig, the calibration's or the record's own (``identification.measurand``)
+LIMIT, CALIBRATION, RECORD, RELEASES = "small-swing limit", "calibration", "record", "releases"
+
+
+@dataclass(frozen=True)
+class ReadAt:
+    """The swing amplitude ω_n (and J) is read at.
+
+    amplitude: rad (0: the small-swing limit); basis: LIMIT, CALIBRATION (the amplitude the rig's calibration
+    read its references at), RECORD (the record's own: the amplitude a damped sinusoid fitted to it measures
+    at) or RELEASES (the releases of one object read together, at their own amplitudes' mean); limit, limit_std: where a fitted amplitude law is read at the amplitude, the law's small-swing limit and
+    its 1σ, rad/s (None: no such law, ω_n is the same at every amplitude the model knows).
+    """
+
+    amplitude: float = 0.0
+    basis: str = LIMIT
+    limit: float | None = None
+    limit_std: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"amplitude": _num(self.amplitude), "basis": self.basis, "limit": _num(self.limit),
+                "limit_std": _num(self.limit_std)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ReadAt:
+        """Read back ``to_dict``."""
+        return cls(read_number(d["amplitude"]), str(d["basis"]), d["limit"], d["limit_std"])
+
+    def describe(self) -> str:
+        """The measurand in words, for the report."""
+        if self.basis == LIMIT:
+            return "ω_n is the small-swing limit of the rig's restoring law"
+        if self.amplitude <= 0:
+            return "ω_n is the small-swing limit: the rig's calibration read its references at zero amplitude"
+        where = {CALIBRATION: "the amplitude the rig's calibration read its references at",
+                 RELEASES: "the mean of the object's releases' own amplitudes (one measurand for the releases together)",
+                 }.get(self.basis, "the record's own amplitude, where a damped sinusoid fitted to it measures")
+        law = ("" if self.limit is None else
+               f"; the fitted amplitude law's small-swing limit, {self.limit:.6g} ± {self.limit_std or 0.0:.2g} rad/s, "
+               "is not J's (a free law is not extrapolated to zero amplitude)")
+        return f"ω_n is the frequency at a swing of {self.amplitude:.3g} rad, {where}{law}"
 
 
 @dataclass(frozen=True)
@@ -338,6 +382,8 @@ class IdentificationResult:
     #: the scatter of ω_n between releases, which one record cannot see (``measurement.reproducibility``):
     #: a rig's history pooled (in u), or the documented default (stated, not in u); None: not said
     reproducibility: Reproducibility | None = None
+    #: the swing amplitude ω_n and J are read at (``ReadAt``; schema 9)
+    omega_n_read_at: ReadAt = field(default_factory=ReadAt)
     arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -410,6 +456,7 @@ class IdentificationResult:
             "omega_n_from": self.omega_n_from,
             "omega_n_effects": list(self.omega_n_effects or self.effects),
             "reproducibility": None if self.reproducibility is None else self.reproducibility.to_dict(),
+            "omega_n_read_at": self.omega_n_read_at.to_dict(),
         }
         if include_arrays:
             d["arrays"] = {k: [_num(x) for x in np.asarray(v).tolist()] for k, v in self.arrays.items()}
@@ -445,6 +492,7 @@ class IdentificationResult:
             omega_n_effects=tuple(d.get("omega_n_effects") or d["effects"]),
             model_form=ModelForm.from_dict(d["model_form"]),
             reproducibility=None if d.get("reproducibility") is None else Reproducibility.from_dict(d["reproducibility"]),
+            omega_n_read_at=ReadAt.from_dict(d["omega_n_read_at"]),
             uncertainty_budget={k: Budget.from_dict(b) for k, b in d["uncertainty_budget"].items()},
             arrays={k: np.asarray(v, dtype=float) for k, v in (d.get("arrays") or {}).items()},
         )

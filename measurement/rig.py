@@ -45,7 +45,7 @@ _OBJECT_KEYS = {"mass", "axis_offset"}
 _OBJECT_STD_KEYS = {"mass_std", "axis_offset_std"}
 _MODEL_KEYS = {"declared"}
 _SENSOR_KEYS = {"calibrated", "clock_accuracy_ppm", "angle_scale_std"}
-_CALIBRATION_KEYS = {"date", "valid_days", "references", "source"}
+_CALIBRATION_KEYS = {"date", "valid_days", "references", "source", "amplitude"}
 
 
 def _positive(name: str, value: Any, unit: str, *, allow_zero: bool = False) -> float:
@@ -81,12 +81,16 @@ class CalibrationRecord:
     expiry). references: what was used (name, added inertia and its 1σ in
     kg·m², ω_n and its 1σ in rad/s...), as recorded by ``moi calibrate``.
     source: the calibration file it came from.
+    amplitude: the swing amplitude (rad) the references' ω_n were read at (None: not stated). A spring
+    whose stiffness changes with the amplitude is calibrated at this one: a part's ω is read there too
+    (``identification.measurand``).
     """
 
     date: _dt.date
     valid_days: int | None = None
     references: tuple[dict[str, Any], ...] = ()
     source: str | None = None
+    amplitude: float | None = None
 
     @property
     def valid_until(self) -> _dt.date | None:
@@ -104,6 +108,8 @@ class CalibrationRecord:
             d["valid_days"] = self.valid_days
         if self.source is not None:
             d["source"] = self.source
+        if self.amplitude is not None:
+            d["amplitude"] = self.amplitude
         if self.references:
             d["references"] = [dict(r) for r in self.references]
         return d
@@ -111,7 +117,8 @@ class CalibrationRecord:
     @classmethod
     def from_dict(cls, doc: Any) -> "CalibrationRecord":
         if not isinstance(doc, Mapping) or set(doc) - _CALIBRATION_KEYS or "date" not in doc:
-            raise RigError("rig file: [calibration] needs date = YYYY-MM-DD, optional valid_days, references, source")
+            raise RigError("rig file: [calibration] needs date = YYYY-MM-DD, optional valid_days, references, source, "
+                           "amplitude")
         date = doc["date"]
         if isinstance(date, _dt.datetime):
             date = date.date()
@@ -129,7 +136,10 @@ class CalibrationRecord:
         if not isinstance(refs, list) or not all(isinstance(r, Mapping) for r in refs):
             raise RigError("rig file: [calibration] references must be a list of tables")
         source = doc.get("source")
-        return cls(date, valid, tuple(dict(r) for r in refs), None if source is None else str(source))
+        amplitude = doc.get("amplitude")
+        if amplitude is not None:
+            amplitude = _positive("[calibration] amplitude", amplitude, "rad", allow_zero=True)
+        return cls(date, valid, tuple(dict(r) for r in refs), None if source is None else str(source), amplitude)
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,7 @@ from ..fit import swing_amplitude
 from ..periods import Periods, periods
 from ..result import IdentificationResult, Quantity
 from .findings import Findings
+from .measurand import read_at
 from .quantities import (
     RATE_UNITS,
     budgets,
@@ -57,14 +58,17 @@ def _periods(found: Findings, w: float, w_u: float, zeta: float) -> Periods | No
     final, rig = found.final, found.rig
     if not (math.isfinite(w) and w > 0):
         return None
+    # the small-swing period is the final model's law's limit, carried to the headline read at an amplitude
+    # (``measurand``; the declared model's where it is the more accurate)
+    limit = w * found.omega_n / read_at(final, found.read_at.amplitude)[0]
     amplitude = swing_amplitude(final)
     at = omega_at_amplitude(final, amplitude)
     if at is not None:
-        # the final model's amplitude law, carried to the headline ω_n (the declared model's where it is the
-        # more accurate: its law of amplitude is then the same, no restoring law having been added)
-        at = (at[0] * w / found.omega_n, *at[1:])
+        # the final model's amplitude law, carried to the headline's limit (the declared model's where it is
+        # the more accurate: its law of amplitude is then the same, no restoring law having been added)
+        at = (at[0] * limit / found.omega_n, *at[1:])
     swing = final.fitted - final.value("offset")
-    return periods(rig.kind, w, w_u, w if at is None else at[0], amplitude, zeta, final.t, swing,
+    return periods(rig.kind, limit, w_u * limit / w, limit if at is None else at[0], amplitude, zeta, final.t, swing,
                    rig.length, rig.length_std, rig.geometry)
 
 
@@ -98,4 +102,5 @@ def assemble(found: Findings, flags: tuple[str, ...], structure: tuple[str, ...]
         sensor_calibrated=rig.sensor_calibrated, measures=rig.measures, arrays=_arrays(found),
         periods=_periods(found, w, w_u, zeta),
         omega_n_from=head.chosen, omega_n_effects=head.effects, reproducibility=found.reproducibility,
+        omega_n_read_at=found.read_at,
     )

@@ -12,7 +12,7 @@ from ..model import Model
 from ..reproducibility import DEFAULT as DEFAULT_REPRODUCIBILITY
 from ..reproducibility import Reproducibility
 from ..residual import Diagnostics
-from ..result import DiscoveryStep, ModelForm, SegmentCheck
+from ..result import DiscoveryStep, ModelForm, ReadAt, SegmentCheck
 from ..rig import Rig
 from ..trace import Trace
 from .focus import DISCOVERED, Focus
@@ -62,6 +62,8 @@ class Findings:
     focus: Focus | None = None
     #: the scatter between releases this record cannot see (``Options.reproducibility``; the default: stated only)
     reproducibility: Reproducibility = DEFAULT_REPRODUCIBILITY
+    #: the swing amplitude the headline ω_n is read at (``measurand``)
+    read_at: ReadAt = ReadAt()
 
     @property
     def headline(self) -> Focus:

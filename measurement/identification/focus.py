@@ -29,10 +29,14 @@ unchanged: only where ω_n is read from.
 Both must estimate one quantity. Where the discovered model holds a
 restoring law the rig does not declare (a cubic spring), its ω_n is the law's
 small-swing limit and the declared model's the frequency at the record's
-own swing: two measurands, not two estimates of one, and the choice is not
-made (on the front wheel of the bicycle set, read from one release's
-declared model and its sisters' cubic springs, the releases ended 4–5 u
-apart where each had been within 2 u).
+own swing: two measurands, not two estimates of one (on the front wheel of
+the bicycle set, read from one release's declared model and its sisters'
+cubic springs' limits, the releases ended 4–5 u apart where each had been
+within 2 u). On a torsion rig ω is read at a reference amplitude
+(``measurand``: the calibration's, else the record's own, where a damped
+sinusoid, and so the declared model, measures): the discovered model's ω
+there and the declared model's ω_n are one measurand, and the choice is
+made. Elsewhere (the small-swing limit of a rig's exact law) it is not.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ from ..consistency import check_segments
 from ..effects import EFFECTS
 from ..fit import ModelFit
 from ..result import Competitor, ModelForm
+from .measurand import read_at
 from .rivals import covering
 from .starts import Aliases
 
@@ -65,14 +70,16 @@ class Focus:
     form: ModelForm
     chosen: str
     mse: tuple[float, float] | None = None
+    #: the swing amplitude ω is read at, rad (0: the small-swing limit: ``measurand``)
+    at: float = 0.0
 
     @property
     def omega_n(self) -> float:
-        return self.fit.value("omega_n")
+        return read_at(self.fit, self.at)[0]
 
     @property
     def omega_n_std(self) -> float:
-        return self.fit.stdev("omega_n")
+        return read_at(self.fit, self.at)[1]
 
     @property
     def effects(self) -> tuple[str, ...]:
@@ -80,13 +87,14 @@ class Focus:
 
 
 def declared_mse(base: ModelFit, final: ModelFit, form: ModelForm, noise: float,
-                 aliases: Aliases) -> tuple[float, float, ModelForm] | None:
-    """(MSE of ω_n under the declared model, under the discovered one, the declared model's form); None where
-    the declared model's halves cannot be fitted."""
+                 aliases: Aliases, at: float = 0.0) -> tuple[float, float, ModelForm] | None:
+    """(MSE of ω_n under the declared model, under the discovered one, the declared model's form), each read at
+    the swing amplitude ``at`` (rad; 0: the small-swing limit); None where the declared model's halves cannot be
+    fitted."""
     segments = check_segments(base, noise)
     if segments is None:
         return None
-    w_d, s_d, w_f, s_f = base.value("omega_n"), base.stdev("omega_n"), final.value("omega_n"), final.stdev("omega_n")
+    (w_d, s_d), (w_f, s_f) = read_at(base, at), read_at(final, at)
     moved = tuple(Competitor(c.change, c.d_bic, c.weight, c.omega_n, c.omega_n - w_d, c.effects)
                   for c in form.competitors if c not in aliases.rivals)
     # a rival the discovered model carried whole (weight 1: a law the record does not determine, one the
@@ -103,17 +111,19 @@ def declared_mse(base: ModelFit, final: ModelFit, form: ModelForm, noise: float,
 
 
 def focus(final: ModelFit, base: ModelFit, form: ModelForm, noise: float, aliases: Aliases,
-          base_follows: bool) -> Focus:
-    """The model whose ω_n is the more accurate (module doc): the discovered ``final`` or the declared ``base``."""
-    kept = Focus(final, form, DISCOVERED)
+          base_follows: bool, at: float = 0.0) -> Focus:
+    """The model whose ω_n is the more accurate (module doc): the discovered ``final`` or the declared ``base``,
+    ω read at the swing amplitude ``at`` (rad; 0: the small-swing limit)."""
+    kept = Focus(final, form, DISCOVERED, at=at)
     if base.model.effect_names == final.model.effect_names or not base.success or not base_follows:
         return kept
-    if any(EFFECTS[n].role == "stiffness" for n in final.model.effect_names if n not in base.model.effect_names):
+    if at <= 0 and any(EFFECTS[n].role == "stiffness" for n in final.model.effect_names
+                       if n not in base.model.effect_names):
         return kept  # another measurand (module doc)
-    judged = declared_mse(base, final, form, noise, aliases)
+    judged = declared_mse(base, final, form, noise, aliases, at)
     if judged is None:
         return kept
     mse_d, mse_f, form_d = judged
     if mse_d < mse_f:
-        return Focus(base, form_d, DECLARED, (mse_d, mse_f))
-    return Focus(final, form, DISCOVERED, (mse_d, mse_f))
+        return Focus(base, form_d, DECLARED, (mse_d, mse_f), at)
+    return Focus(final, form, DISCOVERED, (mse_d, mse_f), at)

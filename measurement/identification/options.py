@@ -31,6 +31,10 @@ class Options:
     reproducibility: the rig's scatter of ω_n between releases (``measurement.reproducibility.pooled``
     over its history): a line of the budget, in u. None: not
     known; the budget states the documented default without counting it.
+    reference_amplitude: on a torsion rig, the swing amplitude (rad) a fitted amplitude law reads ω at
+    (``identification.measurand``), and reference_basis what it is ("calibration": the references' of a
+    calibration; "releases": the releases' of one object, read together). None: the rig's calibration's
+    (``[calibration] amplitude``), else the record's own.
     """
 
     discover: bool = True
@@ -44,3 +48,5 @@ class Options:
     rival_laws: tuple[tuple[str, float, tuple[str, ...], str], ...] = ()
     focused: bool = True
     reproducibility: Reproducibility | None = None
+    reference_amplitude: float | None = None
+    reference_basis: str = "calibration"

@@ -23,6 +23,7 @@ from .discovery import Move, discover
 from .findings import Findings
 from .flags import follows_swing, leftover, raise_flags
 from .focus import DISCOVERED, Focus, focus
+from .measurand import measurand, reference_amplitude
 from .options import Options
 from .outliers import departures, remove_outliers, without_wild
 from .preparation import Prepared, prepare
@@ -212,18 +213,19 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
     follows, follow_ratio = follows_swing(final, prep.noise)
     # the model's form: does it hold across the record, and do rival models the data cannot
     # tell apart give another ω_n (consistency.py, rivals.py)
+    at, basis = reference_amplitude(rig, final, options)
     segments = check_segments(final, prep.noise)
     law, spent = law_rival(final, run.moves, prep, rig, run.f_scale) if run.withdrawn is None else (None, 0)
     form = model_form(final, segments, run.steps, run.aliases, run.withdrawn, law, options.bic_margin,
                       options.rival_laws)
-    # the headline ω_n from the model whose ω_n is the more accurate (focus.py)
-    head = (focus(final, g.base, form, prep.noise, run.aliases, follows_swing(g.base, prep.noise)[0])
-            if options.focused else Focus(final, form, DISCOVERED))
+    # from the model whose ω_n is the more accurate where it is read (measurand.py, focus.py)
+    head = (focus(final, g.base, form, prep.noise, run.aliases, follows_swing(g.base, prep.noise)[0], at)
+            if options.focused else Focus(final, form, DISCOVERED, at=at))
     # the models chosen, the σ stated is no smaller than the record's own scores say (fit.py)
     floored = {id(f): with_score_floor(f) for f in (g.base, final, head.fit)}
     base, final = floored[id(g.base)], floored[id(final)]
     head = replace(head, fit=floored[id(head.fit)])
-    w, ws = head.omega_n, head.omega_n_std
+    w, ws, read = measurand(head.fit, at, basis)
     # a sensor calibrated from the record itself carries its own uncertainty into ω_n, beside the fit's
     w_cal = omega_n_std_view(head.fit, view) if view is not None else None
     found = Findings(
@@ -232,7 +234,7 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         slipped_from=g.slipped_from, beaten_by=g.beaten_by, follows=follows, follow_ratio=follow_ratio,
         view=view, omega_n_view=w_cal, inertias=inertias(rig, w, ws),
         nominal=omega_n_at_nominal_scale(final), nfev=run.nfev + g.nfev + spent, bic_margin=options.bic_margin,
-        rival_laws=options.rival_laws, focus=head,
+        rival_laws=options.rival_laws, focus=head, read_at=read,
         reproducibility=options.reproducibility or DEFAULT_REPRODUCIBILITY)
     left = leftover(found)
     return assemble(found, raise_flags(found, left), describe(found, left))

@@ -219,7 +219,7 @@ def inertias(rig: Rig, omega_n: float, omega_n_std: float) -> Inertias:
     return Inertias(J, J_std, J_obj, J_obj_std, J_ax, J_ax_std)
 
 
-def omega_at_amplitude(fit: ModelFit, amplitude: float) -> tuple[float, float] | None:
+def omega_at_amplitude(fit: FittedParameters, amplitude: float) -> tuple[float, float] | None:
     """(ω, its 1σ) of the swing at ``amplitude`` (rad) by the fitted restoring laws, rad/s; None when no law
     of the model makes the frequency depend on the amplitude (then it is ω_n at every amplitude)."""
     model = fit.model

@@ -11,12 +11,13 @@ import math
 
 from .. import flags as F
 from ..fit import swing_amplitude
-from ..result import SegmentCheck
+from ..result import LIMIT, SegmentCheck
 from ..trace import READING_UNITS
 from .discovery import SCREEN_TRUST
 from .findings import Findings
 from .flags import FOLLOW_LIMIT, Leftover
 from .focus import DECLARED
+from .measurand import has_law, read_at
 from .quantities import omega_at_amplitude
 from .rivals import LAW_SIGMA
 
@@ -133,7 +134,7 @@ def _focus(found: Findings) -> list[str]:
     if head.mse is None:
         return []
     mse_d, mse_f = (math.sqrt(m) for m in head.mse)
-    w_d, w_f = found.base.value("omega_n"), found.final.value("omega_n")
+    w_d, w_f = read_at(found.base, head.at)[0], read_at(found.final, head.at)[0]
     if head.chosen == DECLARED:
         return [f"ω_n is read from the declared model ({', '.join(head.effects)}), {w_d:.6g} rad/s: its ω_n is the more "
                 f"accurate (estimated root mean squared error {mse_d:.2g} rad/s, its halves and its distance to the "
@@ -144,18 +145,25 @@ def _focus(found: Findings) -> list[str]:
 
 
 def _measurand(found: Findings) -> list[str]:
-    """Where a restoring law is kept: ω_n is its small-swing limit; the swing's own frequency beside it."""
+    """Where ω_n is read (``measurand``), and where a restoring law is kept the swing's own frequency beside it."""
+    read = found.read_at
+    if not has_law(found.final):
+        return []  # ω is the same at every amplitude the model knows
+    out = [read.describe()] if read.basis != LIMIT else []
     if found.headline.chosen == DECLARED:
-        return []
+        return out
     amplitude = swing_amplitude(found.final)
     at = omega_at_amplitude(found.final, amplitude)
     if at is None:
-        return []
-    w = found.omega_n
+        return out
+    w = read_at(found.final, read.amplitude)[0]
     laws = ", ".join(e.name for e in found.final.model.dynamic if e.role == "stiffness")
-    return [f"ω_n is the small-swing limit of the restoring law ({laws} kept): at the record's largest swing, {amplitude:.3g} rad, the law gives ω {at[0]:.6g} ± {at[1]:.2g} rad/s "
-            f"({100 * (at[0] - w) / w:+.2f} %); a stiffness calibrated from plain periods at a stated amplitude is "
-            "the stiffness at that amplitude, and J from it takes ω at the same amplitude"]
+    if read.amplitude <= 0:
+        return [f"ω_n is the small-swing limit of the restoring law ({laws} kept): at the record's largest swing, "
+                f"{amplitude:.3g} rad, the law gives ω {at[0]:.6g} ± {at[1]:.2g} rad/s ({100 * (at[0] - w) / w:+.2f} %)"
+                ] + out
+    return out + [f"at the record's largest swing, {amplitude:.3g} rad, the law ({laws} kept) gives ω {at[0]:.6g} ± "
+                  f"{at[1]:.2g} rad/s ({100 * (at[0] - w) / w:+.2f} %)"]
 
 
 def describe(found: Findings, left: Leftover) -> tuple[str, ...]:

@@ -122,6 +122,16 @@ def _known_inertia(name: str, r: dict) -> tuple[float, float | None]:
 
 def load_references(path: str, rig) -> list[Reference]:
     """The references of CAL.toml, each with its stated uncertainties (None where not stated)."""
+    return read_references(path, rig)[0]
+
+
+def read_references(path: str, rig) -> tuple[list[Reference], float | None]:
+    """(the references of CAL.toml, the swing amplitude their traces' ω_n are read at, rad; None: no trace).
+
+    Where a spring's stiffness changes with the amplitude, k is the stiffness at the amplitude its
+    references were read at: each trace is read at one amplitude, the mean of the traces' own
+    (``measurement.identification.measurand``), which the rig's ``[calibration] amplitude`` keeps so that a
+    part's ω is read there too."""
     from measurement import Options, identify  # scipy: only when a reference is a trace
 
     doc = read_toml(path, "calibration file")
@@ -130,6 +140,9 @@ def load_references(path: str, rig) -> list[Reference]:
         raise CalibrationError(f"{path}: expected [[reference]] tables only (name, trace or omega/zeta, added_inertia or cylinders)")
     base = Path(path).parent
     out = []
+    # the references are read with no earlier calibration's amplitude, each at its own first
+    free = replace(rig, stiffness=None, stiffness_std=None, stiffness_tare_covariance=None, calibration=None)
+    traced: list[tuple[int, tuple, float]] = []  # (index in out, (trace, stated σ, a law fitted), its amplitude)
     for i, r in enumerate(refs, start=1):
         if not isinstance(r, dict):
             raise CalibrationError(f"{path}: reference {i} is {r!r}; expected a [[reference]] table")
@@ -143,10 +156,12 @@ def load_references(path: str, rig) -> list[Reference]:
         u_omega = _std(name, "omega_n_std", r["omega_n_std"], "rad/s") if "omega_n_std" in r else None
         if "trace" in r:
             trace = read_trace(base / str(r["trace"]))
-            result = identify(trace, replace(rig, stiffness=None, stiffness_std=None), Options())
+            result = identify(trace, free, Options())
             # the record's own uncertainty of ω_n: the fit and its model form, unless the file states one
             out.append(Reference(name, added, result.omega_n,
                                  u_omega if u_omega is not None else (result.omega_n_u or result.omega_n_std), u_added))
+            if result.omega_n_read_at.basis != "small-swing limit":
+                traced.append((len(out) - 1, (trace, u_omega, bool(result.stiffness)), result.omega_n_read_at.amplitude))
         elif "omega" in r and "zeta" in r:
             ref = Reference.from_damped(name, added, _number(name, "omega", r["omega"]), _number(name, "zeta", r["zeta"]),
                                         u_added)
@@ -160,7 +175,17 @@ def load_references(path: str, rig) -> list[Reference]:
             if (problem := name_problem("certificate", certificate)) is not None:
                 raise CalibrationError(f"reference {name!r}: {problem}; expected the certificate's identifier")
             out[-1] = replace(out[-1], certificate=certificate)
-    return out
+    if not traced:
+        return out, None
+    amplitude = sum(a for _, _, a in traced) / len(traced)
+    for k, (trace, u_omega, law), own in traced:
+        if law and own != amplitude:
+            # one amplitude for every reference: a fitted amplitude law reads its ω there (the others' ω is the
+            # same at every amplitude their model knows)
+            result = identify(trace, free, Options(reference_amplitude=amplitude))
+            out[k] = replace(out[k], omega_n=result.omega_n,
+                             omega_n_std=u_omega if u_omega is not None else (result.omega_n_u or result.omega_n_std))
+    return out, amplitude
 
 
 def run(args: argparse.Namespace) -> int:
@@ -174,9 +199,10 @@ def run(args: argparse.Namespace) -> int:
         date = dt.date.fromisoformat(args.date) if args.date else dt.datetime.now(dt.UTC).date()
     except ValueError:
         raise CalibrationError(f"--date must be a date like 2026-01-31, got {args.date!r}") from None
-    cal = calibrate_torsion(load_references(args.calibration, rig))
+    refs, amplitude = read_references(args.calibration, rig)
+    cal = calibrate_torsion(refs)
     references = [{k: v for k, v in ref.items() if v is not None} for ref in cal.to_dict()["references"]]
-    record = CalibrationRecord(date, args.valid_days, tuple(references), str(args.calibration))
+    record = CalibrationRecord(date, args.valid_days, tuple(references), str(args.calibration), amplitude)
     until = record.valid_until
     assert until is not None  # valid_days was given
     if args.out:

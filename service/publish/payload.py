@@ -128,6 +128,8 @@ _NEXT_SCHEMA: dict[int, dict[str, Any]] = {
     6: {"periods": None},  # schema 7: the periods and g, none computed before; warnings, omega_n_from and
     #                         omega_n_effects, which from_dict derives from the flags and effects
     7: {},  # schema 8: J_std_calibration and J_std_model removed (lines of the budget), which from_dict does not read
+    # schema 9: where ω_n is read; every result before it read ω_n as the small-swing limit of its laws
+    8: {"omega_n_read_at": {"amplitude": 0.0, "basis": "small-swing limit", "limit": None, "limit_std": None}},
 }
 
 

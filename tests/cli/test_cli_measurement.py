@@ -197,9 +197,15 @@ def test_calibrate_from_traces_of_known_loads(tmp_path):
         refs.append(f'[[reference]]\nname = "load {i}"\ntrace = "{out.name}"\nadded_inertia = {added}\n')
     (tmp_path / "cal.toml").write_text("\n".join(refs))
     (tmp_path / "empty_rig.toml").write_text('[rig]\nkind = "torsion"\n')
-    r = moi("calibrate", tmp_path / "cal.toml", "--rig", tmp_path / "empty_rig.toml", "--json")
+    r = moi("calibrate", tmp_path / "cal.toml", "--rig", tmp_path / "empty_rig.toml", "--json",
+            "--out", tmp_path / "calibrated.toml")
     assert r.returncode == 0, r.stderr
     d = json.loads(r.stdout)
     assert d["stiffness"] == pytest.approx(k, rel=1e-4)
     assert d["tare_inertia"] == pytest.approx(I0, rel=1e-4)
     assert d["stiffness_std"] < 1e-4 * k
+    # the amplitude the references' ω_n were read at is kept with the calibration: a part's ω is read there too
+    import tomllib
+
+    written = tomllib.loads((tmp_path / "calibrated.toml").read_text(encoding="utf-8"))
+    assert 0.05 < written["calibration"]["amplitude"] < 0.3

@@ -25,8 +25,9 @@ from pathlib import Path
 import pytest
 
 from measurement import flags as F
+from measurement.identification import identify
 from measurement.joint import CONSISTENT_P, OWN_PAIR_Z, JointResult, identify_releases
-from measurement.reports import joint_report
+from measurement.reports import joint_report, result_report
 from measurement.result import IdentificationResult
 from service.sources.dispatch import load_source
 from service.sources.files import read_rig
@@ -73,6 +74,33 @@ def test_the_spread_between_releases_is_no_wider_than_a_plain_damped_sinusoids(p
     assert moi <= SPREAD_RATIO * plain or any(law in line for r in j.releases for line in r.structure), (moi, plain)
 
 
+@functools.cache
+def alone(part: str, reading: str) -> tuple[IdentificationResult, ...]:
+    """``moi identify FILE`` of each release alone (what a one-release recipe gets)."""
+    rig = read_rig(DATA / f"bicycle_{part}_first_1_rig.toml")
+    return tuple(identify(load_source(f), rig) for f in _files(part, reading))
+
+
+@pytest.mark.parametrize(("part", "reading"), SETS)
+def test_one_release_alone_scatters_no_wider_than_a_plain_damped_sinusoid(part, reading):
+    # a cubic spring fitted on 1.4-2.3° swings flips its sign between the wheel's releases on the rod: read at
+    # its small-swing limit it spread ω_n 1.9-2.0 × the plain fit's; read at the record's own amplitude (a torsion
+    # rig's measurand where its calibration states none), as wide as the plain fit's
+    results = alone(part, reading)
+    moi = _spread([r.omega_n for r in results])
+    # the joint identification reads the releases at one amplitude, their own amplitudes' mean
+    together = {(r.omega_n_read_at.basis, r.omega_n_read_at.amplitude) for r in joint(part, reading).releases}
+    assert len(together) == 1 and next(iter(together))[0] == ("releases" if part == "fwheel_torsional"
+                                                             else "small-swing limit")
+    plain = _spread([damped_sinusoid(*reading_columns(f))[0] for f in _files(part, reading)])
+    assert moi <= SPREAD_RATIO * plain, (moi, plain)
+    if part == "fwheel_torsional":
+        assert all(r.omega_n_read_at.basis == "record" and r.omega_n_read_at.amplitude > 0 for r in results)
+        assert "ω_n read at  = a swing of" in result_report(results[0])
+    else:
+        assert all(r.omega_n_read_at.basis == "small-swing limit" for r in results)
+
+
 @pytest.mark.parametrize(("part", "reading"), SETS)
 def test_releases_apart_beyond_their_stated_u_are_flagged_with_the_two_named(part, reading):
     j = joint(part, reading)
@@ -86,8 +114,11 @@ def test_releases_apart_beyond_their_stated_u_are_flagged_with_the_two_named(par
         assert f"{a} and {b} are {z:.1f} u apart" in report or f"{b} and {a} are {z:.1f} u apart" in report
     # the wheel hung from its rim: its releases are 0.35 % apart, and its rates say so; its integrated angles
     # hold less well across their records (the 2nd's first half moves by 0.006 rad/s without its first
-    # half-swing), and within the u that states they do not disagree
-    assert (F.RELEASES_DISAGREE in j.flags) == ((part, reading) == ("fwheel_compound", "rate"))
+    # half-swing), and within the u that states they do not disagree. The wheel on the rod: its releases are
+    # 0.25 % apart (a plain fit's spread as well) where each record states ± 0.06-0.12 %. Its cubic springs,
+    # read at the record's own amplitude, give the plain frequency, and no law extrapolated to zero amplitude
+    # widens u to cover the scatter between releases that one record cannot see (remounting): it is flagged
+    assert (F.RELEASES_DISAGREE in j.flags) == (part == "fwheel_torsional" or (part, reading) == ("fwheel_compound", "rate"))
 
 
 #: the releases whose rate and angle records are more than OWN_PAIR_Z stated u apart, and why (none now: the

@@ -4,12 +4,15 @@ Data come from the independent reference solver (tests/measurement/reference.py)
 not from the simulator the fit uses, with realistic noise and a 17-bit encoder.
 """
 
+import datetime as dt
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from measurement import Rig, Trace, identify
+from measurement.rig import CalibrationRecord
 
 from .reference import reference_motion, sensor
 
@@ -54,7 +57,9 @@ def test_air_drag_is_discovered():
 def test_hardening_spring_is_discovered_and_fixes_J():
     k3_per_J = 40.0
     trace = torsion_trace(viscous=0.01, cubic=k3_per_J)
-    r = identify(trace, torsion_rig())
+    # K is the spring's small-swing stiffness: a calibration read at zero amplitude (J takes ω there too)
+    r = identify(trace, replace(torsion_rig(), calibration=CalibrationRecord(dt.date(2026, 1, 5), amplitude=0.0)))
+    assert r.omega_n_read_at.amplitude == 0.0 and r.omega_n_read_at.basis == "calibration"
     assert r.baseline.J is not None
     assert abs(r.baseline.J / J - 1) > 3e-3, "the case must matter: viscous-only J off by > 0.3 %"
     assert r.added_effects == ("cubic_stiffness",)

@@ -54,11 +54,18 @@ def test_a_release_whose_discovered_omega_n_is_less_accurate_reads_the_declared_
     assert back.omega_n_from == "declared" and back.omega_n_effects == focused.omega_n_effects
 
 
-def test_a_restoring_law_makes_another_measurand_and_no_choice_is_made():
-    # a cubic spring's ω_n is its small-swing limit, the declared model's the frequency at the swing:
-    # weighed against each other, releases of one wheel read one or the other and ended 4-5 u apart
+def test_a_fitted_law_read_at_the_records_amplitude_is_one_measurand_with_the_declared_model():
+    # a cubic spring's small-swing limit and the declared model's frequency at the swing were two measurands
+    # (weighed against each other, releases of one wheel ended 4-5 u apart): on a torsion rig the law is read
+    # at the record's own amplitude, where the declared model measures, and the choice is made
     trace = load_source(ROOT / "data/bicycle_fwheel_torsional_first_3.csv")
     r = identify(trace, read_rig(ROOT / "data/bicycle_fwheel_torsional_first_3_rig.toml"))
-    assert "cubic_stiffness" in r.added_effects
-    assert r.omega_n_from == "discovered" and r.omega_n_effects == r.effects
-    assert not any("root mean squared error" in s for s in r.structure)
+    assert "cubic_stiffness" in r.added_effects and r.periods is not None and r.omega_n_u is not None
+    assert r.omega_n_read_at.basis == "record" and 0.02 < r.omega_n_read_at.amplitude < r.periods.amplitude
+    assert r.omega_n_from == "declared" and r.omega_n == r.baseline.omega_n
+    assert any("root mean squared error" in s for s in r.structure)
+    # the discovered model's ω there is the declared model's within a fraction of u; its limit is far off
+    rival = r.model_form.competitors[0]
+    assert rival.effects == r.effects and abs(rival.delta) < 0.1 * r.omega_n_u
+    assert r.omega_n_read_at.limit is None  # read from the declared model: no law to extrapolate
+    assert any(s.startswith("ω_n is the frequency at a swing of") for s in r.structure)

@@ -9,6 +9,7 @@ and a consistent size, or it is withdrawn from every release that kept it.
 
 from __future__ import annotations
 
+import datetime as dt
 import functools
 import math
 
@@ -23,6 +24,7 @@ from measurement.identification.preparation import Prepared
 from measurement.model import Model
 from measurement.object_laws import LawAcross
 from measurement.result import SegmentCheck
+from measurement.rig import CalibrationRecord
 
 
 def test_a_law_that_changes_sign_between_releases_is_not_one_of_the_object():
@@ -41,7 +43,8 @@ def test_a_law_that_changes_sign_between_releases_is_not_one_of_the_object():
 
 
 def _hardening(seed: int) -> tuple[Trace, Rig, float]:
-    rig = Rig(kind="torsion", stiffness=0.3651)
+    # the simulated k is the spring's small-swing stiffness: a calibration read at zero amplitude
+    rig = Rig(kind="torsion", stiffness=0.3651, calibration=CalibrationRecord(dt.date(2026, 1, 5), amplitude=0.0))
     J = 0.0125
     spring = Pendulum(rig, J, {"viscous": {"c_per_J": 0.1}, "cubic_stiffness": {"k3": 1.5 * 0.3651}})
     return simulate_trace(spring, theta0=math.radians(5), duration=30.0, rate=200.0, noise_std=2e-4,
@@ -56,7 +59,8 @@ def test_a_hardening_torsion_spring_is_found_and_kept():
     k3 = r.stiffness["cubic_stiffness"]["k3"]
     assert k3.value is not None and k3.std is not None
     assert abs(k3.value - 1.5 * 0.3651) < 4 * k3.std
-    # the measurand is the small-swing limit; the swing's frequency at its largest amplitude is beside it
+    # the measurand is the calibration's amplitude's, here the small-swing limit; the swing's frequency at its
+    # largest amplitude is beside it
     # (3/8 · 1.5 · (5°)² = +0.43 % by the describing function)
     line = next(s for s in r.structure if "small-swing limit" in s)
     assert "+0.4" in line
