@@ -26,6 +26,13 @@ freedom, and a lucky small misfit must not promise more than the certificates.
 Only when no reference states any uncertainty does the misfit alone set the
 σ (and the calibration says so). k = 1/b and I0 = a/b and their covariance
 follow by first-order propagation.
+
+A reference released more than once (several references of one name, one known
+inertia) is a point per release in the fit, and its releases show the rig's
+scatter between releases, which one record cannot see: ``reproducibility``
+pools the references' relative within-name deviations of ω_n as ISO 5725-2 does
+(``measurement.reproducibility.pooled``, ν = Σ(n_i − 1)), the figure the rig
+file keeps with its calibration.
 """
 
 from __future__ import annotations
@@ -37,6 +44,7 @@ from typing import Sequence
 import numpy as np
 
 from .errors import CalibrationError
+from .reproducibility import Reproducibility, calibrated, pooled
 
 
 @dataclass(frozen=True)
@@ -201,6 +209,24 @@ def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
     residual_I = tuple(float(v) for v in residual_x * k)
     return Calibration(k, k_std, a / b, I0_std, corr, refs, residual_I, kI_cov, "stated" if stated else "misfit",
                        birge, tuple(notes))
+
+
+def reproducibility(references: Sequence[Reference]) -> Reproducibility | None:
+    """The scatter of ω_n between the releases of each reference released more than once (by name), pooled
+    (source "rig"); None when none is. A name given with two different known inertias is refused: those are two
+    references, not one released again."""
+    groups: dict[str, list[Reference]] = {}
+    for r in references:
+        groups.setdefault(r.name, []).append(r)
+    for name, rs in groups.items():
+        if any(not math.isclose(r.added_inertia, rs[0].added_inertia, rel_tol=1e-9, abs_tol=1e-15) for r in rs):
+            raise CalibrationError(f"reference {name!r} is given with different known inertias "
+                                   f"({', '.join(f'{r.added_inertia:.6g}' for r in rs)} kg·m²); expected one name "
+                                   "per reference (a reference released again repeats its table unchanged)")
+    figure = pooled([r.omega_n for r in rs] for rs in groups.values())
+    if figure.relative is None:
+        return None
+    return calibrated(figure.relative, figure.dof, figure.groups, figure.releases)
 
 
 def _checked(references: Sequence[Reference]) -> tuple[Reference, ...]:
