@@ -404,7 +404,7 @@ def _reproducibility(doc: Mapping[str, Any]) -> tuple[float | None, int | None]:
     if not set(doc) >= _REPRO_KEYS or isinstance(dof, bool) or not isinstance(dof, int) or dof < 1:
         raise RigError(f"rig file: [calibration] reproducibility needs reproducibility_dof, a whole number >= 1 "
                        f"(Σ(n_i − 1) of the releases pooled), got {dof!r}")
-    return _positive("calibration.reproducibility", rel, "1 (relative)"), dof
+    return _positive("[calibration] reproducibility", rel, "(a relative 1σ of ω_n)"), dof
 
 
 def _object_transfer(o: Any) -> ObjectTransfer:
