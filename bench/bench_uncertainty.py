@@ -22,6 +22,7 @@ history in u and without it (one release on a rig whose calibration keeps no fig
 
 from __future__ import annotations
 
+import datetime as dt
 import math
 import statistics
 import sys
@@ -31,8 +32,6 @@ from dataclasses import replace
 import numpy as np
 
 from measurement import Options, Pendulum, Rig, identify, simulate_trace
-import datetime as dt
-
 from measurement.calibration import Reference, calibrate_torsion, reproducibility
 from measurement.identification.quantities import budgets
 from measurement.reproducibility import DEFAULT, pooled

@@ -62,8 +62,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from measurement.calibration import Cylinder, Reference, calibrate_torsion, cylinder_inertia_std, reproducibility
-from measurement.reproducibility import MIN_DOF, Reproducibility
 from measurement.errors import CalibrationError
+from measurement.reproducibility import MIN_DOF, Reproducibility
 from measurement.rig import CalibrationRecord
 from service.errors import InputFileError
 from service.names import name_problem

@@ -9,8 +9,7 @@ import pytest
 
 from measurement import Options, Pendulum, Rig, identify, simulate_trace
 from measurement.reports import result_report
-from measurement.reproducibility import (DEFAULT, HISTORY, MIN_DOF, RIG, ReproducibilityError, calibrated,
-                                         for_release, pooled)
+from measurement.reproducibility import DEFAULT, HISTORY, MIN_DOF, RIG, ReproducibilityError, calibrated, for_release, pooled
 from measurement.result import IdentificationResult
 from measurement.uncertainty import PendulumInputs
 
