@@ -383,8 +383,7 @@ class Appliance:
 
     def identification_options(self, rig: Rig) -> Options:
         """The configuration's identification options with ``rig``'s scatter between releases pooled from the store's
-        repeat releases since its calibration (any thread); too thin a history: the figure the rig's calibration keeps,
-        else the documented default (``measurement.reproducibility.for_release``)."""
+        repeat releases since its calibration (any thread); else its calibration's figure, else the default (``for_release``)."""
         history = self.history.reproducibility(rig) if self.history is not None else None
         return dataclasses.replace(self.config.identification, reproducibility=for_release(history, rig.reproducibility))
 
