@@ -112,3 +112,13 @@ def test_a_rig_files_figure_without_its_dof_or_out_of_range_is_refused(tmp_path,
     path.write_text(Path(RIG_FILE).read_text() + f'\n[calibration]\ndate = 2026-01-31\n{keys}\n')
     assert main(["identify", str(REPO / "examples" / "calibration.toml"), "--rig", str(path)]) == 2
     assert "[calibration] reproducibility" in capsys.readouterr().err
+
+
+def test_calibrating_in_place_again_with_once_released_references_drops_the_old_figure(tmp_path, capsys):
+    out = _calibrated_rig(tmp_path, capsys)
+    assert read_rig(str(out)).reproducibility is not None
+    (tmp_path / "once.toml").write_text((REPO / "examples" / "calibration.toml").read_text())
+    assert main(["calibrate", str(tmp_path / "once.toml"), "--rig", str(out), "--out", str(out)]) == 0
+    rig = read_rig(str(out))
+    assert rig.calibration is not None and rig.calibration.source == str(tmp_path / "once.toml")
+    assert rig.reproducibility is None and "reproducibility" not in out.read_text()
