@@ -23,9 +23,9 @@ RELEASES = {"empty fixture": (0.0, (0.0011, -0.0006)), "disc 5 g·m²": (0.005, 
             "disc 12.5 g·m²": (0.0125, (0.0002,))}
 
 
-def _cal_text() -> str:
+def _cal_text(releases=RELEASES) -> str:
     tables = []
-    for name, (added, offs) in RELEASES.items():
+    for name, (added, offs) in releases.items():
         for off in offs:
             w = math.sqrt(K / (I0 + added)) * (1 + off)
             tables.append(f'[[reference]]\nname = "{name}"\nadded_inertia = {added}\nadded_inertia_std = '
@@ -122,3 +122,13 @@ def test_calibrating_in_place_again_with_once_released_references_drops_the_old_
     rig = read_rig(str(out))
     assert rig.calibration is not None and rig.calibration.source == str(tmp_path / "once.toml")
     assert rig.reproducibility is None and "reproducibility" not in out.read_text()
+
+
+def test_one_reference_released_twice_is_too_thin_to_keep(tmp_path, capsys):
+    # ν = 1: a Type A line of one degree of freedom setting u would set k near 13
+    once = {name: (added, offs[:1]) for name, (added, offs) in RELEASES.items()}
+    (tmp_path / "cal.toml").write_text(_cal_text(once | {"empty fixture": RELEASES["empty fixture"]}))
+    out = tmp_path / "rig.toml"
+    assert main(["calibrate", str(tmp_path / "cal.toml"), "--rig", RIG_FILE, "--out", str(out)]) == 0
+    assert "fewer than 2 degrees of freedom: not kept" in capsys.readouterr().out
+    assert read_rig(str(out)).reproducibility is None
