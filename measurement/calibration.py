@@ -28,9 +28,11 @@ Only when no reference states any uncertainty does the misfit alone set the
 follow by first-order propagation.
 
 A reference released more than once (several references of one name, one known
-inertia) is a point per release in the fit, and its releases show the rig's
-scatter between releases, which one record cannot see: ``reproducibility``
-pools the references' relative within-name deviations of ω_n as ISO 5725-2 does
+inertia) is one point of the fit, its releases averaged (``_points``): its
+certificate's error is common to its releases, and n independent points would
+shrink k's σ by √n. Its releases show the rig's scatter between releases, which
+one record cannot see: ``reproducibility`` pools the references' relative
+within-name deviations of ω_n as ISO 5725-2 does
 (``measurement.reproducibility.pooled``, ν = Σ(n_i − 1)), the figure the rig
 file keeps with its calibration.
 """
