@@ -20,7 +20,9 @@ releases while this one does not; the detail names the model each release's
 ω_n came from.
 
 Coverage of one release: the share of the pairs of releases of one object,
-each identified alone, whose difference lies within 2 combined u
+each identified alone (its u with the scatter between releases it counts: the
+documented default, the rig files here keeping no calibration figure), whose
+difference lies within 2 combined u
 (|Δω_n| ≤ 2·√(u_i² + u_j²)): what a user who measures a part once and then
 again sees. Besides data/, the phone-gyro recording of a racquet hung as a
 physical pendulum (../shared/real/userdata/phyphox_racquet_x_14-02-08, as
@@ -143,6 +145,10 @@ def moi_alone(trace_file: str, rig_file: str, discover: bool = True) -> tuple[Es
     except MeasurementError as exc:
         return _failed(exc), _failed(exc)
     u = res.omega_n_u or res.omega_n_std
+    repro = res.reproducibility
+    if repro is not None and repro.counted and repro.relative is not None:
+        # one release's u counts the scatter between releases its record cannot see (the documented default here)
+        u = math.hypot(u, repro.relative * res.omega_n)
     note = f"{', '.join(res.added_effects) or '-'} [ω_n from {res.omega_n_from}]"
     head = Estimate(res.omega_n, u, note)
     counted = res.periods.counted if res.periods is not None else None

@@ -26,6 +26,15 @@ freedom, and a lucky small misfit must not promise more than the certificates.
 Only when no reference states any uncertainty does the misfit alone set the
 σ (and the calibration says so). k = 1/b and I0 = a/b and their covariance
 follow by first-order propagation.
+
+A reference released more than once (several references of one name, one known
+inertia) is one point of the fit, its releases averaged (``_points``): its
+certificate's error is common to its releases, and n independent points would
+shrink k's σ by √n. Its releases show the rig's scatter between releases, which
+one record cannot see: ``reproducibility`` pools the references' relative
+within-name deviations of ω_n as ISO 5725-2 does
+(``measurement.reproducibility.pooled``, ν = Σ(n_i − 1)), the figure the rig
+file keeps with its calibration.
 """
 
 from __future__ import annotations
@@ -37,6 +46,7 @@ from typing import Sequence
 import numpy as np
 
 from .errors import CalibrationError
+from .reproducibility import Reproducibility, calibrated, pooled
 
 
 @dataclass(frozen=True)
@@ -168,10 +178,7 @@ CONSISTENCY_LEVEL = 0.95
 def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
     """Fit k and I0 from references (at least two distinct added inertias); see the module doc."""
     refs = _checked(references)
-    I = np.array([r.added_inertia for r in refs], dtype=float)
-    x = 1.0 / np.array([r.omega_n for r in refs], dtype=float) ** 2
-    sx = np.array([2.0 * (r.omega_n_std or 0.0) / r.omega_n**3 for r in refs])
-    sI = np.array([r.added_inertia_std or 0.0 for r in refs])
+    I, x, sx, sI = _points(refs)
     A = np.vstack([np.ones_like(I), I]).T
     stated = bool(np.any(sx > 0) or np.any(sI > 0))
     notes: list[str] = []
@@ -179,7 +186,7 @@ def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
     s_eff = np.ones_like(x)
     if stated:
         coef, s_eff = _effective_variance(A, x, sx, sI, coef)
-        unstated = [r.name for r, a, b in zip(refs, sx, sI) if a == 0 and b == 0]
+        unstated = [n for n, a, b in zip(dict.fromkeys(r.name for r in refs), sx, sI) if a == 0 and b == 0]
         if unstated:
             notes.append(f"no uncertainty stated for {', '.join(unstated)}: treated as 1/1000 of the smallest "
                          "stated one (state added_inertia_std and omega_n_std)")
@@ -187,6 +194,9 @@ def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
     if b <= 0:
         raise CalibrationError("calibration: the period does not grow with the added inertia; check the references")
     residual_x = x - A @ coef
+    # each release's own misfit, from the line its reference's mean fixed
+    x_each = 1.0 / np.array([r.omega_n for r in refs], dtype=float) ** 2
+    residual_each = x_each - (a + b * np.array([r.added_inertia for r in refs], dtype=float))
     cov, birge = _covariance(A, s_eff, residual_x, stated, notes)
     k_std = I0_std = corr = kI_cov = None
     if cov is not None:
@@ -198,9 +208,47 @@ def calibrate_torsion(references: Sequence[Reference]) -> Calibration:
         kI_cov = float(gk @ cov @ gI)
         corr = kI_cov / (k_std * I0_std) if k_std > 0 and I0_std > 0 else None
     k = 1.0 / b
-    residual_I = tuple(float(v) for v in residual_x * k)
+    residual_I = tuple(float(v) for v in residual_each * k)
     return Calibration(k, k_std, a / b, I0_std, corr, refs, residual_I, kI_cov, "stated" if stated else "misfit",
                        birge, tuple(notes))
+
+
+def reproducibility(references: Sequence[Reference]) -> Reproducibility | None:
+    """The scatter of ω_n between the releases of each reference released more than once (by name), pooled
+    (source "rig"); None when none is. A name given with two different known inertias is refused: those are two
+    references, not one released again."""
+    groups: dict[str, list[Reference]] = {}
+    for r in references:
+        groups.setdefault(r.name, []).append(r)
+    for name, rs in groups.items():
+        if any(not math.isclose(r.added_inertia, rs[0].added_inertia, rel_tol=1e-9, abs_tol=1e-15) for r in rs):
+            raise CalibrationError(f"reference {name!r} is given with different known inertias "
+                                   f"({', '.join(f'{r.added_inertia:.6g}' for r in rs)} kg·m²); expected one name "
+                                   "per reference (a reference released again repeats its table unchanged)")
+    figure = pooled([r.omega_n for r in rs] for rs in groups.values())
+    if figure.relative is None:
+        return None
+    return calibrated(figure.relative, figure.dof, figure.groups, figure.releases)
+
+
+def _points(refs: Sequence[Reference]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The fit's points (I, x = 1/ω², σ(x), σ(I)): one per reference, its releases averaged. A reference released
+    n times has one certificate: its error is common to its releases, so it is one point, not n independent ones
+    (that would shrink k's σ by √n). Its x is the releases' mean, σ(x)² the larger of their own mean σ² and the
+    calibration's pooled scatter between releases (``reproducibility``), over n."""
+    repro = reproducibility(refs)
+    rel = 0.0 if repro is None or repro.relative is None else repro.relative
+    groups: dict[str, list[Reference]] = {}
+    for r in refs:
+        groups.setdefault(r.name, []).append(r)
+    rows = []
+    for rs in groups.values():
+        xs = np.array([1.0 / r.omega_n**2 for r in rs])
+        own = np.array([2.0 * (r.omega_n_std or 0.0) / r.omega_n**3 for r in rs])
+        var = max(float(np.mean(own**2)), (2.0 * rel * float(xs.mean())) ** 2) if len(rs) > 1 else float(own[0] ** 2)
+        rows.append((rs[0].added_inertia, float(xs.mean()), math.sqrt(var / len(rs)), rs[0].added_inertia_std or 0.0))
+    I, x, sx, sI = (np.array(c, dtype=float) for c in zip(*rows))
+    return I, x, sx, sI
 
 
 def _checked(references: Sequence[Reference]) -> tuple[Reference, ...]:

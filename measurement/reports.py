@@ -46,12 +46,11 @@ def budget_table(b: Budget) -> list[str]:
 
 def reproducibility_line(r: Reproducibility | None) -> str:
     """The report's line on the scatter between releases, which one record cannot see."""
-    if r is None or not r.known:
-        default = "" if r is None or r.relative is None else (
-            f" (a typical rig: ±{100 * r.relative:.2g} % of ω_n, Type B: stated, not counted)")
-        return ("    reproducibility: not known from one release (remounting, the pivot settling, a hand-held "
-                f"sensor): not in u{default}; measure ≥ 3 releases, whose joint identification carries their scatter")
-    assert r.relative is not None
+    if r is None or r.relative is None:
+        return ("    reproducibility: not known (remounting, the pivot settling, a hand-held sensor): not in u; "
+                "measure ≥ 3 releases, whose joint identification carries their scatter")
+    if not r.known:
+        return f"    reproducibility: {r.note()}"
     return (f"    reproducibility: ±{100 * r.relative:.2g} % of ω_n between releases ({r.note()}, ν = {r.dof:.0f}): in u")
 
 

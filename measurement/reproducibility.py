@@ -14,9 +14,12 @@ Objects of different size are pooled on the relative deviations from each group'
 rig's history of check standards and parts of any inertia gives one relative figure. It is stated
 for ω_n: J = C/ω² carries twice its relative value.
 
-Where no history exists (one release, a file given to ``moi identify``) the scatter is not known;
-``DEFAULT`` is the Type B figure documented for that case (``docs/uncertainty.md``): stated beside
-the budget, not counted in u (``counted`` False), see there why.
+One release's u counts, in this order (``for_release``): the rig's history (``pooled`` over the
+appliance's store, source "history") where it pools at least ``MIN_DOF`` degrees of freedom; else the
+figure its calibration keeps (``moi calibrate`` pools the references released more than once, source
+"rig", Type A with its ν); else ``DEFAULT``, the documented Type B figure (source "default"), counted
+too (GUM 4.3: a component known to exist and not measured gets a documented estimate; a measured
+figure replaces it). ``docs/uncertainty.md`` gives the reasons and the benches' figures.
 """
 
 from __future__ import annotations
@@ -49,7 +52,7 @@ class Reproducibility:
     relative: 1σ of ω_n between releases over ω_n (None: not known); dof: its degrees of freedom (∞ for
     a Type B figure); groups, releases: what was pooled (0 for a stated figure); source: "history" (pooled
     from repeat releases), "rig" (stated in the rig file) or "default" (the documented Type B figure);
-    counted: whether the budget's u holds it (a default is stated, not counted).
+    counted: whether the budget's u holds it (every figure ``for_release`` gives is counted).
     """
 
     relative: float | None
@@ -67,10 +70,14 @@ class Reproducibility:
         """What the budget's line says of its source."""
         if self.source == DEFAULT_SOURCE:
             rel = 100 * (self.relative or 0.0)
-            return (f"one release: not known, not in u; measure ≥ 3 releases. Default ±{rel:.2g} % of ω_n "
-                    f"(±{2 * rel:.2g} % of J), Type B: docs/uncertainty.md")
+            return (f"one release, the rig's reproducibility not known: the documented default ±{rel:.2g} % of ω_n "
+                    f"(±{2 * rel:.2g} % of J, Type B) is in u; measure ≥ 3 releases or calibrate with each reference "
+                    "released twice to replace it: docs/uncertainty.md")
         if self.relative is None:
             return "not known: no group of repeat releases in the history"
+        if self.source == RIG:
+            refs = "1 reference" if self.groups == 1 else f"{self.groups} references"
+            return f"rig: its calibration's {self.releases} releases of {refs} pooled (ISO 5725-2)"
         objects = "1 object" if self.groups == 1 else f"{self.groups} objects"
         return f"{self.source}: {self.releases} releases of {objects} pooled (ISO 5725-2)"
 
@@ -88,9 +95,10 @@ class Reproducibility:
 #: Its source: the range (max − min)/mean of ω_n that a plain damped sinusoid shows between the releases of
 #: the real torsion-rod records of docs/measured-data.md (a bicycle rod 0.204 % over 5 releases, a front
 #: wheel on the rod 0.245 % over 3; hand-built rigs), as a standard deviation range/d₂ (d₂ = 2.326 and
-#: 1.693: 0.088 % and 0.145 %), rounded: the scatter a record's own fit cannot see. Rigs differ by a factor
-#: of ten either way, so it is stated beside one release's budget, not counted in its u.
-DEFAULT = Reproducibility(0.001, math.inf, 0, 0, DEFAULT_SOURCE, False)
+#: 1.693: 0.088 % and 0.145 %), rounded: the scatter a record's own fit cannot see. Counted in one release's
+#: u when neither a history nor the rig's calibration measured it; taken at its value (ν = ∞, GUM G.4.3: its own
+#: uncertainty is not modelled, so it does not raise k) — a rig that scatters otherwise says so by measuring.
+DEFAULT = Reproducibility(0.001, math.inf, 0, 0, DEFAULT_SOURCE, True)
 
 
 def _group(values: Sequence[float]) -> list[float]:
@@ -125,9 +133,16 @@ def pooled(groups: Iterable[Sequence[float]], *, power: float = 1.0) -> Reproduc
     return Reproducibility(math.sqrt(ss / dof) / abs(power), float(dof), n_groups, n_releases, HISTORY, True)
 
 
-def for_release(history: Reproducibility | None) -> Reproducibility:
-    """What one release's budget says of the scatter between releases: its rig's ``history`` (``pooled``) where
-    that pools at least ``MIN_DOF`` degrees of freedom, else the documented ``DEFAULT`` (stated, not counted)."""
-    if history is None or not history.known or history.dof < MIN_DOF:
-        return DEFAULT
-    return history
+def calibrated(relative: float, dof: float, groups: int = 0, releases: int = 0) -> Reproducibility:
+    """The figure a rig's calibration keeps (source "rig"): its references' releases pooled, Type A with ν."""
+    return Reproducibility(relative, dof, groups, releases, RIG, True)
+
+
+def for_release(history: Reproducibility | None, rig: Reproducibility | None = None) -> Reproducibility:
+    """What one release's u counts of the scatter between releases: its rig's ``history`` (``pooled``) where that
+    pools at least ``MIN_DOF`` degrees of freedom, else the ``rig``'s calibration figure (``calibrated``) where it
+    does, else the documented ``DEFAULT`` (Type B)."""
+    for figure in (history, rig):
+        if figure is not None and figure.known and figure.dof >= MIN_DOF:
+            return figure
+    return DEFAULT

@@ -380,7 +380,7 @@ class IdentificationResult:
     omega_n_from: str = "discovered"
     omega_n_effects: tuple[str, ...] = ()
     #: the scatter of ω_n between releases, which one record cannot see (``measurement.reproducibility``):
-    #: a rig's history pooled (in u), or the documented default (stated, not in u); None: not said
+    #: a rig's history pooled, its calibration's figure, or the documented default (each in u); None: not said
     reproducibility: Reproducibility | None = None
     #: the swing amplitude ω_n and J are read at (``ReadAt``; schema 9)
     omega_n_read_at: ReadAt = field(default_factory=ReadAt)

@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
+from collections import Counter
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping
 
 from .effects import resolve_effects
 from .errors import RigError
+from .reproducibility import Reproducibility, calibrated
 from .restoring import RIG_KINDS, WIRE_SUSPENSIONS, wire_geometry
 from .trace import READINGS
 from .uncertainty import check_covariance
@@ -46,6 +48,8 @@ _OBJECT_STD_KEYS = {"mass_std", "axis_offset_std"}
 _MODEL_KEYS = {"declared"}
 _SENSOR_KEYS = {"calibrated", "clock_accuracy_ppm", "angle_scale_std"}
 _CALIBRATION_KEYS = {"date", "valid_days", "references", "source", "amplitude"}
+#: the rig's reproducibility between releases its calibration pooled (``moi calibrate``; optional)
+_REPRO_KEYS = {"reproducibility", "reproducibility_dof"}
 
 
 def _positive(name: str, value: Any, unit: str, *, allow_zero: bool = False) -> float:
@@ -84,6 +88,9 @@ class CalibrationRecord:
     amplitude: the swing amplitude (rad) the references' ω_n were read at (None: not stated). A spring
     whose stiffness changes with the amplitude is calibrated at this one: a part's ω is read there too
     (``identification.measurand``).
+    reproducibility, reproducibility_dof: the relative 1σ of ω_n between releases that the references released
+    more than once showed (ISO 5725-2 pooled, ``measurement.reproducibility``) and its degrees of freedom
+    Σ(n_i − 1); None: not measured (one release of each reference).
     """
 
     date: _dt.date
@@ -91,6 +98,16 @@ class CalibrationRecord:
     references: tuple[dict[str, Any], ...] = ()
     source: str | None = None
     amplitude: float | None = None
+    reproducibility: float | None = None
+    reproducibility_dof: int | None = None
+
+    def reproducibility_figure(self) -> Reproducibility | None:
+        """The kept figure (source "rig") with what it pooled (the references named more than once); None: none."""
+        if self.reproducibility is None or self.reproducibility_dof is None:
+            return None
+        names = Counter(str(r.get("name")) for r in self.references)
+        repeated = [n for n in names.values() if n > 1]
+        return calibrated(self.reproducibility, float(self.reproducibility_dof), len(repeated), sum(repeated))
 
     @property
     def valid_until(self) -> _dt.date | None:
@@ -112,13 +129,15 @@ class CalibrationRecord:
             d["amplitude"] = self.amplitude
         if self.references:
             d["references"] = [dict(r) for r in self.references]
+        if self.reproducibility is not None:
+            d |= {"reproducibility": self.reproducibility, "reproducibility_dof": self.reproducibility_dof}
         return d
 
     @classmethod
     def from_dict(cls, doc: Any) -> "CalibrationRecord":
-        if not isinstance(doc, Mapping) or set(doc) - _CALIBRATION_KEYS or "date" not in doc:
+        if not isinstance(doc, Mapping) or set(doc) - _CALIBRATION_KEYS - _REPRO_KEYS or "date" not in doc:
             raise RigError("rig file: [calibration] needs date = YYYY-MM-DD, optional valid_days, references, source, "
-                           "amplitude")
+                           "amplitude, reproducibility and reproducibility_dof")
         date = doc["date"]
         if isinstance(date, _dt.datetime):
             date = date.date()
@@ -139,7 +158,8 @@ class CalibrationRecord:
         amplitude = doc.get("amplitude")
         if amplitude is not None:
             amplitude = _positive("[calibration] amplitude", amplitude, "rad", allow_zero=True)
-        return cls(date, valid, tuple(dict(r) for r in refs), None if source is None else str(source), amplitude)
+        return cls(date, valid, tuple(dict(r) for r in refs), None if source is None else str(source), amplitude,
+                   *_reproducibility(doc))
 
 
 @dataclass(frozen=True)
@@ -244,6 +264,11 @@ class Rig:
                            f"(wire_length {self.wire_length:g} m, distance {self.wire_radius:g} m)")
 
     # -- derived constants ---------------------------------------------------
+    @property
+    def reproducibility(self) -> Reproducibility | None:
+        """The scatter of ω_n between releases its calibration measured (source "rig"); None: not measured."""
+        return None if self.calibration is None else self.calibration.reproducibility_figure()
+
     @property
     def wire_radius(self) -> float | None:
         """R, the wires' distance from the axis (m): D/2 on a bifilar, the circle's radius on a trifilar."""
@@ -378,6 +403,17 @@ def _rig_table(doc: Mapping[str, Any]) -> Mapping[str, Any]:
     if rig["kind"] not in RIG_KINDS:
         raise RigError(f"rig file: unknown kind {rig['kind']!r}; expected one of {', '.join(RIG_KINDS)}")
     return rig
+
+
+def _reproducibility(doc: Mapping[str, Any]) -> tuple[float | None, int | None]:
+    """[calibration]'s reproducibility (relative 1σ of ω_n) and its degrees of freedom: both or neither."""
+    if not set(doc) & _REPRO_KEYS:
+        return None, None
+    rel, dof = doc.get("reproducibility"), doc.get("reproducibility_dof")
+    if not set(doc) >= _REPRO_KEYS or isinstance(dof, bool) or not isinstance(dof, int) or dof < 1:
+        raise RigError(f"rig file: [calibration] reproducibility needs reproducibility_dof, a whole number >= 1 "
+                       f"(Σ(n_i − 1) of the releases pooled), got {dof!r}")
+    return _positive("[calibration] reproducibility", rel, "(a relative 1σ of ω_n)"), dof
 
 
 def _object_transfer(o: Any) -> ObjectTransfer:

@@ -383,9 +383,9 @@ class Appliance:
 
     def identification_options(self, rig: Rig) -> Options:
         """The configuration's identification options with ``rig``'s scatter between releases pooled from the store's
-        repeat releases since its calibration (any thread); too thin a history: the documented default, stated."""
+        repeat releases since its calibration (any thread); else its calibration's figure, else the default (``for_release``)."""
         history = self.history.reproducibility(rig) if self.history is not None else None
-        return dataclasses.replace(self.config.identification, reproducibility=for_release(history))
+        return dataclasses.replace(self.config.identification, reproducibility=for_release(history, rig.reproducibility))
 
     def _on_event(self, event: Event) -> None:
         self._armed_at = event.time if event.state is State.ARMED else None

@@ -60,7 +60,8 @@ class Findings:
     rival_laws: tuple[tuple[str, float, tuple[str, ...], str], ...] = ()
     #: the model the headline ω_n is read from (``focus``); None: the final model
     focus: Focus | None = None
-    #: the scatter between releases this record cannot see (``Options.reproducibility``; the default: stated only)
+    #: the scatter between releases this record cannot see (``Options.reproducibility``, else the rig's
+    #: calibration figure, else the documented default: ``reproducibility.for_release``)
     reproducibility: Reproducibility = DEFAULT_REPRODUCIBILITY
     #: the swing amplitude the headline ω_n is read at (``measurand``)
     read_at: ReadAt = ReadAt()

@@ -29,8 +29,8 @@ class Options:
     focused: read the headline ω_n from the declared model where its ω_n is the more accurate
     (``identification.focus``; False: always from the discovered model).
     reproducibility: the rig's scatter of ω_n between releases (``measurement.reproducibility.pooled``
-    over its history): a line of the budget, in u. None: not
-    known; the budget states the documented default without counting it.
+    over its history): a line of the budget, in u. None: the figure the rig's calibration keeps, else the
+    documented default (``measurement.reproducibility.for_release``), counted.
     reference_amplitude: on a torsion rig, the swing amplitude (rad) a fitted amplitude law reads ω at
     (``identification.measurand``), and reference_basis what it is ("calibration": the references' of a
     calibration; "releases": the releases' of one object, read together). None: the rig's calibration's

@@ -13,7 +13,7 @@ from ..effects import EFFECTS
 from ..errors import RigError, UnknownEffectError
 from ..fit import ModelFit, fit_model, with_score_floor
 from ..model import Model
-from ..reproducibility import DEFAULT as DEFAULT_REPRODUCIBILITY
+from ..reproducibility import for_release
 from ..residual import Diagnostics
 from ..result import DiscoveryStep, IdentificationResult
 from ..rig import Rig
@@ -235,6 +235,6 @@ def _identify(trace: Trace, rig: Rig, options: Options) -> IdentificationResult:
         view=view, omega_n_view=w_cal, inertias=inertias(rig, w, ws),
         nominal=omega_n_at_nominal_scale(final), nfev=run.nfev + g.nfev + spent, bic_margin=options.bic_margin,
         rival_laws=options.rival_laws, focus=head, read_at=read,
-        reproducibility=options.reproducibility or DEFAULT_REPRODUCIBILITY)
+        reproducibility=options.reproducibility or for_release(None, rig.reproducibility))
     left = leftover(found)
     return assemble(found, raise_flags(found, left), describe(found, left))

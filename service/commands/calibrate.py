@@ -20,6 +20,16 @@ modulation ζ as a monocular-vision torsion pendulum reports them:
                    mass_std = 1e-4, diameter_std = 1e-5, distance_std = 2e-5 },
                  { mass = 0.5006, diameter = 0.06004, distance = 0.05 }]
 
+A reference released more than once (remounted, swung again) repeats its
+table with the same name and known inertia and its new trace (or ω): each
+release is a point of the fit, and the releases of the references given
+more than once are pooled into the rig's reproducibility between releases
+(ISO 5725-2: the relative within-reference standard deviation of ω_n, ν =
+Σ(n_i − 1)), written with the calibration as ``reproducibility`` and
+``reproducibility_dof`` once ν ≥ 2 (each of two references released twice,
+or one three times). One release's u then counts it in place of the
+documented default (docs/uncertainty.md).
+
 The regression uses every stated uncertainty (weighted, errors in the known
 inertia as well as in ω_n: measurement/calibration.py); a reference whose σ
 is not stated is said to be so. With few references a small misfit does not
@@ -51,8 +61,9 @@ import socket
 from dataclasses import replace
 from pathlib import Path
 
-from measurement.calibration import Cylinder, Reference, calibrate_torsion, cylinder_inertia_std
+from measurement.calibration import Cylinder, Reference, calibrate_torsion, cylinder_inertia_std, reproducibility
 from measurement.errors import CalibrationError
+from measurement.reproducibility import MIN_DOF, Reproducibility
 from measurement.rig import CalibrationRecord
 from service.errors import InputFileError
 from service.names import name_problem
@@ -201,8 +212,11 @@ def run(args: argparse.Namespace) -> int:
         raise CalibrationError(f"--date must be a date like 2026-01-31, got {args.date!r}") from None
     refs, amplitude = read_references(args.calibration, rig)
     cal = calibrate_torsion(refs)
+    repro = reproducibility(refs)
+    kept = repro if repro is not None and repro.dof >= MIN_DOF else None  # a thinner figure would set k near 13
     references = [{k: v for k, v in ref.items() if v is not None} for ref in cal.to_dict()["references"]]
-    record = CalibrationRecord(date, args.valid_days, tuple(references), str(args.calibration), amplitude)
+    record = CalibrationRecord(date, args.valid_days, tuple(references), str(args.calibration), amplitude,
+                               None if kept is None else kept.relative, None if kept is None else int(kept.dof))
     until = record.valid_until
     assert until is not None  # valid_days was given
     if args.out:
@@ -220,9 +234,22 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(cal.report())
         print(f"    calibrated on {date.isoformat()}, valid until {until.isoformat()}")
+        print(_reproducibility_line(repro))
         if args.out:
             print(f"rig written to {args.out}; calibration appended to {history}")
     return 0
+
+
+def _reproducibility_line(r: Reproducibility | None) -> str:
+    """What the calibration says of the rig's scatter between releases (kept in the rig file from ν ≥ MIN_DOF)."""
+    if r is None or r.relative is None:
+        return ("    reproducibility between releases: not measured (each reference released once): one release's u "
+                "counts the documented default; release each reference twice to measure it")
+    figure = f"±{100 * r.relative:.2g} % of ω_n ({r.note()}, ν = {r.dof:.0f})"
+    if r.dof < MIN_DOF:
+        return (f"    reproducibility between releases: {figure}, fewer than {MIN_DOF} degrees of freedom: not kept; "
+                "release two references twice")
+    return f"    reproducibility between releases: {figure}: kept with the calibration, in one release's u"
 
 
 def _who(by: str | None) -> str:

@@ -119,7 +119,12 @@ def write_rig(rig: Rig, path: str | os.PathLike, comment: str | None = None,
         import tomlkit
 
         doc = tomlkit.parse(read_text(keep_from, "rig file"))
-        _update_toml(doc, rig.to_dict())
+        values = rig.to_dict()
+        if "calibration" in values and hasattr(doc.get("calibration"), "items"):
+            # a new calibration: nothing of the old one's table holds (its reproducibility figure, say)
+            for key in set(doc["calibration"]) - set(values["calibration"]):
+                del doc["calibration"][key]
+        _update_toml(doc, values)
         text = tomlkit.dumps(doc)
         if comment and comment not in text:
             text = "".join(f"# {line}\n" for line in comment.splitlines()) + text

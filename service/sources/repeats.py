@@ -142,7 +142,7 @@ class RigHistory:
                 try:
                     self._groups, self._since = _read(self._store, since), since
                 except StoreError as exc:
-                    log.warning("the rig's history of repeat releases not read (%s): its default is stated", exc)
+                    log.warning("the rig's history of repeat releases not read (%s): its calibration's figure or the default counts", exc)
                     return None
             return pooled(self._groups.values())
 

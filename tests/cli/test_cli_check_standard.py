@@ -96,6 +96,9 @@ def test_identify_json_carries_the_expanded_uncertainty_and_its_budget(swing, ri
     k, i0 = rng.multivariate_normal([rig.stiffness, rig.tare_inertia], cov, n).T
     w = sum(rng.normal(0.0, ln["std"], n) for ln in lines.values() if ln["unit"] == "rad/s") + d["omega_n"]
     w = w * (1 + rng.normal(0.0, rig.clock_accuracy_ppm * 1e-6, n))
+    # one release: the documented default of the scatter between releases, counted (a relative factor on ω)
+    assert lines["omega_n_repro"]["std"] == 0.001
+    w = w * (1 + rng.normal(0.0, lines["omega_n_repro"]["std"], n))
     assert np.std(k / w**2 - i0) == pytest.approx(d["J_object_u"], rel=0.1)
 
 

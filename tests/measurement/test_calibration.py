@@ -1,6 +1,8 @@
 """Table 2 (calibration) and Table 3 (repeatability) of the monocular-vision torsion pendulum paper:
 "Research on the Measurement Technology of Rotational Inertia of Rigid Body Based on the Principles of Monocular Vision and Torsion Pendulum"."""
 
+import math
+
 import pytest
 
 from measurement.calibration import Cylinder, Reference, calibrate_torsion
@@ -50,3 +52,15 @@ def test_paper_table3_standard_deviations_as_printed():
     assert round(repeatability(sphere).std, 4) == 0.0151
     assert round(repeatability(sleeve).std, 4) == 0.0679
     assert round(repeatability(uav).std, 4) == 0.0303
+
+
+def test_a_reference_released_twice_is_one_point_its_certificates_error_common_to_its_releases():
+    k, i0 = 0.3651, 4.5043e-3
+    loads = ((0.0, 0.0), (0.005, 2e-5), (0.0125, 6e-5))  # certificates dominate: ω_n's σ is tiny
+    once = [Reference(f"r{j}", I, math.sqrt(k / (i0 + I)), 1e-6, u) for j, (I, u) in enumerate(loads)]
+    twice = [r for r in once for _ in range(2)]
+    a, b = calibrate_torsion(once), calibrate_torsion(twice)
+    assert b.stiffness == pytest.approx(a.stiffness, rel=1e-9)
+    # six independent points would shrink k's σ by √2; one certificate per reference keeps it
+    assert b.stiffness_std == pytest.approx(a.stiffness_std, rel=1e-3)
+    assert len(b.residuals) == 6 and len(b.references) == 6

@@ -9,7 +9,7 @@ import pytest
 
 from measurement import Options, Pendulum, Rig, identify, simulate_trace
 from measurement.reports import result_report
-from measurement.reproducibility import DEFAULT, HISTORY, MIN_DOF, ReproducibilityError, for_release, pooled
+from measurement.reproducibility import DEFAULT, HISTORY, MIN_DOF, RIG, ReproducibilityError, calibrated, for_release, pooled
 from measurement.result import IdentificationResult
 from measurement.uncertainty import PendulumInputs
 
@@ -60,14 +60,18 @@ def test_a_history_enters_u_with_its_degrees_of_freedom():
     assert with_it.dof < 1e6 and with_it.coverage_factor > 2.0  # 3 degrees of freedom widen k
 
 
-def test_the_default_is_stated_beside_the_budget_not_counted():
+def test_the_default_is_counted_in_u_as_a_type_b_line():
     without = _inputs(None).budgets()["J"]
     d = DEFAULT
     b = _inputs((d.relative, d.dof, d.counted, d.note())).budgets()["J"]
-    assert b.u == without.u and b.U == without.U
+    added = 2 * without.value * d.relative  # J = k/ω²: 0.1 % of ω_n is 0.2 % of J
+    assert b.u**2 == pytest.approx(without.u**2 + added**2, rel=1e-6)
     line = next(ln for ln in b.lines if ln.symbol == "omega_n_repro")
-    assert not line.stated and line.contribution == 0.0 and "measure ≥ 3 releases" in line.note
-    assert "0.1 % of ω_n" in line.note and "0.2 % of J" in line.note
+    assert line.stated and line.std == d.relative and line.contribution == pytest.approx(-added, rel=1e-6)
+    assert "measure ≥ 3 releases" in line.note
+    assert "0.1 % of ω_n" in line.note and "0.2 % of J" in line.note and "is in u" in line.note
+    # taken at its value (ν = ∞): k stays that of the record's own lines
+    assert d.counted and math.isinf(d.dof) and b.coverage_factor == pytest.approx(without.coverage_factor)
 
 
 def _release():
@@ -81,10 +85,10 @@ def test_one_release_says_reproducibility_is_not_known_and_a_history_counts():
     rig, trace = _release()
     alone = identify(trace, rig, Options(discover=False))
     assert alone.reproducibility == DEFAULT
-    assert "reproducibility: not known from one release" in result_report(alone)
+    assert "the rig's reproducibility not known: the documented default" in result_report(alone)
     back = IdentificationResult.from_dict(alone.to_dict())
     assert back.reproducibility == DEFAULT
-    history = pooled([[0.0170, 0.01702, 0.01698], [0.0125, 0.01251, 0.01249]], power=-2)
+    history = pooled([[0.0170, 0.01705, 0.01695], [0.0125, 0.01254, 0.01246]], power=-2)  # above the default
     known = identify(trace, rig, Options(discover=False, reproducibility=history))
     assert known.uncertainty_budget["J"].u > alone.uncertainty_budget["J"].u
     assert known.J == alone.J
@@ -92,7 +96,7 @@ def test_one_release_says_reproducibility_is_not_known_and_a_history_counts():
     assert known.to_dict()["reproducibility"]["relative"] == pytest.approx(history.relative)
 
 
-def test_a_release_counts_a_history_of_at_least_min_dof_and_states_the_default_otherwise():
+def test_a_release_counts_a_history_of_at_least_min_dof_and_the_default_otherwise():
     assert MIN_DOF == 2
     # one object released twice: ν = 1, too thin (a Type A line of ν = 1 setting u would set k near 13)
     assert for_release(pooled([[4.0, 4.004]])) is DEFAULT
@@ -101,3 +105,13 @@ def test_a_release_counts_a_history_of_at_least_min_dof_and_states_the_default_o
     assert for_release(three) is three and three.counted and three.dof == 2.0
     two_pairs = pooled([[4.0, 4.004], [6.0, 6.003]])
     assert for_release(two_pairs) is two_pairs and two_pairs.dof == 2.0
+
+
+def test_the_history_wins_then_the_rigs_calibration_figure_then_the_default():
+    history = pooled([[4.0, 4.004, 3.998]])
+    rig = calibrated(0.002, 3.0, 3, 6)
+    assert for_release(history, rig) is history
+    # a history too thin (ν = 1) gives way to the rig's figure, and a figure too thin to the default
+    assert for_release(pooled([[4.0, 4.004]]), rig) is rig and for_release(None, rig) is rig
+    assert for_release(None, calibrated(0.002, 1.0, 1, 2)) is DEFAULT
+    assert rig.source == RIG and rig.counted and rig.known and "its calibration's 6 releases of 3 references" in rig.note()

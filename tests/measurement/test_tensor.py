@@ -81,7 +81,8 @@ def test_the_offsets_matter_so_the_parallel_axis_step_is_tested(default_set, mon
     for broken in (lambda m, n, d: 0.0, lambda m, n, d: -true_term(m, n, d)):
         monkeypatch.setattr(TS, "axis_offset_inertia", broken)
         wrong = TS.solve_results(plan, results, RIG)
-        assert np.max(np.abs(z_scores(wrong))) > 50
+        # far outside (each orientation's u holds the documented scatter between releases, 0.1 % of ω_n)
+        assert np.max(np.abs(z_scores(wrong))) > 20
     monkeypatch.setattr(TS, "axis_offset_inertia", true_term)
 
 

@@ -1,6 +1,7 @@
 """The appliance's own releases carry the rig's reproducibility between releases in their u: pooled from the store's
 repeat releases since the rig's calibration (a check standard measured a few times), on the simulated rig; before
-any history the documented default is stated and not counted."""
+any history the figure the rig's calibration keeps (and without it the documented default, counted:
+tests/cli/test_cli_calibrate_reproducibility.py)."""
 
 from __future__ import annotations
 
@@ -10,17 +11,18 @@ import math
 import numpy as np
 import pytest
 
-from measurement.reproducibility import DEFAULT
+from measurement.reproducibility import DEFAULT, calibrated
 from measurement.uncertainty import coverage_factor, welch_satterthwaite
 from tests.service.conftest import appliance_doc
 
 
 def _setup(tmp_path):
-    """The device's rig calibrated last month; a check standard (one release a part), a part type of one release and
-    one of three."""
+    """The device's rig calibrated last month, its references' releases showing 0.05 % between releases (ν = 4); a
+    check standard (one release a part), a part type of one release and one of three."""
     rig = tmp_path / "rig.toml"
     rig.write_text('[rig]\nkind = "torsion"\nstiffness = 0.3651\n[calibration]\n'
-                   f'date = {(dt.date.today() - dt.timedelta(days=30)).isoformat()}\nvalid_days = 365\n')
+                   f'date = {(dt.date.today() - dt.timedelta(days=30)).isoformat()}\nvalid_days = 365\n'
+                   'reproducibility = 0.0005\nreproducibility_dof = 4\n')
     recipes = tmp_path / "recipes"
     recipes.mkdir()
     cs = '[check_standard]\nname = "disc CS-1"\nreference = 0.0125\nreference_U = 2.0e-5\n'
@@ -51,11 +53,12 @@ def test_a_release_carries_the_rigs_pooled_reproducibility_once_a_check_standard
     doc = appliance_doc(tmp_path / "state", device={"rig": str(rig)},
                         recipes={"directory": str(recipes), "active": "rotor"})
     running = appliance_factory(doc)
-    # before any history: the default is stated, not counted in u
+    # before any history: the rig's calibration figure, in u (not the default)
     first = _release(running, 1, recipe="rotor").payload
-    assert first["reproducibility"] == DEFAULT.to_dict()
+    assert first["reproducibility"] == calibrated(0.0005, 4.0).to_dict() != DEFAULT.to_dict()
     line = _repro_line(first)
-    assert not line["stated"] and line["contribution"] == 0.0 and "not in u" in line["note"]
+    assert line["stated"] and line["std"] == 0.0005 and line["dof"] == 4 and abs(line["contribution"]) > 0
+    assert "rig: its calibration's" in line["note"]
     # the check standard measured three times: one object, three releases, two degrees of freedom
     checks = [_release(running, n, recipe="cs") for n in (2, 3, 4)]
     assert len(running.app.store.check_standards(limit=None)) == 3
@@ -63,7 +66,7 @@ def test_a_release_carries_the_rigs_pooled_reproducibility_once_a_check_standard
     # by hand: the pooled relative within-group sd of the check standard's stored ω_n (one group)
     w = np.array([c.omega_n for c in checks])
     hand = float(np.sqrt(np.sum((w / w.mean() - 1.0) ** 2) / (w.size - 1)))
-    repro = part["reproducibility"]
+    repro = part["reproducibility"]  # the history wins over the rig's calibration figure
     assert (repro["source"], repro["counted"], repro["dof"], repro["groups"], repro["releases"]) == \
         ("history", True, 2, 1, 3)
     assert repro["relative"] == pytest.approx(hand, rel=1e-9)
