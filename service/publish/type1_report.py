@@ -11,7 +11,7 @@ from typing import Any
 
 from measurement.gauge import CG_LIMIT, TOLERANCE_SHARE
 from measurement.units import SI, from_si
-from service.parts.gauge_study import TYPE1, Type1Record
+from service.parts.gauge_study import TYPE1, Type1Record, status_words
 
 from . import quality as Q
 
@@ -64,7 +64,7 @@ def type1_words(rec: Type1Record, default_unit: str = SI, time_format: str = Q.T
              ("n", "measurements", f"{len(rec.values)} of {rec.plan.count}")]
     s = rec.study
     if s is None:
-        head = f"Type 1 study {rec.status}" + (f": {rec.error}" if rec.error else "")
+        head = "Type 1 study " + status_words(rec.status, rec.error)
         return Type1Words(head, None, tuple(facts), (), unit, pl)
     b = s.bias
     ci = f"{Q.number(100 * b.level, '.3g')} % interval {j(b.ci[0], fine)} … {j(b.ci[1], fine)}"

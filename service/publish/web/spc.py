@@ -42,6 +42,13 @@ def check_standards(pages: Pages, filters: Mapping[str, Any],
     return checks, check_chart
 
 
+def _design_words(grr: Any) -> tuple[str, str | None] | None:
+    """The Gauge R&R's size in words, and why it is below the AIAG MSA design (``measurement.grr_design``)."""
+    from measurement.grr_design import below_design, design
+
+    return None if grr is None or grr.study is None else (design(grr.study), below_design(grr.study))
+
+
 class SpcPages(Family):
     """``/spc``."""
 
@@ -112,4 +119,5 @@ class SpcPages(Family):
         return self.pages.page(request, "spc.html", title="SPC", recipes=recipes, recipe=recipe, spc=result,
                                chart=charts[WIDE] if charts else None, narrow=charts[NARROW] if charts else None,
                                note=note, capability=capability, charts=CHARTS, unit=unit, q=q, grr=grr,
-                               checks=checks[-10:][::-1], check_chart=check_chart, type1=gauge1)
+                               checks=checks[-10:][::-1], check_chart=check_chart, type1=gauge1,
+                               grr_design=_design_words(grr))
