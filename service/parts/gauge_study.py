@@ -359,3 +359,38 @@ def latest_type1(store: Any, recipe: str | None) -> Type1Study | None:
         return None
     found = type1_records(store, recipe, COMPLETE, 1)
     return found[0].study if found else None
+
+
+@dataclass(frozen=True)
+class StudyRelease:
+    """A release a Type 1 study counted: the study (its uuid, ``None`` while it runs), and its place k of n."""
+
+    study: str | None
+    recipe: str
+    index: int
+    count: int
+
+    @property
+    def words(self) -> str:
+        return f"Type 1 study, {self.index} of {self.count}"
+
+    @property
+    def link(self) -> str:
+        return f"/type1/{self.study}" if self.study else "/type1"
+
+
+def study_releases(store: Any, state_dir: str | Path | None = None, limit: int = 50) -> dict[str, StudyRelease]:
+    """measurement uuid → the Type 1 study that counted it, of the latest ``limit`` stored studies and the one
+    running (its file in ``state_dir``): what a page says of a release that is no part's."""
+    found: dict[str, StudyRelease] = {}
+    records = type1_records(store, limit=limit)
+    if state_dir is not None:
+        try:
+            running = Type1Record.from_dict(json.loads((Path(state_dir) / OPEN_STUDY_FILE).read_text("utf-8")))
+            records.append(dataclasses.replace(running, uuid=""))
+        except (OSError, ValueError, KeyError, TypeError):
+            pass  # none runs (or its file is being written): its releases are said once it is stored
+    for rec in records:
+        for i, u in enumerate(rec.releases):
+            found.setdefault(u, StudyRelease(rec.uuid or None, rec.recipe, i + 1, rec.plan.count))
+    return found

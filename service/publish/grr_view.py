@@ -89,8 +89,10 @@ class GrrView:
 
 
 def _study_of(g: RecipeGrr) -> str:
-    return (f"{len(g.complete)} parts × {len(g.appraisers)} appraisers × {g.trials} trials" if g.study is not None
-            else f"{len(g.parts)} parts measured more than once × {len(g.appraisers)} appraisers")
+    a = len(g.appraisers)
+    return (design(g.study) if g.study is not None
+            else f"{len(g.parts)} part{'s' if len(g.parts) != 1 else ''} measured more than once × {a} "
+                 f"appraiser{'s' if a != 1 else ''}")
 
 
 def grr_view(g: RecipeGrr, unit: str, recipe: Mapping[str, Any] | None = None, time_format: str = Q.TIME_FORMAT,
@@ -101,7 +103,7 @@ def grr_view(g: RecipeGrr, unit: str, recipe: Mapping[str, Any] | None = None, t
     places = Q.places(spec, unit)
     s = g.study
     facts = [("recipe", f"{g.recipe}" + (f" ({spec['quantity']})" if spec.get("quantity") else "")),
-             ("records", f"{g.read} measurements, {Q.local_time(g.first, time_format)} … "
+             ("records", f"{g.read} measurement{'s' if g.read != 1 else ''}, {Q.local_time(g.first, time_format)} … "
                          f"{Q.local_time(g.last, time_format)}" if g.read else "none in the period"),
              ("appraisers", f"{BY[g.by]}: {', '.join(g.appraisers) or Q.MISSING}"),
              ("trial", TRIALS[g.trial]), ("study", _study_of(g))]

@@ -378,7 +378,7 @@ def test_a_study_far_below_the_manual_s_design_of_parts_all_alike_says_so(tmp_pa
 
     with Store(tmp_path / "state") as store:
         rec = Records(store)
-        for t, e in enumerate((3e-7, -3e-7)):  # every part's and appraiser's mean the same: PV = 0
+        for e in (3e-7, -3e-7):  # every part's and appraiser's mean the same: PV = 0
             for who in ("web:alice", "web:bob"):
                 for i in range(3):
                     rec.part(DISC, f"SN-{i + 1}", 0.0125 + (e if i != 1 or who == "web:bob" else -e), who)
