@@ -230,7 +230,16 @@ def test_a_study_started_and_aborted_in_the_browser(browser, tmp_path, appliance
     wait.until(lambda d: d.find_element(By.ID, "t1-count").text == "1 of 25")  # the page as the daemon has it
     browser.find_element(By.ID, "t1-abort").click()
     wait.until(lambda d: d.find_elements(By.ID, "t1-ended"))
-    assert "aborted by web" in browser.find_element(By.ID, "t1-ended").text
     rec = app.store.gauge_studies("type1", limit=1)[0]
     assert rec["status"] == "aborted" and rec["reference"] == pytest.approx(J_REF, rel=1e-12)
     assert len(rec["releases"]) == 1 and rec["count"] == 25
+    assert "aborted by the web page (token login)" in browser.find_element(By.ID, "t1-ended").text
+    assert "aborted: aborted" not in browser.find_element(By.ID, "t1-ended").text  # said once
+    # a phone, 390×844: the form, the stored studies and a study's page fit, nothing scrolls sideways
+    browser.set_window_size(390, 844)
+    for path in ("type1", f"type1/{rec['uuid']}"):
+        browser.get(app.web.url + path)
+        wait.until(lambda d: d.execute_script("return document.readyState") == "complete")
+        assert browser.find_elements(By.ID, "t1-recent" if path == "type1" else "t1-result")
+        assert browser.execute_script("return document.documentElement.scrollWidth <= window.innerWidth"), (
+            path, browser.execute_script("return [document.documentElement.scrollWidth, window.innerWidth]"))
