@@ -196,3 +196,15 @@ def test_the_history_writes_each_value_with_its_recipes_decimals():
                                                    unit_of=pages.unit, places_of=pages.places, q={}, link=str,
                                                    export="", flag_names=[], recipes=["wheel"])
     assert "125123.4 g·cm²" in html
+    # flags in words, the identifier their tooltip; the filter's options whole
+    from measurement.flags import describe
+
+    flagged = SimpleNamespace(**{**vars(row), "flags": ("model_ambiguous", "outliers_removed")})
+    names = [("model_ambiguous", "model ambiguous", describe("model_ambiguous"))]
+    html = env.get_template("history.html").render(rows=[flagged], total=1, page=1, pages=1, unit="kg·m²",
+                                                   unit_of=pages.unit, places_of=pages.places, q={}, link=str,
+                                                   export="", flag_names=names, recipes=["wheel"],
+                                                   flag_meaning=describe, studied={})
+    assert ">model ambiguous</span>, <span" in html and ">outliers removed</span>" in html
+    assert 'title="model_ambiguous: ' in html and ">model_ambiguous<" not in html
+    assert f">model ambiguous</option>" in html and "…" not in html.split('name="flag"')[1].split("</select>")[0]
