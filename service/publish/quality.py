@@ -64,9 +64,7 @@ def reason(text: Any, unit: str = SI, decimals: int = 6) -> str:
     in ``unit`` and ``decimals`` (the part's, as the tile above it), never fewer than two significant digits (a
     small uncertainty is not written as 0); other numbers as ``plain_text`` writes them."""
     def shown(x: str) -> str:
-        v = from_si(float(x), unit) or 0.0
-        d = decimals if v == 0 else max(decimals, 1 - int(math.floor(math.log10(abs(v)))))
-        return number(v, min(d, 12))
+        return spread(float(x), unit, decimals).removesuffix(f" {unit}")
 
     def convert(m: re.Match) -> str:
         if m.group(1) and m.group(3):
@@ -95,6 +93,17 @@ def inertia(v: Any, unit: str = SI, spec: str | int = ".7g") -> str:
     "g" spec, or an int: decimals (a recipe's, ``places``)."""
     shown = from_si(v, unit) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
     return MISSING if shown is None else f"{signed(number(shown, spec))} {unit}"
+
+
+def spread(v: Any, unit: str = SI, places: int = 6) -> str:
+    """An uncertainty or a scatter ``v`` kg·m² in ``unit``: with the part's ``places``, never fewer than two
+    significant digits (a small U is not written as 0): the one rule of the pages, the reports and the verdict's
+    sentences."""
+    shown = from_si(v, unit) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+    if shown is None or not math.isfinite(shown):
+        return MISSING
+    d = places if shown == 0 else max(places, 1 - int(math.floor(math.log10(abs(shown)))))
+    return f"{signed(number(shown, min(d, 12)))} {unit}"
 
 
 def signed(text: str) -> str:
