@@ -7,10 +7,28 @@ PDF and the capability warnings (``gauge.capability_warnings``) follow."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .gauge import GaugeRR
+
+class GaugeRR(Protocol):
+    """What the rule reads of a ``gauge.GaugeRR`` (typed here so that ``gauge`` may use the rule)."""
+
+    @property
+    def parts(self) -> tuple[str, ...]: ...
+
+    @property
+    def appraisers(self) -> tuple[str, ...]: ...
+
+    @property
+    def pv(self) -> float: ...
+
+    @property
+    def tv(self) -> float: ...
+
+    @property
+    def trials(self) -> int: ...
+
+    def pct_of_process(self, sigma: float) -> float: ...
 
 #: the manual's design: parts, appraisers (fewest, most usual), trials (fewest, most usual)
 DESIGN_PARTS, DESIGN_APPRAISERS, DESIGN_TRIALS = 10, (2, 3), (2, 3)

@@ -207,7 +207,7 @@ def test_the_history_writes_each_value_with_its_recipes_decimals():
                                                    flag_meaning=describe, studied={})
     assert ">model ambiguous</span>, <span" in html and ">outliers removed</span>" in html
     assert 'title="model_ambiguous: ' in html and ">model_ambiguous<" not in html
-    assert f">model ambiguous</option>" in html and "…" not in html.split('name="flag"')[1].split("</select>")[0]
+    assert ">model ambiguous</option>" in html and "…" not in html.split('name="flag"')[1].split("</select>")[0]
 
 
 def test_a_control_chart_writes_every_value_with_the_recipes_decimals_and_the_minus_sign():
