@@ -16,7 +16,7 @@ import pytest
 from scipy import stats
 
 from service.publish.web.auth import allowed
-from tests.service.conftest import appliance_doc
+from tests.service.conftest import appliance_doc, wait_until
 from tests.service.publish.web import test_service_web_browser as in_browser
 from tests.service.publish.web.test_service_web import Client
 
@@ -156,6 +156,8 @@ def test_a_study_through_the_page_gives_the_figures_of_an_independent_computatio
     assert "Type 1 study" in hist and "25 of 25 of the study" in hist
     first = c.request(f"/results/{rec['releases'][0]}")[2].decode()
     assert "Type 1 study, 1 of 25" in first and f'href="/type1/{rec["uuid"]}"' in first
+    report = c.request(f"/results/{rec['releases'][0]}/report.pdf")[2]
+    assert "Type 1 study, 1 of 25" in "".join(pg.extract_text() for pg in PdfReader(io.BytesIO(report)).pages)
     # two parts measured after it: SPC charts them alone, beside the study's Cg and Cgk at its tolerance
     _measure_until(running, lambda app: len(app.store.list(limit=None, parts_only=True)) >= 2, presses)
     spc = c.request("/spc?recipe=ref")[2].decode()
@@ -189,12 +191,16 @@ def test_an_abort_through_the_page_keeps_the_releases(tmp_path, appliance_factor
     assert "aborted" in _text(page, "t1-ended") and 'id="t1-start-button"' not in page  # not logged in: no form
     # the quality engineer's nav names the page; an operator may not start a study
     assert allowed("quality", "gauge") and allowed("admin", "gauge") and not allowed("operator", "gauge")
+    # a production part set since: the form offers the last study's reference part, not it
+    assert c.json("/api/part", data={"part_id": "P-77"}, method="POST", headers=auth)[0] == 202
+    wait_until(lambda: c.json("/api/state")[1]["part_id"] == "P-77", 10, what="part P-77 set")
     assert c.request("/login", {"token": Path(app.web.token_file).read_text().strip(), "csrf": c.csrf(),
                                 "next": "/type1"})[0] == 200
     page = c.request("/type1")[2].decode()
     assert '<a href="/type1">Type 1</a>' in page and 'id="t1-start-button"' in page
     # the form in the recipe's unit and decimals: T from the recipe, x_ref left to the engineer (no certificate)
     assert 'id="t1-tolerance" value="5000.0"' in page and 'id="t1-reference" value=""' in page
+    assert 'name="part_id" value="CS-1"' in page  # the last study's reference part
     assert 'id="t1-form-recipe">ref<' in page and "(J; active)" in page
     chosen = c.request("/type1?recipe=old")[2].decode()
     assert 'id="t1-form-recipe">old<' in chosen and "selected when the study starts" in chosen
