@@ -164,6 +164,10 @@ def type1_page(rec: Type1Record, w: Type1Words, time_format: str = Q.TIME_FORMAT
         for line in wrapped:
             fig.text(0.40, y, line, fontsize=8.5, va="top")
             y -= 0.017
+    if w.capable is not None:
+        fig.text(0.06, y, f"values in {w.unit} with {w.places} decimal{'' if w.places == 1 else 's'}; s, the bias and "
+                 "its interval with one more (a scatter)", fontsize=7.5, color="0.35", va="top")
+        y -= 0.017
     for note in w.notes:
         for line in textwrap.wrap("note: " + note, 95):
             fig.text(0.06, y, line, fontsize=8.5, color="#9a6700", va="top")

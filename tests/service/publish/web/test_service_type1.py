@@ -151,6 +151,8 @@ def test_a_study_through_the_page_gives_the_figures_of_an_independent_computatio
     text = "".join(pg.extract_text() for pg in PdfReader(io.BytesIO(pdf)).pages)
     assert f"{cg:.2f}" in text and f"{mean * G_CM2:.1f} g·cm²" in text and "run chart" in text
     assert all(f"{v * G_CM2:.1f} g·cm²" in text for v in x)  # the n values listed
+    assert "with 1 decimal; s, the bias and its interval with one more" in _text(html, "t1-decimals") and \
+        "with 1 decimal; s, the bias" in text
     # History and the release's page say which study counted it, and its place
     hist = unescape(re.sub(r"<[^>]+>", " ", c.request("/history")[2].decode()))
     assert "Type 1 study" in hist and "25 of 25 of the study" in hist
