@@ -40,7 +40,9 @@ quality engineer's decision, not this module's.
 **Capability with the gauge's figures** (``capability_warnings``): a process's Cp, Cpk (and Pp, Ppk)
 see the process's scatter and the gauge's together (σ²_observed = σ²_process + GRR²); when the gauge's
 %GRR is above 30 %, its ndc below 5, or its Cg or Cgk below 1.33 at the specification's tolerance,
-those indices say more about the gauge than about the process (AIAG MSA 4th ed., ch. I; VDA 5).
+those indices say more about the gauge than about the process (AIAG MSA 4th ed., ch. I; VDA 5). A Gauge
+R&R below the manual's design (``grr_design``) gives indicative warnings; one whose parts do not span the
+process gives none of %GRR of the process nor of ndc: its %GRR of the tolerance is the gauge's figure.
 """
 
 from __future__ import annotations
@@ -555,18 +557,24 @@ def capability_warnings(*, grr: GaugeRR | None = None, type1: Type1Study | None 
         out.append(GaugeWarning(figure, value, limit, f"{CAPABILITY_INDICES} are not meaningful: {why}"))
 
     if grr is not None:
+        # a small study's figures are indicative, and with parts all alike those against PV say nothing
+        from .grr_design import below_design, design, parts_alike
+
+        alike = parts_alike(grr)
+        hedge = f" (indicative: {design(grr)}, below the AIAG MSA design)" if below_design(grr) else ""
         pct_t = grr.pct_of_tolerance(grr.grr, tolerance)
         if pct_t is not None and pct_t > GRR_CONDITIONAL:
             warn("%GRR of the tolerance", pct_t, GRR_CONDITIONAL,
-                 f"the gauge's %GRR is {pct_t:.3g} % of the tolerance (above {GRR_CONDITIONAL:g} %)")
-        if grr.pct_grr_process > GRR_CONDITIONAL:
+                 f"the gauge's %GRR is {pct_t:.3g} % of the tolerance (above {GRR_CONDITIONAL:g} %){hedge}")
+        if not alike and grr.pct_grr_process > GRR_CONDITIONAL:
             warn("%GRR of the process", grr.pct_grr_process, GRR_CONDITIONAL,
                  f"the gauge's %GRR is {grr.pct_grr_process:.3g} % of the process variation (above "
-                 f"{GRR_CONDITIONAL:g} %)")
+                 f"{GRR_CONDITIONAL:g} %){hedge}")
         ndc = grr.ndc
-        if ndc is not None and ndc < NDC_MIN:
+        if not alike and ndc is not None and ndc < NDC_MIN:
+            n = "category" if ndc == 1 else "categories"
             warn("ndc", float(ndc), float(NDC_MIN),
-                 f"the gauge tells only {ndc} distinct categories of parts apart (at least {NDC_MIN} wanted)")
+                 f"the gauge tells only {ndc} distinct {n} of parts apart (at least {NDC_MIN} wanted){hedge}")
     if type1 is not None:
         T = type1.tolerance if tolerance is None else tolerance
         for figure, value in (("Cg", type1.cg_at(T)), ("Cgk", type1.cgk_at(T))):

@@ -117,7 +117,8 @@ class Dispatcher:
         block = app.measure_block()
         status, reason, detail = app.studies.act(data or {}, source, recipe=app.parts.recipe,
                                                  part_id=app.parts.part_id, busy=app.sequencer.busy, other=other,
-                                                 block=block["detail"] if block is not None else None)
+                                                 block=block["detail"] if block is not None else None,
+                                                 who=V.source_words(source))
         if status == "refused":
             log.warning("%s from %s refused: %s", name, source, detail)
         return CommandReply(name, status, reason, detail)

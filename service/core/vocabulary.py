@@ -47,6 +47,14 @@ def operator_of(source: str) -> str:
     return user if door == WEB and named and user else source
 
 
+def source_words(source: str) -> str:
+    """Who sent a command, in words: "op on the web page", "the web page (token login)", else the door."""
+    door, named, user = source.partition(":")
+    if door == WEB:
+        return f"{user} on the web page" if named and user else "the web page (token login)"
+    return source
+
+
 @dataclass(frozen=True)
 class Command:
     """One command. does: its words. act: one of ACTS. data: the keys of its data. topic: its MQTT topic

@@ -49,6 +49,13 @@ OPEN_STUDY_FILE = "type1-study-open.json"
 StudyReply = tuple[str, str | None, str]
 
 
+def status_words(status: str, error: str | None) -> str:
+    """A study's end in words, its cause once: "aborted by op on the web page", "failed: no scatter …"."""
+    if not error:
+        return status
+    return error if error.startswith(status) else f"{status}: {error}"
+
+
 class StudyError(ServiceError, InvalidInput):
     """A study that cannot start, or an action that does not apply to it (says why)."""
 
@@ -167,7 +174,7 @@ class Type1Run:
         if self.status == COMPLETE:
             return f"Type 1 study of {self.recipe.name}: complete ({self.plan.count} measurements)"
         if self.done:
-            return f"Type 1 study of {self.recipe.name}: {self.status}" + (f" ({self.error})" if self.error else "")
+            return f"Type 1 study of {self.recipe.name}: " + status_words(self.status, self.error)
         return (f"measure the reference part{' ' + self.part_id if self.part_id else ''}: measurement "
                 f"{len(self.values) + 1} of {self.plan.count} (mount and release it the same way each time)")
 
@@ -223,12 +230,13 @@ class StudyDesk:
         self.current: Type1Run | None = None  # running, or just finished (shown until the next one starts)
 
     def act(self, data: Mapping[str, Any], source: str, *, recipe: Recipe | None, part_id: str | None,
-            busy: bool, other: str | None, block: str | None) -> StudyReply:
+            busy: bool, other: str | None, block: str | None, who: str | None = None) -> StudyReply:
         """The command's ``action`` (start | abort) from ``source``. busy: a measurement runs; other: what else
-        runs that a study may not overlap (a tensor set), or None; block: why the calibration refuses Measure."""
+        runs that a study may not overlap (a tensor set), or None; block: why the calibration refuses Measure; who:
+        ``source`` in words (an abort's cause says it)."""
         action = str(data.get("action") or "")
         if action == "abort":
-            return self.abort(f"aborted by {source}")
+            return self.abort(f"aborted by {who or source}")
         if action != "start":
             return "refused", "malformed", f"unknown study action {action[:20]!r}; expected one of {', '.join(ACTIONS)}"
         running = self.current
@@ -351,3 +359,38 @@ def latest_type1(store: Any, recipe: str | None) -> Type1Study | None:
         return None
     found = type1_records(store, recipe, COMPLETE, 1)
     return found[0].study if found else None
+
+
+@dataclass(frozen=True)
+class StudyRelease:
+    """A release a Type 1 study counted: the study (its uuid, ``None`` while it runs), and its place k of n."""
+
+    study: str | None
+    recipe: str
+    index: int
+    count: int
+
+    @property
+    def words(self) -> str:
+        return f"Type 1 study, {self.index} of {self.count}"
+
+    @property
+    def link(self) -> str:
+        return f"/type1/{self.study}" if self.study else "/type1"
+
+
+def study_releases(store: Any, state_dir: str | Path | None = None, limit: int = 50) -> dict[str, StudyRelease]:
+    """measurement uuid → the Type 1 study that counted it, of the latest ``limit`` stored studies and the one
+    running (its file in ``state_dir``): what a page says of a release that is no part's."""
+    found: dict[str, StudyRelease] = {}
+    records = type1_records(store, limit=limit)
+    if state_dir is not None:
+        try:
+            running = Type1Record.from_dict(json.loads((Path(state_dir) / OPEN_STUDY_FILE).read_text("utf-8")))
+            records.append(dataclasses.replace(running, uuid=""))
+        except (OSError, ValueError, KeyError, TypeError):
+            pass  # none runs (or its file is being written): its releases are said once it is stored
+    for rec in records:
+        for i, u in enumerate(rec.releases):
+            found.setdefault(u, StudyRelease(rec.uuid or None, rec.recipe, i + 1, rec.plan.count))
+    return found

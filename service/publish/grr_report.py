@@ -79,6 +79,8 @@ def grr_pdf(v: GrrView, device_id: str, time_format: str = Q.TIME_FORMAT) -> byt
     flow.fig.text(LEFT, 0.965, f"Gauge R&R of recipe {v.recipe} (AIAG MSA 4th edition, ANOVA method)", fontsize=14,
                   weight="bold", va="top")
     flow.line("", v.headline, size=12, weight="bold", color=BAND_COLOURS.get(v.band, "0.3"))
+    for text in v.cautions:
+        flow.line("", text, color="#9a6700")
     flow.y -= 0.5 * LINE
     for label, text in v.facts:
         flow.line(label, text)

@@ -23,6 +23,7 @@ from measurement.gauge import (
     AnovaRow,
     GaugeRR,
 )
+from measurement.grr_design import below_design, cautions, design, parts_alike
 from measurement.units import from_si
 from service.parts.gauge_rr import BY, TRIALS, RecipeGrr
 
@@ -84,11 +85,14 @@ class GrrView:
     lacking: tuple[str, ...]
     notes: tuple[str, ...]
     points: tuple[tuple[str, str, tuple[float, ...]], ...]
+    cautions: tuple[str, ...] = ()
 
 
 def _study_of(g: RecipeGrr) -> str:
-    return (f"{len(g.complete)} parts × {len(g.appraisers)} appraisers × {g.trials} trials" if g.study is not None
-            else f"{len(g.parts)} parts measured more than once × {len(g.appraisers)} appraisers")
+    a = len(g.appraisers)
+    return (design(g.study) if g.study is not None
+            else f"{len(g.parts)} part{'s' if len(g.parts) != 1 else ''} measured more than once × {a} "
+                 f"appraiser{'s' if a != 1 else ''}")
 
 
 def grr_view(g: RecipeGrr, unit: str, recipe: Mapping[str, Any] | None = None, time_format: str = Q.TIME_FORMAT,
@@ -99,7 +103,7 @@ def grr_view(g: RecipeGrr, unit: str, recipe: Mapping[str, Any] | None = None, t
     places = Q.places(spec, unit)
     s = g.study
     facts = [("recipe", f"{g.recipe}" + (f" ({spec['quantity']})" if spec.get("quantity") else "")),
-             ("records", f"{g.read} measurements, {Q.local_time(g.first, time_format)} … "
+             ("records", f"{g.read} measurement{'s' if g.read != 1 else ''}, {Q.local_time(g.first, time_format)} … "
                          f"{Q.local_time(g.last, time_format)}" if g.read else "none in the period"),
              ("appraisers", f"{BY[g.by]}: {', '.join(g.appraisers) or Q.MISSING}"),
              ("trial", TRIALS[g.trial]), ("study", _study_of(g))]
@@ -118,7 +122,7 @@ def grr_view(g: RecipeGrr, unit: str, recipe: Mapping[str, Any] | None = None, t
                    _pooled_words(s) if s is not None else "", _components(s, unit, places) if s is not None else None,
                    _data(g, s, unit, places) if s is not None else None, _counts(g) if g.parts else None,
                    tuple(f"{p}: " + "; ".join(x.words for x in g.lacks(p)) for p in g.parts if g.lacks(p)),
-                   _notes(g), _points(s, unit) if s is not None else ())
+                   _notes(g), _points(s, unit) if s is not None else (), cautions(s) if s is not None else ())
 
 
 def _grand_mean(s: GaugeRR) -> float:
@@ -127,26 +131,35 @@ def _grand_mean(s: GaugeRR) -> float:
 
 
 def _verdict(s: GaugeRR | None, why: str | None) -> tuple[tuple[Figure, ...], str, str]:
-    """The figures with their bands, the headline and its band (the worse of the two %GRRs)."""
+    """The figures with their bands, the headline and its band (the worse of the two %GRRs; with parts all
+    alike, %GRR of the tolerance alone: those against PV are meaningless, ``measurement.grr_design``)."""
     if s is None:
         return (), f"no Gauge R&R yet: {why}", ""
-    process = Figure("%GRR of the process variation (100·GRR/TV)", f"{Q.number(s.pct_grr_process, 1)} %",
-                     s.verdict_process, "pct-process", s.pct_grr_process)
+    alike = parts_alike(s)
+    meaningless = " (meaningless: the parts do not span the process)" if alike else ""
+    process = Figure("%GRR of the process variation (100·GRR/TV)", f"{Q.number(s.pct_grr_process, 1)} %{meaningless}",
+                     "" if alike else s.verdict_process, "pct-process", s.pct_grr_process)
     pct_t, band_t = s.pct_grr_tolerance, s.verdict_tolerance
     tolerance = Figure(f"%GRR of the tolerance (100·{s.spread:g}·GRR/T)",
                        f"{Q.number(pct_t, 1)} %" if pct_t is not None else "– (no tolerance)", band_t or "",
                        "pct-tolerance", pct_t)
     ndc = s.ndc
-    few = ndc is not None and ndc < NDC_MIN
+    few = not alike and ndc is not None and ndc < NDC_MIN
     distinct = Figure("number of distinct categories (ndc = ⌊1.41·PV/GRR⌋)",
                       (str(ndc) if ndc is not None else "– (GRR is 0)")
-                      + (f": fewer than {NDC_MIN}, the gauge cannot tell the parts apart" if few else
-                         f" (at least {NDC_MIN} wanted)"), NOT_ACCEPTABLE if few else "", "ndc",
+                      + (meaningless if alike else f": fewer than {NDC_MIN}, the gauge cannot tell the parts apart"
+                         if few else f" (at least {NDC_MIN} wanted)"), NOT_ACCEPTABLE if few else "", "ndc",
                       None if ndc is None else float(ndc))
     order = list(BANDS)
-    worst = max((f for f in (process, tolerance) if f.band), key=lambda f: (order.index(f.band), f.value or 0.0))
-    headline = f"Gauge R&R {BANDS[worst.band]}: %GRR {worst.text} of the " + (
-        "tolerance" if worst is tolerance else "process variation") + (f"; ndc {ndc}" if ndc is not None else "")
+    judged = [f for f in (process, tolerance) if f.band]
+    hedge = " (indicative: " + design(s) + ", below the AIAG MSA design)" if below_design(s) else ""
+    if not judged:  # parts alike and no tolerance: nothing speaks of the gauge
+        return (process, tolerance, distinct), ("no Gauge R&R verdict: the parts do not span the process and the "
+                                                 "recipe has no tolerance" + hedge), ""
+    worst = max(judged, key=lambda f: (order.index(f.band), f.value or 0.0))
+    headline = f"Gauge R&R {BANDS[worst.band]}{hedge}: %GRR {worst.text} of the " + (
+        "tolerance" if worst is tolerance else "process variation") + (
+        f"; ndc {ndc}" if ndc is not None and not alike else "")
     return (process, tolerance, distinct), headline, worst.band
 
 

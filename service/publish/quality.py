@@ -64,9 +64,7 @@ def reason(text: Any, unit: str = SI, decimals: int = 6) -> str:
     in ``unit`` and ``decimals`` (the part's, as the tile above it), never fewer than two significant digits (a
     small uncertainty is not written as 0); other numbers as ``plain_text`` writes them."""
     def shown(x: str) -> str:
-        v = from_si(float(x), unit) or 0.0
-        d = decimals if v == 0 else max(decimals, 1 - int(math.floor(math.log10(abs(v)))))
-        return number(v, min(d, 12))
+        return spread(float(x), unit, decimals).removesuffix(f" {unit}")
 
     def convert(m: re.Match) -> str:
         if m.group(1) and m.group(3):
@@ -94,7 +92,23 @@ def inertia(v: Any, unit: str = SI, spec: str | int = ".7g") -> str:
     """``v`` kg·m² written in ``unit`` with the unit ("–" without a value); ``spec``: significant digits as a
     "g" spec, or an int: decimals (a recipe's, ``places``)."""
     shown = from_si(v, unit) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
-    return MISSING if shown is None else f"{number(shown, spec)} {unit}"
+    return MISSING if shown is None else f"{signed(number(shown, spec))} {unit}"
+
+
+def spread(v: Any, unit: str = SI, places: int = 6) -> str:
+    """An uncertainty or a scatter ``v`` kg·m² in ``unit``: with the part's ``places``, never fewer than two
+    significant digits (a small U is not written as 0): the one rule of the pages, the reports and the verdict's
+    sentences."""
+    shown = from_si(v, unit) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+    if shown is None or not math.isfinite(shown):
+        return MISSING
+    d = places if shown == 0 else max(places, 1 - int(math.floor(math.log10(abs(shown)))))
+    return f"{signed(number(shown, min(d, 12)))} {unit}"
+
+
+def signed(text: str) -> str:
+    """A number's text with the minus sign (U+2212) a page writes, not the ASCII hyphen."""
+    return "−" + text[1:] if text.startswith("-") else text
 
 
 def places(recipe: Mapping[str, Any] | None, unit: str = SI, U: float | None = None) -> int:
@@ -311,11 +325,12 @@ RULE_WORDS = {
 
 
 def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: float = 300.0,
-                  names: Sequence[str] = ()) -> dict[str, Any]:
+                  names: Sequence[str] = (), places: int | None = None) -> dict[str, Any]:
     """An SPC summary (``measurement.spc.SpcSummary``) as SVG geometry: the points (violations marked), the
     centre line and the control limits, the specification limits when they are near enough not to flatten
     the chart (else named as off the chart), each labelled on the right; the ranges below, theirs marked too.
-    ``names``: what each point is called (serial and time), else "part N". Values in ``unit``."""
+    ``names``: what each point is called (serial and time), else "part N". Values in ``unit``, written with
+    ``places`` decimals (the recipe's: ``places``; None: those that tell the points apart)."""
     s = summary
     f = from_si(1.0, unit) or 1.0
     pts = [float(v) * f for v in s.points]
@@ -329,7 +344,8 @@ def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: fl
         if s.lcl * f - 2 * width_cl <= v <= s.ucl * f + 2 * width_cl:
             lines.append((name, v, "spec"))
         else:
-            off_chart.append(f"{name} {_plain(v, width_cl)} {unit} ({'above' if v > s.ucl * f else 'below'} the chart)")
+            off_chart.append(f"{name} {_plain(v, width_cl, places)} {unit} "
+                             f"({'above' if v > s.ucl * f else 'below'} the chart)")
     label = [names[i] if i < len(names) and names[i] else f"part {i + 1}" for i in range(len(pts))]
     first = 1 if s.subgroup == 1 else 0  # a moving range starts at the second part
     range_bad = {i + first for i, r in enumerate(s.ranges)
@@ -341,14 +357,14 @@ def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: fl
     for i in sorted(range_bad):
         broken.setdefault(i, []).append(RULE_WORDS["range_beyond_limits"])
     bad = {v.index for v in s.violations} | set(s.outside)
-    top = _panel(pts, lines, bad, width, height, width_cl, names=label)
+    top = _panel(pts, lines, bad, width, height, width_cl, names=label, places=places)
     f_r = [float(r) * f for r in s.ranges]
     rname = {"Xbar-S": "S̄"}.get(s.chart, "R̄")
     r_lines = [(rname, s.range_mean * f, "centre"), ("UCL", s.range_ucl * f, "limit")]
     if s.range_lcl > 0:
         r_lines.append(("LCL", s.range_lcl * f, "limit"))
     bottom = _panel(f_r, r_lines, range_bad, width, height * 0.6, max(s.range_ucl * f, 1e-300), x_offset=first,
-                    n_total=len(pts), names=label, floor=0.0)
+                    n_total=len(pts), names=label, floor=0.0, places=places)
     range_name = ("moving range" if s.subgroup == 1 else
                   f"standard deviation (n = {s.subgroup})" if s.chart == "Xbar-S" else f"range (n = {s.subgroup})")
     return {"top": top, "bottom": bottom, "rules": [(label[i], words) for i, words in sorted(broken.items())],
@@ -356,18 +372,23 @@ def control_chart(summary: Any, unit: str = SI, width: float = 720.0, height: fl
 
 
 def run_panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], width: float = 720.0,
-              height: float = 300.0, names: Sequence[str] = ()) -> dict[str, Any]:
+              height: float = 300.0, names: Sequence[str] = (), bad: set[int] | None = None,
+              places: int | None = None) -> dict[str, Any]:
     """A run chart's geometry: ``values`` in their order and named horizontal ``lines`` (name, value, kind
-    "centre" | "limit" | "spec"), drawn as a control chart's upper panel; in the unit of the values."""
+    "centre" | "limit" | "spec"), drawn as a control chart's upper panel; in the unit of the values, with
+    ``places`` decimals (None: those that tell them apart); ``bad``: the indices of the points marked."""
     ys = list(values) + [v for _, v, _ in lines]
     spread = (max(ys) - min(ys)) if ys else 0.0
-    return _panel(values, lines, set(), width, height, spread if spread > 0 else 1.0, names=names)
+    return _panel(values, lines, bad or set(), width, height, spread if spread > 0 else 1.0, names=names,
+                  places=places)
 
 
-def _plain(v: float, spread: float) -> str:
-    """``v`` with the decimals that tell values ``spread``/50 apart from each other."""
+def _plain(v: float, spread: float, places: int | None = None) -> str:
+    """``v`` with ``places`` decimals (a recipe's), else those that tell values ``spread``/50 apart."""
+    if places is not None:
+        return signed(number(v, places))
     decimals = max(0, min(12, 1 - int(math.floor(math.log10(spread / 50.0))))) if spread > 0 else 6
-    return f"{v:.{decimals}f}" if abs(v) < 1e7 else f"{v:.6g}"
+    return signed(f"{v:.{decimals}f}" if abs(v) < 1e7 else f"{v:.6g}")
 
 
 #: px: the rotated axis title's band at a chart's left edge, and the width of one character of a tick label
@@ -376,7 +397,7 @@ TITLE_BAND, TICK_CHAR = 20.0, 6.7
 
 def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad: set[int], width: float,
            height: float, spread: float, x_offset: int = 0, n_total: int | None = None,
-           names: Sequence[str] = (), floor: float | None = None) -> dict[str, Any]:
+           names: Sequence[str] = (), floor: float | None = None, places: int | None = None) -> dict[str, Any]:
     narrow = width < 500  # a phone's chart: narrower margins, labels as readable
     left, right, top, bottom = (62.0, 122.0, 12.0, 26.0) if narrow else (90.0, 170.0, 12.0, 26.0)
     n = n_total or len(values)
@@ -389,7 +410,9 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
     if floor is not None:
         lo = max(lo, floor)  # a range is never below zero: neither is its axis
     tick_values = [lo + (hi - lo) * i / 4 for i in range(5)]
-    tick_texts = [_plain(v, (hi - lo) * 5) for v in tick_values]
+    # the ticks in the values' decimals while those tell them apart (a flat series: as many as it takes)
+    tick_places = places if places is not None and 10.0 ** -places <= (hi - lo) / 8 else None
+    tick_texts = [_plain(v, (hi - lo) * 5, tick_places) for v in tick_values]
     # the axis title's band, then the longest tick label (11 px digits, some 6.7 px wide): never over each other
     left = max(left, TITLE_BAND + TICK_CHAR * max(len(t) for t in tick_texts) + 8.0)
 
@@ -400,9 +423,9 @@ def _panel(values: Sequence[float], lines: Sequence[tuple[str, float, str]], bad
         return round(top + (hi - v) / (hi - lo) * (height - top - bottom), 1)
 
     points = [(X(i + x_offset), Y(v), (i + x_offset) in bad,
-               names[i + x_offset] if i + x_offset < len(names) else f"part {i + x_offset + 1}", _plain(v, spread))
-              for i, v in enumerate(values)]
-    drawn = [(name, Y(v), kind, f"{name} {_plain(v, spread)}") for name, v, kind in lines]
+               names[i + x_offset] if i + x_offset < len(names) else f"part {i + x_offset + 1}",
+               _plain(v, spread, places)) for i, v in enumerate(values)]
+    drawn = [(name, Y(v), kind, f"{name} {_plain(v, spread, places)}") for name, v, kind in lines]
     # labels at least 13 px apart, in the order of their lines, kept inside the panel
     order = sorted(drawn, key=lambda d: d[1])
     ys_l: list[float] = []

@@ -13,7 +13,7 @@ from service.parts.calibration import uncalibrated
 from . import quality as Q
 from .budget import BUDGET_FOOTNOTE, BudgetRow
 from .payload import stored_result
-from .words import flag_words
+from .words import flag_name, flag_words
 
 #: A4 portrait, inches
 A4 = (8.27, 11.69)
@@ -59,11 +59,11 @@ def report_lines(m: Any, unit: str, lookup: Any = None, time_format: str = Q.TIM
                   + (" (DUE)" if cal.get("due") else "")))
     releases = []
     for r in Q.release_rows(v, p, result, lookup):
-        flags = "flags: " + (", ".join(r["flags"]) or "none") if r["flags"] is not None else ""
+        flags = "flags: " + (", ".join(flag_name(f) for f in r["flags"]) or "none") if r["flags"] is not None else ""
         releases.append(f"release {r['index']} of {r['of']}: {Q.inertia(r['value'], unit, pl)} — "
                         f"{Q.reason(r['status'], unit, pl)}"
                         + (f"; {flags}" if flags else ""))
-    described = [f"{f}: {words}" for f, words in flag_words(m.flags) if words]
+    described = [f"{flag_name(f)} ({f}): {words}" for f, words in flag_words(m.flags) if words]
     if described:
         releases.append("this release's flags: " + "; ".join(described))
     return v, facts, releases
@@ -80,10 +80,11 @@ def _budget_line(row: BudgetRow, unit: str) -> str:
 
 
 def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = None,
-               time_format: str = Q.TIME_FORMAT, decimals: int | None = None) -> bytes:
+               time_format: str = Q.TIME_FORMAT, decimals: int | None = None, study: str | None = None) -> bytes:
     """The report of the stored measurement ``m`` (``StoredMeasurement``) as PDF bytes, on as many A4 pages as
     it takes, each with "page x of y" and the print date (local, ``time_format``), the last with signature
-    lines; ``plot_png``: the evidence plot kept with it (None: said on the page)."""
+    lines; ``plot_png``: the evidence plot kept with it (None: said on the page); ``study``: the Type 1 study that
+    counted it, in words ("Type 1 study, 4 of 25": a reference part's release, no part's)."""
     import textwrap
 
     from matplotlib.backends.backend_pdf import PdfPages
@@ -92,7 +93,9 @@ def report_pdf(m: Any, plot_png: bytes | None, unit: str = SI, lookup: Any = Non
 
     v, facts, releases = report_lines(m, unit, lookup, time_format, decimals)
     verdict = v.get("verdict")
-    if v["kind"] == "part":
+    if study is not None:
+        head, colour = f"{study} (the reference part: no part verdict)", "0.3"
+    elif v["kind"] == "part":
         head, colour = v["verdict_words"], VERDICT_COLOURS.get(verdict or "", "k")
     elif v["kind"] == "release":
         head, colour = f"part in progress: release {v.get('index')} of {v.get('of')} (no part verdict yet)", "0.3"

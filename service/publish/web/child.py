@@ -165,6 +165,7 @@ def replot(state_dir: str, uuid: str, default_rig: Mapping[str, Any], options: A
 def report_file(state_dir: str, uuid: str, default_unit: str, time_format: str | None = None,
                 decimals: int | None = None) -> bytes:
     """The report of the measurement ``uuid`` as PDF (``moi report ID --pdf``)."""
+    from service.parts.gauge_study import study_releases
     from service.persistence.store import Store
     from service.publish.report import report_pdf
 
@@ -174,8 +175,10 @@ def report_file(state_dir: str, uuid: str, default_unit: str, time_format: str |
     with Store(state_dir, read_only=True) as store:
         m = store.get(uuid)
         got = store.get_attachment(uuid, PLOT_NAME)
+        counted = study_releases(store, state_dir).get(m.uuid)
         return report_pdf(m, got[0] if got else None, display_unit(m.payload, default_unit), store.get,
-                          decimals=decimals, **({"time_format": time_format} if time_format else {}))
+                          decimals=decimals, study=counted.words if counted else None,
+                          **({"time_format": time_format} if time_format else {}))
 
 
 def grr_file(state_dir: str, recipe: str, study: Mapping[str, Any], unit: str, shown: Mapping[str, Any],

@@ -146,7 +146,7 @@ def _environment(when: Any) -> jinja2.Environment:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")),
                              autoescape=jinja2.select_autoescape(["html"]), trim_blocks=True, lstrip_blocks=True)
     env.filters.update(fmt=Q.number, name=_name, inertia=Q.inertia, iso=Q.iso, when=when, plain=Q.plain_text,
-                       reason=Q.reason)
+                       reason=Q.reason, spread=Q.spread)
     # file names carry a hash of the content: a browser never keeps a stale script after an update
     stamps = {f.name: hashlib.sha256(f.read_bytes()).hexdigest()[:10] for f in (HERE / "static").iterdir()}
     env.globals.update(version=__version__, PART_ID_LENGTH=PART_ID_LENGTH, allowed=allowed, STATE_WORDS=STATE_WORDS,

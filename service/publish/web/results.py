@@ -11,7 +11,7 @@ from urllib.parse import urlencode
 
 from aiohttp import web
 
-from measurement.flags import FLAGS
+from measurement.flags import FLAGS, describe
 from service.errors import InputFileError
 from service.names import content_disposition
 from service.parts.calibration import uncalibrated
@@ -19,7 +19,7 @@ from service.publish.dfq import ENCODING
 from service.publish.payload import stored_result
 
 from .. import quality as Q
-from ..words import flag_words
+from ..words import flag_name, flag_words
 from .child import export_file, replot, report_file, trace_file
 from .pages import Family, Refused, history_filters, query_args
 from .settings import PLOT_NAME
@@ -52,7 +52,11 @@ class ResultPages(Family):
             later = self.app.store.list(limit=50, part_id=m.part_id, recipe=m.recipe, parts_only=True)
             done = next((r for r in later if r.part_uuid == m.part_uuid), None)
             view["part_done"] = {"uuid": done.uuid, "seq": done.seq, "verdict": done.part_verdict} if done else None
-        return {"m": m, "p": p, "r": r, "unit": unit, "v": view, "band": Q.band(view["recipe"], view.get("value"),
+        from service.parts.gauge_study import study_releases
+
+        counted = study_releases(self.app.store, self.app.config.state_dir).get(m.uuid) if view["kind"] == "plain" \
+            and self.app.store is not None else None
+        return {"m": m, "p": p, "r": r, "unit": unit, "v": view, "study": counted, "band": Q.band(view["recipe"], view.get("value"),
                                                                            view.get("U"), unit),
                 "places": Q.places(view["recipe"], unit, view.get("U") or view.get("std")),
                 "why": Q.judgement(view, unit) if view["kind"] == "part" else None,
@@ -144,14 +148,21 @@ class ResultPages(Family):
         if not 1 <= page <= MAX_PAGE:
             raise Refused(400, f"page: expected a page number 1, 2, ... (at most {MAX_PAGE})")
         rows, total = self.pages.store().search(offset=(page - 1) * size, limit=size, **filters)
+        pages = max(1, math.ceil(total / size))
+        if page > pages:
+            raise Refused(404, f"page {page}: the history has {pages} page{'s' if pages != 1 else ''} of {size} "
+                               f"({total} measurement{'s' if total != 1 else ''}{' match' if any(filters.values()) else ''})")
         args = {k: v for k, v in query_args(request).items() if v}
 
         def link(n: int) -> str:
             return "/history?" + urlencode({**args, "page": n})
 
-        flag_names = [(f, f"{f.replace('_', ' ')}: {w}" if w else f) for f, w in flag_words(sorted(FLAGS))]
+        from service.parts.gauge_study import study_releases
+
+        flag_names = [(f, flag_name(f), w) for f, w in flag_words(sorted(FLAGS))]
         return self.pages.page(request, "history.html", title="History", rows=rows, total=total, page=page,
-                               pages=max(1, math.ceil(total / size)), unit=self.server.settings.display_unit,
+                               pages=pages, unit=self.server.settings.display_unit, flag_meaning=describe,
+                               studied=study_releases(self.pages.store(), self.app.config.state_dir),
                                unit_of=self.pages.unit, places_of=self.pages.places, q=query_args(request), link=link, export=urlencode(args),
                                flag_names=flag_names, recipes=self.pages.store().recipes())
 

@@ -22,8 +22,8 @@ CHARTS = ("auto", "I-MR", "Xbar-R", "Xbar-S")
 WIDE, NARROW = 720.0, 380.0
 
 
-def check_standards(pages: Pages, filters: Mapping[str, Any],
-                    unit: str) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+def check_standards(pages: Pages, filters: Mapping[str, Any], unit: str,
+                    places: int | None = None) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
     """The check standard's history (`moi check-standard`) in the period, oldest first, and its control chart
     (individuals) from two checks on."""
     store = pages.app.store
@@ -37,9 +37,16 @@ def check_standards(pages: Pages, filters: Mapping[str, Any],
 
         summary = individuals([float(c["value"]) for c in checks])
         names = [f"{c.get('name') or 'check'} {pages.when(c['finished_at'])}" for c in checks]
-        check_chart = {kind: Q.control_chart(summary, unit, width=w, names=names)
+        check_chart = {kind: Q.control_chart(summary, unit, width=w, names=names, places=places)
                        for kind, w in (("wide", WIDE), ("narrow", NARROW))}
     return checks, check_chart
+
+
+def _design_words(grr: Any) -> tuple[str, str | None] | None:
+    """The Gauge R&R's size in words, and why it is below the AIAG MSA design (``measurement.grr_design``)."""
+    from measurement.grr_design import below_design, design
+
+    return None if grr is None or grr.study is None else (design(grr.study), below_design(grr.study))
 
 
 class SpcPages(Family):
@@ -78,12 +85,20 @@ class SpcPages(Family):
     def _unit(self, recipe: str) -> str:
         return self.pages.recipe_display(recipe)[0]
 
-    def _charts(self, result: Any, unit: str) -> tuple[dict[float, Any], dict[str, Any]]:
+    def _places(self, recipe: str, summary: Any, unit: str) -> int:
+        """The decimals of the recipe's values in ``unit``: its ``display_decimals``, else those of its limits
+        (``quality.places``, the rule every page follows)."""
+        lo, hi = getattr(summary, "lsl", None), getattr(summary, "usl", None)
+        spec = {"nominal": (lo + hi) / 2, "upper": hi} if lo is not None and hi is not None else {}
+        return Q.places({**spec, **self.pages.recipe_display(recipe)[1]}, unit)
+
+    def _charts(self, result: Any, unit: str, places: int) -> tuple[dict[float, Any], dict[str, Any]]:
         """The control chart at both widths, and the capability's confidence interval."""
         from measurement.spc import SMALL_SAMPLE, capability_interval
 
         names = [f"{p or '(no ID)'} {self.pages.when(t)}" for p, t in zip(result.parts, result.finished)]
-        charts = {w: Q.control_chart(result.summary, unit, width=w, names=names) for w in (WIDE, NARROW)}
+        charts = {w: Q.control_chart(result.summary, unit, width=w, names=names, places=places)
+                  for w in (WIDE, NARROW)}
         s = result.summary
         values = s.n_points * s.subgroup
         capability = {"interval": capability_interval(s.cp, s.cpk, values), "n": values,
@@ -105,11 +120,13 @@ class SpcPages(Family):
         result, note = await self._compute(recipe, filters, chart) if recipe else (None, None)
         result, grr = await self._with_gauge(recipe, result) if result is not None else (None, None)
         unit = self._unit(recipe)
-        charts, capability = self._charts(result, unit) if result is not None else (None, None)
+        places = self._places(recipe, result.summary if result is not None else None, unit)
+        charts, capability = self._charts(result, unit, places) if result is not None else (None, None)
         q = {"since": request.query.get("since", ""), "until": request.query.get("until", ""), "chart": chart}
         checks, check_chart = check_standards(self.pages, filters, unit)
         gauge1 = spc_gauge(store, recipe, result.summary) if result is not None else None  # the last Type 1 study
         return self.pages.page(request, "spc.html", title="SPC", recipes=recipes, recipe=recipe, spc=result,
                                chart=charts[WIDE] if charts else None, narrow=charts[NARROW] if charts else None,
                                note=note, capability=capability, charts=CHARTS, unit=unit, q=q, grr=grr,
-                               checks=checks[-10:][::-1], check_chart=check_chart, type1=gauge1)
+                               checks=checks[-10:][::-1], check_chart=check_chart, type1=gauge1,
+                               grr_design=_design_words(grr), places=places)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+from pathlib import Path
 from typing import Any, Mapping
 
 from aiohttp import web
@@ -15,11 +16,12 @@ from aiohttp import web
 from measurement.gauge import TYPE1_MIN, TYPE1_RECOMMENDED
 from measurement.units import from_si
 from service.core import vocabulary as V
-from service.parts.gauge_study import RUNNING, TYPE1, Type1Record, type1_records
+from service.parts.gauge_study import OPEN_STUDY_FILE, RUNNING, TYPE1, Type1Record, type1_records
 from service.publish.replies import CommandReply
 
 from .. import quality as Q
-from ..type1_report import places_of, run_chart, type1_report_file, type1_words, value_places
+from ..type1_report import places_of, release_flags, run_chart, type1_report_file, type1_words, value_places
+from ..words import flag_name
 from .pages import Family, Refused, action_form
 
 #: how long a start waits for the daemon's answer, s
@@ -67,8 +69,12 @@ class Type1Pages(Family):
         words = type1_words(rec, settings.display_unit, settings.time_format)
         unit, places = places_of(rec, settings.display_unit)
         f = from_si(1.0, unit) or 1.0
-        return {"rec": rec, "w": words, "chart": run_chart(rec, unit, WIDE), "narrow": run_chart(rec, unit, NARROW),
-                "rows": [(i + 1, u, Q.number(v * f, places)) for i, (u, v) in enumerate(zip(rec.releases, rec.values))]}
+        flagged = release_flags(self.pages.store(), rec)
+        rows = [(i + 1, u, Q.signed(Q.number(v * f, places)), [(x, flag_name(x)) for x in flagged[i]])
+                for i, (u, v) in enumerate(zip(rec.releases, rec.values))]
+        return {"rec": rec, "w": words, "chart": run_chart(rec, unit, WIDE, flagged=flagged, places=places),
+                "narrow": run_chart(rec, unit, NARROW, flagged=flagged, places=places), "rows": rows,
+                "flagged": sum(1 for fl in flagged if fl)}
 
     def _recipe(self, name: str) -> Any:
         """The recipe ``name`` names (a 400 saying why when none), or the active one for an empty name."""
@@ -86,8 +92,10 @@ class Type1Pages(Family):
         standard's certified value), and the recipes a study may be run for (those of one quantity)."""
         recipe = self._recipe(name)
         unit = self._unit(recipe)
+        # the reference part: the last study's of this recipe, else the check standard's (never a production part's)
+        last = type1_records(self.pages.store(), recipe.name, limit=1) if recipe is not None else []
         defaults: dict[str, Any] = {"count": TYPE1_RECOMMENDED, "reference": "", "tolerance": "",
-                                    "part_id": self.app.parts.part_id or ""}
+                                    "part_id": (last[0].part_id or "") if last else ""}
         spec = recipe.spec if recipe is not None else None
         if recipe is not None and spec is not None:
             f = from_si(1.0, unit) or 1.0
@@ -101,6 +109,20 @@ class Type1Pages(Family):
                 "tensor": recipe is not None and recipe.spec is None, "active": self.app.parts.recipe,
                 "recipes": [r for r in self.app.parts.book.recipes if r.spec is not None]}
 
+    def _plan(self, progress: Mapping[str, Any] | None) -> dict[str, str] | None:
+        """The running study's x_ref and T as entered, in its unit and decimals (from the file the daemon keeps
+        it in while it runs); None when none runs or its file is not there yet."""
+        if progress is None or progress["status"] != RUNNING:
+            return None
+        try:
+            rec = Type1Record.from_dict(json.loads((Path(self.app.config.state_dir) / OPEN_STUDY_FILE).read_text("utf-8")))
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+        if rec.uuid != progress["uuid"]:
+            return None
+        facts = {k: text for k, _label, text in type1_words(rec, self.server.settings.display_unit).facts}
+        return {"reference": facts["reference"], "tolerance": facts["tolerance"]}
+
     async def type1(self, request: web.Request) -> web.Response:
         progress = await self._progress()
         store = self.pages.store()
@@ -110,13 +132,13 @@ class Type1Pages(Family):
             shown = next((r for r in recent if r.uuid == progress["uuid"]), None)
         elif progress is None and recent:
             shown = recent[0]
-        return self.pages.page(request, "type1.html", title="Type 1 study", progress=progress,
+        return self.pages.page(request, "type1.html", title="Type 1 study", progress=progress, plan=self._plan(progress),
                                form=self._form(request.query.get("recipe", "").strip()), may=self.pages.may(request, "gauge"), result=self._result(shown),
                                recent=recent, blocked=self.pages.blocked())
 
     async def study(self, request: web.Request) -> web.Response:
         rec = self._record(request.match_info["uuid"])
-        return self.pages.page(request, "type1.html", title=f"Type 1 study {rec.recipe}", progress=None, form=None,
+        return self.pages.page(request, "type1.html", title=f"Type 1 study {rec.recipe}", progress=None, plan=None, form=None,
                                may=False, result=self._result(rec), recent=[], blocked=None)
 
     async def api(self, request: web.Request) -> web.Response:

@@ -368,3 +368,59 @@ def test_the_page_fits_a_phone_and_a_desktop(running, browser):  # noqa: F811 (t
             assert len(browser.find_elements(By.TAG_NAME, "h1")) == 1
             if artifacts:
                 browser.save_screenshot(str(Path(artifacts) / f"grr-{recipe}-{width}.png"))
+
+
+def test_a_study_far_below_the_manual_s_design_of_parts_all_alike_says_so(tmp_path, appliance_factory):
+    """3 parts all alike × 2 appraisers × 2 trials: the figures are said to be indicative, %GRR of the process and
+    ndc meaningless (PV ≈ 0), the verdict is %GRR of the tolerance's; SPC does not call Cp/Cpk meaningless on
+    it, and the PDF says what the page says."""
+    from pypdf import PdfReader
+
+    with Store(tmp_path / "state") as store:
+        rec = Records(store)
+        for e in (3e-7, -3e-7):  # every part's and appraiser's mean the same: PV = 0
+            for who in ("web:alice", "web:bob"):
+                for i in range(3):
+                    rec.part(DISC, f"SN-{i + 1}", 0.0125 + (e if i != 1 or who == "web:bob" else -e), who)
+    running = appliance_factory(appliance_doc(tmp_path / "state", web=ON, recipes={
+        "directory": str(_recipes(tmp_path / "recipes")), "active": "disc"}))
+    c = Client(running.app.web.url)
+    page = html.unescape(c.request("/grr?recipe=disc")[2].decode())
+    want = expected(running.app.store, "disc", DISC["upper"] - DISC["lower"])
+    assert want["pv"] < 0.1 * want["tv"]  # the parts do not span the process
+    verdict = re.sub(r"<[^>]+>", "", page.split('id="grr-verdict"')[1].split("</div>")[0])
+    band = "acceptable" if want["pct_tolerance"] < 10 else "conditional"
+    assert f"Gauge R&R {band}" in verdict and "of the tolerance" in verdict and "indicative" in verdict
+    assert "ndc" not in verdict and "process variation" not in verdict
+    cautions = re.findall(r'class="fault grr-caution">(.*?)</p>', page, re.S)
+    assert len(cautions) == 2
+    assert "3 parts × 2 appraisers × 2 trials" in cautions[0] and "10 parts spanning the process" in cautions[0]
+    assert "2–3 appraisers, 2–3 trials" in cautions[0] and "indicative" in cautions[0]
+    assert "the parts do not span the process" in cautions[1] and "%GRR of the tolerance" in cautions[1]
+    assert "meaningless" in _figure(page, "pct-process") and "·" not in _figure(page, "pct-process")
+    assert "meaningless" in _figure(page, "ndc") and "cannot tell" not in _figure(page, "ndc")
+    spc = c.request("/spc?recipe=disc")[2].decode()
+    assert 'id="capability"' in spc and 'id="gauge-warning"' not in spc and "not meaningful" not in spc
+    text = " ".join(" ".join(p.extract_text() for p in PdfReader(io.BytesIO(
+        c.request("/grr/report.pdf?recipe=disc")[2])).pages).split())
+    assert "far below the AIAG MSA design" in text and "do not span the process" in text
+
+
+def test_capability_warnings_hedge_a_small_study_and_drop_the_figures_against_pv():
+    from measurement.gauge import capability_warnings, gauge_rr
+    from measurement.grr_design import adequate, below_design, cautions
+
+    rng = np.random.default_rng(3)
+    truths = np.linspace(0.0124, 0.0126, 10)
+    big = gauge_rr([[[t + rng.normal(0, 4e-5) for _ in range(3)] for _ in range(3)] for t in truths], tolerance=1e-3)
+    assert adequate(big) and below_design(big) is None and cautions(big) == ()
+    assert any(w.figure == "%GRR of the process" for w in capability_warnings(grr=big))
+    assert not any("indicative" in w.message for w in capability_warnings(grr=big))
+    small = gauge_rr([[[t + rng.normal(0, 3e-6) for _ in range(2)] for _ in range(2)] for t in truths[:4]],
+                     tolerance=2e-5)
+    warnings = capability_warnings(grr=small)
+    assert warnings and all("indicative: 4 parts × 2 appraisers × 2 trials" in w.message for w in warnings)
+    alike = gauge_rr([[[0.0125 + rng.normal(0, 3e-7) for _ in range(2)] for _ in range(2)] for _ in range(3)],
+                     tolerance=1e-3)
+    assert not adequate(alike) and len(cautions(alike)) == 2
+    assert capability_warnings(grr=alike) == ()  # its %GRR of the tolerance is small; those against PV say nothing

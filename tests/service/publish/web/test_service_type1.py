@@ -16,7 +16,7 @@ import pytest
 from scipy import stats
 
 from service.publish.web.auth import allowed
-from tests.service.conftest import appliance_doc
+from tests.service.conftest import appliance_doc, wait_until
 from tests.service.publish.web import test_service_web_browser as in_browser
 from tests.service.publish.web.test_service_web import Client
 
@@ -98,6 +98,9 @@ def test_a_study_through_the_page_gives_the_figures_of_an_independent_computatio
     presses = _measure_until(running, _done(12))
     assert c.json("/api/type1")[1]["study"]["done"] == 12 and _text(c.request("/type1")[2].decode(),
                                                                       "t1-count") == "12 of 25"
+    running_page = c.request("/type1")[2].decode()  # what was entered, in the recipe's unit and decimals
+    assert _text(running_page, "t1-plan-reference") == "125000.0 g·cm²"
+    assert _text(running_page, "t1-plan-tolerance") == "5000.0 g·cm²"
     presses = _measure_until(running, _done(25), presses)
     state = c.json("/api/type1")[1]
     assert state["study"]["status"] == "complete"
@@ -121,13 +124,21 @@ def test_a_study_through_the_page_gives_the_figures_of_an_independent_computatio
     assert _text(html, "t1-mean") == f"{mean * G_CM2:.1f} g·cm²"
     assert _text(html, "t1-s") == f"{s * G_CM2:.2f} g·cm²"
     assert _text(html, "t1-reference") == f"{J_REF * G_CM2:.1f} g·cm²" and _text(html, "t1-tolerance") == "5000.0 g·cm²"
-    assert _text(html, "t1-bias").startswith(f"{bias * G_CM2:.2f} g·cm² (95 % interval")
+    assert _text(html, "t1-bias").startswith(f"{bias * G_CM2:.2f} g·cm² (95 % interval".replace("-", "−"))
+    assert "-" not in _text(html, "t1-bias")  # the minus sign, as everywhere
     assert _text(html, "t1-ttest").startswith(f"t = {t:.2f}, 24 degrees of freedom, p = {float(f'{p:.3g}'):g}")
     assert ("not significant" in _text(html, "t1-ttest")) == (p >= 0.05)
     assert _text(html, "t1-tmin") == f"{1.33 * 6 * s / 0.2 * G_CM2:.1f} g·cm²"
     verdict = "capable" if cg >= 1.33 and cgk >= 1.33 else "not capable"
     assert _text(html, "t1-verdict").startswith(verdict)
-    assert 'id="t1-chart"' in html and html.count('class="point"') == 2 * 25  # the run chart at both widths
+    assert 'id="t1-chart"' in html and html.count('class="point') == 2 * 25  # the run chart at both widths
+    # a flagged release marked on the chart and named in the list (its flags in words, the identifier its title)
+    flagged = [store.get(u).flags for u in rec["releases"]]
+    assert html.count('class="point violation"') == 2 * sum(1 for f in flagged if f)
+    for f in {f for fl in flagged for f in fl}:
+        assert f'title="{f}">{f.replace("_", " ")}<' in html
+    ticks = re.findall(r'class="tick" text-anchor="end">([^<]*)<', html)
+    assert ticks and all(re.fullmatch(r"\d+\.\d", t) for t in ticks), ticks  # the axis in the recipe's decimals
     # linked to its measurements, each stored with the reference's part ID and the recipe, without a part verdict
     assert all(f'href="/results/{u}"' in html for u in rec["releases"])
     assert c.request(f"/results/{rec['releases'][0]}")[0] == 200
@@ -139,6 +150,16 @@ def test_a_study_through_the_page_gives_the_figures_of_an_independent_computatio
 
     text = "".join(pg.extract_text() for pg in PdfReader(io.BytesIO(pdf)).pages)
     assert f"{cg:.2f}" in text and f"{mean * G_CM2:.1f} g·cm²" in text and "run chart" in text
+    assert all(f"{v * G_CM2:.1f} g·cm²" in text for v in x)  # the n values listed
+    assert "with 1 decimal; s, the bias and its interval with one more" in _text(html, "t1-decimals") and \
+        "with 1 decimal; s, the bias" in text
+    # History and the release's page say which study counted it, and its place
+    hist = unescape(re.sub(r"<[^>]+>", " ", c.request("/history")[2].decode()))
+    assert "Type 1 study" in hist and "25 of 25 of the study" in hist
+    first = c.request(f"/results/{rec['releases'][0]}")[2].decode()
+    assert "Type 1 study, 1 of 25" in first and f'href="/type1/{rec["uuid"]}"' in first
+    report = c.request(f"/results/{rec['releases'][0]}/report.pdf")[2]
+    assert "Type 1 study, 1 of 25" in "".join(pg.extract_text() for pg in PdfReader(io.BytesIO(report)).pages)
     # two parts measured after it: SPC charts them alone, beside the study's Cg and Cgk at its tolerance
     _measure_until(running, lambda app: len(app.store.list(limit=None, parts_only=True)) >= 2, presses)
     spc = c.request("/spc?recipe=ref")[2].decode()
@@ -172,12 +193,16 @@ def test_an_abort_through_the_page_keeps_the_releases(tmp_path, appliance_factor
     assert "aborted" in _text(page, "t1-ended") and 'id="t1-start-button"' not in page  # not logged in: no form
     # the quality engineer's nav names the page; an operator may not start a study
     assert allowed("quality", "gauge") and allowed("admin", "gauge") and not allowed("operator", "gauge")
+    # a production part set since: the form offers the last study's reference part, not it
+    assert c.json("/api/part", data={"part_id": "P-77"}, method="POST", headers=auth)[0] == 202
+    wait_until(lambda: c.json("/api/state")[1]["part_id"] == "P-77", 10, what="part P-77 set")
     assert c.request("/login", {"token": Path(app.web.token_file).read_text().strip(), "csrf": c.csrf(),
                                 "next": "/type1"})[0] == 200
     page = c.request("/type1")[2].decode()
     assert '<a href="/type1">Type 1</a>' in page and 'id="t1-start-button"' in page
     # the form in the recipe's unit and decimals: T from the recipe, x_ref left to the engineer (no certificate)
     assert 'id="t1-tolerance" value="5000.0"' in page and 'id="t1-reference" value=""' in page
+    assert 'name="part_id" value="CS-1"' in page  # the last study's reference part
     assert 'id="t1-form-recipe">ref<' in page and "(J; active)" in page
     chosen = c.request("/type1?recipe=old")[2].decode()
     assert 'id="t1-form-recipe">old<' in chosen and "selected when the study starts" in chosen
@@ -213,7 +238,16 @@ def test_a_study_started_and_aborted_in_the_browser(browser, tmp_path, appliance
     wait.until(lambda d: d.find_element(By.ID, "t1-count").text == "1 of 25")  # the page as the daemon has it
     browser.find_element(By.ID, "t1-abort").click()
     wait.until(lambda d: d.find_elements(By.ID, "t1-ended"))
-    assert "aborted by web" in browser.find_element(By.ID, "t1-ended").text
     rec = app.store.gauge_studies("type1", limit=1)[0]
     assert rec["status"] == "aborted" and rec["reference"] == pytest.approx(J_REF, rel=1e-12)
     assert len(rec["releases"]) == 1 and rec["count"] == 25
+    assert "aborted by the web page (token login)" in browser.find_element(By.ID, "t1-ended").text
+    assert "aborted: aborted" not in browser.find_element(By.ID, "t1-ended").text  # said once
+    # a phone, 390×844: the form, the stored studies and a study's page fit, nothing scrolls sideways
+    browser.set_window_size(390, 844)
+    for path in ("type1", f"type1/{rec['uuid']}"):
+        browser.get(app.web.url + path)
+        wait.until(lambda d: d.execute_script("return document.readyState") == "complete")
+        assert browser.find_elements(By.ID, "t1-recent" if path == "type1" else "t1-result")
+        assert browser.execute_script("return document.documentElement.scrollWidth <= window.innerWidth"), (
+            path, browser.execute_script("return [document.documentElement.scrollWidth, window.innerWidth]"))

@@ -135,6 +135,7 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
     # bad requests: 4xx with what was wrong, never a traceback
     for path, code, words in (("/history?since=yesterday", 400, b"expected a date YYYY-MM-DD"),
                               ("/history?page=0", 400, b"page number"),
+                              ("/history?page=999", 404, b"page 999: the history has 1 page of"),
                               ("/history?status=maybe", 400, b"expected ok, failed or aborted"),
                               ("/results/no-such-id", 404, b"no measurement"),
                               ("/results/a%27b", 400, b"bad measurement id"),
@@ -428,7 +429,8 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     # the history keeps the part's verdict and each release's check apart
     hist = c.request("/history")[2].decode()
     assert "1 of 2: check OK" in hist and "on release 2 of 2" in hist
-    assert '<option value="calibration_due" >calibration due: ' in hist  # the flags offered in words
+    # the flags offered in words, whole, the identifier and its meaning their tooltip
+    assert re.search(r'<option value="calibration_due" title="calibration_due: [^"]+" >calibration due</option>', hist)
     # the first release, once its part is judged, points to the verdict (and is not called in progress)
     page = c.request(f"/results/{first.uuid}")[2].decode()
     assert f'<a id="part-verdict-link" href="/results/{ok.uuid}">part OK (#{ok.seq})</a>' in page

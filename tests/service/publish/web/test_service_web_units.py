@@ -196,3 +196,38 @@ def test_the_history_writes_each_value_with_its_recipes_decimals():
                                                    unit_of=pages.unit, places_of=pages.places, q={}, link=str,
                                                    export="", flag_names=[], recipes=["wheel"])
     assert "125123.4 g·cm²" in html
+    # flags in words, the identifier their tooltip; the filter's options whole
+    from measurement.flags import describe
+
+    flagged = SimpleNamespace(**{**vars(row), "flags": ("model_ambiguous", "outliers_removed")})
+    names = [("model_ambiguous", "model ambiguous", describe("model_ambiguous"))]
+    html = env.get_template("history.html").render(rows=[flagged], total=1, page=1, pages=1, unit="kg·m²",
+                                                   unit_of=pages.unit, places_of=pages.places, q={}, link=str,
+                                                   export="", flag_names=names, recipes=["wheel"],
+                                                   flag_meaning=describe, studied={})
+    assert ">model ambiguous</span>, <span" in html and ">outliers removed</span>" in html
+    assert 'title="model_ambiguous: ' in html and ">model_ambiguous<" not in html
+    assert ">model ambiguous</option>" in html and "…" not in html.split('name="flag"')[1].split("</select>")[0]
+
+
+def test_a_control_chart_writes_every_value_with_the_recipes_decimals_and_the_minus_sign():
+    from measurement.spc import individuals
+
+    s = individuals([0.01250028, 0.01249972, 0.01250061, 0.01249913, 0.01250007], usl=0.01251, lsl=0.01249)
+    chart = Q.control_chart(s, "g·cm²", places=1)
+    top = chart["top"]
+    texts = [t for *_r, t in top["points"]] + [t.split(" ", 1)[1] for *_r, t in top["lines"]]
+    texts += [t for _y, t in top["yticks"]]
+    assert all(re.fullmatch(r"\d+\.\d", t) for t in texts), texts  # 125002.8, UCL 125007.9, LSL 124900.0 …
+    assert any(t.startswith("LSL 124900.0") for *_r, t in top["lines"])
+    below = Q.run_panel([-1.25, -1.5, -1.0], [("x_ref", -1.25, "centre")], places=2)
+    assert [t for *_r, t in below["points"]] == ["−1.25", "−1.50", "−1.00"]
+    assert Q.inertia(-8.69e-7, "g·cm²", 2) == "−8.69 g·cm²" and Q.inertia(8.69e-7, "g·cm²", 2) == "8.69 g·cm²"
+
+
+def test_an_uncertainty_is_written_with_the_parts_decimals_never_as_zero():
+    # U beside the value ± U: the same text (231.3, not 231 beside ± 231.3); a 1σ with the part's decimals too
+    assert Q.spread(2.3134e-5, "g·cm²", 1) == "231.3 g·cm²" == Q.inertia(2.3134e-5, "g·cm²", 1)
+    assert Q.spread(4.2e-6, "g·cm²", 1) == "42.0 g·cm²"
+    assert Q.spread(2e-10, "g·cm²", 1) == "0.0020 g·cm²"  # two significant digits, not 0.0
+    assert Q.reason("U = 2.3134e-05 kg·m² too large", "g·cm²", 1) == "U = 231.3 g·cm² too large"
