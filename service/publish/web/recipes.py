@@ -6,10 +6,12 @@ import asyncio
 import datetime as dt
 import logging
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
+from urllib.parse import quote
 
 from aiohttp import web
 
+from measurement.units import INERTIA_UNITS
 from service.errors import InputFileError
 from service.parts.recipe_keys import EDITABLE
 from service.parts.recipes import (
@@ -28,6 +30,15 @@ from .. import quality as Q
 from .pages import Family, Refused, read_form
 
 log = logging.getLogger("moi.web")
+
+
+def _chosen_unit(typed: Mapping[str, str], shown: str, default: str) -> str:
+    """The unit the form's inertias are read in: the display unit chosen in the same form ("": the set-up's), else
+    the one the recipe is shown in (a unit the loader would refuse leaves the numbers as shown; it is refused)."""
+    if "display_unit" not in typed:
+        return shown
+    chosen = typed["display_unit"].strip() or default
+    return chosen if chosen in INERTIA_UNITS else shown
 
 
 class RecipePages(Family):
@@ -52,7 +63,8 @@ class RecipePages(Family):
                          "file": recipe_values(r, unit), "version": recipe_version(r)})
         return self.pages.page(request, "recipes.html", status=status, title="Recipes", rows=rows,
                                editable=EDITABLE, may_edit=self.pages.may(request, "recipe"),
-                               default_unit=self.server.settings.display_unit, **ctx)
+                               default_unit=self.server.settings.display_unit, units=INERTIA_UNITS,
+                               saved=request.query.get("saved") if status == 200 else None, **ctx)
 
     async def recipes_change(self, request: web.Request) -> web.StreamResponse:
         """Edit one recipe's [recipe] keys (quality role): checked as a recipe file is, written back in one
@@ -87,9 +99,10 @@ class RecipePages(Family):
                 "recipe": recipe.name, "typed": {}, "errors": [("", "the recipe was changed since you opened it (by "
                                                                 "someone else?): nothing was saved; here it is now, "
                                                                 "edit it again if your change still holds")]})
-        unit = Q.display_unit({"recipe": recipe.to_dict()}, self.server.settings.display_unit)
+        shown = Q.display_unit({"recipe": recipe.to_dict()}, self.server.settings.display_unit)
+        unit = _chosen_unit(typed, shown, self.server.settings.display_unit)
         try:
-            new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed, unit)
+            new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed, unit, shown)
         except RecipeEditError as exc:
             labels = {k.name: k.label_in(unit) for k in EDITABLE}
             errors = [(labels.get(k, "the recipe"), m) for k, m in exc.problems.items()]
@@ -107,4 +120,5 @@ class RecipePages(Family):
                 parts.recipe = book.find(new.name)
             line = await loop.run_in_executor(None, audit_recipe, audit, source, new, changes, now)
             log.info("web: recipe edited: %s", line.strip())
-        raise web.HTTPSeeOther(f"/recipes#recipe-{new.number}")
+        # the saved recipe shown back, its numbers in the unit chosen: said on the page beside it
+        raise web.HTTPSeeOther(f"/recipes?saved={quote(new.name)}#recipe-{new.number}")
