@@ -14,8 +14,7 @@ from firmware_host import State
 from measurement.errors import InvalidInput
 from service.core import vocabulary as V
 from service.parts.recipes import Recipe, RecipeError
-from service.config.appliance import whom_to_call
-from service.publish.replies import CONTACT, CommandReply, ReplyTo, fault_refusal
+from service.publish.replies import CommandReply, ReplyTo, fault_refusal
 
 log = logging.getLogger("moi.daemon")
 
@@ -84,7 +83,7 @@ class Dispatcher:
         state = seq.state
         if state is State.FAULT:
             return CommandReply(name, "refused", "fault",
-                                fault_refusal(seq.last_fault, whom_to_call(self.app.config) or CONTACT))
+                                fault_refusal(seq.last_fault, self.app.contact()))
         return CommandReply(name, "refused", "busy" if seq.busy else "not_ready", f"state {state.value}")
 
     def _act_stop(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,

@@ -4,6 +4,7 @@ and the guided tensor set."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import datetime as dt
 import json
 import logging
@@ -242,10 +243,8 @@ class HomePages(Family):
                 answer.set_result(r)
 
         def reply(r: CommandReply) -> None:  # on the daemon's main loop: handed to the web loop
-            try:
+            with contextlib.suppress(RuntimeError):  # the web server stopped meanwhile: nobody waits for it
                 loop.call_soon_threadsafe(settle, r)
-            except RuntimeError:  # the web server stopped meanwhile: nobody waits for it
-                pass
         self.app.command(name, source, None, reply)
         try:
             return await asyncio.wait_for(answer, ANSWER_TIMEOUT)

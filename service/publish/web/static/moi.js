@@ -447,10 +447,8 @@ var moi = (function () {
       if (!sel) { return; }
       var opened = form.getAttribute("data-unit"), was = opened;
       function unitOf() { return sel.value || form.getAttribute("data-default-unit"); }
-      function factor(u) {
-        var o = Array.prototype.find.call(sel.options, function (x) { return x.value === u || x.textContent === u; });
-        return o && o.getAttribute("data-factor") ? Number(o.getAttribute("data-factor")) : null;
-      }
+      var factors = JSON.parse(sel.getAttribute("data-factors") || "{}");  // each unit per kg·m²
+      function factor(u) { return factors[u] || null; }
       function number(text) { var t = String(text).trim().replace(",", "."); return t && isFinite(Number(t)) ? Number(t) : null; }
       function inertias() {
         return Array.prototype.map.call(form.querySelectorAll("label[data-inertia]"), function (l) {

@@ -73,7 +73,10 @@ def test_a_trigger_in_fault_is_refused_at_once_and_home_says_whom_to_ask(applian
     # another door (MQTT, Modbus) hears the same words from the daemon
     heard: list = []
     answered = threading.Event()
-    app.command(V.TRIGGER, "mqtt", None, lambda r: (heard.append(r), answered.set()))
+    def hear(r) -> None:
+        heard.append(r)
+        answered.set()
+    app.command(V.TRIGGER, "mqtt", None, hear)
     assert answered.wait(10)
     assert (heard[0].status, heard[0].reason, heard[0].detail) == ("refused", "fault", doc["error"])
     assert app.store.count() == 0 and app.sequencer.state.value == "FAULT"
@@ -137,8 +140,8 @@ def test_a_recipe_s_nominal_is_read_in_the_unit_chosen_in_the_same_form(applianc
 
 
 @pytest.mark.browser
-def test_the_fault_measure_busy_the_unreachable_bar_and_the_recipe_unit_in_the_browser(  # noqa: F811
-        browser, appliance_factory, tmp_path, monkeypatch):
+def test_the_fault_measure_busy_the_unreachable_bar_and_the_recipe_unit_in_the_browser(
+        browser, appliance_factory, tmp_path, monkeypatch):  # noqa: F811
     from selenium.common.exceptions import StaleElementReferenceException
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import Select, WebDriverWait
