@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import datetime as dt
 import logging
+import math
 from pathlib import Path
 from typing import Any, Mapping
 from urllib.parse import quote
@@ -41,12 +42,39 @@ def _chosen_unit(typed: Mapping[str, str], shown: str, default: str) -> str:
     return chosen if chosen in INERTIA_UNITS else shown
 
 
+def largest_inertia(rig: Any, capture: float, min_swings: float) -> float | None:
+    """The largest J (kg·m²) a torsion rig can measure: a part swings with T = 2π·√((J + J_tare)/k), and fewer than
+    ``min_swings`` full swings in a capture of ``capture`` s is INVALID, so T ≤ capture/min_swings. None for another
+    kind of rig or one without k (no clear bound)."""
+    k = getattr(rig, "stiffness", None)
+    if getattr(rig, "kind", None) != "torsion" or not k or min_swings <= 0:
+        return None
+    return k * (capture / min_swings / (2 * math.pi)) ** 2 - (getattr(rig, "tare_inertia", None) or 0.0)
+
+
 class RecipePages(Family):
     """``/recipes``, shown and edited."""
 
     def __init__(self, *args: Any, **kw: Any) -> None:
         super().__init__(*args, **kw)
         self._editing = asyncio.Lock()  # one edit at a time: read, check the version, write, audit
+
+    def _beyond_the_rig(self, recipe: Recipe, text: str | None, unit: str) -> str | None:
+        """Why a nominal typed in ``unit`` is no moment of inertia this recipe's rig can measure (a number meant in
+        another unit), or None (also when it is no number: the editor says so)."""
+        nominal_key = next(k for k in EDITABLE if k.name == "nominal")
+        try:
+            nominal = nominal_key.parse(text or "", unit)
+        except ValueError:
+            return None
+        rig = recipe.rig_for(self.app.config.rig)
+        capture = self.app.config.sequencer.capture_duration
+        most = largest_inertia(rig, capture, recipe.quality.min_swings)
+        if nominal is None or most is None or nominal <= most:
+            return None
+        return (f"{Q.inertia(nominal, unit, '.6g')} is beyond what this rig measures: with k = {rig.stiffness:.4g} "
+                f"N·m/rad a part above {Q.inertia(most, unit, '.3g')} swings fewer than "
+                f"{recipe.quality.min_swings:g} full swings in the {capture:g} s capture (is the number in {unit}?)")
 
     async def recipes(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
         """Every recipe as a quality engineer reads it before measuring: nominal, tolerance, limits, releases,
@@ -101,6 +129,10 @@ class RecipePages(Family):
                                                                 "edit it again if your change still holds")]})
         shown = Q.display_unit({"recipe": recipe.to_dict()}, self.server.settings.display_unit)
         unit = _chosen_unit(typed, shown, self.server.settings.display_unit)
+        beyond = self._beyond_the_rig(recipe, typed.get("nominal"), unit)
+        if beyond is not None:
+            return await self.recipes(request, status=400, edit_error={
+                "recipe": recipe.name, "typed": typed, "errors": [(f"nominal ({unit})", beyond)]})
         try:
             new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed, unit, shown)
         except RecipeEditError as exc:

@@ -132,6 +132,17 @@ def test_a_recipe_s_nominal_is_read_in_the_unit_chosen_in_the_same_form(applianc
     said = html.split('id="recipe-saved"', 1)[1].split("</p>", 1)[0]
     assert "Saved rotor-a: nominal 125000" in said and "g·cm²" in said and "kg·m²" not in said, said
     assert "nominal (g·cm²)" in html.split('id="edit-3"', 1)[1].split("</form>", 1)[0]
+    # the reviewer's number kept in kg·m²: no moment of inertia this torsion rig measures (k and the capture's
+    # swings bound it), refused by the nominal's label and nothing written
+    status, _, page = qe.request("/recipes", {"recipe": "rotor-b", "nominal": "125000", "csrf": csrf})
+    html = page.decode()
+    assert status == 400 and "beyond what this rig measures" in html and "is the number in kg·m²?" in html, html[-3000:]
+    assert _file(d, "rotor-b")["nominal"] == 0.0125
+    from service.publish.web.recipes import largest_inertia
+
+    rig = running.app.config.rig
+    assert largest_inertia(rig, 30.0, 3.0) == pytest.approx(rig.stiffness * (10.0 / (2 * 3.141592653589793)) ** 2
+                                                            - (rig.tare_inertia or 0.0))
     # only the unit changed, the nominal left as the form showed it (kg·m²): its value kept, not read in g·cm²
     status, _, _ = qe.request("/recipes", {"recipe": "rotor-b", "nominal": "0.0125", "display_unit": "g·cm²",
                                            "csrf": csrf})
