@@ -12,6 +12,12 @@ from __future__ import annotations
 from measurement.errors import InvalidInput
 
 
+def fault_words(exc: BaseException) -> str:
+    """The one place a fault's words are made from an exception: what went wrong, as the pages, the history and
+    the replies show it, without the exception's class name (a programmer's word; the log keeps it)."""
+    return str(exc).strip() or "an error without a message (the appliance log names it)"
+
+
 class SequencerError(Exception):
     """Base of all errors raised by ``firmware_host``."""
 

@@ -43,6 +43,7 @@ from .errors import (
     IllegalTransition,
     PublishFailed,
     SequencerFault,
+    fault_words,
 )
 from .ports import Identifier, PressSource, ReleaseActuator, ResultSink, StatusIndicator
 from .states import BUSY, TRANSITIONS, Event, Measurement, State
@@ -254,10 +255,10 @@ class Sequencer:
                 if isinstance(exc, (DeviceFault, SequencerFault)):
                     reason = str(exc)  # these messages name the device/step and what went wrong
                 elif isinstance(exc, MeasurementError):
-                    reason = f"{type(exc).__name__}: {exc}"
+                    reason = fault_words(exc)
                 else:
                     log.exception("unexpected error in state %s", self._state.value)
-                    reason = f"internal error in {self._state.value}: {type(exc).__name__}: {exc}"
+                    reason = f"internal error in {self._state.value}: {fault_words(exc)}"
                 self._enter_fault(now, reason)
             with self._lock:
                 events, self._events = self._events, []
@@ -477,8 +478,7 @@ class Sequencer:
             try:
                 trace = finish(trace)
             except Exception as exc:
-                raise SensorFault(f"{self.sensor.source}: finishing the capture failed: "
-                                  f"{type(exc).__name__}: {exc}") from exc
+                raise SensorFault(f"{self.sensor.source}: finishing the capture failed: {fault_words(exc)}") from exc
             if not isinstance(trace, Trace):
                 raise SensorFault(f"{self.sensor.source}: finish() returned {type(trace).__name__}; expected a Trace")
         return trace, self._identifier(trace, rig)
@@ -500,7 +500,7 @@ class Sequencer:
                 raise exc
             if not isinstance(exc, MeasurementError):
                 log.error("identification raised", exc_info=exc)
-            raise IdentificationFailed(f"identification failed: {type(exc).__name__}: {exc}") from exc
+            raise IdentificationFailed(f"identification failed: {fault_words(exc)}") from exc
         assert job.result is not None and run.capture_ended_at is not None, "done without an error: run() stored it"
         run.trace, result = job.result
         measurement = Measurement(
@@ -513,7 +513,7 @@ class Sequencer:
             self._sink(measurement)
         except Exception as exc:  # the sink is the daemon's (store/outbox): its failure is a FAULT with the reason
             log.exception("result sink failed")
-            raise PublishFailed(f"publishing failed: {type(exc).__name__}: {exc}") from exc
+            raise PublishFailed(f"publishing failed: {fault_words(exc)}") from exc
         self.last_measurement = measurement
         self.counts["measurements"] += 1
         run.measurement = measurement

@@ -449,16 +449,16 @@ class Appliance:
         return SCHEMA
 
     def calibration_state(self) -> dict[str, Any] | None:
-        """The calibration of the rig the active recipe measures with, as the next result will be judged
-        (``service.parts.calibration.calibration_state``)."""
+        """The calibration of the active recipe's rig as the next result will be judged (``calibration_state``)."""
         return calibration_rule.calibration_state(self._active_rig(), self.newest_checks(), self.wall_clock())
 
+    def contact(self) -> str:  # whom every door says to call ([web] contact): a calibration's block, a FAULT
+        return whom_to_call(self.config) or CONTACT
+
     def measure_block(self) -> dict[str, Any] | None:
-        """Why no measurement may start now, for every door (``service.parts.calibration.measure_block``), with
-        whom to call ([web] contact), or None."""
-        contact = whom_to_call(self.config) or CONTACT
+        """Why no measurement may start now, for every door (``calibration.measure_block``) with ``contact()``."""
         return calibration_rule.measure_block(self._active_rig(), self.parts.recipe, self.newest_checks(), self.wall_clock(),
-                                              contact, self.config.require_calibration)
+                                              self.contact(), self.config.require_calibration)
 
     def show_block(self, refused: bool, again: bool = False) -> None:
         """The status lamp or buzzer says the calibration refuses Measure while the appliance is IDLE (it is

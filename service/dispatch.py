@@ -14,7 +14,7 @@ from firmware_host import State
 from measurement.errors import InvalidInput
 from service.core import vocabulary as V
 from service.parts.recipes import Recipe, RecipeError
-from service.publish.replies import CommandReply, ReplyTo
+from service.publish.replies import CommandReply, ReplyTo, fault_refusal
 
 log = logging.getLogger("moi.daemon")
 
@@ -81,8 +81,10 @@ class Dispatcher:
             return CommandReply(name, "accepted")
         self._log_ignored(f"trigger from {source} ignored (state {seq.state.value})")
         state = seq.state
-        return CommandReply(name, "refused", "fault" if state is State.FAULT else "busy" if seq.busy else "not_ready",
-                            f"state {state.value}")
+        if state is State.FAULT:
+            return CommandReply(name, "refused", "fault",
+                                fault_refusal(seq.last_fault, self.app.contact()))
+        return CommandReply(name, "refused", "busy" if seq.busy else "not_ready", f"state {state.value}")
 
     def _act_stop(self, name: str, command: V.Command, source: str, data: Mapping[str, Any] | None,
                   reply: ReplyTo | None) -> CommandReply:

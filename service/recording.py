@@ -19,6 +19,7 @@ from collections import deque
 from typing import Any, Mapping
 
 from firmware_host import Event, Measurement, State
+from firmware_host.errors import fault_words
 from measurement import IdentificationResult, Rig
 from measurement import flags as F
 from service.core import vocabulary as V
@@ -94,7 +95,7 @@ class Recorder:
         finished = self.app.wall_clock()
         self._started.pop(m.id, None)
         part_id, recipe = self._part.pop(m.id, (self.app.parts.part_id, self.app.parts.recipe))
-        error = f"captured, but not stored as a result: {type(exc).__name__}: {exc}"
+        error = f"captured, but not stored as a result: {fault_words(exc)}"
         if (reply := self._reply.pop(m.id, None)) is not None:
             reply(CommandReply("trigger", "failed", "measurement_failed", error, {"uuid": m.id}))
         try:

@@ -368,12 +368,14 @@ def _check_standard(c: Any, doc: Mapping[str, Any], rec: Mapping[str, Any],
 RECIPE_AUDIT_FILE = "recipe-audit.log"
 
 
-def edit_recipe(recipe: Recipe, typed: Mapping[str, str],
-                unit: str = SI) -> tuple[Recipe, dict[str, tuple[Any, Any]]]:
+def edit_recipe(recipe: Recipe, typed: Mapping[str, str], unit: str = SI,
+                shown_in: str | None = None) -> tuple[Recipe, dict[str, tuple[Any, Any]]]:
     """Set the editable [recipe] keys (``recipe_keys.EDITABLE``) of ``typed`` (text as typed, an inertia in
-    ``unit``; empty removes an optional key) in ``recipe``'s file, keeping its comments and layout; the new file
-    goes through ``load_recipe`` before it replaces the old one in one step (RecipeEditError naming every key
-    refused, the file unchanged). Returns the re-read recipe and {key: (before, after)} of what changed."""
+    ``unit``, the display unit chosen in the same form; empty removes an optional key) in ``recipe``'s file,
+    keeping its comments and layout; the new file goes through ``load_recipe`` before it replaces the old one in
+    one step (RecipeEditError naming every key refused, the file unchanged). An inertia left as the form showed
+    it (in ``shown_in``, the unit it was opened in) keeps its value. Returns the re-read recipe and
+    {key: (before, after)} of what changed."""
     import tomlkit
 
     from service.sources.files import write_atomic
@@ -388,10 +390,11 @@ def edit_recipe(recipe: Recipe, typed: Mapping[str, str],
             continue
         before = table.get(key.name)
         before = before.unwrap() if hasattr(before, "unwrap") else before
-        if str(typed[key.name]).strip() == (key.typed(before, unit) or ""):
+        text = str(typed[key.name]).strip()
+        if text in {key.typed(before, u) or "" for u in (unit, shown_in or unit)}:
             continue  # as shown: unchanged, whatever a conversion to the unit and back would round
         try:
-            after = key.parse(str(typed[key.name]), unit)
+            after = key.parse(text, unit)
         except ValueError as exc:
             problems[key.name] = str(exc)
             continue

@@ -55,6 +55,13 @@ REASONS: dict[str, Reason] = {
 CONTACT = "the quality engineer on shift"
 
 
+def fault_refusal(fault: str | None, contact: str) -> str:
+    """The words every door says to a trigger refused in FAULT: what is wrong, and who acknowledges it (an
+    operator cannot: the quality role, or the PLC's acknowledge, does once the cause is fixed)."""
+    return (f"not measured: the appliance is in FAULT ({fault or 'no reason recorded'}); nothing is measured until "
+            f"the fault is acknowledged: ask {contact} to acknowledge it once the cause is fixed")
+
+
 #: the statuses of a reply, in the order a trigger goes through them
 STATUSES = ("accepted", "refused", "done", "failed")
 

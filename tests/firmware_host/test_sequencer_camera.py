@@ -185,6 +185,6 @@ def test_the_finish_hook_runs_once_before_identification_and_its_trace_is_publis
             seq.request_measurement("test")
             while seq.poll() is not State.FAULT:
                 clock.advance(0.01)
-            assert seq.last_fault == "encoder: finishing the capture failed: ValueError: no swing in the record"
+            assert seq.last_fault == "encoder: finishing the capture failed: no swing in the record"
             assert not solenoid.is_active and len(results) == 1
         sim.close()

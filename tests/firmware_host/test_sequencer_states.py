@@ -214,11 +214,11 @@ SCENARIOS = {
                                    "capture time-out: no sample from the encoder for"),
     "capture too short": (capture_too_short, NORMAL[:3] + ["FAULT"], "capture too short"),
     "identification raises": (identification_raises, NORMAL[:4] + ["FAULT"],
-                              "identification failed: RuntimeError: singular Jacobian"),
+                              "identification failed: singular Jacobian"),
     "identification rejects the trace": (identification_rejects_the_trace, NORMAL[:4] + ["FAULT"],
-                                         "identification failed: TraceError: encoder: only 12 samples"),
+                                         "identification failed: encoder: only 12 samples"),
     "identification times out": (identification_times_out, NORMAL[:4] + ["FAULT"], "identification time-out"),
-    "sink raises": (sink_raises, NORMAL[:5] + ["FAULT"], "publishing failed: OSError: outbox database is read-only"),
+    "sink raises": (sink_raises, NORMAL[:5] + ["FAULT"], "publishing failed: outbox database is read-only"),
     "solenoid fails": (solenoid_fails, ["ARMED", "FAULT"], "over-current"),
 }
 

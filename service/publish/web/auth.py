@@ -16,8 +16,8 @@ with their name and password and acts in their role; each measurement they start
 (trigger ``web:<name>``). Roles, each with what the ones before it may do:
 
 * ``operator``: Measure, Abort a running measurement, set the part ID, the tensor set's redo/skip/abort;
-* ``quality``: also change the recipe, acknowledge a fault, set the camera's region of interest, start a Type 1
-  gauge study and find the gauge studies in the page's menu (the quality engineer);
+* ``quality``: also change the recipe, acknowledge a fault, set the camera's region of interest, start and abort a
+  Type 1 gauge study and find the gauge studies in the page's menu (the quality engineer);
 * ``admin``: everything (the appliance's token, for scripts and for the set-up, acts as admin).
 
 Passwords are kept as scrypt hashes (RFC 7914, ``hashlib.scrypt``: memory-hard, salted per user),

@@ -4,6 +4,7 @@ and the guided tensor set."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import datetime as dt
 import json
 import logging
@@ -14,6 +15,7 @@ from aiohttp import web
 from service.core import vocabulary as V
 from service.parts.calibration import uncalibrated
 from service.publish.payload import stored_result
+from service.publish.replies import CommandReply
 from service.states import STATES
 
 from .. import quality as Q
@@ -25,6 +27,8 @@ log = logging.getLogger("moi.web")
 
 #: a tick of the live stream every this many s (elapsed time, new samples)
 TICK = 0.25
+#: how long Measure waits for the daemon's answer (accepted or refused), s
+ANSWER_TIMEOUT = 10.0
 
 
 def _calibration(app: Any) -> dict[str, Any] | None:
@@ -106,13 +110,28 @@ class HomePages(Family):
                 "last_view": Q.part_view(last.payload, stored_result(last.payload)) if last else None,
                 "last_unit": pages.unit(last.payload if last else None)}
 
-    async def _summary(self) -> dict[str, Any]:
+    def _fault(self, request: web.Request) -> dict[str, Any]:
+        """What Home says of a FAULT to the one reading it: what is wrong, and who acknowledges it: the quality
+        role with Abort; an operator, who may not, is told whom to ask."""
+        seq = self.app.sequencer
+        may = self.pages.may(request, "acknowledge")
+        contact = self.server.settings.contact
+        do = ("Fix the cause, then acknowledge the fault with Abort: the release is measured again after it."
+              if may else f"Do not measure: ask {contact} to acknowledge the fault once its cause is fixed.")
+        return {"what": (seq.last_fault if seq is not None else None) or "no reason recorded", "do": do,
+                "words": "fault: acknowledge it (Abort) once the cause is fixed" if may
+                else f"fault: ask {contact} to acknowledge it"}
+
+    async def _summary(self, request: web.Request) -> dict[str, Any]:
         """``summary()`` with the running tensor set's orientation to mount, or the running Type 1 study's count (read on
-        the main loop, which owns them)."""
+        the main loop, which owns them); in FAULT, the fault and who acknowledges it, whatever runs."""
         progress = await asyncio.wrap_future(self.app.call_soon(self.app.set_progress))
         study = await asyncio.wrap_future(self.app.call_soon(self.app.study_progress))
         s = self.summary()
-        if progress is not None and progress.get("status") == "running" and progress.get("orientation"):
+        s["fault"] = self._fault(request)
+        if self.app.live_status().state == "FAULT":
+            s.update(mode="fault")  # never READY or "press Measure" under a FAULT heading
+        elif progress is not None and progress.get("status") == "running" and progress.get("orientation"):
             o = progress["orientation"]
             s.update(mode="set", set=progress, drawing=axes_drawing(o["axis"], o.get("offset"), size=150))
         elif study is not None and study.get("status") == "running":
@@ -122,11 +141,11 @@ class HomePages(Family):
 
     async def home(self, request: web.Request) -> web.Response:
         return self.pages.page(request, "home.html", title="Home", state=self.pages.live.snapshot(),
-                               s=await self._summary(), recipes=self.app.parts.book.recipes)
+                               s=await self._summary(request), recipes=self.app.parts.book.recipes)
 
     async def home_summary(self, request: web.Request) -> web.Response:
         """Home's operator panel, counters and last parts alone (the page fetches it after each result)."""
-        html = self.pages.env.get_template("summary.html").render(s=await self._summary())
+        html = self.pages.env.get_template("summary.html").render(s=await self._summary(request))
         return web.Response(text=html, content_type="text/html", headers={"Cache-Control": "no-store"})
 
     async def api_state(self, request: web.Request) -> web.Response:
@@ -200,11 +219,38 @@ class HomePages(Family):
             now = seq.state.value
             running = f"already running ({now})" if STATES[now].busy else "already requested and starting"
             raise Refused(409, f"a measurement is {running}: Measure again when it is IDLE")
-        self.app.command(name, source)
+        if name == V.TRIGGER:
+            # the daemon's answer awaited: a trigger it refuses (FAULT, busy, blocked) is said at once in its words,
+            # and the page never shows a measurement running that the daemon did not start
+            r = await self._answer(name, source)
+            if r.status == "refused":
+                raise Refused(409, r.detail or r.reason or "refused")
+        else:
+            self.app.command(name, source)
         log.info("%s: %s requested (state %s)", source, name, state)
         if "text/html" in request.headers.get("Accept", "") and form:
             raise web.HTTPSeeOther("/")
         return web.json_response({"accepted": True, "command": name, "state": state}, status=202)
+
+    async def _answer(self, name: str, source: str) -> CommandReply:
+        """``name`` queued for the daemon, and its first answer (accepted or refused; a trigger's later outcome,
+        done or failed, reaches the page through the live stream)."""
+        loop = asyncio.get_running_loop()
+        answer: asyncio.Future[CommandReply] = loop.create_future()
+
+        def settle(r: CommandReply) -> None:
+            if not answer.done():  # the run's outcome, or an answer after the time-out: the page has its own
+                answer.set_result(r)
+
+        def reply(r: CommandReply) -> None:  # on the daemon's main loop: handed to the web loop
+            with contextlib.suppress(RuntimeError):  # the web server stopped meanwhile: nobody waits for it
+                loop.call_soon_threadsafe(settle, r)
+        self.app.command(name, source, None, reply)
+        try:
+            return await asyncio.wait_for(answer, ANSWER_TIMEOUT)
+        except TimeoutError:
+            raise Refused(503, f"the appliance did not answer within {ANSWER_TIMEOUT:g} s: nothing is known to "
+                               "have started; look at the state before pressing again") from None
 
     async def measure(self, request: web.Request) -> web.Response:
         return await self._action(request, V.TRIGGER)

@@ -20,7 +20,7 @@ from service import __version__
 from service.core import vocabulary as V
 from service.parts import calibration as calibration_rule
 from service.parts.recipes import PART_ID_LENGTH
-from service.states import vocabulary
+from service.states import STATES, vocabulary
 
 from .. import quality as Q
 from ..budget import BUDGET_FOOTNOTE, budget_rows
@@ -61,7 +61,7 @@ if TYPE_CHECKING:  # pragma: no cover
 HERE = Path(__file__).parent
 #: what a refusal of an action needs, in words
 NEEDS = {"recipe": "change the recipe", "acknowledge": "acknowledge a fault",
-         "camera": "set the camera's region of interest", "gauge": "start a gauge study"}
+         "camera": "set the camera's region of interest", "gauge": "start or abort a gauge study"}
 #: the history's filters in the query string (the history, its export and the SPC page read them)
 FILTERS = ("since", "until", "recipe", "part", "flag", "status")
 
@@ -152,6 +152,7 @@ def _environment(when: Any) -> jinja2.Environment:
     env.globals.update(version=__version__, PART_ID_LENGTH=PART_ID_LENGTH, allowed=allowed, STATE_WORDS=STATE_WORDS,
                        VERDICT_WORDS=Q.VERDICT_WORDS, budget_rows=budget_rows, BUDGET_FOOTNOTE=BUDGET_FOOTNOTE,
                        states_json=json.dumps(vocabulary(), separators=(",", ":")),
+                       BUSY_STATES=frozenset(name for name, info in STATES.items() if info.busy),
                        static_url=lambda name: f"/static/{name}?v={stamps.get(name, '')}")
     return env
 

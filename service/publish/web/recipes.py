@@ -5,11 +5,14 @@ from __future__ import annotations
 import asyncio
 import datetime as dt
 import logging
+import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
+from urllib.parse import quote
 
 from aiohttp import web
 
+from measurement.units import INERTIA_UNITS
 from service.errors import InputFileError
 from service.parts.recipe_keys import EDITABLE
 from service.parts.recipes import (
@@ -30,12 +33,48 @@ from .pages import Family, Refused, read_form
 log = logging.getLogger("moi.web")
 
 
+def _chosen_unit(typed: Mapping[str, str], shown: str, default: str) -> str:
+    """The unit the form's inertias are read in: the display unit chosen in the same form ("": the set-up's), else
+    the one the recipe is shown in (a unit the loader would refuse leaves the numbers as shown; it is refused)."""
+    if "display_unit" not in typed:
+        return shown
+    chosen = typed["display_unit"].strip() or default
+    return chosen if chosen in INERTIA_UNITS else shown
+
+
+def largest_inertia(rig: Any, capture: float, min_swings: float) -> float | None:
+    """The largest J (kg·m²) a torsion rig can measure: a part swings with T = 2π·√((J + J_tare)/k), and fewer than
+    ``min_swings`` full swings in a capture of ``capture`` s is INVALID, so T ≤ capture/min_swings. None for another
+    kind of rig or one without k (no clear bound)."""
+    k = getattr(rig, "stiffness", None)
+    if getattr(rig, "kind", None) != "torsion" or not k or min_swings <= 0:
+        return None
+    return k * (capture / min_swings / (2 * math.pi)) ** 2 - (getattr(rig, "tare_inertia", None) or 0.0)
+
+
 class RecipePages(Family):
     """``/recipes``, shown and edited."""
 
     def __init__(self, *args: Any, **kw: Any) -> None:
         super().__init__(*args, **kw)
         self._editing = asyncio.Lock()  # one edit at a time: read, check the version, write, audit
+
+    def _beyond_the_rig(self, recipe: Recipe, text: str | None, unit: str) -> str | None:
+        """Why a nominal typed in ``unit`` is no moment of inertia this recipe's rig can measure (a number meant in
+        another unit), or None (also when it is no number: the editor says so)."""
+        nominal_key = next(k for k in EDITABLE if k.name == "nominal")
+        try:
+            nominal = nominal_key.parse(text or "", unit)
+        except ValueError:
+            return None
+        rig = recipe.rig_for(self.app.config.rig)
+        capture = self.app.config.sequencer.capture_duration
+        most = largest_inertia(rig, capture, recipe.quality.min_swings)
+        if nominal is None or most is None or nominal <= most:
+            return None
+        return (f"{Q.inertia(nominal, unit, '.6g')} is beyond what this rig measures: with k = {rig.stiffness:.4g} "
+                f"N·m/rad a part above {Q.inertia(most, unit, '.3g')} swings fewer than "
+                f"{recipe.quality.min_swings:g} full swings in the {capture:g} s capture (is the number in {unit}?)")
 
     async def recipes(self, request: web.Request, status: int = 200, **ctx: Any) -> web.Response:
         """Every recipe as a quality engineer reads it before measuring: nominal, tolerance, limits, releases,
@@ -52,7 +91,8 @@ class RecipePages(Family):
                          "file": recipe_values(r, unit), "version": recipe_version(r)})
         return self.pages.page(request, "recipes.html", status=status, title="Recipes", rows=rows,
                                editable=EDITABLE, may_edit=self.pages.may(request, "recipe"),
-                               default_unit=self.server.settings.display_unit, **ctx)
+                               default_unit=self.server.settings.display_unit, units=INERTIA_UNITS,
+                               saved=request.query.get("saved") if status == 200 else None, **ctx)
 
     async def recipes_change(self, request: web.Request) -> web.StreamResponse:
         """Edit one recipe's [recipe] keys (quality role): checked as a recipe file is, written back in one
@@ -87,9 +127,14 @@ class RecipePages(Family):
                 "recipe": recipe.name, "typed": {}, "errors": [("", "the recipe was changed since you opened it (by "
                                                                 "someone else?): nothing was saved; here it is now, "
                                                                 "edit it again if your change still holds")]})
-        unit = Q.display_unit({"recipe": recipe.to_dict()}, self.server.settings.display_unit)
+        shown = Q.display_unit({"recipe": recipe.to_dict()}, self.server.settings.display_unit)
+        unit = _chosen_unit(typed, shown, self.server.settings.display_unit)
+        beyond = self._beyond_the_rig(recipe, typed.get("nominal"), unit)
+        if beyond is not None:
+            return await self.recipes(request, status=400, edit_error={
+                "recipe": recipe.name, "typed": typed, "errors": [(f"nominal ({unit})", beyond)]})
         try:
-            new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed, unit)
+            new, changes = await loop.run_in_executor(None, edit_recipe, recipe, typed, unit, shown)
         except RecipeEditError as exc:
             labels = {k.name: k.label_in(unit) for k in EDITABLE}
             errors = [(labels.get(k, "the recipe"), m) for k, m in exc.problems.items()]
@@ -107,4 +152,5 @@ class RecipePages(Family):
                 parts.recipe = book.find(new.name)
             line = await loop.run_in_executor(None, audit_recipe, audit, source, new, changes, now)
             log.info("web: recipe edited: %s", line.strip())
-        raise web.HTTPSeeOther(f"/recipes#recipe-{new.number}")
+        # the saved recipe shown back, its numbers in the unit chosen: said on the page beside it
+        raise web.HTTPSeeOther(f"/recipes?saved={quote(new.name)}#recipe-{new.number}")

@@ -75,9 +75,9 @@ KEYS: dict[str, dict] = {
                             min=1.0, max=86400.0),
     "time_format": dict(doc="how the pages write a time a person reads: strftime codes, the appliance's local "
                         "time (exports and the JSON API keep ISO 8601 with the UTC offset)"),
-    "contact": dict(doc="whom the operator calls when the calibration is due or a check standard failed, "
-                    "e.g. \"quality lab, ext. 2345\" (said on the banner that refuses Measure, and in the refusal the "
-                    "push button, the PLC and MQTT get)"),
+    "contact": dict(doc="whom the operator calls when the calibration is due or a check standard failed, or to "
+                    "acknowledge a FAULT, e.g. \"quality lab, ext. 2345\" (said on the banner that refuses Measure, "
+                    "on Home in FAULT, and in the refusal the push button, the PLC and MQTT get)"),
 }
 
 

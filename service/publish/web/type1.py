@@ -221,8 +221,10 @@ class Type1Pages(Family):
             raise Refused(409, "a measurement runs: start the study when it is IDLE")
 
     async def abort(self, request: web.Request) -> web.Response:
+        """Abort the running study: the quality role's, as its start is (an operator's press would throw away a
+        quality engineer's study)."""
         form = await action_form(request)
-        source = await self.pages.authorise(request, form, "set")
+        source = await self.pages.authorise(request, form, "gauge")
         return self._done(request, form, await self._command(source, {"action": "abort"}))
 
 

@@ -237,10 +237,13 @@ var moi = (function () {
       return fetch("/home/summary", {credentials: "same-origin"}).then(function (r) { return r.ok ? r.text() : null; })
         .then(function (html) { if (html) { swap(html); syncMeasure(); } });
     }
-    // the Measure button carries what the server says about the part in hand: refused, or a part to repeat
+    // the Measure button carries what the server says about the part in hand (refused, or a part to repeat) and
+    // the state: greyed in FAULT (the daemon refuses it, saying why), busy and disabled while a measurement runs
     function syncMeasure() {
-      var b = $("blocked");
-      if (b) { measure.setAttribute("aria-disabled", "true"); } else { measure.removeAttribute("aria-disabled"); }
+      var b = $("blocked"), st = $("state").textContent, running = busy(st);
+      if (b || st === "FAULT") { measure.setAttribute("aria-disabled", "true"); } else { measure.removeAttribute("aria-disabled"); }
+      measure.setAttribute("aria-busy", running ? "true" : "false");
+      if (!view || !view.unreachable()) { measure.disabled = running; }  // while unreachable, the shared part decides
       var now = $("now");
       measure.setAttribute("data-repeat", now ? now.getAttribute("data-repeat") || "" : "");
     }
@@ -280,7 +283,9 @@ var moi = (function () {
       if (s.release_next !== undefined) { seen = s; }
       var el = $("state");
       el.textContent = s.state; el.className = "state state-" + s.state;
-      $("words").textContent = s.words || "";
+      var wd = $("words");  // a FAULT in the words of the one reading it: who acknowledges it
+      wd.textContent = (s.state === "FAULT" && wd.getAttribute("data-fault-words")) || s.words || "";
+      syncMeasure();
       var f = $("fault");
       if (s.state === "FAULT" && s.fault) { f.textContent = s.fault; f.hidden = false; } else { f.hidden = true; }
       if (s.recipe !== undefined) { $("recipe").textContent = s.recipe ? s.recipe.number + " " + s.recipe.name : "–"; }
@@ -314,6 +319,8 @@ var moi = (function () {
       if (s.state === "ABORTED") { say("aborted: this release is not counted; Measure measures it again"); }
       else if (s.state === "FAULT") { say(""); }  // answered now
       else if (s.state === "IDLE" && lastState !== "ABORTED") { say(""); }
+      // a FAULT, and its acknowledgement: the part in hand as the server now has it (never READY under FAULT)
+      if (s.state === "FAULT" || (s.state === "IDLE" && (lastState === "FAULT" || s.previous === "FAULT"))) { refresh(); }
       lastState = s.state;
       if (s.state === "IDLE" && finished(s)) {
         var id = s.measurement_id;
@@ -371,6 +378,17 @@ var moi = (function () {
       lostWords: "nothing can be measured until it answers",
       unreachable: function () {
         var el = $("state"); el.textContent = "NO CONNECTION"; el.className = "state state-unreachable"; $("words").textContent = "";
+        // the card says so too: not "press Measure" while nothing can be measured (the server's card is back on
+        // reconnection)
+        var now = $("now");
+        if (now) {
+          now.className = "now now-unreachable"; now.removeAttribute("data-measuring"); now.innerHTML = "";
+          var p = document.createElement("p"); p.className = "now-line"; p.id = "now-line";
+          var w = document.createElement("span"); w.className = "now-word"; w.textContent = "NOT REACHABLE"; p.appendChild(w);
+          var n = document.createElement("p"); n.className = "next"; n.id = "next-step";
+          n.textContent = "The appliance is not reachable: nothing can be measured until it answers (since " + clock(new Date()) + ").";
+          now.appendChild(p); now.appendChild(n);
+        }
       },
       reachable: function (was) { if (was) { refresh(); } },  // what changed meanwhile
       refused: function () { refresh(); },  // the banner and Measure as the server now has them (the part in hand's)
@@ -420,5 +438,53 @@ var moi = (function () {
       if (s.state === "IDLE" && finished(s)) { window.location.reload(); }
     }});
   }
-  return {home: home, setup: setup, tensorSet: tensorSet, page: page, act: act, states: STATES};
+  // the recipes page's edit forms: the inertias are read in the display unit chosen in the same form, so their
+  // labels follow the select at once; a number left as the form showed it is converted with it (its value kept),
+  // a number typed is read in the unit chosen; the note says what will be saved, in both units, before Save
+  function recipes() {
+    document.querySelectorAll("form.recipe-form").forEach(function (form) {
+      var sel = form.querySelector("select[name=display_unit]"), note = form.querySelector(".recipe-unit-note");
+      if (!sel) { return; }
+      var opened = form.getAttribute("data-unit"), was = opened;
+      function unitOf() { return sel.value || form.getAttribute("data-default-unit"); }
+      var factors = JSON.parse(sel.getAttribute("data-factors") || "{}");  // each unit per kg·m²
+      function factor(u) { return factors[u] || null; }
+      function number(text) { var t = String(text).trim().replace(",", "."); return t && isFinite(Number(t)) ? Number(t) : null; }
+      function inertias() {
+        return Array.prototype.map.call(form.querySelectorAll("label[data-inertia]"), function (l) {
+          return {label: l, name: l.getAttribute("data-inertia"), input: $(l.getAttribute("for"))};
+        }).filter(function (f) { return f.input; });
+      }
+      function tell() {
+        var u = unitOf(), fu = factor(u), said = [];
+        inertias().forEach(function (f) {
+          var v = number(f.input.value);
+          if (v === null) { return; }
+          said.push(f.name + " " + f.input.value.trim() + " " + u + (fu && u !== "kg·m²" ? " (= " + Number((v / fu).toPrecision(6)) + " kg·m²)" : ""));
+        });
+        note.textContent = (u !== opened ? "display unit " + opened + " → " + u + ": " : "") +
+          (said.length ? "saved as " + said.join(", ") : "nominal and tolerance are read in " + u);
+        note.setAttribute("data-unit", u);
+      }
+      sel.addEventListener("change", function () {
+        var u = unitOf(), from = factor(was), to = factor(u);
+        inertias().forEach(function (f) {
+          f.label.textContent = f.name + " (" + u + ")";
+          var v = number(f.input.value);
+          // left as the form showed it (in the unit it was shown in): the same value, in the new unit
+          if (v !== null && from && to && f.input.value === f.input.getAttribute("data-shown")) {
+            f.input.value = String(Number((v * to / from).toPrecision(12)));
+            f.input.setAttribute("data-shown", f.input.value);
+          }
+        });
+        was = u; tell();
+      });
+      inertias().forEach(function (f) {
+        f.input.setAttribute("data-shown", f.input.value);
+        f.input.addEventListener("input", tell);
+      });
+      tell();
+    });
+  }
+  return {home: home, setup: setup, tensorSet: tensorSet, page: page, act: act, states: STATES, recipes: recipes};
 })();
