@@ -356,6 +356,8 @@ def test_verdict_first_pages_every_unit_written_and_no_raw_value_on_any_page(app
     app = running.app
     bearer = {"Authorization": f"Bearer {Path(app.web.token_file).read_text().strip()}"}
     c = Client(app.web.url)
+    recipes = c.request("/recipes")[2].decode()  # a count in words: "1 decimal", never "1 decimals"
+    assert "g·cm², 1 decimal<" in recipes and "1 decimals" not in recipes
     _measure(running, c, bearer, "rotor-ok", "SN-1", 1)
     first = app.store.latest()
     # a part in progress: the release's own check, never a part verdict
