@@ -10,7 +10,7 @@ from typing import Any
 
 from aiohttp import web
 
-from measurement.reproducibility import Reproducibility
+from measurement.reproducibility import Reproducibility, for_release
 from service.sources.calibrations import read_history, recorded_at
 from service.sources.repeats import calibrated_since, rig_reproducibility
 
@@ -48,7 +48,10 @@ class CalibrationPages(Family):
             history = await loop.run_in_executor(None, self._history, path, before if i == paged else None)
             # the store is the set-up's: its repeat releases tell the set-up's rig's scatter between releases
             repro = await loop.run_in_executor(None, self._reproducibility, cal) if i == 0 else None
+            # what one release measured on this rig counts in its u: the history, else the calibration's, else the default
+            counted = for_release(repro, rig.reproducibility)
             rows.append({"name": name, "used_by": used_by, "cal": cal, "until": until, "index": i, "repro": repro,
+                         "repro_rig": rig.reproducibility, "repro_counted": counted,
                          "days_left": (until - today).days if until is not None else None,
                          "due": cal is not None and cal.due(today), "stiffness": rig.stiffness,
                          "stiffness_std": rig.stiffness_std, "paged": i == paged and before is not None, **history})

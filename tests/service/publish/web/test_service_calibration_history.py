@@ -151,6 +151,10 @@ def test_the_page_shows_the_rigs_reproducibility_pooled_from_its_check_standards
     status, _, body = c.request("/calibration")
     repro = re.search(r'<dd class="cal-repro">(.*?)</dd>', body.decode(), re.S)
     assert status == 200 and repro is not None and "not known: no object released twice" in repro.group(1)
+    # the example calibration releases each reference once: one release's u counts the documented default
+    counted = re.search(r'<dd class="cal-repro-counted">(.*?)</dd>', body.decode(), re.S)
+    assert counted is not None and "the documented default ± 0.1 % of ω_n" in html.unescape(counted.group(1))
+    assert 'class="cal-repro-rig"' not in body.decode()
     store = running.app.store
     # one check standard three times after the calibration (J ± 0.16 %: ω_n ± 0.08 %), one the day before it
     day = 1_780_272_000.0  # 2026-06-01 00:00 UTC
@@ -164,3 +168,23 @@ def test_the_page_shows_the_rigs_reproducibility_pooled_from_its_check_standards
     shown = html.unescape(re.sub(r"<[^>]+>", "", repro.group(1)))
     assert "± 0.08 % of ω_n (± 0.16 % of J)" in shown and "3 repeat releases of 1 object since" in shown, shown
     assert "ν = 2" in shown
+    counted = re.search(r'<dd class="cal-repro-counted">(.*?)</dd>', body.decode(), re.S)
+    assert counted is not None and counted.group(1) == "the history's figure"
+
+
+def test_the_page_shows_the_figure_the_calibration_keeps_and_that_one_release_counts_it(tmp_path, appliance_factory):
+    shutil.copy(REPO / "examples" / "torsion_rig.toml", tmp_path / "rig.toml")
+    shutil.copy(REPO / "examples" / "calibration.toml", tmp_path / "calibration.toml")
+    _calibrate(tmp_path, "2026-06-01", "A. Meyer")
+    rig = tmp_path / "rig.toml"
+    text = rig.read_text(encoding="utf-8")
+    assert "[calibration]\n" in text
+    rig.write_text(text.replace("[calibration]\n", "[calibration]\nreproducibility = 0.0005\nreproducibility_dof = 3\n"),
+                   encoding="utf-8")
+    running = appliance_factory(appliance_doc(tmp_path / "state", device={"rig": str(rig)}, web={"enabled": True}))
+    body = Client(running.app.web.url).request("/calibration")[2].decode()
+    kept = re.search(r'<dd class="cal-repro-rig">(.*?)</dd>', body, re.S)
+    counted = re.search(r'<dd class="cal-repro-counted">(.*?)</dd>', body, re.S)
+    assert kept is not None and "± 0.05 % of ω_n (± 0.1 % of J)" in html.unescape(kept.group(1))
+    assert "ν = 3" in kept.group(1)
+    assert counted is not None and counted.group(1) == "the calibration's figure"
