@@ -320,7 +320,8 @@ var moi = (function () {
       else if (s.state === "FAULT") { say(""); }  // answered now
       else if (s.state === "IDLE" && lastState !== "ABORTED") { say(""); }
       // a FAULT, and its acknowledgement: the part in hand as the server now has it (never READY under FAULT)
-      if (s.state === "FAULT" || (s.state === "IDLE" && (lastState === "FAULT" || s.previous === "FAULT"))) { refresh(); }
+      var fault = function (name) { return name === "FAULT"; };
+      if (fault(s.state) || (s.state === "IDLE" && (fault(lastState) || fault(s.previous)))) { refresh(); }
       lastState = s.state;
       if (s.state === "IDLE" && finished(s)) {
         var id = s.measurement_id;
