@@ -71,7 +71,7 @@ def repeat(i: int) -> tuple[float, float, float, float, float]:
     figure = reproducibility(refs)
     assert figure is not None and figure.relative is not None
     record = CalibrationRecord(dt.date(2026, 1, 1), None, tuple({"name": r.name} for r in refs), None,
-                               figure.relative, int(figure.dof))
+                               reproducibility=figure.relative, reproducibility_dof=int(figure.dof))
     rig = Rig(kind="torsion", stiffness=cal.stiffness, stiffness_std=cal.stiffness_std, tare_inertia=cal.tare_inertia,
               tare_inertia_std=cal.tare_inertia_std, stiffness_tare_covariance=cal.covariance, declared=("viscous",),
               calibration=record)
