@@ -89,12 +89,17 @@ def test_a_calibration_block_reaches_the_live_stream_as_it_starts(appliance_fact
     assert 'id="blocked"' in c.request("/home/summary")[2].decode()
 
 
-def test_a_second_measure_names_the_state_it_refers_to(appliance_factory, tmp_path):
+def _long_capture(appliance_factory, tmp_path):
+    """An appliance whose capture lasts 300 s (a measurement stays running until aborted), its bearer and a client."""
     doc = appliance_doc(tmp_path / "state", web=ON)
     doc["sequencer"]["capture_duration"] = 300.0
     running = appliance_factory(doc)
     bearer = {"Authorization": f"Bearer {Path(running.app.web.token_file).read_text().strip()}"}
-    c = Client(running.app.web.url)
+    return running, bearer, Client(running.app.web.url)
+
+
+def test_a_second_measure_names_the_state_it_refers_to(appliance_factory, tmp_path):
+    running, bearer, c = _long_capture(appliance_factory, tmp_path)
     # a double click: the second press right behind the first, before or after the sequencer took it
     assert c.json("/api/measure", method="POST", headers=bearer)[0] == 202
     status, refused = c.json("/api/measure", method="POST", headers=bearer)
@@ -106,11 +111,7 @@ def test_a_second_measure_names_the_state_it_refers_to(appliance_factory, tmp_pa
 
 
 def test_a_page_that_draws_no_swing_is_sent_no_samples(appliance_factory, tmp_path):
-    doc = appliance_doc(tmp_path / "state", web=ON)
-    doc["sequencer"]["capture_duration"] = 300.0
-    running = appliance_factory(doc)
-    bearer = {"Authorization": f"Bearer {Path(running.app.web.token_file).read_text().strip()}"}
-    c = Client(running.app.web.url)
+    running, bearer, c = _long_capture(appliance_factory, tmp_path)
     assert c.json("/api/measure", method="POST", headers=bearer)[0] == 202
     events = running.app.web.url + "events"
     assert any(t.get("samples", {}).get("t") for t in _capture_ticks(events, 8))  # Home's: the swing as it arrives

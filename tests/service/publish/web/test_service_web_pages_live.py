@@ -265,18 +265,6 @@ def _in_unit(text: str, unit: str, places: int) -> list[str]:
 
 
 @pytest.fixture
-def berlin(monkeypatch):
-    """The appliance's clock in Berlin (an hour or two from UTC), set back afterwards."""
-    import time
-
-    monkeypatch.setenv("TZ", "Europe/Berlin")
-    time.tzset()
-    yield
-    monkeypatch.undo()
-    time.tzset()
-
-
-@pytest.fixture
 def shop(appliance_factory, tmp_path, berlin):
     """Named users (an admin, an operator, two quality engineers) and two part types shown in g·cm² with 0
     decimals, one whose nominal is 20 % off (NOK), one whose 1σ limit no release meets (INVALID)."""

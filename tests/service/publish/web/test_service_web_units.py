@@ -128,18 +128,6 @@ def test_the_budget_on_the_page_and_in_the_pdf_gives_units_and_percent():
     assert pdf_percents == percents and "g·cm² per N·m/rad" in text and "of u_c²" not in text
 
 
-@pytest.fixture
-def berlin(monkeypatch):
-    """The appliance's clock in Berlin (an hour from UTC in winter), set back afterwards."""
-    import time
-
-    monkeypatch.setenv("TZ", "Europe/Berlin")
-    time.tzset()
-    yield
-    monkeypatch.undo()
-    time.tzset()
-
-
 def test_the_dfq_writes_local_time_and_an_invalid_parts_reason_in_its_unit(berlin):
     from service.publish.dfq import FIELD, dfq_text
 
