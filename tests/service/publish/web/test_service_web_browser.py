@@ -18,6 +18,7 @@ import pytest
 from tests.components import missing
 from tests.service.conftest import appliance_doc, wait_until
 from tests.service.publish.web.test_service_web import E_NOTATION, ISO_TIME, UUID
+from tests.service.publish.web.wcag import contrast
 
 pytestmark = pytest.mark.browser
 
@@ -220,7 +221,7 @@ def test_measure_from_the_browser(browser, appliance_factory, tmp_path):
             break
     assert stops[-1] == "measure", stops
     for el in (measure, browser.find_element(By.ID, "state")):
-        assert _contrast(browser, el) >= 4.5, (el.get_attribute("id"), _contrast(browser, el))
+        assert contrast(browser, el) >= 4.5, (el.get_attribute("id"), contrast(browser, el))
 
     # the part is complete and its ID still set: Measure asks before measuring it again as a new part
     done = app.store.count()
@@ -341,24 +342,6 @@ def _check_page(browser, name: str, width: int, verdict: str | None, artifacts: 
     browser.save_screenshot(str(shot))
     assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     browser.set_window_size(width, 900)
-
-
-def _contrast(browser, el) -> float:
-    """The WCAG 2 contrast ratio of an element's text against its background (the first opaque one up the tree)."""
-    fg, bg = browser.execute_script(r"""
-        var e = arguments[0], fg = getComputedStyle(e).color, bg = null;
-        for (var n = e; n && !bg; n = n.parentElement) {
-          var c = getComputedStyle(n).backgroundColor; if (c && !/rgba\(.*, 0\)$/.test(c) && c !== 'transparent') { bg = c; }
-        }
-        return [fg, bg || 'rgb(255, 255, 255)'];""", el)
-
-    def luminance(css: str) -> float:
-        r, g, b = (int(x) / 255 for x in re.findall(r"[\d.]+", css)[:3])
-        lin = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in (r, g, b)]
-        return 0.2126 * lin[0] + 0.7152 * lin[1] + 0.0722 * lin[2]
-
-    a, b = sorted((luminance(fg), luminance(bg)), reverse=True)
-    return (a + 0.05) / (b + 0.05)
 
 
 def _post(url: str, data: dict, headers: dict) -> None:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import io
 import math
-import re
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +16,7 @@ import pytest
 
 from tests.service.conftest import appliance_doc
 from tests.service.publish.web.test_service_web_browser import _post, browser  # noqa: F401 (the fixture)
+from tests.service.publish.web.wcag import contrast
 
 SIZES = ((390, 844), (1280, 800))
 
@@ -141,27 +141,6 @@ def test_subgroups_of_unequal_size_are_said_without_a_python_list():
 
 # --- the pages in the browser ---------------------------------------------------------------------------------------
 
-def _contrast(driver, el) -> float:
-    """The WCAG 2 contrast ratio of an element's text colour against its background: the first opaque background up
-    the tree (the page's white when none is), both as the browser computed them."""
-    fg, bg = driver.execute_script(r"""
-        var fg = getComputedStyle(arguments[0]).color, bg = null;
-        for (var n = arguments[0]; n && !bg; n = n.parentElement) {
-          var c = getComputedStyle(n).backgroundColor, m = c.match(/rgba?\(([^)]*)\)/);
-          var parts = m ? m[1].split(',').map(parseFloat) : [];
-          if (parts.length >= 3 && (parts.length === 3 || parts[3] >= 1)) { bg = c; }
-        }
-        return [fg, bg || 'rgb(255, 255, 255)'];""", el)
-
-    def luminance(css: str) -> float:
-        r, g, b = (float(x) / 255 for x in re.findall(r"[\d.]+", css)[:3])
-        lin = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in (r, g, b)]
-        return 0.2126 * lin[0] + 0.7152 * lin[1] + 0.0722 * lin[2]
-
-    a, b = sorted((luminance(fg), luminance(bg)), reverse=True)
-    return (a + 0.05) / (b + 0.05)
-
-
 def _boxes_overlap(driver, svg) -> list[str]:
     """The tick labels of a chart that overlap its axis title (their boxes as the browser drew them)."""
     return driver.execute_script("""
@@ -199,7 +178,7 @@ def test_the_header_login_the_set_up_page_and_a_phone_s_navigation(browser, appl
         assert "wrong" in error.text
         for el in (browser.find_element(By.CSS_SELECTOR, "label[for=user]"),
                    browser.find_element(By.CSS_SELECTOR, "label[for=token]"), error):
-            assert el.is_displayed() and _contrast(browser, el) >= 4.5, (width, el.text, _contrast(browser, el))
+            assert el.is_displayed() and contrast(browser, el) >= 4.5, (width, el.text, contrast(browser, el))
         # every page's link in sight, none pushed off the screen's edge
         inner = browser.execute_script("return window.innerWidth")
         links = browser.find_elements(By.CSS_SELECTOR, "header nav a")

@@ -14,22 +14,8 @@ from tests.service.conftest import appliance_doc, wait_until
 from tests.service.publish.web.test_service_web import ON, Client, _measure, _recipes
 
 
-def _first_tick(url: str) -> dict:
-    """The first ``tick`` of the live stream, the connection closed after it."""
-    with urllib.request.urlopen(url.rstrip("/") + "/events", timeout=30) as r:
-        event = None
-        for raw in r:
-            line = raw.decode().rstrip("\n")
-            if line.startswith("event: "):
-                event = line[7:]
-            elif line.startswith("data: ") and event == "tick":
-                return json.loads(line[6:])
-    raise AssertionError("the stream ended without a tick")
-
-
-def _capture_ticks(url: str, n: int) -> list[dict]:
-    """``n`` ticks of the stream at ``url`` taken during a capture, the connection closed after them."""
-    ticks = []
+def _ticks(url: str):
+    """The ``tick`` events of the live stream at ``url``, as they come (the connection closed when the caller stops)."""
     with urllib.request.urlopen(url, timeout=30) as r:
         event = None
         for raw in r:
@@ -37,11 +23,24 @@ def _capture_ticks(url: str, n: int) -> list[dict]:
             if line.startswith("event: "):
                 event = line[7:]
             elif line.startswith("data: ") and event == "tick":
-                tick = json.loads(line[6:])
-                if tick["state"] == "CAPTURING" and tick.get("elapsed", 0) > 0:
-                    ticks.append(tick)
-                    if len(ticks) == n:
-                        return ticks
+                yield json.loads(line[6:])
+
+
+def _first_tick(url: str) -> dict:
+    """The first ``tick`` of the live stream, the connection closed after it."""
+    for tick in _ticks(url.rstrip("/") + "/events"):
+        return tick
+    raise AssertionError("the stream ended without a tick")
+
+
+def _capture_ticks(url: str, n: int) -> list[dict]:
+    """``n`` ticks of the stream at ``url`` taken during a capture, the connection closed after them."""
+    ticks = []
+    for tick in _ticks(url):
+        if tick["state"] == "CAPTURING" and tick.get("elapsed", 0) > 0:
+            ticks.append(tick)
+            if len(ticks) == n:
+                return ticks
     raise AssertionError(f"the stream ended after {len(ticks)} ticks of the capture")
 
 
