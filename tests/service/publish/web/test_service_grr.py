@@ -257,7 +257,7 @@ def test_the_pdf_says_what_the_page_says(running):
 
     c = Client(running.app.web.url)
     page = c.request("/grr?recipe=ring")[2].decode()
-    status, headers, body = c.request("/grr/report.pdf?recipe=ring")
+    status, headers, body = c.request("/grr/report.pdf?recipe=ring", timeout=180)
     assert status == 200 and headers["Content-Type"] == "application/pdf" and "ring-gauge-rr.pdf" in \
         headers["Content-Disposition"]
     text = " ".join(" ".join(p.extract_text() for p in PdfReader(io.BytesIO(body)).pages).split())
@@ -267,7 +267,7 @@ def test_the_pdf_says_what_the_page_says(running):
     assert f"%GRR of the process variation (100·GRR/TV): {shown}" in text
     assert "4 parts × 2 appraisers × 3 trials" in text and "g·cm²" in text and "kg·m²" not in text
     assert "page 1 of" in text and "accepted by quality" in text
-    status, _, body = c.request("/grr/report.pdf?recipe=rotor")  # no study yet: the PDF says why
+    status, _, body = c.request("/grr/report.pdf?recipe=rotor", timeout=180)  # no study yet: the PDF says why
     assert status == 200 and "no measurements of this recipe" in PdfReader(io.BytesIO(body)).pages[0].extract_text()
 
 
@@ -402,7 +402,7 @@ def test_a_study_far_below_the_manual_s_design_of_parts_all_alike_says_so(tmp_pa
     spc = c.request("/spc?recipe=disc")[2].decode()
     assert 'id="capability"' in spc and 'id="gauge-warning"' not in spc and "not meaningful" not in spc
     text = " ".join(" ".join(p.extract_text() for p in PdfReader(io.BytesIO(
-        c.request("/grr/report.pdf?recipe=disc")[2])).pages).split())
+        c.request("/grr/report.pdf?recipe=disc", timeout=180)[2])).pages).split())
     assert "far below the AIAG MSA design" in text and "do not span the process" in text
 
 

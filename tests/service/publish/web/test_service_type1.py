@@ -144,7 +144,7 @@ def test_a_study_through_the_page_gives_the_figures_of_an_independent_computatio
     assert c.request(f"/results/{rec['releases'][0]}")[0] == 200
     assert {(m.part_id, m.recipe, m.part_verdict) for m in _ok(store)} == {("CS-1", "ref", None)}
     # the PDF says the same
-    status, headers, pdf = c.request(f"/type1/{rec['uuid']}/report.pdf")
+    status, headers, pdf = c.request(f"/type1/{rec['uuid']}/report.pdf", timeout=180)
     assert status == 200 and pdf[:5] == b"%PDF-" and headers["Content-Type"] == "application/pdf"
     from pypdf import PdfReader
 
@@ -158,7 +158,7 @@ def test_a_study_through_the_page_gives_the_figures_of_an_independent_computatio
     assert "Type 1 study" in hist and "25 of 25 of the study" in hist
     first = c.request(f"/results/{rec['releases'][0]}")[2].decode()
     assert "Type 1 study, 1 of 25" in first and f'href="/type1/{rec["uuid"]}"' in first
-    report = c.request(f"/results/{rec['releases'][0]}/report.pdf")[2]
+    report = c.request(f"/results/{rec['releases'][0]}/report.pdf", timeout=180)[2]
     assert "Type 1 study, 1 of 25" in "".join(pg.extract_text() for pg in PdfReader(io.BytesIO(report)).pages)
     # two parts measured after it: SPC charts them alone, beside the study's Cg and Cgk at its tolerance
     _measure_until(running, lambda app: len(app.store.list(limit=None, parts_only=True)) >= 2, presses)
