@@ -11,9 +11,10 @@ os.environ.setdefault("GPIOZERO_PIN_FACTORY", "mock")
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 #: the areas whose tests run servers, threads and a simulated rig against the clock (Modbus, MQTT, OPC UA,
-#: the web page, the sequencer, the encoder bus): marked `clock`, run by `make test` after the computations
-#: and alone, so that the suite's own parallel workers never compete with them for the cores. A module
-#: elsewhere that does the same says `pytestmark = pytest.mark.clock`.
+#: the web page, the sequencer, the encoder bus): marked `clock`. `make test` runs them beside the computations
+#: (they wait on their peers while those keep the cores busy), so none may depend on how fast the host is;
+#: `pytest -m clock` runs them alone, to try them under a busy loop on each core. A module elsewhere that does
+#: the same says `pytestmark = pytest.mark.clock`.
 CLOCK_AREAS = frozenset({"service", "firmware_host", "drivers"})
 _TESTS = Path(__file__).resolve().parent
 

@@ -159,13 +159,16 @@ def run(args: argparse.Namespace) -> int:
             printer = _StatePrinter(clock, args.time_scale, out, config.capture_duration, _show_progress(args))
             seq.subscribe(printer)
             print("pressing the button", file=out)
+            # the mock factory is process-wide and a pin's history with it: this measurement's pulses only
+            history_from = max(0, len(solenoid.pin.states) - 1)
             button.pin.drive_low()   # pull-up button: pressed pulls the line low
             button.pin.drive_high()
             try:
                 last = seq.run_until_settled(timeout=args.pre_trigger + args.duration + 120.0 * args.time_scale)
             finally:
                 printer.close()
-        on_times = [s.timestamp for prev, s in zip(solenoid.pin.states, solenoid.pin.states[1:]) if prev.state]
+        states = solenoid.pin.states[history_from:]
+        on_times = [s.timestamp for prev, s in zip(states, states[1:]) if prev.state]
         print(f"solenoid: {len(on_times)} pulse(s), on for {', '.join(f'{x * 1e3:.1f}' for x in on_times)} ms "
               f"(real time), now {'ON' if solenoid.is_active else 'off'}", file=out)
     if results:
