@@ -107,7 +107,9 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
     assert app.store.get_attachment(m.uuid, "plot.png")[0] == png  # drawn once, kept with the measurement
     assert app.web.child.jobs >= 1  # in the child process, away from the sensor's reader
     status, _, page = c.request(f"/results/{m.seq}")
-    assert status == 200 and f"{m.J:.7g}".encode() in page
+    assert status == 200
+    shown = page.decode().split('id="J-release">')[1].split(" ± ")[0]  # J in the part's unit and decimals
+    assert shown.endswith(" kg·m²") and abs(float(shown.split()[0].replace("\u2212", "-")) / m.J - 1) < 1e-4
     # the uncertainty budget: a table per measurand, each line's share as a bar
     budget = page.decode().split('id="uncertainty-budget"')[1]
     assert "stiffness k (calibration)" in budget and "<meter" in budget and "U = " in budget
@@ -119,6 +121,7 @@ def test_result_plot_kept_history_filters_and_clear_errors(running):
     assert r is not None
     model = page.decode().split('class="model"')[1].split("</table>")[0]
     assert number(r.baseline.omega_n, ".7g") in model and number(r.statistics["bic"], ".1f") in model
+    assert f"<td>{shown}</td>" in model  # the final model's J written as the headline writes it, not to 7 digits
     assert f"noise floor {number(r.noise_floor, '.3g')} rad" in page.decode()
     status, _, csv_text = c.request(f"/results/{m.uuid}/trace.csv")
     assert status == 200 and b"t,angle" in csv_text
