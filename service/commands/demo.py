@@ -28,7 +28,7 @@ from typing import Iterator
 from service.core import vocabulary as V
 from service.errors import AddressInUse, InputFileError
 from service.parts.outcome import PartOutcome
-from service.settings.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE
+from service.settings.defaults import DEMO_EFFECTS, DEMO_INERTIA, SIM_ENCODER_NOISE, SIM_ENCODER_TIME_SCALE, sim_sample_timeout
 
 EXIT_FAULT = 3
 
@@ -67,7 +67,7 @@ def _doc(args: argparse.Namespace, state_dir: str) -> dict:
     doc = {
         "device": {"id": "demo", "state_dir": state_dir, "log_level": "warning"},
         "sequencer": {"pre_trigger": 0.5, "capture_duration": args.duration,
-                      "sample_timeout": max(1.0, 0.2 * args.time_scale)},
+                      "sample_timeout": sim_sample_timeout(args.time_scale)},
         "simulation": {"inertia": args.inertia, "time_scale": args.time_scale, "seed": args.seed, "sensor": "encoder",
                        "noise": SIM_ENCODER_NOISE, "effects": DEMO_EFFECTS},
         "modbus": {"host": "127.0.0.1", "port": 0},

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 
 from measurement.errors import InvalidInput
 from service.settings import sensor_registry as sensors
-from service.settings.defaults import DEMO_EFFECTS, DEMO_RIG, SIM_ENCODER_NOISE
+from service.settings.defaults import DEMO_EFFECTS, DEMO_RIG, SIM_ENCODER_NOISE, sim_sample_timeout
 from service.sources.files import read_rig
 
 from .simulate import EFFECT_SYNTAX, parse_effects
@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
     config = SequencerConfig(pre_trigger=args.pre_trigger, capture_duration=args.duration,
-                             decay_threshold=args.decay_threshold, sample_timeout=max(1.0, 0.2 * args.time_scale))
+                             decay_threshold=args.decay_threshold, sample_timeout=sim_sample_timeout(args.time_scale))
     simulation = SimulationSettings(
         inertia=args.inertia, effects=effects, theta0=args.theta0, noise=args.noise, bits=args.bits,
         time_scale=args.time_scale, seed=args.seed, sensor=args.sensor, latency=args.latency, camera=args.camera,

@@ -40,6 +40,16 @@ SIM_ENCODER_TIME_SCALE = 1.0
 #: the demo rig) on a busy 2-core host; at 50× it was 7
 MAX_ENCODER_TIME_SCALE = 20.0
 
+
+def sim_sample_timeout(time_scale: float) -> float:
+    """The capture time-out (real s) of `moi measure --sim` and `moi demo` with the simulated encoder: 3 s, or a
+    fifth of the time scale when that is longer. Its server answers from the same interpreter as its client, so a
+    busy host silences both ends of the bus at once (a lossy link at 2× went 1 s without a sample beside a busy
+    loop per core), which a real encoder on its own bus never is: the hardware's 1 s would fault a rig that
+    works. A dead bus is still a FAULT, 3 s after its last sample."""
+    return max(3.0, 0.2 * time_scale)
+
+
 #: the simulated camera when no camera file is given (the camera file's tables): 640×480 px at
 #: 100 frames/s, 56° field of view, the marker on a 0.10 m radius seen from 0.25 m (240 px per rad at rest)
 DEMO_CAMERA: dict[str, Any] = {
