@@ -114,7 +114,10 @@ def test_routine_simulated_measurements_raise_no_quality_flag_and_a_glitch_still
         enc = d["acquisition"]["encoder"]
         assert enc["samples"] + enc["late_replies"] + enc["errors"] == enc["requests"]  # every request accounted for
         assert f"{enc['late_replies']} late replies" in err  # dropped samples are reported, not silent
-    d, _ = moi_measure_sim("--duration", "6", "--seed", "4", "--glitch-rate", "0.004")
+    # 3 % of the positions latched wrong: which replies are kept depends on how fast the host answers them (late
+    # ones are set aside), so at 0.4 % a busy host's few hundred samples could hold no glitch at all; at 3 % some
+    # twenty are left among the fewest samples a busy host has kept
+    d, _ = moi_measure_sim("--duration", "6", "--seed", "4", "--glitch-rate", "0.03")
     assert {"outliers_removed", "outliers_downweighted"} & set(d["flags"]), d["flags"]
     assert abs(d["J"] / d["truth"]["J"] - 1) < 1e-3
 
