@@ -217,9 +217,7 @@ def reproducibility(references: Sequence[Reference]) -> Reproducibility | None:
     """The scatter of ω_n between the releases of each reference released more than once (by name), pooled
     (source "rig"); None when none is. A name given with two different known inertias is refused: those are two
     references, not one released again."""
-    groups: dict[str, list[Reference]] = {}
-    for r in references:
-        groups.setdefault(r.name, []).append(r)
+    groups = _by_name(references)
     for name, rs in groups.items():
         if any(not math.isclose(r.added_inertia, rs[0].added_inertia, rel_tol=1e-9, abs_tol=1e-15) for r in rs):
             raise CalibrationError(f"reference {name!r} is given with different known inertias "
@@ -231,6 +229,14 @@ def reproducibility(references: Sequence[Reference]) -> Reproducibility | None:
     return calibrated(figure.relative, figure.dof, figure.groups, figure.releases)
 
 
+def _by_name(references: Sequence[Reference]) -> dict[str, list[Reference]]:
+    """The references grouped by name, in their order: one reference's releases together."""
+    groups: dict[str, list[Reference]] = {}
+    for r in references:
+        groups.setdefault(r.name, []).append(r)
+    return groups
+
+
 def _points(refs: Sequence[Reference]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The fit's points (I, x = 1/ω², σ(x), σ(I)): one per reference, its releases averaged. A reference released
     n times has one certificate: its error is common to its releases, so it is one point, not n independent ones
@@ -238,11 +244,8 @@ def _points(refs: Sequence[Reference]) -> tuple[np.ndarray, np.ndarray, np.ndarr
     calibration's pooled scatter between releases (``reproducibility``), over n."""
     repro = reproducibility(refs)
     rel = 0.0 if repro is None or repro.relative is None else repro.relative
-    groups: dict[str, list[Reference]] = {}
-    for r in refs:
-        groups.setdefault(r.name, []).append(r)
     rows = []
-    for rs in groups.values():
+    for rs in _by_name(refs).values():
         xs = np.array([1.0 / r.omega_n**2 for r in rs])
         own = np.array([2.0 * (r.omega_n_std or 0.0) / r.omega_n**3 for r in rs])
         var = max(float(np.mean(own**2)), (2.0 * rel * float(xs.mean())) ** 2) if len(rs) > 1 else float(own[0] ** 2)

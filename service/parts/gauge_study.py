@@ -19,7 +19,6 @@ Everything here is in SI (kg·m²); the pages convert to the recipe's display un
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import math
 import uuid as uuidlib
@@ -32,6 +31,7 @@ from measurement.gauge import TYPE1_MIN, TYPE1_RECOMMENDED, Type1Study, type1_st
 from measurement.result import IdentificationResult
 from service.errors import ServiceError
 from service.parts.recipes import Recipe
+from service.parts.running_record import RunningRecord
 
 log = logging.getLogger("moi.gauge")
 
@@ -220,12 +220,26 @@ class Type1Run:
                            r.display_unit, r.display_decimals, self.started_at, finished_at)
 
 
+def running_file(state_dir: str | Path) -> RunningRecord:
+    """The running study's record in ``state_dir`` (``OPEN_STUDY_FILE``)."""
+    return RunningRecord(Path(state_dir) / OPEN_STUDY_FILE, "Type 1 study")
+
+
+def running_study(state_dir: str | Path) -> Type1Record | None:
+    """The study running now as its file keeps it (None: none runs, or its file cannot be read)."""
+    kept = running_file(state_dir).read()
+    try:
+        return Type1Record.from_dict(kept) if kept is not None else None
+    except (ValueError, KeyError, TypeError):
+        return None
+
+
 class StudyDesk:
     """The daemon's Type 1 study (main loop thread). state_dir: where the running study's record is kept
     (``OPEN_STUDY_FILE``); store(): the result store (None before start and after stop); wall_clock: Unix time, s."""
 
     def __init__(self, state_dir: str | Path, store: Callable[[], Any], wall_clock: Callable[[], float]) -> None:
-        self.file = Path(state_dir) / OPEN_STUDY_FILE
+        self.file = running_file(state_dir)
         self._store, self._now = store, wall_clock
         self.current: Type1Run | None = None  # running, or just finished (shown until the next one starts)
 
@@ -304,7 +318,7 @@ class StudyDesk:
         except ServiceError:
             log.exception("could not store the Type 1 study %s", s.uuid)
             return
-        self.file.unlink(missing_ok=True)
+        self.file.drop()
         if s.study is not None:
             log.info("Type 1 study %s complete: Cg %.3g, Cgk %.3g, bias %.3g kg·m² (p = %.3g)", s.uuid, s.study.cg,
                      s.study.cgk, s.study.bias.bias, s.study.bias.p)
@@ -314,23 +328,18 @@ class StudyDesk:
 
     def _keep(self, s: Type1Run) -> None:
         """The running study's record in its file (a kill leaves it for ``recover``)."""
-        from service.sources.files import write_text_atomic
-
-        try:
-            write_text_atomic(self.file, json.dumps(s.record().to_dict(), allow_nan=False))
-        except (OSError, ValueError) as exc:  # the study goes on; only a kill would leave it unrecorded
-            log.warning("cannot keep the running Type 1 study in %s: %s", self.file, exc)
+        self.file.keep(s.record().to_dict())
 
     def recover(self) -> None:
         """The study a kill cut short (its file is left): stored as aborted, with why; its releases stay stored."""
         store = self._store()
-        if store is None or not self.file.exists():
+        kept = self.file.left() if store is not None else None
+        if kept is None:
             return
         try:
-            left = Type1Record.from_dict(json.loads(self.file.read_text(encoding="utf-8")))
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            log.warning("the running Type 1 study's file %s is damaged (%s); removed", self.file, exc)
-            self.file.unlink(missing_ok=True)
+            left = Type1Record.from_dict(kept)
+        except (ValueError, KeyError, TypeError) as exc:
+            self.file.damaged(exc)
             return
         why = (f"interrupted: the daemon was stopped during the study without storing it; its {len(left.values)} "
                "release(s) stay stored")
@@ -340,7 +349,7 @@ class StudyDesk:
         except ServiceError:
             log.exception("could not store the interrupted Type 1 study %s", left.uuid)
             return
-        self.file.unlink(missing_ok=True)
+        self.file.drop()
         log.warning("Type 1 study %s (%s) was %s", left.uuid, left.recipe, why)
 
 
@@ -384,12 +393,10 @@ def study_releases(store: Any, state_dir: str | Path | None = None, limit: int =
     running (its file in ``state_dir``): what a page says of a release that is no part's."""
     found: dict[str, StudyRelease] = {}
     records = type1_records(store, limit=limit)
-    if state_dir is not None:
-        try:
-            running = Type1Record.from_dict(json.loads((Path(state_dir) / OPEN_STUDY_FILE).read_text("utf-8")))
-            records.append(dataclasses.replace(running, uuid=""))
-        except (OSError, ValueError, KeyError, TypeError):
-            pass  # none runs (or its file is being written): its releases are said once it is stored
+    # none running (or its file unreadable): its releases are said once it is stored
+    running = running_study(state_dir) if state_dir is not None else None
+    if running is not None:
+        records.append(dataclasses.replace(running, uuid=""))
     for rec in records:
         for i, u in enumerate(rec.releases):
             found.setdefault(u, StudyRelease(rec.uuid or None, rec.recipe, i + 1, rec.plan.count))

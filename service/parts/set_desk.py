@@ -14,7 +14,8 @@ from measurement.errors import InvalidInput
 from measurement.rig import Rig
 from service.errors import ServiceError
 from service.parts.recipes import Recipe
-from service.parts.tensor_set import COMPLETE, OpenSetFile, TensorSet, interrupted
+from service.parts.running_record import RunningRecord
+from service.parts.tensor_set import COMPLETE, OPEN_SET_FILE, TensorSet, interrupted
 
 log = logging.getLogger("moi.daemon")
 
@@ -30,7 +31,7 @@ class SetDesk:
     def __init__(self, state_dir: Path, device_id: str, store: Callable[[], Any],
                  announce: Callable[[str, Any], None], refresh: Callable[[], None],
                  wall_clock: Callable[[], float]) -> None:
-        self.file = OpenSetFile(state_dir)
+        self.file = RunningRecord(Path(state_dir) / OPEN_SET_FILE, "tensor set")
         self.device_id = device_id
         self._store, self._announce, self._refresh, self._now = store, announce, refresh, wall_clock
         self.current: TensorSet | None = None  # open, or just finished (shown until the next one starts)
@@ -127,7 +128,7 @@ class SetDesk:
     def publish(self) -> None:
         """The set's progress to every publisher (and to its file while it is open), then the live status."""
         if self.current is not None and not self.current.done:
-            self.file.keep(self.current)
+            self.file.keep(self.current.to_dict() | {"started_at": self.current.started_at})
         progress = self.progress()
         if progress is not None:
             self._announce("on_set", progress)

@@ -210,42 +210,6 @@ class TensorSet:
 OPEN_SET_FILE = "tensor-set-open.json"
 
 
-class OpenSetFile:
-    """The running set's record on disk (``OPEN_SET_FILE``): written at each step, removed when it is stored."""
-
-    def __init__(self, state_dir: Any) -> None:
-        from pathlib import Path
-
-        self.path = Path(state_dir) / OPEN_SET_FILE
-
-    def keep(self, s: TensorSet) -> None:
-        import json
-
-        from service.sources.files import write_text_atomic
-
-        try:
-            write_text_atomic(self.path, json.dumps(s.to_dict() | {"started_at": s.started_at}, allow_nan=False))
-        except (OSError, ValueError) as exc:  # the set goes on; only a kill would leave it unrecorded
-            log.warning("cannot keep the running tensor set in %s: %s", self.path, exc)
-
-    def drop(self) -> None:
-        self.path.unlink(missing_ok=True)
-
-    def left(self) -> dict[str, Any] | None:
-        """The record of a set the last run left unfinished (a kill), or None; a damaged file says so."""
-        import json
-
-        try:
-            record = json.loads(self.path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            return None
-        except (OSError, ValueError) as exc:
-            log.warning("the running tensor set's file %s is damaged (%s); removed", self.path, exc)
-            self.drop()
-            return None
-        return record if isinstance(record, dict) and isinstance(record.get("uuid"), str) else None
-
-
 def interrupted(record: Mapping[str, Any], why: str) -> dict[str, Any]:
     """A running set's record as stored when the set was cut short (the daemon stopped or was killed): aborted,
     marked ``interrupted``, its releases stay stored."""

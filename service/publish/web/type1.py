@@ -8,7 +8,6 @@ from __future__ import annotations
 import asyncio
 import json
 import math
-from pathlib import Path
 from typing import Any, Mapping
 
 from aiohttp import web
@@ -16,7 +15,7 @@ from aiohttp import web
 from measurement.gauge import TYPE1_MIN, TYPE1_RECOMMENDED
 from measurement.units import from_si
 from service.core import vocabulary as V
-from service.parts.gauge_study import OPEN_STUDY_FILE, RUNNING, TYPE1, Type1Record, type1_records
+from service.parts.gauge_study import RUNNING, TYPE1, Type1Record, running_study, type1_records
 from service.publish.replies import CommandReply
 
 from .. import quality as Q
@@ -114,11 +113,8 @@ class Type1Pages(Family):
         it in while it runs); None when none runs or its file is not there yet."""
         if progress is None or progress["status"] != RUNNING:
             return None
-        try:
-            rec = Type1Record.from_dict(json.loads((Path(self.app.config.state_dir) / OPEN_STUDY_FILE).read_text("utf-8")))
-        except (OSError, ValueError, KeyError, TypeError):
-            return None
-        if rec.uuid != progress["uuid"]:
+        rec = running_study(self.app.config.state_dir)
+        if rec is None or rec.uuid != progress["uuid"]:
             return None
         facts = {k: text for k, _label, text in type1_words(rec, self.server.settings.display_unit).facts}
         return {"reference": facts["reference"], "tolerance": facts["tolerance"]}

@@ -150,13 +150,13 @@ def test_a_study_a_kill_cut_short_is_stored_as_aborted_at_the_next_start(tmp_pat
     r = recipe(tmp_path)
     start(d, r)
     kept = [release(d, store, r, J_REF + 1e-6 * k, k) for k in range(2)]
-    assert d.file.exists() and type1_records(store) == []  # killed here: nothing stored but the releases
+    assert d.file.path.exists() and type1_records(store) == []  # killed here: nothing stored but the releases
     after = StudyDesk(tmp_path / "state", lambda: store, lambda: 1.8e9)
     after.recover()
     [rec] = type1_records(store)
     assert rec.status == "aborted" and rec.releases == tuple(kept) and "interrupted" in str(rec.error)
-    assert not d.file.exists() and after.progress() is None
+    assert not d.file.path.exists() and after.progress() is None
     # a daemon that stops stores its running study itself
-    assert start(after, r)[0] == "done" and after.file.exists()
+    assert start(after, r)[0] == "done" and after.file.path.exists()
     after.interrupt("the daemon stopped")
-    assert type1_records(store)[0].error == "interrupted: the daemon stopped" and not after.file.exists()
+    assert type1_records(store)[0].error == "interrupted: the daemon stopped" and not after.file.path.exists()

@@ -345,6 +345,16 @@ def _recipes(d: Path) -> Path:
     return d
 
 
+def _three_release_doc(tmp_path: Path) -> dict:
+    """The simulated appliance (5× real time, the web page on) with ``_recipes`` and a three-release part type,
+    rotor-3, active: a part in hand between its releases."""
+    recipes = _recipes(tmp_path / "recipes")
+    (recipes / "three.toml").write_text('[recipe]\nname = "rotor-3"\nnumber = 5\nnominal = 0.0125\n'
+                                        'tolerance_percent = 2.0\nreleases = 3\n')
+    return appliance_doc(tmp_path / "state", time_scale=5.0, web=ON,
+                         recipes={"directory": str(recipes), "active": "rotor-3"})
+
+
 def _measure(running, c: Client, bearer: dict, recipe: str, part_id: str, count: int) -> None:
     assert c.json("/api/part", data={"recipe": recipe, "part_id": part_id}, headers=bearer)[0] == 202
     for _ in range(count):

@@ -9,8 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.service.conftest import appliance_doc
-from tests.service.publish.web.test_service_web import _recipes
+from tests.service.publish.web.test_service_web import _three_release_doc
 from tests.service.publish.web.test_service_web_browser import _post, browser  # noqa: F401 (the fixture)
 
 pytestmark = pytest.mark.browser
@@ -23,11 +22,7 @@ def test_the_open_home_page_follows_a_block_an_outage_and_a_restart(browser, app
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
-    recipes = _recipes(tmp_path / "recipes")
-    (recipes / "three.toml").write_text('[recipe]\nname = "rotor-3"\nnumber = 5\nnominal = 0.0125\n'
-                                        'tolerance_percent = 2.0\nreleases = 3\n')
-    doc = appliance_doc(tmp_path / "state", time_scale=5.0, web={"enabled": True},
-                        recipes={"directory": str(recipes), "active": "rotor-3"})
+    doc = _three_release_doc(tmp_path)
     first = appliance_factory(doc)
     url = first.app.web.url
     token = Path(first.app.web.token_file).read_text().strip()

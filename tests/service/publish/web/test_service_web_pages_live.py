@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 
 from tests.service.conftest import appliance_doc
-from tests.service.publish.web.test_service_web import Client, _recipes
+from tests.service.publish.web.test_service_web import Client, _three_release_doc
 from tests.service.publish.web.test_service_web_browser import _post, browser  # noqa: F401 (the fixture)
 
 pytestmark = pytest.mark.browser
@@ -146,11 +146,7 @@ def _open(driver, wait, url: str) -> None:
 @pytest.fixture
 def rig(appliance_factory, tmp_path):
     """The simulated rig with the shared recipes and a three-release part type, reached through a cable."""
-    recipes = _recipes(tmp_path / "recipes")
-    (recipes / "three.toml").write_text('[recipe]\nname = "rotor-3"\nnumber = 5\nnominal = 0.0125\n'
-                                        'tolerance_percent = 2.0\nreleases = 3\n')
-    doc = appliance_doc(tmp_path / "state", time_scale=5.0, web={"enabled": True},
-                        recipes={"directory": str(recipes), "active": "rotor-3"})
+    doc = _three_release_doc(tmp_path)
     running = appliance_factory(doc)
     cable = _Cable(int(running.app.web.url.rstrip("/").rsplit(":", 1)[1]))
     yield doc, running, cable
