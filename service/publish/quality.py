@@ -182,7 +182,7 @@ def percent(v: float) -> str:
     shown = round(v, 1)
     if shown == 0:
         return "0.0 %"
-    return f"{number(shown, '+.1f').replace('-', '−')} %"
+    return f"{signed(number(shown, '+.1f'))} %"
 
 
 def display_unit(payload: Mapping[str, Any] | None, default: str = SI) -> str:
